@@ -1,0 +1,92 @@
+"""The ``ardrone-nmpc`` command line: a thin typer app over keyword-only functions.
+
+Heavy modules (numpy, numba kernels, pydantic schema, CasADi) are imported inside the
+commands, so ``ardrone-nmpc --help`` stays fast. User errors print one ``field.path: message``
+line per problem on stderr and exit 1, never a traceback.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+app = typer.Typer(
+    name="ardrone-nmpc",
+    help="Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+SET_HELP = "Override a config value before validation: dotted.path=value (repeatable)."
+
+
+def _fail(messages) -> None:
+    """Print user-facing error lines on stderr and exit 1."""
+    for line in messages:
+        typer.echo(f"error: {line}", err=True)
+    raise typer.Exit(code=1)
+
+
+def _load(config: Optional[Path], overrides: List[str]):
+    from ardrone_nmpc.config import ConfigError, load_config
+
+    try:
+        return load_config(config, overrides)
+    except ConfigError as err:
+        _fail(err.messages)
+
+
+@app.command()
+def check(
+    config: Path = typer.Argument(..., help="Experiment YAML file."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+) -> None:
+    """Validate a config and print the resolved values (exit 1 with the errors)."""
+    from ardrone_nmpc.config import dump_config
+
+    cfg = _load(config, set_)
+    typer.echo(dump_config(cfg), nl=False)
+
+
+@app.command()
+def bench(
+    config: Optional[Path] = typer.Option(None, "--config", help="Take weights, bounds and solver settings from this config."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+    horizon_steps: Optional[int] = typer.Option(None, "--horizon-steps", min=1, help="N (overrides the config)."),
+    kmax: Optional[int] = typer.Option(None, "--kmax", min=1, help="GMRES iterations per solve (overrides the config)."),
+    steps: int = typer.Option(300, "--steps", min=10, help="Timed control ticks per solver."),
+    solvers: str = typer.Option("cgmres,newton", "--solvers", help="Comma-separated: cgmres, newton."),
+    compare: Optional[str] = typer.Option(None, "--compare", help="'casadi': also solve the OCP exactly with CasADi/IPOPT."),
+    json_path: Optional[Path] = typer.Option(None, "--json", help="Write the rows as JSON to this file."),
+) -> None:
+    """Time the NMPC solvers in a closed loop (1 m step in x, y, z and 1 rad in ψ)."""
+    from ardrone_nmpc.benchcli import run_bench_command
+
+    overrides = list(set_)
+    if horizon_steps is not None:
+        overrides.append(f"controller.horizon_steps={horizon_steps}")
+    if kmax is not None:
+        overrides.append(f"controller.solver.kmax={kmax}")
+    cfg = _load(config, overrides)
+    names = [s.strip() for s in solvers.split(",") if s.strip()]
+    bad = [s for s in names if s not in ("cgmres", "newton")]
+    if bad or not names:
+        _fail([f"--solvers: unknown solver(s) {', '.join(bad) or '(none)'}; choose cgmres, newton"])
+    if compare not in (None, "casadi"):
+        _fail([f"--compare: unknown comparison {compare!r}; the only one is 'casadi'"])
+    try:
+        run_bench_command(cfg=cfg, solvers=names, steps=steps, compare_casadi=compare == "casadi",
+                          json_path=json_path)
+    except RuntimeError as err:
+        _fail([str(err)])
+
+
+def main() -> None:  # console-script entry point
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

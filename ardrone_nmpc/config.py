@@ -1,0 +1,595 @@
+"""Experiment configuration: the YAML schema, loading, ``--set`` overrides and dumping.
+
+An experiment is one YAML mapping whose top level has ``name``, ``duration_s`` and one section
+per subsystem::
+
+    name: step_x                 # used in run-directory names
+    duration_s: 20.0
+    controller: {kind, horizon_steps, dtau_s, q, r, q_terminal, u_min, u_max, solver: {…}, p_gains: {…}}
+    estimator:  {kind, kalman_q, kalman_r, kalman_p0, luenberger_lambda0_per_s, …}
+    reference:  {kind, start_m, target_m, step_time_s, side_m, …, path_file}
+    loop:       {period_s}
+    drone:      {host, at_port, navdata_port, euler_angle_max_rad, control_vz_max_mps, …}
+    mocap:      {bind_host, port, object_name, rate_hz}
+    sim:        {seed, plant: {…}, noise: {…}, mocap_rate_hz, navdata_rate_hz}
+    safety:     {geofence_min_m, geofence_max_m, max_tilt_rad, …, solver_fallback}
+
+Every key is optional: a missing key takes its default, and the defaults are the values of the
+thesis (``specs/thesis.md``), the AR.Drone SDK (``specs/ardrone-protocol.md`` §3.1) and the plant
+identification (``specs/plant.md``). Unknown keys, NaN/inf, out-of-range values and vectors of the
+wrong length are errors. Every field carries its unit in its name and a description
+(``ExperimentConfig.model_json_schema()`` lists them all).
+
+Vectors are YAML lists, ordered like the thesis: states ``[x, ẋ, y, ẏ, z, ż, ψ]``, inputs
+``[z̈, φ, θ, ψ̇]``, positions ``[x, y, z]`` in the world frame (x forward, y left, z up).
+
+Errors are reported as a :class:`ConfigError` whose ``messages`` are ``field.path: message`` lines,
+e.g. ``controller.solver.kmax: Input should be greater than or equal to 1``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal, Optional
+
+import yaml
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
+from pydantic_core import PydanticCustomError
+
+__all__ = [
+    "ConfigError",
+    "ControllerConfig",
+    "DroneConfig",
+    "EstimatorConfig",
+    "ExperimentConfig",
+    "LoopConfig",
+    "MocapConfig",
+    "NoiseConfig",
+    "PGainsConfig",
+    "PlantConfig",
+    "ReferenceConfig",
+    "SafetyConfig",
+    "SimConfig",
+    "SolverConfig",
+    "apply_overrides",
+    "config_from_dict",
+    "config_to_dict",
+    "dump_config",
+    "load_config",
+]
+
+
+class ConfigError(Exception):
+    """Invalid configuration. ``messages`` are one-line ``field.path: message`` strings."""
+
+    def __init__(self, messages: str | Sequence[str]) -> None:
+        self.messages: list[str] = [messages] if isinstance(messages, str) else list(messages)
+        super().__init__(self.messages)
+
+    def __str__(self) -> str:
+        return "\n".join(self.messages)
+
+
+def _invalid(message: str) -> PydanticCustomError:
+    return PydanticCustomError("config", "{message}", {"message": message})
+
+
+# ----------------------------------------------------------------------------- field types
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+def _vector(item: Any, length: int) -> Any:
+    """A fixed-length tuple of ``item``; accepts a YAML list. A wrong length is one error at the
+    vector itself (not a cascade of per-item errors)."""
+
+    def check_length(value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and len(value) != length:
+            raise _invalid(f"expected {length} values, got {len(value)}")
+        return value
+
+    return Annotated[
+        tuple[item, ...],
+        BeforeValidator(check_length),
+        Field(json_schema_extra={"minItems": length, "maxItems": length}),
+    ]
+
+
+Vec2 = _vector(Finite, 2)
+Vec3 = _vector(Finite, 3)
+Vec4 = _vector(Finite, 4)
+PositiveVec2 = _vector(Positive, 2)
+PositiveVec4 = _vector(Positive, 4)
+NonNegativeVec7 = _vector(NonNegative, 7)
+Port = Annotated[int, Field(ge=1, le=65535)]
+
+
+def _require_increasing(lower_name: str, upper_name: str) -> Callable[..., Any]:
+    """Validator for ``upper_name`` that requires it to exceed ``lower_name`` (declared earlier)
+    elementwise; the error is reported at ``upper_name``."""
+
+    def check(cls: type, value: Any, info: ValidationInfo) -> Any:
+        lower = info.data.get(lower_name)
+        if lower is None:  # the lower field itself failed and is reported on its own
+            return value
+        lows = lower if isinstance(lower, tuple) else (lower,)
+        highs = value if isinstance(value, tuple) else (value,)
+        for i, (lo, hi) in enumerate(zip(lows, highs)):
+            if not lo < hi:
+                where = f" at index {i}" if isinstance(value, tuple) else ""
+                raise _invalid(f"must be greater than {lower_name}{where} ({hi} <= {lo})")
+        return value
+
+    return field_validator(upper_name)(classmethod(check))  # type: ignore[arg-type]
+
+
+class _Section(BaseModel):
+    # validate_default: defaults go through the same checks (cross-field ones included).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
+                              validate_default=True)
+
+
+# ----------------------------------------------------------------------------- controller
+
+
+class SolverConfig(_Section):
+    """Numerical settings of the NMPC solvers (thesis §3.3, Algorithm 1; Ohtsuka's C/GMRES)."""
+
+    method: Literal["cgmres", "newton"] = Field(
+        "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
+        "'newton': the thesis' per-step Newton iterations with fdgmres.")
+    kmax: int = Field(5, ge=1, description="GMRES Krylov-subspace dimension per solve (count).")
+    zeta_per_s: Positive = Field(
+        15.0, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
+    fd_step: Positive = Field(
+        1e-6, description="Forward-difference step h of Jacobian-vector products (dimensionless).")
+    gmres_rtol: float = Field(
+        1e-3, gt=0, lt=1, description="GMRES relative residual tolerance η (thesis Algorithm 1).")
+    tolerance: Positive = Field(
+        1e-4, description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
+    max_newton_iterations: int = Field(20, ge=1, description="Newton iteration cap per solve.")
+    dummy_weight: Positive = Field(
+        0.01, description="Linear cost weight of the dummy inputs that enforce the input bounds.")
+    bound_epsilon: NonNegative = Field(
+        1e-3, description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
+    horizon_ramp_rate_per_s: NonNegative = Field(
+        0.0, description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
+    divergence_residual: Positive = Field(
+        1e3, description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
+    newton_trigger_residual: Positive = Field(
+        100.0, description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
+        "re-projects onto F = 0 by Newton/GMRES warm-started from the current solution (a "
+        "reference jump is an impulse the continuation cannot follow).")
+    condensed: bool = Field(
+        True, description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
+        "form (4 unknowns per stage, not 12). Same equations; GMRES(5) stagnates on the "
+        "uncondensed saddle-point system, so false is for comparison only.")
+
+
+class PGainsConfig(_Section):
+    """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none)."""
+
+    k1_per_s: Positive = Field(1.5, description="ż_ref = k1 (z_d − z), 1/s.")
+    k2_rad_per_mps: Positive = Field(
+        0.35, description="Roll φ per m/s of lateral speed error, rad/(m/s).")
+    k3_rad_per_mps: Positive = Field(
+        0.35, description="Pitch θ per m/s of forward speed error, rad/(m/s).")
+    k4_per_s: Positive = Field(2.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
+
+
+class ControllerConfig(_Section):
+    """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
+
+    kind: Literal["nmpc", "p"] = Field(
+        "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
+    horizon_steps: int = Field(15, ge=1, description="Prediction horizon N (steps).")
+    dtau_s: Positive = Field(0.1, description="Prediction step Δτ (s); horizon T = N·Δτ.")
+    q: NonNegativeVec7 = Field(
+        (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0),
+        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
+    r: PositiveVec4 = Field(
+        (4.0, 12.0, 12.0, 24.0),
+        description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
+    q_terminal: NonNegativeVec7 = Field(
+        (0.0,) * 7, description="Terminal state weights, order as q (the thesis has none).")
+    u_min: Vec4 = Field(
+        (-1.0, -1.0, -1.0, -1.0),
+        description="Input lower bounds [m/s², rad, rad, rad/s] (thesis eq. 4.17).")
+    u_max: Vec4 = Field(
+        (1.0, 1.0, 1.0, 1.0),
+        description="Input upper bounds [m/s², rad, rad, rad/s]; each above u_min (eq. 4.17).")
+    solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
+    p_gains: PGainsConfig = Field(
+        default_factory=PGainsConfig, description="Gains of the 'p' controller.")
+
+    _u_bounds = _require_increasing("u_min", "u_max")
+
+
+# ----------------------------------------------------------------------------- estimation
+
+
+class EstimatorConfig(_Section):
+    """Velocity estimation (thesis ch. 4): ż from mocap z, ẋ/ẏ from navdata or differences."""
+
+    kind: Literal["kalman", "luenberger", "difference"] = Field(
+        "kalman", description="ż estimator: Kalman filter (eq. 4.5–4.9), Luenberger observer "
+        "(eq. 4.10–4.15) or the raw finite difference of z.")
+    kalman_q: Positive = Field(
+        2.8559e-4, description="Kalman process-noise variance Q, (m/s)² (thesis).")
+    kalman_r: Positive = Field(
+        3.2e-3, description="Kalman measurement-noise variance R of differenced z, (m/s)² (thesis).")
+    kalman_p0: Positive = Field(1e-2, description="Initial Kalman error variance P0, (m/s)².")
+    luenberger_lambda0_per_s: Positive = Field(
+        5.0, description="Observer double pole at −λ0 (1/s); gain K = [2λ0, λ0²].")
+    luenberger_gain: Optional[PositiveVec2] = Field(
+        None, description="Explicit observer gain [k1 (1/s), k2 (1/s²)], overriding λ0; both > 0 "
+        "so that A − KC is Hurwitz. null = derive from λ0.")
+    horizontal_velocity: Literal["navdata", "difference"] = Field(
+        "navdata", description="Source of ẋ, ẏ: the drone's optical-flow navdata (as in the "
+        "thesis) or finite differences of the mocap position.")
+
+
+# ----------------------------------------------------------------------------- reference
+
+
+class ReferenceConfig(_Section):
+    """The desired trajectory x_d(t), world frame, metres and radians."""
+
+    kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path"] = (
+        Field("hover", description="Trajectory type; the fields below apply as noted."))
+    start_m: Vec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
+    start_psi_rad: Finite = Field(0.0, description="Start heading ψ (rad, counter-clockwise).")
+    target_m: Vec3 = Field((0.0, 0.0, 1.0), description="Step target position [x, y, z] (m).")
+    target_psi_rad: Finite = Field(0.0, description="Step target heading ψ (rad).")
+    step_time_s: NonNegative = Field(1.0, description="Time of the step (s from start).")
+    side_m: Positive = Field(1.0, description="Square side length (m).")
+    leg_duration_s: Positive = Field(
+        5.0, description="Time per side of 'square' and 'square_altitudes' (s).")
+    altitudes_m: PositiveVec4 = Field(
+        (0.8, 1.0, 1.2, 1.4), description="Corner altitudes of 'square_altitudes' (m).")
+    center_m: Vec2 = Field((0.0, 0.0), description="Ellipse centre [x, y] (m).")
+    semi_axes_m: PositiveVec2 = Field((1.0, 0.6), description="Ellipse semi-axes [a_x, a_y] (m).")
+    period_s: Positive = Field(20.0, description="Time for one lap of the ellipse (s).")
+    lorenz_scale_m: Positive = Field(
+        0.05, description="Metres per Lorenz-system unit of the 'lorenz' path.")
+    lorenz_time_scale: Positive = Field(
+        0.25, description="Lorenz-system time advanced per second of flight (dimensionless).")
+    path_file: Optional[str] = Field(
+        None, validate_default=True,
+        description="CSV waypoint file (t_s,x_m,y_m,z_m,psi_rad) for 'path'; relative paths in a "
+        "config file are relative to that file's directory. Stored as an absolute path.")
+
+    @field_validator("path_file")
+    @classmethod
+    def _check_path_file(cls, value: Optional[str], info: ValidationInfo) -> Optional[str]:
+        if value is None:
+            if info.data.get("kind") == "path":
+                raise _invalid("required when kind is 'path'")
+            return None
+        base = (info.context or {}).get("base_dir")
+        path = Path(value).expanduser()
+        if not path.is_absolute():
+            path = Path(base or ".") / path
+        path = path.resolve()
+        if not path.is_file():
+            raise _invalid(f"no such file: {path}")
+        return str(path)
+
+
+# ----------------------------------------------------------------------------- hardware
+
+
+class LoopConfig(_Section):
+    """The control loop."""
+
+    period_s: Positive = Field(0.065, description="Control period (s); 65 ms in the thesis.")
+
+
+class DroneConfig(_Section):
+    """The AR.Drone link and the limits written to its configuration at connect (protocol §3.1)."""
+
+    host: str = Field("192.168.1.1", min_length=1, description="Drone IP address or host name.")
+    at_port: Port = Field(5556, description="UDP port of AT commands.")
+    navdata_port: Port = Field(5554, description="UDP port of navdata.")
+    euler_angle_max_rad: float = Field(
+        0.2094, gt=0, le=0.52, description="control:euler_angle_max (rad): tilt at PCMD ±1.")
+    control_vz_max_mps: float = Field(
+        0.7, ge=0.2, le=2.0, description="control:control_vz_max (m/s): climb rate at PCMD gaz ±1.")
+    control_yaw_radps: float = Field(
+        1.745, ge=0.7, le=6.11, description="control:control_yaw (rad/s): yaw rate at PCMD yaw ±1.")
+    altitude_max_m: Positive = Field(3.0, description="control:altitude_max (m).")
+    navdata_demo: bool = Field(True, description="general:navdata_demo: 15 Hz demo packets if true.")
+    keepalive_interval_s: float = Field(
+        0.03, gt=0, le=0.03, description="Longest gap between AT commands (s); ≤ 30 ms (§2.6).")
+
+
+class MocapConfig(_Section):
+    """The motion-capture pose stream (specs/mocap-stream.md)."""
+
+    bind_host: str = Field("0.0.0.0", min_length=1, description="Local address to listen on.")
+    port: Port = Field(51001, description="UDP port of the pose stream.")
+    object_name: str = Field(
+        "ardrone", min_length=1, max_length=24, description="Tracked object name (≤ 24 ASCII).")
+    rate_hz: Positive = Field(100.0, description="Expected pose rate (Hz).")
+
+    @field_validator("object_name")
+    @classmethod
+    def _ascii_name(cls, value: str) -> str:
+        if not value.isascii() or "\x00" in value:
+            raise _invalid("must be ASCII without NUL characters")
+        return value
+
+
+# ----------------------------------------------------------------------------- simulation
+
+
+class PlantConfig(_Section):
+    """The simulated AR.Drone closed loop (specs/plant.md)."""
+
+    # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
+    command_delay_s: NonNegative = Field(0.26, description="Command transport delay T_d (s).")
+    # tum_ardrone EKF prediction model (Engel et al., IROS 2012).
+    tau_tilt_s: Positive = Field(0.10, description="Roll/pitch first-order time constant τ_a (s).")
+    # tum_ardrone EKF prediction model.
+    tau_yaw_s: Positive = Field(0.10, description="Yaw-rate first-order time constant τ_r (s).")
+    # Middle of the identifications bracketing it (0.17 s ROS simulator … 0.71 s tum_ardrone).
+    tau_vz_s: Positive = Field(0.5, description="Vertical-speed time constant τ_z (s).")
+    # tum_ardrone EKF constant c1 = 0.58.
+    drag_per_s: NonNegative = Field(0.58, description="Horizontal linear drag k_d (1/s).")
+    # specs/plant.md: fixed-step RK4 at 200 Hz for determinism.
+    integration_step_s: float = Field(
+        0.005, gt=0, le=0.05, description="Fixed RK4 integration step (s).")
+    # Landed at the world origin.
+    initial_position_m: Vec3 = Field((0.0, 0.0, 0.0), description="Initial [x, y, z] (m), z ≥ 0.")
+    initial_psi_rad: Finite = Field(0.0, description="Initial heading ψ (rad).")
+    # A full battery.
+    battery_start_pct: float = Field(100.0, ge=0, le=100, description="Initial battery (%).")
+    # Project default, not identified: slow enough that long simulated runs are not cut short
+    # by safety.battery_floor_pct (100 % → 20 % in ≈ 53 min).
+    battery_drain_pct_per_min: NonNegative = Field(
+        1.5, description="Battery drain while flying (% per minute).")
+
+    @field_validator("initial_position_m")
+    @classmethod
+    def _above_ground(cls, value: tuple[float, ...]) -> tuple[float, ...]:
+        if value[2] < 0:
+            raise _invalid("z must be ≥ 0 (the ground)")
+        return value
+
+
+class NoiseConfig(_Section):
+    """Simulated sensor noise, standard deviations (specs/plant.md table, mocap-stream.md)."""
+
+    mocap_position_std_m: NonNegative = Field(0.0005, description="Mocap position σ per axis (m).")
+    mocap_angle_std_rad: NonNegative = Field(
+        math.radians(0.1), description="Mocap angle σ (rad), 0.1°.")
+    mocap_latency_ms: NonNegative = Field(2.0, description="Mocap stream latency (ms).")
+    navdata_attitude_std_rad: NonNegative = Field(
+        math.radians(0.2), description="Navdata roll/pitch σ (rad), 0.2°.")
+    navdata_yaw_std_rad: NonNegative = Field(
+        math.radians(0.3), description="Navdata yaw σ (rad), 0.3°.")
+    navdata_altitude_std_m: NonNegative = Field(
+        0.010, description="Navdata ultrasound altitude σ (m).")
+    navdata_velocity_std_mps: NonNegative = Field(
+        0.040, description="Navdata optical-flow vx, vy σ (m/s).")
+
+
+class SimConfig(_Section):
+    """Simulation: seed, plant, sensor noise and stream rates."""
+
+    seed: int = Field(0, ge=0, description="Seed of every random source of the simulation.")
+    plant: PlantConfig = Field(default_factory=PlantConfig, description="Plant parameters.")
+    noise: NoiseConfig = Field(default_factory=NoiseConfig, description="Sensor noise.")
+    mocap_rate_hz: Positive = Field(100.0, description="Simulated mocap stream rate (Hz).")
+    navdata_rate_hz: Positive = Field(15.0, description="Simulated navdata rate (Hz); 15 = demo.")
+
+
+# ----------------------------------------------------------------------------- safety
+
+
+class SafetyConfig(_Section):
+    """Supervisor limits: outside them it hovers, lands or falls back."""
+
+    geofence_min_m: Vec3 = Field((-3.0, -3.0, 0.0), description="Geofence lower corner [x, y, z] (m).")
+    geofence_max_m: Vec3 = Field((3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
+    max_tilt_rad: Positive = Field(0.35, description="Largest measured roll/pitch allowed (rad).")
+    max_speed_mps: Positive = Field(2.0, description="Largest estimated speed allowed (m/s).")
+    mocap_hold_ms: Positive = Field(
+        100.0, description="Mocap pose age (ms) above which the last command is held.")
+    mocap_hover_ms: Positive = Field(
+        250.0, description="Mocap pose age (ms) above which the drone hovers; > mocap_hold_ms.")
+    mocap_land_ms: Positive = Field(
+        1000.0, description="Mocap pose age (ms) above which the drone lands; > mocap_hover_ms.")
+    navdata_land_ms: Positive = Field(500.0, description="Navdata age (ms) above which it lands.")
+    battery_floor_pct: float = Field(
+        20.0, ge=0, le=100, description="Battery level (%) below which the drone lands.")
+    solver_fallback: Literal["hold", "p", "hover"] = Field(
+        "p", description="On solver failure: hold the last input, switch to the P controller, "
+        "or hover.")
+
+    _geofence = _require_increasing("geofence_min_m", "geofence_max_m")
+    _hover_after_hold = _require_increasing("mocap_hold_ms", "mocap_hover_ms")
+    _land_after_hover = _require_increasing("mocap_hover_ms", "mocap_land_ms")
+
+
+# ----------------------------------------------------------------------------- top level
+
+
+class ExperimentConfig(_Section):
+    """One flight experiment."""
+
+    name: str = Field(
+        "experiment", pattern=r"^[A-Za-z0-9_.-]+$", description="Experiment name, used in run "
+        "directory names (letters, digits, '_', '.', '-').")
+    duration_s: Positive = Field(30.0, description="Length of the experiment (s).")
+    controller: ControllerConfig = Field(default_factory=ControllerConfig, description="Controller.")
+    estimator: EstimatorConfig = Field(default_factory=EstimatorConfig, description="Estimator.")
+    reference: ReferenceConfig = Field(default_factory=ReferenceConfig, description="Reference.")
+    loop: LoopConfig = Field(default_factory=LoopConfig, description="Control loop.")
+    drone: DroneConfig = Field(default_factory=DroneConfig, description="Drone link and limits.")
+    mocap: MocapConfig = Field(default_factory=MocapConfig, description="Mocap stream.")
+    sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
+    safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
+
+
+# ----------------------------------------------------------------------------- loading
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that rejects duplicate keys instead of keeping the last one."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                duplicate = key in seen
+            except TypeError:  # unhashable key: the base class reports it
+                break
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark,
+                    f"duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _format_errors(exc: ValidationError) -> list[str]:
+    messages = []
+    for error in exc.errors():
+        path = ".".join(str(part) for part in error["loc"]) or "(top level)"
+        messages.append(f"{path}: {error['msg']}")
+    return messages
+
+
+def apply_overrides(data: Mapping[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """Return a copy of ``data`` with each ``dotted.path=value`` override set.
+
+    The value is parsed as YAML (``5`` → int, ``0.1`` → float, ``[1, 2]`` → list, ``null`` →
+    None, ``p`` → str); missing intermediate mappings are created. Raises :class:`ConfigError`
+    listing every malformed override.
+    """
+    result = copy.deepcopy(dict(data))
+    errors = []
+    for override in overrides:
+        path, sep, text = override.partition("=")
+        keys = path.strip().split(".")
+        if not sep or any(not key.strip() for key in keys):
+            errors.append(f"override {override!r}: expected dotted.path=value")
+            continue
+        keys = [key.strip() for key in keys]
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            errors.append(f"override {override!r}: invalid YAML value: {exc}".replace("\n", " "))
+            continue
+        node = result
+        for depth, key in enumerate(keys[:-1]):
+            child = node.setdefault(key, {})
+            if not isinstance(child, dict):
+                errors.append(f"override {override!r}: "
+                              f"{'.'.join(keys[:depth + 1])} is not a mapping")
+                break
+            node = child
+        else:
+            node[keys[-1]] = value
+    if errors:
+        raise ConfigError(errors)
+    return result
+
+
+def config_from_dict(data: Mapping[str, Any], base_dir: str | Path | None = None
+                     ) -> ExperimentConfig:
+    """Validate a plain mapping; relative ``reference.path_file`` is resolved against
+    ``base_dir`` (default: the working directory). Raises :class:`ConfigError`."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"(top level): expected a mapping, got {type(data).__name__}")
+    try:
+        return ExperimentConfig.model_validate(dict(data), context={"base_dir": base_dir})
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(exc)) from None
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read: {exc}") from None
+    try:
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = f" (line {mark.line + 1})" if mark is not None else ""
+        problem = exc.problem or exc.context or "syntax error"
+        raise ConfigError(f"{path}: invalid YAML{line}: {problem}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}".replace("\n", " ")) from None
+    if data is None:  # an empty file means "all defaults"
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: the top level must be a mapping of section names to "
+                          f"values, not a {type(data).__name__}")
+    return data
+
+
+def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()
+                ) -> ExperimentConfig:
+    """Load and validate an experiment.
+
+    ``path`` None means all defaults. ``overrides`` (``dotted.path=value``) are merged before
+    validation. A relative ``reference.path_file`` written in the file is resolved against the
+    file's directory; one given by an override, against the working directory.
+    Raises :class:`ConfigError` with every problem found.
+    """
+    data: dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        data = _read_yaml(path)
+        reference = data.get("reference")
+        if isinstance(reference, dict) and isinstance(reference.get("path_file"), str):
+            path_file = Path(reference["path_file"]).expanduser()
+            if not path_file.is_absolute():
+                reference["path_file"] = str(path.parent / path_file)
+    return config_from_dict(apply_overrides(data, overrides))
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block-style mappings, vectors on one line (``q: [12.0, 2.0, …]``)."""
+
+
+_Dumper.add_representer(
+    list, lambda dumper, data: dumper.represent_sequence(
+        "tag:yaml.org,2002:seq", data, flow_style=True))
+
+
+def config_to_dict(cfg: ExperimentConfig) -> dict[str, Any]:
+    """The configuration as plain JSON/YAML-safe data (tuples become lists), declared order."""
+    return cfg.model_dump(mode="json")
+
+
+def dump_config(cfg: ExperimentConfig, header: str | None = None) -> str:
+    """The configuration as YAML, keys in declared order, loadable by :func:`load_config`.
+
+    ``header`` (e.g. the tool version) is written as leading ``#`` comment lines.
+    """
+    body = yaml.dump(config_to_dict(cfg), Dumper=_Dumper, sort_keys=False,
+                     default_flow_style=False, allow_unicode=True, width=100)
+    if not header:
+        return body
+    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
+    return comments + body

@@ -1,0 +1,478 @@
+"""Numba kernels of the thesis OCP (eq. 3.14–3.25): residual F(U, x, t), fdgmres, C/GMRES, Newton.
+
+Problem (per stage ``i = 0 … N−1``, forward Euler, thesis eq. 3.14/3.16)::
+
+    x_{i+1} = x_i + f(x_i, u_i) Δτ
+    L_i     = ½ (x_i − x_d,i)ᵀ q (x_i − x_d,i) + ½ u_iᵀ r u_i
+    Φ       = ½ (x_N − x_d,N)ᵀ q_f (x_N − x_d,N)            (q_f = 0 in the thesis)
+
+Costates run backward, ``λ_N = q_f (x_N − x_d,N)``, ``λ_i = λ_{i+1} + H_x Δτ`` (eq. 3.19/3.20),
+and ``F`` stacks the stationarity conditions per stage (eq. 3.21). Stage layouts (``m``):
+
+* ``m = 12`` — dummy-input form (Ohtsuka): unknowns ``[u(4), v(4), μ(4)]``; each bound
+  ``u_min ≤ u ≤ u_max`` becomes ``(u − c)² + v² − w² = 0`` (``c``, ``w`` centre and half-width)
+  and the cost gains ``−ρ_d Σ v``. Rows ``H_u = r u + f_uᵀλ + 2μ(u − c)``, ``H_v = −ρ_d + 2μv``,
+  ``C``.
+* ``m = 4`` — the same equations condensed: ``C = 0`` and ``H_v = 0`` give
+  ``v = √(w² − (u − c)²)``, ``μ = ρ_d / 2v``, so ``2μ(u − c) = ρ_d s/√(1 − s²)`` with
+  ``s = (u − c)/w``. ``F`` is the gradient of the barrier-augmented cost and ``F_U`` its
+  symmetric Hessian, on which restarted GMRES(5) converges; on the indefinite ``m = 12``
+  system it stagnates (docs/solver-notes.md).
+* ``m = 8`` — the thesis' eq. 3.25: unknowns ``[u(4), ν(4)]`` and an active set
+  ``a ∈ {−1, 0, +1}`` per input; an active bound imposes ``u = u_max − ε`` (``u_min + ε``), an
+  inactive one ``ν = 0``. Rows ``H_u = r u + f_uᵀλ + a ν``, then the constraint or ``ν``.
+
+Packed arguments keep the Python→numba call cheap (one dispatch per tick, few arrays):
+
+* ``W`` (5, 7): rows ``q``, ``q_f``, ``r`` (first 4), ``u_min`` (first 4), ``u_max`` (first 4).
+* ``prm`` (9,): ``Δτ, Δτ(t+h), ρ_d, ζ, h, η, Δt_control, tolerance, Newton trigger ‖F‖``.
+* ``iprm`` (4,): ``m, kmax, max Newton iterations, kmax of a Newton solve``.
+* ``buf``: one flat workspace, carved by :func:`_views` (:func:`workspace_size` long).
+* ``stats`` (4,) out: ``Newton iterations, GMRES iterations, ‖F‖ after Newton, ‖F‖ at the
+  continuation point``.
+
+``U`` is flat: stage ``i`` occupies ``U[i*m : (i+1)*m]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.control.gmres import FAST_MATH, gmres_finish, gmres_iterate, gmres_start
+
+GRAVITY_MPS2 = 9.81
+NX = 7
+NU = 4
+STAGE_CONDENSED = 4
+STAGE_ACTIVE = 8
+STAGE_DUMMY = 12
+# Beyond |s| = S_MAX the condensed bound term continues along its tangent, so an iterate
+# outside the box gets a finite, steep residual that pulls it back instead of a NaN.
+S_MAX = 0.999
+# prm indices
+P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = range(9)
+N_PRM = 9
+# return flags
+FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE = 0, 1, 2
+
+
+def workspace_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
+    """Length of the flat ``buf`` for :func:`_views`."""
+    n = horizon_steps * stage_dim
+    rows = horizon_steps + 1
+    return 3 * rows * NX + rows * 5 + (kmax + 1) * n + (kmax + 1) * kmax + 3 * kmax + 1 + 7 * n + NX
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def _views(buf, n_stages, m, kmax):
+    """Carve ``buf`` into (xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1)."""
+    n = n_stages * m
+    rows = n_stages + 1
+    o = 0
+    xs = buf[o:o + rows * NX].reshape((rows, NX)); o += rows * NX
+    ref0 = buf[o:o + rows * NX].reshape((rows, NX)); o += rows * NX
+    ref1 = buf[o:o + rows * NX].reshape((rows, NX)); o += rows * NX
+    trig = buf[o:o + rows * 5].reshape((rows, 5)); o += rows * 5
+    V = buf[o:o + (kmax + 1) * n].reshape((kmax + 1, n)); o += (kmax + 1) * n
+    H = buf[o:o + (kmax + 1) * kmax].reshape((kmax + 1, kmax)); o += (kmax + 1) * kmax
+    cs = buf[o:o + kmax]; o += kmax
+    sn = buf[o:o + kmax]; o += kmax
+    g = buf[o:o + kmax + 1]; o += kmax + 1
+    F0 = buf[o:o + n]; o += n
+    F1 = buf[o:o + n]; o += n
+    rhs = buf[o:o + n]; o += n
+    Ut = buf[o:o + n]; o += n
+    Ft = buf[o:o + n]; o += n
+    w = buf[o:o + n]; o += n
+    dU = buf[o:o + n]; o += n
+    x1 = buf[o:o + NX]
+    return xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
+def sincos_small(a):
+    """``(sin a, cos a)``: Taylor polynomials to a¹³/a¹⁴ for |a| ≤ 0.5 (error < 1e-16),
+    the library functions beyond. Cheaper than two calls for the small ψ increments."""
+    if abs(a) > 0.5:
+        return math.sin(a), math.cos(a)
+    a2 = a * a
+    s = a * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0 * (
+        1.0 - a2 / 110.0 * (1.0 - a2 / 156.0))))))
+    c = 1.0 - a2 / 2.0 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (
+        1.0 - a2 / 90.0 * (1.0 - a2 / 132.0 * (1.0 - a2 / 182.0))))))
+    return s, c
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def bound_gradient(s):
+    """``s/√(1 − s²)`` for |s| < S_MAX, continued along its tangent beyond (condensed bounds)."""
+    if abs(s) < S_MAX:
+        return s / math.sqrt(1.0 - s * s)
+    s0 = S_MAX if s > 0 else -S_MAX
+    c = 1.0 - S_MAX * S_MAX
+    return s0 / math.sqrt(c) + (s - s0) / (c * math.sqrt(c))
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out):
+    """Evaluate ``F(U, x0, t)`` into ``out`` (N·m,); return ``‖F‖₂``.
+
+    ``ref`` (N+1, 7): the reference at the stage times ``t + iΔτ``. ``xs`` (N+1, 7) ends
+    holding the predicted trajectory; ``trig`` (N+1, 5) caches the forward pass' sin/cos/tan.
+    """
+    n_stages = ref.shape[0] - 1
+    xs[0, :] = x0
+    spsi = math.sin(x0[6])
+    cpsi = math.cos(x0[6])
+    for i in range(n_stages):
+        b = i * m
+        if i > 0:  # ψ_i = ψ_{i−1} + Δτ u_{i−1,3}: rotate instead of two more trig calls
+            s_d, c_d = sincos_small(dtau * U[b - m + 3])
+            spsi, cpsi = spsi * c_d + cpsi * s_d, cpsi * c_d - spsi * s_d
+        tphi = math.tan(U[b + 1])
+        cth = math.cos(U[b + 2])
+        tth = math.sin(U[b + 2]) / cth
+        thrust = U[b] + GRAVITY_MPS2
+        trig[i, 0] = spsi
+        trig[i, 1] = cpsi
+        trig[i, 2] = tphi
+        trig[i, 3] = tth
+        trig[i, 4] = 1.0 / cth
+        xs[i + 1, 0] = xs[i, 0] + dtau * xs[i, 1]
+        xs[i + 1, 1] = xs[i, 1] + dtau * (spsi * tphi / cth + cpsi * tth) * thrust
+        xs[i + 1, 2] = xs[i, 2] + dtau * xs[i, 3]
+        xs[i + 1, 3] = xs[i, 3] + dtau * (-cpsi * tphi / cth + spsi * tth) * thrust
+        xs[i + 1, 4] = xs[i, 4] + dtau * xs[i, 5]
+        xs[i + 1, 5] = xs[i, 5] + dtau * U[b]
+        xs[i + 1, 6] = xs[i, 6] + dtau * U[b + 3]
+    # λ_N = Φ_xᵀ, then backward (eq. 3.19, 3.20); l0..l6 hold λ_{i+1}.
+    qf = W[1]
+    l0 = qf[0] * (xs[n_stages, 0] - ref[n_stages, 0])
+    l1 = qf[1] * (xs[n_stages, 1] - ref[n_stages, 1])
+    l2 = qf[2] * (xs[n_stages, 2] - ref[n_stages, 2])
+    l3 = qf[3] * (xs[n_stages, 3] - ref[n_stages, 3])
+    l4 = qf[4] * (xs[n_stages, 4] - ref[n_stages, 4])
+    l5 = qf[5] * (xs[n_stages, 5] - ref[n_stages, 5])
+    l6 = qf[6] * (xs[n_stages, 6] - ref[n_stages, 6])
+    q = W[0]
+    norm2 = 0.0
+    for i in range(n_stages - 1, -1, -1):
+        b = i * m
+        spsi = trig[i, 0]
+        cpsi = trig[i, 1]
+        tphi = trig[i, 2]
+        tth = trig[i, 3]
+        sec_th = trig[i, 4]
+        thrust = U[b] + GRAVITY_MPS2
+        ax = spsi * tphi * sec_th + cpsi * tth  # ẍ / (z̈ + g)
+        ay = -cpsi * tphi * sec_th + spsi * tth  # ÿ / (z̈ + g)
+        # f_uᵀ λ_{i+1}
+        fl0 = l1 * ax + l3 * ay + l5
+        fl1 = (l1 * spsi - l3 * cpsi) * (1.0 + tphi * tphi) * sec_th * thrust
+        sec2th = 1.0 + tth * tth
+        fl2 = (l1 * (spsi * tphi * tth * sec_th + cpsi * sec2th)
+               + l3 * (-cpsi * tphi * tth * sec_th + spsi * sec2th)) * thrust
+        fl3 = l6
+        for j in range(NU):
+            fl = fl0 if j == 0 else (fl1 if j == 1 else (fl2 if j == 2 else fl3))
+            norm2 += _stage_rows(U, b, j, i, m, fl, W, rho, eps, active, out)
+        # λ_i = λ_{i+1} + H_x Δτ, H_x = q (x_i − x_d,i) + f_xᵀ λ_{i+1}
+        dxdpsi = (cpsi * tphi * sec_th - spsi * tth) * thrust
+        dydpsi = -ay * thrust
+        n0 = l0 + dtau * q[0] * (xs[i, 0] - ref[i, 0])
+        n1 = l1 + dtau * (q[1] * (xs[i, 1] - ref[i, 1]) + l0)
+        n2 = l2 + dtau * q[2] * (xs[i, 2] - ref[i, 2])
+        n3 = l3 + dtau * (q[3] * (xs[i, 3] - ref[i, 3]) + l2)
+        n4 = l4 + dtau * q[4] * (xs[i, 4] - ref[i, 4])
+        n5 = l5 + dtau * (q[5] * (xs[i, 5] - ref[i, 5]) + l4)
+        n6 = l6 + dtau * (q[6] * (xs[i, 6] - ref[i, 6]) + l1 * dxdpsi + l3 * dydpsi)
+        l0, l1, l2, l3, l4, l5, l6 = n0, n1, n2, n3, n4, n5, n6
+    return math.sqrt(norm2)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
+def _stage_rows(U, b, j, i, m, fl, W, rho, eps, active, out):
+    """Rows of input ``j`` at stage ``i`` for layout ``m``; returns their squared norm."""
+    u = U[b + j]
+    r = W[2, j]
+    lo = W[3, j]
+    hi = W[4, j]
+    if m == STAGE_CONDENSED:
+        e_u = r * u + fl + rho * bound_gradient((2.0 * u - (hi + lo)) / (hi - lo))
+        out[b + j] = e_u
+        return e_u * e_u
+    if m == STAGE_DUMMY:
+        half = 0.5 * (hi - lo)
+        v = U[b + 4 + j]
+        mu = U[b + 8 + j]
+        du = u - 0.5 * (hi + lo)
+        e_u = r * u + fl + 2.0 * mu * du
+        e_v = -rho + 2.0 * mu * v
+        e_c = du * du + v * v - half * half
+        out[b + j] = e_u
+        out[b + 4 + j] = e_v
+        out[b + 8 + j] = e_c
+        return e_u * e_u + e_v * e_v + e_c * e_c
+    a = active[i, j]
+    nu = U[b + 4 + j]
+    e_u = r * u + fl + a * nu
+    if a > 0:
+        e_c = u - (hi - eps)
+    elif a < 0:
+        e_c = (lo + eps) - u
+    else:
+        e_c = nu
+    out[b + j] = e_u
+    out[b + 4 + j] = e_c
+    return e_u * e_u + e_c * e_c
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax, rtol,
+            views, out):
+    """Thesis Algorithm 1: solve ``F_U w = rhs`` with ``F_U w ≈ (F(U + h w) − Fbase)/h``.
+
+    ``Fbase`` must be ``F(U, x0, …)``. Starts from ``guess`` (warm start); writes the
+    solution into ``out`` (may alias ``guess``). Returns ``(iterations, residual estimate)``.
+    """
+    xs, _, _, trig, V, H, cs, sn, g, _, _, _, Ut, Ft, w, _, _ = views
+    n = U.shape[0]
+    inv_h = 1.0 / h
+    warm = False
+    for i in range(n):
+        if guess[i] != 0.0:
+            warm = True
+            break
+    if warm:
+        for i in range(n):
+            Ut[i] = U[i] + h * guess[i]
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft)
+        for i in range(n):
+            w[i] = rhs[i] - (Ft[i] - Fbase[i]) * inv_h
+    else:  # a zero guess needs no product: one F evaluation saved
+        w[:] = rhs
+    res = gmres_start(w, V, g)
+    target = 0.0
+    for i in range(n):
+        target += rhs[i] * rhs[i]
+    target = rtol * math.sqrt(target)
+    k = 0
+    while k < kmax and res > target:
+        vk = V[k]
+        for i in range(n):
+            Ut[i] = U[i] + h * vk[i]
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft)
+        for i in range(n):
+            w[i] = (Ft[i] - Fbase[i]) * inv_h
+        res = gmres_iterate(k, w, V, H, cs, sn, g)
+        k += 1
+    gmres_finish(k, V, H, g, guess, out)
+    return k, res
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def prepare_reference(x, ref, out):
+    """Copy ``ref`` into ``out`` with ψ unwrapped along the horizon and shifted by 2πk to
+    lie near ``x[6]`` (the OCP penalises ψ − ψ_d unwrapped). False if anything is non-finite."""
+    for k in range(NX):
+        if not math.isfinite(x[k]):
+            return False
+    two_pi = 2.0 * math.pi
+    prev = x[6]
+    for i in range(ref.shape[0]):
+        for k in range(NX):
+            if not math.isfinite(ref[i, k]):
+                return False
+            out[i, k] = ref[i, k]
+        out[i, 6] = ref[i, 6] + two_pi * round((prev - ref[i, 6]) / two_pi)
+        prev = out[i, 6]
+    return True
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def clip_first_input(U, W, u_out):
+    """``u_out = clip(U[0:4], u_min, u_max)``; False if any is non-finite."""
+    for j in range(NU):
+        u = U[j]
+        if not math.isfinite(u):
+            return False
+        u_out[j] = min(max(u, W[3, j]), W[4, j])
+    return True
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def input_at_now(U, m, lead, W, u_out):
+    """The input for *now* from a solution integrated to ``t + Δt``, clipped to the bounds.
+
+    After ``U ← U + Δt U̇`` the stages sit at ``t + Δt + iΔτ``; stepping back ``lead = Δt/Δτ``
+    stages along the horizon (linear extrapolation) gives the corrected solution's input at
+    ``t``. Applying ``U[0]`` itself would apply the input for one period later — measured:
+    +4 % closed-loop cost against the exact optimum on the bench scenario. False if any is
+    non-finite.
+    """
+    for j in range(NU):
+        u0 = U[j]
+        u = u0 - lead * (U[m + j] - u0) if U.shape[0] > m else u0
+        if not math.isfinite(u):
+            return False
+        u_out[j] = min(max(u, W[3, j]), W[4, j])
+    return True
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax, rtol, views):
+    """Newton/GMRES on ``F(U, x, t) = 0`` (eq. 3.22–3.24) with a backtracking line search.
+
+    ``U`` is updated in place. Returns ``(Newton iterations, GMRES iterations, ‖F‖)``.
+    """
+    xs, _, _, trig, _, _, _, _, _, F0, _, rhs, Ut, Ft, _, dU, _ = views
+    norm = residual(U, m, x, ref, dtau, W, rho, eps, active, xs, trig, F0)
+    it = 0
+    gm_total = 0
+    while it < max_iter and norm > tol and math.isfinite(norm):
+        rhs[:] = -F0
+        dU[:] = 0.0
+        k, _ = fdgmres(U, m, x, ref, dtau, W, rho, eps, active, F0, rhs, dU, h, kmax, rtol,
+                       views, dU)
+        gm_total += k
+        it += 1
+        step = 1.0
+        trial = norm
+        accepted = False
+        for _ in range(12):
+            Ut[:] = U + step * dU
+            trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft)
+            if math.isfinite(trial) and trial < (1.0 - 1e-4 * step) * norm:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            break
+        U[:] = Ut
+        F0[:] = Ft
+        norm = trial
+    return it, gm_total, norm
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
+    """One C/GMRES control tick (Ohtsuka 2004); ``U``, ``dU``, ``u_out``, ``stats`` are written.
+
+    With ``initialise`` it first solves ``F = 0`` by Newton/GMRES from ``U`` (start on the
+    solution manifold); so it does when ‖F‖ at the new measurement exceeds the trigger. Then it solves ``F_U U̇ = −ζ F − F_x ẋ − F_t`` with forward differences along
+    ``(ẋ, 1)``, ``ẋ = f(x, u_0)``, warm-started from the last ``U̇``, and sets
+    ``U ← U + U̇ Δt``. Returns a ``FLAG_*``.
+    """
+    m = iprm[0]
+    kmax = iprm[1]
+    n_stages = ref.shape[0] - 1
+    views = _views(buf, n_stages, m, max(kmax, iprm[3]))
+    xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1 = views
+    no_active = np.zeros((1, 1), dtype=np.int8)
+    stats[:] = 0.0
+    if not prepare_reference(x, ref, ref0):
+        return FLAG_BAD_INPUT
+    dtau = prm[P_DTAU]
+    dtau_next = prm[P_DTAU_NEXT]
+    rho = prm[P_RHO]
+    h = prm[P_H]
+    rtol = prm[P_RTOL]
+    if initialise:
+        it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, no_active, prm[P_TOL],
+                                    iprm[2], h, iprm[3], rtol, views)
+        stats[0] = it
+        stats[1] = gm
+        stats[2] = norm
+        dU[:] = 0.0
+    else:
+        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, no_active, xs, trig, F0)
+        if norm > prm[P_TRIGGER]:
+            # A jump the continuation cannot follow (a reference step is an impulse in F_t):
+            # re-project onto F = 0 by line-searched Newton, warm-started from U.
+            it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, no_active,
+                                        prm[P_TOL], iprm[2], h, iprm[3], rtol, views)
+            stats[0] = it
+            stats[1] = gm
+            stats[2] = norm
+            dU[:] = 0.0
+    # x1 = x + h f(x, u0)
+    spsi = math.sin(x[6])
+    cpsi = math.cos(x[6])
+    tphi = math.tan(U[1])
+    tth = math.tan(U[2])
+    sec_th = 1.0 / math.cos(U[2])
+    thrust = U[0] + GRAVITY_MPS2
+    x1[0] = x[0] + h * x[1]
+    x1[1] = x[1] + h * (spsi * tphi * sec_th + cpsi * tth) * thrust
+    x1[2] = x[2] + h * x[3]
+    x1[3] = x[3] + h * (-cpsi * tphi * sec_th + spsi * tth) * thrust
+    x1[4] = x[4] + h * x[5]
+    x1[5] = x[5] + h * U[0]
+    x1[6] = x[6] + h * U[3]
+    # the reference at t + h, interpolated along the horizon
+    for i in range(n_stages):
+        ref1[i, :] = ref0[i] + (h / dtau) * (ref0[i + 1] - ref0[i])
+    ref1[n_stages, :] = ref0[n_stages] + (h / dtau) * (ref0[n_stages] - ref0[n_stages - 1])
+    norm0 = norm  # F0 holds F(U, x, t): computed above, or left current by newton_solve
+    residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, no_active, xs, trig, F1)
+    zeta = prm[P_ZETA]
+    for i in range(F0.shape[0]):
+        rhs[i] = -zeta * F0[i] - (F1[i] - F0[i]) / h
+    k, _ = fdgmres(U, m, x1, ref1, dtau_next, W, rho, 0.0, no_active, F1, rhs, dU, h, kmax,
+                   rtol, views, dU)
+    period = prm[P_PERIOD]
+    for i in range(U.shape[0]):
+        U[i] += period * dU[i]
+    stats[1] += k
+    stats[3] = norm0
+    if not (math.isfinite(norm0) and input_at_now(U, m, period / dtau, W, u_out)):
+        return FLAG_NON_FINITE
+    return FLAG_OK
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats):
+    """One tick of the thesis' method (m = 8): Newton/fdgmres to tolerance, then eq. 3.25.
+
+    Bounds are checked after each solve: a violated bound joins the active set (its
+    constraint ``C − ε = 0`` is imposed), an active bound whose multiplier turned negative
+    leaves it; the solve repeats until the set settles (≤ 4 rounds). Returns a ``FLAG_*``.
+    """
+    m = STAGE_ACTIVE
+    n_stages = ref.shape[0] - 1
+    views = _views(buf, n_stages, m, iprm[1])
+    ref0 = views[1]
+    stats[:] = 0.0
+    if not prepare_reference(x, ref, ref0):
+        return FLAG_BAD_INPUT
+    norm = 0.0
+    for _ in range(4):
+        it, gm, norm = newton_solve(U, m, x, ref0, prm[P_DTAU], W, 0.0, prm[P_RHO], active,
+                                    prm[P_TOL], iprm[2], prm[P_H], iprm[1], prm[P_RTOL], views)
+        stats[0] += it
+        stats[1] += gm
+        changed = False
+        for i in range(n_stages):
+            for j in range(NU):
+                u = U[i * m + j]
+                nu = U[i * m + 4 + j]
+                if active[i, j] == 0 and u > W[4, j]:
+                    active[i, j] = 1
+                    changed = True
+                elif active[i, j] == 0 and u < W[3, j]:
+                    active[i, j] = -1
+                    changed = True
+                elif active[i, j] != 0 and nu < 0.0:
+                    active[i, j] = 0
+                    U[i * m + 4 + j] = 0.0
+                    changed = True
+        if not changed:
+            break
+    stats[2] = norm
+    stats[3] = norm
+    if not (math.isfinite(norm) and clip_first_input(U, W, u_out)):
+        return FLAG_NON_FINITE
+    return FLAG_OK

@@ -1,0 +1,148 @@
+"""Controller output → AR.Drone PCMD fractions (DESIGN.md §4).
+
+``roll = φ/E``, ``pitch = −θ/E`` (negative pitch = nose down = forward), ``gaz = ż_ref/V``,
+``yaw = −ψ̇/Y`` (PCMD yaw > 0 turns clockwise seen from above, world ψ is counter-clockwise),
+with E, V, Y the drone's configured ``euler_angle_max``, ``control_vz_max`` and ``control_yaw``.
+Each fraction is clipped to [−1, 1] and the clipping is flagged, never silent. A non-finite
+value anywhere is refused: no command is ever built from NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..types import AttitudeCommand
+
+__all__ = ["DroneLimits", "PcmdCommand", "MappingError", "map_to_pcmd", "vz_reference_mps"]
+
+
+class MappingError(ValueError):
+    """A command could not be mapped (a non-finite input); the message names the field."""
+
+
+def _finite(name: str, value: float) -> float:
+    v = float(value)
+    if not math.isfinite(v):
+        raise MappingError(f"{name} must be finite, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class DroneLimits:
+    """The drone's configured command scales (AR.Drone SDK defaults).
+
+    Attributes
+    ----------
+    euler_angle_max_rad : float
+        Tilt at PCMD roll/pitch = ±1, rad (``control:euler_angle_max``, default 0.2094 = 12°).
+    control_vz_max_mps : float
+        Vertical speed at PCMD gaz = ±1, m/s (``control:control_vz_max``, default 0.7).
+    control_yaw_radps : float
+        Yaw rate at PCMD yaw = ±1, rad/s (``control:control_yaw``, default 1.745 = 100°/s).
+    """
+
+    euler_angle_max_rad: float = 0.2094
+    control_vz_max_mps: float = 0.7
+    control_yaw_radps: float = 1.745
+
+    def __post_init__(self) -> None:
+        for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class PcmdCommand:
+    """One AT*PCMD's four fractions in [−1, 1] and which of them were clipped.
+
+    Attributes
+    ----------
+    roll_frac, pitch_frac, gaz_frac, yaw_frac : float
+        PCMD fractions in [−1, 1] (AR.Drone signs, see module docstring).
+    saturated : tuple of 4 bool
+        Per fraction (roll, pitch, gaz, yaw): True when the unclipped value exceeded ±1.
+    """
+
+    roll_frac: float
+    pitch_frac: float
+    gaz_frac: float
+    yaw_frac: float
+    saturated: tuple[bool, bool, bool, bool] = (False, False, False, False)
+
+    @property
+    def any_saturated(self) -> bool:
+        """True when at least one fraction was clipped."""
+        return any(self.saturated)
+
+
+def _clip_unit(v: float) -> tuple[float, bool]:
+    if v > 1.0:
+        return 1.0, True
+    if v < -1.0:
+        return -1.0, True
+    return v, False
+
+
+def map_to_pcmd(cmd: AttitudeCommand, limits: DroneLimits = DroneLimits()) -> PcmdCommand:
+    """Scale an attitude command to PCMD fractions, clipping to [−1, 1] with flags.
+
+    Parameters
+    ----------
+    cmd : AttitudeCommand
+        ż reference (m/s), φ and θ (rad), ψ̇ (rad/s) in the thesis/world conventions.
+    limits : DroneLimits, optional
+
+    Returns
+    -------
+    PcmdCommand
+
+    Raises
+    ------
+    MappingError
+        If any field of ``cmd`` is not finite (the message names it).
+    """
+    phi = _finite("phi_rad", cmd.phi_rad)
+    theta = _finite("theta_rad", cmd.theta_rad)
+    vz = _finite("vz_ref_mps", cmd.vz_ref_mps)
+    psirate = _finite("psirate_radps", cmd.psirate_radps)
+    roll, s_roll = _clip_unit(phi / limits.euler_angle_max_rad)
+    pitch, s_pitch = _clip_unit(-theta / limits.euler_angle_max_rad)
+    gaz, s_gaz = _clip_unit(vz / limits.control_vz_max_mps)
+    yaw, s_yaw = _clip_unit(-psirate / limits.control_yaw_radps)
+    return PcmdCommand(roll, pitch, gaz, yaw, (s_roll, s_pitch, s_gaz, s_yaw))
+
+
+def vz_reference_mps(vz_est_mps: float, zacc_mps2: float, dt_s: float) -> float:
+    """ż reference for the drone from the NMPC's z̈ (thesis, end of §4.4).
+
+    The drone's vertical input is a speed, the NMPC's is an acceleration: integrate the
+    acceleration over one control period from the estimator's ż, ``vz_est + z̈·Δt``
+    (the Kalman prediction step of eq. 4.9).
+
+    Parameters
+    ----------
+    vz_est_mps : float
+        Current ż estimate, m/s.
+    zacc_mps2 : float
+        Commanded z̈ (u1), m/s².
+    dt_s : float
+        Control period, s, >= 0.
+
+    Returns
+    -------
+    float
+        ż reference, m/s (unclipped; :func:`map_to_pcmd` clips and flags).
+
+    Raises
+    ------
+    MappingError
+        Non-finite input (named) or negative ``dt_s``.
+    """
+    vz = _finite("vz_est_mps", vz_est_mps)
+    a = _finite("zacc_mps2", zacc_mps2)
+    dt = _finite("dt_s", dt_s)
+    if dt < 0.0:
+        raise MappingError(f"dt_s must be >= 0, got {dt!r}")
+    return vz + a * dt

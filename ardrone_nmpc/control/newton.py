@@ -1,0 +1,79 @@
+"""The thesis' own NMPC scheme: per tick, Newton/fdgmres to a tolerance (Algorithm 1).
+
+Unknowns per stage are ``[u(4), ν(4)]``; bounds are handled as in thesis eq. 3.25 — after a
+solve, each violated bound ``C ≥ 0`` is imposed as ``C − ε = 0`` and the solve repeated (an
+active bound whose multiplier turns negative is released). Warm start: the previous tick's
+solution and active set.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ardrone_nmpc.control import kernels
+from ardrone_nmpc.control.cgmres import NmpcSolverBase
+from ardrone_nmpc.control.ocp import OcpSpec
+
+
+class NewtonGMRESController(NmpcSolverBase):
+    """Newton/GMRES NMPC (thesis §3.4).
+
+    Parameters
+    ----------
+    spec : :class:`OcpSpec`.
+    period_s : control period (s); only recorded (no continuation here).
+    kmax : k_max of Algorithm 1, per Newton step.
+    fd_step : h of eq. 3.24. gmres_rtol : η of Algorithm 1.
+    tolerance : ‖F‖ at which a tick's Newton iterations stop.
+    max_newton_iterations : Newton steps per solve (per active-set round).
+    bound_epsilon : ε of eq. 3.25 — active bounds are imposed ε inside the box.
+    divergence_residual : ‖F‖ above which the solver re-initialises.
+
+    ``residual_norm`` is ‖F‖ at the end of the tick's iterations; ``max-iterations`` when it
+    is still above ``tolerance``.
+    """
+
+    method = "newton"
+    stage_dim = kernels.STAGE_ACTIVE
+    _newton_every_tick = True
+
+    def __init__(self, spec: OcpSpec, *, period_s: float = 0.065, kmax: int = 5,
+                 fd_step: float = 1e-6, gmres_rtol: float = 1e-3, tolerance: float = 1e-4,
+                 max_newton_iterations: int = 20, bound_epsilon: float = 1e-3,
+                 divergence_residual: float = 1e3):
+        super().__init__(spec, period_s=period_s, kmax=kmax, fd_step=fd_step,
+                         gmres_rtol=gmres_rtol, tolerance=tolerance,
+                         max_newton_iterations=max_newton_iterations, dummy_weight=0.0,
+                         divergence_residual=divergence_residual, newton_kmax=kmax)
+        self._prm[kernels.P_RHO] = bound_epsilon  # the kernel reads ε from this slot
+        self.active = np.zeros((spec.horizon_steps, 4), dtype=np.int8)
+
+    @classmethod
+    def from_config(cls, controller, *, period_s: float) -> "NewtonGMRESController":
+        s = controller.solver
+        return cls(OcpSpec.from_config(controller), period_s=period_s, kmax=s.kmax,
+                   fd_step=s.fd_step, gmres_rtol=s.gmres_rtol, tolerance=s.tolerance,
+                   max_newton_iterations=s.max_newton_iterations,
+                   bound_epsilon=s.bound_epsilon, divergence_residual=s.divergence_residual)
+
+    def _initial_guess(self) -> None:
+        self.U[:] = 0.0
+        self.U.reshape(self.spec.horizon_steps, self.stage_dim)[:, :4] = (
+            0.5 * (self.spec.u_min + self.spec.u_max))
+        self.active[:] = 0
+
+    def _tick(self, x, ref, initialise: bool) -> int:
+        return kernels.newton_tick(self.U, x, ref, self._W, self._prm, self._iprm, self.active,
+                                   self._buf, self._u, self._stats)
+
+
+def make_nmpc(controller, *, period_s: float) -> NmpcSolverBase:
+    """The solver named by ``controller.solver.method`` (``cgmres`` | ``newton``)."""
+    method = controller.solver.method
+    if method == "cgmres":
+        from ardrone_nmpc.control.cgmres import CGMRESController
+
+        return CGMRESController.from_config(controller, period_s=period_s)
+    if method == "newton":
+        return NewtonGMRESController.from_config(controller, period_s=period_s)
+    raise ValueError(f"controller.solver.method: unknown solver {method!r}")

@@ -1,0 +1,151 @@
+"""The thesis OCP as data, the solver result record, and what both NMPC solvers share.
+
+Kept free of numba so that building an :class:`OcpSpec` from a config is cheap; the solvers
+import the kernels when they are constructed.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import NamedTuple
+
+import numpy as np
+
+from ardrone_nmpc.types import INPUT_DIM, IX_PSI, STATE_DIM
+
+
+class SolverStatus(str, Enum):
+    """Outcome of one controller solve; the supervisor, not the solver, picks the fallback."""
+
+    OK = "ok"
+    MAX_ITERATIONS = "max-iterations"
+    DIVERGED = "diverged"
+    NON_FINITE = "non-finite"
+
+
+class SolveResult(NamedTuple):
+    """One tick of an NMPC solver (a NamedTuple: immutable and cheap to build per tick).
+
+    Attributes
+    ----------
+    u : (4,) input ``[z̈ m/s², φ rad, θ rad, ψ̇ rad/s]`` to apply; always finite and within the
+        bounds (after a failure it is the re-initialised solver's first input).
+    status : :class:`SolverStatus`.
+    residual_norm : ‖F‖₂ of the optimality conditions (see each solver for which point).
+    gmres_iterations : Krylov iterations spent this tick (all Newton steps together).
+    solve_time_us : wall time of the solve (µs), measured around the kernels.
+    newton_iterations : Newton steps this tick (0 for a pure continuation update).
+    reinitialised : the solver reset its guess this tick (divergence or non-finite values).
+    """
+
+    u: np.ndarray
+    status: SolverStatus
+    residual_norm: float
+    gmres_iterations: int
+    solve_time_us: float
+    newton_iterations: int = 0
+    reinitialised: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return self.status is SolverStatus.OK
+
+
+def _vector(values, length: int, name: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float).reshape(-1)
+    if arr.shape != (length,):
+        raise ValueError(f"{name}: expected {length} values, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: values must be finite")
+    return arr
+
+
+@dataclass(frozen=True)
+class OcpSpec:
+    """Thesis eq. 3.14 with eq. 4.17 bounds: weights (diagonals), horizon and input box.
+
+    Parameters
+    ----------
+    horizon_steps : N, prediction steps.
+    dtau_s : Δτ (s), prediction step at full horizon.
+    q : (7,) state weights; r : (4,) input weights; q_terminal : (7,) terminal weights.
+    u_min, u_max : (4,) input bounds (m/s², rad, rad, rad/s).
+    horizon_ramp_rate_per_s : α of ``T(t) = N Δτ (1 − e^{−α t})``; 0 keeps Δτ fixed.
+    """
+
+    horizon_steps: int = 15
+    dtau_s: float = 0.1
+    q: np.ndarray = field(default_factory=lambda: np.array([12.0, 2, 7, 2, 5, 10, 13]))
+    r: np.ndarray = field(default_factory=lambda: np.array([4.0, 12, 12, 24]))
+    q_terminal: np.ndarray = field(default_factory=lambda: np.zeros(STATE_DIM))
+    u_min: np.ndarray = field(default_factory=lambda: -np.ones(INPUT_DIM))
+    u_max: np.ndarray = field(default_factory=lambda: np.ones(INPUT_DIM))
+    horizon_ramp_rate_per_s: float = 0.0
+
+    def __post_init__(self):
+        if self.horizon_steps < 1:
+            raise ValueError(f"horizon_steps: must be ≥ 1, got {self.horizon_steps}")
+        if not (self.dtau_s > 0 and math.isfinite(self.dtau_s)):
+            raise ValueError(f"dtau_s: must be a positive number, got {self.dtau_s}")
+        for name, length in (("q", 7), ("r", 4), ("q_terminal", 7), ("u_min", 4), ("u_max", 4)):
+            object.__setattr__(self, name, _vector(getattr(self, name), length, name))
+        if np.any(self.q < 0) or np.any(self.q_terminal < 0) or np.any(self.r <= 0):
+            raise ValueError("weights: q, q_terminal must be ≥ 0 and r > 0")
+        if np.any(self.u_min >= self.u_max):
+            raise ValueError("u_min: must be below u_max for every input")
+
+    @classmethod
+    def from_config(cls, controller) -> "OcpSpec":
+        """Build from a ``config.ControllerConfig`` section."""
+        return cls(
+            horizon_steps=controller.horizon_steps,
+            dtau_s=controller.dtau_s,
+            q=controller.q,
+            r=controller.r,
+            q_terminal=controller.q_terminal,
+            u_min=controller.u_min,
+            u_max=controller.u_max,
+            horizon_ramp_rate_per_s=controller.solver.horizon_ramp_rate_per_s,
+        )
+
+    def stage_dtau_s(self, elapsed_s: float) -> float:
+        """Δτ at ``elapsed_s`` after the controller started (the horizon ramp)."""
+        if self.horizon_ramp_rate_per_s <= 0.0:
+            return self.dtau_s
+        return self.dtau_s * (1.0 - math.exp(-self.horizon_ramp_rate_per_s * max(elapsed_s, 0.0)))
+
+    def stage_cost(self, x: np.ndarray, x_ref: np.ndarray, u: np.ndarray) -> float:
+        """``½ (x − x_d)ᵀ q (x − x_d) + ½ uᵀ r u`` (ψ error wrapped)."""
+        err = np.asarray(x, float) - np.asarray(x_ref, float)
+        err[IX_PSI] = (err[IX_PSI] + math.pi) % (2 * math.pi) - math.pi
+        return 0.5 * float(err @ (self.q * err) + u @ (self.r * u))
+
+
+def unwrap_reference_psi(ref: np.ndarray, psi_rad: float) -> np.ndarray:
+    """Copy of ``ref`` (N+1, 7) whose ψ column is shifted by 2πk to lie near ``psi_rad``.
+
+    The OCP penalises ``ψ − ψ_d`` without wrapping, so a reference at +3.1 rad seen from
+    −3.1 rad must become −3.18 rad, not a 6.2 rad turn the other way.
+    """
+    out = np.array(ref, dtype=float, copy=True)
+    psi = np.unwrap(out[:, IX_PSI])  # continuous along the horizon
+    psi += 2 * math.pi * np.round((psi_rad - psi[0]) / (2 * math.pi))
+    out[:, IX_PSI] = psi
+    return out
+
+
+class Stopwatch:
+    """``with Stopwatch() as sw: …`` then ``sw.us``; perf_counter_ns resolution."""
+
+    __slots__ = ("_t0", "us")
+
+    def __enter__(self):
+        self._t0 = time.perf_counter_ns()
+        return self
+
+    def __exit__(self, *exc):
+        self.us = (time.perf_counter_ns() - self._t0) * 1e-3
+        return False

@@ -1,0 +1,102 @@
+"""Baseline proportional controller (thesis eq. 4.16), made frame-correct.
+
+Eq. 4.16 as printed::
+
+    ż = k1 (z_d − z)
+    φ = k2 (ẏ_d − ẏ),   ẏ_d = y_d − y
+    θ = k3 (ẋ_d − ẋ),   ẋ_d = x_d − x
+    ψ = k4 (ψ_d − ψ)     (a yaw-*rate* command: the drone's yaw input is ψ̇)
+
+is only right at ψ = 0 and with φ's sign flipped: in the model (eq. 3.13) θ > 0 accelerates
+along the body's forward axis and φ > 0 towards the body's *right* (−y at ψ = 0). So the world
+velocity error is rotated into the body frame by ψ first, θ acts on its forward part and φ on
+minus its left part, and the heading error is wrapped so the drone turns the short way.
+
+No clipping happens here: the thesis' point is that the P inputs go well beyond the NMPC's ±1
+bound; the command mapping clips and flags saturation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from ..angles import wrap_angle_rad
+from ..types import IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, AttitudeCommand
+
+__all__ = ["PGains", "p_control"]
+
+
+@dataclass(frozen=True)
+class PGains:
+    """Gains of the P controller. The thesis does not give them; these are chosen.
+
+    The numbers are sized against the simulated AR.Drone's inner loops (specs/plant.md:
+    vz lag τ_z = 0.5 s, tilt lag 0.1 s, yaw-rate lag 0.1 s, command delay 0.26 s) and the
+    thesis' P settling times (z 2 s, x 4 s, y 4.5 s, ψ 2.5 s).
+
+    Attributes
+    ----------
+    k1_per_s : float
+        Altitude error → ż reference, 1/s. 1.5 gives a ≈ 0.7 s outer time constant on top of
+        the 0.5 s vz loop (ζ ≈ 0.58 without delay); a 1 m climb is then vz-limited at
+        0.7 m/s for most of the way, ≈ 2 s as in the thesis.
+    k2_rad_per_mps : float
+        Body-left velocity error → roll φ, rad per m/s (applied with a minus sign, see module).
+    k3_rad_per_mps : float
+        Body-forward velocity error → pitch θ, rad per m/s. 0.35 makes the velocity loop pole
+        ≈ g·k + drag ≈ 4 1/s — slower than the tilt loop, still stable with the 0.26 s delay —
+        and the unit-gain position loop (ẋ_d = x_d − x) then dominates: ≈ 4 s for 1.5 m.
+    k4_per_s : float
+        Heading error → yaw rate, 1/s. 2 gives a 0.5 s time constant over the 0.1 s yaw-rate
+        loop; a 1 rad turn saturates briefly at 1.745 rad/s and settles in ≈ 2–2.5 s.
+    """
+
+    k1_per_s: float = 1.5
+    k2_rad_per_mps: float = 0.35
+    k3_rad_per_mps: float = 0.35
+    k4_per_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("k1_per_s", "k2_rad_per_mps", "k3_rad_per_mps", "k4_per_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+
+
+def p_control(
+    state: Sequence[float], reference: Sequence[float], gains: PGains = PGains()
+) -> AttitudeCommand:
+    """Proportional attitude command of eq. 4.16 in the body frame.
+
+    Parameters
+    ----------
+    state : sequence of float, shape (7,)
+        ``[x, ẋ, y, ẏ, z, ż, ψ]`` (m, m/s, m, m/s, m, m/s, rad), world frame.
+    reference : sequence of float, shape (7,)
+        Desired state in the same order; only x_d, y_d, z_d and ψ_d are used (eq. 4.16 derives
+        the desired velocity from the position error with unit gain).
+    gains : PGains, optional
+
+    Returns
+    -------
+    AttitudeCommand
+        ``vz_ref_mps = k1 (z_d − z)``;
+        ``theta_rad = k3 · e_forward``, ``phi_rad = −k2 · e_left`` where ``e`` is
+        ``(x_d − x − ẋ, y_d − y − ẏ)`` rotated into the body frame by ψ;
+        ``psirate_radps = k4 · wrap(ψ_d − ψ)``. Unclipped.
+    """
+    psi = float(state[IX_PSI])
+    # Desired world velocity = position error (unit gain), minus the measured velocity.
+    ex = float(reference[IX_X]) - float(state[IX_X]) - float(state[IX_VX])
+    ey = float(reference[IX_Y]) - float(state[IX_Y]) - float(state[IX_VY])
+    c, s = math.cos(psi), math.sin(psi)
+    e_forward = c * ex + s * ey
+    e_left = -s * ex + c * ey
+    return AttitudeCommand(
+        vz_ref_mps=gains.k1_per_s * (float(reference[IX_Z]) - float(state[IX_Z])),
+        phi_rad=-gains.k2_rad_per_mps * e_left,  # φ > 0 pushes right (−left), eq. 3.13
+        theta_rad=gains.k3_rad_per_mps * e_forward,
+        psirate_radps=gains.k4_per_s * wrap_angle_rad(float(reference[IX_PSI]) - psi),
+    )
