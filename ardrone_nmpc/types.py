@@ -37,3 +37,112 @@ class AttitudeCommand:
     phi_rad: float
     theta_rad: float
     psirate_radps: float
+
+
+# ----------------------------------------------------------------------------- flight records
+# Produced by the simulated plant (sim/plant.py) and, on real hardware, by the links; consumed
+# by the estimator, the supervisor and the recorder. Vectors are read-only float64 arrays, so
+# the records compare by identity (``eq=False``): compare fields with numpy instead.
+
+import enum as _enum
+
+import numpy as _np
+
+
+class FlightMode(_enum.Enum):
+    """The drone's flight state as the ground station sees it (protocol §4.5, §5)."""
+
+    LANDED = "landed"          # on the ground, motors off; PCMD ignored
+    TAKING_OFF = "taking_off"  # automatic climb to the take-off height; PCMD ignored
+    FLYING = "flying"          # airborne, following PCMD (or hovering with the flag at 0)
+    LANDING = "landing"        # automatic descent to the ground; PCMD ignored
+    EMERGENCY = "emergency"    # motors cut (falls, then lies on the ground) until reset
+
+    @property
+    def airborne(self) -> bool:
+        """True while the motors run (take-off, flying, landing)."""
+        return self in (FlightMode.TAKING_OFF, FlightMode.FLYING, FlightMode.LANDING)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlantTruth:
+    """The simulated drone's true state (world frame, DESIGN.md §4).
+
+    Attributes
+    ----------
+    t_s : plant time (s).
+    position_m : (3,) [x, y, z] (m); x forward, y left, z up.
+    velocity_mps : (3,) world velocity [ẋ, ẏ, ż] (m/s).
+    roll_rad : roll φ (rad), model convention of thesis eq. 3.13: φ > 0 accelerates towards −y
+        at ψ = 0 (right wing down; the same sign as PCMD roll).
+    pitch_rad : pitch θ (rad), model convention: θ > 0 accelerates towards +x at ψ = 0 (nose
+        down; the opposite sign of PCMD pitch and of navdata theta).
+    psi_rad : heading ψ (rad), counter-clockwise from +x, wrapped to (−π, π].
+    psi_rate_radps : ψ̇ (rad/s), counter-clockwise positive.
+    mode : flight mode.
+    battery_pct : battery level (%).
+    """
+
+    t_s: float
+    position_m: _np.ndarray
+    velocity_mps: _np.ndarray
+    roll_rad: float
+    pitch_rad: float
+    psi_rad: float
+    psi_rate_radps: float
+    mode: FlightMode
+    battery_pct: float
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MocapPose:
+    """One motion-capture pose of the drone (specs/mocap-stream.md), converted to SI.
+
+    Attributes
+    ----------
+    t_s : time of the pose (s): plant time in simulation, receipt time on the real link.
+    position_m : (3,) [x, y, z] (m), world frame (x forward, y left, z up).
+    rotation_xyz_rad : (3,) Euler angles [rx, ry, rz] (rad) with R = Rx(rx)·Ry(ry)·Rz(rz)
+        (intrinsic X→Y→Z, scipy ``Rotation.from_euler("XYZ", …)``), R mapping body to world.
+    psi_rad : heading ψ = atan2(R[1,0], R[0,0]) (rad), counter-clockwise, wrapped to (−π, π].
+    """
+
+    t_s: float
+    position_m: _np.ndarray
+    rotation_xyz_rad: _np.ndarray
+    psi_rad: float
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class NavdataSample:
+    """One navdata demo sample (protocol §4.4) in the drone's own sign conventions, SI-ish units.
+
+    Only the units differ from the wire (millidegrees → degrees, mm → m, mm/s → m/s); the signs
+    are the drone's: body frame x forward, y right, z down.
+
+    Attributes
+    ----------
+    t_s : time of the sample (s).
+    mode : flight mode (ctrl_state major / state bits on the wire).
+    battery_pct : battery level (%).
+    roll_deg : navdata phi (°), > 0 right wing down (= world φ in degrees, plus trim bias).
+    pitch_deg : navdata theta (°), > 0 nose up (= −world θ in degrees, plus trim bias).
+    yaw_deg : navdata psi (°), > 0 clockwise seen from above (= −world ψ), with an arbitrary
+        offset set at take-off and a slow drift; wrapped to (−180, 180].
+    altitude_m : ultrasound altitude (m), ≥ 0; 0 when not airborne.
+    vx_body_mps : optical-flow speed along the body x axis (forward positive), m/s.
+    vy_body_mps : optical-flow speed along the body y axis, **right positive** (navdata vy; the
+        world-frame "left" speed is −vy_body_mps).
+    vz_mps : vertical speed (m/s), **down positive** (navdata body z down).
+    """
+
+    t_s: float
+    mode: FlightMode
+    battery_pct: float
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    altitude_m: float
+    vx_body_mps: float
+    vy_body_mps: float
+    vz_mps: float

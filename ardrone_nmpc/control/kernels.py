@@ -52,9 +52,14 @@ STAGE_DUMMY = 12
 # Beyond |s| = S_MAX the condensed bound term continues along its tangent, so an iterate
 # outside the box gets a finite, steep residual that pulls it back instead of a NaN.
 S_MAX = 0.999
+# An update that would take a condensed input across its bound moves it this fraction of the
+# way to the bound instead (component-wise fraction-to-the-boundary): the barrier is only
+# meaningful inside the box, and outside it the model's tan() has spurious stationary points.
+FRACTION_TO_BOUND = 0.99
 # prm indices
 P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = range(9)
 N_PRM = 9
+ACTIVE_SET_ROUNDS = 8  # eq. 3.25 re-solves per tick at most
 # return flags
 FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE = 0, 1, 2
 
@@ -114,6 +119,23 @@ def bound_gradient(s):
     s0 = S_MAX if s > 0 else -S_MAX
     c = 1.0 - S_MAX * S_MAX
     return s0 / math.sqrt(c) + (s - s0) / (c * math.sqrt(c))
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def keep_inside(U_old, U_new, W):
+    """Condensed layout: pull every input of ``U_new`` that left the box back inside.
+
+    A component whose update would cross a bound goes ``FRACTION_TO_BOUND`` of the way from
+    its old value to that bound instead; the others keep their full step.
+    """
+    for k in range(U_new.shape[0]):
+        j = k % NU
+        lo = W[3, j]
+        hi = W[4, j]
+        if U_new[k] >= hi:
+            U_new[k] = U_old[k] + FRACTION_TO_BOUND * (hi - U_old[k])
+        elif U_new[k] <= lo:
+            U_new[k] = U_old[k] + FRACTION_TO_BOUND * (lo - U_old[k])
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
@@ -180,8 +202,8 @@ def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out):
             fl = fl0 if j == 0 else (fl1 if j == 1 else (fl2 if j == 2 else fl3))
             norm2 += _stage_rows(U, b, j, i, m, fl, W, rho, eps, active, out)
         # λ_i = λ_{i+1} + H_x Δτ, H_x = q (x_i − x_d,i) + f_xᵀ λ_{i+1}
-        dxdpsi = (cpsi * tphi * sec_th - spsi * tth) * thrust
-        dydpsi = -ay * thrust
+        dxdpsi = -ay * thrust  # ∂ẍ/∂ψ
+        dydpsi = ax * thrust  # ∂ÿ/∂ψ
         n0 = l0 + dtau * q[0] * (xs[i, 0] - ref[i, 0])
         n1 = l1 + dtau * (q[1] * (xs[i, 1] - ref[i, 1]) + l0)
         n2 = l2 + dtau * q[2] * (xs[i, 2] - ref[i, 2])
@@ -304,25 +326,6 @@ def clip_first_input(U, W, u_out):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def input_at_now(U, m, lead, W, u_out):
-    """The input for *now* from a solution integrated to ``t + Δt``, clipped to the bounds.
-
-    After ``U ← U + Δt U̇`` the stages sit at ``t + Δt + iΔτ``; stepping back ``lead = Δt/Δτ``
-    stages along the horizon (linear extrapolation) gives the corrected solution's input at
-    ``t``. Applying ``U[0]`` itself would apply the input for one period later — measured:
-    +4 % closed-loop cost against the exact optimum on the bench scenario. False if any is
-    non-finite.
-    """
-    for j in range(NU):
-        u0 = U[j]
-        u = u0 - lead * (U[m + j] - u0) if U.shape[0] > m else u0
-        if not math.isfinite(u):
-            return False
-        u_out[j] = min(max(u, W[3, j]), W[4, j])
-    return True
-
-
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax, rtol, views):
     """Newton/GMRES on ``F(U, x, t) = 0`` (eq. 3.22–3.24) with a backtracking line search.
 
@@ -344,6 +347,8 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
         accepted = False
         for _ in range(12):
             Ut[:] = U + step * dU
+            if m == STAGE_CONDENSED:
+                keep_inside(U, Ut, W)
             trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft)
             if math.isfinite(trial) and trial < (1.0 - 1e-4 * step) * norm:
                 accepted = True
@@ -363,8 +368,9 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
 
     With ``initialise`` it first solves ``F = 0`` by Newton/GMRES from ``U`` (start on the
     solution manifold); so it does when ‖F‖ at the new measurement exceeds the trigger. Then it solves ``F_U U̇ = −ζ F − F_x ẋ − F_t`` with forward differences along
-    ``(ẋ, 1)``, ``ẋ = f(x, u_0)``, warm-started from the last ``U̇``, and sets
-    ``U ← U + U̇ Δt``. Returns a ``FLAG_*``.
+    ``(ẋ, 1)``, ``ẋ = f(x, u_0)``, warm-started from the last ``U̇``; writes ``u_0`` of the
+    solution at ``t`` to ``u_out`` and sets ``U ← U + U̇ Δt`` (Ohtsuka's explicit-Euler
+    integration of the continuation). Returns a ``FLAG_*``.
     """
     m = iprm[0]
     kmax = iprm[1]
@@ -423,23 +429,59 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
         rhs[i] = -zeta * F0[i] - (F1[i] - F0[i]) / h
     k, _ = fdgmres(U, m, x1, ref1, dtau_next, W, rho, 0.0, no_active, F1, rhs, dU, h, kmax,
                    rtol, views, dU)
+    # Apply U(t)[0] — the input the prediction above assumed — then integrate U to t + Δt.
+    # Applying the integrated U[0] instead would apply the input meant for one period later
+    # (measured +4 % closed-loop cost), and extrapolating back along the horizon breaks the
+    # consistency with ẋ = f(x, U[0]) and leaves a fixed point with F ≠ 0 (a steady offset).
+    applied_ok = clip_first_input(U, W, u_out)
     period = prm[P_PERIOD]
+    Unew = views[12]  # Ut: free again after fdgmres
     for i in range(U.shape[0]):
-        U[i] += period * dU[i]
+        Unew[i] = U[i] + period * dU[i]
+    if m == STAGE_CONDENSED:
+        keep_inside(U, Unew, W)
+    U[:] = Unew
     stats[1] += k
     stats[3] = norm0
-    if not (math.isfinite(norm0) and input_at_now(U, m, period / dtau, W, u_out)):
+    if not (math.isfinite(norm0) and applied_ok and math.isfinite(U[0])):
         return FLAG_NON_FINITE
     return FLAG_OK
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def update_active_set(U, active, W, eps, n_stages):
+    """Eq. 3.25 bookkeeping after a solve; True if the active set changed.
+
+    Every violated bound joins the set and its input is projected to ``bound ∓ ε`` (the next
+    Newton solve then starts feasible for it); an active bound whose multiplier ν turned
+    negative (it pushes the wrong way) leaves the set.
+    """
+    m = STAGE_ACTIVE
+    changed = False
+    for i in range(n_stages):
+        for j in range(NU):
+            u = U[i * m + j]
+            if active[i, j] == 0 and u > W[4, j]:
+                active[i, j] = 1
+                U[i * m + j] = W[4, j] - eps
+                changed = True
+            elif active[i, j] == 0 and u < W[3, j]:
+                active[i, j] = -1
+                U[i * m + j] = W[3, j] + eps
+                changed = True
+            elif active[i, j] != 0 and U[i * m + 4 + j] < 0.0:
+                active[i, j] = 0
+                U[i * m + 4 + j] = 0.0
+                changed = True
+    return changed
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats):
     """One tick of the thesis' method (m = 8): Newton/fdgmres to tolerance, then eq. 3.25.
 
-    Bounds are checked after each solve: a violated bound joins the active set (its
-    constraint ``C − ε = 0`` is imposed), an active bound whose multiplier turned negative
-    leaves it; the solve repeats until the set settles (≤ 4 rounds). Returns a ``FLAG_*``.
+    After each solve the active set is updated (:func:`update_active_set`) and, if it
+    changed, the solve repeats — at most ``ACTIVE_SET_ROUNDS`` times. Returns a ``FLAG_*``.
     """
     m = STAGE_ACTIVE
     n_stages = ref.shape[0] - 1
@@ -448,28 +490,14 @@ def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats):
     stats[:] = 0.0
     if not prepare_reference(x, ref, ref0):
         return FLAG_BAD_INPUT
+    eps = prm[P_RHO]  # the ε of eq. 3.25 travels in the ρ slot for this layout
     norm = 0.0
-    for _ in range(4):
-        it, gm, norm = newton_solve(U, m, x, ref0, prm[P_DTAU], W, 0.0, prm[P_RHO], active,
+    for _ in range(ACTIVE_SET_ROUNDS):
+        it, gm, norm = newton_solve(U, m, x, ref0, prm[P_DTAU], W, 0.0, eps, active,
                                     prm[P_TOL], iprm[2], prm[P_H], iprm[1], prm[P_RTOL], views)
         stats[0] += it
         stats[1] += gm
-        changed = False
-        for i in range(n_stages):
-            for j in range(NU):
-                u = U[i * m + j]
-                nu = U[i * m + 4 + j]
-                if active[i, j] == 0 and u > W[4, j]:
-                    active[i, j] = 1
-                    changed = True
-                elif active[i, j] == 0 and u < W[3, j]:
-                    active[i, j] = -1
-                    changed = True
-                elif active[i, j] != 0 and nu < 0.0:
-                    active[i, j] = 0
-                    U[i * m + 4 + j] = 0.0
-                    changed = True
-        if not changed:
+        if not update_active_set(U, active, W, eps, n_stages):
             break
     stats[2] = norm
     stats[3] = norm

@@ -1,0 +1,28 @@
+"""Shared test fixtures and helpers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc import model
+
+
+def thesis_cost(x0, ref, u, *, q, r, qf, dtau):
+    """Thesis eq. 3.14 evaluated directly (forward Euler), for gradient checks.
+
+    x0 (7,), ref (N+1, 7), u (N, 4).
+    """
+    x = np.array(x0, dtype=float)
+    cost = 0.0
+    for i in range(u.shape[0]):
+        e = x - ref[i]
+        cost += 0.5 * (e @ (q * e) + u[i] @ (r * u[i])) * dtau
+        x = x + model.f(x, u[i]) * dtau
+    e = x - ref[-1]
+    return cost + 0.5 * e @ (qf * e)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20191)
