@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ardrone_nmpc import model
-from ardrone_nmpc.control.ocp import OcpSpec
+from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus
 
 STEP_M = 1.0
 STEP_PSI_RAD = 1.0
@@ -39,6 +39,8 @@ class BenchRow:
     p50_us: float
     p99_us: float
     max_us: float
+    call_mean_us: float
+    call_p99_us: float
     residual_mean: float
     residual_max: float
     closed_loop_cost: float
@@ -66,10 +68,11 @@ def plant_step(x: np.ndarray, u: np.ndarray, period_s: float) -> np.ndarray:
 
 def closed_loop(solve, spec: OcpSpec, *, steps: int, period_s: float,
                 x0: np.ndarray | None = None, target: np.ndarray | None = None):
-    """Run ``solve(t_s, x, ref) -> (u, residual, ok)`` for ``steps`` timed ticks.
+    """Run ``solve(t_s, x, ref) -> (u, residual, ok, update_us)`` for ``steps`` timed ticks.
 
-    Returns ``(times_us, residuals, cost, failures, states)``; timing is wall time around
-    each ``solve`` call, as the control loop would pay it.
+    Returns ``(call_us, update_us, residuals, cost, failures, states)``: ``call_us`` is wall
+    time around each ``solve`` call as the control loop pays it, ``update_us`` the solver's
+    own figure for its update (kernel and dispatch, without packaging the result).
     """
     x = HOVER_STATE.copy() if x0 is None else np.asarray(x0, float).copy()
     hover_ref = np.tile(x, (spec.horizon_steps + 1, 1))
@@ -78,6 +81,7 @@ def closed_loop(solve, spec: OcpSpec, *, steps: int, period_s: float,
     target = step_target() if target is None else target
     ref = np.tile(target, (spec.horizon_steps + 1, 1))
     times = np.empty(steps)
+    updates = np.empty(steps)
     residuals = np.empty(steps)
     states = np.empty((steps + 1, x.size))
     states[0] = x
@@ -86,49 +90,63 @@ def closed_loop(solve, spec: OcpSpec, *, steps: int, period_s: float,
     t_base = WARMUP_TICKS * period_s
     for k in range(steps):
         t0 = time.perf_counter_ns()
-        u, res, ok = solve(t_base + k * period_s, x, ref)
+        u, res, ok, update_us = solve(t_base + k * period_s, x, ref)
         times[k] = (time.perf_counter_ns() - t0) * 1e-3
+        updates[k] = update_us
         residuals[k] = res
         failures += not ok
         cost += spec.stage_cost(x, target, u) * period_s
         x = plant_step(x, u, period_s)
         states[k + 1] = x
-    return times, residuals, cost, failures, states
+    return times, updates, residuals, cost, failures, states
 
 
-def _row(name, spec, kmax, times, residuals, cost, failures) -> BenchRow:
+def _row(name, spec, kmax, calls, updates, residuals, cost, failures) -> BenchRow:
     finite = residuals[np.isfinite(residuals)]  # IPOPT reports no residual: NaN
     return BenchRow(
-        solver=name, horizon_steps=spec.horizon_steps, kmax=kmax, steps=int(times.size),
-        mean_us=float(times.mean()), p50_us=float(np.percentile(times, 50)),
-        p99_us=float(np.percentile(times, 99)), max_us=float(times.max()),
+        solver=name, horizon_steps=spec.horizon_steps, kmax=kmax, steps=int(updates.size),
+        mean_us=float(updates.mean()), p50_us=float(np.percentile(updates, 50)),
+        p99_us=float(np.percentile(updates, 99)), max_us=float(updates.max()),
+        call_mean_us=float(calls.mean()), call_p99_us=float(np.percentile(calls, 99)),
         residual_mean=float(finite.mean()) if finite.size else math.nan,
         residual_max=float(finite.max()) if finite.size else math.nan,
         closed_loop_cost=float(cost), failures=int(failures))
 
 
-def bench_nmpc(solver, *, steps: int) -> BenchRow:
-    """Benchmark a :class:`~ardrone_nmpc.control.cgmres.NmpcSolverBase` solver."""
+def bench_nmpc(make_solver, *, steps: int, repeats: int = 1) -> BenchRow:
+    """Benchmark a solver: ``make_solver()`` builds a fresh one per repeat.
 
-    def solve(t_s, x, ref):
-        r = solver.solve(t_s, x, ref)
-        return r.u, r.residual_norm, r.ok
+    The closed loop is deterministic, so every repeat computes the same ticks; taking each
+    tick's minimum time over the repeats strips the interference of other processes on a
+    shared machine (the figures of one run are what a single flight would see).
+    """
+    all_calls, all_updates = [], []
+    for _ in range(max(1, repeats)):
+        solver = make_solver()
 
-    times, residuals, cost, failures, _ = closed_loop(
-        solve, solver.spec, steps=steps, period_s=solver.period_s)
-    return _row(solver.method, solver.spec, solver.kmax, times, residuals, cost, failures)
+        def solve(t_s, x, ref):
+            r = solver.solve(t_s, x, ref)
+            return r.u, r.residual_norm, r.status is SolverStatus.OK, r.solve_time_us
+
+        calls, updates, residuals, cost, failures, _ = closed_loop(
+            solve, solver.spec, steps=steps, period_s=solver.period_s)
+        all_calls.append(calls)
+        all_updates.append(updates)
+    return _row(solver.method, solver.spec, solver.kmax, np.min(all_calls, axis=0),
+                np.min(all_updates, axis=0), residuals, cost, failures)
 
 
-def bench_ipopt(spec: OcpSpec, *, steps: int, period_s: float) -> BenchRow:
+def bench_ipopt(spec: OcpSpec, *, steps: int, period_s: float) -> BenchRow:  # one repeat: slow
     """The same OCP solved to optimality by CasADi/IPOPT each tick (warm-started)."""
     from ardrone_nmpc.control.exact import IpoptController
 
     solver = IpoptController(spec)
 
     def solve(t_s, x, ref):
+        t0 = time.perf_counter_ns()
         u, ok = solver.solve(x, ref)
-        return u, math.nan, ok
+        return u, math.nan, ok, (time.perf_counter_ns() - t0) * 1e-3
 
-    times, residuals, cost, failures, _ = closed_loop(solve, spec, steps=steps,
-                                                      period_s=period_s)
-    return _row("ipopt", spec, 0, times, residuals, cost, failures)
+    calls, updates, residuals, cost, failures, _ = closed_loop(solve, spec, steps=steps,
+                                                               period_s=period_s)
+    return _row("ipopt", spec, 0, calls, updates, residuals, cost, failures)

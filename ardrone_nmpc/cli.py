@@ -58,6 +58,7 @@ def bench(
     horizon_steps: Optional[int] = typer.Option(None, "--horizon-steps", min=1, help="N (overrides the config)."),
     kmax: Optional[int] = typer.Option(None, "--kmax", min=1, help="GMRES iterations per solve (overrides the config)."),
     steps: int = typer.Option(300, "--steps", min=10, help="Timed control ticks per solver."),
+    repeats: int = typer.Option(5, "--repeats", min=1, help="Identical closed-loop repeats; each tick's best time is kept (strips machine noise)."),
     solvers: str = typer.Option("cgmres,newton", "--solvers", help="Comma-separated: cgmres, newton."),
     compare: Optional[str] = typer.Option(None, "--compare", help="'casadi': also solve the OCP exactly with CasADi/IPOPT."),
     json_path: Optional[Path] = typer.Option(None, "--json", help="Write the rows as JSON to this file."),
@@ -79,7 +80,7 @@ def bench(
         _fail([f"--compare: unknown comparison {compare!r}; the only one is 'casadi'"])
     try:
         run_bench_command(cfg=cfg, solvers=names, steps=steps, compare_casadi=compare == "casadi",
-                          json_path=json_path)
+                          json_path=json_path, repeats=repeats)
     except RuntimeError as err:
         _fail([str(err)])
 

@@ -396,6 +396,9 @@ class SimConfig(_Section):
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="Sensor noise.")
     mocap_rate_hz: Positive = Field(100.0, description="Simulated mocap stream rate (Hz).")
     navdata_rate_hz: Positive = Field(15.0, description="Simulated navdata rate (Hz); 15 = demo.")
+    settle_s: NonNegative = Field(
+        4.0, description="Seconds the controller holds the reference's start point before t = 0 "
+        "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis.")
 
 
 # ----------------------------------------------------------------------------- safety

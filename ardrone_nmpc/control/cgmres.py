@@ -49,27 +49,24 @@ class NmpcSolverBase:
         self.kmax = int(kmax)
         self.tolerance = float(tolerance)
         self.divergence_residual = float(divergence_residual)
-        n = spec.horizon_steps * self.stage_dim
-        self._W = np.zeros((5, STATE_DIM))
+        newton_kmax = min(int(newton_kmax), spec.horizon_steps * self.stage_dim)
+        self._mem = np.zeros(kernels.memory_size(spec.horizon_steps, self.stage_dim,
+                                                 max(self.kmax, newton_kmax)))
+        (self.U, self.dU, self._u, self._stats, self._W, self._prm,
+         self._buf) = kernels.unpack(self._mem, spec.horizon_steps, self.stage_dim)
         self._W[0], self._W[1] = spec.q, spec.q_terminal
         self._W[2, :INPUT_DIM] = spec.r
         self._W[3, :INPUT_DIM], self._W[4, :INPUT_DIM] = spec.u_min, spec.u_max
-        self._prm = np.zeros(kernels.N_PRM)
         self._prm[kernels.P_RHO] = dummy_weight
         self._prm[kernels.P_H] = fd_step
         self._prm[kernels.P_RTOL] = gmres_rtol
         self._prm[kernels.P_PERIOD] = period_s
         self._prm[kernels.P_TOL] = tolerance
-        newton_kmax = min(int(newton_kmax), n)
+        self._prm[kernels.P_DTAU] = self._prm[kernels.P_DTAU_NEXT] = spec.dtau_s
         self._iprm = np.array([self.stage_dim, self.kmax, max_newton_iterations, newton_kmax],
                               dtype=np.int64)
-        self._buf = np.zeros(kernels.workspace_size(spec.horizon_steps, self.stage_dim,
-                                                    max(self.kmax, newton_kmax)))
         self._ramped = spec.horizon_ramp_rate_per_s > 0
-        self._prm[kernels.P_DTAU] = self._prm[kernels.P_DTAU_NEXT] = spec.dtau_s
-        self._u = np.zeros(INPUT_DIM)
-        self._stats = np.zeros(4)
-        self.U = np.zeros(n)
+        self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
 
     @property
@@ -100,9 +97,11 @@ class NmpcSolverBase:
         ref : (N+1, 7) reference at the stage times ``t_s + i·Δτ`` (``stage_dtau_s(t_s)``);
             ψ is unwrapped inside, any 2π branch will do.
         """
-        x = np.asarray(x, dtype=np.float64)
-        ref = np.asarray(ref, dtype=np.float64)
-        if x.shape != (STATE_DIM,) or ref.shape != (self.spec.horizon_steps + 1, STATE_DIM):
+        if x.__class__ is not np.ndarray or x.dtype != np.float64:
+            x = np.asarray(x, dtype=np.float64)
+        if ref.__class__ is not np.ndarray or ref.dtype != np.float64:
+            ref = np.asarray(ref, dtype=np.float64)
+        if x.shape != (STATE_DIM,) or ref.shape != self._ref_shape:
             raise ValueError(f"solve: x must be (7,), ref ({self.spec.horizon_steps + 1}, 7); "
                              f"got {x.shape} and {ref.shape}")
         initialise = self._t0_s is None
@@ -201,7 +200,6 @@ class CGMRESController(NmpcSolverBase):
                              f"got {newton_trigger_residual}")
         self._prm[kernels.P_ZETA] = zeta_per_s
         self._prm[kernels.P_TRIGGER] = newton_trigger_residual
-        self.dU = np.zeros_like(self.U)
 
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "CGMRESController":
@@ -223,5 +221,4 @@ class CGMRESController(NmpcSolverBase):
         self.dU[:] = 0.0
 
     def _tick(self, x, ref, initialise: bool) -> int:
-        return kernels.cgmres_tick(self.U, self.dU, x, ref, self._W, self._prm, self._iprm,
-                                   initialise, self._buf, self._u, self._stats)
+        return kernels.cgmres_step(self._mem, x, ref, self._iprm, initialise)

@@ -26,11 +26,17 @@ FAST_MATH = {"contract", "reassoc", "arcp", "nsz", "afn"}
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def gmres_start(r0, V, g):
     """Set ``V[0] = r0/‖r0‖`` and ``g = ‖r0‖ e1``; return ``β = ‖r0‖``."""
-    beta = math.sqrt(np.dot(r0, r0))
+    beta = 0.0
+    for i in range(r0.shape[0]):
+        beta += r0[i] * r0[i]
+    beta = math.sqrt(beta)
     g[:] = 0.0
     g[0] = beta
     if beta > 0.0:
-        V[0, :] = r0 / beta
+        inv = 1.0 / beta
+        v0 = V[0]
+        for i in range(r0.shape[0]):
+            v0[i] = r0[i] * inv
     return beta
 
 

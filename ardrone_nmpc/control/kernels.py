@@ -60,6 +60,7 @@ FRACTION_TO_BOUND = 0.99
 P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = range(9)
 N_PRM = 9
 ACTIVE_SET_ROUNDS = 8  # eq. 3.25 re-solves per tick at most
+NO_ACTIVE = np.zeros((1, 1), dtype=np.int8)  # the active set argument of layouts without one
 # return flags
 FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE = 0, 1, 2
 
@@ -69,6 +70,30 @@ def workspace_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
     n = horizon_steps * stage_dim
     rows = horizon_steps + 1
     return 3 * rows * NX + rows * 5 + (kmax + 1) * n + (kmax + 1) * kmax + 3 * kmax + 1 + 7 * n + NX
+
+
+def memory_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
+    """Length of one solver's packed float memory (see :func:`unpack`)."""
+    n = horizon_steps * stage_dim
+    return 2 * n + NU + 4 + 5 * NX + N_PRM + workspace_size(horizon_steps, stage_dim, kmax)
+
+
+@njit(cache=True)
+def unpack(mem, n_stages, m):
+    """Views of one solver's packed memory: ``(U, dU, u_out, stats, W, prm, buf)``.
+
+    One array instead of seven keeps the Python→numba call of every tick cheap (dispatch
+    costs per argument); the Python side holds the same views.
+    """
+    n = n_stages * m
+    o = 0
+    U = mem[o:o + n]; o += n
+    dU = mem[o:o + n]; o += n
+    u_out = mem[o:o + NU]; o += NU
+    stats = mem[o:o + 4]; o += 4
+    W = mem[o:o + 5 * NX].reshape((5, NX)); o += 5 * NX
+    prm = mem[o:o + N_PRM]; o += N_PRM
+    return U, dU, u_out, stats, W, prm, mem[o:]
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
@@ -139,11 +164,13 @@ def keep_inside(U_old, U_new, W):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out):
+def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_inputs=False):
     """Evaluate ``F(U, x0, t)`` into ``out`` (N·m,); return ``‖F‖₂``.
 
     ``ref`` (N+1, 7): the reference at the stage times ``t + iΔτ``. ``xs`` (N+1, 7) ends
     holding the predicted trajectory; ``trig`` (N+1, 5) caches the forward pass' sin/cos/tan.
+    ``same_inputs``: ``U`` is the one of the previous call, so the inputs' tan/sec in
+    ``trig`` are still valid (saves 3N trig calls; ψ's are recomputed as ``x0`` may differ).
     """
     n_stages = ref.shape[0] - 1
     xs[0, :] = x0
@@ -154,19 +181,24 @@ def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out):
         if i > 0:  # ψ_i = ψ_{i−1} + Δτ u_{i−1,3}: rotate instead of two more trig calls
             s_d, c_d = sincos_small(dtau * U[b - m + 3])
             spsi, cpsi = spsi * c_d + cpsi * s_d, cpsi * c_d - spsi * s_d
-        tphi = math.tan(U[b + 1])
-        cth = math.cos(U[b + 2])
-        tth = math.sin(U[b + 2]) / cth
+        if same_inputs:
+            tphi = trig[i, 2]
+            tth = trig[i, 3]
+            sec_th = trig[i, 4]
+        else:
+            tphi = math.tan(U[b + 1])
+            sec_th = 1.0 / math.cos(U[b + 2])
+            tth = math.sin(U[b + 2]) * sec_th
+            trig[i, 2] = tphi
+            trig[i, 3] = tth
+            trig[i, 4] = sec_th
         thrust = U[b] + GRAVITY_MPS2
         trig[i, 0] = spsi
         trig[i, 1] = cpsi
-        trig[i, 2] = tphi
-        trig[i, 3] = tth
-        trig[i, 4] = 1.0 / cth
         xs[i + 1, 0] = xs[i, 0] + dtau * xs[i, 1]
-        xs[i + 1, 1] = xs[i, 1] + dtau * (spsi * tphi / cth + cpsi * tth) * thrust
+        xs[i + 1, 1] = xs[i, 1] + dtau * (spsi * tphi * sec_th + cpsi * tth) * thrust
         xs[i + 1, 2] = xs[i, 2] + dtau * xs[i, 3]
-        xs[i + 1, 3] = xs[i, 3] + dtau * (-cpsi * tphi / cth + spsi * tth) * thrust
+        xs[i + 1, 3] = xs[i, 3] + dtau * (-cpsi * tphi * sec_th + spsi * tth) * thrust
         xs[i + 1, 4] = xs[i, 4] + dtau * xs[i, 5]
         xs[i + 1, 5] = xs[i, 5] + dtau * U[b]
         xs[i + 1, 6] = xs[i, 6] + dtau * U[b + 3]
@@ -377,7 +409,6 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
     n_stages = ref.shape[0] - 1
     views = _views(buf, n_stages, m, max(kmax, iprm[3]))
     xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1 = views
-    no_active = np.zeros((1, 1), dtype=np.int8)
     stats[:] = 0.0
     if not prepare_reference(x, ref, ref0):
         return FLAG_BAD_INPUT
@@ -386,19 +417,21 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
     rho = prm[P_RHO]
     h = prm[P_H]
     rtol = prm[P_RTOL]
+    newton_ran = initialise
     if initialise:
-        it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, no_active, prm[P_TOL],
+        it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, prm[P_TOL],
                                     iprm[2], h, iprm[3], rtol, views)
         stats[0] = it
         stats[1] = gm
         stats[2] = norm
         dU[:] = 0.0
     else:
-        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, no_active, xs, trig, F0)
+        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, xs, trig, F0)
         if norm > prm[P_TRIGGER]:
+            newton_ran = True
             # A jump the continuation cannot follow (a reference step is an impulse in F_t):
             # re-project onto F = 0 by line-searched Newton, warm-started from U.
-            it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, no_active,
+            it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE,
                                         prm[P_TOL], iprm[2], h, iprm[3], rtol, views)
             stats[0] = it
             stats[1] = gm
@@ -419,15 +452,18 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
     x1[5] = x[5] + h * U[0]
     x1[6] = x[6] + h * U[3]
     # the reference at t + h, interpolated along the horizon
-    for i in range(n_stages):
-        ref1[i, :] = ref0[i] + (h / dtau) * (ref0[i + 1] - ref0[i])
-    ref1[n_stages, :] = ref0[n_stages] + (h / dtau) * (ref0[n_stages] - ref0[n_stages - 1])
+    c = h / dtau
+    for i in range(n_stages + 1):
+        i0 = i if i < n_stages else n_stages - 1  # the last point extrapolates the last slope
+        for k in range(NX):
+            ref1[i, k] = ref0[i, k] + c * (ref0[i0 + 1, k] - ref0[i0, k])
     norm0 = norm  # F0 holds F(U, x, t): computed above, or left current by newton_solve
-    residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, no_active, xs, trig, F1)
+    # F0's input trig is valid for U unless a Newton line search evaluated other points last
+    residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, xs, trig, F1, not newton_ran)
     zeta = prm[P_ZETA]
     for i in range(F0.shape[0]):
         rhs[i] = -zeta * F0[i] - (F1[i] - F0[i]) / h
-    k, _ = fdgmres(U, m, x1, ref1, dtau_next, W, rho, 0.0, no_active, F1, rhs, dU, h, kmax,
+    k, _ = fdgmres(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, F1, rhs, dU, h, kmax,
                    rtol, views, dU)
     # Apply U(t)[0] — the input the prediction above assumed — then integrate U to t + Δt.
     # Applying the integrated U[0] instead would apply the input meant for one period later
@@ -474,6 +510,20 @@ def update_active_set(U, active, W, eps, n_stages):
                 U[i * m + 4 + j] = 0.0
                 changed = True
     return changed
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def cgmres_step(mem, x, ref, iprm, initialise):
+    """:func:`cgmres_tick` on packed memory (the per-tick entry point from Python)."""
+    U, dU, u_out, stats, W, prm, buf = unpack(mem, ref.shape[0] - 1, iprm[0])
+    return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def newton_step(mem, x, ref, iprm, active):
+    """:func:`newton_tick` on packed memory (the per-tick entry point from Python)."""
+    U, _, u_out, stats, W, prm, buf = unpack(mem, ref.shape[0] - 1, iprm[0])
+    return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)

@@ -63,8 +63,7 @@ class NewtonGMRESController(NmpcSolverBase):
         self.active[:] = 0
 
     def _tick(self, x, ref, initialise: bool) -> int:
-        return kernels.newton_tick(self.U, x, ref, self._W, self._prm, self._iprm, self.active,
-                                   self._buf, self._u, self._stats)
+        return kernels.newton_step(self._mem, x, ref, self._iprm, self.active)
 
 
 def make_nmpc(controller, *, period_s: float) -> NmpcSolverBase:

@@ -380,9 +380,12 @@ class AirframePlant:
         self._new_flight_biases()
 
     @classmethod
-    def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig) -> AirframePlant:
-        """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``sim.seed``."""
-        return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise, seed=sim_cfg.seed)
+    def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
+                    seed: int | None = None) -> AirframePlant:
+        """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``seed``
+        (default ``sim.seed``)."""
+        return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
+                   seed=sim_cfg.seed if seed is None else seed)
 
     # ------------------------------------------------------------------ commands and modes
 

@@ -92,9 +92,9 @@ def _run(solver, target, steps, x0=None):
     def solve(t, x, ref):
         r = solver.solve(t, x, ref)
         log.append(r)
-        return r.u, r.residual_norm, r.ok
+        return r.u, r.residual_norm, r.ok, r.solve_time_us
 
-    _, _, cost, failures, states = closed_loop(
+    _, _, _, cost, failures, states = closed_loop(
         solve, solver.spec, steps=steps, period_s=solver.period_s, x0=x0,
         target=np.asarray(target, float))
     return log, states, cost, failures

@@ -1,0 +1,181 @@
+"""The control tick of DESIGN.md §2 — the one function ``simulate``, ``fly`` and ``replay`` share.
+
+Per tick: measurements (latest mocap pose, latest navdata) → state estimate (position and ψ
+from mocap, ẋ/ẏ from navdata or differences, ż from the vertical-speed estimator) → horizon
+reference → NMPC (or the thesis' P controller) → mapping to PCMD fractions. The caller owns
+the clock and the links; :meth:`Tick.step` only needs what arrived and when.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
+from ardrone_nmpc.control.proportional import PGains, p_control
+from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.reference import Trajectory, horizon
+from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
+
+HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
+
+
+@dataclass(frozen=True, slots=True)
+class TickInputs:
+    """What the links hold at tick time ``t_s`` (s, the run's clock).
+
+    ``pose``/``navdata`` are the newest received (None before the first); ``*_rx_t_s`` their
+    receipt times on the same clock (ages are measured from those).
+    """
+
+    t_s: float
+    pose: MocapPose | None
+    pose_rx_t_s: float
+    navdata: NavdataSample | None
+    navdata_rx_t_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class TickOutput:
+    """The command to send and the log row of the tick.
+
+    ``progressive`` False means "hover" (AT*PCMD flag 0: the drone holds position itself).
+    """
+
+    pcmd: PcmdCommand
+    progressive: bool
+    row: dict
+
+
+def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
+    """Navdata body velocities (forward, right-positive) → world (ẋ, ẏ) at heading ψ (CCW)."""
+    c, s = math.cos(psi_rad), math.sin(psi_rad)
+    fwd, right = nav.vx_body_mps, nav.vy_body_mps
+    return fwd * c + right * s, fwd * s - right * c
+
+
+def effective_controller(controller, limits: DroneLimits):
+    """``controller`` with its input box intersected with what the drone is configured to do.
+
+    The thesis bounds φ, θ and ψ̇ by ±1 (rad, rad/s), but the AR.Drone clips tilt to
+    ``euler_angle_max`` (0.21 rad by default) and yaw rate to ``control_yaw``: planning beyond
+    them plans the impossible, and every command then saturates behind the command delay.
+    """
+    lo = list(controller.u_min)
+    hi = list(controller.u_max)
+    for j, cap in ((1, limits.euler_angle_max_rad), (2, limits.euler_angle_max_rad),
+                   (3, limits.control_yaw_radps)):
+        lo[j], hi[j] = max(lo[j], -cap), min(hi[j], cap)
+    return controller.model_copy(update={"u_min": tuple(lo), "u_max": tuple(hi)})
+
+
+class Tick:
+    """Estimator → reference → controller → mapping for one experiment.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig.
+    trajectory : the experiment's reference (time 0 = experiment start).
+    """
+
+    def __init__(self, cfg, trajectory: Trajectory):
+        self.cfg = cfg
+        self.trajectory = trajectory
+        self.period_s = cfg.loop.period_s
+        self.limits = DroneLimits(cfg.drone.euler_angle_max_rad, cfg.drone.control_vz_max_mps,
+                                  cfg.drone.control_yaw_radps)
+        ctl = cfg.controller
+        self.use_nmpc = ctl.kind == "nmpc"
+        if self.use_nmpc:
+            from ardrone_nmpc.control.newton import make_nmpc
+
+            self.nmpc = make_nmpc(effective_controller(ctl, self.limits), period_s=self.period_s)
+        g = ctl.p_gains
+        self.p_gains = PGains(g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
+        est = cfg.estimator
+        self.vz_estimator = make_vz_estimator(
+            est.kind, kalman_q=est.kalman_q, kalman_r=est.kalman_r, kalman_p0=est.kalman_p0,
+            lambda0_per_s=est.luenberger_lambda0_per_s, gain=est.luenberger_gain)
+        self.xy_difference = BackwardDifference(size=2)
+        self._last_pose_t_s: float | None = None
+        self._zacc_mps2 = 0.0  # z̈ applied over the last interval (KF/observer input)
+        self._state = np.zeros(7)
+
+    # -- estimation ---------------------------------------------------------------------
+    def _estimate(self, inputs: TickInputs) -> np.ndarray:
+        pose = inputs.pose
+        x = self._state
+        if pose.t_s != self._last_pose_t_s:  # a new pose: update the estimators
+            if self._last_pose_t_s is None:
+                self.vz_estimator.reset(pose.position_m[2])
+                self.xy_difference.reset()
+                self.xy_difference.update(pose.position_m[:2], 1.0)
+            else:
+                dt = pose.t_s - self._last_pose_t_s
+                self.vz_estimator.update(pose.position_m[2], self._zacc_mps2, dt)
+                self.xy_difference.update(pose.position_m[:2], dt)
+            self._last_pose_t_s = pose.t_s
+        x[0], x[2], x[4] = pose.position_m
+        x[6] = pose.psi_rad
+        x[5] = self.vz_estimator.vz_mps
+        if self.cfg.estimator.horizontal_velocity == "navdata" and inputs.navdata is not None:
+            x[1], x[3] = navdata_velocity_world(inputs.navdata, pose.psi_rad)
+        else:
+            x[1], x[3] = self.xy_difference.velocity_mps
+        return x
+
+    # -- the tick -----------------------------------------------------------------------
+    def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
+             trajectory: Trajectory | None = None) -> TickOutput:
+        """One tick at experiment time ``t_exp_s`` against ``trajectory`` (default: the
+        experiment's). ``mode`` labels the row ("track", "settle")."""
+        t0 = time.perf_counter_ns()
+        traj = trajectory or self.trajectory
+        mocap_age_ms = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose else math.inf
+        navdata_age_ms = ((inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata
+                          else math.inf)
+        row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms,
+               "battery_pct": inputs.navdata.battery_pct if inputs.navdata else math.nan}
+        if inputs.pose is None or mocap_age_ms > self.cfg.safety.mocap_hover_ms:
+            # No fresh pose: never control from stale data. (Full policy: safety.py, issue 6.)
+            row.update(mode="hover-stale-mocap", solver_status="", cmd_saturated="0000",
+                       cmd_roll_frac=0.0, cmd_pitch_frac=0.0, cmd_gaz_frac=0.0, cmd_yaw_frac=0.0)
+            row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
+            return TickOutput(HOVER, False, row)
+        x = self._estimate(inputs)
+        if self.use_nmpc:
+            cmd, ref_now = self._nmpc(t_exp_s, x, traj, row)
+        else:
+            ref_now = traj.state_at(t_exp_s)[0]
+            cmd = p_control(x, ref_now, self.p_gains)
+            self._zacc_mps2 = 0.0  # P commands ż directly: no z̈ to feed the estimator
+            row.update(solver_status="", u_zacc_mps2=math.nan, u_phi_rad=cmd.phi_rad,
+                       u_theta_rad=cmd.theta_rad, u_psirate_radps=cmd.psirate_radps)
+        pcmd = map_to_pcmd(cmd, self.limits)
+        row.update(
+            x_m=x[0], y_m=x[2], z_m=x[4], psi_rad=x[6], vx_mps=x[1], vy_mps=x[3], vz_mps=x[5],
+            x_ref_m=ref_now[0], y_ref_m=ref_now[2], z_ref_m=ref_now[4], psi_ref_rad=ref_now[6],
+            vz_ref_mps=cmd.vz_ref_mps, cmd_roll_frac=pcmd.roll_frac,
+            cmd_pitch_frac=pcmd.pitch_frac, cmd_gaz_frac=pcmd.gaz_frac,
+            cmd_yaw_frac=pcmd.yaw_frac, mode=mode,
+            cmd_saturated="".join("1" if f else "0" for f in pcmd.saturated))
+        row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
+        return TickOutput(pcmd, True, row)
+
+    def _nmpc(self, t_exp_s, x, traj, row):
+        solver = self.nmpc
+        dtau = solver.stage_dtau_s(t_exp_s)
+        ref = horizon(traj, t_exp_s, max(dtau, 1e-9), solver.spec.horizon_steps)
+        result = solver.solve(t_exp_s, x, ref)
+        u = result.u
+        self._zacc_mps2 = float(u[0])
+        cmd = AttitudeCommand(vz_reference_mps(x[5], u[0], self.period_s), float(u[1]),
+                              float(u[2]), float(u[3]))
+        row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
+                   solve_us=result.solve_time_us, solver_status=result.status.value,
+                   residual_norm=result.residual_norm, gmres_iterations=result.gmres_iterations,
+                   newton_iterations=result.newton_iterations)
+        return cmd, ref[0]

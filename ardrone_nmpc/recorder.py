@@ -1,0 +1,516 @@
+"""The run directory (DESIGN.md §5): write it while flying, read it back for summaries and replay.
+
+A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` holds:
+
+* ``config.yaml`` — the resolved :class:`~ardrone_nmpc.config.ExperimentConfig`, written at
+  creation (before the first row), with ``#`` comment lines ``ardrone-nmpc <version>``,
+  ``seed: <seed>`` and ``created: <ISO time>``; :func:`~ardrone_nmpc.config.load_config` reads it.
+* ``log.csv`` — a header row, then one row per control tick, columns :data:`LOG_COLUMNS`.
+  Plain CSV without quoting: string cells never contain ``,``, ``"`` or line breaks (the writer
+  refuses them). Floats are written with 17 significant digits (``format(v, ".17g")``), which
+  round-trips every finite double bit for bit (−0.0 included); NaN and ±inf are written
+  ``nan``/``inf``/``-inf``; a missing value is an empty cell (read back as NaN).
+* ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``.
+* ``summary.csv`` — ``axis,metric,value,unit`` rows (:mod:`ardrone_nmpc.summary`).
+
+Crash safety: ``log.csv`` and ``events.jsonl`` are opened unbuffered, and each row/event is
+handed to the kernel by one ``write`` call, so a killed process (SIGKILL included) loses at
+most the row being written; :func:`read_run` drops a final line without its newline (with a
+note in :attr:`RunData.warnings`). Rows are not ``fsync``-ed: a power cut of the *ground
+station* may lose what the OS had not yet written to disk.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import enum
+import json
+import math
+import operator
+import os
+import re
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from . import __version__
+from .config import ConfigError, ExperimentConfig, dump_config, load_config
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .summary import SummaryRow
+
+__all__ = [
+    "LOG_COLUMNS",
+    "LogError",
+    "REQUIRED_COLUMNS",
+    "RunData",
+    "RunRecorder",
+    "STRING_COLUMNS",
+    "read_run",
+]
+
+#: The columns of ``log.csv``, in order. Units are in the names (s, m, rad, m/s, m/s², rad/s,
+#: fraction of full PCMD deflection, µs, ms, %); ``*_ref_*`` is the reference at the tick,
+#: ``u_*`` the controller's input, ``cmd_*`` the PCMD fractions sent, ``*_true_*`` the
+#: simulated plant's truth (empty in real flight).
+LOG_COLUMNS: tuple[str, ...] = (
+    "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
+    "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
+    "u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps", "vz_ref_mps",
+    "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac", "cmd_saturated",
+    "solve_us", "solver_status", "residual_norm", "gmres_iterations", "newton_iterations",
+    "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct", "tick_late_ms", "compute_us",
+    "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps",
+)
+
+#: Columns holding strings: ``cmd_saturated`` (4 flags ``0``/``1``, roll, pitch, gaz, yaw),
+#: ``solver_status`` (``ok``, ``max-iterations``, …; empty without a solve) and ``mode``.
+STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode"})
+
+#: Columns a ``log.csv`` header must name (DESIGN.md §5); the others of :data:`LOG_COLUMNS`
+#: are filled with NaN (or ``""``) by :func:`read_run` when absent.
+REQUIRED_COLUMNS: tuple[str, ...] = (
+    "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
+    "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
+    "u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps",
+    "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac",
+    "solve_us", "solver_status", "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct",
+)
+
+CONFIG_FILE = "config.yaml"
+LOG_FILE = "log.csv"
+EVENTS_FILE = "events.jsonl"
+SUMMARY_FILE = "summary.csv"
+
+_COLUMN_SET = frozenset(LOG_COLUMNS)
+_N_COLUMNS = len(LOG_COLUMNS)
+# format() spec per column: floats with 17 significant digits, strings as they are. A float
+# in a string column or a string in a numeric column makes format() raise.
+_SPECS = tuple("s" if c in STRING_COLUMNS else ".17g" for c in LOG_COLUMNS)  # slow path
+_FORBIDDEN = re.compile(r'[,"\r\n]')
+
+
+class LogError(ValueError):
+    """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line)."""
+
+
+def _json_default(obj: Any) -> Any:
+    """JSON for the odd types events carry; never raises (an event must not stop a flight)."""
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, enum.Enum):
+        return obj.value
+    if isinstance(obj, (set, frozenset)):
+        return sorted(obj, key=repr)
+    if isinstance(obj, (Path, _dt.datetime, _dt.date)):
+        return str(obj)
+    return repr(obj)
+
+
+def _write_all(raw: Any, data: bytes) -> None:
+    """Write ``data`` to an unbuffered file: one ``write`` call unless the OS takes less."""
+    n = raw.write(data)
+    while n is not None and n < len(data):  # pragma: no cover - regular files take it all
+        data = data[n:]
+        n = raw.write(data)
+
+
+class RunRecorder:
+    """Writes one run directory; a context manager (leaving it closes the files).
+
+    Make one with :meth:`create`. :meth:`write_row` and :meth:`event` hand each line to the OS
+    at once (see the module docstring).
+    """
+
+    def __init__(self, path: Path, log_file: Any, events_file: Any) -> None:
+        self.path = path
+        self._log = log_file
+        self._events = events_file
+        self.rows_written = 0
+        self._plans: dict[tuple, tuple] = {}
+
+    # -- creation ---------------------------------------------------------------------------
+    @classmethod
+    def create(cls, log_dir: str | Path, cfg: ExperimentConfig, *, seed: int | None,
+               now: _dt.datetime | None = None) -> RunRecorder:
+        """Create ``log_dir/<YYYYmmdd-HHMMSS>-<cfg.name>/`` (``-2``, ``-3``, … appended if it
+        exists; parents created), write ``config.yaml``, open ``log.csv`` (header row written)
+        and ``events.jsonl``.
+
+        Parameters
+        ----------
+        log_dir : directory holding the runs.
+        cfg : the resolved experiment configuration.
+        seed : the run's random seed (recorded in ``config.yaml``'s header), or None.
+        now : the creation time for the name and header (default: the local time now).
+        """
+        now = now if now is not None else _dt.datetime.now().astimezone()
+        log_dir = Path(log_dir)
+        log_dir.mkdir(parents=True, exist_ok=True)
+        base = f"{now.strftime('%Y%m%d-%H%M%S')}-{cfg.name}"
+        suffix = 1
+        while True:
+            path = log_dir / (base if suffix == 1 else f"{base}-{suffix}")
+            try:
+                path.mkdir()  # atomic: two recorders never share a directory
+                break
+            except FileExistsError:
+                suffix += 1
+        header = (f"ardrone-nmpc {__version__}\nseed: {seed}\n"
+                  f"created: {now.isoformat(timespec='seconds')}")
+        with open(path / CONFIG_FILE, "w", encoding="utf-8") as f:
+            f.write(dump_config(cfg, header=header))
+            f.flush()
+            os.fsync(f.fileno())
+        log_file = open(path / LOG_FILE, "xb", buffering=0)  # noqa: SIM115 - closed in close()
+        try:
+            _write_all(log_file, (",".join(LOG_COLUMNS) + "\n").encode("ascii"))
+            events_file = open(path / EVENTS_FILE, "xb", buffering=0)  # noqa: SIM115
+        except BaseException:
+            log_file.close()
+            raise
+        return cls(path, log_file, events_file)
+
+    # -- writing ----------------------------------------------------------------------------
+    def write_row(self, row: Mapping[str, Any]) -> None:
+        """Append one tick to ``log.csv`` (columns in :data:`LOG_COLUMNS` order), then hand it
+        to the OS.
+
+        Missing keys and None are empty cells. Numeric cells take anything ``'%.17g'``
+        formats (float, numpy floats, int, bool; ints beyond 2**53 lose digits); string columns
+        take str only. Raises ValueError for an unknown key, a value of the wrong kind, or a
+        string holding ``,``, ``"`` or a line break (nothing is written then).
+
+        Cost: the row is formatted by one ``%`` operation with a template cached per key
+        sequence (callers build their rows the same way every tick), so the price is almost
+        only CPython's float formatting (≈ 0.7–1 µs per float on a 2 GHz VM).
+        """
+        line = self._fast_line(row)
+        if line is None:
+            # None or "" (empty cells) somewhere: drop them and try again, else the slow path
+            # with its precise error.
+            stripped = {k: v for k, v in row.items()
+                        if not (v is None or (v.__class__ is str and v == ""))}
+            line = self._fast_line(stripped) if len(stripped) < len(row) else None
+            if line is None:
+                line = self._slow_line(row)
+        _write_all(self._log, (line + "\n").encode("utf-8"))
+        self.rows_written += 1
+
+    def _fast_line(self, row: Mapping[str, Any]) -> str | None:
+        """The row line by the cached ``%`` template, or None if some value does not fit it."""
+        keys = tuple(row)
+        plan = self._plans.get(keys)
+        if plan is None:
+            plan = self._plan(keys)  # validates the keys; raises for an unknown one
+        template, getter, string_slots = plan
+        try:
+            values = getter(row)
+            for i in string_slots:
+                if values[i].__class__ is not str:
+                    return None
+            line = template % values
+        except (TypeError, ValueError):
+            return None
+        if line.count(",") != _N_COLUMNS - 1 or (
+                string_slots and ('"' in line or "\n" in line or "\r" in line)):
+            return None
+        return line
+
+    def _plan(self, keys: tuple) -> tuple[str, Callable[[Mapping[str, Any]], tuple], tuple]:
+        """The ``%`` template, value getter and string positions for rows with these keys."""
+        unknown = [k for k in keys if k not in _COLUMN_SET]
+        if unknown:
+            raise ValueError(f"unknown log column(s) {', '.join(map(repr, unknown))}; "
+                             f"expected names from LOG_COLUMNS")
+        present = [c for c in LOG_COLUMNS if c in set(keys)]
+        template = ",".join(("%s" if c in STRING_COLUMNS else "%.16g") if c in keys else ""
+                            for c in LOG_COLUMNS)
+        if len(present) > 1:
+            getter: Callable[[Mapping[str, Any]], tuple] = operator.itemgetter(*present)
+        elif present:
+            name = present[0]
+            getter = lambda row: (row[name],)  # noqa: E731
+        else:
+            getter = lambda row: ()  # noqa: E731
+        string_slots = tuple(i for i, c in enumerate(present) if c in STRING_COLUMNS)
+        plan = (template, getter, string_slots)
+        if len(self._plans) >= 64:  # rows of ever-changing shapes: keep the cache small
+            self._plans.clear()
+        self._plans[keys] = plan
+        return plan
+
+    @staticmethod
+    def _slow_line(row: Mapping[str, Any]) -> str:
+        """The row line with None accepted and a precise error for a bad cell."""
+        cells = []
+        for name, spec in zip(LOG_COLUMNS, _SPECS):
+            v = row.get(name)
+            if v is None or (isinstance(v, str) and v == "" and spec != "s"):
+                cells.append("")
+                continue
+            try:
+                if spec == "s":
+                    if not isinstance(v, str):
+                        raise TypeError
+                    if _FORBIDDEN.search(v):
+                        raise ValueError(f"log column {name}: {v!r} contains ',', '\"' or a "
+                                         f"line break")
+                    cell = str(v)
+                else:
+                    cell = "%.17g" % (v,)
+            except TypeError:
+                kind = "a string" if spec == "s" else "a number"
+                raise ValueError(f"log column {name}: {v!r} is not {kind}") from None
+            cells.append(cell)
+        return ",".join(cells)
+
+    def event(self, t_s: float, kind: str, **fields: Any) -> None:
+        """Append ``{"t_s": t_s, "kind": kind, **fields}`` as one line of ``events.jsonl``.
+
+        numpy values, enums and paths are converted; anything else JSON cannot hold is
+        written as its ``repr``. Floats keep full precision (NaN/inf as ``NaN``/``Infinity``).
+        """
+        record = {"t_s": float(t_s), "kind": str(kind), **fields}
+        line = json.dumps(record, default=_json_default, separators=(",", ":"))
+        _write_all(self._events, (line + "\n").encode("utf-8"))
+
+    def flush(self) -> None:
+        """No-op kept for symmetry: rows and events are unbuffered (written at once)."""
+
+    def write_summary(self, rows: Iterable[SummaryRow]) -> Path:
+        """Write ``summary.csv`` (``axis,metric,value,unit``; values with 17 significant
+        digits), replacing any earlier one atomically. Returns its path."""
+        lines = ["axis,metric,value,unit"]
+        for r in rows:
+            cells = (str(r.axis), str(r.metric), format(float(r.value), ".17g"), str(r.unit))
+            for c in cells:
+                if _FORBIDDEN.search(c):
+                    raise ValueError(f"summary cell {c!r} contains ',', '\"' or a line break")
+            lines.append(",".join(cells))
+        target = self.path / SUMMARY_FILE
+        tmp = target.with_name(SUMMARY_FILE + ".tmp")
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        os.replace(tmp, target)
+        return target
+
+    # -- closing ----------------------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        return self._log.closed and self._events.closed
+
+    def close(self) -> None:
+        """Close ``log.csv`` and ``events.jsonl`` (idempotent)."""
+        for f in (self._log, self._events):
+            if not f.closed:
+                f.close()
+
+    def __enter__(self) -> RunRecorder:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"RunRecorder({str(self.path)!r}, rows_written={self.rows_written})"
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+@dataclass
+class RunData:
+    """A run directory read back by :func:`read_run`.
+
+    Attributes
+    ----------
+    path : the run directory.
+    config : the experiment configuration of ``config.yaml``.
+    columns : every column of ``log.csv`` (and every :data:`LOG_COLUMNS` name, filled when
+        absent) → array over the rows: float64 for numeric columns (empty cell → NaN), object
+        arrays of str for :data:`STRING_COLUMNS` (empty cell → ``""``).
+    events : the ``events.jsonl`` objects in order.
+    seed : the seed recorded in ``config.yaml``'s header (None if absent or ``None``).
+    version : the tool version recorded in the header (None if absent).
+    warnings : notes about recoverable damage (a torn last line dropped).
+    """
+
+    path: Path
+    config: ExperimentConfig
+    columns: dict[str, np.ndarray]
+    events: list[dict[str, Any]]
+    seed: int | None = None
+    version: str | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def n_rows(self) -> int:
+        """Number of logged ticks."""
+        return int(self.columns["t_s"].size)
+
+    def __len__(self) -> int:
+        return self.n_rows
+
+
+def _read_text(path: Path) -> str:
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    try:
+        return path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read: {exc}") from None
+    except UnicodeDecodeError as exc:
+        line = path.read_bytes()[: exc.start].count(b"\n") + 1
+        raise LogError(f"{path}:{line}: not UTF-8 text") from None
+
+
+def _split_lines(path: Path, text: str, warnings: list[str]) -> list[str]:
+    """Complete lines of ``text``; a final line without its newline (torn by a crash) is
+    dropped with a note in ``warnings``."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n")
+    parts = text.split("\n")
+    torn = parts.pop()  # "" when the text ends with a newline
+    if torn:
+        warnings.append(f"{path}:{len(parts) + 1}: incomplete last line dropped "
+                        f"(the run was probably cut short): {torn[:60]!r}")
+    return parts
+
+
+def _parse_header_comments(text: str) -> tuple[int | None, str | None]:
+    seed: int | None = None
+    version: str | None = None
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        body = line[1:].strip()
+        if body.startswith("seed:"):
+            value = body[5:].strip()
+            try:
+                seed = int(value)
+            except ValueError:
+                seed = None
+        elif body.startswith("ardrone-nmpc "):
+            version = body.split(None, 1)[1].strip()
+    return seed, version
+
+
+def _float_column(path: Path, name: str, cells: list[str]) -> np.ndarray:
+    """Parse one numeric column; ``cells[i]`` is on line ``i + 2`` of the file."""
+    n = len(cells)
+    try:
+        return np.fromiter(map(float, cells), dtype=np.float64, count=n)
+    except ValueError:
+        pass
+    out = np.empty(n, dtype=np.float64)
+    for i, cell in enumerate(cells):
+        if cell == "":
+            out[i] = math.nan
+            continue
+        try:
+            out[i] = float(cell)
+        except ValueError:
+            raise LogError(f"{path}:{i + 2}: column {name}: {cell!r} is not a number") from None
+    return out
+
+
+def _read_log(path: Path, warnings: list[str]) -> dict[str, np.ndarray]:
+    lines = _split_lines(path, _read_text(path), warnings)
+    if not lines or not lines[0].strip():
+        if warnings and not lines:
+            raise LogError(f"{path}:1: incomplete header row")
+        raise LogError(f"{path}:1: empty file: expected a header row")
+    header = [c.strip() for c in lines[0].split(",")]
+    seen: set[str] = set()
+    for name in header:
+        if name in seen:
+            raise LogError(f"{path}:1: column {name!r} appears more than once")
+        seen.add(name)
+    missing = [c for c in REQUIRED_COLUMNS if c not in seen]
+    if missing:
+        raise LogError(f"{path}:1: missing column{'s' if len(missing) > 1 else ''} "
+                       f"{', '.join(missing)}")
+    width = len(header)
+    rows = [line.split(",") for line in lines[1:]]
+    for i, cells in enumerate(rows):
+        if len(cells) != width:
+            raise LogError(f"{path}:{i + 2}: expected {width} cells, got {len(cells)} "
+                           f"(a torn or corrupted row)")
+    n = len(rows)
+    transposed = list(zip(*rows)) if n else [()] * width
+    columns: dict[str, np.ndarray] = {}
+    for name, cells in zip(header, transposed):
+        if name in STRING_COLUMNS:
+            arr = np.empty(n, dtype=object)
+            arr[:] = list(cells)
+            columns[name] = arr
+        elif name in _COLUMN_SET:
+            columns[name] = _float_column(path, name, list(cells))
+        else:  # an extra column: numbers if they all parse, strings otherwise
+            try:
+                columns[name] = _float_column(path, name, list(cells))
+            except LogError:
+                arr = np.empty(n, dtype=object)
+                arr[:] = list(cells)
+                columns[name] = arr
+    for name in LOG_COLUMNS:
+        if name not in columns:
+            if name in STRING_COLUMNS:
+                arr = np.empty(n, dtype=object)
+                arr[:] = [""] * n
+                columns[name] = arr
+            else:
+                columns[name] = np.full(n, math.nan)
+    return columns
+
+
+def _read_events(path: Path, warnings: list[str]) -> list[dict[str, Any]]:
+    events = []
+    for i, line in enumerate(_split_lines(path, _read_text(path), warnings), start=1):
+        if not line.strip():
+            continue
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise LogError(f"{path}:{i}: invalid JSON: {exc.msg}") from None
+        if not isinstance(obj, dict):
+            raise LogError(f"{path}:{i}: expected a JSON object, got {type(obj).__name__}")
+        events.append(obj)
+    return events
+
+
+def read_run(run_dir: str | Path) -> RunData:
+    """Read a run directory written by :class:`RunRecorder`.
+
+    Raises
+    ------
+    LogError
+        ``<file>:<line>: <message>`` for a missing directory or file, an invalid
+        ``config.yaml``, a ``log.csv`` header without a required column (or with a repeated
+        one), a row with the wrong number of cells (a torn line anywhere but at the end), a
+        non-numeric cell in a numeric column, or an ``events.jsonl`` line that is not a JSON
+        object. A torn *last* line of ``log.csv`` or ``events.jsonl`` is dropped with a note
+        in :attr:`RunData.warnings`.
+    """
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise LogError(f"{path}: no such run directory")
+    cfg_path = path / CONFIG_FILE
+    cfg_text = _read_text(cfg_path)
+    try:
+        config = load_config(cfg_path)
+    except ConfigError as exc:
+        detail = "; ".join(exc.messages)
+        prefix = "" if detail.startswith(str(cfg_path)) else f"{cfg_path}: "
+        raise LogError(f"{prefix}{detail}") from None
+    seed, version = _parse_header_comments(cfg_text)
+    warnings: list[str] = []
+    columns = _read_log(path / LOG_FILE, warnings)
+    events = _read_events(path / EVENTS_FILE, warnings)
+    return RunData(path=path, config=config, columns=columns, events=events, seed=seed,
+                   version=version, warnings=warnings)

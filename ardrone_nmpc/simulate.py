@@ -1,0 +1,158 @@
+"""Lockstep simulation: the real tick against the simulated AR.Drone on a manual clock.
+
+No sockets and no sleeping: the runner advances the plant between sensor and tick events
+and hands the tick exactly what the links would hold — the newest mocap pose (sampled at
+``sim.mocap_rate_hz``, delivered ``noise.mocap_latency_ms`` later) and the newest navdata
+(``sim.navdata_rate_hz``, body-frame velocities). Sequence: take off (on-board), hold the
+reference's start for ``sim.settle_s`` (rows with t_s < 0), fly the experiment for
+``duration_s``, land. Deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.reference import Trajectory, make_trajectory
+from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.types import FlightMode
+
+TAKEOFF_TIMEOUT_S = 10.0
+LANDING_TIMEOUT_S = 15.0
+
+
+class HoldStartThen:
+    """``trajectory`` for t ≥ 0, its t = 0 point at rest for t < 0 (the settle phase)."""
+
+    def __init__(self, trajectory: Trajectory):
+        self.inner = trajectory
+        start = trajectory.state_at(0.0)[0].copy()
+        start[[1, 3, 5]] = 0.0
+        self._start = start
+        self.duration_s = trajectory.duration_s
+
+    def state_at(self, t_s):
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        out = self.inner.state_at(np.maximum(t, 0.0))
+        out[t < 0.0] = self._start
+        return out
+
+    def polyline_m(self):
+        return self.inner.polyline_m()
+
+
+@dataclass
+class SimResult:
+    """What a lockstep run produced (the rows are also in the recorder, if one was given)."""
+
+    ticks: int
+    final_mode: FlightMode
+    run_dir: Path | None
+
+
+class _Sensors:
+    """Sensor events of the lockstep clock: which sample the links hold at time t."""
+
+    def __init__(self, cfg, plant: AirframePlant):
+        self.plant = plant
+        self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
+        self.mocap_latency_s = cfg.sim.noise.mocap_latency_ms * 1e-3
+        self.nav_period_s = 1.0 / cfg.sim.navdata_rate_hz
+        self.pose = None
+        self.pose_rx_t_s = -math.inf
+        self.nav = None
+        self.nav_rx_t_s = -math.inf
+        self._next_mocap_k = 0
+        self._next_nav_k = 0
+
+    def advance_to(self, t_s: float) -> None:
+        """Run the plant to ``t_s``, sampling the sensors on their own grids on the way.
+
+        Only the newest sample of each stream before ``t_s`` is what a link would hand the
+        tick, so intermediate mocap frames are skipped (their noise draws with them; the
+        stream stays deterministic for a seed).
+        """
+        plant = self.plant
+        k_mocap = math.floor((t_s - self.mocap_latency_s) / self.mocap_period_s + 1e-9)
+        k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
+        events = []
+        if k_mocap >= self._next_mocap_k:
+            events.append((k_mocap * self.mocap_period_s, "mocap"))
+            self._next_mocap_k = k_mocap + 1
+        if k_nav >= self._next_nav_k:
+            events.append((k_nav * self.nav_period_s, "nav"))
+            self._next_nav_k = k_nav + 1
+        for t_event, kind in sorted(events):
+            if t_event > plant.t_s:
+                plant.advance(t_event - plant.t_s)
+            if kind == "mocap":
+                self.pose = plant.mocap_pose()
+                self.pose_rx_t_s = t_event + self.mocap_latency_s
+            else:
+                self.nav = plant.navdata()
+                self.nav_rx_t_s = t_event
+        if t_s > plant.t_s:
+            plant.advance(t_s - plant.t_s)
+
+    def inputs(self, t_s: float) -> TickInputs:
+        return TickInputs(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s)
+
+
+def truth_columns(plant: AirframePlant) -> dict:
+    truth = plant.truth
+    return {"x_true_m": truth.position_m[0], "y_true_m": truth.position_m[1],
+            "z_true_m": truth.position_m[2], "psi_true_rad": truth.psi_rad,
+            "vz_true_mps": truth.velocity_mps[2]}
+
+
+def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
+                 progress: Callable[[float], None] | None = None) -> SimResult:
+    """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
+
+    ``progress(fraction)`` is called every tick with the fraction of the run done.
+    """
+    seed = cfg.sim.seed if seed is None else seed
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    trajectory = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    tick = Tick(cfg, trajectory)
+    sensors = _Sensors(cfg, plant)
+    period = cfg.loop.period_s
+    event = recorder.event if recorder is not None else (lambda *a, **k: None)
+
+    plant.takeoff()
+    event(plant.t_s, "takeoff")
+    while plant.mode is not FlightMode.FLYING and plant.t_s < TAKEOFF_TIMEOUT_S:
+        sensors.advance_to(plant.t_s + period)
+    if plant.mode is not FlightMode.FLYING:
+        raise RuntimeError(f"simulated take-off did not complete (mode {plant.mode.value})")
+    t_start = plant.t_s + cfg.sim.settle_s  # experiment time 0 on the plant clock
+    n_settle = round(cfg.sim.settle_s / period)
+    n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
+    t_first = t_start - n_settle * period
+    for k in range(n_ticks):
+        t_plant = t_first + k * period
+        sensors.advance_to(t_plant)
+        t_exp = (k - n_settle) * period
+        out = tick.step(sensors.inputs(t_plant), t_exp_s=t_exp,
+                        mode="settle" if t_exp < 0 else "track")
+        pcmd = out.pcmd
+        plant.command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
+                      progressive=out.progressive)
+        if recorder is not None:
+            row = out.row
+            row.update(truth_columns(plant))
+            recorder.write_row(row)
+        if progress is not None:
+            progress((k + 1) / n_ticks)
+    plant.land()
+    event(t_first + n_ticks * period - t_start, "land")
+    deadline = plant.t_s + LANDING_TIMEOUT_S
+    while plant.mode is not FlightMode.LANDED and plant.t_s < deadline:
+        sensors.advance_to(plant.t_s + period)
+    event(plant.t_s - t_start, "landed" if plant.mode is FlightMode.LANDED else "not-landed")
+    return SimResult(n_ticks, plant.mode, recorder.path if recorder is not None else None)
