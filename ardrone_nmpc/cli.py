@@ -52,6 +52,42 @@ def check(
 
 
 @app.command()
+def simulate(
+    config: Path = typer.Argument(..., help="Experiment YAML file."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+    log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random source (default: sim.seed)."),
+    quiet: bool = typer.Option(False, "--quiet", help="Only print the run directory."),
+) -> None:
+    """Fly an experiment against the simulated AR.Drone in lockstep (no sockets, faster than
+    real time); writes a run directory and prints its summary. Last line: run: <dir>."""
+    from ardrone_nmpc.recorder import LogError
+    from ardrone_nmpc.reference import ReferenceError
+    from ardrone_nmpc.simcli import run_simulate_command
+
+    cfg = _load(config, set_)
+    try:
+        path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet)
+    except (ReferenceError, LogError, RuntimeError, OSError) as err:
+        _fail([str(err)])
+    typer.echo(f"run: {path}")
+
+
+@app.command()
+def summary(
+    run_dirs: List[Path] = typer.Argument(..., help="One or more run directories."),
+) -> None:
+    """Print the summary table of one run, or several side by side."""
+    from ardrone_nmpc.recorder import LogError
+    from ardrone_nmpc.simcli import run_summary_command
+
+    try:
+        run_summary_command(run_dirs=run_dirs)
+    except LogError as err:
+        _fail([str(err)])
+
+
+@app.command()
 def bench(
     config: Optional[Path] = typer.Option(None, "--config", help="Take weights, bounds and solver settings from this config."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),

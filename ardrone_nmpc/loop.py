@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ import numpy as np
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.reference import Trajectory, horizon
 from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
 
@@ -103,6 +105,21 @@ class Tick:
         self._last_pose_t_s: float | None = None
         self._zacc_mps2 = 0.0  # z̈ applied over the last interval (KF/observer input)
         self._state = np.zeros(7)
+        # Delay compensation: the inputs sent but not yet acting (newest last).
+        self.delay_ticks = math.ceil(ctl.delay_compensation_s / self.period_s - 1e-9)
+        self._pending = deque(maxlen=max(self.delay_ticks, 1))
+        self._sent = np.zeros((self.delay_ticks, 4))
+        if self.use_nmpc:
+            self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Load (or compile) the solver kernels now, not on the first tick in the air."""
+        hover = np.zeros(7)
+        hover[4] = 1.0
+        self.nmpc.solve(0.0, hover, np.tile(hover, (self.nmpc.spec.horizon_steps + 1, 1)))
+        self.nmpc.reset()
+        if self.delay_ticks:
+            rollout_rk4(hover, self._sent, self.period_s, np.empty(7))
 
     # -- estimation ---------------------------------------------------------------------
     def _estimate(self, inputs: TickInputs) -> np.ndarray:
@@ -165,14 +182,32 @@ class Tick:
         row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
         return TickOutput(pcmd, True, row)
 
+    def predict_through_delay(self, x: np.ndarray) -> np.ndarray:
+        """``x`` rolled forward through the inputs already sent and not yet acting (model
+        eq. 3.13, RK4 per control period) — the state the new command will meet."""
+        if self.delay_ticks == 0 or not self._pending:
+            return x
+        sent = self._sent
+        missing = self.delay_ticks - len(self._pending)  # start-up: hover for those
+        sent[:missing] = 0.0
+        for k, u in enumerate(self._pending):
+            sent[missing + k] = u
+        out = np.empty(7)
+        rollout_rk4(x, sent, self.period_s, out)
+        return out
+
     def _nmpc(self, t_exp_s, x, traj, row):
         solver = self.nmpc
+        lead_s = self.delay_ticks * self.period_s
+        x_solve = self.predict_through_delay(x)
         dtau = solver.stage_dtau_s(t_exp_s)
-        ref = horizon(traj, t_exp_s, max(dtau, 1e-9), solver.spec.horizon_steps)
-        result = solver.solve(t_exp_s, x, ref)
+        ref = horizon(traj, t_exp_s + lead_s, max(dtau, 1e-9), solver.spec.horizon_steps)
+        result = solver.solve(t_exp_s, x_solve, ref)
         u = result.u
         self._zacc_mps2 = float(u[0])
-        cmd = AttitudeCommand(vz_reference_mps(x[5], u[0], self.period_s), float(u[1]),
+        if self.delay_ticks:
+            self._pending.append(u.copy())
+        cmd = AttitudeCommand(vz_reference_mps(x_solve[5], u[0], self.period_s), float(u[1]),
                               float(u[2]), float(u[3]))
         row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
                    solve_us=result.solve_time_us, solver_status=result.status.value,

@@ -130,10 +130,11 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
         sensors.advance_to(plant.t_s + period)
     if plant.mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete (mode {plant.mode.value})")
-    t_start = plant.t_s + cfg.sim.settle_s  # experiment time 0 on the plant clock
-    n_settle = round(cfg.sim.settle_s / period)
+    # The settle phase starts now, on whole ticks: experiment time 0 is n_settle ticks later.
+    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
-    t_first = t_start - n_settle * period
+    t_first = plant.t_s
+    t_start = t_first + n_settle * period  # experiment time 0 on the plant clock
     for k in range(n_ticks):
         t_plant = t_first + k * period
         sensors.advance_to(t_plant)

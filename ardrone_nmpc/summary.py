@@ -22,7 +22,7 @@ What :func:`summarise` measures, and over which rows
   max :func:`path_deviation` of the positions from the trajectory's polyline, over the flying
   ticks (mode not ``landed``/``taking_off``/``landing``; all ticks when the mode column is empty
   or holds one value only). Paths and ``hover`` also get the RMSE of each axis against the
-  logged reference columns over the same ticks, and the 3-D position RMSE.
+  logged reference columns over the same ticks, and the 3-D position RMSE (axis ``xyz``).
 * **Inputs**: per input the peak |u| and the fraction of ticks at or beyond a bound of
   ``controller.u_min``/``u_max`` (:func:`input_stats`); per PCMD channel the fraction of ticks
   whose ``cmd_saturated`` flag is set.
@@ -383,7 +383,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
             else:
                 sq = sq + e * e
             add(SummaryRow(axis, "rmse", _rmse(e), unit))
-        add(SummaryRow("path", "position_rmse", _rmse(np.sqrt(sq)), "m"))
+        add(SummaryRow("xyz", "rmse", _rmse(np.sqrt(sq)), "m"))
 
     # inputs
     u = np.column_stack([np.asarray(cols[c], dtype=np.float64) for _, c, _ in _INPUTS])[window]

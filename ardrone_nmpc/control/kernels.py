@@ -78,6 +78,50 @@ def memory_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
     return 2 * n + NU + 4 + 5 * NX + N_PRM + workspace_size(horizon_steps, stage_dim, kmax)
 
 
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def rollout_rk4(x, inputs, dt, out):
+    """``out`` = ``x`` integrated through ``inputs`` (k, 4), each held for ``dt`` (RK4 of
+    eq. 3.13) — the delay compensation's prediction of the state a new command will meet."""
+    out[:] = x
+    k1 = np.empty(NX)
+    k2 = np.empty(NX)
+    k3 = np.empty(NX)
+    k4 = np.empty(NX)
+    tmp = np.empty(NX)
+    for r in range(inputs.shape[0]):
+        u = inputs[r]
+        _model(out, u, k1)
+        for i in range(NX):
+            tmp[i] = out[i] + 0.5 * dt * k1[i]
+        _model(tmp, u, k2)
+        for i in range(NX):
+            tmp[i] = out[i] + 0.5 * dt * k2[i]
+        _model(tmp, u, k3)
+        for i in range(NX):
+            tmp[i] = out[i] + dt * k3[i]
+        _model(tmp, u, k4)
+        for i in range(NX):
+            out[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
+def _model(x, u, out):
+    """Eq. 3.13 (same expressions as :func:`ardrone_nmpc.model.dynamics`)."""
+    spsi = math.sin(x[6])
+    cpsi = math.cos(x[6])
+    tphi = math.tan(u[1])
+    cth = math.cos(u[2])
+    tth = math.tan(u[2])
+    thrust = u[0] + GRAVITY_MPS2
+    out[0] = x[1]
+    out[1] = (spsi * tphi / cth + cpsi * tth) * thrust
+    out[2] = x[3]
+    out[3] = (-cpsi * tphi / cth + spsi * tth) * thrust
+    out[4] = x[5]
+    out[5] = u[0]
+    out[6] = u[3]
+
+
 @njit(cache=True)
 def unpack(mem, n_stages, m):
     """Views of one solver's packed memory: ``(U, dU, u_out, stats, W, prm, buf)``.

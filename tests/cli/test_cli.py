@@ -1,6 +1,9 @@
 """The command line through typer's CliRunner: output, exit codes, error lines."""
 
 import json
+from pathlib import Path
+
+import numpy as np
 
 import pytest
 import yaml
@@ -70,3 +73,65 @@ def test_bench_rejects_bad_options(args, message):
     result = runner.invoke(app, ["bench", "--steps", "10", *args])
     assert result.exit_code == 1
     assert message in result.output
+
+
+def _simulate(tmp_path, *extra):
+    return runner.invoke(app, ["simulate", "configs/step_x.yaml", "--log-dir", str(tmp_path),
+                               "--set", "duration_s=2.0", "--set", "sim.settle_s=0.5",
+                               *extra])
+
+
+def test_simulate_writes_a_complete_run_directory(tmp_path):
+    from ardrone_nmpc.recorder import read_run
+
+    result = _simulate(tmp_path, "--seed", "3")
+    assert result.exit_code == 0, result.output
+    last = result.output.strip().splitlines()[-1]
+    assert last.startswith("run: ")
+    run = read_run(last[len("run: "):])
+    assert run.seed == 3 and run.config.sim.seed == 3
+    assert run.config.duration_s == 2.0
+    t = run.columns["t_s"]
+    assert t[0] < 0 <= t[-1] and t[-1] == pytest.approx(2.0, abs=0.07)  # settle, then 2 s
+    assert set(run.columns["mode"]) <= {"settle", "track"}
+    assert any(e["kind"] == "landed" for e in run.events)
+    assert (run.path / "summary.csv").read_text().startswith("axis,metric,value,unit")
+
+
+def test_simulate_quiet_prints_only_the_run_line(tmp_path):
+    result = _simulate(tmp_path, "--quiet")
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines() == [result.output.strip()]
+    assert result.output.startswith("run: ")
+
+
+def test_simulate_is_deterministic_for_a_seed(tmp_path):
+    from ardrone_nmpc.recorder import read_run
+
+    runs = []
+    for sub in ("a", "b"):
+        result = _simulate(tmp_path / sub, "--quiet", "--seed", "7")
+        runs.append(read_run(result.output.strip()[len("run: "):]))
+    for column in ("x_m", "z_m", "x_true_m", "u_theta_rad", "cmd_pitch_frac"):
+        assert np.array_equal(runs[0].columns[column], runs[1].columns[column], equal_nan=True)
+
+
+def test_summary_prints_runs_side_by_side(tmp_path):
+    paths = [_simulate(tmp_path / s, "--quiet", "--seed", s).output.strip()[5:] for s in "12"]
+    result = runner.invoke(app, ["summary", *paths])
+    assert result.exit_code == 0, result.output
+    assert "rmse" in result.output
+    for p in paths:
+        assert Path(p).name[:15] in result.output
+
+
+def test_summary_of_a_missing_run_is_one_clear_line(tmp_path):
+    result = runner.invoke(app, ["summary", str(tmp_path / "nope")])
+    assert result.exit_code == 1
+    assert "Traceback" not in result.output
+
+
+def test_simulate_rejects_a_bad_override(tmp_path):
+    result = _simulate(tmp_path, "--set", "controller.kind=pid")
+    assert result.exit_code == 1
+    assert "controller.kind:" in result.output

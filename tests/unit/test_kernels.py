@@ -158,3 +158,16 @@ def test_sincos_small_is_exact_to_rounding(a):
     s, c = K.sincos_small(a)
     assert s == pytest.approx(math.sin(a), abs=2e-16)
     assert c == pytest.approx(math.cos(a), abs=2e-16)
+
+
+def test_rollout_rk4_matches_the_model_integrator(rng):
+    from ardrone_nmpc import model
+
+    x = rng.normal(size=7)
+    inputs = rng.uniform(-0.5, 0.5, (4, 4))
+    expected = x.copy()
+    for u in inputs:
+        expected = model.rk4_step(expected, u, 0.065)
+    out = np.zeros(7)
+    K.rollout_rk4(x, inputs, 0.065, out)
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)

@@ -327,7 +327,7 @@ def test_summarise_square_path(tmp_path):
     assert rows[("path", "max_deviation")].value == pytest.approx(0.1, abs=1e-9)
     assert rows[("z", "rmse")].value == pytest.approx(0.1, abs=1e-12)
     assert rows[("x", "rmse")].value == 0.0
-    assert rows[("path", "position_rmse")].value == pytest.approx(0.1, abs=1e-12)
+    assert rows[("xyz", "rmse")].value == pytest.approx(0.1, abs=1e-12)
     assert math.isnan(rows[("solver", "solve_time_mean")].value)
     assert ("loop", "overruns") not in rows  # no tick_late_ms logged
 

@@ -1,0 +1,61 @@
+"""``ardrone-nmpc simulate`` and ``summary``: run directories in, tables out."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.simulate import run_lockstep
+from ardrone_nmpc.summary import render_side_by_side, render_summary, summarise
+
+
+def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
+                         console: Console | None = None) -> Path:
+    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path."""
+    console = console or Console(stderr=False)
+    seed = cfg.sim.seed if seed is None else seed
+    if seed != cfg.sim.seed:  # the run directory must reproduce the run: record the seed used
+        cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
+    wall0 = time.perf_counter()
+    with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
+        if not quiet:
+            console.print(f"simulating [bold]{cfg.name}[/]: {cfg.duration_s:g} s "
+                          f"(+{cfg.sim.settle_s:g} s settle), controller {cfg.controller.kind}"
+                          f"{'/' + cfg.controller.solver.method if cfg.controller.kind == 'nmpc' else ''},"
+                          f" estimator {cfg.estimator.kind}, seed {seed}")
+        columns = [TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                   TimeRemainingColumn()]
+        with Progress(*columns, console=console, disable=quiet, transient=True) as progress:
+            task = progress.add_task("flying", total=1.0)
+            result = run_lockstep(cfg, recorder=recorder, seed=seed,
+                                  progress=lambda f: progress.update(task, completed=f))
+        wall_s = time.perf_counter() - wall0
+        recorder.event(0.0, "simulated", wall_s=wall_s, ticks=result.ticks,
+                       final_mode=result.final_mode.value)
+        recorder.flush()
+        rows = summarise(read_run(recorder.path))
+        recorder.write_summary(rows)
+    if not quiet:
+        console.print(render_summary(rows, title=f"{cfg.name} — {recorder.path.name}"))
+        sim_s = cfg.duration_s + cfg.sim.settle_s
+        console.print(f"{result.ticks} ticks, {sim_s:g} s simulated in {wall_s:.2f} s wall "
+                      f"({sim_s / wall_s:.0f}× real time); drone {result.final_mode.value}")
+    return recorder.path
+
+
+def run_summary_command(*, run_dirs: list[Path], console: Console | None = None) -> None:
+    console = console or Console()
+    runs = []
+    for run_dir in run_dirs:
+        run = read_run(run_dir)
+        for warning in run.warnings:
+            console.print(f"[yellow]warning[/]: {warning}")
+        runs.append((Path(run_dir).name, summarise(run)))
+    if len(runs) == 1:
+        console.print(render_summary(runs[0][1], title=runs[0][0]))
+    else:
+        console.print(render_side_by_side(runs))
