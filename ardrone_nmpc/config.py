@@ -212,9 +212,10 @@ class ControllerConfig(_Section):
         (1.0, 1.0, 1.0, 1.0),
         description="Input upper bounds [m/s², rad, rad, rad/s]; each above u_min (eq. 4.17).")
     delay_compensation_s: NonNegative = Field(
-        0.0, description="Command delay (s) the NMPC predicts through: the state is rolled "
+        0.26, description="Command delay (s) the NMPC predicts through: the state is rolled "
         "forward through the commands already sent and the OCP solved for the moment the new "
-        "command takes effect. 0 = the thesis' delay-free formulation; 0.26 matches sim.plant.")
+        "command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); 0 = the "
+        "thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
     solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
     p_gains: PGainsConfig = Field(
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")

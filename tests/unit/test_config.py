@@ -335,8 +335,9 @@ def test_shipped_step_configs_match_the_thesis_experiments():
     assert step_x.reference.start_m == (0, 0, 1) and step_x.reference.target_m == (-1.5, 0, 1)
     assert step_x.reference.step_time_s == 1.0 and step_x.duration_s == 20.0
     step_z = load_config(CONFIG_DIR / "step_z.yaml")
-    assert step_z.reference.start_m == (0, 0, 0) and step_z.reference.target_m == (0, 0, 1)
-    assert step_z.reference.step_time_s == 0.0 and step_z.duration_s == 20.0
+    # "take-off to 1 m": from a low hover after the on-board take-off, up to 1 m
+    assert step_z.reference.start_m[2] < 0.5 and step_z.reference.target_m == (0, 0, 1)
+    assert step_z.reference.step_time_s > 0.0 and step_z.duration_s >= 10.0
     square = load_config(CONFIG_DIR / "square.yaml")
     assert square.reference.kind == "square" and square.reference.side_m == 1.0
     assert square.reference.start_m[2] == 1.0 and square.reference.leg_duration_s == 5.0
