@@ -182,12 +182,13 @@ class SolverConfig(_Section):
 class PGainsConfig(_Section):
     """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none)."""
 
-    k1_per_s: Positive = Field(1.5, description="ż_ref = k1 (z_d − z), 1/s.")
+    k1_per_s: Positive = Field(0.7, description="ż_ref = k1 (z_d − z), 1/s (tuned in "
+                               "simulation: see control/proportional.py PGains).")
     k2_rad_per_mps: Positive = Field(
-        0.35, description="Roll φ per m/s of lateral speed error, rad/(m/s).")
+        0.2, description="Roll φ per m/s of lateral speed error, rad/(m/s).")
     k3_rad_per_mps: Positive = Field(
-        0.35, description="Pitch θ per m/s of forward speed error, rad/(m/s).")
-    k4_per_s: Positive = Field(2.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
+        0.2, description="Pitch θ per m/s of forward speed error, rad/(m/s).")
+    k4_per_s: Positive = Field(1.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
 
 
 class ControllerConfig(_Section):
@@ -229,9 +230,10 @@ class ControllerConfig(_Section):
 class EstimatorConfig(_Section):
     """Velocity estimation (thesis ch. 4): ż from mocap z, ẋ/ẏ from navdata or differences."""
 
-    kind: Literal["kalman", "luenberger", "difference"] = Field(
+    kind: Literal["kalman", "luenberger", "difference", "none"] = Field(
         "kalman", description="ż estimator: Kalman filter (eq. 4.5–4.9), Luenberger observer "
-        "(eq. 4.10–4.15) or the raw finite difference of z.")
+        "(eq. 4.10–4.15), the raw finite difference of z, or none (ż ≡ 0: the thesis' first "
+        "altitude experiment, fig. 3.2).")
     kalman_q: Positive = Field(
         2.8559e-4, description="Kalman process-noise variance Q, (m/s)² (thesis).")
     kalman_r: Positive = Field(

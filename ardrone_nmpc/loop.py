@@ -104,6 +104,7 @@ class Tick:
         self.xy_difference = BackwardDifference(size=2)
         self._last_pose_t_s: float | None = None
         self._zacc_mps2 = 0.0  # z̈ applied over the last interval (KF/observer input)
+        self._vz_ref_mps = 0.0  # the last ż reference sent
         self._state = np.zeros(7)
         # Delay compensation: the inputs sent but not yet acting (newest last).
         self.delay_ticks = math.ceil(ctl.delay_compensation_s / self.period_s - 1e-9)
@@ -207,8 +208,12 @@ class Tick:
         self._zacc_mps2 = float(u[0])
         if self.delay_ticks:
             self._pending.append(u.copy())
-        cmd = AttitudeCommand(vz_reference_mps(x_solve[5], u[0], self.period_s), float(u[1]),
-                              float(u[2]), float(u[3]))
+        # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
+        # Without an estimate the thesis could only integrate its own z̈ commands — the
+        # integrator that winds up into fig. 3.2's overshoot.
+        vz_base = self._vz_ref_mps if self.cfg.estimator.kind == "none" else x_solve[5]
+        self._vz_ref_mps = vz_reference_mps(vz_base, u[0], self.period_s)
+        cmd = AttitudeCommand(self._vz_ref_mps, float(u[1]), float(u[2]), float(u[3]))
         row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
                    solve_us=result.solve_time_us, solver_status=result.status.value,
                    residual_norm=result.residual_norm, gmres_iterations=result.gmres_iterations,

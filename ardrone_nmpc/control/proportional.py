@@ -36,27 +36,31 @@ class PGains:
     vz lag τ_z = 0.5 s, tilt lag 0.1 s, yaw-rate lag 0.1 s, command delay 0.26 s) and the
     thesis' P settling times (z 2 s, x 4 s, y 4.5 s, ψ 2.5 s).
 
+    Tuned in lockstep simulation against that plant, with its 0.26 s delay (each figure:
+    ``ardrone-nmpc simulate configs/<step>.yaml --set controller.kind=p``, seed 0; settling
+    in the 2 % band): x step 3.9 s / 1.8 % overshoot, ψ step 2.2 s / 0.2 %, z step 5.6 s /
+    6.9 %. The first guesses sized from the time constants alone (1.5, 0.35, 0.35, 2.0)
+    never settled x (14 % overshoot, the delay makes the velocity loop ring) and overshot
+    z by 30 % and ψ by 25 %.
+
     Attributes
     ----------
     k1_per_s : float
-        Altitude error → ż reference, 1/s. 1.5 gives a ≈ 0.7 s outer time constant on top of
-        the 0.5 s vz loop (ζ ≈ 0.58 without delay); a 1 m climb is then vz-limited at
-        0.7 m/s for most of the way, ≈ 2 s as in the thesis.
+        Altitude error → ż reference, 1/s. Above ≈ 0.8 the 0.5 s vz lag plus the delay
+        overshoots; the thesis' 2 s take-off is out of reach for P on this plant (5.6 s).
     k2_rad_per_mps : float
         Body-left velocity error → roll φ, rad per m/s (applied with a minus sign, see module).
     k3_rad_per_mps : float
-        Body-forward velocity error → pitch θ, rad per m/s. 0.35 makes the velocity loop pole
-        ≈ g·k + drag ≈ 4 1/s — slower than the tilt loop, still stable with the 0.26 s delay —
-        and the unit-gain position loop (ẋ_d = x_d − x) then dominates: ≈ 4 s for 1.5 m.
+        Body-forward velocity error → pitch θ, rad per m/s; the unit-gain position loop
+        (ẋ_d = x_d − x) on top makes the 1.5 m step take ≈ 4 s, as in the thesis.
     k4_per_s : float
-        Heading error → yaw rate, 1/s. 2 gives a 0.5 s time constant over the 0.1 s yaw-rate
-        loop; a 1 rad turn saturates briefly at 1.745 rad/s and settles in ≈ 2–2.5 s.
+        Heading error → yaw rate, 1/s: a 1 s time constant over the 0.1 s yaw-rate loop.
     """
 
-    k1_per_s: float = 1.5
-    k2_rad_per_mps: float = 0.35
-    k3_rad_per_mps: float = 0.35
-    k4_per_s: float = 2.0
+    k1_per_s: float = 0.7
+    k2_rad_per_mps: float = 0.2
+    k3_rad_per_mps: float = 0.2
+    k4_per_s: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("k1_per_s", "k2_rad_per_mps", "k3_rad_per_mps", "k4_per_s"):

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from .base import EstimatorError, VerticalSpeedEstimator
-from .differentiate import BackwardDifference, FiniteDifferenceVz
+from .differentiate import BackwardDifference, FiniteDifferenceVz, NoVz
 from .kalman import THESIS_Q, THESIS_R, ScalarKalmanVz, steady_state_kalman
 from .luenberger import THESIS_LAMBDA0_PER_S, LuenbergerVz, observer_gain
 
@@ -23,12 +23,13 @@ __all__ = [
     "LuenbergerVz",
     "observer_gain",
     "FiniteDifferenceVz",
+    "NoVz",
     "BackwardDifference",
     "make_vz_estimator",
     "VZ_ESTIMATOR_KINDS",
 ]
 
-VZ_ESTIMATOR_KINDS = ("kalman", "luenberger", "difference")
+VZ_ESTIMATOR_KINDS = ("kalman", "luenberger", "difference", "none")
 
 # Initial ż covariance: the drone starts at rest, so a modest prior (0.1 m/s std) is honest.
 DEFAULT_KALMAN_P0 = 1e-2
@@ -72,4 +73,6 @@ def make_vz_estimator(
         return LuenbergerVz(lambda0_per_s, gain)
     if kind == "difference":
         return FiniteDifferenceVz()
+    if kind == "none":
+        return NoVz()
     raise ValueError(f"unknown vz estimator kind {kind!r}; expected one of {VZ_ESTIMATOR_KINDS}")

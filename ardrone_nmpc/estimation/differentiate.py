@@ -15,6 +15,27 @@ from .base import EstimatorError, check_finite, check_step
 __all__ = ["FiniteDifferenceVz", "BackwardDifference"]
 
 
+class NoVz:
+    """No vertical-speed estimate: ż ≡ 0 (m/s) — the thesis' first altitude experiment
+    (§3.5, fig. 3.2), where the NMPC flew without ż feedback. Follows
+    :class:`~ardrone_nmpc.estimation.base.VerticalSpeedEstimator`.
+    """
+
+    def reset(self, z_m: float, vz_mps: float = 0.0) -> None:
+        check_finite("z_m", z_m)
+
+    def update(self, z_m: float, zacc_mps2: float, dt_s: float) -> float:
+        check_step(z_m, zacc_mps2, dt_s)
+        return 0.0
+
+    @property
+    def vz_mps(self) -> float:
+        return 0.0
+
+    def __repr__(self) -> str:
+        return "NoVz()"
+
+
 class FiniteDifferenceVz:
     """Baseline vertical-speed estimate ``(z[k] − z[k−1]) / Δt`` (m/s); ignores z̈.
 

@@ -340,3 +340,11 @@ class TestFactory:
     def test_unknown_kind(self):
         with pytest.raises(ValueError, match="unknown vz estimator kind 'ekf'"):
             make_vz_estimator("ekf")
+
+
+def test_none_estimator_reports_zero_whatever_the_motion():
+    est = make_vz_estimator("none")
+    est.reset(1.0)
+    assert [est.update(1.0 + 0.1 * k, 2.0, 0.065) for k in range(5)] == [0.0] * 5
+    with pytest.raises(EstimatorError):
+        est.update(1.0, 0.0, 0.0)

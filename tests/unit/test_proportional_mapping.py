@@ -21,6 +21,9 @@ from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.model import f
 from ardrone_nmpc.types import AttitudeCommand
 
+# Explicit gains: these tests check eq. 4.16's formulas, not the tuned defaults.
+FORMULA_GAINS = PGains(k1_per_s=1.5, k2_rad_per_mps=0.35, k3_rad_per_mps=0.35, k4_per_s=2.0)
+
 angles = st.floats(-math.pi, math.pi)
 
 
@@ -82,16 +85,16 @@ class TestPControlSigns:
     def test_body_frame_rotation_at_quarter_turn(self):
         # Facing +y (ψ = π/2): a +y error is straight ahead (pitch), a +x error is to the right.
         s = state(psi=math.pi / 2)
-        ahead = p_control(s, state(y=1.0, psi=math.pi / 2))
+        ahead = p_control(s, state(y=1.0, psi=math.pi / 2), FORMULA_GAINS)
         assert ahead.theta_rad == pytest.approx(0.35)
         assert ahead.phi_rad == pytest.approx(0.0, abs=1e-15)
-        right = p_control(s, state(x=1.0, psi=math.pi / 2))
+        right = p_control(s, state(x=1.0, psi=math.pi / 2), FORMULA_GAINS)
         assert right.phi_rad == pytest.approx(0.35)
         assert right.theta_rad == pytest.approx(0.0, abs=1e-15)
 
     @given(st.floats(-3, 3), st.floats(-3, 3))
     def test_vz_reference_sign(self, z, z_d):
-        vz_ref = p_control(state(z=z), state(z=z_d)).vz_ref_mps
+        vz_ref = p_control(state(z=z), state(z=z_d), FORMULA_GAINS).vz_ref_mps
         assert vz_ref == pytest.approx(1.5 * (z_d - z))
         if z_d > z:
             assert vz_ref > 0.0  # below the target: climb (z is up)
@@ -99,14 +102,14 @@ class TestPControlSigns:
             assert vz_ref < 0.0
 
     def test_yaw_takes_short_way_across_pi(self):
-        cmd = p_control(state(psi=3.0), state(psi=-3.0))
+        cmd = p_control(state(psi=3.0), state(psi=-3.0), FORMULA_GAINS)
         assert cmd.psirate_radps == pytest.approx(2.0 * (2 * math.pi - 6.0))
         assert cmd.psirate_radps > 0.0
-        assert p_control(state(psi=-3.0), state(psi=3.0)).psirate_radps < 0.0
+        assert p_control(state(psi=-3.0), state(psi=3.0), FORMULA_GAINS).psirate_radps < 0.0
 
     @given(angles, angles)
     def test_yaw_error_never_exceeds_half_turn(self, psi, psi_d):
-        rate = p_control(state(psi=psi), state(psi=psi_d)).psirate_radps
+        rate = p_control(state(psi=psi), state(psi=psi_d), FORMULA_GAINS).psirate_radps
         assert abs(rate) <= 2.0 * math.pi + 1e-12
         # Integrating the rate for a short time reduces the wrapped heading error.
         err0 = abs(wrap_angle_rad(psi_d - psi))
@@ -114,7 +117,7 @@ class TestPControlSigns:
         assert abs(wrap_angle_rad(psi_d - (psi + 1e-3 * rate))) < err0
 
     def test_not_clipped(self):
-        cmd = p_control(state(), state(x=-1.5, z=1.0, psi=1.0))
+        cmd = p_control(state(), state(x=-1.5, z=1.0, psi=1.0), FORMULA_GAINS)
         assert abs(cmd.theta_rad) > 0.5 and cmd.psirate_radps == pytest.approx(2.0)
 
     @pytest.mark.parametrize("field", ["k1_per_s", "k2_rad_per_mps", "k3_rad_per_mps", "k4_per_s"])
