@@ -105,6 +105,7 @@ class Tick:
         self._last_pose_t_s: float | None = None
         self._zacc_mps2 = 0.0  # z̈ applied over the last interval (KF/observer input)
         self._vz_ref_mps = 0.0  # the last ż reference sent
+        self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else self.period_s
         self._state = np.zeros(7)
         # Delay compensation: the inputs sent but not yet acting (newest last).
         self.delay_ticks = math.ceil(ctl.delay_compensation_s / self.period_s - 1e-9)
@@ -212,7 +213,7 @@ class Tick:
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = self._vz_ref_mps if self.cfg.estimator.kind == "none" else x_solve[5]
-        self._vz_ref_mps = vz_reference_mps(vz_base, u[0], self.period_s)
+        self._vz_ref_mps = vz_reference_mps(vz_base, u[0], self.vz_lead_s)
         cmd = AttitudeCommand(self._vz_ref_mps, float(u[1]), float(u[2]), float(u[3]))
         row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
                    solve_us=result.solve_time_us, solver_status=result.status.value,

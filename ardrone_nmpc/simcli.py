@@ -16,7 +16,7 @@ from ardrone_nmpc.summary import render_side_by_side, render_summary, summarise
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                          console: Console | None = None) -> Path:
     """Fly ``cfg`` in lockstep simulation into a new run directory; return its path."""
-    console = console or Console(stderr=False)
+    console = console or _console()
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:  # the run directory must reproduce the run: record the seed used
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
@@ -47,8 +47,15 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
     return recorder.path
 
 
+def _console() -> Console:
+    """The terminal's width on a TTY; 150 columns when piped (tables of runs are wide)."""
+    import sys
+
+    return Console(width=None if sys.stdout.isatty() else 150)
+
+
 def run_summary_command(*, run_dirs: list[Path], console: Console | None = None) -> None:
-    console = console or Console()
+    console = console or _console()
     runs = []
     for run_dir in run_dirs:
         run = read_run(run_dir)

@@ -82,7 +82,9 @@ def _clip_unit(v: float) -> tuple[float, bool]:
         return 1.0, True
     if v < -1.0:
         return -1.0, True
-    return v, False
+    # + 0.0 turns −0.0 (e.g. pitch = −θ/E at θ = 0) into 0.0: on the wire −0.0 is the int32
+    # −2147483648, a value no drone firmware is known to accept.
+    return v + 0.0, False
 
 
 def map_to_pcmd(cmd: AttitudeCommand, limits: DroneLimits = DroneLimits()) -> PcmdCommand:

@@ -236,3 +236,9 @@ class TestAngles:
     def test_unwrap_near_across_seam(self):
         assert unwrap_near(-3.0, 3.0) == pytest.approx(2 * math.pi - 3.0)
         assert unwrap_near(0.1, 4 * math.pi) == pytest.approx(4 * math.pi + 0.1)
+
+
+def test_mapping_never_emits_negative_zero():
+    out = map_to_pcmd(AttitudeCommand(-0.0, -0.0, 0.0, 0.0), LIM)
+    for frac in (out.roll_frac, out.pitch_frac, out.gaz_frac, out.yaw_frac):
+        assert math.copysign(1.0, frac) == 1.0

@@ -1,0 +1,346 @@
+"""Tests of the navdata encoder and decoder (ardrone_nmpc.protocol.navdata).
+
+The bootstrap packet of specs/ardrone-protocol.md §4.1 (captured from a drone) is the byte-exact
+fixture; demo packets are built with the spec's own ``struct`` format, independently of the
+encoder.
+"""
+
+from __future__ import annotations
+
+import random
+import struct
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from ardrone_nmpc.protocol.navdata import (
+    CHECKSUM_TAG,
+    DEMO_FORMAT,
+    DEMO_SIZE,
+    NAVDATA_MAGIC,
+    NAVDATA_MAGIC_ALT,
+    NAVDATA_MAX_BYTES,
+    NAVDATA_WAKEUP,
+    CtrlMajor,
+    DemoOption,
+    DroneState,
+    Navdata,
+    NavdataError,
+    NavdataOption,
+    OptionTag,
+    ctrl_state_value,
+    decode_navdata,
+    empty_vision_detect_option,
+    encode_navdata,
+    navdata_checksum,
+)
+
+FUZZ = settings(max_examples=2000, deadline=None,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+PROPERTY = settings(max_examples=300, deadline=None,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+# §4.1 worked example: bootstrap packet (header + checksum option only).
+BOOTSTRAP = bytes.fromhex("88776655 100C804F 01000000 00000000 FFFF0800 A6020000")
+SPEC_DEMO_FORMAT = "<HHIIfffifffI9f3fII9f3f"
+
+
+def with_checksum(body: bytes) -> bytes:
+    """Append a checksum option computed independently of the module."""
+    return body + struct.pack("<HHI", 0xFFFF, 8, sum(body) & 0xFFFFFFFF)
+
+
+def demo_bytes(*, ctrl_major=4, ctrl_minor=0, battery=87, theta=1500.0, phi=-2500.0,
+               psi=-170000.0, altitude=1234, vx=100.0, vy=-50.0, vz=25.0, size=DEMO_SIZE):
+    raw = struct.pack(SPEC_DEMO_FORMAT, 0, size, (ctrl_major << 16) | ctrl_minor, battery,
+                      theta, phi, psi, altitude, vx, vy, vz, 42, *([0.0] * 12), 0, 3,
+                      *range(9), 1.0, 2.0, 3.0)
+    return raw + bytes(size - DEMO_SIZE)
+
+
+def header(state=0x0000_0401, seq=7, vision=0, magic=0x55667788) -> bytes:
+    return struct.pack("<IIIi", magic, state, seq, vision)
+
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+def test_bootstrap_example_decodes():
+    assert len(BOOTSTRAP) == 24
+    assert navdata_checksum(BOOTSTRAP[:16]) == 678 == 0x2A6
+    nav = decode_navdata(BOOTSTRAP)
+    assert nav.magic == NAVDATA_MAGIC and nav.sequence == 1 and nav.vision_flag == 0
+    assert int(nav.state) == 0x4F800C10
+    expected_bits = {4, 10, 11, 23, 24, 25, 26, 27, 30}
+    assert {b for b in range(32) if nav.state & (1 << b)} == expected_bits
+    assert DroneState.NAVDATA_BOOTSTRAP in nav.state and DroneState.COM_WATCHDOG in nav.state
+    assert DroneState.FLY not in nav.state and DroneState.COMMAND not in nav.state
+    assert nav.demo is None and nav.options == ()
+
+
+def test_bootstrap_example_encodes_byte_exact():
+    nav = Navdata(DroneState(0x4F800C10), 1)
+    assert encode_navdata(nav) == BOOTSTRAP
+
+
+def test_ack_state_after_config():
+    acked = DroneState(0x4F800C50)
+    assert DroneState.COMMAND in acked and acked & ~DroneState.COMMAND == 0x4F800C10
+
+
+@pytest.mark.parametrize("name, bit", [
+    ("FLY", 0), ("VIDEO", 1), ("VISION", 2), ("CONTROL", 3), ("ALTITUDE", 4),
+    ("USER_FEEDBACK_START", 5), ("COMMAND", 6), ("CAMERA", 7), ("TRAVELLING", 8), ("USB", 9),
+    ("NAVDATA_DEMO", 10), ("NAVDATA_BOOTSTRAP", 11), ("MOTORS", 12), ("COM_LOST", 13),
+    ("SOFTWARE_FAULT", 14), ("VBAT_LOW", 15), ("USER_EL", 16), ("TIMER_ELAPSED", 17),
+    ("MAGNETO_NEEDS_CALIB", 18), ("ANGLES_OUT_OF_RANGE", 19), ("WIND", 20),
+    ("ULTRASOUND", 21), ("CUTOUT", 22), ("PIC_VERSION", 23), ("ATCODEC_THREAD_ON", 24),
+    ("NAVDATA_THREAD_ON", 25), ("VIDEO_THREAD_ON", 26), ("ACQ_THREAD_ON", 27),
+    ("CTRL_WATCHDOG", 28), ("ADC_WATCHDOG", 29), ("COM_WATCHDOG", 30), ("EMERGENCY", 31),
+])
+def test_state_bits_match_spec(name, bit):
+    assert DroneState[name] == 1 << bit
+
+
+def test_state_aliases():
+    assert DroneState.FLYING is DroneState.FLY
+    assert DroneState.COMMAND_ACK is DroneState.COMMAND
+    assert DroneState.LOW_BATTERY is DroneState.VBAT_LOW
+
+
+def test_constants():
+    assert struct.calcsize(DEMO_FORMAT) == DEMO_SIZE == 148 and DEMO_FORMAT == SPEC_DEMO_FORMAT
+    assert NAVDATA_WAKEUP == b"\x01\x00\x00\x00"
+    assert OptionTag.VISION_DETECT == 16 and OptionTag.CHECKSUM == CHECKSUM_TAG == 0xFFFF
+    assert ctrl_state_value(CtrlMajor.HOVERING, 8) == 0x0004_0008
+    with pytest.raises(ValueError):
+        ctrl_state_value(1 << 16)
+
+
+def test_demo_packet_decodes_with_units():
+    body = header(state=int(DroneState.FLY | DroneState.NAVDATA_DEMO)) + demo_bytes() + \
+        struct.pack("<HH", 16, 328) + bytes(324)
+    packet = with_checksum(body)
+    assert len(packet) == 500                    # the default demo-mode packet size (§4.3)
+    assert packet[16 + 4:16 + 8] == b"\x00\x00\x04\x00"   # bytes 4-5 minor, 6-7 major
+    nav = decode_navdata(packet)
+    d = nav.demo
+    assert d is not None and DroneState.FLYING in nav.state
+    assert (d.ctrl_major, d.ctrl_minor, d.battery_pct) == (CtrlMajor.HOVERING, 0, 87)
+    assert (d.theta_mdeg, d.phi_mdeg, d.psi_mdeg) == (1500.0, -2500.0, -170000.0)
+    assert (d.pitch_deg, d.roll_deg, d.yaw_deg) == (1.5, -2.5, -170.0)
+    assert d.altitude_mm == 1234 and d.altitude_m == pytest.approx(1.234)
+    assert (d.vx_body_mps, d.vy_body_mps, d.vz_mps) == (0.1, -0.05, 0.025)
+    assert d.num_frames == 42 and d.detection_camera_type == 3
+    assert d.drone_camera_rot == tuple(float(i) for i in range(9))
+    assert d.drone_camera_trans == (1.0, 2.0, 3.0)
+    assert nav.options == (empty_vision_detect_option(),)
+    assert nav.option(16) == empty_vision_detect_option() and nav.option(99) is None
+    assert encode_navdata(nav) == packet
+
+
+def test_negative_altitude_is_signed():
+    nav = decode_navdata(with_checksum(header() + demo_bytes(altitude=-5)))
+    assert nav.demo.altitude_mm == -5
+
+
+def test_unknown_options_are_skipped_by_size():
+    body = header() + demo_bytes() + struct.pack("<HH", 28, 10) + b"\xAA" * 6 + \
+        struct.pack("<HH", 43150, 4)
+    nav = decode_navdata(with_checksum(body))
+    assert nav.demo is not None
+    assert nav.options == (NavdataOption(28, b"\xAA" * 6), NavdataOption(43150, b""))
+
+
+def test_grown_demo_option_is_read_and_skipped():
+    nav = decode_navdata(with_checksum(header() + demo_bytes(size=160) +
+                                       struct.pack("<HH", 1, 8) + b"\x01\x02\x03\x04"))
+    assert nav.demo.altitude_mm == 1234
+    assert nav.options == (NavdataOption(1, b"\x01\x02\x03\x04"),)
+
+
+def test_alternative_magic_and_trailing_bytes_accepted():
+    nav = decode_navdata(with_checksum(header(magic=NAVDATA_MAGIC_ALT)) + b"\x00" * 10)
+    assert nav.magic == NAVDATA_MAGIC_ALT
+
+
+MALFORMED = {
+    "empty": b"",
+    "short": BOOTSTRAP[:23],
+    "bad magic": with_checksum(header(magic=0x55667790)),
+    "size 0 (ardrone_autonomy #69)": with_checksum(header() + struct.pack("<HH", 43150, 0)),
+    "size 3": with_checksum(header() + struct.pack("<HH", 5, 3)),
+    "overrun": header() + struct.pack("<HH", 5, 200) + bytes(20),
+    "no checksum": header() + struct.pack("<HH", 1, 8) + bytes(4),
+    "truncated option head": header() + b"\x01\x00",
+    "bad checksum": BOOTSTRAP[:-4] + struct.pack("<I", 0x2A7),
+    "checksum size 12": header() + struct.pack("<HHII", 0xFFFF, 12, 678, 0),
+    "short demo": with_checksum(header() + struct.pack("<HH", 0, 100) + bytes(96)),
+    "two demos": with_checksum(header() + demo_bytes() + demo_bytes()),
+    "too long": with_checksum(header() + struct.pack("<HH", 9, 4090) + bytes(4086)),
+}
+
+
+@pytest.mark.parametrize("data", MALFORMED.values(), ids=MALFORMED.keys())
+def test_malformed_raises_navdata_error(data):
+    with pytest.raises(NavdataError):
+        decode_navdata(data)
+
+
+def test_navdata_error_is_value_error():
+    assert issubclass(NavdataError, ValueError)
+
+
+def test_encoder_orders_options_and_validates():
+    opts = (NavdataOption(26, b"ab"), empty_vision_detect_option(), NavdataOption(1, b"abcd"))
+    nav = Navdata(DroneState(0), 3, demo=DemoOption(), options=opts)
+    back = decode_navdata(encode_navdata(nav))
+    assert [o.tag for o in back.options] == [1, 16, 26]
+    for bad in (NavdataOption(0, b""), NavdataOption(0xFFFF, b"")):
+        with pytest.raises(ValueError):
+            Navdata(DroneState(0), 1, options=(bad,))
+    with pytest.raises(ValueError):
+        encode_navdata(Navdata(DroneState(0), 1, options=(NavdataOption(9, bytes(4070)),)))
+    with pytest.raises(ValueError):
+        Navdata(DroneState(0), 2**32)
+    with pytest.raises(ValueError):
+        Navdata(DroneState(0), 1, magic=0)
+    with pytest.raises(ValueError):
+        NavdataOption(1, bytes(0xFFFF))
+    with pytest.raises(ValueError):
+        DemoOption(battery_pct=-1)
+    with pytest.raises(ValueError):
+        DemoOption(theta_mdeg=1e39)
+    with pytest.raises(ValueError):
+        DemoOption(drone_camera_trans=(1.0, 2.0))
+
+
+def test_max_size_packet_round_trips():
+    nav = Navdata(DroneState(0), 1, options=(NavdataOption(9, bytes(NAVDATA_MAX_BYTES - 28)),))
+    raw = encode_navdata(nav)
+    assert len(raw) == NAVDATA_MAX_BYTES and decode_navdata(raw) == nav
+
+
+def test_demo_from_si():
+    d = DemoOption.from_si(ctrl_state=ctrl_state_value(CtrlMajor.FLYING), battery_pct=55,
+                           pitch_deg=-3.25, roll_deg=1.5, yaw_deg=90.0, altitude_m=0.8005,
+                           vx_body_mps=0.5, vy_body_mps=-0.25, vz_mps=0.125)
+    assert (d.theta_mdeg, d.phi_mdeg, d.psi_mdeg) == (-3250.0, 1500.0, 90000.0)
+    assert d.altitude_mm == 800 or d.altitude_mm == 801
+    assert (d.vx_mmps, d.vy_mmps, d.vz_mmps) == (500.0, -250.0, 125.0)
+    assert d.ctrl_major == CtrlMajor.FLYING
+
+
+# ----------------------------------------------------------------------------- properties
+
+F32 = st.one_of(st.floats(width=32, allow_nan=False), st.sampled_from([-0.0, 0.0]))
+U32 = st.integers(0, 2**32 - 1)
+DEMOS = st.builds(
+    DemoOption, ctrl_state=U32, battery_pct=U32, theta_mdeg=F32, phi_mdeg=F32, psi_mdeg=F32,
+    altitude_mm=st.integers(-(2**31), 2**31 - 1), vx_mmps=F32, vy_mmps=F32, vz_mmps=F32,
+    num_frames=U32, detection_camera_rot=st.tuples(*[F32] * 9),
+    detection_camera_trans=st.tuples(*[F32] * 3), detection_tag_index=U32,
+    detection_camera_type=U32, drone_camera_rot=st.tuples(*[F32] * 9),
+    drone_camera_trans=st.tuples(*[F32] * 3))
+OPTIONS = st.lists(st.builds(NavdataOption, st.integers(1, 0xFFFE), st.binary(max_size=64)),
+                   max_size=12).map(lambda os: tuple(sorted(os, key=lambda o: o.tag)))
+PACKETS = st.builds(Navdata, st.builds(DroneState, U32), U32,
+                    st.integers(-(2**31), 2**31 - 1), st.none() | DEMOS, OPTIONS,
+                    st.sampled_from([NAVDATA_MAGIC, NAVDATA_MAGIC_ALT]))
+
+
+def _float_bits(d: DemoOption) -> bytes:
+    return struct.pack("<9f", d.theta_mdeg, d.phi_mdeg, d.psi_mdeg, d.vx_mmps, d.vy_mmps,
+                       d.vz_mmps, *d.drone_camera_trans)
+
+
+@PROPERTY
+@given(PACKETS)
+def test_round_trip(nav):
+    raw = encode_navdata(nav)
+    assert len(raw) <= NAVDATA_MAX_BYTES
+    assert raw[-8:-4] == b"\xff\xff\x08\x00"
+    assert struct.unpack("<I", raw[-4:])[0] == sum(raw[:-8]) & 0xFFFFFFFF
+    back = decode_navdata(raw)
+    assert back == nav
+    if nav.demo is not None:
+        assert _float_bits(back.demo) == _float_bits(nav.demo)     # −0.0 survives
+    assert encode_navdata(back) == raw
+
+
+@PROPERTY
+@given(st.floats(width=32))
+def test_demo_nan_survives_as_nan(x):
+    d = decode_navdata(encode_navdata(Navdata(DroneState(0), 1, demo=DemoOption(vx_mmps=x))))
+    assert (d.demo.vx_mmps != d.demo.vx_mmps) == (x != x)
+
+
+def _decode_or_own_error(data: bytes) -> None:
+    try:
+        nav = decode_navdata(data)
+    except NavdataError:
+        return
+    assert isinstance(nav, Navdata)
+    decode_navdata(encode_navdata(nav))       # what decodes is representable
+
+
+def _valid_pool() -> list[bytes]:
+    rng = random.Random(4546)
+    pool = [BOOTSTRAP, with_checksum(header() + demo_bytes() + struct.pack("<HH", 16, 328) +
+                                     bytes(324))]
+    for _ in range(200):
+        demo = None if rng.random() < 0.3 else DemoOption(
+            ctrl_state=rng.randrange(2**20), battery_pct=rng.randrange(101),
+            theta_mdeg=rng.uniform(-3e4, 3e4), altitude_mm=rng.randrange(-10, 3000))
+        opts = sorted((NavdataOption(rng.choice([1, 16, 22, 27, 28, 300, 0xFFFE]),
+                                     rng.randbytes(rng.randrange(0, 40)))
+                       for _ in range(rng.randrange(4))), key=lambda o: o.tag)
+        pool.append(encode_navdata(Navdata(DroneState(rng.randrange(2**32)),
+                                           rng.randrange(2**32), 0, demo, tuple(opts))))
+    return pool
+
+
+VALID = st.sampled_from(_valid_pool())
+
+
+@FUZZ
+@given(st.binary(max_size=NAVDATA_MAX_BYTES + 50))
+def test_arbitrary_bytes(data):
+    _decode_or_own_error(data)
+
+
+@FUZZ
+@given(st.binary(max_size=200))
+def test_arbitrary_bytes_after_a_valid_header(data):
+    _decode_or_own_error(header() + data)
+    _decode_or_own_error(with_checksum(header() + data))
+
+
+@FUZZ
+@given(VALID, st.data())
+def test_truncated_packets(raw, draw):
+    cut = draw.draw(st.integers(0, len(raw) - 1))
+    _decode_or_own_error(raw[:cut])
+
+
+@FUZZ
+@given(VALID, st.data())
+def test_single_byte_corruptions(raw, draw):
+    i = draw.draw(st.integers(0, len(raw) - 1))
+    b = draw.draw(st.integers(0, 255))
+    bad = raw[:i] + bytes([b]) + raw[i + 1:]
+    _decode_or_own_error(bad)
+    if b != raw[i] and i < len(raw) - 8:
+        with pytest.raises(NavdataError):      # the checksum (or the structure) catches it
+            decode_navdata(bad)
+
+
+@FUZZ
+@given(VALID, st.data())
+def test_corruptions_with_a_fixed_checksum(raw, draw):
+    """Corrupt the body, then rewrite a consistent checksum so the option walk is exercised."""
+    i = draw.draw(st.integers(0, len(raw) - 9))
+    b = draw.draw(st.one_of(st.integers(0, 255), st.sampled_from([0, 1, 3, 4, 0xFF])))
+    body = raw[:i] + bytes([b]) + raw[i + 1:len(raw) - 8]
+    _decode_or_own_error(with_checksum(body))
