@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.gmres import FAST_MATH, gmres_finish, gmres_iterate, gmres_start
+from ardrone_nmpc.model import dynamics
 
 GRAVITY_MPS2 = 9.81
 NX = 7
@@ -104,22 +105,8 @@ def rollout_rk4(x, inputs, dt, out):
             out[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
-def _model(x, u, out):
-    """Eq. 3.13 (same expressions as :func:`ardrone_nmpc.model.dynamics`)."""
-    spsi = math.sin(x[6])
-    cpsi = math.cos(x[6])
-    tphi = math.tan(u[1])
-    cth = math.cos(u[2])
-    tth = math.tan(u[2])
-    thrust = u[0] + GRAVITY_MPS2
-    out[0] = x[1]
-    out[1] = (spsi * tphi / cth + cpsi * tth) * thrust
-    out[2] = x[3]
-    out[3] = (-cpsi * tphi / cth + spsi * tth) * thrust
-    out[4] = x[5]
-    out[5] = u[0]
-    out[6] = u[3]
+# Eq. 3.13 compiled from its single definition in ardrone_nmpc.model.
+_model = njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")(dynamics)
 
 
 @njit(cache=True)

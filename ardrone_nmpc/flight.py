@@ -1,0 +1,119 @@
+"""``ardrone-nmpc fly``: the real-time loop over real UDP — the drone, or the loopback simulators.
+
+The same :class:`~ardrone_nmpc.loop.Tick` as ``simulate``; here the clock is the wall clock
+(absolute deadlines, :class:`~ardrone_nmpc.clock.Rate`) and the measurements come from the
+links. The session lands the drone however the loop ends; SIGTERM is turned into an
+exception so that it lands too.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+from ardrone_nmpc.clock import Rate
+from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.reference import make_trajectory
+from ardrone_nmpc.session import FlightSession
+from ardrone_nmpc.simulate import HoldStartThen
+from ardrone_nmpc.summary import summarise
+
+EXIT_SIGINT = 130
+EXIT_SIGTERM = 143
+
+
+class Terminated(Exception):
+    """SIGTERM arrived: leave the loop (and land) like Ctrl-C."""
+
+
+class LinkLost(RuntimeError):
+    """Navdata went silent beyond ``safety.navdata_land_ms``."""
+
+
+def _raise_terminated(signum, frame):  # pragma: no cover - exercised by subprocess tests
+    raise Terminated()
+
+
+def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
+               navdata_port: int | None, mocap_port: int | None, log_dir: Path,
+               seed: int | None, status=None) -> Path:
+    """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures."""
+    from ardrone_nmpc.links.drone_link import DroneLink
+    from ardrone_nmpc.links.mocap_link import MocapLink
+
+    seed = cfg.sim.seed if seed is None else seed
+    period = cfg.loop.period_s
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        with ExitStack() as stack:
+            if sim:
+                from ardrone_nmpc.sim.loopback import start_loopback
+
+                mocap = stack.enter_context(MocapLink(
+                    "127.0.0.1", 0, object_name=cfg.mocap.object_name))
+                loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port))
+                host, at_port, navdata_port = "127.0.0.1", loop.at_port, loop.navdata_port
+            else:
+                mocap = stack.enter_context(MocapLink(
+                    cfg.mocap.bind_host, mocap_port or cfg.mocap.port,
+                    object_name=cfg.mocap.object_name))
+                host = drone_host or cfg.drone.host
+                at_port = at_port or cfg.drone.at_port
+                navdata_port = navdata_port or cfg.drone.navdata_port
+            recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
+            t_origin = time.monotonic()
+            event = lambda kind, **f: recorder.event(time.monotonic() - t_origin, kind, **f)
+            event("links", drone=f"{host}:{at_port}/{navdata_port}", mocap_port=mocap.port,
+                  sim=sim)
+            drone = stack.enter_context(DroneLink(
+                host, at_port=at_port, navdata_port=navdata_port,
+                keepalive_interval_s=cfg.drone.keepalive_interval_s))
+            tick = Tick(cfg, HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s)))
+            session = FlightSession(cfg, drone, mocap, event=event)
+            try:
+                with session:
+                    _control_loop(cfg, tick, drone, mocap, recorder, event, status)
+            finally:
+                event("session_end", landed=session.landed_cleanly)
+            path = recorder.path
+        recorder.write_summary(summarise(read_run(path)))
+        return path
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status) -> None:
+    period = cfg.loop.period_s
+    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
+    n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
+    rate = Rate(period)
+    nav_limit_s = cfg.safety.navdata_land_ms * 1e-3
+    for k in range(n_ticks):
+        late_s = rate.sleep()
+        now = time.monotonic()
+        pose, pose_rx = mocap.latest()
+        nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
+        if nav is None or now - nav_rx > nav_limit_s:
+            event("link_lost", navdata_age_ms=(now - nav_rx) * 1e3 if nav else None)
+            raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
+        t_exp = (k - n_settle) * period
+        out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx), t_exp_s=t_exp,
+                        mode="settle" if t_exp < 0 else "track")
+        pcmd = out.pcmd
+        if out.progressive:
+            drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac)
+        else:
+            drone.hover()
+        row = out.row
+        row["tick_late_ms"] = late_s * 1e3
+        recorder.write_row(row)
+        if status is not None:
+            status({**row, "progress": (k + 1) / n_ticks, "overruns": rate.overruns,
+                    "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz})
+    jitter = rate.jitter_ms()
+    event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],
+          jitter_p99_ms=jitter["p99"], jitter_max_ms=jitter["max"])
