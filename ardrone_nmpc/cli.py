@@ -74,6 +74,73 @@ def simulate(
 
 
 @app.command()
+def fly(
+    config: Path = typer.Argument(..., help="Experiment YAML file."),
+    sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone."),
+    drone: Optional[str] = typer.Option(None, "--drone", help="Drone address (default: drone.host, 192.168.1.1)."),
+    at_port: Optional[int] = typer.Option(None, "--at-port", help="AT command UDP port (default: drone.at_port, 5556)."),
+    navdata_port: Optional[int] = typer.Option(None, "--navdata-port", help="Navdata UDP port (default: drone.navdata_port, 5554)."),
+    mocap_port: Optional[int] = typer.Option(None, "--mocap-port", help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
+    duration_s: Optional[float] = typer.Option(None, "--duration-s", help="Experiment length (s), overriding duration_s."),
+    log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
+    dashboard: bool = typer.Option(True, "--dashboard/--no-dashboard", help="Live status (only on a terminal)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulators (--sim)."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+) -> None:
+    """Fly an experiment over UDP: the AR.Drone (with mocap), or with --sim the loopback
+    simulators. Takes off, flies the 65 ms loop, lands at the end, on Ctrl-C, on any error
+    and on link loss. Last line: run: <dir>."""
+    import sys
+
+    overrides = list(set_)
+    if duration_s is not None:
+        overrides.append(f"duration_s={duration_s}")
+    cfg = _load(config, overrides)
+    from rich.console import Console
+    from rich.live import Live
+
+    from ardrone_nmpc.dashboard import LiveStatus
+    from ardrone_nmpc.flight import EXIT_SIGINT, EXIT_SIGTERM, Terminated, run_flight
+
+    console = Console(stderr=True)
+    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}")
+    live = Live(view, console=console, refresh_per_second=4, transient=True)
+    use_live = dashboard and sys.stderr.isatty()
+    code = 0
+    try:
+        if use_live:
+            live.start()
+        path = run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
+                          navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
+                          seed=seed, status=view.update if use_live else None)
+    except KeyboardInterrupt:
+        code, path = EXIT_SIGINT, None
+    except Terminated:
+        code, path = EXIT_SIGTERM, None
+    except Exception as err:  # noqa: BLE001 - one clear line; the session has landed
+        code, path = 1, None
+        typer.echo(f"error: {err}", err=True)
+    finally:
+        if use_live:
+            live.stop()
+    if path is None:
+        path = _latest_run(log_dir, cfg.name)
+    elif code == 0:
+        from ardrone_nmpc.simcli import run_summary_command
+
+        run_summary_command(run_dirs=[path])
+    if path is not None:
+        typer.echo(f"run: {path}")
+    if code:
+        raise typer.Exit(code=code)
+
+
+def _latest_run(log_dir: Path, name: str):
+    runs = sorted(Path(log_dir).glob(f"*-{name}*"))
+    return runs[-1] if runs else None
+
+
+@app.command()
 def summary(
     run_dirs: List[Path] = typer.Argument(..., help="One or more run directories."),
 ) -> None:
@@ -145,6 +212,29 @@ def bench(
         run_bench_command(cfg=cfg, solvers=names, steps=steps, compare_casadi=compare == "casadi",
                           json_path=json_path, repeats=repeats)
     except RuntimeError as err:
+        _fail([str(err)])
+
+
+@app.command("sim-drone")
+def sim_drone(
+    config: Optional[Path] = typer.Option(None, "--config", help="Experiment YAML (sim, drone, mocap sections); default: all defaults."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+    bind: str = typer.Option("127.0.0.1", "--bind", help="Loopback address the simulated drone listens on."),
+    at_port: int = typer.Option(5556, "--at-port", min=0, max=65535, help="AT command UDP port (0 = free port)."),
+    navdata_port: int = typer.Option(5554, "--navdata-port", min=0, max=65535, help="Navdata UDP port (0 = free port)."),
+    control_port: Optional[int] = typer.Option(None, "--control-port", min=0, max=65535, help="Also serve the TCP configuration port (the drone's 5559); default: not served."),
+    mocap_to: str = typer.Option("127.0.0.1:51001", "--mocap-to", help="Loopback host:port the mocap pose stream is sent to."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulation (default: sim.seed)."),
+) -> None:
+    """Serve a simulated AR.Drone 2.0 (AT commands, navdata) and its mocap stream on loopback
+    until Ctrl-C."""
+    from ardrone_nmpc.sim.serve import serve
+
+    cfg = _load(config, set_)
+    try:
+        serve(cfg=cfg, bind=bind, at_port=at_port, navdata_port=navdata_port, mocap_to=mocap_to,
+              seed=seed, control_port=control_port, echo=typer.echo)
+    except (ValueError, OSError) as err:
         _fail([str(err)])
 
 

@@ -56,11 +56,15 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 mocap = stack.enter_context(MocapLink(
                     "127.0.0.1", 0, object_name=cfg.mocap.object_name))
                 loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port))
-                host, at_port, navdata_port = "127.0.0.1", loop.at_port, loop.navdata_port
+                host, at_port, navdata_port = loop.drone_host, loop.at_port, loop.navdata_port
+                link_options = {"bind_host": "127.0.0.1"}
+                if loop.control_port is not None:
+                    link_options["control_port"] = loop.control_port
             else:
                 mocap = stack.enter_context(MocapLink(
                     cfg.mocap.bind_host, mocap_port or cfg.mocap.port,
                     object_name=cfg.mocap.object_name))
+                link_options = {}
                 host = drone_host or cfg.drone.host
                 at_port = at_port or cfg.drone.at_port
                 navdata_port = navdata_port or cfg.drone.navdata_port
@@ -71,7 +75,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                   sim=sim)
             drone = stack.enter_context(DroneLink(
                 host, at_port=at_port, navdata_port=navdata_port,
-                keepalive_interval_s=cfg.drone.keepalive_interval_s))
+                keepalive_interval_s=cfg.drone.keepalive_interval_s, **link_options))
             tick = Tick(cfg, HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s)))
             session = FlightSession(cfg, drone, mocap, event=event)
             try:

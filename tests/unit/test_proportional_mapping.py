@@ -63,7 +63,11 @@ class TestPControlSigns:
         err = dist * np.array([math.cos(bearing), math.sin(bearing)])
         s = state(psi=psi)
         ref = state(x=err[0], y=err[1], psi=psi)
-        assert horizontal_accel(s, p_control(s, ref, gains)) @ err > 0.0
+        cmd = p_control(s, ref, gains)
+        # eq. 3.13 means something only for tilts inside ±π/2 (tan changes sign beyond):
+        # the unclipped P output can leave that range for large errors (hypothesis found one)
+        assume(max(abs(cmd.phi_rad), abs(cmd.theta_rad)) < 1.4)
+        assert horizontal_accel(s, cmd) @ err > 0.0
 
     @given(angles, st.floats(0.05, 2.5), st.floats(-math.pi, math.pi))
     def test_damps_velocity_at_the_target(self, psi, speed, heading):

@@ -1,0 +1,23 @@
+"""Network links to the drone and the motion-capture system (DESIGN.md §2–§3).
+
+* :mod:`ardrone_nmpc.links.udp` — socket helper (:func:`~ardrone_nmpc.links.udp.open_udp`), the
+  :class:`~ardrone_nmpc.links.udp.Clock` protocol and :class:`~ardrone_nmpc.links.udp.LinkStats`
+  (packets, sliding-window rate, loss from sequence gaps, malformed count, age).
+* :mod:`ardrone_nmpc.links.drone_link` — :class:`~ardrone_nmpc.links.drone_link.DroneLink`: the
+  AR.Drone 2.0 AT-command sender (one sequencer, keepalive thread resending REF + PCMD every
+  30 ms, hover on a stale controller command) and navdata receiver (wake-up, bootstrap exit with
+  the config ACK handshake, re-wake after silence).
+* :mod:`ardrone_nmpc.links.mocap_link` — :class:`~ardrone_nmpc.links.mocap_link.MocapLink`: the
+  latest fresh pose of one object from the Vicon-style UDP stream, receipt-stamped.
+
+Layering: links own sockets, threads and clocks; every byte is encoded or decoded by
+:mod:`ardrone_nmpc.protocol` (the one exception, the plain-text configuration dump of TCP 5559,
+is split into lines in :mod:`~ardrone_nmpc.links.drone_link`; see ``DroneLink.read_config``).
+Protocol records are converted into :mod:`ardrone_nmpc.types` records (``NavdataSample``,
+``MocapPose``) at this boundary. Links never decide flight policy: closing a link stops its
+threads and closes its sockets, it does not land the drone — the session does that.
+"""
+
+from ardrone_nmpc.links.udp import Clock, LinkStats, open_udp
+
+__all__ = ["Clock", "LinkStats", "open_udp"]

@@ -1,0 +1,226 @@
+"""The motion-capture link: the latest fresh pose of one object from the UDP pose stream.
+
+specs/mocap-stream.md, receiver rules. A receiver thread reads datagrams (buffer ≥ 2048 bytes),
+stamps each on receipt with the link's clock, decodes it with
+:func:`~ardrone_nmpc.protocol.mocap.decode_mocap` (malformed → counted, never raised) and keeps
+the newest *fresh* pose of the configured object as a :class:`~ardrone_nmpc.types.MocapPose`
+(metres, radians, ψ wrapped to (−π, π], ``t_s`` = receipt time).
+
+Not fresh — the last good pose is kept and its age grows (the supervisor acts on the age; a
+zero pose never reaches the controller):
+
+* the object missing from the datagram (``missing``);
+* an all-zero (or non-finite) pose (``zero_poses``; ``MocapObjectPose.fresh`` is False);
+* a bit-identical pose in ``repeat_limit`` (3) or more consecutive frames: the first two are
+  accepted, the third and later are ignored (``repeats``) — real measurements are never
+  bit-identical three frames running, a tracker holding an occluded object's pose is;
+* a frame number not newer than the last accepted one (duplicate or reordered datagram,
+  ``stats.out_of_order``), unless it is far below it (a restarted tracker, ``stats.restarts``).
+
+:attr:`MocapLink.stats` counts every datagram with a valid number (so ``rate_hz`` and frame
+``lost`` describe the stream itself, whether or not the object was visible) and the malformed
+ones. Closing the link stops the thread and closes the socket.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+
+from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, LinkStats, open_udp
+from ardrone_nmpc.protocol.mocap import (
+    MOCAP_DEFAULT_PORT,
+    MocapError,
+    MocapObjectPose,
+    decode_mocap,
+)
+from ardrone_nmpc.types import MocapPose
+
+__all__ = ["MocapLink", "mocap_pose_of"]
+
+_RX_POLL_S = 0.05
+_POSE_BITS = struct.Struct("<6d")     # the six wire floats, to compare poses bit for bit
+
+
+def _readonly(values) -> np.ndarray:
+    a = np.array(values, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+def mocap_pose_of(pose: MocapObjectPose, t_s: float) -> MocapPose:
+    """A decoded wire pose as the :class:`MocapPose` record stamped ``t_s`` (SI units)."""
+    return MocapPose(t_s=t_s, position_m=_readonly(pose.position_m),
+                     rotation_xyz_rad=_readonly(pose.rotation_xyz_rad), psi_rad=pose.psi_rad)
+
+
+class MocapLink:
+    """Receive the pose stream and keep the latest fresh pose of ``object_name``.
+
+    Parameters
+    ----------
+    bind_host : local address to listen on (``"0.0.0.0"``: all interfaces, as a Vicon PC sends
+        from the lab network; ``"127.0.0.1"`` for the loopback streamer).
+    port : UDP port (51001); 0 picks a free one, see :attr:`port`.
+    object_name : the tracked object's name in the stream.
+    clock : receipt stamps (seconds, monotonic).
+    repeat_limit : consecutive bit-identical frames from which a pose stops being fresh (≥ 2).
+    restart_backjump : a frame number this far below the last is a tracker restart.
+
+    Context manager: ``with MocapLink(...) as mocap:`` starts the thread, exit stops it.
+    """
+
+    def __init__(self, bind_host: str = "0.0.0.0", port: int = MOCAP_DEFAULT_PORT, *,
+                 object_name: str = "ardrone", clock: Clock = time.monotonic,
+                 repeat_limit: int = 3, restart_backjump: int = 1000) -> None:
+        if not isinstance(object_name, str) or not object_name:
+            raise ValueError("object_name must be a non-empty string")
+        if repeat_limit < 2:
+            raise ValueError(f"repeat_limit must be >= 2, got {repeat_limit}")
+        self.bind_host = bind_host
+        self.object_name = object_name
+        self.repeat_limit = int(repeat_limit)
+        self._requested_port = int(port)
+        self._clock = clock
+        self._sock: socket.socket | None = None
+        self._bound_port: int | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._pose: MocapPose | None = None
+        self._rx_t_s = -math.inf
+        self._last_values: bytes | None = None
+        self._same_count = 0
+        self._missing = 0
+        self._zero = 0
+        self._repeats = 0
+        self._poses = 0
+        self._last_error: str | None = None
+        self.stats = LinkStats(window_s=1.0, restart_backjump=restart_backjump)
+        """Stream statistics: rate, frame-number gaps (``lost``), malformed, out of order."""
+
+    # ----------------------------------------------------------------------------- lifecycle
+
+    def __enter__(self) -> MocapLink:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Bind the socket and start the receiver thread (once)."""
+        if self._sock is not None or self._stop.is_set():
+            raise RuntimeError("MocapLink already started (or closed)")
+        self._sock = open_udp(self.bind_host, self._requested_port, timeout_s=_RX_POLL_S)
+        self._bound_port = self._sock.getsockname()[1]
+        self._thread = threading.Thread(target=self._rx_loop, name="mocap-rx", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop the thread and close the socket (idempotent)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        if self._sock is not None:
+            self._sock.close()
+
+    @property
+    def port(self) -> int:
+        """The bound UDP port (the actual one when 0 was requested); the requested port before
+        :meth:`start`."""
+        return self._bound_port if self._bound_port is not None else self._requested_port
+
+    # ----------------------------------------------------------------------------- readings
+
+    def latest(self) -> tuple[MocapPose | None, float]:
+        """``(pose, rx_t_s)``: the newest fresh pose and its receipt time (link clock);
+        ``(None, -inf)`` before the first."""
+        with self._lock:
+            return self._pose, self._rx_t_s
+
+    def age_ms(self, now_s: float) -> float:
+        """Milliseconds since the newest fresh pose was received (inf before the first)."""
+        return (now_s - self._rx_t_s) * 1e3
+
+    @property
+    def poses(self) -> int:
+        """Fresh poses accepted."""
+        return self._poses
+
+    @property
+    def missing(self) -> int:
+        """Frames (accepted by number) without the configured object."""
+        return self._missing
+
+    @property
+    def zero_poses(self) -> int:
+        """Frames carrying the object with an all-zero or non-finite pose."""
+        return self._zero
+
+    @property
+    def repeats(self) -> int:
+        """Frames ignored as a bit-identical repeat (``repeat_limit`` or more in a row)."""
+        return self._repeats
+
+    @property
+    def last_error(self) -> str | None:
+        """The latest decoder error message (diagnostics)."""
+        return self._last_error
+
+    # ----------------------------------------------------------------------------- receiver
+
+    def _rx_loop(self) -> None:
+        sock = self._sock
+        assert sock is not None
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(RECV_BUFFER_BYTES)
+            except socket.timeout:
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    return
+                self._stop.wait(_RX_POLL_S)
+                continue
+            self._handle(data, self._clock())
+
+    def _handle(self, data: bytes, t_s: float) -> None:
+        stats = self.stats
+        stats.record_datagram()
+        try:
+            frame = decode_mocap(data)
+        except MocapError as exc:
+            stats.record_malformed()
+            self._last_error = f"mocap: {exc}"
+            return
+        if not stats.accept_sequence(frame.frame_number):
+            return
+        stats.record_packet(t_s)
+        pose = frame.poses.get(self.object_name)
+        if pose is None:
+            self._missing += 1
+            self._last_values, self._same_count = None, 0
+            return
+        if not pose.fresh:
+            self._zero += 1
+            self._last_values, self._same_count = None, 0
+            return
+        values = _POSE_BITS.pack(*pose.translation_mm, *pose.rotation_xyz_rad)
+        if values == self._last_values:        # bit-identical (0.0 and -0.0 differ)
+            self._same_count += 1
+        else:
+            self._last_values, self._same_count = values, 1
+        if self._same_count >= self.repeat_limit:
+            self._repeats += 1
+            return
+        record = mocap_pose_of(pose, t_s)
+        with self._lock:
+            self._pose = record
+            self._rx_t_s = t_s
+        self._poses += 1

@@ -1,0 +1,144 @@
+"""The loopback simulators of one experiment: plant + AR.Drone server + mocap streamer.
+
+:func:`start_loopback` is what ``fly --sim`` (in-process, free ports) and ``sim-drone``
+(fixed ports) use: it builds the plant from the config's ``sim`` and ``drone`` sections, serves
+it with a :class:`~ardrone_nmpc.sim.drone_server.DroneServer` on 127.0.0.1 and streams its pose
+with a :class:`~ardrone_nmpc.sim.mocap_server.MocapServer`, all sharing one lock.
+"""
+
+from __future__ import annotations
+
+import socket
+from typing import Optional
+
+from .drone_server import DroneServer, require_loopback_host
+from .mocap_server import MocapServer
+from .plant import AirframePlant
+
+__all__ = ["Loopback", "start_loopback", "free_udp_port"]
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port free on ``host`` right now (bound and released; the caller binds it next)."""
+    host = require_loopback_host(host)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+class Loopback:
+    """Running simulators (context manager: exit stops them and closes every socket).
+
+    Attributes
+    ----------
+    plant : the simulated drone (read it under :attr:`lock`, or use :meth:`truth`).
+    drone : the :class:`DroneServer`.
+    mocap : the :class:`MocapServer`.
+    lock : the lock shared by the physics, AT, navdata and mocap threads.
+    drone_host : address of the simulated drone (the bind address, 127.0.0.1).
+    at_port, navdata_port : its UDP ports; control_port : its TCP 5559 stand-in or None.
+    mocap_host, mocap_port : where the pose stream is sent.
+    object_name : the mocap object name.
+    """
+
+    def __init__(self, plant: AirframePlant, drone: DroneServer, mocap: MocapServer) -> None:
+        self.plant = plant
+        self.drone = drone
+        self.mocap = mocap
+        self.lock = drone.lock
+
+    @property
+    def drone_host(self) -> str:
+        return self.drone.bind_host
+
+    @property
+    def at_port(self) -> int:
+        return self.drone.at_port
+
+    @property
+    def navdata_port(self) -> int:
+        return self.drone.navdata_port
+
+    @property
+    def control_port(self) -> Optional[int]:
+        return self.drone.control_port
+
+    @property
+    def mocap_host(self) -> str:
+        return self.mocap.target[0]
+
+    @property
+    def mocap_port(self) -> int:
+        return self.mocap.target[1]
+
+    @property
+    def object_name(self) -> str:
+        return self.mocap.object_name
+
+    def truth(self):
+        """The plant's true state now (:class:`~ardrone_nmpc.types.PlantTruth`)."""
+        with self.lock:
+            return self.plant.truth
+
+    def close(self) -> None:
+        """Stop both servers (idempotent)."""
+        self.mocap.stop()
+        self.drone.stop()
+
+    def __enter__(self) -> Loopback:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return (f"Loopback(drone={self.drone_host}:{self.at_port}/{self.navdata_port}, "
+                f"mocap→{self.mocap_host}:{self.mocap_port} {self.object_name!r})")
+
+
+def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int] = None,
+                   mocap_host: str = "127.0.0.1", bind_host: str = "127.0.0.1",
+                   at_port: int = 0, navdata_port: int = 0, control_port: Optional[int] = None,
+                   mocap_drop_probability: float = 0.0, **drone_options) -> Loopback:
+    """Build the plant of ``cfg`` and start its simulators; returns the running :class:`Loopback`.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig (sections ``sim``, ``drone``, ``mocap`` are read).
+    seed : seed of the plant and the stream faults (default ``cfg.sim.seed``).
+    mocap_port : where the pose stream goes; None = a free port on ``mocap_host``, reported as
+        :attr:`Loopback.mocap_port` (the caller binds it).
+    mocap_host, bind_host : loopback addresses (ValueError otherwise).
+    at_port, navdata_port : drone UDP ports; 0 = free ports.
+    control_port : TCP configuration port (None = not served, 0 = free port).
+    mocap_drop_probability : fraction of mocap frames not sent (seeded).
+    drone_options : further :class:`DroneServer` keyword arguments (watchdog times …).
+    """
+    seed = cfg.sim.seed if seed is None else int(seed)
+    bind_host = require_loopback_host(bind_host, "bind address")
+    mocap_host = require_loopback_host(mocap_host, "mocap target")
+    if mocap_port is None:
+        mocap_port = free_udp_port(mocap_host)
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    options = dict(demo_rate_hz=cfg.sim.navdata_rate_hz,
+                   step_s=cfg.sim.plant.integration_step_s,
+                   altitude_max_m=cfg.drone.altitude_max_m)
+    options.update(drone_options)
+    drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,
+                        control_port=control_port, **options)
+    try:
+        mocap = MocapServer(plant, target=(mocap_host, mocap_port), rate_hz=cfg.sim.mocap_rate_hz,
+                            object_name=cfg.mocap.object_name,
+                            latency_ms=cfg.sim.noise.mocap_latency_ms, lock=drone.lock,
+                            drop_probability=mocap_drop_probability, seed=seed)
+    except BaseException:
+        drone.stop()
+        raise
+    try:
+        drone.start()
+        mocap.start()
+    except BaseException:
+        mocap.stop()
+        drone.stop()
+        raise
+    return Loopback(plant, drone, mocap)

@@ -1,0 +1,212 @@
+"""Loopback motion-capture streamer: the plant's pose as Vicon-style UDP datagrams.
+
+specs/mocap-stream.md, "Rules for the loopback streamer". One thread samples
+:meth:`AirframePlant.mocap_pose` (noise from the plant's ``noise`` settings) at ``rate_hz`` on
+absolute deadlines, encodes it with :func:`~ardrone_nmpc.protocol.mocap.encode_mocap` (one pose
+item, zero-padded to 256 bytes) and sends it ``latency_ms`` after the sampling deadline to a
+127.x target. Frame numbers are tied to the deadlines: frame ``first_frame + k`` is the pose of
+deadline ``k``, so they go up by one per frame; a dropped frame (``drop_probability``, seeded)
+leaves a gap, as a lost datagram of a real system would. When the thread wakes more than
+``max_catchup_s`` late (a stalled process) it skips the missed frames (a gap, counted in
+``skipped``) instead of bursting them; shorter delays are caught up frame by frame.
+
+Fault injection still to come (the spec's occlusion bursts, duplicated and reordered datagrams)
+hooks in at :meth:`MocapServer._frame_bytes` / the send queue.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+import random
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from ..protocol.mocap import MOCAP_DEFAULT_PORT, MocapFrame, MocapObjectPose, encode_mocap
+from .drone_server import require_loopback_host
+from .plant import AirframePlant
+
+__all__ = ["MocapServer", "MocapServerCounters"]
+
+
+@dataclass
+class MocapServerCounters:
+    """Counters of a :class:`MocapServer` (a snapshot copy when read)."""
+
+    frames: int = 0            # frames sampled (sent + dropped)
+    sent: int = 0
+    dropped: int = 0           # by drop_probability
+    skipped: int = 0           # deadlines skipped after a stall longer than max_catchup_s
+    send_errors: int = 0
+    last_frame_number: int = -1
+
+
+class _NullLock:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+class MocapServer:
+    """Streams the plant's pose to ``target`` (context manager: enter starts, exit stops).
+
+    Parameters
+    ----------
+    plant : the simulated drone (``mocap_pose()`` is called under ``lock``).
+    target : (host, port); the host must be a 127.x address (ValueError otherwise).
+    rate_hz : frame rate (Hz), 100 as the thesis' Vicon system.
+    object_name : the object name in each pose item (1–24 ASCII characters).
+    latency_ms : delay from the sampling deadline to the send (ms), ≥ 0.
+    lock : lock shared with the thread advancing the plant (None: no locking).
+    drop_probability : probability a frame is not sent (frame number still advances).
+    seed : seed of the drop decisions.
+    first_frame : frame number of the first frame.
+    max_catchup_s : lateness beyond which missed frames are skipped rather than sent.
+    """
+
+    def __init__(self, plant: AirframePlant, *,
+                 target: tuple[str, int] = ("127.0.0.1", MOCAP_DEFAULT_PORT),
+                 rate_hz: float = 100.0, object_name: str = "ardrone", latency_ms: float = 2.0,
+                 lock=None, drop_probability: float = 0.0, seed: int = 0, first_frame: int = 1,
+                 max_catchup_s: float = 0.25,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        host, port = target
+        host = require_loopback_host(host, "mocap target")
+        port = int(port)
+        if not 1 <= port <= 65535:
+            raise ValueError(f"mocap target port must be in 1..65535, got {port}")
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"rate_hz must be finite and > 0, got {rate_hz!r}")
+        if not (math.isfinite(latency_ms) and latency_ms >= 0):
+            raise ValueError(f"latency_ms must be finite and >= 0, got {latency_ms!r}")
+        if not 0.0 <= drop_probability <= 1.0:
+            raise ValueError(f"drop_probability must be in [0, 1], got {drop_probability!r}")
+        if not 0 <= first_frame <= 0xFFFFFFFF:
+            raise ValueError(f"first_frame must be a u32, got {first_frame!r}")
+        # validates the name (ASCII, 1..24 characters) once, up front
+        encode_mocap(MocapFrame.of(0, [MocapObjectPose(object_name, (1.0, 0, 0), (0, 0, 0))]))
+        self.plant = plant
+        self.target = (host, port)
+        self.rate_hz = float(rate_hz)
+        self.object_name = object_name
+        self.latency_s = float(latency_ms) / 1000.0
+        self.drop_probability = float(drop_probability)
+        self.first_frame = int(first_frame)
+        self.max_catchup_s = float(max_catchup_s)
+        self._lock = lock if lock is not None else _NullLock()
+        self._rng = random.Random(seed)
+        self._clock = clock
+        self._counters = MocapServerCounters()
+        self._counters_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind(("127.0.0.1", 0))
+        except BaseException:
+            self._sock.close()
+            raise
+
+    @property
+    def counters(self) -> MocapServerCounters:
+        with self._counters_lock:
+            return dataclasses.replace(self._counters)
+
+    @property
+    def source_port(self) -> int:
+        """The local UDP port the datagrams come from."""
+        return self._sock.getsockname()[1]
+
+    # ------------------------------------------------------------------ life cycle
+
+    def start(self) -> MocapServer:
+        if self._closed:
+            raise RuntimeError("MocapServer is closed")
+        if self._thread is not None:
+            raise RuntimeError("MocapServer already started")
+        self._thread = threading.Thread(target=self._run, name="mocap-server", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Stop and join the thread, close the socket (idempotent)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        self._sock.close()
+        self._closed = True
+
+    close = stop
+
+    def __enter__(self) -> MocapServer:
+        if self._thread is None:
+            self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        return (f"MocapServer({self.object_name!r} → {self.target[0]}:{self.target[1]}, "
+                f"{self.rate_hz:g} Hz)")
+
+    # ------------------------------------------------------------------ streaming
+
+    def _frame_bytes(self, frame_number: int) -> bytes:
+        with self._lock:
+            pose = self.plant.mocap_pose()
+        p, r = pose.position_m, pose.rotation_xyz_rad
+        item = MocapObjectPose(self.object_name,
+                               (float(p[0]) * 1000.0, float(p[1]) * 1000.0, float(p[2]) * 1000.0),
+                               (float(r[0]), float(r[1]), float(r[2])))
+        return encode_mocap(MocapFrame.of(frame_number & 0xFFFFFFFF, [item]))
+
+    def _run(self) -> None:
+        clock, period = self._clock, 1.0 / self.rate_hz
+        queue: collections.deque = collections.deque()   # (due time, bytes), due ascending
+        t0 = clock()
+        k = 0
+        while not self._stop.is_set():
+            now = clock()
+            while queue and queue[0][0] <= now:
+                _, data = queue.popleft()
+                try:
+                    self._sock.sendto(data, self.target)
+                    sent_ok = True
+                except OSError:
+                    sent_ok = False
+                with self._counters_lock:
+                    if sent_ok:
+                        self._counters.sent += 1
+                    else:
+                        self._counters.send_errors += 1
+            deadline = t0 + k * period
+            if now >= deadline:
+                if now - deadline > self.max_catchup_s:
+                    k_now = int((now - t0) / period)
+                    with self._counters_lock:
+                        self._counters.skipped += k_now - k
+                    k = k_now
+                    deadline = t0 + k * period
+                frame_number = self.first_frame + k
+                data = self._frame_bytes(frame_number)
+                k += 1
+                dropped = self.drop_probability > 0 and self._rng.random() < self.drop_probability
+                with self._counters_lock:
+                    c = self._counters
+                    c.frames += 1
+                    c.last_frame_number = frame_number & 0xFFFFFFFF
+                    if dropped:
+                        c.dropped += 1
+                if not dropped:
+                    queue.append((deadline + self.latency_s, data))
+                continue
+            wake = deadline if not queue else min(deadline, queue[0][0])
+            self._stop.wait(max(0.0, wake - now))

@@ -1,0 +1,77 @@
+"""`fly --sim` end to end: the real loop over UDP on 127.0.0.1 against the loopback drone.
+
+Subprocesses with timeouts; only loopback addresses are ever used.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ardrone_nmpc.recorder import read_run
+
+FLY = [sys.executable, "-m", "ardrone_nmpc.cli", "fly", "configs/hover.yaml", "--sim",
+       "--no-dashboard"]
+
+
+def _events(run_dir):
+    return [json.loads(line) for line in (Path(run_dir) / "events.jsonl").read_text().splitlines()]
+
+
+def _run_line(text):
+    lines = [l for l in text.splitlines() if l.startswith("run: ")]
+    assert lines, text
+    return lines[-1][len("run: "):]
+
+
+@pytest.mark.timeout(120)
+def test_fly_sim_flies_and_lands(tmp_path):
+    proc = subprocess.run([*FLY, "--log-dir", str(tmp_path), "--duration-s", "3",
+                           "--set", "sim.settle_s=1"], capture_output=True, text=True,
+                          timeout=110, cwd=Path(__file__).parents[2])
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1].startswith("run: ")
+    run = read_run(_run_line(proc.stdout))
+    kinds = [e["kind"] for e in _events(run.path)]
+    assert kinds.index("takeoff") < kinds.index("landed")
+    assert "loop_timing" in kinds
+    t = run.columns["t_s"]
+    assert t[-1] == pytest.approx(3.0, abs=0.07) and run.n_rows >= 55
+    assert set(run.columns["mode"]) <= {"settle", "track"}
+    z = run.columns["z_m"][t > 0]
+    assert abs(z.mean() - 1.0) < 0.3  # hovering near the reference over UDP
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_lands_and_exits_with_the_signal_code(tmp_path, sig, code):
+    proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).parents[2])
+    try:
+        deadline = time.monotonic() + 60
+        run_dir = None
+        while time.monotonic() < deadline:  # wait until it is flying the loop
+            dirs = list(Path(tmp_path).glob("*-hover"))
+            if dirs and (dirs[0] / "log.csv").exists() and \
+                    len((dirs[0] / "log.csv").read_text().splitlines()) > 20:
+                run_dir = dirs[0]
+                break
+            time.sleep(0.2)
+        assert run_dir is not None, "the flight never started"
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=40)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == code, err
+    kinds = [e["kind"] for e in _events(run_dir)]
+    assert "landed" in kinds, kinds
+    assert _run_line(out) == str(run_dir)
+    read_run(run_dir)  # complete and readable
