@@ -50,6 +50,11 @@ class FlightSession:
             euler_angle_max_rad=d.euler_angle_max_rad, control_vz_max_mps=d.control_vz_max_mps,
             control_yaw_radps=d.control_yaw_radps, altitude_max_m=d.altitude_max_m)
         self.event("config_written", **{str(k): v for k, v in dict(written).items()})
+        try:  # read back what the drone now holds (control port): logged, not trusted blindly
+            held = self.drone.read_config(timeout_s=2.0)
+            self.event("config_read", **{k: held.get(k) for k in written})
+        except Exception as err:  # noqa: BLE001 - a drone without the port still flies
+            self.event("config_read_failed", error=str(err))
         try:
             self.preflight()
             self.drone.flat_trim()
