@@ -100,44 +100,42 @@ def fly(
     from rich.live import Live
 
     from ardrone_nmpc.dashboard import LiveStatus
-    from ardrone_nmpc.flight import EXIT_SIGINT, EXIT_SIGTERM, Terminated, run_flight
+    from ardrone_nmpc.flight import (EXIT_SIGINT, EXIT_SIGTERM, FlightResult, Terminated,
+                                     run_flight)
 
     console = Console(stderr=True)
     view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}")
     live = Live(view, console=console, refresh_per_second=4, transient=True)
     use_live = dashboard and sys.stderr.isatty()
+    result = FlightResult()
     code = 0
     try:
         if use_live:
             live.start()
-        path = run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
-                          navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
-                          seed=seed, status=view.update if use_live else None)
+        run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
+                   navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
+                   seed=seed, status=view.update if use_live else None, result=result)
+    except Terminated:  # before KeyboardInterrupt: it is one
+        code = EXIT_SIGTERM
     except KeyboardInterrupt:
-        code, path = EXIT_SIGINT, None
-    except Terminated:
-        code, path = EXIT_SIGTERM, None
+        code = EXIT_SIGINT
     except Exception as err:  # noqa: BLE001 - one clear line; the session has landed
-        code, path = 1, None
+        code = 1
         typer.echo(f"error: {err}", err=True)
     finally:
         if use_live:
             live.stop()
-    if path is None:
-        path = _latest_run(log_dir, cfg.name)
-    elif code == 0:
+    if result.landed is False:
+        typer.echo("error: landing not confirmed by navdata — check the drone", err=True)
+        code = code or 1
+    if code == 0 and result.path is not None:
         from ardrone_nmpc.simcli import run_summary_command
 
-        run_summary_command(run_dirs=[path])
-    if path is not None:
-        typer.echo(f"run: {path}")
+        run_summary_command(run_dirs=[result.path])
+    if result.path is not None:
+        typer.echo(f"run: {result.path}")
     if code:
         raise typer.Exit(code=code)
-
-
-def _latest_run(log_dir: Path, name: str):
-    runs = sorted(Path(log_dir).glob(f"*-{name}*"))
-    return runs[-1] if runs else None
 
 
 @app.command()

@@ -14,7 +14,9 @@ class Rate:
 
     :meth:`sleep` returns the lateness of the wake-up (s). Every deadline that passes while the
     tick is still running is an *overrun*: it is counted and skipped (no burst of catch-up
-    ticks); the loop waits for the next future deadline.
+    ticks); the loop waits for the next future deadline. :attr:`index` is the number of the
+    deadline the last :meth:`sleep` woke for (0, 1, 2, … with gaps after overruns), so loop
+    time derived from it stays wall time.
     """
 
     period_s: float
@@ -27,6 +29,8 @@ class Rate:
         if not (self.period_s > 0 and math.isfinite(self.period_s)):
             raise ValueError(f"period_s: must be positive, got {self.period_s}")
         self._next = self.clock() + self.period_s
+        self._k = 0  # index of the deadline self._next
+        self.index = -1  # index of the deadline the last sleep() woke for
 
     @property
     def next_deadline_s(self) -> float:
@@ -39,12 +43,15 @@ class Rate:
             missed = math.floor((now - self._next) / self.period_s) + 1
             self.overruns += missed
             self._next += missed * self.period_s
+            self._k += missed
         remaining = self._next - now
         if remaining > 0:
             self.sleep_fn(remaining)
         woke = self.clock()
         late = max(0.0, woke - self._next)
         self.lateness_s.append(late)
+        self.index = self._k
+        self._k += 1
         self._next += self.period_s
         return late
 

@@ -26,8 +26,20 @@ EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
 
 
-class Terminated(Exception):
-    """SIGTERM arrived: leave the loop (and land) like Ctrl-C."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: leave the loop (and land) exactly like Ctrl-C — a KeyboardInterrupt,
+    so no ``except Exception`` on the way can swallow it."""
+
+
+class LandingNotConfirmed(RuntimeError):
+    """Navdata never showed the drone landed: go and look at it."""
+
+
+class FlightResult:
+    """Filled in as the flight goes, so the caller knows the run directory even on failure."""
+
+    path: Path | None = None
+    landed: bool | None = None
 
 
 class LinkLost(RuntimeError):
@@ -40,8 +52,10 @@ def _raise_terminated(signum, frame):  # pragma: no cover - exercised by subproc
 
 def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                navdata_port: int | None, mocap_port: int | None, log_dir: Path,
-               seed: int | None, status=None) -> Path:
-    """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures."""
+               seed: int | None, status=None, result: FlightResult | None = None) -> Path:
+    """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures;
+    ``result`` holds the run directory and the landing outcome whatever happens."""
+    result = result if result is not None else FlightResult()
     from ardrone_nmpc.links.drone_link import DroneLink
     from ardrone_nmpc.links.mocap_link import MocapLink
 
@@ -69,6 +83,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 at_port = at_port or cfg.drone.at_port
                 navdata_port = navdata_port or cfg.drone.navdata_port
             recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
+            result.path = recorder.path
             t_origin = time.monotonic()
             event = lambda kind, **f: recorder.event(time.monotonic() - t_origin, kind, **f)
             event("links", drone=f"{host}:{at_port}/{navdata_port}", mocap_port=mocap.port,
@@ -82,9 +97,12 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 with session:
                     _control_loop(cfg, tick, drone, mocap, recorder, event, status)
             finally:
+                result.landed = session.landed_cleanly
                 event("session_end", landed=session.landed_cleanly)
             path = recorder.path
         recorder.write_summary(summarise(read_run(path)))
+        if result.landed is False:
+            raise LandingNotConfirmed("navdata never showed the drone landed: check it")
         return path
     finally:
         signal.signal(signal.SIGTERM, previous)
@@ -96,8 +114,11 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status) -> Non
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     rate = Rate(period)
     nav_limit_s = cfg.safety.navdata_land_ms * 1e-3
-    for k in range(n_ticks):
+    while True:
         late_s = rate.sleep()
+        k = rate.index  # deadline number: overrun deadlines are skipped, time stays wall time
+        if k >= n_ticks:
+            break
         now = time.monotonic()
         pose, pose_rx = mocap.latest()
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s

@@ -162,6 +162,12 @@ class Tick:
             # No fresh pose: never control from stale data. (Full policy: safety.py, issue 6.)
             row.update(mode="hover-stale-mocap", solver_status="", cmd_saturated="0000",
                        cmd_roll_frac=0.0, cmd_pitch_frac=0.0, cmd_gaz_frac=0.0, cmd_yaw_frac=0.0)
+            # what the drone now does: no acceleration (its own hover), for the delay
+            # predictor and the integrators — not the last NMPC input, which is never flown
+            self._zacc_mps2 = 0.0
+            self._vz_ref_mps = 0.0
+            if self.delay_ticks:
+                self._pending.append(np.zeros(4))
             row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
             return TickOutput(HOVER, False, row)
         x = self._estimate(inputs)
@@ -205,6 +211,8 @@ class Tick:
         dtau = solver.stage_dtau_s(t_exp_s)
         ref = horizon(traj, t_exp_s + lead_s, max(dtau, 1e-9), solver.spec.horizon_steps)
         result = solver.solve(t_exp_s, x_solve, ref)
+        # log the reference at t (what x(t) is compared with), not at t + lead
+        ref_now = traj.state_at(t_exp_s)[0] if lead_s > 0 else ref[0]
         u = result.u
         self._zacc_mps2 = float(u[0])
         if self.delay_ticks:
@@ -213,10 +221,12 @@ class Tick:
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = self._vz_ref_mps if self.cfg.estimator.kind == "none" else x_solve[5]
-        self._vz_ref_mps = vz_reference_mps(vz_base, u[0], self.vz_lead_s)
+        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
+        self._vz_ref_mps = min(max(vz_reference_mps(vz_base, u[0], self.vz_lead_s), -vz_max),
+                               vz_max)
         cmd = AttitudeCommand(self._vz_ref_mps, float(u[1]), float(u[2]), float(u[3]))
         row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
                    solve_us=result.solve_time_us, solver_status=result.status.value,
                    residual_norm=result.residual_norm, gmres_iterations=result.gmres_iterations,
                    newton_iterations=result.newton_iterations)
-        return cmd, ref[0]
+        return cmd, ref_now

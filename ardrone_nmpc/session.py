@@ -93,22 +93,39 @@ class FlightSession:
     # -- leaving: land, always ------------------------------------------------------------
     def __exit__(self, exc_type, exc, tb) -> bool:
         reason = "end" if exc_type is None else exc_type.__name__
-        self.event("landing", reason=reason)
-        self.land()
+        try:
+            self.event("landing", reason=reason)
+        finally:  # a failing log (disk full) must not keep the drone in the air
+            self.land()
         return False  # never swallow the exception
 
     def land(self) -> bool:
-        """Command landing until navdata shows the drone landed; True if it did in time."""
-        try:
-            self.drone.hover()
-            self.drone.land()
-            self._wait_for(lambda m: m in (FlightMode.LANDED, FlightMode.EMERGENCY),
-                           self.LANDING_TIMEOUT_S, "landing", resend=self.drone.land)
-            self.landed_cleanly = True
-            self.event("landed")
-        except Exception as err:  # noqa: BLE001 - report, the caller's exception wins
-            self.landed_cleanly = False
-            self.event("landing_failed", error=str(err))
+        """Command landing until navdata shows the drone landed; True if it did in time.
+
+        Interrupts (Ctrl-C, SIGTERM) arriving meanwhile do not stop the landing: the first is
+        re-raised once the drone is down or the landing timed out.
+        """
+        interrupt: BaseException | None = None
+        deadline = self.clock() + self.LANDING_TIMEOUT_S
+        while self.landed_cleanly is not True:
+            try:
+                self.drone.land()  # the link also drops the flight command to hover
+                self._wait_for(lambda m: m in (FlightMode.LANDED, FlightMode.EMERGENCY),
+                               max(deadline - self.clock(), 0.0), "landing",
+                               resend=self.drone.land)
+                self.landed_cleanly = True
+                self.event("landed")
+            except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: keep landing
+                interrupt = interrupt or err
+                if self.clock() > deadline:
+                    self.landed_cleanly = False
+                    break
+            except Exception as err:  # noqa: BLE001 - reported; the caller's exception wins
+                self.landed_cleanly = False
+                self.event("landing_failed", error=str(err) or type(err).__name__)
+                break
+        if interrupt is not None:
+            raise interrupt
         return bool(self.landed_cleanly)
 
     # -- helpers --------------------------------------------------------------------------

@@ -37,6 +37,7 @@ def test_overrun_skips_missed_deadlines_and_counts_them():
     rate.sleep()
     assert rate.overruns == 3
     assert clock.t == pytest.approx(100.5, abs=1e-9)  # no burst: the next live deadline
+    assert rate.index == 4  # deadlines 1, 2, 3 were skipped: loop time stays wall time
 
 
 def test_jitter_reports_lateness_in_ms():
