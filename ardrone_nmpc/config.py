@@ -390,7 +390,10 @@ class NoiseConfig(_Section):
     mocap_position_std_m: NonNegative = Field(0.0005, description="Mocap position σ per axis (m).")
     mocap_angle_std_rad: NonNegative = Field(
         math.radians(0.1), description="Mocap angle σ (rad), 0.1°.")
-    mocap_latency_ms: NonNegative = Field(2.0, description="Mocap stream latency (ms).")
+    mocap_latency_ms: float = Field(
+        2.0, ge=0.0, le=50.0, description="Mocap stream latency (ms), 0–50: the lockstep runner "
+        "samples only the newest frame a tick can see, which needs latency + frame period < "
+        "the control period (65 ms); larger latencies would be silently capped.")
     navdata_attitude_std_rad: NonNegative = Field(
         math.radians(0.2), description="Navdata roll/pitch σ (rad), 0.2°.")
     navdata_yaw_std_rad: NonNegative = Field(

@@ -19,7 +19,7 @@ from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, 
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.reference import Trajectory, horizon
+from ardrone_nmpc.reference import Trajectory
 from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
 
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
@@ -95,6 +95,7 @@ class Tick:
             from ardrone_nmpc.control.newton import make_nmpc
 
             self.nmpc = make_nmpc(effective_controller(ctl, self.limits), period_s=self.period_s)
+            self._stage_index = np.arange(ctl.horizon_steps + 1, dtype=np.float64)
         g = ctl.p_gains
         self.p_gains = PGains(g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
         est = cfg.estimator
@@ -209,10 +210,14 @@ class Tick:
         lead_s = self.delay_ticks * self.period_s
         x_solve = self.predict_through_delay(x)
         dtau = solver.stage_dtau_s(t_exp_s)
-        ref = horizon(traj, t_exp_s + lead_s, max(dtau, 1e-9), solver.spec.horizon_steps)
+        # one lookup for the reference at t (logged against x(t)) and over the horizon that
+        # starts when this command takes effect, t + lead
+        times = np.empty(solver.spec.horizon_steps + 2)
+        times[0] = t_exp_s
+        times[1:] = t_exp_s + lead_s + max(dtau, 1e-9) * self._stage_index
+        states = traj.state_at(times)
+        ref_now, ref = states[0], states[1:]
         result = solver.solve(t_exp_s, x_solve, ref)
-        # log the reference at t (what x(t) is compared with), not at t + lead
-        ref_now = traj.state_at(t_exp_s)[0] if lead_s > 0 else ref[0]
         u = result.u
         self._zacc_mps2 = float(u[0])
         if self.delay_ticks:

@@ -342,3 +342,8 @@ def test_shipped_step_configs_match_the_thesis_experiments():
     assert square.reference.kind == "square" and square.reference.side_m == 1.0
     assert square.reference.start_m[2] == 1.0 and square.reference.leg_duration_s == 5.0
     assert square.duration_s == 25.0
+
+
+def test_mocap_latency_beyond_what_lockstep_can_represent_is_refused():
+    with pytest.raises(ConfigError, match=r"sim\.noise\.mocap_latency_ms:"):
+        load_config(None, ["sim.noise.mocap_latency_ms=100"])

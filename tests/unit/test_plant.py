@@ -593,3 +593,17 @@ def test_sim_does_not_import_control_or_estimation():
             "'ardrone_nmpc.estimation'))]; print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=10, max_size=10),
+       st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), st.booleans(),
+       st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))
+def test_compiled_rk4_equals_the_python_reference(state, cmd, hold, wind):
+    from ardrone_nmpc.sim.plant import airframe_rk4, rk4_step, airframe_derivative
+
+    params = PlantParams()
+    state = tuple(state)
+    expected = rk4_step(airframe_derivative, state, 0.005, (*cmd, hold), params, tuple(wind))
+    got = airframe_rk4(state, *cmd, hold, params.rhs_coefficients, tuple(wind), 0.005)
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
