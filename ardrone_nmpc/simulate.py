@@ -11,6 +11,7 @@ reference's start for ``sim.settle_s`` (rows with t_s < 0), fly the experiment f
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -53,6 +54,7 @@ class SimResult:
     ticks: int
     final_mode: FlightMode
     run_dir: Path | None
+    loop_wall_s: float = math.nan  # wall time of the flight itself (JIT warm-up excluded)
 
 
 class _Sensors:
@@ -134,6 +136,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     t_first = plant.t_s
+    wall0 = time.perf_counter()
     t_start = t_first + n_settle * period  # experiment time 0 on the plant clock
     for k in range(n_ticks):
         t_plant = t_first + k * period
@@ -150,10 +153,12 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
             recorder.write_row(row)
         if progress is not None:
             progress((k + 1) / n_ticks)
+    loop_wall_s = time.perf_counter() - wall0
     plant.land()
     event(t_first + n_ticks * period - t_start, "land")
     deadline = plant.t_s + LANDING_TIMEOUT_S
     while plant.mode is not FlightMode.LANDED and plant.t_s < deadline:
         sensors.advance_to(plant.t_s + period)
     event(plant.t_s - t_start, "landed" if plant.mode is FlightMode.LANDED else "not-landed")
-    return SimResult(n_ticks, plant.mode, recorder.path if recorder is not None else None)
+    return SimResult(n_ticks, plant.mode, recorder.path if recorder is not None else None,
+                     loop_wall_s)
