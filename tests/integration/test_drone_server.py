@@ -699,8 +699,8 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
 @pytest.mark.timeout(20)
 @pytest.mark.parametrize("kwargs, message", [
     (dict(bind="0.0.0.0"), "--bind"),
-    (dict(bind="192.168.1.1"), "--bind"),
-    (dict(mocap_to="192.168.1.2:51001"), "--mocap-to"),
+    (dict(bind="192.0.2.1"), "--bind"),
+    (dict(mocap_to="198.51.100.2:51001"), "--mocap-to"),
     (dict(mocap_to="10.1.2.3:51001"), "--mocap-to"),
     (dict(mocap_to="127.0.0.1"), "--mocap-to"),
     (dict(mocap_to="127.0.0.1:99999"), "--mocap-to"),
@@ -718,7 +718,7 @@ def test_serve_refuses_non_loopback_addresses(kwargs, message):
 
 def test_servers_refuse_non_loopback_binds():
     plant = AirframePlant(PlantParams(), QUIET)
-    for host in ("0.0.0.0", "192.168.1.1", "::1", "example.com"):
+    for host in ("0.0.0.0", "192.0.2.1", "::1", "example.com"):  # RFC 5737 test address
         with pytest.raises(ValueError, match="loopback"):
             DroneServer(plant, bind_host=host)
     assert require_loopback_host("localhost") == LOCALHOST
@@ -728,7 +728,7 @@ def test_servers_refuse_non_loopback_binds():
 @pytest.mark.timeout(20)
 @pytest.mark.parametrize("args, message", [
     (["--bind", "0.0.0.0"], "--bind '0.0.0.0' is not a loopback address"),
-    (["--mocap-to", "192.168.1.2:51001"], "--mocap-to '192.168.1.2' is not a loopback address"),
+    (["--mocap-to", "198.51.100.2:51001"], "--mocap-to '198.51.100.2' is not a loopback address"),
 ])
 def test_sim_drone_command_refuses_non_loopback_addresses(args, message):
     from typer.testing import CliRunner

@@ -159,7 +159,8 @@ def test_a_stall_longer_than_max_catchup_skips_frames(rx, make_streamer):
     assert gaps.max() > 10 and m.counters.skipped > 10
 
 
-@pytest.mark.parametrize("host", ["192.168.1.1", "10.0.0.1", "0.0.0.0", "example.com", "::1"])
+# RFC 5737 documentation addresses: refused before any socket is opened
+@pytest.mark.parametrize("host", ["192.0.2.1", "198.51.100.7", "0.0.0.0", "example.com", "::1"])
 def test_non_loopback_targets_are_refused(host):
     with pytest.raises(ValueError, match="loopback"):
         MocapServer(hovering_plant(), target=(host, 51001))
