@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ardrone_nmpc.control.ocp import OcpSpec, unwrap_reference_psi
+from ardrone_nmpc.control.kernels import prepare_reference
+from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.types import GRAVITY_MPS2, INPUT_DIM, STATE_DIM
 
 
@@ -49,8 +50,11 @@ class IpoptController:
 
     def solve(self, x: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, bool]:
         """Return ``(u (4,), success)`` for state ``x`` (7,) and reference ``ref`` (N+1, 7)."""
-        ref = unwrap_reference_psi(ref, x[6])
-        p = np.concatenate([x, ref.reshape(-1)])
+        x = np.ascontiguousarray(x, dtype=float)
+        unwrapped = np.empty_like(ref, dtype=float)
+        if not prepare_reference(x, np.ascontiguousarray(ref, dtype=float), unwrapped):
+            return np.zeros(INPUT_DIM), False  # non-finite input: nothing to solve
+        p = np.concatenate([x, unwrapped.reshape(-1)])
         sol = self._solver(x0=self._guess, lam_x0=self._lam, p=p, lbx=self._lbx, ubx=self._ubx)
         ok = bool(self._solver.stats()["success"])
         U = np.asarray(sol["x"]).reshape(-1)

@@ -469,19 +469,9 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
             stats[2] = norm
             dU[:] = 0.0
     # x1 = x + h f(x, u0)
-    spsi = math.sin(x[6])
-    cpsi = math.cos(x[6])
-    tphi = math.tan(U[1])
-    tth = math.tan(U[2])
-    sec_th = 1.0 / math.cos(U[2])
-    thrust = U[0] + GRAVITY_MPS2
-    x1[0] = x[0] + h * x[1]
-    x1[1] = x[1] + h * (spsi * tphi * sec_th + cpsi * tth) * thrust
-    x1[2] = x[2] + h * x[3]
-    x1[3] = x[3] + h * (-cpsi * tphi * sec_th + spsi * tth) * thrust
-    x1[4] = x[4] + h * x[5]
-    x1[5] = x[5] + h * U[0]
-    x1[6] = x[6] + h * U[3]
+    _model(x, U[:NU], x1)
+    for i in range(NX):
+        x1[i] = x[i] + h * x1[i]
     # the reference at t + h, interpolated along the horizon
     c = h / dtau
     for i in range(n_stages + 1):

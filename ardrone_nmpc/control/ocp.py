@@ -7,7 +7,6 @@ import the kernels when they are constructed.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import NamedTuple
@@ -122,30 +121,3 @@ class OcpSpec:
         err = np.asarray(x, float) - np.asarray(x_ref, float)
         err[IX_PSI] = (err[IX_PSI] + math.pi) % (2 * math.pi) - math.pi
         return 0.5 * float(err @ (self.q * err) + u @ (self.r * u))
-
-
-def unwrap_reference_psi(ref: np.ndarray, psi_rad: float) -> np.ndarray:
-    """Copy of ``ref`` (N+1, 7) whose ψ column is shifted by 2πk to lie near ``psi_rad``.
-
-    The OCP penalises ``ψ − ψ_d`` without wrapping, so a reference at +3.1 rad seen from
-    −3.1 rad must become −3.18 rad, not a 6.2 rad turn the other way.
-    """
-    out = np.array(ref, dtype=float, copy=True)
-    psi = np.unwrap(out[:, IX_PSI])  # continuous along the horizon
-    psi += 2 * math.pi * np.round((psi_rad - psi[0]) / (2 * math.pi))
-    out[:, IX_PSI] = psi
-    return out
-
-
-class Stopwatch:
-    """``with Stopwatch() as sw: …`` then ``sw.us``; perf_counter_ns resolution."""
-
-    __slots__ = ("_t0", "us")
-
-    def __enter__(self):
-        self._t0 = time.perf_counter_ns()
-        return self
-
-    def __exit__(self, *exc):
-        self.us = (time.perf_counter_ns() - self._t0) * 1e-3
-        return False

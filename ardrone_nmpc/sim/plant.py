@@ -68,9 +68,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from math import cos as _cos
-from math import sin as _sin
-from math import tan as _tan
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Optional
 
@@ -219,26 +216,12 @@ def airframe_derivative(state: tuple, command: tuple, params: PlantParams,
     -------
     10-tuple, the time derivative of ``state``.
     """
-    _, _, _, vx, vy, vz, phi, theta, psi, r = state
     roll, pitch, gaz, yaw, hold = command
-    e, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw, inv_tau_tilt, kd, hold_damping = (
-        params.rhs_coefficients)
-    forward = GRAVITY_MPS2 * _tan(theta)
-    right = GRAVITY_MPS2 * _tan(phi)
-    c = _cos(psi)
-    s = _sin(psi)
-    ax = c * forward + s * right - kd * (vx - wind_mps[0])
-    ay = s * forward - c * right - kd * (vy - wind_mps[1])
-    if hold:
-        ax -= hold_damping * vx
-        ay -= hold_damping * vy
-        phi_dot = -phi * inv_tau_tilt
-        theta_dot = -theta * inv_tau_tilt
-    else:
-        phi_dot = (roll * e - phi) * inv_tau_tilt
-        theta_dot = (-pitch * e - theta) * inv_tau_tilt
-    return (vx, vy, vz, ax, ay, gaz * vz_gain - vz * inv_tau_vz + kd * wind_mps[2],
-            phi_dot, theta_dot, r, -yaw * yaw_gain - r * inv_tau_yaw)
+    out = np.empty(10)
+    _airframe_rhs(np.asarray(state, dtype=np.float64), float(roll), float(pitch), float(gaz),
+                  float(yaw), bool(hold), params.rhs_coefficients,
+                  tuple(float(w) for w in wind_mps), out)
+    return tuple(out.tolist())
 
 
 def freefall_derivative(state: tuple, command: tuple, params: PlantParams,
@@ -285,7 +268,8 @@ def rk4_step(deriv, state: tuple, h: float, command: tuple, params: PlantParams,
 
 @njit(cache=True)
 def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
-    """:func:`airframe_derivative` on arrays, for :func:`airframe_rk4` (same expressions)."""
+    """The motors-on right-hand side on arrays (the one definition: :func:`airframe_derivative`
+    and :func:`airframe_rk4` both call it)."""
     e, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw, inv_tau_tilt, kd, hold_damping = k
     vx, vy, vz, phi, theta, psi, r = x[3], x[4], x[5], x[6], x[7], x[8], x[9]
     forward = GRAVITY_MPS2 * math.tan(theta)
