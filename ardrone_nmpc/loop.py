@@ -59,6 +59,23 @@ def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, f
     return fwd * c + right * s, fwd * s - right * c
 
 
+def measurement_columns(inputs: TickInputs, t_exp_s: float) -> dict:
+    """The raw measurements of ``inputs`` as log columns (replay feeds them back).
+
+    ``mocap_t_s`` is the pose's own time moved to the experiment clock (the tick's clock
+    minus its offset), so its differences are the estimators' sample intervals.
+    """
+    nav = inputs.navdata
+    pose = inputs.pose
+    return {
+        "mocap_t_s": pose.t_s - (inputs.t_s - t_exp_s) if pose is not None else math.nan,
+        "battery_pct": nav.battery_pct if nav is not None else math.nan,
+        "nav_vx_body_mps": nav.vx_body_mps if nav is not None else math.nan,
+        "nav_vy_body_mps": nav.vy_body_mps if nav is not None else math.nan,
+        "nav_mode": nav.mode.value if nav is not None else "",
+    }
+
+
 def effective_controller(controller, limits: DroneLimits):
     """``controller`` with its input box intersected with what the drone is configured to do.
 
@@ -157,8 +174,8 @@ class Tick:
         mocap_age_ms = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose else math.inf
         navdata_age_ms = ((inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata
                           else math.inf)
-        row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms,
-               "battery_pct": inputs.navdata.battery_pct if inputs.navdata else math.nan}
+        row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms}
+        row.update(measurement_columns(inputs, t_exp_s))
         if inputs.pose is None or mocap_age_ms > self.cfg.safety.mocap_hover_ms:
             # No fresh pose: never control from stale data. (Full policy: safety.py, issue 6.)
             row.update(mode="hover-stale-mocap", solver_status="", cmd_saturated="0000",

@@ -66,7 +66,9 @@ __all__ = [
 #: The columns of ``log.csv``, in order. Units are in the names (s, m, rad, m/s, m/s², rad/s,
 #: fraction of full PCMD deflection, µs, ms, %); ``*_ref_*`` is the reference at the tick,
 #: ``u_*`` the controller's input, ``cmd_*`` the PCMD fractions sent, ``*_true_*`` the
-#: simulated plant's truth (empty in real flight).
+#: simulated plant's truth (empty in real flight). ``mocap_t_s`` (the pose's own time on the
+#: experiment clock), ``nav_vx_body_mps``/``nav_vy_body_mps`` and ``nav_mode`` complete the raw
+#: measurements the tick saw, so ``replay --rerun`` can feed them through it again.
 LOG_COLUMNS: tuple[str, ...] = (
     "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
     "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
@@ -74,12 +76,15 @@ LOG_COLUMNS: tuple[str, ...] = (
     "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac", "cmd_saturated",
     "solve_us", "solver_status", "residual_norm", "gmres_iterations", "newton_iterations",
     "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct", "tick_late_ms", "compute_us",
+    "mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode",
     "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps",
 )
 
 #: Columns holding strings: ``cmd_saturated`` (4 flags ``0``/``1``, roll, pitch, gaz, yaw),
-#: ``solver_status`` (``ok``, ``max-iterations``, …; empty without a solve) and ``mode``.
-STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode"})
+#: ``solver_status`` (``ok``, ``max-iterations``, …; empty without a solve), ``mode`` (the
+#: supervisor's verdict) and ``nav_mode`` (the drone's flight mode from its newest navdata).
+STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode",
+                                            "nav_mode"})
 
 #: Columns a ``log.csv`` header must name (DESIGN.md §5); the others of :data:`LOG_COLUMNS`
 #: are filled with NaN (or ``""``) by :func:`read_run` when absent.

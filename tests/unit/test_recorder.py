@@ -45,7 +45,8 @@ def cfg():
 def full_row(k: int) -> dict:
     """A row with every column set; values depend on k."""
     row = {c: (k + i / 7.0) * (-1) ** i for i, c in enumerate(NUMERIC_COLUMNS)}
-    row.update(cmd_saturated="0100", solver_status="ok", mode="track", gmres_iterations=k)
+    row.update(cmd_saturated="0100", solver_status="ok", mode="track", nav_mode="flying",
+               gmres_iterations=k)
     return row
 
 
@@ -327,7 +328,7 @@ def test_torn_last_event_is_dropped_with_a_warning(tmp_path, cfg):
 def test_torn_middle_line_is_an_error(tmp_path, cfg):
     path = write_run(tmp_path, cfg, [full_row(k) for k in range(4)])
     rewrite_lines(path / "log.csv", lambda lines: lines[:3] + [lines[3][:40]] + lines[4:])
-    with pytest.raises(LogError, match=r"log\.csv:4: expected 38 cells, got \d+"):
+    with pytest.raises(LogError, match=rf"log\.csv:4: expected {len(LOG_COLUMNS)} cells, got \d+"):
         read_run(path)
 
 
