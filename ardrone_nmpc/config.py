@@ -13,6 +13,7 @@ per subsystem::
     mocap:      {bind_host, port, object_name, rate_hz}
     sim:        {seed, plant: {…}, noise: {…}, mocap_rate_hz, navdata_rate_hz}
     safety:     {geofence_min_m, geofence_max_m, max_tilt_rad, …, solver_fallback}
+    faults:     {mocap_dropout: {start_s, duration_s}, …}   (simulation only; all off by default)
 
 Every key is optional: a missing key takes its default, and the defaults are the values of the
 thesis (``specs/thesis.md``), the AR.Drone SDK (``specs/ardrone-protocol.md`` §3.1) and the plant
@@ -53,6 +54,7 @@ __all__ = [
     "DroneConfig",
     "EstimatorConfig",
     "ExperimentConfig",
+    "FaultsConfig",
     "LoopConfig",
     "MocapConfig",
     "NoiseConfig",
@@ -422,12 +424,18 @@ class SimConfig(_Section):
 
 
 class SafetyConfig(_Section):
-    """Supervisor limits: outside them it hovers, lands or falls back."""
+    """Supervisor limits and policies (ardrone_nmpc/safety.py): outside them it holds the last
+    command, falls back to the P controller, hovers or lands."""
 
     geofence_min_m: Vec3 = Field((-3.0, -3.0, 0.0), description="Geofence lower corner [x, y, z] (m).")
     geofence_max_m: Vec3 = Field((3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
-    max_tilt_rad: Positive = Field(0.35, description="Largest measured roll/pitch allowed (rad).")
-    max_speed_mps: Positive = Field(2.0, description="Largest estimated speed allowed (m/s).")
+    geofence_action: Literal["land", "hover"] = Field(
+        "land", description="What the drone does when its measured position leaves the geofence.")
+    max_tilt_rad: Positive = Field(
+        0.35, description="Largest roll/pitch (rad): commands are clipped to it, a measured "
+        "(navdata) tilt beyond it makes the drone hover.")
+    max_speed_mps: Positive = Field(
+        2.0, description="Largest estimated speed (m/s); beyond it the drone hovers (brakes).")
     mocap_hold_ms: Positive = Field(
         100.0, description="Mocap pose age (ms) above which the last command is held.")
     mocap_hover_ms: Positive = Field(
@@ -438,12 +446,140 @@ class SafetyConfig(_Section):
     battery_floor_pct: float = Field(
         20.0, ge=0, le=100, description="Battery level (%) below which the drone lands.")
     solver_fallback: Literal["hold", "p", "hover"] = Field(
-        "p", description="On solver failure: hold the last input, switch to the P controller, "
-        "or hover.")
+        "p", description="On solver failure, once solver_hold_ticks have passed: keep holding "
+        "the last input (then hover after solver_hover_ticks), switch to the P controller, or "
+        "hover.")
+    solver_accept_max_iterations: bool = Field(
+        True, description="Fly a solve that stopped at max_newton_iterations (its input is "
+        "finite, bounded and better than its start guess; it happens on re-initialisation "
+        "after a reference jump); false treats it as a failure.")
+    solver_hold_ticks: int = Field(
+        2, ge=0, le=20, description="Failed solves for which the last good command is held "
+        "before the fallback (ticks).")
+    solver_hover_ticks: int = Field(
+        8, ge=1, le=200, description="With solver_fallback 'hold': failed solves before the "
+        "drone hovers (ticks).")
+    solver_recover_ticks: int = Field(
+        3, ge=1, le=100, description="Consecutive good solves before the NMPC flies again "
+        "(ticks).")
 
     _geofence = _require_increasing("geofence_min_m", "geofence_max_m")
     _hover_after_hold = _require_increasing("mocap_hold_ms", "mocap_hover_ms")
     _land_after_hover = _require_increasing("mocap_hover_ms", "mocap_land_ms")
+
+
+# ----------------------------------------------------------------------------- faults
+
+
+class _FaultWindow(_Section):
+    """A fault active from ``start_s`` for ``duration_s`` (experiment time: 0 = the end of the
+    settle phase, the first tick of the experiment)."""
+
+    start_s: Finite = Field(5.0, description="When the fault starts (s, experiment time).")
+    duration_s: Positive = Field(1.0, description="How long it lasts (s).")
+
+
+class MocapDropoutFault(_FaultWindow):
+    """No mocap datagram arrives (network loss or tracker stall)."""
+
+    repeat_every_s: Optional[Positive] = Field(
+        None, description="Repeat the burst with this period (s) until the end; null = once.")
+
+
+class MocapOcclusionFault(_FaultWindow):
+    """Datagrams arrive but the object is missing (markers occluded) or its pose is zero."""
+
+    zero_pose: bool = Field(False, description="Send an all-zero pose instead of omitting it.")
+
+
+class MocapLatencyFault(_FaultWindow):
+    """Mocap datagrams sent during the window arrive ``extra_latency_ms`` late."""
+
+    extra_latency_ms: Positive = Field(200.0, description="Added latency (ms).")
+
+
+class NavdataLossFault(_FaultWindow):
+    """No navdata arrives."""
+
+
+class NavdataCorruptFault(_FaultWindow):
+    """Every navdata packet of the window is corrupted on the wire."""
+
+    kind: Literal["checksum", "truncated", "zero_option"] = Field(
+        "checksum", description="Bad checksum, truncated packet, or an option of size 0.")
+
+
+class DisorderFault(_FaultWindow):
+    """Datagrams of one stream duplicated and reordered (swapped with the next)."""
+
+    stream: Literal["mocap", "navdata"] = Field("mocap", description="Which stream.")
+    duplicate_probability: float = Field(0.3, ge=0, le=1, description="Chance a datagram is sent twice.")
+    reorder_probability: float = Field(0.3, ge=0, le=1, description="Chance a datagram is held back behind the next.")
+
+
+class AtLossFault(_FaultWindow):
+    """AT datagrams lost before the drone: it keeps flying its last command."""
+
+    probability: float = Field(1.0, gt=0, le=1, description="Chance each command is lost.")
+
+
+class SolverDivergeFault(_FaultWindow):
+    """The NMPC returns a diverged, non-finite solution every tick of the window."""
+
+
+class BatteryFloorFault(_Section):
+    """The battery drops to ``level_pct`` at ``start_s``."""
+
+    start_s: Finite = Field(5.0, description="When (s, experiment time).")
+    level_pct: float = Field(19.0, ge=0, le=100, description="Battery level it drops to (%).")
+
+
+class EmergencyFault(_Section):
+    """The drone raises its emergency state (motors cut) at ``start_s``."""
+
+    start_s: Finite = Field(5.0, description="When (s, experiment time).")
+
+
+class WindGustFault(_FaultWindow):
+    """Air moving at ``velocity_mps`` (world frame) during the window; drag pushes the drone."""
+
+    velocity_mps: Vec3 = Field((1.5, 0.0, 0.0), description="Gust air velocity [x, y, z] (m/s).")
+
+
+class WindFault(_Section):
+    """Constant wind for the whole flight (take-off included)."""
+
+    velocity_mps: Vec3 = Field((0.5, 0.0, 0.0), description="Air velocity [x, y, z] (m/s).")
+
+
+class DelayJumpFault(_Section):
+    """The command transport delay jumps to ``delay_s`` at ``start_s``."""
+
+    start_s: Finite = Field(5.0, description="When (s, experiment time).")
+    delay_s: NonNegative = Field(0.5, le=2.0, description="New command delay (s).")
+
+
+class FaultsConfig(_Section):
+    """Injected faults (simulation only: ``simulate`` and ``fly --sim``); each is off (null)
+    unless given, e.g. ``--set faults.mocap_dropout.start_s=5``."""
+
+    mocap_dropout: Optional[MocapDropoutFault] = Field(None, description="Mocap dropout bursts.")
+    mocap_occlusion: Optional[MocapOcclusionFault] = Field(None, description="Object occluded.")
+    mocap_latency: Optional[MocapLatencyFault] = Field(None, description="Mocap latency spike.")
+    navdata_loss: Optional[NavdataLossFault] = Field(None, description="Navdata lost.")
+    navdata_corrupt: Optional[NavdataCorruptFault] = Field(None, description="Navdata corrupted.")
+    disorder: Optional[DisorderFault] = Field(None, description="Duplicated/reordered datagrams.")
+    at_loss: Optional[AtLossFault] = Field(None, description="AT commands lost (drone side).")
+    solver_diverge: Optional[SolverDivergeFault] = Field(None, description="Solver forced to diverge.")
+    battery_floor: Optional[BatteryFloorFault] = Field(None, description="Battery at the floor.")
+    emergency: Optional[EmergencyFault] = Field(None, description="Emergency triggered.")
+    wind_gust: Optional[WindGustFault] = Field(None, description="Wind gust on the plant.")
+    wind: Optional[WindFault] = Field(None, description="Constant wind on the plant.")
+    delay_jump: Optional[DelayJumpFault] = Field(None, description="Command-delay jump.")
+
+    def active(self) -> list[str]:
+        """Names of the faults that are set."""
+        return [name for name in type(self).model_fields if getattr(self, name) is not None]
 
 
 # ----------------------------------------------------------------------------- top level
@@ -464,6 +600,7 @@ class ExperimentConfig(_Section):
     mocap: MocapConfig = Field(default_factory=MocapConfig, description="Mocap stream.")
     sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
     safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
+    faults: FaultsConfig = Field(default_factory=FaultsConfig, description="Injected faults (simulation).")
 
 
 # ----------------------------------------------------------------------------- loading

@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
 
 from ardrone_nmpc.clock import Rate
 from ardrone_nmpc.loop import Tick, TickInputs
-from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.recorder import RunRecorder, read_run, write_summary
 from ardrone_nmpc.reference import make_trajectory
+from ardrone_nmpc.safety import Action
 from ardrone_nmpc.session import FlightSession
 from ardrone_nmpc.simulate import HoldStartThen
 from ardrone_nmpc.summary import summarise
@@ -44,6 +46,14 @@ class FlightResult:
 
 class LinkLost(RuntimeError):
     """Navdata went silent beyond ``safety.navdata_land_ms``."""
+
+
+class SupervisorLanding(RuntimeError):
+    """The supervisor decided to land (battery, geofence, mocap lost): the flight is cut short."""
+
+
+class DroneEmergency(RuntimeError):
+    """The drone reported an emergency (motors cut)."""
 
 
 def _raise_terminated(signum, frame):  # pragma: no cover - exercised by subprocess tests
@@ -93,41 +103,56 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 keepalive_interval_s=cfg.drone.keepalive_interval_s, **link_options))
             tick = Tick(cfg, HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s)))
             session = FlightSession(cfg, drone, mocap, event=event)
+            fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
             try:
                 with session:
-                    _control_loop(cfg, tick, drone, mocap, recorder, event, status)
+                    _control_loop(cfg, tick, drone, mocap, recorder, event, status,
+                                  fault_clock)
             finally:
                 result.landed = session.landed_cleanly
                 event("session_end", landed=session.landed_cleanly)
             path = recorder.path
-        recorder.write_summary(summarise(read_run(path)))
         if result.landed is False:
             raise LandingNotConfirmed("navdata never showed the drone landed: check it")
         return path
     finally:
         signal.signal(signal.SIGTERM, previous)
+        if result.path is not None:  # however the flight ended: the run dir is complete
+            _write_summary_quietly(result.path)
 
 
-def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status) -> None:
+def _write_summary_quietly(path: Path) -> None:
+    """summary.csv of the run at ``path``; a failure here must not mask the flight's outcome."""
+    try:
+        write_summary(path, summarise(read_run(path)))
+    except Exception as err:  # noqa: BLE001 - the log is intact; `summary RUN` redoes it
+        print(f"warning: {path / 'summary.csv'} not written: {err}", file=sys.stderr)
+
+
+def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
+                  fault_clock=None) -> None:
+    """The 65 ms loop until the experiment ends or the supervisor ends it (an exception: the
+    session's exit lands the drone). ``fault_clock(t0)`` receives the monotonic time of
+    experiment time 0 (the loopback's fault injection runs on it)."""
     period = cfg.loop.period_s
     n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     rate = Rate(period)
-    nav_limit_s = cfg.safety.navdata_land_ms * 1e-3
     while True:
         late_s = rate.sleep()
         k = rate.index  # deadline number: overrun deadlines are skipped, time stays wall time
         if k >= n_ticks:
             break
         now = time.monotonic()
+        if k == 0 and fault_clock is not None:  # experiment time 0 for the injected faults
+            fault_clock(now + n_settle * period)
         pose, pose_rx = mocap.latest()
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
-        if nav is None or now - nav_rx > nav_limit_s:
-            event("link_lost", navdata_age_ms=(now - nav_rx) * 1e3 if nav else None)
-            raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
         t_exp = (k - n_settle) * period
         out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx), t_exp_s=t_exp,
                         mode="settle" if t_exp < 0 else "track")
+        for ev in out.events:
+            event(ev.pop("kind"), t_exp_s=t_exp, **ev)
         pcmd = out.pcmd
         if out.progressive:
             drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac)
@@ -139,6 +164,12 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status) -> Non
         if status is not None:
             status({**row, "progress": (k + 1) / n_ticks, "overruns": rate.overruns,
                     "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz})
+        if out.action is Action.LAND:   # the session's exit lands it
+            if row["mode"] == "land-navdata-lost":
+                raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
+            raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}")
+        if out.action is Action.STOP:
+            raise DroneEmergency("the drone reports an emergency (motors cut): check it")
     jitter = rate.jitter_ms()
     event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],
           jitter_p99_ms=jitter["p99"], jitter_max_ms=jitter["max"])

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,6 +19,8 @@ from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, 
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.control.ocp import SolverStatus
+from ardrone_nmpc.safety import NOMINAL, Action, Decision, Supervisor
 from ardrone_nmpc.reference import Trajectory
 from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
 
@@ -42,14 +44,19 @@ class TickInputs:
 
 @dataclass(frozen=True, slots=True)
 class TickOutput:
-    """The command to send and the log row of the tick.
+    """The command to send, the log row of the tick and the supervisor's verdict.
 
     ``progressive`` False means "hover" (AT*PCMD flag 0: the drone holds position itself).
+    ``action`` tells the runner what else to do: :attr:`Action.LAND` — land now;
+    :attr:`Action.STOP` — the drone is in emergency: stop the loop and report. ``events`` are
+    the supervisor's mode changes of this tick, for ``events.jsonl``.
     """
 
     pcmd: PcmdCommand
     progressive: bool
     row: dict
+    action: Action = Action.CONTROL
+    events: list = field(default_factory=list)
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -125,6 +132,11 @@ class Tick:
         self._vz_ref_mps = 0.0  # the last ż reference sent
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else self.period_s
         self._state = np.zeros(7)
+        self.supervisor = Supervisor(cfg.safety)
+        self._last = None  # (pcmd, u) of the last command sent, for a hold
+        diverge = cfg.faults.solver_diverge
+        self._solver_fault = (None if diverge is None else
+                              lambda t: diverge.start_s <= t < diverge.start_s + diverge.duration_s)
         # Delay compensation: the inputs sent but not yet acting (newest last).
         self.delay_ticks = math.ceil(ctl.delay_compensation_s / self.period_s - 1e-9)
         self._pending = deque(maxlen=max(self.delay_ticks, 1))
@@ -168,45 +180,110 @@ class Tick:
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None) -> TickOutput:
         """One tick at experiment time ``t_exp_s`` against ``trajectory`` (default: the
-        experiment's). ``mode`` labels the row ("track", "settle")."""
+        experiment's). ``mode`` labels a nominal row ("track", "settle"); the supervisor's
+        verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
         t0 = time.perf_counter_ns()
         traj = trajectory or self.trajectory
         mocap_age_ms = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose else math.inf
         navdata_age_ms = ((inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata
                           else math.inf)
-        row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms}
+        row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms,
+               "solver_status": "", "cmd_saturated": "0000"}
         row.update(measurement_columns(inputs, t_exp_s))
-        if inputs.pose is None or mocap_age_ms > self.cfg.safety.mocap_hover_ms:
-            # No fresh pose: never control from stale data. (Full policy: safety.py, issue 6.)
-            row.update(mode="hover-stale-mocap", solver_status="", cmd_saturated="0000",
-                       cmd_roll_frac=0.0, cmd_pitch_frac=0.0, cmd_gaz_frac=0.0, cmd_yaw_frac=0.0)
-            # what the drone now does: no acceleration (its own hover), for the delay
-            # predictor and the integrators — not the last NMPC input, which is never flown
-            self._zacc_mps2 = 0.0
-            self._vz_ref_mps = 0.0
-            if self.delay_ticks:
-                self._pending.append(np.zeros(4))
-            row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
-            return TickOutput(HOVER, False, row)
-        x = self._estimate(inputs)
-        if self.use_nmpc:
-            cmd, ref_now = self._nmpc(t_exp_s, x, traj, row)
-        else:
+        sup = self.supervisor
+        cmd = None
+        decision = sup.check_feedback(mocap_age_ms=mocap_age_ms, navdata_age_ms=navdata_age_ms,
+                                      navdata=inputs.navdata)
+        if inputs.pose is not None:  # logged even when stale (mocap_age_ms says so)
+            x = self._estimate(inputs)
+            row.update(x_m=x[0], y_m=x[2], z_m=x[4], psi_rad=x[6], vx_mps=x[1], vy_mps=x[3],
+                       vz_mps=x[5])
+        if decision.action is Action.CONTROL:
+            decision = sup.check_state(x, inputs.navdata)
+            if decision.action is Action.CONTROL:
+                cmd, decision = self._control(t_exp_s, x, traj, row)
+        pcmd, progressive, decision = self._command_of(decision, cmd, row)
+        row["mode"] = sup.record(decision, mode)
+        row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
+        return TickOutput(pcmd, progressive, row, decision.action, sup.take_events())
+
+    def _control(self, t_exp_s, x, traj, row):
+        """The controller (NMPC or P) and the supervisor's verdict on its solution."""
+        if not self.use_nmpc:
             ref_now = traj.state_at(t_exp_s)[0]
             cmd = p_control(x, ref_now, self.p_gains)
-            self._zacc_mps2 = 0.0  # P commands ż directly: no z̈ to feed the estimator
-            row.update(solver_status="", u_zacc_mps2=math.nan, u_phi_rad=cmd.phi_rad,
+            row.update(x_ref_m=ref_now[0], y_ref_m=ref_now[2], z_ref_m=ref_now[4],
+                       psi_ref_rad=ref_now[6], u_zacc_mps2=math.nan, u_phi_rad=cmd.phi_rad,
                        u_theta_rad=cmd.theta_rad, u_psirate_radps=cmd.psirate_radps)
-        pcmd = map_to_pcmd(cmd, self.limits)
-        row.update(
-            x_m=x[0], y_m=x[2], z_m=x[4], psi_rad=x[6], vx_mps=x[1], vy_mps=x[3], vz_mps=x[5],
-            x_ref_m=ref_now[0], y_ref_m=ref_now[2], z_ref_m=ref_now[4], psi_ref_rad=ref_now[6],
-            vz_ref_mps=cmd.vz_ref_mps, cmd_roll_frac=pcmd.roll_frac,
-            cmd_pitch_frac=pcmd.pitch_frac, cmd_gaz_frac=pcmd.gaz_frac,
-            cmd_yaw_frac=pcmd.yaw_frac, mode=mode,
-            cmd_saturated="".join("1" if f else "0" for f in pcmd.saturated))
-        row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
-        return TickOutput(pcmd, True, row)
+            return cmd, NOMINAL
+        x_solve, result, ref_now = self._nmpc(t_exp_s, x, traj, row)
+        u = result.u
+        if self._solver_fault is not None and self._solver_fault(t_exp_s):
+            u = np.full(4, math.nan)  # injected: a diverged, non-finite solution
+            row["solver_status"] = SolverStatus.DIVERGED.value
+            ok = False
+        else:
+            ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
+                               and self.cfg.safety.solver_accept_max_iterations)
+        decision = self.supervisor.check_solution(ok, u)
+        if decision.action is Action.CONTROL:
+            return self._apply_nmpc_input(u, x_solve), decision
+        if decision.action is Action.FALLBACK:
+            return p_control(x, ref_now, self.p_gains), decision
+        return None, decision
+
+    def _apply_nmpc_input(self, u, x_solve) -> AttitudeCommand:
+        """The NMPC input ``u`` as an attitude command; its z̈ feeds the ż integrators."""
+        # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
+        # Without an estimate the thesis could only integrate its own z̈ commands — the
+        # integrator that winds up into fig. 3.2's overshoot.
+        vz_base = self._vz_ref_mps if self.cfg.estimator.kind == "none" else x_solve[5]
+        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
+        vz_ref = min(max(vz_reference_mps(vz_base, u[0], self.vz_lead_s), -vz_max), vz_max)
+        return AttitudeCommand(vz_ref, float(u[1]), float(u[2]), float(u[3]))
+
+    def _command_of(self, decision: Decision, cmd: AttitudeCommand | None, row):
+        """The command the decision flies, with the bookkeeping of what was sent (the ż
+        integrators, the delay predictor's pending inputs, the last command for a hold)."""
+        action = decision.action
+        if action is Action.HOLD and self._last is not None:
+            pcmd, u_sent = self._last
+            return self._sent_output(pcmd, u_sent, True, decision, row)
+        if cmd is not None and action in (Action.CONTROL, Action.FALLBACK):
+            roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
+            pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
+            cmd = AttitudeCommand(cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps)
+            if all(map(math.isfinite, (cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps))):
+                pcmd = map_to_pcmd(cmd, self.limits)
+                flags = (pcmd.saturated[0] or roll_clipped, pcmd.saturated[1] or pitch_clipped,
+                         *pcmd.saturated[2:])
+                zacc = row["u_zacc_mps2"] if action is Action.CONTROL else 0.0
+                u_sent = np.array([zacc if math.isfinite(zacc) else 0.0, roll, pitch,
+                                   cmd.psirate_radps])
+                row.update(vz_ref_mps=cmd.vz_ref_mps,
+                           cmd_saturated="".join("1" if f else "0" for f in flags))
+                if action is Action.FALLBACK:
+                    row.update(u_phi_rad=roll, u_theta_rad=pitch,
+                               u_psirate_radps=cmd.psirate_radps)
+                self._vz_ref_mps = cmd.vz_ref_mps
+                self._last = (pcmd, u_sent)
+                return self._sent_output(pcmd, u_sent, True, decision, row)
+            decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
+        elif action is Action.HOLD:  # nothing sent yet that could be held
+            decision = Decision(Action.HOVER, decision.reason)
+        # hover, land, stop: the drone's own hover — no acceleration, for the delay predictor
+        # and the integrators; the last NMPC input is never flown
+        self._vz_ref_mps = 0.0
+        self._last = None
+        return self._sent_output(HOVER, np.zeros(4), False, decision, row)
+
+    def _sent_output(self, pcmd, u_sent, progressive, decision, row):
+        self._zacc_mps2 = float(u_sent[0])
+        if self.delay_ticks:
+            self._pending.append(u_sent)
+        row.update(cmd_roll_frac=pcmd.roll_frac, cmd_pitch_frac=pcmd.pitch_frac,
+                   cmd_gaz_frac=pcmd.gaz_frac, cmd_yaw_frac=pcmd.yaw_frac)
+        return pcmd, progressive, decision
 
     def predict_through_delay(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the inputs already sent and not yet acting (model
@@ -236,19 +313,10 @@ class Tick:
         ref_now, ref = states[0], states[1:]
         result = solver.solve(t_exp_s, x_solve, ref)
         u = result.u
-        self._zacc_mps2 = float(u[0])
-        if self.delay_ticks:
-            self._pending.append(u.copy())
-        # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
-        # Without an estimate the thesis could only integrate its own z̈ commands — the
-        # integrator that winds up into fig. 3.2's overshoot.
-        vz_base = self._vz_ref_mps if self.cfg.estimator.kind == "none" else x_solve[5]
-        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
-        self._vz_ref_mps = min(max(vz_reference_mps(vz_base, u[0], self.vz_lead_s), -vz_max),
-                               vz_max)
-        cmd = AttitudeCommand(self._vz_ref_mps, float(u[1]), float(u[2]), float(u[3]))
-        row.update(u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2], u_psirate_radps=u[3],
-                   solve_us=result.solve_time_us, solver_status=result.status.value,
-                   residual_norm=result.residual_norm, gmres_iterations=result.gmres_iterations,
+        row.update(x_ref_m=ref_now[0], y_ref_m=ref_now[2], z_ref_m=ref_now[4],
+                   psi_ref_rad=ref_now[6], u_zacc_mps2=u[0], u_phi_rad=u[1], u_theta_rad=u[2],
+                   u_psirate_radps=u[3], solve_us=result.solve_time_us,
+                   solver_status=result.status.value, residual_norm=result.residual_norm,
+                   gmres_iterations=result.gmres_iterations,
                    newton_iterations=result.newton_iterations)
-        return cmd, ref_now
+        return x_solve, result, ref_now

@@ -61,6 +61,7 @@ __all__ = [
     "STRING_COLUMNS",
     "format_number",
     "read_run",
+    "write_summary",
 ]
 
 #: The columns of ``log.csv``, in order. Units are in the names (s, m, rad, m/s, m/s², rad/s,
@@ -332,20 +333,8 @@ class RunRecorder:
         """No-op kept for symmetry: rows and events are unbuffered (written at once)."""
 
     def write_summary(self, rows: Iterable[SummaryRow]) -> Path:
-        """Write ``summary.csv`` (``axis,metric,value,unit``; values as in ``log.csv``),
-        replacing any earlier one atomically. Returns its path."""
-        lines = ["axis,metric,value,unit"]
-        for r in rows:
-            cells = (str(r.axis), str(r.metric), format_number(r.value), str(r.unit))
-            for c in cells:
-                if _FORBIDDEN.search(c):
-                    raise ValueError(f"summary cell {c!r} contains ',', '\"' or a line break")
-            lines.append(",".join(cells))
-        target = self.path / SUMMARY_FILE
-        tmp = target.with_name(SUMMARY_FILE + ".tmp")
-        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        os.replace(tmp, target)
-        return target
+        """Write this run's ``summary.csv`` (:func:`write_summary`). Returns its path."""
+        return write_summary(self.path, rows)
 
     # -- closing ----------------------------------------------------------------------------
     @property
@@ -369,6 +358,23 @@ class RunRecorder:
 
 
 # ----------------------------------------------------------------------------- reading
+
+
+def write_summary(run_dir: str | Path, rows: Iterable[SummaryRow]) -> Path:
+    """Write ``run_dir/summary.csv`` (``axis,metric,value,unit``; values as in ``log.csv``),
+    replacing any earlier one atomically. Returns its path."""
+    lines = ["axis,metric,value,unit"]
+    for r in rows:
+        cells = (str(r.axis), str(r.metric), format_number(r.value), str(r.unit))
+        for c in cells:
+            if _FORBIDDEN.search(c):
+                raise ValueError(f"summary cell {c!r} contains ',', '\"' or a line break")
+        lines.append(",".join(cells))
+    target = Path(run_dir) / SUMMARY_FILE
+    tmp = target.with_name(SUMMARY_FILE + ".tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    os.replace(tmp, target)
+    return target
 
 
 @dataclass

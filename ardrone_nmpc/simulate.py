@@ -18,10 +18,13 @@ from typing import Callable
 
 import numpy as np
 
+from ardrone_nmpc.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.safety import Action
 from ardrone_nmpc.reference import Trajectory, make_trajectory
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.wire_sensors import WireSensors
 
 TAKEOFF_TIMEOUT_S = 10.0
 LANDING_TIMEOUT_S = 15.0
@@ -49,12 +52,22 @@ class HoldStartThen:
 
 @dataclass
 class SimResult:
-    """What a lockstep run produced (the rows are also in the recorder, if one was given)."""
+    """What a lockstep run produced (the rows are also in the recorder, if one was given).
+
+    ``ending`` says how the flight ended: ``"completed"`` (the experiment ran to its end),
+    ``"land-<reason>"`` (the supervisor landed it), ``"stop-emergency"`` (the drone cut its
+    motors); ``final_mode`` is the drone's mode after the run.
+    """
 
     ticks: int
     final_mode: FlightMode
     run_dir: Path | None
     loop_wall_s: float = math.nan  # wall time of the flight itself (JIT warm-up excluded)
+    ending: str = "completed"
+
+
+class TakeoffRefused(RuntimeError):
+    """The pre-flight check failed (battery at or below the floor): nothing took off."""
 
 
 class _Sensors:
@@ -116,18 +129,28 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
                  progress: Callable[[float], None] | None = None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
 
-    ``progress(fraction)`` is called every tick with the fraction of the run done.
+    ``progress(fraction)`` is called every tick with the fraction of the run done. The
+    supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
+    touch-down), ``stop`` (emergency) ends the run. Events are stamped with experiment time.
+    Raises :class:`TakeoffRefused` when the battery is at or below ``safety.battery_floor_pct``.
     """
     seed = cfg.sim.seed if seed is None else seed
     plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    schedule = FaultSchedule(cfg.faults, seed)
     trajectory = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
     tick = Tick(cfg, trajectory)
-    sensors = _Sensors(cfg, plant)
+    sensors = WireSensors(cfg, plant, schedule) if schedule.touches_sensors else _Sensors(cfg, plant)
+    plant_faults = PlantFaults(schedule, plant)
     period = cfg.loop.period_s
-    event = recorder.event if recorder is not None else (lambda *a, **k: None)
+    write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
 
+    if plant.battery_pct <= cfg.safety.battery_floor_pct:
+        raise TakeoffRefused(f"battery {plant.battery_pct:.0f} % is at or below the floor "
+                             f"safety.battery_floor_pct = {cfg.safety.battery_floor_pct:.0f} %: "
+                             "take-off refused")
+    t_takeoff = plant.t_s
+    plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start
     plant.takeoff()
-    event(plant.t_s, "takeoff")
     while plant.mode is not FlightMode.FLYING and plant.t_s < TAKEOFF_TIMEOUT_S:
         sensors.advance_to(plant.t_s + period)
     if plant.mode is not FlightMode.FLYING:
@@ -136,29 +159,70 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     t_first = plant.t_s
-    wall0 = time.perf_counter()
     t_start = t_first + n_settle * period  # experiment time 0 on the plant clock
+    sensors.t_zero_s = t_start
+    write_event(t_takeoff - t_start, "takeoff")
+    if schedule.any:
+        write_event(-n_settle * period, "faults", windows=[list(w) for w in schedule.windows()])
+    wall0 = time.perf_counter()
+    ending, k = "completed", 0
     for k in range(n_ticks):
-        t_plant = t_first + k * period
-        sensors.advance_to(t_plant)
         t_exp = (k - n_settle) * period
-        out = tick.step(sensors.inputs(t_plant), t_exp_s=t_exp,
+        for ev in plant_faults.update(t_exp):
+            write_event(t_exp, **ev)
+        sensors.advance_to(t_first + k * period)
+        out = tick.step(sensors.inputs(t_first + k * period), t_exp_s=t_exp,
                         mode="settle" if t_exp < 0 else "track")
-        pcmd = out.pcmd
-        plant.command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
-                      progressive=out.progressive)
-        if recorder is not None:
-            row = out.row
-            row.update(truth_columns(plant))
-            recorder.write_row(row)
+        for ev in out.events:
+            write_event(t_exp, **ev)
+        if not schedule.at_lost(t_exp):
+            pcmd = out.pcmd
+            plant.command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
+                          progressive=out.progressive)
+        _record(recorder, out.row, plant)
         if progress is not None:
             progress((k + 1) / n_ticks)
+        if out.action in (Action.LAND, Action.STOP):
+            ending = out.row["mode"]
+            break
     loop_wall_s = time.perf_counter() - wall0
+    t_end = t_first + (k + 1) * period - t_start
+    if ending.startswith("stop"):
+        write_event(t_end, "stopped", reason=ending, drone_mode=plant.mode.value)
+        sensors.advance_to(plant.t_s + 3.0)  # let it come to rest: the truth shows the fall
+    else:
+        _land(cfg, tick, sensors, plant, plant_faults, recorder, write_event,
+              t_first, t_start, k + 1, logged=ending != "completed")
+    return SimResult(k + 1, plant.mode, recorder.path if recorder is not None else None,
+                     loop_wall_s, ending)
+
+
+def _record(recorder, row: dict, plant: AirframePlant) -> None:
+    if recorder is not None:
+        row.update(truth_columns(plant))
+        recorder.write_row(row)
+
+
+def _land(cfg, tick, sensors, plant, plant_faults, recorder, write_event, t_first, t_start,
+          k0, *, logged: bool) -> None:
+    """Land and wait for touch-down. After a supervisor landing the ticks go on (logged, the
+    supervisor hovering the link) so the log shows the descent; after a completed experiment
+    only the events are written."""
+    period = cfg.loop.period_s
     plant.land()
-    event(t_first + n_ticks * period - t_start, "land")
+    write_event(t_first + k0 * period - t_start, "land")
     deadline = plant.t_s + LANDING_TIMEOUT_S
+    k = k0
     while plant.mode is not FlightMode.LANDED and plant.t_s < deadline:
-        sensors.advance_to(plant.t_s + period)
-    event(plant.t_s - t_start, "landed" if plant.mode is FlightMode.LANDED else "not-landed")
-    return SimResult(n_ticks, plant.mode, recorder.path if recorder is not None else None,
-                     loop_wall_s)
+        if plant.mode is FlightMode.EMERGENCY:
+            break
+        t_plant = t_first + k * period
+        plant_faults.update(t_plant - t_start)
+        sensors.advance_to(t_plant)
+        if logged:
+            out = tick.step(sensors.inputs(t_plant), t_exp_s=t_plant - t_start)
+            out.row["mode"] = "landing"
+            _record(recorder, out.row, plant)
+        k += 1
+    write_event(plant.t_s - t_start, "landed" if plant.mode is FlightMode.LANDED else "not-landed",
+                drone_mode=plant.mode.value)

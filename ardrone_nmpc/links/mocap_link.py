@@ -190,6 +190,11 @@ class MocapLink:
                 continue
             self._handle(data, self._clock())
 
+    def feed(self, data: bytes, t_s: float) -> None:
+        """Handle one datagram received at ``t_s`` (link clock) as the receiver thread would:
+        the lockstep simulator delivers its datagrams this way, without a socket."""
+        self._handle(data, t_s)
+
     def _handle(self, data: bytes, t_s: float) -> None:
         stats = self.stats
         stats.record_datagram()

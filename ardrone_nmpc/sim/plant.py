@@ -490,6 +490,31 @@ class AirframePlant:
         self._state = self._at_rest(self._state)
         return True
 
+    # ------------------------------------------------------------------ faults
+
+    def set_battery_pct(self, level_pct: float) -> None:
+        """Fault injection: the battery reads ``level_pct`` (%) from now on (then drains)."""
+        if not (math.isfinite(level_pct) and 0.0 <= level_pct <= 100.0):
+            raise ValueError(f"level_pct must be in [0, 100], got {level_pct!r}")
+        self._battery = float(level_pct)
+
+    def set_command_delay_s(self, delay_s: float) -> None:
+        """Fault injection: the command transport delay becomes ``delay_s`` (s) now.
+
+        A longer delay repeats the oldest queued command (the drone flies it longer); a
+        shorter one drops the oldest queued commands (they never act).
+        """
+        if not (math.isfinite(delay_s) and delay_s >= 0.0):
+            raise ValueError(f"delay_s must be finite and >= 0, got {delay_s!r}")
+        self.params = self.params.replace(command_delay_s=float(delay_s))
+        n = self.params.command_delay_steps
+        fifo = self._fifo
+        oldest = fifo[0] if fifo else self._current
+        while len(fifo) < n:
+            fifo.appendleft(oldest)
+        while len(fifo) > n:
+            fifo.popleft()
+
     # ------------------------------------------------------------------ time
 
     def advance(self, dt_s: float) -> None:

@@ -1,0 +1,195 @@
+"""Fault injection (config section ``faults``, simulation only): when each fault is active, the
+byte-level corruptions, and the plant-side faults.
+
+Times are experiment times (s; 0 = the first tick after the settle phase). The runners ask a
+:class:`FaultSchedule` per sensor frame or tick; the lockstep runner feeds the faulted datagrams
+through the real decoders and link logic (:mod:`ardrone_nmpc.simulate`), ``fly --sim`` through
+the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
+seeded by the run's seed, so a faulted run is as reproducible as a clean one.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+
+from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES
+
+__all__ = ["FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS", "PLANT_FAULTS"]
+
+#: Faults that act on the sensor datagrams (the lockstep runner then goes through the bytes).
+SENSOR_FAULTS = frozenset({"mocap_dropout", "mocap_occlusion", "mocap_latency",
+                           "navdata_loss", "navdata_corrupt", "disorder"})
+#: Faults that act on the simulated drone itself.
+PLANT_FAULTS = frozenset({"at_loss", "battery_floor", "emergency", "wind_gust", "wind",
+                          "delay_jump"})
+
+_OPTION_HEAD = struct.Struct("<HH")
+
+
+def _within(fault, t_s: float) -> bool:
+    return fault is not None and fault.start_s <= t_s < fault.start_s + fault.duration_s
+
+
+def corrupt_navdata(data: bytes, kind: str) -> bytes:
+    """``data`` (a whole navdata packet) corrupted the way ``kind`` says.
+
+    ``checksum``: the checksum value's last byte flipped; ``truncated``: the packet cut in
+    half; ``zero_option``: the first option's size field set to 0 (a decoder that trusted it
+    would loop for ever).
+    """
+    buf = bytearray(data)
+    if kind == "checksum":
+        buf[-1] ^= 0xFF
+    elif kind == "truncated":
+        del buf[len(buf) // 2:]
+    elif kind == "zero_option":
+        if len(buf) >= HEADER_BYTES + OPTION_HEAD_BYTES:
+            tag, _ = _OPTION_HEAD.unpack_from(buf, HEADER_BYTES)
+            _OPTION_HEAD.pack_into(buf, HEADER_BYTES, tag, 0)
+    else:
+        raise ValueError(f"unknown navdata corruption {kind!r}")
+    return bytes(buf)
+
+
+class FaultSchedule:
+    """Which faults of a :class:`~ardrone_nmpc.config.FaultsConfig` act at a time.
+
+    Parameters
+    ----------
+    faults : FaultsConfig.
+    seed : seed of the fault draws (duplicates, reordering, AT loss).
+    """
+
+    def __init__(self, faults, seed: int = 0) -> None:
+        self.cfg = faults
+        self.active = frozenset(faults.active())
+        self.rng = np.random.default_rng([int(seed), 0xFA17])
+
+    @property
+    def any(self) -> bool:
+        return bool(self.active)
+
+    @property
+    def touches_sensors(self) -> bool:
+        return bool(self.active & SENSOR_FAULTS)
+
+    # ------------------------------------------------------------------ mocap
+    def mocap_dropped(self, t_s: float) -> bool:
+        """No mocap datagram sent at ``t_s`` (dropout burst, repeated if configured)."""
+        f = self.cfg.mocap_dropout
+        if f is None or t_s < f.start_s:
+            return False
+        phase = t_s - f.start_s
+        if f.repeat_every_s is not None:
+            phase = math.fmod(phase, f.repeat_every_s)
+        return phase < f.duration_s
+
+    def mocap_occlusion(self, t_s: float) -> str | None:
+        """``"missing"`` or ``"zero"`` while the object is occluded at ``t_s``, else None."""
+        f = self.cfg.mocap_occlusion
+        if not _within(f, t_s):
+            return None
+        return "zero" if f.zero_pose else "missing"
+
+    def mocap_extra_latency_s(self, t_s: float) -> float:
+        """Latency added to a mocap datagram sent at ``t_s`` (s)."""
+        f = self.cfg.mocap_latency
+        return f.extra_latency_ms * 1e-3 if _within(f, t_s) else 0.0
+
+    # ------------------------------------------------------------------ navdata
+    def navdata_lost(self, t_s: float) -> bool:
+        return _within(self.cfg.navdata_loss, t_s)
+
+    def navdata_corruption(self, t_s: float) -> str | None:
+        f = self.cfg.navdata_corrupt
+        return f.kind if _within(f, t_s) else None
+
+    # ------------------------------------------------------------------ both streams
+    def disorder(self, stream: str, t_s: float) -> tuple[bool, bool]:
+        """``(duplicate, hold_back)`` draws for a datagram of ``stream`` sent at ``t_s``."""
+        f = self.cfg.disorder
+        if f is None or f.stream != stream or not _within(f, t_s):
+            return False, False
+        draw = self.rng.random(2)
+        return bool(draw[0] < f.duplicate_probability), bool(draw[1] < f.reorder_probability)
+
+    # ------------------------------------------------------------------ the drone
+    def at_lost(self, t_s: float) -> bool:
+        """The AT datagram of the tick at ``t_s`` never reaches the drone."""
+        f = self.cfg.at_loss
+        return _within(f, t_s) and bool(self.rng.random() < f.probability)
+
+    def solver_diverges(self, t_s: float) -> bool:
+        return _within(self.cfg.solver_diverge, t_s)
+
+    def wind_mps(self, t_s: float) -> np.ndarray:
+        """Air velocity at ``t_s``: the constant wind plus a gust in its window (m/s)."""
+        w = np.zeros(3)
+        if self.cfg.wind is not None:
+            w += self.cfg.wind.velocity_mps
+        if _within(self.cfg.wind_gust, t_s):
+            w += self.cfg.wind_gust.velocity_mps
+        return w
+
+    def plant_events(self) -> list[tuple[float, str, float]]:
+        """One-shot plant faults ``(t_s, kind, value)``, in time order."""
+        out = []
+        c = self.cfg
+        if c.battery_floor is not None:
+            out.append((c.battery_floor.start_s, "battery", c.battery_floor.level_pct))
+        if c.emergency is not None:
+            out.append((c.emergency.start_s, "emergency", math.nan))
+        if c.delay_jump is not None:
+            out.append((c.delay_jump.start_s, "delay", c.delay_jump.delay_s))
+        return sorted(out)
+
+    def windows(self) -> list[tuple[str, float, float]]:
+        """``(name, start_s, end_s)`` of every configured fault (end inf for one-shot ones and
+        the constant wind), for reports and the fault matrix."""
+        out = []
+        for name in sorted(self.active):
+            f = getattr(self.cfg, name)
+            start = getattr(f, "start_s", -math.inf)
+            duration = getattr(f, "duration_s", math.inf)
+            if name == "mocap_dropout" and f.repeat_every_s is not None:
+                duration = math.inf
+            out.append((name, start, start + duration))
+        return out
+
+
+class PlantFaults:
+    """Applies a schedule's plant-side faults to an
+    :class:`~ardrone_nmpc.sim.plant.AirframePlant` as experiment time passes.
+
+    ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``).
+    """
+
+    def __init__(self, schedule: FaultSchedule, plant) -> None:
+        self.schedule = schedule
+        self.plant = plant
+        self._pending = schedule.plant_events()
+        self._gust_on = False
+
+    def update(self, t_s: float) -> list[dict]:
+        events = []
+        plant, sched = self.plant, self.schedule
+        while self._pending and self._pending[0][0] <= t_s:
+            _, kind, value = self._pending.pop(0)
+            if kind == "battery":
+                plant.set_battery_pct(value)
+                events.append({"kind": "fault", "fault": "battery_floor", "level_pct": value})
+            elif kind == "emergency":
+                plant.emergency()
+                events.append({"kind": "fault", "fault": "emergency"})
+            elif kind == "delay":
+                plant.set_command_delay_s(value)
+                events.append({"kind": "fault", "fault": "delay_jump", "delay_s": value})
+        plant.wind_mps = sched.wind_mps(t_s)
+        gust = _within(sched.cfg.wind_gust, t_s)
+        if gust != self._gust_on:
+            self._gust_on = gust
+            events.append({"kind": "fault", "fault": "wind_gust", "on": gust})
+        return events

@@ -1,0 +1,218 @@
+"""The supervisor (DESIGN.md §2): between the controller and the mapping, it decides what flies.
+
+Every tick it looks at the feedback (ages of the mocap pose and of navdata, the drone's state
+bits and battery), at the state estimate (finite, inside the geofence, not too fast, not too
+tilted) and at the controller's solution (solver status, finite values) and returns a
+:class:`Decision`: fly the controller's command, hold the last good command, fly the P
+controller instead, hover (AT*PCMD flag 0: the drone's own position hold), land, or stop (the
+drone reports an emergency: nothing more is sent).
+
+Policies (``safety`` config section, :class:`~ardrone_nmpc.config.SafetyConfig`):
+
+=====================================  ==========================================================
+condition                              action
+=====================================  ==========================================================
+drone in emergency (navdata)           ``stop`` (latched; reported)
+battery ≤ ``battery_floor_pct``        ``land`` (latched)
+navdata age > ``navdata_land_ms``      ``land`` (latched)
+mocap age > ``mocap_land_ms``          ``land`` (latched)
+mocap age > ``mocap_hover_ms``         ``hover``
+mocap age > ``mocap_hold_ms``          ``hold`` the last command sent
+state estimate not finite              ``hover``
+position outside the geofence          ``geofence_action`` (``land`` latched, or ``hover``)
+speed > ``max_speed_mps``              ``hover`` (the drone brakes itself)
+measured tilt > ``max_tilt_rad``       ``hover``
+solver failed (below)                  ``hold`` for ``solver_hold_ticks``, then
+                                       ``solver_fallback``: ``p`` (P controller), ``hover``, or
+                                       ``hold`` (then ``hover`` after ``solver_hover_ticks``);
+                                       the NMPC flies again after ``solver_recover_ticks`` good
+                                       solves in a row
+commanded tilt > ``max_tilt_rad``      clipped (flagged in ``cmd_saturated``)
+=====================================  ==========================================================
+
+A solve *failed* when its status is ``diverged`` or ``non-finite``, when its input is not finite,
+or when it is ``max-iterations`` and ``solver_accept_max_iterations`` is false.
+
+Precedence is the table's order: the first condition that holds wins. ``land`` and ``stop``
+latch: once decided, they stay until the run ends. Every change of mode is an event (``kind``
+``"mode"``, with the reason) that the runner writes to ``events.jsonl``; the mode is the log's
+``mode`` column and the dashboard's.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from ardrone_nmpc.types import FlightMode, NavdataSample
+
+__all__ = ["Action", "Decision", "Supervisor"]
+
+
+class Action(str, enum.Enum):
+    """What the tick does with the drone."""
+
+    CONTROL = "control"    # fly the controller's command
+    HOLD = "hold"          # resend the last command sent
+    FALLBACK = "fallback"  # fly the P controller's command
+    HOVER = "hover"        # PCMD flag 0: the drone holds its position itself
+    LAND = "land"          # land now (the runner commands it)
+    STOP = "stop"          # the drone is in emergency: send nothing, report
+
+
+#: Actions after which the run does not go back to flying the experiment.
+LATCHING = frozenset({Action.LAND, Action.STOP})
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """The supervisor's verdict for one tick: ``action`` and why (``reason``; "" if nominal).
+
+    ``mode`` is the log's ``mode`` label: ``"<action>-<reason>"`` (``hold-stale-mocap``,
+    ``fallback-solver``, ``land-geofence``, …) or the nominal label the runner gave.
+    """
+
+    action: Action
+    reason: str = ""
+
+    def mode(self, nominal: str) -> str:
+        if self.action is Action.CONTROL:
+            return nominal
+        return f"{self.action.value}-{self.reason}" if self.reason else self.action.value
+
+
+NOMINAL = Decision(Action.CONTROL)
+
+
+class Supervisor:
+    """Stateful policy of :mod:`ardrone_nmpc.safety` for one flight.
+
+    Parameters
+    ----------
+    safety : :class:`~ardrone_nmpc.config.SafetyConfig`.
+
+    Attributes
+    ----------
+    events : list of dict
+        Mode changes since the last :meth:`take_events` (``{"kind": "mode", "mode": …,
+        "previous": …, "reason": …}``); the runner stamps and writes them.
+    """
+
+    def __init__(self, safety) -> None:
+        self.cfg = safety
+        self._fence_lo = tuple(safety.geofence_min_m)
+        self._fence_hi = tuple(safety.geofence_max_m)
+        self._latched: Decision | None = None
+        self._solver_failures = 0   # consecutive failed solves
+        self._solver_good = 0       # consecutive good solves while in a solver fallback
+        self._solver_fallback = False
+        self._mode = ""
+        self.events: list[dict] = []
+
+    # ------------------------------------------------------------------ the three checks
+    def check_feedback(self, *, mocap_age_ms: float, navdata_age_ms: float,
+                       navdata: NavdataSample | None) -> Decision:
+        """Before estimation: may the tick use the measurements at all?"""
+        if self._latched is not None:
+            return self._latched
+        cfg = self.cfg
+        if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
+            return self._latch(Decision(Action.STOP, "emergency"))
+        if navdata is not None and navdata.battery_pct <= cfg.battery_floor_pct:
+            return self._latch(Decision(Action.LAND, "battery"))
+        if not navdata_age_ms <= cfg.navdata_land_ms:  # NaN/inf (never received) included
+            return self._latch(Decision(Action.LAND, "navdata-lost"))
+        if not mocap_age_ms <= cfg.mocap_land_ms:
+            return self._latch(Decision(Action.LAND, "mocap-lost"))
+        if mocap_age_ms > cfg.mocap_hover_ms:
+            return Decision(Action.HOVER, "stale-mocap")
+        if mocap_age_ms > cfg.mocap_hold_ms:
+            return Decision(Action.HOLD, "stale-mocap")
+        return NOMINAL
+
+    def check_state(self, x, navdata: NavdataSample | None) -> Decision:
+        """After estimation: is the state estimate usable, and is the drone where it may be?
+
+        ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``.
+        """
+        cfg = self.cfg
+        if not all(math.isfinite(v) for v in x):
+            return Decision(Action.HOVER, "nonfinite-state")
+        position = (x[0], x[2], x[4])
+        if not all(lo <= p <= hi for p, lo, hi in zip(position, self._fence_lo, self._fence_hi)):
+            if cfg.geofence_action == "land":
+                return self._latch(Decision(Action.LAND, "geofence"))
+            return Decision(Action.HOVER, "geofence")
+        if math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2) > cfg.max_speed_mps:
+            return Decision(Action.HOVER, "speed")
+        if navdata is not None:
+            tilt_rad = math.radians(max(abs(navdata.roll_deg), abs(navdata.pitch_deg)))
+            if tilt_rad > cfg.max_tilt_rad:
+                return Decision(Action.HOVER, "tilt")
+        return NOMINAL
+
+    def check_solution(self, ok: bool, u) -> Decision:
+        """After the NMPC: fly it, hold, fall back or hover (the solver-failure chain).
+
+        ``ok`` is the solver's status; ``u`` its (4,) input (checked for finiteness here too:
+        the supervisor never trusts the solver to have done so).
+        """
+        cfg = self.cfg
+        good = ok and all(math.isfinite(v) for v in u)
+        if good:
+            self._solver_failures = 0
+            if not self._solver_fallback:
+                return NOMINAL
+            self._solver_good += 1
+            if self._solver_good >= cfg.solver_recover_ticks:
+                self._solver_fallback = False
+                return NOMINAL
+        else:
+            self._solver_failures += 1
+            self._solver_good = 0
+            if self._solver_failures <= cfg.solver_hold_ticks and not self._solver_fallback:
+                return Decision(Action.HOLD, "solver")
+            self._solver_fallback = True
+        # in the fallback: until the NMPC has been good long enough
+        policy = cfg.solver_fallback
+        if policy == "p":
+            return Decision(Action.FALLBACK, "solver")
+        if policy == "hold" and self._solver_failures <= cfg.solver_hover_ticks:
+            return Decision(Action.HOLD, "solver")
+        return Decision(Action.HOVER, "solver")
+
+    def clip_tilt_rad(self, angle_rad: float) -> tuple[float, bool]:
+        """A commanded roll/pitch clipped to ``±max_tilt_rad``, and whether it was."""
+        cap = self.cfg.max_tilt_rad
+        if angle_rad > cap:
+            return cap, True
+        if angle_rad < -cap:
+            return -cap, True
+        return angle_rad, False
+
+    # ------------------------------------------------------------------ mode bookkeeping
+    def record(self, decision: Decision, nominal: str) -> str:
+        """Note the tick's final decision; return its mode label (an event if it changed)."""
+        mode = decision.mode(nominal)
+        if mode != self._mode:
+            # the settle → track switch is the runner's schedule, not a supervisor event
+            if not (decision.action is Action.CONTROL and self._mode in ("", "settle", "track")):
+                self.events.append({"kind": "mode", "mode": mode, "previous": self._mode,
+                                    "action": decision.action.value, "reason": decision.reason})
+            self._mode = mode
+        return mode
+
+    def take_events(self) -> list[dict]:
+        """The mode-change events since the last call (and forget them)."""
+        events, self.events = self.events, []
+        return events
+
+    @property
+    def latched(self) -> Decision | None:
+        """The ``land``/``stop`` decision the run is bound to, if any."""
+        return self._latched
+
+    def _latch(self, decision: Decision) -> Decision:
+        self._latched = decision
+        return decision
