@@ -34,7 +34,8 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
             result = run_lockstep(cfg, recorder=recorder, seed=seed,
                                   progress=lambda f: progress.update(task, completed=f))
         wall_s = time.perf_counter() - wall0
-        recorder.event(0.0, "simulated", wall_s=wall_s, ticks=result.ticks,
+        recorder.event(result.ticks * cfg.loop.period_s - cfg.sim.settle_s, "simulated",
+                       wall_s=wall_s, ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)
         recorder.flush()
         rows = summarise(read_run(recorder.path))
@@ -45,7 +46,8 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
         loop_s = result.loop_wall_s
         console.print(f"{result.ticks} ticks, {sim_s:g} s flown in {loop_s:.2f} s "
                       f"({sim_s / loop_s:.0f}× real time); {wall_s:.1f} s in all, kernels "
-                      f"loaded or compiled included; drone {result.final_mode.value}")
+                      f"loaded or compiled included; ended: {result.ending}, drone "
+                      f"{result.final_mode.value}")
     return recorder.path
 
 

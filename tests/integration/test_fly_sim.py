@@ -75,3 +75,45 @@ def test_interrupt_lands_and_exits_with_the_signal_code(tmp_path, sig, code):
     assert "landed" in kinds, kinds
     assert _run_line(out) == str(run_dir)
     read_run(run_dir)  # complete and readable
+    assert (run_dir / "summary.csv").read_text().startswith("axis,metric,value,unit")
+
+
+def _wait_for_rows(run_glob, n_rows, timeout_s=60):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        dirs = list(run_glob())
+        if dirs and (dirs[0] / "log.csv").exists() and \
+                len((dirs[0] / "log.csv").read_bytes().splitlines()) > n_rows:
+            return dirs[0]
+        time.sleep(0.1)
+    return None
+
+
+@pytest.mark.timeout(120)
+def test_sigkill_mid_flight_leaves_a_readable_run(tmp_path):
+    """No landing is possible after SIGKILL (the drone's own watchdog hovers it); what the
+    tool owes is its log: config.yaml from before take-off, log.csv readable, at most the
+    row being written lost."""
+    from ardrone_nmpc.config import load_config
+
+    proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).parents[2])
+    try:
+        run_dir = _wait_for_rows(lambda: Path(tmp_path).glob("*-hover"), 30)
+        assert run_dir is not None, "the flight never started"
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == -signal.SIGKILL
+    cfg = load_config(run_dir / "config.yaml")
+    assert cfg.name == "hover" and cfg.duration_s == 60
+    lines = (run_dir / "log.csv").read_bytes().splitlines(keepends=True)
+    run = read_run(run_dir)
+    complete = sum(1 for line in lines[1:] if line.endswith(b"\n"))
+    assert run.n_rows == complete >= 30  # every finished row, at most a torn last one lost
+    assert len(lines) - 1 - complete <= 1
+    assert "takeoff" in [e["kind"] for e in _events(run_dir)]

@@ -1,0 +1,234 @@
+"""Fault injection: the schedule, the byte corruptions, the plant faults, and every fault of the
+matrix flown end to end in lockstep with the outcome and event it must produce."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config import load_config
+from ardrone_nmpc.faultmatrix import (FAULT_CASES, classify, deviation_from, log_complete,
+                                      recovery_time_s)
+from ardrone_nmpc.faults import FaultSchedule, corrupt_navdata
+from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
+from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.simulate import TakeoffRefused, run_lockstep
+from ardrone_nmpc.summary import summarise
+from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.wire_sensors import WireSensors, navdata_packet
+
+CONFIGS = Path(__file__).parents[2] / "configs"
+SHORT = ["duration_s=5", "sim.settle_s=1"]
+
+
+def flying_plant(cfg, seed=0) -> AirframePlant:
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    plant.takeoff()
+    while plant.mode is not FlightMode.FLYING:
+        plant.advance(0.05)
+    return plant
+
+
+# ----------------------------------------------------------------------------- bytes
+@pytest.mark.parametrize("kind, message", [
+    ("checksum", "checksum mismatch"), ("truncated", r"overruns|no checksum|shorter"),
+    ("zero_option", "invalid size 0")])
+def test_each_corruption_is_rejected_by_the_decoder(kind, message):
+    cfg = load_config(None)
+    data = navdata_packet(flying_plant(cfg), 7)
+    assert decode_navdata(data).sequence == 7  # the clean packet decodes
+    with pytest.raises(NavdataError, match=message):
+        decode_navdata(corrupt_navdata(data, kind))
+    with pytest.raises(ValueError, match="unknown navdata corruption"):
+        corrupt_navdata(data, "scrambled")
+
+
+# ----------------------------------------------------------------------------- schedule
+def test_schedule_windows_and_repeats():
+    cfg = load_config(None, ["faults.mocap_dropout.start_s=2", "faults.mocap_dropout.duration_s=0.5",
+                             "faults.mocap_dropout.repeat_every_s=3",
+                             "faults.wind_gust.start_s=1", "faults.wind_gust.duration_s=1",
+                             "faults.wind.velocity_mps=[0.5,0,0]"])
+    s = FaultSchedule(cfg.faults)
+    assert [s.mocap_dropped(t) for t in (1.99, 2.0, 2.49, 2.5, 5.1, 5.6, 8.2)] == \
+        [False, True, True, False, True, False, True]
+    np.testing.assert_allclose(s.wind_mps(-math.inf), [0.5, 0, 0])
+    np.testing.assert_allclose(s.wind_mps(1.5), [2.0, 0, 0])  # gust (1.5) on top of the wind
+    np.testing.assert_allclose(s.wind_mps(2.0), [0.5, 0, 0])
+    assert not s.navdata_lost(3.0) and s.touches_sensors
+
+
+def test_disorder_draws_are_seeded():
+    cfg = load_config(None, ["faults.disorder.start_s=0", "faults.disorder.duration_s=10"])
+    schedules = [FaultSchedule(cfg.faults, seed) for seed in (3, 3, 4)]
+    draws = [[s.disorder("mocap", 1.0) for _ in range(20)] for s in schedules]
+    assert draws[0] == draws[1] != draws[2]
+    assert FaultSchedule(cfg.faults, 3).disorder("navdata", 1.0) == (False, False)
+
+
+# ----------------------------------------------------------------------------- plant faults
+def test_command_delay_jump_delays_the_response():
+    """A roll command reaches the tilt loop command_delay_s later; after the jump, later."""
+    cfg = load_config(None)
+
+    def response_time_s(delay_s):
+        plant = flying_plant(cfg)
+        if delay_s is not None:
+            plant.set_command_delay_s(delay_s)
+        t0 = plant.t_s
+        plant.command(1.0, 0.0, 0.0, 0.0)
+        while abs(plant.truth.roll_rad) < 1e-3:
+            plant.advance(0.005)
+        return plant.t_s - t0
+
+    base = response_time_s(None)
+    assert base == pytest.approx(cfg.sim.plant.command_delay_s, abs=0.02)
+    assert response_time_s(0.6) == pytest.approx(0.6, abs=0.02)
+    assert response_time_s(0.0) < 0.02
+    with pytest.raises(ValueError, match="delay_s"):
+        flying_plant(cfg).set_command_delay_s(-1.0)
+
+
+def test_battery_fault_and_takeoff_refusal(tmp_path):
+    cfg = load_config(None)
+    plant = flying_plant(cfg)
+    plant.set_battery_pct(10.0)
+    assert plant.navdata().battery_pct == 10.0
+    with pytest.raises(ValueError, match="level_pct"):
+        plant.set_battery_pct(101.0)
+    low = load_config(CONFIGS / "hover.yaml", ["sim.plant.battery_start_pct=15", *SHORT])
+    with pytest.raises(TakeoffRefused, match="battery 15 % is at or below the floor"):
+        run_lockstep(low)
+
+
+# ----------------------------------------------------------------------------- wire sensors
+def test_wire_sensors_reject_duplicates_and_reordered_frames():
+    cfg = load_config(None, ["faults.disorder.start_s=-100", "faults.disorder.duration_s=1000",
+                             "faults.disorder.duplicate_probability=0.5",
+                             "faults.disorder.reorder_probability=0.5"])
+    plant = flying_plant(cfg)
+    sensors = WireSensors(cfg, plant, FaultSchedule(cfg.faults, 1), t_zero_s=0.0)
+    times = []
+    for k in range(1, 60):
+        sensors.advance_to(plant.t_s + 0.065)
+        pose, rx = sensors.mocap.latest()
+        times.append(pose.t_s)
+    stats = sensors.mocap.stats
+    assert stats.out_of_order > 10  # duplicates and overtaken frames were seen …
+    assert np.all(np.diff(times) > 0)  # … and none of them became the newest pose
+
+
+def test_wire_sensors_track_the_direct_sensors():
+    """A clean run through the bytes flies like the direct one (noise drawn in another order)."""
+    from ardrone_nmpc.faultmatrix import _positions
+
+    base = load_config(CONFIGS / "step_x.yaml", SHORT)
+    wire = load_config(CONFIGS / "step_x.yaml", [*SHORT, "faults.disorder.start_s=100"])
+    runs = []
+    for cfg in (base, wire):
+        rows = []
+
+        class Rec:
+            path = None
+            write_row = rows.append
+
+            def event(self, *a, **k):
+                pass
+        run_lockstep(cfg, recorder=Rec())
+        runs.append(np.array([[r["x_true_m"], r["z_true_m"]] for r in rows]))
+    assert runs[0].shape == runs[1].shape
+    np.testing.assert_allclose(runs[1], runs[0], atol=0.03)
+    assert runs[0][-1, 0] == pytest.approx(-1.5, abs=0.05)
+
+
+# ----------------------------------------------------------------------------- end to end
+#: fault → (expected ending, a mode/fault/stop event that must appear (kind, key, value))
+EXPECTED = {
+    "mocap_dropout_bursts": ("completed", ("mode", "reason", "stale-mocap")),
+    "mocap_lost": ("land-mocap-lost", ("mode", "mode", "land-mocap-lost")),
+    "mocap_occlusion": ("completed", ("mode", "reason", "stale-mocap")),
+    "mocap_latency_spike": ("completed", ("mode", "mode", "hold-stale-mocap")),
+    "navdata_loss": ("land-navdata-lost", ("mode", "mode", "land-navdata-lost")),
+    "navdata_bad_checksum": ("completed", ("faults", None, None)),
+    "navdata_truncated": ("completed", ("faults", None, None)),
+    "navdata_zero_option": ("completed", ("faults", None, None)),
+    "mocap_dup_reorder": ("completed", ("faults", None, None)),
+    "navdata_dup_reorder": ("completed", ("faults", None, None)),
+    "at_loss": ("completed", ("faults", None, None)),
+    "solver_diverge": ("completed", ("mode", "mode", "fallback-solver")),
+    "battery_floor": ("land-battery", ("mode", "mode", "land-battery")),
+    "emergency": ("stop-emergency", ("stopped", "reason", "stop-emergency")),
+    "wind_gust": ("completed", ("fault", "fault", "wind_gust")),
+    "wind_constant": ("completed", ("faults", None, None)),
+    "delay_jump": ("completed", ("fault", "fault", "delay_jump")),
+}
+
+
+def fly(tmp_path, fault, experiment="hover.yaml"):
+    overrides = [*SHORT, *(FAULT_CASES[fault] if fault else ())]
+    cfg = load_config(CONFIGS / experiment, overrides)
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        result = run_lockstep(cfg, recorder=rec)
+    rec.write_summary(summarise(read_run(rec.path)))
+    return result, read_run(rec.path)
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    return fly(tmp_path_factory.mktemp("base"), None)[1]
+
+
+def test_matrix_covers_every_fault_kind():
+    from ardrone_nmpc.config import FaultsConfig
+
+    covered = {name for overrides in FAULT_CASES.values() for o in overrides
+               for name in [o.split(".")[1]]}
+    assert covered == set(FaultsConfig.model_fields)
+    assert set(EXPECTED) == set(FAULT_CASES)
+
+
+@pytest.mark.parametrize("fault", sorted(FAULT_CASES))
+def test_each_fault_ends_by_policy_with_a_complete_log(tmp_path, baseline, fault):
+    result, run = fly(tmp_path, fault)
+    ending, (kind, key, value) = EXPECTED[fault]
+    assert result.ending == ending
+    assert any(e["kind"] == kind and (key is None or e.get(key) == value) for e in run.events), \
+        [e for e in run.events if e["kind"] != "mode"]
+    complete, why = log_complete(run.path, result.ticks)
+    assert complete, why
+    cmds = np.column_stack([run.columns[c] for c in ("cmd_roll_frac", "cmd_pitch_frac",
+                                                     "cmd_gaz_frac", "cmd_yaw_frac")])
+    assert np.all(np.isfinite(cmds))
+    outcome = classify(run, result.ending, fault)
+    assert outcome == {"completed": "completed", "stop-emergency": "stopped"}.get(ending, "landed")
+    if ending.startswith("land"):
+        assert result.final_mode is FlightMode.LANDED
+        assert run.columns["mode"][-1] == "landing"  # the descent is in the log
+
+
+def test_sensor_faults_show_in_the_logged_ages(tmp_path):
+    _, run = fly(tmp_path, "navdata_bad_checksum")
+    assert np.nanmax(run.columns["navdata_age_ms"]) > 250  # 0.3 s of packets rejected
+    _, run = fly(tmp_path, "mocap_latency_spike")
+    ages = run.columns["mocap_age_ms"]
+    assert np.nanmax(ages) > 150 and np.nanmedian(ages) < 20
+
+
+def test_solver_divergence_is_never_flown(tmp_path):
+    _, run = fly(tmp_path, "solver_diverge")
+    status, mode = run.columns["solver_status"], run.columns["mode"]
+    diverged = status == "diverged"
+    assert diverged.sum() >= 10  # 1 s of forced divergence
+    assert set(mode[diverged]) <= {"hold-solver", "fallback-solver"}
+    assert np.all(np.isfinite(run.columns["cmd_pitch_frac"][diverged]))
+
+
+def test_wind_pushes_and_the_deviation_metrics(tmp_path, baseline):
+    _, run = fly(tmp_path, "wind_gust")
+    t, dev = deviation_from(run, baseline)
+    assert dev.max() > 0.1  # the gust moved it
+    assert recovery_time_s(t, dev, 2.0) < 3.0  # and it came back
+    assert recovery_time_s(np.array([0.0, 1.0]), np.array([0.2, 0.2]), 0.0) != \
+        recovery_time_s(np.array([0.0, 1.0]), np.array([0.2, 0.05]), 0.0)
