@@ -70,7 +70,6 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
     from ardrone_nmpc.links.mocap_link import MocapLink
 
     seed = cfg.sim.seed if seed is None else seed
-    period = cfg.loop.period_s
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         with ExitStack() as stack:

@@ -69,17 +69,21 @@ def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, f
 def measurement_columns(inputs: TickInputs, t_exp_s: float) -> dict:
     """The raw measurements of ``inputs`` as log columns (replay feeds them back).
 
-    ``mocap_t_s`` is the pose's own time moved to the experiment clock (the tick's clock
-    minus its offset), so its differences are the estimators' sample intervals.
+    ``mocap_t_s`` is the pose's own time stamp as the tick saw it (the link's clock: receipt
+    time in ``fly``, plant time in simulation), bit for bit: the estimators difference it, and
+    moved to the experiment clock it would carry the tick's offset (rounding; in ``fly`` its
+    lateness) into those differences.
     """
     nav = inputs.navdata
     pose = inputs.pose
     return {
-        "mocap_t_s": pose.t_s - (inputs.t_s - t_exp_s) if pose is not None else math.nan,
+        "mocap_t_s": pose.t_s if pose is not None else math.nan,
         "battery_pct": nav.battery_pct if nav is not None else math.nan,
         "nav_vx_body_mps": nav.vx_body_mps if nav is not None else math.nan,
         "nav_vy_body_mps": nav.vy_body_mps if nav is not None else math.nan,
         "nav_mode": nav.mode.value if nav is not None else "",
+        "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
+        "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
     }
 
 

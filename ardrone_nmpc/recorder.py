@@ -67,9 +67,10 @@ __all__ = [
 #: The columns of ``log.csv``, in order. Units are in the names (s, m, rad, m/s, m/s², rad/s,
 #: fraction of full PCMD deflection, µs, ms, %); ``*_ref_*`` is the reference at the tick,
 #: ``u_*`` the controller's input, ``cmd_*`` the PCMD fractions sent, ``*_true_*`` the
-#: simulated plant's truth (empty in real flight). ``mocap_t_s`` (the pose's own time on the
-#: experiment clock), ``nav_vx_body_mps``/``nav_vy_body_mps`` and ``nav_mode`` complete the raw
-#: measurements the tick saw, so ``replay --rerun`` can feed them through it again.
+#: simulated plant's truth (empty in real flight). ``mocap_t_s`` (the pose's own time stamp on
+#: the link's clock, as the tick saw it), ``nav_vx_body_mps``/``nav_vy_body_mps``,
+#: ``nav_roll_deg``/``nav_pitch_deg`` and ``nav_mode`` complete the raw measurements the tick
+#: saw, so ``replay --rerun`` can feed them through it again.
 LOG_COLUMNS: tuple[str, ...] = (
     "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
     "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
@@ -77,7 +78,8 @@ LOG_COLUMNS: tuple[str, ...] = (
     "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac", "cmd_saturated",
     "solve_us", "solver_status", "residual_norm", "gmres_iterations", "newton_iterations",
     "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct", "tick_late_ms", "compute_us",
-    "mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode",
+    "mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode", "nav_roll_deg",
+    "nav_pitch_deg",
     "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps",
 )
 

@@ -4,7 +4,6 @@ Subprocesses with timeouts; only loopback addresses are ever used.
 """
 
 import json
-import os
 import signal
 import subprocess
 import sys

@@ -122,8 +122,6 @@ def test_wire_sensors_reject_duplicates_and_reordered_frames():
 
 def test_wire_sensors_track_the_direct_sensors():
     """A clean run through the bytes flies like the direct one (noise drawn in another order)."""
-    from ardrone_nmpc.faultmatrix import _positions
-
     base = load_config(CONFIGS / "step_x.yaml", SHORT)
     wire = load_config(CONFIGS / "step_x.yaml", [*SHORT, "faults.disorder.start_s=100"])
     runs = []
