@@ -409,6 +409,10 @@ def summarise(run: RunData) -> list[SummaryRow]:
     # loop
     fallbacks = int(np.sum(window & (mode != "") & (mode != NOMINAL_MODE)))
     add(SummaryRow("loop", "fallbacks", float(fallbacks), "count"))
+    # the supervisor's verdicts (safety.py): ticks per action, over the whole run
+    for action in ("hold", "fallback", "hover", "land", "stop"):
+        ticks = sum(1 for m in mode if m.startswith(action + "-") or m == action)
+        add(SummaryRow("supervisor", f"{action}_ticks", float(ticks), "count"))
     late = np.asarray(cols.get("tick_late_ms", np.full(n, np.nan)), dtype=np.float64)
     pct = _percentiles(late)
     if pct is not None:

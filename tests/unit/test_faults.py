@@ -230,3 +230,14 @@ def test_wind_pushes_and_the_deviation_metrics(tmp_path, baseline):
     assert recovery_time_s(t, dev, 2.0) < 3.0  # and it came back
     assert recovery_time_s(np.array([0.0, 1.0]), np.array([0.2, 0.2]), 0.0) != \
         recovery_time_s(np.array([0.0, 1.0]), np.array([0.2, 0.05]), 0.0)
+
+
+def test_summary_counts_the_supervisor_verdicts(tmp_path):
+    from ardrone_nmpc.summary import read_summary
+
+    _, run = fly(tmp_path, "solver_diverge")
+    figures = {(r.axis, r.metric): r.value for r in read_summary(run.path)}
+    mode = list(run.columns["mode"])
+    assert figures[("supervisor", "hold_ticks")] == mode.count("hold-solver") == 2
+    assert figures[("supervisor", "fallback_ticks")] == mode.count("fallback-solver") > 10
+    assert figures[("supervisor", "land_ticks")] == 0
