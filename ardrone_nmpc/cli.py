@@ -153,6 +153,73 @@ def summary(
 
 
 @app.command()
+def replay(
+    run_dir: Path = typer.Argument(..., help="A run directory (logs/<run>)."),
+    rerun: bool = typer.Option(False, "--rerun", help="Feed the logged measurements through the estimator and controller again; report recomputed − logged commands and write a new run directory."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP + " With --rerun: the counterfactual config."),
+    log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where --rerun creates its run directory (default: logs)."),
+    broadcast: bool = typer.Option(False, "--broadcast", help="Re-send the logged mocap poses as the UDP pose stream, with the logged timing."),
+    speed: Optional[float] = typer.Option(None, "--speed", help="--broadcast playback speed factor (default 1)."),
+    port: Optional[int] = typer.Option(None, "--port", min=1, max=65535, help="--broadcast UDP port (default: the run's mocap.port, 51001)."),
+    host: Optional[str] = typer.Option(None, "--host", help="--broadcast target; default 127.0.0.1 (only an explicit --host leaves this machine)."),
+) -> None:
+    """Re-summarise a run; --rerun recomputes its commands from the logged measurements (last
+    line: run: <dir>); --broadcast re-sends its mocap poses over UDP."""
+    from ardrone_nmpc.replaycli import ReplayUsageError, run_replay_command
+
+    try:
+        path = run_replay_command(run_dir=run_dir, rerun_=rerun, overrides=set_, log_dir=log_dir,
+                                  broadcast_=broadcast, speed=speed, port=port, host=host)
+    except ReplayUsageError as err:
+        _fail(err.messages)
+    if path is not None:
+        typer.echo(f"run: {path}")
+
+
+@app.command()
+def sweep(
+    config: Path = typer.Argument(..., help="Experiment YAML file."),
+    grid: List[str] = typer.Option([], "--grid", help="Swept field and its values: dotted.path=v1,v2,… (repeatable; the Cartesian product is flown). Values parse like --set; commas inside [] separate vector items: controller.r=[4,12,12,24],[1,12,12,24]."),
+    set_: List[str] = typer.Option([], "--set", help=SET_HELP + " Applied to every case, before the grid."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", min=1, help="Parallel workers (default: the CPU count); 1 = in this process."),
+    engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
+    rank_by: str = typer.Option("rmse", "--rank-by", help="Rank the table by: rmse, settling, overshoot, path_deviation, solve_p99."),
+    top: Optional[int] = typer.Option(None, "--top", min=1, help="Show only the best K cases."),
+    diverge_m: float = typer.Option(0.5, "--diverge-m", min=0.0, help="A case is 'unstable' if it is farther than this (m) from the reference in the last quarter of the experiment (or leaves the geofence, or is landed by the supervisor)."),
+) -> None:
+    """Fly the grid of lockstep simulations in parallel; writes one run directory per case
+    and sweep.csv (parameters, metrics, status), prints the ranked table. Re-running resumes.
+    Last line: sweep: <sweep.csv>."""
+    import os
+
+    from ardrone_nmpc.config import ConfigError
+    from ardrone_nmpc.sweepcli import SweepEngineError, run_sweep_command
+
+    out_dir = out if out is not None else Path("logs") / "sweeps" / config.stem
+    n_jobs = jobs if jobs is not None else os.cpu_count() or 1
+    try:
+        outcome = run_sweep_command(config=config, grid=grid, overrides=set_, out_dir=out_dir,
+                                    jobs=n_jobs, engine=engine, scheduler=scheduler,
+                                    rank_by=rank_by, top=top, diverge_m=diverge_m)
+    except ConfigError as err:
+        _fail(err.messages)
+    except SweepEngineError as err:
+        _fail([str(err)])
+    except KeyboardInterrupt:
+        typer.echo("interrupted: re-run the same command to resume", err=True)
+        raise typer.Exit(code=130)
+    typer.echo(f"sweep: {outcome.csv_path}")
+    if outcome.interrupted:
+        typer.echo("interrupted: re-run the same command to resume", err=True)
+        raise typer.Exit(code=130)
+    if outcome.counts["failed"]:
+        _fail([f"{outcome.counts['failed']} of {outcome.total} cases failed (see the message "
+               f"column of {outcome.csv_path})"])
+
+
+@app.command()
 def reproduce(
     out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "--out", help="Markdown report to write."),
     log_dir: Path = typer.Option(Path("logs/reproduce"), "--log-dir", help="Where the run directories go."),
@@ -211,6 +278,55 @@ def bench(
                           json_path=json_path, repeats=repeats)
     except RuntimeError as err:
         _fail([str(err)])
+
+
+@app.command()
+def plot(
+    path: Path = typer.Argument(..., help="A run directory, or a sweep directory (holding sweep.csv)."),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Image file (default: <dir>/plot-<kind>.png); with --kind all one file per kind: FILE-tracking.png, FILE-inputs.png, …"),
+    kind: Optional[str] = typer.Option(None, "--kind", help="Run figure: tracking, inputs, solver, path3d or all (default: all)."),
+    metric: Optional[str] = typer.Option(None, "--metric", help="Sweep heat map: metric column of sweep.csv (default: rmse_m)."),
+    x: Optional[str] = typer.Option(None, "--x", help="Sweep heat map: swept parameter on the x axis (default: the first)."),
+    y: Optional[str] = typer.Option(None, "--y", help="Sweep heat map: swept parameter on the y axis (default: the next); any others are minimised over."),
+    dpi: int = typer.Option(100, "--dpi", min=30, max=600, help="Resolution (pixels per inch)."),
+) -> None:
+    """Draw a run's figures (tracking, inputs, solver, 3-D path), or a sweep's metric heat map,
+    as images (needs matplotlib: the 'plot' extra). Prints plot: <file> per file."""
+    from ardrone_nmpc.plotcli import PlotError, run_plot_command
+    from ardrone_nmpc.recorder import LogError
+
+    try:
+        written = run_plot_command(path=path, output=output, kind=kind, metric=metric, x=x,
+                                   y=y, dpi=dpi,
+                                   warn=lambda note: typer.echo(f"warning: {note}", err=True))
+    except (PlotError, LogError, OSError) as err:
+        _fail([str(err)])
+    for file in written:
+        typer.echo(f"plot: {file}")
+
+
+@app.command()
+def faults(
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the results as JSON to this file."),
+    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write the Markdown report (docs/fault-matrix.md) to this file."),
+    experiments: str = typer.Option("hover,step,square", "--experiments", help="Comma-separated experiment kinds: hover, step, square."),
+    only: Optional[str] = typer.Option(None, "--faults", help="Comma-separated fault cases (default: all)."),
+    config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="Where hover.yaml, step_x.yaml, square.yaml are."),
+    log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where the case run directories go (default: logs/faults-<time>)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every case."),
+) -> None:
+    """Run every injected fault against hover, step and square in lockstep simulation and
+    report each case's outcome, deviation, recovery and log completeness (exit 1 if any case
+    fails)."""
+    from ardrone_nmpc.faultmatrix import run_faults_command
+
+    try:
+        ok = run_faults_command(json_out=json_out, markdown=markdown, experiments=experiments,
+                                only=only, config_dir=config_dir, log_dir=log_dir, seed=seed)
+    except (ValueError, RuntimeError, OSError) as err:
+        _fail([str(err)])
+    if not ok:
+        raise typer.Exit(code=1)
 
 
 @app.command("sim-drone")

@@ -109,6 +109,9 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                                   fault_clock)
             finally:
                 result.landed = session.landed_cleanly
+                for t_exp, ev in (getattr(loop, "fault_events", None) or []) if sim else ():
+                    fields = dict(ev)  # the loopback's injected faults, on experiment time
+                    event(fields.pop("kind"), t_exp_s=t_exp, **fields)
                 event("session_end", landed=session.landed_cleanly)
             path = recorder.path
         if result.landed is False:

@@ -45,8 +45,9 @@ Behaviour (protocol §5; [?] marks the spec's design choices, taken as written t
 * ``AT*FTRIM``: accepted (counted) only when landed; no state change. ``AT*CALIB``: accepted
   (counted) only in flight; the spin manoeuvre is not simulated.
 * ``AT*CONFIG``: stored in :attr:`config`; sets the command-ACK bit 6 until ``AT*CTRL=…,5``.
-  ``control:euler_angle_max`` (rad, clamped to 0.52), ``control:control_vz_max`` (mm/s),
-  ``control:control_yaw`` (rad/s) replace the plant's params (``PlantParams.replace``);
+  ``control:euler_angle_max`` (rad, clamped to 0.52), ``control:control_vz_max`` (mm/s,
+  clamped to 200–2000), ``control:control_yaw`` (rad/s, clamped to 0.7–6.11) replace the
+  plant's params (``PlantParams.replace``);
   ``control:altitude_max`` (mm) sets the cap; ``general:navdata_demo`` leaves bootstrap
   (TRUE = demo packets, FALSE = full rate); ``general:navdata_options`` selects the options
   the simulator can produce (bit 0 demo, bit 1 time, bit 16 vision_detect). Values that do
@@ -128,6 +129,11 @@ from .plant import AirframePlant
 __all__ = ["DroneServer", "DroneServerCounters", "require_loopback_host", "EULER_ANGLE_MAX_LIMIT_RAD"]
 
 EULER_ANGLE_MAX_LIMIT_RAD = 0.52          # dev guide range of control:euler_angle_max
+# Recommended ranges of the other two limits (protocol §3.1). Written values are clamped to
+# them: an unbounded value (a client may send "1e300") would drive the plant to altitudes no
+# navdata int32 field can carry, and the navdata thread would die on it.
+_CONTROL_VZ_MAX_RANGE_MMPS = (200.0, 2000.0)
+_CONTROL_YAW_RANGE_RADPS = (0.7, 6.11)
 DEFAULT_NAVDATA_OPTIONS = (1 << 0) | (1 << 16)   # 65537: demo + vision_detect
 _RECV_BYTES = 4096
 _POLL_S = 0.05                            # socket timeout: shutdown latency of the threads
@@ -205,6 +211,7 @@ class DroneServerCounters:
     physics_steps: int = 0
     physics_max_lag_s: float = 0.0    # largest lateness of a physics wake-up
     link_losses: int = 0
+    at_datagrams_lost: int = 0        # discarded on arrival by an injected AT-loss fault
 
 
 class DroneServer:
@@ -227,6 +234,10 @@ class DroneServer:
     altitude_max_m : initial ``control:altitude_max`` (m).
     vbat_low_pct : battery level (%) below which state bit 15 is set.
     lock : the lock to share (default: a new ``threading.RLock``).
+    clock : the time source (s), ``time.monotonic`` by default.
+    faults : injected faults (:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`, None =
+        none): plant faults each physics step, navdata packets lost / corrupted / disordered,
+        AT datagrams lost on arrival; their experiment time runs on ``clock``.
     """
 
     def __init__(self, plant: AirframePlant, *, bind_host: str = "127.0.0.1", at_port: int = 0,
@@ -239,7 +250,7 @@ class DroneServer:
                  transition_codes: Literal["observed", "sdk"] = "observed",
                  altitude_max_m: float = 3.0, vbat_low_pct: float = 20.0,
                  lock: Optional[threading.RLock] = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, faults=None) -> None:
         self.bind_host = require_loopback_host(bind_host, "bind address")
         for name, v in (("step_s", step_s), ("demo_rate_hz", demo_rate_hz),
                         ("full_rate_hz", full_rate_hz), ("comwdg_s", comwdg_s),
@@ -270,6 +281,7 @@ class DroneServer:
             self._takeoff_major, self._landing_major = (int(CtrlMajor.TRANS_TAKEOFF),
                                                         int(CtrlMajor.TRANS_LANDING))
         self._clock = clock
+        self._faults = faults
 
         # protocol state (under self.lock)
         self._last_seq = 0
@@ -452,6 +464,8 @@ class DroneServer:
             with self.lock:
                 c = self._counters
                 c.physics_max_lag_s = max(c.physics_max_lag_s, now - deadline)
+                if self._faults is not None:   # battery, emergency, delay jump, wind
+                    self._faults.update_plant(now)
                 self.plant.advance(due * step)
                 done += due
                 c.physics_steps += due
@@ -518,6 +532,10 @@ class DroneServer:
 
     def handle_at_datagram(self, data: bytes) -> None:
         """Apply one AT datagram (as received on the AT port)."""
+        if self._faults is not None and self._faults.at_lost(self._clock()):
+            with self.lock:   # lost before the drone: no traffic for its watchdogs either
+                self._counters.at_datagrams_lost += 1
+            return
         commands, errors = parse_datagram_lenient(data)
         now = self._clock()
         with self.lock:
@@ -610,9 +628,11 @@ class DroneServer:
             if key == "control:euler_angle_max":
                 change = {"euler_angle_max_rad": min(v, EULER_ANGLE_MAX_LIMIT_RAD)}
             elif key == "control:control_vz_max":
-                change = {"control_vz_max_mps": v / 1000.0}
+                lo, hi = _CONTROL_VZ_MAX_RANGE_MMPS
+                change = {"control_vz_max_mps": min(max(v, lo), hi) / 1000.0}
             else:
-                change = {"control_yaw_radps": v}
+                lo, hi = _CONTROL_YAW_RANGE_RADPS
+                change = {"control_yaw_radps": min(max(v, lo), hi)}
             try:
                 plant.params = plant.params.replace(**change)
             except (ValueError, TypeError, AttributeError):   # keep the old params
@@ -755,13 +775,17 @@ class DroneServer:
                 packet = self._packet(now)
                 target = self._nav_client
                 period = self._navdata_period()
-            try:
-                sock.sendto(packet, target)
-                with self.lock:
-                    self._counters.navdata_packets_out += 1
-            except OSError:
-                with self.lock:
-                    self._counters.navdata_send_errors += 1
+                # injected faults: none (lost), corrupted, duplicated or held back
+                datagrams = ([packet] if self._faults is None
+                             else self._faults.navdata_datagrams(now, packet))
+            for packet in datagrams:
+                try:
+                    sock.sendto(packet, target)
+                    with self.lock:
+                        self._counters.navdata_packets_out += 1
+                except OSError:
+                    with self.lock:
+                        self._counters.navdata_send_errors += 1
             next_send += period
             if next_send < now - period:   # fell behind by more than a period: re-anchor
                 next_send = now + period

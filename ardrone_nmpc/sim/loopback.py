@@ -4,14 +4,22 @@
 (fixed ports) use: it builds the plant from the config's ``sim`` and ``drone`` sections, serves
 it with a :class:`~ardrone_nmpc.sim.drone_server.DroneServer` on 127.0.0.1 and streams its pose
 with a :class:`~ardrone_nmpc.sim.mocap_server.MocapServer`, all sharing one lock.
+
+The config's ``faults`` are injected by both servers through one
+:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`; their experiment time starts when the
+runner calls :meth:`Loopback.set_fault_clock` (never, for ``sim-drone``: then only the
+constant wind acts).
 """
 
 from __future__ import annotations
 
+import math
 import socket
 from typing import Optional
 
+from ..faults import FaultSchedule
 from .drone_server import DroneServer, require_loopback_host
+from .fault_injection import FaultCounters, ServerFaults
 from .mocap_server import MocapServer
 from .plant import AirframePlant
 
@@ -39,13 +47,31 @@ class Loopback:
     at_port, navdata_port : its UDP ports; control_port : its TCP 5559 stand-in or None.
     mocap_host, mocap_port : where the pose stream is sent.
     object_name : the mocap object name.
+    faults : the servers' shared :class:`ServerFaults` (None: no fault injection).
     """
 
-    def __init__(self, plant: AirframePlant, drone: DroneServer, mocap: MocapServer) -> None:
+    def __init__(self, plant: AirframePlant, drone: DroneServer, mocap: MocapServer,
+                 faults: Optional[ServerFaults] = None) -> None:
         self.plant = plant
         self.drone = drone
         self.mocap = mocap
         self.lock = drone.lock
+        self.faults = faults
+
+    def set_fault_clock(self, t0_mono: float) -> None:
+        """Experiment time 0 of the injected faults is ``t0_mono`` (``time.monotonic()``, s)."""
+        if self.faults is not None:
+            self.faults.set_clock(t0_mono)
+
+    @property
+    def fault_events(self) -> list[tuple[float, dict]]:
+        """``(experiment time s, event)`` of each plant fault that started so far."""
+        return [] if self.faults is None else self.faults.events
+
+    @property
+    def fault_counters(self) -> FaultCounters:
+        """How often each injected fault acted so far."""
+        return FaultCounters() if self.faults is None else self.faults.counters
 
     @property
     def drone_host(self) -> str:
@@ -104,7 +130,7 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
 
     Parameters
     ----------
-    cfg : ExperimentConfig (sections ``sim``, ``drone``, ``mocap`` are read).
+    cfg : ExperimentConfig (sections ``sim``, ``drone``, ``mocap``, ``faults`` are read).
     seed : seed of the plant and the stream faults (default ``cfg.sim.seed``).
     mocap_port : where the pose stream goes; None = a free port on ``mocap_host``, reported as
         :attr:`Loopback.mocap_port` (the caller binds it).
@@ -120,17 +146,20 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
     if mocap_port is None:
         mocap_port = free_udp_port(mocap_host)
     plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    schedule = FaultSchedule(cfg.faults, seed)
+    faults = ServerFaults(schedule, plant) if schedule.any else None
+    plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start
     options = dict(demo_rate_hz=cfg.sim.navdata_rate_hz,
                    step_s=cfg.sim.plant.integration_step_s,
                    altitude_max_m=cfg.drone.altitude_max_m)
     options.update(drone_options)
     drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,
-                        control_port=control_port, **options)
+                        control_port=control_port, faults=faults, **options)
     try:
         mocap = MocapServer(plant, target=(mocap_host, mocap_port), rate_hz=cfg.sim.mocap_rate_hz,
                             object_name=cfg.mocap.object_name,
                             latency_ms=cfg.sim.noise.mocap_latency_ms, lock=drone.lock,
-                            drop_probability=mocap_drop_probability, seed=seed)
+                            drop_probability=mocap_drop_probability, seed=seed, faults=faults)
     except BaseException:
         drone.stop()
         raise
@@ -141,4 +170,4 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
         mocap.stop()
         drone.stop()
         raise
-    return Loopback(plant, drone, mocap)
+    return Loopback(plant, drone, mocap, faults)

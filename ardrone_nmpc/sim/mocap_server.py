@@ -10,14 +10,18 @@ leaves a gap, as a lost datagram of a real system would. When the thread wakes m
 ``max_catchup_s`` late (a stalled process) it skips the missed frames (a gap, counted in
 ``skipped``) instead of bursting them; shorter delays are caught up frame by frame.
 
-Fault injection still to come (the spec's occlusion bursts, duplicated and reordered datagrams)
-hooks in at :meth:`MocapServer._frame_bytes` / the send queue.
+Injected faults (``faults``, a :class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`) act per
+frame at its sampling deadline: a dropout burst sends nothing (a frame-number gap), an
+occlusion sends the frame without the object or with an all-zero pose, a latency spike adds to
+the due time, and disorder duplicates a datagram or holds it back behind the next one. The send
+queue is kept sorted by due time, so frames delayed by a spike are overtaken by later ones, as
+on a real network.
 """
 
 from __future__ import annotations
 
-import collections
 import dataclasses
+import heapq
 import math
 import random
 import socket
@@ -28,6 +32,7 @@ from typing import Callable, Optional
 
 from ..protocol.mocap import MOCAP_DEFAULT_PORT, MocapFrame, MocapObjectPose, encode_mocap
 from .drone_server import require_loopback_host
+from .fault_injection import NO_MOCAP_FAULT, ServerFaults
 from .plant import AirframePlant
 
 __all__ = ["MocapServer", "MocapServerCounters"]
@@ -37,7 +42,7 @@ __all__ = ["MocapServer", "MocapServerCounters"]
 class MocapServerCounters:
     """Counters of a :class:`MocapServer` (a snapshot copy when read)."""
 
-    frames: int = 0            # frames sampled (sent + dropped)
+    frames: int = 0            # deadlines sampled (sent, dropped, or withheld by a fault)
     sent: int = 0
     dropped: int = 0           # by drop_probability
     skipped: int = 0           # deadlines skipped after a stall longer than max_catchup_s
@@ -68,6 +73,8 @@ class MocapServer:
     seed : seed of the drop decisions.
     first_frame : frame number of the first frame.
     max_catchup_s : lateness beyond which missed frames are skipped rather than sent.
+    clock : the time source (s), ``time.monotonic`` by default.
+    faults : injected faults (None: none); their experiment time runs on ``clock``.
     """
 
     def __init__(self, plant: AirframePlant, *,
@@ -75,7 +82,8 @@ class MocapServer:
                  rate_hz: float = 100.0, object_name: str = "ardrone", latency_ms: float = 2.0,
                  lock=None, drop_probability: float = 0.0, seed: int = 0, first_frame: int = 1,
                  max_catchup_s: float = 0.25,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 faults: Optional[ServerFaults] = None) -> None:
         host, port = target
         host = require_loopback_host(host, "mocap target")
         port = int(port)
@@ -102,6 +110,8 @@ class MocapServer:
         self._lock = lock if lock is not None else _NullLock()
         self._rng = random.Random(seed)
         self._clock = clock
+        self._faults = faults
+        self._order = 0                 # queue tie-break: equal due times go out FIFO
         self._counters = MocapServerCounters()
         self._counters_lock = threading.Lock()
         self._stop = threading.Event()
@@ -159,34 +169,30 @@ class MocapServer:
 
     # ------------------------------------------------------------------ streaming
 
-    def _frame_bytes(self, frame_number: int) -> bytes:
+    def _frame_bytes(self, frame_number: int, occlusion: Optional[str] = None) -> bytes:
+        """The datagram of ``frame_number``; ``occlusion`` ``"missing"`` leaves the object out,
+        ``"zero"`` sends it at an all-zero pose (a tracker's "not seen" convention)."""
         with self._lock:
             pose = self.plant.mocap_pose()
         p, r = pose.position_m, pose.rotation_xyz_rad
-        item = MocapObjectPose(self.object_name,
-                               (float(p[0]) * 1000.0, float(p[1]) * 1000.0, float(p[2]) * 1000.0),
-                               (float(r[0]), float(r[1]), float(r[2])))
-        return encode_mocap(MocapFrame.of(frame_number & 0xFFFFFFFF, [item]))
+        if occlusion == "missing":
+            items = []
+        elif occlusion == "zero":
+            items = [MocapObjectPose(self.object_name, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
+        else:
+            items = [MocapObjectPose(
+                self.object_name, (float(p[0]) * 1000.0, float(p[1]) * 1000.0,
+                                   float(p[2]) * 1000.0), (float(r[0]), float(r[1]), float(r[2])))]
+        return encode_mocap(MocapFrame.of(frame_number & 0xFFFFFFFF, items))
 
     def _run(self) -> None:
         clock, period = self._clock, 1.0 / self.rate_hz
-        queue: collections.deque = collections.deque()   # (due time, bytes), due ascending
+        queue: list = []   # heap of (due time, order, bytes): sent in due order, FIFO on ties
         t0 = clock()
         k = 0
         while not self._stop.is_set():
             now = clock()
-            while queue and queue[0][0] <= now:
-                _, data = queue.popleft()
-                try:
-                    self._sock.sendto(data, self.target)
-                    sent_ok = True
-                except OSError:
-                    sent_ok = False
-                with self._counters_lock:
-                    if sent_ok:
-                        self._counters.sent += 1
-                    else:
-                        self._counters.send_errors += 1
+            self._send_due(queue, now)
             deadline = t0 + k * period
             if now >= deadline:
                 if now - deadline > self.max_catchup_s:
@@ -195,18 +201,42 @@ class MocapServer:
                         self._counters.skipped += k_now - k
                     k = k_now
                     deadline = t0 + k * period
-                frame_number = self.first_frame + k
-                data = self._frame_bytes(frame_number)
+                self._sample(self.first_frame + k, deadline, queue)
                 k += 1
-                dropped = self.drop_probability > 0 and self._rng.random() < self.drop_probability
-                with self._counters_lock:
-                    c = self._counters
-                    c.frames += 1
-                    c.last_frame_number = frame_number & 0xFFFFFFFF
-                    if dropped:
-                        c.dropped += 1
-                if not dropped:
-                    queue.append((deadline + self.latency_s, data))
                 continue
             wake = deadline if not queue else min(deadline, queue[0][0])
             self._stop.wait(max(0.0, wake - now))
+
+    def _send_due(self, queue: list, now: float) -> None:
+        """Send every queued datagram due by ``now`` (s), earliest first."""
+        while queue and queue[0][0] <= now:
+            _, _, data = heapq.heappop(queue)
+            try:
+                self._sock.sendto(data, self.target)
+                sent_ok = True
+            except OSError:
+                sent_ok = False
+            with self._counters_lock:
+                if sent_ok:
+                    self._counters.sent += 1
+                else:
+                    self._counters.send_errors += 1
+
+    def _sample(self, frame_number: int, deadline: float, queue: list) -> None:
+        """Sample the frame of ``deadline`` (s) and queue its datagrams (or none)."""
+        fault = NO_MOCAP_FAULT if self._faults is None else self._faults.mocap_frame(deadline)
+        data = None if fault.dropped else self._frame_bytes(frame_number, fault.occlusion)
+        dropped = self.drop_probability > 0 and self._rng.random() < self.drop_probability
+        with self._counters_lock:
+            c = self._counters
+            c.frames += 1
+            c.last_frame_number = frame_number & 0xFFFFFFFF
+            if dropped and data is not None:
+                c.dropped += 1
+        if dropped or data is None:
+            return
+        due = deadline + self.latency_s + fault.extra_latency_s
+        datagrams = [data] if self._faults is None else self._faults.mocap_datagrams(deadline, data)
+        for d in datagrams:
+            heapq.heappush(queue, (due, self._order, d))
+            self._order += 1

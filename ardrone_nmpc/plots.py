@@ -1,0 +1,854 @@
+"""Figures of a run directory and of a sweep: pure functions returning matplotlib Figures.
+
+Every ``figure_*`` function builds a :class:`matplotlib.figure.Figure` with the object-oriented
+API and an Agg canvas attached — no ``pyplot``, no global state, so they are safe in tests, in
+worker processes and on headless CI machines. matplotlib is imported inside the functions only:
+this module (and its sweep-table reader) imports without it, and ``ardrone-nmpc --help`` never
+pays for it. :func:`save_figure` writes a figure to a file.
+
+Run figures (``run`` is a :class:`~ardrone_nmpc.recorder.RunData`):
+
+* :func:`figure_tracking` — x, y, z, ψ measured vs reference (and the simulator's truth), and
+  the estimator's ż against the true ż; experiment time from t = 0 (the settle phase of a
+  simulated run, t < 0, is left out); ticks in a fallback mode are shaded.
+* :func:`figure_inputs` — the NMPC inputs z̈, φ, θ, ψ̇ with ``controller.u_min``/``u_max`` and
+  the drone's own limits (tilt ``drone.euler_angle_max_rad``, yaw rate
+  ``drone.control_yaw_radps``), and the PCMD fractions sent, saturated ticks marked.
+* :func:`figure_solver` — solve and tick compute time, residual ‖F‖, iterations, mocap/navdata
+  ages with the supervisor's thresholds; every row, the settle phase shaded.
+* :func:`figure_path3d` — the flown path in 3-D and from above, with the reference polyline.
+
+A bound far outside the data (more than :data:`OFF_SCALE_FACTOR` × the data's extent) is not
+allowed to squash the data into a flat line: the view stays on the data and the bound's legend
+entry says "off scale".
+
+Sweeps: :func:`read_sweep` reads a sweep directory's ``sweep.csv``, :func:`sweep_grid` lays one
+metric out over two swept parameters, :func:`figure_sweep_heatmap` draws it.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from .recorder import RunData
+
+__all__ = [
+    "KINDS",
+    "OFF_SCALE_FACTOR",
+    "PlotError",
+    "SWEEP_FILE",
+    "SWEEP_METRICS",
+    "SweepGrid",
+    "SweepTable",
+    "figure_inputs",
+    "figure_path3d",
+    "figure_solver",
+    "figure_sweep_heatmap",
+    "figure_tracking",
+    "read_sweep",
+    "save_figure",
+    "sweep_grid",
+]
+
+#: The run figures by ``--kind`` name.
+KINDS = ("tracking", "inputs", "solver", "path3d")
+#: A bound further from zero than this many times the data's largest magnitude is off scale.
+OFF_SCALE_FACTOR = 3.0
+#: The results table of a sweep directory.
+SWEEP_FILE = "sweep.csv"
+#: Metric columns of ``sweep.csv`` → (axis label with unit, short name). Lower is better for
+#: all of them, which is why aggregating over extra parameters takes the minimum.
+SWEEP_METRICS: dict[str, tuple[str, str]] = {
+    "rmse_m": ("RMSE (m)", "RMSE"),
+    "settling_s": ("settling time (s)", "settling time"),
+    "overshoot_pct": ("overshoot (%)", "overshoot"),
+    "path_deviation_m": ("mean path deviation (m)", "mean path deviation"),
+    "solve_mean_us": ("mean solve time (µs)", "mean solve time"),
+    "solve_p99_us": ("p99 solve time (µs)", "p99 solve time"),
+    "fallbacks": ("fallback ticks (count)", "fallback ticks"),
+}
+#: Non-metric trailing columns of ``sweep.csv``.
+_SWEEP_TAIL = ("status", "message", "run_dir")
+#: Statuses whose metrics are shown as numbers; any other status marks the cell.
+_OK_STATUSES = frozenset({"ok", ""})
+#: Modes that are not fallbacks (DESIGN §2: anything else is the supervisor stepping in).
+_NOMINAL_MODES = frozenset({"track", "settle", ""})
+#: Unit suffixes of dotted config names (DESIGN §4) → the unit printed on an axis.
+_UNIT_SUFFIXES = (("_per_s", "1/s"), ("_radps", "rad/s"), ("_mps2", "m/s²"), ("_mps", "m/s"),
+                  ("_rad", "rad"), ("_pct", "%"), ("_us", "µs"), ("_ms", "ms"), ("_hz", "Hz"),
+                  ("_s", "s"), ("_m", "m"))
+
+_TRUTH = ("x_true_m", "y_true_m", "z_true_m", "psi_true_rad")
+_REF_STYLE = {"color": "black", "linestyle": "--", "linewidth": 1.2}
+_TRUTH_STYLE = {"color": "tab:orange", "linestyle": ":", "linewidth": 1.6}
+_BOUND_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.0}
+_LIMIT_STYLE = {"color": "tab:purple", "linestyle": "-.", "linewidth": 1.0}
+_LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": "small",
+           "borderaxespad": 0.0}
+
+
+class PlotError(ValueError):
+    """Data that cannot be plotted, or a plot request that makes no sense (one line)."""
+
+
+# ============================================================================= helpers
+
+
+def _new_figure(width_in: float, height_in: float) -> Figure:
+    """A Figure (constrained layout) with an Agg canvas: rendering never needs a display."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig: Figure, path: str | Path, *, dpi: int = 100) -> Path:
+    """Write ``fig`` to ``path`` (format from the suffix; parents created) and return the path.
+
+    The image is exactly ``figsize × dpi`` pixels (no tight bounding box), so callers and tests
+    know its size.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+def _col(run: RunData, name: str) -> np.ndarray:
+    """A numeric column as float64 (NaN-filled when the log lacks it)."""
+    n = run.n_rows
+    values = run.columns.get(name)
+    if values is None:
+        return np.full(n, math.nan)
+    return np.asarray(values, dtype=np.float64)
+
+
+def _strings(run: RunData, name: str) -> np.ndarray:
+    values = run.columns.get(name)
+    if values is None:
+        return np.full(run.n_rows, "", dtype=object)
+    return np.array(["" if not isinstance(v, str) else v for v in values], dtype=object)
+
+
+def _has(values: np.ndarray) -> bool:
+    return bool(np.isfinite(values).any())
+
+
+def _experiment(run: RunData) -> np.ndarray:
+    """Rows of the experiment: t ≥ 0 (a simulation's settle phase is t < 0); all if none."""
+    if run.n_rows == 0:
+        raise PlotError(f"{run.path}: log.csv has no rows to plot")
+    t = _col(run, "t_s")
+    if not np.isfinite(t).any():
+        raise PlotError(f"{run.path}: log.csv has no row with a time (t_s)")
+    rows = np.isfinite(t) & (t >= 0.0)
+    return rows if rows.any() else np.isfinite(t)
+
+
+def _has_truth(run: RunData) -> bool:
+    """A simulated run: the plant truth of every position axis is logged (as in summary)."""
+    return all(_has(_col(run, c)) for c in _TRUTH)
+
+
+def _spans(flags: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [i, j] (inclusive) of consecutive True ``flags``."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _shade_fallbacks(axes: Sequence[Axes], t: np.ndarray, mode: np.ndarray) -> None:
+    """Shade ticks whose mode is a fallback (hover, p, land…) on every axis; legend on top."""
+    bad = np.array([m not in _NOMINAL_MODES for m in mode], dtype=bool)
+    period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    for k, ax in enumerate(axes):
+        labelled = set()  # one legend entry per mode, on the top panel only
+        for i, j in _spans(bad):
+            label = f"fallback ({mode[i]})"
+            show = k == 0 and label not in labelled
+            ax.axvspan(t[i], t[j] + period, color="tab:red", alpha=0.12, linewidth=0,
+                       label=label if show else None)
+            labelled.add(label)
+
+
+def _off_scale_view(data: np.ndarray, bounds: Sequence[float]) -> tuple[tuple[float, float],
+                                                                          set[float]]:
+    """y-limits showing ``data`` and the ``bounds`` that are not far outside it.
+
+    Returns the limits and the set of bounds left off scale (beyond
+    :data:`OFF_SCALE_FACTOR` × the data's largest magnitude, measured from zero: inputs, ages
+    and fractions are all centred on or start at zero).
+    """
+    finite = data[np.isfinite(data)]
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
+    reach = max(abs(lo), abs(hi))
+    off = set()
+    for b in bounds:
+        if reach > 0 and abs(b) <= OFF_SCALE_FACTOR * reach:
+            lo, hi = min(lo, b), max(hi, b)
+        else:
+            off.add(b)
+    pad = 0.08 * (hi - lo) if hi > lo else max(1e-3, 0.1 * abs(hi))
+    return (lo - pad, hi + pad), off
+
+
+def _bounded(ax: Axes, data: np.ndarray, lines: Sequence[tuple[float, float, str, dict]]) -> None:
+    """Draw horizontal bound pairs ``(low, high, label, style)`` and set a readable y-view."""
+    view, off = _off_scale_view(data, [b for lo, hi, _, _ in lines for b in (lo, hi)])
+    for lo, hi, label, style in lines:
+        note = " (off scale)" if lo in off and hi in off else ""
+        ax.axhline(lo, label=label + note, **style)
+        ax.axhline(hi, **style)
+    ax.set_ylim(*view)
+
+
+def _min_span(ax: Axes, span: float) -> None:
+    """Widen the y-view to at least ``span`` around its centre, so sensor noise of a
+    millimetre does not fill a panel and read as an oscillation."""
+    lo, hi = ax.get_ylim()
+    if hi - lo < span:
+        mid = (lo + hi) / 2
+        ax.set_ylim(mid - span / 2, mid + span / 2)
+
+
+def _no_data(ax: Axes, text: str) -> None:
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="grey")
+
+
+def _unit_of(name: str) -> str:
+    """The unit of a dotted config/metric name from its suffix (DESIGN §4), or ''."""
+    for suffix, unit in _UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            return unit
+    return ""
+
+
+def _with_unit(name: str) -> str:
+    unit = _unit_of(name)
+    return f"{name} ({unit})" if unit else name
+
+
+def _run_title(run: RunData, what: str) -> str:
+    return f"{run.config.name} — {what}\n{Path(run.path).name}"
+
+
+# ============================================================================= tracking
+
+
+def _psi_near(psi: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """ψ shifted by whole turns to lie within π of the (continuous) reference, so a wrapped
+    heading does not jump by 2π across the plot."""
+    turns = np.round((psi - ref) / (2.0 * math.pi))
+    return psi - 2.0 * math.pi * np.where(np.isfinite(turns), turns, 0.0)
+
+
+#: Smallest y-extent of the tracking panels: 5 cm and 0.05 rad (≈ 3°).
+_TRACK_MIN_SPAN = {"x": 0.05, "y": 0.05, "z": 0.05, "psi": 0.05}
+_TRACK_AXES = (("x", "x_m", "x_ref_m", "x_true_m", "x position", "x (m)"),
+               ("y", "y_m", "y_ref_m", "y_true_m", "y position", "y (m)"),
+               ("z", "z_m", "z_ref_m", "z_true_m", "altitude z", "z (m)"),
+               ("psi", "psi_rad", "psi_ref_rad", "psi_true_rad", "heading ψ", "ψ (rad)"))
+
+
+def figure_tracking(run: RunData) -> Figure:
+    """Position and heading against the reference per axis, and the estimator's ż.
+
+    Panels: x, y, z (m) and ψ (rad) — measured (the mocap values the controller used), the
+    reference, and in simulation the plant's truth; then ż (m/s): the estimator's value and, in
+    simulation, the true ż. Experiment rows only (t ≥ 0 s). ψ is drawn within π of the
+    reference (whole turns removed), as the controller compares them.
+
+    Returns
+    -------
+    Figure : 11 × 12.5 in (1100 × 1250 px at 100 dpi).
+    """
+    rows = _experiment(run)
+    t = _col(run, "t_s")[rows]
+    truth = _has_truth(run)
+    fig = _new_figure(11, 12.5)
+    axes = fig.subplots(5, 1, sharex=True)
+    for ax, (axis, meas, ref, true, title, ylabel) in zip(axes, _TRACK_AXES):
+        r = _col(run, ref)[rows]
+        y = _col(run, meas)[rows]
+        if axis == "psi":
+            y = _psi_near(y, r)
+        ax.plot(t, y, color="tab:blue", linewidth=1.4, label="measured")
+        if truth:
+            yt = _col(run, true)[rows]
+            ax.plot(t, _psi_near(yt, r) if axis == "psi" else yt, label="truth (sim)",
+                    **_TRUTH_STYLE)
+        ax.plot(t, r, label="reference", **_REF_STYLE)
+        ax.set_title(title, loc="left")
+        ax.set_ylabel(ylabel)
+        _min_span(ax, _TRACK_MIN_SPAN[axis])
+    _vz_panel(axes[4], run, rows, t, truth)
+    _shade_fallbacks(axes, t, _strings(run, "mode")[rows])
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(**_LEGEND)
+    axes[-1].set_xlabel("t (s)")
+    if t.size > 1:
+        axes[-1].set_xlim(t[0], t[-1])
+    fig.suptitle(_run_title(run, "tracking"))
+    return fig
+
+
+def _vz_panel(ax: Axes, run: RunData, rows: np.ndarray, t: np.ndarray, truth: bool) -> None:
+    """ż: the estimator (Kalman/Luenberger/difference, per the config) against the truth."""
+    ax.plot(t, _col(run, "vz_mps")[rows], color="tab:green", linewidth=1.2,
+            label=f"estimate ({run.config.estimator.kind})")
+    vz_true = _col(run, "vz_true_mps")[rows]
+    if truth and _has(vz_true):
+        ax.plot(t, vz_true, label="truth (sim)", **_TRUTH_STYLE)
+    ax.set_title("vertical speed ż: estimator" + (" vs truth" if truth else ""), loc="left")
+    ax.set_ylabel("ż (m/s)")
+
+
+# ============================================================================= inputs
+
+
+def figure_inputs(run: RunData) -> Figure:
+    """The controller's inputs with their bounds, and the PCMD fractions sent to the drone.
+
+    Panels: z̈ (m/s²), φ (rad), θ (rad), ψ̇ (rad/s) with ``controller.u_min``/``u_max`` and, for
+    φ, θ, ψ̇, the drone's limit at PCMD ±1 (``drone.euler_angle_max_rad``,
+    ``drone.control_yaw_radps``); then the four PCMD fractions on [−1, 1] with the ticks whose
+    command was saturated marked. Experiment rows only (t ≥ 0 s).
+
+    Returns
+    -------
+    Figure : 11 × 12.5 in (1100 × 1250 px at 100 dpi).
+    """
+    rows = _experiment(run)
+    t = _col(run, "t_s")[rows]
+    cfg = run.config
+    u_min, u_max = cfg.controller.u_min, cfg.controller.u_max
+    tilt, yaw = cfg.drone.euler_angle_max_rad, cfg.drone.control_yaw_radps
+    panels = (("u_zacc_mps2", "vertical acceleration input z̈", "z̈ (m/s²)", "m/s²", None),
+              ("u_phi_rad", "roll input φ", "φ (rad)", "rad", tilt),
+              ("u_theta_rad", "pitch input θ", "θ (rad)", "rad", tilt),
+              ("u_psirate_radps", "yaw-rate input ψ̇", "ψ̇ (rad/s)", "rad/s", yaw))
+    fig = _new_figure(11, 12.5)
+    axes = fig.subplots(5, 1, sharex=True)
+    for i, (ax, (name, title, ylabel, unit, limit)) in enumerate(zip(axes, panels)):
+        u = _col(run, name)[rows]
+        ax.plot(t, u, color="tab:blue", linewidth=1.2, label="input")
+        lines = [(u_min[i], u_max[i], f"bounds {_interval(u_min[i], u_max[i])} {unit}",
+                  _BOUND_STYLE)]
+        if limit is not None:  # the drone's own limit: PCMD ±1 (DESIGN §4)
+            lines.append((-limit, limit, f"drone limit ±{limit:.3g} {unit}", _LIMIT_STYLE))
+        _bounded(ax, u, lines)
+        ax.set_title(title, loc="left")
+        ax.set_ylabel(ylabel)
+    _pcmd_panel(axes[4], run, rows, t)
+    _shade_fallbacks(axes, t, _strings(run, "mode")[rows])
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(**_LEGEND)
+    axes[-1].set_xlabel("t (s)")
+    if t.size > 1:
+        axes[-1].set_xlim(t[0], t[-1])
+    fig.suptitle(_run_title(run, "inputs"))
+    return fig
+
+
+def _interval(lo: float, hi: float) -> str:
+    return f"±{hi:g}" if lo == -hi else f"[{lo:g}, {hi:g}]"
+
+
+_PCMD = (("cmd_roll_frac", "roll", "tab:blue"), ("cmd_pitch_frac", "pitch", "tab:orange"),
+         ("cmd_gaz_frac", "gaz", "tab:green"), ("cmd_yaw_frac", "yaw", "tab:purple"))
+
+
+def _pcmd_panel(ax: Axes, run: RunData, rows: np.ndarray, t: np.ndarray) -> None:
+    """PCMD fractions on their fixed [−1, 1] scale; saturated ticks (cmd_saturated) marked."""
+    flags = _strings(run, "cmd_saturated")[rows]
+    for k, (name, label, color) in enumerate(_PCMD):
+        v = _col(run, name)[rows]
+        ax.plot(t, v, color=color, linewidth=1.1, label=label)
+        hit = np.array([len(f) == 4 and f[k] == "1" for f in flags], dtype=bool)
+        if hit.any():
+            ax.plot(t[hit], v[hit], linestyle="none", marker="x", color=color, markersize=5,
+                    label=f"{label} saturated ({int(hit.sum())} ticks)")
+    ax.axhline(-1.0, label="full deflection ±1", **_BOUND_STYLE)
+    ax.axhline(1.0, **_BOUND_STYLE)
+    ax.set_ylim(-1.15, 1.15)
+    ax.set_title("PCMD commands sent (fraction of full deflection)", loc="left")
+    ax.set_ylabel("command (fraction)")
+
+
+# ============================================================================= solver
+
+
+def figure_solver(run: RunData) -> Figure:
+    """Solver and link health over every logged tick (the settle phase t < 0 s shaded).
+
+    Panels: solve time and tick compute time (µs) with non-``ok`` solver statuses marked; the
+    residual ‖F‖ (log scale); GMRES and Newton iterations; mocap and navdata ages (ms) — and
+    the tick lateness of real-time runs — with the supervisor's thresholds.
+
+    Returns
+    -------
+    Figure : 11 × 11 in (1100 × 1100 px at 100 dpi).
+    """
+    _experiment(run)  # raises for a log without rows
+    t = _col(run, "t_s")
+    fig = _new_figure(11, 11)
+    axes = fig.subplots(4, 1, sharex=True)
+    _timing_panel(axes[0], run, t)
+    _residual_panel(axes[1], run, t)
+    _iterations_panel(axes[2], run, t)
+    _ages_panel(axes[3], run, t)
+    if np.nanmin(t) < 0:  # the settle phase of a simulated run
+        for k, ax in enumerate(axes):
+            ax.axvspan(np.nanmin(t), 0.0, color="grey", alpha=0.15, linewidth=0,
+                       label="settle (t < 0)" if k == 0 else None)
+    _shade_fallbacks(axes, t, _strings(run, "mode"))
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(**_LEGEND)
+    axes[-1].set_xlabel("t (s)")
+    if t.size > 1:
+        axes[-1].set_xlim(np.nanmin(t), np.nanmax(t))
+    fig.suptitle(_run_title(run, "solver and links"))
+    return fig
+
+
+def _timing_panel(ax: Axes, run: RunData, t: np.ndarray) -> None:
+    solve = _col(run, "solve_us")
+    compute = _col(run, "compute_us")
+    ax.set_title("solve time per tick", loc="left")
+    ax.set_ylabel("time (µs)")
+    if not (_has(solve) or _has(compute)):
+        _no_data(ax, "no solve times logged (P controller?)")
+        return
+    if _has(solve):
+        mean, p99 = np.nanmean(solve), np.nanpercentile(solve, 99)
+        ax.plot(t, solve, color="tab:blue", linewidth=1.0,
+                label=f"solve (mean {mean:.0f} µs, p99 {p99:.0f} µs)")
+    if _has(compute):
+        ax.plot(t, compute, color="tab:grey", linewidth=0.9, alpha=0.8,
+                label=f"whole tick compute (mean {np.nanmean(compute):.0f} µs)")
+    status = _strings(run, "solver_status")
+    bad = np.array([s not in ("", "ok") for s in status], dtype=bool)
+    if bad.any():
+        y = np.where(np.isfinite(solve), solve, np.nanmax(np.r_[solve, compute, 0.0]))
+        ax.plot(t[bad], y[bad], linestyle="none", marker="x", color="tab:red",
+                label=f"status ≠ ok ({int(bad.sum())} ticks)")
+    ax.set_ylim(bottom=0.0)
+
+
+def _residual_panel(ax: Axes, run: RunData, t: np.ndarray) -> None:
+    res = _col(run, "residual_norm")
+    ax.set_title("optimality residual ‖F‖ after each solve", loc="left")
+    ax.set_ylabel("‖F‖ (log scale)")
+    positive = np.where(res > 0, res, np.nan)  # a log axis cannot show 0
+    if not _has(positive):
+        _no_data(ax, "no residuals logged")
+        return
+    ax.plot(t, positive, color="tab:blue", linewidth=1.0,
+            label=f"‖F‖ (median {np.nanmedian(positive):.2g})")
+    ax.set_yscale("log")
+
+
+def _iterations_panel(ax: Axes, run: RunData, t: np.ndarray) -> None:
+    ax.set_title("solver iterations per tick", loc="left")
+    ax.set_ylabel("iterations (count)")
+    drawn = False
+    for name, label, color in (("gmres_iterations", "GMRES", "tab:blue"),
+                               ("newton_iterations", "Newton", "tab:orange")):
+        v = _col(run, name)
+        if _has(v):
+            ax.step(t, v, where="post", color=color, linewidth=1.0, label=label)
+            drawn = True
+    if not drawn:
+        _no_data(ax, "no iteration counts logged")
+    else:
+        ax.set_ylim(bottom=0.0)
+
+
+def _ages_panel(ax: Axes, run: RunData, t: np.ndarray) -> None:
+    """Link ages (ms); ``inf`` (no sample yet) is counted in the legend, not drawn."""
+    safety = run.config.safety
+    shown = []
+    for name, label, color in (("mocap_age_ms", "mocap age", "tab:blue"),
+                               ("navdata_age_ms", "navdata age", "tab:green"),
+                               ("tick_late_ms", "tick lateness", "tab:grey")):
+        v = _col(run, name)
+        missing = int(np.isposinf(v).sum())
+        v = np.where(np.isfinite(v), v, np.nan)
+        if not _has(v):
+            continue
+        note = f" ({missing} ticks without data)" if missing else ""
+        ax.plot(t, v, color=color, linewidth=1.0, label=label + note)
+        shown.append(v)
+    ax.set_title("link ages and loop lateness, with the supervisor's thresholds", loc="left")
+    ax.set_ylabel("age (ms)")
+    if not shown:
+        _no_data(ax, "no link ages logged")
+        return
+    thresholds = ((safety.mocap_hold_ms, "mocap hold", _LIMIT_STYLE),
+                  (safety.mocap_hover_ms, "mocap hover", _BOUND_STYLE),
+                  (safety.navdata_land_ms, "navdata land", _REF_STYLE))
+    (_, hi), off = _off_scale_view(np.concatenate(shown), [v for v, _, _ in thresholds])
+    for value, label, style in thresholds:
+        note = " (off scale)" if value in off else ""
+        ax.axhline(value, label=f"{label} {value:g} ms{note}", **style)
+    ax.set_ylim(0.0, hi)
+
+
+# ============================================================================= path
+
+
+def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str]:
+    """The reference path: the trajectory's polyline, or the logged reference if the
+    trajectory cannot be rebuilt here (e.g. its waypoint file is on another machine)."""
+    from .reference import ReferenceError, make_trajectory
+
+    cfg = run.config
+    try:
+        return make_trajectory(cfg.reference, duration_s=cfg.duration_s).polyline_m(), \
+            f"reference ({cfg.reference.kind})"
+    except (ReferenceError, OSError, ValueError):
+        ref = np.column_stack([_col(run, c)[rows] for c in ("x_ref_m", "y_ref_m", "z_ref_m")])
+        return ref, "reference (logged)"
+
+
+def _flown(run: RunData) -> tuple[np.ndarray, str]:
+    """Flown positions of the experiment's flying ticks; the truth in simulation (the same
+    choice as the summary's path deviation), the mocap measurement otherwise."""
+    from .summary import GROUND_MODES
+
+    rows = _experiment(run)
+    mode = _strings(run, "mode")
+    if len(set(mode.tolist())) > 1:
+        rows = rows & ~np.isin(mode, list(GROUND_MODES))
+    names = _TRUTH[:3] if _has_truth(run) else ("x_m", "y_m", "z_m")
+    xyz = np.column_stack([_col(run, c)[rows] for c in names])
+    source = "sim truth" if names[0] == "x_true_m" else "measured"
+    return xyz[np.all(np.isfinite(xyz), axis=1)], source
+
+
+def _centre_half(*arrays: np.ndarray, min_span: float) -> tuple[float, float]:
+    """Centre and half-width (10 % margin) covering ``arrays``, at least ``min_span`` wide."""
+    data = np.concatenate([a[np.isfinite(a)] for a in arrays])
+    lo, hi = float(data.min()), float(data.max())
+    return (lo + hi) / 2, max(hi - lo, min_span) / 2 * 1.1
+
+
+def _path_limits(ax3: Axes, ax2: Axes, xyz: np.ndarray, ref: np.ndarray) -> None:
+    """x and y on one scale in both views, each at least 0.5 m wide (a hover's
+    sub-millimetre wander stays a dot); z has its own (altitudes vary less)."""
+    cx, hx = _centre_half(xyz[:, 0], ref[:, 0], min_span=0.5)
+    cy, hy = _centre_half(xyz[:, 1], ref[:, 1], min_span=0.5)
+    half = max(hx, hy)
+    for ax in (ax3, ax2):
+        ax.set_xlim(cx - half, cx + half)
+        ax.set_ylim(cy - half, cy + half)
+    cz, hz = _centre_half(xyz[:, 2], ref[:, 2], min_span=0.5)
+    ax3.set_zlim(cz - hz, cz + hz)
+    ax2.set_aspect("equal", adjustable="box")  # equal ranges: a square box
+
+
+def figure_path3d(run: RunData) -> Figure:
+    """The flown path against the reference: 3-D view and top-down (x–y, equal scale).
+
+    The flown path is the experiment's flying ticks (truth in simulation, else measured); the
+    title gives the mean deviation from the reference polyline for path references (m).
+
+    Returns
+    -------
+    Figure : 13 × 6.5 in (1300 × 650 px at 100 dpi).
+    """
+    from .summary import PATH_KINDS, path_deviation
+
+    xyz, source = _flown(run)
+    if xyz.shape[0] == 0:
+        raise PlotError(f"{run.path}: no finite positions to draw a path from")
+    ref, ref_label = _reference_polyline(run, _experiment(run))
+    fig = _new_figure(13, 6.5)
+    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    ax2 = fig.add_subplot(1, 2, 2)
+    # a set point (hover) or a step is one or two points: mark them, a dash alone is invisible
+    ref_style = {**_REF_STYLE, "marker": "x" if ref.shape[0] <= 2 else None}
+    for ax, dims in ((ax3, (0, 1, 2)), (ax2, (0, 1))):
+        ax.plot(*(ref[:, d] for d in dims), label=ref_label, **ref_style)
+        ax.plot(*(xyz[:, d] for d in dims), color="tab:blue", linewidth=1.4,
+                label=f"flown ({source})")
+        ax.plot(*(xyz[:1, d] for d in dims), "o", color="tab:green", label="start")
+        ax.plot(*(xyz[-1:, d] for d in dims), "s", color="tab:red", label="end")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    _path_limits(ax3, ax2, xyz, ref)
+    ax3.set_zlabel("z (m)")
+    ax3.set_box_aspect(None, zoom=0.85)  # room for the z label next to the top-down view
+    ax3.set_title("3-D path")
+    ax2.grid(True, alpha=0.3)
+    ax2.set_title("top-down view (x forward, y left)")
+    ax2.legend(**_LEGEND)
+    what = "path"
+    if run.config.reference.kind in PATH_KINDS:
+        mean_m, max_m = path_deviation(xyz, ref)
+        what = (f"path — deviation from the reference: mean {mean_m:.3f} m, "
+                f"max {max_m:.3f} m ({source})")
+    fig.suptitle(_run_title(run, what))
+    return fig
+
+
+# ============================================================================= sweeps
+
+
+@dataclass(frozen=True)
+class SweepTable:
+    """``sweep.csv`` read back.
+
+    Attributes
+    ----------
+    path : the file.
+    params : swept parameters (dotted config paths), the columns between ``case`` and the
+        first metric.
+    metrics : numeric metric columns present (see :data:`SWEEP_METRICS`).
+    rows : one dict per case, cells as text.
+    warnings : notes on recoverable damage (a torn last row dropped).
+    """
+
+    path: Path
+    params: tuple[str, ...]
+    metrics: tuple[str, ...]
+    rows: tuple[dict[str, str], ...]
+    warnings: tuple[str, ...] = ()
+
+
+def read_sweep(path: str | Path) -> SweepTable:
+    """Read ``sweep.csv`` (a file or its sweep directory).
+
+    Raises
+    ------
+    PlotError
+        ``<file>[:<line>]: <message>`` for a missing file, a header without ``case`` or
+        without metrics, no swept parameter, a row of the wrong width, or no rows. A short
+        *last* row (a sweep still appending, or killed mid-row) is dropped with a note in
+        :attr:`SweepTable.warnings` instead.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / SWEEP_FILE
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            lines = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PlotError(f"{path}: cannot read: {exc}") from None
+    except csv.Error as exc:
+        raise PlotError(f"{path}: not a CSV file: {exc}") from None
+    if not lines or not lines[0]:
+        raise PlotError(f"{path}:1: empty file: expected a header row")
+    header = [c.strip() for c in lines[0]]
+    if header[0] != "case":
+        raise PlotError(f"{path}:1: the first column must be 'case', got {header[0]!r}")
+    end = next((i for i, c in enumerate(header) if c in SWEEP_METRICS or c in _SWEEP_TAIL),
+               None)
+    if end is None:
+        raise PlotError(f"{path}:1: no metric columns ({', '.join(SWEEP_METRICS)})")
+    params = tuple(header[1:end])
+    if not params:
+        raise PlotError(f"{path}:1: no swept parameter columns between 'case' and "
+                        f"{header[end]!r}")
+    rows, warnings = [], []
+    body = [(i, cells) for i, cells in enumerate(lines[1:], start=2) if cells]
+    for k, (i, cells) in enumerate(body):
+        if len(cells) != len(header):
+            if k == len(body) - 1 and len(cells) < len(header):
+                warnings.append(f"{path}:{i}: incomplete last row dropped")
+                break
+            raise PlotError(f"{path}:{i}: expected {len(header)} cells, got {len(cells)}")
+        rows.append(dict(zip(header, (c.strip() for c in cells))))
+    if not rows:
+        raise PlotError(f"{path}: no cases in the table")
+    metrics = tuple(c for c in header if c in SWEEP_METRICS)
+    return SweepTable(path=path, params=params, metrics=metrics, rows=tuple(rows),
+                      warnings=tuple(warnings))
+
+
+@dataclass(frozen=True)
+class SweepGrid:
+    """One metric of a sweep over two parameters (rows = y values, columns = x values).
+
+    Attributes
+    ----------
+    metric, x, y : the metric and the parameters on the axes (``y`` None: one parameter).
+    x_labels, y_labels : tick labels of the parameter values, in increasing order.
+    values : (ny, nx) metric per cell — the minimum over the aggregated parameters of the
+        cases with an ok status; NaN where there is none.
+    status : (ny, nx) ``""`` for a cell with a value, else the (most common) non-ok status of
+        its cases, ``"not run"`` without any case, ``"no value"`` for ok cases without the
+        metric.
+    n_bad : (ny, nx) number of non-ok cases behind each cell.
+    bad_status : (ny, nx) the most common non-ok status behind each cell (``""``: none).
+    aggregated : parameters minimised over (not on an axis).
+    """
+
+    metric: str
+    x: str
+    y: str | None
+    x_labels: tuple[str, ...]
+    y_labels: tuple[str, ...]
+    values: np.ndarray
+    status: np.ndarray
+    n_bad: np.ndarray
+    bad_status: np.ndarray
+    aggregated: tuple[str, ...]
+
+
+def _float_or_none(text: str) -> float | None:
+    try:
+        v = float(text)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _axis_values(table: SweepTable, param: str) -> tuple[list[str], dict[str, int]]:
+    """Distinct values of ``param`` in order (numeric order if all numeric) → tick labels and
+    the cell index of each raw text (``0.1`` and ``0.10`` share a cell)."""
+    texts = list(dict.fromkeys(r[param] for r in table.rows))
+    nums = [_float_or_none(s) for s in texts]
+    if all(v is not None for v in nums):
+        distinct = sorted(set(nums))
+        labels = [f"{v:g}" for v in distinct]
+        return labels, {s: distinct.index(v) for s, v in zip(texts, nums)}
+    return texts, {s: i for i, s in enumerate(texts)}
+
+
+def sweep_grid(table: SweepTable, *, metric: str = "rmse_m", x: str | None = None,
+               y: str | None = None) -> SweepGrid:
+    """Lay ``metric`` out over parameters ``x`` and ``y`` (default: the first two swept).
+
+    Parameters left off the axes are aggregated: a cell holds the minimum over them (every
+    metric is lower-is-better). Raises :class:`PlotError` for an unknown metric or parameter.
+    """
+    if metric not in table.metrics:
+        raise PlotError(f"--metric: {metric!r} is not a metric of {table.path} "
+                        f"(choose from {', '.join(table.metrics)})")
+    for option, name in (("--x", x), ("--y", y)):
+        if name is not None and name not in table.params:
+            raise PlotError(f"{option}: {name!r} was not swept (swept: "
+                            f"{', '.join(table.params)})")
+    if x is not None and x == y:
+        raise PlotError("--x and --y must name different parameters")
+    rest = [p for p in table.params if p not in (x, y)]
+    x = x or rest.pop(0)
+    y = y if y is not None else (rest.pop(0) if rest else None)
+    x_labels, x_index = _axis_values(table, x)
+    y_labels, y_index = _axis_values(table, y) if y else ([""], None)
+    shape = (len(y_labels), len(x_labels))
+    cells: dict[tuple[int, int], list[dict[str, str]]] = {}
+    for row in table.rows:
+        key = (y_index[row[y]] if y_index else 0, x_index[row[x]])
+        cells.setdefault(key, []).append(row)
+    values = np.full(shape, math.nan)
+    status = np.full(shape, "not run", dtype=object)
+    n_bad = np.zeros(shape, dtype=int)
+    bad_status = np.full(shape, "", dtype=object)
+    for (i, j), group in cells.items():
+        values[i, j], status[i, j], n_bad[i, j], bad_status[i, j] = _cell(group, metric)
+    return SweepGrid(metric=metric, x=x, y=y, x_labels=tuple(x_labels),
+                     y_labels=tuple(y_labels), values=values, status=status, n_bad=n_bad,
+                     bad_status=bad_status, aggregated=tuple(rest))
+
+
+def _cell(group: list[dict[str, str]], metric: str) -> tuple[float, str, int, str]:
+    """(value, status, non-ok count, most common non-ok status) of one cell's cases."""
+    ok = [_float_or_none(r.get(metric, "")) for r in group if r.get("status", "") in _OK_STATUSES]
+    bad = [r.get("status", "") for r in group if r.get("status", "") not in _OK_STATUSES]
+    worst = max(sorted(set(bad)), key=bad.count) if bad else ""
+    finite = [v for v in ok if v is not None]
+    if finite:
+        return min(finite), "", len(bad), worst
+    if bad:
+        return math.nan, worst, len(bad), worst
+    return math.nan, "no value", 0, ""
+
+
+def figure_sweep_heatmap(table: SweepTable, *, metric: str = "rmse_m", x: str | None = None,
+                         y: str | None = None) -> Figure:
+    """Heat map of one sweep metric over two swept parameters (see :func:`sweep_grid`).
+
+    Cells are annotated with their value; cells whose cases were unstable or failed are grey
+    and hatched with the status; the best cell is outlined. The title names the parameters
+    aggregated (minimum over them) when more than two were swept.
+    """
+    from matplotlib import colormaps
+    from matplotlib.patches import Patch, Rectangle
+
+    grid = sweep_grid(table, metric=metric, x=x, y=y)
+    ny, nx = grid.values.shape
+    fig = _new_figure(max(7.0, 1.2 * nx + 4.0), max(4.5, 0.75 * ny + 3.0))
+    ax = fig.add_subplot()
+    cmap = colormaps["viridis"].with_extremes(bad="white")
+    masked = np.ma.masked_invalid(grid.values)
+    image = ax.imshow(masked, origin="lower", cmap=cmap, aspect="auto")
+    label, short = SWEEP_METRICS.get(grid.metric, (_with_unit(grid.metric), grid.metric))
+    fig.colorbar(image, ax=ax, label=label)
+    _annotate_cells(ax, grid, image, Rectangle)
+    ax.set_xticks(range(nx), grid.x_labels)
+    ax.set_yticks(range(ny), grid.y_labels)
+    ax.set_xlabel(_with_unit(grid.x))
+    ax.set_ylabel(_with_unit(grid.y) if grid.y else "(one parameter swept)")
+    handles = []
+    if np.isin(grid.status, ["", "not run", "no value"], invert=True).any():
+        handles.append(Patch(facecolor="lightgrey", hatch="///", edgecolor="dimgrey",
+                             label="no value: unstable / failed"))
+    if np.isfinite(grid.values).any():
+        handles.append(Patch(facecolor="none", edgecolor="red", linewidth=2, label="best"))
+    if handles:  # below the x label, out of the cells' way
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, -0.14 if ny > 1
+                                                                      else -0.3),
+                  ncols=2, fontsize="small", frameon=False)
+    title = f"{short} over {grid.x}" + (f" × {grid.y}" if grid.y else "")
+    if grid.aggregated:
+        title += f"\nbest (minimum) over {', '.join(grid.aggregated)}"
+    ax.set_title(f"{title}\n{table.path.parent.name}/{table.path.name}")
+    return fig
+
+
+def _annotate_cells(ax: Axes, grid: SweepGrid, image: Any, rectangle: Any) -> None:
+    """Value text per cell (colour chosen for contrast), hatched status cells, best outlined."""
+    ny, nx = grid.values.shape
+    finite = np.isfinite(grid.values)
+    best = np.unravel_index(np.nanargmin(np.where(finite, grid.values, np.inf)),
+                            grid.values.shape) if finite.any() else None
+    for i in range(ny):
+        for j in range(nx):
+            v = grid.values[i, j]
+            if math.isfinite(v):
+                r, g, b, _ = image.cmap(image.norm(v))
+                dark = 0.299 * r + 0.587 * g + 0.114 * b < 0.5
+                text = f"{v:.3g}"
+                if grid.n_bad[i, j]:  # aggregated cell: some of its cases gave no value
+                    text += f"\n(+{grid.n_bad[i, j]} {grid.bad_status[i, j]})"
+                ax.text(j, i, text, ha="center", va="center", fontsize="medium",
+                        color="white" if dark else "black")
+                continue
+            hatch = grid.status[i, j] not in ("not run", "no value")  # unstable/failed
+            ax.add_patch(rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="lightgrey" if hatch
+                                   else "white", hatch="///" if hatch else None,
+                                   edgecolor="dimgrey", linewidth=0.5))
+            ax.text(j, i, grid.status[i, j], ha="center", va="center", fontsize="medium",
+                    color="black", bbox={"facecolor": "white", "alpha": 0.8, "linewidth": 0})
+    if best is not None:
+        i, j = best
+        ax.add_patch(rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="none", edgecolor="red",
+                               linewidth=2.5))

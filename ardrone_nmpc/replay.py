@@ -1,0 +1,493 @@
+"""``replay``: a recorded run fed back through the tick, or re-sent as a live pose stream.
+
+DESIGN.md §2: the same :class:`~ardrone_nmpc.loop.Tick` serves ``fly``, ``simulate`` and
+``replay --rerun``; only the clock and the links change. Here the clock is manual — the
+experiment clock of the log itself (``t_s``) — and the "links" are the logged measurements
+(``log.csv`` columns written by :func:`~ardrone_nmpc.loop.measurement_columns`):
+
+* the mocap pose: ``x_m, y_m, z_m, psi_rad`` (the pose's position and ψ, exactly), its own time
+  ``mocap_t_s`` and its age ``mocap_age_ms`` at the tick;
+* the navdata sample: ``nav_vx_body_mps, nav_vy_body_mps, battery_pct, nav_mode`` and its age
+  ``navdata_age_ms``.
+
+What is *not* logged, and what the replay puts in its place: the pose's roll and pitch (0 —
+the tick only uses position and ψ); navdata attitude (``nav_roll_deg``/``nav_pitch_deg`` if a
+log has them, else NaN: the supervisor's measured-tilt check then never fires), yaw,
+altitude and vertical speed (NaN, so a consumer that starts using them shows up instead of
+silently reading zeros).
+
+Functions
+---------
+:func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.loop.TickInputs` of every row;
+:func:`rerun` steps a fresh tick through them and compares the commands; :func:`broadcast`
+re-sends the logged poses as the UDP pose stream (specs/mocap-stream.md).
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.recorder import LOG_FILE, RunData, format_number
+from ardrone_nmpc.safety import Action
+from ardrone_nmpc.types import FlightMode, MocapPose, NavdataSample
+
+__all__ = [
+    "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
+    "SAME_POSE_TOLERANCE_S", "BroadcastResult", "ReplayError", "RerunCost", "RerunResult",
+    "broadcast", "logged_poses", "missing_rerun_columns", "require_rerun_columns", "rerun",
+    "rows_to_inputs", "write_rerun_csv",
+]
+
+#: Columns a log needs beyond DESIGN.md §5's for ``--rerun`` (added with the raw measurements).
+RERUN_COLUMNS: tuple[str, ...] = ("mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps",
+                                  "nav_mode")
+CMD_COLUMNS = ("cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac")
+INPUT_COLUMNS = ("u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps")
+COMPARED_COLUMNS = CMD_COLUMNS + INPUT_COLUMNS
+#: The per-tick differences written next to the recomputed ``log.csv``.
+RERUN_FILE = "rerun.csv"
+
+#: Two rows whose ``mocap_t_s`` differ by less than this saw the same pose: distinct poses are
+#: a mocap frame (≥ 1 ms) apart. Logs whose ``mocap_t_s`` is the pose stamp moved to the
+#: experiment clock by a per-tick offset (written since 5b5377e) can show one pose a few ulps
+#: apart on two ticks in simulation — and, in ``fly``, by the tick's lateness (≈ ms), which
+#: no tolerance can absorb: such logs do not re-run exactly (see the report on the issue).
+SAME_POSE_TOLERANCE_S = 1e-9
+
+_STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps", "psi_rad")
+
+
+class ReplayError(ValueError):
+    """A run that cannot be replayed as asked (one line for the user)."""
+
+
+# ----------------------------------------------------------------------------- inputs
+
+
+def missing_rerun_columns(*, run: RunData) -> list[str]:
+    """The :data:`RERUN_COLUMNS` the run's ``log.csv`` header lacks (older versions).
+
+    :func:`~ardrone_nmpc.recorder.read_run` fills absent columns with NaN, which a run that
+    never saw a pose would also show, so the header itself is read. A ``RunData`` built in
+    memory (no ``log.csv`` on disk) counts as complete.
+    """
+    log = Path(run.path) / LOG_FILE
+    try:
+        with open(log, encoding="utf-8") as f:
+            header = {c.strip() for c in f.readline().split(",")}
+    except OSError:
+        return [c for c in RERUN_COLUMNS if c not in run.columns]
+    return [c for c in RERUN_COLUMNS if c not in header]
+
+
+def require_rerun_columns(*, run: RunData) -> None:
+    """Raise :class:`ReplayError` naming the :data:`RERUN_COLUMNS` the log lacks, if any."""
+    missing = missing_rerun_columns(run=run)
+    if missing:
+        raise ReplayError(f"{run.path}: log.csv has no {', '.join(missing)} column"
+                          f"{'s' if len(missing) > 1 else ''} (written by an older version): "
+                          f"it can be re-summarised, not re-run")
+
+
+def _pose_of_row(cols: dict, i: int, previous: MocapPose | None) -> MocapPose | None:
+    """The pose row ``i`` saw: the previous one again, a new one, or None before the first.
+
+    A new pose without a logged position (a stale-mocap hover row of a tick that did not
+    estimate) never reached the estimators in the flight, so the previous pose stands in — its
+    time stays the estimators' last sample time, as it did in the flight — and only the
+    row's age (the supervisor's input) moves on. NaN position if there is no previous pose.
+    """
+    t_pose = float(cols["mocap_t_s"][i])
+    if math.isnan(t_pose):
+        return None
+    x, y, z, psi = (float(cols[c][i]) for c in ("x_m", "y_m", "z_m", "psi_rad"))
+    logged = not math.isnan(x)
+    if previous is not None:
+        if abs(t_pose - previous.t_s) <= SAME_POSE_TOLERANCE_S:
+            if not logged or not math.isnan(previous.position_m[0]):
+                return previous  # the same object: the tick recognises it by its time
+            t_pose = previous.t_s  # first logged sighting of a pose first seen unlogged
+        elif not logged:
+            return previous
+    position = np.array([x, y, z])
+    rotation = np.array([0.0, 0.0, psi])  # roll and pitch are not logged (nor used)
+    position.setflags(write=False)
+    rotation.setflags(write=False)
+    return MocapPose(t_s=t_pose, position_m=position, rotation_xyz_rad=rotation, psi_rad=psi)
+
+
+def _unlogged(cols: dict, i: int, pose: MocapPose | None) -> bool:
+    """Row ``i`` saw a pose the replay could not rebuild (see :func:`_pose_of_row`)."""
+    if pose is None:
+        return False
+    return (math.isnan(pose.position_m[0])
+            or abs(float(cols["mocap_t_s"][i]) - pose.t_s) > SAME_POSE_TOLERANCE_S)
+
+
+def _navdata_of_row(cols: dict, i: int, rx_t_s: float) -> NavdataSample | None:
+    """The navdata sample row ``i`` saw (None before the first): logged fields, NaN others."""
+    mode = str(cols["nav_mode"][i])
+    if not mode or not math.isfinite(rx_t_s):
+        return None
+    try:
+        flight_mode = FlightMode(mode)
+    except ValueError:
+        raise ReplayError(f"log.csv row {i + 2}: nav_mode {mode!r} is not a flight mode "
+                          f"({', '.join(m.value for m in FlightMode)})") from None
+    nan = math.nan
+    # navdata attitude is not among the measurement columns (yet): taken when a log has it
+    roll, pitch = (float(cols[c][i]) if c in cols else nan
+                   for c in ("nav_roll_deg", "nav_pitch_deg"))
+    return NavdataSample(t_s=rx_t_s, mode=flight_mode, battery_pct=float(cols["battery_pct"][i]),
+                         roll_deg=roll, pitch_deg=pitch, yaw_deg=nan, altitude_m=nan,
+                         vx_body_mps=float(cols["nav_vx_body_mps"][i]),
+                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan)
+
+
+def rows_to_inputs(*, run: RunData) -> list[TickInputs]:
+    """The :class:`TickInputs` of every logged tick, on the experiment clock.
+
+    The tick's clock is the row's ``t_s`` (so the tick's clock offset is 0 and the pose keeps
+    its logged ``mocap_t_s``); receipt times are ``t_s − age``. A pose seen on several ticks
+    is one object (the estimators update on a *new* pose only).
+
+    Raises
+    ------
+    ReplayError
+        The log lacks :data:`RERUN_COLUMNS`, or a ``nav_mode`` cell is not a flight mode.
+    """
+    require_rerun_columns(run=run)
+    cols = run.columns
+    inputs: list[TickInputs] = []
+    pose: MocapPose | None = None
+    for i in range(run.n_rows):
+        t = float(cols["t_s"][i])
+        pose = _pose_of_row(cols, i, pose)
+        mocap_age_s = float(cols["mocap_age_ms"][i]) * 1e-3
+        nav_age_s = float(cols["navdata_age_ms"][i]) * 1e-3
+        pose_rx = t - mocap_age_s if pose is not None else -math.inf
+        nav_rx = t - nav_age_s if math.isfinite(nav_age_s) else -math.inf
+        inputs.append(TickInputs(t, pose, pose_rx, _navdata_of_row(cols, i, nav_rx), nav_rx))
+    return inputs
+
+
+# ----------------------------------------------------------------------------- rerun
+
+
+@dataclass(frozen=True)
+class RerunCost:
+    """The NMPC stage cost of thesis eq. 3.14, summed over the experiment's ticks.
+
+    ``Σ_k ½ (x_k − x_d(t_k))ᵀ q (x_k − x_d(t_k)) + ½ u_kᵀ r u_k`` · period (cost·s), q and r
+    from the *rerun* config, x_k the **logged** state estimates, x_d the rerun config's
+    reference (velocities included), u_k the logged or the recomputed input.
+
+    Open-loop counterfactual: the logged states did not respond to the recomputed inputs, so
+    the state part is shared and only the input part differs — it prices the new commands on
+    the old flight, it does not predict how the new controller would have flown. Rows
+    without a state estimate (stale-mocap hover) are left out; a NaN input (the P controller
+    logs no z̈, a hover row none at all) counts as 0 — no commanded acceleration.
+
+    Attributes
+    ----------
+    rows : ticks summed (t_s ≥ 0 with a state; all ticks with a state if none has t_s ≥ 0).
+    state : the shared state part (cost·s).
+    input_logged, input_rerun : the input parts (cost·s).
+    """
+
+    rows: int
+    state: float
+    input_logged: float
+    input_rerun: float
+
+    @property
+    def logged(self) -> float:
+        """Total with the logged inputs (cost·s)."""
+        return self.state + self.input_logged
+
+    @property
+    def rerun(self) -> float:
+        """Total with the recomputed inputs (cost·s)."""
+        return self.state + self.input_rerun
+
+
+@dataclass
+class RerunResult:
+    """What :func:`rerun` recomputed and how it differs from the log.
+
+    Attributes
+    ----------
+    t_s : (n,) tick times (s, experiment clock).
+    rows : the recomputed log rows (as :meth:`Tick.step` made them).
+    logged : column → (n,) logged values, for :data:`COMPARED_COLUMNS`.
+    recomputed : column → (n,) recomputed values (NaN where the tick logged none).
+    diff : column → (n,) recomputed − logged; 0 where both are NaN, ±inf where only one is
+        (one side commanded, the other hovered).
+    max_abs_diff : column → max |diff| (0 for an empty run).
+    logged_mode, mode : (n,) the logged and recomputed ``mode`` per tick.
+    cost : :class:`RerunCost`.
+    unlogged_pose_rows : ticks whose pose was new but whose position was not logged (a
+        stale-mocap hover of an older tick): replayed with the previous pose, ageing.
+    """
+
+    t_s: np.ndarray
+    rows: list[dict]
+    logged: dict[str, np.ndarray]
+    recomputed: dict[str, np.ndarray]
+    diff: dict[str, np.ndarray]
+    max_abs_diff: dict[str, float]
+    logged_mode: np.ndarray
+    mode: np.ndarray
+    cost: RerunCost
+    unlogged_pose_rows: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def mode_mismatches(self) -> int:
+        """Ticks whose recomputed mode differs from the logged one."""
+        return int(np.sum(self.logged_mode != self.mode))
+
+    @property
+    def max_abs_diff_overall(self) -> float:
+        return max(self.max_abs_diff.values(), default=0.0)
+
+
+def _difference(recomputed: np.ndarray, logged: np.ndarray) -> np.ndarray:
+    """recomputed − logged; both NaN → 0 (neither side had a value), one NaN → inf."""
+    with np.errstate(invalid="ignore"):
+        diff = recomputed - logged
+    r_nan, l_nan = np.isnan(recomputed), np.isnan(logged)
+    diff[r_nan & l_nan] = 0.0
+    diff[r_nan ^ l_nan] = math.inf
+    return diff
+
+
+def _cost(*, cfg, trajectory, t_s: np.ndarray, states: np.ndarray, u_logged: np.ndarray,
+          u_rerun: np.ndarray) -> RerunCost:
+    """:class:`RerunCost` of ``states`` (n, 7) with both input histories (n, 4)."""
+    ctl = cfg.controller
+    q, r = np.asarray(ctl.q, float), np.asarray(ctl.r, float)
+    has_state = np.all(np.isfinite(states), axis=1)
+    window = has_state & (t_s >= 0.0)
+    if not window.any():
+        window = has_state
+    if not window.any():
+        return RerunCost(0, 0.0, 0.0, 0.0)
+    err = states[window] - trajectory.state_at(t_s[window])
+    err[:, 6] = (err[:, 6] + math.pi) % (2 * math.pi) - math.pi  # as OcpSpec.stage_cost
+    period = cfg.loop.period_s
+
+    def input_part(u: np.ndarray) -> float:
+        u = np.nan_to_num(u[window], nan=0.0)
+        return 0.5 * float(np.sum(u * u * r)) * period
+
+    return RerunCost(int(window.sum()), 0.5 * float(np.sum(err * err * q)) * period,
+                     input_part(u_logged), input_part(u_rerun))
+
+
+def _column(rows: list[dict], name: str) -> np.ndarray:
+    return np.array([float(row.get(name, math.nan)) for row in rows], dtype=float)
+
+
+def rerun(*, run: RunData, cfg, recorder=None,
+          progress: Callable[[float], None] | None = None) -> RerunResult:
+    """Feed the run's logged measurements through a fresh :class:`Tick` built from ``cfg``.
+
+    Every row from the first is fed in order (the estimators and the NMPC warm start carry
+    state), with the mode label the flight used ("settle" before t = 0, "track" after; a row
+    the runner relabelled "landing" keeps that label when the tick has latched land/stop too).
+    With the run's own config the commands are reproduced to float round-off; with a changed
+    one they are the counterfactual commands on the same measurements.
+
+    Parameters
+    ----------
+    run : the recorded run (:func:`~ardrone_nmpc.recorder.read_run`).
+    cfg : the configuration to recompute with (``run.config``, possibly with overrides).
+    recorder : a :class:`~ardrone_nmpc.recorder.RunRecorder` receiving the recomputed rows.
+    progress : called with the fraction done after each tick.
+
+    Raises
+    ------
+    ReplayError
+        The log lacks the measurement columns (an older version) or holds no rows.
+    """
+    from ardrone_nmpc.reference import make_trajectory
+    from ardrone_nmpc.simulate import HoldStartThen
+
+    inputs = rows_to_inputs(run=run)
+    if not inputs:
+        raise ReplayError(f"{run.path}: log.csv holds no ticks")
+    trajectory = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    tick = Tick(cfg, trajectory)
+    logged_mode = run.columns["mode"]
+    rows: list[dict] = []
+    for k, inp in enumerate(inputs):
+        # manual clock = the experiment clock: the tick's clock offset is 0
+        out = tick.step(inp, t_exp_s=inp.t_s, mode="settle" if inp.t_s < 0 else "track")
+        if logged_mode[k] == "landing" and out.action in (Action.LAND, Action.STOP):
+            out.row["mode"] = "landing"  # the runner's label for its descent after a landing
+        rows.append(out.row)
+        if recorder is not None:
+            recorder.write_row(out.row)
+            for event in out.events:  # the supervisor's mode changes, as the flight wrote them
+                fields = {k: v for k, v in event.items() if k != "kind"}
+                recorder.event(inp.t_s, event["kind"], **fields)
+        if progress is not None:
+            progress((k + 1) / len(inputs))
+    return _compare(run=run, cfg=cfg, trajectory=trajectory, inputs=inputs, rows=rows)
+
+
+def _compare(*, run: RunData, cfg, trajectory, inputs: list[TickInputs],
+             rows: list[dict]) -> RerunResult:
+    """Differences per compared column, the cost, and the bookkeeping of :func:`rerun`."""
+    cols = run.columns
+    logged = {c: np.asarray(cols[c], dtype=float) for c in COMPARED_COLUMNS}
+    recomputed = {c: _column(rows, c) for c in COMPARED_COLUMNS}
+    diff = {c: _difference(recomputed[c], logged[c]) for c in COMPARED_COLUMNS}
+    max_abs = {c: float(np.max(np.abs(d))) if d.size else 0.0 for c, d in diff.items()}
+    t_s = np.asarray(cols["t_s"], dtype=float)
+    states = np.column_stack([np.asarray(cols[c], dtype=float) for c in _STATE_COLUMNS])
+    cost = _cost(cfg=cfg, trajectory=trajectory, t_s=t_s, states=states,
+                 u_logged=np.column_stack([logged[c] for c in INPUT_COLUMNS]),
+                 u_rerun=np.column_stack([recomputed[c] for c in INPUT_COLUMNS]))
+    unlogged = sum(1 for i, inp in enumerate(inputs) if _unlogged(cols, i, inp.pose))
+    mode = np.array([str(row.get("mode", "")) for row in rows], dtype=object)
+    return RerunResult(t_s=t_s, rows=rows, logged=logged, recomputed=recomputed, diff=diff,
+                       max_abs_diff=max_abs, logged_mode=np.asarray(cols["mode"], dtype=object),
+                       mode=mode, cost=cost, unlogged_pose_rows=unlogged,
+                       notes=list(run.warnings))
+
+
+def write_rerun_csv(*, result: RerunResult, path: Path) -> Path:
+    """Write the per-tick differences: ``t_s, logged_mode, mode, d_<column>…`` (recomputed −
+    logged, numbers as in ``log.csv``). Returns ``path``."""
+    header = ["t_s", "logged_mode", "mode"] + [f"d_{c}" for c in COMPARED_COLUMNS]
+    lines = [",".join(header)]
+    for i, t in enumerate(result.t_s):
+        cells = [format_number(t), str(result.logged_mode[i]), str(result.mode[i])]
+        cells += [format_number(result.diff[c][i]) for c in COMPARED_COLUMNS]
+        lines.append(",".join(cells))
+    path = Path(path)
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+# ----------------------------------------------------------------------------- broadcast
+
+
+@dataclass(frozen=True)
+class BroadcastResult:
+    """What :func:`broadcast` sent.
+
+    Attributes
+    ----------
+    frames : datagrams sent (one per distinct logged pose).
+    skipped : distinct poses not sent because their position was not logged.
+    span_s : logged time from the first to the last pose sent (s).
+    target : (host, port) sent to.
+    """
+
+    frames: int
+    skipped: int
+    span_s: float
+    target: tuple[str, int]
+
+
+def logged_poses(*, run: RunData) -> tuple[list[MocapPose], int]:
+    """The distinct poses the run's ticks saw, in order, and how many had no logged position.
+
+    Times are ``mocap_t_s`` (their differences are the stream's timing). Needs the
+    ``mocap_t_s`` column (:class:`ReplayError` otherwise).
+    """
+    if "mocap_t_s" in missing_rerun_columns(run=run):
+        raise ReplayError(f"{run.path}: log.csv has no mocap_t_s column (written by an older "
+                          f"version): the pose timing is unknown, nothing to broadcast")
+    cols = run.columns
+    poses: list[MocapPose] = []
+    unlogged_times: list[float] = []
+    pose = None
+    for i in range(run.n_rows):
+        new = _pose_of_row(cols, i, pose)
+        if _unlogged(cols, i, new):
+            t = float(cols["mocap_t_s"][i])
+            if not unlogged_times or abs(t - unlogged_times[-1]) > SAME_POSE_TOLERANCE_S:
+                unlogged_times.append(t)
+        elif new is not None and new is not pose:
+            poses.append(new)
+        pose = new
+    return poses, len(unlogged_times)
+
+
+def _target(host: str, port: int, allow_remote: bool) -> tuple[str, int]:
+    from ardrone_nmpc.sim.drone_server import require_loopback_host
+
+    if not allow_remote:  # only an explicit --host leaves this machine
+        host = require_loopback_host(host, "broadcast host")
+    port = int(port)
+    if not 1 <= port <= 65535:
+        raise ReplayError(f"--port: {port} is not a UDP port (1..65535)")
+    return host, port
+
+
+def broadcast(*, run: RunData, port: int, host: str = "127.0.0.1", speed: float = 1.0,
+              object_name: str | None = None, allow_remote: bool = False,
+              clock: Callable[[], float] = time.monotonic,
+              sleep: Callable[[float], None] = time.sleep,
+              progress: Callable[[float], None] | None = None) -> BroadcastResult:
+    """Re-send the run's logged poses as the mocap UDP stream (specs/mocap-stream.md).
+
+    One datagram per distinct logged pose (a pose seen on several ticks is sent once), at its
+    logged time (``mocap_t_s`` spacing) divided by ``speed``, on absolute deadlines from the
+    first. The log holds the pose each *tick* used (≈ 15 Hz), not every mocap frame, so that is
+    the stream's rate; frame numbers count the datagrams (1, 2, …: no gaps). Roll and pitch
+    are not logged and are sent as 0 (ψ as the rotation about z).
+
+    Parameters
+    ----------
+    run : the recorded run. port : UDP port (1..65535). host : target address; must be a
+        loopback address unless ``allow_remote`` (the CLI sets it for an explicit ``--host``).
+    speed : playback speed factor (> 0; 2 = twice as fast). object_name : the pose item's
+        name (default: the run config's ``mocap.object_name``).
+    clock, sleep : monotonic seconds and the sleep used for the deadlines (tests).
+    progress : called with the fraction of the poses sent.
+
+    Raises
+    ------
+    ValueError
+        A non-loopback host without ``allow_remote``, a bad port or speed, a log without
+        ``mocap_t_s`` (:class:`ReplayError`). OSError from the socket.
+    """
+    if not (math.isfinite(speed) and speed > 0):
+        raise ReplayError(f"--speed: must be a positive number, got {speed!r}")
+    target = _target(host, port, allow_remote)
+    name = object_name or run.config.mocap.object_name
+    poses, skipped = logged_poses(run=run)
+    datagrams = [_datagram(pose, frame, name) for frame, pose in enumerate(poses, start=1)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        t0 = clock()
+        for k, (pose, data) in enumerate(zip(poses, datagrams)):
+            wait = t0 + (pose.t_s - poses[0].t_s) / speed - clock()
+            if wait > 0:
+                sleep(wait)
+            sock.sendto(data, target)
+            if progress is not None:
+                progress((k + 1) / len(poses))
+    span = poses[-1].t_s - poses[0].t_s if poses else 0.0
+    return BroadcastResult(len(poses), skipped, span, target)
+
+
+def _datagram(pose: MocapPose, frame: int, name: str) -> bytes:
+    """One pose as the wire datagram (millimetres, rotation (0, 0, ψ))."""
+    p = pose.position_m
+    item = MocapObjectPose(name, (float(p[0]) * 1000.0, float(p[1]) * 1000.0,
+                                  float(p[2]) * 1000.0), (0.0, 0.0, float(pose.psi_rad)))
+    return encode_mocap(MocapFrame.of(frame & 0xFFFFFFFF, [item]))

@@ -1,0 +1,140 @@
+"""The loopback servers' fault decisions (ardrone_nmpc.sim.fault_injection), without sockets:
+the experiment clock, which datagrams go out for a navdata packet or a mocap frame, AT loss,
+and the plant faults."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config import load_config
+from ardrone_nmpc.faults import FaultSchedule
+from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
+from ardrone_nmpc.sim.fault_injection import Disorder, ServerFaults
+from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.wire_sensors import navdata_packet
+
+NOW = 1000.0  # a monotonic time (s); experiment time 0 is set to it where the clock is set
+
+
+def server_faults(*overrides, plant=None, seed=0, clock_set=True) -> ServerFaults:
+    cfg = load_config(None, list(overrides))
+    faults = ServerFaults(FaultSchedule(cfg.faults, seed), plant)
+    if clock_set:
+        faults.set_clock(NOW)
+    return faults
+
+
+def packet(seq=5) -> bytes:
+    cfg = load_config(None)
+    return navdata_packet(AirframePlant.from_config(cfg.sim, cfg.drone), seq)
+
+
+# ----------------------------------------------------------------------------- disorder
+def test_disorder_holds_one_back_behind_the_next_and_duplicates():
+    d = Disorder()
+    assert d(b"1", duplicate=False, hold=True) == [] and d.holding
+    assert d(b"2", duplicate=False, hold=True) == [b"2", b"1"]  # released: no second hold
+    assert not d.holding
+    assert d(b"3", duplicate=True, hold=False) == [b"3", b"3"]
+    assert d(b"4", duplicate=True, hold=True) == [b"4"] and d.holding  # the copy goes now
+    assert d(b"5", duplicate=False, hold=False) == [b"5", b"4"]
+
+
+# ----------------------------------------------------------------------------- the clock
+def test_no_window_fault_acts_before_the_clock_is_set():
+    args = ["faults.mocap_dropout.start_s=-1e6", "faults.mocap_dropout.duration_s=1e7",
+            "faults.navdata_loss.start_s=-1e6", "faults.navdata_loss.duration_s=1e7",
+            "faults.at_loss.start_s=-1e6", "faults.at_loss.duration_s=1e7"]
+    faults = server_faults(*args, clock_set=False)
+    assert faults.t_exp(NOW) == -math.inf
+    assert not faults.mocap_frame(NOW).dropped
+    assert faults.navdata_datagrams(NOW, b"x") == [b"x"]
+    assert not faults.at_lost(NOW)
+    faults.set_clock(NOW - 2.0)
+    assert faults.t_exp(NOW) == pytest.approx(2.0)
+    assert faults.mocap_frame(NOW).dropped
+    assert faults.navdata_datagrams(NOW, b"x") == []
+    assert faults.at_lost(NOW)
+    c = faults.counters
+    assert (c.mocap_dropped, c.navdata_lost, c.at_lost) == (1, 1, 1)
+
+
+# ----------------------------------------------------------------------------- navdata
+@pytest.mark.parametrize("kind", ["checksum", "truncated", "zero_option"])
+def test_navdata_corrupted_in_its_window_only(kind):
+    faults = server_faults("faults.navdata_corrupt.start_s=1",
+                           "faults.navdata_corrupt.duration_s=0.5",
+                           f"faults.navdata_corrupt.kind={kind}")
+    clean = packet()
+    assert faults.navdata_datagrams(NOW + 0.99, clean) == [clean]
+    (bad,) = faults.navdata_datagrams(NOW + 1.2, clean)
+    with pytest.raises(NavdataError):
+        decode_navdata(bad)
+    assert faults.navdata_datagrams(NOW + 1.5, clean) == [clean]
+    assert faults.counters.navdata_corrupted == 1
+
+
+def test_navdata_reordered_and_duplicated_only_on_its_stream():
+    faults = server_faults("faults.disorder.stream=navdata", "faults.disorder.start_s=0",
+                           "faults.disorder.duration_s=1", "faults.disorder.reorder_probability=1",
+                           "faults.disorder.duplicate_probability=0")
+    out = [faults.navdata_datagrams(NOW + 0.1 * i, bytes([i])) for i in range(4)]
+    assert out == [[], [b"\x01", b"\x00"], [], [b"\x03", b"\x02"]]
+    assert faults.mocap_datagrams(NOW + 0.1, b"m") == [b"m"]  # the other stream is untouched
+    assert faults.navdata_datagrams(NOW + 1.0, b"z") == [b"z"]  # window over
+    assert faults.counters.reordered == 2 and faults.counters.duplicated == 0
+
+
+# ----------------------------------------------------------------------------- mocap
+def test_mocap_frame_faults_by_sampling_time():
+    faults = server_faults("faults.mocap_occlusion.start_s=1",
+                           "faults.mocap_occlusion.duration_s=1",
+                           "faults.mocap_occlusion.zero_pose=true",
+                           "faults.mocap_latency.start_s=1.5", "faults.mocap_latency.duration_s=1",
+                           "faults.mocap_latency.extra_latency_ms=150")
+    f = [faults.mocap_frame(NOW + t) for t in (0.5, 1.2, 1.7, 2.2, 2.6)]
+    assert [x.occlusion for x in f] == [None, "zero", "zero", None, None]
+    assert [x.extra_latency_s for x in f] == pytest.approx([0, 0, 0.15, 0.15, 0])
+    assert not any(x.dropped for x in f)
+    c = faults.counters
+    assert (c.mocap_occluded, c.mocap_delayed) == (2, 2)
+
+
+def test_mocap_duplicates_with_certainty():
+    faults = server_faults("faults.disorder.start_s=0", "faults.disorder.duration_s=1",
+                           "faults.disorder.reorder_probability=0",
+                           "faults.disorder.duplicate_probability=1")
+    assert faults.mocap_datagrams(NOW + 0.5, b"m") == [b"m", b"m"]
+    assert faults.counters.duplicated == 1
+
+
+# ----------------------------------------------------------------------------- AT + plant
+def test_at_loss_draws_with_the_configured_probability():
+    faults = server_faults("faults.at_loss.start_s=0", "faults.at_loss.duration_s=100",
+                           "faults.at_loss.probability=0.5", seed=7)
+    lost = [faults.at_lost(NOW + 0.01 * i) for i in range(2000)]
+    assert 0.4 < np.mean(lost) < 0.6
+    assert faults.counters.at_lost == sum(lost)
+    assert not faults.at_lost(NOW + 100.0)
+
+
+def test_plant_faults_follow_the_experiment_clock():
+    cfg = load_config(None)
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone)
+    faults = server_faults("faults.battery_floor.start_s=2", "faults.battery_floor.level_pct=19",
+                           "faults.wind.velocity_mps=[0.5,0,0]",
+                           "faults.wind_gust.start_s=1", "faults.wind_gust.duration_s=1",
+                           "faults.wind_gust.velocity_mps=[0,1,0]", plant=plant, clock_set=False)
+    assert faults.update_plant(NOW) == []  # before the clock: only the constant wind
+    np.testing.assert_allclose(plant.wind_mps, [0.5, 0, 0])
+    assert plant.battery_pct == 100.0
+    faults.set_clock(NOW)
+    faults.update_plant(NOW + 1.5)
+    np.testing.assert_allclose(plant.wind_mps, [0.5, 1, 0])
+    faults.update_plant(NOW + 2.5)
+    assert plant.battery_pct == pytest.approx(19.0)
+    np.testing.assert_allclose(plant.wind_mps, [0.5, 0, 0])
+    events = [(t, ev["fault"], ev.get("on")) for t, ev in faults.events]
+    assert events == [(1.5, "wind_gust", True), (2.5, "battery_floor", None),
+                      (2.5, "wind_gust", False)]
