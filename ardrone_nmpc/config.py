@@ -115,6 +115,11 @@ Vec3 = _vector(Finite, 3)
 Vec4 = _vector(Finite, 4)
 PositiveVec2 = _vector(Positive, 2)
 PositiveVec4 = _vector(Positive, 4)
+# Sizes of a reference path: a kilometre is already far beyond any mocap volume, and the path
+# is sampled at 2 cm for the deviation metrics (1e300 m would not fit in memory).
+PathSize = Annotated[float, Field(gt=0, le=1000.0, allow_inf_nan=False)]
+PathSizeVec2 = _vector(PathSize, 2)
+PathSizeVec4 = _vector(PathSize, 4)
 NonNegativeVec7 = _vector(NonNegative, 7)
 Port = Annotated[int, Field(ge=1, le=65535)]
 
@@ -138,10 +143,37 @@ def _require_increasing(lower_name: str, upper_name: str) -> Callable[..., Any]:
     return field_validator(upper_name)(classmethod(check))  # type: ignore[arg-type]
 
 
+def _type_words(annotation: Any) -> str:
+    """What a field takes, for error messages ("an integer", "a list of numbers", …)."""
+    text = str(annotation)
+    if "tuple" in text:
+        return "a list of numbers"
+    for kind, words in ((int, "an integer"), (float, "a number"), (str, "a string")):
+        if annotation is kind or (kind.__name__ in text and "Literal" not in text):
+            return words
+    return "a value of another type"
+
+
 class _Section(BaseModel):
     # validate_default: defaults go through the same checks (cross-field ones included).
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
                               validate_default=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_booleans_as_numbers(cls, value: Any, info: ValidationInfo) -> Any:
+        # Lax mode would take YAML true/false as 1/0 (horizon_steps: true → 1): a boolean is
+        # valid only where the field is declared bool.
+        annotation = cls.model_fields[info.field_name].annotation
+        if annotation is bool:
+            return value
+        items = value if isinstance(value, (list, tuple)) else (value,)
+        for i, item in enumerate(items):
+            if isinstance(item, bool):
+                where = f" at index {i}" if items is value else ""
+                raise _invalid(f"expected {_type_words(annotation)}, got the boolean "
+                               f"{str(item).lower()}{where}")
+        return value
 
 
 # ----------------------------------------------------------------------------- controller
@@ -153,7 +185,8 @@ class SolverConfig(_Section):
     method: Literal["cgmres", "newton"] = Field(
         "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
         "'newton': the thesis' per-step Newton iterations with fdgmres.")
-    kmax: int = Field(5, ge=1, description="GMRES Krylov-subspace dimension per solve (count).")
+    kmax: int = Field(5, ge=1, le=1000,
+                      description="GMRES Krylov-subspace dimension per solve (count).")
     zeta_per_s: Positive = Field(
         15.0, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
     fd_step: Positive = Field(
@@ -198,7 +231,7 @@ class ControllerConfig(_Section):
 
     kind: Literal["nmpc", "p"] = Field(
         "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
-    horizon_steps: int = Field(15, ge=1, description="Prediction horizon N (steps).")
+    horizon_steps: int = Field(15, ge=1, le=1000, description="Prediction horizon N (steps).")
     dtau_s: Positive = Field(0.1, description="Prediction step Δτ (s); horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
         (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0),
@@ -221,10 +254,10 @@ class ControllerConfig(_Section):
         "thesis' integration (end of §4.4), which assumes a new vertical speed within a tick "
         "and overshoots altitude steps by 6–7 % in simulation (2.3 % with 0.5).")
     delay_compensation_s: NonNegative = Field(
-        0.26, description="Command delay (s) the NMPC predicts through: the state is rolled "
-        "forward through the commands already sent and the OCP solved for the moment the new "
-        "command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); 0 = the "
-        "thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
+        0.26, le=2.0, description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
+        "is rolled forward through the commands already sent and the OCP solved for the moment "
+        "the new command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); "
+        "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
     solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
     p_gains: PGainsConfig = Field(
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")
@@ -248,7 +281,8 @@ class EstimatorConfig(_Section):
         3.2e-3, description="Kalman measurement-noise variance R of differenced z, (m/s)² (thesis).")
     kalman_p0: Positive = Field(1e-2, description="Initial Kalman error variance P0, (m/s)².")
     luenberger_lambda0_per_s: Positive = Field(
-        5.0, description="Observer double pole at −λ0 (1/s); gain K = [2λ0, λ0²].")
+        5.0, le=1000.0, description="Observer double pole at −λ0 (1/s), ≤ 1000; gain K = "
+        "[2λ0, λ0²].")
     luenberger_gain: Optional[PositiveVec2] = Field(
         None, description="Explicit observer gain [k1 (1/s), k2 (1/s²)], overriding λ0; both > 0 "
         "so that A − KC is Hurwitz. null = derive from λ0.")
@@ -261,29 +295,65 @@ class EstimatorConfig(_Section):
 # ----------------------------------------------------------------------------- reference
 
 
+def _ascii_object_name(value: str) -> str:
+    if not value.isascii() or "\x00" in value:
+        raise _invalid("must be ASCII without NUL characters")
+    return value
+
+
+class FollowConfig(_Section):
+    """Reference kind 'follow': the drone follows a second object of the mocap stream."""
+
+    object_name: str = Field(
+        "car", min_length=1, max_length=24, description="Mocap name of the object to follow.")
+    offset_m: Vec3 = Field(
+        (0.0, 0.0, 1.0), description="Where the drone should be relative to the object (m).")
+    offset_frame: Literal["world", "object"] = Field(
+        "world", description="Frame of offset_m: the world's, or the object's (turns with it).")
+    heading: Literal["fixed", "object"] = Field(
+        "fixed", description="Drone heading: reference.start_psi_rad, or the object's heading.")
+    predict: bool = Field(
+        True, description="Extrapolate the object's velocity over the horizon (else the "
+        "horizon holds its latest pose).")
+    velocity_filter_s: Positive = Field(
+        0.2, description="Time constant of the object's velocity estimate (s).")
+    max_age_ms: Positive = Field(
+        300.0, description="Object pose age (ms) beyond which the reference stops "
+        "extrapolating and holds the last position.")
+
+    _name = field_validator("object_name")(classmethod(lambda cls, v: _ascii_object_name(v)))
+
+
 class ReferenceConfig(_Section):
     """The desired trajectory x_d(t), world frame, metres and radians."""
 
-    kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path"] = (
-        Field("hover", description="Trajectory type; the fields below apply as noted."))
+    kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path",
+                  "follow"] = (
+        Field("hover", description="Trajectory type; the fields below apply as noted. "
+              "'follow' takes it live from a second mocap object (see follow)."))
+    follow: FollowConfig = Field(
+        default_factory=FollowConfig, description="Reference kind 'follow' only; before the "
+        "object is seen, the reference holds start_m.")
     start_m: Vec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
     start_psi_rad: Finite = Field(0.0, description="Start heading ψ (rad, counter-clockwise).")
     target_m: Vec3 = Field((0.0, 0.0, 1.0), description="Step target position [x, y, z] (m).")
     target_psi_rad: Finite = Field(0.0, description="Step target heading ψ (rad).")
     step_time_s: NonNegative = Field(1.0, description="Time of the step (s from start).")
-    side_m: Positive = Field(1.0, description="Square side length (m).")
+    side_m: PathSize = Field(1.0, description="Square side length (m), ≤ 1000.")
     leg_duration_s: Positive = Field(
         5.0, description="Time per side of 'square' and 'square_altitudes' (s).")
-    altitudes_m: PositiveVec4 = Field(
-        (0.8, 1.0, 1.2, 1.4), description="Corner altitudes of 'square_altitudes' (m).")
+    altitudes_m: PathSizeVec4 = Field(
+        (0.8, 1.0, 1.2, 1.4), description="Corner altitudes of 'square_altitudes' (m), ≤ 1000.")
     center_m: Vec2 = Field((0.0, 0.0), description="Ellipse centre [x, y] (m).")
-    semi_axes_m: PositiveVec2 = Field((1.0, 0.6), description="Ellipse semi-axes [a_x, a_y] (m).")
+    semi_axes_m: PathSizeVec2 = Field(
+        (1.0, 0.6), description="Ellipse semi-axes [a_x, a_y] (m), ≤ 1000.")
     period_s: Positive = Field(20.0, description="Time for one lap of the ellipse (s).")
     lorenz_scale_m: Positive = Field(
-        0.05, description="Metres per Lorenz-system unit of the 'lorenz' path.")
+        0.05, le=1.0, description="Metres per Lorenz-system unit of the 'lorenz' path, ≤ 1.")
     lorenz_time_scale: Positive = Field(
-        0.05, description="Lorenz-system time advanced per second of flight (dimensionless); "
-        "0.05 keeps the scaled attractor under 1 m/s (peak ≈ 0.72 m/s at lorenz_scale_m 0.05).")
+        0.05, le=1.0, description="Lorenz-system time advanced per second of flight "
+        "(dimensionless, ≤ 1); 0.05 keeps the scaled attractor under 1 m/s (peak ≈ 0.72 m/s at "
+        "lorenz_scale_m 0.05).")
     path_file: Optional[str] = Field(
         None, validate_default=True,
         description="CSV waypoint file (t_s,x_m,y_m,z_m,psi_rad) for 'path'; relative paths in a "
@@ -303,6 +373,14 @@ class ReferenceConfig(_Section):
         path = path.resolve()
         if not path.is_file():
             raise _invalid(f"no such file: {path}")
+        # Read it now, so that `check` rejects what `simulate` would (non-monotonic time, a
+        # bad cell: "<file>:<line>: …"). Imported here: reference imports this module.
+        from .reference import ReferenceError, load_waypoints_csv
+
+        try:
+            load_waypoints_csv(path)
+        except ReferenceError as exc:
+            raise _invalid(str(exc)) from None
         return str(path)
 
 
@@ -312,7 +390,9 @@ class ReferenceConfig(_Section):
 class LoopConfig(_Section):
     """The control loop."""
 
-    period_s: Positive = Field(0.065, description="Control period (s); 65 ms in the thesis.")
+    period_s: Positive = Field(
+        0.065, ge=0.001, le=1.0,
+        description="Control period (s), 1 ms … 1 s; 65 ms in the thesis.")
 
 
 class DroneConfig(_Section):
@@ -357,7 +437,8 @@ class PlantConfig(_Section):
     """The simulated AR.Drone closed loop (specs/plant.md)."""
 
     # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
-    command_delay_s: NonNegative = Field(0.26, description="Command transport delay T_d (s).")
+    command_delay_s: NonNegative = Field(
+        0.26, le=2.0, description="Command transport delay T_d (s), ≤ 2.")
     # tum_ardrone EKF prediction model (Engel et al., IROS 2012).
     tau_tilt_s: Positive = Field(0.10, description="Roll/pitch first-order time constant τ_a (s).")
     # tum_ardrone EKF prediction model.
@@ -368,7 +449,8 @@ class PlantConfig(_Section):
     drag_per_s: NonNegative = Field(0.58, description="Horizontal linear drag k_d (1/s).")
     # specs/plant.md: fixed-step RK4 at 200 Hz for determinism.
     integration_step_s: float = Field(
-        0.005, gt=0, le=0.05, description="Fixed RK4 integration step (s).")
+        0.005, ge=1e-4, le=0.05, description="Fixed RK4 integration step (s), 0.1 … 50 ms; at "
+        "most every time constant and 1 / drag_per_s (explicit RK4 is unstable beyond).")
     # Landed at the world origin.
     initial_position_m: Vec3 = Field((0.0, 0.0, 0.0), description="Initial [x, y, z] (m), z ≥ 0.")
     initial_psi_rad: Finite = Field(0.0, description="Initial heading ψ (rad).")
@@ -384,6 +466,20 @@ class PlantConfig(_Section):
     def _above_ground(cls, value: tuple[float, ...]) -> tuple[float, ...]:
         if value[2] < 0:
             raise _invalid("z must be ≥ 0 (the ground)")
+        return value
+
+    @field_validator("integration_step_s")
+    @classmethod
+    def _stable_step(cls, value: float, info: ValidationInfo) -> float:
+        # h·λ ≤ 1 for every first-order mode (λ = 1/τ, drag): well inside RK4's stability
+        # bound (2.79), where a tiny τ or a huge drag would make the plant blow up to NaN.
+        for name in ("tau_tilt_s", "tau_yaw_s", "tau_vz_s"):
+            tau = info.data.get(name)
+            if tau is not None and value > tau:
+                raise _invalid(f"must be at most {name} ({value} > {tau})")
+        drag = info.data.get("drag_per_s")
+        if drag is not None and value * drag > 1.0:
+            raise _invalid(f"must be at most 1 / drag_per_s ({value} × {drag} > 1)")
         return value
 
 
@@ -407,6 +503,19 @@ class NoiseConfig(_Section):
         0.040, description="Navdata optical-flow vx, vy σ (m/s).")
 
 
+class TargetConfig(_Section):
+    """A scripted second object on the simulated mocap stream (e.g. a scale car on a loop),
+    moving from the start of the simulation."""
+
+    object_name: str = Field("car", min_length=1, max_length=24, description="Its mocap name.")
+    path: Literal["circle", "figure8"] = Field("circle", description="The loop it drives.")
+    center_m: Vec3 = Field((0.0, 0.0, 0.0), description="Centre of the loop [x, y, z] (m).")
+    radius_m: Positive = Field(1.0, description="Circle radius / figure-8 half width (m).")
+    speed_mps: NonNegative = Field(0.3, le=3.0, description="Speed along the loop (m/s).")
+
+    _name = field_validator("object_name")(classmethod(lambda cls, v: _ascii_object_name(v)))
+
+
 class SimConfig(_Section):
     """Simulation: seed, plant, sensor noise and stream rates."""
 
@@ -415,6 +524,8 @@ class SimConfig(_Section):
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="Sensor noise.")
     mocap_rate_hz: Positive = Field(100.0, description="Simulated mocap stream rate (Hz).")
     navdata_rate_hz: Positive = Field(15.0, description="Simulated navdata rate (Hz); 15 = demo.")
+    target: Optional[TargetConfig] = Field(
+        None, description="A scripted second object streamed on the mocap stream (null: none).")
     settle_s: NonNegative = Field(
         4.0, description="Seconds the controller holds the reference's start point before t = 0 "
         "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis.")
@@ -697,8 +808,11 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: invalid YAML{line}: {problem}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: invalid YAML: {exc}".replace("\n", " ")) from None
-    if data is None:  # an empty file means "all defaults"
-        return {}
+    if data is None:
+        # Most likely a truncated or wrong file; flying the default experiment instead would
+        # be a surprise. `{}` (or no config at all) asks for the defaults explicitly.
+        raise ConfigError(f"{path}: empty file (no settings); write {{}} in it for an "
+                          "experiment with every default")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of section names to "
                           f"values, not a {type(data).__name__}")

@@ -18,10 +18,9 @@ from pathlib import Path
 from ardrone_nmpc.clock import Rate
 from ardrone_nmpc.loop import Tick, TickInputs
 from ardrone_nmpc.recorder import RunRecorder, read_run, write_summary
-from ardrone_nmpc.reference import make_trajectory
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.session import FlightSession
-from ardrone_nmpc.simulate import HoldStartThen
+from ardrone_nmpc.simulate import experiment_trajectory
 from ardrone_nmpc.summary import summarise
 
 EXIT_SIGINT = 130
@@ -71,13 +70,15 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
 
     seed = cfg.sim.seed if seed is None else seed
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    follow = cfg.reference.follow.object_name if cfg.reference.kind == "follow" else None
+    others = (follow,) if follow else ()
     try:
         with ExitStack() as stack:
             if sim:
                 from ardrone_nmpc.sim.loopback import start_loopback
 
                 mocap = stack.enter_context(MocapLink(
-                    "127.0.0.1", 0, object_name=cfg.mocap.object_name))
+                    "127.0.0.1", 0, object_name=cfg.mocap.object_name, other_objects=others))
                 loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port))
                 host, at_port, navdata_port = loop.drone_host, loop.at_port, loop.navdata_port
                 link_options = {"bind_host": "127.0.0.1"}
@@ -86,7 +87,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
             else:
                 mocap = stack.enter_context(MocapLink(
                     cfg.mocap.bind_host, mocap_port or cfg.mocap.port,
-                    object_name=cfg.mocap.object_name))
+                    object_name=cfg.mocap.object_name, other_objects=others))
                 link_options = {}
                 host = drone_host or cfg.drone.host
                 at_port = at_port or cfg.drone.at_port
@@ -100,7 +101,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
             drone = stack.enter_context(DroneLink(
                 host, at_port=at_port, navdata_port=navdata_port,
                 keepalive_interval_s=cfg.drone.keepalive_interval_s, **link_options))
-            tick = Tick(cfg, HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s)))
+            tick = Tick(cfg, experiment_trajectory(cfg))
             session = FlightSession(cfg, drone, mocap, event=event)
             fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
             try:
@@ -137,6 +138,7 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
     session's exit lands the drone). ``fault_clock(t0)`` receives the monotonic time of
     experiment time 0 (the loopback's fault injection runs on it)."""
     period = cfg.loop.period_s
+    follow = cfg.reference.follow.object_name if cfg.reference.kind == "follow" else None
     n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     rate = Rate(period)
@@ -150,8 +152,10 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
             fault_clock(now + n_settle * period)
         pose, pose_rx = mocap.latest()
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
+        target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
         t_exp = (k - n_settle) * period
-        out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx), t_exp_s=t_exp,
+        out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
+                        t_exp_s=t_exp,
                         mode="settle" if t_exp < 0 else "track")
         for ev in out.events:
             event(ev.pop("kind"), t_exp_s=t_exp, **ev)

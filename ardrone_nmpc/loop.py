@@ -32,7 +32,8 @@ class TickInputs:
     """What the links hold at tick time ``t_s`` (s, the run's clock).
 
     ``pose``/``navdata`` are the newest received (None before the first); ``*_rx_t_s`` their
-    receipt times on the same clock (ages are measured from those).
+    receipt times on the same clock (ages are measured from those). ``target`` is the newest
+    pose of the followed object (reference kind ``follow``; None otherwise).
     """
 
     t_s: float
@@ -40,6 +41,8 @@ class TickInputs:
     pose_rx_t_s: float
     navdata: NavdataSample | None
     navdata_rx_t_s: float
+    target: MocapPose | None = None
+    target_rx_t_s: float = -math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,7 +87,17 @@ def measurement_columns(inputs: TickInputs, t_exp_s: float) -> dict:
         "nav_mode": nav.mode.value if nav is not None else "",
         "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
         "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
-    }
+    } | _target_columns(inputs)
+
+
+def _target_columns(inputs: TickInputs) -> dict:
+    target = inputs.target
+    if target is None:
+        return {}
+    p = target.position_m
+    return {"target_x_m": p[0], "target_y_m": p[1], "target_z_m": p[2],
+            "target_psi_rad": target.psi_rad, "target_t_s": target.t_s,
+            "target_age_ms": (inputs.t_s - inputs.target_rx_t_s) * 1e3}
 
 
 def effective_controller(controller, limits: DroneLimits):
@@ -137,6 +150,7 @@ class Tick:
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else self.period_s
         self._state = np.zeros(7)
         self.supervisor = Supervisor(cfg.safety)
+        self._live = trajectory if hasattr(trajectory, "observe") else None
         self._last = None  # (pcmd, u) of the last command sent, for a hold
         diverge = cfg.faults.solver_diverge
         self._solver_fault = (None if diverge is None else
@@ -194,6 +208,9 @@ class Tick:
         row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms,
                "solver_status": "", "cmd_saturated": "0000"}
         row.update(measurement_columns(inputs, t_exp_s))
+        if self._live is not None:  # reference kind 'follow': the object's newest pose
+            self._live.observe(inputs.target, t_pose_s=t_exp_s - (inputs.t_s - inputs.target_rx_t_s),
+                               age_ms=(inputs.t_s - inputs.target_rx_t_s) * 1e3)
         sup = self.supervisor
         cmd = None
         decision = sup.check_feedback(mocap_age_ms=mocap_age_ms, navdata_age_ms=navdata_age_ms,

@@ -637,6 +637,7 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
     ``lorenz``                :class:`Lorenz` around ``center_m``, altitude ``start_m[2]``,
                               ``lorenz_scale_m``, ``lorenz_time_scale``
     ``path``                  :func:`load_waypoints_csv` of ``path_file``
+    ``follow``                :class:`~ardrone_nmpc.follow.LiveTarget` (a second mocap object)
     ========================  =================================================================
 
     Paths use ``start_psi_rad`` as their constant heading. ``duration_s`` (s) is the flight
@@ -665,4 +666,8 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
         if ref_cfg.path_file is None:
             raise ReferenceError("reference.path_file: required when kind is 'path'")
         return load_waypoints_csv(ref_cfg.path_file)
+    if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/follow.py)
+        from .follow import LiveTarget
+
+        return LiveTarget(ref_cfg)
     raise ReferenceError(f"reference.kind: unknown trajectory kind {kind!r}")

@@ -176,8 +176,21 @@ def rows_to_inputs(*, run: RunData) -> list[TickInputs]:
         nav_age_s = float(cols["navdata_age_ms"][i]) * 1e-3
         pose_rx = t - mocap_age_s if pose is not None else -math.inf
         nav_rx = t - nav_age_s if math.isfinite(nav_age_s) else -math.inf
-        inputs.append(TickInputs(t, pose, pose_rx, _navdata_of_row(cols, i, nav_rx), nav_rx))
+        target, target_rx = _target_of_row(cols, i)
+        inputs.append(TickInputs(t, pose, pose_rx, _navdata_of_row(cols, i, nav_rx), nav_rx,
+                                 target, target_rx))
     return inputs
+
+
+def _target_of_row(cols, i: int) -> tuple[MocapPose | None, float]:
+    """The followed object's pose of row ``i`` (reference kind ``follow``), if logged."""
+    if "target_t_s" not in cols or not math.isfinite(float(cols["target_t_s"][i])):
+        return None, -math.inf
+    position = np.array([float(cols[c][i]) for c in ("target_x_m", "target_y_m", "target_z_m")])
+    psi = float(cols["target_psi_rad"][i])
+    pose = MocapPose(t_s=float(cols["target_t_s"][i]), position_m=position,
+                     rotation_xyz_rad=np.array([0.0, 0.0, psi]), psi_rad=psi)
+    return pose, float(cols["t_s"][i]) - float(cols["target_age_ms"][i]) * 1e-3
 
 
 # ----------------------------------------------------------------------------- rerun
@@ -320,13 +333,12 @@ def rerun(*, run: RunData, cfg, recorder=None,
     ReplayError
         The log lacks the measurement columns (an older version) or holds no rows.
     """
-    from ardrone_nmpc.reference import make_trajectory
-    from ardrone_nmpc.simulate import HoldStartThen
+    from ardrone_nmpc.simulate import experiment_trajectory
 
     inputs = rows_to_inputs(run=run)
     if not inputs:
         raise ReplayError(f"{run.path}: log.csv holds no ticks")
-    trajectory = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    trajectory = experiment_trajectory(cfg)
     tick = Tick(cfg, trajectory)
     logged_mode = run.columns["mode"]
     rows: list[dict] = []
@@ -343,7 +355,25 @@ def rerun(*, run: RunData, cfg, recorder=None,
                 recorder.event(inp.t_s, event["kind"], **fields)
         if progress is not None:
             progress((k + 1) / len(inputs))
+    if cfg.reference.kind == "follow":  # live: price against what the rerun tick followed
+        trajectory = _RowReference(rows)
     return _compare(run=run, cfg=cfg, trajectory=trajectory, inputs=inputs, rows=rows)
+
+
+class _RowReference:
+    """The reference the rerun ticks logged (positions and ψ; velocities 0), as a trajectory
+    — for kind ``follow``, whose reference exists only tick by tick."""
+
+    def __init__(self, rows: list[dict]) -> None:
+        self._t = _column(rows, "t_s")
+        self._ref = np.column_stack([_column(rows, c) for c in
+                                     ("x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad")])
+
+    def state_at(self, t_s) -> np.ndarray:
+        idx = np.clip(np.searchsorted(self._t, np.atleast_1d(t_s)), 0, len(self._t) - 1)
+        out = np.zeros((idx.size, 7))
+        out[:, [0, 2, 4, 6]] = self._ref[idx]
+        return out
 
 
 def _compare(*, run: RunData, cfg, trajectory, inputs: list[TickInputs],

@@ -23,6 +23,7 @@ from ardrone_nmpc.loop import Tick, TickInputs
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.reference import Trajectory, make_trajectory
 from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.target import target_pose
 from ardrone_nmpc.types import FlightMode
 from ardrone_nmpc.wire_sensors import WireSensors
 
@@ -48,6 +49,15 @@ class HoldStartThen:
 
     def polyline_m(self):
         return self.inner.polyline_m()
+
+
+def experiment_trajectory(cfg):
+    """The reference a runner hands the tick: the configured trajectory held at its start
+    through the settle phase, or — kind ``follow`` — the live object (it follows from the
+    first tick)."""
+    if cfg.reference.kind == "follow":
+        return make_trajectory(cfg.reference)
+    return HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
 
 
 @dataclass
@@ -84,6 +94,11 @@ class _Sensors:
         self.nav_rx_t_s = -math.inf
         self._next_mocap_k = 0
         self._next_nav_k = 0
+        self.target_cfg = cfg.sim.target
+        self.target = None
+        self.target_rx_t_s = -math.inf
+        self._target_rng = np.random.default_rng([cfg.sim.seed, 0x7A26])
+        self._target_std_m = cfg.sim.noise.mocap_position_std_m
 
     def advance_to(self, t_s: float) -> None:
         """Run the plant to ``t_s``, sampling the sensors on their own grids on the way.
@@ -108,6 +123,10 @@ class _Sensors:
             if kind == "mocap":
                 self.pose = plant.mocap_pose()
                 self.pose_rx_t_s = t_event + self.mocap_latency_s
+                if self.target_cfg is not None:  # the scripted second object, same frame
+                    self.target = target_pose(self.target_cfg, t_event, self._target_rng,
+                                              self._target_std_m)
+                    self.target_rx_t_s = self.pose_rx_t_s
             else:
                 self.nav = plant.navdata()
                 self.nav_rx_t_s = t_event
@@ -115,7 +134,8 @@ class _Sensors:
             plant.advance(t_s - plant.t_s)
 
     def inputs(self, t_s: float) -> TickInputs:
-        return TickInputs(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s)
+        return TickInputs(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
+                          self.target, self.target_rx_t_s)
 
 
 def truth_columns(plant: AirframePlant) -> dict:
@@ -137,8 +157,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     seed = cfg.sim.seed if seed is None else seed
     plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
     schedule = FaultSchedule(cfg.faults, seed)
-    trajectory = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
-    tick = Tick(cfg, trajectory)
+    tick = Tick(cfg, experiment_trajectory(cfg))
     sensors = WireSensors(cfg, plant, schedule) if schedule.touches_sensors else _Sensors(cfg, plant)
     plant_faults = PlantFaults(schedule, plant)
     period = cfg.loop.period_s

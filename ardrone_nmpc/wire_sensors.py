@@ -31,6 +31,7 @@ from ardrone_nmpc.protocol.navdata import (
     decode_navdata,
     encode_navdata,
 )
+from ardrone_nmpc.sim.target import target_pose
 from ardrone_nmpc.types import FlightMode
 
 _CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
@@ -74,7 +75,10 @@ class WireSensors:
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
         self.mocap_latency_s = cfg.sim.noise.mocap_latency_ms * 1e-3
         self.nav_period_s = 1.0 / cfg.sim.navdata_rate_hz
-        self.mocap = MocapLink("127.0.0.1", 0, object_name=self.object_name)  # never opened
+        self.target_cfg = cfg.sim.target
+        others = (self.target_cfg.object_name,) if self.target_cfg is not None else ()
+        self.mocap = MocapLink("127.0.0.1", 0, object_name=self.object_name,  # never opened
+                               other_objects=others)
         self.nav_stats = LinkStats(window_s=1.0)
         self.nav = None
         self.nav_rx_t_s = -math.inf
@@ -117,6 +121,11 @@ class WireSensors:
             items.append(MocapObjectPose(
                 self.object_name, (float(p[0]) * 1e3, float(p[1]) * 1e3, float(p[2]) * 1e3),
                 (float(r[0]), float(r[1]), float(r[2]))))
+        if self.target_cfg is not None:  # the scripted second object shares the frame
+            tp = target_pose(self.target_cfg, t_s)
+            items.append(MocapObjectPose(
+                self.target_cfg.object_name, tuple(float(v) * 1e3 for v in tp.position_m),
+                (0.0, 0.0, tp.psi_rad)))
         data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
         latency = self.mocap_latency_s + sched.mocap_extra_latency_s(t_exp)
         self._send("mocap", t_s, t_s + latency, data)
@@ -178,4 +187,6 @@ class WireSensors:
 
     def inputs(self, t_s: float) -> TickInputs:
         pose, pose_rx = self.mocap.latest()
-        return TickInputs(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s)
+        target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
+                             if self.target_cfg is not None else (None, -math.inf))
+        return TickInputs(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)

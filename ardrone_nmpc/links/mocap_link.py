@@ -77,7 +77,8 @@ class MocapLink:
 
     def __init__(self, bind_host: str = "0.0.0.0", port: int = MOCAP_DEFAULT_PORT, *,
                  object_name: str = "ardrone", clock: Clock = time.monotonic,
-                 repeat_limit: int = 3, restart_backjump: int = 1000) -> None:
+                 repeat_limit: int = 3, restart_backjump: int = 1000,
+                 other_objects: tuple[str, ...] = ()) -> None:
         if not isinstance(object_name, str) or not object_name:
             raise ValueError("object_name must be a non-empty string")
         if repeat_limit < 2:
@@ -101,6 +102,8 @@ class MocapLink:
         self._repeats = 0
         self._poses = 0
         self._last_error: str | None = None
+        self.other_objects = tuple(other_objects)
+        self._others: dict[str, tuple[MocapPose, float]] = {}
         self.stats = LinkStats(window_s=1.0, restart_backjump=restart_backjump)
         """Stream statistics: rate, frame-number gaps (``lost``), malformed, out of order."""
 
@@ -143,6 +146,12 @@ class MocapLink:
         ``(None, -inf)`` before the first."""
         with self._lock:
             return self._pose, self._rx_t_s
+
+    def latest_of(self, name: str) -> tuple[MocapPose | None, float]:
+        """``(pose, rx_t_s)`` of another tracked object (``other_objects``); ``(None, -inf)``
+        before its first fresh pose."""
+        with self._lock:
+            return self._others.get(name, (None, -math.inf))
 
     def age_ms(self, now_s: float) -> float:
         """Milliseconds since the newest fresh pose was received (inf before the first)."""
@@ -207,6 +216,11 @@ class MocapLink:
         if not stats.accept_sequence(frame.frame_number):
             return
         stats.record_packet(t_s)
+        for name in self.other_objects:  # e.g. the object a 'follow' reference tracks
+            other = frame.poses.get(name)
+            if other is not None and other.fresh:
+                with self._lock:
+                    self._others[name] = (mocap_pose_of(other, t_s), t_s)
         pose = frame.poses.get(self.object_name)
         if pose is None:
             self._missing += 1

@@ -159,7 +159,8 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
         mocap = MocapServer(plant, target=(mocap_host, mocap_port), rate_hz=cfg.sim.mocap_rate_hz,
                             object_name=cfg.mocap.object_name,
                             latency_ms=cfg.sim.noise.mocap_latency_ms, lock=drone.lock,
-                            drop_probability=mocap_drop_probability, seed=seed, faults=faults)
+                            drop_probability=mocap_drop_probability, seed=seed, faults=faults,
+                            second_object=cfg.sim.target)
     except BaseException:
         drone.stop()
         raise

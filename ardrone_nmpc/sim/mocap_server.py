@@ -34,6 +34,7 @@ from ..protocol.mocap import MOCAP_DEFAULT_PORT, MocapFrame, MocapObjectPose, en
 from .drone_server import require_loopback_host
 from .fault_injection import NO_MOCAP_FAULT, ServerFaults
 from .plant import AirframePlant
+from .target import target_pose
 
 __all__ = ["MocapServer", "MocapServerCounters"]
 
@@ -83,7 +84,7 @@ class MocapServer:
                  lock=None, drop_probability: float = 0.0, seed: int = 0, first_frame: int = 1,
                  max_catchup_s: float = 0.25,
                  clock: Callable[[], float] = time.monotonic,
-                 faults: Optional[ServerFaults] = None) -> None:
+                 faults: Optional[ServerFaults] = None, second_object=None) -> None:
         host, port = target
         host = require_loopback_host(host, "mocap target")
         port = int(port)
@@ -100,6 +101,7 @@ class MocapServer:
         # validates the name (ASCII, 1..24 characters) once, up front
         encode_mocap(MocapFrame.of(0, [MocapObjectPose(object_name, (1.0, 0, 0), (0, 0, 0))]))
         self.plant = plant
+        self.second_object = second_object  # a sim.target config: a scripted second object
         self.target = (host, port)
         self.rate_hz = float(rate_hz)
         self.object_name = object_name
@@ -174,6 +176,7 @@ class MocapServer:
         ``"zero"`` sends it at an all-zero pose (a tracker's "not seen" convention)."""
         with self._lock:
             pose = self.plant.mocap_pose()
+            t_plant_s = self.plant.t_s
         p, r = pose.position_m, pose.rotation_xyz_rad
         if occlusion == "missing":
             items = []
@@ -183,6 +186,11 @@ class MocapServer:
             items = [MocapObjectPose(
                 self.object_name, (float(p[0]) * 1000.0, float(p[1]) * 1000.0,
                                    float(p[2]) * 1000.0), (float(r[0]), float(r[1]), float(r[2])))]
+        if self.second_object is not None:  # on the plant's clock, as in lockstep
+            other = target_pose(self.second_object, t_plant_s)
+            items.append(MocapObjectPose(self.second_object.object_name,
+                                         tuple(float(v) * 1000.0 for v in other.position_m),
+                                         (0.0, 0.0, other.psi_rad)))
         return encode_mocap(MocapFrame.of(frame_number & 0xFFFFFFFF, items))
 
     def _run(self) -> None:

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ardrone_nmpc.recorder import read_run
@@ -116,3 +117,26 @@ def test_sigkill_mid_flight_leaves_a_readable_run(tmp_path):
     assert run.n_rows == complete >= 30  # every finished row, at most a torn last one lost
     assert len(lines) - 1 - complete <= 1
     assert "takeoff" in [e["kind"] for e in _events(run_dir)]
+
+
+@pytest.mark.timeout(120)
+def test_fly_sim_follows_the_streamed_car(tmp_path):
+    """The loopback mocap stream carries the scripted car; the link tracks it; the tick
+    follows it — the same path as lockstep, over UDP."""
+    proc = subprocess.run([sys.executable, "-m", "ardrone_nmpc.cli", "fly",
+                           "configs/follow_car.yaml", "--sim", "--no-dashboard", "--log-dir",
+                           str(tmp_path), "--duration-s", "6", "--set", "sim.settle_s=2"],
+                          capture_output=True, text=True, timeout=110,
+                          cwd=Path(__file__).parents[2])
+    assert proc.returncode == 0, proc.stderr
+    run = read_run(_run_line(proc.stdout))
+    c = run.columns
+    seen = np.isfinite(c["target_x_m"])
+    assert seen.mean() > 0.9
+    # the reference is the car plus 1 m up (the car moves on a 1 m circle at 0.3 m/s)
+    np.testing.assert_allclose(c["z_ref_m"][seen], c["target_z_m"][seen] + 1.0, atol=1e-9)
+    radius = np.hypot(c["target_x_m"][seen], c["target_y_m"][seen])
+    np.testing.assert_allclose(radius, 1.0, atol=0.01)
+    late = c["t_s"] > 2
+    gap = np.hypot(c["x_m"][late] - c["target_x_m"][late], c["y_m"][late] - c["target_y_m"][late])
+    assert np.median(gap) < 0.25

@@ -64,10 +64,12 @@ def test_defaults_are_the_thesis_values():
         100, 250, 1000)
 
 
-def test_no_file_and_empty_file_and_empty_mapping_all_give_the_defaults(tmp_path):
+def test_no_file_and_empty_mapping_give_the_defaults_an_empty_file_is_an_error(tmp_path):
     assert load_config() == ExperimentConfig()
-    assert load_config(write(tmp_path, "")) == ExperimentConfig()
+    assert load_config(write(tmp_path, "{}\n")) == ExperimentConfig()
     assert config_from_dict({}) == ExperimentConfig()
+    with pytest.raises(ConfigError, match=r"empty file \(no settings\); write \{\} in it"):
+        load_config(write(tmp_path, "# only a comment\n"))
 
 
 def test_config_is_frozen():
@@ -179,7 +181,7 @@ def test_scientific_notation_without_a_dot_is_a_float(tmp_path):
 def test_relative_path_file_is_resolved_against_the_config_directory(tmp_path, monkeypatch):
     sub = tmp_path / "sub"
     sub.mkdir()
-    (sub / "traj.csv").write_text("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n")
+    (sub / "traj.csv").write_text("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n1,1,0,1,0\n")
     config = write(sub, "reference: {kind: path, path_file: traj.csv}\n")
     monkeypatch.chdir(tmp_path)  # not the config's directory
     cfg = load_config(config)

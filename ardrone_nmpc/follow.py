@@ -1,0 +1,98 @@
+"""Reference kind ``follow``: the desired state taken live from a second mocap object.
+
+Each tick the runner hands :meth:`LiveTarget.observe` the object's newest pose with its age;
+:meth:`LiveTarget.state_at` then answers the controller's horizon like any
+:class:`~ardrone_nmpc.reference.Trajectory`: the object's position plus the configured offset,
+extrapolated at its estimated velocity (``follow.predict``), so the NMPC plans to where the
+object will be, not where it was. The velocity comes from differences of successive poses
+through a first-order filter (time constant ``follow.velocity_filter_s``). Before the object is
+seen the reference holds ``reference.start_m``; once its pose is older than
+``follow.max_age_ms`` the reference stops extrapolating and holds the last position.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ardrone_nmpc.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
+
+__all__ = ["LiveTarget"]
+
+_MAX_EXTRAPOLATION_S = 3.0  # never plan further ahead on a guessed velocity than this
+
+
+class LiveTarget:
+    """A :class:`~ardrone_nmpc.reference.Trajectory` that follows a tracked object.
+
+    Parameters
+    ----------
+    ref_cfg : :class:`~ardrone_nmpc.config.ReferenceConfig` with ``kind: follow``.
+    """
+
+    duration_s = math.inf
+
+    def __init__(self, ref_cfg) -> None:
+        f = ref_cfg.follow
+        self.cfg = f
+        self.start_m = np.asarray(ref_cfg.start_m, dtype=np.float64)
+        self.fixed_psi_rad = float(ref_cfg.start_psi_rad)
+        self._offset = np.asarray(f.offset_m, dtype=np.float64)
+        self._pos: np.ndarray | None = None   # object position (m) at _t_pose_s
+        self._psi = 0.0
+        self._vel = np.zeros(3)
+        self._t_pose_s = -math.inf            # experiment time of the newest pose
+        self._stamp = None                    # the pose's own stamp (a new pose or not)
+        self._fresh = False
+
+    # ------------------------------------------------------------------ measurements
+    def observe(self, pose, *, t_pose_s: float, age_ms: float) -> None:
+        """The object's newest ``pose`` (MocapPose or None), seen at experiment time
+        ``t_pose_s`` (s), ``age_ms`` old now."""
+        self._fresh = pose is not None and age_ms <= self.cfg.max_age_ms
+        if pose is None or pose.t_s == self._stamp:
+            return
+        p = np.asarray(pose.position_m, dtype=np.float64)
+        if self._pos is not None and t_pose_s > self._t_pose_s:
+            dt = t_pose_s - self._t_pose_s
+            a = dt / (dt + self.cfg.velocity_filter_s)
+            self._vel = (1.0 - a) * self._vel + a * (p - self._pos) / dt
+        self._pos, self._psi, self._t_pose_s, self._stamp = p, float(pose.psi_rad), t_pose_s, pose.t_s
+
+    @property
+    def seen(self) -> bool:
+        return self._pos is not None
+
+    @property
+    def object_position_m(self) -> np.ndarray | None:
+        return None if self._pos is None else self._pos.copy()
+
+    # ------------------------------------------------------------------ the reference
+    def _offset_world(self) -> np.ndarray:
+        if self.cfg.offset_frame == "world":
+            return self._offset
+        c, s = math.cos(self._psi), math.sin(self._psi)
+        ox, oy, oz = self._offset
+        return np.array([c * ox - s * oy, s * ox + c * oy, oz])
+
+    def state_at(self, t_s) -> np.ndarray:
+        """Desired states ``(len(t), 7)`` at experiment times ``t_s`` (s)."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
+        out = np.zeros((t.size, STATE_DIM))
+        psi = self._psi if self.cfg.heading == "object" else self.fixed_psi_rad
+        out[:, IX_PSI] = psi
+        if self._pos is None:
+            out[:, [IX_X, IX_Y, IX_Z]] = self.start_m
+            return out
+        moving = self.cfg.predict and self._fresh
+        vel = self._vel if moving else np.zeros(3)
+        ahead = np.clip(t - self._t_pose_s, 0.0, _MAX_EXTRAPOLATION_S)
+        base = self._pos + self._offset_world()
+        out[:, [IX_X, IX_Y, IX_Z]] = base + ahead[:, None] * vel
+        out[:, [IX_VX, IX_VY, IX_VZ]] = vel
+        return out
+
+    def polyline_m(self) -> np.ndarray:
+        """Where the reference is now, (1, 3) (the path is not known in advance)."""
+        return self.state_at(self._t_pose_s if self.seen else 0.0)[:, [IX_X, IX_Y, IX_Z]]
