@@ -519,12 +519,14 @@ def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str
     from .reference import ReferenceError, make_trajectory
 
     cfg = run.config
+    logged = np.column_stack([_col(run, c)[rows] for c in ("x_ref_m", "y_ref_m", "z_ref_m")])
+    if cfg.reference.kind == "follow":  # a live reference: only the log knows where it went
+        return logged, "reference (follow, logged)"
     try:
         return make_trajectory(cfg.reference, duration_s=cfg.duration_s).polyline_m(), \
             f"reference ({cfg.reference.kind})"
     except (ReferenceError, OSError, ValueError):
-        ref = np.column_stack([_col(run, c)[rows] for c in ("x_ref_m", "y_ref_m", "z_ref_m")])
-        return ref, "reference (logged)"
+        return logged, "reference (logged)"
 
 
 def _flown(run: RunData) -> tuple[np.ndarray, str]:
@@ -592,6 +594,14 @@ def figure_path3d(run: RunData) -> Figure:
         ax.plot(*(xyz[-1:, d] for d in dims), "s", color="tab:red", label="end")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
+    target = np.column_stack([_col(run, c) for c in ("target_x_m", "target_y_m", "target_z_m")
+                              if c in run.columns] or [np.empty(0)])
+    if target.shape[1:] == (3,) and np.isfinite(target).any():  # the followed object
+        target = target[_experiment(run) & np.all(np.isfinite(target), axis=1)]
+        # top-down only: the object drives below the flight altitude, off the 3-D z range
+        ax2.plot(target[:, 0], target[:, 1], color="tab:orange", linewidth=1.0, alpha=0.8,
+                 label="followed object")
+        ax2.legend(**_LEGEND)
     _path_limits(ax3, ax2, xyz, ref)
     ax3.set_zlabel("z (m)")
     ax3.set_box_aspect(None, zoom=0.85)  # room for the z label next to the top-down view

@@ -134,3 +134,17 @@ def test_rerun_of_a_follow_flight_is_exact(tmp_path):
     run, _ = fly(tmp_path, "duration_s=4")
     result = rerun(run=run, cfg=run.config)
     assert max(result.max_abs_diff.values()) == 0.0
+
+
+def test_path_plot_draws_the_followed_object(tmp_path):
+    pytest.importorskip("matplotlib")
+    from ardrone_nmpc.plots import figure_path3d
+
+    run, _ = fly(tmp_path, "duration_s=3")
+    fig = figure_path3d(run)
+    top = fig.axes[1]
+    lines = {line.get_label(): line for line in top.get_lines()}
+    assert "followed object" in lines and "reference (follow, logged)" in lines
+    shown = lines["followed object"].get_xdata()
+    logged = run.columns["target_x_m"][(run.columns["t_s"] >= 0)]
+    np.testing.assert_array_equal(shown, logged[np.isfinite(logged)])
