@@ -109,7 +109,7 @@ def _crossing_time(t: np.ndarray, e: np.ndarray, k: int) -> float:
 
 
 def step_metrics(t_s: np.ndarray, y: np.ndarray, *, y0: float, y_final: float, t_step_s: float,
-                 band: float = 0.02) -> dict[str, float]:
+                 band: float = 0.02, min_dwell_s: float = 1.0) -> dict[str, float]:
     """Step-response metrics of ``y`` (any unit) for a step ``y0 → y_final`` at ``t_step_s``.
 
     Samples with a non-finite time or value are ignored; times must increase. Crossing times
@@ -122,7 +122,8 @@ def step_metrics(t_s: np.ndarray, y: np.ndarray, *, y0: float, y_final: float, t
         (after ``t_step_s``); NaN if y never gets there.
         ``settling_time_s`` — s after ``t_step_s`` from which ``|y − y_final|`` stays within
         ``band·|y_final − y0|`` up to the end of the record; 0 if always within; NaN if the last
-        sample is outside (never settles).
+        sample is outside, or if that final stay inside lasts less than ``min_dwell_s`` (an
+        oscillation that happens to end in the band has not settled).
         ``overshoot_pct`` — largest excursion beyond ``y_final`` in the direction of the step,
         % of ``|y_final − y0|``; 0 if y never passes ``y_final``.
         ``steady_state_error`` — mean of ``y − y_final`` over the last 10 % of the record's time
@@ -177,7 +178,8 @@ def step_metrics(t_s: np.ndarray, y: np.ndarray, *, y0: float, y_final: float, t
     else:
         k = int(outside[-1]) + 1  # first sample of the final stay inside
         # crossing of the band edge between k-1 (outside) and k (inside)
-        settling = _crossing_time(t, -err, k) - float(t_step_s)
+        t_in = _crossing_time(t, -err, k)
+        settling = t_in - float(t_step_s) if float(t[-1]) - t_in >= min_dwell_s else math.nan
 
     overshoot = max(0.0, float(np.max(s)) - 1.0) * 100.0
 

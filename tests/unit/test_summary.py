@@ -371,3 +371,20 @@ def test_render_summary_and_side_by_side():
     assert "1.235" in line and "2.5" in line
     line = next(x for x in text.splitlines() if "mean_deviation" in x)
     assert "0.1045" in line and "1.235" not in line
+
+
+def test_an_oscillation_ending_in_the_band_has_not_settled():
+    """A sustained ±20 % oscillation sampled so that its last sample is inside the 2 % band:
+    the final stay inside is one sample long, shorter than min_dwell_s → NaN, not 'settled
+    at the end of the run'."""
+    t = np.arange(0.0, 30.0, 0.065)
+    y = 1.0 + 0.2 * np.sin(2 * np.pi * t / 2.25)
+    y[-1] = 1.0  # the record happens to end on the target
+    m = step_metrics(t, y, y0=0.0, y_final=1.0, t_step_s=0.0)
+    assert math.isnan(m["settling_time_s"])
+    # a response that really settles keeps its settling time
+    y_ok = 1.0 - np.exp(-t)
+    m_ok = step_metrics(t, y_ok, y0=0.0, y_final=1.0, t_step_s=0.0)
+    assert m_ok["settling_time_s"] == pytest.approx(-math.log(0.02), abs=0.07)
+    assert step_metrics(t, y, y0=0.0, y_final=1.0, t_step_s=0.0, min_dwell_s=0.0)[
+        "settling_time_s"] > 29.0
