@@ -138,6 +138,10 @@ def flight_mode_of(state: DroneState, ctrl_major: int | None) -> FlightMode:
 
 
 def _wrap_deg(a: float) -> float:
+    # A checksum-valid packet may carry ±inf (the wire is float32); math.remainder(inf, …)
+    # raises, which would kill the receiver thread. NaN marks the sample as unusable instead.
+    if not math.isfinite(a):
+        return math.nan
     r = math.remainder(a, 360.0)
     return 180.0 if r <= -180.0 else r
 

@@ -451,7 +451,7 @@ def config_for(kind, tmp_path):
 
 def test_every_config_kind_is_covered():
     assert set(KINDS) == {"hover", "step", "square", "square_altitudes", "ellipse", "lorenz",
-                          "path"}
+                          "path", "follow"}
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -466,7 +466,7 @@ def test_make_trajectory_every_kind_from_defaults(kind, tmp_path):
     assert poly.ndim == 2 and poly.shape[1] == 3 and len(poly) >= 1
     if len(poly) > 1:
         assert segment_lengths(poly).min() > 0
-    if kind not in ("hover", "step"):
+    if kind not in ("hover", "step", "follow"):  # follow: a live point until the object is seen
         assert segment_lengths(poly).max() <= POLYLINE_SPACING_M + 1e-12
 
 
