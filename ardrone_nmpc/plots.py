@@ -294,6 +294,14 @@ def figure_tracking(run: RunData) -> Figure:
         ax.set_ylabel(ylabel)
         _min_span(ax, _TRACK_MIN_SPAN[axis])
     _vz_panel(axes[4], run, rows, t, truth)
+    _finish_time_panels(fig, axes, run, rows, t, "tracking")
+    return fig
+
+
+def _finish_time_panels(fig: Figure, axes, run: RunData, rows: np.ndarray, t: np.ndarray,
+                        what: str) -> None:
+    """Shared finish of the stacked time panels: fallback shading, grids, legends, the time
+    axis over the experiment, the title."""
     _shade_fallbacks(axes, t, _strings(run, "mode")[rows])
     for ax in axes:
         ax.grid(True, alpha=0.3)
@@ -301,8 +309,7 @@ def figure_tracking(run: RunData) -> Figure:
     axes[-1].set_xlabel("t (s)")
     if t.size > 1:
         axes[-1].set_xlim(t[0], t[-1])
-    fig.suptitle(_run_title(run, "tracking"))
-    return fig
+    fig.suptitle(_run_title(run, what))
 
 
 def _vz_panel(ax: Axes, run: RunData, rows: np.ndarray, t: np.ndarray, truth: bool) -> None:
@@ -353,14 +360,7 @@ def figure_inputs(run: RunData) -> Figure:
         ax.set_title(title, loc="left")
         ax.set_ylabel(ylabel)
     _pcmd_panel(axes[4], run, rows, t)
-    _shade_fallbacks(axes, t, _strings(run, "mode")[rows])
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-        ax.legend(**_LEGEND)
-    axes[-1].set_xlabel("t (s)")
-    if t.size > 1:
-        axes[-1].set_xlim(t[0], t[-1])
-    fig.suptitle(_run_title(run, "inputs"))
+    _finish_time_panels(fig, axes, run, rows, t, "inputs")
     return fig
 
 
