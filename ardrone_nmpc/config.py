@@ -538,7 +538,10 @@ class SafetyConfig(_Section):
     """Supervisor limits and policies (ardrone_nmpc/safety.py): outside them it holds the last
     command, falls back to the P controller, hovers or lands."""
 
-    geofence_min_m: Vec3 = Field((-3.0, -3.0, 0.0), description="Geofence lower corner [x, y, z] (m).")
+    # z below the floor: a drone resting on it reads ±0.5 mm around 0, which is no breach.
+    geofence_min_m: Vec3 = Field(
+        (-3.0, -3.0, -0.2), description="Geofence lower corner [x, y, z] (m); z a little "
+        "below the floor, so that mocap noise on the ground is no breach.")
     geofence_max_m: Vec3 = Field((3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
     geofence_action: Literal["land", "hover"] = Field(
         "land", description="What the drone does when its measured position leaves the geofence.")
