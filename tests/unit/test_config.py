@@ -141,7 +141,7 @@ def test_unknown_keys_are_rejected_at_their_path(tmp_path, text, expected):
          "safety.mocap_land_ms: must be greater than mocap_hover_ms"),
         ("safety: {mocap_hold_ms: 300}",
          "safety.mocap_hover_ms: must be greater than mocap_hold_ms"),
-        ("safety: {geofence_max_m: [3, 3, 0]}",
+        ("safety: {geofence_max_m: [3, 3, -0.5]}",
          "safety.geofence_max_m: must be greater than geofence_min_m at index 2"),
         ("drone: {keepalive_interval_s: 0.05}",
          "drone.keepalive_interval_s: Input should be less than or equal to 0.03"),
