@@ -251,11 +251,6 @@ class ControllerConfig(_Section):
         2000.0, description="Weight w of the obstacle penalty ½ w max(0, d² − ‖p − c‖²)² in the "
         "stage cost (1/m⁴, relative to q and r). Larger: less intrusion into the margin, a "
         "stiffer problem for GMRES.")
-    obstacle_knee_m: Positive = Field(
-        0.02, description="Intrusion depth (m) into d beyond which the obstacle penalty grows "
-        "only linearly in the squared-distance intrusion (a Huber function): near the boundary "
-        "it is stiff, and a plan through an obstacle gets a bounded push instead of residuals "
-        "that trip the Newton re-projection and divergence thresholds.")
     obstacle_tie_break_m: NonNegative = Field(
         0.05, description="Tie-break of head-on approaches (m): each tick the penalty's centre "
         "moves this far to the left of the line of sight from the drone, and d grows by as "

@@ -18,9 +18,9 @@ and ``F`` stacks the stationarity conditions per stage (eq. 3.21). Stage layouts
   ``s = (u − c)/w``. ``F`` is the gradient of the barrier-augmented cost and ``F_U`` its
   symmetric Hessian, on which restarted GMRES(5) converges; on the indefinite ``m = 12``
   system it stagnates (docs/solver-notes.md).
-* obstacles (any layout) — an exterior penalty ``w φ(max(0, d² − ‖p − c‖²))`` (φ a Huber
-  function, :mod:`~ardrone_nmpc.control.obstacles`) on every predicted position, the terminal
-  one included; its position gradient joins ``H_x`` in the costate recursion. Jacobian
+* obstacles (any layout) — an exterior penalty ``½ w max(0, d² − ‖p − c‖²)²``
+  (:mod:`~ardrone_nmpc.control.obstacles`) on every predicted position, the terminal one
+  included; its position gradient joins ``H_x`` in the costate recursion. Jacobian
   products see its Gauss–Newton curvature and Newton line searches the cost
   (:func:`condensed_cost`) as merit, so that the iterations head for a way round an obstacle,
   not for the stationary path through its centre (docs/solver-notes.md §7).

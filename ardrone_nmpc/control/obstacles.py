@@ -3,18 +3,16 @@
 Formulation (docs/solver-notes.md §7). Each obstacle ``k`` adds to every stage cost
 ``L_i`` (``i = 0 … N``, the terminal state included, each weighted by Δτ like a stage)::
 
-    P_k(p) = w_k · φ(max(0, d_k² − ‖p − c_k‖²)),   φ(e) = ½ e²             for e ≤ e_k
-                                                    φ(e) = e_k (e − ½ e_k)  beyond
+    P_k(p) = ½ w_k · max(0, d_k² − ‖p − c_k‖²)²
 
 with ``p`` the predicted position, ``c_k`` the centre, ``d_k = radius + margin`` the
-constraint distance and ``e`` the intrusion (m²). A cylinder (vertical, unbounded in height)
-measures the horizontal distance only. The penalty is C¹ (a Huber function of the
-intrusion): zero and flat outside ``d_k``, stiff (``w_k``) near the boundary, where it decides
-the clearance, and only linear in deep intrusions — a plan that runs through an obstacle gets
-a bounded push, not residuals in the thousands that would trip the solver's Newton
-re-projection and divergence thresholds. Its gradient ``−2 w_k min(e, e_k) (p − c_k)`` keeps
-the optimality residual the gradient of a cost; it enters the costates as ``∂L/∂x``
-(λ̇ = −H_x).
+constraint distance and ``e = d_k² − ‖p − c_k‖²`` the intrusion (m²). A cylinder (vertical,
+unbounded in height) measures the horizontal distance only. The penalty is C¹: zero and flat
+outside ``d_k``, growing without bound inside. Its gradient ``−2 w_k max(0, e) (p − c_k)``
+keeps the optimality residual the gradient of a cost; it enters the costates as ``∂L/∂x``
+(λ̇ = −H_x). (A Huber variant, linear beyond a knee, bounded the residuals of plans through
+an obstacle but also the push out of it: a strong pull of the reference then overpowered it.
+Measured in docs/solver-notes.md §7.)
 
 Why a penalty and not a dummy-input constraint: the input bounds' condensed dummy inputs are
 a barrier, which needs a strictly feasible iterate; a state constraint is met or not by the
@@ -33,8 +31,8 @@ The table travels to the kernels as a runtime array (one row per obstacle, colum
 ``OBS_*``), so a moving obstacle can rewrite its centre every tick; the kernels write the
 effective columns ``OBS_E*`` from it. Like :mod:`ardrone_nmpc.model`, the functions here are
 plain Python (cheap to import: the summary uses :func:`clearance_m`) and numba-compatible;
-:mod:`~ardrone_nmpc.control.kernels` compiles them. They call nothing but ``min``, so that
-each compiles on its own.
+:mod:`~ardrone_nmpc.control.kernels` compiles them. They call no other function of theirs, so
+that each compiles on its own.
 """
 
 from __future__ import annotations
@@ -42,34 +40,29 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "KINDS", "KIND_CYLINDER", "KIND_SPHERE", "OBS_COLS", "OBS_DIST", "OBS_EDIST", "OBS_EKNEE",
-    "OBS_EX", "OBS_EY", "OBS_EZ", "OBS_KIND", "OBS_KNEE_DEPTH", "OBS_SHIFT", "OBS_WEIGHT",
-    "OBS_X", "OBS_Y", "OBS_Z", "aim_obstacles", "clearance_m", "obstacle_table", "penalty",
-    "penalty_gradient",
+    "KINDS", "KIND_CYLINDER", "KIND_SPHERE", "OBS_COLS", "OBS_DIST", "OBS_EDIST", "OBS_EX",
+    "OBS_EY", "OBS_EZ", "OBS_KIND", "OBS_SHIFT", "OBS_WEIGHT", "OBS_X", "OBS_Y", "OBS_Z",
+    "aim_obstacles", "clearance_m", "obstacle_table", "penalty", "penalty_gradient",
 ]
 
 # Columns of the obstacle table. The obstacle (from the config; a moving obstacle rewrites
-# X, Y, Z): kind, centre (m), constraint distance d (m), weight, knee depth (m), shift s (m) …
-OBS_KIND, OBS_X, OBS_Y, OBS_Z, OBS_DIST, OBS_WEIGHT, OBS_KNEE_DEPTH, OBS_SHIFT = range(8)
-# … and what the penalty uses, written by aim_obstacles each tick: centre (m), d (m), knee e_k
-# (m²).
-OBS_EX, OBS_EY, OBS_EZ, OBS_EDIST, OBS_EKNEE = range(8, 13)
-OBS_COLS = 13
+# X, Y, Z): kind, centre (m), constraint distance d (m), weight, tie-break shift s (m) …
+OBS_KIND, OBS_X, OBS_Y, OBS_Z, OBS_DIST, OBS_WEIGHT, OBS_SHIFT = range(7)
+# … and what the penalty uses, written by aim_obstacles each tick: centre (m), d (m).
+OBS_EX, OBS_EY, OBS_EZ, OBS_EDIST = range(7, 11)
+OBS_COLS = 11
 KIND_SPHERE = 0.0
 KIND_CYLINDER = 1.0
 KINDS = {"sphere": KIND_SPHERE, "cylinder": KIND_CYLINDER}
 
 
-def obstacle_table(obstacles, weight: float, knee_depth_m: float,
-                   tie_break_m: float = 0.0) -> np.ndarray:
+def obstacle_table(obstacles, weight: float, tie_break_m: float = 0.0) -> np.ndarray:
     """The kernels' (n, ``OBS_COLS``) table from config obstacles (``ObstacleConfig``).
 
     Parameters
     ----------
     obstacles : sequence with ``kind``, ``center_m`` (3,), ``radius_m``, ``margin_m``.
     weight : penalty weight ``w`` (1/m⁴ per unit of stage cost), the same for all.
-    knee_depth_m : intrusion depth (m) beyond which the penalty is linear in the intrusion
-        ``e`` (its knee ``e_k = d² − (d − depth)²``, m²).
     tie_break_m : the tie-break shift ``s`` (m).
 
     The effective columns start unshifted (:func:`aim_obstacles` sets them each tick).
@@ -80,7 +73,6 @@ def obstacle_table(obstacles, weight: float, knee_depth_m: float,
         table[k, OBS_X:OBS_Z + 1] = obs.center_m
         table[k, OBS_DIST] = obs.radius_m + obs.margin_m
         table[k, OBS_WEIGHT] = weight
-        table[k, OBS_KNEE_DEPTH] = knee_depth_m
         table[k, OBS_SHIFT] = tie_break_m
     aim_obstacles(table, np.array([np.nan] * 7))  # no line of sight: unshifted
     return table
@@ -92,7 +84,7 @@ def aim_obstacles(obs, x):
     The centre moves by the obstacle's shift ``s`` along the horizontal line of sight from
     ``(x, y)`` to it, turned 90° counter-clockwise (to its left), and ``d`` grows by ``s``;
     without a line of sight (right above or below the centre, or a non-finite ``x``) nothing
-    moves. The knee follows the effective ``d``.
+    moves.
     """
     for k in range(obs.shape[0]):
         sx = obs[k, OBS_X] - x[0]
@@ -104,14 +96,11 @@ def aim_obstacles(obs, x):
         obs[k, OBS_EX] = obs[k, OBS_X] + shift * left_x
         obs[k, OBS_EY] = obs[k, OBS_Y] + shift * left_y
         obs[k, OBS_EZ] = obs[k, OBS_Z]
-        d = obs[k, OBS_DIST] + shift
-        depth = min(obs[k, OBS_KNEE_DEPTH], d)
-        obs[k, OBS_EDIST] = d
-        obs[k, OBS_EKNEE] = d * d - (d - depth) * (d - depth)
+        obs[k, OBS_EDIST] = obs[k, OBS_DIST] + shift
 
 
 def penalty(obs, px, py, pz):
-    """``Σ_k w_k φ(max(0, d_k² − ‖p − c_k‖²))`` at the position ``(px, py, pz)`` (m), with the
+    """``Σ_k ½ w_k max(0, d_k² − ‖p − c_k‖²)²`` at the position ``(px, py, pz)`` (m), with the
     effective centres and distances."""
     total = 0.0
     for k in range(obs.shape[0]):
@@ -121,24 +110,20 @@ def penalty(obs, px, py, pz):
         d = obs[k, OBS_EDIST]
         intrusion = d * d - (dx * dx + dy * dy + dz * dz)
         if intrusion > 0.0:
-            knee = obs[k, OBS_EKNEE]
-            if intrusion <= knee:
-                total += 0.5 * obs[k, OBS_WEIGHT] * intrusion * intrusion
-            else:
-                total += obs[k, OBS_WEIGHT] * knee * (intrusion - 0.5 * knee)
+            total += 0.5 * obs[k, OBS_WEIGHT] * intrusion * intrusion
     return total
 
 
 def penalty_gradient(obs, px, py, pz, fx, fy, fz):
     """``∂/∂p`` of :func:`penalty` at ``p``, ``(g_x, g_y, g_z)``, with the direction of each
-    term taken at ``f``: ``Σ_k −2 w_k min(e_k(p), knee_k) (f − c_k)`` over the obstacles whose
-    intrusion ``e_k(p) = d_k² − ‖p − c_k‖²`` is positive.
+    term taken at ``f``: ``Σ_k −2 w_k e_k(p) (f − c_k)`` over the obstacles whose intrusion
+    ``e_k(p) = d_k² − ‖p − c_k‖²`` is positive.
 
     ``f = p`` is the exact gradient. A fixed ``f`` (the base point of a Jacobian–vector
     product) makes the product's derivative the Gauss–Newton curvature
-    ``4 w_k (f − c_k)(f − c_k)ᵀ`` (0 beyond the knee): it drops ``−2 w_k min(e, knee) I``, the
-    negative curvature that makes the path through an obstacle's centre a stationary point
-    that Newton steps are drawn to. Exactly zero outside every ``d_k``.
+    ``4 w_k (f − c_k)(f − c_k)ᵀ``: it drops ``−2 w_k e_k I``, the negative curvature that makes
+    the path through an obstacle's centre a stationary point that Newton steps are drawn to.
+    Exactly zero outside every ``d_k``.
     """
     gx = 0.0
     gy = 0.0
@@ -151,7 +136,7 @@ def penalty_gradient(obs, px, py, pz, fx, fy, fz):
         d = obs[k, OBS_EDIST]
         intrusion = d * d - (dx * dx + dy * dy + dz * dz)
         if intrusion > 0.0:
-            c = -2.0 * obs[k, OBS_WEIGHT] * min(intrusion, obs[k, OBS_EKNEE])
+            c = -2.0 * obs[k, OBS_WEIGHT] * intrusion
             gx += c * (fx - obs[k, OBS_EX])
             gy += c * (fy - obs[k, OBS_EY])
             gz += 0.0 if cylinder else c * (fz - obs[k, OBS_EZ])

@@ -13,8 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ardrone_nmpc.control.obstacles import (OBS_COLS, OBS_DIST, OBS_KNEE_DEPTH, OBS_SHIFT,
-                                            OBS_WEIGHT, obstacle_table)
+from ardrone_nmpc.control.obstacles import (OBS_COLS, OBS_DIST, OBS_SHIFT, OBS_WEIGHT,
+                                            obstacle_table)
 from ardrone_nmpc.types import INPUT_DIM, IX_PSI, STATE_DIM
 
 
@@ -76,8 +76,8 @@ class OcpSpec:
     u_min, u_max : (4,) input bounds (m/s², rad, rad, rad/s).
     horizon_ramp_rate_per_s : α of ``T(t) = N Δτ (1 − e^{−α t})``; 0 keeps Δτ fixed.
     obstacles : (n, ``OBS_COLS``) obstacle table (:func:`~ardrone_nmpc.control.obstacles.
-        obstacle_table`): kind, centre (m), constraint distance d (m), penalty weight, knee
-        depth (m), tie-break shift (m); none by default.
+        obstacle_table`): kind, centre (m), constraint distance d (m), penalty weight,
+        tie-break shift (m); none by default.
     obstacle_gauss_newton : the solvers' Jacobian products see the penalty's Gauss–Newton
         curvature (positive semi-definite), not its exact one.
     """
@@ -107,9 +107,9 @@ class OcpSpec:
         obstacles = np.array(self.obstacles, dtype=float).reshape(-1, OBS_COLS)
         if not np.all(np.isfinite(obstacles)):
             raise ValueError("obstacles: values must be finite")
-        positive = obstacles[:, [OBS_DIST, OBS_WEIGHT, OBS_KNEE_DEPTH]]
+        positive = obstacles[:, [OBS_DIST, OBS_WEIGHT]]
         if np.any(positive <= 0) or np.any(obstacles[:, OBS_SHIFT] < 0):
-            raise ValueError("obstacles: distances, weights and knee depths must be positive, "
+            raise ValueError("obstacles: distances and weights must be positive, "
                              "tie-break shifts ≥ 0")
         object.__setattr__(self, "obstacles", obstacles)
 
@@ -126,7 +126,7 @@ class OcpSpec:
             u_max=controller.u_max,
             horizon_ramp_rate_per_s=controller.solver.horizon_ramp_rate_per_s,
             obstacles=obstacle_table(controller.obstacles, controller.obstacle_weight,
-                                     controller.obstacle_knee_m, controller.obstacle_tie_break_m),
+                                     controller.obstacle_tie_break_m),
             obstacle_gauss_newton=controller.obstacle_curvature == "gauss-newton",
         )
 
