@@ -6,7 +6,7 @@ per subsystem::
     name: step_x                 # used in run-directory names
     duration_s: 20.0
     controller: {kind, horizon_steps, dtau_s, q, r, q_terminal, u_min, u_max, solver: {…}, p_gains: {…},
-                 obstacles: [{kind, center_m, radius_m, margin_m}, …], obstacle_weight}
+                 obstacles: [{kind, center_m, radius_m, margin_m}, …], obstacle_weight, …}
     estimator:  {kind, kalman_q, kalman_r, kalman_p0, luenberger_lambda0_per_s, …}
     reference:  {kind, start_m, target_m, step_time_s, side_m, …, path_file}
     loop:       {period_s}

@@ -68,4 +68,5 @@ def fingerprints() -> dict[str, np.ndarray]:
 if __name__ == "__main__":
     print(f"package: {Path(ardrone_nmpc.__file__).parent}")
     for key, values in fingerprints().items():
-        print(f"{key:16} {values.size:6} values  sha256 {hashlib.sha256(values.tobytes()).hexdigest()[:16]}")
+        digest = hashlib.sha256(values.tobytes()).hexdigest()[:16]
+        print(f"{key:16} {values.size:6} values  sha256 {digest}")
