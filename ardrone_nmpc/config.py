@@ -5,7 +5,8 @@ per subsystem::
 
     name: step_x                 # used in run-directory names
     duration_s: 20.0
-    controller: {kind, horizon_steps, dtau_s, q, r, q_terminal, u_min, u_max, solver: {…}, p_gains: {…}}
+    controller: {kind, horizon_steps, dtau_s, q, r, q_terminal, u_min, u_max, solver: {…}, p_gains: {…},
+                 obstacles: [{kind, center_m, radius_m, margin_m}, …], obstacle_weight, …}
     estimator:  {kind, kalman_q, kalman_r, kalman_p0, luenberger_lambda0_per_s, …}
     reference:  {kind, start_m, target_m, step_time_s, side_m, …, path_file}
     loop:       {period_s}
@@ -58,6 +59,7 @@ __all__ = [
     "LoopConfig",
     "MocapConfig",
     "NoiseConfig",
+    "ObstacleConfig",
     "PGainsConfig",
     "PlantConfig",
     "ReferenceConfig",
@@ -226,6 +228,23 @@ class PGainsConfig(_Section):
     k4_per_s: Positive = Field(1.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
 
 
+class ObstacleConfig(_Section):
+    """A static obstacle the NMPC keeps out of: the constraint ‖p − c‖ ≥ d, d = radius + margin.
+
+    A sphere measures the 3-D distance from its centre; a cylinder is vertical and unbounded
+    in height and measures the horizontal distance only (its centre's z is ignored).
+    """
+
+    kind: Literal["sphere", "cylinder"] = Field(
+        ..., description="'sphere' (3-D distance) or 'cylinder' (vertical; horizontal distance).")
+    center_m: Vec3 = Field(..., description="Centre [x, y, z] (m); z is ignored for a cylinder.")
+    radius_m: Positive = Field(..., description="Radius of the obstacle itself (m).")
+    margin_m: NonNegative = Field(
+        0.3, description="Safety margin added to the radius (m): the drone's half-size (≈ 0.26 m "
+        "with the indoor hull) plus a buffer. The NMPC keeps the drone's centre d = radius + "
+        "margin from the obstacle's centre.")
+
+
 class ControllerConfig(_Section):
     """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
 
@@ -259,6 +278,25 @@ class ControllerConfig(_Section):
         "the new command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); "
         "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
     solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
+    obstacles: tuple[ObstacleConfig, ...] = Field(
+        (), max_length=32, description="Static obstacles the NMPC avoids (exterior penalty on "
+        "‖p − c‖² ≥ d², docs/solver-notes.md §7); none by default. The P controller ignores "
+        "them.")
+    obstacle_weight: Positive = Field(
+        2000.0, description="Weight w of the obstacle penalty ½ w max(0, d² − ‖p − c‖²)² in the "
+        "stage cost (1/m⁴, relative to q and r). Larger: less intrusion into the margin, a "
+        "stiffer problem for GMRES.")
+    obstacle_tie_break_m: NonNegative = Field(
+        0.05, description="Tie-break of head-on approaches (m): each tick the penalty's centre "
+        "moves this far to the left of the line of sight from the drone, and d grows by as "
+        "much (the penalised region still covers the obstacle). A drone within this distance "
+        "of the line through the centre passes the obstacle on its right; 0 leaves the choice "
+        "to noise.")
+    obstacle_curvature: Literal["gauss-newton", "exact"] = Field(
+        "gauss-newton", description="Curvature of the obstacle penalty in the solvers' "
+        "Jacobian products: 'gauss-newton' drops the negative part, so the path through an "
+        "obstacle's centre repels the continuation instead of attracting it; 'exact' is the "
+        "true Hessian (for comparison).")
     p_gains: PGainsConfig = Field(
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")
 
@@ -715,6 +753,26 @@ class ExperimentConfig(_Section):
     sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
     safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
     faults: FaultsConfig = Field(default_factory=FaultsConfig, description="Injected faults (simulation).")
+
+    @field_validator("reference")
+    @classmethod
+    def _start_outside_obstacles(cls, value: ReferenceConfig, info: ValidationInfo
+                                 ) -> ReferenceConfig:
+        """The experiment must not start inside an obstacle's constraint distance d."""
+        controller = info.data.get("controller")
+        if controller is None:  # reported on its own
+            return value
+        for k, obs in enumerate(controller.obstacles):
+            offset = [p - c for p, c in zip(value.start_m, obs.center_m)]
+            if obs.kind == "cylinder":
+                offset[2] = 0.0
+            distance = math.sqrt(sum(o * o for o in offset))
+            d = obs.radius_m + obs.margin_m
+            if distance < d:
+                raise _invalid(f"start_m {list(value.start_m)} is {distance:.3g} m from "
+                               f"controller.obstacles.{k}, inside its radius + margin "
+                               f"({d:.3g} m)")
+        return value
 
 
 # ----------------------------------------------------------------------------- loading

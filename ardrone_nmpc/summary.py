@@ -23,6 +23,13 @@ What :func:`summarise` measures, and over which rows
   ticks (mode not ``landed``/``taking_off``/``landing``; all ticks when the mode column is empty
   or holds one value only). Paths and ``hover`` also get the RMSE of each axis against the
   logged reference columns over the same ticks, and the 3-D position RMSE (axis ``xyz``).
+* **Obstacles** (``controller.obstacles``; axis ``obstacle<k>``, k its index in the config):
+  ``min_clearance`` = min over the flight of ``‖p − c‖ − radius`` (m; horizontal distance
+  for a cylinder, negative inside the obstacle) and ``clearance_violations`` = ticks with
+  ``‖p − c‖ < d − CLEARANCE_TOLERANCE_M``, ``d = radius + margin`` the NMPC's constraint
+  distance (:func:`clearance_stats`). Over every flying tick with a finite position, the
+  settle phase included: a safety margin holds for the whole flight, not the experiment
+  window only.
 * **Inputs**: per input the peak |u| and the fraction of ticks at or beyond a bound of
   ``controller.u_min``/``u_max`` (:func:`input_stats`); per PCMD channel the fraction of ticks
   whose ``cmd_saturated`` flag is set.
@@ -47,6 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .angles import wrap_angle_rad
+from .control.obstacles import clearance_m
 from .recorder import SUMMARY_FILE, LogError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -55,10 +63,12 @@ if TYPE_CHECKING:  # pragma: no cover
     from .recorder import RunData
 
 __all__ = [
+    "CLEARANCE_TOLERANCE_M",
     "GROUND_MODES",
     "NOMINAL_MODE",
     "PATH_KINDS",
     "SummaryRow",
+    "clearance_stats",
     "input_stats",
     "path_deviation",
     "read_summary",
@@ -73,6 +83,8 @@ __all__ = [
 GROUND_MODES = frozenset({"landed", "taking_off", "landing"})
 #: The mode of a tick that tracks the experiment's reference; any other set mode is a fallback.
 NOMINAL_MODE = "track"
+#: A tick violates an obstacle's constraint when its centre is closer than d − this (m).
+CLEARANCE_TOLERANCE_M = 0.05
 #: Reference kinds measured by path deviation.
 PATH_KINDS = frozenset({"square", "square_altitudes", "ellipse", "lorenz", "path"})
 
@@ -273,6 +285,29 @@ def input_stats(u: np.ndarray, lower: Sequence[float], upper: Sequence[float], *
     return {"peak_abs": peak, "saturated_fraction": frac}
 
 
+def clearance_stats(positions_m: np.ndarray, obstacle, *,
+                    tolerance_m: float = CLEARANCE_TOLERANCE_M) -> dict[str, float]:
+    """Clearance of a path from one obstacle (``config.ObstacleConfig``).
+
+    Parameters
+    ----------
+    positions_m : (K, 3) positions (m); rows with a non-finite coordinate are ignored.
+    obstacle : with ``kind``, ``center_m``, ``radius_m``, ``margin_m``.
+    tolerance_m : how far inside ``d = radius + margin`` a tick may be before it counts.
+
+    Returns
+    -------
+    dict with ``min_clearance_m`` — min of ``‖p − c‖ − radius`` (horizontal for a cylinder;
+    NaN without positions) — and ``violations`` — the count of positions with
+    ``‖p − c‖ < d − tolerance_m``, i.e. clearance below ``margin − tolerance_m``.
+    """
+    p = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    clearance = clearance_m(p, obstacle)
+    return {"min_clearance_m": float(clearance.min()) if clearance.size else math.nan,
+            "violations": int(np.sum(clearance < obstacle.margin_m - tolerance_m))}
+
+
 def solver_stats(solve_us: np.ndarray, status: Sequence[str] | np.ndarray) -> dict[str, Any]:
     """Solve-time statistics and failed solves.
 
@@ -386,6 +421,15 @@ def summarise(run: RunData) -> list[SummaryRow]:
                 sq = sq + e * e
             add(SummaryRow(axis, "rmse", _rmse(e), unit))
         add(SummaryRow("xyz", "rmse", _rmse(np.sqrt(sq)), "m"))
+
+    # obstacles: every flying tick, settle phase included
+    flying = ~np.isin(mode, list(GROUND_MODES))
+    xyz_all = np.column_stack([pos["x"], pos["y"], pos["z"]])[flying]
+    for k, obstacle in enumerate(cfg.controller.obstacles):
+        cs = clearance_stats(xyz_all, obstacle)
+        add(SummaryRow(f"obstacle{k}", "min_clearance", cs["min_clearance_m"], "m"))
+        add(SummaryRow(f"obstacle{k}", "clearance_violations", float(cs["violations"]),
+                       "count"))
 
     # inputs
     u = np.column_stack([np.asarray(cols[c], dtype=np.float64) for _, c, _ in _INPUTS])[window]

@@ -22,6 +22,7 @@ import numpy as np
 
 from ardrone_nmpc.control import kernels
 from ardrone_nmpc.control.kernels import FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK
+from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus, SolveResult
 from ardrone_nmpc.types import INPUT_DIM, STATE_DIM
 
@@ -50,10 +51,12 @@ class NmpcSolverBase:
         self.tolerance = float(tolerance)
         self.divergence_residual = float(divergence_residual)
         newton_kmax = min(int(newton_kmax), spec.horizon_steps * self.stage_dim)
+        n_obs = spec.obstacles.shape[0]
         self._mem = np.zeros(kernels.memory_size(spec.horizon_steps, self.stage_dim,
-                                                 max(self.kmax, newton_kmax)))
-        (self.U, self.dU, self._u, self._stats, self._W, self._prm,
-         self._buf) = kernels.unpack(self._mem, spec.horizon_steps, self.stage_dim)
+                                                 max(self.kmax, newton_kmax), n_obs))
+        (self.U, self.dU, self._u, self._stats, self._W, self._prm, self.obstacles,
+         self._buf) = kernels.unpack(self._mem, spec.horizon_steps, self.stage_dim, n_obs)
+        self.obstacles[:] = spec.obstacles
         self._W[0], self._W[1] = spec.q, spec.q_terminal
         self._W[2, :INPUT_DIM] = spec.r
         self._W[3, :INPUT_DIM], self._W[4, :INPUT_DIM] = spec.u_min, spec.u_max
@@ -63,8 +66,8 @@ class NmpcSolverBase:
         self._prm[kernels.P_PERIOD] = period_s
         self._prm[kernels.P_TOL] = tolerance
         self._prm[kernels.P_DTAU] = self._prm[kernels.P_DTAU_NEXT] = spec.dtau_s
-        self._iprm = np.array([self.stage_dim, self.kmax, max_newton_iterations, newton_kmax],
-                              dtype=np.int64)
+        self._iprm = np.array([self.stage_dim, self.kmax, max_newton_iterations, newton_kmax,
+                               n_obs, spec.obstacle_gauss_newton], dtype=np.int64)
         self._ramped = spec.horizon_ramp_rate_per_s > 0
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
@@ -72,6 +75,14 @@ class NmpcSolverBase:
     @property
     def dummy_weight(self) -> float:
         return float(self._prm[kernels.P_RHO])
+
+    def move_obstacles(self, centres_m: np.ndarray) -> None:
+        """Set the obstacles' centres (n, 3) m for the next ticks (a moving obstacle)."""
+        centres = np.asarray(centres_m, dtype=float)
+        if centres.shape != (self.obstacles.shape[0], 3) or not np.all(np.isfinite(centres)):
+            raise ValueError(f"move_obstacles: expected {self.obstacles.shape[0]}×3 finite "
+                             f"centres, got shape {centres.shape}")
+        self.obstacles[:, OBS_X:OBS_Z + 1] = centres
 
     @property
     def inputs_horizon(self) -> np.ndarray:
@@ -174,6 +185,9 @@ class CGMRESController(NmpcSolverBase):
     condensed : eliminate dummy inputs and multipliers per stage in closed form (4 unknowns
         per stage instead of 12). Same equations; restarted GMRES(5) stagnates on the
         indefinite uncondensed system, so ``False`` is for comparison.
+
+    Obstacles come with the spec (``spec.obstacles``); :meth:`move_obstacles` changes their
+    centres between ticks.
 
     ``residual_norm`` in the result is ‖F(U, x, t)‖ at the new measurement, of the solution
     entering the tick (after the Newton re-projection when one ran): how far the

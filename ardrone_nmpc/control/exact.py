@@ -26,6 +26,9 @@ class IpoptController:
     """Per-tick exact optimum of the OCP, warm-started from the shifted previous solution."""
 
     def __init__(self, spec: OcpSpec, *, tolerance: float = 1e-8):
+        if spec.obstacles.shape[0]:
+            raise RuntimeError("the IPOPT comparison models no obstacles; "
+                               "set controller.obstacles=[] to compare")
         ca = _import_casadi()
         self.spec = spec
         n_stages, dtau = spec.horizon_steps, spec.dtau_s

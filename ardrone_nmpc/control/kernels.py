@@ -18,6 +18,12 @@ and ``F`` stacks the stationarity conditions per stage (eq. 3.21). Stage layouts
   ``s = (u − c)/w``. ``F`` is the gradient of the barrier-augmented cost and ``F_U`` its
   symmetric Hessian, on which restarted GMRES(5) converges; on the indefinite ``m = 12``
   system it stagnates (docs/solver-notes.md).
+* obstacles (any layout) — an exterior penalty ``½ w max(0, d² − ‖p − c‖²)²``
+  (:mod:`~ardrone_nmpc.control.obstacles`) on every predicted position, the terminal one
+  included; its position gradient joins ``H_x`` in the costate recursion. Jacobian
+  products see its Gauss–Newton curvature and Newton line searches the cost
+  (:func:`condensed_cost`) as merit, so that the iterations head for a way round an obstacle,
+  not for the stationary path through its centre (docs/solver-notes.md §7).
 * ``m = 8`` — the thesis' eq. 3.25: unknowns ``[u(4), ν(4)]`` and an active set
   ``a ∈ {−1, 0, +1}`` per input; an active bound imposes ``u = u_max − ε`` (``u_min + ε``), an
   inactive one ``ν = 0``. Rows ``H_u = r u + f_uᵀλ + a ν``, then the constraint or ``ν``.
@@ -26,7 +32,13 @@ Packed arguments keep the Python→numba call cheap (one dispatch per tick, few 
 
 * ``W`` (5, 7): rows ``q``, ``q_f``, ``r`` (first 4), ``u_min`` (first 4), ``u_max`` (first 4).
 * ``prm`` (9,): ``Δτ, Δτ(t+h), ρ_d, ζ, h, η, Δt_control, tolerance, Newton trigger ‖F‖``.
-* ``iprm`` (4,): ``m, kmax, max Newton iterations, kmax of a Newton solve``.
+* ``iprm`` (6,): ``m, kmax, max Newton iterations, kmax of a Newton solve, obstacles,
+  Gauss–Newton obstacle curvature (0/1)``.
+* ``obs`` (n_obs, ``OBS_COLS``): the obstacle table, rewritable between ticks. Kernels take
+  ``obs=None`` without obstacles: numba prunes every ``if obs is not None`` branch at compile
+  time, so the obstacle-free solver is the same machine code as before obstacles existed
+  (bit-identical results; a runtime ``n_obs == 0`` test would let LLVM's fast-math
+  contract and reassociate differently).
 * ``buf``: one flat workspace, carved by :func:`_views` (:func:`workspace_size` long).
 * ``stats`` (4,) out: ``Newton iterations, GMRES iterations, ‖F‖ after Newton, ‖F‖ at the
   continuation point``.
@@ -41,7 +53,9 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.control import obstacles
 from ardrone_nmpc.control.gmres import FAST_MATH, gmres_finish, gmres_iterate, gmres_start
+from ardrone_nmpc.control.obstacles import OBS_COLS
 from ardrone_nmpc.model import dynamics
 
 GRAVITY_MPS2 = 9.81
@@ -61,7 +75,13 @@ FRACTION_TO_BOUND = 0.99
 P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = range(9)
 N_PRM = 9
 ACTIVE_SET_ROUNDS = 8  # eq. 3.25 re-solves per tick at most
+# With obstacles, a Newton re-projection stops at this fraction of the trigger residual and
+# solves each Newton step to this relative GMRES residual (inexact Newton): its Gauss–Newton
+# iterations converge only linearly, and the continuation finishes the job (solver-notes §7).
+REPROJECTION_FRACTION = 0.5
+REPROJECTION_RTOL = 0.1
 NO_ACTIVE = np.zeros((1, 1), dtype=np.int8)  # the active set argument of layouts without one
+NO_BASE = np.zeros((1, 3))  # the base positions argument of exact evaluations
 # return flags
 FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE = 0, 1, 2
 
@@ -70,13 +90,15 @@ def workspace_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
     """Length of the flat ``buf`` for :func:`_views`."""
     n = horizon_steps * stage_dim
     rows = horizon_steps + 1
-    return 3 * rows * NX + rows * 5 + (kmax + 1) * n + (kmax + 1) * kmax + 3 * kmax + 1 + 7 * n + NX
+    return (3 * rows * NX + rows * 5 + (kmax + 1) * n + (kmax + 1) * kmax + 3 * kmax + 1 + 7 * n
+            + NX + rows * 3)
 
 
-def memory_size(horizon_steps: int, stage_dim: int, kmax: int) -> int:
+def memory_size(horizon_steps: int, stage_dim: int, kmax: int, n_obstacles: int = 0) -> int:
     """Length of one solver's packed float memory (see :func:`unpack`)."""
     n = horizon_steps * stage_dim
-    return 2 * n + NU + 4 + 5 * NX + N_PRM + workspace_size(horizon_steps, stage_dim, kmax)
+    return (2 * n + NU + 4 + 5 * NX + N_PRM + n_obstacles * OBS_COLS
+            + workspace_size(horizon_steps, stage_dim, kmax))
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
@@ -107,11 +129,18 @@ def rollout_rk4(x, inputs, dt, out):
 
 # Eq. 3.13 compiled from its single definition in ardrone_nmpc.model.
 _model = njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")(dynamics)
+# The obstacle penalty compiled from ardrone_nmpc.control.obstacles. (numba's cache keys on
+# this file: after editing obstacles.py, delete control/__pycache__/*.nb[ic].)
+penalty = njit(cache=True, error_model="numpy", fastmath=FAST_MATH)(obstacles.penalty)
+penalty_gradient = njit(cache=True, error_model="numpy", fastmath=FAST_MATH,
+                        inline="always")(obstacles.penalty_gradient)
+aim_obstacles = njit(cache=True, error_model="numpy", fastmath=FAST_MATH)(
+    obstacles.aim_obstacles)
 
 
 @njit(cache=True)
-def unpack(mem, n_stages, m):
-    """Views of one solver's packed memory: ``(U, dU, u_out, stats, W, prm, buf)``.
+def unpack(mem, n_stages, m, n_obs):
+    """Views of one solver's packed memory: ``(U, dU, u_out, stats, W, prm, obs, buf)``.
 
     One array instead of seven keeps the Python→numba call of every tick cheap (dispatch
     costs per argument); the Python side holds the same views.
@@ -124,12 +153,14 @@ def unpack(mem, n_stages, m):
     stats = mem[o:o + 4]; o += 4
     W = mem[o:o + 5 * NX].reshape((5, NX)); o += 5 * NX
     prm = mem[o:o + N_PRM]; o += N_PRM
-    return U, dU, u_out, stats, W, prm, mem[o:]
+    obs = mem[o:o + n_obs * OBS_COLS].reshape((n_obs, OBS_COLS)); o += n_obs * OBS_COLS
+    return U, dU, u_out, stats, W, prm, obs, mem[o:]
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def _views(buf, n_stages, m, kmax):
-    """Carve ``buf`` into (xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1)."""
+    """Carve ``buf`` into (xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1,
+    pbase)."""
     n = n_stages * m
     rows = n_stages + 1
     o = 0
@@ -149,8 +180,9 @@ def _views(buf, n_stages, m, kmax):
     Ft = buf[o:o + n]; o += n
     w = buf[o:o + n]; o += n
     dU = buf[o:o + n]; o += n
-    x1 = buf[o:o + NX]
-    return xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1
+    x1 = buf[o:o + NX]; o += NX
+    pbase = buf[o:o + rows * 3].reshape((rows, 3))
+    return xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1, pbase
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
@@ -178,6 +210,51 @@ def bound_gradient(s):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def bound_barrier(s):
+    """Antiderivative of :func:`bound_gradient`: ``−√(1 − s²)``, continued beyond S_MAX by
+    the quadratic whose slope is the tangent continuation."""
+    if abs(s) < S_MAX:
+        return -math.sqrt(1.0 - s * s)
+    s0 = S_MAX if s > 0 else -S_MAX
+    c = 1.0 - S_MAX * S_MAX
+    ds = s - s0
+    return -math.sqrt(c) + ds * s0 / math.sqrt(c) + 0.5 * ds * ds / (c * math.sqrt(c))
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def condensed_cost(U, xs, ref, dtau, W, rho, obs):
+    """The cost whose gradient is the condensed residual (``F = ∇_U J / Δτ``, m = 4).
+
+    ``J = Σ_i Δτ [½ e_iᵀ q e_i + ½ u_iᵀ r u_i + ρ Σ_j w_j b(s_ij) + P(x_i)]
+    + ½ e_Nᵀ q_f e_N + Δτ P(x_N)`` with ``e_i = x_i − x_d,i``, ``b`` :func:`bound_barrier`
+    (the eliminated dummy inputs' ``−ρ v``), ``P`` the obstacle penalty. ``xs`` must hold the
+    rollout of ``U`` (as :func:`residual` leaves it).
+    """
+    n_stages = ref.shape[0] - 1
+    q = W[0]
+    total = 0.0
+    for i in range(n_stages + 1):
+        weights = W[1] if i == n_stages else q
+        stage = 0.0
+        for k in range(NX):
+            e = xs[i, k] - ref[i, k]
+            stage += 0.5 * weights[k] * e * e
+        if i == n_stages:
+            total += stage + dtau * penalty(obs, xs[i, 0], xs[i, 2], xs[i, 4])
+            break
+        b = i * STAGE_CONDENSED
+        for j in range(NU):
+            u = U[b + j]
+            lo = W[3, j]
+            hi = W[4, j]
+            stage += 0.5 * W[2, j] * u * u
+            stage += rho * 0.5 * (hi - lo) * bound_barrier((2.0 * u - (hi + lo)) / (hi - lo))
+        stage += penalty(obs, xs[i, 0], xs[i, 2], xs[i, 4])
+        total += dtau * stage
+    return total
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def keep_inside(U_old, U_new, W):
     """Condensed layout: pull every input of ``U_new`` that left the box back inside.
 
@@ -195,13 +272,18 @@ def keep_inside(U_old, U_new, W):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_inputs=False):
+def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_inputs=False,
+             obs=None, base=NO_BASE, gauss_newton=False):
     """Evaluate ``F(U, x0, t)`` into ``out`` (N·m,); return ``‖F‖₂``.
 
     ``ref`` (N+1, 7): the reference at the stage times ``t + iΔτ``. ``xs`` (N+1, 7) ends
     holding the predicted trajectory; ``trig`` (N+1, 5) caches the forward pass' sin/cos/tan.
     ``same_inputs``: ``U`` is the one of the previous call, so the inputs' tan/sec in
     ``trig`` are still valid (saves 3N trig calls; ψ's are recomputed as ``x0`` may differ).
+    ``obs`` (n_obs, ``OBS_COLS``) or None: obstacles penalised at every predicted position.
+    ``gauss_newton``: take the penalty gradients' directions at ``base`` (N+1, 3), the
+    positions of a base rollout, instead of the positions of this one — for Jacobian–vector
+    products with Gauss–Newton curvature of the penalty (:func:`fdgmres`).
     """
     n_stages = ref.shape[0] - 1
     xs[0, :] = x0
@@ -242,6 +324,11 @@ def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_input
     l4 = qf[4] * (xs[n_stages, 4] - ref[n_stages, 4])
     l5 = qf[5] * (xs[n_stages, 5] - ref[n_stages, 5])
     l6 = qf[6] * (xs[n_stages, 6] - ref[n_stages, 6])
+    if obs is not None:  # the terminal state is penalised like a stage (weight Δτ)
+        g0, g2, g4 = _penalty_gradient_at(obs, xs, n_stages, base, gauss_newton)
+        l0 += dtau * g0
+        l2 += dtau * g2
+        l4 += dtau * g4
     q = W[0]
     norm2 = 0.0
     for i in range(n_stages - 1, -1, -1):
@@ -274,8 +361,23 @@ def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_input
         n4 = l4 + dtau * q[4] * (xs[i, 4] - ref[i, 4])
         n5 = l5 + dtau * (q[5] * (xs[i, 5] - ref[i, 5]) + l4)
         n6 = l6 + dtau * (q[6] * (xs[i, 6] - ref[i, 6]) + l1 * dxdpsi + l3 * dydpsi)
+        if obs is not None:  # + ∂P/∂x of the penalty in H_x
+            g0, g2, g4 = _penalty_gradient_at(obs, xs, i, base, gauss_newton)
+            n0 += dtau * g0
+            n2 += dtau * g2
+            n4 += dtau * g4
         l0, l1, l2, l3, l4, l5, l6 = n0, n1, n2, n3, n4, n5, n6
     return math.sqrt(norm2)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
+def _penalty_gradient_at(obs, xs, i, base, gauss_newton):
+    """Obstacle penalty gradient at the predicted position of stage ``i``; directions at
+    ``base[i]`` when ``gauss_newton``, else exact."""
+    if gauss_newton:
+        return penalty_gradient(obs, xs[i, 0], xs[i, 2], xs[i, 4],
+                                base[i, 0], base[i, 1], base[i, 2])
+    return penalty_gradient(obs, xs[i, 0], xs[i, 2], xs[i, 4], xs[i, 0], xs[i, 2], xs[i, 4])
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
@@ -317,14 +419,23 @@ def _stage_rows(U, b, j, i, m, fl, W, rho, eps, active, out):
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax, rtol,
-            views, out):
+            views, out, obs=None, gauss_newton=False):
     """Thesis Algorithm 1: solve ``F_U w = rhs`` with ``F_U w ≈ (F(U + h w) − Fbase)/h``.
 
     ``Fbase`` must be ``F(U, x0, …)``. Starts from ``guess`` (warm start); writes the
     solution into ``out`` (may alias ``guess``). Returns ``(iterations, residual estimate)``.
+    With obstacles and ``gauss_newton``, the products see the obstacle penalty's
+    Gauss–Newton curvature (directions frozen at the rollout of ``U``), not its exact one.
     """
-    xs, _, _, trig, V, H, cs, sn, g, _, _, _, Ut, Ft, w, _, _ = views
+    xs, _, _, trig, V, H, cs, sn, g, _, _, _, Ut, Ft, w, _, _, pbase = views
     n = U.shape[0]
+    if obs is not None:
+        if gauss_newton:  # the base rollout's positions (one more evaluation)
+            residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs)
+            for i in range(xs.shape[0]):
+                pbase[i, 0] = xs[i, 0]
+                pbase[i, 1] = xs[i, 2]
+                pbase[i, 2] = xs[i, 4]
     inv_h = 1.0 / h
     warm = False
     for i in range(n):
@@ -334,7 +445,8 @@ def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax
     if warm:
         for i in range(n):
             Ut[i] = U[i] + h * guess[i]
-        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft)
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs, pbase,
+                 gauss_newton)
         for i in range(n):
             w[i] = rhs[i] - (Ft[i] - Fbase[i]) * inv_h
     else:  # a zero guess needs no product: one F evaluation saved
@@ -349,7 +461,8 @@ def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax
         vk = V[k]
         for i in range(n):
             Ut[i] = U[i] + h * vk[i]
-        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft)
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs, pbase,
+                 gauss_newton)
         for i in range(n):
             w[i] = (Ft[i] - Fbase[i]) * inv_h
         res = gmres_iterate(k, w, V, H, cs, sn, g)
@@ -389,32 +502,54 @@ def clip_first_input(U, W, u_out):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax, rtol, views):
+def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax, rtol, views,
+                 obs=None, gauss_newton=False):
     """Newton/GMRES on ``F(U, x, t) = 0`` (eq. 3.22–3.24) with a backtracking line search.
 
     ``U`` is updated in place. Returns ``(Newton iterations, GMRES iterations, ‖F‖)``.
+    The line search asks ‖F‖ to fall; with obstacles in the condensed layout it asks the
+    cost (:func:`condensed_cost`) to fall instead (Armijo), so that the iteration heads for
+    a minimum: ‖F‖ falls just as well towards the stationary path through an obstacle's
+    centre, and an obstacle ahead on the reference line puts Newton right next to it.
     """
-    xs, _, _, trig, _, _, _, _, _, F0, _, rhs, Ut, Ft, _, dU, _ = views
-    norm = residual(U, m, x, ref, dtau, W, rho, eps, active, xs, trig, F0)
+    xs, _, _, trig, _, _, _, _, _, F0, _, rhs, Ut, Ft, _, dU, _, _ = views
+    norm = residual(U, m, x, ref, dtau, W, rho, eps, active, xs, trig, F0, False, obs)
+    by_cost = False
+    cost = 0.0
+    if obs is not None:
+        by_cost = m == STAGE_CONDENSED
+        cost = condensed_cost(U, xs, ref, dtau, W, rho, obs)
     it = 0
     gm_total = 0
     while it < max_iter and norm > tol and math.isfinite(norm):
         rhs[:] = -F0
         dU[:] = 0.0
         k, _ = fdgmres(U, m, x, ref, dtau, W, rho, eps, active, F0, rhs, dU, h, kmax, rtol,
-                       views, dU)
+                       views, dU, obs, gauss_newton)
         gm_total += k
         it += 1
+        slope = 0.0
+        if obs is not None:
+            if by_cost:
+                slope = dtau * np.dot(F0, dU)  # dJ/ds along U + s dU (F = ∇J/Δτ)
+                if not slope < 0.0:
+                    break  # an inexact or indefinite solve gave no descent direction
         step = 1.0
         trial = norm
+        trial_cost = cost
         accepted = False
         for _ in range(12):
             Ut[:] = U + step * dU
             if m == STAGE_CONDENSED:
                 keep_inside(U, Ut, W)
-            trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft)
-            if math.isfinite(trial) and trial < (1.0 - 1e-4 * step) * norm:
-                accepted = True
+            trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs)
+            accepted = math.isfinite(trial) and trial < (1.0 - 1e-4 * step) * norm
+            if obs is not None:
+                if by_cost:
+                    trial_cost = condensed_cost(Ut, xs, ref, dtau, W, rho, obs)
+                    accepted = (math.isfinite(trial)
+                                and trial_cost <= cost + 1e-4 * step * slope)
+            if accepted:
                 break
             step *= 0.5
         if not accepted:
@@ -422,11 +557,12 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
         U[:] = Ut
         F0[:] = Ft
         norm = trial
+        cost = trial_cost
     return it, gm_total, norm
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
+def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=None):
     """One C/GMRES control tick (Ohtsuka 2004); ``U``, ``dU``, ``u_out``, ``stats`` are written.
 
     With ``initialise`` it first solves ``F = 0`` by Newton/GMRES from ``U`` (start on the
@@ -439,10 +575,13 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
     kmax = iprm[1]
     n_stages = ref.shape[0] - 1
     views = _views(buf, n_stages, m, max(kmax, iprm[3]))
-    xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1 = views
+    xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1, _ = views
+    gauss_newton = iprm[5] != 0
     stats[:] = 0.0
     if not prepare_reference(x, ref, ref0):
         return FLAG_BAD_INPUT
+    if obs is not None:
+        aim_obstacles(obs, x)
     dtau = prm[P_DTAU]
     dtau_next = prm[P_DTAU_NEXT]
     rho = prm[P_RHO]
@@ -451,19 +590,25 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
     newton_ran = initialise
     if initialise:
         it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, prm[P_TOL],
-                                    iprm[2], h, iprm[3], rtol, views)
+                                    iprm[2], h, iprm[3], rtol, views, obs, gauss_newton)
         stats[0] = it
         stats[1] = gm
         stats[2] = norm
         dU[:] = 0.0
     else:
-        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, xs, trig, F0)
+        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, xs, trig, F0, False, obs)
         if norm > prm[P_TRIGGER]:
             newton_ran = True
             # A jump the continuation cannot follow (a reference step is an impulse in F_t):
             # re-project onto F = 0 by line-searched Newton, warm-started from U.
-            it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE,
-                                        prm[P_TOL], iprm[2], h, iprm[3], rtol, views)
+            # With obstacles: an inexact, early-stopped re-projection (REPROJECTION_*).
+            tol = prm[P_TOL]
+            eta = rtol
+            if obs is not None:
+                tol = max(tol, REPROJECTION_FRACTION * prm[P_TRIGGER])
+                eta = max(rtol, REPROJECTION_RTOL)
+            it, gm, norm = newton_solve(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, tol,
+                                        iprm[2], h, iprm[3], eta, views, obs, gauss_newton)
             stats[0] = it
             stats[1] = gm
             stats[2] = norm
@@ -480,12 +625,13 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats):
             ref1[i, k] = ref0[i, k] + c * (ref0[i0 + 1, k] - ref0[i0, k])
     norm0 = norm  # F0 holds F(U, x, t): computed above, or left current by newton_solve
     # F0's input trig is valid for U unless a Newton line search evaluated other points last
-    residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, xs, trig, F1, not newton_ran)
+    residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, xs, trig, F1, not newton_ran,
+             obs)
     zeta = prm[P_ZETA]
     for i in range(F0.shape[0]):
         rhs[i] = -zeta * F0[i] - (F1[i] - F0[i]) / h
     k, _ = fdgmres(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, F1, rhs, dU, h, kmax,
-                   rtol, views, dU)
+                   rtol, views, dU, obs, gauss_newton)
     # Apply U(t)[0] — the input the prediction above assumed — then integrate U to t + Δt.
     # Applying the integrated U[0] instead would apply the input meant for one period later
     # (measured +4 % closed-loop cost), and extrapolating back along the horizon breaks the
@@ -536,19 +682,23 @@ def update_active_set(U, active, W, eps, n_stages):
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def cgmres_step(mem, x, ref, iprm, initialise):
     """:func:`cgmres_tick` on packed memory (the per-tick entry point from Python)."""
-    U, dU, u_out, stats, W, prm, buf = unpack(mem, ref.shape[0] - 1, iprm[0])
-    return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
+    U, dU, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
+    if obs.shape[0] == 0:  # the obstacle-free specialisation (see the module docstring)
+        return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
+    return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def newton_step(mem, x, ref, iprm, active):
     """:func:`newton_tick` on packed memory (the per-tick entry point from Python)."""
-    U, _, u_out, stats, W, prm, buf = unpack(mem, ref.shape[0] - 1, iprm[0])
-    return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
+    U, _, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
+    if obs.shape[0] == 0:  # the obstacle-free specialisation (see the module docstring)
+        return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
+    return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
-def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats):
+def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs=None):
     """One tick of the thesis' method (m = 8): Newton/fdgmres to tolerance, then eq. 3.25.
 
     After each solve the active set is updated (:func:`update_active_set`) and, if it
@@ -561,11 +711,14 @@ def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats):
     stats[:] = 0.0
     if not prepare_reference(x, ref, ref0):
         return FLAG_BAD_INPUT
+    if obs is not None:
+        aim_obstacles(obs, x)
     eps = prm[P_RHO]  # the ε of eq. 3.25 travels in the ρ slot for this layout
     norm = 0.0
     for _ in range(ACTIVE_SET_ROUNDS):
         it, gm, norm = newton_solve(U, m, x, ref0, prm[P_DTAU], W, 0.0, eps, active,
-                                    prm[P_TOL], iprm[2], prm[P_H], iprm[1], prm[P_RTOL], views)
+                                    prm[P_TOL], iprm[2], prm[P_H], iprm[1], prm[P_RTOL], views,
+                                    obs, iprm[5] != 0)
         stats[0] += it
         stats[1] += gm
         if not update_active_set(U, active, W, eps, n_stages):

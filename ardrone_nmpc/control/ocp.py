@@ -13,6 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ardrone_nmpc.control.obstacles import (OBS_COLS, OBS_DIST, OBS_SHIFT, OBS_WEIGHT,
+                                            obstacle_table)
 from ardrone_nmpc.types import INPUT_DIM, IX_PSI, STATE_DIM
 
 
@@ -73,6 +75,11 @@ class OcpSpec:
     q : (7,) state weights; r : (4,) input weights; q_terminal : (7,) terminal weights.
     u_min, u_max : (4,) input bounds (m/s², rad, rad, rad/s).
     horizon_ramp_rate_per_s : α of ``T(t) = N Δτ (1 − e^{−α t})``; 0 keeps Δτ fixed.
+    obstacles : (n, ``OBS_COLS``) obstacle table (:func:`~ardrone_nmpc.control.obstacles.
+        obstacle_table`): kind, centre (m), constraint distance d (m), penalty weight,
+        tie-break shift (m); none by default.
+    obstacle_gauss_newton : the solvers' Jacobian products see the penalty's Gauss–Newton
+        curvature (positive semi-definite), not its exact one.
     """
 
     horizon_steps: int = 15
@@ -83,6 +90,8 @@ class OcpSpec:
     u_min: np.ndarray = field(default_factory=lambda: -np.ones(INPUT_DIM))
     u_max: np.ndarray = field(default_factory=lambda: np.ones(INPUT_DIM))
     horizon_ramp_rate_per_s: float = 0.0
+    obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, OBS_COLS)))
+    obstacle_gauss_newton: bool = True
 
     def __post_init__(self):
         if self.horizon_steps < 1:
@@ -95,6 +104,14 @@ class OcpSpec:
             raise ValueError("weights: q, q_terminal must be ≥ 0 and r > 0")
         if np.any(self.u_min >= self.u_max):
             raise ValueError("u_min: must be below u_max for every input")
+        obstacles = np.array(self.obstacles, dtype=float).reshape(-1, OBS_COLS)
+        if not np.all(np.isfinite(obstacles)):
+            raise ValueError("obstacles: values must be finite")
+        positive = obstacles[:, [OBS_DIST, OBS_WEIGHT]]
+        if np.any(positive <= 0) or np.any(obstacles[:, OBS_SHIFT] < 0):
+            raise ValueError("obstacles: distances and weights must be positive, "
+                             "tie-break shifts ≥ 0")
+        object.__setattr__(self, "obstacles", obstacles)
 
     @classmethod
     def from_config(cls, controller) -> "OcpSpec":
@@ -108,6 +125,9 @@ class OcpSpec:
             u_min=controller.u_min,
             u_max=controller.u_max,
             horizon_ramp_rate_per_s=controller.solver.horizon_ramp_rate_per_s,
+            obstacles=obstacle_table(controller.obstacles, controller.obstacle_weight,
+                                     controller.obstacle_tie_break_m),
+            obstacle_gauss_newton=controller.obstacle_curvature == "gauss-newton",
         )
 
     def stage_dtau_s(self, elapsed_s: float) -> float:
@@ -117,7 +137,8 @@ class OcpSpec:
         return self.dtau_s * (1.0 - math.exp(-self.horizon_ramp_rate_per_s * max(elapsed_s, 0.0)))
 
     def stage_cost(self, x: np.ndarray, x_ref: np.ndarray, u: np.ndarray) -> float:
-        """``½ (x − x_d)ᵀ q (x − x_d) + ½ uᵀ r u`` (ψ error wrapped)."""
+        """``½ (x − x_d)ᵀ q (x − x_d) + ½ uᵀ r u`` (ψ error wrapped; tracking only, without
+        the obstacle penalty)."""
         err = np.asarray(x, float) - np.asarray(x_ref, float)
         err[IX_PSI] = (err[IX_PSI] + math.pi) % (2 * math.pi) - math.pi
         return 0.5 * float(err @ (self.q * err) + u @ (self.r * u))
