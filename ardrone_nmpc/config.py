@@ -243,6 +243,10 @@ class ObstacleConfig(_Section):
         0.3, description="Safety margin added to the radius (m): the drone's half-size (≈ 0.26 m "
         "with the indoor hull) plus a buffer. The NMPC keeps the drone's centre d = radius + "
         "margin from the obstacle's centre.")
+    mocap_object: Optional[str] = Field(
+        None, min_length=1, max_length=24, description="A moving obstacle: the mocap object "
+        "whose newest position is the centre each tick (center_m until it is first seen; the "
+        "last position is kept when it goes stale). null: static.")
 
 
 class ControllerConfig(_Section):
@@ -279,13 +283,18 @@ class ControllerConfig(_Section):
         "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
     solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
     obstacles: tuple[ObstacleConfig, ...] = Field(
-        (), max_length=32, description="Static obstacles the NMPC avoids (exterior penalty on "
+        (), max_length=32, description="Obstacles the NMPC avoids (exterior penalty on "
         "‖p − c‖² ≥ d², docs/solver-notes.md §7); none by default. The P controller ignores "
         "them.")
     obstacle_weight: Positive = Field(
         2000.0, description="Weight w of the obstacle penalty ½ w max(0, d² − ‖p − c‖²)² in the "
         "stage cost (1/m⁴, relative to q and r). Larger: less intrusion into the margin, a "
         "stiffer problem for GMRES.")
+    obstacle_lookahead_s: NonNegative = Field(
+        0.3, le=3.0, description="A moving obstacle (mocap_object) is placed where its "
+        "estimated velocity takes it this long after the command takes effect; its motion over "
+        "the horizon is not modelled, and this short look-ahead stands in for it (s; "
+        "configs/moving_obstacle.yaml: 0 s → 31 ticks inside the margin, 0.3 s → none).")
     obstacle_tie_break_m: NonNegative = Field(
         0.05, description="Tie-break of head-on approaches (m): each tick the penalty's centre "
         "moves this far to the left of the line of sight from the drone, and d grows by as "
@@ -758,11 +767,20 @@ class ExperimentConfig(_Section):
     @classmethod
     def _start_outside_obstacles(cls, value: ReferenceConfig, info: ValidationInfo
                                  ) -> ReferenceConfig:
-        """The experiment must not start inside an obstacle's constraint distance d."""
+        """The experiment must not start inside an obstacle's constraint distance d, and it
+        tracks at most one second mocap object (followed and/or a moving obstacle)."""
         controller = info.data.get("controller")
         if controller is None:  # reported on its own
             return value
+        names = {o.mocap_object for o in controller.obstacles if o.mocap_object}
+        if value.kind == "follow":
+            names.add(value.follow.object_name)
+        if len(names) > 1:
+            raise _invalid(f"one second mocap object per experiment, got {sorted(names)} "
+                           "(follow.object_name and controller.obstacles.*.mocap_object)")
         for k, obs in enumerate(controller.obstacles):
+            if obs.mocap_object:  # moving: where it starts is not known here
+                continue
             offset = [p - c for p, c in zip(value.start_m, obs.center_m)]
             if obs.kind == "cylinder":
                 offset[2] = 0.0
@@ -878,6 +896,13 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: the top level must be a mapping of section names to "
                           f"values, not a {type(data).__name__}")
     return data
+
+
+def tracked_object(cfg: ExperimentConfig) -> str | None:
+    """The second mocap object the experiment tracks (followed, or a moving obstacle), if any."""
+    if cfg.reference.kind == "follow":
+        return cfg.reference.follow.object_name
+    return next((o.mocap_object for o in cfg.controller.obstacles if o.mocap_object), None)
 
 
 def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()

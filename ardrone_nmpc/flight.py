@@ -16,6 +16,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from ardrone_nmpc.clock import Rate
+from ardrone_nmpc.config import tracked_object
 from ardrone_nmpc.loop import Tick, TickInputs
 from ardrone_nmpc.recorder import RunRecorder, read_run, write_summary
 from ardrone_nmpc.safety import Action
@@ -70,7 +71,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
 
     seed = cfg.sim.seed if seed is None else seed
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
-    follow = cfg.reference.follow.object_name if cfg.reference.kind == "follow" else None
+    follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     others = (follow,) if follow else ()
     try:
         with ExitStack() as stack:
@@ -138,7 +139,7 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
     session's exit lands the drone). ``fault_clock(t0)`` receives the monotonic time of
     experiment time 0 (the loopback's fault injection runs on it)."""
     period = cfg.loop.period_s
-    follow = cfg.reference.follow.object_name if cfg.reference.kind == "follow" else None
+    follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     rate = Rate(period)

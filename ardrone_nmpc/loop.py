@@ -19,11 +19,13 @@ from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, 
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolverStatus
 from ardrone_nmpc.safety import NOMINAL, Action, Decision, Supervisor
 from ardrone_nmpc.reference import Trajectory
 from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
 
+OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
 
 
@@ -151,7 +153,12 @@ class Tick:
         self._state = np.zeros(7)
         self.supervisor = Supervisor(cfg.safety)
         self._live = trajectory if hasattr(trajectory, "observe") else None
+        # moving obstacles: indices of those whose centre is the tracked object's position
+        self._moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object] \
+            if self.use_nmpc else []
         self._last = None  # (pcmd, u) of the last command sent, for a hold
+        self._obstacle_seen = None  # (stamp, position) of the moving obstacle's newest pose
+        self._obstacle_vel = np.zeros(3)
         diverge = cfg.faults.solver_diverge
         self._solver_fault = (None if diverge is None else
                               lambda t: diverge.start_s <= t < diverge.start_s + diverge.duration_s)
@@ -211,6 +218,8 @@ class Tick:
         if self._live is not None:  # reference kind 'follow': the object's newest pose
             self._live.observe(inputs.target, t_pose_s=t_exp_s - (inputs.t_s - inputs.target_rx_t_s),
                                age_ms=(inputs.t_s - inputs.target_rx_t_s) * 1e3)
+        if self._moving and inputs.target is not None:
+            self._move_obstacles(inputs.target)
         sup = self.supervisor
         cmd = None
         decision = sup.check_feedback(mocap_age_ms=mocap_age_ms, navdata_age_ms=navdata_age_ms,
@@ -227,6 +236,23 @@ class Tick:
         row["mode"] = sup.record(decision, mode)
         row["compute_us"] = (time.perf_counter_ns() - t0) * 1e-3
         return TickOutput(pcmd, progressive, row, decision.action, sup.take_events())
+
+    def _move_obstacles(self, pose) -> None:
+        """Moving obstacles take the tracked object's position, predicted at its estimated
+        velocity to the moment the command takes effect (the state the NMPC solves from is
+        predicted there too) plus ``controller.obstacle_lookahead_s``, as their centre; over
+        the horizon it is held."""
+        p = np.asarray(pose.position_m, dtype=np.float64)
+        if self._obstacle_seen is not None and pose.t_s > self._obstacle_seen[0]:
+            dt = pose.t_s - self._obstacle_seen[0]
+            a = dt / (dt + OBSTACLE_VELOCITY_FILTER_S)
+            self._obstacle_vel = (1 - a) * self._obstacle_vel + a * (p - self._obstacle_seen[1]) / dt
+        if self._obstacle_seen is None or pose.t_s != self._obstacle_seen[0]:
+            self._obstacle_seen = (pose.t_s, p)
+        centres = self.nmpc.obstacles[:, OBS_X:OBS_Z + 1].copy()
+        ahead_s = self.delay_ticks * self.period_s + self.cfg.controller.obstacle_lookahead_s
+        centres[self._moving] = p + self._obstacle_vel * ahead_s
+        self.nmpc.move_obstacles(centres)
 
     def _control(self, t_exp_s, x, traj, row):
         """The controller (NMPC or P) and the supervisor's verdict on its solution."""

@@ -285,6 +285,21 @@ def input_stats(u: np.ndarray, lower: Sequence[float], upper: Sequence[float], *
     return {"peak_abs": peak, "saturated_fraction": frac}
 
 
+def _relative_to_moving(xyz_m: np.ndarray, obstacle, cols, rows: np.ndarray,
+                        n: int) -> np.ndarray:
+    """For a moving obstacle (``mocap_object``): the positions moved so that the obstacle sits
+    at its configured centre on every tick (its logged ``target_*`` position; ticks before it
+    was seen keep the centre), so :func:`clearance_stats` measures the distance to it."""
+    if not obstacle.mocap_object or "target_x_m" not in cols:
+        return xyz_m
+    target = np.column_stack([np.asarray(cols.get(c, np.full(n, np.nan)), dtype=np.float64)
+                              for c in ("target_x_m", "target_y_m", "target_z_m")])[rows]
+    seen = np.all(np.isfinite(target), axis=1)
+    out = xyz_m.copy()
+    out[seen] += np.asarray(obstacle.center_m) - target[seen]
+    return out
+
+
 def clearance_stats(positions_m: np.ndarray, obstacle, *,
                     tolerance_m: float = CLEARANCE_TOLERANCE_M) -> dict[str, float]:
     """Clearance of a path from one obstacle (``config.ObstacleConfig``).
@@ -426,7 +441,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
     flying = ~np.isin(mode, list(GROUND_MODES))
     xyz_all = np.column_stack([pos["x"], pos["y"], pos["z"]])[flying]
     for k, obstacle in enumerate(cfg.controller.obstacles):
-        cs = clearance_stats(xyz_all, obstacle)
+        cs = clearance_stats(_relative_to_moving(xyz_all, obstacle, cols, flying, n), obstacle)
         add(SummaryRow(f"obstacle{k}", "min_clearance", cs["min_clearance_m"], "m"))
         add(SummaryRow(f"obstacle{k}", "clearance_violations", float(cs["violations"]),
                        "count"))
