@@ -9,6 +9,7 @@ pointed at the bind address (and a mocap receiver on the target port) flies it.
 from __future__ import annotations
 
 import signal
+import time
 import threading
 from typing import Callable, Optional
 
@@ -70,6 +71,9 @@ def serve(*, cfg, bind: str = "127.0.0.1", at_port: int = 5556, navdata_port: in
             echo(f"mocap stream: object {loop.object_name!r} at {cfg.sim.mocap_rate_hz:g} Hz "
                  f"→ udp {loop.mocap_host}:{loop.mocap_port}")
             echo(f"seed {seed}; Ctrl-C to stop")
+            if cfg.faults.active():  # no experiment clock here: fault times count from now
+                loop.set_fault_clock(time.monotonic())
+                echo(f"faults {', '.join(cfg.faults.active())}: start_s counted from now")
             try:
                 while not stop.wait(0.25):
                     pass

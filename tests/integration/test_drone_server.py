@@ -697,6 +697,33 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
 
 
 @pytest.mark.timeout(20)
+def test_serve_starts_the_fault_clock(mocap_rx):
+    """sim-drone has no experiment: its injected faults count from when it starts serving —
+    an occlusion from 0 s on leaves the object out of the streamed frames."""
+    from ardrone_nmpc.config import load_config
+    from ardrone_nmpc.sim.serve import serve
+
+    cfg = load_config(None, ["faults.mocap_occlusion.start_s=0",
+                             "faults.mocap_occlusion.duration_s=100"])
+    lines: list[str] = []
+    stop = threading.Event()
+    port = mocap_rx.getsockname()[1]
+    t = threading.Thread(target=serve, kwargs=dict(
+        cfg=cfg, bind=LOCALHOST, at_port=0, navdata_port=0, mocap_to=f"{LOCALHOST}:{port}",
+        seed=1, echo=lines.append, stop_event=stop))
+    t.start()
+    try:
+        mocap_rx.settimeout(3.0)
+        frames = [decode_mocap(mocap_rx.recv(2048)) for _ in range(30)]
+    finally:
+        stop.set()
+        t.join(5.0)
+    assert not t.is_alive()
+    assert any("faults mocap_occlusion" in line for line in lines)
+    assert "ardrone" not in frames[-1].poses  # occluded once the clock runs
+
+
+@pytest.mark.timeout(20)
 @pytest.mark.parametrize("kwargs, message", [
     (dict(bind="0.0.0.0"), "--bind"),
     (dict(bind="192.0.2.1"), "--bind"),
