@@ -17,7 +17,7 @@ import numpy as np
 
 from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES
 
-__all__ = ["FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS", "PLANT_FAULTS"]
+__all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS", "PLANT_FAULTS"]
 
 #: Faults that act on the sensor datagrams (the lockstep runner then goes through the bytes).
 SENSOR_FAULTS = frozenset({"mocap_dropout", "mocap_occlusion", "mocap_latency",
@@ -52,6 +52,35 @@ def corrupt_navdata(data: bytes, kind: str) -> bytes:
     else:
         raise ValueError(f"unknown navdata corruption {kind!r}")
     return bytes(buf)
+
+
+class Disorder:
+    """Duplicates and holds back the datagrams of one stream.
+
+    A held-back datagram goes out right after the next one (the two arrive swapped, as over a
+    reordering network); while one is held, no second one is held.
+    """
+
+    def __init__(self) -> None:
+        self._held: bytes | None = None
+
+    @property
+    def holding(self) -> bool:
+        return self._held is not None
+
+    def __call__(self, data: bytes, duplicate: bool, hold: bool) -> list[bytes]:
+        """The datagrams to send now, in order, for ``data`` and the draws of its send time."""
+        held, self._held = self._held, None
+        out: list[bytes] = []
+        if hold and held is None:
+            self._held = data
+        else:
+            out.append(data)
+            if held is not None:
+                out.append(held)
+        if duplicate:
+            out.append(data)
+        return out
 
 
 class FaultSchedule:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import heapq
 import math
 
-from ardrone_nmpc.faults import FaultSchedule, corrupt_navdata
+from ardrone_nmpc.faults import Disorder, FaultSchedule, corrupt_navdata
 from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
@@ -37,7 +37,6 @@ from ardrone_nmpc.types import FlightMode
 _CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
                FlightMode.FLYING: CtrlMajor.FLYING, FlightMode.LANDING: CtrlMajor.TRANS_LANDING,
                FlightMode.EMERGENCY: CtrlMajor.DEFAULT}
-_REORDER_HOLD_S = 1e-6  # a held-back datagram arrives just after the next one
 
 
 def navdata_packet(plant, sequence: int) -> bytes:
@@ -87,20 +86,15 @@ class WireSensors:
         self._order = 0
         self._next_mocap_k = 0
         self._next_nav_k = 0
-        self._held: dict[str, tuple] = {}  # stream → a datagram held back behind the next
+        self._disorder = {"mocap": Disorder(), "navdata": Disorder()}
 
     # ------------------------------------------------------------------ sending side
     def _send(self, stream: str, sent_s: float, arrival_s: float, data: bytes) -> None:
         duplicate, hold = self.schedule.disorder(stream, sent_s - self.t_zero_s)
-        held = self._held.pop(stream, None)
-        if hold and held is None:
-            self._held[stream] = (arrival_s, data)
-        else:
-            self._push(arrival_s, stream, data)
-            if held is not None:  # the held-back one overtaken: it arrives just after
-                self._push(arrival_s + _REORDER_HOLD_S, stream, held[1])
-        if duplicate:
-            self._push(arrival_s, stream, data)
+        # equal arrival times leave in push order: a held-back datagram arrives just after
+        # the one that overtook it
+        for datagram in self._disorder[stream](data, duplicate, hold):
+            self._push(arrival_s, stream, datagram)
 
     def _push(self, arrival_s: float, stream: str, data: bytes) -> None:
         heapq.heappush(self._queue, (arrival_s, self._order, stream, data))

@@ -25,9 +25,9 @@ import math
 import threading
 from dataclasses import dataclass, replace
 
-from ..faults import FaultSchedule, PlantFaults, corrupt_navdata
+from ..faults import Disorder, FaultSchedule, PlantFaults, corrupt_navdata
 
-__all__ = ["ServerFaults", "FaultCounters", "MocapFrameFault", "Disorder"]
+__all__ = ["ServerFaults", "FaultCounters", "MocapFrameFault"]
 
 
 @dataclass(frozen=True)
@@ -61,35 +61,6 @@ class FaultCounters:
     duplicated: int = 0           # datagrams sent twice (either stream)
     reordered: int = 0            # datagrams held back behind the next one (either stream)
     at_lost: int = 0              # AT datagrams discarded on arrival
-
-
-class Disorder:
-    """Duplicates and holds back the datagrams of one stream.
-
-    A held-back datagram goes out right after the next one (the two arrive swapped, as over a
-    reordering network); while one is held, no second one is held.
-    """
-
-    def __init__(self) -> None:
-        self._held: bytes | None = None
-
-    @property
-    def holding(self) -> bool:
-        return self._held is not None
-
-    def __call__(self, data: bytes, duplicate: bool, hold: bool) -> list[bytes]:
-        """The datagrams to send now, in order, for ``data`` and the draws of its send time."""
-        held, self._held = self._held, None
-        out: list[bytes] = []
-        if hold and held is None:
-            self._held = data
-        else:
-            out.append(data)
-            if held is not None:
-                out.append(held)
-        if duplicate:
-            out.append(data)
-        return out
 
 
 class ServerFaults:

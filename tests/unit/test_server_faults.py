@@ -10,7 +10,8 @@ import pytest
 from ardrone_nmpc.config import load_config
 from ardrone_nmpc.faults import FaultSchedule
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
-from ardrone_nmpc.sim.fault_injection import Disorder, ServerFaults
+from ardrone_nmpc.faults import Disorder
+from ardrone_nmpc.sim.fault_injection import ServerFaults
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.wire_sensors import navdata_packet
 
