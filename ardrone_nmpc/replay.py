@@ -517,7 +517,5 @@ def broadcast(*, run: RunData, port: int, host: str = "127.0.0.1", speed: float 
 
 def _datagram(pose: MocapPose, frame: int, name: str) -> bytes:
     """One pose as the wire datagram (millimetres, rotation (0, 0, ψ))."""
-    p = pose.position_m
-    item = MocapObjectPose(name, (float(p[0]) * 1000.0, float(p[1]) * 1000.0,
-                                  float(p[2]) * 1000.0), (0.0, 0.0, float(pose.psi_rad)))
+    item = MocapObjectPose.from_si(name, pose.position_m, (0.0, 0.0, pose.psi_rad))
     return encode_mocap(MocapFrame.of(frame & 0xFFFFFFFF, [item]))

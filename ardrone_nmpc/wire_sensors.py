@@ -20,7 +20,7 @@ from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.loop import TickInputs
-from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import (
     CtrlMajor,
     DemoOption,
@@ -31,7 +31,7 @@ from ardrone_nmpc.protocol.navdata import (
     decode_navdata,
     encode_navdata,
 )
-from ardrone_nmpc.sim.target import target_pose
+from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.types import FlightMode
 
 _CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
@@ -106,20 +106,8 @@ class WireSensors:
         if sched.mocap_dropped(t_exp):
             return
         pose = self.plant.mocap_pose()
-        occlusion = sched.mocap_occlusion(t_exp)
-        items = []
-        if occlusion == "zero":
-            items.append(MocapObjectPose(self.object_name, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
-        elif occlusion is None:
-            p, r = pose.position_m, pose.rotation_xyz_rad
-            items.append(MocapObjectPose(
-                self.object_name, (float(p[0]) * 1e3, float(p[1]) * 1e3, float(p[2]) * 1e3),
-                (float(r[0]), float(r[1]), float(r[2]))))
-        if self.target_cfg is not None:  # the scripted second object shares the frame
-            tp = target_pose(self.target_cfg, t_s)
-            items.append(MocapObjectPose(
-                self.target_cfg.object_name, tuple(float(v) * 1e3 for v in tp.position_m),
-                (0.0, 0.0, tp.psi_rad)))
+        items = frame_items(self.object_name, pose, sched.mocap_occlusion(t_exp),
+                            self.target_cfg, t_s)
         data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
         latency = self.mocap_latency_s + sched.mocap_extra_latency_s(t_exp)
         self._send("mocap", t_s, t_s + latency, data)

@@ -114,6 +114,12 @@ class MocapObjectPose:
         values = t + r
         s(self, "fresh", any(values) and all(math.isfinite(v) for v in values))
 
+    @classmethod
+    def from_si(cls, name: str, position_m, rotation_xyz_rad) -> MocapObjectPose:
+        """The wire pose of an object at ``position_m`` (3,) m with ``rotation_xyz_rad`` (3,)."""
+        return cls(name, tuple(float(v) * _MM_PER_M for v in position_m),
+                   tuple(float(v) for v in rotation_xyz_rad))
+
 
 @dataclass(frozen=True, slots=True)
 class MocapFrame:

@@ -36,7 +36,7 @@ from .fault_injection import NO_MOCAP_FAULT, ServerFaults
 from .plant import AirframePlant
 from .target import target_pose
 
-__all__ = ["MocapServer", "MocapServerCounters"]
+__all__ = ["frame_items", "MocapServer", "MocapServerCounters"]
 
 
 @dataclass
@@ -57,6 +57,25 @@ class _NullLock:
 
     def __exit__(self, *exc):
         return False
+
+
+def frame_items(object_name: str, pose, occlusion: Optional[str], second_object,
+                t_plant_s: float) -> list[MocapObjectPose]:
+    """The wire poses of one simulated mocap frame: the drone's ``pose`` (left out when
+    ``occlusion`` is ``"missing"``, all zero when ``"zero"``, a tracker's "not seen") and, if a
+    ``sim.target`` config is given, the scripted second object at plant time ``t_plant_s``.
+    Shared by this streamer and the lockstep wire sensors."""
+    if occlusion == "missing":
+        items = []
+    elif occlusion == "zero":
+        items = [MocapObjectPose(object_name, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
+    else:
+        items = [MocapObjectPose.from_si(object_name, pose.position_m, pose.rotation_xyz_rad)]
+    if second_object is not None:
+        other = target_pose(second_object, t_plant_s)
+        items.append(MocapObjectPose.from_si(second_object.object_name, other.position_m,
+                                             (0.0, 0.0, other.psi_rad)))
+    return items
 
 
 class MocapServer:
@@ -177,20 +196,7 @@ class MocapServer:
         with self._lock:
             pose = self.plant.mocap_pose()
             t_plant_s = self.plant.t_s
-        p, r = pose.position_m, pose.rotation_xyz_rad
-        if occlusion == "missing":
-            items = []
-        elif occlusion == "zero":
-            items = [MocapObjectPose(self.object_name, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]
-        else:
-            items = [MocapObjectPose(
-                self.object_name, (float(p[0]) * 1000.0, float(p[1]) * 1000.0,
-                                   float(p[2]) * 1000.0), (float(r[0]), float(r[1]), float(r[2])))]
-        if self.second_object is not None:  # on the plant's clock, as in lockstep
-            other = target_pose(self.second_object, t_plant_s)
-            items.append(MocapObjectPose(self.second_object.object_name,
-                                         tuple(float(v) * 1000.0 for v in other.position_m),
-                                         (0.0, 0.0, other.psi_rad)))
+        items = frame_items(self.object_name, pose, occlusion, self.second_object, t_plant_s)
         return encode_mocap(MocapFrame.of(frame_number & 0xFFFFFFFF, items))
 
     def _run(self) -> None:

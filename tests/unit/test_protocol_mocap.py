@@ -273,3 +273,11 @@ def test_single_byte_corruptions(raw, draw):
     i = draw.draw(st.integers(0, len(raw) - 1))
     b = draw.draw(st.one_of(st.integers(0, 255), st.sampled_from([0, 1, 2, 72, 75, 0x80, 0xFF])))
     _decode_or_own_error(raw[:i] + bytes([b]) + raw[i + 1:])
+
+
+def test_from_si_converts_metres_to_the_wire_millimetres():
+    pose = MocapObjectPose.from_si("car", np.array([1.2, -0.5, 0.75]), (0.1, 0.2, 0.3))
+    assert pose.translation_mm == (1200.0, -500.0, 750.0)
+    assert pose.rotation_xyz_rad == (0.1, 0.2, 0.3)
+    decoded = decode_mocap(encode_mocap(MocapFrame.of(1, [pose]))).poses["car"]
+    np.testing.assert_allclose(decoded.position_m, [1.2, -0.5, 0.75], atol=1e-12)
