@@ -47,11 +47,7 @@ def navdata_packet(plant, sequence: int) -> bytes:
         state |= DroneState.FLY
     if s.mode is FlightMode.EMERGENCY:
         state |= DroneState.EMERGENCY
-    demo = DemoOption.from_si(
-        ctrl_state=ctrl_state_value(_CTRL_MAJOR[s.mode]),
-        battery_pct=int(round(min(100.0, max(0.0, s.battery_pct)))),
-        pitch_deg=s.pitch_deg, roll_deg=s.roll_deg, yaw_deg=s.yaw_deg, altitude_m=s.altitude_m,
-        vx_body_mps=s.vx_body_mps, vy_body_mps=s.vy_body_mps, vz_mps=s.vz_mps)
+    demo = DemoOption.of_sample(s, ctrl_state_value(_CTRL_MAJOR[s.mode]))
     return encode_navdata(Navdata(state, sequence, demo=demo))
 
 

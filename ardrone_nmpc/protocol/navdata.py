@@ -255,6 +255,18 @@ class DemoOption:
                    vx_mmps=vx_body_mps * 1000.0, vy_mmps=vy_body_mps * 1000.0,
                    vz_mmps=vz_mps * 1000.0, num_frames=num_frames)
 
+    @classmethod
+    def of_sample(cls, sample, ctrl_state: int) -> DemoOption:
+        """The demo option a drone sends for a :class:`~ardrone_nmpc.types.NavdataSample`
+        (the inverse of reading one): the battery as a whole percent clamped to 0–100, the
+        rest as :meth:`from_si`."""
+        return cls.from_si(
+            ctrl_state=ctrl_state,
+            battery_pct=int(round(min(100.0, max(0.0, sample.battery_pct)))),
+            pitch_deg=sample.pitch_deg, roll_deg=sample.roll_deg, yaw_deg=sample.yaw_deg,
+            altitude_m=sample.altitude_m, vx_body_mps=sample.vx_body_mps,
+            vy_body_mps=sample.vy_body_mps, vz_mps=sample.vz_mps)
+
     @property
     def ctrl_major(self) -> int:
         """Upper 16 bits of ctrl_state (:class:`CtrlMajor` value; 10 is seen in the field)."""

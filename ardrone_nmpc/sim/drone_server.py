@@ -847,13 +847,7 @@ class DroneServer:
         demo = None
         options: list[NavdataOption] = []
         if full or mask & (1 << OptionTag.DEMO):
-            s = self.plant.navdata()
-            demo = DemoOption.from_si(
-                ctrl_state=self._ctrl_state(now),
-                battery_pct=int(round(min(100.0, max(0.0, s.battery_pct)))),
-                pitch_deg=s.pitch_deg, roll_deg=s.roll_deg, yaw_deg=s.yaw_deg,
-                altitude_m=s.altitude_m, vx_body_mps=s.vx_body_mps,
-                vy_body_mps=s.vy_body_mps, vz_mps=s.vz_mps)
+            demo = DemoOption.of_sample(self.plant.navdata(), self._ctrl_state(now))
         if full or mask & (1 << OptionTag.TIME):
             t = self.plant.t_s
             sec = int(t)

@@ -344,3 +344,23 @@ def test_corruptions_with_a_fixed_checksum(raw, draw):
     b = draw.draw(st.one_of(st.integers(0, 255), st.sampled_from([0, 1, 3, 4, 0xFF])))
     body = raw[:i] + bytes([b]) + raw[i + 1:len(raw) - 8]
     _decode_or_own_error(with_checksum(body))
+
+
+def test_demo_of_a_sample_round_trips_through_the_reader():
+    """What the simulators send for a NavdataSample reads back as that sample (battery as a
+    clamped whole percent, angles and speeds to the wire's float32, altitude to the mm)."""
+    from ardrone_nmpc.links.drone_link import navdata_sample_of
+    from dataclasses import replace
+
+    from ardrone_nmpc.types import FlightMode, NavdataSample
+
+    sample = NavdataSample(0.0, FlightMode.FLYING, 100.4, 1.5, -2.25, 30.0, 1.2346, 0.5,
+                           -0.25, 0.125)
+    demo = DemoOption.of_sample(sample, ctrl_state_value(CtrlMajor.FLYING))
+    assert demo.battery_pct == 100
+    assert DemoOption.of_sample(replace(sample, battery_pct=-3.0), 0).battery_pct == 0
+    back = navdata_sample_of(Navdata(DroneState.FLY, 1, demo=demo), 2.0)
+    assert back.mode is FlightMode.FLYING and back.battery_pct == 100.0
+    assert back.altitude_m == pytest.approx(1.235, abs=1e-12)
+    for name in ("roll_deg", "pitch_deg", "yaw_deg", "vx_body_mps", "vy_body_mps", "vz_mps"):
+        assert getattr(back, name) == pytest.approx(getattr(sample, name), rel=1e-6), name
