@@ -18,6 +18,7 @@ import numpy as np
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.follow import TrackedObject
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolverStatus
@@ -71,7 +72,7 @@ def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, f
     return fwd * c + right * s, fwd * s - right * c
 
 
-def measurement_columns(inputs: TickInputs, t_exp_s: float) -> dict:
+def measurement_columns(inputs: TickInputs) -> dict:
     """The raw measurements of ``inputs`` as log columns (replay feeds them back).
 
     ``mocap_t_s`` is the pose's own time stamp as the tick saw it (the link's clock: receipt
@@ -157,8 +158,7 @@ class Tick:
         self._moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object] \
             if self.use_nmpc else []
         self._last = None  # (pcmd, u) of the last command sent, for a hold
-        self._obstacle_seen = None  # (stamp, position) of the moving obstacle's newest pose
-        self._obstacle_vel = np.zeros(3)
+        self._moving_track = TrackedObject(OBSTACLE_VELOCITY_FILTER_S)
         diverge = cfg.faults.solver_diverge
         self._solver_fault = (None if diverge is None else
                               lambda t: diverge.start_s <= t < diverge.start_s + diverge.duration_s)
@@ -214,7 +214,7 @@ class Tick:
                           else math.inf)
         row = {"t_s": t_exp_s, "mocap_age_ms": mocap_age_ms, "navdata_age_ms": navdata_age_ms,
                "solver_status": "", "cmd_saturated": "0000"}
-        row.update(measurement_columns(inputs, t_exp_s))
+        row.update(measurement_columns(inputs))
         if self._live is not None:  # reference kind 'follow': the object's newest pose
             self._live.observe(inputs.target, t_pose_s=t_exp_s - (inputs.t_s - inputs.target_rx_t_s),
                                age_ms=(inputs.t_s - inputs.target_rx_t_s) * 1e3)
@@ -242,16 +242,11 @@ class Tick:
         velocity to the moment the command takes effect (the state the NMPC solves from is
         predicted there too) plus ``controller.obstacle_lookahead_s``, as their centre; over
         the horizon it is held."""
-        p = np.asarray(pose.position_m, dtype=np.float64)
-        if self._obstacle_seen is not None and pose.t_s > self._obstacle_seen[0]:
-            dt = pose.t_s - self._obstacle_seen[0]
-            a = dt / (dt + OBSTACLE_VELOCITY_FILTER_S)
-            self._obstacle_vel = (1 - a) * self._obstacle_vel + a * (p - self._obstacle_seen[1]) / dt
-        if self._obstacle_seen is None or pose.t_s != self._obstacle_seen[0]:
-            self._obstacle_seen = (pose.t_s, p)
+        track = self._moving_track
+        track.update(pose, pose.t_s)
         centres = self.nmpc.obstacles[:, OBS_X:OBS_Z + 1].copy()
         ahead_s = self.delay_ticks * self.period_s + self.cfg.controller.obstacle_lookahead_s
-        centres[self._moving] = p + self._obstacle_vel * ahead_s
+        centres[self._moving] = track.position_m + track.velocity_mps * ahead_s
         self.nmpc.move_obstacles(centres)
 
     def _control(self, t_exp_s, x, traj, row):
