@@ -33,7 +33,6 @@ from ardrone_nmpc.links.udp import LinkStats, open_udp
 from ardrone_nmpc.protocol.at import (
     CTRL_MODE_ACK,
     CTRL_MODE_CFG_GET,
-    REF_BASE,
     AtCommand,
     Comwdg,
     Config,

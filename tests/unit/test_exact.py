@@ -1,7 +1,6 @@
 """The IPOPT yardstick and the closed-loop comparison the bench reports."""
 
 import numpy as np
-import pytest
 
 from ardrone_nmpc.bench import HOVER_STATE, bench_ipopt, bench_nmpc
 from ardrone_nmpc.control.cgmres import CGMRESController
