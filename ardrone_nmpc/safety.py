@@ -7,7 +7,7 @@ tilted) and at the controller's solution (solver status, finite values) and retu
 controller instead, hover (AT*PCMD flag 0: the drone's own position hold), land, or stop (the
 drone reports an emergency: nothing more is sent).
 
-Policies (``safety`` config section, :class:`~ardrone_nmpc.config.SafetyConfig`):
+Policies (``safety`` config section, :class:`~ardrone_nmpc.config.schema.SafetyConfig`):
 
 =====================================  ==========================================================
 condition                              action
@@ -45,7 +45,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from ardrone_nmpc.types import FlightMode, NavdataSample
+from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 __all__ = ["Action", "Decision", "Supervisor"]
 
@@ -90,7 +90,7 @@ class Supervisor:
 
     Parameters
     ----------
-    safety : :class:`~ardrone_nmpc.config.SafetyConfig`.
+    safety : :class:`~ardrone_nmpc.config.schema.SafetyConfig`.
 
     Attributes
     ----------

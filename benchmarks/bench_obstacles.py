@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.simulate import run_lockstep
-from ardrone_nmpc.summary import CLEARANCE_TOLERANCE_M, clearance_stats
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.runs.summary import CLEARANCE_TOLERANCE_M, clearance_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 

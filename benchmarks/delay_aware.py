@@ -12,7 +12,7 @@ run is reused, so a second call only redraws. ``--figures DIR`` writes
 top view). ``--mismatch`` also flies the delay-aware variants and the retuned delay-free one
 against plant command delays of 0.13–0.39 s (the controllers still assume 0.26 s).
 
-Step metrics (``ardrone_nmpc.summary.step_metrics``, plant truth):
+Step metrics (``ardrone_nmpc.runs.summary.step_metrics``, plant truth):
 
 * ``settle`` — the summary's settling time: from the step time until the response stays in the
   ±2 % band (for at least the summary's 1 s dwell); ``—`` = never.
@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.angles import wrap_angle_rad
-from ardrone_nmpc.recorder import read_run
-from ardrone_nmpc.summary import read_summary, step_metrics
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.runs.rundir import read_run
+from ardrone_nmpc.runs.summary import read_summary, step_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("step_x", "step_y", "step_z", "step_psi", "square")
@@ -284,7 +284,7 @@ def figures(res: dict, runs: dict, out_dir: Path) -> None:
     fig.savefig(out_dir / "delay-aware-steps.png", dpi=90)
     plt.close(fig)
 
-    from ardrone_nmpc.reference import make_trajectory
+    from ardrone_nmpc.reference.trajectories import make_trajectory
 
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     run = read_run(runs[("thesis_aware", "square")])

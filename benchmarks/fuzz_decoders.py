@@ -405,7 +405,7 @@ def run_target(target: Target, n: int, seed: int, feed: Callable[[bytes], object
 def run_at_sim(n: int, seed: int) -> Result:
     """The simulator's AT receiver on a running server; afterwards its threads must be alive
     and navdata must still arrive (on 127.0.0.1) and decode."""
-    from ardrone_nmpc.config import ExperimentConfig
+    from ardrone_nmpc.config.schema import ExperimentConfig
     from ardrone_nmpc.protocol.navdata import NAVDATA_WAKEUP, decode_navdata
     from ardrone_nmpc.sim.drone_server import DroneServer
     from ardrone_nmpc.sim.plant import AirframePlant

@@ -14,9 +14,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.flight import run_flight
-from ardrone_nmpc.recorder import read_run
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runtime.realtime import run_flight
+from ardrone_nmpc.runs.rundir import read_run
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 
 import ardrone_nmpc
-from ardrone_nmpc.bench import closed_loop
-from ardrone_nmpc.config import load_config
+from ardrone_nmpc.experiments.bench import closed_loop
+from ardrone_nmpc.config.schema import load_config
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.newton import NewtonGMRESController
 from ardrone_nmpc.control.ocp import OcpSpec
-from ardrone_nmpc.simulate import run_lockstep
+from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 COLUMNS = ("x_true_m", "y_true_m", "z_true_m", "u_phi_rad", "u_theta_rad", "u_zacc_mps2",

@@ -24,7 +24,7 @@ from ardrone_nmpc.control import kernels
 from ardrone_nmpc.control.kernels import FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus, SolveResult
-from ardrone_nmpc.types import INPUT_DIM, STATE_DIM
+from ardrone_nmpc.core.types import INPUT_DIM, STATE_DIM
 
 INITIAL_KMAX = 40  # Krylov dimension of a (re-)initialising Newton solve: once, not per tick
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ardrone_nmpc.control.kernels import prepare_reference
 from ardrone_nmpc.control.ocp import OcpSpec
-from ardrone_nmpc.types import GRAVITY_MPS2, INPUT_DIM, STATE_DIM
+from ardrone_nmpc.core.types import GRAVITY_MPS2, INPUT_DIM, STATE_DIM
 
 
 def _import_casadi():

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..types import AttitudeCommand
+from ardrone_nmpc.core.types import AttitudeCommand
 
 __all__ = ["DroneLimits", "PcmdCommand", "MappingError", "map_to_pcmd", "vz_reference_mps"]
 

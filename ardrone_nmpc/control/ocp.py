@@ -15,7 +15,7 @@ import numpy as np
 
 from ardrone_nmpc.control.obstacles import (OBS_COLS, OBS_DIST, OBS_SHIFT, OBS_WEIGHT,
                                             obstacle_table)
-from ardrone_nmpc.types import INPUT_DIM, IX_PSI, STATE_DIM
+from ardrone_nmpc.core.types import INPUT_DIM, IX_PSI, STATE_DIM
 
 
 class SolverStatus(str, Enum):

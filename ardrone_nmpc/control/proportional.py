@@ -22,8 +22,8 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from ..angles import wrap_angle_rad
-from ..types import IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, AttitudeCommand
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, AttitudeCommand
 
 __all__ = ["PGains", "p_control"]
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .base import EstimatorError, VerticalSpeedEstimator
-from .differentiate import BackwardDifference, FiniteDifferenceVz, NoVz
-from .kalman import THESIS_Q, THESIS_R, ScalarKalmanVz, steady_state_kalman
-from .luenberger import THESIS_LAMBDA0_PER_S, LuenbergerVz, observer_gain
+from ardrone_nmpc.estimation.base import EstimatorError, VerticalSpeedEstimator
+from ardrone_nmpc.estimation.differentiate import BackwardDifference, FiniteDifferenceVz, NoVz
+from ardrone_nmpc.estimation.kalman import THESIS_Q, THESIS_R, ScalarKalmanVz, steady_state_kalman
+from ardrone_nmpc.estimation.luenberger import THESIS_LAMBDA0_PER_S, LuenbergerVz, observer_gain
 
 __all__ = [
     "EstimatorError",

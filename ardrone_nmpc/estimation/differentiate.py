@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from .base import EstimatorError, check_finite, check_step
+from ardrone_nmpc.estimation.base import EstimatorError, check_finite, check_step
 
 __all__ = ["FiniteDifferenceVz", "BackwardDifference"]
 

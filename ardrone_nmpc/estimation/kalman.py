@@ -21,7 +21,7 @@ import math
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-from .base import EstimatorError, check_finite, check_step
+from ardrone_nmpc.estimation.base import EstimatorError, check_finite, check_step
 
 __all__ = ["ScalarKalmanVz", "steady_state_kalman", "THESIS_Q", "THESIS_R"]
 

@@ -31,7 +31,7 @@ from typing import Literal, Sequence
 import numpy as np
 from scipy.linalg import expm
 
-from .base import EstimatorError, check_finite, check_step
+from ardrone_nmpc.estimation.base import EstimatorError, check_finite, check_step
 
 __all__ = ["LuenbergerVz", "observer_gain", "observer_matrix", "THESIS_LAMBDA0_PER_S"]
 

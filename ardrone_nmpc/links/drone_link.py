@@ -86,7 +86,7 @@ from ardrone_nmpc.protocol.navdata import (
     NavdataError,
     decode_navdata,
 )
-from ardrone_nmpc.types import FlightMode, NavdataSample
+from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 __all__ = [
     "CONTROL_PORT", "DEFAULT_HOST", "LinkError", "DroneLink", "flight_mode_of",

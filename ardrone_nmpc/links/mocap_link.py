@@ -3,7 +3,7 @@
 specs/mocap-stream.md, receiver rules. A receiver thread reads datagrams (buffer ≥ 2048 bytes),
 stamps each on receipt with the link's clock, decodes it with
 :func:`~ardrone_nmpc.protocol.mocap.decode_mocap` (malformed → counted, never raised) and keeps
-the newest *fresh* pose of the configured object as a :class:`~ardrone_nmpc.types.MocapPose`
+the newest *fresh* pose of the configured object as a :class:`~ardrone_nmpc.core.types.MocapPose`
 (metres, radians, ψ wrapped to (−π, π], ``t_s`` = receipt time).
 
 Not fresh — the last good pose is kept and its age grows (the supervisor acts on the age; a
@@ -39,7 +39,7 @@ from ardrone_nmpc.protocol.mocap import (
     MocapObjectPose,
     decode_mocap,
 )
-from ardrone_nmpc.types import MocapPose
+from ardrone_nmpc.core.types import MocapPose
 
 __all__ = ["MocapLink", "mocap_pose_of"]
 

@@ -257,7 +257,7 @@ class DemoOption:
 
     @classmethod
     def of_sample(cls, sample, ctrl_state: int) -> DemoOption:
-        """The demo option a drone sends for a :class:`~ardrone_nmpc.types.NavdataSample`
+        """The demo option a drone sends for a :class:`~ardrone_nmpc.core.types.NavdataSample`
         (the inverse of reading one): the battery as a whole percent clamped to 0–100, the
         rest as :meth:`from_si`."""
         return cls.from_si(

@@ -95,7 +95,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Literal, Optional
 
-from ..protocol.at import (
+from ardrone_nmpc.protocol.at import (
     CTRL_MODE_ACK,
     CTRL_MODE_CFG_GET,
     CTRL_MODE_CUSTOM_CFG_GET,
@@ -112,7 +112,7 @@ from ..protocol.at import (
     Ref,
     parse_datagram_lenient,
 )
-from ..protocol.navdata import (
+from ardrone_nmpc.protocol.navdata import (
     CtrlMajor,
     DemoOption,
     DroneState,
@@ -123,8 +123,8 @@ from ..protocol.navdata import (
     empty_vision_detect_option,
     encode_navdata,
 )
-from ..types import FlightMode
-from .plant import AirframePlant
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["DroneServer", "DroneServerCounters", "require_loopback_host", "EULER_ANGLE_MAX_LIMIT_RAD"]
 

@@ -1,5 +1,5 @@
 """Fault injection in the loopback servers (``fly --sim``): a
-:class:`~ardrone_nmpc.faults.FaultSchedule` asked datagram by datagram on the real-time clock.
+:class:`~ardrone_nmpc.sim.faults.FaultSchedule` asked datagram by datagram on the real-time clock.
 
 One :class:`ServerFaults` is shared by the drone server and the mocap streamer of a
 :class:`~ardrone_nmpc.sim.loopback.Loopback`. Experiment time is ``now − t0`` (s), ``now`` on
@@ -7,12 +7,12 @@ the servers' clock (``time.monotonic`` unless injected) and ``t0`` set by
 :meth:`ServerFaults.set_clock` — ``fly`` calls it with the monotonic time of experiment time 0.
 Until then experiment time is −inf: no window fault acts, only the constant wind blows.
 
-The decisions are those of the lockstep runner (:mod:`ardrone_nmpc.wire_sensors`): a mocap
+The decisions are those of the lockstep runner (:mod:`ardrone_nmpc.sim.sensors`): a mocap
 frame is dropped, occluded (object missing or an all-zero pose) or delayed by its sampling
 time; a navdata packet is lost or corrupted by its send time; either stream's datagrams are
 duplicated or held back behind the next one; an AT datagram is lost by its arrival time.
 Plant faults (battery floor, emergency, command-delay jump, wind) go through
-:class:`~ardrone_nmpc.faults.PlantFaults`.
+:class:`~ardrone_nmpc.sim.faults.PlantFaults`.
 
 Thread safety: the random draws and the held-back datagrams are guarded by an internal lock
 (the schedule's generator is shared by the AT, navdata and mocap threads);
@@ -25,7 +25,7 @@ import math
 import threading
 from dataclasses import dataclass, replace
 
-from ..faults import Disorder, FaultSchedule, PlantFaults, corrupt_navdata
+from ardrone_nmpc.sim.faults import Disorder, FaultSchedule, PlantFaults, corrupt_navdata
 
 __all__ = ["ServerFaults", "FaultCounters", "MocapFrameFault"]
 
@@ -68,7 +68,7 @@ class ServerFaults:
 
     Parameters
     ----------
-    schedule : the run's :class:`~ardrone_nmpc.faults.FaultSchedule`.
+    schedule : the run's :class:`~ardrone_nmpc.sim.faults.FaultSchedule`.
     plant : the simulated drone the plant faults act on (None: no plant faults).
     """
 

@@ -17,11 +17,11 @@ import math
 import socket
 from typing import Optional
 
-from ..faults import FaultSchedule
-from .drone_server import DroneServer, require_loopback_host
-from .fault_injection import FaultCounters, ServerFaults
-from .mocap_server import MocapServer
-from .plant import AirframePlant
+from ardrone_nmpc.sim.faults import FaultSchedule
+from ardrone_nmpc.sim.drone_server import DroneServer, require_loopback_host
+from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
+from ardrone_nmpc.sim.mocap_server import MocapServer
+from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["Loopback", "start_loopback", "free_udp_port"]
 
@@ -102,7 +102,7 @@ class Loopback:
         return self.mocap.object_name
 
     def truth(self):
-        """The plant's true state now (:class:`~ardrone_nmpc.types.PlantTruth`)."""
+        """The plant's true state now (:class:`~ardrone_nmpc.core.types.PlantTruth`)."""
         with self.lock:
             return self.plant.truth
 

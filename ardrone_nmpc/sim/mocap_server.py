@@ -30,11 +30,11 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from ..protocol.mocap import MOCAP_DEFAULT_PORT, MocapFrame, MocapObjectPose, encode_mocap
-from .drone_server import require_loopback_host
-from .fault_injection import NO_MOCAP_FAULT, ServerFaults
-from .plant import AirframePlant
-from .target import target_pose
+from ardrone_nmpc.protocol.mocap import MOCAP_DEFAULT_PORT, MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.sim.drone_server import require_loopback_host
+from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
+from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.target import target_pose
 
 __all__ = ["frame_items", "MocapServer", "MocapServerCounters"]
 

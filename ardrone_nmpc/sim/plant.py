@@ -28,7 +28,7 @@ truth needs no conversion:
 The airframe's rotation (body → world) is ``R = Rz(ψ)·Ry(θ)·Rx(φ)`` about the body's
 forward/left/up axes; its thrust axis ``R·e_z`` tilts exactly as eq. 3.13 (ẍ/z̈ ∝ tan θ,
 ÿ/z̈ ∝ −tan φ / cos θ). The mocap stream reports the same R as intrinsic X→Y→Z angles.
-Navdata reports the drone's own signs (see :class:`~ardrone_nmpc.types.NavdataSample`):
+Navdata reports the drone's own signs (see :class:`~ardrone_nmpc.core.types.NavdataSample`):
 ``roll_deg = deg(φ)``, ``pitch_deg = −deg(θ)``, ``yaw_deg = −deg(ψ) + offset + drift``, body
 velocities forward / **right**, vertical speed **down** positive.
 
@@ -74,11 +74,11 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
-from ..angles import TWO_PI
-from ..types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.core.angles import TWO_PI
+from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
-    from ..config import DroneConfig, NoiseConfig, SimConfig
+    from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
 
 __all__ = [
     "AirframePlant",
@@ -354,7 +354,7 @@ def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
 
 
 def _wrap_rad(a: float) -> float:
-    """:func:`~ardrone_nmpc.angles.wrap_angle_rad` for a finite python float, without numpy."""
+    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` for a finite python float, without numpy."""
     r = math.remainder(a, TWO_PI)
     return math.pi if r <= -math.pi else r
 
@@ -398,7 +398,7 @@ class AirframePlant:
     def __init__(self, params: PlantParams, noise: Optional[NoiseConfig] = None, *,
                  seed: int = 0) -> None:
         if noise is None:
-            from ..config import NoiseConfig
+            from ardrone_nmpc.config.schema import NoiseConfig
             noise = NoiseConfig()
         self.params = params
         self.noise = noise

@@ -13,7 +13,7 @@ import time
 import threading
 from typing import Callable, Optional
 
-from .drone_server import require_loopback_host
+from ardrone_nmpc.sim.drone_server import require_loopback_host
 
 __all__ = ["parse_host_port", "serve"]
 
@@ -45,7 +45,7 @@ def serve(*, cfg, bind: str = "127.0.0.1", at_port: int = 5556, navdata_port: in
     Raises ValueError (non-loopback ``bind`` or ``mocap_to``, bad ports) before opening any
     socket, and OSError if a port is taken.
     """
-    from .loopback import start_loopback
+    from ardrone_nmpc.sim.loopback import start_loopback
 
     bind = require_loopback_host(bind, "--bind")
     mocap_host, mocap_port = parse_host_port(mocap_to, what="--mocap-to")

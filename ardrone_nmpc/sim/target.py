@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ardrone_nmpc.types import MocapPose
+from ardrone_nmpc.core.types import MocapPose
 
 __all__ = ["target_pose", "target_state"]
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.recorder import read_run
+from ardrone_nmpc.runs.rundir import read_run
 
 N_VALUES = [3, 4, 5, 6, 8, 10, 15, 20]
 DTAU_VALUES = [0.05, 0.08, 0.1, 0.15, 0.2, 0.3, 0.4]

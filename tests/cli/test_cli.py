@@ -9,8 +9,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.config import ExperimentConfig
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import ExperimentConfig
 
 runner = CliRunner()
 
@@ -82,7 +82,7 @@ def _simulate(tmp_path, *extra):
 
 
 def test_simulate_writes_a_complete_run_directory(tmp_path):
-    from ardrone_nmpc.recorder import read_run
+    from ardrone_nmpc.runs.rundir import read_run
 
     result = _simulate(tmp_path, "--seed", "3")
     assert result.exit_code == 0, result.output
@@ -106,7 +106,7 @@ def test_simulate_quiet_prints_only_the_run_line(tmp_path):
 
 
 def test_simulate_is_deterministic_for_a_seed(tmp_path):
-    from ardrone_nmpc.recorder import read_run
+    from ardrone_nmpc.runs.rundir import read_run
 
     runs = []
     for sub in ("a", "b"):

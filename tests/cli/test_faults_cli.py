@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
+from ardrone_nmpc.cli.app import app
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 runner = CliRunner()

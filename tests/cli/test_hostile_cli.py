@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import LOG_COLUMNS, STRING_COLUMNS, RunRecorder
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder
 
 runner = CliRunner()
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import RunRecorder
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import RunRecorder
 
 runner = CliRunner()
 KINDS = ("tracking", "inputs", "solver", "path3d")
@@ -174,7 +174,7 @@ def test_help_does_not_import_matplotlib():
     code = "\n".join([
         "import sys",
         "from typer.testing import CliRunner",
-        "from ardrone_nmpc.cli import app",
+        "from ardrone_nmpc.cli.app import app",
         "r = CliRunner().invoke(app, ['--help'])",
         "assert r.exit_code == 0 and 'plot' in r.output",
         "print(sorted(m for m in sys.modules if m.startswith('matplotlib')))"])

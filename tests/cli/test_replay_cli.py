@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import LOG_FILE, RunRecorder, read_run
-from ardrone_nmpc.replay import RERUN_COLUMNS, RERUN_FILE
-from ardrone_nmpc.simulate import run_lockstep
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import LOG_FILE, RunRecorder, read_run
+from ardrone_nmpc.experiments.replay import RERUN_COLUMNS, RERUN_FILE
+from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 runner = CliRunner()

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.recorder import read_run
-from ardrone_nmpc.summary import read_summary
-from ardrone_nmpc.sweep import read_sweep_csv
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.runs.rundir import read_run
+from ardrone_nmpc.runs.summary import read_summary
+from ardrone_nmpc.experiments.sweep import read_sweep_csv
 
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_x.yaml")
@@ -170,12 +170,12 @@ def test_an_unreachable_scheduler_is_an_error_line(tmp_path):
 
 
 def test_failed_cases_make_the_exit_code_1(tmp_path, monkeypatch):
-    import ardrone_nmpc.simulate
+    import ardrone_nmpc.runtime.lockstep
 
     def explode(cfg, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(ardrone_nmpc.simulate, "run_lockstep", explode)
+    monkeypatch.setattr(ardrone_nmpc.runtime.lockstep, "run_lockstep", explode)
     result = _sweep(tmp_path, "--jobs", "1")
     assert result.exit_code == 1
     assert "error: 2 of 2 cases failed" in result.output
@@ -184,7 +184,7 @@ def test_failed_cases_make_the_exit_code_1(tmp_path, monkeypatch):
 
 
 def test_table_headers_are_the_shortest_distinct_path_tails():
-    from ardrone_nmpc.sweepcli import short_labels
+    from ardrone_nmpc.cli.sweep import short_labels
 
     assert short_labels(["controller.horizon_steps", "controller.dtau_s"]) == [
         "horizon_steps", "dtau_s"]

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.simulate import run_lockstep
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 HERE = Path(__file__).parent
 COLUMNS = ("t_s", "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "u_theta_rad",

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from ardrone_nmpc.config import ExperimentConfig, NoiseConfig
+from ardrone_nmpc.config.schema import ExperimentConfig, NoiseConfig
 from ardrone_nmpc.protocol.at import (
     CTRL_MODE_ACK,
     CTRL_MODE_CFG_GET,
@@ -700,7 +700,7 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
 def test_serve_starts_the_fault_clock(mocap_rx):
     """sim-drone has no experiment: its injected faults count from when it starts serving —
     an occlusion from 0 s on leaves the object out of the streamed frames."""
-    from ardrone_nmpc.config import load_config
+    from ardrone_nmpc.config.schema import load_config
     from ardrone_nmpc.sim.serve import serve
 
     cfg = load_config(None, ["faults.mocap_occlusion.start_s=0",
@@ -760,7 +760,7 @@ def test_servers_refuse_non_loopback_binds():
 def test_sim_drone_command_refuses_non_loopback_addresses(args, message):
     from typer.testing import CliRunner
 
-    from ardrone_nmpc.cli import app
+    from ardrone_nmpc.cli.app import app
 
     result = CliRunner().invoke(app, ["sim-drone", "--at-port", "0", "--navdata-port", "0", *args])
     assert result.exit_code == 1

@@ -20,17 +20,17 @@ from typer.testing import CliRunner
 
 import ardrone_nmpc.links.drone_link as drone_link_module
 import ardrone_nmpc.sim.loopback as loopback_module
-from ardrone_nmpc.cli import app
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.faults import FaultSchedule
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.protocol.at import REF_BASE, REF_TAKEOFF_BIT, AtCommand, Ref
 from ardrone_nmpc.protocol.mocap import decode_mocap
-from ardrone_nmpc.recorder import read_run
+from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.core.types import FlightMode
 
 ROOT = Path(__file__).parents[2]
 HOVER = str(ROOT / "configs" / "hover.yaml")

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.recorder import read_run
+from ardrone_nmpc.runs.rundir import read_run
 
-FLY = [sys.executable, "-m", "ardrone_nmpc.cli", "fly", "configs/hover.yaml", "--sim",
+FLY = [sys.executable, "-m", "ardrone_nmpc.cli.app", "fly", "configs/hover.yaml", "--sim",
        "--no-dashboard"]
 
 
@@ -94,7 +94,7 @@ def test_sigkill_mid_flight_leaves_a_readable_run(tmp_path):
     """No landing is possible after SIGKILL (the drone's own watchdog hovers it); what the
     tool owes is its log: config.yaml from before take-off, log.csv readable, at most the
     row being written lost."""
-    from ardrone_nmpc.config import load_config
+    from ardrone_nmpc.config.schema import load_config
 
     proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -123,7 +123,7 @@ def test_sigkill_mid_flight_leaves_a_readable_run(tmp_path):
 def test_fly_sim_follows_the_streamed_car(tmp_path):
     """The loopback mocap stream carries the scripted car; the link tracks it; the tick
     follows it — the same path as lockstep, over UDP."""
-    proc = subprocess.run([sys.executable, "-m", "ardrone_nmpc.cli", "fly",
+    proc = subprocess.run([sys.executable, "-m", "ardrone_nmpc.cli.app", "fly",
                            "configs/follow_car.yaml", "--sim", "--no-dashboard", "--log-dir",
                            str(tmp_path), "--duration-s", "6", "--set", "sim.settle_s=2"],
                           capture_output=True, text=True, timeout=110,

@@ -19,7 +19,7 @@ import time
 
 import pytest
 
-from ardrone_nmpc.config import ExperimentConfig
+from ardrone_nmpc.config.schema import ExperimentConfig
 from ardrone_nmpc.links.drone_link import DroneLink
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.protocol.at import parse_datagram_lenient

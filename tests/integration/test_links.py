@@ -60,7 +60,7 @@ from ardrone_nmpc.protocol.navdata import (
     empty_vision_detect_option,
     encode_navdata,
 )
-from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.core.types import FlightMode
 
 LOOPBACK = "127.0.0.1"
 REF_TAKEOFF = 290718208

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config import NoiseConfig
+from ardrone_nmpc.config.schema import NoiseConfig
 from ardrone_nmpc.protocol.mocap import decode_mocap
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams

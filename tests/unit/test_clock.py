@@ -2,7 +2,7 @@
 
 import pytest
 
-from ardrone_nmpc.clock import Rate
+from ardrone_nmpc.core.clock import Rate
 
 
 class ManualClock:

@@ -1,4 +1,4 @@
-"""Tests of the experiment schema, loading, overrides and dumping (ardrone_nmpc.config)."""
+"""Tests of the experiment schema, loading, overrides and dumping (ardrone_nmpc.config.schema)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel, ValidationError
 
-from ardrone_nmpc.config import (
+from ardrone_nmpc.config.schema import (
     ConfigError,
     ExperimentConfig,
     apply_overrides,

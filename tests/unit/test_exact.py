@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ardrone_nmpc.bench import HOVER_STATE, bench_ipopt, bench_nmpc
+from ardrone_nmpc.experiments.bench import HOVER_STATE, bench_ipopt, bench_nmpc
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.exact import IpoptController
 from ardrone_nmpc.control.newton import NewtonGMRESController

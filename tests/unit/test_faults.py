@@ -7,17 +7,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.faultmatrix import (FAULT_CASES, classify, deviation_from, log_complete,
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.experiments.faultmatrix import (FAULT_CASES, classify, deviation_from, log_complete,
                                       recovery_time_s)
-from ardrone_nmpc.faults import FaultSchedule, corrupt_navdata
+from ardrone_nmpc.sim.faults import FaultSchedule, corrupt_navdata
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
-from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.simulate import TakeoffRefused, run_lockstep
-from ardrone_nmpc.summary import summarise
-from ardrone_nmpc.types import FlightMode
-from ardrone_nmpc.wire_sensors import WireSensors, navdata_packet
+from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
+from ardrone_nmpc.runs.summary import summarise
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.sensors import WireSensors, navdata_packet
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 SHORT = ["duration_s=5", "sim.settle_s=1"]
@@ -179,7 +179,7 @@ def baseline(tmp_path_factory):
 
 
 def test_matrix_covers_every_fault_kind():
-    from ardrone_nmpc.config import FaultsConfig
+    from ardrone_nmpc.config.schema import FaultsConfig
 
     covered = {name for overrides in FAULT_CASES.values() for o in overrides
                for name in [o.split(".")[1]]}
@@ -233,7 +233,7 @@ def test_wind_pushes_and_the_deviation_metrics(tmp_path, baseline):
 
 
 def test_summary_counts_the_supervisor_verdicts(tmp_path):
-    from ardrone_nmpc.summary import read_summary
+    from ardrone_nmpc.runs.summary import read_summary
 
     _, run = fly(tmp_path, "solver_diverge")
     figures = {(r.axis, r.metric): r.value for r in read_summary(run.path)}

@@ -7,15 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config import ConfigError, load_config
-from ardrone_nmpc.follow import LiveTarget
+from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
-from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.sim.target import target_state
-from ardrone_nmpc.simulate import run_lockstep
-from ardrone_nmpc.summary import read_summary, summarise
-from ardrone_nmpc.types import MocapPose
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.runs.summary import read_summary, summarise
+from ardrone_nmpc.core.types import MocapPose
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 
@@ -129,7 +129,7 @@ def test_closed_loop_follows_the_car_and_prediction_helps(tmp_path):
 
 
 def test_rerun_of_a_follow_flight_is_exact(tmp_path):
-    from ardrone_nmpc.replay import rerun
+    from ardrone_nmpc.experiments.replay import rerun
 
     run, _ = fly(tmp_path, "duration_s=4")
     result = rerun(run=run, cfg=run.config)
@@ -138,7 +138,7 @@ def test_rerun_of_a_follow_flight_is_exact(tmp_path):
 
 def test_path_plot_draws_the_followed_object(tmp_path):
     pytest.importorskip("matplotlib")
-    from ardrone_nmpc.plots import figure_path3d
+    from ardrone_nmpc.viz.plots import figure_path3d
 
     run, _ = fly(tmp_path, "duration_s=3")
     fig = figure_path3d(run)

@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ardrone_nmpc.config import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError, load_config
 from ardrone_nmpc.links.drone_link import navdata_sample_of, parse_config_text
 from ardrone_nmpc.links.mocap_link import mocap_pose_of
 from ardrone_nmpc.protocol.at import (
@@ -48,7 +48,7 @@ from ardrone_nmpc.protocol.navdata import (
     NavdataError,
     decode_navdata,
 )
-from ardrone_nmpc.recorder import LOG_COLUMNS, STRING_COLUMNS, LogError, RunRecorder, read_run
+from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, LogError, RunRecorder, read_run
 
 settings.register_profile(
     "hostile-input", max_examples=int(os.environ.get("HOSTILE_EXAMPLES", "500")),
@@ -357,7 +357,7 @@ def test_at_one_bad_command_among_good_ones(case):
 def drone_server():
     """A simulated drone whose AT receiver is fed directly (sockets bound on 127.0.0.1, threads
     not started: the datagram handling alone, no timing)."""
-    from ardrone_nmpc.config import ExperimentConfig
+    from ardrone_nmpc.config.schema import ExperimentConfig
     from ardrone_nmpc.sim.drone_server import DroneServer
     from ardrone_nmpc.sim.plant import AirframePlant
 

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc import model
-from ardrone_nmpc.config import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError, load_config
 from ardrone_nmpc.control import kernels as K
 from ardrone_nmpc.control import obstacles as O
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.ocp import OcpSpec
-from ardrone_nmpc.recorder import RunRecorder, read_run
-from ardrone_nmpc.simulate import run_lockstep
-from ardrone_nmpc.summary import CLEARANCE_TOLERANCE_M, clearance_stats, summarise
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.runs.summary import CLEARANCE_TOLERANCE_M, clearance_stats, summarise
 from tests.conftest import thesis_cost
 
 CONFIG = "configs/obstacle.yaml"
@@ -249,7 +249,7 @@ def test_an_obstacle_away_from_the_horizon_changes_nothing(problem):
 
 def _hover_run(solver, ticks=40):
     """A small step from hover, exact model, no Newton re-projection: the inputs applied."""
-    from ardrone_nmpc.bench import HOVER_STATE, plant_step
+    from ardrone_nmpc.experiments.bench import HOVER_STATE, plant_step
 
     x = HOVER_STATE.copy()
     target = x.copy()
@@ -290,7 +290,7 @@ def test_obstacle_free_config_builds_an_obstacle_free_solver():
 def test_moving_an_obstacle_onto_the_path_makes_the_drone_go_round():
     """The centre is a runtime parameter: the solver told that the sphere moved onto its path
     flies round it (exact model, the loop's 0.21 rad tilt box); the other flies through."""
-    from ardrone_nmpc.bench import closed_loop
+    from ardrone_nmpc.experiments.bench import closed_loop
 
     centre = np.array([0.9, 0.0, 1.0])
     spec = OcpSpec(u_min=[-1, -0.21, -0.21, -1], u_max=[1, 0.21, 0.21, 1],

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from ardrone_nmpc.angles import wrap_angle_rad
-from ardrone_nmpc.config import DroneConfig, NoiseConfig, SimConfig, config_from_dict
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig, config_from_dict
 from ardrone_nmpc.sim.plant import (
     AirframePlant,
     FlightMode,
@@ -22,7 +22,7 @@ from ardrone_nmpc.sim.plant import (
     mocap_rotation_xyz_rad,
     rotation_heading_rad,
 )
-from ardrone_nmpc.types import GRAVITY_MPS2, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.core.types import GRAVITY_MPS2, MocapPose, NavdataSample, PlantTruth
 
 G = GRAVITY_MPS2
 P0 = PlantParams()

@@ -1,4 +1,4 @@
-"""Figures of ardrone_nmpc.plots: the data drawn is the logged data, the labels carry units,
+"""Figures of ardrone_nmpc.viz.plots: the data drawn is the logged data, the labels carry units,
 and the images render headless with real content."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc import plots
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.plots import PlotError
-from ardrone_nmpc.recorder import RunRecorder, read_run
+from ardrone_nmpc.viz import plots
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.viz.plots import PlotError
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 
 ROOT = Path(__file__).resolve().parents[2]
 SIZES_PX = {"tracking": (1100, 1250), "inputs": (1100, 1250), "solver": (1100, 1100),
@@ -28,7 +28,7 @@ SIZES_PX = {"tracking": (1100, 1250), "inputs": (1100, 1250), "solver": (1100, 1
 @pytest.fixture(scope="module")
 def sim_run(tmp_path_factory):
     """A short lockstep square (0.5 m sides, 1 s legs) with a settle phase: truth logged."""
-    from ardrone_nmpc.simulate import run_lockstep
+    from ardrone_nmpc.runtime.lockstep import run_lockstep
 
     cfg = load_config(ROOT / "configs" / "square.yaml",
                       ["duration_s=5", "sim.settle_s=0.5", "reference.side_m=0.5",
@@ -210,8 +210,8 @@ def test_solver_figure_marks_bad_status_and_missing_link_data(flight_run):
 
 
 def test_path_figure_draws_the_flown_truth_and_the_polyline(sim_run):
-    from ardrone_nmpc.reference import make_trajectory
-    from ardrone_nmpc.summary import summarise
+    from ardrone_nmpc.reference.trajectories import make_trajectory
+    from ardrone_nmpc.runs.summary import summarise
 
     fig = plots.figure_path3d(sim_run)
     ax3, ax2 = fig.get_axes()
@@ -266,7 +266,7 @@ def test_each_kind_renders_a_png_with_content(sim_run, tmp_path, kind):
 
 
 def test_importing_plots_does_not_import_matplotlib():
-    code = "import sys, ardrone_nmpc.plots; print('matplotlib' in sys.modules)"
+    code = "import sys, ardrone_nmpc.viz.plots; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"

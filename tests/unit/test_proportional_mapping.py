@@ -9,7 +9,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from ardrone_nmpc.angles import unwrap_near, wrap_angle_rad
+from ardrone_nmpc.core.angles import unwrap_near, wrap_angle_rad
 from ardrone_nmpc.control.mapping import (
     DroneLimits,
     MappingError,
@@ -19,7 +19,7 @@ from ardrone_nmpc.control.mapping import (
 )
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.model import f
-from ardrone_nmpc.types import AttitudeCommand
+from ardrone_nmpc.core.types import AttitudeCommand
 
 # Explicit gains: these tests check eq. 4.16's formulas, not the tuned defaults.
 FORMULA_GAINS = PGains(k1_per_s=1.5, k2_rad_per_mps=0.35, k3_rad_per_mps=0.35, k4_per_s=2.0)

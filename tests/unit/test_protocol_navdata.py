@@ -352,7 +352,7 @@ def test_demo_of_a_sample_round_trips_through_the_reader():
     from ardrone_nmpc.links.drone_link import navdata_sample_of
     from dataclasses import replace
 
-    from ardrone_nmpc.types import FlightMode, NavdataSample
+    from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
     sample = NavdataSample(0.0, FlightMode.FLYING, 100.4, 1.5, -2.25, 30.0, 1.2346, 0.5,
                            -0.25, 0.125)

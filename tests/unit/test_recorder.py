@@ -1,4 +1,4 @@
-"""Tests of the run directory writer and reader (ardrone_nmpc.recorder)."""
+"""Tests of the run directory writer and reader (ardrone_nmpc.runs.rundir)."""
 
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ardrone_nmpc import __version__
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import (
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import (
     LOG_COLUMNS,
     REQUIRED_COLUMNS,
     STRING_COLUMNS,
@@ -421,7 +421,7 @@ def test_invalid_event_line_is_an_error(tmp_path, cfg):
 
 
 def test_write_summary(tmp_path, cfg):
-    from ardrone_nmpc.summary import SummaryRow, read_summary
+    from ardrone_nmpc.runs.summary import SummaryRow, read_summary
 
     rows = [SummaryRow("x", "rise_time", 1 / 3, "s"), SummaryRow("x", "settling_time",
                                                                  math.nan, "s")]
@@ -442,8 +442,8 @@ def test_write_summary(tmp_path, cfg):
 
 CHILD = r"""
 import sys
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import RunRecorder, LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import RunRecorder, LOG_COLUMNS, STRING_COLUMNS
 cfg = load_config(overrides=["name=killed"])
 rec = RunRecorder.create(sys.argv[1], cfg, seed=1)
 print(rec.path, flush=True)

@@ -1,4 +1,4 @@
-"""Tests of the reference trajectories (ardrone_nmpc.reference)."""
+"""Tests of the reference trajectories (ardrone_nmpc.reference.trajectories)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ardrone_nmpc.angles import wrap_angle_rad
-from ardrone_nmpc.config import ReferenceConfig
-from ardrone_nmpc.reference import (
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.config.schema import ReferenceConfig
+from ardrone_nmpc.reference.trajectories import (
     POLYLINE_SPACING_M,
     Ellipse,
     Hover,
@@ -29,7 +29,7 @@ from ardrone_nmpc.reference import (
     load_waypoints_csv,
     make_trajectory,
 )
-from ardrone_nmpc.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
 TRAJ_DIR = Path(__file__).resolve().parents[2] / "trajectories"
 POS = [IX_X, IX_Y, IX_Z]

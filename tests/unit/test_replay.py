@@ -16,17 +16,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc import loop
-from ardrone_nmpc.config import load_config
+from ardrone_nmpc.runtime import tick as loop
+from ardrone_nmpc.config.schema import load_config
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.links.mocap_link import MocapLink
-from ardrone_nmpc.recorder import LOG_FILE, RunRecorder, read_run
-from ardrone_nmpc.reference import make_trajectory
-from ardrone_nmpc.replay import (
+from ardrone_nmpc.runs.rundir import LOG_FILE, RunRecorder, read_run
+from ardrone_nmpc.reference.trajectories import make_trajectory
+from ardrone_nmpc.experiments.replay import (
     CMD_COLUMNS, COMPARED_COLUMNS, RERUN_COLUMNS, ReplayError, broadcast, logged_poses,
     missing_rerun_columns, rerun, rows_to_inputs,
 )
-from ardrone_nmpc.simulate import HoldStartThen, run_lockstep
+from ardrone_nmpc.runtime.lockstep import HoldStartThen, run_lockstep
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 SHORT = ["duration_s=3.5", "sim.settle_s=0.5"]

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from ardrone_nmpc.reproduce import Outcome, RunFigures, claims, render_markdown
+from ardrone_nmpc.experiments.reproduce import Outcome, RunFigures, claims, render_markdown
 
 
 def fig(metrics=None, unstable=False, input_peak=0.5):

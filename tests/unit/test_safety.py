@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config import SafetyConfig, load_config
+from ardrone_nmpc.config.schema import SafetyConfig, load_config
 from ardrone_nmpc.safety import Action, Decision, Supervisor
-from ardrone_nmpc.types import FlightMode, NavdataSample
+from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 CFG = SafetyConfig()
 
@@ -115,7 +115,7 @@ def test_tilt_clip_and_mode_events():
 
 
 def test_config_validation_of_the_new_fields():
-    from ardrone_nmpc.config import ConfigError
+    from ardrone_nmpc.config.schema import ConfigError
 
     with pytest.raises(ConfigError, match=r"safety\.solver_hold_ticks"):
         load_config(None, ["safety.solver_hold_ticks=-1"])

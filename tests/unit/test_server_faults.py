@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.faults import FaultSchedule
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
-from ardrone_nmpc.faults import Disorder
+from ardrone_nmpc.sim.faults import Disorder
 from ardrone_nmpc.sim.fault_injection import ServerFaults
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.wire_sensors import navdata_packet
+from ardrone_nmpc.sim.sensors import navdata_packet
 
 NOW = 1000.0  # a monotonic time (s); experiment time 0 is set to it where the clock is set
 

@@ -2,9 +2,9 @@
 
 import pytest
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.session import FlightSession
-from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runtime.session import FlightSession
+from ardrone_nmpc.core.types import FlightMode
 
 
 class FakeNav:

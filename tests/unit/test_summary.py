@@ -1,4 +1,4 @@
-"""Tests of the run metrics and their tables (ardrone_nmpc.summary)."""
+"""Tests of the run metrics and their tables (ardrone_nmpc.runs.summary)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import RunRecorder, read_run
-from ardrone_nmpc.reference import make_trajectory
-from ardrone_nmpc.summary import (
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.reference.trajectories import make_trajectory
+from ardrone_nmpc.runs.summary import (
     SummaryRow,
     input_stats,
     path_deviation,

@@ -1,4 +1,4 @@
-"""ardrone_nmpc.sweep: grid parsing, cases and their ids, status and metrics, resume."""
+"""ardrone_nmpc.experiments.sweep: grid parsing, cases and their ids, status and metrics, resume."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc import sweep
-from ardrone_nmpc.config import ConfigError, config_from_dict
-from ardrone_nmpc.recorder import RunRecorder, read_run
-from ardrone_nmpc.summary import summarise
-from ardrone_nmpc.sweep import (CaseResult, build_cases, case_id, case_metrics, classify,
+from ardrone_nmpc.experiments import sweep
+from ardrone_nmpc.config.schema import ConfigError, config_from_dict
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.runs.summary import summarise
+from ardrone_nmpc.experiments.sweep import (CaseResult, build_cases, case_id, case_metrics, classify,
                                 parse_grid, rank_rows, read_sweep_csv, resume_results,
                                 run_case, split_values, sweep_columns, sweep_row,
                                 write_sweep_csv)
@@ -248,12 +248,12 @@ def test_run_case_flies_into_a_complete_run_directory(tmp_path):
 
 
 def test_a_failing_case_is_a_result_and_is_kept_for_inspection(tmp_path, monkeypatch):
-    import ardrone_nmpc.simulate
+    import ardrone_nmpc.runtime.lockstep
 
     def explode(cfg, **kwargs):
         raise RuntimeError("plant exploded\non two lines")
 
-    monkeypatch.setattr(ardrone_nmpc.simulate, "run_lockstep", explode)
+    monkeypatch.setattr(ardrone_nmpc.runtime.lockstep, "run_lockstep", explode)
     (case,) = _cases("controller.horizon_steps=8")
     result = run_case(case, out_dir=tmp_path)
     assert result.status == "failed"

@@ -2,7 +2,7 @@
 
 Each tick the runner hands :meth:`LiveTarget.observe` the object's newest pose with its age;
 :meth:`LiveTarget.state_at` then answers the controller's horizon like any
-:class:`~ardrone_nmpc.reference.Trajectory`: the object's position plus the configured offset,
+:class:`~ardrone_nmpc.reference.trajectories.Trajectory`: the object's position plus the configured offset,
 extrapolated at its estimated velocity (``follow.predict``), so the NMPC plans to where the
 object will be, not where it was. The velocity comes from differences of successive poses
 through a first-order filter (time constant ``follow.velocity_filter_s``). Before the object is
@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ardrone_nmpc.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 
 __all__ = ["LiveTarget", "TrackedObject"]
 
@@ -59,11 +59,11 @@ class TrackedObject:
 
 
 class LiveTarget:
-    """A :class:`~ardrone_nmpc.reference.Trajectory` that follows a tracked object.
+    """A :class:`~ardrone_nmpc.reference.trajectories.Trajectory` that follows a tracked object.
 
     Parameters
     ----------
-    ref_cfg : :class:`~ardrone_nmpc.config.ReferenceConfig` with ``kind: follow``.
+    ref_cfg : :class:`~ardrone_nmpc.config.schema.ReferenceConfig` with ``kind: follow``.
     """
 
     duration_s = math.inf

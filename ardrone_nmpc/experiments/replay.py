@@ -1,9 +1,9 @@
 """``replay``: a recorded run fed back through the tick, or re-sent as a live pose stream.
 
-DESIGN.md §2: the same :class:`~ardrone_nmpc.loop.Tick` serves ``fly``, ``simulate`` and
+DESIGN.md §2: the same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
 ``replay --rerun``; only the clock and the links change. Here the clock is manual — the
 experiment clock of the log itself (``t_s``) — and the "links" are the logged measurements
-(``log.csv`` columns written by :func:`~ardrone_nmpc.loop.measurement_columns`):
+(``log.csv`` columns written by :func:`~ardrone_nmpc.runtime.tick.measurement_columns`):
 
 * the mocap pose: ``x_m, y_m, z_m, psi_rad`` (the pose's position and ψ, exactly), its own time
   ``mocap_t_s`` and its age ``mocap_age_ms`` at the tick;
@@ -18,7 +18,7 @@ silently reading zeros).
 
 Functions
 ---------
-:func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.loop.TickInputs` of every row;
+:func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.runtime.tick.TickInputs` of every row;
 :func:`rerun` steps a fresh tick through them and compares the commands; :func:`broadcast`
 re-sends the logged poses as the UDP pose stream (specs/mocap-stream.md).
 """
@@ -34,11 +34,11 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
-from ardrone_nmpc.recorder import LOG_FILE, RunData, format_number
+from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -76,7 +76,7 @@ class ReplayError(ValueError):
 def missing_rerun_columns(*, run: RunData) -> list[str]:
     """The :data:`RERUN_COLUMNS` the run's ``log.csv`` header lacks (older versions).
 
-    :func:`~ardrone_nmpc.recorder.read_run` fills absent columns with NaN, which a run that
+    :func:`~ardrone_nmpc.runs.rundir.read_run` fills absent columns with NaN, which a run that
     never saw a pose would also show, so the header itself is read. A ``RunData`` built in
     memory (no ``log.csv`` on disk) counts as complete.
     """
@@ -323,9 +323,9 @@ def rerun(*, run: RunData, cfg, recorder=None,
 
     Parameters
     ----------
-    run : the recorded run (:func:`~ardrone_nmpc.recorder.read_run`).
+    run : the recorded run (:func:`~ardrone_nmpc.runs.rundir.read_run`).
     cfg : the configuration to recompute with (``run.config``, possibly with overrides).
-    recorder : a :class:`~ardrone_nmpc.recorder.RunRecorder` receiving the recomputed rows.
+    recorder : a :class:`~ardrone_nmpc.runs.rundir.RunRecorder` receiving the recomputed rows.
     progress : called with the fraction done after each tick.
 
     Raises
@@ -333,7 +333,7 @@ def rerun(*, run: RunData, cfg, recorder=None,
     ReplayError
         The log lacks the measurement columns (an older version) or holds no rows.
     """
-    from ardrone_nmpc.simulate import experiment_trajectory
+    from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 
     inputs = rows_to_inputs(run=run)
     if not inputs:

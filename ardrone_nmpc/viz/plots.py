@@ -6,7 +6,7 @@ worker processes and on headless CI machines. matplotlib is imported inside the 
 this module (and its sweep-table reader) imports without it, and ``ardrone-nmpc --help`` never
 pays for it. :func:`save_figure` writes a figure to a file.
 
-Run figures (``run`` is a :class:`~ardrone_nmpc.recorder.RunData`):
+Run figures (``run`` is a :class:`~ardrone_nmpc.runs.rundir.RunData`):
 
 * :func:`figure_tracking` — x, y, z, ψ measured vs reference (and the simulator's truth), and
   the estimator's ż against the true ż; experiment time from t = 0 (the settle phase of a
@@ -41,7 +41,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from .recorder import RunData
+    from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = [
     "KINDS",
@@ -516,7 +516,7 @@ def _ages_panel(ax: Axes, run: RunData, t: np.ndarray) -> None:
 def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str]:
     """The reference path: the trajectory's polyline, or the logged reference if the
     trajectory cannot be rebuilt here (e.g. its waypoint file is on another machine)."""
-    from .reference import ReferenceError, make_trajectory
+    from ardrone_nmpc.reference.trajectories import ReferenceError, make_trajectory
 
     cfg = run.config
     logged = np.column_stack([_col(run, c)[rows] for c in ("x_ref_m", "y_ref_m", "z_ref_m")])
@@ -532,7 +532,7 @@ def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str
 def _flown(run: RunData) -> tuple[np.ndarray, str]:
     """Flown positions of the experiment's flying ticks; the truth in simulation (the same
     choice as the summary's path deviation), the mocap measurement otherwise."""
-    from .summary import GROUND_MODES
+    from ardrone_nmpc.runs.summary import GROUND_MODES
 
     rows = _experiment(run)
     mode = _strings(run, "mode")
@@ -575,7 +575,7 @@ def figure_path3d(run: RunData) -> Figure:
     -------
     Figure : 13 × 6.5 in (1300 × 650 px at 100 dpi).
     """
-    from .summary import PATH_KINDS, path_deviation
+    from ardrone_nmpc.runs.summary import PATH_KINDS, path_deviation
 
     xyz, source = _flown(run)
     if xyz.shape[0] == 0:

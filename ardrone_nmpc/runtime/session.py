@@ -11,7 +11,7 @@ import math
 import time
 from typing import Callable
 
-from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.core.types import FlightMode
 
 
 class PreflightError(RuntimeError):

@@ -8,9 +8,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from ardrone_nmpc.recorder import RunRecorder, read_run
-from ardrone_nmpc.simulate import run_lockstep
-from ardrone_nmpc.summary import render_side_by_side, render_summary, summarise
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summarise
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,

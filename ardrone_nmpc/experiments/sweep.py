@@ -46,7 +46,7 @@ reference above ``diverge_m`` (default 0.5 m) anywhere in the last quarter of th
 Metrics (``sweep.csv``; the names carry the units)
 --------------------------------------------------
 ``rmse_m``: RMSE of the 3-D distance from the logged reference over the experiment's flying
-ticks (the plant truth when logged, as in :func:`~ardrone_nmpc.summary.summarise`; for path
+ticks (the plant truth when logged, as in :func:`~ardrone_nmpc.runs.summary.summarise`; for path
 experiments this is the summary's ``xyz rmse``). ``settling_s``, ``overshoot_pct``: the worst
 stepped axis of the summary (NaN without a step, and ``settling_s`` NaN when an axis never
 settles). ``path_deviation_m``: the summary's mean path deviation (NaN if not a path
@@ -82,12 +82,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from .config import ConfigError, config_to_dict, load_config
+from ardrone_nmpc.config.schema import ConfigError, config_to_dict, load_config
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .config import ExperimentConfig
-    from .recorder import RunData
-    from .summary import SummaryRow
+    from ardrone_nmpc.config.schema import ExperimentConfig
+    from ardrone_nmpc.runs.rundir import RunData
+    from ardrone_nmpc.runs.summary import SummaryRow
 
 __all__ = [
     "METRIC_COLUMNS",
@@ -308,7 +308,7 @@ class _Window:
 
 
 def _window(run: RunData) -> _Window:
-    from .summary import GROUND_MODES
+    from ardrone_nmpc.runs.summary import GROUND_MODES
 
     cols = run.columns
     t = np.asarray(cols["t_s"], dtype=np.float64)
@@ -361,7 +361,7 @@ def case_metrics(*, run: RunData, rows: Sequence[SummaryRow]) -> dict[str, float
 
 
 def _aborted(mode: np.ndarray) -> str | None:
-    from .summary import GROUND_MODES
+    from ardrone_nmpc.runs.summary import GROUND_MODES
 
     for m in mode:
         if m in GROUND_MODES or "land" in m or "emergency" in m:
@@ -374,7 +374,7 @@ def classify(*, run: RunData, diverge_m: float = DIVERGE_M) -> tuple[str, str]:
 
     Parameters
     ----------
-    run : the run read back (:func:`~ardrone_nmpc.recorder.read_run`).
+    run : the run read back (:func:`~ardrone_nmpc.runs.rundir.read_run`).
     diverge_m : largest 3-D distance from the reference (m) allowed in the last quarter of
         the experiment window.
 
@@ -435,9 +435,9 @@ def _fly(cfg: ExperimentConfig, log_dir: Path) -> tuple[Path, RunData, list[Summ
     """Fly ``cfg`` in lockstep into a new run directory under ``log_dir``, write its
     summary; return (run dir, run read back, summary rows). On an exception the partial run
     directory is left in ``log_dir`` with a ``sweep-case-failed`` event."""
-    from .recorder import RunRecorder, read_run
-    from .simulate import run_lockstep
-    from .summary import summarise
+    from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+    from ardrone_nmpc.runtime.lockstep import run_lockstep
+    from ardrone_nmpc.runs.summary import summarise
 
     seed = cfg.sim.seed
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
@@ -499,8 +499,8 @@ def finished_result(case: Case, *, out_dir: str | Path,
                     diverge_m: float = DIVERGE_M) -> CaseResult | None:
     """The result of a case finished by an earlier run (``summary.csv`` present), read back
     from its run directory; None if it has to be flown (absent, partial or unreadable)."""
-    from .recorder import LogError, read_run
-    from .summary import read_summary
+    from ardrone_nmpc.runs.rundir import LogError, read_run
+    from ardrone_nmpc.runs.summary import read_summary
 
     run_dir = Path(out_dir) / case.case_id
     if not (run_dir / SUMMARY_FILE).is_file():
@@ -562,7 +562,7 @@ def warm_up() -> None:
     global _WARM
     if _WARM:
         return
-    from .config import config_from_dict
+    from ardrone_nmpc.config.schema import config_from_dict
 
     cfg = config_from_dict({"name": "warm-up", "duration_s": 0.2, "sim": {"settle_s": 0.0},
                             "reference": {"kind": "step", "target_m": [-0.5, 0.0, 1.0]}})
@@ -588,7 +588,7 @@ def _init_worker() -> None:
 
 def _pool_context():
     """A forkserver whose process has imported and warmed the kernels (see
-    :mod:`ardrone_nmpc._sweep_preload`): workers fork from it warm, without inheriting the
+    :mod:`ardrone_nmpc.experiments._sweep_preload`): workers fork from it warm, without inheriting the
     parent's threads (numba and ``fork`` of a threaded process do not mix). Spawn where
     there is no forkserver (Windows)."""
     import multiprocessing
@@ -596,7 +596,7 @@ def _pool_context():
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["ardrone_nmpc._sweep_preload"])
+    ctx.set_forkserver_preload(["ardrone_nmpc.experiments._sweep_preload"])
     return ctx
 
 
@@ -717,7 +717,7 @@ def sweep_columns(param_paths: Sequence[str]) -> list[str]:
 
 def sweep_row(case: Case, result: CaseResult) -> dict[str, str]:
     """One ``sweep.csv`` row (text cells; numbers as in ``log.csv``, NaN as ``nan``)."""
-    from .recorder import format_number
+    from ardrone_nmpc.runs.rundir import format_number
 
     row = {"case": case.case_id, **dict(case.params)}
     for name in METRIC_COLUMNS:

@@ -2,9 +2,9 @@
 
 A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` holds:
 
-* ``config.yaml`` — the resolved :class:`~ardrone_nmpc.config.ExperimentConfig`, written at
+* ``config.yaml`` — the resolved :class:`~ardrone_nmpc.config.schema.ExperimentConfig`, written at
   creation (before the first row), with ``#`` comment lines ``ardrone-nmpc <version>``,
-  ``seed: <seed>`` and ``created: <ISO time>``; :func:`~ardrone_nmpc.config.load_config` reads it.
+  ``seed: <seed>`` and ``created: <ISO time>``; :func:`~ardrone_nmpc.config.schema.load_config` reads it.
 * ``log.csv`` — a header row, then one row per control tick, columns :data:`LOG_COLUMNS`.
   Plain CSV without quoting: string cells never contain ``,``, ``"`` or line breaks (the writer
   refuses them). Numbers are written as the *shortest* decimal that reads back to the same
@@ -13,7 +13,7 @@ A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` holds:
   round-trips bit for bit; NaN and ±inf are ``nan``/``inf``/``-inf``; a missing key is an empty
   cell (read back as NaN).
 * ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``.
-* ``summary.csv`` — ``axis,metric,value,unit`` rows (:mod:`ardrone_nmpc.summary`).
+* ``summary.csv`` — ``axis,metric,value,unit`` rows (:mod:`ardrone_nmpc.runs.summary`).
 
 Crash safety: ``log.csv`` and ``events.jsonl`` are opened unbuffered, and each row/event is
 handed to the kernel by one ``write`` call, so a killed process (SIGKILL included) loses at
@@ -46,11 +46,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 
-from . import __version__
-from .config import ConfigError, ExperimentConfig, dump_config, load_config
+from ardrone_nmpc import __version__
+from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, dump_config, load_config
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .summary import SummaryRow
+    from ardrone_nmpc.runs.summary import SummaryRow
 
 __all__ = [
     "LOG_COLUMNS",

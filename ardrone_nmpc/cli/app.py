@@ -31,7 +31,7 @@ def _fail(messages) -> None:
 
 
 def _load(config: Optional[Path], overrides: List[str]):
-    from ardrone_nmpc.config import ConfigError, load_config
+    from ardrone_nmpc.config.schema import ConfigError, load_config
 
     try:
         return load_config(config, overrides)
@@ -45,7 +45,7 @@ def check(
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
 ) -> None:
     """Validate a config and print the resolved values (exit 1 with the errors)."""
-    from ardrone_nmpc.config import dump_config
+    from ardrone_nmpc.config.schema import dump_config
 
     cfg = _load(config, set_)
     typer.echo(dump_config(cfg), nl=False)
@@ -61,9 +61,9 @@ def simulate(
 ) -> None:
     """Fly an experiment against the simulated AR.Drone in lockstep (no sockets, faster than
     real time); writes a run directory and prints its summary. Last line: run: <dir>."""
-    from ardrone_nmpc.recorder import LogError
-    from ardrone_nmpc.reference import ReferenceError
-    from ardrone_nmpc.simcli import run_simulate_command
+    from ardrone_nmpc.runs.rundir import LogError
+    from ardrone_nmpc.reference.trajectories import ReferenceError
+    from ardrone_nmpc.cli.simulate import run_simulate_command
 
     cfg = _load(config, set_)
     try:
@@ -99,8 +99,8 @@ def fly(
     from rich.console import Console
     from rich.live import Live
 
-    from ardrone_nmpc.dashboard import LiveStatus
-    from ardrone_nmpc.flight import (EXIT_SIGINT, EXIT_SIGTERM, FlightResult, Terminated,
+    from ardrone_nmpc.viz.dashboard import LiveStatus
+    from ardrone_nmpc.runtime.realtime import (EXIT_SIGINT, EXIT_SIGTERM, FlightResult, Terminated,
                                      run_flight)
 
     console = Console(stderr=True)
@@ -129,7 +129,7 @@ def fly(
         typer.echo("error: landing not confirmed by navdata — check the drone", err=True)
         code = code or 1
     if code == 0 and result.path is not None:
-        from ardrone_nmpc.simcli import run_summary_command
+        from ardrone_nmpc.cli.simulate import run_summary_command
 
         run_summary_command(run_dirs=[result.path])
     if result.path is not None:
@@ -143,8 +143,8 @@ def summary(
     run_dirs: List[Path] = typer.Argument(..., help="One or more run directories."),
 ) -> None:
     """Print the summary table of one run, or several side by side."""
-    from ardrone_nmpc.recorder import LogError
-    from ardrone_nmpc.simcli import run_summary_command
+    from ardrone_nmpc.runs.rundir import LogError
+    from ardrone_nmpc.cli.simulate import run_summary_command
 
     try:
         run_summary_command(run_dirs=run_dirs)
@@ -165,7 +165,7 @@ def replay(
 ) -> None:
     """Re-summarise a run; --rerun recomputes its commands from the logged measurements (last
     line: run: <dir>); --broadcast re-sends its mocap poses over UDP."""
-    from ardrone_nmpc.replaycli import ReplayUsageError, run_replay_command
+    from ardrone_nmpc.cli.replay import ReplayUsageError, run_replay_command
 
     try:
         path = run_replay_command(run_dir=run_dir, rerun_=rerun, overrides=set_, log_dir=log_dir,
@@ -194,8 +194,8 @@ def sweep(
     Last line: sweep: <sweep.csv>."""
     import os
 
-    from ardrone_nmpc.config import ConfigError
-    from ardrone_nmpc.sweepcli import SweepEngineError, run_sweep_command
+    from ardrone_nmpc.config.schema import ConfigError
+    from ardrone_nmpc.cli.sweep import SweepEngineError, run_sweep_command
 
     out_dir = out if out is not None else Path("logs") / "sweeps" / config.stem
     n_jobs = jobs if jobs is not None else os.cpu_count() or 1
@@ -228,7 +228,7 @@ def reproduce(
 ) -> None:
     """Run every thesis experiment in simulation (thesis formulation and ours) and write the
     claim-by-claim comparison."""
-    from ardrone_nmpc.reproduce import render_markdown, run_claims
+    from ardrone_nmpc.experiments.reproduce import render_markdown, run_claims
     from rich.console import Console
     from rich.progress import Progress
 
@@ -259,7 +259,7 @@ def bench(
     json_path: Optional[Path] = typer.Option(None, "--json", help="Write the rows as JSON to this file."),
 ) -> None:
     """Time the NMPC solvers in a closed loop (1 m step in x, y, z and 1 rad in ψ)."""
-    from ardrone_nmpc.benchcli import run_bench_command
+    from ardrone_nmpc.cli.bench import run_bench_command
 
     overrides = list(set_)
     if horizon_steps is not None:
@@ -292,8 +292,8 @@ def plot(
 ) -> None:
     """Draw a run's figures (tracking, inputs, solver, 3-D path), or a sweep's metric heat map,
     as images (needs matplotlib: the 'plot' extra). Prints plot: <file> per file."""
-    from ardrone_nmpc.plotcli import PlotError, run_plot_command
-    from ardrone_nmpc.recorder import LogError
+    from ardrone_nmpc.cli.plot import PlotError, run_plot_command
+    from ardrone_nmpc.runs.rundir import LogError
 
     try:
         written = run_plot_command(path=path, output=output, kind=kind, metric=metric, x=x,
@@ -318,7 +318,7 @@ def faults(
     """Run every injected fault against hover, step and square in lockstep simulation and
     report each case's outcome, deviation, recovery and log completeness (exit 1 if any case
     fails)."""
-    from ardrone_nmpc.faultmatrix import run_faults_command
+    from ardrone_nmpc.experiments.faultmatrix import run_faults_command
 
     try:
         ok = run_faults_command(json_out=json_out, markdown=markdown, experiments=experiments,

@@ -10,7 +10,7 @@
   the title says). Default output: ``SWEEP_DIR/plot-heatmap-<metric>.png``.
 
 The output format follows the file suffix (``.png`` when there is none). Errors are
-:class:`~ardrone_nmpc.plots.PlotError` or :class:`~ardrone_nmpc.recorder.LogError`, one line.
+:class:`~ardrone_nmpc.viz.plots.PlotError` or :class:`~ardrone_nmpc.runs.rundir.LogError`, one line.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from ardrone_nmpc.plots import KINDS, SWEEP_FILE, PlotError
+from ardrone_nmpc.viz.plots import KINDS, SWEEP_FILE, PlotError
 
 __all__ = ["MATPLOTLIB_MISSING", "PlotError", "run_plot_command"]
 
@@ -47,7 +47,7 @@ def _check_format(path: Path) -> Path:
 
 
 def _save(fig, path: Path, dpi: int) -> Path:
-    from ardrone_nmpc.plots import save_figure
+    from ardrone_nmpc.viz.plots import save_figure
 
     try:
         return save_figure(fig, path, dpi=dpi)
@@ -64,8 +64,8 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
     ----------
     path : a run directory, a sweep directory, or a ``sweep.csv`` file.
     output : image file; with ``kind='all'`` the stem of one file per kind.
-    kind : run figure (:data:`~ardrone_nmpc.plots.KINDS` or ``all``; default ``all``).
-    metric, x, y : sweep heat map only (see :func:`~ardrone_nmpc.plots.sweep_grid`).
+    kind : run figure (:data:`~ardrone_nmpc.viz.plots.KINDS` or ``all``; default ``all``).
+    metric, x, y : sweep heat map only (see :func:`~ardrone_nmpc.viz.plots.sweep_grid`).
     dpi : resolution, pixels per inch.
     warn : called with notes on recoverable damage (a torn last log line).
     """
@@ -90,8 +90,8 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
 
 def _plot_run(path: Path, *, output: Path | None, kind: str, dpi: int,
               warn: Callable[[str], None] | None) -> list[Path]:
-    from ardrone_nmpc import plots
-    from ardrone_nmpc.recorder import read_run
+    from ardrone_nmpc.viz import plots
+    from ardrone_nmpc.runs.rundir import read_run
 
     if kind not in (*KINDS, "all"):
         raise PlotError(f"--kind: unknown kind {kind!r}; choose from {', '.join(KINDS)}, all")
@@ -112,7 +112,7 @@ def _plot_run(path: Path, *, output: Path | None, kind: str, dpi: int,
 
 def _plot_sweep(path: Path, *, output: Path | None, metric: str, x: str | None,
                 y: str | None, dpi: int, warn: Callable[[str], None] | None) -> Path:
-    from ardrone_nmpc.plots import figure_sweep_heatmap, read_sweep
+    from ardrone_nmpc.viz.plots import figure_sweep_heatmap, read_sweep
 
     table = read_sweep(path)
     for note in table.warnings:

@@ -1,6 +1,6 @@
 """``ardrone-nmpc sweep``: run a grid of lockstep simulations, write ``sweep.csv``, rank them.
 
-The pure parts (grid, cases, metrics, status, engines) are in :mod:`ardrone_nmpc.sweep`; this
+The pure parts (grid, cases, metrics, status, engines) are in :mod:`ardrone_nmpc.experiments.sweep`; this
 module drives them: resume, progress bar (stderr), ``sweep.csv`` as cases finish, Ctrl-C, the
 ranked table (stdout).
 """
@@ -20,8 +20,8 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                            TimeElapsedColumn, TimeRemainingColumn)
 from rich.table import Table
 
-from ardrone_nmpc.config import ConfigError
-from ardrone_nmpc.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
                                 CaseResult, SweepCsvAppender, build_cases, finished_result,
                                 iter_dask, iter_local, parse_grid, rank_rows, resume_results,
                                 sweep_columns, sweep_row, write_sweep_csv)
@@ -169,7 +169,7 @@ def short_labels(paths: Sequence[str]) -> list[str]:
 def render_ranked(rows: Sequence[Mapping[str, str]], *, params: Sequence[str], rank_by: str,
                   top: int | None = None, title: str | None = None) -> Table:
     """The ``sweep.csv`` rows as a ``rich`` table, best first by ``--rank-by`` (see
-    :func:`~ardrone_nmpc.sweep.rank_rows`); ``top`` keeps the first rows only."""
+    :func:`~ardrone_nmpc.experiments.sweep.rank_rows`); ``top`` keeps the first rows only."""
     column = RANK_METRICS[rank_by]
     ranked = rank_rows(rows, metric=column)[:top]
     metrics = ["rmse_m", "settling_s", "overshoot_pct", "path_deviation_m", "solve_p99_us",

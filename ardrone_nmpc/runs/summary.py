@@ -1,7 +1,7 @@
 """Run metrics (DESIGN.md §5 ``summary.csv``) and their tables.
 
 The metric functions are pure numpy and take plain arrays; :func:`summarise` applies them to a
-run read by :func:`~ardrone_nmpc.recorder.read_run`, and :func:`render_summary` /
+run read by :func:`~ardrone_nmpc.runs.rundir.read_run`, and :func:`render_summary` /
 :func:`render_side_by_side` lay the rows out as ``rich`` tables.
 
 What :func:`summarise` measures, and over which rows
@@ -53,14 +53,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .angles import wrap_angle_rad
-from .control.obstacles import clearance_m
-from .recorder import SUMMARY_FILE, LogError
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.control.obstacles import clearance_m
+from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError
 
 if TYPE_CHECKING:  # pragma: no cover
     from rich.table import Table
 
-    from .recorder import RunData
+    from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = [
     "CLEARANCE_TOLERANCE_M",
@@ -376,8 +376,8 @@ def _rmse(e: np.ndarray) -> float:
 
 def summarise(run: RunData) -> list[SummaryRow]:
     """The metrics of a run as :class:`SummaryRow` s (see the module docstring for which rows
-    each metric uses). Needs the columns :func:`~ardrone_nmpc.recorder.read_run` provides."""
-    from .reference import make_trajectory
+    each metric uses). Needs the columns :func:`~ardrone_nmpc.runs.rundir.read_run` provides."""
+    from ardrone_nmpc.reference.trajectories import make_trajectory
 
     cfg = run.config
     cols: Mapping[str, np.ndarray] = run.columns
@@ -506,7 +506,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
 def read_summary(run_dir: str | Path) -> list[SummaryRow]:
     """Read a run's ``summary.csv`` (written by ``RunRecorder.write_summary``).
 
-    Raises :class:`~ardrone_nmpc.recorder.LogError` (``<file>:<line>: …``) if it is missing or
+    Raises :class:`~ardrone_nmpc.runs.rundir.LogError` (``<file>:<line>: …``) if it is missing or
     malformed.
     """
     path = Path(run_dir) / SUMMARY_FILE

@@ -1,6 +1,6 @@
 """``ardrone-nmpc replay``: re-summarise a run, re-run its controller, or re-send its poses.
 
-The work is in :mod:`ardrone_nmpc.replay`; this module checks the option combinations, runs
+The work is in :mod:`ardrone_nmpc.experiments.replay`; this module checks the option combinations, runs
 it with progress and prints the tables. Every user error becomes :class:`ReplayUsageError`
 (one line per problem), which the CLI prints as ``error: …`` lines with exit code 1.
 """
@@ -14,13 +14,13 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
-from ardrone_nmpc.config import ConfigError, load_config
-from ardrone_nmpc.recorder import CONFIG_FILE, LogError, RunData, RunRecorder, read_run
-from ardrone_nmpc.replay import (
+from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, LogError, RunData, RunRecorder, read_run
+from ardrone_nmpc.experiments.replay import (
     COMPARED_COLUMNS, RERUN_FILE, ReplayError, RerunResult, broadcast, missing_rerun_columns,
     require_rerun_columns, rerun, write_rerun_csv,
 )
-from ardrone_nmpc.summary import render_summary, summarise
+from ardrone_nmpc.runs.summary import render_summary, summarise
 
 #: ``--rerun`` on an unchanged config must reproduce every command within this (issue target).
 REPRODUCE_TOLERANCE = 1e-9

@@ -1,7 +1,7 @@
 """Reference trajectories: the desired state x_d(t) and its horizon for the NMPC.
 
 A trajectory gives the desired *state* ``[x, ẋ, y, ẏ, z, ż, ψ]`` (m, m/s, m, m/s, m, m/s, rad;
-order of :mod:`ardrone_nmpc.types`) at any time ``t`` (s from the start of the experiment).
+order of :mod:`ardrone_nmpc.core.types`) at any time ``t`` (s from the start of the experiment).
 Velocities are part of it: the NMPC penalises velocity error, so a moving reference carries its
 own velocity and a set point has zero velocity.
 
@@ -16,7 +16,7 @@ Every trajectory implements the :class:`Trajectory` protocol:
   in a pure heading step).
 
 :func:`horizon` stacks ``state_at`` over the NMPC's stage times ``t + i·Δτ``, i = 0..N.
-:func:`make_trajectory` builds a trajectory from a :class:`~ardrone_nmpc.config.ReferenceConfig`.
+:func:`make_trajectory` builds a trajectory from a :class:`~ardrone_nmpc.config.schema.ReferenceConfig`.
 
 ψ in a reference is continuous (unwrapped) along time; the controller wraps errors.
 Times before 0 (or before a waypoint file's first time) hold the first point with zero velocity.
@@ -32,10 +32,10 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from .types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .config import ReferenceConfig
+    from ardrone_nmpc.config.schema import ReferenceConfig
 
 __all__ = [
     "Ellipse",
@@ -623,7 +623,7 @@ def load_waypoints_csv(path: str | Path) -> Waypoints:
 
 
 def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -> Trajectory:
-    """Build the trajectory of a :class:`~ardrone_nmpc.config.ReferenceConfig`.
+    """Build the trajectory of a :class:`~ardrone_nmpc.config.schema.ReferenceConfig`.
 
     ========================  =================================================================
     kind                      trajectory
@@ -637,7 +637,7 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
     ``lorenz``                :class:`Lorenz` around ``center_m``, altitude ``start_m[2]``,
                               ``lorenz_scale_m``, ``lorenz_time_scale``
     ``path``                  :func:`load_waypoints_csv` of ``path_file``
-    ``follow``                :class:`~ardrone_nmpc.follow.LiveTarget` (a second mocap object)
+    ``follow``                :class:`~ardrone_nmpc.reference.live.LiveTarget` (a second mocap object)
     ========================  =================================================================
 
     Paths use ``start_psi_rad`` as their constant heading. ``duration_s`` (s) is the flight
@@ -666,8 +666,8 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
         if ref_cfg.path_file is None:
             raise ReferenceError("reference.path_file: required when kind is 'path'")
         return load_waypoints_csv(ref_cfg.path_file)
-    if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/follow.py)
-        from .follow import LiveTarget
+    if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/reference/live.py)
+        from ardrone_nmpc.reference.live import LiveTarget
 
         return LiveTarget(ref_cfg)
     raise ReferenceError(f"reference.kind: unknown trajectory kind {kind!r}")

@@ -422,7 +422,7 @@ class ReferenceConfig(_Section):
             raise _invalid(f"no such file: {path}")
         # Read it now, so that `check` rejects what `simulate` would (non-monotonic time, a
         # bad cell: "<file>:<line>: …"). Imported here: reference imports this module.
-        from .reference import ReferenceError, load_waypoints_csv
+        from ardrone_nmpc.reference.trajectories import ReferenceError, load_waypoints_csv
 
         try:
             load_waypoints_csv(path)

@@ -17,10 +17,10 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.config import load_config
-from ardrone_nmpc.recorder import RunRecorder, read_run
-from ardrone_nmpc.simulate import run_lockstep
-from ardrone_nmpc.summary import summarise
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.runs.summary import summarise
 
 # The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), and ẋ, ẏ
 # from the drone's navdata.

@@ -18,13 +18,13 @@ import numpy as np
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
-from ardrone_nmpc.follow import TrackedObject
+from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolverStatus
 from ardrone_nmpc.safety import NOMINAL, Action, Decision, Supervisor
-from ardrone_nmpc.reference import Trajectory
-from ardrone_nmpc.types import AttitudeCommand, MocapPose, NavdataSample
+from ardrone_nmpc.reference.trajectories import Trajectory
+from ardrone_nmpc.core.types import AttitudeCommand, MocapPose, NavdataSample
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))

@@ -11,6 +11,6 @@ import signal
 # but only once its preload is done: without this a Ctrl-C now prints its traceback).
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-from ardrone_nmpc.sweep import warm_up  # noqa: E402 - after the signal disposition
+from ardrone_nmpc.experiments.sweep import warm_up  # noqa: E402 - after the signal disposition
 
 warm_up()

@@ -3,7 +3,7 @@ byte-level corruptions, and the plant-side faults.
 
 Times are experiment times (s; 0 = the first tick after the settle phase). The runners ask a
 :class:`FaultSchedule` per sensor frame or tick; the lockstep runner feeds the faulted datagrams
-through the real decoders and link logic (:mod:`ardrone_nmpc.simulate`), ``fly --sim`` through
+through the real decoders and link logic (:mod:`ardrone_nmpc.runtime.lockstep`), ``fly --sim`` through
 the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
 seeded by the run's seed, so a faulted run is as reproducible as a clean one.
 """
@@ -84,7 +84,7 @@ class Disorder:
 
 
 class FaultSchedule:
-    """Which faults of a :class:`~ardrone_nmpc.config.FaultsConfig` act at a time.
+    """Which faults of a :class:`~ardrone_nmpc.config.schema.FaultsConfig` act at a time.
 
     Parameters
     ----------

@@ -18,14 +18,14 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.faults import FaultSchedule, PlantFaults
-from ardrone_nmpc.loop import Tick, TickInputs
+from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.reference import Trajectory, make_trajectory
+from ardrone_nmpc.reference.trajectories import Trajectory, make_trajectory
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.target import target_pose
-from ardrone_nmpc.types import FlightMode
-from ardrone_nmpc.wire_sensors import WireSensors
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.sensors import WireSensors
 
 TAKEOFF_TIMEOUT_S = 10.0
 LANDING_TIMEOUT_S = 15.0

@@ -1,7 +1,7 @@
 """``ardrone-nmpc fly``: the real-time loop over real UDP — the drone, or the loopback simulators.
 
-The same :class:`~ardrone_nmpc.loop.Tick` as ``simulate``; here the clock is the wall clock
-(absolute deadlines, :class:`~ardrone_nmpc.clock.Rate`) and the measurements come from the
+The same :class:`~ardrone_nmpc.runtime.tick.Tick` as ``simulate``; here the clock is the wall clock
+(absolute deadlines, :class:`~ardrone_nmpc.core.clock.Rate`) and the measurements come from the
 links. The session lands the drone however the loop ends; SIGTERM is turned into an
 exception so that it lands too.
 """
@@ -15,14 +15,14 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from ardrone_nmpc.clock import Rate
-from ardrone_nmpc.config import tracked_object
-from ardrone_nmpc.loop import Tick, TickInputs
-from ardrone_nmpc.recorder import RunRecorder, read_run, write_summary
+from ardrone_nmpc.core.clock import Rate
+from ardrone_nmpc.config.schema import tracked_object
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run, write_summary
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.session import FlightSession
-from ardrone_nmpc.simulate import experiment_trajectory
-from ardrone_nmpc.summary import summarise
+from ardrone_nmpc.runtime.session import FlightSession
+from ardrone_nmpc.runtime.lockstep import experiment_trajectory
+from ardrone_nmpc.runs.summary import summarise
 
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143

@@ -4,7 +4,7 @@ receiving logic — :class:`~ardrone_nmpc.links.mocap_link.MocapLink` and the na
 at its arrival time on the manual clock.
 
 The lockstep runner uses this instead of its direct sampling when a sensor fault is configured
-(:data:`~ardrone_nmpc.faults.SENSOR_FAULTS`): sampling every frame costs a little speed and
+(:data:`~ardrone_nmpc.sim.faults.SENSOR_FAULTS`): sampling every frame costs a little speed and
 draws the sensor noise in another order than the direct path, so clean runs keep the direct
 path (and their golden trace). Mocap latency here may be anything (the direct path is limited
 to 50 ms); a frame's receipt time is its pose time, as on the real link.
@@ -15,11 +15,11 @@ from __future__ import annotations
 import heapq
 import math
 
-from ardrone_nmpc.faults import Disorder, FaultSchedule, corrupt_navdata
+from ardrone_nmpc.sim.faults import Disorder, FaultSchedule, corrupt_navdata
 from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
-from ardrone_nmpc.loop import TickInputs
+from ardrone_nmpc.runtime.tick import TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import (
     CtrlMajor,
@@ -32,7 +32,7 @@ from ardrone_nmpc.protocol.navdata import (
     encode_navdata,
 )
 from ardrone_nmpc.sim.mocap_server import frame_items
-from ardrone_nmpc.types import FlightMode
+from ardrone_nmpc.core.types import FlightMode
 
 _CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
                FlightMode.FLYING: CtrlMajor.FLYING, FlightMode.LANDING: CtrlMajor.TRANS_LANDING,
@@ -58,7 +58,7 @@ class WireSensors:
     ----------
     cfg : ExperimentConfig.
     plant : the simulated drone (advanced by :meth:`advance_to`).
-    schedule : the run's :class:`~ardrone_nmpc.faults.FaultSchedule`.
+    schedule : the run's :class:`~ardrone_nmpc.sim.faults.FaultSchedule`.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 

@@ -1,4 +1,4 @@
-"""``ardrone-nmpc bench``: run :mod:`ardrone_nmpc.bench` and present it (rich table, JSON)."""
+"""``ardrone-nmpc bench``: run :mod:`ardrone_nmpc.experiments.bench` and present it (rich table, JSON)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from ardrone_nmpc.bench import BenchRow, bench_ipopt, bench_nmpc
+from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc
 from ardrone_nmpc.control.newton import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
 
