@@ -45,6 +45,7 @@ class AttitudeCommand:
 # the records compare by identity (``eq=False``): compare fields with numpy instead.
 
 import enum as _enum
+import math as _math
 
 import numpy as _np
 
@@ -146,3 +147,23 @@ class NavdataSample:
     vx_body_mps: float
     vy_body_mps: float
     vz_mps: float
+
+
+@dataclass(frozen=True, slots=True)
+class TickInputs:
+    """What the links hold at tick time ``t_s`` (s, the run's clock): the control tick's input.
+
+    ``pose``/``navdata`` are the newest received (None before the first); ``*_rx_t_s`` their
+    receipt times on the same clock (ages are measured from those). ``target`` is the newest
+    pose of the second tracked object (reference kind ``follow`` or a moving obstacle; None
+    otherwise). Here rather than in ``runtime`` so the simulators can build one without
+    importing the runtime.
+    """
+
+    t_s: float
+    pose: MocapPose | None
+    pose_rx_t_s: float
+    navdata: NavdataSample | None
+    navdata_rx_t_s: float
+    target: MocapPose | None = None
+    target_rx_t_s: float = -_math.inf

@@ -19,7 +19,7 @@ from ardrone_nmpc.sim.faults import Disorder, FaultSchedule, corrupt_navdata
 from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
-from ardrone_nmpc.runtime.tick import TickInputs
+from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import (
     CtrlMajor,

@@ -1,0 +1,436 @@
+"""The stages of one control tick, each a small object that can be built and tested alone.
+
+:class:`~ardrone_nmpc.runtime.tick.Tick` chains them (docs/architecture.md, "one tick"):
+estimation → delay prediction → control → supervision → row, with the moving obstacles fed
+from the second tracked object first. Each stage owns the state that carries over from one tick
+to the next — the estimators, the inputs sent but not yet acting, the NMPC warm start, the
+last command sent — and nothing else; the log row is built in one place from their results.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
+from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
+from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
+from ardrone_nmpc.control.proportional import PGains, p_control
+from ardrone_nmpc.core.types import (
+    INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y,
+    IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
+)
+from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.reference.live import TrackedObject
+from ardrone_nmpc.safety import Action, Decision, Supervisor
+from ardrone_nmpc.sim.faults import FaultSchedule
+
+__all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
+           "MovingObstacles", "Sent", "Solution", "Supervision", "feedback_ages_ms",
+           "measurement_columns", "navdata_velocity_world", "tick_row"]
+
+OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
+HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
+
+
+# ----------------------------------------------------------------------------- estimation
+def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
+    """Navdata body velocities (forward, right-positive) → world (ẋ, ẏ) at heading ψ (CCW)."""
+    c, s = math.cos(psi_rad), math.sin(psi_rad)
+    fwd, right = nav.vx_body_mps, nav.vy_body_mps
+    return fwd * c + right * s, fwd * s - right * c
+
+
+class Estimation:
+    """The state ``[x, ẋ, y, ẏ, z, ż, ψ]`` from the newest mocap pose and navdata.
+
+    Position and ψ from mocap; ż from the vertical-speed estimator (fed the z̈ applied over
+    the last interval); ẋ/ẏ from navdata (``estimator.horizontal_velocity: navdata``, when
+    there is any) or else backward differences of the mocap positions. A pose seen again (the
+    same stamp) updates no estimator.
+
+    Parameters
+    ----------
+    est_cfg : :class:`~ardrone_nmpc.config.schema.EstimatorConfig`.
+    """
+
+    def __init__(self, est_cfg) -> None:
+        self.vz_estimator = make_vz_estimator(
+            est_cfg.kind, kalman_q=est_cfg.kalman_q, kalman_r=est_cfg.kalman_r,
+            kalman_p0=est_cfg.kalman_p0, lambda0_per_s=est_cfg.luenberger_lambda0_per_s,
+            gain=est_cfg.luenberger_gain)
+        self.xy_difference = BackwardDifference(size=2)
+        self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
+        self._last_pose_t_s: float | None = None
+        self._x = np.zeros(STATE_DIM)
+
+    def update(self, pose: MocapPose, navdata: NavdataSample | None,
+               zacc_mps2: float) -> np.ndarray:
+        """The estimate after ``pose``; ``zacc_mps2`` is the z̈ applied since the last pose.
+
+        Returns the stage's own (7,) array, overwritten by the next call.
+        """
+        if pose.t_s != self._last_pose_t_s:
+            if self._last_pose_t_s is None:
+                self.vz_estimator.reset(pose.position_m[2])
+                self.xy_difference.reset()
+                self.xy_difference.update(pose.position_m[:2], 1.0)
+            else:
+                dt = pose.t_s - self._last_pose_t_s
+                self.vz_estimator.update(pose.position_m[2], zacc_mps2, dt)
+                self.xy_difference.update(pose.position_m[:2], dt)
+            self._last_pose_t_s = pose.t_s
+        x = self._x
+        x[IX_X], x[IX_Y], x[IX_Z] = pose.position_m
+        x[IX_PSI] = pose.psi_rad
+        x[IX_VZ] = self.vz_estimator.vz_mps
+        if self.velocity_from_navdata and navdata is not None:
+            x[IX_VX], x[IX_VY] = navdata_velocity_world(navdata, pose.psi_rad)
+        else:
+            x[IX_VX], x[IX_VY] = self.xy_difference.velocity_mps
+        return x
+
+
+# ----------------------------------------------------------------------------- delay
+class DelayPrediction:
+    """The inputs sent but not yet acting, and the state they lead to.
+
+    Parameters
+    ----------
+    delay_s : the command delay to compensate (s); rounded up to whole ticks.
+    period_s : control period (s).
+    """
+
+    def __init__(self, delay_s: float, period_s: float) -> None:
+        self.period_s = period_s
+        self.delay_ticks = math.ceil(delay_s / period_s - 1e-9)
+        self._pending: deque = deque(maxlen=max(self.delay_ticks, 1))  # newest last
+        self._sent = np.zeros((self.delay_ticks, INPUT_DIM))
+
+    @property
+    def lead_s(self) -> float:
+        """How far ahead of the measurement the next command takes effect (s)."""
+        return self.delay_ticks * self.period_s
+
+    def push(self, u_sent: np.ndarray) -> None:
+        """Note the (4,) input just sent (zeros for a hover)."""
+        if self.delay_ticks:
+            self._pending.append(u_sent)
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
+        period) — the state the new command will meet; ``x`` itself if nothing is pending."""
+        if self.delay_ticks == 0 or not self._pending:
+            return x
+        sent = self._sent
+        missing = self.delay_ticks - len(self._pending)  # start-up: hover for those
+        sent[:missing] = 0.0
+        for k, u in enumerate(self._pending):
+            sent[missing + k] = u
+        out = np.empty(STATE_DIM)
+        rollout_rk4(x, sent, self.period_s, out)
+        return out
+
+    def warm_up(self, x: np.ndarray) -> None:
+        """Load (or compile) the rollout kernel now, not on the first tick in the air."""
+        if self.delay_ticks:
+            rollout_rk4(x, self._sent, self.period_s, np.empty(STATE_DIM))
+
+
+# ----------------------------------------------------------------------------- obstacles
+class MovingObstacles:
+    """Obstacles centred on the second tracked object, moved in the NMPC every tick.
+
+    The centre is the object's position predicted at its estimated (filtered) velocity by
+    ``ahead_s`` — to the moment the command takes effect (the state the NMPC solves from is
+    predicted there too) plus ``controller.obstacle_lookahead_s``; over the horizon it is held.
+
+    Parameters
+    ----------
+    nmpc : the solver (``obstacles`` array and ``move_obstacles(centres_m)``).
+    indices : rows of ``nmpc.obstacles`` that move.
+    ahead_s : prediction time (s).
+    """
+
+    def __init__(self, nmpc, indices: list[int], ahead_s: float) -> None:
+        self.nmpc = nmpc
+        self.indices = indices
+        self.ahead_s = ahead_s
+        self.track = TrackedObject(OBSTACLE_VELOCITY_FILTER_S)
+
+    def update(self, pose: MocapPose) -> None:
+        track = self.track
+        track.update(pose, pose.t_s)
+        centres = self.nmpc.obstacles[:, OBS_X:OBS_Z + 1].copy()
+        centres[self.indices] = track.position_m + track.velocity_mps * self.ahead_s
+        self.nmpc.move_obstacles(centres)
+
+
+# ----------------------------------------------------------------------------- control
+@dataclass(frozen=True, slots=True, eq=False)
+class Solution:
+    """What the controller computed in one tick (logged whether or not it is flown).
+
+    ``result`` is None for the P controller, whose command is ``p_command``. ``u_flown`` is
+    the NMPC input the supervisor judges (all NaN while a divergence is injected), ``ok``
+    whether the solver may be trusted, ``status`` the ``solver_status`` column.
+    """
+
+    ref_now: np.ndarray
+    x_solve: np.ndarray
+    result: SolveResult | None = None
+    u_flown: np.ndarray | None = None
+    ok: bool = True
+    status: str = ""
+    p_command: AttitudeCommand | None = None
+
+    @property
+    def zacc_mps2(self) -> float:
+        """The NMPC's z̈ as solved (m/s²); NaN for the P controller."""
+        return math.nan if self.result is None else self.result.u[IU_ZACC]
+
+
+class Control:
+    """NMPC or the thesis' P controller, and the attitude command of a verdict.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig (``controller``, ``estimator.kind``, ``safety``, ``loop``).
+    limits : what the drone is configured to do (mapping and ż clipping).
+    nmpc : the solver (None: the P controller flies).
+    delay : the delay predictor the NMPC solves from.
+    faults : the run's fault schedule; a divergence it injects replaces the NMPC input by NaN
+        after the solve (the warm start carries on as it would).
+    """
+
+    def __init__(self, cfg, limits: DroneLimits, nmpc, delay: DelayPrediction,
+                 faults: FaultSchedule | None = None) -> None:
+        ctl = cfg.controller
+        self.nmpc = nmpc
+        self.delay = delay
+        self.limits = limits
+        self.faults = faults
+        g = ctl.p_gains
+        self.p_gains = PGains(g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
+        self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else cfg.loop.period_s
+        self.vz_from_commands = cfg.estimator.kind == "none"
+        self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
+        if nmpc is not None:
+            self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
+
+    def warm_up(self) -> np.ndarray:
+        """Load (or compile) the solver kernels now; returns the hover state it solved at."""
+        hover = np.zeros(STATE_DIM)
+        hover[IX_Z] = 1.0
+        self.nmpc.solve(0.0, hover, np.tile(hover, (self.nmpc.spec.horizon_steps + 1, 1)))
+        self.nmpc.reset()
+        return hover
+
+    def solve(self, t_exp_s: float, x: np.ndarray, traj) -> Solution:
+        """The controller's answer at experiment time ``t_exp_s`` for the estimate ``x``."""
+        if self.nmpc is None:
+            ref_now = traj.state_at(t_exp_s)[0]
+            return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
+        solver = self.nmpc
+        x_solve = self.delay.predict(x)
+        dtau = solver.stage_dtau_s(t_exp_s)
+        # one lookup for the reference at t (logged against x(t)) and over the horizon that
+        # starts when this command takes effect, t + lead
+        times = np.empty(solver.spec.horizon_steps + 2)
+        times[0] = t_exp_s
+        times[1:] = t_exp_s + self.delay.lead_s + max(dtau, 1e-9) * self._stage_index
+        states = traj.state_at(times)
+        result = solver.solve(t_exp_s, x_solve, states[1:])
+        if self.faults is not None and self.faults.solver_diverges(t_exp_s):
+            return Solution(states[0], x_solve, result, np.full(INPUT_DIM, math.nan), False,
+                            SolverStatus.DIVERGED.value)
+        ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
+                           and self.accept_max_iterations)
+        return Solution(states[0], x_solve, result, result.u, ok, result.status.value)
+
+    def command(self, action: Action, sol: Solution, x: np.ndarray,
+                vz_ref_last_mps: float) -> AttitudeCommand | None:
+        """The attitude command ``action`` flies (None for hold, hover, land, stop).
+
+        ``vz_ref_last_mps`` is the ż reference last sent: without a ż estimate the NMPC's z̈
+        is integrated from it.
+        """
+        if action is Action.FALLBACK:
+            return p_control(x, sol.ref_now, self.p_gains)
+        if action is not Action.CONTROL:
+            return None
+        if sol.result is None:
+            return sol.p_command
+        u = sol.result.u
+        # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
+        # Without an estimate the thesis could only integrate its own z̈ commands — the
+        # integrator that winds up into fig. 3.2's overshoot.
+        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
+        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
+        vz_ref = min(max(vz_reference_mps(vz_base, u[IU_ZACC], self.vz_lead_s), -vz_max), vz_max)
+        return AttitudeCommand(vz_ref, float(u[IU_PHI]), float(u[IU_THETA]), float(u[IU_PSIRATE]))
+
+
+# ----------------------------------------------------------------------------- supervision
+@dataclass(frozen=True, slots=True, eq=False)
+class Sent:
+    """What a tick sends and why.
+
+    ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
+    from the NMPC; zeros for a hover). ``flown`` is a newly sent command after tilt clipping
+    and ``saturated`` its ``cmd_saturated`` flags (None for a hold or a hover).
+    """
+
+    pcmd: PcmdCommand
+    u: np.ndarray
+    progressive: bool
+    decision: Decision
+    flown: AttitudeCommand | None = None
+    saturated: str | None = None
+
+
+class Supervision:
+    """The supervisor's verdict turned into the command sent, and the memory of it.
+
+    A hold resends the last command sent (a hover if none was); a control or fallback
+    command is tilt-clipped and mapped (a hover if it is not finite); hover, land and stop
+    send the drone's own hover and forget the last command.
+
+    Parameters
+    ----------
+    supervisor : the flight's :class:`~ardrone_nmpc.safety.Supervisor`.
+    limits : for the mapping to PCMD fractions.
+    """
+
+    def __init__(self, supervisor: Supervisor, limits: DroneLimits) -> None:
+        self.supervisor = supervisor
+        self.limits = limits
+        self._last: tuple[PcmdCommand, np.ndarray] | None = None  # for a hold
+        self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
+        self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
+
+    def command(self, decision: Decision, cmd: AttitudeCommand | None,
+                zacc_mps2: float) -> Sent:
+        """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
+        ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller)."""
+        sent = self._sent(decision, cmd, zacc_mps2)
+        self.zacc_mps2 = float(sent.u[IU_ZACC])
+        return sent
+
+    def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
+        action = decision.action
+        if action is Action.HOLD and self._last is not None:
+            pcmd, u_sent = self._last
+            return Sent(pcmd, u_sent, True, decision)
+        if cmd is not None and action in (Action.CONTROL, Action.FALLBACK):
+            roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
+            pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
+            flown = AttitudeCommand(cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps)
+            if all(map(math.isfinite, (flown.vz_ref_mps, roll, pitch, flown.psirate_radps))):
+                pcmd = map_to_pcmd(flown, self.limits)
+                flags = (pcmd.saturated[0] or roll_clipped, pcmd.saturated[1] or pitch_clipped,
+                         *pcmd.saturated[2:])
+                zacc = zacc_mps2 if action is Action.CONTROL and math.isfinite(zacc_mps2) else 0.0
+                u_sent = np.array([zacc, roll, pitch, flown.psirate_radps])
+                self.vz_ref_mps = flown.vz_ref_mps
+                self._last = (pcmd, u_sent)
+                return Sent(pcmd, u_sent, True, decision, flown,
+                            "".join("1" if f else "0" for f in flags))
+            decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
+        elif action is Action.HOLD:  # nothing sent yet that could be held
+            decision = Decision(Action.HOVER, decision.reason)
+        # hover, land, stop: the drone's own hover — no acceleration, for the delay predictor
+        # and the integrators; the last NMPC input is never flown
+        self.vz_ref_mps = 0.0
+        self._last = None
+        return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
+
+
+# ----------------------------------------------------------------------------- the row
+def feedback_ages_ms(inputs: TickInputs) -> tuple[float, float]:
+    """Ages of the newest mocap pose and navdata at tick time (ms; inf before the first)."""
+    mocap = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose is not None else math.inf
+    nav = (inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata is not None else math.inf
+    return mocap, nav
+
+
+def measurement_columns(inputs: TickInputs) -> dict:
+    """The raw measurements of ``inputs`` as log columns (replay feeds them back).
+
+    ``mocap_t_s`` is the pose's own time stamp as the tick saw it (the link's clock: receipt
+    time in ``fly``, plant time in simulation), bit for bit: the estimators difference it, and
+    moved to the experiment clock it would carry the tick's offset (rounding; in ``fly`` its
+    lateness) into those differences.
+    """
+    nav = inputs.navdata
+    pose = inputs.pose
+    return {
+        "mocap_t_s": pose.t_s if pose is not None else math.nan,
+        "battery_pct": nav.battery_pct if nav is not None else math.nan,
+        "nav_vx_body_mps": nav.vx_body_mps if nav is not None else math.nan,
+        "nav_vy_body_mps": nav.vy_body_mps if nav is not None else math.nan,
+        "nav_mode": nav.mode.value if nav is not None else "",
+        "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
+        "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
+    } | _target_columns(inputs)
+
+
+def _target_columns(inputs: TickInputs) -> dict:
+    target = inputs.target
+    if target is None:
+        return {}
+    p = target.position_m
+    return {"target_x_m": p[0], "target_y_m": p[1], "target_z_m": p[2],
+            "target_psi_rad": target.psi_rad, "target_t_s": target.t_s,
+            "target_age_ms": (inputs.t_s - inputs.target_rx_t_s) * 1e3}
+
+
+def _solution_columns(sol: Solution) -> dict:
+    ref = sol.ref_now
+    cols = {"x_ref_m": ref[IX_X], "y_ref_m": ref[IX_Y], "z_ref_m": ref[IX_Z],
+            "psi_ref_rad": ref[IX_PSI]}
+    result = sol.result
+    if result is None:  # the P controller: no z̈
+        cmd = sol.p_command
+        return cols | {"u_zacc_mps2": math.nan, "u_phi_rad": cmd.phi_rad,
+                       "u_theta_rad": cmd.theta_rad, "u_psirate_radps": cmd.psirate_radps}
+    u = result.u  # as solved, also when the supervisor flies something else
+    return cols | {"u_zacc_mps2": u[IU_ZACC], "u_phi_rad": u[IU_PHI], "u_theta_rad": u[IU_THETA],
+                   "u_psirate_radps": u[IU_PSIRATE], "solve_us": result.solve_time_us,
+                   "residual_norm": result.residual_norm,
+                   "gmres_iterations": result.gmres_iterations,
+                   "newton_iterations": result.newton_iterations}
+
+
+def tick_row(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
+             x: np.ndarray | None, solution: Solution | None, sent: Sent, mode: str,
+             compute_us: float) -> dict:
+    """The tick's ``log.csv`` row (columns of :data:`~ardrone_nmpc.runs.rundir.LOG_COLUMNS`).
+
+    ``x`` is the estimate (None without a pose), ``solution`` the controller's (None when the
+    supervisor stopped the tick before it), ``sent`` what went out, ``mode`` the label.
+    """
+    row = {"t_s": t_exp_s, "mocap_age_ms": ages_ms[0], "navdata_age_ms": ages_ms[1],
+           "solver_status": solution.status if solution is not None else "",
+           "cmd_saturated": sent.saturated if sent.saturated is not None else "0000"}
+    row |= measurement_columns(inputs)
+    if x is not None:  # logged even when stale (mocap_age_ms says so)
+        row |= {"x_m": x[IX_X], "y_m": x[IX_Y], "z_m": x[IX_Z], "psi_rad": x[IX_PSI],
+                "vx_mps": x[IX_VX], "vy_mps": x[IX_VY], "vz_mps": x[IX_VZ]}
+    if solution is not None:
+        row |= _solution_columns(solution)
+    flown = sent.flown
+    if flown is not None:
+        row["vz_ref_mps"] = flown.vz_ref_mps
+        if sent.decision.action is Action.FALLBACK:  # the P command flown instead
+            row |= {"u_phi_rad": flown.phi_rad, "u_theta_rad": flown.theta_rad,
+                    "u_psirate_radps": flown.psirate_radps}
+    pcmd = sent.pcmd
+    row |= {"cmd_roll_frac": pcmd.roll_frac, "cmd_pitch_frac": pcmd.pitch_frac,
+            "cmd_gaz_frac": pcmd.gaz_frac, "cmd_yaw_frac": pcmd.yaw_frac,
+            "mode": mode, "compute_us": compute_us}
+    return row
