@@ -91,7 +91,8 @@ class Tick:
         self.control = Control(cfg, self.limits, nmpc, self.delay, FaultSchedule(cfg.faults))
         self.supervision = Supervision(self.supervisor, self.limits)
         moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object]
-        self.obstacles = (MovingObstacles(nmpc, moving, self.delay.lead_s + ctl.obstacle_lookahead_s)
+        ahead_s = self.delay.lead_s + ctl.obstacle_lookahead_s
+        self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())

@@ -152,6 +152,8 @@ class FaultSchedule:
         return _within(f, t_s) and bool(self.rng.random() < f.probability)
 
     def solver_diverges(self, t_s: float) -> bool:
+        """The NMPC solution of the tick at ``t_s`` is replaced by a diverged, non-finite one
+        (the tick's control stage asks, :class:`~ardrone_nmpc.runtime.stages.Control`)."""
         return _within(self.cfg.solver_diverge, t_s)
 
     def wind_mps(self, t_s: float) -> np.ndarray:
