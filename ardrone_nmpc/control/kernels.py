@@ -74,7 +74,7 @@ FRACTION_TO_BOUND = 0.99
 # prm indices
 P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = range(9)
 N_PRM = 9
-ACTIVE_SET_ROUNDS = 8  # eq. 3.25 re-solves per tick at most
+ACTIVE_SET_ROUNDS = 32  # eq. 3.25 re-solves per tick at most
 # With obstacles, a Newton re-projection stops at this fraction of the trigger residual and
 # solves each Newton step to this relative GMRES residual (inexact Newton): its Gauss–Newton
 # iterations converge only linearly, and the continuation finishes the job (solver-notes §7).
@@ -680,6 +680,48 @@ def update_active_set(U, active, W, eps, n_stages):
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def activate_blocking_bounds(U, dU, active, W, eps, n_stages):
+    """Eq. 3.25 for a stalled solve: move along the last Newton direction ``dU`` to the first
+    bound it meets, which joins the active set (its input at ``bound ∓ ε``). True if one did.
+
+    An unconstrained Newton iteration aimed at a target far outside the box can stall (no
+    step lowers ‖F‖, e.g. where tan θ grows without bound) before any input leaves the box,
+    and eq. 3.25 would then never see a violation. As in a primal active-set method, the
+    blocking bound of the direction is the one to impose; imposing every bound the full
+    step would cross over-constrains the next solve when the direction is poor.
+    """
+    m = STAGE_ACTIVE
+    alpha = 1.0
+    for i in range(n_stages):
+        for j in range(NU):
+            k = i * m + j
+            if active[i, j] != 0 or dU[k] == 0.0:
+                continue
+            if U[k] + dU[k] > W[4, j] - eps:
+                alpha = min(alpha, max(0.0, (W[4, j] - eps - U[k]) / dU[k]))
+            elif U[k] + dU[k] < W[3, j] + eps:
+                alpha = min(alpha, max(0.0, (W[3, j] + eps - U[k]) / dU[k]))
+    changed = False
+    for i in range(n_stages):
+        for j in range(NU):
+            k = i * m + j
+            if active[i, j] != 0:
+                continue
+            u = U[k] + alpha * dU[k]
+            if u >= W[4, j] - eps * (1.0 + 1e-9) and dU[k] > 0.0:
+                active[i, j] = 1
+                U[k] = W[4, j] - eps
+                changed = True
+            elif u <= W[3, j] + eps * (1.0 + 1e-9) and dU[k] < 0.0:
+                active[i, j] = -1
+                U[k] = W[3, j] + eps
+                changed = True
+            else:
+                U[k] = u
+    return changed
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def cgmres_step(mem, x, ref, iprm, initialise):
     """:func:`cgmres_tick` on packed memory (the per-tick entry point from Python)."""
     U, dU, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
@@ -721,7 +763,11 @@ def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs=None):
                                     obs, iprm[5] != 0)
         stats[0] += it
         stats[1] += gm
-        if not update_active_set(U, active, W, eps, n_stages):
+        changed = update_active_set(U, active, W, eps, n_stages)
+        stalled = math.isfinite(norm) and norm > prm[P_TOL] and it < iprm[2]
+        if stalled and not changed:
+            changed = activate_blocking_bounds(U, views[15], active, W, eps, n_stages)
+        if not changed:
             break
     stats[2] = norm
     stats[3] = norm
