@@ -352,6 +352,9 @@ def sim_drone(
         _fail([str(err)])
 
 
+from ardrone_nmpc.cli.tune import register as _register_tune; _register_tune(app)  # noqa: E402,E702
+
+
 def main() -> None:  # console-script entry point
     app()
 

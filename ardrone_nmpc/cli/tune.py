@@ -1,0 +1,253 @@
+"""``ardrone-nmpc tune``: search controller weights (and more) by optimisation, not by grid.
+
+The parts are in :mod:`ardrone_nmpc.experiments.tune` (space, objective, engines, study);
+this module drives them: options, the progress bar (stderr), the ranked table (stdout),
+``trials.csv`` and ``best.yaml`` in ``--out``. :func:`register` adds the command to the app.
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+__all__ = ["TuneOutcome", "register", "run_tune_command"]
+
+ENGINES = ("local", "dask")
+
+
+@dataclass
+class TuneOutcome:
+    """Where the study's files are, how many trials it holds and how many were flown now,
+    the best score, the wall time (s), the simulated time flown (s), and whether Ctrl-C
+    stopped it."""
+
+    out_dir: Path
+    total: int
+    flown: int
+    best_score: float
+    best_path: Path | None
+    wall_s: float
+    sim_s: float
+    interrupted: bool = False
+
+
+def _check_options(*, engine: str, scheduler: str | None) -> None:
+    import importlib.util
+
+    from ardrone_nmpc.config.schema import ConfigError
+
+    errors = []
+    if engine not in ENGINES:
+        errors.append(f"--engine: unknown engine {engine!r}; choose {', '.join(ENGINES)}")
+    if scheduler is not None and engine != "dask":
+        errors.append("--scheduler: only with --engine dask")
+    if engine == "dask" and importlib.util.find_spec("distributed") is None:
+        errors.append("--engine dask: needs dask.distributed "
+                      "(pip install 'ardrone-nmpc[distributed]')")
+    if importlib.util.find_spec("optuna") is None:
+        errors.append("tune needs Optuna: pip install 'ardrone-nmpc[tune]'")
+    if errors:
+        raise ConfigError(errors)
+
+
+def _variants(texts) -> list[tuple[str, tuple[str, ...]]]:
+    """``--variant`` texts (``label:path=v;path=v`` or ``path=v;…``) → (label, overrides);
+    none given: the plant profiles, if the schema has them."""
+    from ardrone_nmpc.config.schema import ConfigError
+    from ardrone_nmpc.experiments.tune.engine import plant_variants
+
+    if not texts:
+        return plant_variants()
+    out, errors = [], []
+    for i, text in enumerate(texts):
+        label, sep, rest = text.partition(":")
+        if not sep or "=" in label:
+            label, rest = f"v{i}", text
+        overrides = tuple(s.strip() for s in rest.split(";") if s.strip())
+        if not overrides or any("=" not in o for o in overrides):
+            errors.append(f"--variant {text!r}: expected [label:]path=value;path=value…")
+        out.append((label.strip(), overrides))
+    if errors:
+        raise ConfigError(errors)
+    return out
+
+
+def _cell(value: float) -> str:
+    return "—" if value is None or not math.isfinite(value) else f"{value:.4g}"
+
+
+def _ranked_table(study, *, space, scenarios, top: int):
+    from rich.markup import escape
+    from rich.table import Table
+
+    from ardrone_nmpc.experiments.tune.study import finished_trials
+
+    trials = sorted(finished_trials(study), key=lambda t: (t.value, t.number))[:top]
+    table = Table(title=f"best {len(trials)} of {len(finished_trials(study))} trials "
+                        f"(score: lower is better; metrics: mean over {len(scenarios)} "
+                        "scenarios)")
+    for head in ("#", "trial", "score", "status"):
+        table.add_column(head, justify="right" if head != "status" else "left")
+    labels = [n.split(".")[-1] for n in space]
+    for label in labels:
+        table.add_column(label, justify="right")
+    means = {"tracking_m": "track_m", "settling_s": "settle_s", "overshoot_pct": "over_%",
+             "supervisor_ticks": "superv"}
+    for head in means.values():
+        table.add_column(head, justify="right")
+    style = {"ok": "green", "aborted": "yellow", "failed": "red"}
+    for i, t in enumerate(trials, start=1):
+        metrics = t.user_attrs.get("metrics", {})
+        row = [str(i), str(t.number), _cell(t.value)]
+        status = t.user_attrs.get("status", "")
+        row.append(f"[{style.get(status, 'white')}]{escape(status)}[/]")
+        row += [_cell(t.params.get(n)) for n in space]
+        for m in means:
+            vals = [s.get(m, math.nan) for s in metrics.values()]
+            vals = [v for v in vals if v is not None and math.isfinite(v)]
+            row.append(_cell(sum(vals) / len(vals)) if vals else "—")
+        table.add_row(*row)
+    return table
+
+
+def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int = 1,
+                     engine: str = "local", scheduler: str | None = None,
+                     out_dir: Path, seed: int = 0, n_seeds: int = 3, variants=(),
+                     space_file: Path | None = None, objective: str | None = None,
+                     resume: bool = False, keep_runs: bool = False, top: int = 10,
+                     command: str = "ardrone-nmpc tune", console=None,
+                     err_console=None) -> TuneOutcome:
+    """Run (or resume) the study; see the module docstring. Raises ConfigError for bad
+    input, before anything flies."""
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                               TimeElapsedColumn, TimeRemainingColumn)
+
+    from ardrone_nmpc.config.schema import ConfigError, load_config
+    from ardrone_nmpc.experiments.tune import engine as eng
+    from ardrone_nmpc.experiments.tune import study as st
+    from ardrone_nmpc.experiments.tune.objective import parse_objective
+    from ardrone_nmpc.experiments.tune.space import load_space
+
+    _check_options(engine=engine, scheduler=scheduler)
+    cfg = load_config(config, overrides)
+    space = load_space(space_file, cfg)
+    obj = parse_objective(objective)
+    scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds, variants=_variants(variants))
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
+    sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
+    study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig, base_values=base_values)
+    columns = st.trials_columns(list(space), scen)
+    console = console or Console(width=None if sys.stdout.isatty() else 160)
+    err_console = err_console or Console(stderr=True)
+    make_spec = st.spec_factory(cfg=cfg, space=space, scenarios=scen, objective=obj,
+                                keep_dir=out_dir / "runs" if keep_runs else None)
+
+    def save() -> None:
+        st.write_trials_csv(out_dir / st.TRIALS_FILE, columns,
+                            st.trial_rows(study, list(space), scen))
+        st.write_best(out_dir / st.BEST_FILE, study, cfg=cfg, space=space, command=command,
+                      objective=obj, scenarios=scen)
+
+    wall0 = time.perf_counter()
+    sim_s, flown, interrupted = 0.0, 0, False
+    todo = max(0, trials - len(st.finished_trials(study)))
+    if todo:
+        runner = eng.make_engine(engine, jobs=max(1, min(jobs, todo)), scheduler=scheduler)
+        progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                            TimeElapsedColumn(), TimeRemainingColumn(), console=err_console,
+                            transient=True)
+        try:
+            with progress:
+                task = progress.add_task("tune", total=todo)
+
+                def on_result(result) -> None:
+                    nonlocal sim_s
+                    sim_s += result.sim_s
+                    save()
+                    progress.update(task, advance=1,
+                                    description=f"tune · best {study.best_value:.4g}")
+
+                flown = st.run_study(study, n_trials=trials, engine=runner, make_spec=make_spec,
+                                     space=space, on_result=on_result)
+        except KeyboardInterrupt:
+            interrupted = True
+        except (OSError, TimeoutError) as err:
+            if engine != "dask":
+                raise
+            raise ConfigError(f"--engine dask: {' '.join(str(err).split())}") from None
+        finally:
+            runner.close()
+    save()
+    wall_s = time.perf_counter() - wall0
+    done = st.finished_trials(study)
+    if done:
+        console.print(_ranked_table(study, space=space, scenarios=scen, top=top))
+    console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
+                  f"{len(scen)} scenarios; {wall_s:.1f} s wall, {sim_s:.0f} s simulated "
+                  f"({sim_s / wall_s if wall_s > 0 else math.nan:.0f}× real time; {engine}, "
+                  f"{jobs} jobs){' (interrupted)' if interrupted else ''}")
+    best = out_dir / st.BEST_FILE
+    return TuneOutcome(out_dir, len(done), flown, study.best_value if done else math.nan,
+                       best if done else None, wall_s, sim_s, interrupted)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``tune`` command to ``app``."""
+
+    @app.command()
+    def tune(
+        config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
+        trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
+        jobs: Optional[int] = typer.Option(None, "--jobs", min=1, help="Trials flown at once (default: the CPU count); 1 = in this process."),
+        engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
+        out: Optional[Path] = typer.Option(None, "--out", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
+        seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
+        variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
+        space: Optional[Path] = typer.Option(None, "--space", help="Search-space YAML (default: q and r log-uniform ×0.1…×10 of the config's)."),
+        objective: Optional[str] = typer.Option(None, "--objective", help="Preset (default, step, tracking) and/or term=weight items: tracking, settling, overshoot, effort, solver, supervisor, abort, worst."),
+        resume: bool = typer.Option(False, "--resume", help="Continue the study in --out (finished trials are not flown again)."),
+        keep_runs: bool = typer.Option(False, "--keep-runs", help="Write every flight's run directory under DIR/runs/ (default: metrics only)."),
+        top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
+        set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),
+    ) -> None:
+        """Tune the controller by optimisation (Optuna TPE): each trial flies the config
+        in lockstep on several seeds (and plant variants) and is scored; writes trials.csv
+        and best.yaml, prints the ranked table. Last line: best: <best.yaml>."""
+        import os
+
+        from ardrone_nmpc.config.schema import ConfigError
+
+        out_dir = out if out is not None else Path("logs") / "tune" / config.stem
+        n_jobs = jobs if jobs is not None else os.cpu_count() or 1
+        command = "ardrone-nmpc " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
+            if sys.argv[1:2] == ["tune"] else f"ardrone-nmpc tune {config}"
+        try:
+            outcome = run_tune_command(config=config, overrides=set_, trials=trials,
+                                       jobs=n_jobs, engine=engine, scheduler=scheduler,
+                                       out_dir=out_dir, seed=seed, n_seeds=seeds,
+                                       variants=variant, space_file=space,
+                                       objective=objective, resume=resume,
+                                       keep_runs=keep_runs, top=top, command=command)
+        except ConfigError as err:
+            for line in err.messages:
+                typer.echo(f"error: {line}", err=True)
+            raise typer.Exit(code=1)
+        if outcome.best_path is not None:
+            typer.echo(f"best: {outcome.best_path}")
+        if outcome.interrupted:
+            typer.echo("interrupted: --resume continues the study", err=True)
+            raise typer.Exit(code=130)

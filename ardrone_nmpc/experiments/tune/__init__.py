@@ -1,0 +1,1 @@
+"""``ardrone-nmpc tune``: search space, objective, engines and the Optuna study."""

@@ -1,0 +1,220 @@
+"""The search space of ``tune``: which config values a trial may change, and within what.
+
+Default space: each weight of ``controller.q`` (7) and ``controller.r`` (4), log-uniform
+within ×0.1…×10 of the config's value (a zero state weight stays zero: there is nothing to
+scale). Parameter names are dotted config paths, ``[i]`` for an element of a vector:
+``controller.q[4]``.
+
+A space file (YAML) replaces or extends it::
+
+    default: true                  # keep the q/r space above (default true)
+    factor: 10                     # its range: ×1/factor … ×factor (default 10)
+    params:
+      controller.horizon_steps: {low: 8, high: 30, type: int}
+      controller.dtau_s: {low: 0.05, high: 0.2, log: true}
+      controller.delay_compensation_s: {low: 0.15, high: 0.35}
+      estimator.kalman_q: {factor: 10}       # log-uniform ×0.1…×10 of the config's value
+      controller.q_terminal: {factor: 5}     # a vector: one parameter per (non-zero) element
+      controller.q[4]: {low: 10, high: 500, log: true}   # overrides the default entry
+
+``low``/``high`` bound a parameter (``log: true`` samples log-uniformly; needs low > 0);
+``factor`` centres a log range on the config's value. ``type`` is ``float`` (default) or
+``int``. Every path must name a numeric config value; mistakes fail before anything flies,
+one ``--space FILE: params.<path>: message`` line each.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ardrone_nmpc.config.schema import ConfigError, config_from_dict, config_to_dict
+
+__all__ = ["DEFAULT_FACTOR", "Param", "apply_params", "config_with", "default_space",
+           "load_space", "parse_space"]
+
+DEFAULT_FACTOR = 10.0
+_NAME = re.compile(r"^(?P<path>[A-Za-z_][A-Za-z0-9_.]*?)(?:\[(?P<index>\d+)\])?$")
+_KEYS = {"low", "high", "log", "type", "factor"}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One searched value: ``name`` (dotted path, ``[i]`` for a vector element), its range
+    and scale, its type and the config's own value (``base``)."""
+
+    name: str
+    low: float
+    high: float
+    log: bool = True
+    kind: str = "float"  # or "int"
+    base: float = math.nan
+
+    def contains(self, value: float) -> bool:
+        return self.low <= value <= self.high
+
+
+def _split(name: str) -> tuple[list[str], int | None]:
+    m = _NAME.match(name)
+    if m is None:
+        raise ValueError("expected a dotted config path, optionally with [index]")
+    index = m.group("index")
+    return m.group("path").split("."), (None if index is None else int(index))
+
+
+def _lookup(data: Mapping[str, Any], name: str) -> Any:
+    keys, index = _split(name)
+    node: Any = data
+    for key in keys:
+        if not isinstance(node, Mapping) or key not in node:
+            raise ValueError("no such config value")
+        node = node[key]
+    if index is not None:
+        if not isinstance(node, list) or index >= len(node):
+            raise ValueError(f"not a vector with an element {index}")
+        node = node[index]
+    return node
+
+
+def _numeric(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _around(name: str, base: float, factor: float, kind: str = "float") -> Param:
+    return Param(name, base / factor, base * factor, True, kind, base)
+
+
+def default_space(cfg, *, factor: float = DEFAULT_FACTOR) -> dict[str, Param]:
+    """q (7) and r (4) log-uniform within ×1/factor…×factor of ``cfg``'s values."""
+    space = {}
+    for vec in ("q", "r"):
+        for i, v in enumerate(getattr(cfg.controller, vec)):
+            if v > 0:
+                name = f"controller.{vec}[{i}]"
+                space[name] = _around(name, float(v), factor)
+    return space
+
+
+def _one(name: str, spec: Any, data: Mapping[str, Any]) -> list[Param]:
+    """The parameters of one ``params`` entry (several for a whole vector)."""
+    if not isinstance(spec, Mapping):
+        raise ValueError("expected a mapping {low, high[, log, type]} or {factor}")
+    unknown = set(spec) - _KEYS
+    if unknown:
+        raise ValueError(f"unknown key(s) {', '.join(sorted(unknown))}; expected "
+                         f"{', '.join(sorted(_KEYS))}")
+    kind = spec.get("type", "float")
+    if kind not in ("float", "int"):
+        raise ValueError(f"type {kind!r}: choose float or int")
+    value = _lookup(data, name)
+    if isinstance(value, list):  # a whole vector: one parameter per element
+        if "factor" not in spec:
+            raise ValueError("a vector takes {factor: F}; bound single elements with "
+                             "path[i]: {low, high}")
+        return [p for i, v in enumerate(value) if _numeric(v) and v > 0
+                for p in _one(f"{name}[{i}]", spec, data)]
+    if not _numeric(value):
+        raise ValueError(f"not a number in the config ({value!r})")
+    base = float(value)
+    if "factor" in spec:
+        if {"low", "high"} & set(spec):
+            raise ValueError("give factor or low/high, not both")
+        factor = spec["factor"]
+        if not _numeric(factor) or factor <= 1:
+            raise ValueError(f"factor {factor!r}: must be a number > 1")
+        if base <= 0:
+            raise ValueError(f"factor needs a positive config value (it is {value!r})")
+        return [_around(name, base, float(factor), kind)]
+    low, high = spec.get("low"), spec.get("high")
+    if not (_numeric(low) and _numeric(high)) or not low < high:
+        raise ValueError("needs numbers low < high")
+    log = bool(spec.get("log", False))
+    if log and low <= 0:
+        raise ValueError("log: true needs low > 0")
+    return [Param(name, float(low), float(high), log, kind, base)]
+
+
+def parse_space(spec: Mapping[str, Any] | None, cfg, *, where: str = "--space") -> dict[str, Param]:
+    """The space of a parsed space file (None: the default) for the config ``cfg``.
+
+    Raises :class:`ConfigError` with one ``<where>: <key>: message`` line per problem.
+    """
+    spec = {} if spec is None else spec
+    if not isinstance(spec, Mapping):
+        raise ConfigError(f"{where}: expected a mapping with default, factor, params")
+    errors = [f"{where}: {k}: unknown key (expected default, factor, params)"
+              for k in spec if k not in ("default", "factor", "params")]
+    factor = spec.get("factor", DEFAULT_FACTOR)
+    if not _numeric(factor) or factor <= 1:
+        errors.append(f"{where}: factor: {factor!r} must be a number > 1")
+        factor = DEFAULT_FACTOR
+    space = default_space(cfg, factor=float(factor)) if spec.get("default", True) else {}
+    params = spec.get("params") or {}
+    if not isinstance(params, Mapping):
+        errors.append(f"{where}: params: expected a mapping of config paths to ranges")
+        params = {}
+    data = config_to_dict(cfg)
+    for name, entry in params.items():
+        try:
+            for p in _one(str(name), entry, data):
+                space[p.name] = p
+        except ValueError as err:
+            errors.append(f"{where}: params.{name}: {err}")
+    if errors:
+        raise ConfigError(errors)
+    if not space:
+        raise ConfigError(f"{where}: the space is empty (default: false and no params)")
+    return space
+
+
+def load_space(path: str | Path | None, cfg) -> dict[str, Param]:
+    """:func:`parse_space` of a YAML file (None: the default space)."""
+    if path is None:
+        return parse_space(None, cfg)
+    path = Path(path)
+    try:
+        spec = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"--space {path}: cannot read: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"--space {path}: invalid YAML: {str(err).splitlines()[0]}") from None
+    return parse_space(spec, cfg, where=f"--space {path}")
+
+
+def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
+                 space: Mapping[str, Param] | None = None) -> dict[str, Any]:
+    """A copy of the config mapping ``data`` with each named value set (ints for int
+    parameters). The caller validates it (:func:`config_from_dict`)."""
+    import copy
+
+    out = copy.deepcopy(dict(data))
+    for name, value in values.items():
+        keys, index = _split(name)
+        node = out
+        for key in keys[:-1]:
+            node = node[key]
+        if space is not None and space[name].kind == "int":
+            value = int(round(value))
+        if index is None:
+            node[keys[-1]] = value
+        else:
+            vec = list(node[keys[-1]])
+            vec[index] = value
+            node[keys[-1]] = vec
+    return out
+
+
+def config_with(cfg, values: Mapping[str, float], space: Mapping[str, Param] | None = None,
+                overrides: Sequence[str] = ()):
+    """``cfg`` with the parameter values (and then ``--set``-style overrides) applied,
+    validated. Raises :class:`ConfigError`."""
+    from ardrone_nmpc.config.schema import apply_overrides
+
+    data = apply_params(config_to_dict(cfg), values, space)
+    return config_from_dict(apply_overrides(data, overrides))

@@ -1,0 +1,97 @@
+"""An in-memory recorder: the rows and events of a run kept in lists, no run directory.
+
+Many short simulations (``tune``) only need a run's metrics: writing ``log.csv`` and
+``events.jsonl`` and reading them back costs more than the metrics. :class:`MemoryRecorder`
+takes the calls :class:`~ardrone_nmpc.runs.rundir.RunRecorder` takes (``write_row``,
+``event``) and builds the :class:`~ardrone_nmpc.runs.rundir.RunData` that
+:func:`~ardrone_nmpc.runs.summary.summarise` needs, with the column types
+:func:`~ardrone_nmpc.runs.rundir.read_run` gives (float64, object arrays of str for
+:data:`~ardrone_nmpc.runs.rundir.STRING_COLUMNS`, every :data:`LOG_COLUMNS` name present).
+Values are kept as given, not rounded through text: the same as a run directory read back,
+since ``log.csv`` round-trips every double.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunData
+
+__all__ = ["MEMORY_PATH", "MemoryRecorder"]
+
+#: The ``path`` of a run that was never written (RunData needs one).
+MEMORY_PATH = Path("<memory>")
+
+
+def _number(value: Any) -> float:
+    if value is None or (isinstance(value, str) and value == ""):
+        return math.nan
+    return float(value)
+
+
+def _text(value: Any) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    return value.value if hasattr(value, "value") and isinstance(value.value, str) else str(value)
+
+
+class MemoryRecorder:
+    """Collects rows and events in memory; :meth:`run_data` turns them into a RunData.
+
+    ``path`` is None: a runner that reports where the run went (``SimResult.run_dir``)
+    reports nothing.
+    """
+
+    path = None
+
+    def __init__(self) -> None:
+        self.rows: list[Mapping[str, Any]] = []
+        self.events: list[dict[str, Any]] = []
+
+    @property
+    def rows_written(self) -> int:
+        return len(self.rows)
+
+    def write_row(self, row: Mapping[str, Any]) -> None:
+        """Keep ``row`` (not copied: the caller must not change it afterwards)."""
+        self.rows.append(row)
+
+    def event(self, t_s: float, kind: str, **fields: Any) -> None:
+        self.events.append({"t_s": float(t_s), "kind": str(kind), **fields})
+
+    def flush(self) -> None:
+        """Nothing to flush (RunRecorder's interface)."""
+
+    def close(self) -> None:
+        """Nothing to close (RunRecorder's interface)."""
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Every :data:`LOG_COLUMNS` name (and any extra key a row had) → array over the
+        rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
+        extra = set().union(*self.rows) - set(LOG_COLUMNS) if self.rows else set()
+        names = [*LOG_COLUMNS, *sorted(extra)]
+        n = len(self.rows)
+        out: dict[str, np.ndarray] = {}
+        for name in names:
+            cells = [row.get(name) for row in self.rows]
+            if name in STRING_COLUMNS:
+                arr = np.empty(n, dtype=object)
+                arr[:] = [_text(c) for c in cells]
+            else:
+                try:
+                    arr = np.fromiter((_number(c) for c in cells), dtype=np.float64, count=n)
+                except (TypeError, ValueError):  # an extra column of text
+                    arr = np.empty(n, dtype=object)
+                    arr[:] = [_text(c) for c in cells]
+            out[name] = arr
+        return out
+
+    def run_data(self, cfg, *, seed: int | None = None) -> RunData:
+        """The run as :func:`~ardrone_nmpc.runs.rundir.read_run` would give it back."""
+        return RunData(path=MEMORY_PATH, config=cfg, columns=self.columns(),
+                       events=list(self.events), seed=seed)
