@@ -40,6 +40,21 @@ def _text(value: Any) -> str:
     return value.value if hasattr(value, "value") and isinstance(value.value, str) else str(value)
 
 
+def _numbers(cells: list, n: int) -> np.ndarray:
+    """float64 of the cells (None → NaN) in one numpy call; cell by cell ("" → NaN) when
+    that fails, and an object array of text for a column that is not numeric."""
+    try:
+        return np.array(cells, dtype=np.float64).reshape(n)
+    except (TypeError, ValueError):
+        pass
+    try:
+        return np.fromiter((_number(c) for c in cells), dtype=np.float64, count=n)
+    except (TypeError, ValueError):  # an extra column of text
+        arr = np.empty(n, dtype=object)
+        arr[:] = [_text(c) for c in cells]
+        return arr
+
+
 class MemoryRecorder:
     """Collects rows and events in memory; :meth:`run_data` turns them into a RunData.
 
@@ -81,13 +96,9 @@ class MemoryRecorder:
             cells = [row.get(name) for row in self.rows]
             if name in STRING_COLUMNS:
                 arr = np.empty(n, dtype=object)
-                arr[:] = [_text(c) for c in cells]
+                arr[:] = [c if c.__class__ is str else _text(c) for c in cells]
             else:
-                try:
-                    arr = np.fromiter((_number(c) for c in cells), dtype=np.float64, count=n)
-                except (TypeError, ValueError):  # an extra column of text
-                    arr = np.empty(n, dtype=object)
-                    arr[:] = [_text(c) for c in cells]
+                arr = _numbers(cells, n)
             out[name] = arr
         return out
 
