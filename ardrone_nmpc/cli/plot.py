@@ -71,6 +71,10 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
     """
     _require_matplotlib()
     path = Path(path)
+    if (path / "study.db").is_file():  # a tune directory: history and importances
+        from ardrone_nmpc.viz.tune_figures import plot_tune_dir
+
+        return plot_tune_dir(path, output=output, dpi=dpi)
     if (path.is_file() and path.name == SWEEP_FILE) or (path / SWEEP_FILE).is_file():
         if kind not in (None, "heatmap"):
             raise PlotError(f"--kind: {path} is a sweep directory; it has one figure, the "

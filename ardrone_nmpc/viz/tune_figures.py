@@ -1,0 +1,113 @@
+"""Figures of a ``tune`` directory: the optimisation history and the parameter importances.
+
+A tune directory holds ``study.db`` (the Optuna study) and ``trials.csv``. Both figures read
+the study: :func:`figure_history` plots every finished trial's score against its number with
+the best so far; :func:`figure_importance` the parameters' importances by Optuna's default
+evaluator (:func:`optuna.importance.get_param_importances`, fANOVA), largest on top. Like
+:mod:`ardrone_nmpc.viz.plots`: object-oriented matplotlib on an Agg canvas, no pyplot.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ardrone_nmpc.viz.plots import PlotError, _new_figure, save_figure
+
+__all__ = ["STUDY_FILE", "figure_history", "figure_importance", "is_tune_dir", "load_study",
+           "plot_tune_dir"]
+
+STUDY_FILE = "study.db"  # experiments/tune/study.py STUDY_FILE
+_STATUS_COLOURS = {"ok": "tab:blue", "aborted": "tab:orange", "failed": "tab:red"}
+
+
+def is_tune_dir(path: Path) -> bool:
+    return Path(path).is_dir() and (Path(path) / STUDY_FILE).is_file()
+
+
+def load_study(path: Path):
+    """The Optuna study of a tune directory. PlotError if Optuna is missing or the file holds
+    no tune study."""
+    try:
+        import optuna
+    except ImportError:
+        raise PlotError("a tune directory's plots need Optuna: pip install -e '.[tune]'") from None
+    from ardrone_nmpc.experiments.tune.study import STUDY_NAME
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = f"sqlite:///{(Path(path) / STUDY_FILE).resolve()}"
+    try:
+        return optuna.load_study(study_name=STUDY_NAME, storage=storage)
+    except KeyError:
+        raise PlotError(f"{path}: {STUDY_FILE} holds no '{STUDY_NAME}' study") from None
+
+
+def _finished(study) -> list:
+    from optuna.trial import TrialState
+
+    return study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+
+
+def figure_history(study):
+    """Score of each finished trial (dots coloured by status) and the best so far (step
+    line); a log scale when every score is positive and they span more than a decade."""
+    trials = _finished(study)
+    if not trials:
+        raise PlotError("the study has no finished trial yet")
+    fig = _new_figure(9.0, 5.0)
+    ax = fig.add_subplot()
+    for status, colour in _STATUS_COLOURS.items():
+        pts = [(t.number, t.value) for t in trials if t.user_attrs.get("status") == status]
+        if pts:
+            ax.scatter(*zip(*pts), s=18, color=colour, label=f"trial ({status})", zorder=3)
+    best, line = math.inf, []
+    for t in trials:
+        best = min(best, t.value)
+        line.append((t.number, best))
+    ax.step(*zip(*line), where="post", color="black", label="best so far")
+    values = [t.value for t in trials]
+    if min(values) > 0 and max(values) / min(values) > 10:
+        ax.set_yscale("log")
+    ax.set_xlabel("trial")
+    ax.set_ylabel("score (lower is better)")
+    ax.set_title(f"optimisation history: {len(trials)} trials, best {best:.4g}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right")
+    return fig
+
+
+def figure_importance(study):
+    """Horizontal bars of the parameter importances (they sum to 1)."""
+    import optuna
+
+    trials = _finished(study)
+    if len(trials) < 2:
+        raise PlotError("parameter importances need at least 2 finished trials")
+    try:
+        imp = optuna.importance.get_param_importances(study)
+    except (RuntimeError, ValueError) as err:
+        raise PlotError(f"parameter importances: {' '.join(str(err).split())}") from None
+    names = list(imp)[::-1]  # the largest on top
+    fig = _new_figure(8.0, max(3.0, 0.4 * len(names) + 1.5))
+    ax = fig.add_subplot()
+    ax.barh(range(len(names)), [imp[n] for n in names], color="tab:blue")
+    ax.set_yticks(range(len(names)), names)
+    ax.set_xlabel("importance (fANOVA, sums to 1)")
+    ax.set_title(f"parameter importances over {len(trials)} trials")
+    ax.grid(True, axis="x", alpha=0.3)
+    return fig
+
+
+def plot_tune_dir(path: Path, *, output: Path | None = None, dpi: int = 100) -> list[Path]:
+    """Write ``plot-history.png`` and ``plot-importance.png`` (or ``FILE-history.png``,
+    ``FILE-importance.png`` for ``output=FILE.png``); returns the files."""
+    path = Path(path)
+    study = load_study(path)
+    if output is None:
+        targets = {k: path / f"plot-{k}.png" for k in ("history", "importance")}
+    else:
+        output = Path(output) if Path(output).suffix else Path(output).with_suffix(".png")
+        targets = {k: output.with_name(f"{output.stem}-{k}{output.suffix}")
+                   for k in ("history", "importance")}
+    figures = {"history": figure_history, "importance": figure_importance}
+    return [save_figure(figures[k](study), target, dpi=dpi) for k, target in targets.items()]
