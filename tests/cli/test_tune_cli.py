@@ -1,0 +1,193 @@
+"""``ardrone-nmpc tune`` through typer's CliRunner: local (in-process and pool), Dask,
+--resume, best.yaml, plot."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+
+optuna = pytest.importorskip("optuna")
+
+runner = CliRunner()
+CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_z.yaml")
+SHORT = ["--set", "duration_s=2", "--set", "sim.settle_s=0.5", "--seeds", "2"]
+METRICS = ["score", "tracking_m", "rmse_m", "path_deviation_m", "settling_s", "overshoot_pct",
+           "effort", "solver_failures", "supervisor_ticks", "aborted", "after_step_s"]
+SPACE = [f"controller.q[{i}]" for i in range(7)] + [f"controller.r[{i}]" for i in range(4)]
+
+
+def _tune(out, *extra):
+    return runner.invoke(app, ["tune", CONFIG, *SHORT, "--out", str(out), *extra])
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with open(out / "trials.csv", newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def _study(out: Path):
+    return optuna.load_study(study_name="tune", storage=f"sqlite:///{out / 'study.db'}")
+
+
+def _check_trials(out: Path, n: int) -> list[dict[str, str]]:
+    rows = _rows(out)
+    assert list(rows[0]) == ["trial", "status", "score", *SPACE, "wall_s", "sim_s",
+                             *(f"seed{s}:{m}" for s in (0, 1) for m in METRICS), "message"]
+    assert [r["trial"] for r in rows] == [str(i) for i in range(n)]
+    study = _study(out)
+    for row, trial in zip(rows, sorted(study.trials, key=lambda t: t.number)):
+        assert float(row["score"]) == trial.value
+        assert row["status"] == "ok", row["message"]
+        assert {k: float(row[k]) for k in SPACE} == trial.params
+        for s in (0, 1):
+            assert 0.0 < float(row[f"seed{s}:tracking_m"]) < 1.0
+            assert row[f"seed{s}:aborted"] == "0"
+    # trial 0 flies the config's own weights
+    assert [float(rows[0][k]) for k in SPACE] == [12, 2, 7, 2, 5, 10, 13, 4, 12, 12, 24]
+    return rows
+
+
+def _check_best(out: Path, rows) -> None:
+    best_row = min(rows, key=lambda r: float(r["score"]))
+    text = (out / "best.yaml").read_text()
+    assert text.startswith("# Found by `ardrone-nmpc tune ")
+    assert f"trial {best_row['trial']} of {len(rows)}" in text
+    cfg = load_config(out / "best.yaml")
+    assert list(cfg.controller.q) + list(cfg.controller.r) == pytest.approx(
+        [float(best_row[k]) for k in SPACE])
+    assert cfg.duration_s == 2.0 and cfg.name == "step_z"
+    assert run_lockstep(cfg).ending == "completed"  # it flies as is
+
+
+def test_a_two_trial_local_tune_writes_trials_best_and_the_table(tmp_path):
+    result = _tune(tmp_path, "--trials", "2", "--jobs", "1")
+    assert result.exit_code == 0, result.output
+    rows = _check_trials(tmp_path, 2)
+    _check_best(tmp_path, rows)
+    assert "best 2 of 2 trials" in result.stdout and "q[4]" in result.stdout
+    assert "2 trials (2 flown now, 0 before) × 2 scenarios" in result.stdout
+    assert result.stdout.strip().splitlines()[-1] == f"best: {tmp_path / 'best.yaml'}"
+    assert not (tmp_path / "runs").exists()  # no run directory without --keep-runs
+    flown = runner.invoke(app, ["simulate", str(tmp_path / "best.yaml"), "--log-dir",
+                                str(tmp_path / "logs"), "--quiet"])
+    assert flown.exit_code == 0, flown.output
+
+
+@pytest.mark.timeout(300)
+def test_a_pool_tune_gives_the_same_flights(tmp_path):
+    """Trial 0 (the config's weights) flies the same in a pool worker as in-process."""
+    assert _tune(tmp_path / "one", "--trials", "1", "--jobs", "1").exit_code == 0
+    result = _tune(tmp_path / "two", "--trials", "3", "--jobs", "2")
+    assert result.exit_code == 0, result.output
+    rows = _check_trials(tmp_path / "two", 3)
+    (first,) = _rows(tmp_path / "one")
+    deterministic = [c for c in first if c.endswith(("tracking_m", "settling_s", "overshoot_pct",
+                                                     "effort"))]
+    assert {c: rows[0][c] for c in deterministic} == {c: first[c] for c in deterministic}
+
+
+@pytest.mark.timeout(300)
+def test_a_two_trial_dask_tune(tmp_path):
+    pytest.importorskip("distributed")
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address=None) as cluster:
+        result = _tune(tmp_path, "--trials", "2", "--engine", "dask", "--scheduler",
+                       cluster.scheduler_address)
+    assert result.exit_code == 0, result.output
+    assert "dask, " in result.stdout
+    _check_best(tmp_path, _check_trials(tmp_path, 2))
+
+
+def test_resume_continues_without_flying_finished_trials_again(tmp_path):
+    assert _tune(tmp_path, "--trials", "2", "--jobs", "1").exit_code == 0
+    first = _rows(tmp_path)
+    again = _tune(tmp_path, "--trials", "2", "--jobs", "1")
+    assert again.exit_code == 1
+    assert again.output.startswith(f"error: --out {tmp_path}: holds a study already")
+    # a run stopped with a trial in flight: it was asked, never told
+    _study(tmp_path).ask()
+    result = _tune(tmp_path, "--trials", "4", "--jobs", "1", "--resume")
+    assert result.exit_code == 0, result.output
+    assert "4 trials (2 flown now, 2 before)" in result.stdout
+    states = [t.state.name for t in sorted(_study(tmp_path).trials, key=lambda t: t.number)]
+    assert states == ["COMPLETE", "COMPLETE", "FAIL", "COMPLETE", "COMPLETE"]
+    rows = _rows(tmp_path)
+    assert rows[:2] == first  # the finished trials kept, not flown again
+    assert [r["trial"] for r in rows] == ["0", "1", "3", "4"]
+    assert len({tuple(r[k] for k in SPACE) for r in rows}) == 4
+    done = _tune(tmp_path, "--trials", "4", "--jobs", "1", "--resume")
+    assert "4 trials (0 flown now, 4 before)" in done.stdout
+
+
+def test_resume_refuses_a_study_of_another_setup(tmp_path):
+    assert _tune(tmp_path, "--trials", "1", "--jobs", "1").exit_code == 0
+    result = _tune(tmp_path, "--trials", "2", "--jobs", "1", "--resume",
+                   "--objective", "tracking")
+    assert result.exit_code == 1
+    assert result.output == (f"error: --resume: the study in {tmp_path} optimises another "
+                             "objective; use another --out\n")
+
+
+def test_keep_runs_writes_each_flight_s_run_directory(tmp_path):
+    result = _tune(tmp_path, "--trials", "1", "--jobs", "1", "--keep-runs")
+    assert result.exit_code == 0, result.output
+    runs = sorted((tmp_path / "runs" / "trial-00000").iterdir())
+    assert len(runs) == 2 and all((r / "summary.csv").is_file() for r in runs)
+    seeds = sorted(load_config(r / "config.yaml").sim.seed for r in runs)
+    assert seeds == [0, 1]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--objective", "fast"], "error: --objective: unknown preset 'fast'"),
+    (["--engine", "ray"], "error: --engine: unknown engine 'ray'"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "error: --scheduler: only with --engine dask"),
+    (["--variant", "nothing"], "error: --variant 'nothing': expected"),
+    (["--space", "/nonexistent/space.yaml"], "error: --space /nonexistent/space.yaml: cannot read"),
+    (["--set", "controller.dtau_s=-1"], "error: controller.dtau_s: "),
+])
+def test_mistakes_are_one_line_and_nothing_flies(tmp_path, args, message):
+    result = _tune(tmp_path / "out", "--trials", "1", "--jobs", "1", *args)
+    assert result.exit_code == 1
+    assert result.output.startswith(message), result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out" / "study.db").exists()
+
+
+def test_a_space_file_and_variants_shape_the_study(tmp_path):
+    space = tmp_path / "space.yaml"
+    space.write_text("default: false\nparams:\n"
+                     "  controller.horizon_steps: {low: 8, high: 20, type: int}\n"
+                     "  controller.q[4]: {low: 5, high: 100, log: true}\n")
+    result = _tune(tmp_path / "out", "--trials", "2", "--jobs", "1", "--space", str(space),
+                   "--variant", "slow:sim.plant.tau_vz_s=0.7", "--variant",
+                   "sim.plant.tau_vz_s=0.3;sim.noise.mocap_position_std_m=0.001")
+    assert result.exit_code == 0, result.output
+    rows = _rows(tmp_path / "out")
+    assert [c for c in rows[0] if c.startswith("controller.")] == [
+        "controller.horizon_steps", "controller.q[4]"]
+    labels = sorted({c.split(":")[0] for c in rows[0] if ":" in c})
+    assert labels == ["seed0+slow", "seed0+v1", "seed1+slow", "seed1+v1"]
+    assert all(float(r["controller.horizon_steps"]).is_integer() for r in rows)
+    assert load_config(tmp_path / "out" / "best.yaml").controller.horizon_steps in range(8, 21)
+
+
+def test_plot_draws_history_and_importances_of_a_tune_directory(tmp_path):
+    pytest.importorskip("matplotlib")
+    assert _tune(tmp_path, "--trials", "3", "--jobs", "1").exit_code == 0
+    result = runner.invoke(app, ["plot", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    files = [Path(line.split(": ", 1)[1]) for line in result.stdout.splitlines()]
+    assert files == [tmp_path / "plot-history.png", tmp_path / "plot-importance.png"]
+    for f in files:
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 5000
+    assert not math.isnan(_study(tmp_path).best_value)
