@@ -25,6 +25,7 @@ second of each: the ratio holds on a loaded machine, the absolute figures do not
 from __future__ import annotations
 
 import argparse
+import functools
 import itertools
 import tempfile
 import time
@@ -154,20 +155,59 @@ def _tune_way(cfgs, jobs: int) -> float:
     return wall
 
 
+def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
+    """Walls of the per-flight work alone: one warm pool runs the sweep's ``run_case`` and
+    tune's ``run_trial`` on the same configs, alternating."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from ardrone_nmpc.config.schema import config_to_dict
+    from ardrone_nmpc.experiments.sweep import (Case, _init_worker, _pool_context,
+                                                _start_forkserver, case_id, run_case)
+    from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
+    from ardrone_nmpc.experiments.tune.objective import parse_objective
+
+    cases = [Case(i, case_id(params=(("i", str(i)),), cfg=c), (("i", str(i)),), c)
+             for i, c in enumerate(cfgs)]
+    obj = parse_objective(None)
+    specs = [TrialSpec(i, {}, config_to_dict(c), {}, (Scenario("seed0", 0),), obj)
+             for i, c in enumerate(cfgs)]
+    ctx = _pool_context()
+    warm = _start_forkserver(ctx)
+    walls = defaultdict(list)
+    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker) as pool:
+        list(pool.map(run_trial, specs[:jobs]))  # every worker started and warm
+        for _ in range(rounds):
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                list(pool.map(functools.partial(run_case, out_dir=tmp), cases))
+                walls["sweep run_case (run dirs)"].append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            list(pool.map(run_trial, specs))
+            walls["tune run_trial (memory)"].append(time.perf_counter() - t0)
+    if warm is not None:
+        warm.join()
+    return walls
+
+
+def _report(title: str, walls: dict, sim_s: float) -> None:
+    print(title)
+    for name, w in walls.items():
+        print(f"  {name:<28} walls {', '.join(f'{x:.2f}' for x in w)} s → best "
+              f"{sim_s / min(w):.0f}× real time")
+    a, b = (min(w) for w in walls.values())
+    print(f"  ratio of throughputs (second / first): {a / b:.2f}")
+
+
 def throughput(jobs: int, rounds: int) -> None:
     cfgs = _configs()
     sim_s = sum(c.duration_s + c.sim.settle_s for c in cfgs)
+    print(f"{len(cfgs)} flights, {sim_s:.0f} s simulated (settle + experiment), {jobs} jobs")
     walls = defaultdict(list)
     for _ in range(rounds):  # alternate, so both see the same load
         walls["sweep (run dirs)"].append(_sweep_way(cfgs, jobs))
         walls["tune (memory)"].append(_tune_way(cfgs, jobs))
-    print(f"{len(cfgs)} flights, {sim_s:.0f} s simulated (settle + experiment), {jobs} jobs, "
-          f"pool start-up included")
-    for name, w in walls.items():
-        print(f"{name:<18} walls {', '.join(f'{x:.1f}' for x in w)} s → best "
-              f"{sim_s / min(w):.0f}× real time")
-    a, b = (min(w) for w in walls.values())
-    print(f"ratio tune/sweep throughput: {a / b:.2f}")
+    _report("end to end, pool start-up included:", walls, sim_s)
+    _report("per-flight work on one warm pool:", _warm_pool(cfgs, jobs, rounds), sim_s)
 
 
 def main() -> None:

@@ -20,6 +20,7 @@ import typer
 __all__ = ["TuneOutcome", "register", "run_tune_command"]
 
 ENGINES = ("local", "dask")
+SAVE_EVERY_S = 5.0
 
 
 @dataclass
@@ -87,7 +88,7 @@ def _ranked_table(study, *, space, scenarios, top: int):
     from rich.markup import escape
     from rich.table import Table
 
-    from ardrone_nmpc.experiments.tune.study import finished_trials
+    from ardrone_nmpc.experiments.tune.study import finished_trials, result_of
 
     trials = sorted(finished_trials(study), key=lambda t: (t.value, t.number))[:top]
     table = Table(title=f"best {len(trials)} of {len(finished_trials(study))} trials "
@@ -104,9 +105,9 @@ def _ranked_table(study, *, space, scenarios, top: int):
         table.add_column(head, justify="right")
     style = {"ok": "green", "aborted": "yellow", "failed": "red"}
     for i, t in enumerate(trials, start=1):
-        metrics = t.user_attrs.get("metrics", {})
+        metrics = result_of(t).get("metrics", {})
         row = [str(i), str(t.number), _cell(t.value)]
-        status = t.user_attrs.get("status", "")
+        status = result_of(t).get("status", "")
         row.append(f"[{style.get(status, 'white')}]{escape(status)}[/]")
         row += [_cell(t.params.get(n)) for n in space]
         for m in means:
@@ -136,6 +137,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from ardrone_nmpc.experiments.tune.objective import parse_objective
     from ardrone_nmpc.experiments.tune.space import load_space
 
+    wall0 = time.perf_counter()  # start-up included: the wall time a user waits
     _check_options(engine=engine, scheduler=scheduler)
     cfg = load_config(config, overrides)
     space = load_space(space_file, cfg)
@@ -147,24 +149,48 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     out_dir.mkdir(parents=True, exist_ok=True)
     base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
     sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
-    study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig, base_values=base_values)
+    if resume is False and (out_dir / st.STUDY_FILE).is_file():  # before any start-up
+        raise ConfigError(f"--out {out_dir}: holds a study already ({st.STUDY_FILE}); "
+                          "--resume continues it, or choose another --out")
+    # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
+    try:
+        runner = eng.make_engine(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler)
+    except (OSError, TimeoutError) as err:
+        if engine != "dask":
+            raise
+        raise ConfigError(f"--engine dask: {' '.join(str(err).split())}") from None
+    try:
+        pair = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
+                             base_values=base_values)
+    except BaseException:
+        runner.close()
+        raise
+    study = pair.record
     columns = st.trials_columns(list(space), scen)
     console = console or Console(width=None if sys.stdout.isatty() else 160)
     err_console = err_console or Console(stderr=True)
     make_spec = st.spec_factory(cfg=cfg, space=space, scenarios=scen, objective=obj,
                                 keep_dir=out_dir / "runs" if keep_runs else None)
 
-    def save() -> None:
+    last_save = [-math.inf]
+    best_score = [min((t.value for t in st.finished_trials(study)), default=math.inf)]
+
+    def save(*, now: bool = True) -> None:
+        """Rewrite trials.csv and best.yaml from the record (during the run at most every
+        SAVE_EVERY_S: the record holds every trial meanwhile)."""
+        if not now and time.perf_counter() - last_save[0] < SAVE_EVERY_S:
+            return
+        last_save[0] = time.perf_counter()
         st.write_trials_csv(out_dir / st.TRIALS_FILE, columns,
                             st.trial_rows(study, list(space), scen))
         st.write_best(out_dir / st.BEST_FILE, study, cfg=cfg, space=space, command=command,
                       objective=obj, scenarios=scen)
 
-    wall0 = time.perf_counter()
     sim_s, flown, interrupted = 0.0, 0, False
     todo = max(0, trials - len(st.finished_trials(study)))
-    if todo:
-        runner = eng.make_engine(engine, jobs=max(1, min(jobs, todo)), scheduler=scheduler)
+    if not todo:
+        runner.close()
+    else:
         progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                             TimeElapsedColumn(), TimeRemainingColumn(), console=err_console,
                             transient=True)
@@ -175,11 +201,12 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                 def on_result(result) -> None:
                     nonlocal sim_s
                     sim_s += result.sim_s
-                    save()
+                    best_score[0] = min(best_score[0], result.score)
+                    save(now=False)
                     progress.update(task, advance=1,
-                                    description=f"tune · best {study.best_value:.4g}")
+                                    description=f"tune · best {best_score[0]:.4g}")
 
-                flown = st.run_study(study, n_trials=trials, engine=runner, make_spec=make_spec,
+                flown = st.run_study(pair, n_trials=trials, engine=runner, make_spec=make_spec,
                                      space=space, on_result=on_result)
         except KeyboardInterrupt:
             interrupted = True

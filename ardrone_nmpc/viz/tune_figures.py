@@ -42,6 +42,12 @@ def load_study(path: Path):
         raise PlotError(f"{path}: {STUDY_FILE} holds no '{STUDY_NAME}' study") from None
 
 
+def result_of(trial) -> dict:
+    from ardrone_nmpc.experiments.tune.study import result_of as stored
+
+    return stored(trial)
+
+
 def _finished(study) -> list:
     from optuna.trial import TrialState
 
@@ -57,7 +63,7 @@ def figure_history(study):
     fig = _new_figure(9.0, 5.0)
     ax = fig.add_subplot()
     for status, colour in _STATUS_COLOURS.items():
-        pts = [(t.number, t.value) for t in trials if t.user_attrs.get("status") == status]
+        pts = [(t.number, t.value) for t in trials if result_of(t).get("status") == status]
         if pts:
             ax.scatter(*zip(*pts), s=18, color=colour, label=f"trial ({status})", zorder=3)
     best, line = math.inf, []

@@ -50,8 +50,8 @@ def _check_trials(out: Path, n: int) -> list[dict[str, str]]:
         for s in (0, 1):
             assert 0.0 < float(row[f"seed{s}:tracking_m"]) < 1.0
             assert row[f"seed{s}:aborted"] == "0"
-    # trial 0 flies the config's own weights
-    assert [float(rows[0][k]) for k in SPACE] == [12, 2, 7, 2, 5, 10, 13, 4, 12, 12, 24]
+    # the first trial asked flies the config's own weights
+    assert [12, 2, 7, 2, 5, 10, 13, 4, 12, 12, 24] in [[float(r[k]) for k in SPACE] for r in rows]
     return rows
 
 
@@ -88,6 +88,7 @@ def test_a_pool_tune_gives_the_same_flights(tmp_path):
     result = _tune(tmp_path / "two", "--trials", "3", "--jobs", "2")
     assert result.exit_code == 0, result.output
     rows = _check_trials(tmp_path / "two", 3)
+    rows = [r for r in rows if float(r["controller.q[4]"]) == 5.0]  # the config's weights
     (first,) = _rows(tmp_path / "one")
     deterministic = [c for c in first if c.endswith(("tracking_m", "settling_s", "overshoot_pct",
                                                      "effort"))]

@@ -184,21 +184,40 @@ class InlineEngine:
 
 
 class PoolEngine:
-    """A pool of ``jobs`` worker processes forked from the sweep's warm forkserver."""
+    """A pool of ``jobs`` worker processes forked from the sweep's warm forkserver. The
+    forkserver warms up (loads the kernels, ~2 s) in the background from construction on,
+    so the caller can open its study meanwhile; the first :meth:`submit` waits for it."""
 
     def __init__(self, jobs: int) -> None:
-        from concurrent.futures import ProcessPoolExecutor
+        import threading
 
-        from ardrone_nmpc.experiments.sweep import _init_worker, _pool_context, _start_forkserver
+        from ardrone_nmpc.experiments.sweep import _pool_context, _start_forkserver
 
         self.slots = jobs
-        ctx = _pool_context()
-        self._warm = _start_forkserver(ctx)
-        self._pool = ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker)
+        self._ctx = _pool_context()
+        self._warm = None
+        self._pool = None
         self._futures: dict[Any, TrialSpec] = {}
 
+        def start() -> None:
+            self._warm = _start_forkserver(self._ctx)
+
+        self._starter = threading.Thread(target=start, name="tune-forkserver", daemon=True)
+        self._starter.start()
+
+    def _ready(self):
+        if self._pool is None:
+            from concurrent.futures import ProcessPoolExecutor
+
+            from ardrone_nmpc.experiments.sweep import _init_worker
+
+            self._starter.join()
+            self._pool = ProcessPoolExecutor(self.slots, mp_context=self._ctx,
+                                             initializer=_init_worker)
+        return self._pool
+
     def submit(self, spec: TrialSpec) -> None:
-        self._futures[self._pool.submit(run_trial, spec)] = spec
+        self._futures[self._ready().submit(run_trial, spec)] = spec
 
     def next_result(self) -> TrialResult:
         from concurrent.futures import FIRST_COMPLETED, wait
@@ -212,7 +231,9 @@ class PoolEngine:
             return _failed(spec, err)
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._starter.join()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
         if self._warm is not None:
             self._warm.join()
 

@@ -1,9 +1,10 @@
 """The Optuna study of a ``tune`` run, its files in ``DIR`` and the ask/tell loop.
 
 ``DIR/study.db`` (SQLite) is the study's own storage: every finished trial is in it with
-its parameters, score and, as user attributes, its status, message and per-scenario
+its parameters, score and, as a user attribute, its status, message and per-scenario
 metrics, so ``--resume`` continues where a stopped run left off — trials finished are never
-flown again; trials that were running when it stopped are marked failed and replaced. The
+flown again; trials in flight when it stopped are lost and replaced. The sampler works on an
+in-memory twin of the study, loaded from the file on ``--resume`` (see :class:`TuneStudy`). The
 study also records what it optimises (config, space, scenarios, objective): resuming with
 different ones is refused. ``DIR/trials.csv`` and ``DIR/best.yaml`` are rewritten from the
 storage as trials finish.
@@ -23,7 +24,7 @@ import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +33,8 @@ from ardrone_nmpc.experiments.tune.engine import Scenario, TrialResult, TrialSpe
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
 
-__all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "finished_trials",
-           "open_study", "run_study", "trial_rows", "trials_columns", "write_best",
+__all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", "finished_trials",
+           "open_study", "result_of", "run_study", "trial_rows", "trials_columns", "write_best",
            "write_trials_csv"]
 
 STUDY_FILE = "study.db"
@@ -60,11 +61,48 @@ def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
             "objective": {**objective.weights, "worst": objective.worst}}
 
 
+def _storage(db: Path):
+    """Optuna's SQLite storage of ``db`` in write-ahead-log mode without a sync per commit:
+    Optuna commits every parameter and attribute it stores, and a synced commit costs
+    milliseconds, on the main process that also feeds the workers. A power cut may lose the
+    last trials told (they are flown again on --resume); the file stays consistent."""
+    import sqlite3
+
+    import optuna
+
+    path = str(db.resolve())
+
+    def connect():
+        con = sqlite3.connect(path, check_same_thread=False, timeout=30.0)
+        con.execute("PRAGMA journal_mode=WAL")
+        con.execute("PRAGMA synchronous=NORMAL")
+        return con
+
+    return optuna.storages.RDBStorage(f"sqlite:///{path}", engine_kwargs={"creator": connect})
+
+
+def result_of(trial) -> dict:
+    """What :func:`run_study` stored with a finished trial: status, message, metrics
+    (scenario → metric → value), wall_s, sim_s."""
+    return trial.user_attrs.get("result", {})
+
+
+@dataclass
+class TuneStudy:
+    """The study of a tune run: ``record`` in ``DIR/study.db`` holds every finished trial
+    (numbered in the order they finished); ``search`` is its in-memory twin the sampler asks
+    and is told — Optuna's SQLite storage costs milliseconds per stored parameter, on the
+    process that feeds the workers, where a whole flight takes ~0.1 s."""
+
+    record: Any
+    search: Any
+
+
 def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any],
-               base_values: Mapping[str, float] | None = None):
+               base_values: Mapping[str, float] | None = None) -> TuneStudy:
     """Create the study in ``out_dir`` (refusing an existing one without ``resume``), or
-    load it (refusing one that optimises something else). Running trials of a stopped
-    run are marked failed. Raises :class:`ConfigError`."""
+    load it (refusing one that optimises something else; trials left running in the
+    storage are marked failed). Raises :class:`ConfigError`."""
     import optuna
     from optuna.trial import TrialState
 
@@ -74,31 +112,32 @@ def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any]
     if exists and not resume:
         raise ConfigError(f"--out {out_dir}: holds a study already ({STUDY_FILE}); "
                           "--resume continues it, or choose another --out")
-    storage = optuna.storages.RDBStorage(f"sqlite:///{db.resolve()}")
-    n_before = 0
+    storage = _storage(db)
     if exists:
         try:
-            old = optuna.load_study(study_name=STUDY_NAME, storage=storage)
+            record = optuna.load_study(study_name=STUDY_NAME, storage=storage)
         except KeyError:
             raise ConfigError(f"--out {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
                               "study") from None
-        recorded = old.user_attrs.get(_SIGNATURE)
+        recorded = record.user_attrs.get(_SIGNATURE)
         if recorded != json.loads(json.dumps(sig)):
             changed = [k for k in sig if (recorded or {}).get(k) != json.loads(
                 json.dumps(sig[k]))]
             raise ConfigError(f"--resume: the study in {out_dir} optimises another "
                               f"{', '.join(changed) or 'setup'}; use another --out")
-        for t in old.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+        for t in record.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
             storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
-        n_before = len(old.trials)
-    sampler = optuna.samplers.TPESampler(seed=seed + n_before, multivariate=True)
-    study = optuna.create_study(study_name=STUDY_NAME, storage=storage, sampler=sampler,
-                                direction="minimize", load_if_exists=True)
-    if not exists:
-        study.set_user_attr(_SIGNATURE, json.loads(json.dumps(sig)))
-        if base_values:
-            study.enqueue_trial(dict(base_values))
-    return study
+    else:
+        record = optuna.create_study(study_name=STUDY_NAME, storage=storage,
+                                     direction="minimize")
+        record.set_user_attr(_SIGNATURE, json.loads(json.dumps(sig)))
+    done = finished_trials(record)
+    sampler = optuna.samplers.TPESampler(seed=seed + len(record.trials), multivariate=True)
+    search = optuna.create_study(sampler=sampler, direction="minimize")
+    search.add_trials(done)
+    if not done and base_values:
+        search.enqueue_trial(dict(base_values))
+    return TuneStudy(record, search)
 
 
 def finished_trials(study) -> list:
@@ -119,30 +158,39 @@ def _suggest(trial, space: Mapping[str, Param]) -> dict[str, float]:
     return values
 
 
-def run_study(study, *, n_trials: int, engine, make_spec: Callable[[int, dict], TrialSpec],
-              space: Mapping[str, Param],
+def run_study(study: TuneStudy, *, n_trials: int, engine,
+              make_spec: Callable[[int, dict], TrialSpec], space: Mapping[str, Param],
               on_result: Callable[[TrialResult], None] | None = None) -> int:
-    """Fly trials until the study has ``n_trials`` finished ones, keeping ``engine.slots``
-    in flight (ask, submit; tell as each finishes). Returns how many were flown now.
-    Ctrl-C stops asking; the trials in flight are then left running in the storage (marked
-    failed on ``--resume``)."""
-    todo = max(0, n_trials - len(finished_trials(study)))
+    """Fly trials until the record holds ``n_trials`` finished ones, keeping
+    ``engine.slots`` in flight (ask, submit; tell as each finishes, then store it in the
+    record). Returns how many were flown now. Ctrl-C stops it; trials in flight are lost
+    (never recorded: a resumed run flies others in their place)."""
+    import optuna
+
+    todo = max(0, n_trials - len(finished_trials(study.record)))
     asked, in_flight, flown = 0, {}, 0
-    while asked < todo or in_flight:
+
+    def fill() -> None:  # keep every worker busy
+        nonlocal asked
         while asked < todo and len(in_flight) < engine.slots:
-            trial = study.ask()
-            values = _suggest(trial, space)
-            engine.submit(make_spec(trial.number, values))
+            trial = study.search.ask()
+            engine.submit(make_spec(trial.number, _suggest(trial, space)))
             in_flight[trial.number] = trial
             asked += 1
+
+    fill()
+    while in_flight:
         result = engine.next_result()
         trial = in_flight.pop(result.number)
-        trial.set_user_attr("status", result.status)
-        trial.set_user_attr("message", result.message)
-        trial.set_user_attr("metrics", result.metrics)
-        trial.set_user_attr("wall_s", result.wall_s)
-        trial.set_user_attr("sim_s", result.sim_s)
-        study.tell(trial, result.score)
+        attrs = {"result": {"status": result.status, "message": result.message,
+                            "metrics": result.metrics, "wall_s": result.wall_s,
+                            "sim_s": result.sim_s}}
+        trial.set_user_attr("result", attrs["result"])
+        frozen = study.search.tell(trial, result.score)
+        fill()  # before the slow SQLite write: the freed worker starts at once
+        study.record.add_trial(optuna.trial.create_trial(
+            params=frozen.params, distributions=frozen.distributions, value=result.score,
+            user_attrs=attrs))
         flown += 1
         if on_result is not None:
             on_result(result)
@@ -169,16 +217,16 @@ def trial_rows(study, space: Sequence[str], scenarios: Sequence[Scenario]) -> li
     """One ``trials.csv`` row (text cells) per finished trial, in trial order."""
     rows = []
     for t in finished_trials(study):
-        row = {"trial": str(t.number), "status": t.user_attrs.get("status", ""),
-               "score": _num(t.value)}
+        res = result_of(t)
+        row = {"trial": str(t.number), "status": res.get("status", ""), "score": _num(t.value)}
         row.update({n: _num(t.params.get(n)) for n in space})
-        row["wall_s"] = _num(t.user_attrs.get("wall_s"))
-        row["sim_s"] = _num(t.user_attrs.get("sim_s"))
-        metrics = t.user_attrs.get("metrics", {})
+        row["wall_s"] = _num(res.get("wall_s"))
+        row["sim_s"] = _num(res.get("sim_s"))
+        metrics = res.get("metrics", {})
         for s in scenarios:
             for m in METRICS:
                 row[f"{s.label}:{m}"] = _num(metrics.get(s.label, {}).get(m))
-        row["message"] = t.user_attrs.get("message", "")
+        row["message"] = res.get("message", "")
         rows.append(row)
     return rows
 
@@ -208,7 +256,7 @@ def write_best(path: Path, study, *, cfg, space: Mapping[str, Param], command: s
     header = "\n".join([
         f"Found by `{command}` on {now}:",
         f"Optuna TPE, trial {best.number} of {len(trials)}, score {best.value:.6g} "
-        f"(status {best.user_attrs.get('status', '?')}).",
+        f"(status {result_of(best).get('status', '?')}).",
         f"Objective: {objective.text} = " + ", ".join(
             f"{k} {w:g}" for k, w in objective.weights.items()) + f", worst {objective.worst:g}.",
         "Scenarios: " + ", ".join(s.label for s in scenarios) + ".",
