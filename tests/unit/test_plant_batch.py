@@ -1,0 +1,57 @@
+"""The plant's compiled run of FLYING substeps equals its step-by-step path bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.plant import AirframePlant
+
+
+def _fly(cfg, *, batched: bool, monkeypatch, batched_steps: list | None = None) -> list[tuple]:
+    original = AirframePlant._flying_substeps
+
+    def counted(self, n, h, wind):
+        done = original(self, n, h, wind) if batched else 0
+        if batched_steps is not None:
+            batched_steps.append(done)
+        return done
+
+    monkeypatch.setattr(AirframePlant, "_flying_substeps", counted)
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=3)
+    rng = np.random.default_rng(11)
+    plant.takeoff()
+    trace = []
+    for k in range(400):
+        if k % 5 == 0:  # hold each command a while; dive now and then (ground contact)
+            gaz = -1.0 if k % 60 == 0 else rng.uniform(-0.6, 0.6)
+            plant.command(*rng.uniform(-0.5, 0.5, 2), gaz, rng.uniform(-0.5, 0.5),
+                          progressive=k % 45 != 0)
+        if k == 200:
+            plant.wind_mps = np.array([0.4, -0.2, 0.1])
+        plant.advance(rng.choice([0.003, 0.01, 0.065, 0.13]))
+        t = plant.truth
+        trace.append((plant.t_s, plant.mode, plant.battery_pct, *t.position_m, *t.velocity_mps,
+                      t.roll_rad, t.pitch_rad, t.psi_rad, t.psi_rate_radps))
+    monkeypatch.undo()
+    return trace
+
+
+@pytest.mark.parametrize("overrides", [
+    [],                                              # the default 0.26 s command delay
+    ["sim.plant.command_delay_s=0"],                 # commands act at once
+    ["sim.plant.battery_drain_pct_per_min=900"],     # empties the battery in flight
+])
+def test_batched_flying_substeps_equal_the_step_by_step_path(overrides, monkeypatch):
+    cfg = load_config(None, overrides)
+    slow = _fly(cfg, batched=False, monkeypatch=monkeypatch)
+    steps: list[int] = []
+    fast = _fly(cfg, batched=True, monkeypatch=monkeypatch, batched_steps=steps)
+    assert sum(steps) > 500  # the compiled path did fly many substeps
+    assert fast == slow  # exact: same floats, modes, battery, time
+    if "900" in " ".join(overrides):  # the battery emptied in flight: it landed by itself
+        assert slow[-1][2] == 0.0 and slow[-1][1] in (FlightMode.LANDING, FlightMode.LANDED)
+    else:  # the dives touched the ground while flying
+        assert any(row[5] == 0.0 and row[1] is FlightMode.FLYING for row in slow)
