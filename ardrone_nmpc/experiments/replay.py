@@ -34,11 +34,14 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
-from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
-from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
-from ardrone_nmpc.safety import Action
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
+from ardrone_nmpc.runs.window import experiment_rows
+from ardrone_nmpc.runtime.schedule import phase, write_events
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.safety import Action
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -289,10 +292,7 @@ def _cost(*, cfg, trajectory, t_s: np.ndarray, states: np.ndarray, u_logged: np.
     """:class:`RerunCost` of ``states`` (n, 7) with both input histories (n, 4)."""
     ctl = cfg.controller
     q, r = np.asarray(ctl.q, float), np.asarray(ctl.r, float)
-    has_state = np.all(np.isfinite(states), axis=1)
-    window = has_state & (t_s >= 0.0)
-    if not window.any():
-        window = has_state
+    window = experiment_rows(t_s, among=np.all(np.isfinite(states), axis=1))
     if not window.any():
         return RerunCost(0, 0.0, 0.0, 0.0)
     err = states[window] - trajectory.state_at(t_s[window])
@@ -333,8 +333,6 @@ def rerun(*, run: RunData, cfg, recorder=None,
     ReplayError
         The log lacks the measurement columns (an older version) or holds no rows.
     """
-    from ardrone_nmpc.runtime.lockstep import experiment_trajectory
-
     inputs = rows_to_inputs(run=run)
     if not inputs:
         raise ReplayError(f"{run.path}: log.csv holds no ticks")
@@ -344,15 +342,14 @@ def rerun(*, run: RunData, cfg, recorder=None,
     rows: list[dict] = []
     for k, inp in enumerate(inputs):
         # manual clock = the experiment clock: the tick's clock offset is 0
-        out = tick.step(inp, t_exp_s=inp.t_s, mode="settle" if inp.t_s < 0 else "track")
+        out = tick.step(inp, t_exp_s=inp.t_s, mode=phase(inp.t_s))
         if logged_mode[k] == "landing" and out.action in (Action.LAND, Action.STOP):
             out.row["mode"] = "landing"  # the runner's label for its descent after a landing
         rows.append(out.row)
         if recorder is not None:
             recorder.write_row(out.row)
-            for event in out.events:  # the supervisor's mode changes, as the flight wrote them
-                fields = {k: v for k, v in event.items() if k != "kind"}
-                recorder.event(inp.t_s, event["kind"], **fields)
+            # the supervisor's mode changes, as the flight wrote them
+            write_events(recorder.event, inp.t_s, out.events)
         if progress is not None:
             progress((k + 1) / len(inputs))
     if cfg.reference.kind == "follow":  # live: price against what the rerun tick followed

@@ -37,6 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ardrone_nmpc.runs.window import experiment_rows, flying_rows
+
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -154,8 +156,7 @@ def _experiment(run: RunData) -> np.ndarray:
     t = _col(run, "t_s")
     if not np.isfinite(t).any():
         raise PlotError(f"{run.path}: log.csv has no row with a time (t_s)")
-    rows = np.isfinite(t) & (t >= 0.0)
-    return rows if rows.any() else np.isfinite(t)
+    return experiment_rows(t)
 
 
 def _has_truth(run: RunData) -> bool:
@@ -532,12 +533,7 @@ def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str
 def _flown(run: RunData) -> tuple[np.ndarray, str]:
     """Flown positions of the experiment's flying ticks; the truth in simulation (the same
     choice as the summary's path deviation), the mocap measurement otherwise."""
-    from ardrone_nmpc.runs.summary import GROUND_MODES
-
-    rows = _experiment(run)
-    mode = _strings(run, "mode")
-    if len(set(mode.tolist())) > 1:
-        rows = rows & ~np.isin(mode, list(GROUND_MODES))
+    rows = _experiment(run) & flying_rows(_strings(run, "mode"))
     names = _TRUTH[:3] if _has_truth(run) else ("x_m", "y_m", "z_m")
     xyz = np.column_stack([_col(run, c)[rows] for c in names])
     source = "sim truth" if names[0] == "x_true_m" else "measured"
