@@ -6,6 +6,9 @@
 (:func:`~ardrone_nmpc.runs.summary.write_run_summary`, also used by the real-time flight),
 so its presence marks a recording that finished. A flight that raises leaves its partial
 run directory with a final ``exception`` event and no ``summary.csv``.
+
+The simulation and the summary are imported when a recording starts: ``sweep`` (and
+``plot``, through the sweep table) import this module without loading the solver kernels.
 """
 
 from __future__ import annotations
@@ -18,8 +21,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Generic, TypeVar
 
 from ardrone_nmpc.runs.rundir import RunRecorder
-from ardrone_nmpc.runs.summary import write_run_summary
-from ardrone_nmpc.runtime import lockstep  # run_lockstep looked up per call (tests replace it)
 from ardrone_nmpc.runtime.schedule import Schedule
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -75,6 +76,8 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     (``t_s`` NaN), no summary is written, and the exception propagates — or, with ``catch``,
     comes back as :attr:`Recording.error`.
     """
+    from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
+
     wall0 = time.perf_counter()
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
         try:
@@ -104,6 +107,8 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
     created for times that give no tick count.
     """
+    from ardrone_nmpc.runtime import lockstep  # when used (module docstring)
+
     Schedule.from_config(cfg)  # refused before a run directory exists
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:

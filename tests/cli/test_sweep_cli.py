@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.runs.summary import read_summary
-from ardrone_nmpc.experiments.sweep import read_sweep_csv
+from ardrone_nmpc.experiments.sweep import read_sweep
 
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_x.yaml")
@@ -41,7 +41,7 @@ def _same(a: str, b: float) -> bool:
 
 def _check_against_run_dirs(out: Path) -> list[dict[str, str]]:
     """Every sweep.csv row agrees with its run directory's summary.csv and log.csv."""
-    rows = read_sweep_csv(out / "sweep.csv")
+    rows = read_sweep(out / "sweep.csv").rows
     assert list(rows[0]) == COLUMNS
     for row in rows:
         run_dir = out / row["run_dir"]
@@ -92,7 +92,7 @@ def test_sweep_on_a_process_pool_gives_the_in_process_results(tmp_path):
     result = _sweep(tmp_path / "two", "--jobs", "2")
     assert result.exit_code == 0, result.output
     rows = _check_against_run_dirs(tmp_path / "two")
-    expected = read_sweep_csv(tmp_path / "one" / "sweep.csv")
+    expected = read_sweep(tmp_path / "one" / "sweep.csv").rows
     assert [{c: r[c] for c in DETERMINISTIC} for r in rows] == [
         {c: r[c] for c in DETERMINISTIC} for r in expected]
 
@@ -111,7 +111,7 @@ def test_sweep_on_a_dask_cluster_gives_the_local_results(tmp_path):
     assert result.exit_code == 0, result.output
     assert "(dask, " in result.stdout
     rows = _check_against_run_dirs(tmp_path / "dask")
-    expected = read_sweep_csv(tmp_path / "local" / "sweep.csv")
+    expected = read_sweep(tmp_path / "local" / "sweep.csv").rows
     assert [{c: r[c] for c in DETERMINISTIC} for r in rows] == [
         {c: r[c] for c in DETERMINISTIC} for r in expected]
 
@@ -179,7 +179,7 @@ def test_failed_cases_make_the_exit_code_1(tmp_path, monkeypatch):
     result = _sweep(tmp_path, "--jobs", "1")
     assert result.exit_code == 1
     assert "error: 2 of 2 cases failed" in result.output
-    rows = read_sweep_csv(tmp_path / "sweep.csv")
+    rows = read_sweep(tmp_path / "sweep.csv").rows
     assert [(r["status"], r["message"]) for r in rows] == [("failed", "RuntimeError: boom")] * 2
 
 
