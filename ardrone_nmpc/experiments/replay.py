@@ -1,6 +1,6 @@
 """``replay``: a recorded run fed back through the tick, or re-sent as a live pose stream.
 
-DESIGN.md §2: the same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
+The same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
 ``replay --rerun``; only the clock and the links change. Here the clock is manual — the
 experiment clock of the log itself (``t_s``) — and the "links" are the logged measurements
 (``log.csv`` columns written by :func:`~ardrone_nmpc.runtime.tick.measurement_columns`):
@@ -20,7 +20,7 @@ Functions
 ---------
 :func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.runtime.tick.TickInputs` of every row;
 :func:`rerun` steps a fresh tick through them and compares the commands; :func:`broadcast`
-re-sends the logged poses as the UDP pose stream (specs/mocap-stream.md).
+re-sends the logged poses as the UDP pose stream (docs/mocap-stream.md).
 """
 
 from __future__ import annotations
@@ -50,7 +50,8 @@ __all__ = [
     "rows_to_inputs", "write_rerun_csv",
 ]
 
-#: Columns a log needs beyond DESIGN.md §5's for ``--rerun`` (added with the raw measurements).
+#: Columns a log needs beyond the required ones (docs/design.md) for ``--rerun`` (added with
+#: the raw measurements).
 RERUN_COLUMNS: tuple[str, ...] = ("mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps",
                                   "nav_mode")
 CMD_COLUMNS = ("cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac")
@@ -470,7 +471,7 @@ def broadcast(*, run: RunData, port: int, host: str = "127.0.0.1", speed: float 
               clock: Callable[[], float] = time.monotonic,
               sleep: Callable[[float], None] = time.sleep,
               progress: Callable[[float], None] | None = None) -> BroadcastResult:
-    """Re-send the run's logged poses as the mocap UDP stream (specs/mocap-stream.md).
+    """Re-send the run's logged poses as the mocap UDP stream (docs/mocap-stream.md).
 
     One datagram per distinct logged pose (a pose seen on several ticks is sent once), at its
     logged time (``mocap_t_s`` spacing) divided by ``speed``, on absolute deadlines from the

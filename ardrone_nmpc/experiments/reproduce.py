@@ -1,6 +1,6 @@
 """``ardrone-nmpc reproduce``: every thesis experiment in simulation, judged against its claim.
 
-Each claim of the thesis' results table (specs/thesis.md) names the runs it needs; every run
+Each claim of the thesis' results table (docs/thesis.md) names the runs it needs; every run
 is flown twice — in the thesis' own formulation (a delay-free prediction model and the ż
 reference integrated over one period: ``controller.delay_compensation_s=0``,
 ``controller.vz_lead_s=null``) and in this tool's default (the 0.26 s command delay predicted
@@ -232,7 +232,7 @@ def render_markdown(outcomes: list[Outcome], *, command: str) -> str:
         "# Thesis results reproduced in simulation",
         "",
         f"Produced by `{command}` (lockstep simulation of the AR.Drone closed loop of",
-        "`specs/plant.md`: tilt/vertical/yaw inner loops, drag, noise, the thesis' 0.26 s command",
+        "`docs/plant.md`: tilt/vertical/yaw inner loops, drag, noise, the thesis' 0.26 s command",
         "delay). Each experiment runs in two formulations: **thesis** — the thesis' delay-free",
         "prediction model, ż reference and navdata velocities (`controller.delay_compensation_s=0`,",
         "`controller.vz_lead_s=null`, `estimator.horizontal_velocity=navdata`); **ours** — this",

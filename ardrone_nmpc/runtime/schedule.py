@@ -45,8 +45,8 @@ def _ticks(name: str, value_s: float, period_s: float, count: Callable[[float], 
         raise ScheduleError(f"{name} = {value_s!r}: must be a finite number of seconds ≥ 0")
     ratio = value_s / period_s
     if not ratio < MAX_TICKS:
-        raise ScheduleError(f"{name} = {value_s:g} s is more than {MAX_TICKS:.3g} ticks of "
-                            f"loop.period_s = {period_s:g} s")
+        raise ScheduleError(f"{name} = {value_s:g} s: more ticks of loop.period_s = "
+                            f"{period_s:g} s than a run can count ({MAX_TICKS:.3g})")
     return count(ratio)
 
 
@@ -76,9 +76,9 @@ class Schedule:
         n_track = _ticks("duration_s", duration_s, period_s, lambda r: int(round(r)))
         n_ticks = n_settle + n_track + 1  # + the tick at t = duration_s
         if n_ticks > MAX_TICKS:
-            raise ScheduleError(f"sim.settle_s + duration_s = {settle_s + duration_s:g} s is "
-                                f"more than {MAX_TICKS:.3g} ticks of loop.period_s = "
-                                f"{period_s:g} s")
+            raise ScheduleError(f"sim.settle_s + duration_s = {settle_s + duration_s:g} s: "
+                                f"more ticks of loop.period_s = {period_s:g} s than a run "
+                                f"can count ({MAX_TICKS:.3g})")
         return cls(period_s, n_settle, n_ticks)
 
     @classmethod

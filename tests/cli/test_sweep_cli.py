@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -192,3 +197,75 @@ def test_table_headers_are_the_shortest_distinct_path_tails():
         "kmax", "kind", "duration_s"]
     assert short_labels(["a.x.q", "b.x.q"]) == ["a.x.q", "b.x.q"]
     assert short_labels(["controller.q", "sim.plant.q"]) == ["controller.q", "plant.q"]
+
+
+# ----------------------------------------------------------------------------- kill -9
+
+
+def _children() -> dict[int, list[tuple[int, str]]]:
+    """parent pid → [(pid, start time in clock ticks)] of every process (Linux /proc)."""
+    kids: dict[int, list[tuple[int, str]]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:  # ended meanwhile
+                continue
+            fields = stat[stat.rindex(")") + 2:].split()
+            kids.setdefault(int(fields[1]), []).append((int(entry.name), fields[19]))
+    return kids
+
+
+def _family(pid: int) -> list[tuple[int, str]]:
+    kids, found, todo = _children(), [], [pid]
+    while todo:
+        for child in kids.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child[0])
+    return found
+
+
+def _alive(process: tuple[int, str]) -> bool:
+    """Still running (not a zombie), and the same process (its start time): pids recycle."""
+    try:
+        stat = Path(f"/proc/{process[0]}/stat").read_text()
+    except OSError:
+        return False
+    fields = stat[stat.rindex(")") + 2:].split()
+    return fields[0] != "Z" and fields[19] == process[1]
+
+
+def _wait_until(done, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+def test_the_processes_of_a_killed_sweep_end_with_it(tmp_path):
+    """SIGKILL of the sweep's process (nothing of it runs any more): its pool workers, the
+    forkserver and the resource tracker must end too, not fly their cases on for minutes."""
+    out = tmp_path / "killed"
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "ardrone_nmpc.cli.app", "sweep", CONFIG, "--grid",
+         "controller.horizon_steps=8,9,10", "--set", "duration_s=3000", "--jobs", "2",
+         "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    family: list[tuple[int, str]] = []
+    try:
+        partial = out / ".partial"
+        _wait_until(lambda: partial.is_dir() and len(list(partial.iterdir())) == 2, 180,
+                    "two cases never started flying")
+        family = _family(sweep.pid)
+        assert len(family) >= 3  # the forkserver and two workers (and a resource tracker)
+        sweep.kill()
+        sweep.wait(timeout=30)
+        _wait_until(lambda: not any(_alive(p) for p in family), 30,
+                    f"still running 30 s after the sweep was killed: "
+                    f"{[p for p in family if _alive(p)]}")
+    finally:
+        for pid, _ in [p for p in family if _alive(p)] + [(sweep.pid, "")]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        sweep.wait(timeout=30)

@@ -374,3 +374,40 @@ def test_a_case_failing_after_its_summary_is_not_taken_as_finished(tmp_path, mon
     assert (result.status, result.message) == ("failed", "ValueError: metrics bug")
     assert (tmp_path / case.case_id / "log.csv").is_file()
     assert not (tmp_path / case.case_id / "summary.csv").exists()
+
+
+# ----------------------------------------------------------------------------- workers
+
+
+def test_a_worker_ends_when_the_write_end_of_its_pipe_closes():
+    """The pool worker's watch: running while the sweep's process holds the pipe's write
+    end, exit ORPHAN_EXIT once it is closed (what the kernel does when that process dies)."""
+    import os
+    import subprocess
+    import sys
+
+    from ardrone_nmpc.experiments.sweep.engines import ORPHAN_EXIT
+
+    code = ("import sys, time\n"
+            "from multiprocessing.connection import Connection\n"
+            "from ardrone_nmpc.experiments.sweep.engines import _exit_with_sweep\n"
+            "_exit_with_sweep(Connection(int(sys.argv[1]), writable=False))\n"
+            "print('watching', flush=True)\n"
+            "time.sleep(120)\n")
+    read_fd, write_fd = os.pipe()
+    worker = subprocess.Popen([sys.executable, "-c", code, str(read_fd)], pass_fds=(read_fd,),
+                              stdout=subprocess.PIPE)
+    os.close(read_fd)
+    try:
+        assert worker.stdout.readline() == b"watching\n"
+        assert worker.poll() is None
+        os.close(write_fd)
+        write_fd = None
+        assert worker.wait(timeout=60) == ORPHAN_EXIT
+    finally:
+        if write_fd is not None:
+            os.close(write_fd)
+        if worker.poll() is None:
+            worker.kill()
+        worker.wait(timeout=60)
+        worker.stdout.close()
