@@ -14,7 +14,8 @@ Per case: a normal run directory (``<log_dir>/<case>/…``), then
   distance fell below :data:`RECOVERED_M` for good (NaN if it never did; not applicable to
   landings);
 * ``log_complete`` — config.yaml, log.csv without torn rows, one row per tick flown,
-  events.jsonl ending in ``landed``/``stopped``, summary.csv;
+  events.jsonl whose flight ends in ``landed``/``stopped`` (then the recording's
+  ``simulated``), summary.csv;
 * ``nonfinite_cmds`` — rows whose PCMD fractions are not finite (must be 0).
 
 A case *passes* when its outcome is the policy's (anything but ``crashed``/``exception``),
@@ -24,7 +25,6 @@ the log is complete and no non-finite command was sent.
 from __future__ import annotations
 
 import math
-import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
@@ -148,7 +148,9 @@ def classify(run, ending: str, fault: str) -> str:
 
 
 def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
-    """Whether the run directory holds everything the log contract asks for."""
+    """Whether the run directory holds everything the log contract asks for: the flight's
+    events end in ``landed``/``stopped`` (the recording's own ``simulated`` event aside)."""
+    from ardrone_nmpc.experiments.record import SIMULATED_EVENT
     from ardrone_nmpc.runs.rundir import LogError, read_run
 
     for name in ("config.yaml", "log.csv", "events.jsonl", "summary.csv"):
@@ -162,7 +164,8 @@ def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
         return False, "; ".join(run.warnings)
     if run.n_rows < ticks_expected:
         return False, f"{run.n_rows} rows for {ticks_expected} ticks"
-    last = run.events[-1]["kind"] if run.events else ""
+    flight = [e["kind"] for e in run.events if e["kind"] != SIMULATED_EVENT]
+    last = flight[-1] if flight else ""
     if last not in ("landed", "stopped"):
         return False, f"events end with {last!r}"
     return True, ""
@@ -177,25 +180,18 @@ def _fault_start_s(cfg) -> float:
 
 def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | None,
              seed: int) -> tuple[Path | None, str, int, str]:
-    """Fly one case into ``log_dir``; ``(run_dir, ending, ticks_flown, error)``."""
+    """Fly one case into ``log_dir``; ``(run_dir, ending, ticks_flown, error)``. An
+    exception is a result of the matrix: ending ``exception``, its one line in ``error``."""
     from ardrone_nmpc.config.schema import load_config
-    from ardrone_nmpc.runs.rundir import RunRecorder, read_run
-    from ardrone_nmpc.runtime.lockstep import run_lockstep
-    from ardrone_nmpc.runs.summary import summarise
+    from ardrone_nmpc.experiments.record import record_lockstep
 
     file, overrides = EXPERIMENTS[experiment]
     cfg = load_config(config_dir / file, [*overrides, *(FAULT_CASES[fault] if fault else ())])
     cfg = cfg.model_copy(update={"name": f"{experiment}-{fault or 'baseline'}"})
-    with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
-        try:
-            result = run_lockstep(cfg, recorder=recorder, seed=seed)
-            ending, ticks, error = result.ending, result.ticks, ""
-        except Exception as err:  # noqa: BLE001 - an exception is a result of the matrix
-            ending, ticks = "exception", 0
-            error = "".join(traceback.format_exception_only(err)).strip()
-            recorder.event(math.nan, "exception", error=error)
-    recorder.write_summary(summarise(read_run(recorder.path)))
-    return recorder.path, ending, ticks, error
+    recording = record_lockstep(cfg, log_dir, seed=seed, catch=True)
+    if recording.result is None:
+        return recording.path, "exception", 0, recording.error
+    return recording.path, recording.result.ending, recording.result.ticks, ""
 
 
 def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, ending: str,

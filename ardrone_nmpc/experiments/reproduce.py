@@ -1,6 +1,6 @@
 """``ardrone-nmpc reproduce``: every thesis experiment in simulation, judged against its claim.
 
-Each claim of the thesis' results table (specs/thesis.md) names the runs it needs; every run
+Each claim of the thesis' results table (docs/thesis.md) names the runs it needs; every run
 is flown twice — in the thesis' own formulation (a delay-free prediction model and the ż
 reference integrated over one period: ``controller.delay_compensation_s=0``,
 ``controller.vz_lead_s=null``) and in this tool's default (the 0.26 s command delay predicted
@@ -18,9 +18,8 @@ from typing import Callable
 import numpy as np
 
 from ardrone_nmpc.config.schema import load_config
-from ardrone_nmpc.runs.rundir import RunRecorder, read_run
-from ardrone_nmpc.runtime.lockstep import run_lockstep
-from ardrone_nmpc.runs.summary import summarise
+from ardrone_nmpc.experiments.record import record_lockstep
+from ardrone_nmpc.runs.window import experiment_rows
 
 # The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), and ẋ, ẏ
 # from the drone's navdata.
@@ -59,9 +58,8 @@ def _fmt(v: float, unit: str = "", digits: int = 2) -> str:
     return "—" if not math.isfinite(v) else f"{v:.{digits}f}{unit}"
 
 
-def figures_of(run_dir: Path) -> RunFigures:
-    run = read_run(run_dir)
-    rows = summarise(run)
+def figures_of(run, rows) -> RunFigures:
+    """What the claims look at in a run read back (``run``) with its summary ``rows``."""
     cols = run.columns
     t = cols["t_s"]
     if not np.any(t >= 0):  # the supervisor ended it before the experiment began
@@ -70,9 +68,9 @@ def figures_of(run_dir: Path) -> RunFigures:
     late = t >= (t[-1] * 2.0 / 3.0)
     errors = [cols[f"{a}_true_m"][late] - cols[f"{a}_ref_m"][late] for a in "xyz"]
     rmse = float(np.sqrt(np.nanmean(np.sum(np.square(errors), axis=0))))
-    ok = cols["solver_status"][t >= 0]
+    flying = experiment_rows(t)
+    ok = cols["solver_status"][flying]
     bad_solves = np.mean([s not in ("", "ok") for s in ok]) if ok.size else 0.0
-    flying = t >= 0
     peaks = [np.nanmax(np.abs(cols[c][flying])) for c in ("u_phi_rad", "u_theta_rad",
                                                             "u_psirate_radps")]
     if run.config.controller.kind == "p":
@@ -220,10 +218,8 @@ def run_claims(*, config_dir: Path, log_dir: Path, seed: int = 0,
                                       [*LAB_OVERRIDES, *form_overrides, *overrides])
                     suffix = "-p" if "controller.kind=p" in overrides else ""
                     cfg = cfg.model_copy(update={"name": f"{cfg.name}{suffix}-{form}"})
-                    with RunRecorder.create(log_dir, cfg, seed=seed) as rec:
-                        run_lockstep(cfg, recorder=rec, seed=seed)
-                        rec.write_summary(summarise(read_run(rec.path)))
-                    cache[key] = figures_of(rec.path)
+                    recording = record_lockstep(cfg, log_dir, seed=seed)
+                    cache[key] = figures_of(recording.run, recording.summary)
                 figs[label] = cache[key]
             outcome.runs[form] = figs
             outcome.ours[form] = claim.judge(figs)
@@ -236,7 +232,7 @@ def render_markdown(outcomes: list[Outcome], *, command: str) -> str:
         "# Thesis results reproduced in simulation",
         "",
         f"Produced by `{command}` (lockstep simulation of the AR.Drone closed loop of",
-        "`specs/plant.md`: tilt/vertical/yaw inner loops, drag, noise, the thesis' 0.26 s command",
+        "`docs/plant.md`: tilt/vertical/yaw inner loops, drag, noise, the thesis' 0.26 s command",
         "delay). Each experiment runs in two formulations: **thesis** — the thesis' delay-free",
         "prediction model, ż reference and navdata velocities (`controller.delay_compensation_s=0`,",
         "`controller.vz_lead_s=null`, `estimator.horizontal_velocity=navdata`); **ours** — this",

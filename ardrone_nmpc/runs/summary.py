@@ -55,7 +55,8 @@ import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.control.obstacles import clearance_m
-from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError
+from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError, read_run, write_summary
+from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows, flying_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from rich.table import Table
@@ -72,6 +73,7 @@ __all__ = [
     "input_stats",
     "path_deviation",
     "read_summary",
+    "write_run_summary",
     "render_side_by_side",
     "render_summary",
     "solver_stats",
@@ -79,8 +81,6 @@ __all__ = [
     "summarise",
 ]
 
-#: Modes in which the drone is not under the experiment's control (excluded from path metrics).
-GROUND_MODES = frozenset({"landed", "taking_off", "landing"})
 #: The mode of a tick that tracks the experiment's reference; any other set mode is a fallback.
 NOMINAL_MODE = "track"
 #: A tick violates an obstacle's constraint when its centre is closer than d − this (m).
@@ -386,9 +386,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
     rows: list[SummaryRow] = []
     add = rows.append
 
-    window = np.isfinite(t) & (t >= 0.0)
-    if not window.any():
-        window = np.isfinite(t)
+    window = experiment_rows(t)
     mode = _strings(cols.get("mode"), n)
 
     truth = all(c in cols and np.isfinite(cols[c]).any() for _, _, c, _, _ in _AXES)
@@ -417,10 +415,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
             add(SummaryRow(axis, "steady_state_error", m["steady_state_error"], unit))
             add(SummaryRow(axis, "rmse", m["rmse"], unit))
     else:
-        flying = ~np.isin(mode, list(GROUND_MODES))
-        if len(set(mode.tolist())) <= 1:
-            flying = np.ones(n, dtype=bool)
-        sel = window & flying
+        sel = window & flying_rows(mode)
         if ref.kind in PATH_KINDS:
             polyline = make_trajectory(ref, duration_s=cfg.duration_s).polyline_m()
             xyz = np.column_stack([pos["x"], pos["y"], pos["z"]])[sel]
@@ -528,6 +523,15 @@ def read_summary(run_dir: str | Path) -> list[SummaryRow]:
             raise LogError(f"{path}:{i}: column value: {cells[2]!r} is not a number") from None
         out.append(SummaryRow(cells[0], cells[1], value, cells[3]))
     return out
+
+
+def write_run_summary(run_dir: str | Path) -> tuple[RunData, list[SummaryRow]]:
+    """Read the run at ``run_dir`` back, summarise it and write its ``summary.csv`` (the
+    last file of every run directory); returns the run and its rows."""
+    run = read_run(run_dir)
+    rows = summarise(run)
+    write_summary(run_dir, rows)
+    return run, rows
 
 
 def _fmt(value: float, unit: str) -> str:

@@ -12,6 +12,7 @@ import time
 from typing import Callable
 
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.runtime.schedule import LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S
 
 
 class PreflightError(RuntimeError):
@@ -30,8 +31,7 @@ class FlightSession:
     clock : monotonic seconds.
     """
 
-    TAKEOFF_TIMEOUT_S = 10.0
-    LANDING_TIMEOUT_S = 15.0
+    TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S = TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S
 
     def __init__(self, cfg, drone, mocap, *, event: Callable[..., None],
                  clock: Callable[[], float] = time.monotonic):
