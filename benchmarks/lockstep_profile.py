@@ -17,7 +17,7 @@ The wrappers add ~0.3 µs per wrapped call; the total is measured without them t
 
 ``python benchmarks/lockstep_profile.py throughput [--jobs 2] [--rounds 2]`` flies the same
 24 configs (step_x, 20 s: horizon 10/15/20 × Δτ 0.08/0.1 × four r) the sweep's way (run
-directories, ``experiments/sweep.iter_local``) and ``tune``'s way (in-memory recorder,
+directories, ``experiments/sweep`` ``iter_local``) and ``tune``'s way (in-memory recorder,
 ``experiments/tune/engine.PoolEngine``), alternating, and prints simulated seconds per wall
 second of each: the ratio holds on a loaded machine, the absolute figures do not.
 """
@@ -161,8 +161,9 @@ def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
     from concurrent.futures import ProcessPoolExecutor
 
     from ardrone_nmpc.config.schema import config_to_dict
-    from ardrone_nmpc.experiments.sweep import (Case, _init_worker, _pool_context,
-                                                _start_forkserver, case_id, run_case)
+    from ardrone_nmpc.experiments.sweep import Case, case_id, run_case
+    from ardrone_nmpc.experiments.sweep.engines import (_init_worker, _pool_context,
+                                                        _start_forkserver)
     from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
     from ardrone_nmpc.experiments.tune.objective import parse_objective
 
@@ -173,8 +174,10 @@ def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
              for i, c in enumerate(cfgs)]
     ctx = _pool_context()
     warm = _start_forkserver(ctx)
+    alive_r, alive_w = ctx.Pipe(duplex=False)  # the sweep's worker watch
     walls = defaultdict(list)
-    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
+                             initargs=(alive_r,)) as pool:
         list(pool.map(run_trial, specs[:jobs]))  # every worker started and warm
         for _ in range(rounds):
             with tempfile.TemporaryDirectory() as tmp:
@@ -186,6 +189,8 @@ def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
             walls["tune run_trial (memory)"].append(time.perf_counter() - t0)
     if warm is not None:
         warm.join()
+    alive_r.close()
+    alive_w.close()
     return walls
 
 

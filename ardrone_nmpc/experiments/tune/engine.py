@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ardrone_nmpc.experiments.record import one_line
 from ardrone_nmpc.experiments.tune.objective import FAILED_METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, apply_params
 
@@ -89,35 +90,25 @@ class TrialResult:
     sim_s: float = 0.0
 
 
-def _one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split())
-    return f"{type(err).__name__}: {text}" if text else type(err).__name__
-
-
 def _fly(cfg, keep_dir: str | None, number: int):
-    """(metrics, simulated seconds) of one flight."""
+    """(metrics, simulated seconds) of one flight: recorded in memory, or with ``keep_dir``
+    the way every caller records a run directory (:mod:`ardrone_nmpc.experiments.record`)."""
     from ardrone_nmpc.experiments.tune.objective import scenario_metrics
-    from ardrone_nmpc.runs.summary import summarise
-    from ardrone_nmpc.runtime.lockstep import run_lockstep
 
     if keep_dir is None:
         from ardrone_nmpc.runs.memory import MemoryRecorder
+        from ardrone_nmpc.runs.summary import summarise
+        from ardrone_nmpc.runtime.lockstep import run_lockstep
 
         recorder = MemoryRecorder()
         result = run_lockstep(cfg, recorder=recorder)
         run = recorder.run_data(cfg, seed=cfg.sim.seed)
+        rows = summarise(run)
     else:
-        from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+        from ardrone_nmpc.experiments.record import record_lockstep
 
-        with RunRecorder.create(Path(keep_dir) / f"trial-{number:05d}", cfg,
-                                seed=cfg.sim.seed) as recorder:
-            result = run_lockstep(cfg, recorder=recorder)
-        run = read_run(recorder.path)
-    rows = summarise(run)
-    if keep_dir is not None:
-        from ardrone_nmpc.runs.rundir import write_summary
-
-        write_summary(run.path, rows)
+        rec = record_lockstep(cfg, Path(keep_dir) / f"trial-{number:05d}")
+        result, run, rows = rec.result, rec.run, rec.summary
     return scenario_metrics(run, rows, ending=result.ending), result.ticks * cfg.loop.period_s
 
 
@@ -142,7 +133,7 @@ def run_trial(spec: TrialSpec) -> TrialResult:
                 messages.append(f"{sc.label}: aborted by the supervisor")
         except (ConfigError, Exception) as err:  # noqa: BLE001 - a failed flight is a result
             m, status = dict(FAILED_METRICS), "failed"
-            text = "; ".join(err.messages) if isinstance(err, ConfigError) else _one_line(err)
+            text = "; ".join(err.messages) if isinstance(err, ConfigError) else one_line(err)
             messages.insert(0, f"{sc.label}: {text}")
         m["score"] = spec.objective.score(m)
         scores.append(m["score"])
@@ -159,7 +150,7 @@ def _failed(spec: TrialSpec, err: BaseException) -> TrialResult:
         metrics[sc.label] = m
     return TrialResult(spec.number, spec.objective.combine([m["score"] for m in
                                                             metrics.values()]),
-                       "failed", metrics, f"worker: {_one_line(err)}")
+                       "failed", metrics, f"worker: {one_line(err)}")
 
 
 # ----------------------------------------------------------------------------- engines
@@ -191,10 +182,12 @@ class PoolEngine:
     def __init__(self, jobs: int) -> None:
         import threading
 
-        from ardrone_nmpc.experiments.sweep import _pool_context, _start_forkserver
+        from ardrone_nmpc.experiments.sweep.engines import _pool_context, _start_forkserver
 
         self.slots = jobs
         self._ctx = _pool_context()
+        # the workers end with this process, however it ends (the sweep's worker watch)
+        self._alive_r, self._alive_w = self._ctx.Pipe(duplex=False)
         self._warm = None
         self._pool = None
         self._futures: dict[Any, TrialSpec] = {}
@@ -209,11 +202,12 @@ class PoolEngine:
         if self._pool is None:
             from concurrent.futures import ProcessPoolExecutor
 
-            from ardrone_nmpc.experiments.sweep import _init_worker
+            from ardrone_nmpc.experiments.sweep.engines import _init_worker
 
             self._starter.join()
             self._pool = ProcessPoolExecutor(self.slots, mp_context=self._ctx,
-                                             initializer=_init_worker)
+                                             initializer=_init_worker,
+                                             initargs=(self._alive_r,))
         return self._pool
 
     def submit(self, spec: TrialSpec) -> None:
@@ -236,6 +230,8 @@ class PoolEngine:
             self._pool.shutdown(wait=True, cancel_futures=True)
         if self._warm is not None:
             self._warm.join()
+        self._alive_r.close()
+        self._alive_w.close()  # after the workers have ended: closing it would end them
 
 
 class DaskEngine:
@@ -247,7 +243,7 @@ class DaskEngine:
 
         from dask.distributed import as_completed
 
-        from ardrone_nmpc.experiments.sweep import _dask_client
+        from ardrone_nmpc.experiments.sweep.engines import _dask_client
 
         self._client, self._cluster = _dask_client(scheduler=scheduler, jobs=jobs)
         info = self._client.scheduler_info()

@@ -157,10 +157,11 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
     ``SimResult.ending``.
     """
     from ardrone_nmpc.experiments.sweep import case_metrics
+    from ardrone_nmpc.runs.window import experiment_rows
 
     cols = run.columns
     t = np.asarray(cols["t_s"], dtype=np.float64)
-    window = np.isfinite(t) & (t >= 0.0)
+    window = experiment_rows(t)
     cmd = np.column_stack([np.asarray(cols[c], dtype=np.float64)[window] for c in
                            ("cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac")])
     sq = np.sum(np.nan_to_num(cmd) ** 2, axis=1)
