@@ -20,6 +20,11 @@ The wrappers add ~0.3 µs per wrapped call; the total is measured without them t
 directories, ``experiments/sweep`` ``iter_local``) and ``tune``'s way (in-memory recorder,
 ``experiments/tune/engine.PoolEngine``), alternating, and prints simulated seconds per wall
 second of each: the ratio holds on a loaded machine, the absolute figures do not.
+
+``python benchmarks/lockstep_profile.py cpu --way sweep|tune [--rounds 3]`` flies the same 24
+flights in this process and prints their CPU seconds (``time.process_time``), which other
+load hardly changes: run ``--way sweep`` from another tree (``PYTHONPATH=...``) to compare
+commits.
 """
 
 from __future__ import annotations
@@ -215,6 +220,37 @@ def throughput(jobs: int, rounds: int) -> None:
     _report("per-flight work on one warm pool:", _warm_pool(cfgs, jobs, rounds), sim_s)
 
 
+def cpu(way: str, rounds: int) -> None:
+    """CPU seconds (``time.process_time``: little affected by other load, unlike wall time)
+    and wall seconds of the 24 flights in this process, the sweep's way or tune's."""
+    from ardrone_nmpc.config.schema import config_to_dict
+    from ardrone_nmpc.experiments.sweep import Case, case_id, run_case, warm_up
+
+    cfgs = _configs()
+    sim_s = sum(c.duration_s + c.sim.settle_s for c in cfgs)
+    warm_up()
+    if way == "tune":
+        from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
+        from ardrone_nmpc.experiments.tune.objective import parse_objective
+
+        obj = parse_objective(None)
+        work = [TrialSpec(i, {}, config_to_dict(c), {}, (Scenario("seed0", 0),), obj)
+                for i, c in enumerate(cfgs)]
+    else:
+        work = [Case(i, case_id(params=(("i", str(i)),), cfg=c), (("i", str(i)),), c)
+                for i, c in enumerate(cfgs)]
+    cpu_s, wall_s = [], []
+    for _ in range(rounds):
+        with tempfile.TemporaryDirectory() as tmp:
+            c0, w0 = time.process_time(), time.perf_counter()
+            for w in work:
+                run_trial(w) if way == "tune" else run_case(w, out_dir=tmp)
+            cpu_s.append(time.process_time() - c0)
+            wall_s.append(time.perf_counter() - w0)
+    print(f"{way}: {len(work)} flights, {sim_s:.0f} s simulated: best {min(cpu_s):.2f} CPU s "
+          f"({sim_s / min(cpu_s):.0f} simulated s per CPU s), best wall {min(wall_s):.2f} s")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -224,9 +260,14 @@ def main() -> None:
     t = sub.add_parser("throughput")
     t.add_argument("--jobs", type=int, default=2)
     t.add_argument("--rounds", type=int, default=2)
+    c = sub.add_parser("cpu")
+    c.add_argument("--way", choices=("sweep", "tune"), required=True)
+    c.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
     if args.what == "profile":
         profile(args.config, args.repeats)
+    elif args.what == "cpu":
+        cpu(args.way, args.rounds)
     else:
         throughput(args.jobs, args.rounds)
 
