@@ -564,7 +564,8 @@ class AirframePlant:
         contact applied here, as :meth:`_substep` does) and leaves to :meth:`_substep` the
         steps that could empty the battery (a mode change). Returns the steps done."""
         drain = self.params.battery_drain_pct_per_min * h / 60.0
-        if n < 2 or self._battery <= (n + 1) * drain:
+        # a subclass may fly other dynamics per substep: it keeps the step-by-step path
+        if n < 2 or type(self) is not AirframePlant or self._battery <= (n + 1) * drain:
             return 0
         fifo, current = self._fifo, self._current
         delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
