@@ -1,0 +1,71 @@
+"""Configs flown on held-out seeds: the numbers docs/tuning.md §4 compares.
+
+``python benchmarks/tune_heldout.py CONFIG... [--seeds 100,101,102,103,104] [--set path=value]``
+flies each config in lockstep on each seed (seeds a ``tune`` run did not fly: it flies
+``sim.seed`` … ``sim.seed + 2`` by default) and prints one Markdown row per config: for a step
+the stepped axis' settling time (2 % band) and overshoot, mean and worst over the seeds; for a
+path experiment the mean path deviation and the 3-D RMSE. Flights are recorded in memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+
+def _flight(cfg, seed: int) -> dict[tuple[str, str], float]:
+    from ardrone_nmpc.runs.memory import MemoryRecorder
+    from ardrone_nmpc.runs.summary import summarise
+    from ardrone_nmpc.runtime.lockstep import run_lockstep
+
+    cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
+    recorder = MemoryRecorder()
+    result = run_lockstep(cfg, recorder=recorder)
+    rows = summarise(recorder.run_data(cfg, seed=seed))
+    values = {(r.axis, r.metric): r.value for r in rows}
+    values[("run", "completed")] = float(result.ending == "completed")
+    return values
+
+
+def _stat(values: list[float], unit: str, digits: int = 2) -> str:
+    if any(math.isnan(v) for v in values):
+        return "never (some seed)"
+    return f"{np.mean(values):.{digits}f} {unit} (worst {max(values):.{digits}f})"
+
+
+def main() -> None:
+    from ardrone_nmpc.config.schema import load_config
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("configs", nargs="+")
+    parser.add_argument("--seeds", default="100,101,102,103,104")
+    parser.add_argument("--set", dest="overrides", action="append", default=[])
+    args = parser.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    print(f"| config | seeds {seeds[0]}–{seeds[-1]} | | completed |")
+    print("|:--|--:|--:|--:|")
+    for path in args.configs:
+        cfg = load_config(path, args.overrides)
+        flights = [_flight(cfg, s) for s in seeds]
+        done = sum(int(f[("run", "completed")]) for f in flights)
+        ref = cfg.reference
+        if ref.kind == "step":
+            axes = [a for a, y0, yf in zip(("x", "y", "z", "psi"), (*ref.start_m, ref.start_psi_rad),
+                                           (*ref.target_m, ref.target_psi_rad)) if y0 != yf]
+            cells = []
+            for axis in axes:
+                settle = [f[(axis, "settling_time")] for f in flights]
+                over = [f[(axis, "overshoot")] for f in flights]
+                cells.append(f"{axis} settling {_stat(settle, 's')}; overshoot {_stat(over, '%', 1)}")
+            print(f"| `{path}` | {' / '.join(cells)} | | {done}/{len(seeds)} |")
+        else:
+            dev = [f[("path", "mean_deviation")] for f in flights]
+            rmse = [f[("xyz", "rmse")] for f in flights]
+            print(f"| `{path}` | path deviation {_stat(dev, 'm', 3)} | 3-D RMSE "
+                  f"{_stat(rmse, 'm', 3)} | {done}/{len(seeds)} |")
+
+
+if __name__ == "__main__":
+    main()
