@@ -1,10 +1,14 @@
 """Configs flown on held-out seeds: the numbers docs/tuning.md §4 compares.
 
-``python benchmarks/tune_heldout.py CONFIG... [--seeds 100,101,102,103,104] [--set path=value]``
+``python benchmarks/tune_heldout.py CONFIG... [--seeds 100,101,102,103,104] [--set path=value]
+[--plant-profile P]``
 flies each config in lockstep on each seed (seeds a ``tune`` run did not fly: it flies
 ``sim.seed`` … ``sim.seed + 2`` by default) and prints one Markdown row per config: for a step
 the stepped axis' settling time (2 % band) and overshoot, mean and worst over the seeds; for a
 path experiment the mean path deviation and the 3-D RMSE. Flights are recorded in memory.
+``--plant-profile P`` replaces each config's ``sim.plant`` section by ``{profile: P}``: a
+``best.yaml`` (or any resolved config) states every plant value of the profile it was tuned
+on, which would otherwise win over P's defaults.
 """
 
 from __future__ import annotations
@@ -35,19 +39,32 @@ def _stat(values: list[float], unit: str, digits: int = 2) -> str:
     return f"{np.mean(values):.{digits}f} {unit} (worst {max(values):.{digits}f})"
 
 
-def main() -> None:
-    from ardrone_nmpc.config.schema import load_config
+def _load(path: str, overrides: list[str], profile: str | None):
+    from pathlib import Path
 
+    import yaml
+
+    from ardrone_nmpc.config.schema import apply_overrides, config_from_dict, load_config
+
+    if profile is None:
+        return load_config(path, overrides)
+    data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    data.setdefault("sim", {})["plant"] = {"profile": profile}
+    return config_from_dict(apply_overrides(data, overrides), base_dir=Path(path).parent)
+
+
+def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("configs", nargs="+")
     parser.add_argument("--seeds", default="100,101,102,103,104")
     parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--plant-profile", default=None)
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     print(f"| config | seeds {seeds[0]}–{seeds[-1]} | | completed |")
     print("|:--|--:|--:|--:|")
     for path in args.configs:
-        cfg = load_config(path, args.overrides)
+        cfg = _load(path, args.overrides, args.plant_profile)
         flights = [_flight(cfg, s) for s in seeds]
         done = sum(int(f[("run", "completed")]) for f in flights)
         ref = cfg.reference

@@ -135,7 +135,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from ardrone_nmpc.experiments.tune import engine as eng
     from ardrone_nmpc.experiments.tune import study as st
     from ardrone_nmpc.experiments.tune.objective import parse_objective
-    from ardrone_nmpc.experiments.tune.space import load_space
+    from ardrone_nmpc.experiments.tune.space import load_space, written_config
 
     wall0 = time.perf_counter()  # start-up included: the wall time a user waits
     _check_options(engine=engine, scheduler=scheduler)
@@ -169,7 +169,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     columns = st.trials_columns(list(space), scen)
     console = console or Console(width=None if sys.stdout.isatty() else 160)
     err_console = err_console or Console(stderr=True)
-    make_spec = st.spec_factory(cfg=cfg, space=space, scenarios=scen, objective=obj,
+    make_spec = st.spec_factory(cfg=cfg, written=written_config(config, overrides, cfg),
+                                space=space, scenarios=scen, objective=obj,
                                 keep_dir=out_dir / "runs" if keep_runs else None)
 
     last_save = [-math.inf]

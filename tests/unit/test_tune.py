@@ -253,3 +253,24 @@ def test_a_trial_flies_every_scenario_and_an_invalid_one_fails_with_the_penalty(
                               (Scenario("x", 0, ("controller.dtau_s=-1",)),), obj))
     assert bad.status == "failed" and bad.message.startswith("x: controller.dtau_s")
     assert bad.score == 10 * obj.weights["abort"]
+
+
+def test_params_on_a_config_as_written_copy_only_what_they_set(step_z):
+    """Trials change the config as written, so defaults that follow other keys (a plant
+    profile's) still follow a scenario's overrides; a vector left out is copied whole."""
+    out = apply_params({"name": "w", "sim": {"seed": 4}}, {"controller.q[4]": 80.0,
+                                                          "estimator.kalman_q": 1e-3},
+                       resolved=config_to_dict(step_z))
+    assert out == {"name": "w", "sim": {"seed": 4},
+                   "controller": {"q": [12.0, 2.0, 7.0, 2.0, 80.0, 10.0, 13.0]},
+                   "estimator": {"kalman_q": 1e-3}}
+
+
+def test_the_written_config_keeps_left_out_keys_out(step_z, tmp_path):
+    from ardrone_nmpc.experiments.tune.space import written_config
+
+    data = written_config(CONFIGS / "step_z.yaml", ["sim.seed=5", "controller.r=[1,2,3,4]"],
+                          step_z)
+    assert data["sim"] == {"settle_s": 8.0, "seed": 5}
+    assert data["controller"] == {"r": [1, 2, 3, 4]}
+    assert "plant" not in data["sim"] and "estimator" not in data

@@ -68,11 +68,12 @@ class TrialSpec:
 
     number: int
     values: Mapping[str, float]
-    base: Mapping[str, Any] = field(repr=False)  # config_to_dict of the tuned config
+    base: Mapping[str, Any] = field(repr=False)  # the tuned config as written (+ --set)
     space: Mapping[str, Param] = field(repr=False)
     scenarios: tuple[Scenario, ...]
     objective: Objective
     keep_dir: str | None = None  # write run directories under keep_dir/trial-NNNNN/
+    resolved: Mapping[str, Any] | None = field(default=None, repr=False)  # base validated
 
 
 @dataclass
@@ -119,7 +120,9 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     from ardrone_nmpc.config.schema import ConfigError, apply_overrides, config_from_dict
 
     wall0 = time.perf_counter()
-    data = apply_params(spec.base, spec.values, spec.space)
+    # the trial's values on the config as written: a scenario's plant profile still fills
+    # every plant key the config leaves out
+    data = apply_params(spec.base, spec.values, spec.space, resolved=spec.resolved)
     metrics, scores, messages, sim_s = {}, [], [], 0.0
     status = "ok"
     for sc in spec.scenarios:

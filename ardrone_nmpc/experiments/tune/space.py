@@ -37,7 +37,7 @@ import yaml
 from ardrone_nmpc.config.schema import ConfigError, config_from_dict, config_to_dict
 
 __all__ = ["DEFAULT_FACTOR", "Param", "apply_params", "config_with", "default_space",
-           "load_space", "parse_space"]
+           "load_space", "parse_space", "written_config"]
 
 DEFAULT_FACTOR = 10.0
 _NAME = re.compile(r"^(?P<path>[A-Za-z_][A-Za-z0-9_.]*?)(?:\[(?P<index>\d+)\])?$")
@@ -188,17 +188,28 @@ def load_space(path: str | Path | None, cfg) -> dict[str, Param]:
 
 
 def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
-                 space: Mapping[str, Param] | None = None) -> dict[str, Any]:
+                 space: Mapping[str, Param] | None = None, *,
+                 resolved: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A copy of the config mapping ``data`` with each named value set (ints for int
-    parameters). The caller validates it (:func:`config_from_dict`)."""
+    parameters). The caller validates it (:func:`config_from_dict`).
+
+    ``data`` may be a config as written (keys left out take their defaults, and profile
+    defaults such as ``sim.plant.profile``'s then still apply); a path it leaves out is
+    first copied from ``resolved`` (the validated config as a mapping): a whole vector when
+    one of its elements is set."""
     import copy
 
     out = copy.deepcopy(dict(data))
     for name, value in values.items():
         keys, index = _split(name)
-        node = out
+        node, source = out, resolved
         for key in keys[:-1]:
+            source = source[key] if source is not None else None
+            if key not in node:
+                node[key] = {}
             node = node[key]
+        if keys[-1] not in node and source is not None:
+            node[keys[-1]] = copy.deepcopy(source[keys[-1]])
         if space is not None and space[name].kind == "int":
             value = int(round(value))
         if index is None:
@@ -208,6 +219,21 @@ def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
             vec[index] = value
             node[keys[-1]] = vec
     return out
+
+
+def written_config(path: str | Path | None, overrides: Sequence[str], cfg) -> dict[str, Any]:
+    """The config as written in ``path`` with the ``--set`` overrides, as a mapping (keys
+    left out stay out, so defaults that depend on other keys — a plant profile's — still
+    follow them); a relative ``reference.path_file`` as ``cfg`` resolved it."""
+    from ardrone_nmpc.config.schema import apply_overrides
+
+    data: dict[str, Any] = {}
+    if path is not None:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    data = apply_overrides(data, overrides)
+    if isinstance(data.get("reference"), dict) and "path_file" in data["reference"]:
+        data["reference"]["path_file"] = cfg.reference.path_file
+    return data
 
 
 def config_with(cfg, values: Mapping[str, float], space: Mapping[str, Param] | None = None,

@@ -269,13 +269,16 @@ def write_best(path: Path, study, *, cfg, space: Mapping[str, Param], command: s
     return path
 
 
-def spec_factory(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
-                 objective: Objective, keep_dir: Path | None) -> Callable[[int, dict], TrialSpec]:
-    """``make_spec(number, values)`` for :func:`run_study`."""
-    base = config_to_dict(cfg)
+def spec_factory(*, cfg, written: Mapping[str, Any], space: Mapping[str, Param],
+                 scenarios: Sequence[Scenario], objective: Objective,
+                 keep_dir: Path | None) -> Callable[[int, dict], TrialSpec]:
+    """``make_spec(number, values)`` for :func:`run_study`; ``written`` is the config as
+    written (:func:`~ardrone_nmpc.experiments.tune.space.written_config`), ``cfg`` it
+    validated."""
+    resolved = config_to_dict(cfg)
     keep = None if keep_dir is None else str(Path(keep_dir).resolve())
-    return lambda number, values: TrialSpec(number, values, base, dict(space),
-                                            tuple(scenarios), objective, keep)
+    return lambda number, values: TrialSpec(number, values, written, dict(space),
+                                            tuple(scenarios), objective, keep, resolved)
 
 
 def space_as_dict(space: Mapping[str, Param]) -> dict[str, dict]:
