@@ -228,19 +228,19 @@ def reproduce(
 ) -> None:
     """Run every thesis experiment in simulation (thesis formulation and ours) and write the
     claim-by-claim comparison."""
-    from ardrone_nmpc.experiments.reproduce import render_markdown, run_claims
+    from ardrone_nmpc.experiments.reproduce import FORMULATIONS, reproduce as run_reproduce
     from rich.console import Console
     from rich.progress import Progress
 
     console = Console()
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("reproducing", total=None)
-        outcomes = run_claims(config_dir=config_dir, log_dir=log_dir, seed=seed,
-                              progress=lambda text: progress.update(task, description=text))
-    command = f"ardrone-nmpc reproduce --seed {seed}"
+        text, outcomes = run_reproduce(
+            config_dir=config_dir, log_dir=log_dir, seed=seed,
+            progress=lambda text: progress.update(task, description=text))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render_markdown(outcomes, command=command))
-    held = {form: sum(o.ours[form][1] for o in outcomes) for form in ("thesis", "ours")}
+    out.write_text(text)
+    held = {form: sum(o.ours[form][1] for o in outcomes) for form in FORMULATIONS}
     console.print(f"{len(outcomes)} claims: {held['thesis']} hold in the thesis formulation, "
                   f"{held['ours']} delay-compensated")
     typer.echo(f"report: {out}")

@@ -34,7 +34,8 @@ What :func:`summarise` measures, and over which rows
   ``controller.u_min``/``u_max`` (:func:`input_stats`); per PCMD channel the fraction of ticks
   whose ``cmd_saturated`` flag is set.
 * **Solver**: solve time mean/p99/max over the ticks that logged one; ticks whose
-  ``solver_status`` is set and not ``ok`` (total and per status).
+  ``solver_status`` is set and not ``ok`` (total and per status); the solves; per solve the
+  tick's Newton iterations (mean/max) and ‖F‖ at its exit (p50/max).
 * **Loop**: ``fallbacks`` = rows of the experiment window whose mode is set and is not
   ``track`` (hovers on stale data, P-controller fallbacks, supervisor landings…);
   ``overruns`` = rows with ``tick_late_ms`` above one control period; ``tick_late_ms``
@@ -369,6 +370,14 @@ def _percentiles(x: np.ndarray) -> tuple[float, float, float] | None:
     return float(np.percentile(x, 50)), float(np.percentile(x, 99)), float(x.max())
 
 
+def _per_solve(column: np.ndarray | None, solved: np.ndarray) -> np.ndarray:
+    """The finite values of ``column`` on the rows with a solve (empty without the column)."""
+    if column is None:
+        return np.zeros(0)
+    v = np.asarray(column, dtype=np.float64)[solved]
+    return v[np.isfinite(v)]
+
+
 def _rmse(e: np.ndarray) -> float:
     e = e[np.isfinite(e)]
     return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
@@ -461,6 +470,17 @@ def summarise(run: RunData) -> list[SummaryRow]:
     add(SummaryRow("solver", "non_ok", float(st["non_ok"]), "count"))
     for status, count in st["by_status"].items():
         add(SummaryRow("solver", f"status_{status}", float(count), "count"))
+    add(SummaryRow("solver", "solves", float(st["solves"]), "count"))
+    # per solve: the tick's Newton iterations and ‖F‖ at its exit
+    solved = np.isfinite(np.asarray(cols["solve_us"], dtype=np.float64))
+    its = _per_solve(cols.get("newton_iterations"), solved)
+    if its.size:
+        add(SummaryRow("solver", "newton_iterations_mean", float(its.mean()), "count"))
+        add(SummaryRow("solver", "newton_iterations_max", float(its.max()), "count"))
+    res = _per_solve(cols.get("residual_norm"), solved)
+    if res.size:
+        add(SummaryRow("solver", "residual_p50", float(np.percentile(res, 50)), "norm"))
+        add(SummaryRow("solver", "residual_max", float(res.max()), "norm"))
 
     # loop
     fallbacks = int(np.sum(window & (mode != "") & (mode != NOMINAL_MODE)))
