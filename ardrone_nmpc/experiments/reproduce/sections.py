@@ -168,7 +168,8 @@ def newton_traces(path: Path) -> dict[int, dict[int, list[float]]]:
     return traces
 
 
-def render_newton(runs: list[NewtonRun], traces, tolerance: float, max_iterations: int) -> list[str]:
+def render_newton(runs: list[NewtonRun], traces, tolerance: float,
+                  max_iterations: int) -> list[str]:
     lines = [
         "## The thesis' Newton solver on the ψ step", "",
         "`controller.solver.method=newton` (thesis Algorithm 1: Newton steps by fdgmres, "
@@ -180,10 +181,10 @@ def render_newton(runs: list[NewtonRun], traces, tolerance: float, max_iteration
         "|--:|--:|--:|---|---|--:|",
     ]
     for r in runs:
+        settling = "—" if not math.isfinite(r.settling_s) else f"{r.settling_s:.1f} s"
         lines.append(f"| {r.kmax} | {r.ticks} | {r.at_max_iterations} | "
                      f"{r.iterations_mean:.1f} / {r.iterations_max:.0f} | "
-                     f"{r.residual_p50:.1e} / {r.residual_max:.1e} | "
-                     + ("—" if not math.isfinite(r.settling_s) else f"{r.settling_s:.1f} s") + " |")
+                     f"{r.residual_p50:.1e} / {r.residual_max:.1e} | {settling} |")
     lines += ["", "‖F‖ after n Newton iterations at some ticks of the k_max = "
               f"{runs[-1].kmax} flight (its logged states replayed through the solver, each "
               "tick's solve repeated from the same warm start):", "",
@@ -214,23 +215,36 @@ def newton_conclusion(traces, tolerance: float) -> list[str]:
     return [" ".join(out)]
 
 
+def _narrowed(name: str, thesis: float, drone: float, unit: str, field: str) -> str:
+    if drone < thesis:
+        return f"{name} within ±{drone:.4f} {unit} (`{field}`), not ±{thesis:g}"
+    return f"{name} within ±{thesis:g} {unit} as in the thesis (`{field}` = {drone:g})"
+
+
 def narrowings(config_dir: Path) -> list[str]:
     """Where both formulations depart from the thesis' (bounds, estimator, solver, …)."""
     cfg = load_config(config_dir / "step_x.yaml", [*LAB_OVERRIDES, *FORMULATIONS["thesis"]])
     ctl, drone, est = cfg.controller, cfg.drone, cfg.estimator
     g = ctl.p_gains
+    tilt = _narrowed("φ, θ", ctl.u_max[IU_THETA], drone.euler_angle_max_rad, "rad",
+                     "drone.euler_angle_max_rad")
+    yaw = _narrowed("ψ̇", ctl.u_max[IU_PSIRATE], drone.control_yaw_radps, "rad/s",
+                    "drone.control_yaw_radps")
     lines = ["## Where the simulated formulations narrow the thesis'", "",
              f"* **Input bounds.** Eq. 4.17 bounds every input by ±1; the configs keep "
              f"u_min = {list(ctl.u_min)}, u_max = {list(ctl.u_max)}, but the NMPC plans within "
-             f"the drone's own limits (`effective_controller`, runtime/tick.py): φ, θ within "
-             f"±{drone.euler_angle_max_rad:.4f} rad (`drone.euler_angle_max_rad`), ψ̇ within "
-             f"±{min(drone.control_yaw_radps, ctl.u_max[IU_PSIRATE]):.4f} rad/s "
-             f"(`drone.control_yaw_radps`), in both formulations. z̈ keeps "
-             f"±{ctl.u_max[IU_ZACC]:g} m/s²; the ż reference sent is clipped to "
-             f"±{drone.control_vz_max_mps:g} m/s.",
-             f"* **Estimator.** ż from the {est.kind} filter of the config (thesis ch. 4); ẋ, ẏ from "
-             "navdata in the thesis formulation (the simulator adds an optical-flow bias), from "
-             "differenced mocap positions in ours; x, y, z, ψ from mocap in both.",
+             f"the drone's own limits (`effective_controller`, runtime/tick.py) in both "
+             f"formulations: {tilt}; {yaw}. "
+             f"u1 is z̈, bounded by ±{ctl.u_max[IU_ZACC]:g} m/s² (the thesis' text calls it a "
+             f"velocity in m/s); the ż reference sent is clipped to ±{drone.control_vz_max_mps:g} "
+             "m/s (`drone.control_vz_max_mps`).",
+             f"* **Estimator.** ż from the estimator each altitude config names "
+             f"(`estimator.kind`; the others use {est.kind}): the Kalman filter with the thesis' "
+             f"Q = {est.kalman_q:g}, R = {est.kalman_r:g}; the Luenberger observer with its "
+             f"double pole at −{est.luenberger_lambda0_per_s:g} /s (K = [2λ0, λ0²]: eq. 4.12 "
+             "as printed puts the poles in the right half-plane, eq. 4.15's K = [10, 25] at −5). "
+             "ẋ, ẏ from navdata in the thesis formulation (the simulator adds an optical-flow "
+             "bias), from differenced mocap positions in ours; x, y, z, ψ from mocap in both.",
              "* **Prediction.** Thesis formulation: delay-free, ż reference = ż + z̈·65 ms. Ours: "
              "the state predicted through the commands in flight over the command delay, "
              "ż reference = ż + z̈·0.5 s (the vertical lag inverted).",
@@ -239,7 +253,8 @@ def narrowings(config_dir: Path) -> list[str]:
              "on the ψ step above.",
              f"* **P controller (eq. 4.16).** The thesis gives no gains; ours: k1 = "
              f"{g.k1_per_s:g}, k2 = {g.k2_rad_per_mps:g}, k3 = {g.k3_rad_per_mps:g}, "
-             f"k4 = {g.k4_per_s:g}, tuned to its P settling times.",
+             f"k4 = {g.k4_per_s:g}, tuned to its P settling times; the velocity error is rotated "
+             "into the body frame and φ's sign fixed (as printed the law holds only at ψ = 0).",
              "* **Supervisor.** The geofence is widened (`" + "`, `".join(LAB_OVERRIDES)
              + "`) so that the supervisor does not end a run the controller would fly on.",
              "* **Plant.** The simulator of `docs/plant.md`, not the thesis' Simulink kit.",
