@@ -352,6 +352,11 @@ def sim_drone(
         _fail([str(err)])
 
 
+from ardrone_nmpc.cli import export as _export, mocap_check as _mocap_check  # noqa: E402
+_mocap_check.register(app)  # commands that live in their own modules
+_export.register(app)
+
+
 def main() -> None:  # console-script entry point
     app()
 
