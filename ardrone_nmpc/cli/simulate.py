@@ -14,8 +14,9 @@ from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summa
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
-                         console: Console | None = None) -> Path:
-    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path."""
+                         console: Console | None = None, live=None) -> Path:
+    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path.
+    ``live`` (a :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too."""
     console = console or _console()
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:  # the run directory must reproduce the run: record the seed used
@@ -31,7 +32,8 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                    TimeRemainingColumn()]
         with Progress(*columns, console=console, disable=quiet, transient=True) as progress:
             task = progress.add_task("flying", total=1.0)
-            result = run_lockstep(cfg, recorder=recorder, seed=seed,
+            result = run_lockstep(cfg, recorder=live.tee(recorder) if live else recorder,
+                                  seed=seed,
                                   progress=lambda f: progress.update(task, completed=f))
         wall_s = time.perf_counter() - wall0
         recorder.event(result.ticks * cfg.loop.period_s - cfg.sim.settle_s, "simulated",

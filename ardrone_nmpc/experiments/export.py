@@ -72,8 +72,8 @@ def write_mcap(run: RunData, out: Path) -> int:
         t_ns = ch.time_ns(origin, row["t_s"])
         for topic, data in ch.row_messages(row, t_ns):
             messages.append((t_ns, len(messages), topic, data))
-    for event in run.events:
-        t = event.get("t_s")
+    for event in run.events:  # a real flight's loop events carry experiment time apart
+        t = event.get("t_exp_s", event.get("t_s"))
         t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
         messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
     config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)

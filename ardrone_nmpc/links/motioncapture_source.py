@@ -203,6 +203,12 @@ class MotionCaptureSource(MocapSource):
             self._connected(str(exc) or type(exc).__name__)
             return
         self._connected(None)
+        yield from self.frames_from(mc)
+
+    def frames_from(self, mc):
+        """``(bodies, t_s)`` per frame of a connected library object ``mc``
+        (``waitForNextFrame``, then ``rigidBodies``: name → ``position``, ``rotation.w/x/y/z``),
+        stamped with the source clock, until the source is closed."""
         while not self._stop.is_set():
             try:
                 mc.waitForNextFrame()
