@@ -75,7 +75,7 @@ def _float_text(v: float) -> str:
         return "null"
     if v in (math.inf, -math.inf):
         return "1e999" if v > 0 else "-1e999"
-    return repr(v)
+    return float.__repr__(v)   # numpy's float64 is a float whose repr is "np.float64(…)"
 
 
 def _text(v: Any) -> str:
@@ -84,7 +84,7 @@ def _text(v: Any) -> str:
     if isinstance(v, float):
         return _float_text(v)
     if isinstance(v, int):
-        return str(v)
+        return int.__repr__(v)
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, np.generic):

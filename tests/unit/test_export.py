@@ -106,6 +106,7 @@ def test_pose_channels_are_foxglove_pose_in_frame(run_dir, tmp_path):
 
 
 def test_json_has_no_nan_or_infinity_tokens():
+    assert ch.json_bytes({"a": np.float64(1.5), "b": np.int64(3)}) == b'{"a":1.5,"b":3}'
     text = ch.json_bytes({"a": math.nan, "b": math.inf, "c": -math.inf, "d": [-0.0]}).decode()
     assert text == '{"a":null,"b":1e999,"c":-1e999,"d":[-0.0]}'
     json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard {c}"))
