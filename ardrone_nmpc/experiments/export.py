@@ -2,9 +2,10 @@
 
 * ``mcap`` (the ``mcap`` extra): the channels of :mod:`ardrone_nmpc.runs.channels` — ``/log``
   (one message per row), ``/events``, ``/config``, ``/pose`` and ``/reference``
-  (``foxglove.PoseInFrame``) — JSON-encoded, each with its JSON schema, for Foxglove,
-  PlotJuggler or the ``mcap`` CLI. A message's log time is its run time ``t_s`` on an epoch
-  that puts the run's first row at the creation time recorded in ``config.yaml``.
+  (``foxglove.PoseInFrame``), ``/flight_path`` and ``/reference_path`` (whole, once) —
+  JSON-encoded, each with its JSON schema, for Foxglove, PlotJuggler or the ``mcap`` CLI. A
+  message's log time is its run time ``t_s`` (an event's ``t_exp_s`` when it has one) on an
+  epoch that puts the run's first row at the creation time recorded in ``config.yaml``.
 * ``parquet`` (the ``parquet`` extra, pyarrow): the log as one table (float64 and string
   columns), the events (JSON lines) and ``config.yaml`` in the file's key-value metadata.
 
@@ -68,17 +69,20 @@ def write_mcap(run: RunData, out: Path) -> int:
     writer_mod = import_extra("mcap.writer", "mcap", "export --format mcap")
     origin = _origin_ns(run)
     messages: list[tuple[int, int, str, bytes]] = []  # (log ns, order, topic, data)
+    paths = ch.PathBuilder()
     for row in run_rows(run):
         t_ns = ch.time_ns(origin, row["t_s"])
-        for topic, data in ch.row_messages(row, t_ns):
+        for topic, data in ch.row_messages(row, t_ns, paths):
             messages.append((t_ns, len(messages), topic, data))
     for event in run.events:  # a real flight's loop events carry experiment time apart
         t = event.get("t_exp_s", event.get("t_s"))
         t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
         messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
     config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)
-    messages.append((ch.time_ns(origin, float(run.columns["t_s"][0]) if run.n_rows else 0.0),
-                     -1, ch.TOPIC_CONFIG, config))
+    t0_ns = ch.time_ns(origin, float(run.columns["t_s"][0]) if run.n_rows else 0.0)
+    messages.append((t0_ns, -2, ch.TOPIC_CONFIG, config))
+    for topic, data in paths.messages(t0_ns):   # whole paths, shown from the start
+        messages.append((t0_ns, -1, topic, data))
     messages.sort()
     with open(out, "wb") as stream:
         writer = writer_mod.Writer(stream)

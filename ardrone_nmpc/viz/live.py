@@ -2,7 +2,7 @@
 ``simulate --foxglove``; the ``foxglove`` extra, foxglove-sdk). docs/live-view.md.
 
 The channels are those of the MCAP export (:mod:`ardrone_nmpc.runs.channels`: ``/log``,
-``/events``, ``/config``, ``/pose``, ``/reference``). The control thread only hands a row over
+``/events``, ``/config``, ``/pose``, ``/reference``, ``/flight_path``, ``/reference_path``). The control thread only hands a row over
 — a dict copy appended to a bounded queue, a few microseconds — and a publisher thread encodes
 and sends it; when the queue is full the row is dropped (and counted), never waited for. The
 server binds 127.0.0.1 only: the protocol has no authentication.
@@ -25,6 +25,8 @@ __all__ = ["LiveView", "DEFAULT_PORT", "open_live_view"]
 DEFAULT_PORT = 8765          # Foxglove's default WebSocket port
 LOOPBACK = "127.0.0.1"
 _CONFIG_EVERY_S = 2.0        # /config is re-sent so that a late client sees it too
+_PATHS_EVERY_S = 1.0         # /flight_path and /reference_path, re-sent as they grow
+_PATH_POSES = 1500
 
 
 class _Tee:
@@ -165,13 +167,18 @@ class LiveView:
 
     def _publish_loop(self) -> None:
         origin_ns: int | None = None      # epoch ns of the rows' t_s = 0 (from the first)
-        next_config = 0.0
+        next_config = next_paths = 0.0
+        paths = ch.PathBuilder()
         while True:
             self._wake.wait(0.5)
             self._wake.clear()
-            if time.monotonic() >= next_config and self._config is not None:
+            now = time.monotonic()
+            if now >= next_config and self._config is not None:
                 self._publish_config()
-                next_config = time.monotonic() + _CONFIG_EVERY_S
+                next_config = now + _CONFIG_EVERY_S
+            if now >= next_paths:
+                self._publish_paths(paths)
+                next_paths = now + _PATHS_EVERY_S
             while self._queue:
                 kind, payload, wall_ns = self._queue.popleft()
                 if kind == "event":   # stamped when it happened: events use several clocks
@@ -183,11 +190,19 @@ class LiveView:
                 if origin_ns is None and math.isfinite(t):
                     origin_ns = wall_ns - round(t * 1e9)
                 log_ns = ch.time_ns(origin_ns, t) if origin_ns is not None else wall_ns
-                for topic, data in ch.row_messages(payload, log_ns):
+                for topic, data in ch.row_messages(payload, log_ns, paths):
                     self._channels[topic].log(data, log_time=log_ns)
                 self.published += 1
             if self._stop.is_set() and not self._queue:
+                self._publish_paths(paths)   # the whole flight, for a client still watching
                 return
+
+    def _publish_paths(self, paths: ch.PathBuilder) -> None:
+        """The paths so far, at most about ``_PATH_POSES`` poses each."""
+        paths.every = 1 + len(paths.poses[ch.TOPIC_FLIGHT_PATH]) // _PATH_POSES
+        now_ns = time.time_ns()
+        for topic, data in paths.messages(now_ns):
+            self._channels[topic].log(data, log_time=now_ns)
 
     def _publish_config(self) -> None:
         from ardrone_nmpc.config.schema import config_to_dict

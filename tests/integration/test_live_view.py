@@ -8,6 +8,7 @@ import json
 import math
 import threading
 
+import numpy as np
 import pytest
 
 from ardrone_nmpc.config.schema import load_config
@@ -50,11 +51,17 @@ def test_a_client_receives_the_ticks_of_a_fly_sim_run(tmp_path):
             view.close()              # publishes what is queued
             run = read_run(path)
             n_rows = run.n_rows
-            deadline = threading.Event()
-            for _ in range(200):      # wait for the state: every published row arrived
-                if len(client.topic_messages("/log")) >= view.published:
+            n_poses = int(np.isfinite(run.columns["x_m"]).sum())
+
+            def complete():           # every published row and the final whole path arrived
+                paths = client.topic_messages("/flight_path")
+                return len(client.topic_messages("/log")) >= view.published and paths and \
+                    len(json.loads(paths[-1][1])["poses"]) == n_poses
+
+            for _ in range(200):      # wait for the state, not for a time
+                if complete():
                     break
-                deadline.wait(0.05)
+                threading.Event().wait(0.05)
             rows = [ch.decode_row(data) for _, data in client.topic_messages("/log")]
             poses = client.topic_messages("/pose")
             events = [json.loads(data) for _, data in client.topic_messages("/events")]
@@ -70,6 +77,7 @@ def test_a_client_receives_the_ticks_of_a_fly_sim_run(tmp_path):
     assert len(poses) >= 0.9 * n_rows
     assert "takeoff" in {e["kind"] for e in events} and "landed" in {e["kind"] for e in events}
     assert client.topic_messages("/config")
+    assert complete()                 # the whole flight path arrived last
 
 
 class _StuckChannel:

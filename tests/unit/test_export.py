@@ -71,7 +71,7 @@ def test_mcap_round_trips_every_row_and_event_bit_for_bit(run_dir, tmp_path):
         assert json.dumps(got, sort_keys=True) == json.dumps(want, sort_keys=True)
         assert all(_same_bits(got[k], want[k]) for k in want if isinstance(want[k], float))
     assert back.config["seed"] == 3 and back.config["config"]["name"] == "export"
-    assert n == 40 + 6 + 1 + len(back.poses["/pose"]) + len(back.poses["/reference"])
+    assert n == 40 + 6 + 1 + 2 + len(back.poses["/pose"]) + len(back.poses["/reference"])
     finite = np.isfinite(np.c_[run.columns["x_m"], run.columns["y_m"], run.columns["z_m"]])
     assert len(back.poses["/pose"]) == finite.all(axis=1).sum() < 40   # none without a position
 
@@ -101,6 +101,17 @@ def test_pose_channels_are_foxglove_pose_in_frame(run_dir, tmp_path):
         pose=fg.Pose(position=fg.Vector3(**msg["pose"]["position"]),
                      orientation=fg.Quaternion(**msg["pose"]["orientation"])))
     assert len(pose.encode()) > 0 and msg["frame_id"] == "world"
+    # the paths: one PosesInFrame each, every pose of its channel, at the first row's time
+    assert back.schemas["/flight_path"] == "foxglove.PosesInFrame"
+    (path,) = back.poses["/flight_path"]
+    (ref_path,) = back.poses["/reference_path"]
+    assert [p_["position"] for p_ in path["poses"]] == \
+        [m["pose"]["position"] for m in back.poses["/pose"]]
+    assert len(ref_path["poses"]) == len(back.poses["/reference"])
+    fg.PosesInFrame(timestamp=fg.Timestamp(**path["timestamp"]), frame_id=path["frame_id"],
+                    poses=[fg.Pose(position=fg.Vector3(**p_["position"]),
+                                   orientation=fg.Quaternion(**p_["orientation"]))
+                           for p_ in path["poses"]])
     q = msg["pose"]["orientation"]
     assert q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2 == pytest.approx(1.0)
 
