@@ -501,6 +501,17 @@ class MocapConfig(_Section):
             raise _invalid("must be ASCII without NUL characters")
         return value
 
+    @field_validator("options", mode="before")
+    @classmethod
+    def _scalar_options(cls, value: Any) -> Any:
+        # the library takes text: one clear line rather than one per member of the union
+        if isinstance(value, Mapping):
+            for key, item in value.items():
+                if not isinstance(item, (str, int, float, bool)):
+                    raise _invalid(f"{key}: expected a string, number or boolean, got "
+                                   f"{type(item).__name__}")
+        return value
+
     @property
     def vertical_axis(self) -> str:
         """The up axis in force: ``up_axis``, or the system's default."""

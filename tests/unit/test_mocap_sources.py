@@ -279,3 +279,12 @@ def test_a_missing_library_names_the_extra(monkeypatch):
     src = open_mocap_source(load_config(None, ["mocap.kind=motioncapture"]).mocap)
     with pytest.raises(MissingExtra, match=r"pip install 'ardrone-nmpc\[mocap\]'"):
         src.start()
+
+
+def test_library_options_must_be_scalars():
+    from ardrone_nmpc.config.schema import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        load_config(None, ["mocap.options.port=[1,2]"])
+    assert err.value.messages == ["mocap.options: port: expected a string, number or boolean, "
+                                  "got list"]
