@@ -109,3 +109,31 @@ def test_rows_are_dropped_never_waited_for():
 def test_port_range_is_checked():
     with pytest.raises(ValueError, match="--foxglove-port 70000"):
         LiveView(70000)
+
+
+@pytest.mark.timeout(120)
+def test_simulate_foxglove_serves_the_lockstep_run_at_real_time(tmp_path):
+    import socket
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ardrone_nmpc.cli.app", "simulate", "configs/hover.yaml",
+         "--quiet", "--log-dir", str(tmp_path), "--set", "duration_s=1.5",
+         "--set", "sim.settle_s=0.5", "--foxglove", "--foxglove-port", str(port)],
+        cwd=Path(__file__).parents[2], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    with FoxgloveClient(port, connect_timeout_s=60) as client:
+        assert client.subscribed.wait(60) and client.error is None
+        t0 = time.monotonic()
+        out, err = proc.communicate(timeout=100)
+        paced_s = time.monotonic() - t0
+    assert proc.returncode == 0, err
+    assert f"live view: ws://127.0.0.1:{port}" in err
+    run = read_run(out.strip().splitlines()[-1][len("run: "):])
+    assert len(client.topic_messages("/log")) >= 0.9 * run.n_rows
+    assert paced_s >= 1.0      # 2 s of flight at real time (unpaced it takes ≈ 0.05 s)

@@ -124,3 +124,39 @@ def test_swapped_source_gives_the_same_log(case, tmp_path, monkeypatch):
         np.testing.assert_allclose(b[ok], a[ok], rtol=1e-6, atol=tol, err_msg=name)
     if case == "follow_car":   # the second object went through the swapped source too
         assert np.isfinite(swapped.columns["target_x_m"]).sum() > 40
+
+
+@pytest.mark.timeout(120)
+def test_fly_reads_a_motioncapture_source(tmp_path):
+    """The real-time runner over real UDP to the simulated drone, its poses from the
+    libmotioncapture `mock` system (the real library, in its child process)."""
+    import threading
+
+    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.sim.loopback import free_udp_port
+    from ardrone_nmpc.sim.serve import serve
+
+    at, nav = free_udp_port(), free_udp_port()
+    stop = threading.Event()
+    server = threading.Thread(target=serve, daemon=True, kwargs=dict(
+        cfg=load_config(None, []), at_port=at, navdata_port=nav,
+        mocap_to=f"127.0.0.1:{free_udp_port()}", echo=lambda *_: None, stop_event=stop))
+    server.start()
+    c, s = math.cos(0.2), math.sin(0.2)
+    cfg = load_config("configs/hover.yaml", [
+        "duration_s=1", "sim.settle_s=0.3", "mocap.kind=motioncapture", "mocap.system=mock",
+        f"mocap.options.rigid_bodies=ardrone(0.1,0.2,0.9,{c!r},0,0,{s!r})"])
+    try:
+        path = run_flight(cfg=cfg, sim=False, drone_host="127.0.0.1", at_port=at,
+                          navdata_port=nav, mocap_port=None, log_dir=tmp_path, seed=0)
+    finally:
+        stop.set()
+        server.join(timeout=10)
+    run = read_run(path)
+    assert run.n_rows >= 15
+    np.testing.assert_allclose(run.columns["x_m"], 0.1, atol=1e-6)     # float32 in the library
+    np.testing.assert_allclose(run.columns["z_m"], 0.9, atol=1e-6)
+    np.testing.assert_allclose(run.columns["psi_rad"], 0.4, atol=1e-6)
+    assert np.all(run.columns["mocap_age_ms"] < 100.0)                  # ≈ 100 Hz, fresh
+    links = next(e for e in run.events if e["kind"] == "links")
+    assert links["mocap"] == "mock@localhost" and links["mocap_port"] is None
