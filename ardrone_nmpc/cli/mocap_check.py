@@ -119,11 +119,13 @@ def _table(result: CheckResult, source, now_s: float, seconds_left: float):
     table = Table(title=f"mocap {result.where} — {seconds_left:.0f} s left (Ctrl-C ends)",
                   caption=f"stream objects: {', '.join(result.names_seen) or '(none)'};  "
                           f"{result.axes.line()}")
-    for col in ("object", "x m", "y m", "z m", "ψ rad", "rate Hz", "age ms", "missing/zero/frozen"):
+    for col in ("object", "x m", "y m", "z m", "ψ rad", "rate Hz", "age ms",
+                "missing/zero/frozen"):
         table.add_column(col, justify="left" if col == "object" else "right")
     for k, tr in enumerate(result.tracks):
         p = tr.pose
-        pos = ["—"] * 4 if p is None else [_num(float(v)) for v in p.position_m] + [_num(p.psi_rad)]
+        pos = ["—"] * 4 if p is None else \
+            [_num(float(v)) for v in p.position_m] + [_num(p.psi_rad)]
         age = (now_s - tr.rx_t_s) * 1e3
         counts = f"{source.missing}/{source.zero_poses}/{source.repeats}" if k == 0 else ""
         table.add_row(tr.name, *pos, f"{tr.recent_rate_hz():.1f}",

@@ -128,7 +128,7 @@ class LiveView:
     def url(self) -> str:
         return f"ws://{LOOPBACK}:{self.port}"
 
-    # ----------------------------------------------------------------------------- the runner's side
+    # ----------------------------------------------------------------------------- runner side
 
     def tee(self, recorder) -> _Tee:
         """``recorder`` (``write_row``, ``event``, …) that also feeds this view."""

@@ -149,3 +149,31 @@ def test_final_line_format():
     track = SimpleNamespace(name="ardrone", pose=SimpleNamespace(
         position_m=(1.2344, -0.0001, 0.8916), psi_rad=-0.0004), rate_hz=lambda: 99.5)
     assert final_line(track) == "ardrone: x=1.234 y=0.000 z=0.892 psi=0.000 rate=99.500"
+
+
+def test_run_check_renders_the_live_table_and_runs_the_axis_test():
+    from rich.console import Console
+
+    from ardrone_nmpc.cli.mocap_check import run_check
+
+    class Source:   # a source whose drone is carried 20 cm forward during the check
+        where, names_seen, missing, zero_poses, repeats = "test", ("ardrone", "wand"), 2, 0, 0
+
+        def __init__(self):
+            self.n = 0
+
+        def latest(self):
+            self.n += 1
+            x = 0.2 if self.n > 3 else 0.0
+            return SimpleNamespace(position_m=(x, 0.0, 1.0), psi_rad=0.0), 0.0
+
+        def fresh_count(self, name):
+            return 10 * self.n
+
+    tables = []
+    result = run_check(Source(), ["ardrone"], 0.3, live=tables.append)
+    text = Console(width=120, record=True)
+    text.print(tables[-1])
+    shown = text.export_text()
+    assert "ardrone" in shown and "stream objects: ardrone, wand" in shown and "2/0/0" in shown
+    assert result.axes.mark("+x") == "✔" and result.tracks[0].rate_hz() > 0
