@@ -222,6 +222,8 @@ def open_live_view(enabled: bool, port: int = DEFAULT_PORT, *, cfg=None, seed: A
     if not enabled:
         yield None
         return
+    if seed is None and cfg is not None:
+        seed = cfg.sim.seed   # what the runner flies with when no --seed is given
     with LiveView(port, config=cfg, seed=seed, pace=pace) as view:
         echo(f"live view: {view.url} (Foxglove: Open connection → Foxglove WebSocket; "
              "layout in docs/live-view.md)")
