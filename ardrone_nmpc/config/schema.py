@@ -11,7 +11,7 @@ per subsystem::
     reference:  {kind, start_m, target_m, step_time_s, side_m, …, path_file}
     loop:       {period_s}
     drone:      {host, at_port, navdata_port, euler_angle_max_rad, control_vz_max_mps, …}
-    mocap:      {bind_host, port, object_name, rate_hz}
+    mocap:      {kind, bind_host, port, system, hostname, options, up_axis, object_name, …}
     sim:        {seed, plant: {…}, noise: {…}, mocap_rate_hz, navdata_rate_hz}
     safety:     {geofence_min_m, geofence_max_m, max_tilt_rad, …, solver_fallback}
     faults:     {mocap_dropout: {start_s, duration_s}, …}   (simulation only; all off by default)
@@ -460,11 +460,36 @@ class DroneConfig(_Section):
         0.03, gt=0, le=0.03, description="Longest gap between AT commands (s); ≤ 30 ms (§2.6).")
 
 
-class MocapConfig(_Section):
-    """The motion-capture pose stream (specs/mocap-stream.md)."""
+MOCAP_SYSTEMS = ("vicon", "optitrack", "optitrack_closed_source", "qualisys", "vrpn", "nokov",
+                 "motionanalysis", "fzmotion", "mock")
+# Systems whose default world frame is Y-up (OptiTrack Motive streams Y up unless told otherwise).
+_Y_UP_SYSTEMS = ("optitrack", "optitrack_closed_source")
 
-    bind_host: str = Field("0.0.0.0", min_length=1, description="Local address to listen on.")
-    port: Port = Field(51001, description="UDP port of the pose stream.")
+
+class MocapConfig(_Section):
+    """The motion-capture source (docs/mocap-sources.md, docs/mocap-stream.md)."""
+
+    kind: Literal["vicon_udp", "motioncapture"] = Field(
+        "vicon_udp", description="'vicon_udp': Vicon Tracker's UDP object stream (bind_host, "
+        "port); 'motioncapture': any system of the libmotioncapture library (system, hostname, "
+        "options; the 'mocap' extra).")
+    bind_host: str = Field("0.0.0.0", min_length=1, description="vicon_udp: local address to "
+                           "listen on.")
+    port: Port = Field(51001, description="vicon_udp: UDP port of the pose stream.")
+    system: Literal[MOCAP_SYSTEMS] = Field(  # type: ignore[valid-type]
+        "vicon", description="motioncapture: the library's system type (vicon = DataStream "
+        "SDK, optitrack = NatNet, qualisys, vrpn, nokov, motionanalysis, fzmotion, mock).")
+    hostname: str = Field("localhost", min_length=1, description="motioncapture: the mocap "
+                          "server's address (the library's 'hostname' option).")
+    options: dict[str, str | int | float | bool] = Field(
+        default_factory=dict, description="motioncapture: more library options, passed through "
+        "as strings (e.g. port_command, interface_ip; mock: rigid_bodies, frequency).")
+    up_axis: Optional[Literal["z", "y"]] = Field(
+        None, description="motioncapture: the system's vertical axis; 'y' turns a right-handed "
+        "Y-up frame into ours (x, -z, y). null: 'y' for optitrack, 'z' otherwise (set 'z' when "
+        "Motive streams Z up).")
+    connect_timeout_s: Positive = Field(
+        5.0, description="motioncapture: how long to wait for the connection (s).")
     object_name: str = Field(
         "ardrone", min_length=1, max_length=24, description="Tracked object name (≤ 24 ASCII).")
     rate_hz: Positive = Field(100.0, description="Expected pose rate (Hz).")
@@ -475,6 +500,24 @@ class MocapConfig(_Section):
         if not value.isascii() or "\x00" in value:
             raise _invalid("must be ASCII without NUL characters")
         return value
+
+    @field_validator("options", mode="before")
+    @classmethod
+    def _scalar_options(cls, value: Any) -> Any:
+        # the library takes text: one clear line rather than one per member of the union
+        if isinstance(value, Mapping):
+            for key, item in value.items():
+                if not isinstance(item, (str, int, float, bool)):
+                    raise _invalid(f"{key}: expected a string, number or boolean, got "
+                                   f"{type(item).__name__}")
+        return value
+
+    @property
+    def vertical_axis(self) -> str:
+        """The up axis in force: ``up_axis``, or the system's default."""
+        if self.up_axis is not None:
+            return self.up_axis
+        return "y" if self.system in _Y_UP_SYSTEMS else "z"
 
 
 # ----------------------------------------------------------------------------- simulation
