@@ -73,9 +73,10 @@ Behaviour (protocol §5; [?] marks the spec's design choices, taken as written t
   VBAT_LOW (battery < ``vbat_low_pct``, 20 %), USER_EL and EMERGENCY (emergency),
   COM_WATCHDOG; ALTITUDE, PIC_VERSION and the four thread bits always, as in the captured
   bootstrap packet 0x4F800C10.
-* ctrl_state major: LANDED 2, FLYING 3 (progressive command with a non-zero value), HOVERING 4,
-  EMERGENCY 0 (DEFAULT, as node-ar-drone's docs show), take-off / landing 7 / 9 (observed on
-  2.x firmware, ``transition_codes="observed"``) or 6 / 8 (SDK header, ``"sdk"``).
+* State bits and ctrl_state come from :class:`~ardrone_nmpc.protocol.navdata.DroneStatus` (the
+  one encoder of every simulated drone): LANDED 2, FLYING 3 (progressive command with a
+  non-zero value), HOVERING 4, EMERGENCY 0, take-off / landing 6 / 8 (SDK header,
+  ``ctrl_codes="sdk"``) or 7 / 9 (reported for 2.4.x firmware, ``"fw2.4"``).
 
 Not simulated: video (TCP 5555), multicast navdata (wake-up value 2 is served unicast),
 animations and LEDs, magnetometer calibration, the tilt / cut-out / motor emergencies of rule
@@ -89,7 +90,6 @@ import ipaddress
 import math
 import select
 import socket
-import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -113,15 +113,11 @@ from ardrone_nmpc.protocol.at import (
     parse_datagram_lenient,
 )
 from ardrone_nmpc.protocol.navdata import (
-    CtrlMajor,
-    DemoOption,
+    DEFAULT_NAVDATA_OPTIONS,
+    CtrlCodes,
     DroneState,
-    Navdata,
-    NavdataOption,
-    OptionTag,
-    ctrl_state_value,
-    empty_vision_detect_option,
-    encode_navdata,
+    DroneStatus,
+    encode_drone_navdata,
 )
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant
@@ -134,19 +130,8 @@ EULER_ANGLE_MAX_LIMIT_RAD = 0.52          # dev guide range of control:euler_ang
 # navdata int32 field can carry, and the navdata thread would die on it.
 _CONTROL_VZ_MAX_RANGE_MMPS = (200.0, 2000.0)
 _CONTROL_YAW_RANGE_RADPS = (0.7, 6.11)
-DEFAULT_NAVDATA_OPTIONS = (1 << 0) | (1 << 16)   # 65537: demo + vision_detect
 _RECV_BYTES = 4096
 _POLL_S = 0.05                            # socket timeout: shutdown latency of the threads
-
-# State bits a running drone always shows (captured bootstrap packet 0x4F800C10, §4.1).
-_ALWAYS_ON = (DroneState.ALTITUDE | DroneState.PIC_VERSION | DroneState.ATCODEC_THREAD_ON
-              | DroneState.NAVDATA_THREAD_ON | DroneState.VIDEO_THREAD_ON
-              | DroneState.ACQ_THREAD_ON)
-
-# ctrl_state minors (control_states.h, §4.5)
-_FLYING_ALT_OUT_ZONE = 3
-_HOVERING_ALT_OUT_ZONE = 4
-_HOVERING_LOST_COM = 8
 
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
 
@@ -230,7 +215,8 @@ class DroneServer:
         §1.1 (0.05, 0.25, 2.0, 2.0); ``navdata_timeout_s=None`` streams forever.
     comwdg_clear : "any" — any accepted command clears state bit 30; "comwdg" — only
         ``AT*COMWDG`` does (latched).
-    transition_codes : "observed" (take-off 7, landing 9) or "sdk" (6, 8).
+    ctrl_codes : :class:`~ardrone_nmpc.protocol.navdata.CtrlCodes` (or its value): "sdk"
+        (take-off 6, landing 8) or "fw2.4" (7, 9).
     altitude_max_m : initial ``control:altitude_max`` (m).
     vbat_low_pct : battery level (%) below which state bit 15 is set.
     lock : the lock to share (default: a new ``threading.RLock``).
@@ -247,7 +233,7 @@ class DroneServer:
                  hover_after_s: float = 0.25, link_loss_s: float = 2.0,
                  navdata_timeout_s: Optional[float] = 2.0,
                  comwdg_clear: Literal["any", "comwdg"] = "any",
-                 transition_codes: Literal["observed", "sdk"] = "observed",
+                 ctrl_codes: CtrlCodes | str = CtrlCodes.SDK,
                  altitude_max_m: float = 3.0, vbat_low_pct: float = 20.0,
                  lock: Optional[threading.RLock] = None,
                  clock: Callable[[], float] = time.monotonic, faults=None) -> None:
@@ -260,9 +246,7 @@ class DroneServer:
                 raise ValueError(f"{name} must be finite and > 0, got {v!r}")
         if comwdg_clear not in ("any", "comwdg"):
             raise ValueError(f"comwdg_clear must be 'any' or 'comwdg', got {comwdg_clear!r}")
-        if transition_codes not in ("observed", "sdk"):
-            raise ValueError(f"transition_codes must be 'observed' or 'sdk', got "
-                             f"{transition_codes!r}")
+        self.ctrl_codes = CtrlCodes(ctrl_codes)   # ValueError for an unknown value
         self.plant = plant
         self.lock = lock if lock is not None else threading.RLock()
         self.step_s = float(step_s)
@@ -275,11 +259,6 @@ class DroneServer:
         self.navdata_timeout_s = None if navdata_timeout_s is None else float(navdata_timeout_s)
         self.comwdg_clear = comwdg_clear
         self.vbat_low_pct = float(vbat_low_pct)
-        if transition_codes == "observed":
-            self._takeoff_major, self._landing_major = 7, 9
-        else:
-            self._takeoff_major, self._landing_major = (int(CtrlMajor.TRANS_TAKEOFF),
-                                                        int(CtrlMajor.TRANS_LANDING))
         self._clock = clock
         self._faults = faults
 
@@ -790,70 +769,26 @@ class DroneServer:
             if next_send < now - period:   # fell behind by more than a period: re-anchor
                 next_send = now + period
 
-    def _ctrl_state(self, now: float) -> int:
-        mode = self.plant.mode
-        if mode is FlightMode.LANDED:
-            return ctrl_state_value(CtrlMajor.LANDED)
-        if mode is FlightMode.EMERGENCY:
-            return ctrl_state_value(CtrlMajor.DEFAULT)
-        if mode is FlightMode.TAKING_OFF:
-            return ctrl_state_value(self._takeoff_major)
-        if mode is FlightMode.LANDING:
-            return ctrl_state_value(self._landing_major)
+    def _status(self, now: float) -> DroneStatus:
+        """What the drone reports about itself now (under the lock)."""
         flags, roll, pitch, gaz, yaw = self._pcmd
-        moving = bool(flags & PcmdFlag.PROGRESSIVE) and any((roll, pitch, gaz, yaw))
-        if self._lost_com_hover:
-            return ctrl_state_value(CtrlMajor.HOVERING, _HOVERING_LOST_COM)
-        if moving:
-            return ctrl_state_value(CtrlMajor.FLYING,
-                                    _FLYING_ALT_OUT_ZONE if self._alt_capped else 0)
-        return ctrl_state_value(CtrlMajor.HOVERING,
-                                _HOVERING_ALT_OUT_ZONE if self._alt_capped else 0)
+        return DroneStatus(
+            self.plant.mode.value,
+            moving=bool(flags & PcmdFlag.PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
+            alt_out_zone=self._alt_capped, lost_com=self._lost_com_hover,
+            user_emergency=self._user_emergency, start_button=self._ref_start, ack=self._ack,
+            bootstrap=self._bootstrap, demo=self._demo,
+            com_watchdog=self._comwdg_latched or (self.comwdg_clear == "any"
+                                                  and self._silence(now) > self.comwdg_s),
+            com_lost=self._link_lost, battery_low=self.plant.battery_pct < self.vbat_low_pct)
 
     def _state_bits(self, now: float) -> DroneState:
-        mode = self.plant.mode
-        s = _ALWAYS_ON
-        if mode.airborne:
-            s |= DroneState.FLY
-        if mode is FlightMode.EMERGENCY:
-            s |= DroneState.EMERGENCY
-            if self._user_emergency:
-                s |= DroneState.USER_EL
-        if self._ref_start:
-            s |= DroneState.USER_FEEDBACK_START
-        if self._ack:
-            s |= DroneState.COMMAND
-        if self._bootstrap:
-            s |= DroneState.NAVDATA_BOOTSTRAP | DroneState.NAVDATA_DEMO
-        elif self._demo:
-            s |= DroneState.NAVDATA_DEMO
-        if self._comwdg_latched or (self.comwdg_clear == "any"
-                                    and self._silence(now) > self.comwdg_s):
-            s |= DroneState.COM_WATCHDOG
-        if self._link_lost:
-            s |= DroneState.COM_LOST
-        if self.plant.battery_pct < self.vbat_low_pct:
-            s |= DroneState.VBAT_LOW
-        return s
+        return self._status(now).state_bits()
 
     def _packet(self, now: float) -> bytes:
         """The next navdata packet (under the lock)."""
         self._nav_seq = self._nav_seq + 1 if self._nav_seq < 0xFFFFFFFF else 1
-        state = self._state_bits(now)
-        if self._bootstrap:
-            return encode_navdata(Navdata(state, self._nav_seq))
-        full = not self._demo
-        mask = self._navdata_options
-        demo = None
-        options: list[NavdataOption] = []
-        if full or mask & (1 << OptionTag.DEMO):
-            demo = DemoOption.of_sample(self.plant.navdata(), self._ctrl_state(now))
-        if full or mask & (1 << OptionTag.TIME):
-            t = self.plant.t_s
-            sec = int(t)
-            usec = int((t - sec) * 1e6)
-            options.append(NavdataOption(OptionTag.TIME, struct.pack(
-                "<I", ((sec & 0x7FF) << 21) | (usec & 0x1FFFFF))))
-        if full or mask & (1 << OptionTag.VISION_DETECT):
-            options.append(empty_vision_detect_option())
-        return encode_navdata(Navdata(state, self._nav_seq, demo=demo, options=tuple(options)))
+        status = self._status(now)
+        sample = None if status.bootstrap else self.plant.navdata()
+        return encode_drone_navdata(status, self._nav_seq, sample, codes=self.ctrl_codes,
+                                    options_mask=self._navdata_options, t_s=self.plant.t_s)

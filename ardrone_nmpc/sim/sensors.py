@@ -22,33 +22,28 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.runtime.tick import TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import (
-    CtrlMajor,
-    DemoOption,
-    DroneState,
-    Navdata,
+    CtrlCodes,
+    DroneStatus,
     NavdataError,
-    ctrl_state_value,
     decode_navdata,
-    encode_navdata,
+    encode_drone_navdata,
 )
 from ardrone_nmpc.sim.mocap_server import frame_items
-from ardrone_nmpc.core.types import FlightMode
 
-_CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
-               FlightMode.FLYING: CtrlMajor.FLYING, FlightMode.LANDING: CtrlMajor.TRANS_LANDING,
-               FlightMode.EMERGENCY: CtrlMajor.DEFAULT}
+#: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
+VBAT_LOW_PCT = 20.0
 
 
-def navdata_packet(plant, sequence: int) -> bytes:
-    """The demo navdata packet the simulated drone sends now (state bits, ctrl_state, demo)."""
+def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:
+    """The demo navdata packet the lockstep drone sends now, through the one drone encoder.
+
+    This drone has no AT link (the runner commands the plant directly), so the bits that
+    echo the client's commands — REF start, ACK, com watchdog, link lost — stay clear.
+    """
     s = plant.navdata()
-    state = DroneState.NAVDATA_DEMO
-    if s.mode.airborne:
-        state |= DroneState.FLY
-    if s.mode is FlightMode.EMERGENCY:
-        state |= DroneState.EMERGENCY
-    demo = DemoOption.of_sample(s, ctrl_state_value(_CTRL_MAJOR[s.mode]))
-    return encode_navdata(Navdata(state, sequence, demo=demo))
+    status = DroneStatus(s.mode.value, moving=plant.moving,
+                         battery_low=plant.battery_pct < VBAT_LOW_PCT)
+    return encode_drone_navdata(status, sequence, s, codes=codes, t_s=plant.t_s)
 
 
 class WireSensors:
