@@ -18,7 +18,8 @@ import socket
 from typing import Optional
 
 from ardrone_nmpc.sim.faults import FaultSchedule
-from ardrone_nmpc.sim.drone_server import DroneServer, require_loopback_host
+from ardrone_nmpc.sim.addresses import require_loopback_host
+from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant

@@ -28,10 +28,8 @@ from ardrone_nmpc.protocol.navdata import (
     decode_navdata,
     encode_drone_navdata,
 )
+from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT
 from ardrone_nmpc.sim.mocap_server import frame_items
-
-#: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
-VBAT_LOW_PCT = 20.0
 
 
 def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:

@@ -13,7 +13,7 @@ import time
 import threading
 from typing import Callable, Optional
 
-from ardrone_nmpc.sim.drone_server import require_loopback_host
+from ardrone_nmpc.sim.addresses import require_loopback_host
 
 __all__ = ["parse_host_port", "serve"]
 
