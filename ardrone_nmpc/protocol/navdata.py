@@ -1,6 +1,6 @@
 """AR.Drone 2.0 navdata (UDP 5554, drone → client): encoder (simulator) and decoder (client).
 
-specs/ardrone-protocol.md §4. A packet is a 16-byte header (magic, state bits, sequence, vision
+docs/protocol.md (navdata). A packet is a 16-byte header (magic, state bits, sequence, vision
 flag), then options ``u16 tag, u16 size, payload`` (``size`` includes the 4-byte head) in
 ascending tag order, then the checksum option (tag 0xFFFF, size 8, ``u32`` = unsigned 32-bit
 sum of every byte before it). Little-endian throughout; at most 4096 bytes.
@@ -12,7 +12,7 @@ required and verified. Size 0 (or < 4), overrunning options, a second demo optio
 and a bad or missing checksum raise :class:`NavdataError`, the only exception the decoder
 raises. Bytes after the checksum option are ignored.
 
-Sign conventions of the demo option (§4.4, inferred from ardrone_autonomy, which negates
+Sign conventions of the demo option (inferred from ardrone_autonomy, which negates
 theta, psi, vy and vz to get ROS frames): body frame x forward, y right, z down; theta > 0 nose
 up, phi > 0 right wing down, psi > 0 **clockwise** seen from above; vx, vy, vz are body-frame
 speeds (vy > 0 to the right, vz > 0 down). The records keep the wire units in their raw fields
@@ -43,7 +43,7 @@ __all__ = [
 ]
 
 NAVDATA_PORT = 5554
-NAVDATA_WAKEUP = b"\x01\x00\x00\x00"       # int32 1: "start streaming, unicast" (§1.1)
+NAVDATA_WAKEUP = b"\x01\x00\x00\x00"       # int32 1: "start streaming, unicast"
 NAVDATA_MAGIC = 0x55667788
 NAVDATA_MAGIC_ALT = 0x55667789             # accepted by node-ar-drone/afParrotSdk2; meaning unknown
 NAVDATA_MAX_BYTES = 4096
@@ -75,7 +75,7 @@ class NavdataError(ValueError):
 
 
 class DroneState(enum.IntFlag):
-    """Drone state bits of the header (``def_ardrone_state_mask_t``, §4.2)."""
+    """Drone state bits of the header (``def_ardrone_state_mask_t``)."""
 
     FLY = 1 << 0                   # flying (0 = landed)
     VIDEO = 1 << 1
@@ -83,7 +83,7 @@ class DroneState(enum.IntFlag):
     CONTROL = 1 << 3               # 0 euler-angle control, 1 angular-speed control
     ALTITUDE = 1 << 4              # altitude control active
     USER_FEEDBACK_START = 1 << 5   # REF bit 9 (start button) state
-    COMMAND = 1 << 6               # control-command ACK (config ACK, §3.2)
+    COMMAND = 1 << 6               # control-command ACK (config ACK)
     CAMERA = 1 << 7
     TRAVELLING = 1 << 8
     USB = 1 << 9
@@ -107,7 +107,7 @@ class DroneState(enum.IntFlag):
     ACQ_THREAD_ON = 1 << 27
     CTRL_WATCHDOG = 1 << 28        # control loop late
     ADC_WATCHDOG = 1 << 29         # nav-board UART late
-    COM_WATCHDOG = 1 << 30         # no client traffic recently (§2.6)
+    COM_WATCHDOG = 1 << 30         # no client traffic recently
     EMERGENCY = 1 << 31
     # Aliases with descriptive names.
     FLYING = FLY
@@ -116,7 +116,7 @@ class DroneState(enum.IntFlag):
 
 
 class OptionTag(enum.IntEnum):
-    """Option tags (``navdata_keys.h``, §4.3); 27 is GPS on firmware 2.4.x."""
+    """Option tags (``navdata_keys.h``); 27 is GPS on firmware 2.4.x."""
 
     DEMO = 0
     TIME = 1
@@ -150,7 +150,7 @@ class OptionTag(enum.IntEnum):
 
 
 class CtrlMajor(enum.IntEnum):
-    """Major ctrl_state (upper 16 bits, ``control_states.h``, §4.5). Real 2.x firmware reports
+    """Major ctrl_state (upper 16 bits, ``control_states.h``). Real 2.x firmware reports
     7 during take-off and 9 during landing; rely on state bit 0 for airborne/landed."""
 
     DEFAULT = 0
@@ -223,7 +223,7 @@ def _f32s(name: str, v, n: int) -> tuple[float, ...]:
 
 @dataclass(frozen=True, slots=True)
 class DemoOption:
-    """The demo option (tag 0, 148 bytes, §4.4), raw wire values with unit-named fields.
+    """The demo option (tag 0, 148 bytes), raw wire values with unit-named fields.
 
     Floats are stored rounded to float32 (the wire type). Converted views: :attr:`pitch_deg`,
     :attr:`roll_deg`, :attr:`yaw_deg`, :attr:`altitude_m`, :attr:`vx_body_mps`,

@@ -3,7 +3,9 @@ connection open; after ``AT*CTRL=seq,4,0`` the drone writes its configuration te
 ended by a NUL byte (docs/protocol.md, control port).
 
 One thread accepts loopback connections and drops those the client closed; :meth:`dump` is
-called by the firmware (under the drone's lock) and writes to every open connection.
+called by the firmware (under the drone's lock) and writes to every open connection. A port
+that does not answer (a fault) either accepts and never writes (``mode="silent"``) or keeps its
+port bound without listening, so connections are refused (``"refused"``).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import select
 import socket
 import threading
+from typing import Literal
 
 from ardrone_nmpc.sim.addresses import is_loopback_peer
 
@@ -24,10 +27,15 @@ class ControlPort:
     """A listening TCP socket on ``(bind_host, port)`` (0 = a free port).
 
     ``lock`` is the drone's lock; ``counters`` its counters (``control_connections``,
-    ``config_dumps`` are counted here, under the lock).
+    ``config_dumps`` are counted here, under the lock); ``mode`` "serve", "silent" or
+    "refused" (module docstring).
     """
 
-    def __init__(self, bind_host: str, port: int, *, lock, counters) -> None:
+    def __init__(self, bind_host: str, port: int, *, lock, counters,
+                 mode: Literal["serve", "silent", "refused"] = "serve") -> None:
+        if mode not in ("serve", "silent", "refused"):
+            raise ValueError(f"control port mode must be serve, silent or refused, got {mode!r}")
+        self.mode = mode
         self.lock = lock
         self.counters = counters
         self.clients: list[socket.socket] = []
@@ -35,7 +43,8 @@ class ControlPort:
         try:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             s.bind((bind_host, int(port)))
-            s.listen(4)
+            if mode != "refused":   # bound, not listening: the port is kept, connects refused
+                s.listen(4)
             s.settimeout(_POLL_S)
         except BaseException:
             s.close()
@@ -49,6 +58,8 @@ class ControlPort:
         return self._sock.getsockname()[1]
 
     def start(self) -> None:
+        if self.mode == "refused":
+            return
         self._thread = threading.Thread(target=self._accept_loop, name="drone-server-control",
                                         daemon=True)
         self._thread.start()
@@ -68,7 +79,7 @@ class ControlPort:
 
     def dump(self, text: str) -> None:
         """Write ``text`` + NUL to every connected client (call under the lock)."""
-        if not self.clients:
+        if not self.clients or self.mode != "serve":
             return
         data = text.encode("ascii", errors="replace") + b"\0"
         for s in list(self.clients):

@@ -17,7 +17,8 @@ calls it under its lock with the time, so it is testable datagram by datagram.
 * Altitude cap: a climbing gaz becomes 0 (minor ALT_OUT_ZONE) once z + v_z·(command delay +
   τ_z), where the climb would stop, reaches ``control:altitude_max``.
 * ``AT*FTRIM`` counted only when landed, ``AT*CALIB`` only in flight (no manoeuvre).
-* ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`) sets the ACK bit 6;
+* ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`; applied or, in another
+  multiconfig session, ignored) sets the ACK bit 6;
   ``AT*CTRL`` 5 clears it, 4 dumps the configuration on the control port and sets it, 6 dumps
   an empty custom-config list and sets it. ``AT*COMWDG`` clears the com-watchdog bit.
 * Watchdogs from the last accepted command: > ``comwdg_s`` → bit 30 (cleared by any command,
@@ -51,7 +52,7 @@ from ardrone_nmpc.protocol.at import (
     parse_datagram_lenient,
 )
 from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneStatus, encode_drone_navdata
-from ardrone_nmpc.sim.drone_config import ConfigStore
+from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession
 
 __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 
@@ -71,7 +72,8 @@ class DroneServerCounters:
     at_commands_unknown: int = 0      # well-formed commands of other names (ANIM, LED, …)
     malformed_datagrams: int = 0      # datagrams with at least one malformed part
     malformed_commands: int = 0       # malformed commands (an oversized datagram counts one)
-    config_writes: int = 0
+    config_writes: int = 0            # acknowledged AT*CONFIG
+    config_writes_ignored: int = 0    # … of them not applied (another multiconfig session)
     ftrim_accepted: int = 0
     calib_accepted: int = 0
     navdata_datagrams_in: int = 0     # wake-ups (any datagram on the navdata port)
@@ -100,13 +102,15 @@ class DroneFirmware:
     ctrl_codes : the transition codes navdata reports (:class:`CtrlCodes`).
     altitude_max_m : initial ``control:altitude_max`` (m).
     vbat_low_pct : battery level (%) below which state bit 15 is set.
+    session : a multiconfig session the drone is in (:class:`HeldSession`), None = default.
     """
 
     def __init__(self, plant, *, counters: DroneServerCounters,
                  dump_config: Optional[Callable[[str], None]] = None, comwdg_s: float = 0.05,
                  hover_after_s: float = 0.25, link_loss_s: float = 2.0,
                  comwdg_clear: str = "any", ctrl_codes: CtrlCodes = CtrlCodes.SDK,
-                 altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT) -> None:
+                 altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
+                 session: Optional[HeldSession] = None) -> None:
         self.plant = plant
         self.counters = counters
         self.dump_config = dump_config
@@ -116,7 +120,7 @@ class DroneFirmware:
         self.comwdg_clear = comwdg_clear
         self.ctrl_codes = CtrlCodes(ctrl_codes)
         self.vbat_low_pct = vbat_low_pct
-        self.config = ConfigStore(plant, altitude_max_m=altitude_max_m)
+        self.config = ConfigStore(plant, altitude_max_m=altitude_max_m, session=session)
         self.last_seq = 0
         self.last_cmd_t: Optional[float] = None      # last accepted AT command
         self.comwdg_latched = True
@@ -141,13 +145,19 @@ class DroneFirmware:
         if errors:
             c.malformed_datagrams += 1
             c.malformed_commands += len(errors)
+        ids = None   # those of an AT*CONFIG_IDS right before (the SDK sends the pair together)
         for cmd in commands:
             c.at_commands_in += 1
-            self.execute(cmd, now)
+            self.execute(cmd, now, ids)
+            b = cmd.body
+            ids = (b.session_id, b.profile_id, b.application_id) if isinstance(b, ConfigIds) \
+                else None
         self.apply_command()
 
-    def execute(self, cmd: AtCommand, now: float) -> None:
-        """One command under the sequence-number rule."""
+    def execute(self, cmd: AtCommand, now: float,
+                ids: Optional[tuple[str, str, str]] = None) -> None:
+        """One command under the sequence-number rule (``ids``: the ``AT*CONFIG_IDS`` before
+        it in the datagram, if any)."""
         c = self.counters
         if not (cmd.seq == 1 or cmd.seq > self.last_seq):
             c.at_commands_stale += 1
@@ -169,9 +179,9 @@ class DroneFirmware:
         elif isinstance(body, Comwdg):
             self.comwdg_latched = False
         elif isinstance(body, Config):
-            self.config.write(body.key, body.value)
             c.config_writes += 1
-            self.ack = True
+            c.config_writes_ignored += not self.config.write(body.key, body.value, ids)
+            self.ack = True                              # acknowledged either way
         elif isinstance(body, ConfigIds):
             self.config.config_ids = (body.session_id, body.profile_id, body.application_id)
         elif isinstance(body, Ctrl):

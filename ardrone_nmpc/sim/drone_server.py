@@ -18,7 +18,13 @@ given the same lock):
   at ``full_rate_hz``. It stops after ``navdata_timeout_s`` without any client datagram (AT or
   navdata port); a new wake-up restarts it, the sequence counting on.
 * **control** (optional TCP ``control_port``, the drone's 5559) —
-  :class:`~ardrone_nmpc.sim.control_port.ControlPort`.
+  :class:`~ardrone_nmpc.sim.control_port.ControlPort`; ``control_port_mode`` makes it answer
+  nothing ("silent") or refuse connections ("refused").
+
+Firmware-like options (also fault kinds, see :mod:`~ardrone_nmpc.sim.faults`): ``ctrl_codes``
+(the transition codes of another firmware), ``session`` (left in another multiconfig session:
+writes acknowledged, not applied; its own limits flown and reported), ``control_port_mode``
+and :meth:`DroneServer.land_by_itself` (a REF still asking for take-off relaunches it).
 
 Not simulated: video (TCP 5555), multicast navdata, animations and LEDs, magnetometer
 calibration, the tilt / cut-out / motor emergencies, navdata options other than demo, time and
@@ -38,7 +44,7 @@ from typing import Callable, Literal, Optional
 from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState
 from ardrone_nmpc.sim.addresses import is_loopback_peer, require_loopback_host
 from ardrone_nmpc.sim.control_port import ControlPort
-from ardrone_nmpc.sim.drone_config import EULER_ANGLE_MAX_LIMIT_RAD
+from ardrone_nmpc.sim.drone_config import EULER_ANGLE_MAX_LIMIT_RAD, HeldSession
 from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT, DroneFirmware, DroneServerCounters
 from ardrone_nmpc.sim.plant import AirframePlant
 
@@ -58,6 +64,8 @@ class DroneServer:
     bind_host : loopback address to bind (ValueError otherwise).
     at_port, navdata_port : UDP ports; 0 picks free ports (see the properties for the actual).
     control_port : TCP configuration port (5559 on the drone); None = not served, 0 = free port.
+    control_port_mode : "serve", or a port that does not answer: "silent" (accepts, never
+        writes) or "refused" (bound, not listening).
     step_s : physics step (s) on the clock.
     demo_rate_hz, full_rate_hz, bootstrap_rate_hz : navdata rates of demo, full
         (``navdata_demo = FALSE``) and bootstrap streaming.
@@ -69,6 +77,8 @@ class DroneServer:
         (take-off 6, landing 8) or "fw2.4" (7, 9).
     altitude_max_m : initial ``control:altitude_max`` (m).
     vbat_low_pct : battery level (%) below which state bit 15 is set.
+    session : a multiconfig session the drone was left in (:class:`HeldSession`), None =
+        the default session.
     lock : the lock to share (default: a new ``threading.RLock``).
     clock : the time source (s), ``time.monotonic`` by default.
     faults : injected faults (:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`, None =
@@ -78,6 +88,7 @@ class DroneServer:
 
     def __init__(self, plant: AirframePlant, *, bind_host: str = "127.0.0.1", at_port: int = 0,
                  navdata_port: int = 0, control_port: Optional[int] = None,
+                 control_port_mode: Literal["serve", "silent", "refused"] = "serve",
                  step_s: float = 0.005, demo_rate_hz: float = 15.0, full_rate_hz: float = 200.0,
                  bootstrap_rate_hz: Optional[float] = None, comwdg_s: float = 0.05,
                  hover_after_s: float = 0.25, link_loss_s: float = 2.0,
@@ -85,7 +96,7 @@ class DroneServer:
                  comwdg_clear: Literal["any", "comwdg"] = "any",
                  ctrl_codes: CtrlCodes | str = CtrlCodes.SDK,
                  altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
-                 lock: Optional[threading.RLock] = None,
+                 session: Optional[HeldSession] = None, lock: Optional[threading.RLock] = None,
                  clock: Callable[[], float] = time.monotonic, faults=None) -> None:
         self.bind_host = require_loopback_host(bind_host, "bind address")
         for name, v in (("step_s", step_s), ("demo_rate_hz", demo_rate_hz),
@@ -110,7 +121,8 @@ class DroneServer:
             plant, counters=self._counters, comwdg_s=float(comwdg_s),
             hover_after_s=float(hover_after_s), link_loss_s=float(link_loss_s),
             comwdg_clear=comwdg_clear, ctrl_codes=CtrlCodes(ctrl_codes),
-            altitude_max_m=float(altitude_max_m), vbat_low_pct=float(vbat_low_pct))
+            altitude_max_m=float(altitude_max_m), vbat_low_pct=float(vbat_low_pct),
+            session=session)
 
         # navdata stream (under self.lock)
         self._last_traffic_t: Optional[float] = None  # last datagram on either port
@@ -128,7 +140,7 @@ class DroneServer:
             self._nav_sock = self._udp(navdata_port)
             if control_port is not None:
                 self._control = ControlPort(self.bind_host, control_port, lock=self.lock,
-                                            counters=self._counters)
+                                            counters=self._counters, mode=control_port_mode)
                 self._firmware.dump_config = self._control.dump
         except BaseException:
             self._close_sockets()
@@ -207,6 +219,19 @@ class DroneServer:
         """True until ``general:navdata_demo`` is written."""
         with self.lock:
             return self._firmware.config.bootstrap
+
+    @property
+    def config_held(self) -> dict[str, str]:
+        """The values the drone flies with, as its control port reports them."""
+        with self.lock:
+            return self._firmware.config.held()
+
+    def land_by_itself(self) -> bool:
+        """The drone lands on its own decision now (motor cut-out, low battery, firmware):
+        landing, then landed. The client's REF is untouched: one still asking for take-off
+        launches it again once it is down, as the firmware does. False if not in the air."""
+        with self.lock:
+            return self.plant.land()
 
     def state_bits(self) -> DroneState:
         """The drone state bits navdata would report now."""

@@ -58,6 +58,7 @@ class WireSensors:
     def __init__(self, cfg, plant, schedule: FaultSchedule, t_zero_s: float = math.inf):
         self.plant = plant
         self.schedule = schedule
+        self.ctrl_codes = schedule.ctrl_codes()
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
@@ -105,7 +106,7 @@ class WireSensors:
         t_exp = t_s - self.t_zero_s
         if self.schedule.navdata_lost(t_exp):
             return
-        data = navdata_packet(self.plant, (k + 1) & 0xFFFFFFFF or 1)
+        data = navdata_packet(self.plant, (k + 1) & 0xFFFFFFFF or 1, self.ctrl_codes)
         kind = self.schedule.navdata_corruption(t_exp)
         if kind is not None:
             data = corrupt_navdata(data, kind)
