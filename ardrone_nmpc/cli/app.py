@@ -348,7 +348,7 @@ def sim_drone(
     bind: str = typer.Option("127.0.0.1", "--bind", help="Loopback address the simulated drone listens on."),
     at_port: int = typer.Option(5556, "--at-port", min=0, max=65535, help="AT command UDP port (0 = free port)."),
     navdata_port: int = typer.Option(5554, "--navdata-port", min=0, max=65535, help="Navdata UDP port (0 = free port)."),
-    control_port: Optional[int] = typer.Option(None, "--control-port", min=0, max=65535, help="Also serve the TCP configuration port (the drone's 5559); default: not served."),
+    control_port: int = typer.Option(5559, "--control-port", min=0, max=65535, help="TCP configuration port (the drone's 5559; 0 = free port)."),
     mocap_to: str = typer.Option("127.0.0.1:51001", "--mocap-to", help="Loopback host:port the mocap pose stream is sent to."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulation (default: sim.seed)."),
 ) -> None:

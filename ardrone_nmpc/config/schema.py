@@ -763,6 +763,41 @@ class DelayJumpFault(_Section):
     delay_s: NonNegative = Field(0.5, le=2.0, description="New command delay (s).")
 
 
+class ForeignSessionFault(_Section):
+    """The drone was left in another multiconfig session: writes of per-session keys (the
+    command limits) without that session's ``AT*CONFIG_IDS`` are acknowledged but not applied;
+    it flies, and reports on the control port, the limits it holds."""
+
+    session_id: str = Field("d2e081a3", pattern=r"^[0-9a-fA-F]{8}$", description="Its session id.")
+    profile_id: str = Field("be27e2e4", pattern=r"^[0-9a-fA-F]{8}$", description="Its profile id.")
+    application_id: str = Field("d87f7e0c", pattern=r"^[0-9a-fA-F]{8}$", description="Its application id.")
+    euler_angle_max_rad: float = Field(0.52, gt=0, le=0.52, description="Tilt limit it holds (rad).")
+    control_vz_max_mps: float = Field(2.0, ge=0.2, le=2.0, description="Climb-rate limit it holds (m/s).")
+    control_yaw_radps: float = Field(6.11, ge=0.7, le=6.11, description="Yaw-rate limit it holds (rad/s).")
+
+
+class SelfLandFault(_Section):
+    """The drone lands by itself at ``start_s`` (motor cut-out, low battery, a firmware
+    decision); a REF still asking for take-off launches it again, as the firmware does."""
+
+    start_s: Finite = Field(5.0, description="When (s, experiment time).")
+
+
+class CtrlCodesFault(_Section):
+    """Navdata reports another firmware's ctrl_state transition codes."""
+
+    codes: Literal["sdk", "fw2.4"] = Field(
+        "fw2.4", description="'fw2.4': take-off 7, landing 9; 'sdk': 6, 8 (control_states.h).")
+
+
+class ControlPortDropFault(_Section):
+    """The drone's TCP control port (configuration read-back) does not answer."""
+
+    mode: Literal["silent", "refused"] = Field(
+        "silent", description="'silent': connections accepted, no configuration ever sent; "
+        "'refused': nothing listens.")
+
+
 class FaultsConfig(_Section):
     """Injected faults (simulation only: ``simulate`` and ``fly --sim``); each is off (null)
     unless given, e.g. ``--set faults.mocap_dropout.start_s=5``."""
@@ -780,6 +815,10 @@ class FaultsConfig(_Section):
     wind_gust: Optional[WindGustFault] = Field(None, description="Wind gust on the plant.")
     wind: Optional[WindFault] = Field(None, description="Constant wind on the plant.")
     delay_jump: Optional[DelayJumpFault] = Field(None, description="Command-delay jump.")
+    foreign_session: Optional[ForeignSessionFault] = Field(None, description="Drone in another config session.")
+    self_land: Optional[SelfLandFault] = Field(None, description="Drone lands by itself.")
+    ctrl_codes: Optional[CtrlCodesFault] = Field(None, description="Other firmware's ctrl_state codes.")
+    control_port_drop: Optional[ControlPortDropFault] = Field(None, description="Control port does not answer.")
 
     def active(self) -> list[str]:
         """Names of the faults that are set."""
