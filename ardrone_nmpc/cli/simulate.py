@@ -13,8 +13,9 @@ from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summa
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
-                         console: Console | None = None) -> Path:
-    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path."""
+                         console: Console | None = None, live=None) -> Path:
+    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path.
+    ``live`` (a :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too."""
     console = console or _console()
     seed = cfg.sim.seed if seed is None else seed
     if not quiet:
@@ -26,7 +27,7 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                TimeRemainingColumn()]
     with Progress(*columns, console=console, disable=quiet, transient=True) as progress:
         task = progress.add_task("flying", total=1.0)
-        recording = record_lockstep(cfg, log_dir, seed=seed,
+        recording = record_lockstep(cfg, log_dir, seed=seed, live=live,
                                     progress=lambda f: progress.update(task, completed=f))
     result, path = recording.result, recording.path
     if not quiet:
