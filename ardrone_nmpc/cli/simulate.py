@@ -1,4 +1,4 @@
-"""``ardrone-nmpc simulate`` and ``summary``: run directories in, tables out."""
+"""``ardrone-nmpc simulate``: fly a config in lockstep simulation into a run directory."""
 
 from __future__ import annotations
 
@@ -8,15 +8,27 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runtime.lockstep import run_lockstep
-from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summarise
+from ardrone_nmpc.runs.summary import render_summary, summarise
+
+
+def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed: int | None,
+                     quiet: bool) -> None:
+    """The ``simulate`` command: load, fly, print; last line ``run: <dir>``."""
+    import typer
+
+    cfg = load_config(config, overrides)
+    path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet)
+    typer.echo(f"run: {path}")
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                          console: Console | None = None) -> Path:
     """Fly ``cfg`` in lockstep simulation into a new run directory; return its path."""
-    console = console or _console()
+    console = console or stdout_console()
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:  # the run directory must reproduce the run: record the seed used
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
@@ -31,7 +43,7 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                    TimeRemainingColumn()]
         with Progress(*columns, console=console, disable=quiet, transient=True) as progress:
             task = progress.add_task("flying", total=1.0)
-            result = run_lockstep(cfg, recorder=recorder, seed=seed,
+            result = run_lockstep(recorder.config, recorder=recorder, seed=seed,
                                   progress=lambda f: progress.update(task, completed=f))
         wall_s = time.perf_counter() - wall0
         recorder.event(result.ticks * cfg.loop.period_s - cfg.sim.settle_s, "simulated",
@@ -49,24 +61,3 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                       f"loaded or compiled included; ended: {result.ending}, drone "
                       f"{result.final_mode.value}")
     return recorder.path
-
-
-def _console() -> Console:
-    """The terminal's width on a TTY; 150 columns when piped (tables of runs are wide)."""
-    import sys
-
-    return Console(width=None if sys.stdout.isatty() else 150)
-
-
-def run_summary_command(*, run_dirs: list[Path], console: Console | None = None) -> None:
-    console = console or _console()
-    runs = []
-    for run_dir in run_dirs:
-        run = read_run(run_dir)
-        for warning in run.warnings:
-            console.print(f"[yellow]warning[/]: {warning}")
-        runs.append((Path(run_dir).name, summarise(run)))
-    if len(runs) == 1:
-        console.print(render_summary(runs[0][1], title=runs[0][0]))
-    else:
-        console.print(render_side_by_side(runs))

@@ -178,7 +178,7 @@ def _fault_start_s(cfg) -> float:
 def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | None,
              seed: int) -> tuple[Path | None, str, int, str]:
     """Fly one case into ``log_dir``; ``(run_dir, ending, ticks_flown, error)``."""
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runs.rundir import RunRecorder, read_run
     from ardrone_nmpc.runtime.lockstep import run_lockstep
     from ardrone_nmpc.runs.summary import summarise
@@ -187,6 +187,7 @@ def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | N
     cfg = load_config(config_dir / file, [*overrides, *(FAULT_CASES[fault] if fault else ())])
     cfg = cfg.model_copy(update={"name": f"{experiment}-{fault or 'baseline'}"})
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
+        cfg = recorder.config  # the run reads its own copy of its input files
         try:
             result = run_lockstep(cfg, recorder=recorder, seed=seed)
             ending, ticks, error = result.ending, result.ticks, ""
@@ -200,7 +201,7 @@ def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | N
 
 def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, ending: str,
              rows: int, error: str) -> CaseResult:
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runs.rundir import read_run
 
     complete, why = log_complete(run_dir, rows)

@@ -39,6 +39,7 @@ from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_moca
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.errors import UserError
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -66,7 +67,7 @@ SAME_POSE_TOLERANCE_S = 1e-9
 _STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps", "psi_rad")
 
 
-class ReplayError(ValueError):
+class ReplayError(UserError, ValueError):
     """A run that cannot be replayed as asked (one line for the user)."""
 
 

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.runs.summary import summarise
@@ -221,7 +221,7 @@ def run_claims(*, config_dir: Path, log_dir: Path, seed: int = 0,
                     suffix = "-p" if "controller.kind=p" in overrides else ""
                     cfg = cfg.model_copy(update={"name": f"{cfg.name}{suffix}-{form}"})
                     with RunRecorder.create(log_dir, cfg, seed=seed) as rec:
-                        run_lockstep(cfg, recorder=rec, seed=seed)
+                        run_lockstep(rec.config, recorder=rec, seed=seed)
                         rec.write_summary(summarise(read_run(rec.path)))
                     cache[key] = figures_of(rec.path)
                 figs[label] = cache[key]

@@ -82,7 +82,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from ardrone_nmpc.config.schema import ConfigError, config_to_dict, load_config
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.config.io import config_to_dict, load_config
 
 if TYPE_CHECKING:  # pragma: no cover
     from ardrone_nmpc.config.schema import ExperimentConfig
@@ -441,6 +442,7 @@ def _fly(cfg: ExperimentConfig, log_dir: Path) -> tuple[Path, RunData, list[Summ
 
     seed = cfg.sim.seed
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
+        cfg = recorder.config  # the run reads its own copy of its input files
         wall0 = time.perf_counter()
         try:
             result = run_lockstep(cfg, recorder=recorder, seed=seed)

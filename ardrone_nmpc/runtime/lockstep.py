@@ -26,6 +26,7 @@ from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.target import target_pose
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.sensors import WireSensors
+from ardrone_nmpc.errors import UserError
 
 TAKEOFF_TIMEOUT_S = 10.0
 LANDING_TIMEOUT_S = 15.0
@@ -76,7 +77,7 @@ class SimResult:
     ending: str = "completed"
 
 
-class TakeoffRefused(RuntimeError):
+class TakeoffRefused(UserError, RuntimeError):
     """The pre-flight check failed (battery at or below the floor): nothing took off."""
 
 

@@ -23,6 +23,7 @@ from ardrone_nmpc.safety import Action
 from ardrone_nmpc.runtime.session import FlightSession
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runs.summary import summarise
+from ardrone_nmpc.errors import UserError
 
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
@@ -33,7 +34,7 @@ class Terminated(KeyboardInterrupt):
     so no ``except Exception`` on the way can swallow it."""
 
 
-class LandingNotConfirmed(RuntimeError):
+class LandingNotConfirmed(UserError, RuntimeError):
     """Navdata never showed the drone landed: go and look at it."""
 
 
@@ -44,15 +45,15 @@ class FlightResult:
     landed: bool | None = None
 
 
-class LinkLost(RuntimeError):
+class LinkLost(UserError, RuntimeError):
     """Navdata went silent beyond ``safety.navdata_land_ms``."""
 
 
-class SupervisorLanding(RuntimeError):
+class SupervisorLanding(UserError, RuntimeError):
     """The supervisor decided to land (battery, geofence, mocap lost): the flight is cut short."""
 
 
-class DroneEmergency(RuntimeError):
+class DroneEmergency(UserError, RuntimeError):
     """The drone reported an emergency (motors cut)."""
 
 
@@ -94,6 +95,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 at_port = at_port or cfg.drone.at_port
                 navdata_port = navdata_port or cfg.drone.navdata_port
             recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
+            cfg = recorder.config  # the run reads its own copy of its input files
             result.path = recorder.path
             t_origin = time.monotonic()
             event = lambda kind, **f: recorder.event(time.monotonic() - t_origin, kind, **f)
@@ -144,9 +146,11 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
     n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     rate = Rate(period)
     while True:
+        skipped = rate.overruns
         late_s = rate.sleep()
         k = rate.index  # deadline number: overrun deadlines are skipped, time stays wall time
-        if k >= n_ticks:
+        if k >= n_ticks:  # deadlines skipped after the last logged tick are not counted, so
+            rate.overruns = skipped  # loop_timing agrees with summary.csv (runs/summary.py)
             break
         now = time.monotonic()
         if k == 0 and fault_clock is not None:  # experiment time 0 for the injected faults

@@ -12,9 +12,10 @@ import time
 from typing import Callable
 
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.errors import UserError
 
 
-class PreflightError(RuntimeError):
+class PreflightError(UserError, RuntimeError):
     """A preflight check failed: the drone did not take off."""
 
 

@@ -37,6 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ardrone_nmpc.errors import UserError
+
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -98,7 +100,7 @@ _LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": "smal
            "borderaxespad": 0.0}
 
 
-class PlotError(ValueError):
+class PlotError(UserError, ValueError):
     """Data that cannot be plotted, or a plot request that makes no sense (one line)."""
 
 
