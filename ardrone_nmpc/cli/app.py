@@ -14,7 +14,7 @@ from typing import List, Optional
 import typer
 
 from ardrone_nmpc.cli.handler import CommandGroup
-from ardrone_nmpc.cli.options import MAX_JOBS, PORT_MAX, finite, non_empty, output_file
+from ardrone_nmpc.cli.options import MAX_JOBS, finite, non_empty, output_file, port
 
 app = typer.Typer(
     name="ardrone-nmpc",
@@ -62,9 +62,9 @@ def fly(
     config: Path = CONFIG_ARG,
     sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone."),
     drone: Optional[str] = typer.Option(None, "--drone", callback=non_empty, help="Drone address (default: drone.host, 192.168.1.1)."),
-    at_port: Optional[int] = typer.Option(None, "--at-port", min=1, max=PORT_MAX, help="AT command UDP port (default: drone.at_port, 5556)."),
-    navdata_port: Optional[int] = typer.Option(None, "--navdata-port", min=1, max=PORT_MAX, help="Navdata UDP port (default: drone.navdata_port, 5554)."),
-    mocap_port: Optional[int] = typer.Option(None, "--mocap-port", min=1, max=PORT_MAX, help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
+    at_port: Optional[int] = typer.Option(None, "--at-port", callback=port(), help="AT command UDP port (default: drone.at_port, 5556)."),
+    navdata_port: Optional[int] = typer.Option(None, "--navdata-port", callback=port(), help="Navdata UDP port (default: drone.navdata_port, 5554)."),
+    mocap_port: Optional[int] = typer.Option(None, "--mocap-port", callback=port(), help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
     duration_s: Optional[float] = typer.Option(None, "--duration-s", help="Experiment length (s), overriding duration_s."),
     log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
     dashboard: bool = typer.Option(True, "--dashboard/--no-dashboard", help="Live status (only on a terminal)."),
@@ -101,7 +101,7 @@ def replay(
     log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where --rerun creates its run directory (default: logs)."),
     broadcast: bool = typer.Option(False, "--broadcast", help="Re-send the logged mocap poses as the UDP pose stream, with the logged timing."),
     speed: Optional[float] = typer.Option(None, "--speed", callback=finite(0.001, 1000.0), help="--broadcast playback speed factor, 0.001 … 1000 (default 1)."),
-    port: Optional[int] = typer.Option(None, "--port", min=1, max=PORT_MAX, help="--broadcast UDP port (default: the run's mocap.port, 51001)."),
+    port: Optional[int] = typer.Option(None, "--port", callback=port(), help="--broadcast UDP port (default: the run's mocap.port, 51001)."),
     host: Optional[str] = typer.Option(None, "--host", callback=non_empty, help="--broadcast target; default 127.0.0.1 (only an explicit --host leaves this machine)."),
 ) -> None:
     """Re-summarise a run; --rerun recomputes its commands from the logged measurements (last
@@ -211,9 +211,9 @@ def sim_drone(
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment YAML (sim, drone, mocap sections); default: all defaults."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
     bind: str = typer.Option("127.0.0.1", "--bind", callback=non_empty, help="Loopback address the simulated drone listens on."),
-    at_port: int = typer.Option(5556, "--at-port", min=0, max=PORT_MAX, help="AT command UDP port (0 = a free port, printed)."),
-    navdata_port: int = typer.Option(5554, "--navdata-port", min=0, max=PORT_MAX, help="Navdata UDP port (0 = a free port, printed)."),
-    control_port: Optional[int] = typer.Option(None, "--control-port", min=0, max=PORT_MAX, help="Also serve the TCP configuration port (the drone's 5559; 0 = a free port, printed); default: not served."),
+    at_port: int = typer.Option(5556, "--at-port", callback=port(zero_picks_a_free_one=True), help="AT command UDP port (0 = a free port, printed)."),
+    navdata_port: int = typer.Option(5554, "--navdata-port", callback=port(zero_picks_a_free_one=True), help="Navdata UDP port (0 = a free port, printed)."),
+    control_port: Optional[int] = typer.Option(None, "--control-port", callback=port(zero_picks_a_free_one=True), help="Also serve the TCP configuration port (the drone's 5559; 0 = a free port, printed); default: not served."),
     mocap_to: str = typer.Option("127.0.0.1:51001", "--mocap-to", callback=non_empty, help="Loopback host:port the mocap pose stream is sent to."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulation (default: sim.seed)."),
 ) -> None:

@@ -17,18 +17,27 @@ __all__ = ["PIPED_WIDTH", "stderr_console", "stdout_console", "stdout_is_termina
 PIPED_WIDTH = 150
 
 
+class _Console(Console):
+    """rich's Console, except that a broken pipe reaches the central handler (rich would
+    exit silently with code 1)."""
+
+    def on_broken_pipe(self) -> None:
+        self.quiet = True
+        raise BrokenPipeError(32, "Broken pipe")
+
+
 def stdout_is_terminal() -> bool:
     return sys.stdout is not None and sys.stdout.isatty()
 
 
 def stdout_console() -> Console:
     """Results: the terminal's width on a TTY; :data:`PIPED_WIDTH` columns when piped."""
-    return Console(width=None if stdout_is_terminal() else PIPED_WIDTH)
+    return _Console(width=None if stdout_is_terminal() else PIPED_WIDTH)
 
 
 def stderr_console() -> Console:
     """Progress, warnings: stderr (never mixed into piped results)."""
-    return Console(stderr=True)
+    return _Console(stderr=True)
 
 
 def warn(note: str, console: Console | None = None) -> None:

@@ -14,7 +14,7 @@ from typing import Optional
 
 import typer
 
-__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "non_empty", "output_file"]
+__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "non_empty", "output_file", "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -33,6 +33,19 @@ def finite(low: float, high: float, *, low_open: bool = False
         above = value > low if low_open else value >= low
         if not (math.isfinite(value) and above and value <= high):
             raise typer.BadParameter(f"must be a number in {interval}, got {value:g}")
+        return value
+
+    return check
+
+
+def port(*, zero_picks_a_free_one: bool = False) -> Callable[[Optional[int]], Optional[int]]:
+    """A callback accepting None or a UDP/TCP port, 1 … 65535 (0 too where it asks the
+    operating system for a free port, which is then printed)."""
+    low = 0 if zero_picks_a_free_one else 1
+
+    def check(value: Optional[int]) -> Optional[int]:
+        if value is not None and not low <= value <= PORT_MAX:
+            raise typer.BadParameter(f"{value} is not a port ({low} … {PORT_MAX})")
         return value
 
     return check
