@@ -15,7 +15,9 @@ Every error is a :class:`ReferenceError` reading ``<file>:<line>: <message>`` (1
 from __future__ import annotations
 
 import csv
+import io
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,13 +57,13 @@ def _error(source: object, line: int, message: str) -> ReferenceError:
     return ReferenceError(f"{source}:{line}: {message}")
 
 
-def _rows(text: str) -> list[tuple[int, list[str]]]:
-    rows: list[tuple[int, list[str]]] = []
-    for lineno, fields in enumerate(csv.reader(text.splitlines()), start=1):
+def _rows(text: str) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, cells)`` of the data-bearing lines, lazily (a huge file stops at the
+    row beyond the limit instead of being split whole)."""
+    for lineno, fields in enumerate(csv.reader(io.StringIO(text)), start=1):
         cells = [c.strip() for c in fields]
         if any(cells) and not cells[0].startswith("#"):
-            rows.append((lineno, cells))
-    return rows
+            yield lineno, cells
 
 
 def _columns(source: object, line: int, header: list[str]) -> list[int]:
@@ -95,12 +97,13 @@ def parse_waypoints(text: str, source: object = "<waypoints>"
     """``(t_s (K,), positions_m (K, 3), psi_rad (K,))`` of a waypoint file's text; errors
     name ``source`` and the line."""
     rows = _rows(text)
-    if not rows:
+    header_line, header = next(rows, (1, None))
+    if header is None:
         raise _error(source, 1, "empty file: expected a header row " + ",".join(WAYPOINT_COLUMNS))
-    header_line, header = rows[0]
     index = _columns(source, header_line, header)
     values: list[list[float]] = []
-    for count, (lineno, cells) in enumerate(rows[1:], start=1):
+    lineno = header_line
+    for count, (lineno, cells) in enumerate(rows, start=1):
         if count > MAX_WAYPOINTS:
             raise _error(source, lineno, f"more than {MAX_WAYPOINTS} waypoints")
         if len(cells) != len(header):
@@ -115,12 +118,12 @@ def parse_waypoints(text: str, source: object = "<waypoints>"
                                          f"previous {values[-1][0]}")
         values.append(row)
     if len(values) < 2:
-        raise _error(source, rows[-1][0], f"at least 2 waypoints are needed, got {len(values)}")
+        raise _error(source, lineno, f"at least 2 waypoints are needed, got {len(values)}")
     data = np.asarray(values, dtype=np.float64)
     length_m = float(np.linalg.norm(np.diff(data[:, 1:4], axis=0), axis=1).sum())
     if length_m > MAX_PATH_LENGTH_M:
-        raise _error(source, rows[-1][0], f"the path is {length_m:.6g} m long; at most "
-                                          f"{MAX_PATH_LENGTH_M:g} m")
+        raise _error(source, lineno, f"the path is {length_m:.6g} m long; at most "
+                                     f"{MAX_PATH_LENGTH_M:g} m")
     return data[:, 0], data[:, 1:4], data[:, 4]
 
 
