@@ -13,7 +13,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
 
-from ardrone_nmpc.config.limits import MAX_COORDINATE_M, MAX_SPAN_S
+from ardrone_nmpc.config.limits import MAX_COORDINATE_M, MAX_SPAN_S, MIN_SPAN_S
 
 
 def invalid(message: str) -> PydanticCustomError:
@@ -56,8 +56,8 @@ Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M,
                                     allow_inf_nan=False)]
 CoordinateVec2 = vector(Coordinate, 2)
 CoordinateVec3 = vector(Coordinate, 3)
-# Time spans (s): they become tick counts and sample counts.
-Span = Annotated[float, Field(gt=0, le=MAX_SPAN_S, allow_inf_nan=False)]
+# Time spans (s): they become tick counts and sample counts, and divide path sizes.
+Span = Annotated[float, Field(ge=MIN_SPAN_S, le=MAX_SPAN_S, allow_inf_nan=False)]
 NonNegativeSpan = Annotated[float, Field(ge=0, le=MAX_SPAN_S, allow_inf_nan=False)]
 PathSizeVec2 = vector(PathSize, 2)
 PathSizeVec4 = vector(PathSize, 4)

@@ -13,6 +13,9 @@ from __future__ import annotations
 #: (1 ms) that is 3.6 million log rows.
 MAX_SPAN_S = 3600.0
 
+#: Shortest square leg or ellipse lap (s): the reference speed (size / time) stays finite.
+MIN_SPAN_S = 1e-3
+
 #: Largest coordinate or path size (m) anywhere in a config or a waypoint file: a kilometre
 #: is beyond any motion-capture volume, and paths are sampled every 2 cm for the deviation
 #: metrics.

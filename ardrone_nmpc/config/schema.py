@@ -163,7 +163,8 @@ class ControllerConfig(Section):
     kind: Literal["nmpc", "p"] = Field(
         "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
     horizon_steps: int = Field(15, ge=1, le=1000, description="Prediction horizon N (steps).")
-    dtau_s: Positive = Field(0.1, description="Prediction step Δτ (s); horizon T = N·Δτ.")
+    dtau_s: Positive = Field(0.1, le=1.0,
+                             description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
         (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0),
         description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
@@ -397,7 +398,7 @@ class PlantConfig(Section):
     # Project default, not identified: slow enough that long simulated runs are not cut short
     # by safety.battery_floor_pct (100 % → 20 % in ≈ 53 min).
     battery_drain_pct_per_min: NonNegative = Field(
-        1.5, description="Battery drain while flying (% per minute).")
+        1.5, le=100.0, description="Battery drain while flying (% per minute), ≤ 100.")
 
     @field_validator("initial_position_m")
     @classmethod
@@ -424,21 +425,23 @@ class PlantConfig(Section):
 class NoiseConfig(Section):
     """Simulated sensor noise, standard deviations (docs/plant.md table, docs/mocap-stream.md)."""
 
-    mocap_position_std_m: NonNegative = Field(0.0005, description="Mocap position σ per axis (m).")
+    # Upper bounds: far beyond any sensor (the reading is noise only), below float overflow.
+    mocap_position_std_m: NonNegative = Field(
+        0.0005, le=1.0, description="Mocap position σ per axis (m), ≤ 1.")
     mocap_angle_std_rad: NonNegative = Field(
-        math.radians(0.1), description="Mocap angle σ (rad), 0.1°.")
+        math.radians(0.1), le=math.pi, description="Mocap angle σ (rad), 0.1°; ≤ π.")
     mocap_latency_ms: float = Field(
         2.0, ge=0.0, le=50.0, description="Mocap stream latency (ms), 0–50: the lockstep runner "
         "samples only the newest frame a tick can see, which needs latency + frame period < "
         "the control period (65 ms); larger latencies would be silently capped.")
     navdata_attitude_std_rad: NonNegative = Field(
-        math.radians(0.2), description="Navdata roll/pitch σ (rad), 0.2°.")
+        math.radians(0.2), le=math.pi, description="Navdata roll/pitch σ (rad), 0.2°; ≤ π.")
     navdata_yaw_std_rad: NonNegative = Field(
-        math.radians(0.3), description="Navdata yaw σ (rad), 0.3°.")
+        math.radians(0.3), le=math.pi, description="Navdata yaw σ (rad), 0.3°; ≤ π.")
     navdata_altitude_std_m: NonNegative = Field(
-        0.010, description="Navdata ultrasound altitude σ (m).")
+        0.010, le=10.0, description="Navdata ultrasound altitude σ (m), ≤ 10.")
     navdata_velocity_std_mps: NonNegative = Field(
-        0.040, description="Navdata optical-flow vx, vy σ (m/s).")
+        0.040, le=10.0, description="Navdata optical-flow vx, vy σ (m/s), ≤ 10.")
 
 
 class TargetConfig(Section):
