@@ -5,8 +5,8 @@ run_flight`; this module shows its figures while it flies (on a terminal) and de
 command ends. Whatever happens, the landing outcome and the run directory are printed:
 
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
-* a flight error (link lost, supervisor landing, emergency, pre-flight refusal): the
-  ``error:`` line from the central handler, exit 1;
+* a flight error (link lost, supervisor landing, emergency, pre-flight refusal): its
+  ``error:`` line, exit 1;
 * Ctrl-C: exit 130; SIGTERM: exit 143 (the session has landed in both cases);
 * navdata never confirmed the landing: ``error: landing not confirmed by navdata — check
   the drone`` in every case, and at least exit 1.
@@ -20,7 +20,7 @@ from pathlib import Path
 import typer
 
 from ardrone_nmpc.cli.handler import report
-from ardrone_nmpc.errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_TERMINATED
+from ardrone_nmpc.errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_TERMINATED, UserError
 
 LANDING_NOT_CONFIRMED = "landing not confirmed by navdata — check the drone"
 
@@ -58,12 +58,17 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
         code = EXIT_TERMINATED
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
-    except BaseException as err:  # reported by the central handler, after the lines below
+    except UserError as err:  # the session has landed: first why, then how the landing went
+        error = err
+        code = err.exit_code
+    except BaseException as err:  # an OSError or a bug: reported by the central handler
         error = err
         raise
     finally:
         if use_live:
             live.stop()
+        if isinstance(error, UserError):
+            report(error.messages)
         if result.landed is False and not isinstance(error, LandingNotConfirmed):
             report([LANDING_NOT_CONFIRMED])
             code = code or EXIT_ERROR
