@@ -169,7 +169,8 @@ def register(app: typer.Typer) -> None:
         """Check the motion capture before a flight: a live table of the tracked objects (rate,
         age, occlusion), the hand-carry axis test (+x, +y, +z, yaw CCW → ✔), and one final line
         per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>."""
-        from ardrone_nmpc.config.schema import ConfigError, load_config, tracked_object
+        from ardrone_nmpc.config.schema import ConfigError, tracked_object
+        from ardrone_nmpc.config.io import load_config
         from ardrone_nmpc.links.mocap_source import open_mocap_source
 
         try:

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.cli.mocap_check import AxisTest, final_line
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.links.mocap_source import open_mocap_source
 from ardrone_nmpc.sim.loopback import free_udp_port
 

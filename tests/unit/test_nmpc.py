@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import minimize
 
 from ardrone_nmpc.experiments.bench import HOVER_STATE, closed_loop, plant_step
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.newton import NewtonGMRESController, make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.mapping import DroneLimits
 from ardrone_nmpc.core.types import IU_PSIRATE, IU_THETA, IU_ZACC, IX_VX, IX_X
 from ardrone_nmpc.experiments.reproduce.claims import FORMULATIONS, LAB_OVERRIDES, fly
