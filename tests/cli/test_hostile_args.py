@@ -120,6 +120,13 @@ CASES = [
      r"--bind '198\.51\.100\.7' is not a loopback address"),
     ("sim-drone-mocap-to", ["sim-drone", "--mocap-to", "nohost"], 1,
      r"--mocap-to 'nohost': expected host:port"),
+    ("export-missing", ["export", "{tmp}/nope", "--format", "mcap", "-o", "{tmp}/x.mcap"], 1,
+     r"^error: .*nope: no such run directory$"),
+    ("export-bogus-format", ["export", "{run}", "--format", "bogus", "-o", "{tmp}/x.mcap"], 1,
+     r"^error: --format: unknown format 'bogus'; choose mcap, parquet$"),
+    ("mocap-check-missing", ["mocap-check", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
+    ("mocap-check-negative-seconds", ["mocap-check", HOVER, "--seconds", "-1"], 2,
+     r"^error: --seconds: "),
 ]
 
 
