@@ -530,7 +530,7 @@ PLANT_PROFILE_DEFAULTS: dict[str, dict[str, float]] = {
     "thesis_kit": {},    # the kit's identified channels (sim/plant_kit.py), 0.26 s, 5 ms
     # the real drone as identified: tum_ardrone's ≈ 0.12 s delay and the turbulence calibrated
     # on the thesis' experimental square (docs/plant-profiles.md §3)
-    "ardrone_lab": {"command_delay_s": 0.12, "turbulence_std_mps": 0.0},
+    "ardrone_lab": {"command_delay_s": 0.12, "turbulence_std_mps": 0.7},
 }
 
 
@@ -570,9 +570,9 @@ class PlantConfig(_Section):
     turbulence_std_mps: NonNegative = Field(
         0.0, le=5.0, description="Turbulence: σ (m/s) per horizontal axis of a Gauss–Markov "
         "wind added to sim faults' wind (0: none).")
-    # Project choice (not identified): gusts of about a second, slower than the tilt loops.
+    # Project choice (not identified): slow room-air drift, far slower than the tilt loops.
     turbulence_tau_s: Positive = Field(
-        1.0, description="Turbulence correlation time τ (s) of the Gauss–Markov wind.")
+        5.0, description="Turbulence correlation time τ (s) of the Gauss–Markov wind.")
 
     @model_validator(mode="before")
     @classmethod

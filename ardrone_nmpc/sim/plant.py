@@ -127,7 +127,7 @@ class PlantParams:
     battery_drain_pct_per_min: float = 1.5
     # --- air turbulence (docs/plant-profiles.md): a horizontal Gauss–Markov wind, σ per axis
     turbulence_std_mps: float = 0.0
-    turbulence_tau_s: float = 1.0
+    turbulence_tau_s: float = 5.0
     # --- on-board behaviour (protocol §5), no config key
     hover_tau_s: float = 0.5                 # optical-flow position hold: v_xy time constant
     takeoff_altitude_m: float = 0.9          # where the take-off climb settles
