@@ -9,8 +9,11 @@ Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``comma
     v_x' =  cos ψ·forward + sin ψ·right − k_d·(v_x − w_x) [− d·v_x in position hold]
     v_y' =  sin ψ·forward − cos ψ·right − k_d·(v_y − w_y) [− d·v_y in position hold]
 
-with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` and
-d = max(0, 1/hover_tau_s − k_d), so that without wind a hold damps v_xy with τ = hover_tau_s.
+with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` (+ the turbulence, a
+Gauss–Markov wind of ``turbulence_std_mps``) and d = max(0, 1/hover_tau_s − k_d), so that without
+wind a hold damps v_xy with τ = hover_tau_s. This is the ``ardrone`` profile's backend; the
+``thesis_kit`` one (:mod:`~ardrone_nmpc.sim.plant_kit`) replaces :meth:`_motors_on_step`
+(docs/plant-profiles.md).
 
 Sign conventions
 ----------------
@@ -86,6 +89,7 @@ __all__ = [
     "PlantParams",
     "airframe_derivative",
     "freefall_derivative",
+    "gauss_markov_step",
     "mocap_rotation_xyz_rad",
     "plant_backend",
     "rk4_step",
@@ -153,12 +157,10 @@ class PlantParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        if not (math.isfinite(self.turbulence_std_mps) and self.turbulence_std_mps >= 0.0):
-            raise ValueError(
-                f"turbulence_std_mps must be finite and >= 0, got {self.turbulence_std_mps!r}")
-        if not (math.isfinite(self.command_delay_s) and self.command_delay_s >= 0.0):
-            raise ValueError(
-                f"command_delay_s must be finite and >= 0, got {self.command_delay_s!r}")
+        for name in ("command_delay_s", "turbulence_std_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
             raise ValueError(f"initial_position_m must be [x, y, z] with z >= 0, "
                              f"got {self.initial_position_m!r}")
@@ -331,6 +333,14 @@ def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
 
 
 # ----------------------------------------------------------------------------- backends
+
+
+def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, normals) -> tuple:
+    """Independent Gauss–Markov processes (stationary σ ``std``, correlation time ``tau_s``)
+    advanced exactly over ``dt_s`` with standard normal draws ``normals``."""
+    a = math.exp(-dt_s / tau_s)
+    q = std * math.sqrt(1.0 - a * a)
+    return tuple(a * v + q * n for v, n in zip(values, normals))
 
 
 def plant_backend(profile: str) -> type:
@@ -580,8 +590,11 @@ class AirframePlant:
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
         self._state = (x, y, z, vx, vy, vz, phi, theta, _wrap_rad(psi), r)
         self._advance_biases(n * h)
-        if self.params.turbulence_std_mps > 0.0:
-            self._advance_gust(n * h)
+        p = self.params
+        if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
+            self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
+                                               p.turbulence_tau_s, n * h,
+                                               self._gust_rng.standard_normal(2))
 
     def _substep(self, h: float, wind: tuple) -> None:
         fifo = self._fifo
@@ -664,18 +677,8 @@ class AirframePlant:
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
         self._yaw_bias_deg = _wrap_deg(self._yaw_bias_deg + math.degrees(drift + walk))
-        a = math.exp(-dt / p.navdata_velocity_bias_tau_s)
-        q = p.navdata_velocity_bias_std_mps * math.sqrt(1.0 - a * a)
-        self._vel_bias = (a * self._vel_bias[0] + q * n[1], a * self._vel_bias[1] + q * n[2])
-
-    def _advance_gust(self, dt: float) -> None:
-        """The turbulence: a horizontal Gauss–Markov wind per axis (σ, τ of the params),
-        discretised exactly over ``dt`` and held within one :meth:`advance` call."""
-        p = self.params
-        a = math.exp(-dt / p.turbulence_tau_s)
-        q = p.turbulence_std_mps * math.sqrt(1.0 - a * a)
-        n = self._gust_rng.standard_normal(2)
-        self._gust_mps = (a * self._gust_mps[0] + q * n[0], a * self._gust_mps[1] + q * n[1])
+        self._vel_bias = gauss_markov_step(self._vel_bias, p.navdata_velocity_bias_std_mps,
+                                           p.navdata_velocity_bias_tau_s, dt, n[1:])
 
     # ------------------------------------------------------------------ outputs
 
