@@ -527,7 +527,8 @@ class MocapConfig(_Section):
 #: What each ``sim.plant.profile`` sets where the config leaves a key out (docs/plant-profiles.md).
 PLANT_PROFILE_DEFAULTS: dict[str, dict[str, float]] = {
     "ardrone": {},       # the defaults below: tum_ardrone dynamics with the thesis' 0.26 s delay
-    "thesis_kit": {},    # the kit's identified channels (sim/plant_kit.py), 0.26 s, 5 ms
+    # the kit's identified channels (sim/plant_kit.py) with its timeDelay and simDT
+    "thesis_kit": {"command_delay_s": 0.26, "integration_step_s": 0.005},
     # the real drone as identified: tum_ardrone's ≈ 0.12 s delay and the turbulence calibrated
     # on the thesis' experimental square (docs/plant-profiles.md §3)
     "ardrone_lab": {"command_delay_s": 0.12, "turbulence_std_mps": 0.7},
