@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig, load_config
+from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
+
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 from ardrone_nmpc.sim.plant_kit import KitPlant
