@@ -89,7 +89,7 @@ def _fly(cfg, kind: str, acc: dict | None) -> tuple[float, int]:
 
 
 def profile(config: str, repeats: int) -> None:
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
 
     cfg = load_config(config)
     _fly(cfg, "memory", None)  # load the kernels
@@ -117,7 +117,7 @@ def profile(config: str, repeats: int) -> None:
 
 
 def _configs():
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
 
     rs = ("[4,12,12,24]", "[1,12,12,24]", "[2,12,12,24]", "[4,6,6,24]")
     return [load_config(ROOT / "configs" / "step_x.yaml",
@@ -140,7 +140,7 @@ def _sweep_way(cfgs, jobs: int) -> float:
 
 
 def _tune_way(cfgs, jobs: int) -> float:
-    from ardrone_nmpc.config.schema import config_to_dict
+    from ardrone_nmpc.config.io import config_to_dict
     from ardrone_nmpc.experiments.tune.engine import PoolEngine, Scenario, TrialSpec
     from ardrone_nmpc.experiments.tune.objective import parse_objective
 
@@ -165,7 +165,7 @@ def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
     tune's ``run_trial`` on the same configs, alternating."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from ardrone_nmpc.config.schema import config_to_dict
+    from ardrone_nmpc.config.io import config_to_dict
     from ardrone_nmpc.experiments.sweep import Case, case_id, run_case
     from ardrone_nmpc.experiments.sweep.engines import (_init_worker, _pool_context,
                                                         _start_forkserver)
@@ -223,7 +223,7 @@ def throughput(jobs: int, rounds: int) -> None:
 def cpu(way: str, rounds: int) -> None:
     """CPU seconds (``time.process_time``: little affected by other load, unlike wall time)
     and wall seconds of the 24 flights in this process, the sweep's way or tune's."""
-    from ardrone_nmpc.config.schema import config_to_dict
+    from ardrone_nmpc.config.io import config_to_dict
     from ardrone_nmpc.experiments.sweep import Case, case_id, run_case, warm_up
 
     cfgs = _configs()

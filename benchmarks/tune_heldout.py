@@ -44,13 +44,14 @@ def _load(path: str, overrides: list[str], profile: str | None):
 
     import yaml
 
-    from ardrone_nmpc.config.schema import apply_overrides, config_from_dict, load_config
+    from ardrone_nmpc.config.io import apply_overrides, load_config
+    from ardrone_nmpc.config.schema import config_from_dict
 
     if profile is None:
         return load_config(path, overrides)
     data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     data.setdefault("sim", {})["plant"] = {"profile": profile}
-    return config_from_dict(apply_overrides(data, overrides), base_dir=Path(path).parent)
+    return config_from_dict(apply_overrides(data, overrides))
 
 
 def main() -> None:

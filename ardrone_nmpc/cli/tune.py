@@ -131,7 +131,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)
 
-    from ardrone_nmpc.config.schema import ConfigError, load_config
+    from ardrone_nmpc.config.io import load_config
+    from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.tune import engine as eng
     from ardrone_nmpc.experiments.tune import study as st
     from ardrone_nmpc.experiments.tune.objective import parse_objective
@@ -169,7 +170,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     columns = st.trials_columns(list(space), scen)
     console = console or Console(width=None if sys.stdout.isatty() else 160)
     err_console = err_console or Console(stderr=True)
-    make_spec = st.spec_factory(cfg=cfg, written=written_config(config, overrides, cfg),
+    make_spec = st.spec_factory(cfg=cfg, written=written_config(config, overrides),
                                 space=space, scenarios=scen, objective=obj,
                                 keep_dir=out_dir / "runs" if keep_runs else None)
 
@@ -232,15 +233,17 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
 
 
 def register(app: typer.Typer) -> None:
-    """Add the ``tune`` command to ``app``."""
+    """Add the ``tune`` command to ``app`` (errors go to the app's one handler,
+    :mod:`ardrone_nmpc.cli.handler`)."""
+    from ardrone_nmpc.cli.options import MAX_JOBS, non_empty
 
     @app.command()
     def tune(
         config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
         trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
-        jobs: Optional[int] = typer.Option(None, "--jobs", min=1, help="Trials flown at once (default: the CPU count); 1 = in this process."),
+        jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
         engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
-        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
         out: Optional[Path] = typer.Option(None, "--out", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
         seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
@@ -257,25 +260,19 @@ def register(app: typer.Typer) -> None:
         and best.yaml, prints the ranked table. Last line: best: <best.yaml>."""
         import os
 
-        from ardrone_nmpc.config.schema import ConfigError
-
         out_dir = out if out is not None else Path("logs") / "tune" / config.stem
         n_jobs = jobs if jobs is not None else os.cpu_count() or 1
         command = "ardrone-nmpc " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
             if sys.argv[1:2] == ["tune"] else f"ardrone-nmpc tune {config}"
-        try:
-            outcome = run_tune_command(config=config, overrides=set_, trials=trials,
-                                       jobs=n_jobs, engine=engine, scheduler=scheduler,
-                                       out_dir=out_dir, seed=seed, n_seeds=seeds,
-                                       variants=variant, space_file=space,
-                                       objective=objective, resume=resume,
-                                       keep_runs=keep_runs, top=top, command=command)
-        except ConfigError as err:
-            for line in err.messages:
-                typer.echo(f"error: {line}", err=True)
-            raise typer.Exit(code=1)
+        outcome = run_tune_command(config=config, overrides=set_, trials=trials, jobs=n_jobs,
+                                   engine=engine, scheduler=scheduler, out_dir=out_dir,
+                                   seed=seed, n_seeds=seeds, variants=variant,
+                                   space_file=space, objective=objective, resume=resume,
+                                   keep_runs=keep_runs, top=top, command=command)
         if outcome.best_path is not None:
             typer.echo(f"best: {outcome.best_path}")
         if outcome.interrupted:
+            from ardrone_nmpc.errors import EXIT_INTERRUPTED
+
             typer.echo("interrupted: --resume continues the study", err=True)
-            raise typer.Exit(code=130)
+            raise typer.Exit(code=EXIT_INTERRUPTED)

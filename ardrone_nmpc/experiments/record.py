@@ -94,7 +94,7 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
 
 def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None = None,
                     progress: Callable[[float], None] | None = None,
-                    catch: bool = False) -> Recording[SimResult]:
+                    catch: bool = False, live=None) -> Recording[SimResult]:
     """Fly ``cfg`` in the lockstep simulation into a new run directory under ``log_dir`` and
     summarise it (see :func:`record`).
 
@@ -102,7 +102,8 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     directory reproduces the flight. ``events.jsonl`` ends with :data:`SIMULATED_EVENT`,
     stamped with the experiment time at which the simulation ended (touch-down, or rest
     after an emergency stop): ``wall_s``, ``ticks``, ``ending``, ``final_mode``.
-    ``progress(fraction)`` is called every tick.
+    ``progress(fraction)`` is called every tick. ``live`` (a
+    :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too.
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
     created for times that give no tick count.
@@ -116,7 +117,10 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     wall0 = time.perf_counter()
 
     def fly(recorder: RunRecorder) -> SimResult:
-        result = lockstep.run_lockstep(cfg, recorder=recorder, seed=seed, progress=progress)
+        sink = live.tee(recorder) if live is not None else recorder
+        # the run flies its own copy of its input files (the path CSV in the run directory)
+        result = lockstep.run_lockstep(recorder.config, recorder=sink, seed=seed,
+                                       progress=progress)
         recorder.event(result.end_t_s, SIMULATED_EVENT, wall_s=time.perf_counter() - wall0,
                        ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)

@@ -42,6 +42,7 @@ from ardrone_nmpc.runs.window import experiment_rows
 from ardrone_nmpc.runtime.schedule import phase, write_events
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
+from ardrone_nmpc.errors import UserError
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -70,7 +71,7 @@ SAME_POSE_TOLERANCE_S = 1e-9
 _STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps", "psi_rad")
 
 
-class ReplayError(ValueError):
+class ReplayError(UserError, ValueError):
     """A run that cannot be replayed as asked (one line for the user)."""
 
 

@@ -87,6 +87,7 @@ from ardrone_nmpc.protocol.navdata import (
     decode_navdata,
 )
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
+from ardrone_nmpc.errors import UserError
 
 __all__ = [
     "CONTROL_PORT", "DEFAULT_HOST", "LinkError", "DroneLink", "flight_mode_of",
@@ -103,7 +104,7 @@ _CONFIG_DUMP_MAX_BYTES = 1 << 20
 _CONFIG_GET_RESEND_S = 0.5           # CTRL 4 resend period while the dump has not started
 
 
-class LinkError(RuntimeError):
+class LinkError(UserError, RuntimeError):
     """The drone link failed: no navdata, no config acknowledgement, a closed link, a socket
     error on an explicit command. The message says which and after how long."""
 

@@ -28,6 +28,7 @@ from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import WireSensors
 from ardrone_nmpc.sim.target import target_pose
+from ardrone_nmpc.errors import UserError
 
 
 @dataclass
@@ -47,7 +48,7 @@ class SimResult:
     end_t_s: float = math.nan  # experiment time when it ended: touch-down, or rest after a stop
 
 
-class TakeoffRefused(RuntimeError):
+class TakeoffRefused(UserError, RuntimeError):
     """The pre-flight check failed (battery at or below the floor): nothing took off."""
 
 

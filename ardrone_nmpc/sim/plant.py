@@ -9,8 +9,11 @@ Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``comma
     v_x' =  cos ψ·forward + sin ψ·right − k_d·(v_x − w_x) [− d·v_x in position hold]
     v_y' =  sin ψ·forward − cos ψ·right − k_d·(v_y − w_y) [− d·v_y in position hold]
 
-with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` and
-d = max(0, 1/hover_tau_s − k_d), so that without wind a hold damps v_xy with τ = hover_tau_s.
+with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` (+ the turbulence, a
+Gauss–Markov wind of ``turbulence_std_mps``) and d = max(0, 1/hover_tau_s − k_d), so that without
+wind a hold damps v_xy with τ = hover_tau_s. This is the ``ardrone`` profile's backend; the
+``thesis_kit`` one (:mod:`~ardrone_nmpc.sim.plant_kit`) replaces :meth:`_motors_on_step`
+(docs/plant-profiles.md).
 
 Sign conventions
 ----------------
@@ -87,7 +90,9 @@ __all__ = [
     "PlantParams",
     "airframe_derivative",
     "freefall_derivative",
+    "gauss_markov_step",
     "mocap_rotation_xyz_rad",
+    "plant_backend",
     "rk4_step",
     "rotation_heading_rad",
 ]
@@ -125,6 +130,9 @@ class PlantParams:
     initial_psi_rad: float = 0.0
     battery_start_pct: float = 100.0
     battery_drain_pct_per_min: float = 1.5
+    # --- air turbulence (docs/plant-profiles.md): a horizontal Gauss–Markov wind, σ per axis
+    turbulence_std_mps: float = 0.0
+    turbulence_tau_s: float = 5.0
     # --- on-board behaviour (protocol §5), no config key
     hover_tau_s: float = 0.5                 # optical-flow position hold: v_xy time constant
     takeoff_altitude_m: float = 0.9          # where the take-off climb settles
@@ -146,13 +154,14 @@ class PlantParams:
         for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps",
                      "tau_tilt_s", "tau_yaw_s", "tau_vz_s", "integration_step_s", "hover_tau_s",
                      "takeoff_altitude_m", "takeoff_climb_mps", "landing_speed_mps",
-                     "navdata_velocity_bias_tau_s"):
+                     "navdata_velocity_bias_tau_s", "turbulence_tau_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        if not (math.isfinite(self.command_delay_s) and self.command_delay_s >= 0.0):
-            raise ValueError(
-                f"command_delay_s must be finite and >= 0, got {self.command_delay_s!r}")
+        for name in ("command_delay_s", "turbulence_std_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
             raise ValueError(f"initial_position_m must be [x, y, z] with z >= 0, "
                              f"got {self.initial_position_m!r}")
@@ -183,6 +192,8 @@ class PlantParams:
             initial_psi_rad=plant.initial_psi_rad,
             battery_start_pct=plant.battery_start_pct,
             battery_drain_pct_per_min=plant.battery_drain_pct_per_min,
+            turbulence_std_mps=plant.turbulence_std_mps,
+            turbulence_tau_s=plant.turbulence_tau_s,
             **overrides,
         )
 
@@ -336,6 +347,28 @@ def airframe_rk4_many(state, commands, k, w, h):
     return commands.shape[0], x
 
 
+# ----------------------------------------------------------------------------- backends
+
+
+def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, normals) -> tuple:
+    """Independent Gauss–Markov processes (stationary σ ``std``, correlation time ``tau_s``)
+    advanced exactly over ``dt_s`` with standard normal draws ``normals``."""
+    a = math.exp(-dt_s / tau_s)
+    q = std * math.sqrt(1.0 - a * a)
+    return tuple(a * v + q * n for v, n in zip(values, normals))
+
+
+def plant_backend(profile: str) -> type:
+    """The plant class of a ``sim.plant.profile`` (docs/plant-profiles.md): the kit's linear
+    identified channels for ``thesis_kit``, :class:`AirframePlant` for the ``ardrone`` ones."""
+    if profile == "thesis_kit":
+        from ardrone_nmpc.sim.plant_kit import KitPlant  # imports this module
+        return KitPlant
+    if profile.startswith("ardrone"):
+        return AirframePlant
+    raise ValueError(f"unknown plant profile {profile!r}")
+
+
 # ----------------------------------------------------------------------------- sensor geometry
 
 
@@ -419,7 +452,11 @@ class AirframePlant:
         self.noise = noise
         self.wind_mps = np.zeros(3)
         root = np.random.default_rng(seed)
-        self._mocap_rng, self._nav_rng, self._bias_rng = root.spawn(3)
+        # a fourth stream for the turbulence: spawn(4)'s first three equal spawn(3)'s, so the
+        # sensor noise of a seed does not depend on the turbulence setting
+        self._mocap_rng, self._nav_rng, self._bias_rng, self._gust_rng = root.spawn(4)
+        self._gust_mps = tuple(params.turbulence_std_mps * v
+                               for v in self._gust_rng.standard_normal(2))
         x, y, z = params.initial_position_m
         psi = _wrap_rad(float(params.initial_psi_rad))
         self._state = (x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
@@ -437,7 +474,12 @@ class AirframePlant:
     def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
                     seed: int | None = None) -> AirframePlant:
         """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``seed``
-        (default ``sim.seed``)."""
+        (default ``sim.seed``): the backend ``sim.plant.profile`` names (docs/plant-profiles.md),
+        e.g. a :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` for ``thesis_kit``."""
+        if cls is AirframePlant:
+            backend = plant_backend(getattr(sim_cfg.plant, "profile", "ardrone"))
+            if backend is not cls:
+                return backend.from_config(sim_cfg, drone_cfg, seed=seed)
         return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
                    seed=sim_cfg.seed if seed is None else seed)
 
@@ -455,6 +497,12 @@ class AirframePlant:
     @property
     def battery_pct(self) -> float:
         return self._battery
+
+    @property
+    def moving(self) -> bool:
+        """The current PCMD is progressive with a non-zero value (the drone is *flying* a
+        command rather than hovering; its navdata ctrl_state tells the two apart)."""
+        return any(self._current[:4]) and not self._current[4]
 
     def command(self, roll_frac: float, pitch_frac: float, gaz_frac: float, yaw_frac: float,
                 *, progressive: bool = True) -> None:
@@ -550,12 +598,19 @@ class AirframePlant:
         if n == 0:
             return
         wind = tuple(float(w) for w in self.wind_mps)
+        if self.params.turbulence_std_mps > 0.0:
+            wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
         done = self._flying_substeps(n, h, wind) if self._mode is FlightMode.FLYING else 0
         for _ in range(n - done):
             self._substep(h, wind)
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
         self._state = (x, y, z, vx, vy, vz, phi, theta, _wrap_rad(psi), r)
         self._advance_biases(n * h)
+        p = self.params
+        if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
+            self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
+                                               p.turbulence_tau_s, n * h,
+                                               self._gust_rng.standard_normal(2))
 
     def _flying_substeps(self, n: int, h: float, wind: tuple) -> int:
         """Up to ``n`` FLYING substeps in one compiled call (:func:`airframe_rk4_many`), the
@@ -564,8 +619,9 @@ class AirframePlant:
         contact applied here, as :meth:`_substep` does) and leaves to :meth:`_substep` the
         steps that could empty the battery (a mode change). Returns the steps done."""
         drain = self.params.battery_drain_pct_per_min * h / 60.0
-        # a subclass may fly other dynamics per substep: it keeps the step-by-step path
-        if n < 2 or type(self) is not AirframePlant or self._battery <= (n + 1) * drain:
+        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path
+        if (n < 2 or type(self)._motors_on_step is not AirframePlant._motors_on_step
+                or self._battery <= (n + 1) * drain):
             return 0
         fifo, current = self._fifo, self._current
         delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
@@ -595,11 +651,8 @@ class AirframePlant:
             deriv, command = freefall_derivative, _HOVER
         else:
             return  # LANDED, or EMERGENCY lying on the ground: frozen
-        if deriv is airframe_derivative:  # the compiled twin of rk4_step(airframe_derivative)
-            roll, pitch, gaz, yaw, hold = command
-            state = airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
-                                 bool(hold), self.params.rhs_coefficients,
-                                 tuple(map(float, wind)), h)
+        if deriv is airframe_derivative:
+            state = self._motors_on_step(command, h, wind)
         else:
             state = rk4_step(deriv, self._state, h, command, self.params, wind)
         self._state = state if state[2] > 0.0 else self._ground_contact(state)
@@ -608,6 +661,14 @@ class AirframePlant:
             self._battery = max(0.0, self._battery - drain)
             if mode is not FlightMode.FLYING or self._battery <= 0.0:
                 self._check_transitions()
+
+    def _motors_on_step(self, command: tuple, h: float, wind: tuple) -> tuple:
+        """One step of the motors-on dynamics from ``self._state`` (the backend's hook: a
+        profile with other dynamics overrides this, the modes, sensors and faults stay)."""
+        roll, pitch, gaz, yaw, hold = command  # the compiled twin of rk4_step(airframe_derivative)
+        return airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
+                            bool(hold), self.params.rhs_coefficients,
+                            tuple(map(float, wind)), h)
 
     def _auto_command(self, mode: FlightMode) -> tuple:
         p = self.params
@@ -657,9 +718,8 @@ class AirframePlant:
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
         self._yaw_bias_deg = _wrap_deg(self._yaw_bias_deg + math.degrees(drift + walk))
-        a = math.exp(-dt / p.navdata_velocity_bias_tau_s)
-        q = p.navdata_velocity_bias_std_mps * math.sqrt(1.0 - a * a)
-        self._vel_bias = (a * self._vel_bias[0] + q * n[1], a * self._vel_bias[1] + q * n[2])
+        self._vel_bias = gauss_markov_step(self._vel_bias, p.navdata_velocity_bias_std_mps,
+                                           p.navdata_velocity_bias_tau_s, dt, n[1:])
 
     # ------------------------------------------------------------------ outputs
 

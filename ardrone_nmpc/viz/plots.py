@@ -39,6 +39,7 @@ import numpy as np
 from ardrone_nmpc.experiments.sweep.table import SWEEP_FILE, SweepTable, SweepTableError
 from ardrone_nmpc.experiments.sweep.table import read_sweep as _read_sweep_table
 from ardrone_nmpc.runs.window import experiment_rows, flying_rows
+from ardrone_nmpc.errors import UserError
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -97,7 +98,7 @@ _LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": "smal
            "borderaxespad": 0.0}
 
 
-class PlotError(ValueError):
+class PlotError(UserError, ValueError):
     """Data that cannot be plotted, or a plot request that makes no sense (one line)."""
 
 

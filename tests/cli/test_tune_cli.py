@@ -11,7 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.experiments.tune.engine import plant_variants
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 optuna = pytest.importorskip("optuna")
@@ -19,6 +20,9 @@ optuna = pytest.importorskip("optuna")
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_z.yaml")
 SHORT = ["--set", "duration_s=2", "--set", "sim.settle_s=0.5", "--seeds", "2"]
+# every trial flies each seed on each plant profile of the schema (sim.plant.profile)
+PROFILES = [label for label, _ in plant_variants()]
+LABELS = [f"seed{s}+{p}" for p in PROFILES for s in (0, 1)] if PROFILES else ["seed0", "seed1"]
 METRICS = ["score", "tracking_m", "rmse_m", "path_deviation_m", "settling_s", "overshoot_pct",
            "effort", "solver_failures", "supervisor_ticks", "aborted", "after_step_s"]
 SPACE = [f"controller.q[{i}]" for i in range(7)] + [f"controller.r[{i}]" for i in range(4)]
@@ -40,16 +44,16 @@ def _study(out: Path):
 def _check_trials(out: Path, n: int) -> list[dict[str, str]]:
     rows = _rows(out)
     assert list(rows[0]) == ["trial", "status", "score", *SPACE, "wall_s", "sim_s",
-                             *(f"seed{s}:{m}" for s in (0, 1) for m in METRICS), "message"]
+                             *(f"{label}:{m}" for label in LABELS for m in METRICS), "message"]
     assert [r["trial"] for r in rows] == [str(i) for i in range(n)]
     study = _study(out)
     for row, trial in zip(rows, sorted(study.trials, key=lambda t: t.number)):
         assert float(row["score"]) == trial.value
         assert row["status"] == "ok", row["message"]
         assert {k: float(row[k]) for k in SPACE} == trial.params
-        for s in (0, 1):
-            assert 0.0 < float(row[f"seed{s}:tracking_m"]) < 1.0
-            assert row[f"seed{s}:aborted"] == "0"
+        for label in LABELS:
+            assert 0.0 < float(row[f"{label}:tracking_m"]) < 1.0
+            assert row[f"{label}:aborted"] == "0"
     # the first trial asked flies the config's own weights
     assert [12, 2, 7, 2, 5, 10, 13, 4, 12, 12, 24] in [[float(r[k]) for k in SPACE] for r in rows]
     return rows
@@ -73,7 +77,7 @@ def test_a_two_trial_local_tune_writes_trials_best_and_the_table(tmp_path):
     rows = _check_trials(tmp_path, 2)
     _check_best(tmp_path, rows)
     assert "best 2 of 2 trials" in result.stdout and "q[4]" in result.stdout
-    assert "2 trials (2 flown now, 0 before) × 2 scenarios" in result.stdout
+    assert f"2 trials (2 flown now, 0 before) × {len(LABELS)} scenarios" in result.stdout
     assert result.stdout.strip().splitlines()[-1] == f"best: {tmp_path / 'best.yaml'}"
     assert not (tmp_path / "runs").exists()  # no run directory without --keep-runs
     flown = runner.invoke(app, ["simulate", str(tmp_path / "best.yaml"), "--log-dir",
@@ -143,9 +147,12 @@ def test_keep_runs_writes_each_flight_s_run_directory(tmp_path):
     result = _tune(tmp_path, "--trials", "1", "--jobs", "1", "--keep-runs")
     assert result.exit_code == 0, result.output
     runs = sorted((tmp_path / "runs" / "trial-00000").iterdir())
-    assert len(runs) == 2 and all((r / "summary.csv").is_file() for r in runs)
-    seeds = sorted(load_config(r / "config.yaml").sim.seed for r in runs)
-    assert seeds == [0, 1]
+    assert all((r / "summary.csv").is_file() for r in runs)
+    flown = sorted((load_config(r / "config.yaml").sim.seed,
+                    getattr(load_config(r / "config.yaml").sim.plant, "profile", ""))
+                   for r in runs)
+    assert len(runs) == len(LABELS)
+    assert flown == sorted((int(label[4]), label.partition("+")[2]) for label in LABELS)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder, read_run
 from ardrone_nmpc.runs.summary import summarise

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import minimize
 
 from ardrone_nmpc.experiments.bench import HOVER_STATE, closed_loop, plant_step
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.newton import NewtonGMRESController, make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus
@@ -231,7 +231,7 @@ def test_horizon_ramp_grows_from_zero():
 
 def test_solvers_build_from_the_config():
     cfg = load_config(None, ["controller.solver.method=newton", "controller.horizon_steps=8",
-                             "controller.solver.kmax=7"])
+                             "controller.solver.newton_kmax=7"])
     solver = make_nmpc(cfg.controller, period_s=cfg.loop.period_s)
     assert isinstance(solver, NewtonGMRESController)
     assert solver.spec.horizon_steps == 8 and solver.kmax == 7

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc import model
-from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control import kernels as K
 from ardrone_nmpc.control import obstacles as O
 from ardrone_nmpc.control.cgmres import CGMRESController

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant
 
@@ -42,7 +42,8 @@ def _fly(cfg, *, batched: bool, monkeypatch, batched_steps: list | None = None) 
 @pytest.mark.parametrize("overrides", [
     [],                                              # the default 0.26 s command delay
     ["sim.plant.command_delay_s=0"],                 # commands act at once
-    ["sim.plant.battery_drain_pct_per_min=900"],     # empties the battery in flight
+    ["sim.plant.battery_drain_pct_per_min=100",      # empties the battery in flight
+     "sim.plant.battery_start_pct=25"],
 ])
 def test_batched_flying_substeps_equal_the_step_by_step_path(overrides, monkeypatch):
     cfg = load_config(None, overrides)
@@ -51,7 +52,17 @@ def test_batched_flying_substeps_equal_the_step_by_step_path(overrides, monkeypa
     fast = _fly(cfg, batched=True, monkeypatch=monkeypatch, batched_steps=steps)
     assert sum(steps) > 500  # the compiled path did fly many substeps
     assert fast == slow  # exact: same floats, modes, battery, time
-    if "900" in " ".join(overrides):  # the battery emptied in flight: it landed by itself
+    if "sim.plant.battery_start_pct=25" in overrides:  # the battery emptied in flight: it landed by itself
         assert slow[-1][2] == 0.0 and slow[-1][1] in (FlightMode.LANDING, FlightMode.LANDED)
     else:  # the dives touched the ground while flying
         assert any(row[5] == 0.0 and row[1] is FlightMode.FLYING for row in slow)
+
+
+def test_a_backend_with_its_own_dynamics_keeps_the_step_by_step_path():
+    cfg = load_config(None, ["sim.plant.profile=thesis_kit"])
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=0)
+    assert type(plant)._motors_on_step is not AirframePlant._motors_on_step  # the kit's
+    plant.takeoff()
+    while plant.mode is not FlightMode.FLYING:
+        plant.advance(0.065)
+    assert plant._flying_substeps(13, plant.params.integration_step_s, (0.0, 0.0, 0.0)) == 0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc.viz import plots
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.viz.plots import PlotError
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 

@@ -117,7 +117,8 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     """Fly ``spec`` on each of its scenarios and score it. Never raises: a flight that
     cannot run (an invalid config, an exception) makes the trial ``failed`` with the
     objective's penalty."""
-    from ardrone_nmpc.config.schema import ConfigError, apply_overrides, config_from_dict
+    from ardrone_nmpc.config.io import apply_overrides
+    from ardrone_nmpc.config.schema import ConfigError, config_from_dict
 
     wall0 = time.perf_counter()
     # the trial's values on the config as written: a scenario's plant profile still fills

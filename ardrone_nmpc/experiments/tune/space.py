@@ -34,7 +34,8 @@ from typing import Any
 
 import yaml
 
-from ardrone_nmpc.config.schema import ConfigError, config_from_dict, config_to_dict
+from ardrone_nmpc.config.io import config_to_dict
+from ardrone_nmpc.config.schema import ConfigError, config_from_dict
 
 __all__ = ["DEFAULT_FACTOR", "Param", "apply_params", "config_with", "default_space",
            "load_space", "parse_space", "written_config"]
@@ -221,18 +222,18 @@ def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
     return out
 
 
-def written_config(path: str | Path | None, overrides: Sequence[str], cfg) -> dict[str, Any]:
+def written_config(path: str | Path | None, overrides: Sequence[str]) -> dict[str, Any]:
     """The config as written in ``path`` with the ``--set`` overrides, as a mapping (keys
     left out stay out, so defaults that depend on other keys — a plant profile's — still
-    follow them); a relative ``reference.path_file`` as ``cfg`` resolved it."""
-    from ardrone_nmpc.config.schema import apply_overrides
+    follow them), read as :func:`~ardrone_nmpc.config.io.load_config` reads it."""
+    from ardrone_nmpc.config.io import _path_file, _read_yaml, apply_overrides
 
     data: dict[str, Any] = {}
     if path is not None:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+        data = _read_yaml(Path(path))
+        _path_file(data, Path(path).parent)
     data = apply_overrides(data, overrides)
-    if isinstance(data.get("reference"), dict) and "path_file" in data["reference"]:
-        data["reference"]["path_file"] = cfg.reference.path_file
+    _path_file(data, Path.cwd())
     return data
 
 
@@ -240,7 +241,7 @@ def config_with(cfg, values: Mapping[str, float], space: Mapping[str, Param] | N
                 overrides: Sequence[str] = ()):
     """``cfg`` with the parameter values (and then ``--set``-style overrides) applied,
     validated. Raises :class:`ConfigError`."""
-    from ardrone_nmpc.config.schema import apply_overrides
+    from ardrone_nmpc.config.io import apply_overrides
 
     data = apply_params(config_to_dict(cfg), values, space)
     return config_from_dict(apply_overrides(data, overrides))

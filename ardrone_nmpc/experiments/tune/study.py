@@ -28,7 +28,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from ardrone_nmpc.config.schema import ConfigError, config_to_dict, dump_config
+from ardrone_nmpc.config.io import config_to_dict, dump_config
+from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.experiments.tune.engine import Scenario, TrialResult, TrialSpec
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
