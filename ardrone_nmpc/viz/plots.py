@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ardrone_nmpc.core.angles import unwrap_near_turns
 from ardrone_nmpc.experiments.sweep.table import SWEEP_FILE, SweepTable, SweepTableError
 from ardrone_nmpc.experiments.sweep.table import read_sweep as _read_sweep_table
 from ardrone_nmpc.runs.window import experiment_rows, flying_rows
@@ -247,9 +248,11 @@ def _run_title(run: RunData, what: str) -> str:
 
 def _psi_near(psi: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """ψ shifted by whole turns to lie within π of the (continuous) reference, so a wrapped
-    heading does not jump by 2π across the plot."""
-    turns = np.round((psi - ref) / (2.0 * math.pi))
-    return psi - 2.0 * math.pi * np.where(np.isfinite(turns), turns, 0.0)
+    heading does not jump by 2π across the plot; kept as it is where either is not finite."""
+    out = np.array(psi, dtype=float)
+    both = np.isfinite(out - ref)
+    out[both] = unwrap_near_turns(out[both], ref[both])
+    return out
 
 
 #: Smallest y-extent of the tracking panels: 5 cm and 0.05 rad (≈ 3°).
