@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc
-from ardrone_nmpc.control.newton import make_nmpc
+from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
 
 
