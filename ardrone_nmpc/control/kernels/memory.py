@@ -83,6 +83,36 @@ class SolverMemory:
                                gauss_newton], dtype=np.int64)
 
     @property
+    def kmax(self) -> int:
+        """Krylov dimension of a continuation update (``newton``: of each Newton step)."""
+        return int(self._iprm[1])
+
+    @kmax.setter
+    def kmax(self, value: int) -> None:
+        if not 1 <= value <= self._kmax:  # the workspace holds at most this many vectors
+            raise ValueError(f"kmax: must be in 1 … {self._kmax}, got {value}")
+        self._iprm[1] = value
+
+    @property
+    def max_newton_iterations(self) -> int:
+        """Newton steps per solve."""
+        return int(self._iprm[2])
+
+    @max_newton_iterations.setter
+    def max_newton_iterations(self, value: int) -> None:
+        if value < 1:
+            raise ValueError(f"max_newton_iterations: must be ≥ 1, got {value}")
+        self._iprm[2] = value
+
+    def snapshot(self) -> np.ndarray:
+        """A copy of the whole float memory (solution, warm start, settings, workspace)."""
+        return self._mem.copy()
+
+    def restore(self, snapshot: np.ndarray) -> None:
+        """Put back what :meth:`snapshot` took (to repeat a tick from the same warm start)."""
+        self._mem[:] = snapshot
+
+    @property
     def n_obstacles(self) -> int:
         """Obstacles in the table; 0 runs the kernels' obstacle-free specialisation."""
         return int(self._iprm[4])
