@@ -51,7 +51,9 @@ class AxisTest:
         i = max(range(3), key=lambda k: abs(d[k]))
         if abs(d[i]) >= AXIS_STEP_M:
             self.seen[_AXES[i]].add(1 if d[i] > 0 else -1)
-        dpsi = math.remainder(float(psi_rad) - self.origin_psi_rad, 2.0 * math.pi)
+        from ardrone_nmpc.core.angles import wrap_angle_rad  # numpy: not at --help time
+
+        dpsi = wrap_angle_rad(float(psi_rad) - self.origin_psi_rad)
         if abs(dpsi) >= YAW_STEP_RAD:
             self.seen["yaw CCW"].add(1 if dpsi > 0 else -1)
 

@@ -77,7 +77,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.core.angles import TWO_PI
+from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -383,18 +383,7 @@ def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
     (mocap-stream.md)."""
     r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
     r00 = math.cos(ry) * math.cos(rz)
-    return _wrap_rad(math.atan2(r10, r00))
-
-
-def _wrap_rad(a: float) -> float:
-    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` for a finite python float, without numpy."""
-    r = math.remainder(a, TWO_PI)
-    return math.pi if r <= -math.pi else r
-
-
-def _wrap_deg(a: float) -> float:
-    r = math.remainder(a, 360.0)
-    return 180.0 if r <= -180.0 else r
+    return wrap_angle_rad(math.atan2(r10, r00))
 
 
 def _finite_frac(name: str, value: float) -> float:
@@ -443,7 +432,7 @@ class AirframePlant:
         self._gust_mps = tuple(params.turbulence_std_mps * v
                                for v in self._gust_rng.standard_normal(2))
         x, y, z = params.initial_position_m
-        psi = _wrap_rad(float(params.initial_psi_rad))
+        psi = wrap_angle_rad(float(params.initial_psi_rad))
         self._state = (x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
         self._mode = FlightMode.FLYING if z > 0.0 else FlightMode.LANDED
         self._battery = float(params.battery_start_pct)
@@ -588,7 +577,7 @@ class AirframePlant:
         for _ in range(n):
             self._substep(h, wind)
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
-        self._state = (x, y, z, vx, vy, vz, phi, theta, _wrap_rad(psi), r)
+        self._state = (x, y, z, vx, vy, vz, phi, theta, wrap_angle_rad(psi), r)
         self._advance_biases(n * h)
         p = self.params
         if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
@@ -676,7 +665,7 @@ class AirframePlant:
         n = self._bias_rng.standard_normal(3)
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
-        self._yaw_bias_deg = _wrap_deg(self._yaw_bias_deg + math.degrees(drift + walk))
+        self._yaw_bias_deg = wrap_angle_deg(self._yaw_bias_deg + math.degrees(drift + walk))
         self._vel_bias = gauss_markov_step(self._vel_bias, p.navdata_velocity_bias_std_mps,
                                            p.navdata_velocity_bias_tau_s, dt, n[1:])
 
@@ -688,7 +677,7 @@ class AirframePlant:
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
         return PlantTruth(
             t_s=self.t_s, position_m=_readonly(x, y, z), velocity_mps=_readonly(vx, vy, vz),
-            roll_rad=phi, pitch_rad=theta, psi_rad=_wrap_rad(psi), psi_rate_radps=r,
+            roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
             mode=self._mode, battery_pct=self._battery)
 
     def mocap_pose(self) -> MocapPose:
@@ -697,7 +686,8 @@ class AirframePlant:
         n = self._mocap_rng.standard_normal(6)
         sp, sa = self.noise.mocap_position_std_m, self.noise.mocap_angle_std_rad
         rx, ry, rz = mocap_rotation_xyz_rad(phi, theta, psi)
-        rx, ry, rz = _wrap_rad(rx + sa * n[3]), ry + sa * n[4], _wrap_rad(rz + sa * n[5])
+        rx, ry = wrap_angle_rad(rx + sa * n[3]), ry + sa * n[4]
+        rz = wrap_angle_rad(rz + sa * n[5])
         return MocapPose(
             t_s=self.t_s,
             position_m=_readonly(x + sp * n[0], y + sp * n[1], z + sp * n[2]),
@@ -711,7 +701,8 @@ class AirframePlant:
         n = self._nav_rng.standard_normal(7)
         roll = math.degrees(phi + self._trim_bias_rad[0] + nz.navdata_attitude_std_rad * n[0])
         pitch = math.degrees(-theta + self._trim_bias_rad[1] + nz.navdata_attitude_std_rad * n[1])
-        yaw = _wrap_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2]) + self._yaw_bias_deg)
+        yaw = wrap_angle_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2])
+                             + self._yaw_bias_deg)
         if self._mode.airborne:
             c, s = math.cos(psi), math.sin(psi)
             sv = nz.navdata_velocity_std_mps
