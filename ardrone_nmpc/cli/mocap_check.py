@@ -173,7 +173,7 @@ def register(app: typer.Typer) -> None:
         per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>."""
         from ardrone_nmpc.config.schema import ConfigError, tracked_object
         from ardrone_nmpc.config.io import load_config
-        from ardrone_nmpc.links.mocap_source import open_mocap_source
+        from ardrone_nmpc.links.mocap_factory import open_mocap_source
 
         try:
             cfg = load_config(config, set_)

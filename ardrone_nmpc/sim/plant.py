@@ -91,7 +91,6 @@ __all__ = [
     "freefall_derivative",
     "gauss_markov_step",
     "mocap_rotation_xyz_rad",
-    "plant_backend",
     "rk4_step",
     "rotation_heading_rad",
 ]
@@ -343,17 +342,6 @@ def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, norm
     return tuple(a * v + q * n for v, n in zip(values, normals))
 
 
-def plant_backend(profile: str) -> type:
-    """The plant class of a ``sim.plant.profile`` (docs/plant-profiles.md): the kit's linear
-    identified channels for ``thesis_kit``, :class:`AirframePlant` for the ``ardrone`` ones."""
-    if profile == "thesis_kit":
-        from ardrone_nmpc.sim.plant_kit import KitPlant  # imports this module
-        return KitPlant
-    if profile.startswith("ardrone"):
-        return AirframePlant
-    raise ValueError(f"unknown plant profile {profile!r}")
-
-
 # ----------------------------------------------------------------------------- sensor geometry
 
 
@@ -448,12 +436,8 @@ class AirframePlant:
     def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
                     seed: int | None = None) -> AirframePlant:
         """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``seed``
-        (default ``sim.seed``): the backend ``sim.plant.profile`` names (docs/plant-profiles.md),
-        e.g. a :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` for ``thesis_kit``."""
-        if cls is AirframePlant:
-            backend = plant_backend(getattr(sim_cfg.plant, "profile", "ardrone"))
-            if backend is not cls:
-                return backend.from_config(sim_cfg, drone_cfg, seed=seed)
+        (default ``sim.seed``). This class only: :func:`~ardrone_nmpc.sim.backends.make_plant`
+        picks the backend ``sim.plant.profile`` names (docs/plant-profiles.md)."""
         return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
                    seed=sim_cfg.seed if seed is None else seed)
 

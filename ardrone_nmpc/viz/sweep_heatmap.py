@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ardrone_nmpc.experiments.sweep.table import SweepTable, SweepTableError
-from ardrone_nmpc.experiments.sweep.table import read_sweep as _read_sweep_table
+from ardrone_nmpc.runs.sweep_table import SweepTable, SweepTableError
+from ardrone_nmpc.runs.sweep_table import read_sweep as _read_sweep_table
 from ardrone_nmpc.viz.figure import PlotError, new_figure
 
 if TYPE_CHECKING:  # pragma: no cover
