@@ -11,7 +11,7 @@ from rich.table import Table
 
 from ardrone_nmpc.cli.console import stdout_console
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.control.newton import make_nmpc
+from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc

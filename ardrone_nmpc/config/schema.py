@@ -50,6 +50,8 @@ from ardrone_nmpc.config.fields import (
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
 from ardrone_nmpc.errors import UserError
 
+from ardrone_nmpc.core import defaults
+
 __all__ = [
     "ConfigError",
     "ControllerConfig",
@@ -93,37 +95,46 @@ class SolverConfig(Section):
     method: Literal["cgmres", "newton"] = Field(
         "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
         "'newton': the thesis' per-step Newton iterations with fdgmres.")
-    kmax: int = Field(5, ge=1, le=1000,
+    kmax: int = Field(defaults.KMAX, ge=1, le=1000,
                       description="C/GMRES: Krylov-subspace dimension per solve (count).")
     newton_kmax: int = Field(
-        30, ge=1, le=1000, description="Method 'newton': Krylov dimension k_max of each Newton "
-        "step (Algorithm 1; the thesis gives none). Its system is uncondensed (8 unknowns per "
-        "stage): with 5, GMRES stops far above η and Newton stalls at ‖F‖ ≈ 0.1 "
-        "(docs/thesis-reproduction.md).")
+        defaults.NEWTON_KMAX, ge=1, le=1000, description="Method 'newton': Krylov dimension "
+        "k_max of each Newton step (Algorithm 1; the thesis gives none). Its system is "
+        "uncondensed (8 unknowns per stage): with 5, GMRES stops far above η and Newton stalls "
+        "at ‖F‖ ≈ 0.1 (docs/thesis-reproduction.md).")
     zeta_per_s: Positive = Field(
-        15.0, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
+        defaults.ZETA_PER_S, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
     fd_step: Positive = Field(
-        1e-6, description="Forward-difference step h of Jacobian-vector products (dimensionless).")
+        defaults.FD_STEP,
+        description="Forward-difference step h of Jacobian-vector products (dimensionless).")
     gmres_rtol: float = Field(
-        1e-3, gt=0, lt=1, description="GMRES relative residual tolerance η (thesis Algorithm 1).")
+        defaults.GMRES_RTOL, gt=0, lt=1,
+        description="GMRES relative residual tolerance η (thesis Algorithm 1).")
     tolerance: Positive = Field(
-        1e-4, description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
-    max_newton_iterations: int = Field(20, ge=1, le=1000,
+        defaults.TOLERANCE,
+        description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
+    max_newton_iterations: int = Field(defaults.MAX_NEWTON_ITERATIONS, ge=1, le=1000,
                                        description="Newton iteration cap per solve.")
     dummy_weight: Positive = Field(
-        0.01, description="Linear cost weight of the dummy inputs that enforce the input bounds.")
+        defaults.DUMMY_WEIGHT,
+        description="Linear cost weight of the dummy inputs that enforce the input bounds.")
     bound_epsilon: NonNegative = Field(
-        1e-3, description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
+        defaults.BOUND_EPSILON,
+        description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
     horizon_ramp_rate_per_s: NonNegative = Field(
-        0.0, description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
+        defaults.HORIZON_RAMP_RATE_PER_S,
+        description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
     divergence_residual: Positive = Field(
-        1e3, description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
+        defaults.DIVERGENCE_RESIDUAL,
+        description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
     newton_trigger_residual: Positive = Field(
-        100.0, description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
+        defaults.NEWTON_TRIGGER_RESIDUAL,
+        description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
         "re-projects onto F = 0 by Newton/GMRES warm-started from the current solution (a "
         "reference jump is an impulse the continuation cannot follow).")
     condensed: bool = Field(
-        True, description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
+        defaults.CONDENSED,
+        description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
         "form (4 unknowns per stage, not 12). Same equations; GMRES(5) stagnates on the "
         "uncondensed saddle-point system, so false is for comparison only.")
 
@@ -167,22 +178,24 @@ class ControllerConfig(Section):
 
     kind: Literal["nmpc", "p"] = Field(
         "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
-    horizon_steps: int = Field(15, ge=1, le=1000, description="Prediction horizon N (steps).")
-    dtau_s: Positive = Field(0.1, le=1.0,
+    horizon_steps: int = Field(defaults.HORIZON_STEPS, ge=1, le=1000,
+                               description="Prediction horizon N (steps).")
+    dtau_s: Positive = Field(defaults.DTAU_S, le=1.0,
                              description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
-        (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0),
+        defaults.Q_STATE,
         description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
     r: PositiveVec4 = Field(
-        (4.0, 12.0, 12.0, 24.0),
+        defaults.R_INPUT,
         description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
     q_terminal: NonNegativeVec7 = Field(
-        (0.0,) * 7, description="Terminal state weights, order as q (the thesis has none).")
+        defaults.Q_TERMINAL,
+        description="Terminal state weights, order as q (the thesis has none).")
     u_min: Vec4 = Field(
-        (-1.0, -1.0, -1.0, -1.0),
+        defaults.U_MIN,
         description="Input lower bounds [m/s², rad, rad, rad/s] (thesis eq. 4.17).")
     u_max: Vec4 = Field(
-        (1.0, 1.0, 1.0, 1.0),
+        defaults.U_MAX,
         description="Input upper bounds [m/s², rad, rad, rad/s]; each above u_min (eq. 4.17).")
     vz_lead_s: Optional[Positive] = Field(
         0.5, description="ż reference = ż estimate + z̈ · vz_lead_s (s). The drone's vertical "
@@ -334,7 +347,7 @@ class LoopConfig(Section):
     """The control loop."""
 
     period_s: Positive = Field(
-        0.065, ge=0.001, le=1.0,
+        defaults.LOOP_PERIOD_S, ge=0.001, le=1.0,
         description="Control period (s), 1 ms … 1 s; 65 ms in the thesis.")
 
 

@@ -34,7 +34,8 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import IX_PSI, FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
@@ -298,7 +299,7 @@ def _cost(*, cfg, trajectory, t_s: np.ndarray, states: np.ndarray, u_logged: np.
     if not window.any():
         return RerunCost(0, 0.0, 0.0, 0.0)
     err = states[window] - trajectory.state_at(t_s[window])
-    err[:, 6] = (err[:, 6] + math.pi) % (2 * math.pi) - math.pi  # as OcpSpec.stage_cost
+    err[:, IX_PSI] = wrap_angle_rad(err[:, IX_PSI])  # as OcpSpec.stage_cost
     period = cfg.loop.period_s
 
     def input_part(u: np.ndarray) -> float:

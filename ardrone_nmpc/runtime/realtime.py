@@ -73,7 +73,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
     result = result if result is not None else FlightResult()
     from ardrone_nmpc.links.drone_link import DroneLink
     from ardrone_nmpc.links.mocap_link import MocapLink
-    from ardrone_nmpc.links.mocap_source import open_mocap_source
+    from ardrone_nmpc.links.mocap_factory import open_mocap_source
 
     seed = cfg.sim.seed if seed is None else seed
     schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing

@@ -78,7 +78,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.core.angles import TWO_PI
+from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -92,7 +92,6 @@ __all__ = [
     "freefall_derivative",
     "gauss_markov_step",
     "mocap_rotation_xyz_rad",
-    "plant_backend",
     "rk4_step",
     "rotation_heading_rad",
 ]
@@ -358,17 +357,6 @@ def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, norm
     return tuple(a * v + q * n for v, n in zip(values, normals))
 
 
-def plant_backend(profile: str) -> type:
-    """The plant class of a ``sim.plant.profile`` (docs/plant-profiles.md): the kit's linear
-    identified channels for ``thesis_kit``, :class:`AirframePlant` for the ``ardrone`` ones."""
-    if profile == "thesis_kit":
-        from ardrone_nmpc.sim.plant_kit import KitPlant  # imports this module
-        return KitPlant
-    if profile.startswith("ardrone"):
-        return AirframePlant
-    raise ValueError(f"unknown plant profile {profile!r}")
-
-
 # ----------------------------------------------------------------------------- sensor geometry
 
 
@@ -398,18 +386,7 @@ def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
     (mocap-stream.md)."""
     r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
     r00 = math.cos(ry) * math.cos(rz)
-    return _wrap_rad(math.atan2(r10, r00))
-
-
-def _wrap_rad(a: float) -> float:
-    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` for a finite python float, without numpy."""
-    r = math.remainder(a, TWO_PI)
-    return math.pi if r <= -math.pi else r
-
-
-def _wrap_deg(a: float) -> float:
-    r = math.remainder(a, 360.0)
-    return 180.0 if r <= -180.0 else r
+    return wrap_angle_rad(math.atan2(r10, r00))
 
 
 def _finite_frac(name: str, value: float) -> float:
@@ -458,7 +435,7 @@ class AirframePlant:
         self._gust_mps = tuple(params.turbulence_std_mps * v
                                for v in self._gust_rng.standard_normal(2))
         x, y, z = params.initial_position_m
-        psi = _wrap_rad(float(params.initial_psi_rad))
+        psi = wrap_angle_rad(float(params.initial_psi_rad))
         self._state = (x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
         self._mode = FlightMode.FLYING if z > 0.0 else FlightMode.LANDED
         self._battery = float(params.battery_start_pct)
@@ -474,12 +451,8 @@ class AirframePlant:
     def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
                     seed: int | None = None) -> AirframePlant:
         """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``seed``
-        (default ``sim.seed``): the backend ``sim.plant.profile`` names (docs/plant-profiles.md),
-        e.g. a :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` for ``thesis_kit``."""
-        if cls is AirframePlant:
-            backend = plant_backend(getattr(sim_cfg.plant, "profile", "ardrone"))
-            if backend is not cls:
-                return backend.from_config(sim_cfg, drone_cfg, seed=seed)
+        (default ``sim.seed``). This class only: :func:`~ardrone_nmpc.sim.backends.make_plant`
+        picks the backend ``sim.plant.profile`` names (docs/plant-profiles.md)."""
         return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
                    seed=sim_cfg.seed if seed is None else seed)
 
@@ -604,7 +577,7 @@ class AirframePlant:
         for _ in range(n - done):
             self._substep(h, wind)
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
-        self._state = (x, y, z, vx, vy, vz, phi, theta, _wrap_rad(psi), r)
+        self._state = (x, y, z, vx, vy, vz, phi, theta, wrap_angle_rad(psi), r)
         self._advance_biases(n * h)
         p = self.params
         if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
@@ -717,7 +690,7 @@ class AirframePlant:
         n = self._bias_rng.standard_normal(3)
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
-        self._yaw_bias_deg = _wrap_deg(self._yaw_bias_deg + math.degrees(drift + walk))
+        self._yaw_bias_deg = wrap_angle_deg(self._yaw_bias_deg + math.degrees(drift + walk))
         self._vel_bias = gauss_markov_step(self._vel_bias, p.navdata_velocity_bias_std_mps,
                                            p.navdata_velocity_bias_tau_s, dt, n[1:])
 
@@ -729,7 +702,7 @@ class AirframePlant:
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
         return PlantTruth(
             t_s=self.t_s, position_m=_readonly(x, y, z), velocity_mps=_readonly(vx, vy, vz),
-            roll_rad=phi, pitch_rad=theta, psi_rad=_wrap_rad(psi), psi_rate_radps=r,
+            roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
             mode=self._mode, battery_pct=self._battery)
 
     def mocap_pose(self) -> MocapPose:
@@ -738,7 +711,8 @@ class AirframePlant:
         n = self._mocap_rng.standard_normal(6)
         sp, sa = self.noise.mocap_position_std_m, self.noise.mocap_angle_std_rad
         rx, ry, rz = mocap_rotation_xyz_rad(phi, theta, psi)
-        rx, ry, rz = _wrap_rad(rx + sa * n[3]), ry + sa * n[4], _wrap_rad(rz + sa * n[5])
+        rx, ry = wrap_angle_rad(rx + sa * n[3]), ry + sa * n[4]
+        rz = wrap_angle_rad(rz + sa * n[5])
         return MocapPose(
             t_s=self.t_s,
             position_m=_readonly(x + sp * n[0], y + sp * n[1], z + sp * n[2]),
@@ -752,7 +726,8 @@ class AirframePlant:
         n = self._nav_rng.standard_normal(7)
         roll = math.degrees(phi + self._trim_bias_rad[0] + nz.navdata_attitude_std_rad * n[0])
         pitch = math.degrees(-theta + self._trim_bias_rad[1] + nz.navdata_attitude_std_rad * n[1])
-        yaw = _wrap_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2]) + self._yaw_bias_deg)
+        yaw = wrap_angle_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2])
+                             + self._yaw_bias_deg)
         if self._mode.airborne:
             c, s = math.cos(psi), math.sin(psi)
             sv = nz.navdata_velocity_std_mps

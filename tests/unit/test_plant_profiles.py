@@ -15,6 +15,7 @@ from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.backends import make_plant
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 from ardrone_nmpc.sim.plant_kit import KitPlant
 
@@ -161,11 +162,11 @@ def _sim(**plant) -> SimConfig:
 
 def test_profile_selects_the_backend_and_its_defaults():
     drone = DroneConfig()
-    assert type(AirframePlant.from_config(_sim(), drone)) is AirframePlant
-    assert type(AirframePlant.from_config(_sim(profile="ardrone"), drone)) is AirframePlant
-    kit = AirframePlant.from_config(_sim(profile="thesis_kit"), drone)
+    assert type(make_plant(_sim(), drone)) is AirframePlant
+    assert type(make_plant(_sim(profile="ardrone"), drone)) is AirframePlant
+    kit = make_plant(_sim(profile="thesis_kit"), drone)
     assert type(kit) is KitPlant and kit.params.command_delay_s == DELAY_S
-    lab = AirframePlant.from_config(_sim(profile="ardrone_lab"), drone)
+    lab = make_plant(_sim(profile="ardrone_lab"), drone)
     assert type(lab) is AirframePlant
     assert lab.params.command_delay_s == 0.12 and lab.params.turbulence_std_mps > 0.0
     # a profile fills only what the config leaves out
@@ -175,7 +176,7 @@ def test_profile_selects_the_backend_and_its_defaults():
 
 def test_profile_from_a_config_file_override():
     cfg = load_config(Path("configs/hover.yaml"), ["sim.plant.profile=thesis_kit"])
-    assert type(AirframePlant.from_config(cfg.sim, cfg.drone)) is KitPlant
+    assert type(make_plant(cfg.sim, cfg.drone)) is KitPlant
     with pytest.raises(Exception):
         load_config(Path("configs/hover.yaml"), ["sim.plant.profile=gazebo"])
 
