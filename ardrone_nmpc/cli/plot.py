@@ -76,18 +76,19 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
 
     Parameters
     ----------
-    path : a run directory, a sweep directory, or a ``sweep.csv`` file.
+    path : a run directory, a sweep directory, a ``sweep.csv`` file, or a tune directory
+        (``study.db``: its history and parameter importances).
     output : image file; with ``kind='all'`` the stem of one file per kind.
     kind : run figure (:data:`~ardrone_nmpc.viz.plots.KINDS` or ``all``; default ``all``).
     metric, x, y : sweep heat map only (see :func:`~ardrone_nmpc.viz.plots.sweep_grid`).
     dpi : resolution, pixels per inch.
     warn : called with notes on recoverable damage (a torn last log line).
     """
+    from ardrone_nmpc.viz.tune_figures import is_tune_dir, plot_tune_dir
+
     _require_matplotlib()
     path = Path(path)
-    if (path / "study.db").is_file():  # a tune directory: history and importances
-        from ardrone_nmpc.viz.tune_figures import plot_tune_dir
-
+    if is_tune_dir(path):  # a tune directory: history and importances
         return plot_tune_dir(path, output=output, dpi=dpi)
     if (path.is_file() and path.name == SWEEP_FILE) or (path / SWEEP_FILE).is_file():
         if kind not in (None, "heatmap"):

@@ -71,15 +71,15 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from itertools import islice
 from dataclasses import dataclass, field, replace
+from itertools import islice
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
-from numba import njit
 
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.sim.airframe import _airframe_rhs, airframe_rk4, airframe_rk4_many
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
     from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
@@ -275,75 +275,6 @@ def rk4_step(deriv, state: tuple, h: float, command: tuple, params: PlantParams,
             x4 + h6 * (a4 + 2.0 * (b4 + c4) + d4), x5 + h6 * (a5 + 2.0 * (b5 + c5) + d5),
             x6 + h6 * (a6 + 2.0 * (b6 + c6) + d6), x7 + h6 * (a7 + 2.0 * (b7 + c7) + d7),
             x8 + h6 * (a8 + 2.0 * (b8 + c8) + d8), x9 + h6 * (a9 + 2.0 * (b9 + c9) + d9))
-
-
-@njit(cache=True)
-def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
-    """The motors-on right-hand side on arrays (the one definition: :func:`airframe_derivative`
-    and :func:`airframe_rk4` both call it)."""
-    e, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw, inv_tau_tilt, kd, hold_damping = k
-    vx, vy, vz, phi, theta, psi, r = x[3], x[4], x[5], x[6], x[7], x[8], x[9]
-    forward = GRAVITY_MPS2 * math.tan(theta)
-    right = GRAVITY_MPS2 * math.tan(phi)
-    c = math.cos(psi)
-    s = math.sin(psi)
-    ax = c * forward + s * right - kd * (vx - w[0])
-    ay = s * forward - c * right - kd * (vy - w[1])
-    if hold:
-        ax -= hold_damping * vx
-        ay -= hold_damping * vy
-        phi_dot = -phi * inv_tau_tilt
-        theta_dot = -theta * inv_tau_tilt
-    else:
-        phi_dot = (roll * e - phi) * inv_tau_tilt
-        theta_dot = (-pitch * e - theta) * inv_tau_tilt
-    out[0], out[1], out[2], out[3], out[4] = vx, vy, vz, ax, ay
-    out[5] = gaz * vz_gain - vz * inv_tau_vz + kd * w[2]
-    out[6], out[7], out[8], out[9] = phi_dot, theta_dot, r, -yaw * yaw_gain - r * inv_tau_yaw
-
-
-@njit(cache=True)
-def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
-    """:func:`rk4_step` of :func:`airframe_derivative`, compiled: the simulator's hot path
-    (13 substeps per control tick). ``k`` is ``PlantParams.rhs_coefficients``; returns the
-    new 10-tuple state."""
-    x = np.empty(10)
-    for i in range(10):
-        x[i] = state[i]
-    a = np.empty(10)
-    b = np.empty(10)
-    c = np.empty(10)
-    d = np.empty(10)
-    t = np.empty(10)
-    hh = 0.5 * h
-    _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, a)
-    for i in range(10):
-        t[i] = x[i] + hh * a[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
-    for i in range(10):
-        t[i] = x[i] + hh * b[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
-    for i in range(10):
-        t[i] = x[i] + h * c[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
-    h6 = h / 6.0
-    for i in range(10):
-        x[i] = x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
-    return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9])
-
-
-@njit(cache=True)
-def airframe_rk4_many(state, commands, k, w, h):
-    """:func:`airframe_rk4` once per row of ``commands`` (n, 5: roll, pitch, gaz, yaw, hold
-    as 0/1), each step from the last; stops after a step that ends at z ≤ 0 (ground
-    contact is the caller's). Returns (steps done, state)."""
-    x = state
-    for i in range(commands.shape[0]):
-        c = commands[i]
-        x = airframe_rk4(x, c[0], c[1], c[2], c[3], c[4] != 0.0, k, w, h)
-        if x[2] <= 0.0:
-            return i + 1, x
-    return commands.shape[0], x
 
 
 # ----------------------------------------------------------------------------- backends

@@ -3,8 +3,9 @@
 A tune directory holds ``study.db`` (the Optuna study) and ``trials.csv``. Both figures read
 the study: :func:`figure_history` plots every finished trial's score against its number with
 the best so far; :func:`figure_importance` the parameters' importances by Optuna's default
-evaluator (:func:`optuna.importance.get_param_importances`, fANOVA), largest on top. Like
-:mod:`ardrone_nmpc.viz.plots`: object-oriented matplotlib on an Agg canvas, no pyplot.
+evaluator (:func:`optuna.importance.get_param_importances`, fANOVA), largest on top. Like the
+other figures (:mod:`ardrone_nmpc.viz.figure`): object-oriented matplotlib on an Agg canvas,
+no pyplot. The record is read through :mod:`ardrone_nmpc.runs.tune_record`.
 """
 
 from __future__ import annotations
@@ -12,12 +13,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ardrone_nmpc.viz.plots import PlotError, _new_figure, save_figure
+from ardrone_nmpc.runs.tune_record import STUDY_FILE, STUDY_NAME, load_record, result_of
+from ardrone_nmpc.viz.figure import PlotError, new_figure, save_figure
 
-__all__ = ["STUDY_FILE", "figure_history", "figure_importance", "is_tune_dir", "load_study",
+__all__ = ["figure_history", "figure_importance", "is_tune_dir", "load_study",
            "plot_tune_dir"]
 
-STUDY_FILE = "study.db"  # experiments/tune/study.py STUDY_FILE
 _STATUS_COLOURS = {"ok": "tab:blue", "aborted": "tab:orange", "failed": "tab:red"}
 
 
@@ -29,23 +30,13 @@ def load_study(path: Path):
     """The Optuna study of a tune directory. PlotError if Optuna is missing or the file holds
     no tune study."""
     try:
-        import optuna
+        import optuna  # noqa: F401 - only checking that it is there
     except ImportError:
         raise PlotError("a tune directory's plots need Optuna: pip install -e '.[tune]'") from None
-    from ardrone_nmpc.experiments.tune.study import STUDY_NAME
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    storage = f"sqlite:///{(Path(path) / STUDY_FILE).resolve()}"
     try:
-        return optuna.load_study(study_name=STUDY_NAME, storage=storage)
+        return load_record(path)
     except KeyError:
         raise PlotError(f"{path}: {STUDY_FILE} holds no '{STUDY_NAME}' study") from None
-
-
-def result_of(trial) -> dict:
-    from ardrone_nmpc.experiments.tune.study import result_of as stored
-
-    return stored(trial)
 
 
 def _finished(study) -> list:
@@ -60,7 +51,7 @@ def figure_history(study):
     trials = _finished(study)
     if not trials:
         raise PlotError("the study has no finished trial yet")
-    fig = _new_figure(9.0, 5.0)
+    fig = new_figure(9.0, 5.0)
     ax = fig.add_subplot()
     for status, colour in _STATUS_COLOURS.items():
         pts = [(t.number, t.value) for t in trials if result_of(t).get("status") == status]
@@ -94,7 +85,7 @@ def figure_importance(study):
     except (RuntimeError, ValueError) as err:
         raise PlotError(f"parameter importances: {' '.join(str(err).split())}") from None
     names = list(imp)[::-1]  # the largest on top
-    fig = _new_figure(8.0, max(3.0, 0.4 * len(names) + 1.5))
+    fig = new_figure(8.0, max(3.0, 0.4 * len(names) + 1.5))
     ax = fig.add_subplot()
     ax.barh(range(len(names)), [imp[n] for n in names], color="tab:blue")
     ax.set_yticks(range(len(names)), names)

@@ -59,8 +59,10 @@ def test_batched_flying_substeps_equal_the_step_by_step_path(overrides, monkeypa
 
 
 def test_a_backend_with_its_own_dynamics_keeps_the_step_by_step_path():
+    from ardrone_nmpc.sim.backends import make_plant
+
     cfg = load_config(None, ["sim.plant.profile=thesis_kit"])
-    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=0)
+    plant = make_plant(cfg.sim, cfg.drone, seed=0)
     assert type(plant)._motors_on_step is not AirframePlant._motors_on_step  # the kit's
     plant.takeoff()
     while plant.mode is not FlightMode.FLYING:

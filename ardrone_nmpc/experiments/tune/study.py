@@ -33,22 +33,16 @@ from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.experiments.tune.engine import Scenario, TrialResult, TrialSpec
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
+from ardrone_nmpc.runs.tune_record import RESULT_ATTR, STUDY_FILE, STUDY_NAME, result_of
+from ardrone_nmpc.runs.tune_record import storage as record_storage
 
 __all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", "finished_trials",
            "open_study", "result_of", "run_study", "trial_rows", "trials_columns", "write_best",
            "write_trials_csv"]
 
-STUDY_FILE = "study.db"
 TRIALS_FILE = "trials.csv"
 BEST_FILE = "best.yaml"
-STUDY_NAME = "tune"
 _SIGNATURE = "tune_signature"
-
-
-def _quiet_optuna() -> None:
-    import optuna
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
 def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
@@ -60,32 +54,6 @@ def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
             "space": {n: [p.low, p.high, p.log, p.kind] for n, p in space.items()},
             "scenarios": [[s.label, s.seed, list(s.overrides)] for s in scenarios],
             "objective": {**objective.weights, "worst": objective.worst}}
-
-
-def _storage(db: Path):
-    """Optuna's SQLite storage of ``db`` in write-ahead-log mode without a sync per commit:
-    Optuna commits every parameter and attribute it stores, and a synced commit costs
-    milliseconds, on the main process that also feeds the workers. A power cut may lose the
-    last trials told (they are flown again on --resume); the file stays consistent."""
-    import sqlite3
-
-    import optuna
-
-    path = str(db.resolve())
-
-    def connect():
-        con = sqlite3.connect(path, check_same_thread=False, timeout=30.0)
-        con.execute("PRAGMA journal_mode=WAL")
-        con.execute("PRAGMA synchronous=NORMAL")
-        return con
-
-    return optuna.storages.RDBStorage(f"sqlite:///{path}", engine_kwargs={"creator": connect})
-
-
-def result_of(trial) -> dict:
-    """What :func:`run_study` stored with a finished trial: status, message, metrics
-    (scenario → metric → value), wall_s, sim_s."""
-    return trial.user_attrs.get("result", {})
 
 
 @dataclass
@@ -107,13 +75,12 @@ def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any]
     import optuna
     from optuna.trial import TrialState
 
-    _quiet_optuna()
     db = out_dir / STUDY_FILE
     exists = db.is_file()
     if exists and not resume:
         raise ConfigError(f"--out {out_dir}: holds a study already ({STUDY_FILE}); "
                           "--resume continues it, or choose another --out")
-    storage = _storage(db)
+    storage = record_storage(db)
     if exists:
         try:
             record = optuna.load_study(study_name=STUDY_NAME, storage=storage)
@@ -183,10 +150,10 @@ def run_study(study: TuneStudy, *, n_trials: int, engine,
     while in_flight:
         result = engine.next_result()
         trial = in_flight.pop(result.number)
-        attrs = {"result": {"status": result.status, "message": result.message,
+        attrs = {RESULT_ATTR: {"status": result.status, "message": result.message,
                             "metrics": result.metrics, "wall_s": result.wall_s,
                             "sim_s": result.sim_s}}
-        trial.set_user_attr("result", attrs["result"])
+        trial.set_user_attr(RESULT_ATTR, attrs[RESULT_ATTR])
         frozen = study.search.tell(trial, result.score)
         fill()  # before the slow SQLite write: the freed worker starts at once
         study.record.add_trial(optuna.trial.create_trial(
