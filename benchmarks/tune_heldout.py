@@ -40,16 +40,19 @@ def _stat(values: list[float], unit: str, digits: int = 2) -> str:
 
 
 def _load(path: str, overrides: list[str], profile: str | None):
+    """``path`` loaded as ``load_config`` loads a run's config (retired keys dropped), its
+    ``sim.plant`` replaced by ``{profile: P}`` when a profile is given."""
     from pathlib import Path
 
-    import yaml
-
-    from ardrone_nmpc.config.io import apply_overrides, load_config
+    from ardrone_nmpc.config.io import (_path_file, _read_yaml, _retire, apply_overrides,
+                                        load_config)
     from ardrone_nmpc.config.schema import config_from_dict
 
     if profile is None:
-        return load_config(path, overrides)
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+        return load_config(path, overrides, allow_retired=True)
+    data = _read_yaml(Path(path))
+    _path_file(data, Path(path).parent)
+    _retire(data, drop=True)
     data.setdefault("sim", {})["plant"] = {"profile": profile}
     return config_from_dict(apply_overrides(data, overrides))
 
