@@ -24,7 +24,7 @@ import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -247,7 +247,3 @@ def spec_factory(*, cfg, written: Mapping[str, Any], space: Mapping[str, Param],
     keep = None if keep_dir is None else str(Path(keep_dir).resolve())
     return lambda number, values: TrialSpec(number, values, written, dict(space),
                                             tuple(scenarios), objective, keep, resolved)
-
-
-def space_as_dict(space: Mapping[str, Param]) -> dict[str, dict]:
-    return {n: asdict(p) for n, p in space.items()}
