@@ -127,6 +127,8 @@ CASES = [
     ("mocap-check-missing", ["mocap-check", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
     ("mocap-check-negative-seconds", ["mocap-check", HOVER, "--seconds", "-1"], 2,
      r"^error: --seconds: "),
+    ("tune-missing", ["tune", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
+    ("tune-zero-trials", ["tune", HOVER, "--trials", "0"], 2, r"^error: --trials: "),
 ]
 
 
