@@ -123,6 +123,7 @@ PathSize = Annotated[float, Field(gt=0, le=1000.0, allow_inf_nan=False)]
 PathSizeVec2 = _vector(PathSize, 2)
 PathSizeVec4 = _vector(PathSize, 4)
 NonNegativeVec7 = _vector(NonNegative, 7)
+NonNegativeVec4 = _vector(NonNegative, 4)
 Port = Annotated[int, Field(ge=1, le=65535)]
 
 
@@ -249,6 +250,28 @@ class ObstacleConfig(_Section):
         "last position is kept when it goes stale). null: static.")
 
 
+class OffsetFreeConfig(_Section):
+    """Offset-free tracking: integral action on the position/yaw error, fed to the NMPC as a
+    shift of its reference (docs/solver-notes.md, "Offset-free tracking"). A constant wind, a
+    vertical gain mismatch, battery sag or a navdata velocity bias then leave no steady error.
+    Vectors are ordered [x, y, z, ψ]."""
+
+    enabled: bool = Field(True, description="Integral action on (true) or off (false: the "
+                          "NMPC tracks the reference itself, as in the thesis).")
+    ki_per_s: NonNegativeVec4 = Field(
+        (0.5, 0.5, 0.5, 0.5), description="Integral gain per axis (1/s): the reference shift "
+        "moves by −ki·error per second, [x, y, z, ψ]; 0 switches an axis off.")
+    error_band: PositiveVec4 = Field(
+        (0.15, 0.15, 0.15, 0.15), description="Integrate an axis only while |error| is below "
+        "this [m, m, m, rad] (conditional integration: a step's transient does not wind up).")
+    speed_band_mps: Positive = Field(
+        0.15, description="… and while the estimated speed along the axis is below this (m/s; "
+        "x, y, z): the integrator learns only near rest.")
+    max_shift: PositiveVec4 = Field(
+        (0.5, 0.5, 0.5, 0.3), description="Largest reference shift [m, m, m, rad]: a bad "
+        "sensor cannot drag the drone further than this from the reference.")
+
+
 class ControllerConfig(_Section):
     """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
 
@@ -308,6 +331,9 @@ class ControllerConfig(_Section):
         "true Hessian (for comparison).")
     p_gains: PGainsConfig = Field(
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")
+    offset_free: OffsetFreeConfig = Field(
+        default_factory=OffsetFreeConfig, description="Offset-free tracking (integral action "
+        "of the NMPC; the 'p' controller has none).")
 
     _u_bounds = _require_increasing("u_min", "u_max")
 
@@ -573,6 +599,16 @@ class SimConfig(_Section):
     navdata_rate_hz: Positive = Field(15.0, description="Simulated navdata rate (Hz); 15 = demo.")
     target: Optional[TargetConfig] = Field(
         None, description="A scripted second object streamed on the mocap stream (null: none).")
+    vz_gain: float = Field(
+        1.0, gt=0.0, le=2.0, description="Disturbance: the plant's vertical speed is this times "
+        "the commanded (a vertical gain mismatch, e.g. 0.7), full battery. Constant wind is "
+        "faults.wind.")
+    battery_sag_frac: float = Field(
+        0.0, ge=0.0, lt=1.0, description="Disturbance: fraction of the vertical gain lost at "
+        "0 % battery, linear in the discharge (battery sag: less thrust as it drains).")
+    navdata_velocity_bias_mps: Vec2 = Field(
+        (0.0, 0.0), description="Disturbance: constant bias of the navdata body velocities "
+        "[forward, right] (m/s), on top of the drifting one.")
     settle_s: NonNegative = Field(
         4.0, description="Seconds the controller holds the reference's start point before t = 0 "
         "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis.")

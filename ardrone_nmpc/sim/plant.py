@@ -4,13 +4,18 @@ Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``comma
 
     φ' = (c_roll·E − φ)/τ_a          θ' = (−c_pitch·E − θ)/τ_a        (world/model signs, below)
     r' = (−c_yaw·Y − r)/τ_r          ψ' = r
-    v_z' = (c_gaz·V − v_z)/τ_z + k_d·w_z                 z' = v_z
+    v_z' = (G·c_gaz·V − v_z)/τ_z + k_d·w_z               z' = v_z
     forward = g·tan θ,  right = g·tan φ                  (body accelerations)
     v_x' =  cos ψ·forward + sin ψ·right − k_d·(v_x − w_x) [− d·v_x in position hold]
     v_y' =  sin ψ·forward − cos ψ·right − k_d·(v_y − w_y) [− d·v_y in position hold]
 
 with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` and
 d = max(0, 1/hover_tau_s − k_d), so that without wind a hold damps v_xy with τ = hover_tau_s.
+G = ``vz_gain``·(1 − ``battery_sag_frac``·(1 − battery/100)) is the vertical loop's gain: 1
+for the nominal drone; below 1 a drone that climbs slower than commanded (a vertical gain
+mismatch, and battery sag: less thrust as the battery drains). These disturbance options and
+``navdata_velocity_bias_mps`` come from the ``sim`` config section; constant wind is
+``faults.wind`` (its one home, applied through :class:`~ardrone_nmpc.sim.faults.PlantFaults`).
 
 Sign conventions
 ----------------
@@ -53,7 +58,7 @@ Mocap (:meth:`AirframePlant.mocap_pose`): position + N(0, σ_p) per axis; the th
 roll/pitch + N(0, σ) + a per-flight trim bias uniform in ±0.5°; yaw + N(0, σ) + an offset
 uniform in ±180° drawn at take-off + a drift of 1°/min (random sign per flight) with a small
 random walk; ultrasound altitude + N(0, σ); body velocities + N(0, σ_v) + a Gauss–Markov bias
-(σ 0.02 m/s, τ 30 s); altitude and velocities read 0 with the motors off. The biases evolve in
+(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read 0 with the motors off. The biases evolve in
 :meth:`~AirframePlant.advance`; σ values come from ``sim.noise``, the bias sizes from
 :class:`PlantParams` (zero them for exact tests).
 
@@ -136,6 +141,10 @@ class PlantParams:
     navdata_yaw_walk_rad_per_sqrt_s: float = math.radians(0.2) / math.sqrt(60.0)
     navdata_velocity_bias_std_mps: float = 0.02              # Gauss–Markov, stationary σ
     navdata_velocity_bias_tau_s: float = 30.0
+    # --- disturbance options (sim section): the drone differs from its model
+    vz_gain: float = 1.0                     # vertical speed / commanded, full battery
+    battery_sag_frac: float = 0.0            # vertical gain lost at 0 % battery (linear)
+    navdata_velocity_bias_mps: tuple[float, float] = (0.0, 0.0)  # constant (forward, right)
     # derived: extra damping of the position hold so that v_xy decays with τ = hover_tau_s
     hover_damping_per_s: float = field(init=False, repr=False)
     # derived: (E, V/τ_z, 1/τ_z, Y/τ_r, 1/τ_r, 1/τ_a, k_d, hover damping) for the RHS
@@ -145,7 +154,7 @@ class PlantParams:
         for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps",
                      "tau_tilt_s", "tau_yaw_s", "tau_vz_s", "integration_step_s", "hover_tau_s",
                      "takeoff_altitude_m", "takeoff_climb_mps", "landing_speed_mps",
-                     "navdata_velocity_bias_tau_s"):
+                     "navdata_velocity_bias_tau_s", "vz_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -155,12 +164,17 @@ class PlantParams:
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
             raise ValueError(f"initial_position_m must be [x, y, z] with z >= 0, "
                              f"got {self.initial_position_m!r}")
+        if not 0.0 <= self.battery_sag_frac < 1.0:
+            raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         object.__setattr__(self, "initial_position_m",
                            tuple(float(v) for v in self.initial_position_m))
+        object.__setattr__(self, "navdata_velocity_bias_mps",
+                           tuple(float(v) for v in self.navdata_velocity_bias_mps))
         damping = max(0.0, 1.0 / self.hover_tau_s - self.drag_per_s)
         object.__setattr__(self, "hover_damping_per_s", damping)
         object.__setattr__(self, "rhs_coefficients", (
-            self.euler_angle_max_rad, self.control_vz_max_mps / self.tau_vz_s, 1.0 / self.tau_vz_s,
+            self.euler_angle_max_rad, self.vz_gain * self.control_vz_max_mps / self.tau_vz_s,
+            1.0 / self.tau_vz_s,
             self.control_yaw_radps / self.tau_yaw_s, 1.0 / self.tau_yaw_s, 1.0 / self.tau_tilt_s,
             self.drag_per_s, damping))
 
@@ -182,6 +196,9 @@ class PlantParams:
             initial_psi_rad=plant.initial_psi_rad,
             battery_start_pct=plant.battery_start_pct,
             battery_drain_pct_per_min=plant.battery_drain_pct_per_min,
+            vz_gain=sim_cfg.vz_gain,
+            battery_sag_frac=sim_cfg.battery_sag_frac,
+            navdata_velocity_bias_mps=tuple(sim_cfg.navdata_velocity_bias_mps),
             **overrides,
         )
 
@@ -189,6 +206,14 @@ class PlantParams:
     def command_delay_steps(self) -> int:
         """Length of the command FIFO: round(command_delay_s / integration_step_s)."""
         return int(round(self.command_delay_s / self.integration_step_s))
+
+    def coefficients_at(self, battery_pct: float) -> tuple:
+        """:attr:`rhs_coefficients` with the vertical gain sagged for ``battery_pct`` (%)."""
+        if self.battery_sag_frac == 0.0:
+            return self.rhs_coefficients
+        k = self.rhs_coefficients
+        sag = 1.0 - self.battery_sag_frac * (1.0 - min(max(battery_pct, 0.0), 100.0) / 100.0)
+        return (k[0], k[1] * sag, *k[2:])
 
     def replace(self, **changes) -> PlantParams:
         """A copy with some fields changed (e.g. a command-delay fault)."""
@@ -558,7 +583,7 @@ class AirframePlant:
         if deriv is airframe_derivative:  # the compiled twin of rk4_step(airframe_derivative)
             roll, pitch, gaz, yaw, hold = command
             state = airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
-                                 bool(hold), self.params.rhs_coefficients,
+                                 bool(hold), self.params.coefficients_at(self._battery),
                                  tuple(map(float, wind)), h)
         else:
             state = rk4_step(deriv, self._state, h, command, self.params, wind)
@@ -657,8 +682,9 @@ class AirframePlant:
             c, s = math.cos(psi), math.sin(psi)
             sv = nz.navdata_velocity_std_mps
             altitude = max(0.0, z + nz.navdata_altitude_std_m * n[3])
-            forward = c * vx + s * vy + self._vel_bias[0] + sv * n[4]
-            right = s * vx - c * vy + self._vel_bias[1] + sv * n[5]
+            bias = self.params.navdata_velocity_bias_mps
+            forward = c * vx + s * vy + self._vel_bias[0] + bias[0] + sv * n[4]
+            right = s * vx - c * vy + self._vel_bias[1] + bias[1] + sv * n[5]
             down = -vz + sv * n[6]
         else:  # motors off: ultrasound and optical flow report nothing
             altitude = forward = right = down = 0.0

@@ -1,0 +1,105 @@
+"""Offset-free tracking: integral action on the position/yaw error as a reference shift.
+
+The NMPC's model (eq. 3.13) knows no wind, no vertical gain mismatch, no battery sag and no
+sensor bias; under a constant one the closed loop settles a constant offset Δ away from its
+reference. The model is invariant under translations of x, y, z (positions appear only in the
+cost), so moving the reference by s moves that equilibrium by s: an integrator that shifts the
+NMPC's reference by ``s' = −ki·(p − p_ref)`` stops exactly when the measured position is on the
+reference, whatever Δ was. At rest, ``−s`` *is* the disturbance estimate, expressed as the offset
+it would cause (docs/solver-notes.md, "Offset-free tracking", argues the choice with numbers).
+
+Anti-windup: the integrator learns only near rest near the reference (error and speed bands,
+conditional integration), never while the command sits on the drone's limits, and never while
+the supervisor holds, hovers, lands or falls back — it is frozen there, not reset (a constant
+disturbance is still there afterwards). The shift is clipped to ``max_shift``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
+
+__all__ = ["AXES", "SATURATION_FRAC", "ReferenceIntegrator", "frozen_axes"]
+
+AXES = ("x", "y", "z", "psi")
+_POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
+_VEL = (IX_VX, IX_VY, IX_VZ)
+#: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
+#: to control_vz_max before the mapping, so the gaz flag alone would never show it).
+SATURATION_FRAC = 0.999
+
+
+def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
+                flags: str | None) -> tuple[bool, bool, bool, bool]:
+    """Which of [x, y, z, ψ] must not integrate, from the command sent.
+
+    ``pcmd_fracs`` = (roll, pitch, gaz, yaw) fractions, ``flags`` the ``cmd_saturated`` string
+    ("0100"; None for none). Roll and pitch act on x and y together once the drone has turned,
+    so either one on its limit freezes both; gaz freezes z, yaw ψ.
+    """
+    sat = [abs(f) >= SATURATION_FRAC for f in pcmd_fracs]
+    if flags:
+        sat = [s or c == "1" for s, c in zip(sat, flags)]
+    tilt = sat[0] or sat[1]
+    return tilt, tilt, sat[2], sat[3]
+
+
+class ReferenceIntegrator:
+    """The reference shift ``s`` = [x, y, z, ψ] and its integration law.
+
+    Parameters
+    ----------
+    ki_per_s, error_band, max_shift : (4,) per axis, [x, y, z, ψ] (1/s; m, m, m, rad).
+    speed_band_mps : speed gate of x, y, z (m/s).
+    period_s : integration step (s), the control period.
+    """
+
+    def __init__(self, ki_per_s, error_band, speed_band_mps: float, max_shift,
+                 period_s: float) -> None:
+        self.ki_per_s = np.asarray(ki_per_s, dtype=float)
+        self.error_band = np.asarray(error_band, dtype=float)
+        self.speed_band_mps = float(speed_band_mps)
+        self.max_shift = np.asarray(max_shift, dtype=float)
+        self.period_s = float(period_s)
+        self.shift = np.zeros(4)
+        self.learning = np.zeros(4, dtype=bool)  # which axes integrated on the last update
+
+    @classmethod
+    def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
+        """From ``controller.offset_free`` (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
+        return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band_mps, cfg.max_shift, period_s)
+
+    def errors(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """Tracking errors [x, y, z, ψ] of the estimate ``x`` (7,) against ``ref`` (7,)."""
+        e = np.array([x[i] - ref[i] for i in _POS])
+        e[3] = wrap_angle_rad(e[3])
+        return e
+
+    def update(self, x: np.ndarray, ref: np.ndarray,
+               frozen: tuple[bool, bool, bool, bool] = (False,) * 4) -> np.ndarray:
+        """One control period of integration; returns the new shift (the object's own array).
+
+        ``frozen`` axes keep their shift (anti-windup); the others integrate
+        ``s ← s − ki·e·period`` while |e| is inside the error band and, for x, y, z, the speed
+        inside the speed band; the result is clipped to ±max_shift.
+        """
+        e = self.errors(x, ref)
+        for k in range(4):
+            ok = (not frozen[k] and math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
+                  and (k == 3 or abs(x[_VEL[k]]) < self.speed_band_mps))
+            self.learning[k] = ok
+            if ok:
+                s = self.shift[k] - self.ki_per_s[k] * e[k] * self.period_s
+                self.shift[k] = min(max(s, -self.max_shift[k]), self.max_shift[k])
+        return self.shift
+
+    def shifted(self, states: np.ndarray) -> np.ndarray:
+        """Reference states (n, 7) with the shift added to x, y, z, ψ (a new array)."""
+        out = np.array(states, dtype=float, copy=True)
+        for k, i in enumerate(_POS):
+            out[..., i] += self.shift[k]
+        return out
