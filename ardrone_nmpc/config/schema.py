@@ -259,14 +259,18 @@ class OffsetFreeConfig(_Section):
     enabled: bool = Field(True, description="Integral action on (true) or off (false: the "
                           "NMPC tracks the reference itself, as in the thesis).")
     ki_per_s: NonNegativeVec4 = Field(
-        (0.5, 0.5, 0.5, 0.5), description="Integral gain per axis (1/s): the reference shift "
-        "moves by −ki·error per second, [x, y, z, ψ]; 0 switches an axis off.")
+        (0.5, 0.5, 0.2, 0.15), description="Integral gain per axis (1/s): the reference shift "
+        "moves by −ki·e per second while it learns, [x, y, z, ψ]; 0 switches an axis off.")
     error_band: PositiveVec4 = Field(
-        (0.15, 0.15, 0.15, 0.15), description="Integrate an axis only while |error| is below "
-        "this [m, m, m, rad] (conditional integration: a step's transient does not wind up).")
-    speed_band_mps: Positive = Field(
-        0.15, description="… and while the estimated speed along the axis is below this (m/s; "
-        "x, y, z): the integrator learns only near rest.")
+        (0.5, 0.5, 0.5, 0.3), description="An axis learns only while |error| is below this "
+        "[m, m, m, rad] (conditional integration: a step's transient does not wind up).")
+    hold_s: NonNegativeVec4 = Field(
+        (1.5, 1.5, 3.0, 5.0), description="It starts learning once the axis has been at rest "
+        "inside its error band this long (s), and goes on until the error leaves the band or "
+        "the reference moves: the tail of a step is the loop's own.")
+    speed_band: PositiveVec4 = Field(
+        (0.15, 0.15, 0.05, 0.3), description="'At rest': the estimated rate of the axis below "
+        "this [m/s, m/s, m/s, rad/s].")
     max_shift: PositiveVec4 = Field(
         (0.5, 0.5, 0.5, 0.3), description="Largest reference shift [m, m, m, rad]: a bad "
         "sensor cannot drag the drone further than this from the reference.")

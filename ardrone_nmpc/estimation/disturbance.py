@@ -7,11 +7,6 @@ cost), so moving the reference by s moves that equilibrium by s: an integrator t
 NMPC's reference by ``s' = −ki·(p − p_ref)`` stops exactly when the measured position is on the
 reference, whatever Δ was. At rest, ``−s`` *is* the disturbance estimate, expressed as the offset
 it would cause (docs/solver-notes.md, "Offset-free tracking", argues the choice with numbers).
-
-Anti-windup: the integrator learns only near rest near the reference (error and speed bands,
-conditional integration), never while the command sits on the drone's limits, and never while
-the supervisor holds, hovers, lands or falls back — it is frozen there, not reset (a constant
-disturbance is still there afterwards). The shift is clipped to ``max_shift``.
 """
 
 from __future__ import annotations
@@ -28,6 +23,7 @@ __all__ = ["AXES", "SATURATION_FRAC", "ReferenceIntegrator", "frozen_axes"]
 AXES = ("x", "y", "z", "psi")
 _POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
 _VEL = (IX_VX, IX_VY, IX_VZ)
+_REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
 #: to control_vz_max before the mapping, so the gaz flag alone would never show it).
 SATURATION_FRAC = 0.999
@@ -53,16 +49,21 @@ class ReferenceIntegrator:
 
     Parameters
     ----------
-    ki_per_s, error_band, max_shift : (4,) per axis, [x, y, z, ψ] (1/s; m, m, m, rad).
-    speed_band_mps : speed gate of x, y, z (m/s).
+    ki_per_s, error_band, speed_band, max_shift, hold_s : (4,) per axis, [x, y, z, ψ]
+        (1/s; m, m, m, rad; m/s, m/s, m/s, rad/s; m, m, m, rad; s).
     period_s : integration step (s), the control period.
     """
 
-    def __init__(self, ki_per_s, error_band, speed_band_mps: float, max_shift,
+    def __init__(self, ki_per_s, error_band, speed_band, max_shift, hold_s,
                  period_s: float) -> None:
+        self.hold_s = np.asarray(hold_s, dtype=float)
+        self._rest_s = np.zeros(4)  # how long each axis has been at rest inside its band
+        self.latched = np.zeros(4, dtype=bool)  # learning until the error or reference moves
+        self._last = np.full(4, math.nan)  # the reference components of the last update
+        self._last_error_psi = math.nan
         self.ki_per_s = np.asarray(ki_per_s, dtype=float)
         self.error_band = np.asarray(error_band, dtype=float)
-        self.speed_band_mps = float(speed_band_mps)
+        self.speed_band = np.asarray(speed_band, dtype=float)
         self.max_shift = np.asarray(max_shift, dtype=float)
         self.period_s = float(period_s)
         self.shift = np.zeros(4)
@@ -71,7 +72,8 @@ class ReferenceIntegrator:
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
         """From ``controller.offset_free`` (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
-        return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band_mps, cfg.max_shift, period_s)
+        return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band, cfg.max_shift, cfg.hold_s,
+                   period_s)
 
     def errors(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Tracking errors [x, y, z, ψ] of the estimate ``x`` (7,) against ``ref`` (7,)."""
@@ -80,19 +82,38 @@ class ReferenceIntegrator:
         return e
 
     def update(self, x: np.ndarray, ref: np.ndarray,
-               frozen: tuple[bool, bool, bool, bool] = (False,) * 4) -> np.ndarray:
+               frozen: tuple[bool, bool, bool, bool] = (False,) * 4,
+               preview: np.ndarray | None = None) -> np.ndarray:
         """One control period of integration; returns the new shift (the object's own array).
 
-        ``frozen`` axes keep their shift (anti-windup); the others integrate
-        ``s ← s − ki·e·period`` while |e| is inside the error band and, for x, y, z, the speed
-        inside the speed band; the result is clipped to ±max_shift.
+        Per axis: the integrator starts learning once the axis has been at rest (|ė| below
+        the speed band) with |e| inside the error band for ``hold_s`` — the tail of a step is
+        the loop's own — and keeps learning, ``s ← s − ki·e·period``, until |e| leaves the
+        error band or the reference moves — now, or anywhere in ``preview`` (n, 7), the
+        reference the NMPC sees over its horizon: it starts a step before the reference
+        does. ``frozen`` axes keep their shift (anti-windup).
+        The shift is clipped to ±max_shift. ė is the estimate's velocity, for ψ the
+        difference of its error over one period.
         """
         e = self.errors(x, ref)
-        for k in range(4):
-            ok = (not frozen[k] and math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
-                  and (k == 3 or abs(x[_VEL[k]]) < self.speed_band_mps))
-            self.learning[k] = ok
-            if ok:
+        rate = [x[i] for i in _VEL] + [0.0]
+        if math.isfinite(self._last_error_psi):
+            rate[3] = wrap_angle_rad(e[3] - self._last_error_psi) / self.period_s
+        self._last_error_psi = e[3]
+        for k, i in enumerate(_POS):
+            moved = not abs(ref[i] - self._last[k]) <= _REF_STILL  # NaN (first tick) too
+            if preview is not None:
+                moved = moved or not np.all(np.abs(preview[:, i] - ref[i]) <= _REF_STILL)
+            self._last[k] = ref[i]
+            inside = math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
+            at_rest = inside and abs(rate[k]) < self.speed_band[k] and not moved
+            self._rest_s[k] = self._rest_s[k] + self.period_s if at_rest else 0.0
+            if not inside or moved:
+                self.latched[k] = False
+            elif self._rest_s[k] > self.hold_s[k]:
+                self.latched[k] = True
+            self.learning[k] = self.latched[k] and not frozen[k]
+            if self.learning[k]:
                 s = self.shift[k] - self.ki_per_s[k] * e[k] * self.period_s
                 self.shift[k] = min(max(s, -self.max_shift[k]), self.max_shift[k])
         return self.shift

@@ -188,6 +188,7 @@ class Solution:
     ok: bool = True
     status: str = ""
     p_command: AttitudeCommand | None = None
+    ref_horizon: np.ndarray | None = None
 
     @property
     def zacc_mps2(self) -> float:
@@ -252,10 +253,11 @@ class Control:
         result = solver.solve(t_exp_s, x_solve, horizon)
         if self.faults is not None and self.faults.solver_diverges(t_exp_s):
             return Solution(states[0], x_solve, result, np.full(INPUT_DIM, math.nan), False,
-                            SolverStatus.DIVERGED.value)
+                            SolverStatus.DIVERGED.value, ref_horizon=states[1:])
         ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
                            and self.accept_max_iterations)
-        return Solution(states[0], x_solve, result, result.u, ok, result.status.value)
+        return Solution(states[0], x_solve, result, result.u, ok, result.status.value,
+                        ref_horizon=states[1:])
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -299,7 +301,7 @@ class OffsetFree:
             return
         p = sent.pcmd
         frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac), sent.saturated)
-        self.integrator.update(x, sol.ref_now, frozen)
+        self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
 # ----------------------------------------------------------------------------- supervision
