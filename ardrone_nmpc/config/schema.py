@@ -259,8 +259,12 @@ class OffsetFreeConfig(_Section):
     enabled: bool = Field(True, description="Integral action on (true) or off (false: the "
                           "NMPC tracks the reference itself, as in the thesis).")
     ki_per_s: NonNegativeVec4 = Field(
-        (0.5, 0.5, 0.2, 0.15), description="Integral gain per axis (1/s): the reference shift "
+        (0.5, 0.5, 0.4, 0.15), description="Integral gain per axis (1/s): the reference shift "
         "moves by −ki·e per second while it learns, [x, y, z, ψ]; 0 switches an axis off.")
+    kp: NonNegativeVec4 = Field(
+        (0.0, 0.0, 1.0, 0.0), description="Proportional part of the shift while learning "
+        "(dimensionless, m per m / rad per rad), [x, y, z, ψ]: stiffens a slow loop so the "
+        "integrator settles without overshoot (velocity form: it never jumps the shift).")
     error_band: PositiveVec4 = Field(
         (0.5, 0.5, 0.5, 0.3), description="An axis learns only while |error| is below this "
         "[m, m, m, rad] (conditional integration: a step's transient does not wind up).")

@@ -55,12 +55,15 @@ class ReferenceIntegrator:
     """
 
     def __init__(self, ki_per_s, error_band, speed_band, max_shift, hold_s,
-                 period_s: float) -> None:
+                 period_s: float, kp=(0.0,) * 4) -> None:
+        self.kp = np.asarray(kp, dtype=float)
         self.hold_s = np.asarray(hold_s, dtype=float)
         self._rest_s = np.zeros(4)  # how long each axis has been at rest inside its band
         self.latched = np.zeros(4, dtype=bool)  # learning until the error or reference moves
         self._last = np.full(4, math.nan)  # the reference components of the last update
         self._last_error_psi = math.nan
+        self._integral = np.zeros(4)  # the integral part of the shift
+        self._held_error = np.zeros(4)
         self.ki_per_s = np.asarray(ki_per_s, dtype=float)
         self.error_band = np.asarray(error_band, dtype=float)
         self.speed_band = np.asarray(speed_band, dtype=float)
@@ -73,7 +76,7 @@ class ReferenceIntegrator:
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
         """From ``controller.offset_free`` (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
         return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band, cfg.max_shift, cfg.hold_s,
-                   period_s)
+                   period_s, cfg.kp)
 
     def errors(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Tracking errors [x, y, z, ψ] of the estimate ``x`` (7,) against ``ref`` (7,)."""
@@ -114,8 +117,11 @@ class ReferenceIntegrator:
                 self.latched[k] = True
             self.learning[k] = self.latched[k] and not frozen[k]
             if self.learning[k]:
-                s = self.shift[k] - self.ki_per_s[k] * e[k] * self.period_s
-                self.shift[k] = min(max(s, -self.max_shift[k]), self.max_shift[k])
+                lim = self.max_shift[k]
+                integral = self._integral[k] - self.ki_per_s[k] * e[k] * self.period_s
+                self._integral[k] = min(max(integral, -lim), lim)
+                self._held_error[k] = e[k]  # the proportional part's error, held when frozen
+                self.shift[k] = min(max(self._integral[k] - self.kp[k] * e[k], -lim), lim)
         return self.shift
 
     def shifted(self, states: np.ndarray) -> np.ndarray:
