@@ -104,7 +104,7 @@ class ReferenceIntegrator:
             rate[3] = wrap_angle_rad(e[3] - self._last_error_psi) / self.period_s
         self._last_error_psi = e[3]
         for k, i in enumerate(_POS):
-            moved = not abs(ref[i] - self._last[k]) <= _REF_STILL  # NaN (first tick) too
+            moved = abs(ref[i] - self._last[k]) > _REF_STILL  # False on the first update (NaN)
             if preview is not None:
                 moved = moved or not np.all(np.abs(preview[:, i] - ref[i]) <= _REF_STILL)
             self._last[k] = ref[i]

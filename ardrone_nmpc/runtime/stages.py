@@ -296,11 +296,15 @@ class OffsetFree:
         self.integrator = ReferenceIntegrator.from_config(cfg, period_s)
 
     def update(self, x: np.ndarray | None, sol: Solution | None, sent: Sent) -> None:
-        if x is None or sol is None or sent.decision.action is not Action.CONTROL:
+        if x is None or sol is None:  # nothing solved: nothing to learn from
             self.integrator.learning[:] = False
             return
         p = sent.pcmd
-        frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac), sent.saturated)
+        if sent.decision.action is Action.CONTROL:
+            frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
+                                 sent.saturated)
+        else:  # frozen, but it still sees the reference move and the drone come to rest
+            frozen = (True,) * 4
         self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
