@@ -275,6 +275,10 @@ class OffsetFreeConfig(_Section):
     speed_band: PositiveVec4 = Field(
         (0.15, 0.15, 0.05, 0.3), description="'At rest': the estimated rate of the axis below "
         "this [m/s, m/s, m/s, rad/s].")
+    release_speed: PositiveVec4 = Field(
+        (0.3, 0.3, 0.3, 0.6), description="A learning axis stops (and needs a new hold) when "
+        "its rate exceeds this [m/s, m/s, m/s, rad/s]: a gust is not a constant disturbance. "
+        "Above speed_band, so the motion the shift itself causes does not stop it.")
     max_shift: PositiveVec4 = Field(
         (0.5, 0.5, 0.5, 0.3), description="Largest reference shift [m, m, m, rad]: a bad "
         "sensor cannot drag the drone further than this from the reference.")

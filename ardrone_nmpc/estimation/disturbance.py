@@ -49,13 +49,15 @@ class ReferenceIntegrator:
 
     Parameters
     ----------
-    ki_per_s, error_band, speed_band, max_shift, hold_s : (4,) per axis, [x, y, z, ψ]
-        (1/s; m, m, m, rad; m/s, m/s, m/s, rad/s; m, m, m, rad; s).
+    ki_per_s, error_band, speed_band, max_shift, hold_s, kp, release_speed : (4,) per axis,
+        [x, y, z, ψ] (1/s; m, m, m, rad; m/s, m/s, m/s, rad/s; m, m, m, rad; s; –;
+        as speed_band).
     period_s : integration step (s), the control period.
     """
 
     def __init__(self, ki_per_s, error_band, speed_band, max_shift, hold_s,
-                 period_s: float, kp=(0.0,) * 4) -> None:
+                 period_s: float, kp=(0.0,) * 4, release_speed=(math.inf,) * 4) -> None:
+        self.release_speed = np.asarray(release_speed, dtype=float)
         self.kp = np.asarray(kp, dtype=float)
         self.hold_s = np.asarray(hold_s, dtype=float)
         self._rest_s = np.zeros(4)  # how long each axis has been at rest inside its band
@@ -76,7 +78,7 @@ class ReferenceIntegrator:
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
         """From ``controller.offset_free`` (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
         return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band, cfg.max_shift, cfg.hold_s,
-                   period_s, cfg.kp)
+                   period_s, cfg.kp, cfg.release_speed)
 
     def errors(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Tracking errors [x, y, z, ψ] of the estimate ``x`` (7,) against ``ref`` (7,)."""
@@ -91,8 +93,9 @@ class ReferenceIntegrator:
 
         Per axis: the integrator starts learning once the axis has been at rest (|ė| below
         the speed band) with |e| inside the error band for ``hold_s`` — the tail of a step is
-        the loop's own — and keeps learning, ``s ← s − ki·e·period``, until |e| leaves the
-        error band or the reference moves — now, or anywhere in ``preview`` (n, 7), the
+        the loop's own — and keeps learning, ``s ← s − ki·e·period`` (shift = integral − kp·e),
+        until |e| leaves the error band, |ė| exceeds ``release_speed`` (a gust, not a constant
+        disturbance) or the reference moves — now, or anywhere in ``preview`` (n, 7), the
         reference the NMPC sees over its horizon: it starts a step before the reference
         does. ``frozen`` axes keep their shift (anti-windup).
         The shift is clipped to ±max_shift. ė is the estimate's velocity, for ψ the
@@ -111,7 +114,7 @@ class ReferenceIntegrator:
             inside = math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
             at_rest = inside and abs(rate[k]) < self.speed_band[k] and not moved
             self._rest_s[k] = self._rest_s[k] + self.period_s if at_rest else 0.0
-            if not inside or moved:
+            if not inside or moved or abs(rate[k]) > self.release_speed[k]:
                 self.latched[k] = False
             elif self._rest_s[k] > self.hold_s[k]:
                 self.latched[k] = True
