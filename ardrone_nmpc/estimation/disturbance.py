@@ -76,7 +76,8 @@ class ReferenceIntegrator:
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
-        """From ``controller.offset_free`` (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
+        """From ``controller.offset_free``
+        (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
         return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band, cfg.max_shift, cfg.hold_s,
                    period_s, cfg.kp, cfg.release_speed)
 

@@ -58,9 +58,9 @@ Mocap (:meth:`AirframePlant.mocap_pose`): position + N(0, σ_p) per axis; the th
 roll/pitch + N(0, σ) + a per-flight trim bias uniform in ±0.5°; yaw + N(0, σ) + an offset
 uniform in ±180° drawn at take-off + a drift of 1°/min (random sign per flight) with a small
 random walk; ultrasound altitude + N(0, σ); body velocities + N(0, σ_v) + a Gauss–Markov bias
-(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read 0 with the motors off. The biases evolve in
-:meth:`~AirframePlant.advance`; σ values come from ``sim.noise``, the bias sizes from
-:class:`PlantParams` (zero them for exact tests).
+(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read
+0 with the motors off. The biases evolve in :meth:`~AirframePlant.advance`; σ values come
+from ``sim.noise``, the bias sizes from :class:`PlantParams` (zero them for exact tests).
 
 Time
 ----

@@ -69,7 +69,8 @@ def test_constant_disturbances_leave_at_most_3_cm(disturbance):
     assert np.max(np.abs(_steady_error_m(rows_off))) > TARGET_M  # the disturbance is real
 
 
-_AXIS = {"x": ("x_true_m", 0), "y": ("y_true_m", 1), "z": ("z_true_m", 2), "psi": ("psi_true_rad", 3)}
+_AXIS = {"x": ("x_true_m", 0), "y": ("y_true_m", 1), "z": ("z_true_m", 2),
+         "psi": ("psi_true_rad", 3)}
 
 
 def _step(axis: str, *overrides: str) -> dict:
