@@ -22,10 +22,11 @@ from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.runs.summary import summarise
 
-# The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), and ẋ, ẏ
-# from the drone's navdata.
+# The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), ẋ, ẏ
+# from the drone's navdata, and no integral action.
 FORMULATIONS = {"thesis": ["controller.delay_compensation_s=0", "controller.vz_lead_s=null",
-                           "estimator.horizontal_velocity=navdata"],
+                           "estimator.horizontal_velocity=navdata",
+                           "controller.offset_free.enabled=false"],
                 "ours": []}
 UNSTABLE_RMSE_M = 0.3  # tracking error RMSE over the last third of a run beyond this: unstable
 # The reproduction measures the controllers, not the supervisor: a fence wide enough that the
@@ -239,7 +240,8 @@ def render_markdown(outcomes: list[Outcome], *, command: str) -> str:
         "`specs/plant.md`: tilt/vertical/yaw inner loops, drag, noise, the thesis' 0.26 s command",
         "delay). Each experiment runs in two formulations: **thesis** — the thesis' delay-free",
         "prediction model, ż reference and navdata velocities (`controller.delay_compensation_s=0`,",
-        "`controller.vz_lead_s=null`, `estimator.horizontal_velocity=navdata`); **ours** — this",
+        "`controller.vz_lead_s=null`, `estimator.horizontal_velocity=navdata`, no offset-free",
+        "integral action: `controller.offset_free.enabled=false`); **ours** — this",
         "tool's default, which predicts the state through the commands already sent, inverts the",
         "drone's 0.5 s vertical lag and differentiates the mocap position for ẋ, ẏ. Run",
         "directories are listed at the end; `ardrone-nmpc summary DIR` shows any in full.",
