@@ -58,16 +58,22 @@ def simulate(
     log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random source (default: sim.seed)."),
     quiet: bool = typer.Option(False, "--quiet", help="Only print the run directory."),
+    foxglove: bool = typer.Option(False, "--foxglove", help="Serve the run live on a Foxglove WebSocket (127.0.0.1), flown at real time (the 'foxglove' extra; docs/live-view.md)."),
+    foxglove_port: int = typer.Option(8765, "--foxglove-port", min=0, max=65535, help="--foxglove port (0: a free one)."),
 ) -> None:
     """Fly an experiment against the simulated AR.Drone in lockstep (no sockets, faster than
     real time); writes a run directory and prints its summary. Last line: run: <dir>."""
     from ardrone_nmpc.runs.rundir import LogError
     from ardrone_nmpc.reference.trajectories import ReferenceError
     from ardrone_nmpc.cli.simulate import run_simulate_command
+    from ardrone_nmpc.viz.live import open_live_view
 
     cfg = _load(config, set_)
     try:
-        path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet)
+        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, pace=True,
+                            echo=lambda line: typer.echo(line, err=True)) as live:
+            path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet,
+                                        live=live)
     except (ReferenceError, LogError, RuntimeError, OSError) as err:
         _fail([str(err)])
     typer.echo(f"run: {path}")
@@ -86,6 +92,8 @@ def fly(
     dashboard: bool = typer.Option(True, "--dashboard/--no-dashboard", help="Live status (only on a terminal)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulators (--sim)."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
+    foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live on a Foxglove WebSocket (127.0.0.1; the 'foxglove' extra; docs/live-view.md)."),
+    foxglove_port: int = typer.Option(8765, "--foxglove-port", min=0, max=65535, help="--foxglove port (0: a free one)."),
 ) -> None:
     """Fly an experiment over UDP: the AR.Drone (with mocap), or with --sim the loopback
     simulators. Takes off, flies the 65 ms loop, lands at the end, on Ctrl-C, on any error
@@ -100,6 +108,7 @@ def fly(
     from rich.live import Live
 
     from ardrone_nmpc.viz.dashboard import LiveStatus
+    from ardrone_nmpc.viz.live import open_live_view
     from ardrone_nmpc.runtime.realtime import (EXIT_SIGINT, EXIT_SIGTERM, FlightResult, Terminated,
                                      run_flight)
 
@@ -110,11 +119,14 @@ def fly(
     result = FlightResult()
     code = 0
     try:
-        if use_live:
-            live.start()
-        run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
-                   navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
-                   seed=seed, status=view.update if use_live else None, result=result)
+        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed,
+                            echo=lambda line: typer.echo(line, err=True)) as sink:
+            if use_live:
+                live.start()
+            run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
+                       navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
+                       seed=seed, status=view.update if use_live else None, result=result,
+                       sink=sink)
     except Terminated:  # before KeyboardInterrupt: it is one
         code = EXIT_SIGTERM
     except KeyboardInterrupt:
@@ -228,19 +240,19 @@ def reproduce(
 ) -> None:
     """Run every thesis experiment in simulation (thesis formulation and ours) and write the
     claim-by-claim comparison."""
-    from ardrone_nmpc.experiments.reproduce import render_markdown, run_claims
+    from ardrone_nmpc.experiments.reproduce import FORMULATIONS, reproduce as run_reproduce
     from rich.console import Console
     from rich.progress import Progress
 
     console = Console()
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("reproducing", total=None)
-        outcomes = run_claims(config_dir=config_dir, log_dir=log_dir, seed=seed,
-                              progress=lambda text: progress.update(task, description=text))
-    command = f"ardrone-nmpc reproduce --seed {seed}"
+        text, outcomes = run_reproduce(
+            config_dir=config_dir, log_dir=log_dir, seed=seed,
+            progress=lambda text: progress.update(task, description=text))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render_markdown(outcomes, command=command))
-    held = {form: sum(o.ours[form][1] for o in outcomes) for form in ("thesis", "ours")}
+    out.write_text(text)
+    held = {form: sum(o.ours[form][1] for o in outcomes) for form in FORMULATIONS}
     console.print(f"{len(outcomes)} claims: {held['thesis']} hold in the thesis formulation, "
                   f"{held['ours']} delay-compensated")
     typer.echo(f"report: {out}")
@@ -336,7 +348,7 @@ def sim_drone(
     bind: str = typer.Option("127.0.0.1", "--bind", help="Loopback address the simulated drone listens on."),
     at_port: int = typer.Option(5556, "--at-port", min=0, max=65535, help="AT command UDP port (0 = free port)."),
     navdata_port: int = typer.Option(5554, "--navdata-port", min=0, max=65535, help="Navdata UDP port (0 = free port)."),
-    control_port: Optional[int] = typer.Option(None, "--control-port", min=0, max=65535, help="Also serve the TCP configuration port (the drone's 5559); default: not served."),
+    control_port: int = typer.Option(5559, "--control-port", min=0, max=65535, help="TCP configuration port (the drone's 5559; 0 = free port)."),
     mocap_to: str = typer.Option("127.0.0.1:51001", "--mocap-to", help="Loopback host:port the mocap pose stream is sent to."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulation (default: sim.seed)."),
 ) -> None:
@@ -350,6 +362,11 @@ def sim_drone(
               seed=seed, control_port=control_port, echo=typer.echo)
     except (ValueError, OSError) as err:
         _fail([str(err)])
+
+
+from ardrone_nmpc.cli import export as _export, mocap_check as _mocap_check  # noqa: E402
+_mocap_check.register(app)  # commands that live in their own modules
+_export.register(app)
 
 
 def main() -> None:  # console-script entry point

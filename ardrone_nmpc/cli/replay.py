@@ -15,6 +15,7 @@ from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
 from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.experiments.record import record
 from ardrone_nmpc.runs.rundir import CONFIG_FILE, LogError, RunData, RunRecorder, read_run
 from ardrone_nmpc.experiments.replay import (
     COMPARED_COLUMNS, RERUN_FILE, ReplayError, RerunResult, broadcast, missing_rerun_columns,
@@ -108,17 +109,21 @@ def _rerun(*, run: RunData, overrides: list[str], log_dir: Path, console: Consol
     if not cfg.name.endswith("-rerun"):
         cfg = cfg.model_copy(update={"name": f"{cfg.name}-rerun"})
     require_rerun_columns(run=run)  # before a run directory is created for nothing
-    with RunRecorder.create(log_dir, cfg, seed=run.seed) as recorder:
+    columns = [TextColumn("{task.description}"), BarColumn(),
+               TextColumn("{task.percentage:>3.0f}%")]
+
+    def fly(recorder: RunRecorder) -> RerunResult:
         recorder.event(0.0, "replay", source=str(run.path.resolve()), overrides=overrides,
                        source_version=run.version)
-        columns = [TextColumn("{task.description}"), BarColumn(),
-                   TextColumn("{task.percentage:>3.0f}%")]
         with Progress(*columns, console=console, transient=True) as progress:
             task = progress.add_task("re-running", total=1.0)
             result = rerun(run=run, cfg=cfg, recorder=recorder,
                            progress=lambda f: progress.update(task, completed=f))
         write_rerun_csv(result=result, path=recorder.path / RERUN_FILE)
-        recorder.write_summary(summarise(read_run(recorder.path)))
+        return result
+
+    recording = record(cfg, log_dir, seed=run.seed, fly=fly)
+    result = recording.result
     console.print(_diff_table(result, title=f"{run.path.name}: recomputed − logged"))
     console.print(_cost_table(result))
     console.print("cost = Σ ½(eᵀQe + uᵀRu)·Δt over the experiment (t ≥ 0); q, r of the rerun "
@@ -126,7 +131,7 @@ def _rerun(*, run: RunData, overrides: list[str], log_dir: Path, console: Consol
     console.print("open-loop counterfactual: the logged states did not respond to the "
                   "recomputed inputs, so only the input part differs")
     _verdict(result=result, changed=bool(overrides), console=console)
-    return recorder.path
+    return recording.path
 
 
 def _broadcast(*, run: RunData, host: str | None, port: int | None, speed: float,

@@ -11,7 +11,7 @@ per subsystem::
     reference:  {kind, start_m, target_m, step_time_s, side_m, …, path_file}
     loop:       {period_s}
     drone:      {host, at_port, navdata_port, euler_angle_max_rad, control_vz_max_mps, …}
-    mocap:      {bind_host, port, object_name, rate_hz}
+    mocap:      {kind, bind_host, port, system, hostname, options, up_axis, object_name, …}
     sim:        {seed, plant: {…}, noise: {…}, mocap_rate_hz, navdata_rate_hz}
     safety:     {geofence_min_m, geofence_max_m, max_tilt_rad, …, solver_fallback}
     faults:     {mocap_dropout: {start_s, duration_s}, …}   (simulation only; all off by default)
@@ -46,6 +46,7 @@ from pydantic import (
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -189,7 +190,12 @@ class SolverConfig(_Section):
         "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
         "'newton': the thesis' per-step Newton iterations with fdgmres.")
     kmax: int = Field(5, ge=1, le=1000,
-                      description="GMRES Krylov-subspace dimension per solve (count).")
+                      description="C/GMRES: Krylov-subspace dimension per solve (count).")
+    newton_kmax: int = Field(
+        30, ge=1, le=1000, description="Method 'newton': Krylov dimension k_max of each Newton "
+        "step (Algorithm 1; the thesis gives none). Its system is uncondensed (8 unknowns per "
+        "stage): with 5, GMRES stops far above η and Newton stalls at ‖F‖ ≈ 0.1 "
+        "(docs/thesis-reproduction.md).")
     zeta_per_s: Positive = Field(
         15.0, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
     fd_step: Positive = Field(
@@ -345,9 +351,18 @@ class ControllerConfig(_Section):
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")
     offset_free: OffsetFreeConfig = Field(
         default_factory=OffsetFreeConfig, description="Offset-free tracking (integral action "
-        "of the NMPC; the 'p' controller has none).")
+        "of the NMPC; the 'p' controller has none). true/false is short for "
+        "{enabled: true/false} with the default gains.")
 
     _u_bounds = _require_increasing("u_min", "u_max")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _offset_free_shorthand(cls, data: Any) -> Any:
+        # controller.offset_free: false (a bool) → the section with enabled false
+        if isinstance(data, Mapping) and isinstance(data.get("offset_free"), bool):
+            data = {**data, "offset_free": {"enabled": data["offset_free"]}}
+        return data
 
 
 # ----------------------------------------------------------------------------- estimation
@@ -498,11 +513,36 @@ class DroneConfig(_Section):
         0.03, gt=0, le=0.03, description="Longest gap between AT commands (s); ≤ 30 ms (§2.6).")
 
 
-class MocapConfig(_Section):
-    """The motion-capture pose stream (specs/mocap-stream.md)."""
+MOCAP_SYSTEMS = ("vicon", "optitrack", "optitrack_closed_source", "qualisys", "vrpn", "nokov",
+                 "motionanalysis", "fzmotion", "mock")
+# Systems whose default world frame is Y-up (OptiTrack Motive streams Y up unless told otherwise).
+_Y_UP_SYSTEMS = ("optitrack", "optitrack_closed_source")
 
-    bind_host: str = Field("0.0.0.0", min_length=1, description="Local address to listen on.")
-    port: Port = Field(51001, description="UDP port of the pose stream.")
+
+class MocapConfig(_Section):
+    """The motion-capture source (docs/mocap-sources.md, docs/mocap-stream.md)."""
+
+    kind: Literal["vicon_udp", "motioncapture"] = Field(
+        "vicon_udp", description="'vicon_udp': Vicon Tracker's UDP object stream (bind_host, "
+        "port); 'motioncapture': any system of the libmotioncapture library (system, hostname, "
+        "options; the 'mocap' extra).")
+    bind_host: str = Field("0.0.0.0", min_length=1, description="vicon_udp: local address to "
+                           "listen on.")
+    port: Port = Field(51001, description="vicon_udp: UDP port of the pose stream.")
+    system: Literal[MOCAP_SYSTEMS] = Field(  # type: ignore[valid-type]
+        "vicon", description="motioncapture: the library's system type (vicon = DataStream "
+        "SDK, optitrack = NatNet, qualisys, vrpn, nokov, motionanalysis, fzmotion, mock).")
+    hostname: str = Field("localhost", min_length=1, description="motioncapture: the mocap "
+                          "server's address (the library's 'hostname' option).")
+    options: dict[str, str | int | float | bool] = Field(
+        default_factory=dict, description="motioncapture: more library options, passed through "
+        "as strings (e.g. port_command, interface_ip; mock: rigid_bodies, frequency).")
+    up_axis: Optional[Literal["z", "y"]] = Field(
+        None, description="motioncapture: the system's vertical axis; 'y' turns a right-handed "
+        "Y-up frame into ours (x, -z, y). null: 'y' for optitrack, 'z' otherwise (set 'z' when "
+        "Motive streams Z up).")
+    connect_timeout_s: Positive = Field(
+        5.0, description="motioncapture: how long to wait for the connection (s).")
     object_name: str = Field(
         "ardrone", min_length=1, max_length=24, description="Tracked object name (≤ 24 ASCII).")
     rate_hz: Positive = Field(100.0, description="Expected pose rate (Hz).")
@@ -513,6 +553,24 @@ class MocapConfig(_Section):
         if not value.isascii() or "\x00" in value:
             raise _invalid("must be ASCII without NUL characters")
         return value
+
+    @field_validator("options", mode="before")
+    @classmethod
+    def _scalar_options(cls, value: Any) -> Any:
+        # the library takes text: one clear line rather than one per member of the union
+        if isinstance(value, Mapping):
+            for key, item in value.items():
+                if not isinstance(item, (str, int, float, bool)):
+                    raise _invalid(f"{key}: expected a string, number or boolean, got "
+                                   f"{type(item).__name__}")
+        return value
+
+    @property
+    def vertical_axis(self) -> str:
+        """The up axis in force: ``up_axis``, or the system's default."""
+        if self.up_axis is not None:
+            return self.up_axis
+        return "y" if self.system in _Y_UP_SYSTEMS else "z"
 
 
 # ----------------------------------------------------------------------------- simulation
@@ -768,6 +826,41 @@ class DelayJumpFault(_Section):
     delay_s: NonNegative = Field(0.5, le=2.0, description="New command delay (s).")
 
 
+class ForeignSessionFault(_Section):
+    """The drone was left in another multiconfig session: writes of per-session keys (the
+    command limits) without that session's ``AT*CONFIG_IDS`` are acknowledged but not applied;
+    it flies, and reports on the control port, the limits it holds."""
+
+    session_id: str = Field("d2e081a3", pattern=r"^[0-9a-fA-F]{8}$", description="Its session id.")
+    profile_id: str = Field("be27e2e4", pattern=r"^[0-9a-fA-F]{8}$", description="Its profile id.")
+    application_id: str = Field("d87f7e0c", pattern=r"^[0-9a-fA-F]{8}$", description="Its application id.")
+    euler_angle_max_rad: float = Field(0.52, gt=0, le=0.52, description="Tilt limit it holds (rad).")
+    control_vz_max_mps: float = Field(2.0, ge=0.2, le=2.0, description="Climb-rate limit it holds (m/s).")
+    control_yaw_radps: float = Field(6.11, ge=0.7, le=6.11, description="Yaw-rate limit it holds (rad/s).")
+
+
+class SelfLandFault(_Section):
+    """The drone lands by itself at ``start_s`` (motor cut-out, low battery, a firmware
+    decision); a REF still asking for take-off launches it again, as the firmware does."""
+
+    start_s: Finite = Field(5.0, description="When (s, experiment time).")
+
+
+class CtrlCodesFault(_Section):
+    """Navdata reports another firmware's ctrl_state transition codes."""
+
+    codes: Literal["sdk", "fw2.4"] = Field(
+        "fw2.4", description="'fw2.4': take-off 7, landing 9; 'sdk': 6, 8 (control_states.h).")
+
+
+class ControlPortDropFault(_Section):
+    """The drone's TCP control port (configuration read-back) does not answer."""
+
+    mode: Literal["silent", "refused"] = Field(
+        "silent", description="'silent': connections accepted, no configuration ever sent; "
+        "'refused': nothing listens.")
+
+
 class FaultsConfig(_Section):
     """Injected faults (simulation only: ``simulate`` and ``fly --sim``); each is off (null)
     unless given, e.g. ``--set faults.mocap_dropout.start_s=5``."""
@@ -785,6 +878,10 @@ class FaultsConfig(_Section):
     wind_gust: Optional[WindGustFault] = Field(None, description="Wind gust on the plant.")
     wind: Optional[WindFault] = Field(None, description="Constant wind on the plant.")
     delay_jump: Optional[DelayJumpFault] = Field(None, description="Command-delay jump.")
+    foreign_session: Optional[ForeignSessionFault] = Field(None, description="Drone in another config session.")
+    self_land: Optional[SelfLandFault] = Field(None, description="Drone lands by itself.")
+    ctrl_codes: Optional[CtrlCodesFault] = Field(None, description="Other firmware's ctrl_state codes.")
+    control_port_drop: Optional[ControlPortDropFault] = Field(None, description="Control port does not answer.")
 
     def active(self) -> list[str]:
         """Names of the faults that are set."""

@@ -22,7 +22,7 @@ class NewtonGMRESController(NmpcSolverBase):
     ----------
     spec : :class:`OcpSpec`.
     period_s : control period (s); only recorded (no continuation here).
-    kmax : k_max of Algorithm 1, per Newton step.
+    kmax : k_max of Algorithm 1, per Newton step (``controller.solver.newton_kmax``).
     fd_step : h of eq. 3.24. gmres_rtol : η of Algorithm 1.
     tolerance : ‖F‖ at which a tick's Newton iterations stop.
     max_newton_iterations : Newton steps per solve (per active-set round).
@@ -37,7 +37,7 @@ class NewtonGMRESController(NmpcSolverBase):
     stage_dim = kernels.STAGE_ACTIVE
     _newton_every_tick = True
 
-    def __init__(self, spec: OcpSpec, *, period_s: float = 0.065, kmax: int = 5,
+    def __init__(self, spec: OcpSpec, *, period_s: float = 0.065, kmax: int = 30,
                  fd_step: float = 1e-6, gmres_rtol: float = 1e-3, tolerance: float = 1e-4,
                  max_newton_iterations: int = 20, bound_epsilon: float = 1e-3,
                  divergence_residual: float = 1e3):
@@ -51,7 +51,7 @@ class NewtonGMRESController(NmpcSolverBase):
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "NewtonGMRESController":
         s = controller.solver
-        return cls(OcpSpec.from_config(controller), period_s=period_s, kmax=s.kmax,
+        return cls(OcpSpec.from_config(controller), period_s=period_s, kmax=s.newton_kmax,
                    fd_step=s.fd_step, gmres_rtol=s.gmres_rtol, tolerance=s.tolerance,
                    max_newton_iterations=s.max_newton_iterations,
                    bound_epsilon=s.bound_epsilon, divergence_residual=s.divergence_residual)

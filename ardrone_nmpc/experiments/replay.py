@@ -1,6 +1,6 @@
 """``replay``: a recorded run fed back through the tick, or re-sent as a live pose stream.
 
-DESIGN.md §2: the same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
+The same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
 ``replay --rerun``; only the clock and the links change. Here the clock is manual — the
 experiment clock of the log itself (``t_s``) — and the "links" are the logged measurements
 (``log.csv`` columns written by :func:`~ardrone_nmpc.runtime.tick.measurement_columns`):
@@ -20,7 +20,7 @@ Functions
 ---------
 :func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.runtime.tick.TickInputs` of every row;
 :func:`rerun` steps a fresh tick through them and compares the commands; :func:`broadcast`
-re-sends the logged poses as the UDP pose stream (specs/mocap-stream.md).
+re-sends the logged poses as the UDP pose stream (docs/mocap-stream.md).
 """
 
 from __future__ import annotations
@@ -34,11 +34,14 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
-from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
-from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
-from ardrone_nmpc.safety import Action
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
+from ardrone_nmpc.runs.window import experiment_rows
+from ardrone_nmpc.runtime.schedule import phase, write_events
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.safety import Action
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -47,7 +50,8 @@ __all__ = [
     "rows_to_inputs", "write_rerun_csv",
 ]
 
-#: Columns a log needs beyond DESIGN.md §5's for ``--rerun`` (added with the raw measurements).
+#: Columns a log needs beyond the required ones (docs/design.md) for ``--rerun`` (added with
+#: the raw measurements).
 RERUN_COLUMNS: tuple[str, ...] = ("mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps",
                                   "nav_mode")
 CMD_COLUMNS = ("cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac")
@@ -289,10 +293,7 @@ def _cost(*, cfg, trajectory, t_s: np.ndarray, states: np.ndarray, u_logged: np.
     """:class:`RerunCost` of ``states`` (n, 7) with both input histories (n, 4)."""
     ctl = cfg.controller
     q, r = np.asarray(ctl.q, float), np.asarray(ctl.r, float)
-    has_state = np.all(np.isfinite(states), axis=1)
-    window = has_state & (t_s >= 0.0)
-    if not window.any():
-        window = has_state
+    window = experiment_rows(t_s, among=np.all(np.isfinite(states), axis=1))
     if not window.any():
         return RerunCost(0, 0.0, 0.0, 0.0)
     err = states[window] - trajectory.state_at(t_s[window])
@@ -333,8 +334,6 @@ def rerun(*, run: RunData, cfg, recorder=None,
     ReplayError
         The log lacks the measurement columns (an older version) or holds no rows.
     """
-    from ardrone_nmpc.runtime.lockstep import experiment_trajectory
-
     inputs = rows_to_inputs(run=run)
     if not inputs:
         raise ReplayError(f"{run.path}: log.csv holds no ticks")
@@ -344,15 +343,14 @@ def rerun(*, run: RunData, cfg, recorder=None,
     rows: list[dict] = []
     for k, inp in enumerate(inputs):
         # manual clock = the experiment clock: the tick's clock offset is 0
-        out = tick.step(inp, t_exp_s=inp.t_s, mode="settle" if inp.t_s < 0 else "track")
+        out = tick.step(inp, t_exp_s=inp.t_s, mode=phase(inp.t_s))
         if logged_mode[k] == "landing" and out.action in (Action.LAND, Action.STOP):
             out.row["mode"] = "landing"  # the runner's label for its descent after a landing
         rows.append(out.row)
         if recorder is not None:
             recorder.write_row(out.row)
-            for event in out.events:  # the supervisor's mode changes, as the flight wrote them
-                fields = {k: v for k, v in event.items() if k != "kind"}
-                recorder.event(inp.t_s, event["kind"], **fields)
+            # the supervisor's mode changes, as the flight wrote them
+            write_events(recorder.event, inp.t_s, out.events)
         if progress is not None:
             progress((k + 1) / len(inputs))
     if cfg.reference.kind == "follow":  # live: price against what the rerun tick followed
@@ -473,7 +471,7 @@ def broadcast(*, run: RunData, port: int, host: str = "127.0.0.1", speed: float 
               clock: Callable[[], float] = time.monotonic,
               sleep: Callable[[float], None] = time.sleep,
               progress: Callable[[float], None] | None = None) -> BroadcastResult:
-    """Re-send the run's logged poses as the mocap UDP stream (specs/mocap-stream.md).
+    """Re-send the run's logged poses as the mocap UDP stream (docs/mocap-stream.md).
 
     One datagram per distinct logged pose (a pose seen on several ticks is sent once), at its
     logged time (``mocap_t_s`` spacing) divided by ``speed``, on absolute deadlines from the

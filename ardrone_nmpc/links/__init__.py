@@ -7,8 +7,14 @@
   AR.Drone 2.0 AT-command sender (one sequencer, keepalive thread resending REF + PCMD every
   30 ms, hover on a stale controller command) and navdata receiver (wake-up, bootstrap exit with
   the config ACK handshake, re-wake after silence).
+* :mod:`ardrone_nmpc.links.mocap_source` — :class:`~ardrone_nmpc.links.mocap_source.MocapSource`:
+  the one interface of every mocap source (freshness rules, readings) and
+  :func:`~ardrone_nmpc.links.mocap_source.open_mocap_source` (``mocap.kind``).
 * :mod:`ardrone_nmpc.links.mocap_link` — :class:`~ardrone_nmpc.links.mocap_link.MocapLink`: the
   latest fresh pose of one object from the Vicon-style UDP stream, receipt-stamped.
+* :mod:`ardrone_nmpc.links.motioncapture_source` —
+  :class:`~ardrone_nmpc.links.motioncapture_source.MotionCaptureSource`: the same from any
+  libmotioncapture system (Vicon SDK, OptiTrack, Qualisys, VRPN, …), run in a child process.
 
 Layering: links own sockets, threads and clocks; every byte is encoded or decoded by
 :mod:`ardrone_nmpc.protocol` (the one exception, the plain-text configuration dump of TCP 5559,

@@ -1,21 +1,15 @@
 """The motion-capture link: the latest fresh pose of one object from the UDP pose stream.
 
-specs/mocap-stream.md, receiver rules. A receiver thread reads datagrams (buffer ≥ 2048 bytes),
+docs/mocap-stream.md, receiver rules. A receiver thread reads datagrams (buffer ≥ 2048 bytes),
 stamps each on receipt with the link's clock, decodes it with
-:func:`~ardrone_nmpc.protocol.mocap.decode_mocap` (malformed → counted, never raised) and keeps
-the newest *fresh* pose of the configured object as a :class:`~ardrone_nmpc.core.types.MocapPose`
-(metres, radians, ψ wrapped to (−π, π], ``t_s`` = receipt time).
-
-Not fresh — the last good pose is kept and its age grows (the supervisor acts on the age; a
-zero pose never reaches the controller):
-
-* the object missing from the datagram (``missing``);
-* an all-zero (or non-finite) pose (``zero_poses``; ``MocapObjectPose.fresh`` is False);
-* a bit-identical pose in ``repeat_limit`` (3) or more consecutive frames: the first two are
-  accepted, the third and later are ignored (``repeats``) — real measurements are never
-  bit-identical three frames running, a tracker holding an occluded object's pose is;
-* a frame number not newer than the last accepted one (duplicate or reordered datagram,
-  ``stats.out_of_order``), unless it is far below it (a restarted tracker, ``stats.restarts``).
+:func:`~ardrone_nmpc.protocol.mocap.decode_mocap` (malformed → counted, never raised) and hands
+the frame to :meth:`MocapSource.accept_frame
+<ardrone_nmpc.links.mocap_source.MocapSource.accept_frame>`, which keeps the newest *fresh* pose
+of the configured object as a :class:`~ardrone_nmpc.core.types.MocapPose` (metres, radians, ψ
+wrapped to (−π, π], ``t_s`` = receipt time) by the rules every mocap source shares (missing,
+zero and repeated poses). Here, on top: a frame number not newer than the last accepted one
+(duplicate or reordered datagram, ``stats.out_of_order``) is dropped, unless it is far below it
+(a restarted tracker, ``stats.restarts``).
 
 :attr:`MocapLink.stats` counts every datagram with a valid number (so ``rate_hz`` and frame
 ``lost`` describe the stream itself, whether or not the object was visible) and the malformed
@@ -24,42 +18,20 @@ ones. Closing the link stops the thread and closes the socket.
 
 from __future__ import annotations
 
-import math
 import socket
-import struct
 import threading
 import time
 
-import numpy as np
-
-from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, LinkStats, open_udp
-from ardrone_nmpc.protocol.mocap import (
-    MOCAP_DEFAULT_PORT,
-    MocapError,
-    MocapObjectPose,
-    decode_mocap,
-)
-from ardrone_nmpc.core.types import MocapPose
+from ardrone_nmpc.links.mocap_source import MocapSource, mocap_pose_of
+from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, open_udp
+from ardrone_nmpc.protocol.mocap import MOCAP_DEFAULT_PORT, MocapError, decode_mocap
 
 __all__ = ["MocapLink", "mocap_pose_of"]
 
 _RX_POLL_S = 0.05
-_POSE_BITS = struct.Struct("<6d")     # the six wire floats, to compare poses bit for bit
 
 
-def _readonly(values) -> np.ndarray:
-    a = np.array(values, dtype=np.float64)
-    a.setflags(write=False)
-    return a
-
-
-def mocap_pose_of(pose: MocapObjectPose, t_s: float) -> MocapPose:
-    """A decoded wire pose as the :class:`MocapPose` record stamped ``t_s`` (SI units)."""
-    return MocapPose(t_s=t_s, position_m=_readonly(pose.position_m),
-                     rotation_xyz_rad=_readonly(pose.rotation_xyz_rad), psi_rad=pose.psi_rad)
-
-
-class MocapLink:
+class MocapLink(MocapSource):
     """Receive the pose stream and keep the latest fresh pose of ``object_name``.
 
     Parameters
@@ -75,46 +47,22 @@ class MocapLink:
     Context manager: ``with MocapLink(...) as mocap:`` starts the thread, exit stops it.
     """
 
+    kind = "vicon_udp"
+
     def __init__(self, bind_host: str = "0.0.0.0", port: int = MOCAP_DEFAULT_PORT, *,
                  object_name: str = "ardrone", clock: Clock = time.monotonic,
                  repeat_limit: int = 3, restart_backjump: int = 1000,
                  other_objects: tuple[str, ...] = ()) -> None:
-        if not isinstance(object_name, str) or not object_name:
-            raise ValueError("object_name must be a non-empty string")
-        if repeat_limit < 2:
-            raise ValueError(f"repeat_limit must be >= 2, got {repeat_limit}")
+        super().__init__(object_name=object_name, other_objects=other_objects, clock=clock,
+                         repeat_limit=repeat_limit, restart_backjump=restart_backjump)
         self.bind_host = bind_host
-        self.object_name = object_name
-        self.repeat_limit = int(repeat_limit)
         self._requested_port = int(port)
-        self._clock = clock
         self._sock: socket.socket | None = None
         self._bound_port: int | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._pose: MocapPose | None = None
-        self._rx_t_s = -math.inf
-        self._last_values: bytes | None = None
-        self._same_count = 0
-        self._missing = 0
-        self._zero = 0
-        self._repeats = 0
-        self._poses = 0
-        self._last_error: str | None = None
-        self.other_objects = tuple(other_objects)
-        self._others: dict[str, tuple[MocapPose, float]] = {}
-        self.stats = LinkStats(window_s=1.0, restart_backjump=restart_backjump)
-        """Stream statistics: rate, frame-number gaps (``lost``), malformed, out of order."""
 
     # ----------------------------------------------------------------------------- lifecycle
-
-    def __enter__(self) -> MocapLink:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
     def start(self) -> None:
         """Bind the socket and start the receiver thread (once)."""
@@ -139,48 +87,9 @@ class MocapLink:
         :meth:`start`."""
         return self._bound_port if self._bound_port is not None else self._requested_port
 
-    # ----------------------------------------------------------------------------- readings
-
-    def latest(self) -> tuple[MocapPose | None, float]:
-        """``(pose, rx_t_s)``: the newest fresh pose and its receipt time (link clock);
-        ``(None, -inf)`` before the first."""
-        with self._lock:
-            return self._pose, self._rx_t_s
-
-    def latest_of(self, name: str) -> tuple[MocapPose | None, float]:
-        """``(pose, rx_t_s)`` of another tracked object (``other_objects``); ``(None, -inf)``
-        before its first fresh pose."""
-        with self._lock:
-            return self._others.get(name, (None, -math.inf))
-
-    def age_ms(self, now_s: float) -> float:
-        """Milliseconds since the newest fresh pose was received (inf before the first)."""
-        return (now_s - self._rx_t_s) * 1e3
-
     @property
-    def poses(self) -> int:
-        """Fresh poses accepted."""
-        return self._poses
-
-    @property
-    def missing(self) -> int:
-        """Frames (accepted by number) without the configured object."""
-        return self._missing
-
-    @property
-    def zero_poses(self) -> int:
-        """Frames carrying the object with an all-zero or non-finite pose."""
-        return self._zero
-
-    @property
-    def repeats(self) -> int:
-        """Frames ignored as a bit-identical repeat (``repeat_limit`` or more in a row)."""
-        return self._repeats
-
-    @property
-    def last_error(self) -> str | None:
-        """The latest decoder error message (diagnostics)."""
-        return self._last_error
+    def where(self) -> str:
+        return f"udp {self.bind_host}:{self.port}"
 
     # ----------------------------------------------------------------------------- receiver
 
@@ -216,30 +125,4 @@ class MocapLink:
         if not stats.accept_sequence(frame.frame_number):
             return
         stats.record_packet(t_s)
-        for name in self.other_objects:  # e.g. the object a 'follow' reference tracks
-            other = frame.poses.get(name)
-            if other is not None and other.fresh:
-                with self._lock:
-                    self._others[name] = (mocap_pose_of(other, t_s), t_s)
-        pose = frame.poses.get(self.object_name)
-        if pose is None:
-            self._missing += 1
-            self._last_values, self._same_count = None, 0
-            return
-        if not pose.fresh:
-            self._zero += 1
-            self._last_values, self._same_count = None, 0
-            return
-        values = _POSE_BITS.pack(*pose.translation_mm, *pose.rotation_xyz_rad)
-        if values == self._last_values:        # bit-identical (0.0 and -0.0 differ)
-            self._same_count += 1
-        else:
-            self._last_values, self._same_count = values, 1
-        if self._same_count >= self.repeat_limit:
-            self._repeats += 1
-            return
-        record = mocap_pose_of(pose, t_s)
-        with self._lock:
-            self._pose = record
-            self._rx_t_s = t_s
-        self._poses += 1
+        self.accept_frame(frame.poses, t_s)

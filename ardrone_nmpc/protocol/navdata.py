@@ -1,6 +1,6 @@
 """AR.Drone 2.0 navdata (UDP 5554, drone → client): encoder (simulator) and decoder (client).
 
-specs/ardrone-protocol.md §4. A packet is a 16-byte header (magic, state bits, sequence, vision
+docs/protocol.md (navdata). A packet is a 16-byte header (magic, state bits, sequence, vision
 flag), then options ``u16 tag, u16 size, payload`` (``size`` includes the 4-byte head) in
 ascending tag order, then the checksum option (tag 0xFFFF, size 8, ``u32`` = unsigned 32-bit
 sum of every byte before it). Little-endian throughout; at most 4096 bytes.
@@ -12,12 +12,16 @@ required and verified. Size 0 (or < 4), overrunning options, a second demo optio
 and a bad or missing checksum raise :class:`NavdataError`, the only exception the decoder
 raises. Bytes after the checksum option are ignored.
 
-Sign conventions of the demo option (§4.4, inferred from ardrone_autonomy, which negates
+Sign conventions of the demo option (inferred from ardrone_autonomy, which negates
 theta, psi, vy and vz to get ROS frames): body frame x forward, y right, z down; theta > 0 nose
 up, phi > 0 right wing down, psi > 0 **clockwise** seen from above; vx, vy, vz are body-frame
 speeds (vy > 0 to the right, vz > 0 down). The records keep the wire units in their raw fields
 (``theta_mdeg``, ``altitude_mm`` …) and convert at the boundary in properties (``pitch_deg``,
 ``altitude_m`` …); signs are never changed here.
+
+Every simulated drone builds its packets with :func:`encode_drone_navdata` from a
+:class:`DroneStatus` (what the drone knows about itself: flight phase, command, link), so the
+state bits and the ctrl_state codes of a flight state are written in one place.
 """
 
 from __future__ import annotations
@@ -34,10 +38,12 @@ __all__ = [
     "VISION_DETECT_TAG", "VISION_DETECT_SIZE", "NavdataError", "DroneState", "OptionTag",
     "CtrlMajor", "ctrl_state_value", "DemoOption", "NavdataOption", "Navdata",
     "navdata_checksum", "empty_vision_detect_option", "encode_navdata", "decode_navdata",
+    "CtrlCodes", "DRONE_PHASES", "DroneStatus", "ALWAYS_ON_STATE", "DEFAULT_NAVDATA_OPTIONS",
+    "time_option", "encode_drone_navdata",
 ]
 
 NAVDATA_PORT = 5554
-NAVDATA_WAKEUP = b"\x01\x00\x00\x00"       # int32 1: "start streaming, unicast" (§1.1)
+NAVDATA_WAKEUP = b"\x01\x00\x00\x00"       # int32 1: "start streaming, unicast"
 NAVDATA_MAGIC = 0x55667788
 NAVDATA_MAGIC_ALT = 0x55667789             # accepted by node-ar-drone/afParrotSdk2; meaning unknown
 NAVDATA_MAX_BYTES = 4096
@@ -69,7 +75,7 @@ class NavdataError(ValueError):
 
 
 class DroneState(enum.IntFlag):
-    """Drone state bits of the header (``def_ardrone_state_mask_t``, §4.2)."""
+    """Drone state bits of the header (``def_ardrone_state_mask_t``)."""
 
     FLY = 1 << 0                   # flying (0 = landed)
     VIDEO = 1 << 1
@@ -77,7 +83,7 @@ class DroneState(enum.IntFlag):
     CONTROL = 1 << 3               # 0 euler-angle control, 1 angular-speed control
     ALTITUDE = 1 << 4              # altitude control active
     USER_FEEDBACK_START = 1 << 5   # REF bit 9 (start button) state
-    COMMAND = 1 << 6               # control-command ACK (config ACK, §3.2)
+    COMMAND = 1 << 6               # control-command ACK (config ACK)
     CAMERA = 1 << 7
     TRAVELLING = 1 << 8
     USB = 1 << 9
@@ -101,7 +107,7 @@ class DroneState(enum.IntFlag):
     ACQ_THREAD_ON = 1 << 27
     CTRL_WATCHDOG = 1 << 28        # control loop late
     ADC_WATCHDOG = 1 << 29         # nav-board UART late
-    COM_WATCHDOG = 1 << 30         # no client traffic recently (§2.6)
+    COM_WATCHDOG = 1 << 30         # no client traffic recently
     EMERGENCY = 1 << 31
     # Aliases with descriptive names.
     FLYING = FLY
@@ -110,7 +116,7 @@ class DroneState(enum.IntFlag):
 
 
 class OptionTag(enum.IntEnum):
-    """Option tags (``navdata_keys.h``, §4.3); 27 is GPS on firmware 2.4.x."""
+    """Option tags (``navdata_keys.h``); 27 is GPS on firmware 2.4.x."""
 
     DEMO = 0
     TIME = 1
@@ -144,7 +150,7 @@ class OptionTag(enum.IntEnum):
 
 
 class CtrlMajor(enum.IntEnum):
-    """Major ctrl_state (upper 16 bits, ``control_states.h``, §4.5). Real 2.x firmware reports
+    """Major ctrl_state (upper 16 bits, ``control_states.h``). Real 2.x firmware reports
     7 during take-off and 9 during landing; rely on state bit 0 for airborne/landed."""
 
     DEFAULT = 0
@@ -164,6 +170,33 @@ def ctrl_state_value(major: int, minor: int = 0) -> int:
     if not (0 <= major <= 0xFFFF and 0 <= minor <= 0xFFFF):
         raise ValueError(f"major/minor must be u16, got {major}/{minor}")
     return (int(major) << 16) | int(minor)
+
+
+# Minor ctrl_states a simulated drone reports (control_states.h FLYING_STATES, HOVERING_STATES).
+FLYING_ALT_OUT_ZONE = 3
+HOVERING_ALT_OUT_ZONE = 4
+HOVERING_LOST_COM = 8
+
+
+class CtrlCodes(enum.Enum):
+    """The major codes a drone reports during its two automatic transitions.
+
+    ``SDK``: ``control_states.h`` — take-off 6 (CTRL_TRANS_TAKEOFF), landing 8
+    (CTRL_TRANS_LANDING). ``FIRMWARE_2_4``: what 2.4.x firmware is reported to send — take-off
+    7, landing 9 (the header's GOTOFIX and LOOPING; ardrone_autonomy #186, node-ar-drone #132).
+    A client must read both (docs/protocol.md, ctrl_state).
+    """
+
+    SDK = "sdk"
+    FIRMWARE_2_4 = "fw2.4"
+
+    @property
+    def takeoff_major(self) -> int:
+        return 6 if self is CtrlCodes.SDK else 7
+
+    @property
+    def landing_major(self) -> int:
+        return 8 if self is CtrlCodes.SDK else 9
 
 
 def _uint(name: str, v, hi: int = _U32_MAX) -> int:
@@ -190,7 +223,7 @@ def _f32s(name: str, v, n: int) -> tuple[float, ...]:
 
 @dataclass(frozen=True, slots=True)
 class DemoOption:
-    """The demo option (tag 0, 148 bytes, §4.4), raw wire values with unit-named fields.
+    """The demo option (tag 0, 148 bytes), raw wire values with unit-named fields.
 
     Floats are stored rounded to float32 (the wire type). Converted views: :attr:`pitch_deg`,
     :attr:`roll_deg`, :attr:`yaw_deg`, :attr:`altitude_m`, :attr:`vx_body_mps`,
@@ -467,3 +500,129 @@ def decode_navdata(data: bytes) -> Navdata:
         off += size
     return Navdata(DroneState(state), sequence, vision_flag, demo, tuple(options), magic)
 
+
+# ----------------------------------------------------------------------------- the drone's side
+
+#: Flight phases a :class:`DroneStatus` names (the values of the tool's flight modes).
+DRONE_PHASES = ("landed", "taking_off", "flying", "landing", "emergency")
+_AIRBORNE_PHASES = ("taking_off", "flying", "landing")
+
+#: State bits a running drone always shows (the captured bootstrap packet 0x4F800C10).
+ALWAYS_ON_STATE = (DroneState.ALTITUDE | DroneState.PIC_VERSION | DroneState.ATCODEC_THREAD_ON
+                   | DroneState.NAVDATA_THREAD_ON | DroneState.VIDEO_THREAD_ON
+                   | DroneState.ACQ_THREAD_ON)
+#: ``general:navdata_options`` default: demo + vision_detect (65537).
+DEFAULT_NAVDATA_OPTIONS = (1 << OptionTag.DEMO) | (1 << OptionTag.VISION_DETECT)
+
+
+@dataclass(frozen=True, slots=True)
+class DroneStatus:
+    """What a drone knows about itself when it sends a packet (the simulators' side).
+
+    Attributes
+    ----------
+    phase : one of :data:`DRONE_PHASES`.
+    moving : a progressive PCMD with a non-zero value is being flown (FLYING, else HOVERING).
+    alt_out_zone : the altitude cap holds the climb (minor ALT_OUT_ZONE).
+    lost_com : hovering because the client went silent (minor HOVERING_LOST_COM).
+    user_emergency : the emergency came from the client's REF (state bit 16).
+    start_button : REF bit 9 as last received (state bit 5).
+    ack : the command-ACK bit 6.
+    bootstrap : no ``general:navdata_demo`` written yet (bits 10 + 11, no options).
+    demo : demo packets (bit 10); False = full-rate packets with every option.
+    com_watchdog, com_lost, battery_low : state bits 30, 13, 15.
+    """
+
+    phase: str
+    moving: bool = False
+    alt_out_zone: bool = False
+    lost_com: bool = False
+    user_emergency: bool = False
+    start_button: bool = False
+    ack: bool = False
+    bootstrap: bool = False
+    demo: bool = True
+    com_watchdog: bool = False
+    com_lost: bool = False
+    battery_low: bool = False
+
+    def __post_init__(self) -> None:
+        if self.phase not in DRONE_PHASES:
+            raise ValueError(f"phase must be one of {DRONE_PHASES}, got {self.phase!r}")
+
+    def state_bits(self) -> DroneState:
+        """The header's state bits."""
+        s = ALWAYS_ON_STATE
+        flags = ((self.phase in _AIRBORNE_PHASES, DroneState.FLY),
+                 (self.phase == "emergency", DroneState.EMERGENCY),
+                 (self.phase == "emergency" and self.user_emergency, DroneState.USER_EL),
+                 (self.start_button, DroneState.USER_FEEDBACK_START),
+                 (self.ack, DroneState.COMMAND),
+                 (self.bootstrap, DroneState.NAVDATA_BOOTSTRAP | DroneState.NAVDATA_DEMO),
+                 (not self.bootstrap and self.demo, DroneState.NAVDATA_DEMO),
+                 (self.com_watchdog, DroneState.COM_WATCHDOG),
+                 (self.com_lost, DroneState.COM_LOST),
+                 (self.battery_low, DroneState.VBAT_LOW))
+        for on, bits in flags:
+            if on:
+                s |= bits
+        return s
+
+    def ctrl_state(self, codes: CtrlCodes = CtrlCodes.SDK) -> int:
+        """``major << 16 | minor``: LANDED 2, emergency DEFAULT 0 (as node-ar-drone's docs
+        show a drone in emergency), the transitions by ``codes``, airborne HOVERING 4 (minor
+        LOST_COM or ALT_OUT_ZONE) or FLYING 3 while moving (minor ALT_OUT_ZONE)."""
+        phase = self.phase
+        if phase == "landed":
+            return ctrl_state_value(CtrlMajor.LANDED)
+        if phase == "emergency":
+            return ctrl_state_value(CtrlMajor.DEFAULT)
+        if phase == "taking_off":
+            return ctrl_state_value(codes.takeoff_major)
+        if phase == "landing":
+            return ctrl_state_value(codes.landing_major)
+        if self.lost_com:
+            return ctrl_state_value(CtrlMajor.HOVERING, HOVERING_LOST_COM)
+        if self.moving:
+            return ctrl_state_value(CtrlMajor.FLYING,
+                                    FLYING_ALT_OUT_ZONE if self.alt_out_zone else 0)
+        return ctrl_state_value(CtrlMajor.HOVERING,
+                                HOVERING_ALT_OUT_ZONE if self.alt_out_zone else 0)
+
+
+_TIME = struct.Struct("<I")
+
+
+def time_option(t_s: float) -> NavdataOption:
+    """The time option (tag 1): ``u32`` with 11 bits of seconds over 21 bits of microseconds."""
+    if not (math.isfinite(t_s) and t_s >= 0.0):
+        raise ValueError(f"t_s must be finite and >= 0, got {t_s!r}")
+    sec = int(t_s)
+    usec = int((t_s - sec) * 1e6)
+    return NavdataOption(OptionTag.TIME, _TIME.pack(((sec & 0x7FF) << 21) | (usec & 0x1FFFFF)))
+
+
+def encode_drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
+                         codes: CtrlCodes = CtrlCodes.SDK,
+                         options_mask: int = DEFAULT_NAVDATA_OPTIONS, t_s: float = 0.0) -> bytes:
+    """The packet a drone in ``status`` sends: the one navdata encoder of every simulated drone.
+
+    Bootstrap: header and checksum only. Otherwise the options ``options_mask`` selects
+    (``general:navdata_options``; every one in full mode, ``status.demo`` False) among those a
+    simulator produces: demo (bit 0) from ``sample`` (a
+    :class:`~ardrone_nmpc.core.types.NavdataSample`, see :meth:`DemoOption.of_sample`; None =
+    no demo option), time (bit 1) from ``t_s`` and an empty vision_detect (bit 16).
+    """
+    state = status.state_bits()
+    if status.bootstrap:
+        return encode_navdata(Navdata(state, sequence))
+    full = not status.demo
+    demo = None
+    options: list[NavdataOption] = []
+    if sample is not None and (full or options_mask & (1 << OptionTag.DEMO)):
+        demo = DemoOption.of_sample(sample, status.ctrl_state(codes))
+    if full or options_mask & (1 << OptionTag.TIME):
+        options.append(time_option(t_s))
+    if full or options_mask & (1 << OptionTag.VISION_DETECT):
+        options.append(empty_vision_detect_option())
+    return encode_navdata(Navdata(state, sequence, demo=demo, options=tuple(options)))

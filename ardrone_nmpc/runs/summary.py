@@ -34,7 +34,8 @@ What :func:`summarise` measures, and over which rows
   ``controller.u_min``/``u_max`` (:func:`input_stats`); per PCMD channel the fraction of ticks
   whose ``cmd_saturated`` flag is set.
 * **Solver**: solve time mean/p99/max over the ticks that logged one; ticks whose
-  ``solver_status`` is set and not ``ok`` (total and per status).
+  ``solver_status`` is set and not ``ok`` (total and per status); the solves; per solve the
+  tick's Newton iterations (mean/max) and ‖F‖ at its exit (p50/max).
 * **Loop**: ``fallbacks`` = rows of the experiment window whose mode is set and is not
   ``track`` (hovers on stale data, P-controller fallbacks, supervisor landings…);
   ``overruns`` = rows with ``tick_late_ms`` above one control period; ``tick_late_ms``
@@ -55,7 +56,8 @@ import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.control.obstacles import clearance_m
-from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError
+from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError, read_run, write_summary
+from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows, flying_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from rich.table import Table
@@ -72,6 +74,7 @@ __all__ = [
     "input_stats",
     "path_deviation",
     "read_summary",
+    "write_run_summary",
     "render_side_by_side",
     "render_summary",
     "solver_stats",
@@ -79,8 +82,6 @@ __all__ = [
     "summarise",
 ]
 
-#: Modes in which the drone is not under the experiment's control (excluded from path metrics).
-GROUND_MODES = frozenset({"landed", "taking_off", "landing"})
 #: The mode of a tick that tracks the experiment's reference; any other set mode is a fallback.
 NOMINAL_MODE = "track"
 #: A tick violates an obstacle's constraint when its centre is closer than d − this (m).
@@ -369,6 +370,14 @@ def _percentiles(x: np.ndarray) -> tuple[float, float, float] | None:
     return float(np.percentile(x, 50)), float(np.percentile(x, 99)), float(x.max())
 
 
+def _per_solve(column: np.ndarray | None, solved: np.ndarray) -> np.ndarray:
+    """The finite values of ``column`` on the rows with a solve (empty without the column)."""
+    if column is None:
+        return np.zeros(0)
+    v = np.asarray(column, dtype=np.float64)[solved]
+    return v[np.isfinite(v)]
+
+
 def _rmse(e: np.ndarray) -> float:
     e = e[np.isfinite(e)]
     return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
@@ -386,9 +395,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
     rows: list[SummaryRow] = []
     add = rows.append
 
-    window = np.isfinite(t) & (t >= 0.0)
-    if not window.any():
-        window = np.isfinite(t)
+    window = experiment_rows(t)
     mode = _strings(cols.get("mode"), n)
 
     truth = all(c in cols and np.isfinite(cols[c]).any() for _, _, c, _, _ in _AXES)
@@ -417,10 +424,7 @@ def summarise(run: RunData) -> list[SummaryRow]:
             add(SummaryRow(axis, "steady_state_error", m["steady_state_error"], unit))
             add(SummaryRow(axis, "rmse", m["rmse"], unit))
     else:
-        flying = ~np.isin(mode, list(GROUND_MODES))
-        if len(set(mode.tolist())) <= 1:
-            flying = np.ones(n, dtype=bool)
-        sel = window & flying
+        sel = window & flying_rows(mode)
         if ref.kind in PATH_KINDS:
             polyline = make_trajectory(ref, duration_s=cfg.duration_s).polyline_m()
             xyz = np.column_stack([pos["x"], pos["y"], pos["z"]])[sel]
@@ -466,6 +470,17 @@ def summarise(run: RunData) -> list[SummaryRow]:
     add(SummaryRow("solver", "non_ok", float(st["non_ok"]), "count"))
     for status, count in st["by_status"].items():
         add(SummaryRow("solver", f"status_{status}", float(count), "count"))
+    add(SummaryRow("solver", "solves", float(st["solves"]), "count"))
+    # per solve: the tick's Newton iterations and ‖F‖ at its exit
+    solved = np.isfinite(np.asarray(cols["solve_us"], dtype=np.float64))
+    its = _per_solve(cols.get("newton_iterations"), solved)
+    if its.size:
+        add(SummaryRow("solver", "newton_iterations_mean", float(its.mean()), "count"))
+        add(SummaryRow("solver", "newton_iterations_max", float(its.max()), "count"))
+    res = _per_solve(cols.get("residual_norm"), solved)
+    if res.size:
+        add(SummaryRow("solver", "residual_p50", float(np.percentile(res, 50)), "norm"))
+        add(SummaryRow("solver", "residual_max", float(res.max()), "norm"))
 
     # loop
     fallbacks = int(np.sum(window & (mode != "") & (mode != NOMINAL_MODE)))
@@ -528,6 +543,15 @@ def read_summary(run_dir: str | Path) -> list[SummaryRow]:
             raise LogError(f"{path}:{i}: column value: {cells[2]!r} is not a number") from None
         out.append(SummaryRow(cells[0], cells[1], value, cells[3]))
     return out
+
+
+def write_run_summary(run_dir: str | Path) -> tuple[RunData, list[SummaryRow]]:
+    """Read the run at ``run_dir`` back, summarise it and write its ``summary.csv`` (the
+    last file of every run directory); returns the run and its rows."""
+    run = read_run(run_dir)
+    rows = summarise(run)
+    write_summary(run_dir, rows)
+    return run, rows
 
 
 def _fmt(value: float, unit: str) -> str:

@@ -18,46 +18,16 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
+                                           write_events)
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.reference.trajectories import Trajectory, make_trajectory
+from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.target import target_pose
-from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.sensors import WireSensors
-
-TAKEOFF_TIMEOUT_S = 10.0
-LANDING_TIMEOUT_S = 15.0
-
-
-class HoldStartThen:
-    """``trajectory`` for t ≥ 0, its t = 0 point at rest for t < 0 (the settle phase)."""
-
-    def __init__(self, trajectory: Trajectory):
-        self.inner = trajectory
-        start = trajectory.state_at(0.0)[0].copy()
-        start[[1, 3, 5]] = 0.0
-        self._start = start
-        self.duration_s = trajectory.duration_s
-
-    def state_at(self, t_s):
-        t = np.atleast_1d(np.asarray(t_s, dtype=float))
-        out = self.inner.state_at(np.maximum(t, 0.0))
-        out[t < 0.0] = self._start
-        return out
-
-    def polyline_m(self):
-        return self.inner.polyline_m()
-
-
-def experiment_trajectory(cfg):
-    """The reference a runner hands the tick: the configured trajectory held at its start
-    through the settle phase, or — kind ``follow`` — the live object (it follows from the
-    first tick)."""
-    if cfg.reference.kind == "follow":
-        return make_trajectory(cfg.reference)
-    return HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+from ardrone_nmpc.sim.target import target_pose
 
 
 @dataclass
@@ -74,6 +44,7 @@ class SimResult:
     run_dir: Path | None
     loop_wall_s: float = math.nan  # wall time of the flight itself (JIT warm-up excluded)
     ending: str = "completed"
+    end_t_s: float = math.nan  # experiment time when it ended: touch-down, or rest after a stop
 
 
 class TakeoffRefused(RuntimeError):
@@ -152,15 +123,17 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     ``progress(fraction)`` is called every tick with the fraction of the run done. The
     supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
     touch-down), ``stop`` (emergency) ends the run. Events are stamped with experiment time.
-    Raises :class:`TakeoffRefused` when the battery is at or below ``safety.battery_floor_pct``.
+    Raises :class:`TakeoffRefused` when the battery is at or below ``safety.battery_floor_pct``,
+    :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` for times that give no tick count.
     """
+    schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
-    schedule = FaultSchedule(cfg.faults, seed)
+    faults = FaultSchedule(cfg.faults, seed)
     tick = Tick(cfg, experiment_trajectory(cfg))
-    sensors = WireSensors(cfg, plant, schedule) if schedule.touches_sensors else _Sensors(cfg, plant)
-    plant_faults = PlantFaults(schedule, plant)
-    period = cfg.loop.period_s
+    sensors = WireSensors(cfg, plant, faults) if faults.touches_sensors else _Sensors(cfg, plant)
+    plant_faults = PlantFaults(faults, plant)
+    period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
 
     if plant.battery_pct <= cfg.safety.battery_floor_pct:
@@ -168,39 +141,34 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
                              f"safety.battery_floor_pct = {cfg.safety.battery_floor_pct:.0f} %: "
                              "take-off refused")
     t_takeoff = plant.t_s
-    plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start
+    plant.wind_mps = faults.wind_mps(-math.inf)  # a constant wind blows from the start
     plant.takeoff()
     while plant.mode is not FlightMode.FLYING and plant.t_s < TAKEOFF_TIMEOUT_S:
         sensors.advance_to(plant.t_s + period)
     if plant.mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete (mode {plant.mode.value})")
     # The settle phase starts now, on whole ticks: experiment time 0 is n_settle ticks later.
-    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
-    n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
     t_first = plant.t_s
-    t_start = t_first + n_settle * period  # experiment time 0 on the plant clock
+    t_start = t_first + schedule.settle_span_s  # experiment time 0 on the plant clock
     sensors.t_zero_s = t_start
     write_event(t_takeoff - t_start, "takeoff")
-    if schedule.any:
-        write_event(-n_settle * period, "faults", windows=[list(w) for w in schedule.windows()])
+    if faults.any:
+        write_event(schedule.t_exp_s(0), "faults", windows=[list(w) for w in faults.windows()])
     wall0 = time.perf_counter()
     ending, k = "completed", 0
-    for k in range(n_ticks):
-        t_exp = (k - n_settle) * period
-        for ev in plant_faults.update(t_exp):
-            write_event(t_exp, **ev)
+    for k in range(schedule.n_ticks):
+        t_exp = schedule.t_exp_s(k)
+        write_events(write_event, t_exp, plant_faults.update(t_exp))
         sensors.advance_to(t_first + k * period)
-        out = tick.step(sensors.inputs(t_first + k * period), t_exp_s=t_exp,
-                        mode="settle" if t_exp < 0 else "track")
-        for ev in out.events:
-            write_event(t_exp, **ev)
-        if not schedule.at_lost(t_exp):
+        out = tick.step(sensors.inputs(t_first + k * period), t_exp_s=t_exp, mode=phase(t_exp))
+        write_events(write_event, t_exp, out.events)
+        if not faults.at_lost(t_exp):
             pcmd = out.pcmd
             plant.command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
                           progressive=out.progressive)
         _record(recorder, out.row, plant)
         if progress is not None:
-            progress((k + 1) / n_ticks)
+            progress(schedule.fraction_done(k))
         if out.action in (Action.LAND, Action.STOP):
             ending = out.row["mode"]
             break
@@ -213,7 +181,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
         _land(cfg, tick, sensors, plant, plant_faults, recorder, write_event,
               t_first, t_start, k + 1, logged=ending != "completed")
     return SimResult(k + 1, plant.mode, recorder.path if recorder is not None else None,
-                     loop_wall_s, ending)
+                     loop_wall_s, ending, plant.t_s - t_start)
 
 
 def _record(recorder, row: dict, plant: AirframePlant) -> None:

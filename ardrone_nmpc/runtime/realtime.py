@@ -17,12 +17,13 @@ from pathlib import Path
 
 from ardrone_nmpc.core.clock import Rate
 from ardrone_nmpc.config.schema import tracked_object
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
-from ardrone_nmpc.runs.rundir import RunRecorder, read_run, write_summary
-from ardrone_nmpc.safety import Action
+from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.rundir import RunRecorder
+from ardrone_nmpc.runs.summary import write_run_summary
+from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_events
 from ardrone_nmpc.runtime.session import FlightSession
-from ardrone_nmpc.runtime.lockstep import experiment_trajectory
-from ardrone_nmpc.runs.summary import summarise
+from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.safety import Action
 
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
@@ -62,14 +63,19 @@ def _raise_terminated(signum, frame):  # pragma: no cover - exercised by subproc
 
 def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                navdata_port: int | None, mocap_port: int | None, log_dir: Path,
-               seed: int | None, status=None, result: FlightResult | None = None) -> Path:
+               seed: int | None, status=None, result: FlightResult | None = None,
+               sink=None) -> Path:
     """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures;
-    ``result`` holds the run directory and the landing outcome whatever happens."""
+    ``result`` holds the run directory and the landing outcome whatever happens; ``sink``
+    (e.g. :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event as the recorder
+    does (``sink.tee(recorder)``) and must never block."""
     result = result if result is not None else FlightResult()
     from ardrone_nmpc.links.drone_link import DroneLink
     from ardrone_nmpc.links.mocap_link import MocapLink
+    from ardrone_nmpc.links.mocap_source import open_mocap_source
 
     seed = cfg.sim.seed if seed is None else seed
+    schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     others = (follow,) if follow else ()
@@ -85,20 +91,21 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 link_options = {"bind_host": "127.0.0.1"}
                 if loop.control_port is not None:
                     link_options["control_port"] = loop.control_port
-            else:
-                mocap = stack.enter_context(MocapLink(
-                    cfg.mocap.bind_host, mocap_port or cfg.mocap.port,
-                    object_name=cfg.mocap.object_name, other_objects=others))
+            else:  # mocap.kind: Vicon UDP or a libmotioncapture system
+                mocap = stack.enter_context(open_mocap_source(
+                    cfg.mocap, other_objects=others, port=mocap_port))
                 link_options = {}
                 host = drone_host or cfg.drone.host
                 at_port = at_port or cfg.drone.at_port
                 navdata_port = navdata_port or cfg.drone.navdata_port
             recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
+            if sink is not None:
+                recorder = sink.tee(recorder)
             result.path = recorder.path
             t_origin = time.monotonic()
             event = lambda kind, **f: recorder.event(time.monotonic() - t_origin, kind, **f)
             event("links", drone=f"{host}:{at_port}/{navdata_port}", mocap_port=mocap.port,
-                  sim=sim)
+                  mocap=mocap.where, sim=sim)
             drone = stack.enter_context(DroneLink(
                 host, at_port=at_port, navdata_port=navdata_port,
                 keepalive_interval_s=cfg.drone.keepalive_interval_s, **link_options))
@@ -107,13 +114,13 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
             fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
             try:
                 with session:
-                    _control_loop(cfg, tick, drone, mocap, recorder, event, status,
-                                  fault_clock)
+                    _control_loop(cfg, schedule, tick, drone, mocap, recorder, event,
+                                  status, fault_clock)
             finally:
                 result.landed = session.landed_cleanly
                 for t_exp, ev in (getattr(loop, "fault_events", None) or []) if sim else ():
-                    fields = dict(ev)  # the loopback's injected faults, on experiment time
-                    event(fields.pop("kind"), t_exp_s=t_exp, **fields)
+                    # the loopback's injected faults, on experiment time
+                    write_events(on_wall_clock(event), t_exp, [ev])
                 event("session_end", landed=session.landed_cleanly)
             path = recorder.path
         if result.landed is False:
@@ -128,38 +135,34 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
 def _write_summary_quietly(path: Path) -> None:
     """summary.csv of the run at ``path``; a failure here must not mask the flight's outcome."""
     try:
-        write_summary(path, summarise(read_run(path)))
+        write_run_summary(path)
     except Exception as err:  # noqa: BLE001 - the log is intact; `summary RUN` redoes it
         print(f"warning: {path / 'summary.csv'} not written: {err}", file=sys.stderr)
 
 
-def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
+def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, event, status,
                   fault_clock=None) -> None:
     """The 65 ms loop until the experiment ends or the supervisor ends it (an exception: the
     session's exit lands the drone). ``fault_clock(t0)`` receives the monotonic time of
     experiment time 0 (the loopback's fault injection runs on it)."""
-    period = cfg.loop.period_s
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
-    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
-    n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
-    rate = Rate(period)
+    write = on_wall_clock(event)
+    rate = Rate(schedule.period_s)
     while True:
         late_s = rate.sleep()
         k = rate.index  # deadline number: overrun deadlines are skipped, time stays wall time
-        if k >= n_ticks:
+        if k >= schedule.n_ticks:
             break
         now = time.monotonic()
         if k == 0 and fault_clock is not None:  # experiment time 0 for the injected faults
-            fault_clock(now + n_settle * period)
+            fault_clock(now + schedule.settle_span_s)
         pose, pose_rx = mocap.latest()
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
         target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
-        t_exp = (k - n_settle) * period
+        t_exp = schedule.t_exp_s(k)
         out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
-                        t_exp_s=t_exp,
-                        mode="settle" if t_exp < 0 else "track")
-        for ev in out.events:
-            event(ev.pop("kind"), t_exp_s=t_exp, **ev)
+                        t_exp_s=t_exp, mode=phase(t_exp))
+        write_events(write, t_exp, out.events)
         pcmd = out.pcmd
         if out.progressive:
             drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac)
@@ -169,7 +172,7 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
         row["tick_late_ms"] = late_s * 1e3
         recorder.write_row(row)
         if status is not None:
-            status({**row, "progress": (k + 1) / n_ticks, "overruns": rate.overruns,
+            status({**row, "progress": schedule.fraction_done(k), "overruns": rate.overruns,
                     "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz})
         if out.action is Action.LAND:   # the session's exit lands it
             if row["mode"] == "land-navdata-lost":

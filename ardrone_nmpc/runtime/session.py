@@ -12,6 +12,7 @@ import time
 from typing import Callable
 
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.runtime.schedule import LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S
 
 
 class PreflightError(RuntimeError):
@@ -25,13 +26,12 @@ class FlightSession:
     ----------
     cfg : ExperimentConfig (``drone`` limits, ``safety`` floors).
     drone : a connected-or-connectable :class:`~ardrone_nmpc.links.drone_link.DroneLink`.
-    mocap : a running :class:`~ardrone_nmpc.links.mocap_link.MocapLink`.
+    mocap : a running :class:`~ardrone_nmpc.links.mocap_source.MocapSource`.
     event : ``event(kind, **fields)`` sink for the run's events.jsonl.
     clock : monotonic seconds.
     """
 
-    TAKEOFF_TIMEOUT_S = 10.0
-    LANDING_TIMEOUT_S = 15.0
+    TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S = TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S
 
     def __init__(self, cfg, drone, mocap, *, event: Callable[..., None],
                  clock: Callable[[], float] = time.monotonic):
@@ -85,8 +85,8 @@ class FlightSession:
                 break
             if self.clock() > deadline:
                 raise PreflightError(
-                    f"mocap object {self.cfg.mocap.object_name!r} not visible on port "
-                    f"{self.mocap.port} (last pose age {age_ms:.0f} ms)")
+                    f"mocap object {self.cfg.mocap.object_name!r} not visible from "
+                    f"{self.mocap.where} (last pose age {age_ms:.0f} ms)")
             time.sleep(0.02)
         self.event("preflight_ok", battery_pct=nav.battery_pct)
 

@@ -11,8 +11,10 @@ The decisions are those of the lockstep runner (:mod:`ardrone_nmpc.sim.sensors`)
 frame is dropped, occluded (object missing or an all-zero pose) or delayed by its sampling
 time; a navdata packet is lost or corrupted by its send time; either stream's datagrams are
 duplicated or held back behind the next one; an AT datagram is lost by its arrival time.
-Plant faults (battery floor, emergency, command-delay jump, wind) go through
-:class:`~ardrone_nmpc.sim.faults.PlantFaults`.
+Plant faults (battery floor, emergency, command-delay jump, wind, landing by itself, the limits
+of another config session) go through :class:`~ardrone_nmpc.sim.faults.PlantFaults`; the
+drone's firmware options (ctrl_state codes, config session, control port) are read from the
+same schedule by :func:`~ardrone_nmpc.sim.loopback.start_loopback`.
 
 Thread safety: the random draws and the held-back datagrams are guarded by an internal lock
 (the schedule's generator is shared by the AT, navdata and mocap threads);

@@ -6,6 +6,12 @@ Times are experiment times (s; 0 = the first tick after the settle phase). The r
 through the real decoders and link logic (:mod:`ardrone_nmpc.runtime.lockstep`), ``fly --sim`` through
 the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
 seeded by the run's seed, so a faulted run is as reproducible as a clean one.
+
+Firmware faults make the simulated drone behave like a real one a careless client trips over:
+another firmware's ctrl_state codes (``ctrl_codes``), a drone left in another configuration
+session (``foreign_session``), a control port that does not answer (``control_port_drop``) —
+all three from the start, before any experiment time — and a landing of its own (``self_land``,
+at a time; a take-off REF afterwards launches it again).
 """
 
 from __future__ import annotations
@@ -15,16 +21,21 @@ import struct
 
 import numpy as np
 
-from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES
+from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES, CtrlCodes
+from ardrone_nmpc.sim.drone_config import HeldSession, apply_limits
 
-__all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS", "PLANT_FAULTS"]
+__all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS",
+           "PLANT_FAULTS", "LINK_FAULTS"]
 
 #: Faults that act on the sensor datagrams (the lockstep runner then goes through the bytes).
 SENSOR_FAULTS = frozenset({"mocap_dropout", "mocap_occlusion", "mocap_latency",
-                           "navdata_loss", "navdata_corrupt", "disorder"})
+                           "navdata_loss", "navdata_corrupt", "disorder", "ctrl_codes"})
 #: Faults that act on the simulated drone itself.
 PLANT_FAULTS = frozenset({"at_loss", "battery_floor", "emergency", "wind_gust", "wind",
-                          "delay_jump"})
+                          "delay_jump", "self_land", "foreign_session"})
+#: Faults of the drone's configuration link (the TCP control port): only the loopback drone
+#: serves one; the lockstep runner reads no configuration.
+LINK_FAULTS = frozenset({"control_port_drop"})
 
 _OPTION_HEAD = struct.Struct("<HH")
 
@@ -175,7 +186,25 @@ class FaultSchedule:
             out.append((c.emergency.start_s, "emergency", math.nan))
         if c.delay_jump is not None:
             out.append((c.delay_jump.start_s, "delay", c.delay_jump.delay_s))
+        if c.self_land is not None:
+            out.append((c.self_land.start_s, "self_land", math.nan))
         return sorted(out)
+
+    # ------------------------------------------------------------------ the firmware
+    def ctrl_codes(self) -> CtrlCodes:
+        """The ctrl_state transition codes the drone's navdata reports."""
+        f = self.cfg.ctrl_codes
+        return CtrlCodes.SDK if f is None else CtrlCodes(f.codes)
+
+    def held_session(self) -> HeldSession | None:
+        """The multiconfig session the drone was left in (from the start), or None."""
+        f = self.cfg.foreign_session
+        return None if f is None else HeldSession.of_fault(f)
+
+    def control_port_mode(self) -> str:
+        """"serve", or how the control port fails to answer ("silent", "refused")."""
+        f = self.cfg.control_port_drop
+        return "serve" if f is None else f.mode
 
     def windows(self) -> list[tuple[str, float, float]]:
         """``(name, start_s, end_s)`` of every configured fault (end inf for one-shot ones and
@@ -196,6 +225,7 @@ class PlantFaults:
     :class:`~ardrone_nmpc.sim.plant.AirframePlant` as experiment time passes.
 
     ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``).
+    A drone left in another configuration session flies that session's limits from the start.
     """
 
     def __init__(self, schedule: FaultSchedule, plant) -> None:
@@ -203,6 +233,9 @@ class PlantFaults:
         self.plant = plant
         self._pending = schedule.plant_events()
         self._gust_on = False
+        session = schedule.held_session()
+        if session is not None:
+            apply_limits(plant, session.limits())
 
     def update(self, t_s: float) -> list[dict]:
         events = []
@@ -218,6 +251,9 @@ class PlantFaults:
             elif kind == "delay":
                 plant.set_command_delay_s(value)
                 events.append({"kind": "fault", "fault": "delay_jump", "delay_s": value})
+            elif kind == "self_land":   # the firmware's own decision: through landing
+                events.append({"kind": "fault", "fault": "self_land",
+                               "accepted": plant.land()})
         plant.wind_mps = sched.wind_mps(t_s)
         gust = _within(sched.cfg.wind_gust, t_s)
         if gust != self._gust_on:

@@ -7,8 +7,10 @@ with a :class:`~ardrone_nmpc.sim.mocap_server.MocapServer`, all sharing one lock
 
 The config's ``faults`` are injected by both servers through one
 :class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`; their experiment time starts when the
-runner calls :meth:`Loopback.set_fault_clock` (never, for ``sim-drone``: then only the
-constant wind acts).
+runner calls :meth:`Loopback.set_fault_clock` (``sim-drone`` calls it when it starts serving).
+The firmware faults (ctrl_state codes, another config session, a silent control port) act from
+the start. The drone serves its TCP control port (a free port by default), so a client's
+configuration read-back works as against the real drone.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ import socket
 from typing import Optional
 
 from ardrone_nmpc.sim.faults import FaultSchedule
-from ardrone_nmpc.sim.drone_server import DroneServer, require_loopback_host
+from ardrone_nmpc.sim.addresses import require_loopback_host
+from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant
@@ -124,7 +127,7 @@ class Loopback:
 
 def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int] = None,
                    mocap_host: str = "127.0.0.1", bind_host: str = "127.0.0.1",
-                   at_port: int = 0, navdata_port: int = 0, control_port: Optional[int] = None,
+                   at_port: int = 0, navdata_port: int = 0, control_port: Optional[int] = 0,
                    mocap_drop_probability: float = 0.0, **drone_options) -> Loopback:
     """Build the plant of ``cfg`` and start its simulators; returns the running :class:`Loopback`.
 
@@ -136,7 +139,7 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
         :attr:`Loopback.mocap_port` (the caller binds it).
     mocap_host, bind_host : loopback addresses (ValueError otherwise).
     at_port, navdata_port : drone UDP ports; 0 = free ports.
-    control_port : TCP configuration port (None = not served, 0 = free port).
+    control_port : TCP configuration port (0 = a free port, the default; None = not served).
     mocap_drop_probability : fraction of mocap frames not sent (seeded).
     drone_options : further :class:`DroneServer` keyword arguments (watchdog times …).
     """
@@ -151,7 +154,9 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
     plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start
     options = dict(demo_rate_hz=cfg.sim.navdata_rate_hz,
                    step_s=cfg.sim.plant.integration_step_s,
-                   altitude_max_m=cfg.drone.altitude_max_m)
+                   altitude_max_m=cfg.drone.altitude_max_m,
+                   ctrl_codes=schedule.ctrl_codes(), session=schedule.held_session(),
+                   control_port_mode=schedule.control_port_mode())
     options.update(drone_options)
     drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,
                         control_port=control_port, faults=faults, **options)

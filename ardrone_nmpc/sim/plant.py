@@ -466,6 +466,12 @@ class AirframePlant:
     def battery_pct(self) -> float:
         return self._battery
 
+    @property
+    def moving(self) -> bool:
+        """The current PCMD is progressive with a non-zero value (the drone is *flying* a
+        command rather than hovering; its navdata ctrl_state tells the two apart)."""
+        return any(self._current[:4]) and not self._current[4]
+
     def command(self, roll_frac: float, pitch_frac: float, gaz_frac: float, yaw_frac: float,
                 *, progressive: bool = True) -> None:
         """Set the current PCMD (drone signs), held until the next call.

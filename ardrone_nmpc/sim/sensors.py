@@ -22,33 +22,26 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import (
-    CtrlMajor,
-    DemoOption,
-    DroneState,
-    Navdata,
+    CtrlCodes,
+    DroneStatus,
     NavdataError,
-    ctrl_state_value,
     decode_navdata,
-    encode_navdata,
+    encode_drone_navdata,
 )
+from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT
 from ardrone_nmpc.sim.mocap_server import frame_items
-from ardrone_nmpc.core.types import FlightMode
-
-_CTRL_MAJOR = {FlightMode.LANDED: CtrlMajor.LANDED, FlightMode.TAKING_OFF: CtrlMajor.TRANS_TAKEOFF,
-               FlightMode.FLYING: CtrlMajor.FLYING, FlightMode.LANDING: CtrlMajor.TRANS_LANDING,
-               FlightMode.EMERGENCY: CtrlMajor.DEFAULT}
 
 
-def navdata_packet(plant, sequence: int) -> bytes:
-    """The demo navdata packet the simulated drone sends now (state bits, ctrl_state, demo)."""
+def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:
+    """The demo navdata packet the lockstep drone sends now, through the one drone encoder.
+
+    This drone has no AT link (the runner commands the plant directly), so the bits that
+    echo the client's commands — REF start, ACK, com watchdog, link lost — stay clear.
+    """
     s = plant.navdata()
-    state = DroneState.NAVDATA_DEMO
-    if s.mode.airborne:
-        state |= DroneState.FLY
-    if s.mode is FlightMode.EMERGENCY:
-        state |= DroneState.EMERGENCY
-    demo = DemoOption.of_sample(s, ctrl_state_value(_CTRL_MAJOR[s.mode]))
-    return encode_navdata(Navdata(state, sequence, demo=demo))
+    status = DroneStatus(s.mode.value, moving=plant.moving,
+                         battery_low=plant.battery_pct < VBAT_LOW_PCT)
+    return encode_drone_navdata(status, sequence, s, codes=codes, t_s=plant.t_s)
 
 
 class WireSensors:
@@ -65,6 +58,7 @@ class WireSensors:
     def __init__(self, cfg, plant, schedule: FaultSchedule, t_zero_s: float = math.inf):
         self.plant = plant
         self.schedule = schedule
+        self.ctrl_codes = schedule.ctrl_codes()
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
@@ -112,7 +106,7 @@ class WireSensors:
         t_exp = t_s - self.t_zero_s
         if self.schedule.navdata_lost(t_exp):
             return
-        data = navdata_packet(self.plant, (k + 1) & 0xFFFFFFFF or 1)
+        data = navdata_packet(self.plant, (k + 1) & 0xFFFFFFFF or 1, self.ctrl_codes)
         kind = self.schedule.navdata_corruption(t_exp)
         if kind is not None:
             data = corrupt_navdata(data, kind)

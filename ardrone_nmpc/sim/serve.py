@@ -1,6 +1,6 @@
 """``ardrone-nmpc sim-drone``: the loopback drone and mocap streamer as a stand-alone process.
 
-Serves the AR.Drone protocol (AT commands, navdata, optionally the TCP configuration port) on a
+Serves the AR.Drone protocol (AT commands, navdata, the TCP configuration port) on a
 loopback address and streams the simulated pose to a loopback target until interrupted
 (Ctrl-C / SIGTERM), then stops every thread and closes every socket. Any AR.Drone client
 pointed at the bind address (and a mocap receiver on the target port) flies it.
@@ -13,9 +13,11 @@ import time
 import threading
 from typing import Callable, Optional
 
-from ardrone_nmpc.sim.drone_server import require_loopback_host
+from ardrone_nmpc.sim.addresses import require_loopback_host
 
-__all__ = ["parse_host_port", "serve"]
+__all__ = ["parse_host_port", "serve", "CONTROL_PORT"]
+
+CONTROL_PORT = 5559   # the drone's TCP configuration port
 
 
 def parse_host_port(text, *, what: str = "address") -> tuple[str, int]:
@@ -38,9 +40,10 @@ def parse_host_port(text, *, what: str = "address") -> tuple[str, int]:
 
 def serve(*, cfg, bind: str = "127.0.0.1", at_port: int = 5556, navdata_port: int = 5554,
           mocap_to="127.0.0.1:51001", seed: Optional[int] = None,
-          control_port: Optional[int] = None, echo: Callable[[str], None] = print,
+          control_port: Optional[int] = CONTROL_PORT, echo: Callable[[str], None] = print,
           stop_event: Optional[threading.Event] = None) -> None:
     """Run the simulators until Ctrl-C (or ``stop_event`` is set); print what is served.
+``control_port`` None serves no configuration port, 0 a free one.
 
     Raises ValueError (non-loopback ``bind`` or ``mocap_to``, bad ports) before opening any
     socket, and OSError if a port is taken.

@@ -28,7 +28,6 @@ metric out over two swept parameters, :func:`figure_sweep_heatmap` draws it.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -36,6 +35,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ardrone_nmpc.experiments.sweep.table import SWEEP_FILE, SweepTable, SweepTableError
+from ardrone_nmpc.experiments.sweep.table import read_sweep as _read_sweep_table
+from ardrone_nmpc.runs.window import experiment_rows, flying_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -65,8 +68,6 @@ __all__ = [
 KINDS = ("tracking", "inputs", "solver", "path3d")
 #: A bound further from zero than this many times the data's largest magnitude is off scale.
 OFF_SCALE_FACTOR = 3.0
-#: The results table of a sweep directory.
-SWEEP_FILE = "sweep.csv"
 #: Metric columns of ``sweep.csv`` → (axis label with unit, short name). Lower is better for
 #: all of them, which is why aggregating over extra parameters takes the minimum.
 SWEEP_METRICS: dict[str, tuple[str, str]] = {
@@ -78,8 +79,6 @@ SWEEP_METRICS: dict[str, tuple[str, str]] = {
     "solve_p99_us": ("p99 solve time (µs)", "p99 solve time"),
     "fallbacks": ("fallback ticks (count)", "fallback ticks"),
 }
-#: Non-metric trailing columns of ``sweep.csv``.
-_SWEEP_TAIL = ("status", "message", "run_dir")
 #: Statuses whose metrics are shown as numbers; any other status marks the cell.
 _OK_STATUSES = frozenset({"ok", ""})
 #: Modes that are not fallbacks (DESIGN §2: anything else is the supervisor stepping in).
@@ -154,8 +153,7 @@ def _experiment(run: RunData) -> np.ndarray:
     t = _col(run, "t_s")
     if not np.isfinite(t).any():
         raise PlotError(f"{run.path}: log.csv has no row with a time (t_s)")
-    rows = np.isfinite(t) & (t >= 0.0)
-    return rows if rows.any() else np.isfinite(t)
+    return experiment_rows(t)
 
 
 def _has_truth(run: RunData) -> bool:
@@ -532,12 +530,7 @@ def _reference_polyline(run: RunData, rows: np.ndarray) -> tuple[np.ndarray, str
 def _flown(run: RunData) -> tuple[np.ndarray, str]:
     """Flown positions of the experiment's flying ticks; the truth in simulation (the same
     choice as the summary's path deviation), the mocap measurement otherwise."""
-    from ardrone_nmpc.runs.summary import GROUND_MODES
-
-    rows = _experiment(run)
-    mode = _strings(run, "mode")
-    if len(set(mode.tolist())) > 1:
-        rows = rows & ~np.isin(mode, list(GROUND_MODES))
+    rows = _experiment(run) & flying_rows(_strings(run, "mode"))
     names = _TRUTH[:3] if _has_truth(run) else ("x_m", "y_m", "z_m")
     xyz = np.column_stack([_col(run, c)[rows] for c in names])
     source = "sim truth" if names[0] == "x_true_m" else "measured"
@@ -621,75 +614,13 @@ def figure_path3d(run: RunData) -> Figure:
 # ============================================================================= sweeps
 
 
-@dataclass(frozen=True)
-class SweepTable:
-    """``sweep.csv`` read back.
-
-    Attributes
-    ----------
-    path : the file.
-    params : swept parameters (dotted config paths), the columns between ``case`` and the
-        first metric.
-    metrics : numeric metric columns present (see :data:`SWEEP_METRICS`).
-    rows : one dict per case, cells as text.
-    warnings : notes on recoverable damage (a torn last row dropped).
-    """
-
-    path: Path
-    params: tuple[str, ...]
-    metrics: tuple[str, ...]
-    rows: tuple[dict[str, str], ...]
-    warnings: tuple[str, ...] = ()
-
-
 def read_sweep(path: str | Path) -> SweepTable:
-    """Read ``sweep.csv`` (a file or its sweep directory).
-
-    Raises
-    ------
-    PlotError
-        ``<file>[:<line>]: <message>`` for a missing file, a header without ``case`` or
-        without metrics, no swept parameter, a row of the wrong width, or no rows. A short
-        *last* row (a sweep still appending, or killed mid-row) is dropped with a note in
-        :attr:`SweepTable.warnings` instead.
-    """
-    path = Path(path)
-    if path.is_dir():
-        path = path / SWEEP_FILE
+    """``sweep.csv`` read back (:func:`ardrone_nmpc.experiments.sweep.read_sweep`); its
+    errors are :class:`PlotError` s."""
     try:
-        with open(path, newline="", encoding="utf-8") as f:
-            lines = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise PlotError(f"{path}: cannot read: {exc}") from None
-    except csv.Error as exc:
-        raise PlotError(f"{path}: not a CSV file: {exc}") from None
-    if not lines or not lines[0]:
-        raise PlotError(f"{path}:1: empty file: expected a header row")
-    header = [c.strip() for c in lines[0]]
-    if header[0] != "case":
-        raise PlotError(f"{path}:1: the first column must be 'case', got {header[0]!r}")
-    end = next((i for i, c in enumerate(header) if c in SWEEP_METRICS or c in _SWEEP_TAIL),
-               None)
-    if end is None:
-        raise PlotError(f"{path}:1: no metric columns ({', '.join(SWEEP_METRICS)})")
-    params = tuple(header[1:end])
-    if not params:
-        raise PlotError(f"{path}:1: no swept parameter columns between 'case' and "
-                        f"{header[end]!r}")
-    rows, warnings = [], []
-    body = [(i, cells) for i, cells in enumerate(lines[1:], start=2) if cells]
-    for k, (i, cells) in enumerate(body):
-        if len(cells) != len(header):
-            if k == len(body) - 1 and len(cells) < len(header):
-                warnings.append(f"{path}:{i}: incomplete last row dropped")
-                break
-            raise PlotError(f"{path}:{i}: expected {len(header)} cells, got {len(cells)}")
-        rows.append(dict(zip(header, (c.strip() for c in cells))))
-    if not rows:
-        raise PlotError(f"{path}: no cases in the table")
-    metrics = tuple(c for c in header if c in SWEEP_METRICS)
-    return SweepTable(path=path, params=params, metrics=metrics, rows=tuple(rows),
-                      warnings=tuple(warnings))
+        return _read_sweep_table(path)
+    except SweepTableError as err:
+        raise PlotError(str(err)) from None
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +17,7 @@ from typer.testing import CliRunner
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.runs.summary import read_summary
-from ardrone_nmpc.experiments.sweep import read_sweep_csv
+from ardrone_nmpc.experiments.sweep import read_sweep
 
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_x.yaml")
@@ -41,7 +46,7 @@ def _same(a: str, b: float) -> bool:
 
 def _check_against_run_dirs(out: Path) -> list[dict[str, str]]:
     """Every sweep.csv row agrees with its run directory's summary.csv and log.csv."""
-    rows = read_sweep_csv(out / "sweep.csv")
+    rows = read_sweep(out / "sweep.csv").rows
     assert list(rows[0]) == COLUMNS
     for row in rows:
         run_dir = out / row["run_dir"]
@@ -92,7 +97,7 @@ def test_sweep_on_a_process_pool_gives_the_in_process_results(tmp_path):
     result = _sweep(tmp_path / "two", "--jobs", "2")
     assert result.exit_code == 0, result.output
     rows = _check_against_run_dirs(tmp_path / "two")
-    expected = read_sweep_csv(tmp_path / "one" / "sweep.csv")
+    expected = read_sweep(tmp_path / "one" / "sweep.csv").rows
     assert [{c: r[c] for c in DETERMINISTIC} for r in rows] == [
         {c: r[c] for c in DETERMINISTIC} for r in expected]
 
@@ -111,7 +116,7 @@ def test_sweep_on_a_dask_cluster_gives_the_local_results(tmp_path):
     assert result.exit_code == 0, result.output
     assert "(dask, " in result.stdout
     rows = _check_against_run_dirs(tmp_path / "dask")
-    expected = read_sweep_csv(tmp_path / "local" / "sweep.csv")
+    expected = read_sweep(tmp_path / "local" / "sweep.csv").rows
     assert [{c: r[c] for c in DETERMINISTIC} for r in rows] == [
         {c: r[c] for c in DETERMINISTIC} for r in expected]
 
@@ -179,7 +184,7 @@ def test_failed_cases_make_the_exit_code_1(tmp_path, monkeypatch):
     result = _sweep(tmp_path, "--jobs", "1")
     assert result.exit_code == 1
     assert "error: 2 of 2 cases failed" in result.output
-    rows = read_sweep_csv(tmp_path / "sweep.csv")
+    rows = read_sweep(tmp_path / "sweep.csv").rows
     assert [(r["status"], r["message"]) for r in rows] == [("failed", "RuntimeError: boom")] * 2
 
 
@@ -192,3 +197,75 @@ def test_table_headers_are_the_shortest_distinct_path_tails():
         "kmax", "kind", "duration_s"]
     assert short_labels(["a.x.q", "b.x.q"]) == ["a.x.q", "b.x.q"]
     assert short_labels(["controller.q", "sim.plant.q"]) == ["controller.q", "plant.q"]
+
+
+# ----------------------------------------------------------------------------- kill -9
+
+
+def _children() -> dict[int, list[tuple[int, str]]]:
+    """parent pid → [(pid, start time in clock ticks)] of every process (Linux /proc)."""
+    kids: dict[int, list[tuple[int, str]]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:  # ended meanwhile
+                continue
+            fields = stat[stat.rindex(")") + 2:].split()
+            kids.setdefault(int(fields[1]), []).append((int(entry.name), fields[19]))
+    return kids
+
+
+def _family(pid: int) -> list[tuple[int, str]]:
+    kids, found, todo = _children(), [], [pid]
+    while todo:
+        for child in kids.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child[0])
+    return found
+
+
+def _alive(process: tuple[int, str]) -> bool:
+    """Still running (not a zombie), and the same process (its start time): pids recycle."""
+    try:
+        stat = Path(f"/proc/{process[0]}/stat").read_text()
+    except OSError:
+        return False
+    fields = stat[stat.rindex(")") + 2:].split()
+    return fields[0] != "Z" and fields[19] == process[1]
+
+
+def _wait_until(done, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+def test_the_processes_of_a_killed_sweep_end_with_it(tmp_path):
+    """SIGKILL of the sweep's process (nothing of it runs any more): its pool workers, the
+    forkserver and the resource tracker must end too, not fly their cases on for minutes."""
+    out = tmp_path / "killed"
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "ardrone_nmpc.cli.app", "sweep", CONFIG, "--grid",
+         "controller.horizon_steps=8,9,10", "--set", "duration_s=3000", "--jobs", "2",
+         "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    family: list[tuple[int, str]] = []
+    try:
+        partial = out / ".partial"
+        _wait_until(lambda: partial.is_dir() and len(list(partial.iterdir())) == 2, 180,
+                    "two cases never started flying")
+        family = _family(sweep.pid)
+        assert len(family) >= 3  # the forkserver and two workers (and a resource tracker)
+        sweep.kill()
+        sweep.wait(timeout=30)
+        _wait_until(lambda: not any(_alive(p) for p in family), 30,
+                    f"still running 30 s after the sweep was killed: "
+                    f"{[p for p in family if _alive(p)]}")
+    finally:
+        for pid, _ in [p for p in family if _alive(p)] + [(sweep.pid, "")]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        sweep.wait(timeout=30)

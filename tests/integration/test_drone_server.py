@@ -256,7 +256,10 @@ def test_bootstrap_then_ack_handshake_then_demo_packets_at_15_hz(make_server, ma
     for _, n in packets:
         assert n.demo is not None and n.option(OptionTag.VISION_DETECT) is not None
         assert major(n) == CtrlMajor.LANDED and n.demo.battery_pct == 100
-        assert not n.state & (S.FLY | S.COM_WATCHDOG | S.COMMAND | S.NAVDATA_BOOTSTRAP)
+        assert not n.state & (S.FLY | S.COMMAND | S.NAVDATA_BOOTSTRAP)
+    # bit 30 clears with the client's traffic (a keepalive late by > 50 ms on a loaded
+    # machine sets it again for a packet, as on the drone)
+    assert any(not n.state & S.COM_WATCHDOG for _, n in packets)
     assert cli.bad_packets == 0
 
 
@@ -374,6 +377,52 @@ def test_altitude_max_caps_the_climb(make_server, make_client):
     top = max(n.demo.altitude_mm for _, n in packets)
     assert 1200 <= top <= 1400, top
     assert any(major(n) == CtrlMajor.FLYING and minor(n) == 3 for _, n in packets)
+
+
+@pytest.mark.timeout(30)
+def test_landing_by_itself_then_a_held_takeoff_ref_relaunches_it(make_server, make_client):
+    """The firmware hazard a client must avoid: the drone lands on its own decision (state bit
+    0 clears, ctrl_state LANDED), and a REF still carrying the take-off bit starts it again."""
+    srv = make_server(**FAST)
+    cli = make_client(srv)
+    cli.start_demo()
+    cli.ref = Ref.takeoff()
+    cli.wait_for(lambda n: major(n) == CtrlMajor.HOVERING, 6.0, what="hovering")
+    assert srv.land_by_itself()
+    landing = cli.wait_for(lambda n: major(n) == 8, 1.0, what="landing (SDK code 8)")
+    assert landing.state & S.FLY and landing.state & S.USER_FEEDBACK_START
+    cli.ref = Ref.landing()          # this client drops the take-off bit: it stays down
+    down = cli.wait_for(lambda n: not n.state & S.FLY, 5.0, what="landed")
+    assert major(down) == CtrlMajor.LANDED and down.demo.altitude_mm == 0
+    cli.collect(0.3)
+    assert not cli.last.state & S.FLY and srv.plant.mode is FlightMode.LANDED
+    assert not srv.land_by_itself()  # on the ground: nothing to land
+
+    cli.ref = Ref.takeoff()          # airborne again, then landed by the drone once more …
+    cli.wait_for(lambda n: major(n) == CtrlMajor.HOVERING, 6.0, what="hovering again")
+    srv.land_by_itself()
+    cli.wait_for(lambda n: major(n) == 8, 1.0, what="landing by itself")
+    # … while this client keeps sending the take-off bit: the drone touches down and takes
+    # off again within a keepalive period, so navdata (15 Hz) may never even show it landed
+    relaunch = cli.wait_for(lambda n: major(n) == 6, 5.0, what="take-off again")
+    assert relaunch.state & S.FLY and srv.plant.mode is not FlightMode.LANDED
+
+
+@pytest.mark.timeout(30)
+def test_firmware_2_4_codes_for_take_off_and_landing(make_server, make_client):
+    srv = make_server(server=dict(ctrl_codes="fw2.4"), **FAST)
+    cli = make_client(srv)
+    cli.start_demo()
+    cli.ref = Ref.takeoff()
+    up = cli.wait_for(lambda n: n.state & S.FLY, 1.0, what="FLY bit")
+    assert major(up) == 7                      # the SDK header's GOTOFIX
+    cli.wait_for(lambda n: major(n) == CtrlMajor.HOVERING, 6.0, what="hovering")
+    cli.ref = Ref.landing()
+    down = cli.wait_for(lambda n: major(n) != CtrlMajor.HOVERING, 1.0, what="landing")
+    assert major(down) == 9 and down.state & S.FLY   # the header's LOOPING
+    cli.wait_for(lambda n: major(n) == CtrlMajor.LANDED, 5.0, what="landed")
+    with pytest.raises(ValueError):
+        DroneServer(srv.plant, ctrl_codes="observed")
 
 
 # ----------------------------------------------------------------------------- AT parsing
@@ -677,7 +726,8 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
     def run():
         try:
             serve(cfg=ExperimentConfig(), bind=LOCALHOST, at_port=0, navdata_port=0,
-                  mocap_to=f"{LOCALHOST}:{port}", seed=1, echo=lines.append, stop_event=stop)
+                  control_port=0, mocap_to=f"{LOCALHOST}:{port}", seed=1, echo=lines.append,
+                  stop_event=stop)
         except BaseException as exc:  # noqa: BLE001 - reported below
             errors.append(exc)
 
@@ -692,6 +742,7 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
     assert not t.is_alive() and not errors
     text = "\n".join(lines)
     assert "AT commands udp/" in text and "navdata udp/" in text
+    assert "config tcp/" in text          # the control port is served by default
     assert f"{LOCALHOST}:{port}" in text and "'ardrone'" in text
     assert lines[-1].startswith("stopped:")
 
@@ -709,8 +760,8 @@ def test_serve_starts_the_fault_clock(mocap_rx):
     stop = threading.Event()
     port = mocap_rx.getsockname()[1]
     t = threading.Thread(target=serve, kwargs=dict(
-        cfg=cfg, bind=LOCALHOST, at_port=0, navdata_port=0, mocap_to=f"{LOCALHOST}:{port}",
-        seed=1, echo=lines.append, stop_event=stop))
+        cfg=cfg, bind=LOCALHOST, at_port=0, navdata_port=0, control_port=0,
+        mocap_to=f"{LOCALHOST}:{port}", seed=1, echo=lines.append, stop_event=stop))
     t.start()
     try:
         mocap_rx.settimeout(3.0)
@@ -736,7 +787,7 @@ def test_serve_refuses_non_loopback_addresses(kwargs, message):
     from ardrone_nmpc.sim.serve import serve
 
     args = dict(cfg=ExperimentConfig(), bind=LOCALHOST, at_port=0, navdata_port=0,
-                mocap_to="127.0.0.1:51001", seed=None, echo=lambda s: None,
+                control_port=0, mocap_to="127.0.0.1:51001", seed=None, echo=lambda s: None,
                 stop_event=threading.Event())
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
@@ -762,7 +813,8 @@ def test_sim_drone_command_refuses_non_loopback_addresses(args, message):
 
     from ardrone_nmpc.cli.app import app
 
-    result = CliRunner().invoke(app, ["sim-drone", "--at-port", "0", "--navdata-port", "0", *args])
+    result = CliRunner().invoke(app, ["sim-drone", "--at-port", "0", "--navdata-port", "0",
+                                      "--control-port", "0", *args])
     assert result.exit_code == 1
     assert message in result.output
     assert "Traceback" not in result.output

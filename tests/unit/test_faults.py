@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc.config.schema import load_config
-from ardrone_nmpc.experiments.faultmatrix import (FAULT_CASES, classify, deviation_from, log_complete,
-                                      recovery_time_s)
+from ardrone_nmpc.experiments.faultmatrix import (FAULT_CASES, REQUIRED_OUTCOME, classify,
+                                                  deviation_from, log_complete, recovery_time_s)
 from ardrone_nmpc.sim.faults import FaultSchedule, corrupt_navdata
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
@@ -161,7 +161,14 @@ EXPECTED = {
     "wind_gust": ("completed", ("fault", "fault", "wind_gust")),
     "wind_constant": ("completed", ("faults", None, None)),
     "delay_jump": ("completed", ("fault", "fault", "delay_jump")),
+    "ctrl_codes_fw24": ("completed", ("faults", None, None)),
 }
+#: Rows whose required outcome needs the client side (issue 17 items 1-2), not yet in the
+#: lockstep runner: strict xfails below, which error out the day it lands (remove the mark).
+PENDING = {"foreign_session", "control_port_silent", "self_land"}
+PENDING_CLIENT = pytest.mark.xfail(
+    strict=True, reason="PENDING: refuse take-off on a mismatched / unread configuration and "
+    "stop after the drone lands by itself (issue 17 items 1-2) are not in the lockstep runner")
 
 
 def fly(tmp_path, fault, experiment="hover.yaml"):
@@ -184,10 +191,11 @@ def test_matrix_covers_every_fault_kind():
     covered = {name for overrides in FAULT_CASES.values() for o in overrides
                for name in [o.split(".")[1]]}
     assert covered == set(FaultsConfig.model_fields)
-    assert set(EXPECTED) == set(FAULT_CASES)
+    assert set(EXPECTED) | PENDING == set(FAULT_CASES) and not set(EXPECTED) & PENDING
+    assert PENDING <= set(REQUIRED_OUTCOME) <= set(FAULT_CASES)
 
 
-@pytest.mark.parametrize("fault", sorted(FAULT_CASES))
+@pytest.mark.parametrize("fault", sorted(set(FAULT_CASES) - PENDING))
 def test_each_fault_ends_by_policy_with_a_complete_log(tmp_path, baseline, fault):
     result, run = fly(tmp_path, fault)
     ending, (kind, key, value) = EXPECTED[fault]
@@ -241,3 +249,35 @@ def test_summary_counts_the_supervisor_verdicts(tmp_path):
     assert figures[("supervisor", "hold_ticks")] == mode.count("hold-solver") == 2
     assert figures[("supervisor", "fallback_ticks")] == mode.count("fallback-solver") > 10
     assert figures[("supervisor", "land_ticks")] == 0
+
+
+# ----------------------------------------------------------------------------- firmware rows
+def test_firmware_2_4_codes_change_no_flight(tmp_path, baseline):
+    """7 / 9 instead of 6 / 8 in the transitions: the client reads them alike; the flight
+    differs from the direct-sensor baseline only by the wire path's noise order."""
+    result, run = fly(tmp_path, "ctrl_codes_fw24")
+    assert result.ending == "completed"
+    _, dev = deviation_from(run, baseline)
+    assert dev.max() < 0.05
+
+
+@PENDING_CLIENT
+def test_lockstep_refuses_a_drone_that_holds_other_limits(tmp_path):
+    with pytest.raises(Exception, match="euler_angle_max"):   # the key the drone kept
+        fly(tmp_path, "foreign_session")
+
+
+@PENDING_CLIENT
+def test_lockstep_refuses_without_a_configuration_read_back(tmp_path):
+    with pytest.raises(Exception, match="control port|configuration"):
+        fly(tmp_path, "control_port_silent")
+
+
+@PENDING_CLIENT
+def test_lockstep_stops_when_the_drone_lands_by_itself(tmp_path):
+    result, run = fly(tmp_path, "self_land")
+    assert result.ending != "completed"                 # the run says it ended early
+    assert classify(run, result.ending, "self_land") in REQUIRED_OUTCOME["self_land"]
+    complete, why = log_complete(run.path, result.ticks)
+    assert complete, why
+

@@ -231,7 +231,7 @@ def test_horizon_ramp_grows_from_zero():
 
 def test_solvers_build_from_the_config():
     cfg = load_config(None, ["controller.solver.method=newton", "controller.horizon_steps=8",
-                             "controller.solver.kmax=7"])
+                             "controller.solver.newton_kmax=7"])
     solver = make_nmpc(cfg.controller, period_s=cfg.loop.period_s)
     assert isinstance(solver, NewtonGMRESController)
     assert solver.spec.horizon_steps == 8 and solver.kmax == 7

@@ -364,3 +364,92 @@ def test_demo_of_a_sample_round_trips_through_the_reader():
     assert back.altitude_m == pytest.approx(1.235, abs=1e-12)
     for name in ("roll_deg", "pitch_deg", "yaw_deg", "vx_body_mps", "vy_body_mps", "vz_mps"):
         assert getattr(back, name) == pytest.approx(getattr(sample, name), rel=1e-6), name
+
+
+# ----------------------------------------------------------------------------- the drone's side
+# Codes written from ARDroneLib Soft/Common/control_states.h (CTRL_STATES enum: DEFAULT 0,
+# INIT 1, LANDED 2, FLYING 3, HOVERING 4, TEST 5, TRANS_TAKEOFF 6, TRANS_GOTOFIX 7,
+# TRANS_LANDING 8, TRANS_LOOPING 9; FLYING_ALT_OUT_ZONE 3, HOVERING_ALT_OUT_ZONE 4,
+# HOVERING_LOST_COM 8), independently of CtrlMajor.
+from ardrone_nmpc.protocol.navdata import (  # noqa: E402
+    DEFAULT_NAVDATA_OPTIONS,
+    CtrlCodes,
+    DroneStatus,
+    encode_drone_navdata,
+    time_option,
+)
+
+
+def test_drone_encoder_bootstrap_is_the_captured_packet():
+    status = DroneStatus("landed", bootstrap=True, com_watchdog=True)
+    assert encode_drone_navdata(status, 1) == BOOTSTRAP
+    # the ACK after the first CONFIG adds bit 6 only (§3.2)
+    acked = DroneStatus("landed", bootstrap=True, com_watchdog=True, ack=True)
+    assert int(acked.state_bits()) == 0x4F800C50
+
+
+@pytest.mark.parametrize("phase, kwargs, sdk, fw24", [
+    ("landed", {}, (2, 0), (2, 0)),
+    ("emergency", {}, (0, 0), (0, 0)),
+    ("taking_off", {}, (6, 0), (7, 0)),
+    ("landing", {}, (8, 0), (9, 0)),
+    ("flying", {}, (4, 0), (4, 0)),
+    ("flying", {"moving": True}, (3, 0), (3, 0)),
+    ("flying", {"moving": True, "alt_out_zone": True}, (3, 3), (3, 3)),
+    ("flying", {"alt_out_zone": True}, (4, 4), (4, 4)),
+    ("flying", {"moving": True, "lost_com": True}, (4, 8), (4, 8)),
+])
+def test_drone_ctrl_state_codes(phase, kwargs, sdk, fw24):
+    status = DroneStatus(phase, **kwargs)
+    for codes, (major, minor) in ((CtrlCodes.SDK, sdk), (CtrlCodes.FIRMWARE_2_4, fw24)):
+        assert status.ctrl_state(codes) == (major << 16) | minor, codes
+    assert status.ctrl_state() == status.ctrl_state(CtrlCodes.SDK)
+
+
+@pytest.mark.parametrize("phase, fly, emergency", [
+    ("landed", False, False), ("taking_off", True, False), ("flying", True, False),
+    ("landing", True, False), ("emergency", False, True)])
+def test_drone_state_bits_follow_the_phase(phase, fly, emergency):
+    bits = DroneStatus(phase, user_emergency=True).state_bits()
+    assert (DroneState.FLY in bits) is fly
+    assert (DroneState.EMERGENCY in bits) is emergency
+    assert (DroneState.USER_EL in bits) is emergency    # only shown while in emergency
+    assert DroneState.NAVDATA_DEMO in bits and DroneState.NAVDATA_BOOTSTRAP not in bits
+    assert bits & 0x0F800010 == 0x0F800010              # always-on bits of the capture
+    flags = DroneStatus(phase, start_button=True, com_lost=True, battery_low=True,
+                        demo=False).state_bits()
+    assert flags & ((1 << 5) | (1 << 13) | (1 << 15)) == (1 << 5) | (1 << 13) | (1 << 15)
+    assert not flags & (1 << 10)
+    with pytest.raises(ValueError, match="phase"):
+        DroneStatus("hovering")
+
+
+def _sample(**changes):
+    from dataclasses import replace
+
+    from ardrone_nmpc.core.types import FlightMode, NavdataSample
+
+    return replace(NavdataSample(0.0, FlightMode.FLYING, 55.0, 1.0, -2.0, 30.0, 0.9, 0.1,
+                                 -0.2, 0.05), **changes)
+
+
+def test_drone_encoder_options_follow_the_mask():
+    flying = DroneStatus("flying", moving=True)
+    nav = decode_navdata(encode_drone_navdata(flying, 9, _sample()))
+    assert DEFAULT_NAVDATA_OPTIONS == 65537
+    assert nav.sequence == 9 and nav.demo is not None and nav.demo.ctrl_state == 3 << 16
+    assert [o.tag for o in nav.options] == [16] and nav.options[0].size == 328
+    assert nav.options[0].payload == bytes(324)                  # nb_detected = 0
+    bare = decode_navdata(encode_drone_navdata(flying, 9, _sample(), options_mask=1))
+    assert bare.demo is not None and bare.options == ()
+    none = decode_navdata(encode_drone_navdata(flying, 9, _sample(), options_mask=0))
+    assert none.demo is None and none.options == ()
+    full = decode_navdata(encode_drone_navdata(DroneStatus("flying", demo=False), 9, _sample(),
+                                               options_mask=0, t_s=3.25))
+    assert full.demo is not None and [o.tag for o in full.options] == [1, 16]
+    assert not full.state & DroneState.NAVDATA_DEMO
+    # time: 11 bits of seconds over 21 bits of microseconds, packed here by hand
+    assert full.option(1).payload == struct.pack("<I", (3 << 21) | 250000)
+    assert time_option(2049.5).payload == struct.pack("<I", (1 << 21) | 500000)
+    with pytest.raises(ValueError):
+        time_option(float("nan"))

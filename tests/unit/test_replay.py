@@ -26,7 +26,8 @@ from ardrone_nmpc.experiments.replay import (
     CMD_COLUMNS, COMPARED_COLUMNS, RERUN_COLUMNS, ReplayError, broadcast, logged_poses,
     missing_rerun_columns, rerun, rows_to_inputs,
 )
-from ardrone_nmpc.runtime.lockstep import HoldStartThen, run_lockstep
+from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 SHORT = ["duration_s=3.5", "sim.settle_s=0.5"]

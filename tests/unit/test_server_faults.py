@@ -139,3 +139,61 @@ def test_plant_faults_follow_the_experiment_clock():
     events = [(t, ev["fault"], ev.get("on")) for t, ev in faults.events]
     assert events == [(1.5, "wind_gust", True), (2.5, "battery_floor", None),
                       (2.5, "wind_gust", False)]
+
+
+# ----------------------------------------------------------------------------- firmware faults
+def test_self_land_lands_a_flying_drone_at_its_time():
+    from ardrone_nmpc.core.types import FlightMode
+
+    cfg = load_config(None)
+    plant = AirframePlant.from_config(cfg.sim, cfg.drone)
+    plant.takeoff()
+    while plant.mode is not FlightMode.FLYING:
+        plant.advance(0.05)
+    faults = server_faults("faults.self_land.start_s=3", plant=plant)
+    assert faults.update_plant(NOW + 2.9) == [] and plant.mode is FlightMode.FLYING
+    assert faults.update_plant(NOW + 3.0) == [{"kind": "fault", "fault": "self_land",
+                                               "accepted": True}]
+    assert plant.mode is FlightMode.LANDING          # through landing, not a motor cut
+    while plant.mode is FlightMode.LANDING:
+        plant.advance(0.05)
+    assert plant.mode is FlightMode.LANDED and plant.truth.position_m[2] == 0.0
+    assert faults.update_plant(NOW + 4.0) == []      # once
+
+
+@pytest.mark.parametrize("overrides, codes, port", [
+    ([], "sdk", "serve"),
+    (["faults.ctrl_codes.codes=fw2.4"], "fw2.4", "serve"),
+    (["faults.control_port_drop.mode=silent"], "sdk", "silent"),
+    (["faults.control_port_drop.mode=refused"], "sdk", "refused"),
+])
+def test_firmware_fault_options(overrides, codes, port):
+    cfg = load_config(None, overrides)
+    schedule = FaultSchedule(cfg.faults)
+    assert schedule.ctrl_codes().value == codes
+    assert schedule.control_port_mode() == port
+    assert schedule.held_session() is None
+    assert schedule.touches_sensors is (codes != "sdk")   # the lockstep goes through the bytes
+
+
+def test_wire_sensors_report_the_configured_codes_in_transitions():
+    from ardrone_nmpc.core.types import FlightMode
+    from ardrone_nmpc.sim.sensors import WireSensors
+
+    majors = {}
+    for codes in ("sdk", "fw2.4"):
+        cfg = load_config(None, [f"faults.ctrl_codes.codes={codes}"])
+        plant = AirframePlant.from_config(cfg.sim, cfg.drone)
+        sensors = WireSensors(cfg, plant, FaultSchedule(cfg.faults), t_zero_s=0.0)
+        plant.takeoff()
+        seen = []
+        while plant.mode is not FlightMode.FLYING:
+            sensors.advance_to(plant.t_s + 0.1)
+            data = navdata_packet(plant, 1, sensors.ctrl_codes)
+            seen.append(decode_navdata(data).demo.ctrl_major)
+        plant.land()
+        sensors.advance_to(plant.t_s + 0.1)
+        seen.append(decode_navdata(navdata_packet(plant, 1, sensors.ctrl_codes)).demo.ctrl_major)
+        majors[codes] = (seen[0], seen[-1])
+        assert sensors.nav.mode is FlightMode.LANDING    # the client reads both codes alike
+    assert majors == {"sdk": (6, 8), "fw2.4": (7, 9)}

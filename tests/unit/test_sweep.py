@@ -13,10 +13,11 @@ from ardrone_nmpc.experiments import sweep
 from ardrone_nmpc.config.schema import ConfigError, config_from_dict
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runs.summary import summarise
-from ardrone_nmpc.experiments.sweep import (CaseResult, build_cases, case_id, case_metrics, classify,
-                                parse_grid, rank_rows, read_sweep_csv, resume_results,
-                                run_case, split_values, sweep_columns, sweep_row,
-                                write_sweep_csv)
+from ardrone_nmpc.experiments import record
+from ardrone_nmpc.experiments.sweep import (CaseResult, build_cases, case_id, case_metrics,
+                                            classify, parse_grid, rank_rows, read_sweep,
+                                            resume_results, run_case, split_values,
+                                            sweep_columns, sweep_row, write_sweep_csv)
 
 STEP_X = Path(__file__).resolve().parents[2] / "configs" / "step_x.yaml"
 SHORT = ["duration_s=1.0", "sim.settle_s=0.2", "reference.target_m=[-0.3, 0, 1]"]
@@ -260,7 +261,7 @@ def test_a_failing_case_is_a_result_and_is_kept_for_inspection(tmp_path, monkeyp
     assert result.message == "RuntimeError: plant exploded on two lines"
     assert all(math.isnan(v) for v in result.metrics.values())
     run_dir = tmp_path / case.case_id
-    assert (run_dir / "events.jsonl").read_text().count("sweep-case-failed") == 1
+    assert (run_dir / "events.jsonl").read_text().count('"exception"') == 1
     assert not (run_dir / "summary.csv").exists()  # not finished: flown again on resume
     assert resume_results([case], out_dir=tmp_path) == {}
 
@@ -268,11 +269,11 @@ def test_a_failing_case_is_a_result_and_is_kept_for_inspection(tmp_path, monkeyp
 class _CountingFly:
     def __init__(self):
         self.calls = 0
-        self.inner = sweep._fly
+        self.inner = record.record_lockstep
 
-    def __call__(self, cfg, log_dir):
+    def __call__(self, cfg, log_dir, **kwargs):
         self.calls += 1
-        return self.inner(cfg, log_dir)
+        return self.inner(cfg, log_dir, **kwargs)
 
 
 def _sweep(cases, out_dir):
@@ -289,7 +290,7 @@ def _sweep(cases, out_dir):
 
 def test_finished_cases_are_not_flown_again(tmp_path, monkeypatch):
     fly = _CountingFly()
-    monkeypatch.setattr(sweep, "_fly", fly)
+    monkeypatch.setattr(record, "record_lockstep", fly)
     cases = _cases("controller.horizon_steps=8,9")
     first = _sweep(cases, tmp_path)
     assert fly.calls == 2 and not any(r.resumed for r in first.values())
@@ -304,7 +305,7 @@ def test_finished_cases_are_not_flown_again(tmp_path, monkeypatch):
 
 def test_resume_flies_only_unfinished_cases(tmp_path, monkeypatch):
     fly = _CountingFly()
-    monkeypatch.setattr(sweep, "_fly", fly)
+    monkeypatch.setattr(record, "record_lockstep", fly)
     cases = _cases("controller.horizon_steps=8,9,10")
     _sweep(cases, tmp_path)
     (tmp_path / cases[1].case_id / "summary.csv").unlink()  # a case cut short
@@ -312,7 +313,7 @@ def test_resume_flies_only_unfinished_cases(tmp_path, monkeypatch):
     results = _sweep(cases, tmp_path)
     assert fly.calls == 4
     assert [results[c.case_id].resumed for c in cases] == [True, False, True]
-    rows = read_sweep_csv(tmp_path / "sweep.csv")
+    rows = read_sweep(tmp_path / "sweep.csv").rows
     assert [r["case"] for r in rows] == [c.case_id for c in cases]
 
 
@@ -322,7 +323,7 @@ def test_resume_reads_the_run_directory_when_the_csv_row_is_torn(tmp_path, monke
     text = (tmp_path / "sweep.csv").read_text()
     (tmp_path / "sweep.csv").write_text(text[: text.index(",ok,")])  # cut mid-row
     fly = _CountingFly()
-    monkeypatch.setattr(sweep, "_fly", fly)
+    monkeypatch.setattr(record, "record_lockstep", fly)
     (again,) = resume_results(cases, out_dir=tmp_path).values()
     assert fly.calls == 0 and again.resumed
     assert again.metrics == pytest.approx(done.metrics, nan_ok=True)
@@ -356,7 +357,7 @@ def test_sweep_row_writes_numbers_that_read_back_exactly(tmp_path):
     result = CaseResult(case.case_id, "unstable", "far, away", metrics, case.case_id)
     columns = sweep_columns(["controller.r"])
     write_sweep_csv(tmp_path / "sweep.csv", columns, [sweep_row(case, result)])
-    (row,) = read_sweep_csv(tmp_path / "sweep.csv")
+    (row,) = read_sweep(tmp_path / "sweep.csv").rows
     assert list(row) == columns
     assert float(row["rmse_m"]) == 0.1 + 0.2 and row["fallbacks"] == "3"
     assert row["settling_s"] == "nan" and row["message"] == "far, away"
@@ -367,9 +368,46 @@ def test_a_case_failing_after_its_summary_is_not_taken_as_finished(tmp_path, mon
     def broken(**kwargs):
         raise ValueError("metrics bug")
 
-    monkeypatch.setattr(sweep, "case_metrics", broken)
+    monkeypatch.setattr(sweep.cases, "case_metrics", broken)
     (case,) = _cases("controller.horizon_steps=8")
     result = run_case(case, out_dir=tmp_path)
     assert (result.status, result.message) == ("failed", "ValueError: metrics bug")
     assert (tmp_path / case.case_id / "log.csv").is_file()
     assert not (tmp_path / case.case_id / "summary.csv").exists()
+
+
+# ----------------------------------------------------------------------------- workers
+
+
+def test_a_worker_ends_when_the_write_end_of_its_pipe_closes():
+    """The pool worker's watch: running while the sweep's process holds the pipe's write
+    end, exit ORPHAN_EXIT once it is closed (what the kernel does when that process dies)."""
+    import os
+    import subprocess
+    import sys
+
+    from ardrone_nmpc.experiments.sweep.engines import ORPHAN_EXIT
+
+    code = ("import sys, time\n"
+            "from multiprocessing.connection import Connection\n"
+            "from ardrone_nmpc.experiments.sweep.engines import _exit_with_sweep\n"
+            "_exit_with_sweep(Connection(int(sys.argv[1]), writable=False))\n"
+            "print('watching', flush=True)\n"
+            "time.sleep(120)\n")
+    read_fd, write_fd = os.pipe()
+    worker = subprocess.Popen([sys.executable, "-c", code, str(read_fd)], pass_fds=(read_fd,),
+                              stdout=subprocess.PIPE)
+    os.close(read_fd)
+    try:
+        assert worker.stdout.readline() == b"watching\n"
+        assert worker.poll() is None
+        os.close(write_fd)
+        write_fd = None
+        assert worker.wait(timeout=60) == ORPHAN_EXIT
+    finally:
+        if write_fd is not None:
+            os.close(write_fd)
+        if worker.poll() is None:
+            worker.kill()
+        worker.wait(timeout=60)
+        worker.stdout.close()

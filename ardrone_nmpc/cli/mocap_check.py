@@ -1,0 +1,209 @@
+"""``ardrone-nmpc mocap-check CONFIG``: is the motion capture ready to fly? (docs/mocap-sources.md)
+
+Connects to the configured source (``mocap.kind``), shows a live table of the tracked objects
+(pose, fresh-pose rate, age, missing/zero/frozen frames) and guides the hand-carry axis test:
+carry the drone ≥ 10 cm along +x (forward), +y (left), +z (up) and turn it ≥ 20°
+counter-clockwise; each shows ✔ when the measured sign is right, ✘ when only the opposite
+sign was seen (a mirrored or swapped axis, a wrong ``mocap.up_axis``). It ends with one line
+per tracked object: ``<name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>`` (3 decimals).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+__all__ = ["AxisTest", "CheckResult", "register", "run_check", "final_line"]
+
+AXIS_STEP_M = 0.10      # a hand-carried move the test counts
+YAW_STEP_RAD = 0.35     # ≈ 20°
+_SAMPLE_S = 0.05        # how often the check reads the source (it never blocks on it)
+_AXES = ("+x", "+y", "+z", "yaw CCW")
+
+
+def _num(v: float) -> str:
+    """3 decimals, never ``-0.000``."""
+    s = f"{v:.3f}"
+    return "0.000" if s == "-0.000" else s
+
+
+@dataclass
+class AxisTest:
+    """The hand-carry test: each axis ✔ once a move of the right sign was seen (✘: only the
+    wrong one). A translation counts when it is ≥ 10 cm and the largest of the three."""
+
+    origin_m: tuple[float, float, float] | None = None
+    origin_psi_rad: float = 0.0
+    seen: dict[str, set[int]] = field(default_factory=lambda: {a: set() for a in _AXES})
+
+    def update(self, position_m, psi_rad: float) -> None:
+        p = tuple(float(v) for v in position_m)
+        if self.origin_m is None:
+            self.origin_m, self.origin_psi_rad = p, float(psi_rad)
+            return
+        d = [p[i] - self.origin_m[i] for i in range(3)]
+        i = max(range(3), key=lambda k: abs(d[k]))
+        if abs(d[i]) >= AXIS_STEP_M:
+            self.seen[_AXES[i]].add(1 if d[i] > 0 else -1)
+        dpsi = math.remainder(float(psi_rad) - self.origin_psi_rad, 2.0 * math.pi)
+        if abs(dpsi) >= YAW_STEP_RAD:
+            self.seen["yaw CCW"].add(1 if dpsi > 0 else -1)
+
+    def mark(self, axis: str) -> str:
+        signs = self.seen[axis]
+        return "✔" if 1 in signs else ("✘" if -1 in signs else "·")
+
+    def line(self) -> str:
+        return "axis test: " + "  ".join(f"{a} {self.mark(a)}" for a in _AXES)
+
+
+@dataclass
+class _Track:
+    """What the check saw of one object."""
+
+    name: str
+    pose: object = None
+    rx_t_s: float = -math.inf
+    count0: int | None = None
+    t0_s: float = math.nan
+    count: int = 0
+    t_s: float = math.nan
+    window: list = field(default_factory=list)   # (t, count) of the last second
+
+    def sample(self, source, now_s: float, main: bool) -> None:
+        self.pose, self.rx_t_s = source.latest() if main else source.latest_of(self.name)
+        self.count, self.t_s = source.fresh_count(self.name), now_s
+        if self.count0 is None:
+            self.count0, self.t0_s = self.count, now_s
+        self.window.append((now_s, self.count))
+        while self.window and self.window[0][0] < now_s - 1.0:
+            self.window.pop(0)
+
+    def rate_hz(self) -> float:
+        """Fresh poses per second over the whole check."""
+        span = self.t_s - self.t0_s
+        return (self.count - self.count0) / span if span > 0 else 0.0
+
+    def recent_rate_hz(self) -> float:
+        (t0, c0), (t1, c1) = self.window[0], self.window[-1]
+        return (c1 - c0) / (t1 - t0) if t1 > t0 else 0.0
+
+
+@dataclass
+class CheckResult:
+    tracks: list[_Track]
+    axes: AxisTest
+    where: str
+    names_seen: tuple[str, ...]
+
+
+def final_line(track: _Track) -> str:
+    """``<name>: x=… y=… z=… psi=… rate=…`` of one object (``<name>: not seen``)."""
+    p = track.pose
+    if p is None:
+        return f"{track.name}: not seen"
+    x, y, z = (float(v) for v in p.position_m)
+    return (f"{track.name}: x={_num(x)} y={_num(y)} z={_num(z)} psi={_num(p.psi_rad)} "
+            f"rate={_num(track.rate_hz())}")
+
+
+def _table(result: CheckResult, source, now_s: float, seconds_left: float):
+    from rich.table import Table
+
+    table = Table(title=f"mocap {result.where} — {seconds_left:.0f} s left (Ctrl-C ends)",
+                  caption=f"stream objects: {', '.join(result.names_seen) or '(none)'};  "
+                          f"{result.axes.line()}")
+    for col in ("object", "x m", "y m", "z m", "ψ rad", "rate Hz", "age ms",
+                "missing/zero/frozen"):
+        table.add_column(col, justify="left" if col == "object" else "right")
+    for k, tr in enumerate(result.tracks):
+        p = tr.pose
+        pos = ["—"] * 4 if p is None else \
+            [_num(float(v)) for v in p.position_m] + [_num(p.psi_rad)]
+        age = (now_s - tr.rx_t_s) * 1e3
+        counts = f"{source.missing}/{source.zero_poses}/{source.repeats}" if k == 0 else ""
+        table.add_row(tr.name, *pos, f"{tr.recent_rate_hz():.1f}",
+                      "never" if not math.isfinite(age) else f"{age:.0f}", counts)
+    return table
+
+
+def run_check(source, names: list[str], seconds: float, *, live=None,
+              clock=time.monotonic) -> CheckResult:
+    """Sample the started ``source`` for ``seconds``; ``live(renderable)`` shows the table."""
+    tracks = [_Track(n) for n in names]
+    result = CheckResult(tracks, AxisTest(), source.where, ())
+    t_end = clock() + seconds
+    try:
+        while True:
+            now = clock()
+            for k, tr in enumerate(tracks):
+                tr.sample(source, now, main=k == 0)
+            result.names_seen = source.names_seen
+            if tracks[0].pose is not None:
+                result.axes.update(tracks[0].pose.position_m, tracks[0].pose.psi_rad)
+            if live is not None:
+                live(_table(result, source, now, max(t_end - now, 0.0)))
+            if now >= t_end:
+                return result
+            time.sleep(min(_SAMPLE_S, max(t_end - now, 0.0)))
+    except KeyboardInterrupt:
+        return result
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``mocap-check`` command to ``app``."""
+
+    @app.command("mocap-check")
+    def mocap_check(
+        config: Path = typer.Argument(..., help="Experiment YAML file (its mocap section)."),
+        seconds: float = typer.Option(10.0, "--seconds", min=0.1, max=3600.0, help="How long to watch (s)."),
+        set_: List[str] = typer.Option([], "--set", help="Override a config value before validation: dotted.path=value (repeatable)."),
+        live: Optional[bool] = typer.Option(None, "--live/--no-live", help="Live table and axis test (default: on a terminal)."),
+    ) -> None:
+        """Check the motion capture before a flight: a live table of the tracked objects (rate,
+        age, occlusion), the hand-carry axis test (+x, +y, +z, yaw CCW → ✔), and one final line
+        per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>."""
+        from ardrone_nmpc.config.schema import ConfigError, load_config, tracked_object
+        from ardrone_nmpc.links.mocap_source import open_mocap_source
+
+        try:
+            cfg = load_config(config, set_)
+        except ConfigError as err:
+            for line in err.messages:
+                typer.echo(f"error: {line}", err=True)
+            raise typer.Exit(code=1)
+        names = [cfg.mocap.object_name]
+        second = tracked_object(cfg)
+        if second and second not in names:
+            names.append(second)
+        show = sys.stderr.isatty() if live is None else live
+        try:
+            with open_mocap_source(cfg.mocap, other_objects=tuple(names[1:])) as source:
+                result = _watch(source, names, seconds, show)
+        except (RuntimeError, OSError, ValueError) as err:  # connect, missing extra, bind
+            typer.echo(f"error: {err}", err=True)
+            raise typer.Exit(code=1)
+        for tr in result.tracks:
+            typer.echo(final_line(tr))
+        typer.echo(result.axes.line())
+        if result.tracks[0].pose is None:
+            seen = ", ".join(result.names_seen) or "no objects"
+            typer.echo(f"error: object {names[0]!r} not seen from {result.where} in "
+                       f"{seconds:g} s (stream: {seen})", err=True)
+            raise typer.Exit(code=1)
+
+
+def _watch(source, names: list[str], seconds: float, show: bool) -> CheckResult:
+    if not show:
+        return run_check(source, names, seconds)
+    from rich.console import Console
+    from rich.live import Live
+
+    with Live(console=Console(stderr=True), refresh_per_second=8, transient=True) as view:
+        return run_check(source, names, seconds, live=view.update)

@@ -1,0 +1,165 @@
+"""``export RUN``: a run directory as one file the robotics viewers open.
+
+* ``mcap`` (the ``mcap`` extra): the channels of :mod:`ardrone_nmpc.runs.channels` — ``/log``
+  (one message per row), ``/events``, ``/config``, ``/pose`` and ``/reference``
+  (``foxglove.PoseInFrame``), ``/flight_path`` and ``/reference_path`` (whole, once) —
+  JSON-encoded, each with its JSON schema, for Foxglove, PlotJuggler or the ``mcap`` CLI. A
+  message's log time is its run time ``t_s`` (an event's ``t_exp_s`` when it has one) on an
+  epoch that puts the run's first row at the creation time recorded in ``config.yaml``.
+* ``parquet`` (the ``parquet`` extra, pyarrow): the log as one table (float64 and string
+  columns), the events (JSON lines) and ``config.yaml`` in the file's key-value metadata.
+
+Both keep every float bit for bit (``read_mcap`` reads an MCAP file back).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ardrone_nmpc.config.schema import config_to_dict
+from ardrone_nmpc.core.extras import import_extra
+from ardrone_nmpc.runs import channels as ch
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, STRING_COLUMNS, RunData, read_run
+
+__all__ = ["EXPORT_FORMATS", "ExportError", "export_run", "write_mcap", "write_parquet",
+           "read_mcap", "McapContents", "run_rows"]
+
+EXPORT_FORMATS = ("mcap", "parquet")
+PARQUET_EVENTS_KEY = b"ardrone_nmpc.events"
+PARQUET_CONFIG_KEY = b"ardrone_nmpc.config"
+_CREATED = re.compile(r"^#\s*created:\s*(\S+)\s*$", re.MULTILINE)
+
+
+class ExportError(ValueError):
+    """A user-facing export problem (unknown format, unwritable output): one line."""
+
+
+def run_rows(run: RunData) -> list[dict[str, Any]]:
+    """The log rows of ``run`` as dicts in column order (floats and str, as read)."""
+    names = list(run.columns)
+    cols = [run.columns[n].tolist() for n in names]
+    return [dict(zip(names, values)) for values in zip(*cols)]
+
+
+def _created_ns(run: RunData) -> int:
+    """The creation time in ``config.yaml``'s header (ns since the epoch); 0 if absent."""
+    try:
+        m = _CREATED.search((run.path / CONFIG_FILE).read_text(encoding="utf-8"))
+        return int(_dt.datetime.fromisoformat(m.group(1)).timestamp() * 1e9) if m else 0
+    except (OSError, ValueError):
+        return 0
+
+
+def _origin_ns(run: RunData) -> int:
+    """The epoch (ns) of ``t_s = 0``: the first row (or event) falls on the creation time."""
+    times = [float(t) for t in run.columns["t_s"][:1]] + [
+        float(e["t_s"]) for e in run.events[:1] if isinstance(e.get("t_s"), (int, float))]
+    first = min((t for t in times if np.isfinite(t)), default=0.0)
+    return _created_ns(run) - round(min(first, 0.0) * 1e9)
+
+
+def write_mcap(run: RunData, out: Path) -> int:
+    """Write ``run`` as MCAP to ``out``; return the number of messages."""
+    writer_mod = import_extra("mcap.writer", "mcap", "export --format mcap")
+    origin = _origin_ns(run)
+    messages: list[tuple[int, int, str, bytes]] = []  # (log ns, order, topic, data)
+    paths = ch.PathBuilder()
+    for row in run_rows(run):
+        t_ns = ch.time_ns(origin, row["t_s"])
+        for topic, data in ch.row_messages(row, t_ns, paths):
+            messages.append((t_ns, len(messages), topic, data))
+    for event in run.events:  # a real flight's loop events carry experiment time apart
+        t = event.get("t_exp_s", event.get("t_s"))
+        t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
+        messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
+    config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)
+    t0_ns = ch.time_ns(origin, float(run.columns["t_s"][0]) if run.n_rows else 0.0)
+    messages.append((t0_ns, -2, ch.TOPIC_CONFIG, config))
+    for topic, data in paths.messages(t0_ns):   # whole paths, shown from the start
+        messages.append((t0_ns, -1, topic, data))
+    messages.sort()
+    with open(out, "wb") as stream:
+        writer = writer_mod.Writer(stream)
+        writer.start(profile="", library="ardrone-nmpc")
+        ids = {}
+        for topic, (name, schema) in ch.SCHEMAS.items():
+            schema_id = writer.register_schema(name=name, encoding="jsonschema", data=schema)
+            ids[topic] = writer.register_channel(topic=topic, message_encoding="json",
+                                                 schema_id=schema_id)
+        for seq, (t_ns, _, topic, data) in enumerate(messages):
+            writer.add_message(channel_id=ids[topic], log_time=t_ns, publish_time=t_ns,
+                               data=data, sequence=seq & 0xFFFFFFFF)
+        writer.finish()
+    return len(messages)
+
+
+@dataclass
+class McapContents:
+    """An MCAP file of :func:`write_mcap` read back: messages per topic, in file order."""
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    row_log_times_ns: list[int] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    config: dict[str, Any] | None = None
+    poses: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    schemas: dict[str, str] = field(default_factory=dict)   # topic → schema name
+
+
+def read_mcap(path: Path) -> McapContents:
+    """Read an exported MCAP file with the ``mcap`` library."""
+    import json
+
+    reader_mod = import_extra("mcap.reader", "mcap", "reading MCAP")
+    out = McapContents()
+    with open(path, "rb") as stream:
+        reader = reader_mod.make_reader(stream)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            topic = channel.topic
+            out.schemas[topic] = schema.name if schema is not None else ""
+            if topic == ch.TOPIC_LOG:
+                out.rows.append(ch.decode_row(message.data))
+                out.row_log_times_ns.append(message.log_time)
+            elif topic == ch.TOPIC_EVENTS:
+                out.events.append(json.loads(message.data))
+            elif topic == ch.TOPIC_CONFIG:
+                out.config = json.loads(message.data)
+            else:
+                out.poses.setdefault(topic, []).append(json.loads(message.data))
+    return out
+
+
+def write_parquet(run: RunData, out: Path) -> int:
+    """Write the log of ``run`` as a Parquet table to ``out``; return the number of rows."""
+    pa = import_extra("pyarrow", "parquet", "export --format parquet")
+    pq = import_extra("pyarrow.parquet", "parquet", "export --format parquet")
+    arrays, names = [], []
+    for name, values in run.columns.items():
+        arrays.append(pa.array(values.tolist(), type=pa.string()) if name in STRING_COLUMNS
+                      else pa.array(np.asarray(values, dtype=np.float64), type=pa.float64()))
+        names.append(name)
+    events = b"\n".join(ch.event_message(e) for e in run.events)
+    config = (run.path / CONFIG_FILE).read_bytes()
+    table = pa.Table.from_arrays(arrays, names=names).replace_schema_metadata(
+        {PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
+    pq.write_table(table, out)
+    return table.num_rows
+
+
+def export_run(run_dir: Path, fmt: str, out: Path) -> str:
+    """Export the run at ``run_dir`` as ``fmt`` to ``out``; return a one-line report."""
+    if fmt not in EXPORT_FORMATS:
+        raise ExportError(f"--format: unknown format {fmt!r}; choose {', '.join(EXPORT_FORMATS)}")
+    run = read_run(run_dir)
+    if out.is_dir():
+        raise ExportError(f"{out}: is a directory; give the output file")
+    if fmt == "mcap":
+        n = write_mcap(run, out)
+        return f"{out}: {n} messages ({run.n_rows} rows, {len(run.events)} events)"
+    n = write_parquet(run, out)
+    return f"{out}: {n} rows, {len(run.events)} events in the metadata"

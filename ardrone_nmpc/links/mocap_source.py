@@ -1,0 +1,244 @@
+"""Motion-capture sources behind one interface: the newest fresh pose of each tracked object.
+
+``mocap.kind`` picks the source: ``vicon_udp`` (:class:`~ardrone_nmpc.links.mocap_link.MocapLink`,
+Vicon Tracker's UDP object stream, decoded by this package) or ``motioncapture``
+(:class:`~ardrone_nmpc.links.motioncapture_source.MotionCaptureSource`: every system the
+libmotioncapture library speaks — Vicon DataStream SDK, OptiTrack, Qualisys, VRPN, NOKOV, …).
+Each turns a frame into :class:`~ardrone_nmpc.protocol.mocap.MocapObjectPose` records in our
+world frame (x forward, y left, z up, ψ counter-clockwise) and hands them to
+:meth:`MocapSource.accept_frame`, so the freshness rules below, the readings the runner, the
+session and the dashboard use, and therefore the log, are one code path for every system.
+
+Not fresh — the last good pose is kept and its age grows (the supervisor acts on the age; a
+zero pose never reaches the controller), see docs/mocap-stream.md:
+
+* the object missing from the frame (``missing``);
+* an all-zero (or non-finite) pose (``zero_poses``; ``MocapObjectPose.fresh`` is False);
+* a bit-identical pose in ``repeat_limit`` (3) or more consecutive frames: the first two are
+  accepted, the third and later are ignored (``repeats``) — real measurements are never
+  bit-identical three frames running, a tracker holding an occluded object's pose is.
+
+Every source receives on its own thread; the readings take a lock for a few attribute reads,
+so the 65 ms loop never waits for the network or for the mocap system.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from collections.abc import Mapping
+
+import numpy as np
+
+from ardrone_nmpc.core.types import MocapPose
+from ardrone_nmpc.links.udp import Clock, LinkStats
+from ardrone_nmpc.protocol.mocap import MocapObjectPose
+
+__all__ = ["MOCAP_KINDS", "MocapSource", "MocapConnectError", "mocap_pose_of",
+           "open_mocap_source"]
+
+MOCAP_KINDS = ("vicon_udp", "motioncapture")
+_POSE_BITS = struct.Struct("<6d")     # the six pose floats, to compare poses bit for bit
+
+
+class MocapConnectError(RuntimeError):
+    """The mocap system could not be reached (or its library is missing): one line to show."""
+
+
+def _readonly(values) -> np.ndarray:
+    a = np.array(values, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+def mocap_pose_of(pose: MocapObjectPose, t_s: float) -> MocapPose:
+    """A decoded wire pose as the :class:`MocapPose` record stamped ``t_s`` (SI units)."""
+    return MocapPose(t_s=t_s, position_m=_readonly(pose.position_m),
+                     rotation_xyz_rad=_readonly(pose.rotation_xyz_rad), psi_rad=pose.psi_rad)
+
+
+class MocapSource:
+    """The newest fresh pose of ``object_name`` (and of ``other_objects``) from some system.
+
+    Subclasses own the thread and the transport: they call :meth:`accept_frame` once per
+    frame (after counting it in :attr:`stats`) and implement :meth:`start`, :meth:`close`
+    and :attr:`where`.
+
+    Parameters
+    ----------
+    object_name : the controlled object's name in the stream.
+    other_objects : more objects to keep (the followed one, moving obstacles).
+    clock : receipt stamps (seconds, monotonic).
+    repeat_limit : consecutive bit-identical frames from which a pose stops being fresh
+        (≥ 2), or None to accept repeats (a mock system whose poses never change).
+    restart_backjump : a frame number this far below the last is a tracker restart.
+    """
+
+    kind = "?"
+
+    def __init__(self, *, object_name: str = "ardrone", other_objects: tuple[str, ...] = (),
+                 clock: Clock = time.monotonic, repeat_limit: int | None = 3,
+                 restart_backjump: int = 1000) -> None:
+        if not isinstance(object_name, str) or not object_name:
+            raise ValueError("object_name must be a non-empty string")
+        if repeat_limit is not None and repeat_limit < 2:
+            raise ValueError(f"repeat_limit must be >= 2 (or None), got {repeat_limit}")
+        self.object_name = object_name
+        self.other_objects = tuple(other_objects)
+        self.repeat_limit = None if repeat_limit is None else int(repeat_limit)
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._pose: MocapPose | None = None
+        self._rx_t_s = -math.inf
+        self._last_values: bytes | None = None
+        self._same_count = 0
+        self._missing = 0
+        self._zero = 0
+        self._repeats = 0
+        self._poses = 0
+        self._last_error: str | None = None
+        self._others: dict[str, tuple[MocapPose, float]] = {}
+        self._fresh_counts: dict[str, int] = {}
+        self._names_seen: tuple[str, ...] = ()
+        self.stats = LinkStats(window_s=1.0, restart_backjump=restart_backjump)
+        """Stream statistics: frame rate, frame-number gaps (``lost``), malformed, out of order."""
+
+    # ----------------------------------------------------------------------------- lifecycle
+
+    def __enter__(self) -> MocapSource:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def start(self) -> None:  # pragma: no cover - abstract
+        """Connect and start the receiver thread (once)."""
+        raise NotImplementedError
+
+    def close(self) -> None:  # pragma: no cover - abstract
+        """Stop the thread and release the connection (idempotent)."""
+        raise NotImplementedError
+
+    @property
+    def where(self) -> str:  # pragma: no cover - abstract
+        """Where the poses come from, for messages (``udp 0.0.0.0:51001``, ``vicon@host``)."""
+        raise NotImplementedError
+
+    @property
+    def port(self) -> int | None:
+        """The UDP port listened on, for a UDP source; None otherwise."""
+        return None
+
+    # ----------------------------------------------------------------------------- readings
+
+    def latest(self) -> tuple[MocapPose | None, float]:
+        """``(pose, rx_t_s)``: the newest fresh pose and its receipt time (source clock);
+        ``(None, -inf)`` before the first."""
+        with self._lock:
+            return self._pose, self._rx_t_s
+
+    def latest_of(self, name: str) -> tuple[MocapPose | None, float]:
+        """``(pose, rx_t_s)`` of another tracked object (``other_objects``); ``(None, -inf)``
+        before its first fresh pose."""
+        with self._lock:
+            return self._others.get(name, (None, -math.inf))
+
+    def age_ms(self, now_s: float) -> float:
+        """Milliseconds since the newest fresh pose was received (inf before the first)."""
+        return (now_s - self._rx_t_s) * 1e3
+
+    def fresh_count(self, name: str) -> int:
+        """Fresh poses accepted so far for ``name`` (the object or one of ``other_objects``)."""
+        return self._fresh_counts.get(name, 0)
+
+    @property
+    def names_seen(self) -> tuple[str, ...]:
+        """The object names of the newest frame (diagnostics: what the system streams)."""
+        return self._names_seen
+
+    @property
+    def poses(self) -> int:
+        """Fresh poses accepted."""
+        return self._poses
+
+    @property
+    def missing(self) -> int:
+        """Frames without the configured object."""
+        return self._missing
+
+    @property
+    def zero_poses(self) -> int:
+        """Frames carrying the object with an all-zero or non-finite pose."""
+        return self._zero
+
+    @property
+    def repeats(self) -> int:
+        """Frames ignored as a bit-identical repeat (``repeat_limit`` or more in a row)."""
+        return self._repeats
+
+    @property
+    def last_error(self) -> str | None:
+        """The latest receive or decode error message (diagnostics)."""
+        return self._last_error
+
+    # ----------------------------------------------------------------------------- frames
+
+    def accept_frame(self, poses: Mapping[str, MocapObjectPose], t_s: float) -> None:
+        """Apply the freshness rules to one frame received at ``t_s`` (source clock)."""
+        self._names_seen = tuple(poses)
+        counts = self._fresh_counts
+        for name in self.other_objects:  # e.g. the object a 'follow' reference tracks
+            other = poses.get(name)
+            if other is not None and other.fresh:
+                with self._lock:
+                    self._others[name] = (mocap_pose_of(other, t_s), t_s)
+                counts[name] = counts.get(name, 0) + 1
+        pose = poses.get(self.object_name)
+        if pose is None:
+            self._missing += 1
+            self._last_values, self._same_count = None, 0
+            return
+        if not pose.fresh:
+            self._zero += 1
+            self._last_values, self._same_count = None, 0
+            return
+        values = _POSE_BITS.pack(*pose.translation_mm, *pose.rotation_xyz_rad)
+        if values == self._last_values:        # bit-identical (0.0 and -0.0 differ)
+            self._same_count += 1
+        else:
+            self._last_values, self._same_count = values, 1
+        if self.repeat_limit is not None and self._same_count >= self.repeat_limit:
+            self._repeats += 1
+            return
+        record = mocap_pose_of(pose, t_s)
+        with self._lock:
+            self._pose = record
+            self._rx_t_s = t_s
+        self._poses += 1
+        counts[self.object_name] = counts.get(self.object_name, 0) + 1
+
+
+def open_mocap_source(mocap_cfg, *, other_objects: tuple[str, ...] = (),
+                      port: int | None = None, clock: Clock = time.monotonic) -> MocapSource:
+    """The source ``mocap_cfg`` (a ``MocapConfig``) describes, not yet started.
+
+    ``port`` overrides ``mocap.port`` (``fly --mocap-port``; UDP only). The ``motioncapture``
+    library is imported only here, and only for that kind: a missing one raises
+    :class:`MocapConnectError` naming the extra to install.
+    """
+    kind = getattr(mocap_cfg, "kind", "vicon_udp")
+    if kind == "vicon_udp":
+        from ardrone_nmpc.links.mocap_link import MocapLink
+
+        return MocapLink(mocap_cfg.bind_host, port or mocap_cfg.port,
+                         object_name=mocap_cfg.object_name, clock=clock,
+                         other_objects=tuple(other_objects))
+    if kind == "motioncapture":
+        from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
+
+        return MotionCaptureSource.from_config(mocap_cfg, other_objects=tuple(other_objects),
+                                               clock=clock)
+    raise ValueError(f"unknown mocap.kind {kind!r}; choose one of {', '.join(MOCAP_KINDS)}")

@@ -1,0 +1,221 @@
+"""The simulated drone's configuration: what ``AT*CONFIG`` writes, what the drone applies to
+the plant, and the text it sends on the control port (docs/protocol.md, configuration).
+
+Applied keys: ``control:euler_angle_max`` (rad, clamped to 0.52), ``control:control_vz_max``
+(mm/s, clamped to 200–2000), ``control:control_yaw`` (rad/s, clamped to 0.7–6.11) replace the
+plant's params; ``control:altitude_max`` (mm) sets the altitude cap; ``general:navdata_demo``
+leaves bootstrap (TRUE demo packets, FALSE full rate); ``general:navdata_options`` selects the
+options. Any other key, and a value that does not parse, is stored but changes nothing. The
+clamps keep a hostile value ("1e300") from driving the plant where no navdata int32 reaches.
+
+Multiconfiguration: a drone left in another application's session (:class:`HeldSession`)
+acknowledges every ``AT*CONFIG``. Keys every session shares (ARDroneLib ``config_keys.h``
+category CAT_COMMON: ``general:navdata_demo``, ``control:altitude_max``, ``control:outdoor`` …)
+apply; a per-session key (CAT_APPLI, CAT_USER, CAT_SESSION: the three command limits,
+``general:navdata_options``, ``control:flying_mode`` …) applies only when the ``AT*CONFIG_IDS``
+right before it (same datagram, as the SDK sends them) carries that session's three ids.
+``custom:session_id`` / ``profile_id`` / ``application_id`` switch ids and always apply (the SDK
+sends them with the ids it switches to). The exact firmware rule is not documented; this is
+the reading of docs/protocol.md (multiconfiguration). The dump reports what the drone holds:
+the plant's limits, the active ids.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ardrone_nmpc.protocol.navdata import DEFAULT_NAVDATA_OPTIONS
+
+__all__ = ["ConfigStore", "HeldSession", "apply_limits", "limit_change",
+           "EULER_ANGLE_MAX_LIMIT_RAD", "DEFAULT_CONFIG_ID"]
+
+EULER_ANGLE_MAX_LIMIT_RAD = 0.52          # dev guide range of control:euler_angle_max
+CONTROL_VZ_MAX_RANGE_MMPS = (200.0, 2000.0)   # recommended ranges of the other two limits
+CONTROL_YAW_RANGE_RADPS = (0.7, 6.11)
+DEFAULT_CONFIG_ID = "00000000"            # the default session, profile and application
+_LIMIT_KEYS = ("control:euler_angle_max", "control:control_vz_max", "control:control_yaw")
+_ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
+#: Keys of the per-session categories (CAT_APPLI, CAT_USER, CAT_SESSION in config_keys.h).
+SESSION_KEYS = frozenset({
+    "general:navdata_options", "control:control_level", "control:euler_angle_max",
+    "control:control_iphone_tilt", "control:control_vz_max", "control:control_yaw",
+    "control:manual_trim", "control:indoor_euler_angle_max", "control:indoor_control_vz_max",
+    "control:indoor_control_yaw", "control:outdoor_euler_angle_max",
+    "control:outdoor_control_vz_max", "control:outdoor_control_yaw", "control:flying_mode",
+    "control:hovering_range", "video:codec_fps", "video:video_codec", "video:video_slices",
+    "video:video_live_socket", "video:bitrate", "video:max_bitrate", "video:bitrate_ctrl_mode",
+    "video:bitrate_storage", "video:video_channel", "detect:groundstripe_colors",
+    "detect:detect_type", "detect:detections_select_h", "detect:detections_select_v_hsync",
+    "detect:detections_select_v", "userbox:userbox_cmd", "gps:latitude", "gps:longitude",
+    "gps:altitude", "custom:application_desc", "custom:profile_desc", "custom:session_desc"})
+
+
+def _parse_bool(text: str) -> bool:
+    return text.strip().upper() in ("TRUE", "1", "YES", "ON")
+
+
+def _parse_float(text: str) -> float | None:
+    try:
+        v = float(text)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+def limit_change(key: str, value: str) -> dict | None:
+    """The :class:`~ardrone_nmpc.sim.plant.PlantParams` change one limit key asks for (the
+    value clamped to its range), or None if the key is no limit or the value does not parse."""
+    v = _parse_float(value) if key in _LIMIT_KEYS else None
+    if v is None or v <= 0:
+        return None
+    if key == "control:euler_angle_max":
+        return {"euler_angle_max_rad": min(v, EULER_ANGLE_MAX_LIMIT_RAD)}
+    if key == "control:control_vz_max":
+        lo, hi = CONTROL_VZ_MAX_RANGE_MMPS
+        return {"control_vz_max_mps": min(max(v, lo), hi) / 1000.0}
+    lo, hi = CONTROL_YAW_RANGE_RADPS
+    return {"control_yaw_radps": min(max(v, lo), hi)}
+
+
+def apply_limits(plant, values: dict[str, str]) -> None:
+    """Apply the limit keys among ``values`` (key → value text) to ``plant``'s params."""
+    for key, value in values.items():
+        change = limit_change(key, value)
+        if change is None:
+            continue
+        try:
+            plant.params = plant.params.replace(**change)
+        except (ValueError, TypeError, AttributeError):   # keep the old params
+            pass
+
+
+@dataclass(frozen=True)
+class HeldSession:
+    """A multiconfig session the drone is in (not the client's) and the limits it holds there.
+
+    ``ids`` are (session, profile, application), 8 hex digits each, not all "00000000".
+    """
+
+    ids: tuple[str, str, str]
+    euler_angle_max_rad: float = EULER_ANGLE_MAX_LIMIT_RAD
+    control_vz_max_mps: float = CONTROL_VZ_MAX_RANGE_MMPS[1] / 1000.0
+    control_yaw_radps: float = CONTROL_YAW_RANGE_RADPS[1]
+
+    def __post_init__(self) -> None:
+        ids = tuple(str(i) for i in self.ids)
+        if len(ids) != 3 or ids == (DEFAULT_CONFIG_ID,) * 3:
+            raise ValueError(f"a held session needs 3 ids, not all {DEFAULT_CONFIG_ID}: {ids}")
+        object.__setattr__(self, "ids", ids)
+
+    @classmethod
+    def of_fault(cls, fault) -> HeldSession:
+        """From a :class:`~ardrone_nmpc.config.schema.ForeignSessionFault`."""
+        return cls((fault.session_id, fault.profile_id, fault.application_id),
+                   fault.euler_angle_max_rad, fault.control_vz_max_mps, fault.control_yaw_radps)
+
+    def limits(self) -> dict[str, str]:
+        """The held limits as config key → value text (the wire's units: rad, mm/s, rad/s)."""
+        return {"control:euler_angle_max": repr(self.euler_angle_max_rad),
+                "control:control_vz_max": repr(self.control_vz_max_mps * 1000.0),
+                "control:control_yaw": repr(self.control_yaw_radps)}
+
+
+class ConfigStore:
+    """The configuration of one simulated drone (use under the drone's lock).
+
+    Attributes
+    ----------
+    written : key → value text of every applied ``AT*CONFIG``.
+    config_ids : the last ``AT*CONFIG_IDS`` (session, profile, application).
+    active_ids : the session, profile and application the drone is in.
+    ignored : key → value text of the writes acknowledged but not applied (another session).
+    bootstrap : True until ``general:navdata_demo`` is written.
+    demo : demo packets (False: full rate).
+    navdata_options : the ``general:navdata_options`` mask.
+    altitude_max_m : the altitude cap (m).
+    """
+
+    def __init__(self, plant, *, altitude_max_m: float,
+                 session: HeldSession | None = None) -> None:
+        self.plant = plant
+        self.written: dict[str, str] = {}
+        self.ignored: dict[str, str] = {}
+        self.config_ids: tuple[str, str, str] = (DEFAULT_CONFIG_ID,) * 3
+        self.active_ids: tuple[str, str, str] = (DEFAULT_CONFIG_ID,) * 3
+        if session is not None:
+            self.active_ids = session.ids
+            self.apply_limits(session.limits())
+        self.bootstrap = True
+        self.demo = True
+        self.navdata_options = DEFAULT_NAVDATA_OPTIONS
+        self.altitude_max_m = float(altitude_max_m)
+
+    @property
+    def multiconfig(self) -> bool:
+        """The drone is in a session other than the default one."""
+        return self.active_ids != (DEFAULT_CONFIG_ID,) * 3
+
+    def write(self, key: str, value: str, ids: tuple[str, str, str] | None = None) -> bool:
+        """One ``AT*CONFIG``; ``ids`` those of the ``AT*CONFIG_IDS`` right before it, if any.
+        Returns whether it was applied (either way the drone acknowledges it)."""
+        if key in _ID_KEYS:
+            if not value.startswith("-"):   # "-<id>" / "-all" delete sessions: not modelled
+                i = _ID_KEYS.index(key)
+                self.active_ids = (*self.active_ids[:i], value, *self.active_ids[i + 1:])
+        elif key in SESSION_KEYS and self.multiconfig and ids != self.active_ids:
+            self.ignored[key] = value
+            return False
+        self.written[key] = value
+        if key == "general:navdata_demo":
+            self.bootstrap = False
+            self.demo = _parse_bool(value)
+        elif key == "general:navdata_options":
+            try:
+                self.navdata_options = int(value) & 0xFFFFFFFF
+            except ValueError:
+                pass
+        elif key == "control:altitude_max":
+            v = _parse_float(value)
+            if v is not None and v > 0:
+                self.altitude_max_m = v / 1000.0
+        else:
+            self.apply_limits({key: value})
+        return True
+
+    def apply_limits(self, values: dict[str, str]) -> None:
+        """Apply the limit keys among ``values`` to the plant (others are ignored)."""
+        apply_limits(self.plant, values)
+
+    def held(self) -> dict[str, str]:
+        """The values the drone flies with, as the dump reports them whatever text was
+        written (clamped limits, writes of another session)."""
+        p = self.plant.params
+        return {
+            "general:navdata_demo": "TRUE" if self.demo else "FALSE",
+            "general:navdata_options": str(self.navdata_options),
+            "control:euler_angle_max": f"{p.euler_angle_max_rad:.4f}",
+            "control:altitude_max": str(int(round(self.altitude_max_m * 1000))),
+            "control:control_vz_max": f"{p.control_vz_max_mps * 1000:.1f}",
+            "control:control_yaw": f"{p.control_yaw_radps:.4f}",
+            "custom:session_id": self.active_ids[0],
+            "custom:profile_id": self.active_ids[1],
+            "custom:application_id": self.active_ids[2],
+        }
+
+    def text(self) -> str:
+        """The configuration dump: ``section:key = value`` lines (the NUL is the port's)."""
+        values = {
+            "general:num_version_soft": "2.4.8",
+            "general:com_watchdog": "2",
+            "general:vbat_min": "9000",
+            "control:altitude_min": "50",
+            "control:outdoor": "FALSE",
+            "control:flight_without_shell": "FALSE",
+            "control:flying_mode": "0",
+            "video:video_codec": "129",
+            "video:video_channel": "0",
+        }
+        values.update(self.written)
+        values.update(self.held())
+        return "".join(f"{k} = {v}\n" for k, v in values.items())

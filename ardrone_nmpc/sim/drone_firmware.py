@@ -1,0 +1,284 @@
+"""The simulated AR.Drone's firmware: AT commands applied to the plant, the communication
+watchdogs, the altitude cap, and the status its navdata reports (docs/protocol.md, "behaviour a
+faithful simulator should reproduce"; [?] marks that document's design choices).
+
+No sockets, threads or clock of its own: :class:`~ardrone_nmpc.sim.drone_server.DroneServer`
+calls it under its lock with the time, so it is testable datagram by datagram.
+
+* Sequence numbers: a command runs only if ``seq == 1`` or ``seq > last``; ``last`` resets to
+  0 after ``link_loss_s`` without an accepted command [?]. Ignored commands are counted
+  (``at_commands_stale``) and are no traffic for the watchdogs.
+* ``AT*REF``: bit 9 is a level — set while landed (no emergency, battery above the plant's
+  take-off floor) takes off, so a REF still asking for take-off after the drone landed by
+  itself launches it again; clear while taking off or flying lands. Bit 8 acts on its 0→1
+  edge: not in emergency → emergency (motors cut, state bits 31 and 16); in emergency on the
+  ground → cleared [?].
+* ``AT*PCMD`` / ``PCMD_MAG``: flag bit 0 set → the fractions go to the plant; clear → hover.
+* Altitude cap: a climbing gaz becomes 0 (minor ALT_OUT_ZONE) once z + v_z·(command delay +
+  τ_z), where the climb would stop, reaches ``control:altitude_max``.
+* ``AT*FTRIM`` counted only when landed, ``AT*CALIB`` only in flight (no manoeuvre).
+* ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`; applied or, in another
+  multiconfig session, ignored) sets the ACK bit 6;
+  ``AT*CTRL`` 5 clears it, 4 dumps the configuration on the control port and sets it, 6 dumps
+  an empty custom-config list and sets it. ``AT*COMWDG`` clears the com-watchdog bit.
+* Watchdogs from the last accepted command: > ``comwdg_s`` → bit 30 (cleared by any command,
+  or with ``comwdg_clear="comwdg"`` only by ``AT*COMWDG``); > ``hover_after_s`` airborne → the
+  held PCMD is dropped (HOVERING / LOST_COM); > ``link_loss_s`` → bit 13 and the sequence
+  resets, the drone keeps hovering.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.protocol.at import (
+    CTRL_MODE_ACK,
+    CTRL_MODE_CFG_GET,
+    CTRL_MODE_CUSTOM_CFG_GET,
+    AtCommand,
+    Calib,
+    Comwdg,
+    Config,
+    ConfigIds,
+    Ctrl,
+    Ftrim,
+    Pcmd,
+    PcmdFlag,
+    PcmdMag,
+    Ref,
+    parse_datagram_lenient,
+)
+from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneStatus, encode_drone_navdata
+from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession
+
+__all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
+
+#: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
+VBAT_LOW_PCT = 20.0
+_HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
+
+
+@dataclass
+class DroneServerCounters:
+    """Traffic and timing counters of a simulated drone (a snapshot copy when read)."""
+
+    at_datagrams_in: int = 0          # datagrams on the AT port (incl. malformed ones)
+    at_commands_in: int = 0           # well-formed commands
+    at_commands_applied: int = 0      # accepted by the sequence rule and executed
+    at_commands_stale: int = 0        # ignored by the sequence rule
+    at_commands_unknown: int = 0      # well-formed commands of other names (ANIM, LED, …)
+    malformed_datagrams: int = 0      # datagrams with at least one malformed part
+    malformed_commands: int = 0       # malformed commands (an oversized datagram counts one)
+    config_writes: int = 0            # acknowledged AT*CONFIG
+    config_writes_ignored: int = 0    # … of them not applied (another multiconfig session)
+    ftrim_accepted: int = 0
+    calib_accepted: int = 0
+    navdata_datagrams_in: int = 0     # wake-ups (any datagram on the navdata port)
+    navdata_packets_out: int = 0
+    navdata_send_errors: int = 0
+    navdata_stream_starts: int = 0
+    navdata_stream_stops: int = 0     # streams stopped for lack of client traffic
+    control_connections: int = 0
+    config_dumps: int = 0
+    physics_steps: int = 0
+    physics_max_lag_s: float = 0.0    # largest lateness of a physics wake-up
+    link_losses: int = 0
+    at_datagrams_lost: int = 0        # discarded on arrival by an injected AT-loss fault
+
+
+class DroneFirmware:
+    """The drone's protocol state and behaviour (module docstring); call under the lock.
+
+    Parameters
+    ----------
+    plant : the simulated drone.
+    counters : the server's :class:`DroneServerCounters` (updated here).
+    dump_config : writes a text on the control port (``AT*CTRL`` 4 and 6); None = not served.
+    comwdg_s, hover_after_s, link_loss_s : watchdog times (s).
+    comwdg_clear : "any" or "comwdg" (who clears state bit 30).
+    ctrl_codes : the transition codes navdata reports (:class:`CtrlCodes`).
+    altitude_max_m : initial ``control:altitude_max`` (m).
+    vbat_low_pct : battery level (%) below which state bit 15 is set.
+    session : a multiconfig session the drone is in (:class:`HeldSession`), None = default.
+    """
+
+    def __init__(self, plant, *, counters: DroneServerCounters,
+                 dump_config: Optional[Callable[[str], None]] = None, comwdg_s: float = 0.05,
+                 hover_after_s: float = 0.25, link_loss_s: float = 2.0,
+                 comwdg_clear: str = "any", ctrl_codes: CtrlCodes = CtrlCodes.SDK,
+                 altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
+                 session: Optional[HeldSession] = None) -> None:
+        self.plant = plant
+        self.counters = counters
+        self.dump_config = dump_config
+        self.comwdg_s = comwdg_s
+        self.hover_after_s = hover_after_s
+        self.link_loss_s = link_loss_s
+        self.comwdg_clear = comwdg_clear
+        self.ctrl_codes = CtrlCodes(ctrl_codes)
+        self.vbat_low_pct = vbat_low_pct
+        self.config = ConfigStore(plant, altitude_max_m=altitude_max_m, session=session)
+        self.last_seq = 0
+        self.last_cmd_t: Optional[float] = None      # last accepted AT command
+        self.comwdg_latched = True
+        self.lost_com_hover = False
+        self.link_lost = False
+        self.ref_start = False
+        self.ref_emergency = False
+        self.user_emergency = False
+        self.ack = False
+        self.pcmd = _HOVER_CMD
+        self.applied: tuple | None = None
+        self.alt_capped = False
+        self.nav_seq = 0
+
+    # ------------------------------------------------------------------ AT intake
+
+    def receive(self, data: bytes, now: float) -> None:
+        """Apply one AT datagram received at ``now``."""
+        commands, errors = parse_datagram_lenient(data)
+        c = self.counters
+        c.at_datagrams_in += 1
+        if errors:
+            c.malformed_datagrams += 1
+            c.malformed_commands += len(errors)
+        ids = None   # those of an AT*CONFIG_IDS right before (the SDK sends the pair together)
+        for cmd in commands:
+            c.at_commands_in += 1
+            self.execute(cmd, now, ids)
+            b = cmd.body
+            ids = (b.session_id, b.profile_id, b.application_id) if isinstance(b, ConfigIds) \
+                else None
+        self.apply_command()
+
+    def execute(self, cmd: AtCommand, now: float,
+                ids: Optional[tuple[str, str, str]] = None) -> None:
+        """One command under the sequence-number rule (``ids``: the ``AT*CONFIG_IDS`` before
+        it in the datagram, if any)."""
+        c = self.counters
+        if not (cmd.seq == 1 or cmd.seq > self.last_seq):
+            c.at_commands_stale += 1
+            return
+        self.last_seq = cmd.seq
+        c.at_commands_applied += 1
+        self.last_cmd_t = now
+        self.link_lost = False
+        self.lost_com_hover = False
+        if self.comwdg_clear == "any":
+            self.comwdg_latched = False
+        body = cmd.body
+        mode = self.plant.mode
+        if isinstance(body, Ref):
+            self._on_ref(body)
+        elif isinstance(body, (Pcmd, PcmdMag)):
+            self.pcmd = (body.flags, body.roll_frac, body.pitch_frac, body.gaz_frac,
+                         body.yaw_frac)
+        elif isinstance(body, Comwdg):
+            self.comwdg_latched = False
+        elif isinstance(body, Config):
+            c.config_writes += 1
+            c.config_writes_ignored += not self.config.write(body.key, body.value, ids)
+            self.ack = True                              # acknowledged either way
+        elif isinstance(body, ConfigIds):
+            self.config.config_ids = (body.session_id, body.profile_id, body.application_id)
+        elif isinstance(body, Ctrl):
+            self._on_ctrl(body.mode)
+        elif isinstance(body, Ftrim):
+            c.ftrim_accepted += mode is FlightMode.LANDED
+        elif isinstance(body, Calib):
+            c.calib_accepted += mode is FlightMode.FLYING
+        else:
+            c.at_commands_unknown += 1
+
+    def _on_ref(self, ref: Ref) -> None:
+        plant = self.plant
+        start, emergency = ref.is_takeoff, ref.is_emergency
+        if emergency and not self.ref_emergency:        # 0→1 edge of bit 8
+            if plant.mode is FlightMode.EMERGENCY:
+                if plant.reset_emergency():
+                    self.user_emergency = False
+            elif plant.emergency():
+                self.user_emergency = True
+                self.pcmd = _HOVER_CMD
+        self.ref_emergency = emergency
+        self.ref_start = start
+        mode = plant.mode
+        if start and mode is FlightMode.LANDED:
+            plant.takeoff()                              # refused on low battery
+        elif not start and mode in (FlightMode.TAKING_OFF, FlightMode.FLYING):
+            plant.land()
+
+    def _on_ctrl(self, mode: int) -> None:
+        if mode == CTRL_MODE_ACK:
+            self.ack = False
+        elif mode in (CTRL_MODE_CFG_GET, CTRL_MODE_CUSTOM_CFG_GET):
+            if self.dump_config is not None:
+                self.dump_config(self.config.text() if mode == CTRL_MODE_CFG_GET else "")
+            self.ack = True
+
+    # ------------------------------------------------------------------ time passing
+
+    def silence(self, now: float) -> float:
+        """Seconds since the last accepted command (inf before the first)."""
+        return math.inf if self.last_cmd_t is None else now - self.last_cmd_t
+
+    def watchdogs(self, now: float) -> None:
+        silence = self.silence(now)
+        if silence > self.comwdg_s:
+            self.comwdg_latched = True
+        if (silence > self.hover_after_s and not self.lost_com_hover
+                and self.plant.mode.airborne):
+            self.lost_com_hover = True
+            self.pcmd = _HOVER_CMD
+        if silence > self.link_loss_s and not self.link_lost and self.last_cmd_t is not None:
+            self.link_lost = True
+            self.last_seq = 0
+            self.counters.link_losses += 1
+
+    def apply_command(self) -> None:
+        """Send the effective PCMD (held command, altitude cap) to the plant when it changes."""
+        flags, roll, pitch, gaz, yaw = self.pcmd
+        progressive = bool(flags & PcmdFlag.PROGRESSIVE)
+        at_cap = False
+        plant = self.plant
+        if plant.mode.airborne:
+            truth, params = plant.truth, plant.params
+            # where the climb stops if gaz drops to 0 now: the command delay, then the
+            # first-order vertical loop (τ_z) still rises v_z·(T_d + τ_z)
+            lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
+            z_stop = float(truth.position_m[2]) + max(0.0, float(truth.velocity_mps[2])) * lead
+            at_cap = z_stop >= self.config.altitude_max_m
+        if at_cap and progressive and gaz > 0.0:
+            gaz = 0.0
+        self.alt_capped = at_cap
+        cmd = (roll, pitch, gaz, yaw, True) if progressive else (0.0, 0.0, 0.0, 0.0, False)
+        if cmd != self.applied:
+            plant.command(*cmd[:4], progressive=cmd[4])
+            self.applied = cmd
+
+    # ------------------------------------------------------------------ navdata
+
+    def status(self, now: float) -> DroneStatus:
+        """What the drone reports about itself now."""
+        flags, roll, pitch, gaz, yaw = self.pcmd
+        return DroneStatus(
+            self.plant.mode.value,
+            moving=bool(flags & PcmdFlag.PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
+            alt_out_zone=self.alt_capped, lost_com=self.lost_com_hover,
+            user_emergency=self.user_emergency, start_button=self.ref_start, ack=self.ack,
+            bootstrap=self.config.bootstrap, demo=self.config.demo,
+            com_watchdog=self.comwdg_latched or (self.comwdg_clear == "any"
+                                                 and self.silence(now) > self.comwdg_s),
+            com_lost=self.link_lost, battery_low=self.plant.battery_pct < self.vbat_low_pct)
+
+    def packet(self, now: float) -> bytes:
+        """The next navdata packet (its sequence counts up from 1 across stream restarts)."""
+        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
+        status = self.status(now)
+        sample = None if status.bootstrap else self.plant.navdata()
+        return encode_drone_navdata(status, self.nav_seq, sample, codes=self.ctrl_codes,
+                                    options_mask=self.config.navdata_options,
+                                    t_s=self.plant.t_s)

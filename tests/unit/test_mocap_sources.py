@@ -1,0 +1,290 @@
+"""Mocap sources behind one interface: the libmotioncapture conversion (checked against scipy's
+rotations), the freshness rules shared with the Vicon UDP link, and the source's lifecycle
+with stand-ins of the library written from its documented API (connect(type, options),
+waitForNextFrame(), rigidBodies: name → position, rotation.w/x/y/z)."""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.core.extras import MissingExtra
+from ardrone_nmpc.links.mocap_link import MocapLink
+from ardrone_nmpc.links.mocap_source import MocapConnectError, open_mocap_source
+from ardrone_nmpc.links.motioncapture_source import (
+    MotionCaptureSource,
+    library_options,
+    quaternion_to_xyz_rad,
+    rigid_body_pose,
+)
+from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+
+
+def _wxyz(rot: Rotation) -> tuple[float, float, float, float]:
+    x, y, z, w = rot.as_quat()
+    return w, x, y, z
+
+
+# ----------------------------------------------------------------------------- conversion
+
+
+def test_quaternion_angles_match_scipy_xyz_euler(rng):
+    rots = Rotation.random(500, random_state=7)
+    for rot in rots:
+        got = quaternion_to_xyz_rad(*_wxyz(rot))
+        np.testing.assert_allclose(got, rot.as_euler("XYZ"), atol=1e-9)
+
+
+def test_heading_of_a_converted_body_is_the_nose_direction(rng):
+    for rot in Rotation.random(200, random_state=3):
+        pose = rigid_body_pose("b", (1.0, 2.0, 3.0), _wxyz(rot))
+        nose = rot.apply([1.0, 0.0, 0.0])
+        # ψ = atan2(R[1,0], R[0,0]): the heading of the body's x axis seen from above
+        assert math.isclose(pose.psi_rad, math.atan2(nose[1], nose[0]), abs_tol=1e-9)
+        assert pose.position_m == pytest.approx((1.0, 2.0, 3.0), abs=1e-12)
+
+
+def test_a_45_degree_yaw_is_psi_pi_over_4():
+    c, s = math.cos(math.pi / 8), math.sin(math.pi / 8)
+    pose = rigid_body_pose("ardrone", (0.5, -0.25, 1.0), (c, 0.0, 0.0, s))
+    assert pose.psi_rad == pytest.approx(math.pi / 4, abs=1e-12)
+    assert pose.fresh
+
+
+def test_float32_quaternions_are_normalised():
+    q = np.array(_wxyz(Rotation.from_euler("z", 0.3)), dtype=np.float32) * np.float32(1.0000003)
+    pose = rigid_body_pose("b", np.float32([1, 2, 3]), q)
+    assert pose.psi_rad == pytest.approx(0.3, abs=1e-6)
+
+
+def test_zero_or_nan_quaternion_is_not_fresh():
+    assert not rigid_body_pose("b", (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 0.0)).fresh
+    assert not rigid_body_pose("b", (math.nan, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0)).fresh
+
+
+def test_y_up_frame_turns_into_z_up():
+    # OptiTrack's default: x, y up, z (right-handed). Ours: x, y left, z up.
+    pose = rigid_body_pose("b", (1.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0), y_up=True)
+    assert pose.position_m == pytest.approx((1.0, -3.0, 2.0))
+    # a CCW turn about the vertical (+y there) is a CCW turn about +z here
+    turn = rigid_body_pose("b", (1.0, 2.0, 3.0), _wxyz(Rotation.from_rotvec([0, 0.7, 0])),
+                           y_up=True)
+    assert turn.psi_rad == pytest.approx(0.7, abs=1e-12)
+    # any rotation R becomes C R Cᵀ with C = +90° about x
+    c = Rotation.from_euler("x", 90, degrees=True)
+    for rot in Rotation.random(100, random_state=5):
+        got = rigid_body_pose("b", (0.0, 0.0, 1.0), _wxyz(rot), y_up=True)
+        want = (c * rot * c.inv()).as_euler("XYZ")
+        np.testing.assert_allclose(got.rotation_xyz_rad, want, atol=1e-9)
+
+
+def test_library_options_are_text_the_library_reads():
+    opts = library_options("10.0.0.5", {"enable_objects": True, "port_command": 1510,
+                                        "enable_pointcloud": False, "frequency": 99.5})
+    assert opts == {"enable_objects": "true", "port_command": "1510",
+                    "enable_pointcloud": "false", "frequency": "99.5", "hostname": "10.0.0.5"}
+
+
+def test_up_axis_defaults_per_system():
+    assert load_config(None, ["mocap.system=optitrack"]).mocap.vertical_axis == "y"
+    assert load_config(None, ["mocap.system=vicon"]).mocap.vertical_axis == "z"
+    assert load_config(None, ["mocap.system=optitrack",
+                              "mocap.up_axis=z"]).mocap.vertical_axis == "z"
+
+
+# ----------------------------------------------------------------------------- library stand-ins
+
+
+class Quaternion:
+    def __init__(self, w, x, y, z):
+        self.w, self.x, self.y, self.z = w, x, y, z
+
+
+class Body:
+    def __init__(self, name, position, rotation: Rotation):
+        self.name = name
+        self.position = np.asarray(position, dtype=np.float64)
+        self.rotation = Quaternion(*_wxyz(rotation))
+
+
+class ScriptedMotionCapture:
+    """A connected system whose frames the test hands over one at a time."""
+
+    def __init__(self):
+        self.frames: list[dict] = []
+        self.current: dict = {}
+        self.ready = threading.Semaphore(0)
+
+    def push(self, *bodies: Body) -> None:
+        self.frames.append({b.name: b for b in bodies})
+        self.ready.release()
+
+    def waitForNextFrame(self):  # noqa: N802 - the library's name
+        self.ready.acquire()
+        self.current = self.frames.pop(0)
+
+    @property
+    def rigidBodies(self):  # noqa: N802 - the library's name
+        return self.current
+
+
+class Library:
+    def __init__(self, mc=None, error: Exception | None = None, block: threading.Event = None):
+        self.mc, self.error, self.block, self.calls = mc, error, block, []
+
+    def connect(self, system, options):
+        self.calls.append((system, dict(options)))
+        if self.block is not None:
+            self.block.wait()
+        if self.error is not None:
+            raise self.error
+        return self.mc
+
+
+def _source(mc, **kw) -> MotionCaptureSource:
+    ticks = iter(range(1, 10_000))
+    return MotionCaptureSource("vicon", {"hostname": "lab"}, object_name="ardrone",
+                               library=Library(mc), clock=lambda: float(next(ticks)), **kw)
+
+
+def test_frames_from_a_connected_library_keep_the_newest_pose():
+    mc = ScriptedMotionCapture()
+    src = _source(mc, other_objects=("car",))
+    frames = src.frames_from(mc)
+    mc.push(Body("ardrone", (1.0, 2.0, 0.5), Rotation.from_euler("z", 0.4)),
+            Body("car", (3.0, 0.0, 0.0), Rotation.identity()))
+    src.receive_bodies(*next(frames))
+    pose, rx = src.latest()
+    assert rx == 1.0 and pose.position_m.tolist() == pytest.approx([1.0, 2.0, 0.5])
+    assert pose.psi_rad == pytest.approx(0.4)
+    assert src.latest_of("car")[0].position_m[0] == pytest.approx(3.0)
+    assert src.names_seen == ("ardrone", "car") and src.stats.packets == 1
+
+
+def test_occluded_zero_and_frozen_poses_are_not_fresh():
+    mc = ScriptedMotionCapture()
+    src = _source(mc)
+    frames = src.frames_from(mc)
+    yaw = Rotation.from_euler("z", 0.1)
+    mc.push(Body("ardrone", (1.0, 0.0, 1.0), yaw))
+    src.receive_bodies(*next(frames))                        # t = 1: fresh
+    mc.push(Body("wand", (0.0, 0.0, 0.0), yaw))               # occluded: left out of the frame
+    src.receive_bodies(*next(frames))
+    mc.push(Body("ardrone", (0.0, 0.0, 0.0), Rotation.from_quat([0, 0, 0, 1])))  # all zero
+    src.receive_bodies(*next(frames))
+    for _ in range(3):                                        # bit-identical: frozen on the 3rd
+        mc.push(Body("ardrone", (1.5, 0.0, 1.0), yaw))
+        src.receive_bodies(*next(frames))
+    assert (src.missing, src.zero_poses, src.repeats, src.poses) == (1, 1, 1, 3)
+    pose, rx = src.latest()
+    assert rx == 5.0 and pose.position_m[0] == pytest.approx(1.5)
+    assert src.age_ms(7.0) == pytest.approx(2000.0)
+
+
+def test_same_frames_give_the_same_readings_as_the_vicon_udp_link(rng):
+    """One frame sequence through both sources: the Vicon UDP link (datagrams) and the
+    motioncapture source (quaternions): same counts, same poses to rounding."""
+    link = MocapLink("127.0.0.1", 0, object_name="ardrone", other_objects=("car",))
+    mc = ScriptedMotionCapture()
+    src = _source(mc, other_objects=("car",))
+    frames = src.frames_from(mc)
+    for k in range(1, 60):
+        items = []
+        if k % 7:  # every 7th frame the drone is occluded
+            xyz = rng.normal(size=3)
+            rot = rng.normal(scale=0.3, size=3)
+            if k % 11 == 0:
+                xyz, rot = np.zeros(3), np.zeros(3)       # the zero pose of some trackers
+            items.append(MocapObjectPose.from_si("ardrone", xyz, rot))
+        items.append(MocapObjectPose.from_si("car", rng.normal(size=3), (0.0, 0.0, 0.2)))
+        link.feed(encode_mocap(MocapFrame.of(k, items)), float(k))
+        mc.push(*(Body(p.name, p.position_m, Rotation.from_euler("XYZ", p.rotation_xyz_rad))
+                  for p in items))
+        bodies, _ = next(frames)
+        src.receive_bodies(bodies, float(k))
+        a, b = link.latest(), src.latest()
+        assert a[1] == b[1]
+        np.testing.assert_allclose(a[0].position_m, b[0].position_m, atol=1e-12)
+        assert a[0].psi_rad == pytest.approx(b[0].psi_rad, abs=1e-12)
+        np.testing.assert_allclose(link.latest_of("car")[0].position_m,
+                                   src.latest_of("car")[0].position_m, atol=1e-12)
+    assert (link.missing, link.zero_poses, link.poses) == (src.missing, src.zero_poses, src.poses)
+    assert src.missing > 0 and src.zero_poses > 0
+
+
+# ----------------------------------------------------------------------------- lifecycle
+
+
+@pytest.mark.timeout(10)
+def test_start_runs_the_receiver_thread_until_close():
+    mc = ScriptedMotionCapture()
+    lib = Library(mc)
+    src = MotionCaptureSource("qualisys", library_options("h", {}), object_name="ardrone",
+                              library=lib)
+    with src:
+        mc.push(Body("ardrone", (1.0, 1.0, 1.0), Rotation.identity()))
+        deadline = threading.Event()
+        for _ in range(200):
+            if src.poses:
+                break
+            deadline.wait(0.01)
+        assert src.poses == 1 and src.where == "qualisys@h"
+        assert lib.calls == [("qualisys", {"hostname": "h"})]
+        mc.push()  # wake the thread so it sees the stop
+    assert not src._thread.is_alive()
+
+
+@pytest.mark.timeout(10)
+def test_a_failing_connect_is_one_line():
+    src = MotionCaptureSource("vicon", {"hostname": "nowhere"},
+                              library=Library(error=RuntimeError("Unknown host")))
+    with pytest.raises(MocapConnectError, match=r"^mocap: cannot connect to vicon@nowhere: "
+                                                r"Unknown host$"):
+        src.start()
+
+
+@pytest.mark.timeout(10)
+def test_a_connect_that_never_returns_times_out():
+    block = threading.Event()
+    src = MotionCaptureSource("vicon", {"hostname": "silent"}, connect_timeout_s=0.2,
+                              library=Library(ScriptedMotionCapture(), block=block))
+    try:
+        with pytest.raises(MocapConnectError, match="no connection to vicon@silent within 0.2 s"):
+            src.start()
+    finally:
+        block.set()
+
+
+def test_open_mocap_source_picks_the_kind():
+    cfg = load_config(None, [])
+    udp = open_mocap_source(cfg.mocap, other_objects=("car",), port=5)
+    assert isinstance(udp, MocapLink) and udp.port == 5 and udp.other_objects == ("car",)
+    mc_cfg = load_config(None, ["mocap.kind=motioncapture", "mocap.system=mock",
+                                "mocap.hostname=h", "mocap.options.frequency=50"]).mocap
+    src = open_mocap_source(mc_cfg)
+    assert isinstance(src, MotionCaptureSource)
+    assert src.options == {"frequency": "50", "hostname": "h"} and src.repeat_limit is None
+    vicon = open_mocap_source(load_config(None, ["mocap.kind=motioncapture"]).mocap)
+    assert vicon.repeat_limit == 3 and not vicon.y_up
+
+
+def test_a_missing_library_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "motioncapture", None)   # import fails
+    src = open_mocap_source(load_config(None, ["mocap.kind=motioncapture"]).mocap)
+    with pytest.raises(MissingExtra, match=r"pip install 'ardrone-nmpc\[mocap\]'"):
+        src.start()
+
+
+def test_library_options_must_be_scalars():
+    from ardrone_nmpc.config.schema import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        load_config(None, ["mocap.options.port=[1,2]"])
+    assert err.value.messages == ["mocap.options: port: expected a string, number or boolean, "
+                                  "got list"]

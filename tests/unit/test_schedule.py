@@ -1,0 +1,130 @@
+"""ardrone_nmpc.runtime.schedule: tick counts against exact rational arithmetic, the phase
+label, refused times, event stamping; and the lockstep run flying exactly that schedule."""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.schema import config_from_dict, load_config
+from ardrone_nmpc.experiments.record import record_lockstep
+from ardrone_nmpc.runs.rundir import read_run
+from ardrone_nmpc.runtime import schedule as sched
+from ardrone_nmpc.runtime.schedule import Schedule, ScheduleError, phase
+from ardrone_nmpc.runtime.session import FlightSession
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+PERIODS = ("0.065", "0.05", "0.1", "0.03", "0.02", "0.001")
+
+
+@pytest.mark.parametrize("period", PERIODS)
+def test_settle_ticks_are_the_exact_ceiling_of_settle_over_period(period):
+    """Decimal settle times that are whole ticks must not gain a tick from float round-off
+    (0.3 / 0.1 = 3.0000000000000004); the others round up."""
+    p = Fraction(period)
+    for k in range(0, 400):
+        settle = f"{k * 0.005:.3f}"
+        expected = math.ceil(Fraction(settle) / p)
+        got = Schedule.of(settle_s=float(settle), duration_s=1.0, period_s=float(period))
+        assert got.n_settle == expected, (settle, period)
+
+
+@pytest.mark.parametrize("period", PERIODS)
+def test_the_experiment_is_duration_over_period_rounded_plus_its_last_tick(period):
+    p = Fraction(period)
+    for k in range(1, 300):
+        duration = f"{k * 0.0137:.4f}"
+        ratio = Fraction(duration) / p
+        if abs(ratio - math.floor(ratio) - Fraction(1, 2)) < Fraction(1, 10**6):
+            continue  # a tie: float round-off decides, nothing exact to compare with
+        expected = round(ratio)
+        got = Schedule.of(settle_s=0.0, duration_s=float(duration), period_s=float(period))
+        assert got.n_ticks == expected + 1, (duration, period)
+
+
+def test_tick_times_put_experiment_time_zero_on_tick_n_settle():
+    s = Schedule.of(settle_s=0.5, duration_s=3.5, period_s=0.065)
+    assert (s.n_settle, s.n_ticks) == (8, 8 + 54 + 1)
+    assert s.t_exp_s(s.n_settle) == 0.0
+    assert s.t_exp_s(0) == -s.settle_span_s == -8 * 0.065
+    assert s.t_exp_s(s.n_ticks - 1) == pytest.approx(54 * 0.065)
+    assert s.fraction_done(s.n_ticks - 1) == 1.0
+    assert s.fraction_done(0) == pytest.approx(1 / 63)
+
+
+def test_phase_is_settle_before_zero_and_track_from_zero():
+    assert [phase(t) for t in (-1.0, -1e-300, -0.0, 0.0, 1e-300, 5.0)] == [
+        "settle", "settle", "track", "track", "track", "track"]
+
+
+def test_from_config_reads_settle_duration_and_period():
+    cfg = load_config(CONFIGS / "step_x.yaml", ["duration_s=2", "sim.settle_s=0.3",
+                                                 "loop.period_s=0.05"])
+    assert Schedule.from_config(cfg) == Schedule.of(settle_s=0.3, duration_s=2.0, period_s=0.05)
+    assert Schedule.from_config(cfg) == Schedule(0.05, 6, 6 + 40 + 1)
+
+
+@pytest.mark.parametrize("settle, duration, period, field", [
+    (1e308, 10.0, 0.065, "sim.settle_s"),
+    (1.0, 1e308, 0.065, "duration_s"),
+    (math.inf, 10.0, 0.065, "sim.settle_s"),
+    (1.0, math.nan, 0.065, "duration_s"),
+    (-0.5, 10.0, 0.065, "sim.settle_s"),
+    (1.0, 10.0, 0.0, "loop.period_s"),
+    (1.0, 10.0, math.nan, "loop.period_s"),
+    (1.0, 10.0, 5e-324, "sim.settle_s"),  # a subnormal period: 1 / 5e-324 overflows
+    (1.0, 2.0 ** 52, 0.5, "duration_s"),  # finite, but more ticks than doubles count
+    (2.0 ** 51, 2.0 ** 51, 0.5, "sim.settle_s + duration_s"),
+])
+def test_times_without_a_tick_count_are_refused_naming_the_field(settle, duration, period,
+                                                                  field):
+    with pytest.raises(ScheduleError) as err:
+        Schedule.of(settle_s=settle, duration_s=duration, period_s=period)
+    assert isinstance(err.value, ValueError)
+    assert str(err.value).startswith(field + " = ")
+    assert "\n" not in str(err.value)
+
+
+def test_the_largest_tick_count_is_still_taken():
+    s = Schedule.of(settle_s=0.0, duration_s=2.0 ** 53 - 2.0, period_s=1.0)
+    assert s.n_ticks == 2 ** 53 - 1 == sched.MAX_TICKS - 1
+
+
+def test_timeouts_are_defined_once():
+    assert FlightSession.TAKEOFF_TIMEOUT_S is sched.TAKEOFF_TIMEOUT_S
+    assert FlightSession.LANDING_TIMEOUT_S is sched.LANDING_TIMEOUT_S
+    import ardrone_nmpc.runtime.lockstep as lockstep
+
+    assert lockstep.LANDING_TIMEOUT_S is sched.LANDING_TIMEOUT_S
+
+
+def test_events_are_stamped_with_experiment_time_or_carry_it_on_the_wall_clock():
+    written = []
+    events = [{"kind": "mode", "mode": "hover-stale-mocap", "previous": "track"}]
+    sched.write_events(lambda t, kind, **f: written.append((t, kind, f)), -0.13, events)
+    assert written == [(-0.13, "mode", {"mode": "hover-stale-mocap", "previous": "track"})]
+    assert events[0]["kind"] == "mode"  # the tick's own dicts are left alone
+    wall = []
+    write = sched.on_wall_clock(lambda kind, **f: wall.append((kind, f)))
+    sched.write_events(write, 2.6, events)
+    assert wall == [("mode", {"t_exp_s": 2.6, "mode": "hover-stale-mocap",
+                              "previous": "track"})]
+
+
+def test_a_lockstep_run_flies_the_schedule_tick_for_tick(tmp_path):
+    """Every logged tick of a completed run, at its schedule time, with its phase."""
+    cfg = config_from_dict({"name": "sched", "duration_s": 1.3, "sim": {"settle_s": 0.3},
+                            "reference": {"kind": "step", "target_m": [-0.3, 0.0, 1.0]}})
+    s = Schedule.from_config(cfg)
+    recording = record_lockstep(cfg, tmp_path)
+    assert recording.result.ending == "completed" and recording.result.ticks == s.n_ticks
+    run = read_run(recording.path)
+    t = run.columns["t_s"]
+    assert run.n_rows == s.n_ticks
+    assert np.array_equal(t, [s.t_exp_s(k) for k in range(s.n_ticks)])
+    assert list(run.columns["mode"]) == [phase(v) for v in t]
+    assert sum(v < 0 for v in t) == s.n_settle == math.ceil(Fraction("0.3") / Fraction("0.065"))
