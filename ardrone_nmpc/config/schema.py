@@ -275,9 +275,13 @@ class OffsetFreeConfig(_Section):
         (0.5, 0.5, 0.5, 0.3), description="An axis learns only while |error| is below this "
         "[m, m, m, rad] (conditional integration: a step's transient does not wind up).")
     hold_s: NonNegativeVec4 = Field(
-        (1.5, 1.5, 3.0, 5.0), description="It starts learning once the axis has been at rest "
+        (1.5, 1.5, 1.5, 2.0), description="It starts learning once the axis has been at rest "
         "inside its error band this long (s), and goes on until the error leaves the band or "
         "the reference moves: the tail of a step is the loop's own.")
+    steady_band: PositiveVec4 = Field(
+        (0.01, 0.01, 0.02, 0.01), description="'At rest' also needs the error steady: its "
+        "range since the axis came to rest within this [m, m, m, rad] — a step's tail that "
+        "still converges restarts the hold.")
     speed_band: PositiveVec4 = Field(
         (0.15, 0.15, 0.05, 0.3), description="'At rest': the estimated rate of the axis below "
         "this [m/s, m/s, m/s, rad/s].")

@@ -18,7 +18,7 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
-__all__ = ["AXES", "SATURATION_FRAC", "ReferenceIntegrator", "frozen_axes"]
+__all__ = ["AXES", "SATURATION_FRAC", "STEADY_FRACTION", "ReferenceIntegrator", "frozen_axes"]
 
 AXES = ("x", "y", "z", "psi")
 _POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
@@ -27,6 +27,9 @@ _REF_STILL = 1e-9  # a reference component that changes by more than this has mo
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
 #: to control_vz_max before the mapping, so the gaz flag alone would never show it).
 SATURATION_FRAC = 0.999
+#: The error counts as steady while its range since coming to rest is within this fraction of
+#: it (or within ``steady_band``, for small errors).
+STEADY_FRACTION = 0.2
 
 
 def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
@@ -49,14 +52,16 @@ class ReferenceIntegrator:
 
     Parameters
     ----------
-    ki_per_s, error_band, speed_band, max_shift, hold_s, kp, release_speed : (4,) per axis,
-        [x, y, z, ψ] (1/s; m, m, m, rad; m/s, m/s, m/s, rad/s; m, m, m, rad; s; –;
-        as speed_band).
+    ki_per_s, error_band, speed_band, max_shift, hold_s, kp, release_speed, steady_band :
+        (4,) per axis, [x, y, z, ψ] (1/s; m, m, m, rad; m/s, m/s, m/s, rad/s; m, m, m, rad;
+        s; –; as speed_band; as error_band).
     period_s : integration step (s), the control period.
     """
 
     def __init__(self, ki_per_s, error_band, speed_band, max_shift, hold_s,
-                 period_s: float, kp=(0.0,) * 4, release_speed=(math.inf,) * 4) -> None:
+                 period_s: float, kp=(0.0,) * 4, release_speed=(math.inf,) * 4,
+                 steady_band=(math.inf,) * 4) -> None:
+        self.steady_band = np.asarray(steady_band, dtype=float)
         self.release_speed = np.asarray(release_speed, dtype=float)
         self.kp = np.asarray(kp, dtype=float)
         self.hold_s = np.asarray(hold_s, dtype=float)
@@ -65,7 +70,8 @@ class ReferenceIntegrator:
         self._last = np.full(4, math.nan)  # the reference components of the last update
         self._last_error_psi = math.nan
         self._integral = np.zeros(4)  # the integral part of the shift
-        self._held_error = np.zeros(4)
+        self._rest_lo = np.zeros(4)  # the error's range since the axis came to rest
+        self._rest_hi = np.zeros(4)
         self.ki_per_s = np.asarray(ki_per_s, dtype=float)
         self.error_band = np.asarray(error_band, dtype=float)
         self.speed_band = np.asarray(speed_band, dtype=float)
@@ -79,7 +85,7 @@ class ReferenceIntegrator:
         """From ``controller.offset_free``
         (:class:`~ardrone_nmpc.config.schema.OffsetFreeConfig`)."""
         return cls(cfg.ki_per_s, cfg.error_band, cfg.speed_band, cfg.max_shift, cfg.hold_s,
-                   period_s, cfg.kp, cfg.release_speed)
+                   period_s, cfg.kp, cfg.release_speed, cfg.steady_band)
 
     def errors(self, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
         """Tracking errors [x, y, z, ψ] of the estimate ``x`` (7,) against ``ref`` (7,)."""
@@ -93,8 +99,9 @@ class ReferenceIntegrator:
         """One control period of integration; returns the new shift (the object's own array).
 
         Per axis: the integrator starts learning once the axis has been at rest (|ė| below
-        the speed band) with |e| inside the error band for ``hold_s`` — the tail of a step is
-        the loop's own — and keeps learning, ``s ← s − ki·e·period`` (shift = integral − kp·e),
+        the speed band, |e| inside the error band and steady: its range since coming to rest
+        within ``steady_band``) for ``hold_s`` — the tail of a step, still converging, is the
+        loop's own — and keeps learning, ``s ← s − ki·e·period`` (shift = integral − kp·e),
         until |e| leaves the error band, |ė| exceeds ``release_speed`` (a gust, not a constant
         disturbance) or the reference moves — now, or anywhere in ``preview`` (n, 7), the
         reference the NMPC sees over its horizon: it starts a step before the reference
@@ -114,7 +121,22 @@ class ReferenceIntegrator:
             self._last[k] = ref[i]
             inside = math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
             at_rest = inside and abs(rate[k]) < self.speed_band[k] and not moved
-            self._rest_s[k] = self._rest_s[k] + self.period_s if at_rest else 0.0
+            if at_rest and self._rest_s[k] > 0.0:
+                lo = min(self._rest_lo[k], e[k])
+                hi = max(self._rest_hi[k], e[k])
+                # steady: the range within the band or a fifth of the error — a converging tail
+                # changes by (1 − e^(−hold/τ)) of itself, most of it for hold ≳ τ
+                if hi - lo <= max(self.steady_band[k], STEADY_FRACTION * abs(e[k])):
+                    self._rest_lo[k], self._rest_hi[k] = lo, hi
+                    self._rest_s[k] += self.period_s
+                else:  # still converging by itself: the rest starts again from here
+                    self._rest_lo[k] = self._rest_hi[k] = e[k]
+                    self._rest_s[k] = self.period_s
+            elif at_rest:
+                self._rest_lo[k] = self._rest_hi[k] = e[k]
+                self._rest_s[k] = self.period_s
+            else:
+                self._rest_s[k] = 0.0
             if not inside or moved or abs(rate[k]) > self.release_speed[k]:
                 self.latched[k] = False
             elif self._rest_s[k] > self.hold_s[k]:
@@ -124,7 +146,6 @@ class ReferenceIntegrator:
                 lim = self.max_shift[k]
                 integral = self._integral[k] - self.ki_per_s[k] * e[k] * self.period_s
                 self._integral[k] = min(max(integral, -lim), lim)
-                self._held_error[k] = e[k]  # the proportional part's error, held when frozen
                 self.shift[k] = min(max(self._integral[k] - self.kp[k] * e[k], -lim), lim)
         return self.shift
 

@@ -27,8 +27,9 @@ REF = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0])  # hover at (0, 0, 1), ψ = 
 
 
 def integrator(ki=(0.5, 0.5, 0.4, 0.15), kp=(0.0,) * 4, hold_s=(0.0,) * 4, period_s=T,
-               band=(0.5, 0.5, 0.5, 0.3), speed=(0.15, 0.15, 0.05, 0.3), max_shift=(0.5,) * 4):
-    return ReferenceIntegrator(ki, band, speed, max_shift, hold_s, period_s, kp)
+               band=(0.5, 0.5, 0.5, 0.3), speed=(0.15, 0.15, 0.05, 0.3), max_shift=(0.5,) * 4,
+               steady=(math.inf,) * 4, release=(math.inf,) * 4):
+    return ReferenceIntegrator(ki, band, speed, max_shift, hold_s, period_s, kp, release, steady)
 
 
 def state(x=0.0, y=0.0, z=1.0, psi=0.0, vx=0.0, vz=0.0) -> np.ndarray:
@@ -88,6 +89,37 @@ def test_nothing_is_learnt_before_hold_s_at_rest_then_it_learns():
         assert integ.shift[0] == 0.0 and not integ.learning[0]
     integ.update(state(x=0.1), REF)
     assert integ.learning[0] and integ.shift[0] == pytest.approx(-0.5 * 0.1 * T)
+
+
+def test_a_converging_tail_does_not_start_learning_a_steady_offset_does():
+    """e = 5 cm · e^(−t/τ), τ = 0.85 s (the y step's tail): it loses more than a fifth of
+    itself in every 1.5 s hold, so it latches only once within the 2 mm steady band, and
+    learns next to nothing; a steady 5 cm ± 2 mm latches after the hold."""
+    tau_s = 0.85
+    integ = integrator(hold_s=(1.5,) * 4, steady=(0.002,) * 4)
+    for k in range(150):
+        e = 0.05 * math.exp(-k * T / tau_s)
+        integ.update(state(x=e, vx=-e / tau_s), REF)
+        if e > 0.005:
+            assert not integ.learning[0] and integ.shift[0] == 0.0
+    assert abs(integ.shift[0]) < 2e-4
+    integ = integrator(hold_s=(1.5,) * 4, steady=(0.002,) * 4)
+    rng = np.random.default_rng(1)
+    learnt = []
+    for _ in range(100):
+        integ.update(state(x=0.05 + rng.uniform(-0.002, 0.002)), REF)
+        learnt.append(bool(integ.learning[0]))
+    assert not any(learnt[:23]) and all(learnt[24:])  # after 1.5 s = 23 ticks at rest
+
+
+def test_a_fast_motion_releases_a_learning_axis():
+    integ = integrator(release=(0.3,) * 4)
+    for _ in range(5):
+        integ.update(state(x=0.1), REF)
+    assert integ.learning[0]
+    s = integ.shift[0]
+    integ.update(state(x=0.2, vx=0.6), REF)  # a gust
+    assert not integ.learning[0] and integ.shift[0] == s
 
 
 def test_moving_too_fast_does_not_start_learning():
