@@ -230,3 +230,14 @@ def test_stage_freezes_x_and_y_on_a_saturated_tilt():
         stage.update(state(x=0.1, z=1.1), sol,
                      _sent(Action.CONTROL, AttitudeCommand(0.0, 0.0, 0.5, 0.0)))  # > 0.21 rad
     assert stage.integrator.shift[0] == 0.0 and stage.integrator.shift[2] < 0.0
+
+
+@pytest.mark.parametrize("override, enabled", [
+    ("controller.offset_free=false", False), ("controller.offset_free=true", True),
+    ("controller.offset_free.enabled=false", False)])
+def test_offset_free_switch_and_its_bool_shorthand(override, enabled):
+    from ardrone_nmpc.config.schema import load_config
+
+    cfg = load_config(None, [override])
+    assert cfg.controller.offset_free.enabled is enabled
+    assert cfg.controller.offset_free.ki_per_s == OffsetFreeConfig().ki_per_s
