@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-GRAVITY_MPS2 = 9.81
+from ardrone_nmpc.core.types import GRAVITY_MPS2
 
 
 def dynamics(x, u, out):

@@ -28,17 +28,17 @@ def test_residual(benchmark, solver):
     ref = np.tile(TARGET, (16, 1))
     out = np.zeros(solver.U.size)
     xs, trig = np.zeros((16, 7)), np.zeros((16, 5))
-    benchmark(K.residual, solver.U, 4, X, ref, 0.1, solver._W, 0.01, 0.0, K.NO_ACTIVE, xs,
-              trig, out)
+    benchmark(K.residual, solver.U, 4, X, ref, 0.1, solver.memory.weights, 0.01, 0.0,
+              K.NO_ACTIVE, xs, trig, out)
 
 
 def test_cgmres_update(benchmark, solver):
     ref = np.tile(TARGET, (16, 1))
-    solver._prm[K.P_PERIOD] = 0.0  # do not move U: every call is the same update
-    benchmark(K.cgmres_step, solver._mem, X, ref, solver._iprm, False)
+    solver.memory.period_s = 0.0  # do not move U: every call is the same update
+    benchmark(solver.memory.cgmres_step, X, ref, False)
 
 
 def test_solve_call(benchmark, solver):
     ref = np.tile(TARGET, (16, 1))
-    solver._prm[K.P_PERIOD] = 0.0
+    solver.memory.period_s = 0.0
     benchmark(solver.solve, 1.0, X, ref)

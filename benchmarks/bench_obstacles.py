@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.runs.summary import CLEARANCE_TOLERANCE_M, clearance_stats
 

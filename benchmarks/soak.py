@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runtime.realtime import run_flight
 from ardrone_nmpc.runs.rundir import read_run
 

@@ -19,7 +19,7 @@ import numpy as np
 
 import ardrone_nmpc
 from ardrone_nmpc.experiments.bench import closed_loop
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.newton import NewtonGMRESController
 from ardrone_nmpc.control.ocp import OcpSpec

@@ -9,16 +9,57 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc
-from ardrone_nmpc.control.newton import make_nmpc
+from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
+from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc
+
+SOLVERS = ("cgmres", "newton")
+
+
+class BenchUsageError(UserError):
+    """A --solvers or --compare value that cannot work (exit 1)."""
+
+
+def bench_command(*, config: Path | None, overrides: list[str], horizon_steps: int | None,
+                  kmax: int | None, steps: int, repeats: int, solvers: str,
+                  compare: str | None, json_path: Path | None) -> list[BenchRow]:
+    """The ``bench`` command: check the options, load the config, run the benchmark."""
+    overrides = list(overrides)
+    if horizon_steps is not None:
+        overrides.append(f"controller.horizon_steps={horizon_steps}")
+    if kmax is not None:
+        overrides.append(f"controller.solver.kmax={kmax}")
+    names = [s.strip() for s in solvers.split(",") if s.strip()]
+    bad = [s for s in names if s not in SOLVERS]
+    if bad or not names:
+        raise BenchUsageError(f"--solvers: unknown solver(s) {', '.join(bad) or '(none)'}; "
+                              f"choose {', '.join(SOLVERS)}")
+    if compare not in (None, "casadi"):
+        raise BenchUsageError(f"--compare: unknown comparison {compare!r}; the only one is "
+                              "'casadi'")
+    cfg = load_config(config, overrides)
+    if compare == "casadi":
+        import importlib.util
+
+        if importlib.util.find_spec("casadi") is None:
+            raise BenchUsageError("--compare casadi: CasADi is not installed: "
+                                  "pip install -e '.[compare]'")
+        if cfg.controller.obstacles:
+            raise BenchUsageError("--compare casadi: the IPOPT comparison models no "
+                                  "obstacles; remove controller.obstacles")
+    return run_bench_command(cfg=cfg, solvers=names, steps=steps,
+                             compare_casadi=compare == "casadi", json_path=json_path,
+                             repeats=repeats)
 
 
 def run_bench_command(*, cfg, solvers: list[str], steps: int, compare_casadi: bool,
                       json_path: Path | None, repeats: int = 5,
                       console: Console | None = None) -> list[BenchRow]:
     """Benchmark each solver named in ``solvers`` (and IPOPT) on ``cfg``'s OCP."""
-    console = console or Console(width=None if _is_tty() else 150)
+    console = console or stdout_console()
     period_s = cfg.loop.period_s
     rows: list[BenchRow] = []
     with console.status("benchmarking…") as status:
@@ -47,15 +88,10 @@ def run_bench_command(*, cfg, solvers: list[str], steps: int, compare_casadi: bo
             payload["vs_ipopt"] = {r.solver: {"time_ratio": ipopt.mean_us / r.mean_us,
                                               "cost_ratio": r.closed_loop_cost / ipopt.closed_loop_cost}
                                    for r in rows if r is not ipopt}
+        json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(payload, indent=2) + "\n")
         console.print(f"wrote {json_path}")
     return rows
-
-
-def _is_tty() -> bool:
-    import sys
-
-    return sys.stdout.isatty()
 
 
 def render_table(rows: list[BenchRow]) -> Table:

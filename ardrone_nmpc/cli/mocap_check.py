@@ -51,7 +51,9 @@ class AxisTest:
         i = max(range(3), key=lambda k: abs(d[k]))
         if abs(d[i]) >= AXIS_STEP_M:
             self.seen[_AXES[i]].add(1 if d[i] > 0 else -1)
-        dpsi = math.remainder(float(psi_rad) - self.origin_psi_rad, 2.0 * math.pi)
+        from ardrone_nmpc.core.angles import wrap_angle_rad  # numpy: not at --help time
+
+        dpsi = wrap_angle_rad(float(psi_rad) - self.origin_psi_rad)
         if abs(dpsi) >= YAW_STEP_RAD:
             self.seen["yaw CCW"].add(1 if dpsi > 0 else -1)
 
@@ -169,8 +171,9 @@ def register(app: typer.Typer) -> None:
         """Check the motion capture before a flight: a live table of the tracked objects (rate,
         age, occlusion), the hand-carry axis test (+x, +y, +z, yaw CCW → ✔), and one final line
         per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>."""
-        from ardrone_nmpc.config.schema import ConfigError, load_config, tracked_object
-        from ardrone_nmpc.links.mocap_source import open_mocap_source
+        from ardrone_nmpc.config.schema import ConfigError, tracked_object
+        from ardrone_nmpc.config.io import load_config
+        from ardrone_nmpc.links.mocap_factory import open_mocap_source
 
         try:
             cfg = load_config(config, set_)

@@ -4,10 +4,11 @@
   ``all``). ``all`` writes one image per kind — ``FILE-tracking.png``, ``FILE-inputs.png``,
   ``FILE-solver.png``, ``FILE-path3d.png`` for ``-o FILE.png`` — rather than one tall composite:
   each figure stays readable at its own size and can be opened on its own. Default output:
-  ``RUN_DIR/plot-<kind>.png``.
+  ``RUN_DIR/plot-<kind>.png``; ``-o DIR`` (an existing directory) writes those names into DIR.
 * Sweep directory (holds ``sweep.csv``): the heat map of ``--metric`` (default ``rmse_m``) over
   ``--x``/``--y`` (default: the first two swept parameters; any others are minimised over, as
-  the title says). Default output: ``SWEEP_DIR/plot-heatmap-<metric>.png``.
+  the title says). Default output: ``SWEEP_DIR/plot-heatmap-<metric>.png`` (or that name in
+  ``-o DIR``).
 
 The output format follows the file suffix (``.png`` when there is none). Errors are
 :class:`~ardrone_nmpc.viz.plots.PlotError` or :class:`~ardrone_nmpc.runs.rundir.LogError`, one line.
@@ -20,9 +21,22 @@ from pathlib import Path
 
 from ardrone_nmpc.viz.plots import KINDS, SWEEP_FILE, PlotError
 
-__all__ = ["MATPLOTLIB_MISSING", "PlotError", "run_plot_command"]
+__all__ = ["MATPLOTLIB_MISSING", "PlotError", "plot_command", "run_plot_command"]
 
 MATPLOTLIB_MISSING = "plotting needs matplotlib: pip install -e '.[plot]'"
+
+
+def plot_command(*, path: Path, output: Path | None, kind: str | None, metric: str | None,
+                 x: str | None, y: str | None, dpi: int) -> None:
+    """The ``plot`` command: draw, then print ``plot: <file>`` per file written (notes about
+    the data on stderr)."""
+    import typer
+
+    from ardrone_nmpc.cli.console import warn
+
+    for file in run_plot_command(path=path, output=output, kind=kind, metric=metric, x=x,
+                                 y=y, dpi=dpi, warn=warn):
+        typer.echo(f"plot: {file}")
 
 
 def _require_matplotlib() -> None:
@@ -96,8 +110,8 @@ def _plot_run(path: Path, *, output: Path | None, kind: str, dpi: int,
     if kind not in (*KINDS, "all"):
         raise PlotError(f"--kind: unknown kind {kind!r}; choose from {', '.join(KINDS)}, all")
     kinds = KINDS if kind == "all" else (kind,)
-    if output is None:
-        targets = [path / f"plot-{k}.png" for k in kinds]
+    if output is None or output.is_dir():
+        targets = [(output or path) / f"plot-{k}.png" for k in kinds]
     else:
         output = _check_format(output)
         targets = [output] if kind != "all" else \
@@ -119,6 +133,8 @@ def _plot_sweep(path: Path, *, output: Path | None, metric: str, x: str | None,
         if warn is not None:
             warn(note)
     sweep_dir = table.path.parent
-    target = sweep_dir / f"plot-heatmap-{metric}.png" if output is None else \
-        _check_format(output)
+    if output is None or output.is_dir():
+        target = (output or sweep_dir) / f"plot-heatmap-{metric}.png"
+    else:
+        target = _check_format(output)
     return _save(figure_sweep_heatmap(table, metric=metric, x=x, y=y), target, dpi)

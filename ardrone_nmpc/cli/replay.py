@@ -1,24 +1,27 @@
 """``ardrone-nmpc replay``: re-summarise a run, re-run its controller, or re-send its poses.
 
 The work is in :mod:`ardrone_nmpc.experiments.replay`; this module checks the option combinations, runs
-it with progress and prints the tables. Every user error becomes :class:`ReplayUsageError`
-(one line per problem), which the CLI prints as ``error: …`` lines with exit code 1.
+it with progress and prints the tables. Bad option combinations are a
+:class:`ReplayUsageError` (one line per problem); like every other user error it reaches the
+command line's one handler (``error: …`` lines, exit code 1).
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
-from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.cli.console import stdout_console, warn
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.config.limits import MAX_NAME_CHARS, RERUN_SUFFIX
+from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.experiments.record import record
-from ardrone_nmpc.runs.rundir import CONFIG_FILE, LogError, RunData, RunRecorder, read_run
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, RunData, RunRecorder, read_run
 from ardrone_nmpc.experiments.replay import (
-    COMPARED_COLUMNS, RERUN_FILE, ReplayError, RerunResult, broadcast, missing_rerun_columns,
+    COMPARED_COLUMNS, RERUN_FILE, RerunResult, broadcast, missing_rerun_columns,
     require_rerun_columns, rerun, write_rerun_csv,
 )
 from ardrone_nmpc.runs.summary import render_summary, summarise
@@ -27,18 +30,12 @@ from ardrone_nmpc.runs.summary import render_summary, summarise
 REPRODUCE_TOLERANCE = 1e-9
 
 
-class ReplayUsageError(Exception):
-    """Bad options or an unusable run directory: ``messages`` for the user, one per line."""
+class ReplayUsageError(UserError):
+    """Options that do not go together: ``messages`` for the user, one per line (exit 1)."""
 
     def __init__(self, messages: list[str] | str) -> None:
         self.messages = [messages] if isinstance(messages, str) else list(messages)
         super().__init__("; ".join(self.messages))
-
-
-def _console() -> Console:
-    import sys
-
-    return Console(width=None if sys.stdout.isatty() else 150)
 
 
 def _check_options(*, rerun_: bool, overrides: list[str], log_dir: Path | None,
@@ -54,8 +51,6 @@ def _check_options(*, rerun_: bool, overrides: list[str], log_dir: Path | None,
     for value, flag in ((speed, "--speed"), (port, "--port"), (host, "--host")):
         if value is not None and not broadcast_:
             errors.append(f"{flag} applies to --broadcast only")
-    if speed is not None and not (math.isfinite(speed) and speed > 0):
-        errors.append(f"--speed: must be a positive number, got {speed:g}")
     if errors:
         raise ReplayUsageError(errors)
 
@@ -66,28 +61,25 @@ def run_replay_command(*, run_dir: Path, rerun_: bool = False, overrides: list[s
                        host: str | None = None, console: Console | None = None) -> Path | None:
     """The ``replay`` command; returns the new run directory of ``--rerun`` (else None).
 
-    Raises :class:`ReplayUsageError` for every user error.
+    Raises :class:`ReplayUsageError` for options that do not go together; the errors of
+    reading the run, its config and re-running it (LogError, ConfigError, ReplayError, …)
+    as they are.
     """
     overrides = list(overrides)
     _check_options(rerun_=rerun_, overrides=overrides, log_dir=log_dir, broadcast_=broadcast_,
                    speed=speed, port=port, host=host)
-    console = console or _console()
-    try:
-        run = read_run(run_dir)
-        for warning in run.warnings:
-            console.print(f"[yellow]warning[/]: {warning}")
-        if rerun_:
-            return _rerun(run=run, overrides=overrides, log_dir=log_dir or Path("logs"),
-                          console=console)
-        if broadcast_:
-            _broadcast(run=run, host=host, port=port, speed=speed or 1.0, console=console)
-            return None
-        _resummarise(run=run, console=console)
+    console = console or stdout_console()
+    run = read_run(run_dir)
+    for note in run.warnings:
+        warn(note)
+    if rerun_:
+        return _rerun(run=run, overrides=overrides, log_dir=log_dir or Path("logs"),
+                      console=console)
+    if broadcast_:
+        _broadcast(run=run, host=host, port=port, speed=speed or 1.0, console=console)
         return None
-    except ConfigError as err:
-        raise ReplayUsageError(err.messages) from None
-    except (LogError, ReplayError, OSError) as err:
-        raise ReplayUsageError(str(err)) from None
+    _resummarise(run=run, console=console)
+    return None
 
 
 # ----------------------------------------------------------------------------- modes
@@ -105,9 +97,10 @@ def _resummarise(*, run: RunData, console: Console) -> None:
 
 def _rerun(*, run: RunData, overrides: list[str], log_dir: Path, console: Console) -> Path:
     """Recompute every command into a new run directory linked to the original."""
-    cfg = load_config(run.path / CONFIG_FILE, overrides)
-    if not cfg.name.endswith("-rerun"):
-        cfg = cfg.model_copy(update={"name": f"{cfg.name}-rerun"})
+    cfg = load_config(run.path / CONFIG_FILE, overrides, allow_retired=True)
+    if not cfg.name.endswith(RERUN_SUFFIX):  # cut a long name: the result must still load
+        name = cfg.name[:MAX_NAME_CHARS - len(RERUN_SUFFIX)] + RERUN_SUFFIX
+        cfg = cfg.model_copy(update={"name": name})
     require_rerun_columns(run=run)  # before a run directory is created for nothing
     columns = [TextColumn("{task.description}"), BarColumn(),
                TextColumn("{task.percentage:>3.0f}%")]
@@ -117,7 +110,7 @@ def _rerun(*, run: RunData, overrides: list[str], log_dir: Path, console: Consol
                        source_version=run.version)
         with Progress(*columns, console=console, transient=True) as progress:
             task = progress.add_task("re-running", total=1.0)
-            result = rerun(run=run, cfg=cfg, recorder=recorder,
+            result = rerun(run=run, cfg=recorder.config, recorder=recorder,
                            progress=lambda f: progress.update(task, completed=f))
         write_rerun_csv(result=result, path=recorder.path / RERUN_FILE)
         return result

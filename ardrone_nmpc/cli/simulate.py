@@ -1,4 +1,4 @@
-"""``ardrone-nmpc simulate`` and ``summary``: run directories in, tables out."""
+"""``ardrone-nmpc simulate``: fly a config in lockstep simulation into a run directory."""
 
 from __future__ import annotations
 
@@ -7,16 +7,32 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
-from ardrone_nmpc.runs.rundir import read_run
-from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summarise
+from ardrone_nmpc.runs.summary import render_summary
+
+
+def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed: int | None,
+                     quiet: bool, foxglove: bool = False, foxglove_port: int = 8765) -> None:
+    """The ``simulate`` command: load, fly (served live with ``foxglove``), print; last line
+    ``run: <dir>``."""
+    import typer
+
+    from ardrone_nmpc.viz.live import open_live_view
+
+    cfg = load_config(config, overrides)
+    with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, pace=True,
+                        echo=lambda line: typer.echo(line, err=True)) as live:
+        path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet, live=live)
+    typer.echo(f"run: {path}")
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                          console: Console | None = None, live=None) -> Path:
     """Fly ``cfg`` in lockstep simulation into a new run directory; return its path.
     ``live`` (a :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too."""
-    console = console or _console()
+    console = console or stdout_console()
     seed = cfg.sim.seed if seed is None else seed
     if not quiet:
         console.print(f"simulating [bold]{cfg.name}[/]: {cfg.duration_s:g} s "
@@ -39,24 +55,3 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                       f"kernels loaded or compiled included; ended: {result.ending}, drone "
                       f"{result.final_mode.value}")
     return path
-
-
-def _console() -> Console:
-    """The terminal's width on a TTY; 150 columns when piped (tables of runs are wide)."""
-    import sys
-
-    return Console(width=None if sys.stdout.isatty() else 150)
-
-
-def run_summary_command(*, run_dirs: list[Path], console: Console | None = None) -> None:
-    console = console or _console()
-    runs = []
-    for run_dir in run_dirs:
-        run = read_run(run_dir)
-        for warning in run.warnings:
-            console.print(f"[yellow]warning[/]: {warning}")
-        runs.append((Path(run_dir).name, summarise(run)))
-    if len(runs) == 1:
-        console.print(render_summary(runs[0][1], title=runs[0][0]))
-    else:
-        console.print(render_side_by_side(runs))

@@ -20,7 +20,9 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                            TimeElapsedColumn, TimeRemainingColumn)
 from rich.table import Table
 
+from ardrone_nmpc.cli.console import stdout_console
 from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.errors import EXIT_INTERRUPTED, UserError
 from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
                                 CaseResult, SweepCsvAppender, build_cases, finished_result,
                                 iter_dask, iter_local, parse_grid, rank_rows, resume_results,
@@ -29,8 +31,18 @@ from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS
 ENGINES = ("local", "dask")
 
 
-class SweepEngineError(RuntimeError):
-    """The engine could not run (no Dask scheduler at the address, …): one line."""
+class SweepEngineError(UserError, RuntimeError):
+    """The engine could not run (no Dask scheduler at the address, …): one line, exit 1."""
+
+
+class SweepInterrupted(UserError):
+    """Ctrl-C stopped the sweep; what finished is in sweep.csv (exit 130)."""
+
+    exit_code = EXIT_INTERRUPTED
+
+
+class SweepFailures(UserError):
+    """Some cases failed (their message is in sweep.csv); exit 1."""
 
 
 @dataclass
@@ -67,8 +79,24 @@ def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
 def _out_dir(out_dir: Path) -> Path:
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--out {out_dir}: exists and is not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:  # under a file, on a read-only disk, no permission
+        raise ConfigError(f"--out {out_dir}: cannot create the directory: "
+                          f"{err.strerror or err}") from None
     return out_dir
+
+
+def _check_inputs(cases: Sequence[Case]) -> None:
+    """Read and check every waypoint file the cases name, before any case flies."""
+    from ardrone_nmpc.reference.trajectories import path_file
+
+    checked = set()
+    for case in cases:
+        ref = case.config.reference
+        if (ref.kind == "path" or ref.path_file) and ref.path_file not in checked:
+            path_file(ref)
+            checked.add(ref.path_file)
 
 
 def _engine(pending: Sequence[Case], *, engine: str, out_dir: Path, jobs: int,
@@ -83,13 +111,6 @@ def _progress(console: Console) -> Progress:
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), TimeRemainingColumn(), console=console,
                     transient=True)
-
-
-def _console() -> Console:
-    """The terminal's width on a TTY; 150 columns when piped (the table is wide)."""
-    import sys
-
-    return Console(width=None if sys.stdout.isatty() else 150)
 
 
 def _describe(results: Mapping[str, CaseResult]) -> str:
@@ -204,8 +225,9 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
     :class:`SweepEngineError` if the engine cannot run."""
     check_options(engine=engine, scheduler=scheduler, rank_by=rank_by)
     cases = build_cases(config_path=config, overrides=overrides, grid=parse_grid(grid))
+    _check_inputs(cases)
     out_dir = _out_dir(Path(out_dir))
-    console = console or _console()
+    console = console or stdout_console()
     wall0 = time.perf_counter()
     params = [path for path, _ in cases[0].params]
     columns = sweep_columns(params)
@@ -237,3 +259,30 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
                   + ", ".join(f"{n} {s}" for s, n in outcome.counts.items())
                   + f"; {outcome.wall_s:.1f} s wall ({engine}, {jobs} jobs)")
     return outcome
+
+
+def sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[str],
+                  out: Path | None, jobs: int | None, engine: str, scheduler: str | None,
+                  rank_by: str, top: int | None, diverge_m: float) -> None:
+    """The ``sweep`` command: run it, print ``sweep: <sweep.csv>``; Ctrl-C is
+    :class:`SweepInterrupted` (exit 130), failed cases :class:`SweepFailures` (exit 1)."""
+    import os
+
+    import typer
+
+    out_dir = out if out is not None else Path("logs") / "sweeps" / config.stem
+    n_jobs = jobs if jobs is not None else os.cpu_count() or 1
+    resume = "interrupted: re-run the same command to resume"
+    try:
+        outcome = run_sweep_command(config=config, grid=grid, overrides=overrides,
+                                    out_dir=out_dir, jobs=n_jobs, engine=engine,
+                                    scheduler=scheduler, rank_by=rank_by, top=top,
+                                    diverge_m=diverge_m)
+    except KeyboardInterrupt:
+        raise SweepInterrupted(resume) from None
+    typer.echo(f"sweep: {outcome.csv_path}")
+    if outcome.interrupted:
+        raise SweepInterrupted(resume)
+    if outcome.counts["failed"]:
+        raise SweepFailures(f"{outcome.counts['failed']} of {outcome.total} cases failed (see "
+                            f"the message column of {outcome.csv_path})")

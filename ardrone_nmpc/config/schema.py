@@ -1,4 +1,4 @@
-"""Experiment configuration: the YAML schema, loading, ``--set`` overrides and dumping.
+"""Experiment configuration: the pydantic schema of an experiment (loading is in ``config.io``).
 
 An experiment is one YAML mapping whose top level has ``name``, ``duration_s`` and one section
 per subsystem::
@@ -17,10 +17,14 @@ per subsystem::
     faults:     {mocap_dropout: {start_s, duration_s}, …}   (simulation only; all off by default)
 
 Every key is optional: a missing key takes its default, and the defaults are the values of the
-thesis (``specs/thesis.md``), the AR.Drone SDK (``specs/ardrone-protocol.md`` §3.1) and the plant
-identification (``specs/plant.md``). Unknown keys, NaN/inf, out-of-range values and vectors of the
-wrong length are errors. Every field carries its unit in its name and a description
-(``ExperimentConfig.model_json_schema()`` lists them all).
+thesis (``docs/thesis.md``), the AR.Drone SDK (``docs/protocol.md``) and the plant identification
+(``docs/plant.md``). Unknown keys, NaN/inf, out-of-range values and vectors of the wrong length
+are errors; durations, coordinates and the name are bounded (:mod:`ardrone_nmpc.config.limits`)
+so that a valid config cannot crash a run later. Every field carries its unit in its name and a
+description (``ExperimentConfig.model_json_schema()`` lists them all).
+
+This module validates values only: it reads no file (the waypoint file of reference kind
+'path' is read where the trajectory is built, by ``check``, and before a run directory is made).
 
 Vectors are YAML lists, ordered like the thesis: states ``[x, ẋ, y, ẏ, z, ż, ψ]``, inputs
 ``[z̈, φ, θ, ψ̇]``, positions ``[x, y, z]`` in the world frame (x forward, y left, z up).
@@ -31,24 +35,22 @@ e.g. ``controller.solver.kmax: Input should be greater than or equal to 1``.
 
 from __future__ import annotations
 
-import copy
 import math
-from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
-from typing import Annotated, Any, Literal, Optional
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal, Optional
 
-import yaml
-from pydantic import (
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    ValidationError,
-    ValidationInfo,
-    field_validator,
-    model_validator,
+from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
+
+from ardrone_nmpc.config.faults import FaultsConfig
+from ardrone_nmpc.config.fields import (
+    CoordinateVec2, CoordinateVec3, Finite, NonNegative, NonNegativeSpan, NonNegativeVec4,
+    NonNegativeVec7, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
+    PositiveVec4, Section, Span, Vec2, Vec4, ascii_name, invalid, require_increasing,
 )
-from pydantic_core import PydanticCustomError
+from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
+from ardrone_nmpc.errors import UserError
+
+from ardrone_nmpc.core import defaults
 
 __all__ = [
     "ConfigError",
@@ -67,16 +69,14 @@ __all__ = [
     "SafetyConfig",
     "SimConfig",
     "SolverConfig",
-    "apply_overrides",
     "config_from_dict",
-    "config_to_dict",
-    "dump_config",
-    "load_config",
+    "tracked_object",
 ]
 
 
-class ConfigError(Exception):
-    """Invalid configuration. ``messages`` are one-line ``field.path: message`` strings."""
+class ConfigError(UserError):
+    """Invalid configuration. ``messages`` are one-line ``field.path: message`` strings
+    (exit code 1)."""
 
     def __init__(self, messages: str | Sequence[str]) -> None:
         self.messages: list[str] = [messages] if isinstance(messages, str) else list(messages)
@@ -86,144 +86,60 @@ class ConfigError(Exception):
         return "\n".join(self.messages)
 
 
-def _invalid(message: str) -> PydanticCustomError:
-    return PydanticCustomError("config", "{message}", {"message": message})
-
-
-# ----------------------------------------------------------------------------- field types
-
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-
-
-def _vector(item: Any, length: int) -> Any:
-    """A fixed-length tuple of ``item``; accepts a YAML list. A wrong length is one error at the
-    vector itself (not a cascade of per-item errors)."""
-
-    def check_length(value: Any) -> Any:
-        if isinstance(value, (list, tuple)) and len(value) != length:
-            raise _invalid(f"expected {length} values, got {len(value)}")
-        return value
-
-    return Annotated[
-        tuple[item, ...],
-        BeforeValidator(check_length),
-        Field(json_schema_extra={"minItems": length, "maxItems": length}),
-    ]
-
-
-Vec2 = _vector(Finite, 2)
-Vec3 = _vector(Finite, 3)
-Vec4 = _vector(Finite, 4)
-PositiveVec2 = _vector(Positive, 2)
-PositiveVec4 = _vector(Positive, 4)
-# Sizes of a reference path: a kilometre is already far beyond any mocap volume, and the path
-# is sampled at 2 cm for the deviation metrics (1e300 m would not fit in memory).
-PathSize = Annotated[float, Field(gt=0, le=1000.0, allow_inf_nan=False)]
-PathSizeVec2 = _vector(PathSize, 2)
-PathSizeVec4 = _vector(PathSize, 4)
-NonNegativeVec7 = _vector(NonNegative, 7)
-NonNegativeVec4 = _vector(NonNegative, 4)
-Port = Annotated[int, Field(ge=1, le=65535)]
-
-
-def _require_increasing(lower_name: str, upper_name: str) -> Callable[..., Any]:
-    """Validator for ``upper_name`` that requires it to exceed ``lower_name`` (declared earlier)
-    elementwise; the error is reported at ``upper_name``."""
-
-    def check(cls: type, value: Any, info: ValidationInfo) -> Any:
-        lower = info.data.get(lower_name)
-        if lower is None:  # the lower field itself failed and is reported on its own
-            return value
-        lows = lower if isinstance(lower, tuple) else (lower,)
-        highs = value if isinstance(value, tuple) else (value,)
-        for i, (lo, hi) in enumerate(zip(lows, highs)):
-            if not lo < hi:
-                where = f" at index {i}" if isinstance(value, tuple) else ""
-                raise _invalid(f"must be greater than {lower_name}{where} ({hi} <= {lo})")
-        return value
-
-    return field_validator(upper_name)(classmethod(check))  # type: ignore[arg-type]
-
-
-def _type_words(annotation: Any) -> str:
-    """What a field takes, for error messages ("an integer", "a list of numbers", …)."""
-    text = str(annotation)
-    if "tuple" in text:
-        return "a list of numbers"
-    for kind, words in ((int, "an integer"), (float, "a number"), (str, "a string")):
-        if annotation is kind or (kind.__name__ in text and "Literal" not in text):
-            return words
-    return "a value of another type"
-
-
-class _Section(BaseModel):
-    # validate_default: defaults go through the same checks (cross-field ones included).
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
-                              validate_default=True)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _no_booleans_as_numbers(cls, value: Any, info: ValidationInfo) -> Any:
-        # Lax mode would take YAML true/false as 1/0 (horizon_steps: true → 1): a boolean is
-        # valid only where the field is declared bool.
-        annotation = cls.model_fields[info.field_name].annotation
-        if annotation is bool:
-            return value
-        items = value if isinstance(value, (list, tuple)) else (value,)
-        for i, item in enumerate(items):
-            if isinstance(item, bool):
-                where = f" at index {i}" if items is value else ""
-                raise _invalid(f"expected {_type_words(annotation)}, got the boolean "
-                               f"{str(item).lower()}{where}")
-        return value
-
-
 # ----------------------------------------------------------------------------- controller
 
 
-class SolverConfig(_Section):
+class SolverConfig(Section):
     """Numerical settings of the NMPC solvers (thesis §3.3, Algorithm 1; Ohtsuka's C/GMRES)."""
 
     method: Literal["cgmres", "newton"] = Field(
         "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
         "'newton': the thesis' per-step Newton iterations with fdgmres.")
-    kmax: int = Field(5, ge=1, le=1000,
+    kmax: int = Field(defaults.KMAX, ge=1, le=1000,
                       description="C/GMRES: Krylov-subspace dimension per solve (count).")
     newton_kmax: int = Field(
-        30, ge=1, le=1000, description="Method 'newton': Krylov dimension k_max of each Newton "
-        "step (Algorithm 1; the thesis gives none). Its system is uncondensed (8 unknowns per "
-        "stage): with 5, GMRES stops far above η and Newton stalls at ‖F‖ ≈ 0.1 "
-        "(docs/thesis-reproduction.md).")
+        defaults.NEWTON_KMAX, ge=1, le=1000, description="Method 'newton': Krylov dimension "
+        "k_max of each Newton step (Algorithm 1; the thesis gives none). Its system is "
+        "uncondensed (8 unknowns per stage): with 5, GMRES stops far above η and Newton stalls "
+        "at ‖F‖ ≈ 0.1 (docs/thesis-reproduction.md).")
     zeta_per_s: Positive = Field(
-        15.0, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
+        defaults.ZETA_PER_S, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
     fd_step: Positive = Field(
-        1e-6, description="Forward-difference step h of Jacobian-vector products (dimensionless).")
+        defaults.FD_STEP,
+        description="Forward-difference step h of Jacobian-vector products (dimensionless).")
     gmres_rtol: float = Field(
-        1e-3, gt=0, lt=1, description="GMRES relative residual tolerance η (thesis Algorithm 1).")
+        defaults.GMRES_RTOL, gt=0, lt=1,
+        description="GMRES relative residual tolerance η (thesis Algorithm 1).")
     tolerance: Positive = Field(
-        1e-4, description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
-    max_newton_iterations: int = Field(20, ge=1, description="Newton iteration cap per solve.")
+        defaults.TOLERANCE,
+        description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
+    max_newton_iterations: int = Field(defaults.MAX_NEWTON_ITERATIONS, ge=1, le=1000,
+                                       description="Newton iteration cap per solve.")
     dummy_weight: Positive = Field(
-        0.01, description="Linear cost weight of the dummy inputs that enforce the input bounds.")
+        defaults.DUMMY_WEIGHT,
+        description="Linear cost weight of the dummy inputs that enforce the input bounds.")
     bound_epsilon: NonNegative = Field(
-        1e-3, description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
+        defaults.BOUND_EPSILON,
+        description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
     horizon_ramp_rate_per_s: NonNegative = Field(
-        0.0, description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
+        defaults.HORIZON_RAMP_RATE_PER_S,
+        description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
     divergence_residual: Positive = Field(
-        1e3, description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
+        defaults.DIVERGENCE_RESIDUAL,
+        description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
     newton_trigger_residual: Positive = Field(
-        100.0, description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
+        defaults.NEWTON_TRIGGER_RESIDUAL,
+        description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
         "re-projects onto F = 0 by Newton/GMRES warm-started from the current solution (a "
         "reference jump is an impulse the continuation cannot follow).")
     condensed: bool = Field(
-        True, description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
+        defaults.CONDENSED,
+        description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
         "form (4 unknowns per stage, not 12). Same equations; GMRES(5) stagnates on the "
         "uncondensed saddle-point system, so false is for comparison only.")
 
 
-class PGainsConfig(_Section):
+class PGainsConfig(Section):
     """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none)."""
 
     k1_per_s: Positive = Field(0.7, description="ż_ref = k1 (z_d − z), 1/s (tuned in "
@@ -235,7 +151,7 @@ class PGainsConfig(_Section):
     k4_per_s: Positive = Field(1.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
 
 
-class ObstacleConfig(_Section):
+class ObstacleConfig(Section):
     """A static obstacle the NMPC keeps out of: the constraint ‖p − c‖ ≥ d, d = radius + margin.
 
     A sphere measures the 3-D distance from its centre; a cylinder is vertical and unbounded
@@ -244,8 +160,9 @@ class ObstacleConfig(_Section):
 
     kind: Literal["sphere", "cylinder"] = Field(
         ..., description="'sphere' (3-D distance) or 'cylinder' (vertical; horizontal distance).")
-    center_m: Vec3 = Field(..., description="Centre [x, y, z] (m); z is ignored for a cylinder.")
-    radius_m: Positive = Field(..., description="Radius of the obstacle itself (m).")
+    center_m: CoordinateVec3 = Field(
+        ..., description="Centre [x, y, z] (m); z is ignored for a cylinder.")
+    radius_m: PathSize = Field(..., description="Radius of the obstacle itself (m), ≤ 1000.")
     margin_m: NonNegative = Field(
         0.3, description="Safety margin added to the radius (m): the drone's half-size (≈ 0.26 m "
         "with the indoor hull) plus a buffer. The NMPC keeps the drone's centre d = radius + "
@@ -256,7 +173,7 @@ class ObstacleConfig(_Section):
         "last position is kept when it goes stale). null: static.")
 
 
-class OffsetFreeConfig(_Section):
+class OffsetFreeConfig(Section):
     """Offset-free tracking: integral action on the position/yaw error, fed to the NMPC as a
     shift of its reference (docs/solver-notes.md, "Offset-free tracking"). A constant wind, a
     vertical gain mismatch, battery sag or a navdata velocity bias then leave no steady error.
@@ -294,31 +211,34 @@ class OffsetFreeConfig(_Section):
         "sensor cannot drag the drone further than this from the reference.")
 
 
-class ControllerConfig(_Section):
+class ControllerConfig(Section):
     """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
 
     kind: Literal["nmpc", "p"] = Field(
         "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
-    horizon_steps: int = Field(15, ge=1, le=1000, description="Prediction horizon N (steps).")
-    dtau_s: Positive = Field(0.1, description="Prediction step Δτ (s); horizon T = N·Δτ.")
+    horizon_steps: int = Field(defaults.HORIZON_STEPS, ge=1, le=1000,
+                               description="Prediction horizon N (steps).")
+    dtau_s: Positive = Field(defaults.DTAU_S, le=1.0,
+                             description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
-        (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0),
+        defaults.Q_STATE,
         description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
     r: PositiveVec4 = Field(
-        (4.0, 12.0, 12.0, 24.0),
+        defaults.R_INPUT,
         description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
     q_terminal: NonNegativeVec7 = Field(
-        (0.0,) * 7, description="Terminal state weights, order as q (the thesis has none).")
+        defaults.Q_TERMINAL,
+        description="Terminal state weights, order as q (the thesis has none).")
     u_min: Vec4 = Field(
-        (-1.0, -1.0, -1.0, -1.0),
+        defaults.U_MIN,
         description="Input lower bounds [m/s², rad, rad, rad/s] (thesis eq. 4.17).")
     u_max: Vec4 = Field(
-        (1.0, 1.0, 1.0, 1.0),
+        defaults.U_MAX,
         description="Input upper bounds [m/s², rad, rad, rad/s]; each above u_min (eq. 4.17).")
     vz_lead_s: Optional[Positive] = Field(
         0.5, description="ż reference = ż estimate + z̈ · vz_lead_s (s). The drone's vertical "
         "loop is a first-order lag; this inverts it exactly when vz_lead_s is its time "
-        "constant (0.5 s: specs/plant.md, sim.plant.tau_vz_s). null = one control period, the "
+        "constant (0.5 s: docs/plant.md, sim.plant.tau_vz_s). null = one control period, the "
         "thesis' integration (end of §4.4), which assumes a new vertical speed within a tick "
         "and overshoots altitude steps by 6–7 % in simulation (2.3 % with 0.5).")
     delay_compensation_s: NonNegative = Field(
@@ -358,7 +278,7 @@ class ControllerConfig(_Section):
         "of the NMPC; the 'p' controller has none). true/false is short for "
         "{enabled: true/false} with the default gains.")
 
-    _u_bounds = _require_increasing("u_min", "u_max")
+    _u_bounds = require_increasing("u_min", "u_max")
 
     @model_validator(mode="before")
     @classmethod
@@ -372,7 +292,7 @@ class ControllerConfig(_Section):
 # ----------------------------------------------------------------------------- estimation
 
 
-class EstimatorConfig(_Section):
+class EstimatorConfig(Section):
     """Velocity estimation (thesis ch. 4): ż from mocap z, ẋ/ẏ from navdata or differences."""
 
     kind: Literal["kalman", "luenberger", "difference", "none"] = Field(
@@ -392,25 +312,19 @@ class EstimatorConfig(_Section):
         "so that A − KC is Hurwitz. null = derive from λ0.")
     horizontal_velocity: Literal["navdata", "difference"] = Field(
         "difference", description="Source of ẋ, ẏ: finite differences of the mocap position "
-        "(DESIGN §2; in simulation the x step settles in 2.5 s) or the drone's optical-flow "
+        "(docs/design.md; in simulation the x step settles in 2.5 s) or the drone's optical-flow "
         "navdata as in the thesis (its bias leaves a ±3 cm wander: 12.7 s).")
 
 
 # ----------------------------------------------------------------------------- reference
 
 
-def _ascii_object_name(value: str) -> str:
-    if not value.isascii() or "\x00" in value:
-        raise _invalid("must be ASCII without NUL characters")
-    return value
-
-
-class FollowConfig(_Section):
+class FollowConfig(Section):
     """Reference kind 'follow': the drone follows a second object of the mocap stream."""
 
     object_name: str = Field(
         "car", min_length=1, max_length=24, description="Mocap name of the object to follow.")
-    offset_m: Vec3 = Field(
+    offset_m: CoordinateVec3 = Field(
         (0.0, 0.0, 1.0), description="Where the drone should be relative to the object (m).")
     offset_frame: Literal["world", "object"] = Field(
         "world", description="Frame of offset_m: the world's, or the object's (turns with it).")
@@ -425,10 +339,10 @@ class FollowConfig(_Section):
         300.0, description="Object pose age (ms) beyond which the reference stops "
         "extrapolating and holds the last position.")
 
-    _name = field_validator("object_name")(classmethod(lambda cls, v: _ascii_object_name(v)))
+    _name = field_validator("object_name")(classmethod(lambda cls, v: ascii_name(v)))
 
 
-class ReferenceConfig(_Section):
+class ReferenceConfig(Section):
     """The desired trajectory x_d(t), world frame, metres and radians."""
 
     kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path",
@@ -438,20 +352,22 @@ class ReferenceConfig(_Section):
     follow: FollowConfig = Field(
         default_factory=FollowConfig, description="Reference kind 'follow' only; before the "
         "object is seen, the reference holds start_m.")
-    start_m: Vec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
+    start_m: CoordinateVec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
     start_psi_rad: Finite = Field(0.0, description="Start heading ψ (rad, counter-clockwise).")
-    target_m: Vec3 = Field((0.0, 0.0, 1.0), description="Step target position [x, y, z] (m).")
+    target_m: CoordinateVec3 = Field(
+        (0.0, 0.0, 1.0), description="Step target position [x, y, z] (m).")
     target_psi_rad: Finite = Field(0.0, description="Step target heading ψ (rad).")
-    step_time_s: NonNegative = Field(1.0, description="Time of the step (s from start).")
+    step_time_s: NonNegativeSpan = Field(
+        1.0, description="Time of the step (s from start), ≤ 3600.")
     side_m: PathSize = Field(1.0, description="Square side length (m), ≤ 1000.")
-    leg_duration_s: Positive = Field(
-        5.0, description="Time per side of 'square' and 'square_altitudes' (s).")
+    leg_duration_s: Span = Field(
+        5.0, description="Time per side of 'square' and 'square_altitudes' (s), ≤ 3600.")
     altitudes_m: PathSizeVec4 = Field(
         (0.8, 1.0, 1.2, 1.4), description="Corner altitudes of 'square_altitudes' (m), ≤ 1000.")
-    center_m: Vec2 = Field((0.0, 0.0), description="Ellipse centre [x, y] (m).")
+    center_m: CoordinateVec2 = Field((0.0, 0.0), description="Ellipse centre [x, y] (m).")
     semi_axes_m: PathSizeVec2 = Field(
         (1.0, 0.6), description="Ellipse semi-axes [a_x, a_y] (m), ≤ 1000.")
-    period_s: Positive = Field(20.0, description="Time for one lap of the ellipse (s).")
+    period_s: Span = Field(20.0, description="Time for one lap of the ellipse (s), ≤ 3600.")
     lorenz_scale_m: Positive = Field(
         0.05, le=1.0, description="Metres per Lorenz-system unit of the 'lorenz' path, ≤ 1.")
     lorenz_time_scale: Positive = Field(
@@ -459,47 +375,33 @@ class ReferenceConfig(_Section):
         "(dimensionless, ≤ 1); 0.05 keeps the scaled attractor under 1 m/s (peak ≈ 0.72 m/s at "
         "lorenz_scale_m 0.05).")
     path_file: Optional[str] = Field(
-        None, validate_default=True,
+        None, validate_default=True, min_length=1, max_length=4096,
         description="CSV waypoint file (t_s,x_m,y_m,z_m,psi_rad) for 'path'; relative paths in a "
-        "config file are relative to that file's directory. Stored as an absolute path.")
+        "config file are relative to that file's directory. Resolved to an absolute path when "
+        "loaded; a run directory holds its own copy (see docs/design.md). Its contents are "
+        "checked by `check` and before a run starts (reference/waypoints.py: at most 10 000 "
+        "waypoints, coordinates within ±1000 m).")
 
     @field_validator("path_file")
     @classmethod
-    def _check_path_file(cls, value: Optional[str], info: ValidationInfo) -> Optional[str]:
-        if value is None:
-            if info.data.get("kind") == "path":
-                raise _invalid("required when kind is 'path'")
-            return None
-        base = (info.context or {}).get("base_dir")
-        path = Path(value).expanduser()
-        if not path.is_absolute():
-            path = Path(base or ".") / path
-        path = path.resolve()
-        if not path.is_file():
-            raise _invalid(f"no such file: {path}")
-        # Read it now, so that `check` rejects what `simulate` would (non-monotonic time, a
-        # bad cell: "<file>:<line>: …"). Imported here: reference imports this module.
-        from ardrone_nmpc.reference.trajectories import ReferenceError, load_waypoints_csv
-
-        try:
-            load_waypoints_csv(path)
-        except ReferenceError as exc:
-            raise _invalid(str(exc)) from None
-        return str(path)
+    def _path_file_for_paths(cls, value: Optional[str], info: ValidationInfo) -> Optional[str]:
+        if value is None and info.data.get("kind") == "path":
+            raise invalid("required when kind is 'path'")
+        return value
 
 
 # ----------------------------------------------------------------------------- hardware
 
 
-class LoopConfig(_Section):
+class LoopConfig(Section):
     """The control loop."""
 
     period_s: Positive = Field(
-        0.065, ge=0.001, le=1.0,
+        defaults.LOOP_PERIOD_S, ge=0.001, le=1.0,
         description="Control period (s), 1 ms … 1 s; 65 ms in the thesis.")
 
 
-class DroneConfig(_Section):
+class DroneConfig(Section):
     """The AR.Drone link and the limits written to its configuration at connect (protocol §3.1)."""
 
     host: str = Field("192.168.1.1", min_length=1, description="Drone IP address or host name.")
@@ -511,7 +413,8 @@ class DroneConfig(_Section):
         0.7, ge=0.2, le=2.0, description="control:control_vz_max (m/s): climb rate at PCMD gaz ±1.")
     control_yaw_radps: float = Field(
         1.745, ge=0.7, le=6.11, description="control:control_yaw (rad/s): yaw rate at PCMD yaw ±1.")
-    altitude_max_m: Positive = Field(3.0, description="control:altitude_max (m).")
+    altitude_max_m: Positive = Field(
+        3.0, le=100.0, description="control:altitude_max (m), ≤ 100 (the AR.Drone 2.0's cap).")
     navdata_demo: bool = Field(True, description="general:navdata_demo: 15 Hz demo packets if true.")
     keepalive_interval_s: float = Field(
         0.03, gt=0, le=0.03, description="Longest gap between AT commands (s); ≤ 30 ms (§2.6).")
@@ -523,7 +426,7 @@ MOCAP_SYSTEMS = ("vicon", "optitrack", "optitrack_closed_source", "qualisys", "v
 _Y_UP_SYSTEMS = ("optitrack", "optitrack_closed_source")
 
 
-class MocapConfig(_Section):
+class MocapConfig(Section):
     """The motion-capture source (docs/mocap-sources.md, docs/mocap-stream.md)."""
 
     kind: Literal["vicon_udp", "motioncapture"] = Field(
@@ -549,13 +452,12 @@ class MocapConfig(_Section):
         5.0, description="motioncapture: how long to wait for the connection (s).")
     object_name: str = Field(
         "ardrone", min_length=1, max_length=24, description="Tracked object name (≤ 24 ASCII).")
-    rate_hz: Positive = Field(100.0, description="Expected pose rate (Hz).")
 
     @field_validator("object_name")
     @classmethod
     def _ascii_name(cls, value: str) -> str:
         if not value.isascii() or "\x00" in value:
-            raise _invalid("must be ASCII without NUL characters")
+            raise invalid("must be ASCII without NUL characters")
         return value
 
     @field_validator("options", mode="before")
@@ -565,7 +467,7 @@ class MocapConfig(_Section):
         if isinstance(value, Mapping):
             for key, item in value.items():
                 if not isinstance(item, (str, int, float, bool)):
-                    raise _invalid(f"{key}: expected a string, number or boolean, got "
+                    raise invalid(f"{key}: expected a string, number or boolean, got "
                                    f"{type(item).__name__}")
         return value
 
@@ -580,9 +482,25 @@ class MocapConfig(_Section):
 # ----------------------------------------------------------------------------- simulation
 
 
-class PlantConfig(_Section):
-    """The simulated AR.Drone closed loop (specs/plant.md)."""
+#: What each ``sim.plant.profile`` sets where the config leaves a key out (docs/plant-profiles.md).
+PLANT_PROFILE_DEFAULTS: dict[str, dict[str, float]] = {
+    "ardrone": {},       # the defaults below: tum_ardrone dynamics with the thesis' 0.26 s delay
+    # the kit's identified channels (sim/plant_kit.py) with its timeDelay and simDT
+    "thesis_kit": {"command_delay_s": 0.26, "integration_step_s": 0.005},
+    # the real drone as identified: tum_ardrone's ≈ 0.12 s delay and the turbulence calibrated
+    # on the thesis' experimental square (docs/plant-profiles.md §3)
+    "ardrone_lab": {"command_delay_s": 0.12, "turbulence_std_mps": 0.7},
+}
 
+
+class PlantConfig(Section):
+    """The simulated AR.Drone closed loop (docs/plant.md, docs/plant-profiles.md)."""
+
+    profile: Literal["ardrone", "thesis_kit", "ardrone_lab"] = Field(
+        "ardrone", description="Plant backend and its defaults: 'ardrone' (tum_ardrone dynamics, "
+        "firmware limits, the thesis' 0.26 s delay), 'thesis_kit' (the ARDrone Simulink "
+        "Development Kit's linear identified channels; tau_*/drag_per_s unused), 'ardrone_lab' "
+        "(ardrone with a 0.12 s delay and calibrated turbulence). docs/plant-profiles.md.")
     # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
     command_delay_s: NonNegative = Field(
         0.26, le=2.0, description="Command transport delay T_d (s), ≤ 2.")
@@ -594,25 +512,42 @@ class PlantConfig(_Section):
     tau_vz_s: Positive = Field(0.5, description="Vertical-speed time constant τ_z (s).")
     # tum_ardrone EKF constant c1 = 0.58.
     drag_per_s: NonNegative = Field(0.58, description="Horizontal linear drag k_d (1/s).")
-    # specs/plant.md: fixed-step RK4 at 200 Hz for determinism.
+    # docs/plant.md: fixed-step RK4 at 200 Hz for determinism.
     integration_step_s: float = Field(
         0.005, ge=1e-4, le=0.05, description="Fixed RK4 integration step (s), 0.1 … 50 ms; at "
         "most every time constant and 1 / drag_per_s (explicit RK4 is unstable beyond).")
     # Landed at the world origin.
-    initial_position_m: Vec3 = Field((0.0, 0.0, 0.0), description="Initial [x, y, z] (m), z ≥ 0.")
+    initial_position_m: CoordinateVec3 = Field(
+        (0.0, 0.0, 0.0), description="Initial [x, y, z] (m), z ≥ 0.")
     initial_psi_rad: Finite = Field(0.0, description="Initial heading ψ (rad).")
     # A full battery.
     battery_start_pct: float = Field(100.0, ge=0, le=100, description="Initial battery (%).")
     # Project default, not identified: slow enough that long simulated runs are not cut short
     # by safety.battery_floor_pct (100 % → 20 % in ≈ 53 min).
     battery_drain_pct_per_min: NonNegative = Field(
-        1.5, description="Battery drain while flying (% per minute).")
+        1.5, le=100.0, description="Battery drain while flying (% per minute), ≤ 100.")
+    # 0 = still air; 'ardrone_lab' sets the value calibrated on the thesis' square.
+    turbulence_std_mps: NonNegative = Field(
+        0.0, le=5.0, description="Turbulence: σ (m/s) per horizontal axis of a Gauss–Markov "
+        "wind added to sim faults' wind (0: none).")
+    # Project choice (not identified): slow room-air drift, far slower than the tilt loops.
+    turbulence_tau_s: Positive = Field(
+        5.0, description="Turbulence correlation time τ (s) of the Gauss–Markov wind.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _profile_defaults(cls, data: Any) -> Any:
+        # a profile fills only the keys the config leaves out: explicit values win
+        if isinstance(data, Mapping):
+            defaults = PLANT_PROFILE_DEFAULTS.get(data.get("profile", "ardrone"), {})
+            data = {**defaults, **data}
+        return data
 
     @field_validator("initial_position_m")
     @classmethod
     def _above_ground(cls, value: tuple[float, ...]) -> tuple[float, ...]:
         if value[2] < 0:
-            raise _invalid("z must be ≥ 0 (the ground)")
+            raise invalid("z must be ≥ 0 (the ground)")
         return value
 
     @field_validator("integration_step_s")
@@ -623,54 +558,59 @@ class PlantConfig(_Section):
         for name in ("tau_tilt_s", "tau_yaw_s", "tau_vz_s"):
             tau = info.data.get(name)
             if tau is not None and value > tau:
-                raise _invalid(f"must be at most {name} ({value} > {tau})")
+                raise invalid(f"must be at most {name} ({value} > {tau})")
         drag = info.data.get("drag_per_s")
         if drag is not None and value * drag > 1.0:
-            raise _invalid(f"must be at most 1 / drag_per_s ({value} × {drag} > 1)")
+            raise invalid(f"must be at most 1 / drag_per_s ({value} × {drag} > 1)")
         return value
 
 
-class NoiseConfig(_Section):
-    """Simulated sensor noise, standard deviations (specs/plant.md table, mocap-stream.md)."""
+class NoiseConfig(Section):
+    """Simulated sensor noise, standard deviations (docs/plant.md table, docs/mocap-stream.md)."""
 
-    mocap_position_std_m: NonNegative = Field(0.0005, description="Mocap position σ per axis (m).")
+    # Upper bounds: far beyond any sensor (the reading is noise only), below float overflow.
+    mocap_position_std_m: NonNegative = Field(
+        0.0005, le=1.0, description="Mocap position σ per axis (m), ≤ 1.")
     mocap_angle_std_rad: NonNegative = Field(
-        math.radians(0.1), description="Mocap angle σ (rad), 0.1°.")
+        math.radians(0.1), le=math.pi, description="Mocap angle σ (rad), 0.1°; ≤ π.")
     mocap_latency_ms: float = Field(
         2.0, ge=0.0, le=50.0, description="Mocap stream latency (ms), 0–50: the lockstep runner "
         "samples only the newest frame a tick can see, which needs latency + frame period < "
         "the control period (65 ms); larger latencies would be silently capped.")
     navdata_attitude_std_rad: NonNegative = Field(
-        math.radians(0.2), description="Navdata roll/pitch σ (rad), 0.2°.")
+        math.radians(0.2), le=math.pi, description="Navdata roll/pitch σ (rad), 0.2°; ≤ π.")
     navdata_yaw_std_rad: NonNegative = Field(
-        math.radians(0.3), description="Navdata yaw σ (rad), 0.3°.")
+        math.radians(0.3), le=math.pi, description="Navdata yaw σ (rad), 0.3°; ≤ π.")
     navdata_altitude_std_m: NonNegative = Field(
-        0.010, description="Navdata ultrasound altitude σ (m).")
+        0.010, le=10.0, description="Navdata ultrasound altitude σ (m), ≤ 10.")
     navdata_velocity_std_mps: NonNegative = Field(
-        0.040, description="Navdata optical-flow vx, vy σ (m/s).")
+        0.040, le=10.0, description="Navdata optical-flow vx, vy σ (m/s), ≤ 10.")
 
 
-class TargetConfig(_Section):
+class TargetConfig(Section):
     """A scripted second object on the simulated mocap stream (e.g. a scale car on a loop),
     moving from the start of the simulation."""
 
     object_name: str = Field("car", min_length=1, max_length=24, description="Its mocap name.")
     path: Literal["circle", "figure8"] = Field("circle", description="The loop it drives.")
-    center_m: Vec3 = Field((0.0, 0.0, 0.0), description="Centre of the loop [x, y, z] (m).")
-    radius_m: Positive = Field(1.0, description="Circle radius / figure-8 half width (m).")
+    center_m: CoordinateVec3 = Field(
+        (0.0, 0.0, 0.0), description="Centre of the loop [x, y, z] (m).")
+    radius_m: PathSize = Field(1.0, description="Circle radius / figure-8 half width (m).")
     speed_mps: NonNegative = Field(0.3, le=3.0, description="Speed along the loop (m/s).")
 
-    _name = field_validator("object_name")(classmethod(lambda cls, v: _ascii_object_name(v)))
+    _name = field_validator("object_name")(classmethod(lambda cls, v: ascii_name(v)))
 
 
-class SimConfig(_Section):
+class SimConfig(Section):
     """Simulation: seed, plant, sensor noise and stream rates."""
 
     seed: int = Field(0, ge=0, description="Seed of every random source of the simulation.")
     plant: PlantConfig = Field(default_factory=PlantConfig, description="Plant parameters.")
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="Sensor noise.")
-    mocap_rate_hz: Positive = Field(100.0, description="Simulated mocap stream rate (Hz).")
-    navdata_rate_hz: Positive = Field(15.0, description="Simulated navdata rate (Hz); 15 = demo.")
+    mocap_rate_hz: float = Field(
+        100.0, ge=1.0, le=2000.0, description="Simulated mocap stream rate (Hz), 1 … 2000.")
+    navdata_rate_hz: float = Field(
+        15.0, ge=1.0, le=1000.0, description="Simulated navdata rate (Hz), 1 … 1000; 15 = demo.")
     target: Optional[TargetConfig] = Field(
         None, description="A scripted second object streamed on the mocap stream (null: none).")
     vz_gain: float = Field(
@@ -683,23 +623,25 @@ class SimConfig(_Section):
     navdata_velocity_bias_mps: Vec2 = Field(
         (0.0, 0.0), description="Disturbance: constant bias of the navdata body velocities "
         "[forward, right] (m/s), on top of the drifting one.")
-    settle_s: NonNegative = Field(
+    settle_s: NonNegativeSpan = Field(
         4.0, description="Seconds the controller holds the reference's start point before t = 0 "
-        "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis.")
+        "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis; "
+        "≤ 3600.")
 
 
 # ----------------------------------------------------------------------------- safety
 
 
-class SafetyConfig(_Section):
+class SafetyConfig(Section):
     """Supervisor limits and policies (ardrone_nmpc/safety.py): outside them it holds the last
     command, falls back to the P controller, hovers or lands."""
 
     # z below the floor: a drone resting on it reads ±0.5 mm around 0, which is no breach.
-    geofence_min_m: Vec3 = Field(
+    geofence_min_m: CoordinateVec3 = Field(
         (-3.0, -3.0, -0.2), description="Geofence lower corner [x, y, z] (m); z a little "
         "below the floor, so that mocap noise on the ground is no breach.")
-    geofence_max_m: Vec3 = Field((3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
+    geofence_max_m: CoordinateVec3 = Field(
+        (3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
     geofence_action: Literal["land", "hover"] = Field(
         "land", description="What the drone does when its measured position leaves the geofence.")
     max_tilt_rad: Positive = Field(
@@ -734,174 +676,22 @@ class SafetyConfig(_Section):
         3, ge=1, le=100, description="Consecutive good solves before the NMPC flies again "
         "(ticks).")
 
-    _geofence = _require_increasing("geofence_min_m", "geofence_max_m")
-    _hover_after_hold = _require_increasing("mocap_hold_ms", "mocap_hover_ms")
-    _land_after_hover = _require_increasing("mocap_hover_ms", "mocap_land_ms")
-
-
-# ----------------------------------------------------------------------------- faults
-
-
-class _FaultWindow(_Section):
-    """A fault active from ``start_s`` for ``duration_s`` (experiment time: 0 = the end of the
-    settle phase, the first tick of the experiment)."""
-
-    start_s: Finite = Field(5.0, description="When the fault starts (s, experiment time).")
-    duration_s: Positive = Field(1.0, description="How long it lasts (s).")
-
-
-class MocapDropoutFault(_FaultWindow):
-    """No mocap datagram arrives (network loss or tracker stall)."""
-
-    repeat_every_s: Optional[Positive] = Field(
-        None, description="Repeat the burst with this period (s) until the end; null = once.")
-
-
-class MocapOcclusionFault(_FaultWindow):
-    """Datagrams arrive but the object is missing (markers occluded) or its pose is zero."""
-
-    zero_pose: bool = Field(False, description="Send an all-zero pose instead of omitting it.")
-
-
-class MocapLatencyFault(_FaultWindow):
-    """Mocap datagrams sent during the window arrive ``extra_latency_ms`` late."""
-
-    extra_latency_ms: Positive = Field(200.0, description="Added latency (ms).")
-
-
-class NavdataLossFault(_FaultWindow):
-    """No navdata arrives."""
-
-
-class NavdataCorruptFault(_FaultWindow):
-    """Every navdata packet of the window is corrupted on the wire."""
-
-    kind: Literal["checksum", "truncated", "zero_option"] = Field(
-        "checksum", description="Bad checksum, truncated packet, or an option of size 0.")
-
-
-class DisorderFault(_FaultWindow):
-    """Datagrams of one stream duplicated and reordered (swapped with the next)."""
-
-    stream: Literal["mocap", "navdata"] = Field("mocap", description="Which stream.")
-    duplicate_probability: float = Field(0.3, ge=0, le=1, description="Chance a datagram is sent twice.")
-    reorder_probability: float = Field(0.3, ge=0, le=1, description="Chance a datagram is held back behind the next.")
-
-
-class AtLossFault(_FaultWindow):
-    """AT datagrams lost before the drone: it keeps flying its last command."""
-
-    probability: float = Field(1.0, gt=0, le=1, description="Chance each command is lost.")
-
-
-class SolverDivergeFault(_FaultWindow):
-    """The NMPC returns a diverged, non-finite solution every tick of the window."""
-
-
-class BatteryFloorFault(_Section):
-    """The battery drops to ``level_pct`` at ``start_s``."""
-
-    start_s: Finite = Field(5.0, description="When (s, experiment time).")
-    level_pct: float = Field(19.0, ge=0, le=100, description="Battery level it drops to (%).")
-
-
-class EmergencyFault(_Section):
-    """The drone raises its emergency state (motors cut) at ``start_s``."""
-
-    start_s: Finite = Field(5.0, description="When (s, experiment time).")
-
-
-class WindGustFault(_FaultWindow):
-    """Air moving at ``velocity_mps`` (world frame) during the window; drag pushes the drone."""
-
-    velocity_mps: Vec3 = Field((1.5, 0.0, 0.0), description="Gust air velocity [x, y, z] (m/s).")
-
-
-class WindFault(_Section):
-    """Constant wind for the whole flight (take-off included)."""
-
-    velocity_mps: Vec3 = Field((0.5, 0.0, 0.0), description="Air velocity [x, y, z] (m/s).")
-
-
-class DelayJumpFault(_Section):
-    """The command transport delay jumps to ``delay_s`` at ``start_s``."""
-
-    start_s: Finite = Field(5.0, description="When (s, experiment time).")
-    delay_s: NonNegative = Field(0.5, le=2.0, description="New command delay (s).")
-
-
-class ForeignSessionFault(_Section):
-    """The drone was left in another multiconfig session: writes of per-session keys (the
-    command limits) without that session's ``AT*CONFIG_IDS`` are acknowledged but not applied;
-    it flies, and reports on the control port, the limits it holds."""
-
-    session_id: str = Field("d2e081a3", pattern=r"^[0-9a-fA-F]{8}$", description="Its session id.")
-    profile_id: str = Field("be27e2e4", pattern=r"^[0-9a-fA-F]{8}$", description="Its profile id.")
-    application_id: str = Field("d87f7e0c", pattern=r"^[0-9a-fA-F]{8}$", description="Its application id.")
-    euler_angle_max_rad: float = Field(0.52, gt=0, le=0.52, description="Tilt limit it holds (rad).")
-    control_vz_max_mps: float = Field(2.0, ge=0.2, le=2.0, description="Climb-rate limit it holds (m/s).")
-    control_yaw_radps: float = Field(6.11, ge=0.7, le=6.11, description="Yaw-rate limit it holds (rad/s).")
-
-
-class SelfLandFault(_Section):
-    """The drone lands by itself at ``start_s`` (motor cut-out, low battery, a firmware
-    decision); a REF still asking for take-off launches it again, as the firmware does."""
-
-    start_s: Finite = Field(5.0, description="When (s, experiment time).")
-
-
-class CtrlCodesFault(_Section):
-    """Navdata reports another firmware's ctrl_state transition codes."""
-
-    codes: Literal["sdk", "fw2.4"] = Field(
-        "fw2.4", description="'fw2.4': take-off 7, landing 9; 'sdk': 6, 8 (control_states.h).")
-
-
-class ControlPortDropFault(_Section):
-    """The drone's TCP control port (configuration read-back) does not answer."""
-
-    mode: Literal["silent", "refused"] = Field(
-        "silent", description="'silent': connections accepted, no configuration ever sent; "
-        "'refused': nothing listens.")
-
-
-class FaultsConfig(_Section):
-    """Injected faults (simulation only: ``simulate`` and ``fly --sim``); each is off (null)
-    unless given, e.g. ``--set faults.mocap_dropout.start_s=5``."""
-
-    mocap_dropout: Optional[MocapDropoutFault] = Field(None, description="Mocap dropout bursts.")
-    mocap_occlusion: Optional[MocapOcclusionFault] = Field(None, description="Object occluded.")
-    mocap_latency: Optional[MocapLatencyFault] = Field(None, description="Mocap latency spike.")
-    navdata_loss: Optional[NavdataLossFault] = Field(None, description="Navdata lost.")
-    navdata_corrupt: Optional[NavdataCorruptFault] = Field(None, description="Navdata corrupted.")
-    disorder: Optional[DisorderFault] = Field(None, description="Duplicated/reordered datagrams.")
-    at_loss: Optional[AtLossFault] = Field(None, description="AT commands lost (drone side).")
-    solver_diverge: Optional[SolverDivergeFault] = Field(None, description="Solver forced to diverge.")
-    battery_floor: Optional[BatteryFloorFault] = Field(None, description="Battery at the floor.")
-    emergency: Optional[EmergencyFault] = Field(None, description="Emergency triggered.")
-    wind_gust: Optional[WindGustFault] = Field(None, description="Wind gust on the plant.")
-    wind: Optional[WindFault] = Field(None, description="Constant wind on the plant.")
-    delay_jump: Optional[DelayJumpFault] = Field(None, description="Command-delay jump.")
-    foreign_session: Optional[ForeignSessionFault] = Field(None, description="Drone in another config session.")
-    self_land: Optional[SelfLandFault] = Field(None, description="Drone lands by itself.")
-    ctrl_codes: Optional[CtrlCodesFault] = Field(None, description="Other firmware's ctrl_state codes.")
-    control_port_drop: Optional[ControlPortDropFault] = Field(None, description="Control port does not answer.")
-
-    def active(self) -> list[str]:
-        """Names of the faults that are set."""
-        return [name for name in type(self).model_fields if getattr(self, name) is not None]
+    _geofence = require_increasing("geofence_min_m", "geofence_max_m")
+    _hover_after_hold = require_increasing("mocap_hold_ms", "mocap_hover_ms")
+    _land_after_hover = require_increasing("mocap_hover_ms", "mocap_land_ms")
 
 
 # ----------------------------------------------------------------------------- top level
 
 
-class ExperimentConfig(_Section):
+class ExperimentConfig(Section):
     """One flight experiment."""
 
     name: str = Field(
-        "experiment", pattern=r"^[A-Za-z0-9_.-]+$", description="Experiment name, used in run "
-        "directory names (letters, digits, '_', '.', '-').")
-    duration_s: Positive = Field(30.0, description="Length of the experiment (s).")
+        "experiment", pattern=r"^[A-Za-z0-9_.-]+$", max_length=MAX_NAME_CHARS,
+        description="Experiment name, used in run directory names (letters, digits, '_', '.', "
+        "'-'; at most 200, so that the directory name fits every file system).")
+    duration_s: Span = Field(30.0, description="Length of the experiment (s), ≤ 3600.")
     controller: ControllerConfig = Field(default_factory=ControllerConfig, description="Controller.")
     estimator: EstimatorConfig = Field(default_factory=EstimatorConfig, description="Estimator.")
     reference: ReferenceConfig = Field(default_factory=ReferenceConfig, description="Reference.")
@@ -911,6 +701,17 @@ class ExperimentConfig(_Section):
     sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
     safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
     faults: FaultsConfig = Field(default_factory=FaultsConfig, description="Injected faults (simulation).")
+
+    @field_validator("reference")
+    @classmethod
+    def _lorenz_span(cls, value: ReferenceConfig, info: ValidationInfo) -> ReferenceConfig:
+        duration_s = info.data.get("duration_s")
+        if value.kind == "lorenz" and duration_s is not None:
+            span = value.lorenz_time_scale * duration_s
+            if span > MAX_LORENZ_TIME:
+                raise invalid(f"lorenz_time_scale × duration_s is {span:g} Lorenz time units; "
+                              f"at most {MAX_LORENZ_TIME:g} (the path is integrated over it)")
+        return value
 
     @field_validator("reference")
     @classmethod
@@ -925,7 +726,7 @@ class ExperimentConfig(_Section):
         if value.kind == "follow":
             names.add(value.follow.object_name)
         if len(names) > 1:
-            raise _invalid(f"one second mocap object per experiment, got {sorted(names)} "
+            raise invalid(f"one second mocap object per experiment, got {sorted(names)} "
                            "(follow.object_name and controller.obstacles.*.mocap_object)")
         for k, obs in enumerate(controller.obstacles):
             if obs.mocap_object:  # moving: where it starts is not known here
@@ -936,32 +737,13 @@ class ExperimentConfig(_Section):
             distance = math.sqrt(sum(o * o for o in offset))
             d = obs.radius_m + obs.margin_m
             if distance < d:
-                raise _invalid(f"start_m {list(value.start_m)} is {distance:.3g} m from "
+                raise invalid(f"start_m {list(value.start_m)} is {distance:.3g} m from "
                                f"controller.obstacles.{k}, inside its radius + margin "
                                f"({d:.3g} m)")
         return value
 
 
-# ----------------------------------------------------------------------------- loading
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that rejects duplicate keys instead of keeping the last one."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-        seen: set[Any] = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            try:
-                duplicate = key in seen
-            except TypeError:  # unhashable key: the base class reports it
-                break
-            if duplicate:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping", node.start_mark,
-                    f"duplicate key {key!r}", key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
+# ----------------------------------------------------------------------------- validation
 
 
 def _format_errors(exc: ValidationError) -> list[str]:
@@ -972,79 +754,15 @@ def _format_errors(exc: ValidationError) -> list[str]:
     return messages
 
 
-def apply_overrides(data: Mapping[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
-    """Return a copy of ``data`` with each ``dotted.path=value`` override set.
-
-    The value is parsed as YAML (``5`` → int, ``0.1`` → float, ``[1, 2]`` → list, ``null`` →
-    None, ``p`` → str); missing intermediate mappings are created. Raises :class:`ConfigError`
-    listing every malformed override.
-    """
-    result = copy.deepcopy(dict(data))
-    errors = []
-    for override in overrides:
-        path, sep, text = override.partition("=")
-        keys = path.strip().split(".")
-        if not sep or any(not key.strip() for key in keys):
-            errors.append(f"override {override!r}: expected dotted.path=value")
-            continue
-        keys = [key.strip() for key in keys]
-        try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            errors.append(f"override {override!r}: invalid YAML value: {exc}".replace("\n", " "))
-            continue
-        node = result
-        for depth, key in enumerate(keys[:-1]):
-            child = node.setdefault(key, {})
-            if not isinstance(child, dict):
-                errors.append(f"override {override!r}: "
-                              f"{'.'.join(keys[:depth + 1])} is not a mapping")
-                break
-            node = child
-        else:
-            node[keys[-1]] = value
-    if errors:
-        raise ConfigError(errors)
-    return result
-
-
-def config_from_dict(data: Mapping[str, Any], base_dir: str | Path | None = None
-                     ) -> ExperimentConfig:
-    """Validate a plain mapping; relative ``reference.path_file`` is resolved against
-    ``base_dir`` (default: the working directory). Raises :class:`ConfigError`."""
+def config_from_dict(data: Mapping[str, Any]) -> ExperimentConfig:
+    """Validate a plain mapping (as YAML gives it). Raises :class:`ConfigError` listing every
+    problem as a ``field.path: message`` line."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"(top level): expected a mapping, got {type(data).__name__}")
     try:
-        return ExperimentConfig.model_validate(dict(data), context={"base_dir": base_dir})
+        return ExperimentConfig.model_validate(dict(data))
     except ValidationError as exc:
         raise ConfigError(_format_errors(exc)) from None
-
-
-def _read_yaml(path: Path) -> dict[str, Any]:
-    if not path.exists():
-        raise ConfigError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
-    try:
-        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = f" (line {mark.line + 1})" if mark is not None else ""
-        problem = exc.problem or exc.context or "syntax error"
-        raise ConfigError(f"{path}: invalid YAML{line}: {problem}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}".replace("\n", " ")) from None
-    if data is None:
-        # Most likely a truncated or wrong file; flying the default experiment instead would
-        # be a surprise. `{}` (or no config at all) asks for the defaults explicitly.
-        raise ConfigError(f"{path}: empty file (no settings); write {{}} in it for an "
-                          "experiment with every default")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: the top level must be a mapping of section names to "
-                          f"values, not a {type(data).__name__}")
-    return data
 
 
 def tracked_object(cfg: ExperimentConfig) -> str | None:
@@ -1052,51 +770,3 @@ def tracked_object(cfg: ExperimentConfig) -> str | None:
     if cfg.reference.kind == "follow":
         return cfg.reference.follow.object_name
     return next((o.mocap_object for o in cfg.controller.obstacles if o.mocap_object), None)
-
-
-def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()
-                ) -> ExperimentConfig:
-    """Load and validate an experiment.
-
-    ``path`` None means all defaults. ``overrides`` (``dotted.path=value``) are merged before
-    validation. A relative ``reference.path_file`` written in the file is resolved against the
-    file's directory; one given by an override, against the working directory.
-    Raises :class:`ConfigError` with every problem found.
-    """
-    data: dict[str, Any] = {}
-    if path is not None:
-        path = Path(path)
-        data = _read_yaml(path)
-        reference = data.get("reference")
-        if isinstance(reference, dict) and isinstance(reference.get("path_file"), str):
-            path_file = Path(reference["path_file"]).expanduser()
-            if not path_file.is_absolute():
-                reference["path_file"] = str(path.parent / path_file)
-    return config_from_dict(apply_overrides(data, overrides))
-
-
-class _Dumper(yaml.SafeDumper):
-    """Block-style mappings, vectors on one line (``q: [12.0, 2.0, …]``)."""
-
-
-_Dumper.add_representer(
-    list, lambda dumper, data: dumper.represent_sequence(
-        "tag:yaml.org,2002:seq", data, flow_style=True))
-
-
-def config_to_dict(cfg: ExperimentConfig) -> dict[str, Any]:
-    """The configuration as plain JSON/YAML-safe data (tuples become lists), declared order."""
-    return cfg.model_dump(mode="json")
-
-
-def dump_config(cfg: ExperimentConfig, header: str | None = None) -> str:
-    """The configuration as YAML, keys in declared order, loadable by :func:`load_config`.
-
-    ``header`` (e.g. the tool version) is written as leading ``#`` comment lines.
-    """
-    body = yaml.dump(config_to_dict(cfg), Dumper=_Dumper, sort_keys=False,
-                     default_flow_style=False, allow_unicode=True, width=100)
-    if not header:
-        return body
-    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
-    return comments + body

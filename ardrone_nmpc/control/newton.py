@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ardrone_nmpc.control import kernels
-from ardrone_nmpc.control.cgmres import NmpcSolverBase
+from ardrone_nmpc.control.kernels import STAGE_ACTIVE
 from ardrone_nmpc.control.ocp import OcpSpec
+from ardrone_nmpc.control.solver_base import NmpcSolverBase
+from ardrone_nmpc.core import defaults
 
 
 class NewtonGMRESController(NmpcSolverBase):
@@ -34,18 +35,20 @@ class NewtonGMRESController(NmpcSolverBase):
     """
 
     method = "newton"
-    stage_dim = kernels.STAGE_ACTIVE
+    stage_dim = STAGE_ACTIVE
     _newton_every_tick = True
 
-    def __init__(self, spec: OcpSpec, *, period_s: float = 0.065, kmax: int = 30,
-                 fd_step: float = 1e-6, gmres_rtol: float = 1e-3, tolerance: float = 1e-4,
-                 max_newton_iterations: int = 20, bound_epsilon: float = 1e-3,
-                 divergence_residual: float = 1e3):
+    def __init__(self, spec: OcpSpec, *, period_s: float = defaults.LOOP_PERIOD_S,
+                 kmax: int = defaults.NEWTON_KMAX, fd_step: float = defaults.FD_STEP,
+                 gmres_rtol: float = defaults.GMRES_RTOL, tolerance: float = defaults.TOLERANCE,
+                 max_newton_iterations: int = defaults.MAX_NEWTON_ITERATIONS,
+                 bound_epsilon: float = defaults.BOUND_EPSILON,
+                 divergence_residual: float = defaults.DIVERGENCE_RESIDUAL):
         super().__init__(spec, period_s=period_s, kmax=kmax, fd_step=fd_step,
                          gmres_rtol=gmres_rtol, tolerance=tolerance,
                          max_newton_iterations=max_newton_iterations, dummy_weight=0.0,
                          divergence_residual=divergence_residual, newton_kmax=kmax)
-        self._prm[kernels.P_RHO] = bound_epsilon  # the kernel reads ε from this slot
+        self.memory.bound_epsilon = bound_epsilon
         self.active = np.zeros((spec.horizon_steps, 4), dtype=np.int8)
 
     @classmethod
@@ -63,16 +66,5 @@ class NewtonGMRESController(NmpcSolverBase):
         self.active[:] = 0
 
     def _tick(self, x, ref, initialise: bool) -> int:
-        return kernels.newton_step(self._mem, x, ref, self._iprm, self.active)
+        return self.memory.newton_step(x, ref, self.active)
 
-
-def make_nmpc(controller, *, period_s: float) -> NmpcSolverBase:
-    """The solver named by ``controller.solver.method`` (``cgmres`` | ``newton``)."""
-    method = controller.solver.method
-    if method == "cgmres":
-        from ardrone_nmpc.control.cgmres import CGMRESController
-
-        return CGMRESController.from_config(controller, period_s=period_s)
-    if method == "newton":
-        return NewtonGMRESController.from_config(controller, period_s=period_s)
-    raise ValueError(f"controller.solver.method: unknown solver {method!r}")

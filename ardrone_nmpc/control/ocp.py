@@ -15,7 +15,9 @@ import numpy as np
 
 from ardrone_nmpc.control.obstacles import (OBS_COLS, OBS_DIST, OBS_SHIFT, OBS_WEIGHT,
                                             obstacle_table)
-from ardrone_nmpc.core.types import INPUT_DIM, IX_PSI, STATE_DIM
+from ardrone_nmpc.core import defaults
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import IX_PSI
 
 
 class SolverStatus(str, Enum):
@@ -82,14 +84,14 @@ class OcpSpec:
         curvature (positive semi-definite), not its exact one.
     """
 
-    horizon_steps: int = 15
-    dtau_s: float = 0.1
-    q: np.ndarray = field(default_factory=lambda: np.array([12.0, 2, 7, 2, 5, 10, 13]))
-    r: np.ndarray = field(default_factory=lambda: np.array([4.0, 12, 12, 24]))
-    q_terminal: np.ndarray = field(default_factory=lambda: np.zeros(STATE_DIM))
-    u_min: np.ndarray = field(default_factory=lambda: -np.ones(INPUT_DIM))
-    u_max: np.ndarray = field(default_factory=lambda: np.ones(INPUT_DIM))
-    horizon_ramp_rate_per_s: float = 0.0
+    horizon_steps: int = defaults.HORIZON_STEPS
+    dtau_s: float = defaults.DTAU_S
+    q: np.ndarray = field(default_factory=lambda: np.array(defaults.Q_STATE))
+    r: np.ndarray = field(default_factory=lambda: np.array(defaults.R_INPUT))
+    q_terminal: np.ndarray = field(default_factory=lambda: np.array(defaults.Q_TERMINAL))
+    u_min: np.ndarray = field(default_factory=lambda: np.array(defaults.U_MIN))
+    u_max: np.ndarray = field(default_factory=lambda: np.array(defaults.U_MAX))
+    horizon_ramp_rate_per_s: float = defaults.HORIZON_RAMP_RATE_PER_S
     obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, OBS_COLS)))
     obstacle_gauss_newton: bool = True
 
@@ -140,5 +142,5 @@ class OcpSpec:
         """``½ (x − x_d)ᵀ q (x − x_d) + ½ uᵀ r u`` (ψ error wrapped; tracking only, without
         the obstacle penalty)."""
         err = np.asarray(x, float) - np.asarray(x_ref, float)
-        err[IX_PSI] = (err[IX_PSI] + math.pi) % (2 * math.pi) - math.pi
+        err[IX_PSI] = wrap_angle_rad(err[IX_PSI])
         return 0.5 * float(err @ (self.q * err) + u @ (self.r * u))

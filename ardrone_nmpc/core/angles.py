@@ -1,7 +1,9 @@
-"""Angle helpers: wrapping to (−π, π] and unwrapping next to a reference.
+"""Angle helpers — the one home of angle wrapping: to (−π, π] (rad) or (−180, 180] (°), and
+unwrapping next to a reference.
 
-DESIGN.md §4 wraps ψ to (−π, π]. Errors between headings must be wrapped before a gain is
-applied, otherwise a drone at ψ = 3.1 rad asked for ψ_d = −3.1 rad turns the long way round.
+ψ is wrapped to (−π, π] (docs/design.md). Errors between headings must be wrapped before a
+gain is applied, otherwise a drone at ψ = 3.1 rad asked for ψ_d = −3.1 rad turns the long way
+round. :func:`unwrap_near_turns` is plain arithmetic so that the numba kernels compile it.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ import math
 
 import numpy as np
 
-__all__ = ["TWO_PI", "wrap_angle_rad", "unwrap_near"]
+__all__ = ["TWO_PI", "wrap_angle_rad", "wrap_angle_deg", "unwrap_near", "unwrap_near_turns"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -19,7 +21,7 @@ def _wrap_scalar(a: float) -> float:
     # math.remainder is the exact IEEE remainder: for |a| < π it returns a unchanged (so the
     # wrap is idempotent bit for bit) and it lands in [−π, π]; only −π needs moving to π.
     if not math.isfinite(a):
-        return math.nan
+        return math.nan  # math.remainder(inf, …) raises
     r = math.remainder(a, TWO_PI)
     return math.pi if r <= -math.pi else r
 
@@ -46,9 +48,24 @@ def wrap_angle_rad(a):
     A non-finite input gives NaN (like numpy ufuncs) rather than raising: the command mapping
     is the single gate that refuses to turn a NaN into a drone command.
     """
+    if isinstance(a, float):  # python and numpy floats: the simulators' per-step path
+        return _wrap_scalar(a)
     if np.ndim(a) == 0:
         return _wrap_scalar(float(a))
     return _wrap_array(np.asarray(a, dtype=float))
+
+
+def wrap_angle_deg(a: float) -> float:
+    """Wrap an angle in degrees to (−180, 180] (the navdata yaw); NaN if not finite.
+
+    A checksum-valid navdata packet may carry ±inf (the wire is float32): NaN marks the
+    sample unusable instead of raising in a receiver thread.
+    """
+    a = float(a)
+    if not math.isfinite(a):
+        return math.nan
+    r = math.remainder(a, 360.0)
+    return 180.0 if r <= -180.0 else r
 
 
 def unwrap_near(angle_rad: float, ref_rad: float) -> float:
@@ -70,3 +87,14 @@ def unwrap_near(angle_rad: float, ref_rad: float) -> float:
         The equivalent angle in (ref − π, ref + π], rad.
     """
     return float(ref_rad) + wrap_angle_rad(float(angle_rad) - float(ref_rad))
+
+
+def unwrap_near_turns(angle_rad, ref_rad):
+    """``angle_rad + 2πk`` with ``k = rint((ref_rad − angle_rad) / 2π)``, for finite inputs.
+
+    :func:`unwrap_near` by whole turns: plain arithmetic and a ufunc, so numba compiles it
+    (the solver kernels unwrap the reference horizon with it) and it works elementwise on
+    numpy arrays. It can differ from :func:`unwrap_near` in the last bit, and at an exact
+    half turn it may land on ``ref − π`` instead of ``ref + π`` (``rint`` rounds half to even).
+    """
+    return angle_rad + TWO_PI * np.rint((ref_rad - angle_rad) / TWO_PI)

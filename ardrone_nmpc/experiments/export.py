@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import config_to_dict
+from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.core.extras import import_extra
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs.rundir import CONFIG_FILE, STRING_COLUMNS, RunData, read_run

@@ -199,7 +199,7 @@ def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | N
              seed: int) -> tuple[Path | None, str, int, str]:
     """Fly one case into ``log_dir``; ``(run_dir, ending, ticks_flown, error)``. An
     exception is a result of the matrix: ending ``exception``, its one line in ``error``."""
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.experiments.record import record_lockstep
 
     file, overrides = EXPERIMENTS[experiment]
@@ -213,7 +213,7 @@ def run_case(*, config_dir: Path, log_dir: Path, experiment: str, fault: str | N
 
 def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, ending: str,
              rows: int, error: str) -> CaseResult:
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runs.rundir import read_run
 
     complete, why = log_complete(run_dir, rows)

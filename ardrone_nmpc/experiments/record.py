@@ -118,7 +118,9 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
 
     def fly(recorder: RunRecorder) -> SimResult:
         sink = live.tee(recorder) if live is not None else recorder
-        result = lockstep.run_lockstep(cfg, recorder=sink, seed=seed, progress=progress)
+        # the run flies its own copy of its input files (the path CSV in the run directory)
+        result = lockstep.run_lockstep(recorder.config, recorder=sink, seed=seed,
+                                       progress=progress)
         recorder.event(result.end_t_s, SIMULATED_EVENT, wall_s=time.perf_counter() - wall0,
                        ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)

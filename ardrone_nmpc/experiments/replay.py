@@ -34,7 +34,8 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import IX_PSI, FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
@@ -42,6 +43,7 @@ from ardrone_nmpc.runs.window import experiment_rows
 from ardrone_nmpc.runtime.schedule import phase, write_events
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
+from ardrone_nmpc.errors import UserError
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -70,7 +72,7 @@ SAME_POSE_TOLERANCE_S = 1e-9
 _STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps", "psi_rad")
 
 
-class ReplayError(ValueError):
+class ReplayError(UserError, ValueError):
     """A run that cannot be replayed as asked (one line for the user)."""
 
 
@@ -297,7 +299,7 @@ def _cost(*, cfg, trajectory, t_s: np.ndarray, states: np.ndarray, u_logged: np.
     if not window.any():
         return RerunCost(0, 0.0, 0.0, 0.0)
     err = states[window] - trajectory.state_at(t_s[window])
-    err[:, 6] = (err[:, 6] + math.pi) % (2 * math.pi) - math.pi  # as OcpSpec.stage_cost
+    err[:, IX_PSI] = wrap_angle_rad(err[:, IX_PSI])  # as OcpSpec.stage_cost
     period = cfg.loop.period_s
 
     def input_part(u: np.ndarray) -> float:

@@ -9,7 +9,7 @@
   the config ACK handshake, re-wake after silence).
 * :mod:`ardrone_nmpc.links.mocap_source` — :class:`~ardrone_nmpc.links.mocap_source.MocapSource`:
   the one interface of every mocap source (freshness rules, readings) and
-  :func:`~ardrone_nmpc.links.mocap_source.open_mocap_source` (``mocap.kind``).
+  :func:`~ardrone_nmpc.links.mocap_factory.open_mocap_source` (``mocap.kind``).
 * :mod:`ardrone_nmpc.links.mocap_link` — :class:`~ardrone_nmpc.links.mocap_link.MocapLink`: the
   latest fresh pose of one object from the Vicon-style UDP stream, receipt-stamped.
 * :mod:`ardrone_nmpc.links.motioncapture_source` —

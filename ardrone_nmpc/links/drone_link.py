@@ -86,7 +86,9 @@ from ardrone_nmpc.protocol.navdata import (
     NavdataError,
     decode_navdata,
 )
+from ardrone_nmpc.core.angles import wrap_angle_deg
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
+from ardrone_nmpc.errors import UserError
 
 __all__ = [
     "CONTROL_PORT", "DEFAULT_HOST", "LinkError", "DroneLink", "flight_mode_of",
@@ -103,7 +105,7 @@ _CONFIG_DUMP_MAX_BYTES = 1 << 20
 _CONFIG_GET_RESEND_S = 0.5           # CTRL 4 resend period while the dump has not started
 
 
-class LinkError(RuntimeError):
+class LinkError(UserError, RuntimeError):
     """The drone link failed: no navdata, no config acknowledgement, a closed link, a socket
     error on an explicit command. The message says which and after how long."""
 
@@ -137,15 +139,6 @@ def flight_mode_of(state: DroneState, ctrl_major: int | None) -> FlightMode:
     return FlightMode.FLYING if DroneState.FLY in state else FlightMode.LANDED
 
 
-def _wrap_deg(a: float) -> float:
-    # A checksum-valid packet may carry ±inf (the wire is float32); math.remainder(inf, …)
-    # raises, which would kill the receiver thread. NaN marks the sample as unusable instead.
-    if not math.isfinite(a):
-        return math.nan
-    r = math.remainder(a, 360.0)
-    return 180.0 if r <= -180.0 else r
-
-
 def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
     """The packet's demo option as a :class:`NavdataSample` stamped ``t_s`` (None without one).
 
@@ -157,7 +150,7 @@ def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
     return NavdataSample(
         t_s=t_s, mode=flight_mode_of(packet.state, d.ctrl_major),
         battery_pct=float(d.battery_pct), roll_deg=d.roll_deg, pitch_deg=d.pitch_deg,
-        yaw_deg=_wrap_deg(d.yaw_deg), altitude_m=d.altitude_m, vx_body_mps=d.vx_body_mps,
+        yaw_deg=wrap_angle_deg(d.yaw_deg), altitude_m=d.altitude_m, vx_body_mps=d.vx_body_mps,
         vy_body_mps=d.vy_body_mps, vz_mps=d.vz_mps)
 
 

@@ -36,8 +36,7 @@ from ardrone_nmpc.core.types import MocapPose
 from ardrone_nmpc.links.udp import Clock, LinkStats
 from ardrone_nmpc.protocol.mocap import MocapObjectPose
 
-__all__ = ["MOCAP_KINDS", "MocapSource", "MocapConnectError", "mocap_pose_of",
-           "open_mocap_source"]
+__all__ = ["MOCAP_KINDS", "MocapSource", "MocapConnectError", "mocap_pose_of"]
 
 MOCAP_KINDS = ("vicon_udp", "motioncapture")
 _POSE_BITS = struct.Struct("<6d")     # the six pose floats, to compare poses bit for bit
@@ -219,26 +218,3 @@ class MocapSource:
             self._rx_t_s = t_s
         self._poses += 1
         counts[self.object_name] = counts.get(self.object_name, 0) + 1
-
-
-def open_mocap_source(mocap_cfg, *, other_objects: tuple[str, ...] = (),
-                      port: int | None = None, clock: Clock = time.monotonic) -> MocapSource:
-    """The source ``mocap_cfg`` (a ``MocapConfig``) describes, not yet started.
-
-    ``port`` overrides ``mocap.port`` (``fly --mocap-port``; UDP only). The ``motioncapture``
-    library is imported only here, and only for that kind: a missing one raises
-    :class:`MocapConnectError` naming the extra to install.
-    """
-    kind = getattr(mocap_cfg, "kind", "vicon_udp")
-    if kind == "vicon_udp":
-        from ardrone_nmpc.links.mocap_link import MocapLink
-
-        return MocapLink(mocap_cfg.bind_host, port or mocap_cfg.port,
-                         object_name=mocap_cfg.object_name, clock=clock,
-                         other_objects=tuple(other_objects))
-    if kind == "motioncapture":
-        from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
-
-        return MotionCaptureSource.from_config(mocap_cfg, other_objects=tuple(other_objects),
-                                               clock=clock)
-    raise ValueError(f"unknown mocap.kind {kind!r}; choose one of {', '.join(MOCAP_KINDS)}")

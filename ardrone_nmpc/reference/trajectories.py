@@ -24,7 +24,6 @@ Times before 0 (or before a waypoint file's first time) hold the first point wit
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -33,6 +32,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
+from ardrone_nmpc.reference.waypoints import ReferenceError, WaypointFile, read_waypoint_file
 
 if TYPE_CHECKING:  # pragma: no cover
     from ardrone_nmpc.config.schema import ReferenceConfig
@@ -50,18 +50,18 @@ __all__ = [
     "SquareAltitudes",
     "Step",
     "Trajectory",
-    "WAYPOINT_COLUMNS",
     "Waypoints",
     "horizon",
-    "load_waypoints_csv",
     "make_trajectory",
+    "path_file",
 ]
 
 #: Largest spacing (m) between consecutive points of a path's polyline.
 POLYLINE_SPACING_M = 0.02
 
-#: Columns of a waypoint CSV file, in the order they are written.
-WAYPOINT_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "psi_rad")
+#: Most points of a computed (Lorenz) polyline; a longer path is sampled more coarsely than
+#: POLYLINE_SPACING_M (24 MB of points; the configs' Lorenz path needs ≈ 6000).
+MAX_POLYLINE_POINTS = 1_000_000
 
 #: Lorenz-system parameters (the classic chaotic set).
 LORENZ_SIGMA = 10.0
@@ -70,13 +70,6 @@ LORENZ_BETA = 8.0 / 3.0
 
 _POS = (IX_X, IX_Y, IX_Z)
 _VEL = (IX_VX, IX_VY, IX_VZ)
-
-
-class ReferenceError(ValueError):  # noqa: A001 - the project's name; shadows the builtin here only
-    """A reference that cannot be built, e.g. a malformed waypoint file.
-
-    File errors read ``<file>:<line>: <message>`` with a 1-based line number.
-    """
 
 
 @runtime_checkable
@@ -278,6 +271,12 @@ class Waypoints:
         self.psi_rad = np.unwrap(psi)
         self._dt = np.diff(t)
         self._vel = np.diff(p, axis=0) / self._dt[:, None]  # (K-1, 3) segment velocities
+
+    @classmethod
+    def from_file(cls, waypoints: WaypointFile) -> Waypoints:
+        """The trajectory of a waypoint file read by
+        :func:`~ardrone_nmpc.reference.waypoints.read_waypoint_file`."""
+        return cls(waypoints.t_s, waypoints.positions_m, waypoints.psi_rad)
 
     @property
     def duration_s(self) -> float:
@@ -533,10 +532,11 @@ class Lorenz:
         return float(np.linalg.norm(s[:, list(_VEL)], axis=1).max())
 
     def polyline_m(self) -> np.ndarray:
-        """The path over ``[0, duration_s]``, ≤ 2 cm spacing (chord ≤ speed·Δt)."""
+        """The path over ``[0, duration_s]``, ≤ 2 cm spacing (chord ≤ speed·Δt); at most
+        :data:`MAX_POLYLINE_POINTS` points (coarser spacing beyond that)."""
         peak = self.peak_speed_mps()
         dt = 0.75 * POLYLINE_SPACING_M / max(peak, 1e-9)
-        n = max(2, math.ceil(self._duration_s / dt) + 1)
+        n = min(MAX_POLYLINE_POINTS, max(2, math.ceil(self._duration_s / dt) + 1))
         t = np.linspace(0.0, self._duration_s, n)
         return _dedupe(self.state_at(t)[:, list(_POS)])
 
@@ -544,79 +544,16 @@ class Lorenz:
 # ----------------------------------------------------------------------------- files
 
 
-def _file_error(path: Path, line: int, message: str) -> ReferenceError:
-    return ReferenceError(f"{path}:{line}: {message}")
-
-
-def load_waypoints_csv(path: str | Path) -> Waypoints:
-    """Read a waypoint file into a :class:`Waypoints` trajectory.
-
-    Format: a header row naming the columns ``t_s,x_m,y_m,z_m,psi_rad`` (any order; other
-    columns are ignored), then one waypoint per row: time (s, strictly increasing), position
-    (m), heading (rad). Blank lines and lines starting with ``#`` are skipped. At least two
-    waypoints.
-
-    Raises
-    ------
-    ReferenceError
-        ``<file>:<line>: <message>`` (1-based line) for an empty file, a missing or repeated
-        column, a row of the wrong length, a non-numeric or non-finite cell, a time not after
-        the previous one, or fewer than two waypoints; ``<file>: cannot read: …`` if unreadable.
-    """
-    path = Path(path)
+def path_file(ref_cfg: ReferenceConfig) -> WaypointFile:
+    """The waypoint file of a 'path' reference, read and checked
+    (:func:`~ardrone_nmpc.reference.waypoints.read_waypoint_file`); every error starts
+    ``reference.path_file:``."""
+    if ref_cfg.path_file is None:
+        raise ReferenceError("reference.path_file: required when kind is 'path'")
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ReferenceError(f"{path}: cannot read: {exc}") from None
-
-    rows: list[tuple[int, list[str]]] = []
-    for lineno, fields in enumerate(csv.reader(text.splitlines()), start=1):
-        cells = [c.strip() for c in fields]
-        if not any(cells) or cells[0].startswith("#"):
-            continue
-        rows.append((lineno, cells))
-    if not rows:
-        raise _file_error(path, 1, "empty file: expected a header row "
-                          + ",".join(WAYPOINT_COLUMNS))
-
-    header_line, header = rows[0]
-    for name in WAYPOINT_COLUMNS:
-        if header.count(name) > 1:
-            raise _file_error(path, header_line, f"column '{name}' appears more than once")
-    missing = [name for name in WAYPOINT_COLUMNS if name not in header]
-    if missing:
-        raise _file_error(path, header_line,
-                          f"missing column{'s' if len(missing) > 1 else ''} "
-                          f"{', '.join(repr(m) for m in missing)} (header: {','.join(header)}; "
-                          f"expected {','.join(WAYPOINT_COLUMNS)})")
-    index = [header.index(name) for name in WAYPOINT_COLUMNS]
-
-    values = []
-    for lineno, cells in rows[1:]:
-        if len(cells) != len(header):
-            raise _file_error(path, lineno,
-                              f"expected {len(header)} values, got {len(cells)}")
-        row = []
-        for name, i in zip(WAYPOINT_COLUMNS, index):
-            try:
-                v = float(cells[i])
-            except ValueError:
-                raise _file_error(path, lineno,
-                                  f"column '{name}': {cells[i]!r} is not a number") from None
-            if not math.isfinite(v):
-                raise _file_error(path, lineno,
-                                  f"column '{name}': {cells[i]!r} is not a finite number")
-            row.append(v)
-        if values and not row[0] > values[-1][0]:
-            raise _file_error(path, lineno,
-                              f"time {row[0]} is not after the previous {values[-1][0]}")
-        values.append(row)
-    if len(values) < 2:
-        last_line = rows[-1][0]
-        raise _file_error(path, last_line, f"at least 2 waypoints are needed, got {len(values)}")
-
-    data = np.asarray(values, dtype=np.float64)
-    return Waypoints(data[:, 0], data[:, 1:4], data[:, 4])
+        return read_waypoint_file(ref_cfg.path_file)
+    except ReferenceError as err:
+        raise ReferenceError(f"reference.path_file: {err}") from None
 
 
 # ----------------------------------------------------------------------------- from config
@@ -636,13 +573,13 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
     ``ellipse``               :class:`Ellipse` around ``center_m`` at altitude ``start_m[2]``
     ``lorenz``                :class:`Lorenz` around ``center_m``, altitude ``start_m[2]``,
                               ``lorenz_scale_m``, ``lorenz_time_scale``
-    ``path``                  :func:`load_waypoints_csv` of ``path_file``
+    ``path``                  :class:`Waypoints` of ``path_file`` (:func:`path_file`)
     ``follow``                :class:`~ardrone_nmpc.reference.live.LiveTarget` (a second mocap object)
     ========================  =================================================================
 
     Paths use ``start_psi_rad`` as their constant heading. ``duration_s`` (s) is the flight
     time a Lorenz path must cover (default: :class:`Lorenz`'s); other kinds ignore it.
-    Raises :class:`ReferenceError` for a bad waypoint file or an unknown kind.
+    Raises :class:`ReferenceError` for a missing or bad waypoint file or an unknown kind.
     """
     kind = ref_cfg.kind
     start = np.asarray(ref_cfg.start_m, dtype=np.float64)
@@ -663,9 +600,7 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
         return Lorenz(ref_cfg.lorenz_scale_m, ref_cfg.lorenz_time_scale, ref_cfg.center_m,
                       start[2], psi, **extra)
     if kind == "path":
-        if ref_cfg.path_file is None:
-            raise ReferenceError("reference.path_file: required when kind is 'path'")
-        return load_waypoints_csv(ref_cfg.path_file)
+        return Waypoints.from_file(path_file(ref_cfg))
     if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/reference/live.py)
         from ardrone_nmpc.reference.live import LiveTarget
 

@@ -1,10 +1,16 @@
-"""The run directory (DESIGN.md §5): write it while flying, read it back for summaries and replay.
+"""The run directory (docs/design.md): write it while flying, read it back for summaries and replay.
 
-A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` holds:
+A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` stands on its own (it can be moved to
+another machine) and holds:
 
 * ``config.yaml`` — the resolved :class:`~ardrone_nmpc.config.schema.ExperimentConfig`, written at
   creation (before the first row), with ``#`` comment lines ``ardrone-nmpc <version>``,
-  ``seed: <seed>`` and ``created: <ISO time>``; :func:`~ardrone_nmpc.config.schema.load_config` reads it.
+  ``seed: <seed>``, ``created: <ISO time>`` and where each input file was copied from;
+  :func:`~ardrone_nmpc.config.io.load_config` reads it.
+* ``inputs/`` — a copy of every input file the config names (the waypoint file of reference
+  kind 'path'), checked before the directory is made; ``config.yaml`` names the copy by a
+  path relative to the run directory, and the run reads the copy. Runs written before the
+  copy existed name the original by its absolute path and still read.
 * ``log.csv`` — a header row, then one row per control tick, columns :data:`LOG_COLUMNS`.
   Plain CSV without quoting: string cells never contain ``,``, ``"`` or line breaks (the writer
   refuses them). Numbers are written as the *shortest* decimal that reads back to the same
@@ -13,7 +19,9 @@ A run directory ``<log_dir>/<YYYYmmdd-HHMMSS>-<name>/`` holds:
   round-trips bit for bit; NaN and ±inf are ``nan``/``inf``/``-inf``; a missing key is an empty
   cell (read back as NaN).
 * ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``.
-* ``summary.csv`` — ``axis,metric,value,unit`` rows (:mod:`ardrone_nmpc.runs.summary`).
+* ``summary.csv`` — ``axis,metric,value,unit`` rows (:class:`SummaryRow`), computed by
+  :mod:`ardrone_nmpc.runs.summary`, written and read here (:func:`write_summary`,
+  :func:`read_summary`).
 
 Crash safety: ``log.csv`` and ``events.jsonl`` are opened unbuffered, and each row/event is
 handed to the kernel by one ``write`` call, so a killed process (SIGKILL included) loses at
@@ -38,19 +46,20 @@ import math
 import operator
 import os
 import re
+import shutil
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import orjson
 
 from ardrone_nmpc import __version__
-from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, dump_config, load_config
-
-if TYPE_CHECKING:  # pragma: no cover
-    from ardrone_nmpc.runs.summary import SummaryRow
+from ardrone_nmpc.config.io import dump_config, load_config
+from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
+from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.reference.trajectories import path_file
 
 __all__ = [
     "LOG_COLUMNS",
@@ -59,8 +68,10 @@ __all__ = [
     "RunData",
     "RunRecorder",
     "STRING_COLUMNS",
+    "SummaryRow",
     "format_number",
     "read_run",
+    "read_summary",
     "write_summary",
 ]
 
@@ -91,7 +102,7 @@ LOG_COLUMNS: tuple[str, ...] = (
 STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode",
                                             "nav_mode"})
 
-#: Columns a ``log.csv`` header must name (DESIGN.md §5); the others of :data:`LOG_COLUMNS`
+#: Columns a ``log.csv`` header must name (docs/design.md); the others of :data:`LOG_COLUMNS`
 #: are filled with NaN (or ``""``) by :func:`read_run` when absent.
 REQUIRED_COLUMNS: tuple[str, ...] = (
     "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
@@ -105,6 +116,8 @@ CONFIG_FILE = "config.yaml"
 LOG_FILE = "log.csv"
 EVENTS_FILE = "events.jsonl"
 SUMMARY_FILE = "summary.csv"
+#: Folder of the copied input files, inside the run directory.
+INPUTS_DIR = "inputs"
 
 _COLUMN_SET = frozenset(LOG_COLUMNS)
 _INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
@@ -152,8 +165,9 @@ def _fast_line(cells: list, quotes: int) -> bytes | None:
     return text.replace(b'"', b"") + b"\n"
 
 
-class LogError(ValueError):
-    """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line)."""
+class LogError(UserError, ValueError):
+    """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line;
+    exit code 1)."""
 
 
 def _json_default(obj: Any) -> Any:
@@ -189,15 +203,46 @@ def _getter(names: list[str]) -> Callable[[Mapping[str, Any]], tuple]:
     return lambda row: ()
 
 
+def _read_inputs(cfg: ExperimentConfig) -> dict:
+    """The input files ``cfg`` names, read and checked: ``{field: WaypointFile}``."""
+    if cfg.reference.kind == "path" or cfg.reference.path_file is not None:
+        return {"path_file": path_file(cfg.reference)}
+    return {}
+
+
+def _copy_inputs(path: Path, cfg: ExperimentConfig, inputs: dict
+                 ) -> tuple[ExperimentConfig, ExperimentConfig, str]:
+    """Write each input into ``path/inputs/``. Returns the config to record (inputs named
+    relative to the run directory), the config to fly (the copies' absolute paths) and the
+    header lines saying where each copy came from."""
+    if not inputs:
+        return cfg, cfg, ""
+    (path / INPUTS_DIR).mkdir()
+    relative, absolute, origins = {}, {}, ""
+    for name, source in inputs.items():
+        target = path / INPUTS_DIR / source.path.name
+        target.write_bytes(source.raw)
+        relative[name] = f"{INPUTS_DIR}/{source.path.name}"
+        absolute[name] = str(target.resolve())
+        origins += f"\nreference.{name}: copied from {source.path}"
+    ref = cfg.reference
+    recorded = cfg.model_copy(update={"reference": ref.model_copy(update=relative)})
+    flown = cfg.model_copy(update={"reference": ref.model_copy(update=absolute)})
+    return recorded, flown, origins
+
+
 class RunRecorder:
     """Writes one run directory; a context manager (leaving it closes the files).
 
     Make one with :meth:`create`. :meth:`write_row` and :meth:`event` hand each line to the OS
-    at once (see the module docstring).
+    at once (see the module docstring). :attr:`config` is the configuration the run must fly:
+    the one given, with its input files replaced by their copies in the run directory.
     """
 
-    def __init__(self, path: Path, log_file: Any, events_file: Any) -> None:
+    def __init__(self, path: Path, log_file: Any, events_file: Any,
+                 config: ExperimentConfig | None = None) -> None:
         self.path = path
+        self.config = config
         self._log = log_file
         self._events = events_file
         self.rows_written = 0
@@ -208,8 +253,13 @@ class RunRecorder:
     def create(cls, log_dir: str | Path, cfg: ExperimentConfig, *, seed: int | None,
                now: _dt.datetime | None = None) -> RunRecorder:
         """Create ``log_dir/<YYYYmmdd-HHMMSS>-<cfg.name>/`` (``-2``, ``-3``, … appended if it
-        exists; parents created), write ``config.yaml``, open ``log.csv`` (header row written)
-        and ``events.jsonl``.
+        exists; parents created), copy the input files into ``inputs/``, write
+        ``config.yaml``, open ``log.csv`` (header row written) and ``events.jsonl``. Fly
+        :attr:`config` (it reads the copies).
+
+        The input files are read and checked first: a missing or malformed waypoint file
+        raises :class:`~ardrone_nmpc.reference.waypoints.ReferenceError` before anything is
+        created; a failure while filling the directory removes it again.
 
         Parameters
         ----------
@@ -218,6 +268,7 @@ class RunRecorder:
         seed : the run's random seed (recorded in ``config.yaml``'s header), or None.
         now : the creation time for the name and header (default: the local time now).
         """
+        inputs = _read_inputs(cfg)  # checked before anything is created
         now = now if now is not None else _dt.datetime.now().astimezone()
         log_dir = Path(log_dir)
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -230,10 +281,21 @@ class RunRecorder:
                 break
             except FileExistsError:
                 suffix += 1
+        try:
+            return cls._fill(path, cfg, inputs, seed=seed, now=now)
+        except BaseException:  # a disk full or read-only: no half-made run directory
+            shutil.rmtree(path, ignore_errors=True)
+            raise
+
+    @classmethod
+    def _fill(cls, path: Path, cfg: ExperimentConfig, inputs: dict, *, seed: int | None,
+              now: _dt.datetime) -> RunRecorder:
+        """Copy the inputs, write ``config.yaml``, open ``log.csv`` and ``events.jsonl``."""
+        recorded, flown, origins = _copy_inputs(path, cfg, inputs)
         header = (f"ardrone-nmpc {__version__}\nseed: {seed}\n"
-                  f"created: {now.isoformat(timespec='seconds')}")
+                  f"created: {now.isoformat(timespec='seconds')}{origins}")
         with open(path / CONFIG_FILE, "w", encoding="utf-8") as f:
-            f.write(dump_config(cfg, header=header))
+            f.write(dump_config(recorded, header=header))
             f.flush()
             os.fsync(f.fileno())
         log_file = open(path / LOG_FILE, "xb", buffering=0)  # noqa: SIM115 - closed in close()
@@ -243,7 +305,7 @@ class RunRecorder:
         except BaseException:
             log_file.close()
             raise
-        return cls(path, log_file, events_file)
+        return cls(path, log_file, events_file, flown)
 
     # -- writing ----------------------------------------------------------------------------
     def write_row(self, row: Mapping[str, Any]) -> None:
@@ -361,13 +423,26 @@ class RunRecorder:
         return f"RunRecorder({str(self.path)!r}, rows_written={self.rows_written})"
 
 
-# ----------------------------------------------------------------------------- reading
+# ----------------------------------------------------------------------------- summary.csv
+
+
+@dataclass(frozen=True)
+class SummaryRow:
+    """One line of ``summary.csv``: ``value`` of ``metric`` for ``axis``, in ``unit``."""
+
+    axis: str
+    metric: str
+    value: float
+    unit: str
+
+
+SUMMARY_HEADER = "axis,metric,value,unit"
 
 
 def write_summary(run_dir: str | Path, rows: Iterable[SummaryRow]) -> Path:
     """Write ``run_dir/summary.csv`` (``axis,metric,value,unit``; values as in ``log.csv``),
     replacing any earlier one atomically. Returns its path."""
-    lines = ["axis,metric,value,unit"]
+    lines = [SUMMARY_HEADER]
     for r in rows:
         cells = (str(r.axis), str(r.metric), format_number(r.value), str(r.unit))
         for c in cells:
@@ -379,6 +454,33 @@ def write_summary(run_dir: str | Path, rows: Iterable[SummaryRow]) -> Path:
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     os.replace(tmp, target)
     return target
+
+
+def read_summary(run_dir: str | Path) -> list[SummaryRow]:
+    """Read a run's ``summary.csv`` (written by :func:`write_summary`).
+
+    Raises :class:`LogError` (``<file>:<line>: …``) if it is missing or malformed.
+    """
+    path = Path(run_dir) / SUMMARY_FILE
+    lines = _read_text(path).splitlines()
+    if not lines or lines[0].strip() != SUMMARY_HEADER:
+        raise LogError(f"{path}:1: expected the header {SUMMARY_HEADER}")
+    out = []
+    for i, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        cells = line.split(",")
+        if len(cells) != 4:
+            raise LogError(f"{path}:{i}: expected 4 cells, got {len(cells)}")
+        try:
+            value = float(cells[2])
+        except ValueError:
+            raise LogError(f"{path}:{i}: column value: {cells[2]!r} is not a number") from None
+        out.append(SummaryRow(cells[0], cells[1], value, cells[3]))
+    return out
+
+
+# ----------------------------------------------------------------------------- reading
 
 
 @dataclass
@@ -561,13 +663,17 @@ def read_run(run_dir: str | Path) -> RunData:
     cfg_path = path / CONFIG_FILE
     cfg_text = _read_text(cfg_path)
     try:
-        config = load_config(cfg_path)
+        config = load_config(cfg_path, allow_retired=True)
     except ConfigError as exc:
         detail = "; ".join(exc.messages)
         prefix = "" if detail.startswith(str(cfg_path)) else f"{cfg_path}: "
         raise LogError(f"{prefix}{detail}") from None
     seed, version = _parse_header_comments(cfg_text)
     warnings: list[str] = []
+    missing = config.reference.path_file
+    if missing is not None and not Path(missing).is_file():  # an older run: no copy
+        warnings.append(f"{cfg_path}: reference.path_file {missing} is gone: path metrics "
+                        "and the reference path cannot be shown")
     columns = _read_log(path / LOG_FILE, warnings)
     events = _read_events(path / EVENTS_FILE, warnings)
     return RunData(path=path, config=config, columns=columns, events=events, seed=seed,

@@ -1,8 +1,9 @@
-"""Run metrics (DESIGN.md §5 ``summary.csv``) and their tables.
+"""Run metrics (the rows of ``summary.csv``, docs/design.md) and their tables.
 
 The metric functions are pure numpy and take plain arrays; :func:`summarise` applies them to a
 run read by :func:`~ardrone_nmpc.runs.rundir.read_run`, and :func:`render_summary` /
-:func:`render_side_by_side` lay the rows out as ``rich`` tables.
+:func:`render_side_by_side` lay the rows out as ``rich`` tables. ``summary.csv`` itself is
+written and read by :mod:`ardrone_nmpc.runs.rundir` (:class:`SummaryRow`).
 
 What :func:`summarise` measures, and over which rows
 ---------------------------------------------------
@@ -38,8 +39,10 @@ What :func:`summarise` measures, and over which rows
   tick's Newton iterations (mean/max) and ‖F‖ at its exit (p50/max).
 * **Loop**: ``fallbacks`` = rows of the experiment window whose mode is set and is not
   ``track`` (hovers on stale data, P-controller fallbacks, supervisor landings…);
-  ``overruns`` = rows with ``tick_late_ms`` above one control period; ``tick_late_ms``
-  p50/p99/max and ``compute_us`` mean/p99/max when logged.
+  ``overruns`` = control deadlines skipped between two logged ticks because a tick ran past
+  the next deadline (a gap of g periods in ``t_s`` is g − 1 overruns; the ``loop_timing``
+  event of ``fly`` counts the same); ``tick_late_ms`` p50/p99/max and ``compute_us``
+  mean/p99/max when logged.
 * **Links**: mocap and navdata age p99/max (finite ages) and the ticks without any sample yet
   (age ``inf``).
 """
@@ -48,21 +51,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.control.obstacles import clearance_m
-from ardrone_nmpc.runs.rundir import SUMMARY_FILE, LogError, read_run, write_summary
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.reference.trajectories import make_trajectory
+from ardrone_nmpc.reference.waypoints import ReferenceError
+from ardrone_nmpc.runs.rundir import RunData, SummaryRow, read_run, read_summary, write_summary
 from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows, flying_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from rich.table import Table
-
-    from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = [
     "CLEARANCE_TOLERANCE_M",
@@ -71,12 +73,14 @@ __all__ = [
     "PATH_KINDS",
     "SummaryRow",
     "clearance_stats",
+    "format_value",
     "input_stats",
     "path_deviation",
     "read_summary",
     "write_run_summary",
     "render_side_by_side",
     "render_summary",
+    "skipped_deadlines",
     "solver_stats",
     "step_metrics",
     "summarise",
@@ -95,16 +99,6 @@ _PCMD = ("cmd_roll", "cmd_pitch", "cmd_gaz", "cmd_yaw")
 _AXES = (("x", "x_m", "x_true_m", "x_ref_m", "m"), ("y", "y_m", "y_true_m", "y_ref_m", "m"),
          ("z", "z_m", "z_true_m", "z_ref_m", "m"),
          ("psi", "psi_rad", "psi_true_rad", "psi_ref_rad", "rad"))
-
-
-@dataclass(frozen=True)
-class SummaryRow:
-    """One line of ``summary.csv``: ``value`` of ``metric`` for ``axis``, in ``unit``."""
-
-    axis: str
-    metric: str
-    value: float
-    unit: str
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -353,6 +347,18 @@ def solver_stats(solve_us: np.ndarray, status: Sequence[str] | np.ndarray) -> di
             "non_ok": int(sum(by_status.values())), "by_status": dict(sorted(by_status.items()))}
 
 
+def skipped_deadlines(t_s: np.ndarray, period_s: float) -> int:
+    """Control deadlines skipped between consecutive logged ticks: a tick logs at its
+    deadline's time, so a gap of g periods in ``t_s`` is g − 1 skipped deadlines (the loop
+    skips, rather than bursts through, the deadlines a long tick overran)."""
+    t = np.asarray(t_s, dtype=np.float64)
+    t = t[np.isfinite(t)]
+    if t.size < 2:
+        return 0
+    gaps = np.rint(np.diff(t) / period_s)
+    return int(np.sum(np.maximum(gaps - 1.0, 0.0)))
+
+
 # ----------------------------------------------------------------------------- summarise
 
 
@@ -386,8 +392,6 @@ def _rmse(e: np.ndarray) -> float:
 def summarise(run: RunData) -> list[SummaryRow]:
     """The metrics of a run as :class:`SummaryRow` s (see the module docstring for which rows
     each metric uses). Needs the columns :func:`~ardrone_nmpc.runs.rundir.read_run` provides."""
-    from ardrone_nmpc.reference.trajectories import make_trajectory
-
     cfg = run.config
     cols: Mapping[str, np.ndarray] = run.columns
     t = np.asarray(cols["t_s"], dtype=np.float64)
@@ -426,9 +430,13 @@ def summarise(run: RunData) -> list[SummaryRow]:
     else:
         sel = window & flying_rows(mode)
         if ref.kind in PATH_KINDS:
-            polyline = make_trajectory(ref, duration_s=cfg.duration_s).polyline_m()
-            xyz = np.column_stack([pos["x"], pos["y"], pos["z"]])[sel]
-            mean_d, max_d = path_deviation(xyz, polyline)
+            try:
+                polyline = make_trajectory(ref, duration_s=cfg.duration_s).polyline_m()
+            except ReferenceError:  # an older run whose path file is gone (read_run warns)
+                mean_d = max_d = math.nan
+            else:
+                xyz = np.column_stack([pos["x"], pos["y"], pos["z"]])[sel]
+                mean_d, max_d = path_deviation(xyz, polyline)
             add(SummaryRow("path", "mean_deviation", mean_d, "m"))
             add(SummaryRow("path", "max_deviation", max_d, "m"))
         sq = np.zeros(int(sel.sum()))
@@ -492,8 +500,8 @@ def summarise(run: RunData) -> list[SummaryRow]:
     late = np.asarray(cols.get("tick_late_ms", np.full(n, np.nan)), dtype=np.float64)
     pct = _percentiles(late)
     if pct is not None:
-        period_ms = cfg.loop.period_s * 1e3
-        add(SummaryRow("loop", "overruns", float(np.sum(late > period_ms)), "count"))
+        add(SummaryRow("loop", "overruns", float(skipped_deadlines(t, cfg.loop.period_s)),
+                       "count"))
         add(SummaryRow("loop", "tick_late_p50", pct[0], "ms"))
         add(SummaryRow("loop", "tick_late_p99", pct[1], "ms"))
         add(SummaryRow("loop", "tick_late_max", pct[2], "ms"))
@@ -518,33 +526,6 @@ def summarise(run: RunData) -> list[SummaryRow]:
 # ----------------------------------------------------------------------------- files, tables
 
 
-def read_summary(run_dir: str | Path) -> list[SummaryRow]:
-    """Read a run's ``summary.csv`` (written by ``RunRecorder.write_summary``).
-
-    Raises :class:`~ardrone_nmpc.runs.rundir.LogError` (``<file>:<line>: …``) if it is missing or
-    malformed.
-    """
-    path = Path(run_dir) / SUMMARY_FILE
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
-    lines = path.read_text(encoding="utf-8").splitlines()
-    if not lines or lines[0].strip() != "axis,metric,value,unit":
-        raise LogError(f"{path}:1: expected the header axis,metric,value,unit")
-    out = []
-    for i, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        cells = line.split(",")
-        if len(cells) != 4:
-            raise LogError(f"{path}:{i}: expected 4 cells, got {len(cells)}")
-        try:
-            value = float(cells[2])
-        except ValueError:
-            raise LogError(f"{path}:{i}: column value: {cells[2]!r} is not a number") from None
-        out.append(SummaryRow(cells[0], cells[1], value, cells[3]))
-    return out
-
-
 def write_run_summary(run_dir: str | Path) -> tuple[RunData, list[SummaryRow]]:
     """Read the run at ``run_dir`` back, summarise it and write its ``summary.csv`` (the
     last file of every run directory); returns the run and its rows."""
@@ -554,7 +535,9 @@ def write_run_summary(run_dir: str | Path) -> tuple[RunData, list[SummaryRow]]:
     return run, rows
 
 
-def _fmt(value: float, unit: str) -> str:
+def format_value(value: float, unit: str) -> str:
+    """A summary value as the tables show it: counts as integers, fractions with 3 decimals,
+    the rest with 4 significant digits, NaN as —."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "—"
     if unit in ("count", "flag") and float(value).is_integer():
@@ -574,7 +557,7 @@ def render_summary(rows: Sequence[SummaryRow], title: str | None = None) -> Tabl
     table.add_column("value", justify="right")
     table.add_column("unit")
     for r in rows:
-        table.add_row(r.axis, r.metric, _fmt(r.value, r.unit), r.unit)
+        table.add_row(r.axis, r.metric, format_value(r.value, r.unit), r.unit)
     return table
 
 
@@ -599,6 +582,6 @@ def render_side_by_side(runs: Sequence[tuple[str, Sequence[SummaryRow]]],
     for label, _ in runs:
         table.add_column(label, justify="right")
     for (axis, metric), unit in keys.items():
-        cells = [_fmt(v[(axis, metric)], unit) if (axis, metric) in v else "" for v in values]
+        cells = [format_value(v[(axis, metric)], unit) if (axis, metric) in v else "" for v in values]
         table.add_row(axis, metric, unit, *cells)
     return table

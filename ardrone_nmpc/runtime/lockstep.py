@@ -25,9 +25,11 @@ from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S,
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
+from ardrone_nmpc.sim.backends import make_plant
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import WireSensors
 from ardrone_nmpc.sim.target import target_pose
+from ardrone_nmpc.errors import UserError
 
 
 @dataclass
@@ -47,7 +49,7 @@ class SimResult:
     end_t_s: float = math.nan  # experiment time when it ended: touch-down, or rest after a stop
 
 
-class TakeoffRefused(RuntimeError):
+class TakeoffRefused(UserError, RuntimeError):
     """The pre-flight check failed (battery at or below the floor): nothing took off."""
 
 
@@ -128,7 +130,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     """
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
-    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    plant = make_plant(cfg.sim, cfg.drone, seed=seed)
     faults = FaultSchedule(cfg.faults, seed)
     tick = Tick(cfg, experiment_trajectory(cfg))
     sensors = WireSensors(cfg, plant, faults) if faults.touches_sensors else _Sensors(cfg, plant)

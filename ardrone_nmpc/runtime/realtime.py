@@ -24,6 +24,7 @@ from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_
 from ardrone_nmpc.runtime.session import FlightSession
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
+from ardrone_nmpc.errors import UserError
 
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
@@ -34,7 +35,7 @@ class Terminated(KeyboardInterrupt):
     so no ``except Exception`` on the way can swallow it."""
 
 
-class LandingNotConfirmed(RuntimeError):
+class LandingNotConfirmed(UserError, RuntimeError):
     """Navdata never showed the drone landed: go and look at it."""
 
 
@@ -45,15 +46,15 @@ class FlightResult:
     landed: bool | None = None
 
 
-class LinkLost(RuntimeError):
+class LinkLost(UserError, RuntimeError):
     """Navdata went silent beyond ``safety.navdata_land_ms``."""
 
 
-class SupervisorLanding(RuntimeError):
+class SupervisorLanding(UserError, RuntimeError):
     """The supervisor decided to land (battery, geofence, mocap lost): the flight is cut short."""
 
 
-class DroneEmergency(RuntimeError):
+class DroneEmergency(UserError, RuntimeError):
     """The drone reported an emergency (motors cut)."""
 
 
@@ -72,7 +73,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
     result = result if result is not None else FlightResult()
     from ardrone_nmpc.links.drone_link import DroneLink
     from ardrone_nmpc.links.mocap_link import MocapLink
-    from ardrone_nmpc.links.mocap_source import open_mocap_source
+    from ardrone_nmpc.links.mocap_factory import open_mocap_source
 
     seed = cfg.sim.seed if seed is None else seed
     schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
@@ -99,6 +100,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 at_port = at_port or cfg.drone.at_port
                 navdata_port = navdata_port or cfg.drone.navdata_port
             recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
+            cfg = recorder.config  # the run reads its own copy of its input files
             if sink is not None:
                 recorder = sink.tee(recorder)
             result.path = recorder.path
@@ -149,9 +151,11 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, e
     write = on_wall_clock(event)
     rate = Rate(schedule.period_s)
     while True:
+        skipped = rate.overruns
         late_s = rate.sleep()
         k = rate.index  # deadline number: overrun deadlines are skipped, time stays wall time
-        if k >= schedule.n_ticks:
+        if k >= schedule.n_ticks:  # deadlines skipped after the last logged tick are not
+            rate.overruns = skipped  # counted, so loop_timing agrees with summary.csv
             break
         now = time.monotonic()
         if k == 0 and fault_clock is not None:  # experiment time 0 for the injected faults

@@ -13,9 +13,10 @@ from typing import Callable
 
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.runtime.schedule import LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S
+from ardrone_nmpc.errors import UserError
 
 
-class PreflightError(RuntimeError):
+class PreflightError(UserError, RuntimeError):
     """A preflight check failed: the drone did not take off."""
 
 

@@ -81,7 +81,7 @@ class Tick:
         ctl = cfg.controller
         nmpc = None
         if ctl.kind == "nmpc":
-            from ardrone_nmpc.control.newton import make_nmpc
+            from ardrone_nmpc.control.solver import make_nmpc
 
             nmpc = make_nmpc(effective_controller(ctl, self.limits), period_s=self.period_s)
         self.supervisor = Supervisor(cfg.safety)

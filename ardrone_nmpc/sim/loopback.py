@@ -24,6 +24,7 @@ from ardrone_nmpc.sim.addresses import require_loopback_host
 from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
+from ardrone_nmpc.sim.backends import make_plant
 from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["Loopback", "start_loopback", "free_udp_port"]
@@ -148,7 +149,7 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
     mocap_host = require_loopback_host(mocap_host, "mocap target")
     if mocap_port is None:
         mocap_port = free_udp_port(mocap_host)
-    plant = AirframePlant.from_config(cfg.sim, cfg.drone, seed=seed)
+    plant = make_plant(cfg.sim, cfg.drone, seed=seed)
     schedule = FaultSchedule(cfg.faults, seed)
     faults = ServerFaults(schedule, plant) if schedule.any else None
     plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start

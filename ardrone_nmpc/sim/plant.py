@@ -9,13 +9,13 @@ Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``comma
     v_x' =  cos ψ·forward + sin ψ·right − k_d·(v_x − w_x) [− d·v_x in position hold]
     v_y' =  sin ψ·forward − cos ψ·right − k_d·(v_y − w_y) [− d·v_y in position hold]
 
-with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` and
-d = max(0, 1/hover_tau_s − k_d), so that without wind a hold damps v_xy with τ = hover_tau_s.
-G = ``vz_gain``·(1 − ``battery_sag_frac``·(1 − battery/100)) is the vertical loop's gain: 1
-for the nominal drone; below 1 a drone that climbs slower than commanded (a vertical gain
-mismatch, and battery sag: less thrust as the battery drains). These disturbance options and
-``navdata_velocity_bias_mps`` come from the ``sim`` config section; constant wind is
-``faults.wind`` (its one home, applied through :class:`~ardrone_nmpc.sim.faults.PlantFaults`).
+with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` (+ the turbulence, a
+Gauss–Markov wind of ``turbulence_std_mps``) and d = max(0, 1/hover_tau_s − k_d), so that without
+wind a hold damps v_xy with τ = hover_tau_s. This is the ``ardrone`` profile's backend; the
+``thesis_kit`` one (:mod:`~ardrone_nmpc.sim.plant_kit`) replaces :meth:`_motors_on_step`
+(docs/plant-profiles.md). G = ``vz_gain``·(1 − ``battery_sag_frac``·(1 − battery/100)): a
+vertical gain mismatch and battery sag (``sim`` disturbance options, 1 nominally; constant
+wind is ``faults.wind``, applied by :class:`~ardrone_nmpc.sim.faults.PlantFaults`).
 
 Sign conventions
 ----------------
@@ -58,9 +58,9 @@ Mocap (:meth:`AirframePlant.mocap_pose`): position + N(0, σ_p) per axis; the th
 roll/pitch + N(0, σ) + a per-flight trim bias uniform in ±0.5°; yaw + N(0, σ) + an offset
 uniform in ±180° drawn at take-off + a drift of 1°/min (random sign per flight) with a small
 random walk; ultrasound altitude + N(0, σ); body velocities + N(0, σ_v) + a Gauss–Markov bias
-(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read
-0 with the motors off. The biases evolve in :meth:`~AirframePlant.advance`; σ values come
-from ``sim.noise``, the bias sizes from :class:`PlantParams` (zero them for exact tests).
+(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read 0 with the motors off. The biases evolve in
+:meth:`~AirframePlant.advance`; σ values come from ``sim.noise``, the bias sizes from
+:class:`PlantParams` (zero them for exact tests).
 
 Time
 ----
@@ -79,7 +79,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.core.angles import TWO_PI
+from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -91,6 +91,7 @@ __all__ = [
     "PlantParams",
     "airframe_derivative",
     "freefall_derivative",
+    "gauss_markov_step",
     "mocap_rotation_xyz_rad",
     "rk4_step",
     "rotation_heading_rad",
@@ -129,6 +130,9 @@ class PlantParams:
     initial_psi_rad: float = 0.0
     battery_start_pct: float = 100.0
     battery_drain_pct_per_min: float = 1.5
+    # --- air turbulence (docs/plant-profiles.md): a horizontal Gauss–Markov wind, σ per axis
+    turbulence_std_mps: float = 0.0
+    turbulence_tau_s: float = 5.0
     # --- on-board behaviour (protocol §5), no config key
     hover_tau_s: float = 0.5                 # optical-flow position hold: v_xy time constant
     takeoff_altitude_m: float = 0.9          # where the take-off climb settles
@@ -141,10 +145,10 @@ class PlantParams:
     navdata_yaw_walk_rad_per_sqrt_s: float = math.radians(0.2) / math.sqrt(60.0)
     navdata_velocity_bias_std_mps: float = 0.02              # Gauss–Markov, stationary σ
     navdata_velocity_bias_tau_s: float = 30.0
-    # --- disturbance options (sim section): the drone differs from its model
-    vz_gain: float = 1.0                     # vertical speed / commanded, full battery
-    battery_sag_frac: float = 0.0            # vertical gain lost at 0 % battery (linear)
-    navdata_velocity_bias_mps: tuple[float, float] = (0.0, 0.0)  # constant (forward, right)
+    # --- disturbance options (sim section): vertical gain, its sag at 0 % battery, a bias
+    vz_gain: float = 1.0
+    battery_sag_frac: float = 0.0
+    navdata_velocity_bias_mps: tuple[float, float] = (0.0, 0.0)  # (forward, right)
     # derived: extra damping of the position hold so that v_xy decays with τ = hover_tau_s
     hover_damping_per_s: float = field(init=False, repr=False)
     # derived: (E, V/τ_z, 1/τ_z, Y/τ_r, 1/τ_r, 1/τ_a, k_d, hover damping) for the RHS
@@ -154,18 +158,19 @@ class PlantParams:
         for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps",
                      "tau_tilt_s", "tau_yaw_s", "tau_vz_s", "integration_step_s", "hover_tau_s",
                      "takeoff_altitude_m", "takeoff_climb_mps", "landing_speed_mps",
-                     "navdata_velocity_bias_tau_s", "vz_gain"):
+                     "navdata_velocity_bias_tau_s", "turbulence_tau_s", "vz_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        if not (math.isfinite(self.command_delay_s) and self.command_delay_s >= 0.0):
-            raise ValueError(
-                f"command_delay_s must be finite and >= 0, got {self.command_delay_s!r}")
+        for name in ("command_delay_s", "turbulence_std_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        if not 0.0 <= self.battery_sag_frac < 1.0:
+            raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
             raise ValueError(f"initial_position_m must be [x, y, z] with z >= 0, "
                              f"got {self.initial_position_m!r}")
-        if not 0.0 <= self.battery_sag_frac < 1.0:
-            raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         object.__setattr__(self, "initial_position_m",
                            tuple(float(v) for v in self.initial_position_m))
         object.__setattr__(self, "navdata_velocity_bias_mps",
@@ -196,6 +201,8 @@ class PlantParams:
             initial_psi_rad=plant.initial_psi_rad,
             battery_start_pct=plant.battery_start_pct,
             battery_drain_pct_per_min=plant.battery_drain_pct_per_min,
+            turbulence_std_mps=plant.turbulence_std_mps,
+            turbulence_tau_s=plant.turbulence_tau_s,
             vz_gain=sim_cfg.vz_gain,
             battery_sag_frac=sim_cfg.battery_sag_frac,
             navdata_velocity_bias_mps=tuple(sim_cfg.navdata_velocity_bias_mps),
@@ -207,13 +214,17 @@ class PlantParams:
         """Length of the command FIFO: round(command_delay_s / integration_step_s)."""
         return int(round(self.command_delay_s / self.integration_step_s))
 
+    def vertical_gain(self, battery_pct: float) -> float:
+        """G of the module docstring at ``battery_pct`` (%): vertical speed / commanded."""
+        return self.vz_gain * (1.0 - self.battery_sag_frac
+                               * (1.0 - min(max(battery_pct, 0.0), 100.0) / 100.0))
+
     def coefficients_at(self, battery_pct: float) -> tuple:
         """:attr:`rhs_coefficients` with the vertical gain sagged for ``battery_pct`` (%)."""
-        if self.battery_sag_frac == 0.0:
-            return self.rhs_coefficients
         k = self.rhs_coefficients
-        sag = 1.0 - self.battery_sag_frac * (1.0 - min(max(battery_pct, 0.0), 100.0) / 100.0)
-        return (k[0], k[1] * sag, *k[2:])
+        if self.battery_sag_frac == 0.0:
+            return k
+        return (k[0], k[1] * self.vertical_gain(battery_pct) / self.vz_gain, *k[2:])
 
     def replace(self, **changes) -> PlantParams:
         """A copy with some fields changed (e.g. a command-delay fault)."""
@@ -346,6 +357,17 @@ def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
     return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9])
 
 
+# ----------------------------------------------------------------------------- backends
+
+
+def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, normals) -> tuple:
+    """Independent Gauss–Markov processes (stationary σ ``std``, correlation time ``tau_s``)
+    advanced exactly over ``dt_s`` with standard normal draws ``normals``."""
+    a = math.exp(-dt_s / tau_s)
+    q = std * math.sqrt(1.0 - a * a)
+    return tuple(a * v + q * n for v, n in zip(values, normals))
+
+
 # ----------------------------------------------------------------------------- sensor geometry
 
 
@@ -375,18 +397,7 @@ def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
     (mocap-stream.md)."""
     r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
     r00 = math.cos(ry) * math.cos(rz)
-    return _wrap_rad(math.atan2(r10, r00))
-
-
-def _wrap_rad(a: float) -> float:
-    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` for a finite python float, without numpy."""
-    r = math.remainder(a, TWO_PI)
-    return math.pi if r <= -math.pi else r
-
-
-def _wrap_deg(a: float) -> float:
-    r = math.remainder(a, 360.0)
-    return 180.0 if r <= -180.0 else r
+    return wrap_angle_rad(math.atan2(r10, r00))
 
 
 def _finite_frac(name: str, value: float) -> float:
@@ -429,9 +440,13 @@ class AirframePlant:
         self.noise = noise
         self.wind_mps = np.zeros(3)
         root = np.random.default_rng(seed)
-        self._mocap_rng, self._nav_rng, self._bias_rng = root.spawn(3)
+        # a fourth stream for the turbulence: spawn(4)'s first three equal spawn(3)'s, so the
+        # sensor noise of a seed does not depend on the turbulence setting
+        self._mocap_rng, self._nav_rng, self._bias_rng, self._gust_rng = root.spawn(4)
+        self._gust_mps = tuple(params.turbulence_std_mps * v
+                               for v in self._gust_rng.standard_normal(2))
         x, y, z = params.initial_position_m
-        psi = _wrap_rad(float(params.initial_psi_rad))
+        psi = wrap_angle_rad(float(params.initial_psi_rad))
         self._state = (x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
         self._mode = FlightMode.FLYING if z > 0.0 else FlightMode.LANDED
         self._battery = float(params.battery_start_pct)
@@ -447,7 +462,8 @@ class AirframePlant:
     def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
                     seed: int | None = None) -> AirframePlant:
         """The plant of an experiment's ``sim`` and ``drone`` sections, seeded by ``seed``
-        (default ``sim.seed``)."""
+        (default ``sim.seed``). This class only: :func:`~ardrone_nmpc.sim.backends.make_plant`
+        picks the backend ``sim.plant.profile`` names (docs/plant-profiles.md)."""
         return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
                    seed=sim_cfg.seed if seed is None else seed)
 
@@ -566,11 +582,18 @@ class AirframePlant:
         if n == 0:
             return
         wind = tuple(float(w) for w in self.wind_mps)
+        if self.params.turbulence_std_mps > 0.0:
+            wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
         for _ in range(n):
             self._substep(h, wind)
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
-        self._state = (x, y, z, vx, vy, vz, phi, theta, _wrap_rad(psi), r)
+        self._state = (x, y, z, vx, vy, vz, phi, theta, wrap_angle_rad(psi), r)
         self._advance_biases(n * h)
+        p = self.params
+        if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
+            self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
+                                               p.turbulence_tau_s, n * h,
+                                               self._gust_rng.standard_normal(2))
 
     def _substep(self, h: float, wind: tuple) -> None:
         fifo = self._fifo
@@ -586,11 +609,8 @@ class AirframePlant:
             deriv, command = freefall_derivative, _HOVER
         else:
             return  # LANDED, or EMERGENCY lying on the ground: frozen
-        if deriv is airframe_derivative:  # the compiled twin of rk4_step(airframe_derivative)
-            roll, pitch, gaz, yaw, hold = command
-            state = airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
-                                 bool(hold), self.params.coefficients_at(self._battery),
-                                 tuple(map(float, wind)), h)
+        if deriv is airframe_derivative:
+            state = self._motors_on_step(command, h, wind)
         else:
             state = rk4_step(deriv, self._state, h, command, self.params, wind)
         self._state = state if state[2] > 0.0 else self._ground_contact(state)
@@ -599,6 +619,14 @@ class AirframePlant:
             self._battery = max(0.0, self._battery - drain)
             if mode is not FlightMode.FLYING or self._battery <= 0.0:
                 self._check_transitions()
+
+    def _motors_on_step(self, command: tuple, h: float, wind: tuple) -> tuple:
+        """One step of the motors-on dynamics from ``self._state`` (the backend's hook: a
+        profile with other dynamics overrides this, the modes, sensors and faults stay)."""
+        roll, pitch, gaz, yaw, hold = command  # the compiled twin of rk4_step(airframe_derivative)
+        return airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
+                            bool(hold), self.params.coefficients_at(self._battery),
+                            tuple(map(float, wind)), h)
 
     def _auto_command(self, mode: FlightMode) -> tuple:
         p = self.params
@@ -647,10 +675,9 @@ class AirframePlant:
         n = self._bias_rng.standard_normal(3)
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
-        self._yaw_bias_deg = _wrap_deg(self._yaw_bias_deg + math.degrees(drift + walk))
-        a = math.exp(-dt / p.navdata_velocity_bias_tau_s)
-        q = p.navdata_velocity_bias_std_mps * math.sqrt(1.0 - a * a)
-        self._vel_bias = (a * self._vel_bias[0] + q * n[1], a * self._vel_bias[1] + q * n[2])
+        self._yaw_bias_deg = wrap_angle_deg(self._yaw_bias_deg + math.degrees(drift + walk))
+        self._vel_bias = gauss_markov_step(self._vel_bias, p.navdata_velocity_bias_std_mps,
+                                           p.navdata_velocity_bias_tau_s, dt, n[1:])
 
     # ------------------------------------------------------------------ outputs
 
@@ -660,7 +687,7 @@ class AirframePlant:
         x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
         return PlantTruth(
             t_s=self.t_s, position_m=_readonly(x, y, z), velocity_mps=_readonly(vx, vy, vz),
-            roll_rad=phi, pitch_rad=theta, psi_rad=_wrap_rad(psi), psi_rate_radps=r,
+            roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
             mode=self._mode, battery_pct=self._battery)
 
     def mocap_pose(self) -> MocapPose:
@@ -669,7 +696,8 @@ class AirframePlant:
         n = self._mocap_rng.standard_normal(6)
         sp, sa = self.noise.mocap_position_std_m, self.noise.mocap_angle_std_rad
         rx, ry, rz = mocap_rotation_xyz_rad(phi, theta, psi)
-        rx, ry, rz = _wrap_rad(rx + sa * n[3]), ry + sa * n[4], _wrap_rad(rz + sa * n[5])
+        rx, ry = wrap_angle_rad(rx + sa * n[3]), ry + sa * n[4]
+        rz = wrap_angle_rad(rz + sa * n[5])
         return MocapPose(
             t_s=self.t_s,
             position_m=_readonly(x + sp * n[0], y + sp * n[1], z + sp * n[2]),
@@ -683,7 +711,8 @@ class AirframePlant:
         n = self._nav_rng.standard_normal(7)
         roll = math.degrees(phi + self._trim_bias_rad[0] + nz.navdata_attitude_std_rad * n[0])
         pitch = math.degrees(-theta + self._trim_bias_rad[1] + nz.navdata_attitude_std_rad * n[1])
-        yaw = _wrap_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2]) + self._yaw_bias_deg)
+        yaw = wrap_angle_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2])
+                             + self._yaw_bias_deg)
         if self._mode.airborne:
             c, s = math.cos(psi), math.sin(psi)
             sv = nz.navdata_velocity_std_mps

@@ -205,7 +205,7 @@ class LiveView:
             self._channels[topic].log(data, log_time=now_ns)
 
     def _publish_config(self) -> None:
-        from ardrone_nmpc.config.schema import config_to_dict
+        from ardrone_nmpc.config.io import config_to_dict
 
         from ardrone_nmpc import __version__
 

@@ -135,3 +135,54 @@ def test_simulate_rejects_a_bad_override(tmp_path):
     result = _simulate(tmp_path, "--set", "controller.kind=pid")
     assert result.exit_code == 1
     assert "controller.kind:" in result.output
+
+
+def test_a_run_flown_from_a_path_file_survives_the_file(tmp_path):
+    """The run directory holds its own copy: delete the CSV, and summary, replay (also
+    --rerun) and plot still work — and give the same path metrics."""
+    import shutil
+
+    source = tmp_path / "lap.csv"
+    source.write_text("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n1.5,0.3,0,1,0\n3,0.3,0.3,1,0\n")
+    result = runner.invoke(app, ["simulate", "configs/hover.yaml", "--log-dir", str(tmp_path),
+                                 "--quiet", "--set", "reference.kind=path",
+                                 "--set", f"reference.path_file={source}",
+                                 "--set", "duration_s=2", "--set", "sim.settle_s=0.5"])
+    assert result.exit_code == 0, result.output
+    run = Path(result.output.strip().splitlines()[-1][len("run: "):])
+    before = runner.invoke(app, ["summary", "--csv", str(run)]).stdout
+    source.unlink()
+    moved = tmp_path / "moved" / run.name
+    shutil.move(str(run), moved)  # and to another folder (another machine)
+    after = runner.invoke(app, ["summary", "--csv", str(moved)])
+    assert after.exit_code == 0 and after.stderr == "", after.output
+    assert after.stdout == before and "path,mean_deviation," in before
+    assert runner.invoke(app, ["replay", str(moved)]).exit_code == 0
+    rerun = runner.invoke(app, ["replay", str(moved), "--rerun", "--log-dir", str(tmp_path)])
+    assert rerun.exit_code == 0, rerun.output
+    assert "reproduced" in rerun.stdout
+    plot = runner.invoke(app, ["plot", str(moved), "--kind", "path3d"])
+    assert plot.exit_code == 0, plot.output
+    assert (moved / "plot-path3d.png").is_file()
+
+
+@pytest.mark.timeout(120)
+def test_overruns_agree_between_summary_and_loop_timing_at_1_ms(tmp_path):
+    """At period_s = 0.001 a tick takes longer than a period: deadlines are skipped. The
+    summary (from the t_s gaps of log.csv) and fly's loop_timing event count the same."""
+    import csv
+
+    from ardrone_nmpc.runs.rundir import read_run
+
+    result = runner.invoke(app, ["fly", "configs/hover.yaml", "--sim", "--no-dashboard",
+                                 "--log-dir", str(tmp_path), "--set", "loop.period_s=0.001",
+                                 "--set", "duration_s=0.5", "--set", "sim.settle_s=0.2",
+                                 # a horizon of 100 steps: a tick outlasts 1 ms on any machine
+                                 "--set", "controller.horizon_steps=100"])
+    assert result.exit_code == 0, result.output
+    run = read_run(result.stdout.strip().splitlines()[-1][len("run: "):])
+    (timing,) = [e for e in run.events if e["kind"] == "loop_timing"]
+    rows = {(r["axis"], r["metric"]): float(r["value"])
+            for r in csv.DictReader(open(run.path / "summary.csv"))}
+    assert timing["overruns"] > 0  # the case the issue found: deadlines were skipped
+    assert rows[("loop", "overruns")] == timing["overruns"]

@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder
 
 runner = CliRunner()
@@ -181,3 +181,19 @@ def test_help_does_not_import_matplotlib():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_plot_into_an_existing_directory_writes_the_default_names_there(run_dir, tmp_path):
+    out = tmp_path / "figures"
+    out.mkdir()
+    result = runner.invoke(app, ["plot", str(run_dir), "-o", str(out), "--kind", "tracking"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == [f"plot: {out / 'plot-tracking.png'}"]
+    assert _png_size(out / "plot-tracking.png")[0] > 100
+    assert not (tmp_path / "figures.png").exists()  # not beside the directory
+
+
+def test_plot_a_sweep_into_an_existing_directory(sweep_dir, tmp_path):
+    result = runner.invoke(app, ["plot", str(sweep_dir), "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == [f"plot: {tmp_path / 'plot-heatmap-rmse_m.png'}"]

@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunRecorder, read_run
 from ardrone_nmpc.experiments.replay import RERUN_COLUMNS, RERUN_FILE
 from ardrone_nmpc.runtime.lockstep import run_lockstep
@@ -155,8 +155,18 @@ def test_bad_set_is_a_field_error(run_dir, tmp_path, override, fragment):
     (["--set", "duration_s=2"], "--set applies to --rerun only"),
     (["--log-dir", "x"], "--log-dir applies to --rerun only"),
     (["--speed", "2"], "--speed applies to --broadcast only"),
-    (["--broadcast", "--speed", "0"], "--speed: must be a positive number"),
     (["--port", "9"], "--port applies to --broadcast only"),
 ])
 def test_option_combinations(run_dir, args, fragment):
     assert_user_error(runner.invoke(app, ["replay", str(run_dir), *args]), fragment)
+
+
+@pytest.mark.parametrize("args", [["--speed", "0"], ["--speed", "1e-300"], ["--speed", "nan"],
+                                  ["--speed", "inf"], ["--port", "0"], ["--port", "70000"],
+                                  ["--host", ""]])
+def test_broadcast_option_values_are_checked_before_anything_is_sent(run_dir, args):
+    result = runner.invoke(app, ["replay", str(run_dir), "--broadcast", *args])
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and errors[0].startswith(f"error: {args[0]}: "), result.output
+    assert "broadcasting" not in result.output and "Traceback" not in result.output

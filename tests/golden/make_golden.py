@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 HERE = Path(__file__).parent

@@ -751,7 +751,7 @@ def test_serve_prints_what_it_serves_and_stops_cleanly(mocap_rx):
 def test_serve_starts_the_fault_clock(mocap_rx):
     """sim-drone has no experiment: its injected faults count from when it starts serving —
     an occlusion from 0 s on leaves the object out of the streamed frames."""
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.sim.serve import serve
 
     cfg = load_config(None, ["faults.mocap_occlusion.start_s=0",

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.links.drone_link import DroneLink, LinkError
 from ardrone_nmpc.sim.loopback import start_loopback
 

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 import ardrone_nmpc.links.drone_link as drone_link_module
 import ardrone_nmpc.sim.loopback as loopback_module
 from ardrone_nmpc.cli.app import app
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.protocol.at import REF_BASE, REF_TAKEOFF_BIT, AtCommand, Ref
 from ardrone_nmpc.protocol.mocap import decode_mocap

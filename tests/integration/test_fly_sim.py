@@ -94,7 +94,7 @@ def test_sigkill_mid_flight_leaves_a_readable_run(tmp_path):
     """No landing is possible after SIGKILL (the drone's own watchdog hovers it); what the
     tool owes is its log: config.yaml from before take-off, log.csv readable, at most the
     row being written lost."""
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
 
     proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

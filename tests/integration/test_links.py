@@ -159,6 +159,14 @@ class FakeDrone:
     def bodies(self, kind, since_t: float = -math.inf) -> list:
         return [c.body for c in self.commands(since_t) if isinstance(c.body, kind)]
 
+    def ref_runs(self) -> list[tuple[int, int]]:
+        """The REF bits received, in sequence-number order (the order the drone executes
+        them, whatever the scheduler did to receipt times), as ``(bits, count)`` runs."""
+        refs = sorted((c for c in self.commands() if isinstance(c.body, Ref)),
+                      key=lambda c: c.seq)
+        return [(bits, len(list(run)))
+                for bits, run in itertools.groupby(c.body.bits for c in refs)]
+
     def pause(self) -> None:
         """Fall silent and forget the client (only a new wake-up restarts the stream)."""
         with self.lock:
@@ -401,41 +409,54 @@ def test_stale_command_is_replaced_by_hover(drone):
 
 @pytest.mark.timeout(10)
 def test_ref_bits_take_off_land_emergency_and_reset(drone):
+    """Each REF is held by the keepalive until the next call replaces it, and no stale REF
+    follows a newer one. Checked in sequence-number order and by waiting for the drone to
+    have received them: a keepalive datagram sent just before land() may well be read by the
+    fake drone after land() returned (a loaded machine), so receipt times prove nothing."""
+
+    def ref_bits():
+        return [bits for bits, _ in drone.ref_runs()]
+
+    def held(bits):
+        """The newest REF run is ``bits``, repeated by the keepalive at least 4 times."""
+        def check():
+            runs = drone.ref_runs()
+            return bool(runs) and runs[-1][0] == bits and runs[-1][1] >= 4
+        return check
+
     with make_link(drone) as link:
         link.connect(timeout_s=3.0)
         with pytest.raises(ValueError):
             link.set_command(1.5, 0.0, 0.0, 0.0)
-        t0 = time.monotonic()
         link.takeoff()
         assert wait_until(lambda: link.navdata.mode is FlightMode.FLYING)
-        time.sleep(0.15)
-        refs = drone.bodies(Ref, since_t=t0)
-        assert len(refs) >= 4 and {r.bits for r in refs} == {REF_TAKEOFF}   # level, held
+        assert wait_until(held(REF_TAKEOFF))
+        assert ref_bits() == [REF_TAKEOFF]                 # level, held
         assert link.navdata.altitude_m == pytest.approx(1.234)
         with pytest.raises(LinkError, match="flying"):
             link.flat_trim()
 
-        t1 = time.monotonic()
         link.land()
         assert wait_until(lambda: link.navdata.mode is FlightMode.LANDED)
-        time.sleep(0.15)
-        refs = drone.bodies(Ref, since_t=t1)
-        assert len(refs) >= 4 and {r.bits for r in refs} == {REF_LAND}
+        assert wait_until(held(REF_LAND))
+        assert ref_bits() == [REF_TAKEOFF, REF_LAND]
 
         link.flat_trim()
         assert wait_until(lambda: len(drone.bodies(Ftrim)) == 1)
 
-        t2 = time.monotonic()
         link.emergency()
         assert wait_until(lambda: link.navdata.mode is FlightMode.EMERGENCY)
-        time.sleep(0.1)
-        assert {r.bits for r in drone.bodies(Ref, since_t=t2)} == {REF_EMERGENCY}
+        assert wait_until(held(REF_EMERGENCY))
+        assert ref_bits() == [REF_TAKEOFF, REF_LAND, REF_EMERGENCY]
         assert drone.emergency                        # held bit 8: one edge, no toggling back
         with pytest.raises(LinkError, match="emergency"):
             link.takeoff()
         link.reset_emergency(timeout_s=2.0)
         assert wait_until(lambda: link.navdata.mode is FlightMode.LANDED)
         assert link.ref == Ref.landing() and not drone.emergency
+        # the reset: bit 8 low, then one rising edge, then land held
+        assert wait_until(lambda: ref_bits() == [REF_TAKEOFF, REF_LAND, REF_EMERGENCY,
+                                                 REF_LAND, REF_EMERGENCY, REF_LAND])
         with pytest.raises(LinkError, match="does not show an emergency"):
             link.reset_emergency()
         assert_one_sequencer(drone)

@@ -11,7 +11,7 @@ import threading
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.viz.live import LiveView

@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.cli.mocap_check import AxisTest, final_line
-from ardrone_nmpc.config.schema import load_config
-from ardrone_nmpc.links.mocap_source import open_mocap_source
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.links.mocap_factory import open_mocap_source
 from ardrone_nmpc.sim.loopback import free_udp_port
 
 LINE = re.compile(r"^(?P<name>\S+): x=(?P<x>-?\d+\.\d{3}) y=(?P<y>-?\d+\.\d{3}) "

@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import ardrone_nmpc.runtime.lockstep as lockstep
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
 from ardrone_nmpc.protocol.mocap import decode_mocap
 from ardrone_nmpc.runs.rundir import STRING_COLUMNS, RunRecorder, read_run

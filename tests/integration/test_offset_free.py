@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.runs.summary import step_metrics
 from ardrone_nmpc.runtime.lockstep import run_lockstep

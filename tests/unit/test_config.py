@@ -14,15 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel, ValidationError
 
-from ardrone_nmpc.config.schema import (
-    ConfigError,
-    ExperimentConfig,
-    apply_overrides,
-    config_from_dict,
-    config_to_dict,
-    dump_config,
-    load_config,
-)
+from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, config_from_dict
+from ardrone_nmpc.config.io import apply_overrides, config_to_dict, dump_config, load_config
+from ardrone_nmpc.config.limits import MAX_COORDINATE_M, MAX_NAME_CHARS, MAX_SPAN_S
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
@@ -136,7 +130,37 @@ def test_unknown_keys_are_rejected_at_their_path(tmp_path, text, expected):
         ("estimator: {luenberger_gain: [10, -1]}",
          "estimator.luenberger_gain.1: Input should be greater than 0"),
         ("reference: {kind: path}", "reference.path_file: required when kind is 'path'"),
-        ("reference: {kind: path, path_file: missing.csv}", "reference.path_file: no such file"),
+        ("reference: {kind: path, path_file: ''}",
+         "reference.path_file: String should have at least 1 character"),
+        # everything that becomes a count, an allocation or a coordinate is bounded
+        ("duration_s: 1e308", "duration_s: Input should be less than or equal to 3600"),
+        ("sim: {settle_s: 1e308}", "sim.settle_s: Input should be less than or equal to 3600"),
+        ("reference: {kind: square, leg_duration_s: 1e308}",
+         "reference.leg_duration_s: Input should be less than or equal to 3600"),
+        ("reference: {step_time_s: 3601}",
+         "reference.step_time_s: Input should be less than or equal to 3600"),
+        ("reference: {period_s: 1e9}", "reference.period_s: Input should be less than or equal"),
+        ("reference: {start_m: [100000000, 0, 1]}",
+         "reference.start_m.0: Input should be less than or equal to 1000"),
+        ("reference: {kind: lorenz, lorenz_time_scale: 1.0}\nduration_s: 300",
+         "reference: lorenz_time_scale × duration_s is 300 Lorenz time units; at most 200"),
+        ("controller: {obstacles: [{kind: sphere, center_m: [0, -1e9, 1], radius_m: 1}]}",
+         "controller.obstacles.0.center_m.1: Input should be greater than or equal to -1000"),
+        ("controller: {solver: {max_newton_iterations: 1000000000}}",
+         "controller.solver.max_newton_iterations: Input should be less than or equal to 1000"),
+        ("safety: {geofence_max_m: [3, 3, 1e300]}",
+         "safety.geofence_max_m.2: Input should be less than or equal to 1000"),
+        ("sim: {mocap_rate_hz: 1e-300}", "sim.mocap_rate_hz: Input should be greater than or equal to 1"),
+        ("drone: {altitude_max_m: 1e308}", "drone.altitude_max_m: Input should be less than or equal to 100"),
+        ("name: " + "n" * 201, "name: String should have at most 200 characters"),
+        ("mocap: {rate_hz: 100}", "mocap.rate_hz: no longer a setting (removed: nothing read it"),
+        ("reference: {kind: square, leg_duration_s: 1e-308}",
+         "reference.leg_duration_s: Input should be greater than or equal to 0.001"),
+        ("controller: {dtau_s: 1e308}", "controller.dtau_s: Input should be less than or equal to 1"),
+        ("sim: {noise: {mocap_angle_std_rad: 1e308}}",
+         "sim.noise.mocap_angle_std_rad: Input should be less than or equal to 3.14"),
+        ("sim: {plant: {battery_drain_pct_per_min: 1e308}}",
+         "sim.plant.battery_drain_pct_per_min: Input should be less than or equal to 100"),
         ("safety: {mocap_hover_ms: 1500}",
          "safety.mocap_land_ms: must be greater than mocap_hover_ms"),
         ("safety: {mocap_hold_ms: 300}",
@@ -191,6 +215,27 @@ def test_relative_path_file_is_resolved_against_the_config_directory(tmp_path, m
     assert Path(cfg.reference.path_file) == (sub / "traj.csv").resolve()
     # the stored absolute path survives a dump/load round trip
     assert ExperimentConfig.model_validate(yaml.safe_load(dump_config(cfg))) == cfg
+
+
+def test_the_path_file_is_not_read_when_the_config_loads(tmp_path):
+    # Its contents are checked where the trajectory is built (`check`, before a run
+    # directory is made), so an old run whose file is gone still loads.
+    cfg = load_config(write(tmp_path, "reference: {kind: path, path_file: missing.csv}\n"))
+    assert Path(cfg.reference.path_file) == (tmp_path / "missing.csv").resolve()
+
+
+def test_a_retired_key_is_an_error_in_a_config_and_dropped_from_a_run_directory(tmp_path):
+    path = write(tmp_path, "mocap: {rate_hz: 100.0, port: 51002}\n")
+    with pytest.raises(ConfigError, match=r"mocap\.rate_hz: no longer a setting"):
+        load_config(path)
+    assert load_config(path, allow_retired=True).mocap.port == 51002
+
+
+def test_the_longest_name_and_the_bounds_themselves_are_valid():
+    cfg = config_from_dict({"name": "n" * MAX_NAME_CHARS, "duration_s": MAX_SPAN_S,
+                            "sim": {"settle_s": MAX_SPAN_S},
+                            "reference": {"start_m": [-MAX_COORDINATE_M, MAX_COORDINATE_M, 1]}})
+    assert len(cfg.name) == MAX_NAME_CHARS and cfg.duration_s == MAX_SPAN_S
 
 
 # ----------------------------------------------------------------------------- overrides
@@ -301,7 +346,7 @@ def test_dump_load_round_trip_of_a_non_default_config(tmp_path):
 @settings(max_examples=60, deadline=None)
 @given(
     horizon_steps=st.integers(min_value=1, max_value=500),
-    dtau_s=st.floats(min_value=1e-6, max_value=10.0, allow_nan=False, allow_infinity=False),
+    dtau_s=st.floats(min_value=1e-6, max_value=1.0, allow_nan=False, allow_infinity=False),
     kmax=st.integers(min_value=1, max_value=200),
 )
 def test_any_valid_horizon_triple_round_trips_through_overrides(horizon_steps, dtau_s, kmax):

@@ -236,7 +236,7 @@ def test_stage_freezes_x_and_y_on_a_saturated_tilt():
     ("controller.offset_free=false", False), ("controller.offset_free=true", True),
     ("controller.offset_free.enabled=false", False)])
 def test_offset_free_switch_and_its_bool_shorthand(override, enabled):
-    from ardrone_nmpc.config.schema import load_config
+    from ardrone_nmpc.config.io import load_config
 
     cfg = load_config(None, [override])
     assert cfg.controller.offset_free.enabled is enabled

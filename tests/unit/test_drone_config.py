@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import pytest
 
-from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, load_config
+from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
+
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.protocol.navdata import DroneState
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession
 from ardrone_nmpc.sim.drone_server import DroneServer

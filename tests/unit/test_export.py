@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.export import read_mcap, run_rows, write_mcap, write_parquet
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder, read_run

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.faultmatrix import (FAULT_CASES, REQUIRED_OUTCOME, classify,
                                                   deviation_from, log_complete, recovery_time_s)
 from ardrone_nmpc.sim.faults import FaultSchedule, corrupt_navdata

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap

@@ -24,7 +24,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.reference.trajectories import ReferenceError, make_trajectory
 from ardrone_nmpc.links.drone_link import navdata_sample_of, parse_config_text
 from ardrone_nmpc.links.mocap_link import mocap_pose_of
 from ardrone_nmpc.protocol.at import (
@@ -456,19 +458,22 @@ def test_booleans_stay_valid_where_the_field_is_boolean(tmp_path):
     ("0,0,0,1,0\n1,0,0\n", r"path\.csv:3: expected 5 values, got 3"),
     ("0,0,0,1,0\n", r"path\.csv:2: at least 2 waypoints"),
 ])
-def test_a_bad_path_file_is_a_config_error_naming_its_line(tmp_path, rows, match):
+def test_a_bad_path_file_is_a_reference_error_naming_its_line(tmp_path, rows, match):
+    # the config loads (it reads no file); building the trajectory reads and checks it
     (tmp_path / "path.csv").write_text("t_s,x_m,y_m,z_m,psi_rad\n" + rows)
-    with pytest.raises(ConfigError) as info:
-        load_config(_yaml(tmp_path, "reference:\n  kind: path\n  path_file: path.csv\n"))
+    cfg = load_config(_yaml(tmp_path, "reference:\n  kind: path\n  path_file: path.csv\n"))
+    with pytest.raises(ReferenceError) as info:
+        make_trajectory(cfg.reference)
     (message,) = info.value.messages
     assert message.startswith("reference.path_file: ")
     assert re.search(match, message), message
 
 
-def test_a_path_file_that_is_not_utf8_is_a_config_error(tmp_path):
+def test_a_path_file_that_is_not_utf8_is_a_reference_error(tmp_path):
     (tmp_path / "path.csv").write_bytes(b"t_s,x_m\n\xff\xfe")
-    with pytest.raises(ConfigError, match=r"reference\.path_file: .*path\.csv: cannot read"):
-        load_config(_yaml(tmp_path, "reference:\n  kind: path\n  path_file: path.csv\n"))
+    cfg = load_config(_yaml(tmp_path, "reference:\n  kind: path\n  path_file: path.csv\n"))
+    with pytest.raises(ReferenceError, match=r"reference\.path_file: .*path\.csv:2: not UTF-8"):
+        make_trajectory(cfg.reference)
 
 
 # ----------------------------------------------------------------------------- run directories

@@ -124,7 +124,7 @@ def test_fdgmres_matches_a_dense_solve_with_the_fd_jacobian(problem):
     J = np.column_stack([(_residual(U + h * e, K.STAGE_CONDENSED, p)[0] - F) / h
                          for e in np.eye(n)])
     buf = np.zeros(K.workspace_size(N, 4, n))
-    views = K._views(buf, N, 4, n)
+    views = K.carve_workspace(buf, N, 4, n)
     out = np.zeros(n)
     k, _ = K.fdgmres(U, 4, p["x0"], p["ref"], DTAU, p["W"], 0.01, 0.0,
                      np.zeros((1, 1), np.int8), F, -F, np.zeros(n), h, n, 1e-12, views, out)

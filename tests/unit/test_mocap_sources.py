@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.extras import MissingExtra
 from ardrone_nmpc.links.mocap_link import MocapLink
-from ardrone_nmpc.links.mocap_source import MocapConnectError, open_mocap_source
+from ardrone_nmpc.links.mocap_factory import open_mocap_source
+from ardrone_nmpc.links.mocap_source import MocapConnectError
 from ardrone_nmpc.links.motioncapture_source import (
     MotionCaptureSource,
     library_options,

@@ -7,9 +7,10 @@ import pytest
 from scipy.optimize import minimize
 
 from ardrone_nmpc.experiments.bench import HOVER_STATE, closed_loop, plant_step
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.cgmres import CGMRESController
-from ardrone_nmpc.control.newton import NewtonGMRESController, make_nmpc
+from ardrone_nmpc.control.newton import NewtonGMRESController
+from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus
 from tests.conftest import thesis_cost
 
@@ -106,12 +107,11 @@ def test_cgmres_initial_solve_is_near_the_box_optimum():
     solver = CGMRESController(SPEC, dummy_weight=1e-3, tolerance=1e-9, max_newton_iterations=80)
     solver._t0_s = 0.0
     solver._initial_guess()
-    solver._prm[5] = 1e-12  # η: exact Krylov solves, so Newton converges quadratically
     from ardrone_nmpc.control import kernels as K
-    views = K._views(solver._buf, SPEC.horizon_steps, 4, 40)
-    _, _, norm = K.newton_solve(solver.U, 4, x0, _ref(MODERATE_TARGET), SPEC.dtau_s, solver._W,
-                                1e-3, 0.0, np.zeros((1, 1), np.int8), 1e-9, 80, 1e-6, 40,
-                                1e-12, views)
+    # η = 1e-12: exact Krylov solves, so Newton converges quadratically
+    _, _, norm = K.newton_solve(solver.U, 4, x0, _ref(MODERATE_TARGET), SPEC.dtau_s,
+                                solver.memory.weights, 1e-3, 0.0, np.zeros((1, 1), np.int8),
+                                1e-9, 80, 1e-6, 40, 1e-12, solver.memory.workspace_views())
     u_opt, j_opt = _scipy_optimum(SPEC, x0, _ref(MODERATE_TARGET))
     assert norm < 1e-6
     assert np.all(np.abs(solver.inputs_horizon) < 1.0)

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc import model
-from ardrone_nmpc.config.schema import ConfigError, load_config
+from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control import kernels as K
 from ardrone_nmpc.control import obstacles as O
 from ardrone_nmpc.control.cgmres import CGMRESController
@@ -276,12 +277,12 @@ def test_solver_with_a_far_obstacle_flies_like_the_obstacle_free_one():
 
 
 def test_obstacle_free_config_builds_an_obstacle_free_solver():
-    from ardrone_nmpc.control.newton import make_nmpc
+    from ardrone_nmpc.control.solver import make_nmpc
 
     cfg = load_config(CONFIG, ["controller.obstacles=[]"])
     solver = make_nmpc(cfg.controller, period_s=0.065)
     assert solver.obstacles.shape == (0, O.OBS_COLS)
-    assert solver._iprm[4] == 0  # cgmres_step then runs the specialisation without obstacles
+    assert solver.memory.n_obstacles == 0  # the kernels' specialisation without obstacles
     solver = make_nmpc(load_config(CONFIG).controller, period_s=0.065)
     np.testing.assert_allclose(solver.obstacles[0, [O.OBS_X, O.OBS_Y, O.OBS_DIST]],
                                [1.25, 0.0, 0.6])

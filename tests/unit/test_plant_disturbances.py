@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import ConfigError, DroneConfig, NoiseConfig, load_config
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.config.schema import ConfigError, DroneConfig, NoiseConfig
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 

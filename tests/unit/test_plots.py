@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.viz import plots
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.viz import plots, run_figures
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.viz.plots import PlotError
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 
@@ -174,7 +174,7 @@ def test_inputs_mark_saturated_commands(flight_run):
 
 def test_bound_near_the_data_is_shown_far_bound_is_off_scale():
     data = np.array([-0.1, 0.25])
-    (lo, hi), off = plots._off_scale_view(data, [-0.5, 0.5, -1.0, 1.0])
+    (lo, hi), off = run_figures._off_scale_view(data, [-0.5, 0.5, -1.0, 1.0])
     assert off == {-1.0, 1.0}
     assert lo < -0.5 and 0.5 < hi < 1.0
 

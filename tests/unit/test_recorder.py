@@ -8,6 +8,7 @@ import json
 import math
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -20,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ardrone_nmpc import __version__
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import (
     LOG_COLUMNS,
     REQUIRED_COLUMNS,
@@ -421,7 +422,7 @@ def test_invalid_event_line_is_an_error(tmp_path, cfg):
 
 
 def test_write_summary(tmp_path, cfg):
-    from ardrone_nmpc.runs.summary import SummaryRow, read_summary
+    from ardrone_nmpc.runs.rundir import SummaryRow, read_summary
 
     rows = [SummaryRow("x", "rise_time", 1 / 3, "s"), SummaryRow("x", "settling_time",
                                                                  math.nan, "s")]
@@ -438,11 +439,117 @@ def test_write_summary(tmp_path, cfg):
         rec.write_summary([SummaryRow("x,y", "m", 1.0, "s")])
 
 
+# ----------------------------------------------------------------------------- inputs
+
+PATH_CSV = "t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n4,1,0,1,0\n8,1,1,1,0\n"
+
+
+def path_cfg(tmp_path, text=PATH_CSV):
+    source = tmp_path / "src" / "lap.csv"
+    source.parent.mkdir(exist_ok=True)
+    source.write_text(text)
+    return load_config(overrides=["name=lap", "reference.kind=path",
+                                  f"reference.path_file={source}"]), source
+
+
+def test_the_path_file_is_copied_and_the_run_reads_the_copy(tmp_path):
+    from ardrone_nmpc.reference.trajectories import make_trajectory
+    from ardrone_nmpc.runs.summary import summarise
+
+    cfg, source = path_cfg(tmp_path)
+    with RunRecorder.create(tmp_path / "logs", cfg, seed=0, now=NOW) as rec:
+        for k in range(40):
+            rec.write_row({**full_row(k), "t_s": k * 0.2, "x_m": k / 40, "y_m": 0.0,
+                           "z_m": 1.0, "x_true_m": math.nan, "mode": "track"})
+    copy = rec.path / "inputs" / "lap.csv"
+    assert copy.read_bytes() == source.read_bytes()
+    assert Path(rec.config.reference.path_file) == copy.resolve()  # what the run flies
+    text = (rec.path / "config.yaml").read_text()
+    assert "  path_file: inputs/lap.csv\n" in text          # relative: the directory can move
+    assert f"# reference.path_file: copied from {source}\n" in text
+    source.write_text("t_s,x_m,y_m,z_m,psi_rad\n0,9,9,9,0\n1,9,9,8,0\n")  # edited …
+    moved = tmp_path / "elsewhere"
+    os.replace(rec.path, moved)                                            # … and moved
+    source.unlink()                                                       # … and deleted
+    run = read_run(moved)
+    assert Path(run.config.reference.path_file) == (moved / "inputs" / "lap.csv").resolve()
+    assert run.warnings == []
+    wp = make_trajectory(run.config.reference)
+    np.testing.assert_array_equal(wp.positions_m, [[0, 0, 1], [1, 0, 1], [1, 1, 1]])
+    metrics = {(r.axis, r.metric): r.value for r in summarise(run)}
+    assert math.isfinite(metrics[("path", "mean_deviation")])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n2,100000000,0,1,0\n",
+     r"^reference\.path_file: .*lap\.csv:3: column 'x_m': 100000000 is outside ±1000 m$"),
+    ("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n", r"lap\.csv:2: at least 2 waypoints"),
+    (None, r"^reference\.path_file: no such file: .*lap\.csv$"),
+])
+def test_a_bad_input_file_leaves_no_run_directory(tmp_path, text, message):
+    from ardrone_nmpc.reference.waypoints import ReferenceError
+
+    cfg, source = path_cfg(tmp_path, text or PATH_CSV)
+    if text is None:
+        source.unlink()
+    with pytest.raises(ReferenceError, match=message):
+        RunRecorder.create(tmp_path / "logs", cfg, seed=0)
+    assert not (tmp_path / "logs").exists()
+
+
+def test_a_failure_while_filling_the_directory_removes_it(tmp_path, cfg, monkeypatch):
+    import ardrone_nmpc.runs.rundir as rundir
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(rundir, "dump_config", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        RunRecorder.create(tmp_path, cfg, seed=0)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_older_run_naming_its_path_file_absolutely_still_reads(tmp_path):
+    from ardrone_nmpc.runs.summary import summarise
+
+    cfg, source = path_cfg(tmp_path)
+    with RunRecorder.create(tmp_path / "logs", cfg, seed=0, now=NOW) as rec:
+        for k in range(10):
+            rec.write_row({**full_row(k), "t_s": k * 0.2, "mode": "track"})
+    # as written before inputs/ existed: an absolute path, no copy, and a retired key
+    config = rec.path / "config.yaml"
+    config.write_text(config.read_text().replace("path_file: inputs/lap.csv",
+                                                 f"path_file: {source}")
+                      .replace("  port: 51001\n", "  port: 51001\n  rate_hz: 100.0\n"))
+    shutil.rmtree(rec.path / "inputs")
+    assert read_run(rec.path).config.reference.path_file == str(source)
+    source.unlink()  # and then its file was deleted: it still reads, with a warning
+    run = read_run(rec.path)
+    assert any("reference.path_file" in w and "is gone" in w for w in run.warnings)
+    metrics = {(r.axis, r.metric): r.value for r in summarise(run)}
+    assert math.isnan(metrics[("path", "mean_deviation")])
+    assert math.isfinite(metrics[("xyz", "rmse")])
+
+
+def test_the_longest_name_fits_the_file_system_with_every_suffix(tmp_path):
+    from ardrone_nmpc.config.limits import MAX_NAME_CHARS, RERUN_SUFFIX
+
+    cfg = load_config(overrides=[f"name={'n' * (MAX_NAME_CHARS - len(RERUN_SUFFIX))}"
+                                 f"{RERUN_SUFFIX}"])
+    paths = []
+    for _ in range(12):  # same second: -2 … -12 appended
+        with RunRecorder.create(tmp_path, cfg, seed=0, now=NOW) as rec:
+            paths.append(rec.path)
+    assert paths[-1].name.endswith(f"{RERUN_SUFFIX}-12")
+    assert max(len(p.name.encode()) for p in paths) <= 255
+    assert read_run(paths[-1]).config.name == cfg.name
+
+
 # ----------------------------------------------------------------------------- crash safety
 
 CHILD = r"""
 import sys
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, LOG_COLUMNS, STRING_COLUMNS
 cfg = load_config(overrides=["name=killed"])
 rec = RunRecorder.create(sys.argv[1], cfg, seed=1)

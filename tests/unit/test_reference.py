@@ -26,12 +26,19 @@ from ardrone_nmpc.reference.trajectories import (
     Trajectory,
     Waypoints,
     horizon,
-    load_waypoints_csv,
     make_trajectory,
 )
+from ardrone_nmpc.reference.waypoints import read_waypoint_file
+from ardrone_nmpc.config.limits import (MAX_COORDINATE_M, MAX_PATH_FILE_BYTES,
+                                        MAX_PATH_LENGTH_M, MAX_WAYPOINTS)
+from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
 TRAJ_DIR = Path(__file__).resolve().parents[2] / "trajectories"
+
+
+def load_waypoints_csv(path) -> Waypoints:
+    return Waypoints.from_file(read_waypoint_file(path))
 POS = [IX_X, IX_Y, IX_Z]
 VEL = [IX_VX, IX_VY, IX_VZ]
 
@@ -392,8 +399,53 @@ def test_csv_errors_name_file_and_line(tmp_path, text, line, message):
     path = write_csv(tmp_path, text)
     with pytest.raises(ReferenceError, match=re.escape(f"{path}:{line}: {message}")) as info:
         load_waypoints_csv(path)
-    assert isinstance(info.value, ValueError)
+    assert isinstance(info.value, ValueError) and isinstance(info.value, UserError)
     assert "bad.csv" in str(info.value)
+
+
+def _far(n_rows: int, step_m: float) -> str:
+    return HEADER + "".join(f"{i},{(i % 2) * step_m},0,1,0\n" for i in range(n_rows))
+
+
+@pytest.mark.parametrize("text, line, message", [
+    (HEADER + "0,0,0,1,0\n2,100000000,0,1,0\n", 3, "column 'x_m': 100000000 is outside ±1000 m"),
+    (HEADER + "0,0,0,1,0\n2,1e300,0,1,0\n", 3, "column 'x_m': 1e300 is outside ±1000 m"),
+    (HEADER + "0,0,0,1,0\n2,0,0,-1000.5,0\n", 3, "column 'z_m': -1000.5 is outside ±1000 m"),
+    (HEADER + "0,0,0,1,0\n0.0005,1,0,1,0\n", 3,
+     "time 0.0005 is less than 1 ms after the previous 0.0"),
+    (_far(MAX_WAYPOINTS + 5, 0.0), MAX_WAYPOINTS + 2, f"more than {MAX_WAYPOINTS} waypoints"),
+    (_far(12, 1000.0), 13, "the path is 11000 m long; at most 10000 m"),
+])
+def test_csv_limits_name_file_and_line(tmp_path, text, line, message):
+    path = write_csv(tmp_path, text)
+    with pytest.raises(ReferenceError, match=re.escape(f"{path}:{line}: {message}")):
+        load_waypoints_csv(path)
+
+
+def test_csv_at_the_limits_loads(tmp_path):
+    # the longest path, the farthest coordinates and the most rows are all still valid
+    side = MAX_COORDINATE_M
+    n = int(MAX_PATH_LENGTH_M // (2 * side))  # segments of 2 km
+    rows = "".join(f"{i},{side if i % 2 else -side},{-side},{side},0\n" for i in range(n + 1))
+    wp = load_waypoints_csv(write_csv(tmp_path, HEADER + rows, "far.csv"))
+    assert wp.positions_m[:, 0].max() == side and len(wp.t_s) == n + 1
+    wp = load_waypoints_csv(write_csv(tmp_path, _far(MAX_WAYPOINTS, 0.0), "many.csv"))
+    assert len(wp.t_s) == MAX_WAYPOINTS
+
+
+def test_csv_larger_than_the_limit_is_refused_before_it_is_read(tmp_path):
+    path = tmp_path / "huge.csv"
+    with open(path, "wb") as f:
+        f.truncate(MAX_PATH_FILE_BYTES + 1)  # sparse: nothing is written or read
+    with pytest.raises(ReferenceError, match=r"huge\.csv: \d+ bytes; a waypoint file may hold at "
+                                             r"most 16 MiB"):
+        load_waypoints_csv(path)
+
+
+def test_make_trajectory_names_the_field_for_a_bad_path_file(tmp_path):
+    cfg = ReferenceConfig(kind="path", path_file=str(tmp_path / "gone.csv"))
+    with pytest.raises(ReferenceError, match=r"^reference\.path_file: no such file: .*gone\.csv$"):
+        make_trajectory(cfg)
 
 
 def test_csv_thesis_style_message(tmp_path):
@@ -405,7 +457,7 @@ def test_csv_thesis_style_message(tmp_path):
 
 
 def test_csv_missing_file(tmp_path):
-    with pytest.raises(ReferenceError, match="nope.csv: cannot read"):
+    with pytest.raises(ReferenceError, match="no such file: .*nope.csv"):
         load_waypoints_csv(tmp_path / "nope.csv")
 
 
@@ -491,3 +543,13 @@ def test_make_trajectory_maps_fields(tmp_path):
     np.testing.assert_allclose(lz.state_at(np.linspace(0, 120, 13)),
                                Lorenz().state_at(np.linspace(0, 120, 13)), atol=1e-12)
     assert lz.duration_s == 120.0
+
+
+def test_lorenz_polyline_has_at_most_the_point_cap(monkeypatch):
+    import ardrone_nmpc.reference.trajectories as trajectories
+
+    fine = Lorenz(duration_s=20.0).polyline_m()
+    monkeypatch.setattr(trajectories, "MAX_POLYLINE_POINTS", len(fine) // 4)
+    coarse = Lorenz(duration_s=20.0).polyline_m()
+    assert len(coarse) <= len(fine) // 4
+    np.testing.assert_array_equal(coarse[[0, -1]], fine[[0, -1]])  # the same path, sparser

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc.runtime import tick as loop
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunRecorder, read_run

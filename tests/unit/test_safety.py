@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import SafetyConfig, load_config
+from ardrone_nmpc.config.schema import SafetyConfig
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 

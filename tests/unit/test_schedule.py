@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import config_from_dict, load_config
+from ardrone_nmpc.config.schema import config_from_dict
+
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
 from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.runtime import schedule as sched

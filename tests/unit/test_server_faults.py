@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import Disorder

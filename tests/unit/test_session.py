@@ -2,7 +2,7 @@
 
 import pytest
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runtime.session import FlightSession
 from ardrone_nmpc.core.types import FlightMode
 

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.reference.trajectories import make_trajectory
+from ardrone_nmpc.runs.rundir import SummaryRow, read_summary
 from ardrone_nmpc.runs.summary import (
-    SummaryRow,
     input_stats,
     path_deviation,
-    read_summary,
     render_side_by_side,
     render_summary,
+    skipped_deadlines,
     solver_stats,
     step_metrics,
     summarise,
@@ -248,6 +248,7 @@ def test_summarise_step_run(tmp_path):
                                  "reference.step_time_s=1.0"])
     period = cfg.loop.period_s
     t = np.arange(-10, round(12 / period) + 1) * period
+    t = np.delete(t, [101, 102])  # tick 100 overran two deadlines: they were skipped
     x_true = first_order(t, y_final=-1.5)
     with RunRecorder.create(tmp_path, cfg, seed=5) as rec:
         for k, tk in enumerate(t):
@@ -285,7 +286,7 @@ def test_summarise_step_run(tmp_path):
     assert got[("solver", "status_diverged")].value == 1.0
     assert got[("solver", "solve_time_max")].value == 100.0 + len(t) - 1
     assert got[("loop", "fallbacks")].value == 1.0     # the "p" row; "settle" rows are t < 0
-    assert got[("loop", "overruns")].value == 1.0
+    assert got[("loop", "overruns")].value == 2.0  # the skipped deadlines, not late wake-ups
     assert got[("loop", "tick_late_max")].value == 70.0
     assert got[("run", "ticks")].value == len(t)
     assert got[("mocap", "no_data_ticks")].value == 0.0
@@ -293,6 +294,15 @@ def test_summarise_step_run(tmp_path):
     assert [(r.axis, r.metric, r.unit) for r in back] == [(r.axis, r.metric, r.unit)
                                                           for r in rows]
     np.testing.assert_array_equal([r.value for r in back], [r.value for r in rows])
+
+
+@pytest.mark.parametrize("ticks, expected", [
+    ([0, 1, 2, 3], 0), ([0, 1, 4, 5], 2), ([0, 2, 4], 2), ([0, 1, 2, 10], 7), ([5], 0), ([], 0),
+])
+def test_skipped_deadlines_are_the_gaps_in_the_tick_times(ticks, expected):
+    period = 0.001  # rounding of k·period must not add or lose a deadline
+    t = np.asarray(ticks, dtype=float) * period - 0.25
+    assert skipped_deadlines(np.append(t, np.nan), period) == expected
 
 
 def test_summarise_uses_measured_columns_without_truth(tmp_path):

@@ -17,7 +17,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ardrone_nmpc.config.schema import SafetyConfig, load_config
+from ardrone_nmpc.config.schema import SafetyConfig
+
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.mapping import DroneLimits, map_to_pcmd
 from ardrone_nmpc.control.obstacles import OBS_COLS, OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus

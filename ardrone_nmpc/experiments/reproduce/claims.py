@@ -12,7 +12,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ardrone_nmpc.config.schema import ControllerConfig, load_config
+from ardrone_nmpc.config.schema import ControllerConfig
+
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
 from ardrone_nmpc.experiments.reproduce.judges import NO_OVERSHOOT_PCT, RunFigures, figures_of
 

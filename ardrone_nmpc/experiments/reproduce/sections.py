@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ardrone_nmpc.config.schema import load_config
+from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.mapping import DroneLimits
 from ardrone_nmpc.core.types import IU_PSIRATE, IU_THETA, IU_ZACC, IX_VX, IX_X
 from ardrone_nmpc.experiments.reproduce.claims import FORMULATIONS, LAB_OVERRIDES, fly
@@ -148,22 +148,26 @@ def newton_traces(path: Path) -> dict[int, dict[int, list[float]]]:
     solved = np.flatnonzero(np.isfinite(np.asarray(cols["residual_norm"], float)) & (t >= 0))
     stages = np.arange(ctl.horizon_steps + 1) * ctl.dtau_s
     traces: dict[int, dict[int, list[float]]] = {}
-    # private hooks of the solver (_tick, _mem, _iprm): the trace needs the tick's solve
-    # repeated from one warm start with other iteration caps and Krylov dimensions
+    # the solver's private _tick and its memory's snapshot/restore: the trace needs the tick's
+    # solve repeated from one warm start with other iteration caps and Krylov dimensions
+    memory = solver.memory
     for n, k in enumerate(solved[: max(TRACE_TICKS) + 1]):
         x, ref = states[k], traj.state_at(t[k] + stages)
         if n in TRACE_TICKS:
-            mem, active, cap = solver._mem.copy(), solver.active.copy(), int(solver._iprm[2])
+            saved, active = memory.snapshot(), solver.active.copy()
+            cap = memory.max_newton_iterations
             traces[n] = {}
             for kmax in NEWTON_KMAX:
                 traces[n][kmax] = []
                 for iterations in TRACE_CAPS:
-                    solver._mem[:], solver.active[:] = mem, active
-                    solver._iprm[1], solver._iprm[2] = kmax, iterations
+                    memory.restore(saved)
+                    solver.active[:] = active
+                    memory.kmax, memory.max_newton_iterations = kmax, iterations
                     solver._tick(x, ref, False)
-                    traces[n][kmax].append(float(solver._stats[2]))
-            solver._mem[:], solver.active[:] = mem, active
-            solver._iprm[1], solver._iprm[2] = cfg.controller.solver.newton_kmax, cap
+                    traces[n][kmax].append(memory.stats().newton_residual)
+            memory.restore(saved)
+            solver.active[:] = active
+            memory.kmax, memory.max_newton_iterations = cfg.controller.solver.newton_kmax, cap
         solver.solve(float(t[k]), x, ref)
     return traces
 

@@ -7,16 +7,16 @@ run directory and finds the ones an earlier run finished, :mod:`.status` judges 
 """
 
 from ardrone_nmpc.experiments.sweep.cases import (PARTIAL_DIR, CaseResult, finished_result,
-                                                  resume_results, run_case, warm_up)
+                                                  resume_results, run_case, sweep_row, warm_up)
 from ardrone_nmpc.experiments.sweep.engines import iter_dask, iter_local
 from ardrone_nmpc.experiments.sweep.grid import (Case, GridParam, build_cases, case_id,
                                                  parse_grid, split_values, value_text)
 from ardrone_nmpc.experiments.sweep.status import (DIVERGE_M, TAIL_FRACTION, case_metrics,
                                                    classify)
-from ardrone_nmpc.experiments.sweep.table import (METRIC_COLUMNS, RANK_METRICS, STATUSES,
-                                                  SWEEP_FILE, SweepCsvAppender, SweepTable,
-                                                  SweepTableError, rank_rows, read_sweep,
-                                                  sweep_columns, sweep_row, write_sweep_csv)
+from ardrone_nmpc.runs.sweep_table import (METRIC_COLUMNS, RANK_METRICS, STATUSES, SWEEP_FILE,
+                                           SweepCsvAppender, SweepTable, SweepTableError,
+                                           rank_rows, read_sweep, sweep_columns,
+                                           write_sweep_csv)
 
 __all__ = [
     "DIVERGE_M",

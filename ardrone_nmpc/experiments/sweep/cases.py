@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 from ardrone_nmpc.experiments import record
 from ardrone_nmpc.experiments.record import one_line
 from ardrone_nmpc.experiments.sweep.status import DIVERGE_M, case_metrics, classify
-from ardrone_nmpc.experiments.sweep.table import (METRIC_COLUMNS, SWEEP_FILE, SweepTableError,
+from ardrone_nmpc.runs.sweep_table import (METRIC_COLUMNS, SWEEP_FILE, SweepTableError,
                                                   as_float, read_sweep)
 from ardrone_nmpc.runs.rundir import SUMMARY_FILE
 
@@ -182,3 +182,14 @@ def warm_up() -> None:
         case_metrics(run=run, rows=rows)
         classify(run=run)
     _WARM = True
+
+
+def sweep_row(case: Case, result: CaseResult) -> dict[str, str]:
+    """One ``sweep.csv`` row (text cells; numbers as in ``log.csv``, NaN as ``nan``)."""
+    from ardrone_nmpc.runs.rundir import format_number
+
+    row = {"case": case.case_id, **dict(case.params)}
+    for name in METRIC_COLUMNS:
+        row[name] = format_number(result.metrics[name])
+    row.update(status=result.status, message=result.message, run_dir=result.run_dir)
+    return row

@@ -36,7 +36,9 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from ardrone_nmpc.config.schema import ConfigError, config_to_dict, load_config
+from ardrone_nmpc.config.schema import ConfigError
+
+from ardrone_nmpc.config.io import config_to_dict, load_config
 
 if TYPE_CHECKING:  # pragma: no cover
     from ardrone_nmpc.config.schema import ExperimentConfig

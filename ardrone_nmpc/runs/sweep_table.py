@@ -15,11 +15,6 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # pragma: no cover
-    from ardrone_nmpc.experiments.sweep.cases import CaseResult
-    from ardrone_nmpc.experiments.sweep.grid import Case
 
 #: Metric columns of ``sweep.csv``, in order (after ``case`` and the swept parameters).
 METRIC_COLUMNS: tuple[str, ...] = ("rmse_m", "settling_s", "overshoot_pct", "path_deviation_m",
@@ -38,17 +33,6 @@ def sweep_columns(param_paths: Sequence[str]) -> list[str]:
     """The ``sweep.csv`` header: ``case``, the swept paths, the metrics, ``status``,
     ``message``, ``run_dir``."""
     return ["case", *param_paths, *METRIC_COLUMNS, "status", "message", "run_dir"]
-
-
-def sweep_row(case: Case, result: CaseResult) -> dict[str, str]:
-    """One ``sweep.csv`` row (text cells; numbers as in ``log.csv``, NaN as ``nan``)."""
-    from ardrone_nmpc.runs.rundir import format_number
-
-    row = {"case": case.case_id, **dict(case.params)}
-    for name in METRIC_COLUMNS:
-        row[name] = format_number(result.metrics[name])
-    row.update(status=result.status, message=result.message, run_dir=result.run_dir)
-    return row
 
 
 def write_sweep_csv(path: str | Path, columns: Sequence[str],

@@ -1,0 +1,73 @@
+"""Checks of option values done while the command line is parsed (exit 2, one line).
+
+click's own ranges let NaN through and say nothing of empty strings; these callbacks make
+every number finite and inside its documented range, and refuse an empty host, so that a
+typo never silently becomes a default.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "non_empty", "output_file", "port"]
+
+PORT_MAX = 65535
+#: Upper bound of ``sweep --jobs`` (processes started at once).
+MAX_JOBS = 256
+
+
+def finite(low: float, high: float, *, low_open: bool = False
+           ) -> Callable[[Optional[float]], Optional[float]]:
+    """A callback accepting None or a finite number in [low, high] ((low, high] if
+    ``low_open``)."""
+    interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+
+    def check(value: Optional[float]) -> Optional[float]:
+        if value is None:
+            return None
+        above = value > low if low_open else value >= low
+        if not (math.isfinite(value) and above and value <= high):
+            raise typer.BadParameter(f"must be a number in {interval}, got {value:g}")
+        return value
+
+    return check
+
+
+def port(*, zero_picks_a_free_one: bool = False) -> Callable[[Optional[int]], Optional[int]]:
+    """A callback accepting None or a UDP/TCP port, 1 … 65535 (0 too where it asks the
+    operating system for a free port, which is then printed)."""
+    low = 0 if zero_picks_a_free_one else 1
+
+    def check(value: Optional[int]) -> Optional[int]:
+        if value is not None and not low <= value <= PORT_MAX:
+            raise typer.BadParameter(f"{value} is not a port ({low} … {PORT_MAX})")
+        return value
+
+    return check
+
+
+def non_empty(value: Optional[str]) -> Optional[str]:
+    """A callback refusing an empty or blank string (None: the option was not given)."""
+    if value is not None and not value.strip():
+        raise typer.BadParameter("must not be empty")
+    return value
+
+
+def output_file(value: Optional[Path]) -> Optional[Path]:
+    """A callback for a file the command will write: not a directory, and no file where a
+    parent directory has to be (checked before the work, not after it)."""
+    if value is None:
+        return None
+    if value.is_dir():
+        raise typer.BadParameter(f"{value} is a directory; give a file name")
+    for parent in value.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise typer.BadParameter(f"{parent} is not a directory")
+            break
+    return value

@@ -1,0 +1,185 @@
+"""Experiment configs as files: YAML loading, ``--set`` overrides, and dumping.
+
+:func:`load_config` reads a YAML file (duplicate keys are errors), merges ``dotted.path=value``
+overrides, resolves ``reference.path_file`` to an absolute path (relative to the config file,
+or to the working directory for an override) and validates the result with
+:func:`~ardrone_nmpc.config.schema.config_from_dict`. :func:`dump_config` writes a config back
+as YAML that :func:`load_config` reads. Every problem is a
+:class:`~ardrone_nmpc.config.schema.ConfigError` line.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, config_from_dict
+
+__all__ = ["RETIRED_KEYS", "apply_overrides", "config_to_dict", "dump_config", "load_config"]
+
+#: Settings that existed once and were removed, with the reason. A user's config naming one
+#: is an error that says so; a run directory written before the removal still reads (the
+#: key is dropped).
+RETIRED_KEYS: dict[tuple[str, str], str] = {
+    ("mocap", "rate_hz"): "removed: nothing read it (the pose rate is whatever the mocap "
+                          "system sends; staleness is judged by safety.mocap_*_ms)",
+}
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that rejects duplicate keys instead of keeping the last one."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                duplicate = key in seen
+            except TypeError:  # unhashable key: the base class reports it
+                break
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark,
+                    f"duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def apply_overrides(data: Mapping[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """Return a copy of ``data`` with each ``dotted.path=value`` override set.
+
+    The value is parsed as YAML (``5`` → int, ``0.1`` → float, ``[1, 2]`` → list, ``null`` →
+    None, ``p`` → str); missing intermediate mappings are created. Raises :class:`ConfigError`
+    listing every malformed override.
+    """
+    result = copy.deepcopy(dict(data))
+    errors = []
+    for override in overrides:
+        path, sep, text = override.partition("=")
+        keys = path.strip().split(".")
+        if not sep or any(not key.strip() for key in keys):
+            errors.append(f"override {override!r}: expected dotted.path=value")
+            continue
+        keys = [key.strip() for key in keys]
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            errors.append(f"override {override!r}: invalid YAML value: {exc}".replace("\n", " "))
+            continue
+        node = result
+        for depth, key in enumerate(keys[:-1]):
+            child = node.setdefault(key, {})
+            if not isinstance(child, dict):
+                errors.append(f"override {override!r}: "
+                              f"{'.'.join(keys[:depth + 1])} is not a mapping")
+                break
+            node = child
+        else:
+            node[keys[-1]] = value
+    if errors:
+        raise ConfigError(errors)
+    return result
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read: {exc}") from None
+    try:
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = f" (line {mark.line + 1})" if mark is not None else ""
+        problem = exc.problem or exc.context or "syntax error"
+        raise ConfigError(f"{path}: invalid YAML{line}: {problem}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}".replace("\n", " ")) from None
+    if data is None:
+        # Most likely a truncated or wrong file; flying the default experiment instead would
+        # be a surprise. `{}` (or no config at all) asks for the defaults explicitly.
+        raise ConfigError(f"{path}: empty file (no settings); write {{}} in it for an "
+                          "experiment with every default")
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: the top level must be a mapping of section names to "
+                          f"values, not a {type(data).__name__}")
+    return data
+
+
+def _retire(data: dict[str, Any], *, drop: bool) -> list[str]:
+    """Remove retired keys from ``data`` (``drop``) or return one error line per key found."""
+    errors = []
+    for (section, key), why in RETIRED_KEYS.items():
+        node = data.get(section)
+        if isinstance(node, dict) and key in node:
+            if drop:
+                del node[key]
+            else:
+                errors.append(f"{section}.{key}: no longer a setting ({why}); delete it")
+    return errors
+
+
+def _path_file(data: dict[str, Any], base: Path) -> None:
+    """Make a relative ``reference.path_file`` absolute against ``base`` (in place)."""
+    reference = data.get("reference")
+    if isinstance(reference, dict) and isinstance(reference.get("path_file"), str) \
+            and reference["path_file"]:
+        reference["path_file"] = str((base / Path(reference["path_file"]).expanduser())
+                                     .resolve())
+
+
+def load_config(path: str | Path | None = None, overrides: Sequence[str] = (), *,
+                allow_retired: bool = False) -> ExperimentConfig:
+    """Load and validate an experiment.
+
+    ``path`` None means all defaults. ``overrides`` (``dotted.path=value``) are merged before
+    validation. A relative ``reference.path_file`` written in the file is resolved against the
+    file's directory; one given by an override, against the working directory. The file is
+    not read here (see :func:`ardrone_nmpc.reference.trajectories.make_trajectory`).
+    ``allow_retired`` drops :data:`RETIRED_KEYS` silently (run directories of older versions)
+    instead of reporting them. Raises :class:`ConfigError` with every problem found.
+    """
+    data: dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        data = _read_yaml(path)
+        _path_file(data, path.parent)
+    data = apply_overrides(data, overrides)
+    _path_file(data, Path.cwd())
+    errors = _retire(data, drop=allow_retired)
+    if errors:
+        raise ConfigError(errors)
+    return config_from_dict(data)
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block-style mappings, vectors on one line (``q: [12.0, 2.0, …]``)."""
+
+
+_Dumper.add_representer(
+    list, lambda dumper, data: dumper.represent_sequence(
+        "tag:yaml.org,2002:seq", data, flow_style=True))
+
+
+def config_to_dict(cfg: ExperimentConfig) -> dict[str, Any]:
+    """The configuration as plain JSON/YAML-safe data (tuples become lists), declared order."""
+    return cfg.model_dump(mode="json")
+
+
+def dump_config(cfg: ExperimentConfig, header: str | None = None) -> str:
+    """The configuration as YAML, keys in declared order, loadable by :func:`load_config`.
+
+    ``header`` (e.g. the tool version) is written as leading ``#`` comment lines.
+    """
+    body = yaml.dump(config_to_dict(cfg), Dumper=_Dumper, sort_keys=False,
+                     default_flow_style=False, allow_unicode=True, width=100)
+    if not header:
+        return body
+    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
+    return comments + body

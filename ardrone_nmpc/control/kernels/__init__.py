@@ -1,0 +1,96 @@
+"""Numba kernels of the thesis OCP (eq. 3.14–3.25): residual F(U, x, t), fdgmres, C/GMRES, Newton.
+
+Problem (per stage ``i = 0 … N−1``, forward Euler, thesis eq. 3.14/3.16)::
+
+    x_{i+1} = x_i + f(x_i, u_i) Δτ
+    L_i     = ½ (x_i − x_d,i)ᵀ q (x_i − x_d,i) + ½ u_iᵀ r u_i
+    Φ       = ½ (x_N − x_d,N)ᵀ q_f (x_N − x_d,N)            (q_f = 0 in the thesis)
+
+Costates run backward, ``λ_N = q_f (x_N − x_d,N)``, ``λ_i = λ_{i+1} + H_x Δτ`` (eq. 3.19/3.20),
+and ``F`` stacks the stationarity conditions per stage (eq. 3.21). Stage layouts (``m``):
+
+* ``m = 12`` — dummy-input form (Ohtsuka): unknowns ``[u(4), v(4), μ(4)]``; each bound
+  ``u_min ≤ u ≤ u_max`` becomes ``(u − c)² + v² − w² = 0`` (``c``, ``w`` centre and half-width)
+  and the cost gains ``−ρ_d Σ v``. Rows ``H_u = r u + f_uᵀλ + 2μ(u − c)``, ``H_v = −ρ_d + 2μv``,
+  ``C``.
+* ``m = 4`` — the same equations condensed: ``C = 0`` and ``H_v = 0`` give
+  ``v = √(w² − (u − c)²)``, ``μ = ρ_d / 2v``, so ``2μ(u − c) = ρ_d s/√(1 − s²)`` with
+  ``s = (u − c)/w``. ``F`` is the gradient of the barrier-augmented cost and ``F_U`` its
+  symmetric Hessian, on which restarted GMRES(5) converges; on the indefinite ``m = 12``
+  system it stagnates (docs/solver-notes.md).
+* obstacles (any layout) — an exterior penalty ``½ w max(0, d² − ‖p − c‖²)²``
+  (:mod:`~ardrone_nmpc.control.obstacles`) on every predicted position, the terminal one
+  included; its position gradient joins ``H_x`` in the costate recursion. Jacobian
+  products see its Gauss–Newton curvature and Newton line searches the cost
+  (:func:`condensed_cost`) as merit, so that the iterations head for a way round an obstacle,
+  not for the stationary path through its centre (docs/solver-notes.md §7).
+* ``m = 8`` — the thesis' eq. 3.25: unknowns ``[u(4), ν(4)]`` and an active set
+  ``a ∈ {−1, 0, +1}`` per input; an active bound imposes ``u = u_max − ε`` (``u_min + ε``), an
+  inactive one ``ν = 0``. Rows ``H_u = r u + f_uᵀλ + a ν``, then the constraint or ``ν``.
+
+Modules: ``layout`` (the packed memory), ``residual`` (F, its cost, the compiled model),
+``solve`` (fdgmres, Newton, the active set), ``steps`` (one tick of each scheme), ``memory``
+(:class:`SolverMemory`, what the solvers hold). The solvers use :class:`SolverMemory` only;
+the kernel functions are exported here for tests and benchmarks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+from pathlib import Path
+
+from numba.core.registry import CPUDispatcher
+
+from ardrone_nmpc.control.kernels.layout import (FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK,
+                                                NO_ACTIVE, STAGE_ACTIVE, STAGE_CONDENSED,
+                                                STAGE_DUMMY, carve_workspace, memory_size,
+                                                workspace_size)
+from ardrone_nmpc.control.kernels.memory import SolverMemory, SolverStats
+from ardrone_nmpc.control.kernels.residual import (aim_obstacles, bound_barrier, bound_gradient,
+                                                  condensed_cost, penalty, penalty_gradient,
+                                                  residual, rollout_rk4, sincos_small)
+from ardrone_nmpc.control.kernels.solve import fdgmres, newton_solve, prepare_reference
+from ardrone_nmpc.control.kernels.steps import cgmres_step, newton_step
+
+__all__ = [
+    "FLAG_BAD_INPUT", "FLAG_NON_FINITE", "FLAG_OK", "NO_ACTIVE", "STAGE_ACTIVE",
+    "STAGE_CONDENSED", "STAGE_DUMMY", "SolverMemory", "SolverStats", "aim_obstacles",
+    "bound_barrier", "bound_gradient", "carve_workspace", "cgmres_step", "condensed_cost",
+    "fdgmres", "memory_size", "newton_solve", "newton_step", "penalty", "penalty_gradient",
+    "prepare_reference", "residual", "rollout_rk4", "sincos_small", "workspace_size",
+]
+
+# numba keys a cached kernel on its own file only, but a kernel's machine code includes
+# what it calls from other files (the model, the obstacle penalty, gmres, the angle helper,
+# sibling modules here). So: one digest over all of those sources, and every cached kernel is
+# flushed (recompiled on its next call) when the digest changes.
+_KERNEL_MODULES = ("ardrone_nmpc.model", "ardrone_nmpc.core.angles",
+                   "ardrone_nmpc.control.obstacles", "ardrone_nmpc.control.gmres",
+                   "ardrone_nmpc.control.kernels.layout", "ardrone_nmpc.control.kernels.residual",
+                   "ardrone_nmpc.control.kernels.solve", "ardrone_nmpc.control.kernels.steps")
+_DIGEST_FILE = "kernel-sources.sha256"
+
+
+def _flush_stale_caches() -> None:
+    modules = [sys.modules[name] for name in _KERNEL_MODULES]
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(module.__file__).read_bytes())
+    kernels = [value for module in modules for value in vars(module).values()
+               if isinstance(value, CPUDispatcher) and hasattr(value._cache, "cache_path")]
+    stamp = Path(kernels[0]._cache.cache_path) / _DIGEST_FILE
+    try:
+        if stamp.read_text() == digest.hexdigest():
+            return
+    except OSError:
+        pass
+    for kernel in kernels:
+        kernel._cache.flush()
+    try:
+        stamp.write_text(digest.hexdigest())
+    except OSError:
+        pass  # a read-only tree: numba recompiles every run anyway
+
+
+_flush_stale_caches()

@@ -1,0 +1,201 @@
+"""The ``thesis_kit`` plant: the ARDrone Simulink Development Kit's linear identified channels.
+
+The thesis simulated with the kit (docs/plant.md §4): PCMD fractions pass a 0.26 s delay, then
+linear identified channels, integrated at 5 ms. In the kit's (drone) signs, with c the delayed
+PCMD fractions::
+
+    roll  c_roll  → φ      ssRoll    (1.4834 s + 3.5236)/(s² + 4.2683 s + 12.6865)
+          φ       → v      ssRoll2V  4.7737/(s + 0.4596)        v: body speed to the right
+    pitch c_pitch → θ_k    ssPitch   (2.5139 s + 4.8661)/(s² + 3.9784 s + 11.9184)
+          θ_k     → u      ssPitch2U −6.1543/(s + 0.6650)       u: body speed forward
+    gaz   c_gaz   → z      Gzc       (0.1526 s + 5.153)/(s (s + 5.82))
+    yaw   c_yaw   → ψ_k    ssYaw     1.265/(s + 0.0059)         ψ_k clockwise
+
+θ_k > 0 is nose up (the PCMD sign), so a positive pitch fraction flies backwards; ψ_k is the
+kit's heading change since take-off, clockwise. Into the world frame of docs/design.md §4
+(x forward, y left, z up, ψ counter-clockwise): θ = −θ_k, ψ̇ = −ψ̇_k, and the body speeds turn
+with ψ: ẋ = cos ψ·u + sin ψ·v, ẏ = sin ψ·u − cos ψ·v.
+
+What the kit does not model, and this backend adds so that the rest of the simulator works
+unchanged (the modes, take-off/landing, ground, battery, sensors and faults are
+:class:`~ardrone_nmpc.sim.plant.AirframePlant`'s): the speed poles act on the air-relative speed
+(so wind and ``turbulence_std_mps`` push the drone as drag does in the ``ardrone`` profile); with
+the progressive flag at 0 the tilt commands are 0 and the position hold adds damping so that
+u, v decay with ``hover_tau_s``; the automatic take-off and landing command the climb rate
+through the kit's vertical gain. The firmware limits (``drone.euler_angle_max_rad`` …) are part
+of the identified gains and do not act separately. Constants and sources:
+docs/plant-profiles.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
+
+if TYPE_CHECKING:
+    from ardrone_nmpc.config.schema import DroneConfig, SimConfig
+
+__all__ = ["KIT", "KitModel", "KitPlant", "kit_rk4"]
+
+N_KIT = 12   # x, y, z, ψ (world) + roll (2), pitch (2), u, v, vertical (1), ψ_k states
+
+
+@dataclass(frozen=True, slots=True)
+class KitModel:
+    """The kit's identified state-space channels, as stored in its ``ss*`` objects
+    (docs/plant.md §4; A, B, C per channel, D = 0) and its ``Gzc`` transfer function."""
+
+    roll_a: tuple = ((-4.2683, -3.171628), (4.0, 0.0))
+    roll_b: tuple = (2.0, 0.0)
+    roll_c: tuple = (0.741691, 0.440455)
+    pitch_a: tuple = ((-3.978376, -2.9796), (4.0, 0.0))
+    pitch_b: tuple = (2.0, 0.0)
+    pitch_c: tuple = (1.256933, 0.608257)
+    roll2v_abc: tuple = (-0.459552, 2.0, 2.386839)
+    pitch2u_abc: tuple = (-0.665041, 2.0, -3.07716)
+    yaw_abc: tuple = (-0.005879, 1.0, 1.265268)
+    # Gzc = (gz_num1 s + gz_num0) / (s (s + gz_pole)): gaz → z
+    gz_num1: float = 0.1526
+    gz_num0: float = 5.153
+    gz_pole: float = 5.82
+
+    @property
+    def vz_per_frac_mps(self) -> float:
+        """Steady climb rate per unit gaz (m/s): Gzc·s at s = 0."""
+        return self.gz_num0 / self.gz_pole
+
+    def coefficients(self, hover_tau_s: float) -> tuple:
+        """The flat tuple :func:`kit_rk4` reads (its order is the kernel's unpacking)."""
+        (ra11, ra12), (ra21, ra22) = self.roll_a
+        (pa11, pa12), (pa21, pa22) = self.pitch_a
+        av, bv, cv = self.roll2v_abc
+        au, bu, cu = self.pitch2u_abc
+        ay, by, cy = self.yaw_abc
+        hold_u = max(0.0, 1.0 / hover_tau_s + au)   # au < 0: the pole's own damping
+        hold_v = max(0.0, 1.0 / hover_tau_s + av)
+        return (ra11, ra12, ra21, ra22, self.roll_b[0], self.roll_b[1], self.roll_c[0],
+                self.roll_c[1], pa11, pa12, pa21, pa22, self.pitch_b[0], self.pitch_b[1],
+                self.pitch_c[0], self.pitch_c[1], av, bv * cv, au, bu * cu, ay, by * cy,
+                self.gz_num1, self.gz_num0 - self.gz_num1 * self.gz_pole, self.gz_pole,
+                hold_u, hold_v)
+
+
+KIT = KitModel()
+
+
+@njit(cache=True)
+def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
+    """Derivative of the kit state ``x`` (N_KIT); also returns (vx, vy, vz, φ, θ_k, ψ̇_k)."""
+    (ra11, ra12, ra21, ra22, rb1, rb2, rc1, rc2, pa11, pa12, pa21, pa22, pb1, pb2, pc1, pc2,
+     av, gv, au, gu, ay, gy, gz_feed, gz_in, gz_pole, hold_u, hold_v) = k
+    psi = x[3]
+    c = math.cos(psi)
+    s = math.sin(psi)
+    phi = rc1 * x[4] + rc2 * x[5]
+    theta_k = pc1 * x[6] + pc2 * x[7]
+    u, v = x[8], x[9]
+    w_u = c * w[0] + s * w[1]          # wind along body forward / right
+    w_v = s * w[0] - c * w[1]
+    vz = gz_feed * gaz + x[10]
+    psi_k_rate = ay * x[11] + gy * yaw
+    out[0] = c * u + s * v
+    out[1] = s * u - c * v
+    out[2] = vz
+    out[3] = -psi_k_rate               # world ψ is counter-clockwise, the kit's clockwise
+    out[4] = ra11 * x[4] + ra12 * x[5] + rb1 * roll
+    out[5] = ra21 * x[4] + ra22 * x[5] + rb2 * roll
+    out[6] = pa11 * x[6] + pa12 * x[7] + pb1 * pitch
+    out[7] = pa21 * x[6] + pa22 * x[7] + pb2 * pitch
+    out[8] = au * (u - w_u) + gu * theta_k
+    out[9] = av * (v - w_v) + gv * phi
+    if hold:
+        out[8] -= hold_u * u
+        out[9] -= hold_v * v
+    out[10] = -gz_pole * x[10] + gz_in * gaz
+    out[11] = psi_k_rate
+    return out[0], out[1], vz, phi, theta_k, psi_k_rate
+
+
+@njit(cache=True)
+def kit_rk4(x0, roll, pitch, gaz, yaw, hold, k, w, h):
+    """One classical RK4 step of the kit over ``h`` (the commands held); returns the new state
+    and the outputs (vx, vy, vz, φ, θ_k, ψ̇_k) at its end. ``hold`` zeroes roll and pitch."""
+    if hold:
+        roll = 0.0
+        pitch = 0.0
+    n = x0.shape[0]
+    a = np.empty(n)
+    b = np.empty(n)
+    c = np.empty(n)
+    d = np.empty(n)
+    t = np.empty(n)
+    hh = 0.5 * h
+    _kit_rhs(x0, roll, pitch, gaz, yaw, hold, k, w, a)
+    for i in range(n):
+        t[i] = x0[i] + hh * a[i]
+    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
+    for i in range(n):
+        t[i] = x0[i] + hh * b[i]
+    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
+    for i in range(n):
+        t[i] = x0[i] + h * c[i]
+    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
+    x = np.empty(n)
+    for i in range(n):
+        x[i] = x0[i] + h / 6.0 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
+    outputs = _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, t)
+    return x, outputs
+
+
+class KitPlant(AirframePlant):
+    """:class:`~ardrone_nmpc.sim.plant.AirframePlant` with the kit's channels in flight.
+
+    ``params`` keeps the shared fields (delay, step, take-off, battery, sensor biases); its
+    ``tau_vz_s`` is the kit's vertical time constant 1/5.82 s (the take-off hand-over and the
+    firmware's altitude cap read it). ``model`` holds the identified channels.
+    """
+
+    def __init__(self, params: PlantParams, noise=None, *, seed: int = 0,
+                 model: KitModel = KIT) -> None:
+        params = params.replace(tau_vz_s=1.0 / model.gz_pole)
+        super().__init__(params, noise, seed=seed)
+        self.model = model
+        self._coefficients = model.coefficients(params.hover_tau_s)
+        self._kit = np.zeros(N_KIT)
+
+    @classmethod
+    def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, *,
+                    seed: int | None = None) -> KitPlant:
+        """The kit plant of an experiment's ``sim`` and ``drone`` sections (``tau_*`` and
+        ``drag_per_s`` of ``sim.plant`` are not used)."""
+        return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
+                   seed=sim_cfg.seed if seed is None else seed)
+
+    def _motors_on_step(self, command: tuple, h: float, wind: tuple) -> tuple:
+        roll, pitch, gaz, yaw, hold = command
+        kit = self._kit
+        x, y, z, *_rest = self._state
+        kit[0], kit[1], kit[2], kit[3] = x, y, z, self._state[8]
+        gaz = float(gaz) * self.params.vertical_gain(self._battery)  # sim disturbance options
+        kit, (vx, vy, vz, phi, theta_k, psi_k_rate) = kit_rk4(
+            kit, float(roll), float(pitch), gaz, float(yaw), bool(hold),
+            self._coefficients, wind, h)
+        self._kit = kit
+        return (kit[0], kit[1], kit[2], vx, vy, vz, phi, -theta_k, kit[3], -psi_k_rate)
+
+    def _auto_command(self, mode: FlightMode) -> tuple:
+        p = self.params
+        speed = p.takeoff_climb_mps if mode is FlightMode.TAKING_OFF else -p.landing_speed_mps
+        return (0.0, 0.0, speed / self.model.vz_per_frac_mps, 0.0, True)
+
+    def _at_rest(self, state: tuple) -> tuple:
+        """At rest on the ground, the kit's channels rest too (a new flight starts from 0)."""
+        self._kit = np.zeros(N_KIT)
+        return AirframePlant._at_rest(state)
