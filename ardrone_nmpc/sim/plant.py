@@ -81,6 +81,7 @@ from numba import njit
 
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
     from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
@@ -366,38 +367,6 @@ def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, norm
     a = math.exp(-dt_s / tau_s)
     q = std * math.sqrt(1.0 - a * a)
     return tuple(a * v + q * n for v, n in zip(values, normals))
-
-
-# ----------------------------------------------------------------------------- sensor geometry
-
-
-def mocap_rotation_xyz_rad(roll_rad: float, pitch_rad: float, psi_rad: float
-                           ) -> tuple[float, float, float]:
-    """Mocap angles ``(rx, ry, rz)`` of the attitude φ, θ, ψ (world/model signs).
-
-    The body→world rotation is ``R = Rz(ψ)·Ry(θ)·Rx(φ)``; the result satisfies
-    ``R = Rx(rx)·Ry(ry)·Rz(rz)`` — scipy ``Rotation.from_euler("ZYX", [ψ, θ, φ])
-    .as_euler("XYZ")`` in closed form (≈ 2 µs instead of ≈ 70 µs; equality is tested).
-    ry ∈ [−π/2, π/2], rx and rz in (−π, π].
-    """
-    sf, cf = math.sin(roll_rad), math.cos(roll_rad)
-    st, ct = math.sin(pitch_rad), math.cos(pitch_rad)
-    sp, cp = math.sin(psi_rad), math.cos(psi_rad)
-    r00 = cp * ct
-    r01 = cp * st * sf - sp * cf
-    r02 = cp * st * cf + sp * sf
-    r12 = sp * st * cf - cp * sf
-    r22 = ct * cf
-    ry = math.asin(max(-1.0, min(1.0, r02)))
-    return math.atan2(-r12, r22), ry, math.atan2(-r01, r00)
-
-
-def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
-    """Heading ψ = atan2(R[1,0], R[0,0]) of ``R = Rx(rx)·Ry(ry)·Rz(rz)``, wrapped to (−π, π]
-    (mocap-stream.md)."""
-    r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
-    r00 = math.cos(ry) * math.cos(rz)
-    return wrap_angle_rad(math.atan2(r10, r00))
 
 
 def _finite_frac(name: str, value: float) -> float:
