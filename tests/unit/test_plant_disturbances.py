@@ -85,3 +85,17 @@ def test_config_fields_reach_the_plant_and_are_validated():
     for bad in ("sim.vz_gain=0", "sim.battery_sag_frac=1", "sim.navdata_velocity_bias_mps=[1]"):
         with pytest.raises(ConfigError):
             load_config(None, [bad])
+
+
+@pytest.mark.parametrize("gain", [0.7, 1.0])
+def test_kit_backend_takes_the_same_vertical_gain(gain):
+    """thesis_kit: the linear gaz → vz channel scaled by G; its steady climb rate is
+    G · gaz · vz_per_frac (the channel's own DC gain, from its transfer function)."""
+    from ardrone_nmpc.sim.plant_kit import KitPlant
+
+    plant = KitPlant(PlantParams(initial_position_m=(0.0, 0.0, 1.0),
+                                 **{**NO_BIAS, "vz_gain": gain}), QUIET)
+    plant.command(0.0, 0.0, 0.3, 0.0)
+    plant.advance(3.0)  # 17 time constants of the 1/5.82 s channel
+    assert plant.truth.velocity_mps[2] == pytest.approx(gain * 0.3 * plant.model.vz_per_frac_mps,
+                                                        rel=1e-3)
