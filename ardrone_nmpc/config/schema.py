@@ -43,9 +43,9 @@ from pydantic import Field, ValidationError, ValidationInfo, field_validator, mo
 
 from ardrone_nmpc.config.faults import FaultsConfig
 from ardrone_nmpc.config.fields import (
-    CoordinateVec2, CoordinateVec3, Finite, NonNegative, NonNegativeSpan, NonNegativeVec7,
-    PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2, PositiveVec4, Section,
-    Span, Vec4, ascii_name, invalid, require_increasing,
+    CoordinateVec2, CoordinateVec3, Finite, NonNegative, NonNegativeSpan, NonNegativeVec4,
+    NonNegativeVec7, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
+    PositiveVec4, Section, Span, Vec2, Vec4, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
 from ardrone_nmpc.errors import UserError
@@ -173,6 +173,44 @@ class ObstacleConfig(Section):
         "last position is kept when it goes stale). null: static.")
 
 
+class OffsetFreeConfig(Section):
+    """Offset-free tracking: integral action on the position/yaw error, fed to the NMPC as a
+    shift of its reference (docs/solver-notes.md, "Offset-free tracking"). A constant wind, a
+    vertical gain mismatch, battery sag or a navdata velocity bias then leave no steady error.
+    Vectors are ordered [x, y, z, ψ]."""
+
+    enabled: bool = Field(True, description="Integral action on (true) or off (false: the "
+                          "NMPC tracks the reference itself, as in the thesis).")
+    ki_per_s: NonNegativeVec4 = Field(
+        (0.5, 0.5, 0.4, 0.15), description="Integral gain per axis (1/s): the reference shift "
+        "moves by −ki·e per second while it learns, [x, y, z, ψ]; 0 switches an axis off.")
+    kp: NonNegativeVec4 = Field(
+        (0.0, 0.0, 1.0, 0.0), description="Proportional part of the shift while learning "
+        "(dimensionless, m per m / rad per rad), [x, y, z, ψ]: stiffens a slow loop so the "
+        "integrator settles without overshoot (velocity form: it never jumps the shift).")
+    error_band: PositiveVec4 = Field(
+        (0.5, 0.5, 0.5, 0.3), description="An axis learns only while |error| is below this "
+        "[m, m, m, rad] (conditional integration: a step's transient does not wind up).")
+    hold_s: NonNegativeVec4 = Field(
+        (1.5, 1.5, 1.5, 2.0), description="It starts learning once the axis has been at rest "
+        "inside its error band this long (s), and goes on until the error leaves the band or "
+        "the reference moves: the tail of a step is the loop's own.")
+    steady_band: PositiveVec4 = Field(
+        (0.01, 0.01, 0.02, 0.01), description="'At rest' also needs the error steady: its "
+        "range since the axis came to rest within this [m, m, m, rad] — a step's tail that "
+        "still converges restarts the hold.")
+    speed_band: PositiveVec4 = Field(
+        (0.15, 0.15, 0.05, 0.3), description="'At rest': the estimated rate of the axis below "
+        "this [m/s, m/s, m/s, rad/s].")
+    release_speed: PositiveVec4 = Field(
+        (0.3, 0.3, 0.3, 0.6), description="A learning axis stops (and needs a new hold) when "
+        "its rate exceeds this [m/s, m/s, m/s, rad/s]: a gust is not a constant disturbance. "
+        "Above speed_band, so the motion the shift itself causes does not stop it.")
+    max_shift: PositiveVec4 = Field(
+        (0.5, 0.5, 0.5, 0.3), description="Largest reference shift [m, m, m, rad]: a bad "
+        "sensor cannot drag the drone further than this from the reference.")
+
+
 class ControllerConfig(Section):
     """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
 
@@ -235,8 +273,20 @@ class ControllerConfig(Section):
         "true Hessian (for comparison).")
     p_gains: PGainsConfig = Field(
         default_factory=PGainsConfig, description="Gains of the 'p' controller.")
+    offset_free: OffsetFreeConfig = Field(
+        default_factory=OffsetFreeConfig, description="Offset-free tracking (integral action "
+        "of the NMPC; the 'p' controller has none). true/false is short for "
+        "{enabled: true/false} with the default gains.")
 
     _u_bounds = require_increasing("u_min", "u_max")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _offset_free_shorthand(cls, data: Any) -> Any:
+        # controller.offset_free: false (a bool) → the section with enabled false
+        if isinstance(data, Mapping) and isinstance(data.get("offset_free"), bool):
+            data = {**data, "offset_free": {"enabled": data["offset_free"]}}
+        return data
 
 
 # ----------------------------------------------------------------------------- estimation
@@ -563,6 +613,16 @@ class SimConfig(Section):
         15.0, ge=1.0, le=1000.0, description="Simulated navdata rate (Hz), 1 … 1000; 15 = demo.")
     target: Optional[TargetConfig] = Field(
         None, description="A scripted second object streamed on the mocap stream (null: none).")
+    vz_gain: float = Field(
+        1.0, gt=0.0, le=2.0, description="Disturbance: the plant's vertical speed is this times "
+        "the commanded (a vertical gain mismatch, e.g. 0.7), full battery. Constant wind is "
+        "faults.wind.")
+    battery_sag_frac: float = Field(
+        0.0, ge=0.0, lt=1.0, description="Disturbance: fraction of the vertical gain lost at "
+        "0 % battery, linear in the discharge (battery sag: less thrust as it drains).")
+    navdata_velocity_bias_mps: Vec2 = Field(
+        (0.0, 0.0), description="Disturbance: constant bias of the navdata body velocities "
+        "[forward, right] (m/s), on top of the drifting one.")
     settle_s: NonNegativeSpan = Field(
         4.0, description="Seconds the controller holds the reference's start point before t = 0 "
         "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis; "

@@ -25,12 +25,13 @@ from ardrone_nmpc.core.types import (
     IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
 )
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
-           "MovingObstacles", "Sent", "Solution", "Supervision", "feedback_ages_ms",
+           "MovingObstacles", "OffsetFree", "Sent", "Solution", "Supervision", "feedback_ages_ms",
            "measurement_columns", "navdata_velocity_world", "tick_row"]
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
@@ -187,6 +188,7 @@ class Solution:
     ok: bool = True
     status: str = ""
     p_command: AttitudeCommand | None = None
+    ref_horizon: np.ndarray | None = None
 
     @property
     def zacc_mps2(self) -> float:
@@ -230,8 +232,11 @@ class Control:
         self.nmpc.reset()
         return hover
 
-    def solve(self, t_exp_s: float, x: np.ndarray, traj) -> Solution:
-        """The controller's answer at experiment time ``t_exp_s`` for the estimate ``x``."""
+    def solve(self, t_exp_s: float, x: np.ndarray, traj, offset: OffsetFree | None = None
+              ) -> Solution:
+        """The controller's answer at experiment time ``t_exp_s`` for the estimate ``x``;
+        ``offset`` shifts the NMPC's horizon reference (offset-free tracking; ``ref_now``,
+        the logged reference, stays the experiment's)."""
         if self.nmpc is None:
             ref_now = traj.state_at(t_exp_s)[0]
             return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
@@ -244,13 +249,15 @@ class Control:
         times[0] = t_exp_s
         times[1:] = t_exp_s + self.delay.lead_s + max(dtau, 1e-9) * self._stage_index
         states = traj.state_at(times)
-        result = solver.solve(t_exp_s, x_solve, states[1:])
+        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
+        result = solver.solve(t_exp_s, x_solve, horizon)
         if self.faults is not None and self.faults.solver_diverges(t_exp_s):
             return Solution(states[0], x_solve, result, np.full(INPUT_DIM, math.nan), False,
-                            SolverStatus.DIVERGED.value)
+                            SolverStatus.DIVERGED.value, ref_horizon=states[1:])
         ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
                            and self.accept_max_iterations)
-        return Solution(states[0], x_solve, result, result.u, ok, result.status.value)
+        return Solution(states[0], x_solve, result, result.u, ok, result.status.value,
+                        ref_horizon=states[1:])
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -273,6 +280,32 @@ class Control:
         vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
         vz_ref = min(max(vz_reference_mps(vz_base, u[IU_ZACC], self.vz_lead_s), -vz_max), vz_max)
         return AttitudeCommand(vz_ref, float(u[IU_PHI]), float(u[IU_THETA]), float(u[IU_PSIRATE]))
+
+
+# ----------------------------------------------------------------------------- offset-free
+class OffsetFree:
+    """Integral action of the NMPC (``controller.offset_free``): the reference shift that
+    removes a constant disturbance's steady error (:mod:`ardrone_nmpc.estimation.disturbance`).
+
+    Updated after each tick's verdict: it integrates only on a tick the NMPC flew
+    (:attr:`Action.CONTROL`) — frozen while the supervisor holds, hovers, lands, stops or falls
+    back to P — and, per axis, not while the command sent sits on the drone's limits.
+    """
+
+    def __init__(self, cfg, period_s: float) -> None:
+        self.integrator = ReferenceIntegrator.from_config(cfg, period_s)
+
+    def update(self, x: np.ndarray | None, sol: Solution | None, sent: Sent) -> None:
+        if x is None or sol is None:  # nothing solved: nothing to learn from
+            self.integrator.learning[:] = False
+            return
+        p = sent.pcmd
+        if sent.decision.action is Action.CONTROL:
+            frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
+                                 sent.saturated)
+        else:  # frozen, but it still sees the reference move and the drone come to rest
+            frozen = (True,) * 4
+        self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
 # ----------------------------------------------------------------------------- supervision

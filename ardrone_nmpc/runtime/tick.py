@@ -19,7 +19,8 @@ from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
-    Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world, tick_row,
+    OffsetFree, Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world,
+    tick_row,
 )
 from ardrone_nmpc.safety import Action, Supervisor
 from ardrone_nmpc.sim.faults import FaultSchedule
@@ -90,6 +91,8 @@ class Tick:
         # the one home of solver-divergence injection: the schedule's window (sim/faults.py)
         self.control = Control(cfg, self.limits, nmpc, self.delay, FaultSchedule(cfg.faults))
         self.supervision = Supervision(self.supervisor, self.limits)
+        self.offset = (OffsetFree(ctl.offset_free, self.period_s)
+                       if nmpc is not None and ctl.offset_free.enabled else None)
         moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object]
         ahead_s = self.delay.lead_s + ctl.obstacle_lookahead_s
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
@@ -120,13 +123,15 @@ class Tick:
         if decision.action is Action.CONTROL:
             decision = sup.check_state(x, inputs.navdata)
         if decision.action is Action.CONTROL:
-            solution = self.control.solve(t_exp_s, x, traj)
+            solution = self.control.solve(t_exp_s, x, traj, self.offset)
             if solution.result is not None:  # the NMPC's answer is judged; P's is not
                 decision = sup.check_solution(solution.ok, solution.u_flown)
             cmd = self.control.command(decision.action, solution, x, self.supervision.vz_ref_mps)
         sent = self.supervision.command(
             decision, cmd, solution.zacc_mps2 if solution is not None else math.nan)
         self.delay.push(sent.u)
+        if self.offset is not None:  # integrates after the verdict: frozen unless flown
+            self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
         compute_us = (time.perf_counter_ns() - t0) * 1e-3
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,

@@ -4,7 +4,7 @@ Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``comma
 
     φ' = (c_roll·E − φ)/τ_a          θ' = (−c_pitch·E − θ)/τ_a        (world/model signs, below)
     r' = (−c_yaw·Y − r)/τ_r          ψ' = r
-    v_z' = (c_gaz·V − v_z)/τ_z + k_d·w_z                 z' = v_z
+    v_z' = (G·c_gaz·V − v_z)/τ_z + k_d·w_z               z' = v_z
     forward = g·tan θ,  right = g·tan φ                  (body accelerations)
     v_x' =  cos ψ·forward + sin ψ·right − k_d·(v_x − w_x) [− d·v_x in position hold]
     v_y' =  sin ψ·forward − cos ψ·right − k_d·(v_y − w_y) [− d·v_y in position hold]
@@ -13,7 +13,9 @@ with c = the PCMD fractions ``command_delay_s`` ago, w = ``wind_mps`` (+ the tur
 Gauss–Markov wind of ``turbulence_std_mps``) and d = max(0, 1/hover_tau_s − k_d), so that without
 wind a hold damps v_xy with τ = hover_tau_s. This is the ``ardrone`` profile's backend; the
 ``thesis_kit`` one (:mod:`~ardrone_nmpc.sim.plant_kit`) replaces :meth:`_motors_on_step`
-(docs/plant-profiles.md).
+(docs/plant-profiles.md). G = ``vz_gain``·(1 − ``battery_sag_frac``·(1 − battery/100)): a
+vertical gain mismatch and battery sag (``sim`` disturbance options, 1 nominally; constant
+wind is ``faults.wind``, applied by :class:`~ardrone_nmpc.sim.faults.PlantFaults`).
 
 Sign conventions
 ----------------
@@ -56,7 +58,7 @@ Mocap (:meth:`AirframePlant.mocap_pose`): position + N(0, σ_p) per axis; the th
 roll/pitch + N(0, σ) + a per-flight trim bias uniform in ±0.5°; yaw + N(0, σ) + an offset
 uniform in ±180° drawn at take-off + a drift of 1°/min (random sign per flight) with a small
 random walk; ultrasound altitude + N(0, σ); body velocities + N(0, σ_v) + a Gauss–Markov bias
-(σ 0.02 m/s, τ 30 s); altitude and velocities read 0 with the motors off. The biases evolve in
+(σ 0.02 m/s, τ 30 s) + the constant ``navdata_velocity_bias_mps``; altitude and velocities read 0 with the motors off. The biases evolve in
 :meth:`~AirframePlant.advance`; σ values come from ``sim.noise``, the bias sizes from
 :class:`PlantParams` (zero them for exact tests).
 
@@ -80,6 +82,7 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim.airframe import _airframe_rhs, airframe_rk4, airframe_rk4_many
+from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
     from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
@@ -144,6 +147,10 @@ class PlantParams:
     navdata_yaw_walk_rad_per_sqrt_s: float = math.radians(0.2) / math.sqrt(60.0)
     navdata_velocity_bias_std_mps: float = 0.02              # Gauss–Markov, stationary σ
     navdata_velocity_bias_tau_s: float = 30.0
+    # --- disturbance options (sim section): vertical gain, its sag at 0 % battery, a bias
+    vz_gain: float = 1.0
+    battery_sag_frac: float = 0.0
+    navdata_velocity_bias_mps: tuple[float, float] = (0.0, 0.0)  # (forward, right)
     # derived: extra damping of the position hold so that v_xy decays with τ = hover_tau_s
     hover_damping_per_s: float = field(init=False, repr=False)
     # derived: (E, V/τ_z, 1/τ_z, Y/τ_r, 1/τ_r, 1/τ_a, k_d, hover damping) for the RHS
@@ -153,7 +160,7 @@ class PlantParams:
         for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps",
                      "tau_tilt_s", "tau_yaw_s", "tau_vz_s", "integration_step_s", "hover_tau_s",
                      "takeoff_altitude_m", "takeoff_climb_mps", "landing_speed_mps",
-                     "navdata_velocity_bias_tau_s", "turbulence_tau_s"):
+                     "navdata_velocity_bias_tau_s", "turbulence_tau_s", "vz_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
@@ -161,15 +168,20 @@ class PlantParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        if not 0.0 <= self.battery_sag_frac < 1.0:
+            raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
             raise ValueError(f"initial_position_m must be [x, y, z] with z >= 0, "
                              f"got {self.initial_position_m!r}")
         object.__setattr__(self, "initial_position_m",
                            tuple(float(v) for v in self.initial_position_m))
+        object.__setattr__(self, "navdata_velocity_bias_mps",
+                           tuple(float(v) for v in self.navdata_velocity_bias_mps))
         damping = max(0.0, 1.0 / self.hover_tau_s - self.drag_per_s)
         object.__setattr__(self, "hover_damping_per_s", damping)
         object.__setattr__(self, "rhs_coefficients", (
-            self.euler_angle_max_rad, self.control_vz_max_mps / self.tau_vz_s, 1.0 / self.tau_vz_s,
+            self.euler_angle_max_rad, self.vz_gain * self.control_vz_max_mps / self.tau_vz_s,
+            1.0 / self.tau_vz_s,
             self.control_yaw_radps / self.tau_yaw_s, 1.0 / self.tau_yaw_s, 1.0 / self.tau_tilt_s,
             self.drag_per_s, damping))
 
@@ -193,6 +205,9 @@ class PlantParams:
             battery_drain_pct_per_min=plant.battery_drain_pct_per_min,
             turbulence_std_mps=plant.turbulence_std_mps,
             turbulence_tau_s=plant.turbulence_tau_s,
+            vz_gain=sim_cfg.vz_gain,
+            battery_sag_frac=sim_cfg.battery_sag_frac,
+            navdata_velocity_bias_mps=tuple(sim_cfg.navdata_velocity_bias_mps),
             **overrides,
         )
 
@@ -200,6 +215,18 @@ class PlantParams:
     def command_delay_steps(self) -> int:
         """Length of the command FIFO: round(command_delay_s / integration_step_s)."""
         return int(round(self.command_delay_s / self.integration_step_s))
+
+    def vertical_gain(self, battery_pct: float) -> float:
+        """G of the module docstring at ``battery_pct`` (%): vertical speed / commanded."""
+        return self.vz_gain * (1.0 - self.battery_sag_frac
+                               * (1.0 - min(max(battery_pct, 0.0), 100.0) / 100.0))
+
+    def coefficients_at(self, battery_pct: float) -> tuple:
+        """:attr:`rhs_coefficients` with the vertical gain sagged for ``battery_pct`` (%)."""
+        k = self.rhs_coefficients
+        if self.battery_sag_frac == 0.0:
+            return k
+        return (k[0], k[1] * self.vertical_gain(battery_pct) / self.vz_gain, *k[2:])
 
     def replace(self, **changes) -> PlantParams:
         """A copy with some fields changed (e.g. a command-delay fault)."""
@@ -286,38 +313,6 @@ def gauss_markov_step(values: tuple, std: float, tau_s: float, dt_s: float, norm
     a = math.exp(-dt_s / tau_s)
     q = std * math.sqrt(1.0 - a * a)
     return tuple(a * v + q * n for v, n in zip(values, normals))
-
-
-# ----------------------------------------------------------------------------- sensor geometry
-
-
-def mocap_rotation_xyz_rad(roll_rad: float, pitch_rad: float, psi_rad: float
-                           ) -> tuple[float, float, float]:
-    """Mocap angles ``(rx, ry, rz)`` of the attitude φ, θ, ψ (world/model signs).
-
-    The body→world rotation is ``R = Rz(ψ)·Ry(θ)·Rx(φ)``; the result satisfies
-    ``R = Rx(rx)·Ry(ry)·Rz(rz)`` — scipy ``Rotation.from_euler("ZYX", [ψ, θ, φ])
-    .as_euler("XYZ")`` in closed form (≈ 2 µs instead of ≈ 70 µs; equality is tested).
-    ry ∈ [−π/2, π/2], rx and rz in (−π, π].
-    """
-    sf, cf = math.sin(roll_rad), math.cos(roll_rad)
-    st, ct = math.sin(pitch_rad), math.cos(pitch_rad)
-    sp, cp = math.sin(psi_rad), math.cos(psi_rad)
-    r00 = cp * ct
-    r01 = cp * st * sf - sp * cf
-    r02 = cp * st * cf + sp * sf
-    r12 = sp * st * cf - cp * sf
-    r22 = ct * cf
-    ry = math.asin(max(-1.0, min(1.0, r02)))
-    return math.atan2(-r12, r22), ry, math.atan2(-r01, r00)
-
-
-def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
-    """Heading ψ = atan2(R[1,0], R[0,0]) of ``R = Rx(rx)·Ry(ry)·Rz(rz)``, wrapped to (−π, π]
-    (mocap-stream.md)."""
-    r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
-    r00 = math.cos(ry) * math.cos(rz)
-    return wrap_angle_rad(math.atan2(r10, r00))
 
 
 def _finite_frac(name: str, value: float) -> float:
@@ -571,7 +566,7 @@ class AirframePlant:
         profile with other dynamics overrides this, the modes, sensors and faults stay)."""
         roll, pitch, gaz, yaw, hold = command  # the compiled twin of rk4_step(airframe_derivative)
         return airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
-                            bool(hold), self.params.rhs_coefficients,
+                            bool(hold), self.params.coefficients_at(self._battery),
                             tuple(map(float, wind)), h)
 
     def _auto_command(self, mode: FlightMode) -> tuple:
@@ -663,8 +658,9 @@ class AirframePlant:
             c, s = math.cos(psi), math.sin(psi)
             sv = nz.navdata_velocity_std_mps
             altitude = max(0.0, z + nz.navdata_altitude_std_m * n[3])
-            forward = c * vx + s * vy + self._vel_bias[0] + sv * n[4]
-            right = s * vx - c * vy + self._vel_bias[1] + sv * n[5]
+            bias = self.params.navdata_velocity_bias_mps
+            forward = c * vx + s * vy + self._vel_bias[0] + bias[0] + sv * n[4]
+            right = s * vx - c * vy + self._vel_bias[1] + bias[1] + sv * n[5]
             down = -vz + sv * n[6]
         else:  # motors off: ultrasound and optical flow report nothing
             altitude = forward = right = down = 0.0

@@ -183,8 +183,9 @@ class KitPlant(AirframePlant):
         kit = self._kit
         x, y, z, *_rest = self._state
         kit[0], kit[1], kit[2], kit[3] = x, y, z, self._state[8]
+        gaz = float(gaz) * self.params.vertical_gain(self._battery)  # sim disturbance options
         kit, (vx, vy, vz, phi, theta_k, psi_k_rate) = kit_rk4(
-            kit, float(roll), float(pitch), float(gaz), float(yaw), bool(hold),
+            kit, float(roll), float(pitch), gaz, float(yaw), bool(hold),
             self._coefficients, wind, h)
         self._kit = kit
         return (kit[0], kit[1], kit[2], vx, vy, vz, phi, -theta_k, kit[3], -psi_k_rate)
