@@ -518,9 +518,10 @@ class AirframePlant:
         contact applied here, as :meth:`_substep` does) and leaves to :meth:`_substep` the
         steps that could empty the battery (a mode change). Returns the steps done."""
         drain = self.params.battery_drain_pct_per_min * h / 60.0
-        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path
+        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path,
+        # and so does a sagging vertical gain (its coefficients change with every step's drain)
         if (n < 2 or type(self)._motors_on_step is not AirframePlant._motors_on_step
-                or self._battery <= (n + 1) * drain):
+                or self.params.battery_sag_frac != 0.0 or self._battery <= (n + 1) * drain):
             return 0
         fifo, current = self._fifo, self._current
         delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
