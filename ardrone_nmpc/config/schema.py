@@ -39,13 +39,16 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Optional
 
-from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationError, ValidationInfo, field_validator
 
+from ardrone_nmpc.config.controller import (ControllerConfig, ObstacleConfig, OffsetFreeConfig,
+                                            PGainsConfig, SolverConfig)
 from ardrone_nmpc.config.faults import FaultsConfig
+from ardrone_nmpc.config.sim import (PLANT_PROFILE_DEFAULTS, NoiseConfig, PlantConfig, SimConfig,
+                                     TargetConfig)
 from ardrone_nmpc.config.fields import (
-    CoordinateVec2, CoordinateVec3, Finite, NonNegative, NonNegativeSpan, NonNegativeVec4,
-    NonNegativeVec7, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
-    PositiveVec4, Section, Span, Vec2, Vec4, ascii_name, invalid, require_increasing,
+    CoordinateVec2, CoordinateVec3, Finite, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
+    Section, Span, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
 from ardrone_nmpc.errors import UserError
@@ -63,12 +66,15 @@ __all__ = [
     "MocapConfig",
     "NoiseConfig",
     "ObstacleConfig",
+    "OffsetFreeConfig",
     "PGainsConfig",
+    "PLANT_PROFILE_DEFAULTS",
     "PlantConfig",
     "ReferenceConfig",
     "SafetyConfig",
     "SimConfig",
     "SolverConfig",
+    "TargetConfig",
     "config_from_dict",
     "tracked_object",
 ]
@@ -84,209 +90,6 @@ class ConfigError(UserError):
 
     def __str__(self) -> str:
         return "\n".join(self.messages)
-
-
-# ----------------------------------------------------------------------------- controller
-
-
-class SolverConfig(Section):
-    """Numerical settings of the NMPC solvers (thesis §3.3, Algorithm 1; Ohtsuka's C/GMRES)."""
-
-    method: Literal["cgmres", "newton"] = Field(
-        "cgmres", description="'cgmres': continuation/GMRES, one GMRES solve per tick; "
-        "'newton': the thesis' per-step Newton iterations with fdgmres.")
-    kmax: int = Field(defaults.KMAX, ge=1, le=1000,
-                      description="C/GMRES: Krylov-subspace dimension per solve (count).")
-    newton_kmax: int = Field(
-        defaults.NEWTON_KMAX, ge=1, le=1000, description="Method 'newton': Krylov dimension "
-        "k_max of each Newton step (Algorithm 1; the thesis gives none). Its system is "
-        "uncondensed (8 unknowns per stage): with 5, GMRES stops far above η and Newton stalls "
-        "at ‖F‖ ≈ 0.1 (docs/thesis-reproduction.md).")
-    zeta_per_s: Positive = Field(
-        defaults.ZETA_PER_S, description="Continuation stabilisation gain ζ (1/s): dF/dt = −ζ F.")
-    fd_step: Positive = Field(
-        defaults.FD_STEP,
-        description="Forward-difference step h of Jacobian-vector products (dimensionless).")
-    gmres_rtol: float = Field(
-        defaults.GMRES_RTOL, gt=0, lt=1,
-        description="GMRES relative residual tolerance η (thesis Algorithm 1).")
-    tolerance: Positive = Field(
-        defaults.TOLERANCE,
-        description="Target ‖F‖ of Newton solves (initial solve and method 'newton').")
-    max_newton_iterations: int = Field(defaults.MAX_NEWTON_ITERATIONS, ge=1, le=1000,
-                                       description="Newton iteration cap per solve.")
-    dummy_weight: Positive = Field(
-        defaults.DUMMY_WEIGHT,
-        description="Linear cost weight of the dummy inputs that enforce the input bounds.")
-    bound_epsilon: NonNegative = Field(
-        defaults.BOUND_EPSILON,
-        description="ε of thesis eq. 3.25: an active bound C < 0 becomes C − ε = 0 ('newton').")
-    horizon_ramp_rate_per_s: NonNegative = Field(
-        defaults.HORIZON_RAMP_RATE_PER_S,
-        description="α (1/s) in T(t) = N·Δτ·(1 − e^(−αt)); 0 = fixed horizon as in the thesis.")
-    divergence_residual: Positive = Field(
-        defaults.DIVERGENCE_RESIDUAL,
-        description="‖F‖ above which a solve counts as diverged and the solver re-initialises.")
-    newton_trigger_residual: Positive = Field(
-        defaults.NEWTON_TRIGGER_RESIDUAL,
-        description="C/GMRES: ‖F‖ at a new measurement above which the tick first "
-        "re-projects onto F = 0 by Newton/GMRES warm-started from the current solution (a "
-        "reference jump is an impulse the continuation cannot follow).")
-    condensed: bool = Field(
-        defaults.CONDENSED,
-        description="C/GMRES: eliminate the dummy inputs and multipliers per stage in closed "
-        "form (4 unknowns per stage, not 12). Same equations; GMRES(5) stagnates on the "
-        "uncondensed saddle-point system, so false is for comparison only.")
-
-
-class PGainsConfig(Section):
-    """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none)."""
-
-    k1_per_s: Positive = Field(0.7, description="ż_ref = k1 (z_d − z), 1/s (tuned in "
-                               "simulation: see control/proportional.py PGains).")
-    k2_rad_per_mps: Positive = Field(
-        0.2, description="Roll φ per m/s of lateral speed error, rad/(m/s).")
-    k3_rad_per_mps: Positive = Field(
-        0.2, description="Pitch θ per m/s of forward speed error, rad/(m/s).")
-    k4_per_s: Positive = Field(1.0, description="ψ̇ = k4 (ψ_d − ψ), 1/s.")
-
-
-class ObstacleConfig(Section):
-    """A static obstacle the NMPC keeps out of: the constraint ‖p − c‖ ≥ d, d = radius + margin.
-
-    A sphere measures the 3-D distance from its centre; a cylinder is vertical and unbounded
-    in height and measures the horizontal distance only (its centre's z is ignored).
-    """
-
-    kind: Literal["sphere", "cylinder"] = Field(
-        ..., description="'sphere' (3-D distance) or 'cylinder' (vertical; horizontal distance).")
-    center_m: CoordinateVec3 = Field(
-        ..., description="Centre [x, y, z] (m); z is ignored for a cylinder.")
-    radius_m: PathSize = Field(..., description="Radius of the obstacle itself (m), ≤ 1000.")
-    margin_m: NonNegative = Field(
-        0.3, description="Safety margin added to the radius (m): the drone's half-size (≈ 0.26 m "
-        "with the indoor hull) plus a buffer. The NMPC keeps the drone's centre d = radius + "
-        "margin from the obstacle's centre.")
-    mocap_object: Optional[str] = Field(
-        None, min_length=1, max_length=24, description="A moving obstacle: the mocap object "
-        "whose newest position is the centre each tick (center_m until it is first seen; the "
-        "last position is kept when it goes stale). null: static.")
-
-
-class OffsetFreeConfig(Section):
-    """Offset-free tracking: integral action on the position/yaw error, fed to the NMPC as a
-    shift of its reference (docs/solver-notes.md, "Offset-free tracking"). A constant wind, a
-    vertical gain mismatch, battery sag or a navdata velocity bias then leave no steady error.
-    Vectors are ordered [x, y, z, ψ]."""
-
-    enabled: bool = Field(True, description="Integral action on (true) or off (false: the "
-                          "NMPC tracks the reference itself, as in the thesis).")
-    ki_per_s: NonNegativeVec4 = Field(
-        (0.5, 0.5, 0.4, 0.15), description="Integral gain per axis (1/s): the reference shift "
-        "moves by −ki·e per second while it learns, [x, y, z, ψ]; 0 switches an axis off.")
-    kp: NonNegativeVec4 = Field(
-        (0.0, 0.0, 1.0, 0.0), description="Proportional part of the shift while learning "
-        "(dimensionless, m per m / rad per rad), [x, y, z, ψ]: stiffens a slow loop so the "
-        "integrator settles without overshoot (velocity form: it never jumps the shift).")
-    error_band: PositiveVec4 = Field(
-        (0.5, 0.5, 0.5, 0.3), description="An axis learns only while |error| is below this "
-        "[m, m, m, rad] (conditional integration: a step's transient does not wind up).")
-    hold_s: NonNegativeVec4 = Field(
-        (1.5, 1.5, 1.5, 2.0), description="It starts learning once the axis has been at rest "
-        "inside its error band this long (s), and goes on until the error leaves the band or "
-        "the reference moves: the tail of a step is the loop's own.")
-    steady_band: PositiveVec4 = Field(
-        (0.01, 0.01, 0.02, 0.01), description="'At rest' also needs the error steady: its "
-        "range since the axis came to rest within this [m, m, m, rad] — a step's tail that "
-        "still converges restarts the hold.")
-    speed_band: PositiveVec4 = Field(
-        (0.15, 0.15, 0.05, 0.3), description="'At rest': the estimated rate of the axis below "
-        "this [m/s, m/s, m/s, rad/s].")
-    release_speed: PositiveVec4 = Field(
-        (0.3, 0.3, 0.3, 0.6), description="A learning axis stops (and needs a new hold) when "
-        "its rate exceeds this [m/s, m/s, m/s, rad/s]: a gust is not a constant disturbance. "
-        "Above speed_band, so the motion the shift itself causes does not stop it.")
-    max_shift: PositiveVec4 = Field(
-        (0.5, 0.5, 0.5, 0.3), description="Largest reference shift [m, m, m, rad]: a bad "
-        "sensor cannot drag the drone further than this from the reference.")
-
-
-class ControllerConfig(Section):
-    """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
-
-    kind: Literal["nmpc", "p"] = Field(
-        "nmpc", description="'nmpc': nonlinear MPC; 'p': proportional baseline (eq. 4.16).")
-    horizon_steps: int = Field(defaults.HORIZON_STEPS, ge=1, le=1000,
-                               description="Prediction horizon N (steps).")
-    dtau_s: Positive = Field(defaults.DTAU_S, le=1.0,
-                             description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
-    q: NonNegativeVec7 = Field(
-        defaults.Q_STATE,
-        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
-    r: PositiveVec4 = Field(
-        defaults.R_INPUT,
-        description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
-    q_terminal: NonNegativeVec7 = Field(
-        defaults.Q_TERMINAL,
-        description="Terminal state weights, order as q (the thesis has none).")
-    u_min: Vec4 = Field(
-        defaults.U_MIN,
-        description="Input lower bounds [m/s², rad, rad, rad/s] (thesis eq. 4.17).")
-    u_max: Vec4 = Field(
-        defaults.U_MAX,
-        description="Input upper bounds [m/s², rad, rad, rad/s]; each above u_min (eq. 4.17).")
-    vz_lead_s: Optional[Positive] = Field(
-        0.5, description="ż reference = ż estimate + z̈ · vz_lead_s (s). The drone's vertical "
-        "loop is a first-order lag; this inverts it exactly when vz_lead_s is its time "
-        "constant (0.5 s: docs/plant.md, sim.plant.tau_vz_s). null = one control period, the "
-        "thesis' integration (end of §4.4), which assumes a new vertical speed within a tick "
-        "and overshoots altitude steps by 6–7 % in simulation (2.3 % with 0.5).")
-    delay_compensation_s: NonNegative = Field(
-        0.26, le=2.0, description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
-        "is rolled forward through the commands already sent and the OCP solved for the moment "
-        "the new command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); "
-        "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
-    solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
-    obstacles: tuple[ObstacleConfig, ...] = Field(
-        (), max_length=32, description="Obstacles the NMPC avoids (exterior penalty on "
-        "‖p − c‖² ≥ d², docs/solver-notes.md §7); none by default. The P controller ignores "
-        "them.")
-    obstacle_weight: Positive = Field(
-        2000.0, description="Weight w of the obstacle penalty ½ w max(0, d² − ‖p − c‖²)² in the "
-        "stage cost (1/m⁴, relative to q and r). Larger: less intrusion into the margin, a "
-        "stiffer problem for GMRES.")
-    obstacle_lookahead_s: NonNegative = Field(
-        0.3, le=3.0, description="A moving obstacle (mocap_object) is placed where its "
-        "estimated velocity takes it this long after the command takes effect; its motion over "
-        "the horizon is not modelled, and this short look-ahead stands in for it (s; "
-        "configs/moving_obstacle.yaml: 0 s → 31 ticks inside the margin, 0.3 s → none).")
-    obstacle_tie_break_m: NonNegative = Field(
-        0.05, description="Tie-break of head-on approaches (m): each tick the penalty's centre "
-        "moves this far to the left of the line of sight from the drone, and d grows by as "
-        "much (the penalised region still covers the obstacle). A drone within this distance "
-        "of the line through the centre passes the obstacle on its right; 0 leaves the choice "
-        "to noise.")
-    obstacle_curvature: Literal["gauss-newton", "exact"] = Field(
-        "gauss-newton", description="Curvature of the obstacle penalty in the solvers' "
-        "Jacobian products: 'gauss-newton' drops the negative part, so the path through an "
-        "obstacle's centre repels the continuation instead of attracting it; 'exact' is the "
-        "true Hessian (for comparison).")
-    p_gains: PGainsConfig = Field(
-        default_factory=PGainsConfig, description="Gains of the 'p' controller.")
-    offset_free: OffsetFreeConfig = Field(
-        default_factory=OffsetFreeConfig, description="Offset-free tracking (integral action "
-        "of the NMPC; the 'p' controller has none). true/false is short for "
-        "{enabled: true/false} with the default gains.")
-
-    _u_bounds = require_increasing("u_min", "u_max")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _offset_free_shorthand(cls, data: Any) -> Any:
-        # controller.offset_free: false (a bool) → the section with enabled false
-        if isinstance(data, Mapping) and isinstance(data.get("offset_free"), bool):
-            data = {**data, "offset_free": {"enabled": data["offset_free"]}}
-        return data
 
 
 # ----------------------------------------------------------------------------- estimation
@@ -477,156 +280,6 @@ class MocapConfig(Section):
         if self.up_axis is not None:
             return self.up_axis
         return "y" if self.system in _Y_UP_SYSTEMS else "z"
-
-
-# ----------------------------------------------------------------------------- simulation
-
-
-#: What each ``sim.plant.profile`` sets where the config leaves a key out (docs/plant-profiles.md).
-PLANT_PROFILE_DEFAULTS: dict[str, dict[str, float]] = {
-    "ardrone": {},       # the defaults below: tum_ardrone dynamics with the thesis' 0.26 s delay
-    # the kit's identified channels (sim/plant_kit.py) with its timeDelay and simDT
-    "thesis_kit": {"command_delay_s": 0.26, "integration_step_s": 0.005},
-    # the real drone as identified: tum_ardrone's ≈ 0.12 s delay and the turbulence calibrated
-    # on the thesis' experimental square (docs/plant-profiles.md §3)
-    "ardrone_lab": {"command_delay_s": 0.12, "turbulence_std_mps": 0.7},
-}
-
-
-class PlantConfig(Section):
-    """The simulated AR.Drone closed loop (docs/plant.md, docs/plant-profiles.md)."""
-
-    profile: Literal["ardrone", "thesis_kit", "ardrone_lab"] = Field(
-        "ardrone", description="Plant backend and its defaults: 'ardrone' (tum_ardrone dynamics, "
-        "firmware limits, the thesis' 0.26 s delay), 'thesis_kit' (the ARDrone Simulink "
-        "Development Kit's linear identified channels; tau_*/drag_per_s unused), 'ardrone_lab' "
-        "(ardrone with a 0.12 s delay and calibrated turbulence). docs/plant-profiles.md.")
-    # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
-    command_delay_s: NonNegative = Field(
-        0.26, le=2.0, description="Command transport delay T_d (s), ≤ 2.")
-    # tum_ardrone EKF prediction model (Engel et al., IROS 2012).
-    tau_tilt_s: Positive = Field(0.10, description="Roll/pitch first-order time constant τ_a (s).")
-    # tum_ardrone EKF prediction model.
-    tau_yaw_s: Positive = Field(0.10, description="Yaw-rate first-order time constant τ_r (s).")
-    # Middle of the identifications bracketing it (0.17 s ROS simulator … 0.71 s tum_ardrone).
-    tau_vz_s: Positive = Field(0.5, description="Vertical-speed time constant τ_z (s).")
-    # tum_ardrone EKF constant c1 = 0.58.
-    drag_per_s: NonNegative = Field(0.58, description="Horizontal linear drag k_d (1/s).")
-    # docs/plant.md: fixed-step RK4 at 200 Hz for determinism.
-    integration_step_s: float = Field(
-        0.005, ge=1e-4, le=0.05, description="Fixed RK4 integration step (s), 0.1 … 50 ms; at "
-        "most every time constant and 1 / drag_per_s (explicit RK4 is unstable beyond).")
-    # Landed at the world origin.
-    initial_position_m: CoordinateVec3 = Field(
-        (0.0, 0.0, 0.0), description="Initial [x, y, z] (m), z ≥ 0.")
-    initial_psi_rad: Finite = Field(0.0, description="Initial heading ψ (rad).")
-    # A full battery.
-    battery_start_pct: float = Field(100.0, ge=0, le=100, description="Initial battery (%).")
-    # Project default, not identified: slow enough that long simulated runs are not cut short
-    # by safety.battery_floor_pct (100 % → 20 % in ≈ 53 min).
-    battery_drain_pct_per_min: NonNegative = Field(
-        1.5, le=100.0, description="Battery drain while flying (% per minute), ≤ 100.")
-    # 0 = still air; 'ardrone_lab' sets the value calibrated on the thesis' square.
-    turbulence_std_mps: NonNegative = Field(
-        0.0, le=5.0, description="Turbulence: σ (m/s) per horizontal axis of a Gauss–Markov "
-        "wind added to sim faults' wind (0: none).")
-    # Project choice (not identified): slow room-air drift, far slower than the tilt loops.
-    turbulence_tau_s: Positive = Field(
-        5.0, description="Turbulence correlation time τ (s) of the Gauss–Markov wind.")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _profile_defaults(cls, data: Any) -> Any:
-        # a profile fills only the keys the config leaves out: explicit values win
-        if isinstance(data, Mapping):
-            defaults = PLANT_PROFILE_DEFAULTS.get(data.get("profile", "ardrone"), {})
-            data = {**defaults, **data}
-        return data
-
-    @field_validator("initial_position_m")
-    @classmethod
-    def _above_ground(cls, value: tuple[float, ...]) -> tuple[float, ...]:
-        if value[2] < 0:
-            raise invalid("z must be ≥ 0 (the ground)")
-        return value
-
-    @field_validator("integration_step_s")
-    @classmethod
-    def _stable_step(cls, value: float, info: ValidationInfo) -> float:
-        # h·λ ≤ 1 for every first-order mode (λ = 1/τ, drag): well inside RK4's stability
-        # bound (2.79), where a tiny τ or a huge drag would make the plant blow up to NaN.
-        for name in ("tau_tilt_s", "tau_yaw_s", "tau_vz_s"):
-            tau = info.data.get(name)
-            if tau is not None and value > tau:
-                raise invalid(f"must be at most {name} ({value} > {tau})")
-        drag = info.data.get("drag_per_s")
-        if drag is not None and value * drag > 1.0:
-            raise invalid(f"must be at most 1 / drag_per_s ({value} × {drag} > 1)")
-        return value
-
-
-class NoiseConfig(Section):
-    """Simulated sensor noise, standard deviations (docs/plant.md table, docs/mocap-stream.md)."""
-
-    # Upper bounds: far beyond any sensor (the reading is noise only), below float overflow.
-    mocap_position_std_m: NonNegative = Field(
-        0.0005, le=1.0, description="Mocap position σ per axis (m), ≤ 1.")
-    mocap_angle_std_rad: NonNegative = Field(
-        math.radians(0.1), le=math.pi, description="Mocap angle σ (rad), 0.1°; ≤ π.")
-    mocap_latency_ms: float = Field(
-        2.0, ge=0.0, le=50.0, description="Mocap stream latency (ms), 0–50: the lockstep runner "
-        "samples only the newest frame a tick can see, which needs latency + frame period < "
-        "the control period (65 ms); larger latencies would be silently capped.")
-    navdata_attitude_std_rad: NonNegative = Field(
-        math.radians(0.2), le=math.pi, description="Navdata roll/pitch σ (rad), 0.2°; ≤ π.")
-    navdata_yaw_std_rad: NonNegative = Field(
-        math.radians(0.3), le=math.pi, description="Navdata yaw σ (rad), 0.3°; ≤ π.")
-    navdata_altitude_std_m: NonNegative = Field(
-        0.010, le=10.0, description="Navdata ultrasound altitude σ (m), ≤ 10.")
-    navdata_velocity_std_mps: NonNegative = Field(
-        0.040, le=10.0, description="Navdata optical-flow vx, vy σ (m/s), ≤ 10.")
-
-
-class TargetConfig(Section):
-    """A scripted second object on the simulated mocap stream (e.g. a scale car on a loop),
-    moving from the start of the simulation."""
-
-    object_name: str = Field("car", min_length=1, max_length=24, description="Its mocap name.")
-    path: Literal["circle", "figure8"] = Field("circle", description="The loop it drives.")
-    center_m: CoordinateVec3 = Field(
-        (0.0, 0.0, 0.0), description="Centre of the loop [x, y, z] (m).")
-    radius_m: PathSize = Field(1.0, description="Circle radius / figure-8 half width (m).")
-    speed_mps: NonNegative = Field(0.3, le=3.0, description="Speed along the loop (m/s).")
-
-    _name = field_validator("object_name")(classmethod(lambda cls, v: ascii_name(v)))
-
-
-class SimConfig(Section):
-    """Simulation: seed, plant, sensor noise and stream rates."""
-
-    seed: int = Field(0, ge=0, description="Seed of every random source of the simulation.")
-    plant: PlantConfig = Field(default_factory=PlantConfig, description="Plant parameters.")
-    noise: NoiseConfig = Field(default_factory=NoiseConfig, description="Sensor noise.")
-    mocap_rate_hz: float = Field(
-        100.0, ge=1.0, le=2000.0, description="Simulated mocap stream rate (Hz), 1 … 2000.")
-    navdata_rate_hz: float = Field(
-        15.0, ge=1.0, le=1000.0, description="Simulated navdata rate (Hz), 1 … 1000; 15 = demo.")
-    target: Optional[TargetConfig] = Field(
-        None, description="A scripted second object streamed on the mocap stream (null: none).")
-    vz_gain: float = Field(
-        1.0, gt=0.0, le=2.0, description="Disturbance: the plant's vertical speed is this times "
-        "the commanded (a vertical gain mismatch, e.g. 0.7), full battery. Constant wind is "
-        "faults.wind.")
-    battery_sag_frac: float = Field(
-        0.0, ge=0.0, lt=1.0, description="Disturbance: fraction of the vertical gain lost at "
-        "0 % battery, linear in the discharge (battery sag: less thrust as it drains).")
-    navdata_velocity_bias_mps: Vec2 = Field(
-        (0.0, 0.0), description="Disturbance: constant bias of the navdata body velocities "
-        "[forward, right] (m/s), on top of the drifting one.")
-    settle_s: NonNegativeSpan = Field(
-        4.0, description="Seconds the controller holds the reference's start point before t = 0 "
-        "(logged with t_s < 0, mode 'settle'), so a step starts from rest as in the thesis; "
-        "≤ 3600.")
 
 
 # ----------------------------------------------------------------------------- safety
