@@ -16,7 +16,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["Clock", "DEFAULT_CLOCK", "RECV_BUFFER_BYTES", "open_udp", "LinkStats", "LinkStatsSnapshot"]
+__all__ = ["Clock", "DEFAULT_CLOCK", "RECV_BUFFER_BYTES", "check_host", "check_port", "open_udp",
+           "LinkStats", "LinkStatsSnapshot"]
 
 # Receive buffer for one datagram: ≥ 2048 for padded mocap datagrams, > 4096 (navdata maximum)
 # so an oversized navdata packet arrives whole and is rejected by the decoder, not truncated.
@@ -29,6 +30,23 @@ class Clock(Protocol):
     threads themselves always sleep on real time."""
 
     def __call__(self) -> float: ...
+
+
+def check_port(name: str, port) -> int:
+    """``port`` as an int in 1–65535, or ValueError naming ``name``: 0 ("any port") and
+    negative numbers are user errors here, never a silent fall-back to a default."""
+    if isinstance(port, bool) or not isinstance(port, int):
+        raise ValueError(f"{name} must be a port number 1–65535, got {port!r}")
+    if not 1 <= port <= 65535:
+        raise ValueError(f"{name} must be a port number 1–65535, got {port}")
+    return port
+
+
+def check_host(name: str, host) -> str:
+    """``host`` as a non-empty address or host name without spaces, or ValueError."""
+    if not isinstance(host, str) or not host.strip() or any(c.isspace() for c in host):
+        raise ValueError(f"{name} must be an address or host name, got {host!r}")
+    return host
 
 
 def open_udp(bind_host: str, port: int = 0, *, timeout_s: float | None) -> socket.socket:

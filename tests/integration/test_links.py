@@ -431,8 +431,8 @@ def test_ref_bits_take_off_land_emergency_and_reset(drone):
         time.sleep(0.1)
         assert {r.bits for r in drone.bodies(Ref, since_t=t2)} == {REF_EMERGENCY}
         assert drone.emergency                        # held bit 8: one edge, no toggling back
-        with pytest.raises(LinkError, match="emergency"):
-            link.takeoff()
+        with pytest.raises(LinkError, match="take-off refused: the link landed the drone"):
+            link.takeoff()                            # barred for good since land()
         link.reset_emergency(timeout_s=2.0)
         assert wait_until(lambda: link.navdata.mode is FlightMode.LANDED)
         assert link.ref == Ref.landing() and not drone.emergency
@@ -588,10 +588,19 @@ def test_commands_validate_without_a_connection():
     (DroneState.FLY, 8, FlightMode.LANDING),
     (DroneState.FLY, 9, FlightMode.LANDING),
     (DroneState.FLY, 3, FlightMode.FLYING),
+    (DroneState.FLY, 4, FlightMode.FLYING),
     (DroneState(0), 2, FlightMode.LANDED),
-    (DroneState.FLY, 10, FlightMode.FLYING),
-    (DroneState(0), 0, FlightMode.LANDED),
+    # airborne is bit 0 alone, landed is major 2 alone: an unknown code in the air is never
+    # taken for flying, a code other than 2 on the ground is not "landed" yet
+    (DroneState.FLY, 10, FlightMode.LANDING),
+    (DroneState.FLY, 2, FlightMode.LANDING),
+    (DroneState(0), 0, FlightMode.LANDING),
+    (DroneState(0), 4, FlightMode.LANDING),
+    (DroneState(0), 9, FlightMode.LANDING),
+    (DroneState(0), 6, FlightMode.TAKING_OFF),
     (DroneState.FLY, None, FlightMode.FLYING),
+    (DroneState(0), None, FlightMode.LANDED),
+    (DroneState.EMERGENCY, 2, FlightMode.EMERGENCY),
 ])
 def test_flight_mode_of(state, major, mode):
     assert flight_mode_of(state, major) is mode
