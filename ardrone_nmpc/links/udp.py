@@ -157,13 +157,15 @@ class LinkStats:
         with self._lock:
             self._foreign += 1
 
-    def accept_sequence(self, seq: int | None) -> bool:
+    def accept_sequence(self, seq: int | None, *, restart_ok: bool = False) -> bool:
         """Whether a decoded packet numbered ``seq`` is new; updates the gap and order counts.
 
         The first number after construction or :meth:`reset_sequence` is always accepted; then
         ``seq > last`` is accepted and ``seq − last − 1`` numbers count as lost; ``seq`` more than
         ``restart_backjump`` below ``last`` is a restart (accepted, no loss counted); anything
-        else is a duplicate or reordered packet (rejected). ``None`` (unnumbered) is accepted.
+        else is a duplicate or reordered packet (rejected) — unless ``restart_ok`` (the caller
+        knows the sender may have restarted: after a silence), then it is a restart too.
+        ``None`` (unnumbered) is accepted.
         Call :meth:`record_packet` for accepted packets.
         """
         if seq is None:
@@ -177,7 +179,7 @@ class LinkStats:
                 self._lost += seq - last - 1
                 self._last_seq = seq
                 return True
-            if last - seq > self.restart_backjump:
+            if restart_ok or last - seq > self.restart_backjump:
                 self._restarts += 1
                 self._last_seq = seq
                 return True
