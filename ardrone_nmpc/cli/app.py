@@ -100,11 +100,13 @@ def fly(
     from rich.live import Live
 
     from ardrone_nmpc.viz.dashboard import LiveStatus
-    from ardrone_nmpc.runtime.realtime import (EXIT_SIGINT, EXIT_SIGTERM, FlightResult, Terminated,
-                                     run_flight)
+    from ardrone_nmpc.runtime.realtime import (EXIT_SIGINT, FlightResult, Terminated,
+                                               exit_code_of, run_flight)
 
     console = Console(stderr=True)
-    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}")
+    keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr.isatty())  # land/cut keys
+    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}",
+                      **({} if keys else {"keys_help": None}))
     live = Live(view, console=console, refresh_per_second=4, transient=True)
     use_live = dashboard and sys.stderr.isatty()
     result = FlightResult()
@@ -114,9 +116,12 @@ def fly(
             live.start()
         run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
                    navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
-                   seed=seed, status=view.update if use_live else None, result=result)
-    except Terminated:  # before KeyboardInterrupt: it is one
-        code = EXIT_SIGTERM
+                   seed=seed, status=view.update if use_live else None, result=result,
+                   warn=(lambda line: console.print(line, markup=False, highlight=False))
+                   if use_live else None,
+                   operator_keys=keys)
+    except Terminated as err:  # before KeyboardInterrupt: it is one
+        code = exit_code_of(err)
     except KeyboardInterrupt:
         code = EXIT_SIGINT
     except Exception as err:  # noqa: BLE001 - one clear line; the session has landed
@@ -350,6 +355,11 @@ def sim_drone(
               seed=seed, control_port=control_port, echo=typer.echo)
     except (ValueError, OSError) as err:
         _fail([str(err)])
+
+
+from ardrone_nmpc.cli.operator import register as register_operator_commands  # noqa: E402
+
+register_operator_commands(app)  # land, emergency, reset, status
 
 
 def main() -> None:  # console-script entry point

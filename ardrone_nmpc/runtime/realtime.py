@@ -2,14 +2,15 @@
 
 The same :class:`~ardrone_nmpc.runtime.tick.Tick` as ``simulate``; here the clock is the wall clock
 (absolute deadlines, :class:`~ardrone_nmpc.core.clock.Rate`) and the measurements come from the
-links. The session lands the drone however the loop ends; SIGTERM is turned into an
-exception so that it lands too.
+links. The session lands the drone however the loop ends; every catchable terminating signal
+is turned into an exception so that it lands too (:mod:`ardrone_nmpc.runtime.signals`).
+Everything that can fail before the motors start is checked first: tick counts, addresses and
+ports, the drone's flight lock — a refusal leaves no run directory.
 """
 
 from __future__ import annotations
 
 import math
-import signal
 import sys
 import time
 from contextlib import ExitStack
@@ -20,17 +21,15 @@ from ardrone_nmpc.config.schema import tracked_object
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run, write_summary
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.runtime.session import FlightSession
+from ardrone_nmpc.runtime.session import DroneLandedItself, FlightSession
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
+from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
+from ardrone_nmpc.runtime.signals import Terminated, exit_code_of, landing_signals  # noqa: F401
 from ardrone_nmpc.runs.summary import summarise
 
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM arrived: leave the loop (and land) exactly like Ctrl-C — a KeyboardInterrupt,
-    so no ``except Exception`` on the way can swallow it."""
+MAX_FLIGHT_S = 86400.0  # settle + experiment: a day of ticks is far beyond any battery
 
 
 class LandingNotConfirmed(RuntimeError):
@@ -56,43 +55,70 @@ class DroneEmergency(RuntimeError):
     """The drone reported an emergency (motors cut)."""
 
 
-def _raise_terminated(signum, frame):  # pragma: no cover - exercised by subprocess tests
-    raise Terminated()
+def tick_counts(cfg) -> tuple[int, int]:
+    """(settle ticks, all ticks) of the flight; ValueError if they cannot be flown."""
+    period = cfg.loop.period_s
+    total_s = cfg.sim.settle_s + cfg.duration_s
+    if not (math.isfinite(total_s) and 0.0 <= total_s <= MAX_FLIGHT_S):
+        raise ValueError(f"duration_s + sim.settle_s = {total_s:g} s: a flight lasts at most "
+                         f"{MAX_FLIGHT_S:.0f} s")
+    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
+    return n_settle, n_settle + int(round(cfg.duration_s / period)) + 1
+
+
+def _endpoints(cfg, drone_host, at_port, navdata_port, mocap_port):
+    """The drone's and the mocap's addresses and ports, checked (an option given as 0 or ''
+    is an error, never a silent fall-back to the default)."""
+    from ardrone_nmpc.links.udp import check_host, check_port
+
+    pick = lambda given, default: default if given is None else given  # noqa: E731
+    return (check_host("--drone", pick(drone_host, cfg.drone.host)),
+            check_port("--at-port", pick(at_port, cfg.drone.at_port)),
+            check_port("--navdata-port", pick(navdata_port, cfg.drone.navdata_port)),
+            check_port("--mocap-port", pick(mocap_port, cfg.mocap.port)))
 
 
 def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                navdata_port: int | None, mocap_port: int | None, log_dir: Path,
-               seed: int | None, status=None, result: FlightResult | None = None) -> Path:
+               seed: int | None, status=None, result: FlightResult | None = None,
+               warn=None, operator_keys: bool = False) -> Path:
     """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures;
-    ``result`` holds the run directory and the landing outcome whatever happens."""
+    ``result`` holds the run directory and the landing outcome whatever happens; ``warn(line)``
+    shows the session's messages (stderr by default); ``operator_keys`` reads the land and
+    emergency keys from the terminal on stdin."""
     result = result if result is not None else FlightResult()
     from ardrone_nmpc.links.drone_link import DroneLink
+    from ardrone_nmpc.links.flight_lock import FlightLock
     from ardrone_nmpc.links.mocap_link import MocapLink
 
     seed = cfg.sim.seed if seed is None else seed
-    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    tick_counts(cfg)  # before anything: a count that cannot be flown is the user's error
+    if not sim:
+        host, at_port, navdata_port, mocap_port = _endpoints(cfg, drone_host, at_port,
+                                                             navdata_port, mocap_port)
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     others = (follow,) if follow else ()
     try:
-        with ExitStack() as stack:
+        with landing_signals(), ExitStack() as stack:
             if sim:
                 from ardrone_nmpc.sim.loopback import start_loopback
 
                 mocap = stack.enter_context(MocapLink(
                     "127.0.0.1", 0, object_name=cfg.mocap.object_name, other_objects=others))
-                loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port))
+                loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port,
+                                                          control_port=0))
                 host, at_port, navdata_port = loop.drone_host, loop.at_port, loop.navdata_port
-                link_options = {"bind_host": "127.0.0.1"}
-                if loop.control_port is not None:
-                    link_options["control_port"] = loop.control_port
+                link_options = {"bind_host": "127.0.0.1", "at_local_port": 0,
+                                "control_port": loop.control_port}
             else:
+                link_options = {"control_port": cfg.drone.control_port}
+            lock = FlightLock(host, at_port)
+            lock.acquire()  # one flight per drone: refused before a datagram or a run dir
+            stack.callback(lock.release)
+            if not sim:
                 mocap = stack.enter_context(MocapLink(
-                    cfg.mocap.bind_host, mocap_port or cfg.mocap.port,
-                    object_name=cfg.mocap.object_name, other_objects=others))
-                link_options = {}
-                host = drone_host or cfg.drone.host
-                at_port = at_port or cfg.drone.at_port
-                navdata_port = navdata_port or cfg.drone.navdata_port
+                    cfg.mocap.bind_host, mocap_port, object_name=cfg.mocap.object_name,
+                    other_objects=others))
             recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
             result.path = recorder.path
             t_origin = time.monotonic()
@@ -101,15 +127,26 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                   sim=sim)
             drone = stack.enter_context(DroneLink(
                 host, at_port=at_port, navdata_port=navdata_port,
-                keepalive_interval_s=cfg.drone.keepalive_interval_s, **link_options))
+                keepalive_interval_s=cfg.drone.keepalive_interval_s,
+                config_ids=cfg.drone.config_ids, navdata_demo=cfg.drone.navdata_demo,
+                **link_options))
             tick = Tick(cfg, experiment_trajectory(cfg))
-            session = FlightSession(cfg, drone, mocap, event=event)
+            requests = OperatorRequests()
+            if operator_keys:
+                stack.enter_context(KeyReader(
+                    sys.stdin.fileno(), on_land=requests.request_land,
+                    on_emergency=lambda: _emergency_now(drone, requests)))
+            session = FlightSession(cfg, drone, mocap, event=event, requests=requests,
+                                    start_position_m=_start_position(tick), lock=lock,
+                                    **({"warn": warn} if warn is not None else {}))
             fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
             try:
                 with session:
                     _control_loop(cfg, tick, drone, mocap, recorder, event, status,
-                                  fault_clock)
+                                  fault_clock, requests)
             finally:
+                for ev in mocap.take_events():  # senders seen since the last tick
+                    event(ev.pop("kind"), **ev)
                 result.landed = session.landed_cleanly
                 for t_exp, ev in (getattr(loop, "fault_events", None) or []) if sim else ():
                     fields = dict(ev)  # the loopback's injected faults, on experiment time
@@ -120,9 +157,27 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
             raise LandingNotConfirmed("navdata never showed the drone landed: check it")
         return path
     finally:
-        signal.signal(signal.SIGTERM, previous)
         if result.path is not None:  # however the flight ended: the run dir is complete
             _write_summary_quietly(result.path)
+
+
+def _emergency_now(drone, requests) -> None:
+    """The operator's emergency key: cut the motors from the key thread, at once."""
+    requests.request_emergency()
+    try:
+        drone.emergency()
+    except Exception:  # noqa: BLE001 - not connected yet: the session sees the request
+        pass
+
+
+def _start_position(tick):
+    """The experiment's position at time 0 (None for a live reference: it follows an object)."""
+    if getattr(tick.trajectory, "observe", None) is not None:
+        return None
+    import numpy as np
+
+    state = tick.trajectory.state_at(np.array([0.0]))[0]
+    return (float(state[0]), float(state[2]), float(state[4]))
 
 
 def _write_summary_quietly(path: Path) -> None:
@@ -134,14 +189,13 @@ def _write_summary_quietly(path: Path) -> None:
 
 
 def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
-                  fault_clock=None) -> None:
-    """The 65 ms loop until the experiment ends or the supervisor ends it (an exception: the
-    session's exit lands the drone). ``fault_clock(t0)`` receives the monotonic time of
-    experiment time 0 (the loopback's fault injection runs on it)."""
+                  fault_clock=None, requests=None) -> None:
+    """The 65 ms loop until the experiment ends or the supervisor, the drone or the operator
+    ends it (an exception: the session's exit lands the drone). ``fault_clock(t0)`` receives
+    the monotonic time of experiment time 0 (the loopback's fault injection runs on it)."""
     period = cfg.loop.period_s
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
-    n_settle = math.ceil(cfg.sim.settle_s / period - 1e-9)
-    n_ticks = n_settle + int(round(cfg.duration_s / period)) + 1
+    n_settle, n_ticks = tick_counts(cfg)
     rate = Rate(period)
     while True:
         late_s = rate.sleep()
@@ -155,6 +209,9 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
         target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
         t_exp = (k - n_settle) * period
+        _stop_if_ended_outside(drone, requests, event, t_exp)
+        for ev in mocap.take_events():  # a foreign sender: logged and shown, never used
+            event(ev.pop("kind"), t_exp_s=t_exp, **ev)
         out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
                         t_exp_s=t_exp,
                         mode="settle" if t_exp < 0 else "track")
@@ -167,10 +224,13 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
             drone.hover()
         row = out.row
         row["tick_late_ms"] = late_s * 1e3
+        row["nav_ctrl_state"] = (nav.ctrl_state if nav is not None and nav.ctrl_state is not None
+                                 else math.nan)
         recorder.write_row(row)
         if status is not None:
             status({**row, "progress": (k + 1) / n_ticks, "overruns": rate.overruns,
-                    "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz})
+                    "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz,
+                    "mocap_sender": mocap.sender, "mocap_foreign": mocap.foreign_senders})
         if out.action is Action.LAND:   # the session's exit lands it
             if row["mode"] == "land-navdata-lost":
                 raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
@@ -178,5 +238,20 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
         if out.action is Action.STOP:
             raise DroneEmergency("the drone reports an emergency (motors cut): check it")
     jitter = rate.jitter_ms()
+    _stop_if_ended_outside(drone, requests, event, (n_ticks - 1 - n_settle) * period)
     event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],
           jitter_p99_ms=jitter["p99"], jitter_max_ms=jitter["max"])
+
+
+def _stop_if_ended_outside(drone, requests, event, t_exp: float) -> None:
+    """Leave the loop if the drone landed by itself or the operator pressed a key."""
+    landed_itself = drone.self_landing
+    if landed_itself:
+        event("drone_landed_itself", t_exp_s=t_exp, what=landed_itself)
+        raise DroneLandedItself(f"the drone landed by itself at t = {t_exp:.1f} s: "
+                                f"{landed_itself} — the take-off bit was dropped at once and "
+                                "never sent again; check battery and motors")
+    if requests is not None and requests.land:
+        what = "cut the motors" if requests.emergency else "land"
+        event("operator", t_exp_s=t_exp, action=what)
+        raise OperatorAbort(f"the operator asked to {what} at t = {t_exp:.1f} s")
