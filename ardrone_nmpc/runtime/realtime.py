@@ -209,7 +209,6 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
         nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
         target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
         t_exp = (k - n_settle) * period
-        _stop_if_ended_outside(drone, requests, event, t_exp)
         for ev in mocap.take_events():  # a foreign sender: logged and shown, never used
             event(ev.pop("kind"), t_exp_s=t_exp, **ev)
         out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
@@ -237,6 +236,7 @@ def _control_loop(cfg, tick: Tick, drone, mocap, recorder, event, status,
             raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}")
         if out.action is Action.STOP:
             raise DroneEmergency("the drone reports an emergency (motors cut): check it")
+        _stop_if_ended_outside(drone, requests, event, t_exp)  # after the tick's row: logged
     jitter = rate.jitter_ms()
     _stop_if_ended_outside(drone, requests, event, (n_ticks - 1 - n_settle) * period)
     event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],

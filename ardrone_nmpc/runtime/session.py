@@ -245,7 +245,7 @@ class FlightSession:
             try:
                 if self.requests is not None and self.requests.emergency and not self._cut:
                     self._cut_motors("the operator's emergency key")
-                if not commanded:
+                if not commanded and not self._cut:  # after a cut, REF emergency stays held
                     self.drone.land()  # the link holds REF land from now on
                     commanded = True
                 done = self._landing_done(t_start)
