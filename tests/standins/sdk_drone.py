@@ -101,7 +101,11 @@ class SdkDrone:
         self.log: list = []
         self.takeoffs = 0           # landed → take-off transitions
         self.self_landed_t = None   # when it touched down after landing by itself
+        self.self_landing_start_t = None  # when it began to land by itself
         self.ftrims = []            # accepted FTRIM times
+        self.wakeups: list = []     # times of datagrams on the navdata port
+        self.at_sources: set = set()  # (address, port) AT datagrams came from
+        self.silent_until = -1.0    # no navdata before this time (a Wi-Fi hiccup)
         self._stop = threading.Event()
         self._client = None
         self._ctl_clients: list = []
@@ -174,7 +178,9 @@ class SdkDrone:
                 with self.lock:
                     if s is self.nav:
                         self._client = addr            # wake-up: stream there
+                        self.wakeups.append(now)
                     else:
+                        self.at_sources.add(addr)
                         self._on_datagram(data, now)
             with self.lock:
                 self._advance(now)
@@ -271,6 +277,7 @@ class SdkDrone:
                 now - self.hover_since >= self.land_by_itself_after_s:
             self._set("landing", now)
             self._landing_by_itself = True
+            self.self_landing_start_t = now
             self.land_by_itself_after_s = None  # once
         elif self.phase == "landing" and dt >= self.LANDING_S:
             self._set("landed", now)
@@ -297,8 +304,9 @@ class SdkDrone:
     def _send_navdata(self, now):
         with self.lock:
             client = self._client
-            if client is None:
+            if client is None or now < self.silent_until:
                 return
+            self.last_navdata_t = now
             self._nav_seq += 1
             state, ctrl = self._state_and_ctrl(now)
             body = struct.pack("<IIIi", 0x55667788, state, self._nav_seq, 0)
@@ -335,8 +343,9 @@ class MocapStandIn:
 
     def datagram(self):
         (x, y, z), psi = self.pose()
-        item = struct.pack("<24s6d", self.name.encode(), x * 1000, y * 1000, z * 1000,
-                           0.0, 0.0, psi)
+        jitter_mm = 0.01 * (self.frame % 5)  # a tracker never repeats a pose bit for bit
+        item = struct.pack("<24s6d", self.name.encode(), x * 1000 + jitter_mm, y * 1000,
+                           z * 1000, 0.0, 0.0, psi)
         return struct.pack("<IB", self.frame, 1) + struct.pack("<BH", 0, len(item)) + item
 
     def _loop(self):
