@@ -101,7 +101,7 @@ class FlightSession:
             self.lock.acquire()  # before a single datagram: one flight per drone
         try:
             self.drone.connect(timeout_s=5.0)  # refuses a drone that is already airborne
-            if getattr(self.drone, "at_bind_warning", None):
+            if self.drone.at_bind_warning:
                 self._note("at_port_busy", self.drone.at_bind_warning)
             self.configure()
             self.preflight()
@@ -168,7 +168,7 @@ class FlightSession:
         pose = self._wait_mocap(2.0)
         self._require_at_start(pose)
         self.event("preflight_ok", battery_pct=nav.battery_pct, ctrl_state=nav.ctrl_state,
-                   mocap_sender=getattr(self.mocap, "sender", None),
+                   mocap_sender=self.mocap.sender,
                    x_m=float(pose.position_m[0]), y_m=float(pose.position_m[1]),
                    z_m=float(pose.position_m[2]))
 
@@ -191,14 +191,13 @@ class FlightSession:
         """REF take-off until navdata shows flying, then the heading check: the turn of the
         mocap heading and of navdata's yaw from the first airborne sample (the drone re-zeroes
         its yaw as it takes off) to flying."""
-        t0 = self.clock()
+        deadline = self.clock() + self.TAKEOFF_TIMEOUT_S
         self.drone.takeoff()
         self.event("takeoff")
-        self._wait_for(lambda m: m.airborne, self.TAKEOFF_TIMEOUT_S, "take-off")
+        self._wait_takeoff(lambda m: m.airborne, deadline)
         psi0 = self._wait_mocap(0.5).psi_rad
         yaw0_deg = self._wait_navdata(0.5).yaw_deg
-        self._wait_for(lambda m: m is FlightMode.FLYING,
-                       self.TAKEOFF_TIMEOUT_S - (self.clock() - t0), "take-off")
+        self._wait_takeoff(lambda m: m is FlightMode.FLYING, deadline)
         psi1 = self._wait_mocap(0.5).psi_rad
         yaw1_deg = self._wait_navdata(0.5).yaw_deg
         mocap_turn = wrap_angle_rad(psi1 - psi0)
@@ -238,8 +237,7 @@ class FlightSession:
         at all any more (closed), or a cut was not confirmed.
         """
         interrupt: BaseException | None = None
-        t_start = self.clock()
-        next_notice = t_start + NOTICE_EVERY_S
+        next_notice = self.clock() + NOTICE_EVERY_S
         commanded = False
         while True:
             try:
@@ -248,7 +246,7 @@ class FlightSession:
                 if not commanded and not self._cut:  # after a cut, REF emergency stays held
                     self.drone.land()  # the link holds REF land from now on
                     commanded = True
-                done = self._landing_done(t_start)
+                done = self._landing_done()
                 if done is not None:
                     self.landed_cleanly = done
                     break
@@ -260,7 +258,7 @@ class FlightSession:
                 interrupt = interrupt or err
                 self._interrupted(err)
             except LinkError as err:
-                if not getattr(self.drone, "connected", True):
+                if not self.drone.connected:
                     self.landed_cleanly = False
                     self._log("landing_failed", error=str(err))
                     break
@@ -273,7 +271,7 @@ class FlightSession:
         return bool(self.landed_cleanly)
 
     # -- helpers --------------------------------------------------------------------------
-    def _landing_done(self, t_start: float) -> bool | None:
+    def _landing_done(self) -> bool | None:
         """True once fresh navdata shows landed/emergency; False after an unconfirmed cut."""
         nav = self.drone.navdata
         fresh = nav is not None and self.clock() - self.drone.navdata_rx_t_s <= NAVDATA_FRESH_S
@@ -380,7 +378,7 @@ class FlightSession:
             if age_ms <= self.cfg.safety.mocap_hover_ms:
                 return pose
             if self.clock() > deadline:
-                foreign = getattr(self.mocap, "foreign_senders", {}) or {}
+                foreign = self.mocap.foreign_senders
                 hint = (f"; frames from other senders ignored: {', '.join(foreign)}"
                         if foreign else "")
                 raise PreflightError(
@@ -389,19 +387,18 @@ class FlightSession:
             self._check_operator("before take-off")
             self.sleep(_POLL_S)
 
-    def _wait_for(self, done, timeout_s: float, what: str) -> None:
-        deadline = self.clock() + timeout_s
+    def _wait_takeoff(self, done, deadline: float) -> None:
         while True:
             nav = self.drone.navdata
             if nav is not None and done(nav.mode):
                 return
-            landed_itself = getattr(self.drone, "self_landing", None)
-            if landed_itself:
-                raise DroneLandedItself(f"{what}: {landed_itself}")
+            if self.drone.self_landing:
+                raise DroneLandedItself(f"take-off: {self.drone.self_landing}")
             if self.clock() > deadline:
                 mode = nav.mode.value if nav is not None else "no navdata"
-                raise RuntimeError(f"{what} did not complete in {timeout_s:.0f} s ({mode})")
-            self._check_operator(f"during {what}")
+                raise RuntimeError(f"take-off did not complete in "
+                                   f"{self.TAKEOFF_TIMEOUT_S:.0f} s ({mode})")
+            self._check_operator("during take-off")
             self.sleep(_POLL_S)
 
 

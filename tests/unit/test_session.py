@@ -58,6 +58,11 @@ class Drone:
         self.never_flies, self.never_lands = never_flies, never_lands
         self.t_takeoff = self.t_land = None
         self.nav_lost_until = -math.inf
+        self.nav_gone = (math.inf, math.inf)  # navdata None in this time window
+        self.nav_age_s = lambda t: 0.0        # age of the newest navdata
+        self.gap_after_flying = 0.0           # navdata None this long after the first flying
+        self._first_flying = None
+        self.args: dict = {}
         self.self_landing = None
         self.connected = True
         self.at_bind_warning = None
@@ -65,9 +70,11 @@ class Drone:
 
     def connect(self, timeout_s):
         self.calls.append("connect")
+        self.args["connect"] = timeout_s
 
     def configure_limits(self, **kw):
         self.calls.append("configure_limits")
+        self.args["configure_limits"] = kw
         return dict(WRITTEN)
 
     def configure_profile(self, *, flight_without_shell):
@@ -77,6 +84,7 @@ class Drone:
 
     def read_config(self, timeout_s):
         self.calls.append("read_config")
+        self.args["read_config"] = timeout_s
         if self.read_error:
             raise self.read_error
         return dict(self.held)
@@ -118,7 +126,14 @@ class Drone:
 
     @property
     def navdata(self):
+        if self.nav_gone[0] <= self.clock() < self.nav_gone[1]:
+            return None
         mode = self.mode
+        if self.gap_after_flying and mode is FlightMode.FLYING:
+            if self._first_flying is None:
+                self._first_flying = self.clock()  # this sample is seen, then a gap
+            elif self.clock() < self._first_flying + self.gap_after_flying:
+                return None
         yaw = self.yaw[1] if mode is FlightMode.FLYING else self.yaw[0]
         return NavdataSample(self.clock(), mode, self.battery, self.roll, self.pitch, yaw,
                              0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000)
@@ -126,23 +141,26 @@ class Drone:
     @property
     def navdata_rx_t_s(self):
         t = self.clock()
-        return t - 10.0 if t < self.nav_lost_until else t
+        return t - 10.0 if t < self.nav_lost_until else t - self.nav_age_s(t)
 
 
 class Mocap:
     port, sender = 51001, "10.0.0.2:4000"
 
-    def __init__(self, clock, drone=None, xyz=(0.0, 0.0, 0.0), psi=(0.0, 0.0), visible=True):
+    def __init__(self, clock, drone=None, xyz=(0.0, 0.0, 0.0), psi=(0.0, 0.0), visible=True,
+                 age_s=0.0, visible_from=-math.inf, gone=(math.inf, math.inf)):
         self.clock, self.drone, self.xyz, self.psi, self.visible = clock, drone, xyz, psi, visible
+        self.age_s, self.visible_from, self.gone = age_s, visible_from, gone
         self.foreign_senders = {}
 
     def latest(self):
-        if not self.visible:
+        t = self.clock()
+        if not self.visible or t < self.visible_from or self.gone[0] <= t < self.gone[1]:
             return None, -math.inf
         flying = self.drone is not None and self.drone.mode is FlightMode.FLYING
         pose = MocapPose(self.clock(), np.array(self.xyz, dtype=float), np.zeros(3),
                          self.psi[1] if flying else self.psi[0])
-        return pose, self.clock()
+        return pose, self.clock() - self.age_s
 
 
 class Lock:
@@ -554,3 +572,296 @@ def test_exit_lands_even_if_the_landing_event_fails_and_never_swallows():
     session, drone, events, warnings, clock = flying()
     session.__exit__(Terminated, Terminated(1), None)
     assert warnings == []  # a signal is not a Ctrl-C: no motor-cut announcement
+
+
+# ----------------------------------------------------------------------------- exact words
+# What each refusal says is part of the interface (docs/first-flight.md lists them).
+
+def test_what_is_asked_of_the_drone_and_how_long_it_is_waited_for():
+    session, drone, events, *_ = make(cfg_sets=["drone.euler_angle_max_rad=0.3",
+                                                "drone.control_vz_max_mps=1.1",
+                                                "drone.control_yaw_radps=2.5",
+                                                "drone.altitude_max_m=2.2"])
+    with session:
+        pass
+    assert drone.args == {"connect": 5.0, "read_config": 2.0, "configure_limits": {
+        "euler_angle_max_rad": 0.3, "control_vz_max_mps": 1.1, "control_yaw_radps": 2.5,
+        "altitude_max_m": 2.2}}
+    assert dict(events)["config_read"] == {**WRITTEN, **PROFILE}
+    assert dict(events)["flat_trim"] == {"roll_deg": 0.3, "pitch_deg": -0.2}
+    assert dict(events)["preflight_ok"]["ctrl_state"] == 0x20000
+    check = dict(events)["heading_check"]
+    assert check == {"mocap_turn_rad": 0.0, "navdata_turn_rad": 0.0, "offset_rad": 0.0}
+    assert session.landed_cleanly is True
+
+
+def test_a_refusal_leaves_the_landing_outcome_unknown():
+    session, *_ = make(drone_kw={"battery": 5.0})
+    with pytest.raises(PreflightError):
+        session.__enter__()
+    assert session.landed_cleanly is None
+
+
+@pytest.mark.parametrize("drone_kw, mocap_kw, message", [
+    ({"mode": FlightMode.EMERGENCY}, {},
+     "the drone is in emergency: clear it with `ardrone-nmpc reset --drone 10.0.0.9` before "
+     "flying"),
+    ({"roll": 2.0}, {}, "the drone is not level (roll +2.0°, pitch -0.2°; the flat trim needs "
+                        "both within ±2°): put it on a level surface"),
+    ({"battery": 12.4}, {}, "battery 12 % at or below the floor (20 %, "
+                            "safety.battery_floor_pct): charge it"),
+    ({}, {"xyz": (1.0, 2.51, 0.0)}, "the drone is 0.51 m from the experiment's start: mocap "
+     "(+1.00, +2.51) m, start (+1.00, +2.00) m (safety.start_tolerance_m 0.50 m) — put it there "
+     "or check the mocap origin"),
+    ({}, {"xyz": (1.0, 2.0, 0.75)}, "the mocap puts the landed drone at z = +0.75 m (more than "
+     "safety.start_tolerance_m 0.50 m off the floor): check the mocap origin and the object's "
+     "z axis (up)"),
+    ({}, {"visible": False}, "mocap object 'ardrone' not visible on port 51001 (last pose age "
+                             "inf ms)"),
+    ({}, {"age_s": 1.0}, "mocap object 'ardrone' not visible on port 51001 (last pose age "
+                         "1000 ms)"),
+])
+def test_refusal_messages_word_for_word(drone_kw, mocap_kw, message):
+    if "xyz" not in mocap_kw:
+        mocap_kw = {**mocap_kw, "xyz": (1.0, 2.0, 0.0)}
+    session, *_ = make(drone_kw, mocap_kw, start=(1.0, 2.0, 1.0))
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == message
+
+
+def test_config_refusal_messages_word_for_word():
+    session, *_ = make(drone_kw={"held": {**WRITTEN, **PROFILE, "control:control_yaw": "6.11"}})
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == (
+        "the drone holds control:control_yaw = '6.11', not the '1.745' written: it ignored the "
+        "write (another multiconfig session or an outdoor profile?) — power-cycle the drone, "
+        "or set drone.config_ids to its session, then retry")
+    session, *_ = make(drone_kw={"read_error": LinkError("timed out")})
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == (
+        "the drone's control port 10.0.0.9:5559 did not answer (timed out): the limits it holds "
+        "cannot be verified, so no take-off — check drone.control_port, or set "
+        "drone.verify_config: false to fly unverified")
+    session, _, events, warnings, _ = make(drone_kw={"read_error": LinkError("timed out")},
+                                           cfg_sets=["drone.verify_config=false"])
+    session.configure()
+    line = ("WARNING: flying with UNVERIFIED limits — control port 10.0.0.9:5559 did not answer "
+            "(timed out); drone.verify_config is false")
+    assert warnings == [line] and events[-1] == ("config_unverified", {"message": line})
+
+
+def test_the_busy_at_port_is_said_and_logged():
+    session, drone, events, warnings, _ = make()
+    drone.at_bind_warning = "local UDP port 5556 is busy (in use)"
+    with session:
+        pass
+    assert warnings[0] == "local UDP port 5556 is busy (in use)"
+    assert ("at_port_busy", {"message": warnings[0]}) in events
+
+
+def test_not_ready_names_the_raw_ctrl_state_or_none():
+    session, drone, *_ = make(drone_kw={"mode": FlightMode.LANDING})
+    real = Drone.navdata.fget
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == ("the drone is not landed and ready (mode landing, ctrl_state "
+                              "0x00020000): refusing take-off")
+    type(drone).navdata = property(lambda self: NavdataSample(
+        self.clock(), FlightMode.LANDING, 80.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    try:
+        session, *_ = make()
+        with pytest.raises(PreflightError, match=r"ctrl_state none\)"):
+            session.__enter__()
+    finally:
+        type(drone).navdata = property(real)
+
+
+def test_waits_last_as_long_as_they_should():
+    # no navdata for 2 s: refused at 2 s
+    session, drone, _, _, clock = make()
+    drone.nav_gone = (0.0, math.inf)
+    t0 = clock()
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == "no navdata from the drone" and 2.0 < clock() - t0 < 2.05
+    # mocap appearing after 1.9 s is waited for; after 2.1 s it is not
+    for after_s, ok in ((1.9, True), (2.1, False)):
+        session, drone, _, _, clock = make()
+        session.mocap.visible_from = clock() + after_s
+        if ok:
+            session.preflight()
+        else:
+            with pytest.raises(PreflightError, match="not visible"):
+                session.preflight()
+    # navdata gone 0.9 s at the trim is waited for, 1.1 s is not
+    for gone_s, ok in ((0.9, True), (1.1, False)):
+        session, drone, _, _, clock = make()
+        session.configure()
+        session.preflight()
+        drone.nav_gone = (clock(), clock() + gone_s)
+        if ok:
+            session.trim()
+        else:
+            with pytest.raises(PreflightError, match="no navdata"):
+                session.trim()
+
+
+@pytest.mark.parametrize("gap_s, ok", [(0.4, True), (0.6, False)])
+def test_after_take_off_mocap_and_navdata_are_waited_for_half_a_second(gap_s, ok):
+    for which in ("mocap", "navdata"):
+        session, drone, events, _, clock = make(drone_kw={"takeoff_s": 1.0})
+        session.configure()
+        session.preflight()
+        session.trim()
+        t = clock()
+        gap = (t + 1.0, t + 1.0 + gap_s)  # around the moment it reports flying
+        if which == "mocap":
+            session.mocap.gone = gap
+        else:
+            drone.gap_after_flying = gap_s
+        if ok:
+            session.takeoff()
+        else:
+            with pytest.raises(PreflightError):
+                session.takeoff()
+
+
+def test_the_take_off_deadline_is_one_for_both_phases():
+    session, drone, _, _, clock = make(drone_kw={"never_flies": True})
+    session.configure()
+    session.preflight()
+    session.trim()
+    drone._mode = FlightMode.TAKING_OFF  # airborne at once, never flying
+    t0 = clock()
+    with pytest.raises(RuntimeError) as err:
+        session.takeoff()
+    assert str(err.value) == "take-off did not complete in 10 s (taking_off)"
+    assert 10.0 < clock() - t0 < 10.05
+    drone.nav_gone = (clock(), math.inf)
+    drone._mode = FlightMode.LANDED
+    with pytest.raises(RuntimeError) as err:
+        session.takeoff()
+    assert str(err.value) == "take-off did not complete in 10 s (no navdata)"
+
+
+def test_mocap_age_is_in_milliseconds_against_the_hover_limit():
+    for age_s, ok in ((0.2499, True), (0.2501, False)):
+        session, *_ = make(mocap_kw={"age_s": age_s})
+        if ok:
+            session.preflight()
+        else:
+            with pytest.raises(PreflightError, match="last pose age 250 ms"):
+                session.preflight()
+
+
+def test_a_start_position_anywhere_is_checked_relative_to_it():
+    session, *_ = make(mocap_kw={"xyz": (-3.0, 1.0, 0.0)}, start=(-3.0, 1.0, 1.0))
+    session.preflight()
+    session, *_ = make(mocap_kw={"xyz": (0.5, 0.0, 0.5)}, start=(0.0, 0.0, 1.0))
+    session.preflight()  # exactly at the tolerance, both horizontally and vertically
+
+
+@pytest.mark.parametrize("emergency, word", [(False, "land"), (True, "cut")])
+def test_operator_requests_while_waiting_for_mocap(emergency, word):
+    requests = OperatorRequests()
+    session, drone, *_ = make(requests=requests, mocap_kw={"visible_from": math.inf})
+    real = session.sleep
+    session.sleep = lambda dt: (real(dt), requests.request_emergency() if emergency
+                                else requests.request_land())
+    with pytest.raises(OperatorAbort) as err:
+        session.preflight()
+    assert str(err.value) == f"the operator asked to {word} before take-off"
+    session, drone, *_ = make(requests=requests)
+    drone.nav_gone = (0.0, math.inf)
+    with pytest.raises(OperatorAbort) as err:
+        session.preflight()
+    assert str(err.value) == f"the operator asked to {word} before take-off"
+
+
+class StepClock(Clock):
+    """Exact binary steps, so boundaries (2 s, 0.5 s) are hit exactly."""
+
+    def sleep(self, dt):
+        self.t += 0.25
+
+
+def stepped(**drone_kw):
+    session, drone, events, warnings, clock = flying(**drone_kw)
+    step = StepClock()
+    step.t = 200.0
+    for obj in (session, drone, session.mocap):
+        obj.clock = step
+    session.sleep = step.sleep
+    return session, drone, events, warnings, step
+
+
+def test_a_second_ctrl_c_exactly_2_s_later_still_cuts():
+    session, drone, events, warnings, clock = stepped(landing_s=5.0)
+    presses = [clock() + 1.0, clock() + 3.0]
+    real = session.sleep
+
+    def sleep(dt):
+        real(dt)
+        if presses and clock() >= presses[0]:
+            presses.pop(0)
+            raise KeyboardInterrupt
+    session.sleep = sleep
+    with pytest.raises(KeyboardInterrupt):
+        session.land()
+    assert "emergency" in drone.calls
+
+
+def test_navdata_exactly_half_a_second_old_is_fresh():
+    session, drone, events, warnings, clock = stepped(landing_s=0.0)
+    drone.nav_age_s = lambda t: 0.5
+    t0 = clock()
+    assert session.land() is True and clock() - t0 == 0.0
+    assert warnings == []
+
+
+def test_an_unconfirmed_cut_is_given_exactly_its_2_s():
+    session, drone, events, warnings, clock = stepped(never_lands=True)
+    drone.emergency = lambda: drone.calls.append("emergency")
+    drone.nav_lost_until = math.inf
+    session._cut_motors("test")
+    t0 = clock()
+    assert session.land() is False and clock() - t0 == 2.25
+
+
+def test_notices_come_every_3_s_exactly():
+    session, drone, events, warnings, clock = stepped(landing_s=6.25)
+    t0 = clock()
+    session.land()
+    assert clock() - t0 == 6.25 and kinds(events).count("landing_wait") == 2  # at 3 s and 6 s
+    notice = [f for k, f in events if k == "landing_wait"][0]
+    assert notice == {"message": "landing: waiting for the drone to touch down (mode landing, "
+                                 "ctrl_state 0x00020000)"}
+    session, drone, events, warnings, clock = stepped(landing_s=4.0)
+    drone.nav_lost_until = math.inf
+    real = session.sleep
+    session.sleep = lambda dt: (real(dt), clock() - 200 > 4.0 and
+                                setattr(drone, "nav_lost_until", -math.inf))
+    session.land()
+    lost = [f for k, f in events if k == "landing_navdata_lost"][0]
+    assert lost == {"message": "landing: no navdata for 10 s — still sending land; watch the "
+                               "drone (Ctrl-C twice within 2 s cuts the motors)", "age_s": 10.0}
+
+
+def test_the_default_warning_goes_to_stderr_and_survives_a_dead_terminal(capsys, monkeypatch):
+    from ardrone_nmpc.runtime import session as session_module
+
+    session_module._stderr("hello operator")
+    assert capsys.readouterr().err == "hello operator\n"
+
+    class Dead:
+        def write(self, text):
+            raise OSError(5, "Input/output error")
+
+        def flush(self):
+            raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr("sys.stderr", Dead())
+    session_module._stderr("nobody hears this")  # no exception

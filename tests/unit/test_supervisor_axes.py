@@ -195,8 +195,8 @@ def test_hold_policy_hovers_after_exactly_solver_hover_ticks():
     cfg = CFG.model_copy(update={"solver_fallback": "hold", "solver_hold_ticks": 1,
                                  "solver_hover_ticks": 3})
     sup = Supervisor(cfg)
-    got = [sup.check_solution(False, np.zeros(4)).action for _ in range(5)]
-    assert got == [Action.HOLD, Action.HOLD, Action.HOLD, Action.HOVER, Action.HOVER]
+    got = [sup.check_solution(False, np.zeros(4)) for _ in range(5)]
+    assert got == [Decision(Action.HOLD, "solver")] * 3 + [Decision(Action.HOVER, "solver")] * 2
 
 
 def test_zero_hold_ticks_falls_back_at_once():
@@ -227,3 +227,7 @@ def test_mode_labels_and_events():
     assert sup.take_events() == []
     sup.record(NOMINAL, "track")
     assert sup.take_events()[0]["previous"] == "hold-solver"
+    # the runner's own labels switching under a nominal verdict are no supervisor event
+    for label in ("settle", "track", "settle"):
+        assert sup.record(NOMINAL, label) == label
+    assert sup.take_events() == []
