@@ -52,7 +52,7 @@ class DroneLandedItself(RuntimeError):
 
 def _stderr(message: str) -> None:
     try:
-        print(message, file=sys.stderr, flush=True)
+        print(message, file=sys.stderr)  # stderr is line-buffered: no flush needed
     except (OSError, ValueError):  # the terminal is gone (SIGHUP): the landing goes on
         pass
 
@@ -93,7 +93,7 @@ class FlightSession:
         self.lock = lock
         self.landed_cleanly: bool | None = None
         self._last_sigint: float | None = None
-        self._cut = False
+        self._cut_t: float | None = None  # when the motors were cut (None: not cut)
 
     # -- entering: connect, verify, preflight, trim, take off -----------------------------
     def __enter__(self) -> "FlightSession":
@@ -202,7 +202,7 @@ class FlightSession:
         yaw1_deg = self._wait_navdata(0.5).yaw_deg
         mocap_turn = wrap_angle_rad(psi1 - psi0)
         # navdata yaw is clockwise-positive, mocap ψ counter-clockwise (docs/protocol.md §4.4)
-        navdata_turn = wrap_angle_rad(-math.radians(yaw1_deg - yaw0_deg))
+        navdata_turn = wrap_angle_rad(math.radians(yaw0_deg - yaw1_deg))
         offset = wrap_angle_rad(mocap_turn - navdata_turn)
         self.event("heading_check", mocap_turn_rad=mocap_turn, navdata_turn_rad=navdata_turn,
                    offset_rad=offset)
@@ -241,9 +241,9 @@ class FlightSession:
         commanded = False
         while True:
             try:
-                if self.requests is not None and self.requests.emergency and not self._cut:
+                if self.requests is not None and self.requests.emergency and self._cut_t is None:
                     self._cut_motors("the operator's emergency key")
-                if not commanded and not self._cut:  # after a cut, REF emergency stays held
+                if not commanded and self._cut_t is None:  # after a cut, REF emergency stays held
                     self.drone.land()  # the link holds REF land from now on
                     commanded = True
                 done = self._landing_done()
@@ -277,7 +277,7 @@ class FlightSession:
         fresh = nav is not None and self.clock() - self.drone.navdata_rx_t_s <= NAVDATA_FRESH_S
         if fresh and nav.mode in (FlightMode.LANDED, FlightMode.EMERGENCY):
             return True
-        if self._cut and self.clock() - self._cut_t > EMERGENCY_CONFIRM_S:
+        if self._cut_t is not None and self.clock() - self._cut_t > EMERGENCY_CONFIRM_S:
             self._log("landing_failed", error="motor cut not confirmed by navdata")
             return False
         return None
@@ -299,7 +299,7 @@ class FlightSession:
             return
         now = self.clock()
         if self._last_sigint is not None and now - self._last_sigint <= SECOND_INTERRUPT_S:
-            if not self._cut:
+            if self._cut_t is None:
                 self._cut_motors("a second Ctrl-C")
             return
         self._last_sigint = now
@@ -307,7 +307,6 @@ class FlightSession:
 
     def _cut_motors(self, why: str) -> None:
         self.warn(f"cutting the motors (emergency): {why}")
-        self._cut = True
         self._cut_t = self.clock()
         try:
             self.drone.emergency()
@@ -373,8 +372,8 @@ class FlightSession:
     def _wait_mocap(self, timeout_s: float):
         deadline = self.clock() + timeout_s
         while True:
-            pose, rx_t = self.mocap.latest()
-            age_ms = (self.clock() - rx_t) * 1e3 if pose is not None else math.inf
+            pose, rx_t = self.mocap.latest()  # rx_t is −inf before the first pose
+            age_ms = (self.clock() - rx_t) * 1e3
             if age_ms <= self.cfg.safety.mocap_hover_ms:
                 return pose
             if self.clock() > deadline:

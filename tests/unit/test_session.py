@@ -61,7 +61,8 @@ class Drone:
         self.nav_gone = (math.inf, math.inf)  # navdata None in this time window
         self.nav_age_s = lambda t: 0.0        # age of the newest navdata
         self.gap_after_flying = 0.0           # navdata None this long after the first flying
-        self._first_flying = None
+        self.gap_after_airborne = 0.0         # … after the first airborne sample
+        self._first_flying = self._first_airborne = None
         self.args: dict = {}
         self.self_landing = None
         self.connected = True
@@ -134,6 +135,11 @@ class Drone:
                 self._first_flying = self.clock()  # this sample is seen, then a gap
             elif self.clock() < self._first_flying + self.gap_after_flying:
                 return None
+        if self.gap_after_airborne and mode.airborne:
+            if self._first_airborne is None:
+                self._first_airborne = self.clock()
+            elif self.clock() < self._first_airborne + self.gap_after_airborne:
+                return None
         yaw = self.yaw[1] if mode is FlightMode.FLYING else self.yaw[0]
         return NavdataSample(self.clock(), mode, self.battery, self.roll, self.pitch, yaw,
                              0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000)
@@ -178,8 +184,8 @@ class Lock:
 
 
 def make(drone_kw=None, mocap_kw=None, cfg_sets=(), start=(0.0, 0.0, 1.0), requests=None,
-         event=None):
-    clock = Clock()
+         event=None, clock=None):
+    clock = clock or Clock()
     drone = Drone(clock, **(drone_kw or {}))
     mocap = Mocap(clock, drone, **(mocap_kw or {}))
     events, warnings = [], []
@@ -574,6 +580,13 @@ def test_exit_lands_even_if_the_landing_event_fails_and_never_swallows():
     assert warnings == []  # a signal is not a Ctrl-C: no motor-cut announcement
 
 
+class StepClock(Clock):
+    """Exact binary steps, so boundaries (2 s, 0.5 s) are hit exactly."""
+
+    def sleep(self, dt):
+        self.t += 0.25
+
+
 # ----------------------------------------------------------------------------- exact words
 # What each refusal says is part of the interface (docs/first-flight.md lists them).
 
@@ -781,11 +794,6 @@ def test_operator_requests_while_waiting_for_mocap(emergency, word):
     assert str(err.value) == f"the operator asked to {word} before take-off"
 
 
-class StepClock(Clock):
-    """Exact binary steps, so boundaries (2 s, 0.5 s) are hit exactly."""
-
-    def sleep(self, dt):
-        self.t += 0.25
 
 
 def stepped(**drone_kw):
@@ -865,3 +873,95 @@ def test_the_default_warning_goes_to_stderr_and_survives_a_dead_terminal(capsys,
 
     monkeypatch.setattr("sys.stderr", Dead())
     session_module._stderr("nobody hears this")  # no exception
+
+
+def test_wait_deadlines_are_exclusive():
+    session, drone, _, _, clock = make(clock=StepClock())
+    drone.nav_gone = (0.0, math.inf)
+    t0 = clock()
+    with pytest.raises(PreflightError):
+        session.preflight()
+    assert clock() - t0 == 2.25  # 2.0 is still inside the wait
+    session, drone, _, _, clock = make(mocap_kw={"visible": False}, clock=StepClock())
+    t0 = clock()
+    with pytest.raises(PreflightError):
+        session.preflight()
+    assert clock() - t0 == 2.25
+    session, drone, _, _, clock = make(drone_kw={"never_flies": True}, clock=StepClock())
+    session.configure()
+    session.preflight()
+    t_trim = clock()
+    session.trim()
+    assert clock() - t_trim == 0.5  # FTRIM, then exactly 0.5 s
+    t0 = clock()
+    with pytest.raises(RuntimeError):
+        session.takeoff()
+    assert clock() - t0 == 10.25
+
+
+def test_a_pose_exactly_at_the_hover_age_is_visible_and_exactly_tolerated_offset_passes():
+    session, *_ = make(mocap_kw={"age_s": 0.25}, clock=StepClock())
+    session.preflight()
+    session, drone, events, _, _ = make(mocap_kw={"psi": (0.0, 0.25)},
+                                        cfg_sets=["safety.heading_tolerance_rad=0.25"])
+    session.__enter__()
+    assert dict(events)["heading_check"]["offset_rad"] == 0.25
+
+
+def test_landing_notice_with_navdata_exactly_half_a_second_old_is_a_wait_notice():
+    session, drone, events, warnings, clock = stepped(landing_s=3.25)
+    drone.nav_age_s = lambda t: 0.5
+    session.land()
+    assert kinds(events).count("landing_wait") == 1 and "landing_navdata_lost" not in kinds(events)
+
+
+def test_foreign_senders_are_listed():
+    session, *_ = make(mocap_kw={"visible": False})
+    session.mocap.foreign_senders = {"10.0.0.7:9999": 120, "10.0.0.8:1": 3}
+    with pytest.raises(PreflightError) as err:
+        session.preflight()
+    assert str(err.value).endswith("; frames from other senders ignored: 10.0.0.7:9999, "
+                                   "10.0.0.8:1")
+
+
+def test_take_off_messages_word_for_word():
+    requests = OperatorRequests()
+    session, drone, *_ = make(requests=requests, drone_kw={"never_flies": True})
+    session.configure()
+    session.preflight()
+    session.trim()
+    requests.request_land()
+    with pytest.raises(OperatorAbort) as err:
+        session.takeoff()
+    assert str(err.value) == "the operator asked to land during take-off"
+    session, drone, *_ = make(drone_kw={"never_flies": True})
+    drone.self_landing = "the drone touched down (state bit 0 cleared); ctrl_state 0x00020000"
+    with pytest.raises(DroneLandedItself) as err:
+        session.__enter__()
+    assert str(err.value) == ("take-off: the drone touched down (state bit 0 cleared); "
+                              "ctrl_state 0x00020000")
+    session, drone, *_ = make(drone_kw={"yaw": (0.0, 0.0)}, mocap_kw={"psi": (0.0, 0.5)})
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == (
+        "during take-off the mocap heading turned +28.6° and navdata's yaw +0.0° (offset +28.6°,"
+        " safety.heading_tolerance_rad 11.5°): the mocap object's frame does not match the "
+        "drone — landing; fix the object (x forward, z up) before flying")
+
+
+@pytest.mark.parametrize("which", ["mocap", "navdata"])
+@pytest.mark.parametrize("gap_s, ok", [(0.4, True), (0.6, False)])
+def test_at_the_first_airborne_sample_mocap_and_navdata_get_half_a_second(which, gap_s, ok):
+    session, drone, *_ = make(drone_kw={"takeoff_s": 2.0})
+    session.configure()
+    session.preflight()
+    session.trim()
+    if which == "mocap":
+        session.mocap.gone = (session.clock(), session.clock() + gap_s)
+    else:
+        drone.gap_after_airborne = gap_s
+    if ok:
+        session.takeoff()
+    else:
+        with pytest.raises(PreflightError):
+            session.takeoff()
