@@ -22,3 +22,15 @@ def test_a_zero_period_is_allowed_a_negative_one_is_not():
     with pytest.raises(MappingError) as err:
         vz_reference_mps(0.3, 5.0, -0.01)
     assert str(err.value) == "dt_s must be >= 0, got -0.01"
+
+
+@pytest.mark.parametrize("field", ["vz_ref_mps", "phi_rad", "theta_rad", "psirate_radps"])
+def test_map_to_pcmd_names_the_non_finite_field(field):
+    from ardrone_nmpc.control.mapping import map_to_pcmd
+    from ardrone_nmpc.core.types import AttitudeCommand
+
+    values = dict(vz_ref_mps=0.1, phi_rad=0.01, theta_rad=-0.01, psirate_radps=0.2)
+    values[field] = math.nan
+    with pytest.raises(MappingError) as err:
+        map_to_pcmd(AttitudeCommand(**values))
+    assert str(err.value) == f"{field} must be finite, got nan"
