@@ -472,6 +472,14 @@ class DroneConfig(_Section):
         "indoor", description="The hull fitted: written as control:flight_without_shell "
         "(TRUE for the outdoor hull).")
 
+    @field_validator("config_ids", mode="before")
+    @classmethod
+    def _quoted_ids(cls, value):
+        if isinstance(value, (list, tuple)) and any(isinstance(v, int) for v in value):
+            raise _invalid('quote ids made of digits only, e.g. "00000001" (YAML reads them '
+                           "as numbers)")
+        return value
+
     @field_validator("config_ids")
     @classmethod
     def _hex_ids(cls, value):
