@@ -37,10 +37,14 @@ def test_a_second_sender_never_moves_the_pose_and_is_named(tmp_path, monkeypatch
     stale.bind(("127.0.0.1", 0))
     sent = []
 
+    def hovering_in_the_experiment():  # 20 rows: past the 0.5 s settle, ~0.8 s in
+        logs = list(tmp_path.glob("*-hover/log.csv"))
+        return logs and len(logs[0].read_bytes().splitlines()) > 20
+
     def replay():
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (links and links[0].poses > 250):
-            time.sleep(0.02)  # 2.5 s of live frames: hovering in the experiment
+        while time.monotonic() < deadline and not hovering_in_the_experiment():
+            time.sleep(0.02)
         t_end = time.monotonic() + 3.0
         k = 1
         while time.monotonic() < t_end:
@@ -69,6 +73,7 @@ def test_a_second_sender_never_moves_the_pose_and_is_named(tmp_path, monkeypatch
     events = [json.loads(l) for l in (run / "events.jsonl").read_text().splitlines()]
     foreign = [e for e in events if e["kind"] == "mocap_foreign_sender"]
     assert [e["sender"] for e in foreign] == [name]
+    assert foreign[0]["t_exp_s"] > 0.5  # mid-hover, in the experiment
     assert foreign[0]["carries_object"] is True and foreign[0]["frame"] == 1
     assert links[0].foreign_senders[name] == len(sent)
     assert links[0].stats.foreign == len(sent)
