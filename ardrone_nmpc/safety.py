@@ -30,6 +30,9 @@ solver failed (below)                  ``hold`` for ``solver_hold_ticks``, then
 commanded tilt > ``max_tilt_rad``      clipped (flagged in ``cmd_saturated``)
 =====================================  ==========================================================
 
+Every comparison is written so that a NaN fails it: a non-finite age, battery level, tilt or
+estimate is a breach of its check, never a pass (``max(abs(nan), 1.0) > cap`` is False).
+
 A solve *failed* when its status is ``diverged`` or ``non-finite``, when its input is not finite,
 or when it is ``max-iterations`` and ``solver_accept_max_iterations`` is false.
 
@@ -119,15 +122,15 @@ class Supervisor:
         cfg = self.cfg
         if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
             return self._latch(Decision(Action.STOP, "emergency"))
-        if navdata is not None and navdata.battery_pct <= cfg.battery_floor_pct:
+        if navdata is not None and not navdata.battery_pct > cfg.battery_floor_pct:
             return self._latch(Decision(Action.LAND, "battery"))
         if not navdata_age_ms <= cfg.navdata_land_ms:  # NaN/inf (never received) included
             return self._latch(Decision(Action.LAND, "navdata-lost"))
         if not mocap_age_ms <= cfg.mocap_land_ms:
             return self._latch(Decision(Action.LAND, "mocap-lost"))
-        if mocap_age_ms > cfg.mocap_hover_ms:
+        if not mocap_age_ms <= cfg.mocap_hover_ms:
             return Decision(Action.HOVER, "stale-mocap")
-        if mocap_age_ms > cfg.mocap_hold_ms:
+        if not mocap_age_ms <= cfg.mocap_hold_ms:
             return Decision(Action.HOLD, "stale-mocap")
         return NOMINAL
 
@@ -144,11 +147,11 @@ class Supervisor:
             if cfg.geofence_action == "land":
                 return self._latch(Decision(Action.LAND, "geofence"))
             return Decision(Action.HOVER, "geofence")
-        if math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2) > cfg.max_speed_mps:
+        if not math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2) <= cfg.max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
-            tilt_rad = math.radians(max(abs(navdata.roll_deg), abs(navdata.pitch_deg)))
-            if tilt_rad > cfg.max_tilt_rad:
+            cap_deg = math.degrees(cfg.max_tilt_rad)
+            if not (abs(navdata.roll_deg) <= cap_deg and abs(navdata.pitch_deg) <= cap_deg):
                 return Decision(Action.HOVER, "tilt")
         return NOMINAL
 

@@ -238,6 +238,11 @@ _export.register(app)
 _tune.register(app)
 
 
+from ardrone_nmpc.cli.operator import register as register_operator_commands  # noqa: E402
+
+register_operator_commands(app)  # land, emergency, reset, status
+
+
 def main() -> None:  # console-script entry point
     app()
 

@@ -7,7 +7,8 @@ command ends. Whatever happens, the landing outcome and the run directory are pr
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
 * a flight error (link lost, supervisor landing, emergency, pre-flight refusal): its
   ``error:`` line, exit 1;
-* Ctrl-C: exit 130; SIGTERM: exit 143 (the session has landed in both cases);
+* Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1/2, PIPE): exit
+  128 + its number (the session has landed in every case);
 * navdata never confirmed the landing: ``error: landing not confirmed by navdata — check
   the drone`` in every case, and at least exit 1.
 """
@@ -20,7 +21,7 @@ from pathlib import Path
 import typer
 
 from ardrone_nmpc.cli.handler import report
-from ardrone_nmpc.errors import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_TERMINATED, UserError
+from ardrone_nmpc.errors import EXIT_ERROR, EXIT_INTERRUPTED, UserError
 
 LANDING_NOT_CONFIRMED = "landing not confirmed by navdata — check the drone"
 
@@ -35,7 +36,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     from ardrone_nmpc.cli.console import stderr_console
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runtime.realtime import (FlightResult, LandingNotConfirmed, Terminated,
-                                               run_flight)
+                                               exit_code_of, run_flight)
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 
@@ -43,9 +44,13 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     if duration_s is not None:
         overrides.append(f"duration_s={duration_s!r}")
     cfg = load_config(config, overrides)
-    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}")
+    # the land / cut-motors keys need a terminal to read them from and to show them on
+    keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr and sys.stderr.isatty())
+    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}",
+                      **({} if keys else {"keys_help": None}))
     use_live = dashboard and sys.stderr is not None and sys.stderr.isatty()
-    live = Live(view, console=stderr_console(), refresh_per_second=4, transient=True)
+    console = stderr_console()
+    live = Live(view, console=console, refresh_per_second=4, transient=True)
     result = FlightResult()
     code = 0
     error: BaseException | None = None
@@ -57,9 +62,11 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
             run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,
                        navdata_port=navdata_port, mocap_port=mocap_port, log_dir=log_dir,
                        seed=seed, status=view.update if use_live else None, result=result,
-                       sink=sink)
-    except Terminated:  # before KeyboardInterrupt: it is one
-        code = EXIT_TERMINATED
+                       sink=sink, operator_keys=keys,
+                       warn=(lambda line: console.print(line, markup=False, highlight=False))
+                       if use_live else None)
+    except Terminated as err:  # before KeyboardInterrupt: it is one
+        code = exit_code_of(err)
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
     except UserError as err:  # the session has landed: first why, then how the landing went

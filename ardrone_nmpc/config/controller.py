@@ -1,5 +1,5 @@
 """The ``controller`` section: NMPC (solver, weights, bounds, obstacles, offset-free
-integral action) or the thesis' P controller (docs/thesis.md §3–4)."""
+integral action) or the thesis' P controller (docs/thesis.md)."""
 
 from __future__ import annotations
 

@@ -221,6 +221,35 @@ class DroneConfig(Section):
     navdata_demo: bool = Field(True, description="general:navdata_demo: 15 Hz demo packets if true.")
     keepalive_interval_s: float = Field(
         0.03, gt=0, le=0.03, description="Longest gap between AT commands (s); ≤ 30 ms (§2.6).")
+    control_port: Port = Field(
+        5559, description="TCP port the drone dumps its configuration on (read back to verify "
+        "the limits before take-off).")
+    verify_config: bool = Field(
+        True, description="Refuse to take off unless the configuration read back from "
+        "control_port holds what was written; false flies unverified (with a loud warning).")
+    config_ids: Optional[tuple[str, str, str]] = Field(
+        None, description="Multiconfiguration [session, profile, application] ids (8 hex "
+        "digits each): switched to at connect, and AT*CONFIG_IDS precedes every AT*CONFIG; "
+        "null stays in the default session.")
+    hull: Literal["indoor", "outdoor"] = Field(
+        "indoor", description="The hull fitted: written as control:flight_without_shell "
+        "(TRUE for the outdoor hull).")
+
+    @field_validator("config_ids", mode="before")
+    @classmethod
+    def _quoted_ids(cls, value):
+        if isinstance(value, (list, tuple)) and any(isinstance(v, int) for v in value):
+            raise _invalid('quote ids made of digits only, e.g. "00000001" (YAML reads them '
+                           "as numbers)")
+        return value
+
+    @field_validator("config_ids")
+    @classmethod
+    def _hex_ids(cls, value):
+        if value is not None and not all(
+                len(v) == 8 and all(c in "0123456789abcdefABCDEF" for c in v) for v in value):
+            raise _invalid("each id must be 8 hex digits, e.g. [d2e081a3, be27e2e4, d87f7e0c]")
+        return value
 
 
 MOCAP_SYSTEMS = ("vicon", "optitrack", "optitrack_closed_source", "qualisys", "vrpn", "nokov",
@@ -311,6 +340,12 @@ class SafetyConfig(Section):
     navdata_land_ms: Positive = Field(500.0, description="Navdata age (ms) above which it lands.")
     battery_floor_pct: float = Field(
         20.0, ge=0, le=100, description="Battery level (%) below which the drone lands.")
+    start_tolerance_m: Positive = Field(
+        0.5, description="Largest horizontal distance (m) between the drone's mocap position "
+        "on the ground and the experiment's start; farther, take-off is refused.")
+    heading_tolerance_rad: Positive = Field(
+        0.2, description="Largest disagreement (rad) between the mocap heading change and "
+        "navdata's yaw change during take-off; beyond it the drone lands (wrong object frame).")
     solver_fallback: Literal["hold", "p", "hover"] = Field(
         "p", description="On solver failure, once solver_hold_ticks have passed: keep holding "
         "the last input (then hover after solver_hover_ticks), switch to the P controller, or "

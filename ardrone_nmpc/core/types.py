@@ -135,6 +135,8 @@ class NavdataSample:
     vy_body_mps : optical-flow speed along the body y axis, **right positive** (navdata vy; the
         world-frame "left" speed is −vy_body_mps).
     vz_mps : vertical speed (m/s), **down positive** (navdata body z down).
+    ctrl_state : the raw ctrl_state word (``major << 16 | minor``) it came with; None when the
+        source has none (simulation without a wire).
     """
 
     t_s: float
@@ -147,6 +149,7 @@ class NavdataSample:
     vx_body_mps: float
     vy_body_mps: float
     vz_mps: float
+    ctrl_state: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -131,6 +131,21 @@ class MocapSource:
         """The UDP port listened on, for a UDP source; None otherwise."""
         return None
 
+    @property
+    def sender(self) -> str | None:
+        """The network sender the poses are taken from (``address:port``), for a source that
+        hears several (UDP); None otherwise."""
+        return None
+
+    @property
+    def foreign_senders(self) -> dict[str, int]:
+        """Datagrams from senders that are ignored (a UDP source locks onto one); none here."""
+        return {}
+
+    def take_events(self) -> list[dict]:
+        """Source events since the last call (a UDP source's sender events); none here."""
+        return []
+
     # ----------------------------------------------------------------------------- readings
 
     def latest(self) -> tuple[MocapPose | None, float]:

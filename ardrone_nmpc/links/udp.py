@@ -16,7 +16,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["Clock", "DEFAULT_CLOCK", "RECV_BUFFER_BYTES", "open_udp", "LinkStats", "LinkStatsSnapshot"]
+__all__ = ["Clock", "DEFAULT_CLOCK", "RECV_BUFFER_BYTES", "check_host", "check_port", "open_udp",
+           "LinkStats", "LinkStatsSnapshot"]
 
 # Receive buffer for one datagram: ≥ 2048 for padded mocap datagrams, > 4096 (navdata maximum)
 # so an oversized navdata packet arrives whole and is rejected by the decoder, not truncated.
@@ -29,6 +30,23 @@ class Clock(Protocol):
     threads themselves always sleep on real time."""
 
     def __call__(self) -> float: ...
+
+
+def check_port(name: str, port) -> int:
+    """``port`` as an int in 1–65535, or ValueError naming ``name``: 0 ("any port") and
+    negative numbers are user errors here, never a silent fall-back to a default."""
+    if isinstance(port, bool) or not isinstance(port, int):
+        raise ValueError(f"{name} must be a port number 1–65535, got {port!r}")
+    if not 1 <= port <= 65535:
+        raise ValueError(f"{name} must be a port number 1–65535, got {port}")
+    return port
+
+
+def check_host(name: str, host) -> str:
+    """``host`` as a non-empty address or host name without spaces, or ValueError."""
+    if not isinstance(host, str) or not host.strip() or any(c.isspace() for c in host):
+        raise ValueError(f"{name} must be an address or host name, got {host!r}")
+    return host
 
 
 def open_udp(bind_host: str, port: int = 0, *, timeout_s: float | None) -> socket.socket:
@@ -139,13 +157,15 @@ class LinkStats:
         with self._lock:
             self._foreign += 1
 
-    def accept_sequence(self, seq: int | None) -> bool:
+    def accept_sequence(self, seq: int | None, *, restart_ok: bool = False) -> bool:
         """Whether a decoded packet numbered ``seq`` is new; updates the gap and order counts.
 
         The first number after construction or :meth:`reset_sequence` is always accepted; then
         ``seq > last`` is accepted and ``seq − last − 1`` numbers count as lost; ``seq`` more than
         ``restart_backjump`` below ``last`` is a restart (accepted, no loss counted); anything
-        else is a duplicate or reordered packet (rejected). ``None`` (unnumbered) is accepted.
+        else is a duplicate or reordered packet (rejected) — unless ``restart_ok`` (the caller
+        knows the sender may have restarted: after a silence), then it is a restart too.
+        ``None`` (unnumbered) is accepted.
         Call :meth:`record_packet` for accepted packets.
         """
         if seq is None:
@@ -159,7 +179,7 @@ class LinkStats:
                 self._lost += seq - last - 1
                 self._last_seq = seq
                 return True
-            if last - seq > self.restart_backjump:
+            if restart_ok or last - seq > self.restart_backjump:
                 self._restarts += 1
                 self._last_seq = seq
                 return True

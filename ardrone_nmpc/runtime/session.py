@@ -1,154 +1,407 @@
-"""A flight session: connect → preflight → take off (``__enter__``) … land (``__exit__``).
+"""A flight session: lock → connect → configure and verify → preflight → trim → take off
+(``__enter__``) … land (``__exit__``).
 
-Landing is structure, not the caller's job: leaving the ``with`` block for any reason — the
-end of the experiment, Ctrl-C, an exception, a lost link — lands the drone and waits until
-navdata shows it on the ground (or the attempts run out, which is reported, never hidden).
+It trusts nothing it has not seen: the limits the drone *holds* (read back over its control
+port, not the ACK of the write), the drone on the ground and level before the flat trim, the
+mocap pose where the experiment starts, and the mocap heading turning with navdata's yaw
+during take-off (a wrong object frame is the classic first-flight crash). Every refusal is one
+line naming what was measured and what to do (docs/first-flight.md lists them); a refusal
+before take-off sends nothing that could start the motors.
+
+Landing is structure, not the caller's job: leaving the ``with`` block for any reason after
+take-off was commanded — the end, Ctrl-C or another terminating signal, an exception, a lost
+link, the operator's key — lands the drone, and :meth:`FlightSession.land` never gives up on
+its own: it holds REF land until navdata shows the drone landed or in emergency, saying every
+few seconds what it waits for (and that navdata is lost, if it is). A second Ctrl-C within 2 s
+cuts the motors instead (announced on the first); so does the operator's emergency key. Whether
+the landing is confirmed is decided by navdata alone — a log that cannot be written is
+reported as such, not as a landing failure.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from typing import Callable
 
+from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import FlightMode
-from ardrone_nmpc.runtime.schedule import LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S
+from ardrone_nmpc.links.drone_config import LinkError, verify_config
+from ardrone_nmpc.runtime.operator_input import OperatorAbort
+from ardrone_nmpc.runtime.schedule import TAKEOFF_TIMEOUT_S
+from ardrone_nmpc.runtime.signals import Terminated
 from ardrone_nmpc.errors import UserError
+
+__all__ = ["DroneLandedItself", "FlightSession", "PreflightError"]
+
+LEVEL_MAX_DEG = 2.0          # flat trim only this level: it takes the attitude as horizontal
+TRIM_TO_TAKEOFF_S = 0.5      # the drone re-zeroes its attitude after FTRIM: no take-off meanwhile
+SECOND_INTERRUPT_S = 2.0     # a second Ctrl-C this soon during landing cuts the motors
+NOTICE_EVERY_S = 3.0         # landing: how often to say what it is waiting for
+NAVDATA_FRESH_S = 0.5        # landing: navdata older than this counts as lost
+EMERGENCY_CONFIRM_S = 2.0    # after a cut: how long to wait for navdata to confirm it
+_POLL_S = 0.02
 
 
 class PreflightError(UserError, RuntimeError):
-    """A preflight check failed: the drone did not take off."""
+    """A check before (or during) take-off failed; the message says what and what to do."""
+
+
+class DroneLandedItself(UserError, RuntimeError):
+    """The drone landed or cut its motors by itself during the flight."""
+
+
+def _stderr(message: str) -> None:
+    try:
+        print(message, file=sys.stderr)  # stderr is line-buffered: no flush needed
+    except (OSError, ValueError):  # the terminal is gone (SIGHUP): the landing goes on
+        pass
 
 
 class FlightSession:
-    """Owns take-off and landing of one experiment.
+    """Owns verification, take-off and landing of one experiment.
 
     Parameters
     ----------
-    cfg : ExperimentConfig (``drone`` limits, ``safety`` floors).
-    drone : a connected-or-connectable :class:`~ardrone_nmpc.links.drone_link.DroneLink`.
+    cfg : ExperimentConfig (``drone`` limits and ports, ``safety`` floors and tolerances).
+    drone : a connectable :class:`~ardrone_nmpc.links.drone_link.DroneLink`.
     mocap : a running :class:`~ardrone_nmpc.links.mocap_source.MocapSource`.
     event : ``event(kind, **fields)`` sink for the run's events.jsonl.
-    clock : monotonic seconds.
+    clock, sleep : monotonic seconds and the wait between polls.
+    warn : one line for the operator (stderr by default).
+    start_position_m : the experiment's (x, y, z) at time 0 (None: not checked — a live
+        reference).
+    requests : :class:`~ardrone_nmpc.runtime.operator_input.OperatorRequests` (the keys).
+    lock : a :class:`~ardrone_nmpc.links.flight_lock.FlightLock`, held until the drone is down.
     """
 
-    TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S = TAKEOFF_TIMEOUT_S, LANDING_TIMEOUT_S
+    TAKEOFF_TIMEOUT_S = TAKEOFF_TIMEOUT_S  # runtime/schedule.py; per session so tests can shorten it
 
     def __init__(self, cfg, drone, mocap, *, event: Callable[..., None],
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep,
+                 warn: Callable[[str], None] = _stderr, start_position_m=None,
+                 requests=None, lock=None):
         self.cfg = cfg
         self.drone = drone
         self.mocap = mocap
         self.event = event
         self.clock = clock
+        self.sleep = sleep
+        self.warn = warn
+        self.start_position_m = start_position_m
+        self.requests = requests
+        self.lock = lock
         self.landed_cleanly: bool | None = None
+        self._last_sigint: float | None = None
+        self._cut_t: float | None = None  # when the motors were cut (None: not cut)
 
-    # -- entering: connect, preflight, take off ------------------------------------------
+    # -- entering: connect, verify, preflight, trim, take off -----------------------------
     def __enter__(self) -> "FlightSession":
-        d = self.cfg.drone
-        self.drone.connect(timeout_s=5.0)
-        written = self.drone.configure_limits(
-            euler_angle_max_rad=d.euler_angle_max_rad, control_vz_max_mps=d.control_vz_max_mps,
-            control_yaw_radps=d.control_yaw_radps, altitude_max_m=d.altitude_max_m)
-        self.event("config_written", **{str(k): v for k, v in dict(written).items()})
-        try:  # read back what the drone now holds (control port): logged, not trusted blindly
-            held = self.drone.read_config(timeout_s=2.0)
-            self.event("config_read", **{k: held.get(k) for k in written})
-        except Exception as err:  # noqa: BLE001 - a drone without the port still flies
-            self.event("config_read_failed", error=str(err))
+        if self.lock is not None:
+            self.lock.acquire()  # before a single datagram: one flight per drone
         try:
+            self.drone.connect(timeout_s=5.0)  # refuses a drone that is already airborne
+            if self.drone.at_bind_warning:
+                self._note("at_port_busy", self.drone.at_bind_warning)
+            self.configure()
             self.preflight()
-            self.drone.flat_trim()
-            self.drone.takeoff()
-            self.event("takeoff")
-            self._wait_for(lambda m: m is FlightMode.FLYING, self.TAKEOFF_TIMEOUT_S, "take-off")
-        except BaseException:
-            self.land()  # whatever went wrong after the motors may have started
+            self.trim()
+        except BaseException:  # nothing that could start the motors was sent: nothing to land
+            self._release()
+            raise
+        try:
+            self.takeoff()
+        except BaseException as err:
+            self._interrupted(err)
+            try:
+                self._log("landing", reason=type(err).__name__)
+            finally:
+                self.land()  # whatever went wrong, the motors may have started
+                self._release()
             raise
         return self
 
+    def configure(self) -> None:
+        """Write the limits and the profile keys, read them back, refuse on any difference."""
+        d = self.cfg.drone
+        drone = self.drone
+        written = drone.configure_limits(
+            euler_angle_max_rad=d.euler_angle_max_rad, control_vz_max_mps=d.control_vz_max_mps,
+            control_yaw_radps=d.control_yaw_radps, altitude_max_m=d.altitude_max_m)
+        written.update(drone.configure_profile(flight_without_shell=d.hull == "outdoor"))
+        self.event("config_written", **written)
+        try:
+            held = drone.read_config(timeout_s=2.0)
+        except LinkError as err:
+            where = f"{drone.host}:{drone.control_port}"
+            if d.verify_config:
+                raise PreflightError(
+                    f"the drone's control port {where} did not answer ({err}): the limits it "
+                    "holds cannot be verified, so no take-off — check drone.control_port, or "
+                    "set drone.verify_config: false to fly unverified") from None
+            self._note("config_unverified",
+                       f"WARNING: flying with UNVERIFIED limits — control port {where} did "
+                       f"not answer ({err}); drone.verify_config is false")
+            return
+        self.event("config_read", **{k: held.get(k) for k in written})
+        mismatches = verify_config(written, held)
+        if mismatches:
+            for m in mismatches:
+                self.event("config_mismatch", key=m.key, written=m.written, held=m.held)
+            more = f" (and {len(mismatches) - 1} more key(s))" if len(mismatches) > 1 else ""
+            raise PreflightError(mismatches[0].line() + more)
+
     def preflight(self) -> None:
-        """Navdata flowing, not in emergency, battery above the floor, mocap object visible."""
+        """On the ground, ready, charged, level; mocap visible where the experiment starts."""
         nav = self._wait_navdata(2.0)
         if nav.mode is FlightMode.EMERGENCY:
-            raise PreflightError("drone in emergency: reset it before flying")
+            raise PreflightError(f"the drone is in emergency: clear it with `ardrone-nmpc reset "
+                                 f"--drone {self.drone.host}` before flying")
         if nav.mode is not FlightMode.LANDED:
-            raise PreflightError(f"drone not landed (mode {nav.mode.value}): refusing take-off")
+            raise PreflightError(f"the drone is not landed and ready (mode {nav.mode.value}, "
+                                 f"ctrl_state {_ctrl(nav)}): refusing take-off")
         floor = self.cfg.safety.battery_floor_pct
         if not nav.battery_pct > floor:
             raise PreflightError(f"battery {nav.battery_pct:.0f} % at or below the floor "
-                                 f"({floor:.0f} %, safety.battery_floor_pct)")
-        deadline = self.clock() + 2.0
-        while True:
-            pose, rx_t = self.mocap.latest()
-            age_ms = (self.clock() - rx_t) * 1e3 if pose is not None else math.inf
-            if age_ms <= self.cfg.safety.mocap_hover_ms:
-                break
-            if self.clock() > deadline:
-                raise PreflightError(
-                    f"mocap object {self.cfg.mocap.object_name!r} not visible from "
-                    f"{self.mocap.where} (last pose age {age_ms:.0f} ms)")
-            time.sleep(0.02)
-        self.event("preflight_ok", battery_pct=nav.battery_pct)
+                                 f"({floor:.0f} %, safety.battery_floor_pct): charge it")
+        self._require_level(nav)
+        pose = self._wait_mocap(2.0)
+        self._require_at_start(pose)
+        self.event("preflight_ok", battery_pct=nav.battery_pct, ctrl_state=nav.ctrl_state,
+                   mocap_sender=self.mocap.sender,
+                   x_m=float(pose.position_m[0]), y_m=float(pose.position_m[1]),
+                   z_m=float(pose.position_m[2]))
+
+    def trim(self) -> None:
+        """FTRIM on the ground and level (checked again on fresh navdata), then wait
+        :data:`TRIM_TO_TAKEOFF_S` before anything may take off."""
+        nav = self._wait_navdata(1.0)
+        if nav.mode is not FlightMode.LANDED:
+            raise PreflightError(f"the drone left the ground state before the flat trim "
+                                 f"(mode {nav.mode.value}): refusing take-off")
+        self._require_level(nav)
+        self.drone.flat_trim()
+        self.event("flat_trim", roll_deg=nav.roll_deg, pitch_deg=nav.pitch_deg)
+        until = self.clock() + TRIM_TO_TAKEOFF_S
+        while self.clock() < until:
+            self._check_operator("before take-off")
+            self.sleep(_POLL_S)
+
+    def takeoff(self) -> None:
+        """REF take-off until navdata shows flying, then the heading check: the turn of the
+        mocap heading and of navdata's yaw from the first airborne sample (the drone re-zeroes
+        its yaw as it takes off) to flying."""
+        deadline = self.clock() + self.TAKEOFF_TIMEOUT_S
+        self.drone.takeoff()
+        self.event("takeoff")
+        self._wait_takeoff(lambda m: m.airborne, deadline)
+        psi0 = self._wait_mocap(0.5).psi_rad
+        yaw0_deg = self._wait_navdata(0.5).yaw_deg
+        self._wait_takeoff(lambda m: m is FlightMode.FLYING, deadline)
+        psi1 = self._wait_mocap(0.5).psi_rad
+        yaw1_deg = self._wait_navdata(0.5).yaw_deg
+        mocap_turn = wrap_angle_rad(psi1 - psi0)
+        # navdata yaw is clockwise-positive, mocap ψ counter-clockwise (docs/protocol.md §4.4)
+        navdata_turn = wrap_angle_rad(math.radians(yaw0_deg - yaw1_deg))
+        offset = wrap_angle_rad(mocap_turn - navdata_turn)
+        self.event("heading_check", mocap_turn_rad=mocap_turn, navdata_turn_rad=navdata_turn,
+                   offset_rad=offset)
+        tol = self.cfg.safety.heading_tolerance_rad
+        if not abs(offset) <= tol:
+            raise PreflightError(
+                f"during take-off the mocap heading turned {math.degrees(mocap_turn):+.1f}° "
+                f"and navdata's yaw {math.degrees(navdata_turn):+.1f}° (offset "
+                f"{math.degrees(offset):+.1f}°, safety.heading_tolerance_rad "
+                f"{math.degrees(tol):.1f}°): the mocap object's frame does not match the "
+                "drone — landing; fix the object (x forward, z up) before flying")
 
     # -- leaving: land, always ------------------------------------------------------------
     def __exit__(self, exc_type, exc, tb) -> bool:
+        self._interrupted(exc)
         reason = "end" if exc_type is None else exc_type.__name__
         try:
-            self.event("landing", reason=reason)
+            self._log("landing", reason=reason)
         finally:  # a failing log (disk full) must not keep the drone in the air
-            self.land()
+            try:
+                self.land()
+            finally:
+                self._release()
         return False  # never swallow the exception
 
     def land(self) -> bool:
-        """Command landing until navdata shows the drone landed; True if it did in time.
+        """Hold REF land until navdata shows the drone landed or in emergency; True then.
 
-        Interrupts (Ctrl-C, SIGTERM) arriving meanwhile do not stop the landing: the first is
-        re-raised once the drone is down or the landing timed out.
+        Never gives up on its own. Interrupts meanwhile do not stop it (the first is re-raised
+        once the drone is down); a second Ctrl-C within :data:`SECOND_INTERRUPT_S` — or the
+        operator's emergency key — cuts the motors instead. False only if the link cannot send
+        at all any more (closed), or a cut was not confirmed.
         """
         interrupt: BaseException | None = None
-        deadline = self.clock() + self.LANDING_TIMEOUT_S
-        while self.landed_cleanly is not True:
+        next_notice = self.clock() + NOTICE_EVERY_S
+        commanded = False
+        while True:
             try:
-                self.drone.land()  # the link also drops the flight command to hover
-                self._wait_for(lambda m: m in (FlightMode.LANDED, FlightMode.EMERGENCY),
-                               max(deadline - self.clock(), 0.0), "landing",
-                               resend=self.drone.land)
-                self.landed_cleanly = True
-                self.event("landed")
-            except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: keep landing
-                interrupt = interrupt or err
-                if self.clock() > deadline:
-                    self.landed_cleanly = False
+                if self.requests is not None and self.requests.emergency and self._cut_t is None:
+                    self._cut_motors("the operator's emergency key")
+                if not commanded and self._cut_t is None:  # after a cut, REF emergency stays held
+                    self.drone.land()  # the link holds REF land from now on
+                    commanded = True
+                done = self._landing_done()
+                if done is not None:
+                    self.landed_cleanly = done
                     break
-            except Exception as err:  # noqa: BLE001 - reported; the caller's exception wins
-                self.landed_cleanly = False
-                self.event("landing_failed", error=str(err) or type(err).__name__)
-                break
+                if self.clock() >= next_notice:
+                    self._landing_notice()
+                    next_notice += NOTICE_EVERY_S
+                self.sleep(_POLL_S)
+            except KeyboardInterrupt as err:
+                interrupt = interrupt or err
+                self._interrupted(err)
+            except LinkError as err:
+                if not self.drone.connected:
+                    self.landed_cleanly = False
+                    self._log("landing_failed", error=str(err))
+                    break
+                commanded = False  # a send failed (Wi-Fi gone?): keep trying
+                self.sleep(_POLL_S)
+        if self.landed_cleanly:
+            self._log("landed", mode=self.drone.navdata.mode.value)
         if interrupt is not None:
             raise interrupt
         return bool(self.landed_cleanly)
 
     # -- helpers --------------------------------------------------------------------------
+    def _landing_done(self) -> bool | None:
+        """True once fresh navdata shows landed/emergency; False after an unconfirmed cut."""
+        nav = self.drone.navdata
+        fresh = nav is not None and self.clock() - self.drone.navdata_rx_t_s <= NAVDATA_FRESH_S
+        if fresh and nav.mode in (FlightMode.LANDED, FlightMode.EMERGENCY):
+            return True
+        if self._cut_t is not None and self.clock() - self._cut_t > EMERGENCY_CONFIRM_S:
+            self._log("landing_failed", error="motor cut not confirmed by navdata")
+            return False
+        return None
+
+    def _landing_notice(self) -> None:
+        nav = self.drone.navdata
+        age_s = self.clock() - self.drone.navdata_rx_t_s
+        if nav is None or not age_s <= NAVDATA_FRESH_S:
+            self._note("landing_navdata_lost",
+                       f"landing: no navdata for {age_s:.0f} s — still sending land; watch the "
+                       "drone (Ctrl-C twice within 2 s cuts the motors)", age_s=age_s)
+        else:
+            self._note("landing_wait", f"landing: waiting for the drone to touch down "
+                       f"(mode {nav.mode.value}, ctrl_state {_ctrl(nav)})")
+
+    def _interrupted(self, err) -> None:
+        """A Ctrl-C: the first announces the motor cut, a second within 2 s does it."""
+        if not isinstance(err, KeyboardInterrupt) or isinstance(err, Terminated):
+            return
+        now = self.clock()
+        if self._last_sigint is not None and now - self._last_sigint <= SECOND_INTERRUPT_S:
+            if self._cut_t is None:
+                self._cut_motors("a second Ctrl-C")
+            return
+        self._last_sigint = now
+        self.warn("landing — press Ctrl-C again within 2 s to cut the motors (emergency)")
+
+    def _cut_motors(self, why: str) -> None:
+        self.warn(f"cutting the motors (emergency): {why}")
+        self._cut_t = self.clock()
+        try:
+            self.drone.emergency()
+        finally:
+            self._log("emergency", reason=why)
+
+    def _note(self, kind: str, message: str, **fields) -> None:
+        self.warn(message)
+        self._log(kind, message=message, **fields)
+
+    def _log(self, kind: str, **fields) -> None:
+        """An event that must not change the flight's course if it cannot be written."""
+        try:
+            self.event(kind, **fields)
+        except Exception as err:  # noqa: BLE001 - disk full: say so, keep flying the procedure
+            self.warn(f"warning: event {kind!r} not logged: {err}")
+
+    def _release(self) -> None:
+        if self.lock is not None:
+            self.lock.release()
+
+    def _check_operator(self, when: str) -> None:
+        r = self.requests
+        if r is not None and r.land:
+            raise OperatorAbort(f"the operator asked to {'cut' if r.emergency else 'land'} "
+                                f"{when}")
+
+    def _require_level(self, nav) -> None:
+        if not (abs(nav.roll_deg) < LEVEL_MAX_DEG and abs(nav.pitch_deg) < LEVEL_MAX_DEG):
+            raise PreflightError(
+                f"the drone is not level (roll {nav.roll_deg:+.1f}°, pitch "
+                f"{nav.pitch_deg:+.1f}°; the flat trim needs both within ±{LEVEL_MAX_DEG:.0f}°):"
+                " put it on a level surface")
+
+    def _require_at_start(self, pose) -> None:
+        start = self.start_position_m
+        if start is None:
+            return
+        tol = self.cfg.safety.start_tolerance_m
+        x, y, z = (float(v) for v in pose.position_m)
+        off = math.hypot(x - start[0], y - start[1])
+        if not off <= tol:
+            raise PreflightError(
+                f"the drone is {off:.2f} m from the experiment's start: mocap ({x:+.2f}, "
+                f"{y:+.2f}) m, start ({start[0]:+.2f}, {start[1]:+.2f}) m "
+                f"(safety.start_tolerance_m {tol:.2f} m) — put it there or check the mocap "
+                "origin")
+        if not abs(z) <= tol:
+            raise PreflightError(
+                f"the mocap puts the landed drone at z = {z:+.2f} m (more than "
+                f"safety.start_tolerance_m {tol:.2f} m off the floor): check the mocap origin "
+                "and the object's z axis (up)")
+
     def _wait_navdata(self, timeout_s: float):
         deadline = self.clock() + timeout_s
         while self.drone.navdata is None:
             if self.clock() > deadline:
                 raise PreflightError("no navdata from the drone")
-            time.sleep(0.02)
+            self._check_operator("before take-off")
+            self.sleep(_POLL_S)
         return self.drone.navdata
 
-    def _wait_for(self, done, timeout_s: float, what: str, resend=None) -> None:
+    def _wait_mocap(self, timeout_s: float):
         deadline = self.clock() + timeout_s
-        next_resend = self.clock() + 1.0
+        while True:
+            pose, rx_t = self.mocap.latest()  # rx_t is −inf before the first pose
+            age_ms = (self.clock() - rx_t) * 1e3
+            if age_ms <= self.cfg.safety.mocap_hover_ms:
+                return pose
+            if self.clock() > deadline:
+                foreign = self.mocap.foreign_senders
+                hint = (f"; frames from other senders ignored: {', '.join(foreign)}"
+                        if foreign else "")
+                raise PreflightError(
+                    f"mocap object {self.cfg.mocap.object_name!r} not visible from "
+                    f"{self.mocap.where} (last pose age {age_ms:.0f} ms){hint}")
+            self._check_operator("before take-off")
+            self.sleep(_POLL_S)
+
+    def _wait_takeoff(self, done, deadline: float) -> None:
         while True:
             nav = self.drone.navdata
             if nav is not None and done(nav.mode):
                 return
+            if self.drone.self_landing:
+                raise DroneLandedItself(f"take-off: {self.drone.self_landing}")
             if self.clock() > deadline:
                 mode = nav.mode.value if nav is not None else "no navdata"
-                raise RuntimeError(f"{what} did not complete in {timeout_s:.0f} s ({mode})")
-            if resend is not None and self.clock() > next_resend:
-                resend()
-                next_resend += 1.0
-            time.sleep(0.02)
+                raise RuntimeError(f"take-off did not complete in "
+                                   f"{self.TAKEOFF_TIMEOUT_S:.0f} s ({mode})")
+            self._check_operator("during take-off")
+            self.sleep(_POLL_S)
+
+
+def _ctrl(nav) -> str:
+    return "none" if nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"

@@ -1,5 +1,6 @@
 """Live flight dashboard (rich): rendered by rich's own refresh thread at ~4 Hz, so the
-control loop only hands over a dict of the latest figures."""
+control loop only hands over a dict of the latest figures. It also shows the operator's keys
+and any foreign mocap sender (ignored, but worth a look: a stale replay, a second tracker)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,15 @@ import math
 
 from rich.table import Table
 
+from ardrone_nmpc.runtime.operator_input import KEYS_HELP
+
 
 class LiveStatus:
     """``update(figures)`` from the control loop; rich calls ``__rich__`` to draw."""
 
-    def __init__(self, title: str):
+    def __init__(self, title: str, keys_help: str | None = KEYS_HELP):
         self.title = title
+        self.keys_help = keys_help
         self._figures: dict = {}
 
     def update(self, figures: dict) -> None:
@@ -20,7 +24,8 @@ class LiveStatus:
 
     def __rich__(self) -> Table:
         f = self._figures
-        table = Table(title=self.title, show_header=False, min_width=60)
+        table = Table(title=self.title, show_header=False, min_width=60,
+                      caption=self.keys_help)
         table.add_column(style="bold")
         table.add_column(justify="right")
         if not f:
@@ -40,5 +45,14 @@ class LiveStatus:
                       f"({num('mocap_age_ms', '{:.0f}')} ms) / {num('navdata_rate_hz', '{:.0f}')} Hz "
                       f"({num('navdata_age_ms', '{:.0f}')} ms)")
         table.add_row("battery / overruns", f"{num('battery_pct', '{:.0f}')} % / {f.get('overruns', 0)}")
+        ctrl = f.get("nav_ctrl_state")
+        table.add_row("drone mode / ctrl_state", f"{f.get('nav_mode', '')} / " + (
+            f"0x{int(ctrl):08x}" if isinstance(ctrl, (int, float)) and math.isfinite(ctrl)
+            else "—"))
+        table.add_row("mocap sender", str(f.get("mocap_sender") or "—"))
+        foreign = f.get("mocap_foreign") or {}
+        if foreign:
+            table.add_row("[bold red]IGNORED mocap senders[/]", ", ".join(
+                f"{name} ({count})" for name, count in foreign.items()))
         table.add_row("progress", f"{100 * f.get('progress', 0):.0f} %")
         return table

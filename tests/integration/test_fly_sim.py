@@ -48,9 +48,14 @@ def test_fly_sim_flies_and_lands(tmp_path):
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_interrupt_lands_and_exits_with_the_signal_code(tmp_path, sig, code):
-    proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60"],
+@pytest.mark.parametrize("sig, code, rows", [
+    (signal.SIGINT, 130, 20), (signal.SIGTERM, 143, 20),
+    (signal.SIGHUP, 129, 4.0 / 0.065),      # the terminal closed 4 s into the experiment
+    (signal.SIGQUIT, 131, 20), (signal.SIGUSR1, 138, 20), (signal.SIGUSR2, 140, 20),
+    (signal.SIGPIPE, 141, 20)])
+def test_every_terminating_signal_lands_and_exits_with_its_code(tmp_path, sig, code, rows):
+    proc = subprocess.Popen([*FLY, "--log-dir", str(tmp_path), "--duration-s", "60",
+                             "--set", "sim.settle_s=0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).parents[2])
     try:
@@ -59,10 +64,10 @@ def test_interrupt_lands_and_exits_with_the_signal_code(tmp_path, sig, code):
         while time.monotonic() < deadline:  # wait until it is flying the loop
             dirs = list(Path(tmp_path).glob("*-hover"))
             if dirs and (dirs[0] / "log.csv").exists() and \
-                    len((dirs[0] / "log.csv").read_text().splitlines()) > 20:
+                    len((dirs[0] / "log.csv").read_text().splitlines()) > rows:
                 run_dir = dirs[0]
                 break
-            time.sleep(0.2)
+            time.sleep(0.1)
         assert run_dir is not None, "the flight never started"
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=40)
@@ -73,6 +78,9 @@ def test_interrupt_lands_and_exits_with_the_signal_code(tmp_path, sig, code):
     assert proc.returncode == code, err
     kinds = [e["kind"] for e in _events(run_dir)]
     assert "landed" in kinds, kinds
+    landing = [e for e in _events(run_dir) if e["kind"] == "landing"]
+    assert landing[0]["reason"] in ("KeyboardInterrupt", "Terminated")
+    assert "Traceback" not in err
     assert _run_line(out) == str(run_dir)
     read_run(run_dir)  # complete and readable
     assert (run_dir / "summary.csv").read_text().startswith("axis,metric,value,unit")

@@ -449,8 +449,8 @@ def test_ref_bits_take_off_land_emergency_and_reset(drone):
         assert wait_until(held(REF_EMERGENCY))
         assert ref_bits() == [REF_TAKEOFF, REF_LAND, REF_EMERGENCY]
         assert drone.emergency                        # held bit 8: one edge, no toggling back
-        with pytest.raises(LinkError, match="emergency"):
-            link.takeoff()
+        with pytest.raises(LinkError, match="take-off refused: the link landed the drone"):
+            link.takeoff()                            # barred for good since land()
         link.reset_emergency(timeout_s=2.0)
         assert wait_until(lambda: link.navdata.mode is FlightMode.LANDED)
         assert link.ref == Ref.landing() and not drone.emergency
@@ -609,10 +609,19 @@ def test_commands_validate_without_a_connection():
     (DroneState.FLY, 8, FlightMode.LANDING),
     (DroneState.FLY, 9, FlightMode.LANDING),
     (DroneState.FLY, 3, FlightMode.FLYING),
+    (DroneState.FLY, 4, FlightMode.FLYING),
     (DroneState(0), 2, FlightMode.LANDED),
-    (DroneState.FLY, 10, FlightMode.FLYING),
-    (DroneState(0), 0, FlightMode.LANDED),
+    # airborne is bit 0 alone, landed is major 2 alone: an unknown code in the air is never
+    # taken for flying, a code other than 2 on the ground is not "landed" yet
+    (DroneState.FLY, 10, FlightMode.LANDING),
+    (DroneState.FLY, 2, FlightMode.LANDING),
+    (DroneState(0), 0, FlightMode.LANDING),
+    (DroneState(0), 4, FlightMode.LANDING),
+    (DroneState(0), 9, FlightMode.LANDING),
+    (DroneState(0), 6, FlightMode.TAKING_OFF),
     (DroneState.FLY, None, FlightMode.FLYING),
+    (DroneState(0), None, FlightMode.LANDED),
+    (DroneState.EMERGENCY, 2, FlightMode.EMERGENCY),
 ])
 def test_flight_mode_of(state, major, mode):
     assert flight_mode_of(state, major) is mode
@@ -741,20 +750,36 @@ def test_mocap_repeated_identical_pose_stops_being_fresh(mocap):
 
 
 @pytest.mark.timeout(10)
-def test_mocap_frame_gaps_reordering_and_malformed(mocap):
-    link, st = mocap
-    st.send(1, pose(t=(1.0, 1.0, 1.0)))
-    st.send(2, pose(t=(2.0, 1.0, 1.0)))
-    st.send(5, pose(t=(5.0, 1.0, 1.0)))
-    st.send(4, pose(t=(4.0, 1.0, 1.0)))              # late: dropped
-    st.send(6, pose(t=(6.0, 1.0, 1.0)))
+def test_mocap_frame_gaps_reordering_and_malformed():
+    now = [0.0]
+    with MocapLink(LOOPBACK, 0, object_name="ardrone", clock=lambda: now[0]) as link:
+        st = Streamer(link)
+        try:
+            _gaps_reordering_and_malformed(link, st, now)
+        finally:
+            st.close()
+
+
+def _gaps_reordering_and_malformed(link, st, now):
+    def send(k, x_mm, dt_s=0.01):
+        now[0] += dt_s
+        st.send(k, pose(t=(x_mm, 1.0, 1.0)))
+
+    send(1, 1.0)
+    send(2, 2.0)
+    send(5, 5.0)
+    send(4, 4.0)                                      # late: dropped
+    send(6, 6.0)
     assert link.stats.lost == 2 and link.stats.out_of_order == 1 and link.stats.packets == 4
     assert link.latest()[0].position_m[0] == pytest.approx(0.006)
     st.send_raw(b"\x01\x02")                         # shorter than the header
     good = encode_mocap(MocapFrame.of(7, [pose()]), pad=False)
     st.send_raw(good[:40])                           # the item overruns the datagram
     assert link.stats.malformed == 2 and link.last_error.startswith("mocap")
-    st.send(5000, pose(t=(7.0, 1.0, 1.0)))
-    st.send(3, pose(t=(8.0, 1.0, 1.0)))              # far below: the tracker restarted
+    send(5000, 7.0)
+    send(3, 8.0)                                     # far below, but no silence: dropped
+    assert link.stats.restarts == 0 and link.stats.out_of_order == 2
+    assert link.latest()[0].position_m[0] == pytest.approx(0.007)
+    send(3, 9.0, dt_s=0.6)                           # after a 0.6 s silence: a restart
     assert link.stats.restarts == 1
-    assert link.latest()[0].position_m[0] == pytest.approx(0.008)
+    assert link.latest()[0].position_m[0] == pytest.approx(0.009)

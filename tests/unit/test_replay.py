@@ -279,8 +279,8 @@ class RecordingLink(MocapLink):
         self.got_all = threading.Event()
         self.expected = math.inf
 
-    def _handle(self, data, t_s):
-        super()._handle(data, t_s)
+    def _handle(self, data, t_s, *sender):
+        super()._handle(data, t_s, *sender)
         pose, _ = self.latest()
         if pose is not None and (not self.received or pose is not self.received[-1]):
             self.received.append(pose)

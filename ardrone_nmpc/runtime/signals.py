@@ -1,0 +1,61 @@
+"""Nothing ends a flight without landing it: every catchable terminating signal lands.
+
+A closed terminal (SIGHUP), Ctrl-\\ (SIGQUIT), ``kill`` (SIGTERM), SIGUSR1/2 and a write to a
+closed pipe (SIGPIPE) would each end the process at once by default and leave the drone
+hovering. Inside :func:`landing_signals` each raises :class:`Terminated` instead — a
+``KeyboardInterrupt``, exactly like Ctrl-C (SIGINT), so no ``except Exception`` on the way can
+swallow it and the flight session's exit lands the drone — and the process exits with
+128 + the signal's number (:func:`exit_code_of`). SIGKILL and SIGSTOP cannot be caught; the
+drone's own watchdog then holds it hovering (docs/first-flight.md says what to do).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+
+__all__ = ["LANDING_SIGNALS", "Terminated", "exit_code_of", "landing_signals"]
+
+#: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
+LANDING_SIGNALS: tuple[signal.Signals, ...] = (
+    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2, signal.SIGPIPE,
+    signal.SIGTERM)
+
+
+class Terminated(KeyboardInterrupt):
+    """A terminating signal arrived: leave the loop and land, like Ctrl-C."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+
+def exit_code_of(interrupt: BaseException) -> int:
+    """The exit code of a flight ended by ``interrupt``: 128 + its signal (130 for Ctrl-C)."""
+    if isinstance(interrupt, Terminated):
+        return 128 + interrupt.signum
+    return 128 + int(signal.SIGINT)
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated(signum)
+
+
+@contextmanager
+def landing_signals():
+    """Within the block, :data:`LANDING_SIGNALS` raise :class:`Terminated` and SIGINT raises
+    KeyboardInterrupt (whatever handler was set before); the previous handlers come back after.
+    Outside the main thread (where Python delivers signals) it changes nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    try:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
+        for sig in LANDING_SIGNALS:
+            previous[sig] = signal.signal(sig, _raise_terminated)
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
