@@ -27,6 +27,8 @@ import time
 
 import typer
 
+from ardrone_nmpc.cli.options import non_empty, port
+
 __all__ = ["register"]
 
 HANDOVER_S = 10.0          # how long a holding `fly` gets to land and let go
@@ -35,9 +37,10 @@ _LIMIT_KEYS = ("control:euler_angle_max", "control:control_vz_max", "control:con
                "control:altitude_max", "control:outdoor", "control:flight_without_shell",
                "control:flying_mode")
 
-DRONE = typer.Option("192.168.1.1", "--drone", help="Drone address.")
-AT_PORT = typer.Option(5556, "--at-port", help="AT command UDP port.")
-NAVDATA_PORT = typer.Option(5554, "--navdata-port", help="Navdata UDP port.")
+DRONE = typer.Option("192.168.1.1", "--drone", callback=non_empty,
+                     help="Drone address (the AR.Drone's own network: 192.168.1.1).")
+AT_PORT = typer.Option(5556, "--at-port", callback=port(), help="AT command UDP port.")
+NAVDATA_PORT = typer.Option(5554, "--navdata-port", callback=port(), help="Navdata UDP port.")
 
 
 def _fail(message: str, code: int = 1):
@@ -179,7 +182,7 @@ def reset(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDAT
 
 
 def status(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDATA_PORT,
-           control_port: int = typer.Option(5559, "--control-port",
+           control_port: int = typer.Option(5559, "--control-port", callback=port(),
                                             help="TCP configuration port.")) -> None:
     """One navdata snapshot: state, ctrl_state, battery, altitude and the firmware-held
     limits."""

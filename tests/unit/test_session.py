@@ -151,7 +151,7 @@ class Drone:
 
 
 class Mocap:
-    port, sender = 51001, "10.0.0.2:4000"
+    port, sender, where = 51001, "10.0.0.2:4000", "udp 0.0.0.0:51001"
 
     def __init__(self, clock, drone=None, xyz=(0.0, 0.0, 0.0), psi=(0.0, 0.0), visible=True,
                  age_s=0.0, visible_from=-math.inf, gone=(math.inf, math.inf)):
@@ -298,7 +298,7 @@ def test_a_silent_control_port_refuses_unless_verification_is_off():
     ({"pitch": 2.0}, {}, r"not level \(roll \+0\.3°, pitch \+2\.0°"),
     ({"pitch": -2.0}, {}, r"not level"),
     ({"pitch": math.nan}, {}, r"not level"),
-    ({}, {"visible": False}, r"mocap object 'ardrone' not visible on port 51001"),
+    ({}, {"visible": False}, r"mocap object 'ardrone' not visible from udp 0.0.0.0:51001"),
     ({}, {"xyz": (0.51, 0.0, 0.0)}, r"0\.51 m from the experiment's start: mocap \(\+0\.51, "
                                     r"\+0\.00\) m, start \(\+0\.00, \+0\.00\)"),
     ({}, {"xyz": (0.0, -0.6, 0.0)}, r"0\.60 m from the experiment's start"),
@@ -629,9 +629,9 @@ def test_a_refusal_leaves_the_landing_outcome_unknown():
     ({}, {"xyz": (1.0, 2.0, 0.75)}, "the mocap puts the landed drone at z = +0.75 m (more than "
      "safety.start_tolerance_m 0.50 m off the floor): check the mocap origin and the object's "
      "z axis (up)"),
-    ({}, {"visible": False}, "mocap object 'ardrone' not visible on port 51001 (last pose age "
+    ({}, {"visible": False}, "mocap object 'ardrone' not visible from udp 0.0.0.0:51001 (last pose age "
                              "inf ms)"),
-    ({}, {"age_s": 1.0}, "mocap object 'ardrone' not visible on port 51001 (last pose age "
+    ({}, {"age_s": 1.0}, "mocap object 'ardrone' not visible from udp 0.0.0.0:51001 (last pose age "
                          "1000 ms)"),
 ])
 def test_refusal_messages_word_for_word(drone_kw, mocap_kw, message):
