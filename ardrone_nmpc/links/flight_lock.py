@@ -22,10 +22,12 @@ import sys
 import tempfile
 from pathlib import Path
 
+from ardrone_nmpc.errors import UserError
+
 __all__ = ["DroneBusy", "FlightLock", "lock_dir"]
 
 
-class DroneBusy(RuntimeError):
+class DroneBusy(UserError, RuntimeError):
     """Another process on this machine holds the drone's flight lock."""
 
 

@@ -113,17 +113,19 @@ def test_a_second_fly_at_a_held_drone_is_refused_before_any_datagram(tmp_path):
     assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").iterdir())
 
 
-@pytest.mark.parametrize("option, value, message", [
-    ("--navdata-port", "-1", "--navdata-port must be a port number 1–65535, got -1"),
-    ("--navdata-port", "0", "--navdata-port must be a port number 1–65535, got 0"),
-    ("--at-port", "70000", "--at-port must be a port number 1–65535, got 70000"),
-    ("--drone", "", "--drone must be an address or host name, got ''"),
-    ("--duration-s", "1e308", "duration_s"),  # the schema or the tick count refuses it
+@pytest.mark.parametrize("option, value, code, message", [
+    # the command line's own checks (exit 2), before the config is even read
+    ("--navdata-port", "-1", 2, "--navdata-port: -1 is not a port (1 … 65535)"),
+    ("--navdata-port", "0", 2, "--navdata-port: 0 is not a port (1 … 65535)"),
+    ("--at-port", "70000", 2, "--at-port: 70000 is not a port (1 … 65535)"),
+    ("--drone", "", 2, "--drone: must not be empty"),
+    ("--duration-s", "1e308", 1, "duration_s"),  # the schema or the tick count refuses it
 ])
-def test_what_can_fail_is_checked_before_anything_is_sent(tmp_path, option, value, message):
+def test_what_can_fail_is_checked_before_anything_is_sent(tmp_path, option, value, code,
+                                                          message):
     result = CliRunner().invoke(app, ["fly", HOVER, "--no-dashboard", "--log-dir",
                                       str(tmp_path / "logs"), option, value])
-    assert result.exit_code == 1 and message in result.stderr, result.stderr
+    assert result.exit_code == code and message in result.stderr, result.stderr
     assert "Traceback" not in result.stderr and "Wi-Fi" not in result.stderr
     assert not (tmp_path / "logs").exists()
 
@@ -175,5 +177,5 @@ def test_operator_commands_reject_bad_ports_in_one_line():
     for args in (["land", "--navdata-port", "0"], ["status", "--drone", ""],
                  ["emergency", "--at-port", "-5"]):
         result = CliRunner().invoke(app, args)
-        assert result.exit_code == 1 and result.stderr.startswith("error: ")
+        assert result.exit_code == 2 and result.stderr.startswith("error: ")
         assert len(result.stderr.strip().splitlines()) == 1

@@ -136,16 +136,19 @@ def test_fly_reads_a_motioncapture_source(tmp_path):
     from ardrone_nmpc.sim.loopback import free_udp_port
     from ardrone_nmpc.sim.serve import serve
 
-    at, nav = free_udp_port(), free_udp_port()
+    at, nav, ctl = free_udp_port(), free_udp_port(), free_udp_port()
     stop = threading.Event()
     server = threading.Thread(target=serve, daemon=True, kwargs=dict(
-        cfg=load_config(None, []), at_port=at, navdata_port=nav,
+        cfg=load_config(None, []), at_port=at, navdata_port=nav, control_port=ctl,
         mocap_to=f"127.0.0.1:{free_udp_port()}", echo=lambda *_: None, stop_event=stop))
     server.start()
     c, s = math.cos(0.2), math.sin(0.2)
     cfg = load_config("configs/hover.yaml", [
         "duration_s=1", "sim.settle_s=0.3", "mocap.kind=motioncapture", "mocap.system=mock",
-        f"mocap.options.rigid_bodies=ardrone(0.1,0.2,0.9,{c!r},0,0,{s!r})"])
+        f"drone.control_port={ctl}",
+        # the pose a landed drone has at the start (the pre-flight checks it; the mock's
+        # poses do not move)
+        f"mocap.options.rigid_bodies=ardrone(0.1,0.2,0.2,{c!r},0,0,{s!r})"])
     try:
         path = run_flight(cfg=cfg, sim=False, drone_host="127.0.0.1", at_port=at,
                           navdata_port=nav, mocap_port=None, log_dir=tmp_path, seed=0)
@@ -155,7 +158,7 @@ def test_fly_reads_a_motioncapture_source(tmp_path):
     run = read_run(path)
     assert run.n_rows >= 15
     np.testing.assert_allclose(run.columns["x_m"], 0.1, atol=1e-6)     # float32 in the library
-    np.testing.assert_allclose(run.columns["z_m"], 0.9, atol=1e-6)
+    np.testing.assert_allclose(run.columns["z_m"], 0.2, atol=1e-6)
     np.testing.assert_allclose(run.columns["psi_rad"], 0.4, atol=1e-6)
     assert np.all(run.columns["mocap_age_ms"] < 100.0)                  # ≈ 100 Hz, fresh
     links = next(e for e in run.events if e["kind"] == "links")
