@@ -109,7 +109,9 @@ def test_fly_against_an_independent_emulator_hovers_within_3_cm(tmp_path):
     from ardrone_nmpc.runtime.realtime import run_flight
 
     port = _free_udp_port()
-    cfg = load_config(CONFIGS / "hover.yaml", [*HOVER, "mocap.bind_host=127.0.0.1"])
+    # the emulator is a plant behind AT/navdata only: no TCP control port to read limits back
+    cfg = load_config(CONFIGS / "hover.yaml", [*HOVER, "mocap.bind_host=127.0.0.1",
+                                               "drone.verify_config=false"])
     with OffsetEmulator(mocap_port=port, vz_gain=0.7, wind_mps=(0.3, 0.2), sink_mps=0.05) as emu:
         path = run_flight(cfg=cfg, sim=False, drone_host="127.0.0.1", at_port=emu.at_port,
                           navdata_port=emu.navdata_port, mocap_port=port, log_dir=tmp_path,
