@@ -1,4 +1,4 @@
-"""The supervisor (DESIGN.md §2): between the controller and the mapping, it decides what flies.
+"""The supervisor (docs/design.md §2): between the controller and the mapping, it decides what flies.
 
 Every tick it looks at the feedback (ages of the mocap pose and of navdata, the drone's state
 bits and battery), at the state estimate (finite, inside the geofence, not too fast, not too

@@ -205,7 +205,7 @@ class LoopConfig(Section):
 
 
 class DroneConfig(Section):
-    """The AR.Drone link and the limits written to its configuration at connect (protocol §3.1)."""
+    """The AR.Drone link and the limits written to its configuration at connect (docs/protocol.md §3.1)."""
 
     host: str = Field("192.168.1.1", min_length=1, description="Drone IP address or host name.")
     at_port: Port = Field(5556, description="UDP port of AT commands.")

@@ -1,4 +1,4 @@
-"""Controller output → AR.Drone PCMD fractions (DESIGN.md §4).
+"""Controller output → AR.Drone PCMD fractions (docs/design.md §4).
 
 ``roll = φ/E``, ``pitch = −θ/E`` (negative pitch = nose down = forward), ``gaz = ż_ref/V``,
 ``yaw = −ψ̇/Y`` (PCMD yaw > 0 turns clockwise seen from above, world ψ is counter-clockwise),

@@ -32,7 +32,7 @@ __all__ = ["PGains", "p_control"]
 class PGains:
     """Gains of the P controller. The thesis does not give them; these are chosen.
 
-    The numbers are sized against the simulated AR.Drone's inner loops (specs/plant.md:
+    The numbers are sized against the simulated AR.Drone's inner loops (docs/plant.md:
     vz lag τ_z = 0.5 s, tilt lag 0.1 s, yaw-rate lag 0.1 s, command delay 0.26 s) and the
     thesis' P settling times (z 2 s, x 4 s, y 4.5 s, ψ 2.5 s).
 

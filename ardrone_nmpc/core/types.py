@@ -51,7 +51,7 @@ import numpy as _np
 
 
 class FlightMode(_enum.Enum):
-    """The drone's flight state as the ground station sees it (protocol §4.5, §5)."""
+    """The drone's flight state as the ground station sees it (docs/protocol.md §4.5, §5)."""
 
     LANDED = "landed"          # on the ground, motors off; PCMD ignored
     TAKING_OFF = "taking_off"  # automatic climb to the take-off height; PCMD ignored
@@ -67,7 +67,7 @@ class FlightMode(_enum.Enum):
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PlantTruth:
-    """The simulated drone's true state (world frame, DESIGN.md §4).
+    """The simulated drone's true state (world frame, docs/design.md §4).
 
     Attributes
     ----------
@@ -97,7 +97,7 @@ class PlantTruth:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class MocapPose:
-    """One motion-capture pose of the drone (specs/mocap-stream.md), converted to SI.
+    """One motion-capture pose of the drone (docs/mocap-stream.md), converted to SI.
 
     Attributes
     ----------
@@ -116,7 +116,7 @@ class MocapPose:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class NavdataSample:
-    """One navdata demo sample (protocol §4.4) in the drone's own sign conventions, SI-ish units.
+    """One navdata demo sample (docs/protocol.md §4.4) in the drone's own sign conventions, SI-ish units.
 
     Only the units differ from the wire (millidegrees → degrees, mm → m, mm/s → m/s); the signs
     are the drone's: body frame x forward, y right, z down.

@@ -1,4 +1,4 @@
-"""Network links to the drone and the motion-capture system (DESIGN.md §2–§3).
+"""Network links to the drone and the motion-capture system (docs/design.md §2–§3).
 
 * :mod:`ardrone_nmpc.links.udp` — socket helper (:func:`~ardrone_nmpc.links.udp.open_udp`), the
   :class:`~ardrone_nmpc.links.udp.Clock` protocol and :class:`~ardrone_nmpc.links.udp.LinkStats`

@@ -1,6 +1,6 @@
 """AR.Drone 2.0 AT commands (UDP 5556): records, encoder, sequencer and parser.
 
-specs/ardrone-protocol.md §2. A command is ASCII ``AT*<NAME>=<seq>[,<arg>]...\\r``; several
+docs/protocol.md §2. A command is ASCII ``AT*<NAME>=<seq>[,<arg>]...\\r``; several
 commands may share a datagram of at most 1024 bytes, a command never spans two. Arguments are
 decimal int32, double-quoted strings, or floats sent as the decimal int32 whose bits are the
 IEEE-754 single (``-0.8`` → ``-1085485875``).

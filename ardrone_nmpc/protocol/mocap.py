@@ -1,6 +1,6 @@
 """Motion-capture pose datagrams (Vicon Tracker "UDP object stream" layout): encoder and decoder.
 
-specs/mocap-stream.md. A datagram is ``u32 frame number, u8 item count`` followed by items
+docs/mocap-stream.md. A datagram is ``u32 frame number, u8 item count`` followed by items
 ``u8 id, u16 size, data[size]`` (size excludes the 3-byte item header). A pose item (id 0,
 size 72) is ``char[24]`` NUL-padded ASCII name, translation x, y, z (float64, **mm**, world
 frame) and rotation x, y, z (float64, **rad**, R = Rx(rx)·Ry(ry)·Rz(rz), intrinsic X→Y→Z).

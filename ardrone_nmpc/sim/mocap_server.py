@@ -1,6 +1,6 @@
 """Loopback motion-capture streamer: the plant's pose as Vicon-style UDP datagrams.
 
-specs/mocap-stream.md, "Rules for the loopback streamer". One thread samples
+docs/mocap-stream.md, "Rules for the loopback streamer". One thread samples
 :meth:`AirframePlant.mocap_pose` (noise from the plant's ``noise`` settings) at ``rate_hz`` on
 absolute deadlines, encodes it with :func:`~ardrone_nmpc.protocol.mocap.encode_mocap` (one pose
 item, zero-padded to 256 bytes) and sends it ``latency_ms`` after the sampling deadline to a

@@ -1,4 +1,4 @@
-"""The simulated AR.Drone 2.0 closed loop, driven by PCMD fractions (specs/plant.md).
+"""The simulated AR.Drone 2.0 closed loop, driven by PCMD fractions (docs/plant.md).
 
 Model (per fixed RK4 step of ``integration_step_s``, commands delayed by ``command_delay_s``)::
 
@@ -19,7 +19,7 @@ wind is ``faults.wind``, applied by :class:`~ardrone_nmpc.sim.faults.PlantFaults
 
 Sign conventions
 ----------------
-The plant's state uses the **world/model convention** of thesis eq. 3.13 (DESIGN.md §4), so the
+The plant's state uses the **world/model convention** of thesis eq. 3.13 (docs/design.md §4), so the
 truth needs no conversion:
 
 * world frame x forward, y left, z up; ψ counter-clockwise from +x, r = ψ̇ counter-clockwise;
@@ -112,7 +112,7 @@ _TIME_TOL_S = 1e-9
 
 @dataclass(frozen=True, slots=True)
 class PlantParams:
-    """Parameters of :class:`AirframePlant` (SI units; specs/plant.md).
+    """Parameters of :class:`AirframePlant` (SI units; docs/plant.md).
 
     The first three come from the ``drone`` config section (the limits written to the drone),
     the next ten from ``sim.plant``. The rest are fixed behaviour of the on-board controller
@@ -135,7 +135,7 @@ class PlantParams:
     # --- air turbulence (docs/plant-profiles.md): a horizontal Gauss–Markov wind, σ per axis
     turbulence_std_mps: float = 0.0
     turbulence_tau_s: float = 5.0
-    # --- on-board behaviour (protocol §5), no config key
+    # --- on-board behaviour (docs/protocol.md §5), no config key
     hover_tau_s: float = 0.5                 # optical-flow position hold: v_xy time constant
     takeoff_altitude_m: float = 0.9          # where the take-off climb settles
     takeoff_climb_mps: float = 0.5

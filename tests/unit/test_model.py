@@ -21,7 +21,7 @@ def test_pitch_at_zero_yaw_accelerates_forward():
 
 
 def test_roll_at_zero_yaw_accelerates_towards_minus_y():
-    # φ = 0.1 rad, θ = 0, ψ = 0: ÿ = −tan(0.1)·g (DESIGN §4: φ > 0 towards −y)
+    # φ = 0.1 rad, θ = 0, ψ = 0: ÿ = −tan(0.1)·g (docs/design.md §4: φ > 0 towards −y)
     xdot = model.f([0, 0, 0, 0, 1, 0, 0], [0, 0.1, 0, 0])
     assert xdot[3] == pytest.approx(-math.tan(0.1) * G, rel=1e-12)
     assert xdot[1] == pytest.approx(0.0, abs=1e-15)

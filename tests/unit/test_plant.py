@@ -1,4 +1,4 @@
-"""The simulated AR.Drone closed loop (ardrone_nmpc.sim.plant, specs/plant.md)."""
+"""The simulated AR.Drone closed loop (ardrone_nmpc.sim.plant, docs/plant.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""P controller (eq. 4.16), command mapping (DESIGN.md §4) and angle helpers."""
+"""P controller (eq. 4.16), command mapping (docs/design.md §4) and angle helpers."""
 
 from __future__ import annotations
 

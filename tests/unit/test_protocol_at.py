@@ -1,6 +1,6 @@
 """Tests of the AT-command encoder, sequencer and parser (ardrone_nmpc.protocol.at).
 
-Fixtures are the byte-exact examples of specs/ardrone-protocol.md §2.1, §2.4 and §2.7.
+Fixtures are the byte-exact examples of docs/protocol.md §2.1, §2.4 and §2.7.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Tests of the mocap pose datagram encoder and decoder (ardrone_nmpc.protocol.mocap).
 
-specs/mocap-stream.md gives the layout and the ``struct`` formats; the byte-exact fixture below
+docs/mocap-stream.md gives the layout and the ``struct`` formats; the byte-exact fixture below
 is written out by hand and cross-checked against those formats.
 """
 

@@ -1,6 +1,6 @@
 """Tests of the navdata encoder and decoder (ardrone_nmpc.protocol.navdata).
 
-The bootstrap packet of specs/ardrone-protocol.md §4.1 (captured from a drone) is the byte-exact
+The bootstrap packet of docs/protocol.md §4.1 (captured from a drone) is the byte-exact
 fixture; demo packets are built with the spec's own ``struct`` format, independently of the
 encoder.
 """

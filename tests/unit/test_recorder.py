@@ -360,7 +360,7 @@ def test_missing_required_column_is_an_error(tmp_path, cfg):
 
 
 def test_optional_columns_may_be_absent_and_extra_ones_are_kept(tmp_path, cfg):
-    """An older/other writer: only the DESIGN.md §5 columns plus an extra one."""
+    """An older/other writer: only the docs/design.md §5 columns plus an extra one."""
     (tmp_path / "run").mkdir()
     run_dir = tmp_path / "run"
     with RunRecorder.create(tmp_path / "tmp", cfg, seed=0, now=NOW) as rec:
