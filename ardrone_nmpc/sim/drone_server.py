@@ -356,6 +356,11 @@ class DroneServer:
 
     # ------------------------------------------------------------------ navdata
 
+    @property
+    def navdata_period_s(self) -> float:
+        """The navdata period the server streams at now (s): bootstrap, demo or full rate."""
+        return self._navdata_period()
+
     def _navdata_period(self) -> float:
         config = self._firmware.config
         if config.bootstrap:
