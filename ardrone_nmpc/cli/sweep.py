@@ -59,8 +59,9 @@ class SweepOutcome:
     wall_s: float = math.nan
 
 
-def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
-    """Raise :class:`ConfigError` (one ``--option: message`` line each) for bad options."""
+def engine_errors(*, engine: str, scheduler: str | None) -> list[str]:
+    """The ``--engine`` / ``--scheduler`` mistakes (one ``--option: message`` line each) of
+    the commands that fly many cases: ``sweep`` and ``tune``."""
     errors = []
     if engine not in ENGINES:
         errors.append(f"--engine: unknown engine {engine!r}; choose {', '.join(ENGINES)}")
@@ -69,6 +70,12 @@ def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
     if engine == "dask" and importlib.util.find_spec("distributed") is None:
         errors.append("--engine dask: needs dask.distributed "
                       "(pip install 'ardrone-nmpc[distributed]')")
+    return errors
+
+
+def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
+    """Raise :class:`ConfigError` (one ``--option: message`` line each) for bad options."""
+    errors = engine_errors(engine=engine, scheduler=scheduler)
     if rank_by not in RANK_METRICS:
         errors.append(f"--rank-by: unknown metric {rank_by!r}; choose "
                       f"{', '.join(RANK_METRICS)}")

@@ -19,7 +19,6 @@ import typer
 
 __all__ = ["TuneOutcome", "register", "run_tune_command"]
 
-ENGINES = ("local", "dask")
 SAVE_EVERY_S = 5.0
 
 
@@ -42,16 +41,10 @@ class TuneOutcome:
 def _check_options(*, engine: str, scheduler: str | None) -> None:
     import importlib.util
 
+    from ardrone_nmpc.cli.sweep import engine_errors
     from ardrone_nmpc.config.schema import ConfigError
 
-    errors = []
-    if engine not in ENGINES:
-        errors.append(f"--engine: unknown engine {engine!r}; choose {', '.join(ENGINES)}")
-    if scheduler is not None and engine != "dask":
-        errors.append("--scheduler: only with --engine dask")
-    if engine == "dask" and importlib.util.find_spec("distributed") is None:
-        errors.append("--engine dask: needs dask.distributed "
-                      "(pip install 'ardrone-nmpc[distributed]')")
+    errors = engine_errors(engine=engine, scheduler=scheduler)
     if importlib.util.find_spec("optuna") is None:
         errors.append("tune needs Optuna: pip install 'ardrone-nmpc[tune]'")
     if errors:

@@ -38,6 +38,12 @@ def sweep_columns(param_paths: Sequence[str]) -> list[str]:
 def write_sweep_csv(path: str | Path, columns: Sequence[str],
                     rows: Sequence[Mapping[str, str]]) -> None:
     """Write ``sweep.csv`` atomically (a temporary file renamed over it)."""
+    write_csv_table(path, columns, rows)
+
+
+def write_csv_table(path: str | Path, columns: Sequence[str], rows: Sequence[Mapping]) -> None:
+    """Write a results table (``sweep.csv``, a tune's ``trials.csv``) atomically: a temporary
+    file renamed over it, so a reader never sees half a table."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="", encoding="utf-8") as f:

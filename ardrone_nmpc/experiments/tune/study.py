@@ -17,7 +17,6 @@ never worse than the start.
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
 import hashlib
 import json
@@ -33,6 +32,7 @@ from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.experiments.tune.engine import Scenario, TrialResult, TrialSpec
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
+from ardrone_nmpc.runs.sweep_table import write_csv_table
 from ardrone_nmpc.runs.tune_record import RESULT_ATTR, STUDY_FILE, STUDY_NAME, result_of
 from ardrone_nmpc.runs.tune_record import storage as record_storage
 
@@ -201,12 +201,7 @@ def trial_rows(study, space: Sequence[str], scenarios: Sequence[Scenario]) -> li
 
 def write_trials_csv(path: Path, columns: Sequence[str], rows: Sequence[Mapping]) -> None:
     """Write ``trials.csv`` atomically."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(columns))
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
+    write_csv_table(path, columns, rows)
 
 
 def write_best(path: Path, study, *, cfg, space: Mapping[str, Param], command: str,
