@@ -35,12 +35,12 @@ from ardrone_nmpc.protocol.at import (
     ConfigIds,
     Ctrl,
 )
+from ardrone_nmpc.protocol.config_text import EULER_ANGLE_MAX_LIMIT_RAD, parse_config_text
 from ardrone_nmpc.protocol.navdata import DroneState
 
 __all__ = ["ConfigHandshake", "ConfigMismatch", "EULER_ANGLE_MAX_LIMIT_RAD", "LinkError",
            "parse_config_text", "verify_config"]
 
-EULER_ANGLE_MAX_LIMIT_RAD = 0.52     # control:euler_angle_max range 0 … 0.52 (30°), §3.1
 _CTRL_ACK_RESEND_S = 0.05            # node-ar-drone resends CTRL 5 every 50 ms
 _CONFIG_DUMP_MAX_BYTES = 1 << 20
 _CONFIG_GET_RESEND_S = 0.5           # CTRL 4 resend period while the dump has not started
@@ -53,17 +53,6 @@ _REL_TOLERANCE = 1e-3
 class LinkError(UserError, RuntimeError):
     """The drone link failed: no navdata, no config acknowledgement, a closed link, a socket
     error on an explicit command. The message says which and after how long."""
-
-
-def parse_config_text(text: str) -> dict[str, str]:
-    """The configuration dump of TCP 5559 (``section:key = value`` lines) as a dict."""
-    out: dict[str, str] = {}
-    for line in text.splitlines():
-        key, sep, value = line.partition("=")
-        key = key.strip()
-        if sep and key:
-            out[key] = value.strip()
-    return out
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,12 +25,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ardrone_nmpc.protocol.config_text import EULER_ANGLE_MAX_LIMIT_RAD, format_config_text
 from ardrone_nmpc.protocol.navdata import DEFAULT_NAVDATA_OPTIONS
 
 __all__ = ["ConfigStore", "HeldSession", "apply_limits", "limit_change",
            "EULER_ANGLE_MAX_LIMIT_RAD", "DEFAULT_CONFIG_ID"]
 
-EULER_ANGLE_MAX_LIMIT_RAD = 0.52          # dev guide range of control:euler_angle_max
 CONTROL_VZ_MAX_RANGE_MMPS = (200.0, 2000.0)   # recommended ranges of the other two limits
 CONTROL_YAW_RANGE_RADPS = (0.7, 6.11)
 DEFAULT_CONFIG_ID = "00000000"            # the default session, profile and application
@@ -218,4 +218,4 @@ class ConfigStore:
         }
         values.update(self.written)
         values.update(self.held())
-        return "".join(f"{k} = {v}\n" for k, v in values.items())
+        return format_config_text(values)
