@@ -95,8 +95,7 @@ class _SimConfigPort(ConfigHandshake):
 
     def read_config(self, timeout_s: float = 2.0) -> dict[str, str]:
         if self._port_mode != "serve":
-            raise LinkError(f"control port {self.host}:{self.control_port}: "
-                            f"{self._port_mode} (no configuration dump)")
+            raise LinkError(f"fault control_port_drop: {self._port_mode}, no configuration dump")
         return parse_config_text(self.store.text())
 
 
