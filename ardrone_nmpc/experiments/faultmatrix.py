@@ -6,8 +6,9 @@ Per case: a normal run directory (``<log_dir>/<case>/…``), then
 * ``outcome`` — ``completed`` (flew to the end, tracking again), ``hovered`` (ended hovering
   by policy), ``landed`` (the supervisor landed it; touch-down confirmed), ``stopped``
   (the drone itself cut its motors — the emergency fault; the tool stopped sending and
-  reported), ``crashed`` (the truth hit the ground outside a landing, or an emergency nobody
-  injected), ``exception`` (the tool raised);
+  reported), ``refused`` (the pre-flight check refused the take-off: the run directory holds
+  its ``takeoff_refused`` event and no flight), ``crashed`` (the truth hit the ground outside
+  a landing, or an emergency nobody injected), ``exception`` (the tool raised otherwise);
 * ``max_dev_m`` — the largest distance between the faulted flight's true position and the
   fault-free flight's (same seed, same tick), until a landing began;
 * ``recover_s`` — for flights that went on: seconds from the fault's start until that
@@ -15,11 +16,13 @@ Per case: a normal run directory (``<log_dir>/<case>/…``), then
   landings);
 * ``log_complete`` — config.yaml, log.csv without torn rows, one row per tick flown,
   events.jsonl whose flight ends in ``landed``/``stopped`` (then the recording's
-  ``simulated``), summary.csv;
+  ``simulated``), summary.csv; for a refusal: config.yaml and events.jsonl with the refusal,
+  no take-off and no row;
 * ``nonfinite_cmds`` — rows whose PCMD fractions are not finite (must be 0).
 
-A case *passes* when its outcome is the policy's (anything but ``crashed``/``exception``),
-the log is complete and no non-finite command was sent.
+A case *passes* when its outcome is the policy's (anything but ``crashed``/``exception``;
+``refused`` only for the rows of :data:`REQUIRED_OUTCOME` that ask for it), the log is
+complete and no non-finite command was sent.
 """
 
 from __future__ import annotations
@@ -74,11 +77,9 @@ FAULT_CASES: dict[str, tuple[str, ...]] = {
     "self_land": (f"faults.self_land.start_s={_T0}",),
 }
 
-#: Rows whose required outcome is narrower than "any policy outcome". PENDING: the client side
-#: these need — refuse take-off when the read-back differs from what was written or cannot be
-#: read, and never take off again once the drone landed by itself (issue 17 items 1-2) — is
-#: not in the lockstep runner yet, so foreign_session, control_port_silent and self_land FAIL
-#: until it lands; "refused" (nothing took off) is not yet an outcome the matrix can classify.
+#: Rows whose required outcome is narrower than "any policy outcome": the lockstep runner
+#: refuses take-off when the read-back differs from what was written or cannot be read, and
+#: ends the run without taking off again once the drone landed by itself (issue 17 items 1-2).
 REQUIRED_OUTCOME: dict[str, frozenset[str]] = {
     "ctrl_codes_fw24": frozenset({"completed"}),  # 7/9 instead of 6/8 must change nothing
     "foreign_session": frozenset({"refused"}),    # read back 0.52 / 2000 / 6.11: no take-off
@@ -146,8 +147,18 @@ def recovery_time_s(t: np.ndarray, dev: np.ndarray, t_fault_s: float) -> float:
     return float(t[bad[-1] + 1] - t_fault_s)
 
 
+def refused(run) -> bool:
+    """The run directory holds a refused take-off: the refusal event, no take-off, no row."""
+    from ardrone_nmpc.runtime.lockstep import REFUSED_EVENT
+
+    kinds = {e.get("kind") for e in run.events}
+    return REFUSED_EVENT in kinds and "takeoff" not in kinds and run.n_rows == 0
+
+
 def classify(run, ending: str, fault: str) -> str:
-    """The outcome label of a finished run (see the module docstring)."""
+    """The outcome label of a finished (or refused) run (see the module docstring)."""
+    if refused(run):
+        return "refused"
     mode = [str(m) for m in run.columns["mode"]]
     z = run.columns["z_true_m"]
     t = run.columns["t_s"]
@@ -170,7 +181,7 @@ def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
     from ardrone_nmpc.experiments.record import SIMULATED_EVENT
     from ardrone_nmpc.runs.rundir import LogError, read_run
 
-    for name in ("config.yaml", "log.csv", "events.jsonl", "summary.csv"):
+    for name in ("config.yaml", "events.jsonl"):
         if not (run_dir / name).is_file():
             return False, f"{name} missing"
     try:
@@ -179,6 +190,11 @@ def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
         return False, str(err)
     if run.warnings:
         return False, "; ".join(run.warnings)
+    if refused(run):   # nothing flew: nothing more to log (no rows, no summary)
+        return True, ""
+    for name in ("log.csv", "summary.csv"):
+        if not (run_dir / name).is_file():
+            return False, f"{name} missing"
     if run.n_rows < ticks_expected:
         return False, f"{run.n_rows} rows for {ticks_expected} ticks"
     flight = [e["kind"] for e in run.events if e["kind"] != SIMULATED_EVENT]
@@ -217,10 +233,15 @@ def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, 
     from ardrone_nmpc.runs.rundir import read_run
 
     complete, why = log_complete(run_dir, rows)
+    run = read_run(run_dir) if complete else None
+    if error and run is not None and refused(run):
+        required = REQUIRED_OUTCOME.get(fault, POLICY_OUTCOMES)
+        return CaseResult(experiment, fault, "refused", "refused", math.nan, math.nan, complete,
+                          0, "refused" in required, str(run_dir), error)
     if error:
         return CaseResult(experiment, fault, "exception", ending, math.nan, math.nan, complete,
                           0, False, str(run_dir), error)
-    run, base = read_run(run_dir), read_run(baseline_dir)
+    base = read_run(baseline_dir)
     outcome = classify(run, ending, fault)
     t, dev = deviation_from(run, base)
     t_fault = _fault_start_s(load_config(run_dir / "config.yaml"))
@@ -294,8 +315,9 @@ def render_markdown(results: list[CaseResult], *, command: str) -> str:
         "",
         "Outcome: `completed` (flew to the end), `hovered` (ended hovering by policy), "
         "`landed` (the supervisor landed it, touch-down confirmed), `stopped` (the drone cut "
-        "its motors itself — the emergency fault; nothing more is sent), `crashed`, "
-        "`exception`. *Max dev*: largest distance between the faulted flight's true position "
+        "its motors itself — the emergency fault; nothing more is sent), `refused` (the "
+        "pre-flight check refused the take-off: the drone holds other limits, or its "
+        "configuration could not be read back; nothing took off), `crashed`, `exception`. *Max dev*: largest distance between the faulted flight's true position "
         "and the fault-free flight's (same seed, same tick) until a landing began. *Recover*: "
         f"seconds from the fault's start until that distance stays below {RECOVERED_M:g} m "
         "(– for landings, or never). *Supervisor*: how the run ended (`completed`, or the "

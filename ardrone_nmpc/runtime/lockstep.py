@@ -6,6 +6,12 @@ and hands the tick exactly what the links would hold — the newest mocap pose (
 (``sim.navdata_rate_hz``, body-frame velocities). Sequence: take off (on-board), hold the
 reference's start for ``sim.settle_s`` (rows with t_s < 0), fly the experiment for
 ``duration_s``, land. Deterministic for a seed.
+
+Before take-off the limits are written to the simulated drone's configuration and read back,
+and the session's own check refuses (:class:`TakeoffRefused`, a ``takeoff_refused`` event) a
+drone that holds other values or whose control port does not answer — the
+``FlightSession.configure`` of ``fly``, not a second copy. A drone that lands by itself
+during the flight ends the run (``land-drone-landed-itself``); nothing takes it off again.
 """
 
 from __future__ import annotations
@@ -19,13 +25,17 @@ from typing import Callable
 import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
+from ardrone_nmpc.protocol.at import Config
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
+from ardrone_nmpc.runtime.session import FlightSession, PreflightError
 from ardrone_nmpc.runtime.tick import Tick, TickInputs
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.sim.backends import make_plant
+from ardrone_nmpc.sim.drone_config import ConfigStore
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import WireSensors
 from ardrone_nmpc.sim.target import target_pose
@@ -50,7 +60,56 @@ class SimResult:
 
 
 class TakeoffRefused(UserError, RuntimeError):
-    """The pre-flight check failed (battery at or below the floor): nothing took off."""
+    """The pre-flight check failed (battery at or below the floor, limits the drone does not
+    hold, no configuration read back): nothing took off."""
+
+
+#: The event of a refused take-off (``reason``: the one-line refusal); no flight follows.
+REFUSED_EVENT = "takeoff_refused"
+#: The ending of a run whose drone landed by itself (the supervisor's ``land-<reason>`` form).
+SELF_LANDED = "land-drone-landed-itself"
+
+
+class _SimConfigPort(ConfigHandshake):
+    """The simulated drone's configuration as :class:`FlightSession` sees a link's: the same
+    writes (:meth:`ConfigHandshake.configure_limits`, ``configure_profile``: the key texts the
+    wire would carry) into a :class:`~ardrone_nmpc.sim.drone_config.ConfigStore`, no sockets;
+    the read-back is the store's dump, unless the control port fault keeps it silent."""
+
+    host = "simulated-drone"
+
+    def __init__(self, cfg, store: ConfigStore, port_mode: str):
+        self.store = store
+        self.control_port = cfg.drone.control_port
+        self.config_ids = cfg.drone.config_ids
+        self._port_mode = port_mode
+        if self.config_ids is not None:  # the session switch DroneLink.connect makes first
+            for key, value in zip(("custom:session_id", "custom:profile_id",
+                                   "custom:application_id"), self.config_ids):
+                self.write_config(key, value)
+
+    def write_config(self, key, value, timeout_s: float = 1.0) -> str:
+        text = Config.of(key, value).value
+        self.store.write(key, text, self.config_ids)  # acknowledged, applied or not
+        return text
+
+    def read_config(self, timeout_s: float = 2.0) -> dict[str, str]:
+        if self._port_mode != "serve":
+            raise LinkError(f"fault control_port_drop: {self._port_mode}, no configuration dump")
+        return parse_config_text(self.store.text())
+
+
+def _configure(cfg, plant, faults: FaultSchedule, events: list) -> None:
+    """Write the limits, read them back and refuse as ``fly`` does (TakeoffRefused)."""
+    store = ConfigStore(plant, altitude_max_m=cfg.drone.altitude_max_m,
+                        session=faults.held_session())
+    port = _SimConfigPort(cfg, store, faults.control_port_mode())
+    session = FlightSession(cfg, port, None, event=lambda kind, **f: events.append((kind, f)),
+                            warn=lambda message: None)  # the warning is in the events
+    try:
+        session.configure()
+    except PreflightError as err:
+        raise TakeoffRefused(str(err)) from None
 
 
 class _Sensors:
@@ -125,8 +184,10 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     ``progress(fraction)`` is called every tick with the fraction of the run done. The
     supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
     touch-down), ``stop`` (emergency) ends the run. Events are stamped with experiment time.
-    Raises :class:`TakeoffRefused` when the battery is at or below ``safety.battery_floor_pct``,
+    Raises :class:`TakeoffRefused` (after a :data:`REFUSED_EVENT`) when the battery is at or
+    below ``safety.battery_floor_pct`` or the configuration read back refuses (module doc),
     :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` for times that give no tick count.
+    A drone that lands by itself ends the run with :data:`SELF_LANDED`.
     """
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
@@ -138,10 +199,18 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
 
-    if plant.battery_pct <= cfg.safety.battery_floor_pct:
-        raise TakeoffRefused(f"battery {plant.battery_pct:.0f} % is at or below the floor "
-                             f"safety.battery_floor_pct = {cfg.safety.battery_floor_pct:.0f} %: "
-                             "take-off refused")
+    preflight_events: list[tuple[str, dict]] = []  # stamped once experiment time exists
+    try:
+        if plant.battery_pct <= cfg.safety.battery_floor_pct:
+            raise TakeoffRefused(f"battery {plant.battery_pct:.0f} % is at or below the floor "
+                                 f"safety.battery_floor_pct = "
+                                 f"{cfg.safety.battery_floor_pct:.0f} %: take-off refused")
+        _configure(cfg, plant, faults, preflight_events)
+    except TakeoffRefused as err:  # no experiment time: nothing took off
+        for kind, fields in preflight_events:
+            write_event(math.nan, kind, **fields)
+        write_event(math.nan, REFUSED_EVENT, reason=str(err))
+        raise
     t_takeoff = plant.t_s
     plant.wind_mps = faults.wind_mps(-math.inf)  # a constant wind blows from the start
     plant.takeoff()
@@ -153,15 +222,22 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     t_first = plant.t_s
     t_start = t_first + schedule.settle_span_s  # experiment time 0 on the plant clock
     sensors.t_zero_s = t_start
+    for kind, fields in preflight_events:
+        write_event(t_takeoff - t_start, kind, **fields)
     write_event(t_takeoff - t_start, "takeoff")
     if faults.any:
         write_event(schedule.t_exp_s(0), "faults", windows=[list(w) for w in faults.windows()])
     wall0 = time.perf_counter()
-    ending, k = "completed", 0
+    ending, k, flown = "completed", 0, 0
     for k in range(schedule.n_ticks):
         t_exp = schedule.t_exp_s(k)
         write_events(write_event, t_exp, plant_faults.update(t_exp))
         sensors.advance_to(t_first + k * period)
+        if _landed_itself(sensors.nav):  # the drone's word: no command, no take-off again
+            write_event(t_exp, "drone_landed_itself", drone_mode=sensors.nav.mode.value)
+            ending = SELF_LANDED
+            break
+        flown = k + 1
         out = tick.step(sensors.inputs(t_first + k * period), t_exp_s=t_exp, mode=phase(t_exp))
         write_events(write_event, t_exp, out.events)
         if not faults.at_lost(t_exp):
@@ -175,15 +251,20 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
             ending = out.row["mode"]
             break
     loop_wall_s = time.perf_counter() - wall0
-    t_end = t_first + (k + 1) * period - t_start
+    t_end = t_first + flown * period - t_start
     if ending.startswith("stop"):
         write_event(t_end, "stopped", reason=ending, drone_mode=plant.mode.value)
         sensors.advance_to(plant.t_s + 3.0)  # let it come to rest: the truth shows the fall
     else:
         _land(cfg, tick, sensors, plant, plant_faults, recorder, write_event,
-              t_first, t_start, k + 1, logged=ending != "completed")
-    return SimResult(k + 1, plant.mode, recorder.path if recorder is not None else None,
+              t_first, t_start, flown, logged=ending != "completed")
+    return SimResult(flown, plant.mode, recorder.path if recorder is not None else None,
                      loop_wall_s, ending, plant.t_s - t_start)
+
+
+def _landed_itself(nav) -> bool:
+    """Navdata shows the drone landing or landed while the run holds it in flight."""
+    return nav is not None and nav.mode in (FlightMode.LANDING, FlightMode.LANDED)
 
 
 def _record(recorder, row: dict, plant: AirframePlant) -> None:

@@ -33,8 +33,9 @@ SENSOR_FAULTS = frozenset({"mocap_dropout", "mocap_occlusion", "mocap_latency",
 #: Faults that act on the simulated drone itself.
 PLANT_FAULTS = frozenset({"at_loss", "battery_floor", "emergency", "wind_gust", "wind",
                           "delay_jump", "self_land", "foreign_session"})
-#: Faults of the drone's configuration link (the TCP control port): only the loopback drone
-#: serves one; the lockstep runner reads no configuration.
+#: Faults of the drone's configuration link (the TCP control port): the loopback drone serves
+#: one; the lockstep runner reads its configuration store directly and takes this fault as
+#: "no dump".
 LINK_FAULTS = frozenset({"control_port_drop"})
 
 _OPTION_HEAD = struct.Struct("<HH")

@@ -14,7 +14,7 @@ from ardrone_nmpc.sim.faults import FaultSchedule, corrupt_navdata
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
+from ardrone_nmpc.runtime.lockstep import REFUSED_EVENT, TakeoffRefused, run_lockstep
 from ardrone_nmpc.runs.summary import summarise
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.sensors import WireSensors, navdata_packet
@@ -163,12 +163,9 @@ EXPECTED = {
     "delay_jump": ("completed", ("fault", "fault", "delay_jump")),
     "ctrl_codes_fw24": ("completed", ("faults", None, None)),
 }
-#: Rows whose required outcome needs the client side (issue 17 items 1-2), not yet in the
-#: lockstep runner: strict xfails below, which error out the day it lands (remove the mark).
-PENDING = {"foreign_session", "control_port_silent", "self_land"}
-PENDING_CLIENT = pytest.mark.xfail(
-    strict=True, reason="PENDING: refuse take-off on a mismatched / unread configuration and "
-    "stop after the drone lands by itself (issue 17 items 1-2) are not in the lockstep runner")
+#: Rows the pre-flight check refuses (nothing flies), and the row that lands by itself.
+REFUSED = {"foreign_session", "control_port_silent"}
+SELF_LANDED = {"self_land"}
 
 
 def fly(tmp_path, fault, experiment="hover.yaml"):
@@ -191,11 +188,12 @@ def test_matrix_covers_every_fault_kind():
     covered = {name for overrides in FAULT_CASES.values() for o in overrides
                for name in [o.split(".")[1]]}
     assert covered == set(FaultsConfig.model_fields)
-    assert set(EXPECTED) | PENDING == set(FAULT_CASES) and not set(EXPECTED) & PENDING
-    assert PENDING <= set(REQUIRED_OUTCOME) <= set(FAULT_CASES)
+    special = REFUSED | SELF_LANDED
+    assert set(EXPECTED) | special == set(FAULT_CASES) and not set(EXPECTED) & special
+    assert special <= set(REQUIRED_OUTCOME) <= set(FAULT_CASES)
 
 
-@pytest.mark.parametrize("fault", sorted(set(FAULT_CASES) - PENDING))
+@pytest.mark.parametrize("fault", sorted(set(FAULT_CASES) - REFUSED - SELF_LANDED))
 def test_each_fault_ends_by_policy_with_a_complete_log(tmp_path, baseline, fault):
     result, run = fly(tmp_path, fault)
     ending, (kind, key, value) = EXPECTED[fault]
@@ -261,23 +259,72 @@ def test_firmware_2_4_codes_change_no_flight(tmp_path, baseline):
     assert dev.max() < 0.05
 
 
-@PENDING_CLIENT
+def refused_run(tmp_path, fault, *extra):
+    """Fly ``fault`` expecting the refusal; (the refusal, the run directory read back)."""
+    cfg = load_config(CONFIGS / "hover.yaml", [*SHORT, *FAULT_CASES[fault], *extra])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        with pytest.raises(TakeoffRefused) as refusal:
+            run_lockstep(cfg, recorder=rec)
+    return refusal.value, read_run(rec.path)
+
+
+def assert_nothing_flew(run, fault):
+    kinds = [e["kind"] for e in run.events]
+    assert kinds[-1] == REFUSED_EVENT and "takeoff" not in kinds and run.n_rows == 0
+    assert classify(run, "exception", fault) == "refused"
+    assert log_complete(run.path, 0) == (True, "")
+
+
 def test_lockstep_refuses_a_drone_that_holds_other_limits(tmp_path):
-    with pytest.raises(Exception, match="euler_angle_max"):   # the key the drone kept
-        fly(tmp_path, "foreign_session")
+    err, run = refused_run(tmp_path, "foreign_session")
+    assert "control:euler_angle_max" in str(err) and "'0.2094' written" in str(err)
+    assert_nothing_flew(run, "foreign_session")
+    # the session's own check: every limit the drone kept, with what it holds (0.52, 2000, 6.11)
+    held = {e["key"]: float(e["held"]) for e in run.events if e["kind"] == "config_mismatch"}
+    assert held == pytest.approx({"control:euler_angle_max": 0.52,
+                                  "control:control_vz_max": 2000.0,
+                                  "control:control_yaw": 6.11})
 
 
-@PENDING_CLIENT
+def test_lockstep_flies_a_foreign_session_it_writes_into(tmp_path):
+    """With the drone's session ids (drone.config_ids) the writes apply: read back, verified,
+    flown — so the refusal above is the check, not the fault itself."""
+    cfg = load_config(CONFIGS / "hover.yaml", [*SHORT, *FAULT_CASES["foreign_session"],
+                                               "drone.config_ids=[d2e081a3,be27e2e4,d87f7e0c]"])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        result = run_lockstep(cfg, recorder=rec)
+    run = read_run(rec.path)
+    read = next(e for e in run.events if e["kind"] == "config_read")
+    assert float(read["control:euler_angle_max"]) == pytest.approx(0.2094, abs=1e-4)
+    assert result.ending == "completed"
+
+
 def test_lockstep_refuses_without_a_configuration_read_back(tmp_path):
-    with pytest.raises(Exception, match="control port|configuration"):
-        fly(tmp_path, "control_port_silent")
+    err, run = refused_run(tmp_path, "control_port_silent")
+    assert "control port" in str(err) and "drone.verify_config: false" in str(err)
+    assert_nothing_flew(run, "control_port_silent")
 
 
-@PENDING_CLIENT
+def test_unverified_limits_fly_with_a_warning_when_asked(tmp_path):
+    cfg = load_config(CONFIGS / "hover.yaml", [*SHORT, *FAULT_CASES["control_port_silent"],
+                                               "drone.verify_config=false"])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        result = run_lockstep(cfg, recorder=rec)
+    kinds = [e["kind"] for e in read_run(rec.path).events]
+    assert result.ending == "completed"
+    assert kinds.index("config_unverified") < kinds.index("takeoff")
+
+
 def test_lockstep_stops_when_the_drone_lands_by_itself(tmp_path):
     result, run = fly(tmp_path, "self_land")
-    assert result.ending != "completed"                 # the run says it ended early
+    assert result.ending == "land-drone-landed-itself"
     assert classify(run, result.ending, "self_land") in REQUIRED_OUTCOME["self_land"]
     complete, why = log_complete(run.path, result.ticks)
     assert complete, why
-
+    kinds = [e["kind"] for e in run.events]
+    assert kinds.count("takeoff") == 1                      # never launched again
+    landed_itself = next(e for e in run.events if e["kind"] == "drone_landed_itself")
+    assert 2.0 <= landed_itself["t_s"] < 2.2                # the fault at 2 s, seen in navdata
+    t, mode = run.columns["t_s"], run.columns["mode"]
+    assert set(mode[t >= landed_itself["t_s"]]) == {"landing"}   # no tick flown after it
+    assert result.final_mode is FlightMode.LANDED and run.columns["z_true_m"][-1] < 0.02
