@@ -239,7 +239,7 @@ class DroneConfig(Section):
     @classmethod
     def _quoted_ids(cls, value):
         if isinstance(value, (list, tuple)) and any(isinstance(v, int) for v in value):
-            raise _invalid('quote ids made of digits only, e.g. "00000001" (YAML reads them '
+            raise invalid('quote ids made of digits only, e.g. "00000001" (YAML reads them '
                            "as numbers)")
         return value
 
@@ -248,7 +248,7 @@ class DroneConfig(Section):
     def _hex_ids(cls, value):
         if value is not None and not all(
                 len(v) == 8 and all(c in "0123456789abcdefABCDEF" for c in v) for v in value):
-            raise _invalid("each id must be 8 hex digits, e.g. [d2e081a3, be27e2e4, d87f7e0c]")
+            raise invalid("each id must be 8 hex digits, e.g. [d2e081a3, be27e2e4, d87f7e0c]")
         return value
 
 

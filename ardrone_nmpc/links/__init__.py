@@ -22,8 +22,8 @@
 * :mod:`ardrone_nmpc.links.flight_lock` — one flight per drone address on this machine.
 
 Layering: links own sockets, threads and clocks; every byte is encoded or decoded by
-:mod:`ardrone_nmpc.protocol` (the one exception, the plain-text configuration dump of TCP 5559,
-is split into lines in :mod:`~ardrone_nmpc.links.drone_config`).
+:mod:`ardrone_nmpc.protocol` (the plain-text configuration dump of TCP 5559 included:
+:mod:`~ardrone_nmpc.protocol.config_text`).
 Protocol records are converted into :mod:`ardrone_nmpc.core.types` records (``NavdataSample``,
 ``MocapPose``) at this boundary. Links never decide flight policy: closing a link stops its
 threads and closes its sockets, it does not land the drone — the session does that.

@@ -54,7 +54,8 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ardrone_nmpc.links.drone_commands import FlightCommands
+from ardrone_nmpc.links.drone_commands import _FLYING_MAJORS, FlightCommands
+from ardrone_nmpc.protocol.config_text import CONTROL_PORT
 from ardrone_nmpc.links.drone_config import (
     ConfigHandshake,
     LinkError,
@@ -96,7 +97,6 @@ __all__ = [
 ]
 
 DEFAULT_HOST = "192.168.1.1"
-CONTROL_PORT = 5559                  # TCP: configuration dump after AT*CTRL=seq,4,0 (§1.3)
 _HOVER = Pcmd.hover()
 _RX_POLL_S = 0.05                    # receiver recv timeout: how fast it notices stop / silence
 
@@ -108,7 +108,6 @@ class DroneAirborne(LinkError):
 # ----------------------------------------------------------------------------- conversions
 
 _TAKEOFF_MAJORS = (int(CtrlMajor.TRANS_TAKEOFF), int(CtrlMajor.TRANS_GOTOFIX))     # 6 (SDK), 7 (fw)
-_FLYING_MAJORS = (int(CtrlMajor.FLYING), int(CtrlMajor.HOVERING))
 
 
 def flight_mode_of(state: DroneState, ctrl_major: int | None) -> FlightMode:

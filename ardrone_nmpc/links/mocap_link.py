@@ -86,6 +86,7 @@ class MocapLink(MocapSource):
         self._sender = None                  # (address, port) locked onto; None before
         self._sender_t_s = -math.inf         # its last datagram (link clock)
         self._frames: dict = {}              # sender → [datagrams, last frame number]
+        self._carriers: set = set()          # senders whose frames carried the object
         self._events: list[dict] = []
 
     # ----------------------------------------------------------------------------- lifecycle
@@ -133,6 +134,12 @@ class MocapLink(MocapSource):
         """Datagrams received from ``sender`` (``address:port``), locked or not."""
         with self._lock:
             return next((v[0] for k, v in self._frames.items() if _name(k) == sender), 0)
+
+    @property
+    def contenders(self) -> list[str]:
+        """Foreign senders whose frames carried the controlled object (``address:port``)."""
+        with self._lock:
+            return sorted(_name(k) for k in self._carriers if k != self._sender)
 
     def take_events(self) -> list[dict]:
         """Sender events since the last call (``kind`` ``mocap_sender``,
@@ -189,6 +196,8 @@ class MocapLink(MocapSource):
         carries = self.object_name in frame.poses
         with self._lock:
             count = self._frames.setdefault(sender, [0, None])
+            if carries:
+                self._carriers.add(sender)
             count[0] += 1
             count[1] = frame.frame_number
             locked = self._sender

@@ -146,6 +146,12 @@ class MocapSource:
         """Source events since the last call (a UDP source's sender events); none here."""
         return []
 
+    @property
+    def contenders(self) -> list[str]:
+        """Ignored senders that also carried the controlled object (a second stream of it: a
+        stale ``replay --broadcast``, another tracker); none for a single-sender source."""
+        return []
+
     # ----------------------------------------------------------------------------- readings
 
     def latest(self) -> tuple[MocapPose | None, float]:

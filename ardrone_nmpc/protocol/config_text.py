@@ -7,8 +7,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-__all__ = ["EULER_ANGLE_MAX_LIMIT_RAD", "format_config_text", "parse_config_text"]
+__all__ = ["CONTROL_PORT", "EULER_ANGLE_MAX_LIMIT_RAD", "format_config_text",
+           "parse_config_text"]
 
+CONTROL_PORT = 5559  # TCP: the configuration dump after AT*CTRL=<seq>,4,0 (docs/protocol.md §1.3)
 EULER_ANGLE_MAX_LIMIT_RAD = 0.52  # control:euler_angle_max range 0 … 0.52 rad (30°), §3.1
 
 

@@ -201,7 +201,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
 
     preflight_events: list[tuple[str, dict]] = []  # stamped once experiment time exists
     try:
-        if plant.battery_pct <= cfg.safety.battery_floor_pct:
+        if not plant.battery_pct > cfg.safety.battery_floor_pct:  # NaN is no charge either
             raise TakeoffRefused(f"battery {plant.battery_pct:.0f} % is at or below the floor "
                                  f"safety.battery_floor_pct = "
                                  f"{cfg.safety.battery_floor_pct:.0f} %: take-off refused")

@@ -128,7 +128,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                     sys.stdin.fileno(), on_land=requests.request_land,
                     on_emergency=lambda: _emergency_now(drone, requests)))
             session = FlightSession(cfg, drone, mocap, event=event, requests=requests,
-                                    start_position_m=_start_position(tick), lock=lock,
+                                    start_position_m=_start_position(tick),
                                     **({"warn": warn} if warn is not None else {}))
             fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
             try:

@@ -16,7 +16,8 @@ from typing import Any
 
 #: Take-off must show the drone flying (navdata, or the simulated plant) within this (s).
 TAKEOFF_TIMEOUT_S = 10.0
-#: Landing must show the drone on the ground within this (s).
+#: The simulated landing must show the drone on the ground within this (s); a real landing
+#: has no timeout (the session lands until navdata confirms it).
 LANDING_TIMEOUT_S = 15.0
 
 SETTLE = "settle"

@@ -168,6 +168,12 @@ class FlightSession:
                                  f"({floor:.0f} %, safety.battery_floor_pct): charge it")
         self._require_level(nav)
         pose = self._wait_mocap(2.0)
+        contenders = self.mocap.contenders
+        if contenders:  # which stream is the drone? the first heard need not be the tracker
+            raise PreflightError(
+                f"mocap object {self.cfg.mocap.object_name!r} comes from more than one sender: "
+                f"the link took {self.mocap.sender}, {', '.join(contenders)} also sends it — "
+                "stop the other stream (a replay --broadcast?) before flying")
         self._require_at_start(pose)
         self.event("preflight_ok", battery_pct=nav.battery_pct, ctrl_state=nav.ctrl_state,
                    mocap_sender=self.mocap.sender,
@@ -363,10 +369,14 @@ class FlightSession:
                 "and the object's z axis (up)")
 
     def _wait_navdata(self, timeout_s: float):
+        """The newest navdata sample once it is fresh (≤ NAVDATA_FRESH_S old): a check on a
+        sample from before the link went silent would judge a drone nobody hears."""
         deadline = self.clock() + timeout_s
-        while self.drone.navdata is None:
+        while (self.drone.navdata is None
+               or not self.clock() - self.drone.navdata_rx_t_s <= NAVDATA_FRESH_S):
             if self.clock() > deadline:
-                raise PreflightError("no navdata from the drone")
+                what = "no navdata" if self.drone.navdata is None else "no fresh navdata"
+                raise PreflightError(f"{what} from the drone")
             self._check_operator("before take-off")
             self.sleep(_POLL_S)
         return self.drone.navdata

@@ -110,7 +110,7 @@ class HeldSession:
 
     @classmethod
     def of_fault(cls, fault) -> HeldSession:
-        """From a :class:`~ardrone_nmpc.config.schema.ForeignSessionFault`."""
+        """From a :class:`~ardrone_nmpc.config.faults.ForeignSessionFault`."""
         return cls((fault.session_id, fault.profile_id, fault.application_id),
                    fault.euler_angle_max_rad, fault.control_vz_max_mps, fault.control_yaw_radps)
 

@@ -13,11 +13,11 @@ import time
 import threading
 from typing import Callable, Optional
 
+from ardrone_nmpc.protocol.config_text import CONTROL_PORT
 from ardrone_nmpc.sim.addresses import require_loopback_host
 
 __all__ = ["parse_host_port", "serve", "CONTROL_PORT"]
 
-CONTROL_PORT = 5559   # the drone's TCP configuration port
 
 
 def parse_host_port(text, *, what: str = "address") -> tuple[str, int]:

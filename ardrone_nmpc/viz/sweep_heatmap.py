@@ -55,7 +55,7 @@ def _with_unit(name: str) -> str:
 
 
 def read_sweep(path: str | Path) -> SweepTable:
-    """``sweep.csv`` read back (:func:`ardrone_nmpc.experiments.sweep.read_sweep`); its
+    """``sweep.csv`` read back (:func:`ardrone_nmpc.runs.sweep_table.read_sweep`); its
     errors are :class:`PlotError` s."""
     try:
         return _read_sweep_table(path)

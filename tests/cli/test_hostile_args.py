@@ -53,6 +53,8 @@ CASES = [
     ("check-far-path", ["check", HOVER, "--set", "reference.kind=path",
                         "--set", "reference.path_file={far}"], 1,
      r"^error: reference\.path_file: .*far\.csv:3: column 'x_m': 100000000 is outside ±1000 m$"),
+    ("check-config-ids-digits", ["check", HOVER, "--set", "drone.config_ids=[1,2,3]"], 1,
+     r"^error: drone\.config_ids: quote ids made of digits only"),
     ("simulate-duration-1e308", ["simulate", HOVER, "--set", "duration_s=1e308"], 1,
      r"^error: duration_s: Input should be less than or equal to 3600$"),
     ("simulate-settle-1e308", ["simulate", HOVER, "--set", "sim.settle_s=1e308"], 1,

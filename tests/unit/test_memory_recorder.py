@@ -6,7 +6,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder

@@ -84,3 +84,13 @@ def test_the_lockstep_feed_is_one_sender():
         link.feed(frame(k, float(k)), k * 0.01)
     assert link.sender == "lockstep:0" and x_of(link) == pytest.approx(0.003)
     assert link.foreign_senders == {}
+
+
+def test_a_foreign_sender_of_the_object_is_a_contender_and_one_of_other_objects_is_not():
+    link = MocapLink(object_name="ardrone")
+    assert link.contenders == []
+    link.feed(frame(1, 1.0), 0.00, A)                      # locked
+    link.feed(frame(1, 5.0, name="wand"), 0.01, C)         # another object: no contender
+    assert link.contenders == []
+    link.feed(frame(1, 800.0), 0.02, B)                    # the object again: a contender
+    assert link.contenders == ["10.0.0.3:40000"] and x_of(link) == pytest.approx(0.001)

@@ -152,9 +152,11 @@ class Drone:
 
 class Mocap:
     port, sender, where = 51001, "10.0.0.2:4000", "udp 0.0.0.0:51001"
+    contenders: list = []
 
     def __init__(self, clock, drone=None, xyz=(0.0, 0.0, 0.0), psi=(0.0, 0.0), visible=True,
-                 age_s=0.0, visible_from=-math.inf, gone=(math.inf, math.inf)):
+                 age_s=0.0, visible_from=-math.inf, gone=(math.inf, math.inf), contenders=()):
+        self.contenders = list(contenders)
         self.clock, self.drone, self.xyz, self.psi, self.visible = clock, drone, xyz, psi, visible
         self.age_s, self.visible_from, self.gone = age_s, visible_from, gone
         self.foreign_senders = {}
@@ -305,6 +307,9 @@ def test_a_silent_control_port_refuses_unless_verification_is_off():
     ({}, {"xyz": (0.4, 0.31, 0.0)}, r"0\.51 m from"),
     ({}, {"xyz": (0.0, 0.0, 0.6)}, r"at z = \+0\.60 m"),
     ({}, {"xyz": (0.0, 0.0, -0.6)}, r"at z = -0\.60 m"),
+    ({}, {"contenders": ["127.0.0.1:40000"]},
+     r"comes from more than one sender: the link took 10\.0\.0\.2:4000, 127\.0\.0\.1:40000 "
+     r"also sends it"),
 ])
 def test_preflight_refusals_send_nothing_that_flies(drone_kw, mocap_kw, match):
     session, drone, events, _, _ = make(drone_kw, mocap_kw)
@@ -965,3 +970,13 @@ def test_at_the_first_airborne_sample_mocap_and_navdata_get_half_a_second(which,
     else:
         with pytest.raises(PreflightError):
             session.takeoff()
+
+
+def test_preflight_waits_for_fresh_navdata_and_refuses_a_silent_drone():
+    """A sample from before the link went silent is no check of the drone: the preflight
+    waits for fresh navdata, and refuses when none comes."""
+    session, drone, events, _, _ = make({}, {})
+    drone.nav_age_s = lambda t: 5.0  # the newest sample is 5 s old, and stays so
+    with pytest.raises(PreflightError, match="no fresh navdata from the drone"):
+        session.__enter__()
+    assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls

@@ -51,7 +51,7 @@ def _tick_with_solver_status(accept: bool, status: SolverStatus):
     cfg = load_config(None, [f"safety.solver_accept_max_iterations={str(accept).lower()}"])
     tick = Tick(cfg, experiment_trajectory(cfg))
     u = np.array([0.0, 0.05, -0.04, 0.0])
-    tick.nmpc.solve = lambda t, x, ref: SolveResult(u, status, 1e-3, 5, 30.0, 3)
+    tick.control.nmpc.solve = lambda t, x, ref: SolveResult(u, status, 1e-3, 5, 30.0, 3)
     return tick
 
 
@@ -71,8 +71,9 @@ def test_a_rejected_max_iterations_solve_holds_the_last_good_command():
     tick = _tick_with_solver_status(False, SolverStatus.OK)
     good = step(tick, 0.0, 0.0)
     assert good.row["mode"] == "track" and good.progressive
-    tick.nmpc.solve = lambda t, x, ref: SolveResult(np.array([0.0, 0.2, 0.2, 0.0]),
-                                                    SolverStatus.MAX_ITERATIONS, 1.0, 5, 30.0, 3)
+    rejected = SolveResult(np.array([0.0, 0.2, 0.2, 0.0]), SolverStatus.MAX_ITERATIONS, 1.0, 5,
+                           30.0, 3)
+    tick.control.nmpc.solve = lambda t, x, ref: rejected
     held = step(tick, 0.065, 0.065)
     assert held.row["mode"] == "hold-solver" and held.pcmd == good.pcmd
     assert math.isclose(held.row["cmd_roll_frac"], good.row["cmd_roll_frac"])

@@ -3,7 +3,7 @@
 :mod:`.grid` parses ``--grid`` and builds the cases, :mod:`.cases` flies one case into its
 run directory and finds the ones an earlier run finished, :mod:`.status` judges a case
 (metrics, ok/unstable), :mod:`.engines` runs them (here, a local pool, Dask) and
-:mod:`.table` reads and writes ``sweep.csv``. Everything is re-exported here.
+:mod:`ardrone_nmpc.runs.sweep_table` reads and writes ``sweep.csv``. Everything is re-exported here.
 """
 
 from ardrone_nmpc.experiments.sweep.cases import (PARTIAL_DIR, CaseResult, finished_result,
