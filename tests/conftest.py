@@ -29,6 +29,19 @@ def thesis_cost(x0, ref, u, *, q, r, qf, dtau):
     return cost + 0.5 * e @ (qf * e)
 
 
+class ManualClock:
+    """A clock the test advances: ``clock()`` reads it, ``clock.sleep(dt)`` moves it on."""
+
+    def __init__(self, t: float = 100.0):
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += dt
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20191)

@@ -35,8 +35,8 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
 
     from ardrone_nmpc.cli.console import stderr_console
     from ardrone_nmpc.config.io import load_config
-    from ardrone_nmpc.runtime.realtime import (FlightResult, LandingNotConfirmed, Terminated,
-                                               exit_code_of, run_flight)
+    from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed, run_flight
+    from ardrone_nmpc.runtime.signals import Terminated, exit_code_of
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 

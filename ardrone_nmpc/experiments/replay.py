@@ -18,7 +18,7 @@ silently reading zeros).
 
 Functions
 ---------
-:func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.runtime.tick.TickInputs` of every row;
+:func:`rows_to_inputs` rebuilds the :class:`~ardrone_nmpc.core.types.TickInputs` of every row;
 :func:`rerun` steps a fresh tick through them and compares the commands; :func:`broadcast`
 re-sends the logged poses as the UDP pose stream (docs/mocap-stream.md).
 """
@@ -41,7 +41,8 @@ from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
 from ardrone_nmpc.runs.window import experiment_rows
 from ardrone_nmpc.runtime.schedule import phase, write_events
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.core.types import TickInputs
+from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.errors import UserError
 

@@ -22,7 +22,7 @@ def open_mocap_source(mocap_cfg, *, other_objects: tuple[str, ...] = (),
     library is imported only here, and only for that kind: a missing one raises
     :class:`MocapConnectError` naming the extra to install.
     """
-    kind = getattr(mocap_cfg, "kind", "vicon_udp")
+    kind = mocap_cfg.kind
     if kind == "vicon_udp":
         from ardrone_nmpc.links.mocap_link import MocapLink
 

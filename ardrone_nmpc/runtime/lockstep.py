@@ -31,7 +31,8 @@ from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.core.types import TickInputs
+from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.sim.backends import make_plant

@@ -24,8 +24,9 @@ from ardrone_nmpc.runs.summary import write_run_summary
 from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_events
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
 from ardrone_nmpc.runtime.session import DroneLandedItself, FlightSession
-from ardrone_nmpc.runtime.signals import Terminated, exit_code_of, landing_signals  # noqa: F401
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.runtime.signals import landing_signals
+from ardrone_nmpc.core.types import TickInputs
+from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
 from ardrone_nmpc.errors import UserError
 
@@ -130,7 +131,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
             session = FlightSession(cfg, drone, mocap, event=event, requests=requests,
                                     start_position_m=_start_position(tick),
                                     **({"warn": warn} if warn is not None else {}))
-            fault_clock = getattr(loop, "set_fault_clock", None) if sim else None
+            fault_clock = loop.set_fault_clock if sim else None
             try:
                 with session:
                     _control_loop(cfg, schedule, tick, drone, mocap, recorder, event,
@@ -139,7 +140,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 result.landed = session.landed_cleanly
                 for ev in mocap.take_events():  # senders seen since the last tick
                     event(ev.pop("kind"), **ev)
-                for t_exp, ev in (getattr(loop, "fault_events", None) or []) if sim else ():
+                for t_exp, ev in loop.fault_events if sim else ():
                     # the loopback's injected faults, on experiment time
                     write_events(on_wall_clock(event), t_exp, [ev])
                 event("session_end", landed=session.landed_cleanly)

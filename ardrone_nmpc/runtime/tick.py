@@ -25,7 +25,7 @@ from ardrone_nmpc.runtime.stages import (
 from ardrone_nmpc.safety import Action, Supervisor
 from ardrone_nmpc.sim.faults import FaultSchedule
 
-__all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickInputs", "TickOutput",
+__all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "measurement_columns", "navdata_velocity_world"]
 
 

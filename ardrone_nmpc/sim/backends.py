@@ -22,5 +22,5 @@ def plant_backend(profile: str) -> type[AirframePlant]:
 def make_plant(sim_cfg, drone_cfg, *, seed: int | None = None) -> AirframePlant:
     """The plant of an experiment's ``sim`` and ``drone`` sections (seeded by ``seed``,
     default ``sim.seed``), of the backend ``sim.plant.profile`` names."""
-    backend = plant_backend(getattr(sim_cfg.plant, "profile", "ardrone"))
+    backend = plant_backend(sim_cfg.plant.profile)
     return backend.from_config(sim_cfg, drone_cfg, seed=seed)

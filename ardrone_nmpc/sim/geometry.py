@@ -1,12 +1,13 @@
 """Sensor geometry of the simulated mocap stream: the attitude as the mocap system's XYZ angles
-and the heading back from them (docs/mocap-stream.md §2). Moved out of :mod:`sim.plant`, which
-re-exports both."""
+(docs/mocap-stream.md §2); the heading back from them is the receiver's own
+:func:`~ardrone_nmpc.protocol.mocap.rotation_heading_rad`, so the simulator and the link read
+a pose the same way. Moved out of :mod:`sim.plant`, which re-exports both."""
 
 from __future__ import annotations
 
 import math
 
-from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.protocol.mocap import rotation_heading_rad
 
 __all__ = ["mocap_rotation_xyz_rad", "rotation_heading_rad"]
 
@@ -30,11 +31,3 @@ def mocap_rotation_xyz_rad(roll_rad: float, pitch_rad: float, psi_rad: float
     r22 = ct * cf
     ry = math.asin(max(-1.0, min(1.0, r02)))
     return math.atan2(-r12, r22), ry, math.atan2(-r01, r00)
-
-
-def rotation_heading_rad(rx: float, ry: float, rz: float) -> float:
-    """Heading ψ = atan2(R[1,0], R[0,0]) of ``R = Rx(rx)·Ry(ry)·Rz(rz)``, wrapped to (−π, π]
-    (mocap-stream.md)."""
-    r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
-    r00 = math.cos(ry) * math.cos(rz)
-    return wrap_angle_rad(math.atan2(r10, r00))

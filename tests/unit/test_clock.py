@@ -3,17 +3,7 @@
 import pytest
 
 from ardrone_nmpc.core.clock import Rate
-
-
-class ManualClock:
-    def __init__(self):
-        self.t = 100.0
-
-    def __call__(self):
-        return self.t
-
-    def sleep(self, dt):
-        self.t += dt
+from tests.conftest import ManualClock
 
 
 def test_deadlines_do_not_drift_with_work_time():

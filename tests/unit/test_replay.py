@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime import tick as loop
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.ocp import OcpSpec
@@ -141,7 +142,7 @@ def test_rerun_of_a_log_whose_tick_ran_late(runs, tmp_path):
     late = np.random.default_rng(7).uniform(0.0, 2e-3, len(seen))
     with RunRecorder.create(tmp_path, cfg, seed=run.seed) as recorder:
         for (inputs, t), late_s in zip(seen, late):
-            on_wall = loop.TickInputs(inputs.t_s + late_s, inputs.pose, inputs.pose_rx_t_s,
+            on_wall = TickInputs(inputs.t_s + late_s, inputs.pose, inputs.pose_rx_t_s,
                                       inputs.navdata, inputs.navdata_rx_t_s)
             recorder.write_row(tick.step(on_wall, t_exp_s=t,
                                          mode="settle" if t < 0 else "track").row)

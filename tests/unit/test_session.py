@@ -22,6 +22,7 @@ from ardrone_nmpc.runtime.session import (
     PreflightError,
 )
 from ardrone_nmpc.runtime.signals import Terminated
+from tests.conftest import ManualClock as Clock
 
 WRITTEN = {"control:euler_angle_max": "0.2094", "control:control_vz_max": "700",
            "control:control_yaw": "1.745", "control:altitude_max": "3000"}
@@ -29,15 +30,6 @@ PROFILE = {"control:outdoor": "FALSE", "control:flight_without_shell": "FALSE",
            "control:flying_mode": "0"}
 
 
-class Clock:
-    def __init__(self):
-        self.t = 100.0
-
-    def __call__(self):
-        return self.t
-
-    def sleep(self, dt):
-        self.t += dt
 
 
 class Drone:

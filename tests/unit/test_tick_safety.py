@@ -10,7 +10,8 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
-from ardrone_nmpc.runtime.tick import Tick, TickInputs
+from ardrone_nmpc.core.types import TickInputs
+from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
 
 
