@@ -334,8 +334,8 @@ def test_markdown_tables_have_one_row_per_claim_and_no_broken_cells():
         separators = [row.replace("\\|", "").count("|") for row in rows]
         assert separators == [separators[0]] * len(rows)
     assert "a \\| b" in text
-    assert "* thesis formulation: 0 of 10 simulation claims on `thesis_kit` and 0 of 2 " in text
-    assert "* delay-compensated: 10 of 10 simulation claims on `thesis_kit` and 2 of 2 " in text
+    assert "* thesis formulation: 0 of 10 simulation claims on `thesis_kit` and 0 of 2 experimental" in text
+    assert "* delay-compensated: 10 of 10 simulation claims on `thesis_kit` and 2 of 2 experimental" in text
     # every ✘ of the thesis formulation on a claim's own plant lists its failures and its why
     why = [line for line in text.splitlines() if line.startswith("* **") and "*Why:*" in line]
     assert len(why) == sum(1 for c in claims() if c.note)

@@ -17,6 +17,7 @@ from ardrone_nmpc.experiments.reproduce.judges import (BAD_SOLVES, GROWING, MIN_
 
 COMMAND = "python -m ardrone_nmpc.cli.app reproduce"  # regenerates the committed report
 FORM_NAMES = {"thesis": "thesis formulation", "ours": "delay-compensated"}
+SETTING_NAMES = {"simulation": "simulation", "experiment": "experimental"}
 TABLE_HEADER = ("| experiment | thesis | judged on | thesis formulation | holds | "
                 "delay-compensated | holds | on `ardrone`: thesis / delay-comp. |")
 BESIDE_HEADER = ("| experiment | thesis formulation | holds | delay-compensated | holds | "
@@ -81,7 +82,7 @@ def _counts(outcomes: list[Outcome]) -> list[str]:
         for setting, plant in HOME_PLANTS.items():
             mine = [o for o in outcomes if o.claim.setting == setting]
             held = sum(o.verdict(plant, form).holds for o in mine)
-            per.append(f"{held} of {len(mine)} {setting} claims on `{plant}`")
+            per.append(f"{held} of {len(mine)} {SETTING_NAMES[setting]} claims on `{plant}`")
         beside = sum(o.verdict(BESIDE, form).holds for o in outcomes)
         out.append(f"* {FORM_NAMES[form]}: {' and '.join(per)}; on `{BESIDE}` {beside} of "
                    f"{len(outcomes)}.")
