@@ -279,9 +279,10 @@ NOTES = {
          "thesis' Newton solver too (the table below).",
     "dtau": "With C/GMRES both settle. Flown with the thesis' Newton solver (the table below), "
             "Δτ = 0.08 s limit-cycles and 0.15 s settles — the thesis' result — while the "
-            "linearised loop is stable at both: the instability needs the 1.5 m step's "
-            "saturated tilt command, and C/GMRES's one continuation step per tick is not the "
-            "converged law (the small-step check below).",
+            "linearised loop is stable at both and smaller steps settle (by step size, below): "
+            "the instability needs the 1.5 m step's saturated tilt command, and C/GMRES's one "
+            "continuation step per tick is not the converged law (the small-step check "
+            "below).",
     "r": "Case 2's weights are the x step's, which overshoots on the kit (the x row); Case 3, "
          "with r four times smaller, commands harder against the same fourfold model "
          "mismatch and cycles.",

@@ -33,6 +33,8 @@ KIT = HOME_PLANTS["simulation"]
 NEWTON = ["controller.solver.method=newton"]  # the thesis' solver (Algorithm 1)
 CHECK_STEP_M = 0.1  # small enough that the tilt command stays far inside its ±1 bound
 CHECK_SOLVERS = ("newton", "cgmres")
+AMPLITUDE_CONFIG = "stability_n15_dtau008.yaml"  # the case the Newton flight cycles on
+AMPLITUDES_M = (0.1, 0.5, 1.0, 1.5)  # x step sizes, the last the claim's
 
 
 def _weights(config_dir: Path) -> tuple[float, float, float, float]:
@@ -78,6 +80,15 @@ def newton_flights(config_dir: Path, log_dir: Path, seed: int) -> dict:
             for _, _, name in STABILITY_CASES if name}
 
 
+def amplitude_flights(config_dir: Path, log_dir: Path, seed: int) -> dict:
+    """:data:`AMPLITUDE_CONFIG` flown on the kit (thesis formulation, Newton solver) with x
+    steps of :data:`AMPLITUDES_M`: step (m) -> RunFigures. Small steps follow the linear loop;
+    the claim's 1.5 m saturates the tilt command."""
+    return {a: fly(config_dir, AMPLITUDE_CONFIG, [*NEWTON, f"reference.target_m=[{-a},0,1]"],
+                   "thesis", log_dir, seed, tag=f"-newton-{a:g}m", plant=KIT)
+            for a in AMPLITUDES_M}
+
+
 @dataclass(frozen=True)
 class StepCheck:
     """A small x step flown on the kit (thesis formulation) against the linear loop."""
@@ -120,6 +131,16 @@ def small_step_checks(config_dir: Path, log_dir: Path, seed: int) -> list[StepCh
 
 def _flown(figs: dict | None, key) -> str:
     return figs[key].end("x").describe() if figs and key in figs else "not flown"
+
+
+def render_amplitudes(flights: dict) -> list[str]:
+    if not flights:
+        return []
+    return [f"By step size (`{AMPLITUDE_CONFIG}`, Newton solver, thesis formulation): "
+            + "; ".join(f"{a:g} m — {f.end('x').describe()}, tilt command peak "
+                        f"{f.input_peaks.get('x', math.nan):.2f}" for a, f in flights.items())
+            + ". The loop the linearisation calls stable cycles once the tilt command "
+            "saturates.", ""]
 
 
 def render_kit(rows, age_s: float, flown: dict, newton: dict, checks) -> list[str]:
@@ -245,5 +266,6 @@ def x_loop_section(config_dir: Path, log_dir: Path, seed: int, flown: dict,
     newton = newton_flights(config_dir, log_dir, seed)
     runs = small_step_checks(config_dir, log_dir, seed) if checks else []
     lines += render_kit(x_loop_rows(config_dir, KIT, kit_age), kit_age, flown, newton, runs)
+    lines += render_amplitudes(amplitude_flights(config_dir, log_dir, seed) if checks else {})
     lines += render_ardrone(x_loop_rows(config_dir, "ardrone", ard_age), ard_age, flown)
     return lines
