@@ -14,7 +14,8 @@ from typing import List, Optional
 import typer
 
 from ardrone_nmpc.cli.handler import CommandGroup
-from ardrone_nmpc.cli.options import MAX_JOBS, finite, non_empty, output_file, port
+from ardrone_nmpc.cli.options import (MAX_JOBS, finite, new_output_file, non_empty,
+                                      output_file, port)
 
 app = typer.Typer(
     name="ardrone-nmpc",
@@ -75,6 +76,7 @@ def fly(
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
     foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live on a Foxglove WebSocket (127.0.0.1; the 'foxglove' extra; docs/live-view.md)."),
     foxglove_port: int = typer.Option(8765, "--foxglove-port", min=0, max=65535, help="--foxglove port (0: a free one)."),
+    mcap: Optional[Path] = typer.Option(None, "--mcap", callback=new_output_file, help="Record the flight's Foxglove channels to this new MCAP file as it flies (the 'foxglove' extra; the same channels as --foxglove and export)."),
 ) -> None:
     """Fly an experiment over UDP: the AR.Drone (with mocap), or with --sim the loopback
     simulators. Takes off, flies the 65 ms loop, lands at the end, on Ctrl-C, on any error
@@ -84,7 +86,7 @@ def fly(
     fly_command(config=config, overrides=set_, sim=sim, drone=drone, at_port=at_port,
                 navdata_port=navdata_port, mocap_port=mocap_port, duration_s=duration_s,
                 log_dir=log_dir, dashboard=dashboard, seed=seed, foxglove=foxglove,
-                foxglove_port=foxglove_port)
+                foxglove_port=foxglove_port, mcap=mcap)
 
 
 @app.command()

@@ -14,7 +14,8 @@ from typing import Optional
 
 import typer
 
-__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "non_empty", "output_file", "port"]
+__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "new_output_file", "non_empty", "output_file",
+           "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -70,4 +71,12 @@ def output_file(value: Optional[Path]) -> Optional[Path]:
             if not parent.is_dir():
                 raise typer.BadParameter(f"{parent} is not a directory")
             break
+    return value
+
+
+def new_output_file(value: Optional[Path]) -> Optional[Path]:
+    """:func:`output_file` that must not exist yet (a recording never replaces a file)."""
+    value = output_file(value)
+    if value is not None and value.exists():
+        raise typer.BadParameter(f"{value} exists; give a new file name")
     return value
