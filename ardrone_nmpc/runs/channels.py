@@ -32,7 +32,7 @@ from __future__ import annotations
 import enum
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import PurePath
 from typing import Any, NamedTuple
 
@@ -207,19 +207,26 @@ def row_messages(row: Mapping[str, Any],
             out.append((topic, pose))
             out.append((TOPIC_TF, Transform(WORLD_FRAME, frame, pose)))
             if paths is not None:
-                paths.poses[path_topic].append(pose)
+                paths.add(path_topic, pose)
     return out
 
 
 class PathBuilder:
-    """The poses of ``/pose`` and ``/reference`` so far, as ``(topic, [Pose, …])`` for
+    """The poses of ``/pose`` and ``/reference`` so far, as ``(topic, [pose, …])`` for
     ``/flight_path`` and ``/reference_path`` (the 3-D panel draws them as lines).
 
-    ``every`` keeps one pose in so many (a live view re-sends the whole path)."""
+    ``every`` keeps one pose in so many (a live view re-sends the whole path); ``convert``
+    turns each :class:`Pose` into what the writer logs, once, as it is added (a live view
+    re-sends thousands of poses a second: converting them again each time would cost tens of
+    milliseconds)."""
 
-    def __init__(self, every: int = 1):
+    def __init__(self, every: int = 1, convert: Callable[[Pose], Any] | None = None):
         self.every = max(int(every), 1)
-        self.poses: dict[str, list[Pose]] = {TOPIC_FLIGHT_PATH: [], TOPIC_REFERENCE_PATH: []}
+        self.convert = convert
+        self.poses: dict[str, list[Any]] = {TOPIC_FLIGHT_PATH: [], TOPIC_REFERENCE_PATH: []}
+
+    def add(self, topic: str, pose: Pose) -> None:
+        self.poses[topic].append(pose if self.convert is None else self.convert(pose))
 
     def messages(self) -> list[tuple[str, list[Pose]]]:
         return [(topic, poses[::self.every]) for topic, poses in self.poses.items() if poses]

@@ -136,6 +136,11 @@ class FoxgloveChannels:
     def topics(self) -> list[str]:
         return list(self._channels)
 
+    def path_builder(self) -> ch.PathBuilder:
+        """A :class:`~ardrone_nmpc.runs.channels.PathBuilder` whose poses are foxglove-sdk
+        poses already (a path is then logged without converting each pose again)."""
+        return ch.PathBuilder(convert=lambda pose: _pose(self._m, pose))
+
     def log(self, topic: str, payload: Any, log_ns: int) -> None:
         """Log one message of :func:`~ardrone_nmpc.runs.channels.row_messages` (or a path, a
         ``/events`` or ``/config`` message) at ``log_ns`` (ns since the epoch)."""
@@ -153,9 +158,9 @@ class FoxgloveChannels:
         elif isinstance(payload, ch.Pose):
             message = m.PoseInFrame(timestamp=stamp, frame_id=ch.WORLD_FRAME,
                                     pose=_pose(m, payload))
-        else:  # a path: a list of poses
-            message = m.PosesInFrame(timestamp=stamp, frame_id=ch.WORLD_FRAME,
-                                     poses=[_pose(m, p) for p in payload])
+        else:  # a path: a list of poses (foxglove-sdk's, or ours)
+            poses = [_pose(m, p) if isinstance(p, ch.Pose) else p for p in payload]
+            message = m.PosesInFrame(timestamp=stamp, frame_id=ch.WORLD_FRAME, poses=poses)
         self._channels[topic].log(message, log_time=log_ns)
 
     def close(self) -> None:

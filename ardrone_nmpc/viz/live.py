@@ -145,7 +145,7 @@ class LiveView:
         self._channels: Any = None
         self._pace = pace
         self._pace_origin: tuple[float, float] | None = None   # (wall s, run t_s)
-        self._paths = ch.PathBuilder()
+        self._paths = ch.PathBuilder()   # foxglove-sdk poses once the channels exist
         self._first_log_ns: int | None = None
         self._config_due = config is not None
         self.notices = SdkNotices()
@@ -180,6 +180,7 @@ class LiveView:
                                            port=self._requested_port, context=context,
                                            server_listener=_listener(self._config_wanted))
         self._channels = fox.FoxgloveChannels(fg, context, live_only_paths=self._serve)
+        self._paths = self._channels.path_builder()
         self._thread = threading.Thread(target=self._publish_loop, name="live-view",
                                         daemon=True)
         self._thread.start()
