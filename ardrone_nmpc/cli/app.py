@@ -24,9 +24,25 @@ app = typer.Typer(
     "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM.",
     cls=CommandGroup,
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion [bash|zsh|fish|powershell]
     pretty_exceptions_enable=False,
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from ardrone_nmpc import __version__
+
+        typer.echo(f"ardrone-nmpc {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0."""
 
 SET_HELP = "Override a config value before validation: dotted.path=value (repeatable)."
 CONFIG_ARG = typer.Argument(..., help="Experiment YAML file.")
