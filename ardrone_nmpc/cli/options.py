@@ -8,14 +8,14 @@ typo never silently becomes a default.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional, Union
 
 import typer
 
-__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "new_output_file", "non_empty", "output_file",
-           "port"]
+__all__ = ["MAX_JOBS", "PORT_MAX", "choice", "finite", "new_output_file", "non_empty",
+           "output_file", "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -80,3 +80,34 @@ def new_output_file(value: Optional[Path]) -> Optional[Path]:
     if value is not None and value.exists():
         raise typer.BadParameter(f"{value} exists; give a new file name")
     return value
+
+
+Values = Union[Iterable[str], Callable[[], Iterable[str]]]
+
+
+def choice(values: Values, *, many: bool = False) -> dict[str, Any]:
+    """``typer.Option`` keywords for a closed set of values: a callback refusing any other
+    (exit 2, naming the choices) and shell completion of them. ``many``: a comma-separated
+    list of them. ``values`` may be a function (called when the option is used: a list that
+    lives in a module too heavy to import at start-up)."""
+
+    def known() -> list[str]:
+        return list(values() if callable(values) else values)
+
+    def check(value: Optional[str]) -> Optional[str]:
+        if value is None:
+            return None
+        names = [n.strip() for n in value.split(",")] if many else [value]
+        bad = [n for n in names if n not in known()]
+        if bad or not value.strip():
+            what = ", ".join(repr(n) for n in bad) or "(empty)"
+            raise typer.BadParameter(f"unknown {what}; choose {'from ' if many else ''}"
+                                     f"{', '.join(known())}")
+        return value
+
+    def complete(incomplete: str) -> list[str]:
+        head, _, last = incomplete.rpartition(",") if many else ("", "", incomplete)
+        prefix = head + "," if head else ""
+        return [prefix + v for v in known() if v.startswith(last)]
+
+    return {"callback": check, "autocompletion": complete}

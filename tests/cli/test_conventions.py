@@ -34,3 +34,24 @@ def test_completion_is_installable_and_completes_commands():
     assert "complete " in result.output            # the script registers itself with bash
     assert _complete("ardrone-nmpc exp") == ["export"]
     assert "mocap-check" in _complete("ardrone-nmpc mo")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["faults", "--faults", "bogus"], "error: --faults: unknown 'bogus'; choose from "),
+    (["faults", "--experiments", "hover,loop"], "error: --experiments: unknown 'loop'; "),
+    (["export", ".", "--format", "csv"], "error: --format: unknown 'csv'; choose mcap, parquet"),
+    (["tune", "configs/step_z.yaml", "--engine", "ray"], "error: --engine: unknown 'ray'"),
+    (["plot", ".", "--kind", "pie"], "error: --kind: unknown 'pie'"),
+])
+def test_a_value_outside_a_closed_set_exits_2_with_one_line(args, message):
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    assert result.output.startswith(message) and len(result.output.splitlines()) == 1
+
+
+def test_closed_sets_complete_in_the_shell():
+    assert _complete("ardrone-nmpc export run --format ") == ["mcap", "parquet"]
+    assert _complete("ardrone-nmpc sweep c.yaml --engine d") == ["dask"]
+    assert _complete("ardrone-nmpc faults --experiments hover,s") == ["hover,step",
+                                                                     "hover,square"]
+    assert "mocap_lost" in _complete("ardrone-nmpc faults --faults mocap_l")

@@ -138,10 +138,8 @@ def test_sweep_on_the_default_dask_local_cluster(tmp_path):
     (["--grid", "controller.horizn_steps=5,6"], "error: controller.horizn_steps: "),
     (["--grid", "controller.horizon_steps=0"], "error: controller.horizon_steps: "),
     (["--grid", "controller.dtau_s=0.1", "--set", "duration_s=-1"], "error: duration_s: "),
-    (["--grid", "controller.dtau_s=0.1", "--engine", "ray"], "error: --engine: unknown engine"),
     (["--grid", "controller.dtau_s=0.1", "--scheduler", "tcp://127.0.0.1:1"],
      "error: --scheduler: only with --engine dask"),
-    (["--grid", "controller.dtau_s=0.1", "--rank-by", "speed"], "error: --rank-by: unknown"),
     ([], "error: --grid: give at least one"),
 ])
 def test_bad_input_is_one_error_line_and_nothing_runs(tmp_path, args, message):
@@ -150,6 +148,19 @@ def test_bad_input_is_one_error_line_and_nothing_runs(tmp_path, args, message):
     assert result.exit_code == 1
     assert message in result.output
     assert "Traceback" not in result.output
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--engine", "ray"], "error: --engine: unknown 'ray'; choose local, dask"),
+    (["--rank-by", "speed"], "error: --rank-by: unknown 'speed'; choose rmse, settling, "),
+])
+def test_a_bad_choice_is_a_command_line_error(tmp_path, args, message):
+    out = tmp_path / "sweep"
+    result = runner.invoke(app, ["sweep", CONFIG, "--out", str(out),
+                                 "--grid", "controller.dtau_s=0.1", *args])
+    assert result.exit_code == 2
+    assert result.output.startswith(message) and len(result.output.splitlines()) == 1
     assert not out.exists()
 
 

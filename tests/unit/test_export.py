@@ -199,8 +199,8 @@ def test_export_command(run_dir, tmp_path):
 
 def test_export_errors_are_one_line(run_dir, tmp_path, monkeypatch):
     result = CliRunner().invoke(app, ["export", str(run_dir), "--format", "csv"])
-    assert result.exit_code == 1
-    assert result.output == "error: --format: unknown format 'csv'; choose mcap, parquet\n"
+    assert result.exit_code == 2              # a command-line error
+    assert result.output == "error: --format: unknown 'csv'; choose mcap, parquet\n"
     result = CliRunner().invoke(app, ["export", str(tmp_path / "nope"), "-o", "x.mcap"])
     assert result.exit_code == 1 and result.output.startswith("error: ")
     assert len(result.output.splitlines()) == 1
