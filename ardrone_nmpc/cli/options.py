@@ -97,9 +97,9 @@ def choice(values: Values, *, many: bool = False) -> dict[str, Any]:
     def check(value: Optional[str]) -> Optional[str]:
         if value is None:
             return None
-        names = [n.strip() for n in value.split(",")] if many else [value]
+        names = [n.strip() for n in value.split(",") if n.strip()] if many else [value]
         bad = [n for n in names if n not in known()]
-        if bad or not value.strip():
+        if bad or not names:
             what = ", ".join(repr(n) for n in bad) or "(empty)"
             raise typer.BadParameter(f"unknown {what}; choose {'from ' if many else ''}"
                                      f"{', '.join(known())}")

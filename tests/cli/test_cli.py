@@ -66,7 +66,7 @@ def test_bench_writes_the_json_rows(tmp_path):
 
 @pytest.mark.parametrize("args, code, message", [
     (["--solvers", "fast"], 2, "--solvers: unknown 'fast'; choose from cgmres, newton"),
-    (["--solvers", "cgmres,"], 2, "--solvers: unknown ''"),
+    (["--solvers", ","], 2, "--solvers: unknown (empty); choose from cgmres, newton"),
     (["--compare", "acados"], 2, "--compare: unknown 'acados'; choose casadi"),
     (["--set", "controller.horizon_steps=0"], 1, "controller.horizon_steps:"),
 ])
