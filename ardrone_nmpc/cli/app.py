@@ -170,7 +170,7 @@ def sweep(
     jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Parallel workers (default: the CPU count); 1 = in this process."),
     engine: str = typer.Option("local", "--engine", **choice(_sweep_engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
+    out: Optional[Path] = typer.Option(None, "-o", "--output", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
     rank_by: str = typer.Option("rmse", "--rank-by", **choice(_rank_metrics), help="Rank the table by: rmse, settling, overshoot, path_deviation, solve_p99."),
     top: Optional[int] = typer.Option(None, "--top", min=1, help="Show only the best K cases."),
     diverge_m: float = typer.Option(0.5, "--diverge-m", callback=finite(0.0, 1000.0), help="A case is 'unstable' if it is farther than this (m) from the reference in the last quarter of the experiment (or leaves the geofence, or is landed by the supervisor)."),
@@ -186,7 +186,7 @@ def sweep(
 
 @app.command()
 def reproduce(
-    out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "--out", callback=output_file, help="Markdown report to write."),
+    out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "-o", "--output", callback=output_file, help="Markdown report to write."),
     log_dir: Path = typer.Option(Path("logs/reproduce"), "--log-dir", help="Where the run directories go."),
     config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="The experiment configs."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every run."),

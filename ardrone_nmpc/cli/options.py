@@ -14,8 +14,8 @@ from typing import Any, Optional, Union
 
 import typer
 
-__all__ = ["MAX_JOBS", "PORT_MAX", "choice", "finite", "new_output_file", "non_empty",
-           "output_file", "port"]
+__all__ = ["DEPRECATED_SPELLINGS", "MAX_JOBS", "PORT_MAX", "choice", "finite",
+           "modern_spellings", "new_output_file", "non_empty", "output_file", "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -111,3 +111,35 @@ def choice(values: Values, *, many: bool = False) -> dict[str, Any]:
         return [prefix + v for v in known() if v.startswith(last)]
 
     return {"callback": check, "autocompletion": complete}
+
+
+#: Old spellings of options, per command, still accepted (with a warning on stderr): what a
+#: command writes is ``-o/--output`` everywhere (a file, or the folder it fills); where new
+#: run directories are created is ``--log-dir``.
+DEPRECATED_SPELLINGS: dict[str, dict[str, str]] = {
+    "reproduce": {"--out": "--output"},
+    "sweep": {"--out": "--output"},
+    "tune": {"--out": "--output"},
+}
+
+
+def modern_spellings(command: str, args: list[str], warn: Callable[[str], None]) -> list[str]:
+    """``args`` of ``command`` with each deprecated option spelling (``--out DIR``,
+    ``--out=DIR``) replaced by the current one, and ``warn(line)`` once per spelling used.
+    Nothing after ``--`` is touched."""
+    table = DEPRECATED_SPELLINGS.get(command, {})
+    out: list[str] = []
+    warned: set[str] = set()
+    for k, arg in enumerate(args):
+        if arg == "--":
+            return out + args[k:]
+        name, eq, value = arg.partition("=")
+        if name in table:
+            if name not in warned:
+                warned.add(name)
+                new = table[name]
+                warn(f"warning: {name} is deprecated; use "
+                     f"{'-o/--output' if new == '--output' else new}")
+            arg = table[name] + eq + value
+        out.append(arg)
+    return out

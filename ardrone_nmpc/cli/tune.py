@@ -237,7 +237,7 @@ def register(app: typer.Typer) -> None:
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
         engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
+        out: Optional[Path] = typer.Option(None, "-o", "--output", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
         seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),

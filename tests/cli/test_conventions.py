@@ -55,3 +55,26 @@ def test_closed_sets_complete_in_the_shell():
     assert _complete("ardrone-nmpc faults --experiments hover,s") == ["hover,step",
                                                                      "hover,square"]
     assert "mocap_lost" in _complete("ardrone-nmpc faults --faults mocap_l")
+
+
+def test_deprecated_spellings_are_rewritten_with_one_warning():
+    from ardrone_nmpc.cli.options import modern_spellings
+
+    warnings: list[str] = []
+    args = ["c.yaml", "--out", "a", "--out=b", "--jobs", "2", "--", "--out"]
+    assert modern_spellings("sweep", args, warnings.append) == [
+        "c.yaml", "--output", "a", "--output=b", "--jobs", "2", "--", "--out"]
+    assert warnings == ["warning: --out is deprecated; use -o/--output"]
+    assert modern_spellings("export", ["--out", "x"], warnings.append) == ["--out", "x"]
+
+
+@pytest.mark.timeout(120)
+def test_sweep_out_still_works_and_says_it_is_deprecated(tmp_path):
+    for spelling, where in (("--out", tmp_path / "old"), ("-o", tmp_path / "new")):
+        result = runner.invoke(app, ["sweep", "configs/hover.yaml", "--grid", "duration_s=0.3",
+                                     "--set", "sim.settle_s=0.2", "--jobs", "1", spelling,
+                                     str(where)])
+        assert result.exit_code == 0, result.output
+        assert (where / "sweep.csv").is_file()
+        deprecated = "warning: --out is deprecated; use -o/--output" in result.output
+        assert deprecated == (spelling == "--out")

@@ -89,19 +89,19 @@ CASES = [
     ("replay-empty-host", ["replay", "{run}", "--broadcast", "--host", ""], 2,
      r"^error: --host: must not be empty$"),
     ("replay-both-modes", ["replay", "{run}", "--rerun", "--broadcast"], 1, r"choose one"),
-    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                 "{file}/sweep"], 1,
      r"^error: --out .*afile/sweep: cannot create the directory: Not a directory$"),
-    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out", "{file}"], 1,
+    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o", "{file}"], 1,
      r"^error: --out .*afile: exists and is not a directory$"),
     ("sweep-jobs-0", ["sweep", HOVER, "--jobs", "0"], 2, r"^error: --jobs: .*\b1\b"),
     ("sweep-jobs-huge", ["sweep", HOVER, "--jobs", "100000"], 2, r"^error: --jobs: .*\b256\b"),
     ("sweep-diverge-nan", ["sweep", HOVER, "--diverge-m", "nan"], 2, r"^error: --diverge-m: "),
     ("sweep-far-path", ["sweep", HOVER, "--grid", "duration_s=0.3,0.4", "--set",
                         "reference.kind=path", "--set", "reference.path_file={far}",
-                        "--out", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
-    ("reproduce-out-a-dir", ["reproduce", "--out", "{dir}"], 2,
-     r"^error: --out: .*adir is a directory; give a file name$"),
+                        "-o", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
+    ("reproduce-out-a-dir", ["reproduce", "-o", "{dir}"], 2,
+     r"^error: -o / --output: .*adir is a directory; give a file name$"),
     ("bench-json-a-dir", ["bench", "--json", "{dir}"], 2,
      r"^error: --json: .*adir is a directory; give a file name$"),
     ("bench-json-under-a-file", ["bench", "--json", "{file}/b.json"], 2,
@@ -174,7 +174,7 @@ def test_sweep_out_on_a_read_only_file_system_is_one_line(files, monkeypatch):
         raise OSError(30, "Read-only file system", str(self))
 
     monkeypatch.setattr(Path, "mkdir", read_only)
-    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                  f"{files['tmp']}/ro/sweep"])
     assert result.exit_code == 1, result.output
     assert result.stderr.strip().splitlines() == [

@@ -29,7 +29,7 @@ SPACE = [f"controller.q[{i}]" for i in range(7)] + [f"controller.r[{i}]" for i i
 
 
 def _tune(out, *extra):
-    return runner.invoke(app, ["tune", CONFIG, *SHORT, "--out", str(out), *extra])
+    return runner.invoke(app, ["tune", CONFIG, *SHORT, "-o", str(out), *extra])
 
 
 def _rows(out: Path) -> list[dict[str, str]]:
