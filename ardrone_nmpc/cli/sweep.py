@@ -85,11 +85,11 @@ def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
 
 def _out_dir(out_dir: Path) -> Path:
     if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+        raise ConfigError(f"--output {out_dir}: exists and is not a directory")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:  # under a file, on a read-only disk, no permission
-        raise ConfigError(f"--out {out_dir}: cannot create the directory: "
+        raise ConfigError(f"--output {out_dir}: cannot create the directory: "
                           f"{err.strerror or err}") from None
     return out_dir
 

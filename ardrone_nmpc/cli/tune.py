@@ -2,7 +2,7 @@
 
 The parts are in :mod:`ardrone_nmpc.experiments.tune` (space, objective, engines, study);
 this module drives them: options, the progress bar (stderr), the ranked table (stdout),
-``trials.csv`` and ``best.yaml`` in ``--out``. :func:`register` adds the command to the app.
+``trials.csv`` and ``best.yaml`` in ``-o/--output``. :func:`register` adds the command to the app.
 """
 
 from __future__ import annotations
@@ -139,13 +139,13 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds, variants=_variants(variants))
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+        raise ConfigError(f"--output {out_dir}: exists and is not a directory")
     out_dir.mkdir(parents=True, exist_ok=True)
     base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
     sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
     if resume is False and (out_dir / st.STUDY_FILE).is_file():  # before any start-up
-        raise ConfigError(f"--out {out_dir}: holds a study already ({st.STUDY_FILE}); "
-                          "--resume continues it, or choose another --out")
+        raise ConfigError(f"--output {out_dir}: holds a study already ({st.STUDY_FILE}); "
+                          "--resume continues it, or choose another --output")
     # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
     try:
         runner = eng.make_engine(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler)
@@ -243,7 +243,7 @@ def register(app: typer.Typer) -> None:
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
         space: Optional[Path] = typer.Option(None, "--space", help="Search-space YAML (default: q and r log-uniform ×0.1…×10 of the config's)."),
         objective: Optional[str] = typer.Option(None, "--objective", help="Preset (default, step, tracking) and/or term=weight items: tracking, settling, overshoot, effort, solver, supervisor, abort, worst."),
-        resume: bool = typer.Option(False, "--resume", help="Continue the study in --out (finished trials are not flown again)."),
+        resume: bool = typer.Option(False, "--resume", help="Continue the study in --output (finished trials are not flown again)."),
         keep_runs: bool = typer.Option(False, "--keep-runs", help="Write every flight's run directory under DIR/runs/ (default: metrics only)."),
         top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),

@@ -91,9 +91,9 @@ CASES = [
     ("replay-both-modes", ["replay", "{run}", "--rerun", "--broadcast"], 1, r"choose one"),
     ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                 "{file}/sweep"], 1,
-     r"^error: --out .*afile/sweep: cannot create the directory: Not a directory$"),
+     r"^error: --output .*afile/sweep: cannot create the directory: Not a directory$"),
     ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o", "{file}"], 1,
-     r"^error: --out .*afile: exists and is not a directory$"),
+     r"^error: --output .*afile: exists and is not a directory$"),
     ("sweep-jobs-0", ["sweep", HOVER, "--jobs", "0"], 2, r"^error: --jobs: .*\b1\b"),
     ("sweep-jobs-huge", ["sweep", HOVER, "--jobs", "100000"], 2, r"^error: --jobs: .*\b256\b"),
     ("sweep-diverge-nan", ["sweep", HOVER, "--diverge-m", "nan"], 2, r"^error: --diverge-m: "),
@@ -178,7 +178,7 @@ def test_sweep_out_on_a_read_only_file_system_is_one_line(files, monkeypatch):
                                  f"{files['tmp']}/ro/sweep"])
     assert result.exit_code == 1, result.output
     assert result.stderr.strip().splitlines() == [
-        f"error: --out {files['tmp']}/ro/sweep: cannot create the directory: "
+        f"error: --output {files['tmp']}/ro/sweep: cannot create the directory: "
         "Read-only file system"]
 
 

@@ -118,7 +118,7 @@ def test_resume_continues_without_flying_finished_trials_again(tmp_path):
     first = _rows(tmp_path)
     again = _tune(tmp_path, "--trials", "2", "--jobs", "1")
     assert again.exit_code == 1
-    assert again.output.startswith(f"error: --out {tmp_path}: holds a study already")
+    assert again.output.startswith(f"error: --output {tmp_path}: holds a study already")
     # a run stopped with a trial in flight: it was asked, never told
     _study(tmp_path).ask()
     result = _tune(tmp_path, "--trials", "4", "--jobs", "1", "--resume")
