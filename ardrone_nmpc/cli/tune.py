@@ -124,6 +124,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)
 
+    from ardrone_nmpc.cli.narrow import fit
+
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.tune import engine as eng
@@ -215,7 +217,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     wall_s = time.perf_counter() - wall0
     done = st.finished_trials(study)
     if done:
-        console.print(_ranked_table(study, space=space, scenarios=scen, top=top))
+        console.print(fit(_ranked_table(study, space=space, scenarios=scen, top=top), console))
     console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
                   f"{len(scen)} scenarios; {wall_s:.1f} s wall, {sim_s:.0f} s simulated "
                   f"({sim_s / wall_s if wall_s > 0 else math.nan:.0f}× real time; {engine}, "
