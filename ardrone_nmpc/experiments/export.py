@@ -6,8 +6,10 @@
   (``foxglove.FrameTransform``), ``/flight_path`` and ``/reference_path`` (whole, once) — for
   Foxglove, PlotJuggler or the ``mcap`` CLI. A message's log time is its run time ``t_s`` (an event's ``t_exp_s`` when it has one) on an
   epoch that puts the run's first row at the creation time recorded in ``config.yaml``.
-* ``parquet`` (the ``parquet`` extra, pyarrow): the log as one table (float64 and string
-  columns), the events (JSON lines) and ``config.yaml`` in the file's key-value metadata.
+* ``parquet`` (the ``parquet`` extra, pyarrow): the log as one typed table — integer counts,
+  categorical labels, saturation flags as booleans, an absolute UTC ``time_utc``, every
+  field's unit in its metadata (:mod:`ardrone_nmpc.runs.table_schema`) — with the events
+  (JSON lines) and ``config.yaml`` in the file's key-value metadata.
 
 Both keep every float bit for bit (``read_mcap`` reads an MCAP file back).
 """
@@ -26,7 +28,8 @@ from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.core.extras import import_extra
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs import foxglove_channels as fox
-from ardrone_nmpc.runs.rundir import CONFIG_FILE, STRING_COLUMNS, RunData, read_run
+from ardrone_nmpc.runs.table_schema import log_table
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, RunData, read_run
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "export_run", "write_mcap", "write_parquet",
            "read_mcap", "McapContents", "run_rows"]
@@ -152,15 +155,11 @@ def write_parquet(run: RunData, out: Path) -> int:
     """Write the log of ``run`` as a Parquet table to ``out``; return the number of rows."""
     pa = import_extra("pyarrow", "parquet", "export --format parquet")
     pq = import_extra("pyarrow.parquet", "parquet", "export --format parquet")
-    arrays, names = [], []
-    for name, values in run.columns.items():
-        arrays.append(pa.array(values.tolist(), type=pa.string()) if name in STRING_COLUMNS
-                      else pa.array(np.asarray(values, dtype=np.float64), type=pa.float64()))
-        names.append(name)
+    table = log_table(pa, run, _origin_ns(run))   # typed columns, units (runs/table_schema)
     events = b"\n".join(ch.event_message(e) for e in run.events)
     config = (run.path / CONFIG_FILE).read_bytes()
-    table = pa.Table.from_arrays(arrays, names=names).replace_schema_metadata(
-        {PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
+    table = table.replace_schema_metadata(
+        {**table.schema.metadata, PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
     pq.write_table(table, out)
     return table.num_rows
 

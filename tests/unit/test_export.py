@@ -172,19 +172,88 @@ def test_json_has_no_nan_or_infinity_tokens():
     json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard {c}"))
 
 
-def test_parquet_round_trips_the_log(run_dir, tmp_path):
+def _parquet(run_dir, tmp_path):
     import pyarrow.parquet as pq  # the 'parquet' extra (in 'test')
 
     out = tmp_path / "run.parquet"
     run = read_run(run_dir)
-    assert write_parquet(run, out) == 40
-    table = pq.read_table(out)
+    assert write_parquet(run, out) == run.n_rows
+    return run, pq.read_table(out)
+
+
+def test_parquet_round_trips_the_log(run_dir, tmp_path):
+    run, table = _parquet(run_dir, tmp_path)
+    assert table.num_rows == 40
     for name, values in run.columns.items():
+        if name == "cmd_saturated":
+            continue                       # four boolean columns: test_parquet_types
         got = table.column(name).to_pylist()
-        assert all(_same_bits(a, b) for a, b in zip(got, values.tolist())), name
+        want = values.tolist()
+        if name in ("gmres_iterations", "newton_iterations", "nav_ctrl_state") and \
+                str(table.column(name).type) == "int64":
+            want = [None if math.isnan(v) else int(v) for v in want]
+        assert all(_same_bits(a, b) or (a is None and b != b) for a, b in zip(got, want)), name
     events = [json.loads(line) for line in
               table.schema.metadata[b"ardrone_nmpc.events"].splitlines()]
     assert [e["kind"] for e in events] == [e["kind"] for e in run.events]
+
+
+def test_parquet_types_units_and_utc_time(tmp_path):
+    """Counts are integers, labels categorical, saturation flags booleans, time_utc an
+    absolute UTC timestamp; every field has its unit."""
+    import datetime as dt
+
+    import pyarrow as pa
+
+    cfg = load_config(None, ["name=types"])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        for k in range(6):
+            rec.write_row({"t_s": -0.13 + 0.065 * k, "x_m": 0.1 * k, "gmres_iterations": k,
+                           "newton_iterations": math.nan if k == 2 else 0,
+                           "nav_ctrl_state": 262144 + k, "mode": ("settle", "track")[k > 1],
+                           "solver_status": "ok", "nav_mode": "flying",
+                           "cmd_saturated": ("0000", "1010", "0001")[k % 3],
+                           "battery_pct": 80.0 - k})
+    created = dt.datetime.fromisoformat(
+        next(line.split("created: ")[1] for line in
+             (rec.path / "config.yaml").read_text().splitlines() if "created: " in line))
+    run, table = _parquet(rec.path, tmp_path)
+    schema = table.schema
+    assert schema.field("gmres_iterations").type == pa.int64()
+    assert table.column("gmres_iterations").to_pylist() == [0, 1, 2, 3, 4, 5]
+    assert table.column("newton_iterations").to_pylist() == [0, 0, None, 0, 0, 0]
+    assert table.column("nav_ctrl_state").to_pylist() == [262144 + k for k in range(6)]
+    for name in ("mode", "solver_status", "nav_mode"):
+        assert pa.types.is_dictionary(schema.field(name).type), name
+    assert table.column("mode").to_pylist() == ["settle", "settle", "track", "track", "track",
+                                                "track"]
+    assert "cmd_saturated" not in schema.names
+    assert table.column("cmd_saturated_roll").to_pylist() == [False, True, False] * 2
+    assert table.column("cmd_saturated_gaz").to_pylist() == [False, True, False] * 2
+    assert table.column("cmd_saturated_yaw").to_pylist() == [False, False, True] * 2
+    assert schema.field("battery_pct").type == pa.float64()
+    # the absolute time: the creation time for the first row, t_s apart after it
+    assert schema.field("time_utc").type == pa.timestamp("ns", tz="UTC")
+    assert schema.names.index("time_utc") == schema.names.index("t_s") + 1
+    stamps = table.column("time_utc").cast(pa.int64()).to_pylist()
+    assert stamps[0] == int(created.timestamp()) * 10 ** 9
+    assert np.diff(stamps).tolist() == [65_000_000] * 5
+    # units: per field and as one map in the schema
+    units = json.loads(schema.metadata[b"ardrone_nmpc.units"])
+    assert units["x_m"] == "m" and units["t_s"] == "s" and units["mocap_age_ms"] == "ms"
+    assert units["u_zacc_mps2"] == "m/s²" and units["u_psirate_radps"] == "rad/s"
+    assert units["solve_us"] == "µs" and units["battery_pct"] == "%"
+    assert units["nav_roll_deg"] == "°" and units["cmd_roll_frac"] == "1"
+    assert units["time_utc"] == "UTC" and units["gmres_iterations"] == "count"
+    assert set(units) == set(schema.names)
+    assert all(schema.field(n).metadata[b"unit"].decode() == u for n, u in units.items())
+
+
+def test_every_log_column_has_a_unit():
+    from ardrone_nmpc.runs.table_schema import column_unit
+
+    for name in LOG_COLUMNS:
+        column_unit(name)          # a column added without a unit fails here
 
 
 def test_export_command(run_dir, tmp_path):
