@@ -78,3 +78,48 @@ def test_sweep_out_still_works_and_says_it_is_deprecated(tmp_path):
         assert (where / "sweep.csv").is_file()
         deprecated = "warning: --out is deprecated; use -o/--output" in result.output
         assert deprecated == (spelling == "--out")
+
+
+def _commands():
+    import typer.main
+
+    return typer.main.get_command(app).commands
+
+
+def test_the_readme_says_which_commands_take_set():
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[2] / "README.md").read_text(encoding="utf-8")
+    para = readme[readme.index("Every command that reads an experiment config takes"):]
+    takes, rest = para.split("; the others", 1)
+    rest = rest.split("take none", 1)[0]
+    said_yes = set(re.findall(r"`([a-z-]+)`", takes))
+    said_no = set(re.findall(r"`([a-z-]+)`", rest))
+    have = {name for name, cmd in _commands().items()
+            if any("--set" in p.opts for p in cmd.params)}
+    assert said_yes == have
+    assert said_no == set(_commands()) - have
+
+
+def test_output_options_have_one_spelling():
+    """What a command writes is -o/--output; --out survives only as a deprecated spelling."""
+    for name, cmd in _commands().items():
+        opts = {o for p in cmd.params for o in p.opts}
+        assert "--out" not in opts, name
+        if "--output" in opts:
+            (param,) = [p for p in cmd.params if "--output" in p.opts]
+            assert param.opts == ["-o", "--output"], name
+
+
+def test_the_lab_extra_holds_what_a_lab_needs():
+    import tomllib
+    from pathlib import Path
+
+    project = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    extras = project["project"]["optional-dependencies"]
+    (lab,) = extras["lab"]
+    named = set(lab.split("[", 1)[1].rstrip("]").split(","))
+    assert lab.startswith("ardrone-nmpc[") and named == {"mocap", "foxglove", "mcap", "tune",
+                                                          "plot"}
+    assert named <= set(extras)
