@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs import foxglove_channels as fox
 
@@ -173,8 +174,13 @@ class LiveView:
         fox.add_log_listener(self.notices)
         context = fg.Context()  # channels close with their context
         if self._mcap_path is not None:
-            self._writer = fg.open_mcap(self._mcap_path, context=context,
-                                        channel_filter=_recorded)
+            try:
+                self._mcap_path.parent.mkdir(parents=True, exist_ok=True)
+                self._writer = fg.open_mcap(self._mcap_path, context=context,
+                                            channel_filter=_recorded)
+            except Exception as err:  # the SDK's errors name no file
+                fox.remove_log_listener(self.notices)
+                raise UserError(f"--mcap {self._mcap_path}: cannot write it: {err}") from None
         if self._serve:
             self._server = fg.start_server(name="ardrone-nmpc", host=LOOPBACK,
                                            port=self._requested_port, context=context,

@@ -212,3 +212,14 @@ def test_fly_records_an_mcap_file_as_it_flies(tmp_path):
     assert len(back.poses["/reference_path"]) == 1
     assert back.config is not None and back.config["seed"] == 1 and back.n_configs == 1
     assert {"takeoff", "landed"} <= {e["kind"] for e in back.events}
+
+
+def test_a_recording_that_cannot_be_written_is_one_user_error(tmp_path):
+    from ardrone_nmpc.errors import UserError
+
+    nested = tmp_path / "new" / "folder" / "f.mcap"
+    with LiveView(0, serve=False, mcap=nested):
+        pass
+    assert nested.is_file()                      # its folder was made
+    with pytest.raises(UserError, match=r"^--mcap /proc/none/f\.mcap: cannot write it: "):
+        LiveView(0, serve=False, mcap="/proc/none/f.mcap").start()
