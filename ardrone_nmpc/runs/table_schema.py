@@ -6,9 +6,9 @@
   (dictionary-encoded);
 * ``cmd_saturated`` (four ``0``/``1`` flags) is four booleans, ``cmd_saturated_roll``,
   ``_pitch``, ``_gaz``, ``_yaw`` (null where the cell is not four flags);
-* ``time_utc`` (after ``t_s``): the row's absolute time, UTC, nanoseconds — the run's creation
-  time (``config.yaml``, whole seconds) for its first row plus ``t_s`` since, the epoch the
-  MCAP export uses too;
+* ``time_utc`` (after ``t_s``): the row's absolute time, UTC, nanoseconds — ``t_s`` on the
+  epoch the MCAP export uses, which puts the run's earliest row or event at its creation time
+  (``config.yaml``, whole seconds);
 * every other column float64, bit for bit.
 
 Each field carries its unit in its Arrow metadata (``unit``), and the schema the whole map
