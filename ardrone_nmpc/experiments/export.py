@@ -25,7 +25,8 @@ import numpy as np
 from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.core.extras import import_extra
 from ardrone_nmpc.runs import channels as ch
-from ardrone_nmpc.runs.rundir import CONFIG_FILE, STRING_COLUMNS, RunData, read_run
+from ardrone_nmpc.runs.log_columns import STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, RunData, read_run
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "export_run", "write_mcap", "write_parquet",
            "read_mcap", "McapContents", "run_rows"]

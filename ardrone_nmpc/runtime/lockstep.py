@@ -28,6 +28,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import Config
 from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.log_columns import truth_columns
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
@@ -171,13 +172,6 @@ class _Sensors:
                           self.target, self.target_rx_t_s)
 
 
-def truth_columns(plant: AirframePlant) -> dict:
-    truth = plant.truth
-    return {"x_true_m": truth.position_m[0], "y_true_m": truth.position_m[1],
-            "z_true_m": truth.position_m[2], "psi_true_rad": truth.psi_rad,
-            "vz_true_mps": truth.velocity_mps[2]}
-
-
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
                  progress: Callable[[float], None] | None = None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
@@ -270,7 +264,7 @@ def _landed_itself(nav) -> bool:
 
 def _record(recorder, row: dict, plant: AirframePlant) -> None:
     if recorder is not None:
-        row.update(truth_columns(plant))
+        row.update(truth_columns(plant.truth))
         recorder.write_row(row)
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from ardrone_nmpc.core.clock import Rate
 from ardrone_nmpc.config.schema import tracked_object
 from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.log_columns import link_columns
 from ardrone_nmpc.runs.rundir import RunRecorder
 from ardrone_nmpc.runs.summary import write_run_summary
 from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_events
@@ -213,9 +214,7 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, e
         else:
             drone.hover()
         row = out.row
-        row["tick_late_ms"] = late_s * 1e3
-        row["nav_ctrl_state"] = (nav.ctrl_state if nav is not None and nav.ctrl_state is not None
-                                 else math.nan)
+        row |= link_columns(late_s, nav)
         recorder.write_row(row)
         if status is not None:
             status({**row, "progress": schedule.fraction_done(k), "overruns": rate.overruns,

@@ -17,16 +17,16 @@ from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
+from ardrone_nmpc.runs.log_columns import tick_row
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
-    OffsetFree, Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world,
-    tick_row,
+    OffsetFree, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
 from ardrone_nmpc.safety import Action, Supervisor
 from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
-           "effective_controller", "measurement_columns", "navdata_velocity_world"]
+           "effective_controller", "navdata_velocity_world"]
 
 
 @dataclass(frozen=True, slots=True)

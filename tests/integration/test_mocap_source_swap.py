@@ -18,7 +18,8 @@ import ardrone_nmpc.runtime.lockstep as lockstep
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
 from ardrone_nmpc.protocol.mocap import decode_mocap
-from ardrone_nmpc.runs.rundir import STRING_COLUMNS, RunRecorder, read_run
+from ardrone_nmpc.runs.log_columns import STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.sim.sensors import WireSensors
 
 

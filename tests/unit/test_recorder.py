@@ -22,16 +22,8 @@ from hypothesis import strategies as st
 
 from ardrone_nmpc import __version__
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.runs.rundir import (
-    LOG_COLUMNS,
-    REQUIRED_COLUMNS,
-    STRING_COLUMNS,
-    LogError,
-    RunRecorder,
-    _fast_line,
-    format_number,
-    read_run,
-)
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import LogError, RunRecorder, _fast_line, format_number, read_run
 
 NUMERIC_COLUMNS = [c for c in LOG_COLUMNS if c not in STRING_COLUMNS]
 NOW = dt.datetime(2024, 5, 1, 12, 34, 56, tzinfo=dt.timezone.utc)

@@ -27,12 +27,11 @@ from ardrone_nmpc.core.types import (
     IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, AttitudeCommand, FlightMode, MocapPose,
     NavdataSample, TickInputs,
 )
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, REQUIRED_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, tick_row
 from ardrone_nmpc.runtime import tick as tick_module
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runtime.stages import (
     HOVER, Control, DelayPrediction, Estimation, MovingObstacles, Sent, Solution, Supervision,
-    tick_row,
 )
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action, Decision, Supervisor
