@@ -29,7 +29,6 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
-from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
            "MovingObstacles", "OffsetFree", "Sent", "Solution", "Supervision", "feedback_ages_ms",
@@ -178,8 +177,8 @@ class Solution:
     """What the controller computed in one tick (logged whether or not it is flown).
 
     ``result`` is None for the P controller, whose command is ``p_command``. ``u_flown`` is
-    the NMPC input the supervisor judges (all NaN while a divergence is injected), ``ok``
-    whether the solver may be trusted, ``status`` the ``solver_status`` column.
+    the NMPC input the supervisor judges, ``ok`` whether the solver may be trusted,
+    ``status`` the ``solver_status`` column.
     """
 
     ref_now: np.ndarray
@@ -206,17 +205,13 @@ class Control:
     limits : what the drone is configured to do (mapping and ż clipping).
     nmpc : the solver (None: the P controller flies).
     delay : the delay predictor the NMPC solves from.
-    faults : the run's fault schedule; a divergence it injects replaces the NMPC input by NaN
-        after the solve (the warm start carries on as it would).
     """
 
-    def __init__(self, cfg, limits: DroneLimits, nmpc, delay: DelayPrediction,
-                 faults: FaultSchedule | None = None) -> None:
+    def __init__(self, cfg, limits: DroneLimits, nmpc, delay: DelayPrediction) -> None:
         ctl = cfg.controller
         self.nmpc = nmpc
         self.delay = delay
         self.limits = limits
-        self.faults = faults
         g = ctl.p_gains
         self.p_gains = PGains(g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else cfg.loop.period_s
@@ -252,9 +247,6 @@ class Control:
         states = traj.state_at(times)
         horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
         result = solver.solve(t_exp_s, x_solve, horizon)
-        if self.faults is not None and self.faults.solver_diverges(t_exp_s):
-            return Solution(states[0], x_solve, result, np.full(INPUT_DIM, math.nan), False,
-                            SolverStatus.DIVERGED.value, ref_horizon=states[1:])
         ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
                            and self.accept_max_iterations)
         return Solution(states[0], x_solve, result, result.u, ok, result.status.value,

@@ -2,8 +2,12 @@
 watchdogs, the altitude cap, and the status its navdata reports (docs/protocol.md, "behaviour a
 faithful simulator should reproduce"; [?] marks that document's design choices).
 
-No sockets, threads or clock of its own: :class:`~ardrone_nmpc.sim.drone_server.DroneServer`
-calls it under its lock with the time, so it is testable datagram by datagram.
+No sockets, threads or clock of its own: both runners' simulated drone
+(:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`) owns one — the loopback
+:class:`~ardrone_nmpc.sim.drone_server.DroneServer` calls it under its lock with the wall time,
+the lockstep link (:class:`~ardrone_nmpc.sim.lockstep_drone.LockstepDrone`) with plant time —
+so it is testable datagram by datagram and every rule here holds in ``simulate`` and ``fly
+--sim`` alike.
 
 * Sequence numbers: a command runs only if ``seq == 1`` or ``seq > last``; ``last`` resets to
   0 after ``link_loss_s`` without an accepted command [?]. Ignored commands are counted
@@ -15,7 +19,8 @@ calls it under its lock with the time, so it is testable datagram by datagram.
   ground → cleared [?].
 * ``AT*PCMD`` / ``PCMD_MAG``: flag bit 0 set → the fractions go to the plant; clear → hover.
 * Altitude cap: a climbing gaz becomes 0 (minor ALT_OUT_ZONE) once z + v_z·(command delay +
-  τ_z), where the climb would stop, reaches ``control:altitude_max``.
+  τ_z), where the climb would stop, reaches ``control:altitude_max`` (checked whenever time
+  passes or a command arrives).
 * ``AT*FTRIM`` counted only when landed, ``AT*CALIB`` only in flight (no manoeuvre).
 * ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`; applied or, in another
   multiconfig session, ignored) sets the ACK bit 6;
@@ -145,9 +150,13 @@ class DroneFirmware:
         if errors:
             c.malformed_datagrams += 1
             c.malformed_commands += len(errors)
+        self.execute_datagram(commands, now)
+
+    def execute_datagram(self, commands, now: float) -> None:
+        """The decoded commands of one datagram, in order, then the held command applied."""
         ids = None   # those of an AT*CONFIG_IDS right before (the SDK sends the pair together)
         for cmd in commands:
-            c.at_commands_in += 1
+            self.counters.at_commands_in += 1
             self.execute(cmd, now, ids)
             b = cmd.body
             ids = (b.session_id, b.profile_id, b.application_id) if isinstance(b, ConfigIds) \
@@ -221,6 +230,13 @@ class DroneFirmware:
 
     # ------------------------------------------------------------------ time passing
 
+    def advance(self, dt_s: float, now: float) -> None:
+        """Time passing: the plant by ``dt_s``, then the watchdogs and the held command (the
+        altitude cap) at ``now``."""
+        self.plant.advance(dt_s)
+        self.watchdogs(now)
+        self.apply_command()
+
     def silence(self, now: float) -> float:
         """Seconds since the last accepted command (inf before the first)."""
         return math.inf if self.last_cmd_t is None else now - self.last_cmd_t
@@ -242,16 +258,16 @@ class DroneFirmware:
         """Send the effective PCMD (held command, altitude cap) to the plant when it changes."""
         flags, roll, pitch, gaz, yaw = self.pcmd
         progressive = bool(flags & PcmdFlag.PROGRESSIVE)
-        at_cap = False
         plant = self.plant
-        if plant.mode.airborne:
+        at_cap = False
+        if progressive and gaz > 0.0 and plant.mode.airborne:  # only a climb is capped
             truth, params = plant.truth, plant.params
             # where the climb stops if gaz drops to 0 now: the command delay, then the
             # first-order vertical loop (τ_z) still rises v_z·(T_d + τ_z)
             lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
             z_stop = float(truth.position_m[2]) + max(0.0, float(truth.velocity_mps[2])) * lead
             at_cap = z_stop >= self.config.altitude_max_m
-        if at_cap and progressive and gaz > 0.0:
+        if at_cap:
             gaz = 0.0
         self.alt_capped = at_cap
         cmd = (roll, pitch, gaz, yaw, True) if progressive else (0.0, 0.0, 0.0, 0.0, False)
@@ -273,6 +289,10 @@ class DroneFirmware:
             com_watchdog=self.comwdg_latched or (self.comwdg_clear == "any"
                                                  and self.silence(now) > self.comwdg_s),
             com_lost=self.link_lost, battery_low=self.plant.battery_pct < self.vbat_low_pct)
+
+    def skip_packet(self) -> None:
+        """A packet lost on the way: its sequence number is used all the same."""
+        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
 
     def packet(self, now: float) -> bytes:
         """The next navdata packet (its sequence counts up from 1 across stream restarts)."""
