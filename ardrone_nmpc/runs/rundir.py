@@ -19,7 +19,11 @@ another machine) and holds:
   ``1e-05``, ``1.7976931348623157e+308``) — so every double, −0.0 and subnormals included,
   round-trips bit for bit; NaN and ±inf are ``nan``/``inf``/``-inf``; a missing key is an empty
   cell (read back as NaN).
-* ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``.
+* ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``; ``t_s`` is
+  experiment time in every runner (negative before the experiment starts, NaN for events
+  of a flight that never started), a real-time run's wall time in ``wall_s``.
+  :func:`read_run` moves the events of older ``fly`` runs (wall time in ``t_s``) onto the
+  experiment clock.
 * ``summary.csv`` — ``axis,metric,value,unit`` rows (:class:`SummaryRow`), computed by
   :mod:`ardrone_nmpc.runs.summary`, written and read here (:func:`write_summary`,
   :func:`read_summary`).
@@ -603,7 +607,31 @@ def _read_events(path: Path, warnings: list[str]) -> list[dict[str, Any]]:
         if not isinstance(obj, dict):
             raise LogError(f"{path}:{i}: expected a JSON object, got {type(obj).__name__}")
         events.append(obj)
-    return events
+    return _on_experiment_clock(events)
+
+
+def _on_experiment_clock(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The events of a real-time run written before every runner stamped ``t_s`` with
+    experiment time (``fly`` wrote its session's wall time there, and experiment time into
+    ``t_exp_s``): ``t_s`` becomes experiment time and the old stamp ``wall_s``. The clocks'
+    offset comes from the events that carry both; without any, ``t_s`` is NaN."""
+    old = (any(e.get("kind") == "links" for e in events)
+           and not any("wall_s" in e for e in events))
+    if not old:
+        return events
+    offsets = [e["t_s"] - e["t_exp_s"] for e in events
+               if isinstance(e.get("t_s"), (int, float)) and isinstance(e.get("t_exp_s"),
+                                                                       (int, float))]
+    offset = float(np.median(offsets)) if offsets else math.nan
+    out = []
+    for e in events:
+        e = dict(e)
+        wall = e.pop("t_s", math.nan)
+        t_exp = e.pop("t_exp_s", None)
+        wall = float(wall) if isinstance(wall, (int, float)) else math.nan
+        t_s = float(t_exp) if isinstance(t_exp, (int, float)) else wall - offset
+        out.append({"t_s": t_s, **e, "wall_s": wall})
+    return out
 
 
 def read_run(run_dir: str | Path) -> RunData:

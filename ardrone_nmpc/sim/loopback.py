@@ -17,7 +17,11 @@ configuration read-back works as against the real drone.
 from __future__ import annotations
 
 import socket
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from typing import Optional
+
+from ardrone_nmpc.links.backend import OpenedDrone
 
 from ardrone_nmpc.sim.addresses import require_loopback_host
 from ardrone_nmpc.sim.drone import SimulatedDrone
@@ -26,7 +30,7 @@ from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant
 
-__all__ = ["Loopback", "start_loopback", "free_udp_port"]
+__all__ = ["Loopback", "free_udp_port", "open_loopback_drone", "start_loopback"]
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -186,3 +190,32 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
         drone.stop()
         raise
     return Loopback(plant, drone, mocap, faults, simulated)
+
+
+@contextmanager
+def open_loopback_drone(cfg, *, seed: Optional[int] = None,
+                        other_objects: tuple[str, ...] = ()) -> Iterator[OpenedDrone]:
+    """The ``sim://loopback`` backend (``fly --sim``): the experiment's simulated drone served
+    on free loopback ports, its pose streamed to a mocap link, and the link to it — an
+    :class:`~ardrone_nmpc.links.backend.OpenedDrone` like a real drone's."""
+    from ardrone_nmpc.links import drone_link
+    from ardrone_nmpc.links.flight_lock import FlightLock
+    from ardrone_nmpc.links.mocap_link import MocapLink
+
+    with ExitStack() as stack:
+        mocap = stack.enter_context(MocapLink("127.0.0.1", 0, object_name=cfg.mocap.object_name,
+                                              other_objects=other_objects))
+        loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port,
+                                                  control_port=0))
+        lock = FlightLock(loop.drone_host, loop.at_port)
+        lock.acquire()
+        stack.callback(lock.release)
+        link = stack.enter_context(drone_link.DroneLink(
+            loop.drone_host, at_port=loop.at_port, navdata_port=loop.navdata_port,
+            keepalive_interval_s=cfg.drone.keepalive_interval_s,
+            config_ids=cfg.drone.config_ids, navdata_demo=cfg.drone.navdata_demo,
+            bind_host="127.0.0.1", at_local_port=0, control_port=loop.control_port))
+        yield OpenedDrone(link, mocap, f"sim://loopback ({loop.drone_host}:{loop.at_port}/"
+                          f"{loop.navdata_port})", simulated=True,
+                          start_experiment=loop.start_experiment, take_events=loop.take_events,
+                          solver_divergence=loop.simulated.solver_divergence)

@@ -134,7 +134,7 @@ def test_fly_reads_a_motioncapture_source(tmp_path):
     libmotioncapture `mock` system (the real library, in its child process)."""
     import threading
 
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
     from ardrone_nmpc.sim.loopback import free_udp_port
     from ardrone_nmpc.sim.serve import serve
 
