@@ -17,7 +17,6 @@ from contextlib import ExitStack
 
 import pytest
 
-import ardrone_nmpc.links.drone_link as drone_link_module
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.experiments.record import record_lockstep
@@ -29,24 +28,9 @@ from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from ardrone_nmpc.sim.loopback import open_loopback_drone
 from tests.standins.sdk_drone import SdkDrone
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.usefixtures("loopback_only")]
 CAP_M = 1.5
 HOVER = (0.0, 0.0, 0.0, 0.0)
-
-
-@pytest.fixture(autouse=True)
-def loopback_only(monkeypatch, tmp_path):
-    """The link's lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
-    and the flight locks live in this test's directory."""
-    class LoopbackLink(drone_link_module.DroneLink):
-        def __init__(self, *args, **kwargs):
-            kwargs.setdefault("bind_host", "127.0.0.1")
-            kwargs["at_local_port"] = 0
-            super().__init__(*args, **kwargs)
-
-    monkeypatch.setattr(drone_link_module, "DroneLink", LoopbackLink)
-    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
-    (tmp_path / "run").mkdir()
 
 
 class Lockstep:

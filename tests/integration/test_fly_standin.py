@@ -19,29 +19,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-import ardrone_nmpc.links.drone_link as drone_link_module
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.links.flight_lock import FlightLock
 from tests.standins.sdk_drone import OUTDOOR_HELD, REF_TAKEOFF, MocapStandIn, SdkDrone
 
 ROOT = Path(__file__).parents[2]
 HOVER = str(ROOT / "configs" / "hover.yaml")
-pytestmark = pytest.mark.timeout(90)
-
-
-@pytest.fixture(autouse=True)
-def loopback_only(monkeypatch, tmp_path):
-    """The link's lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
-    and the flight locks live in this test's directory."""
-    class LoopbackLink(drone_link_module.DroneLink):
-        def __init__(self, *args, **kwargs):
-            kwargs.setdefault("bind_host", "127.0.0.1")
-            kwargs["at_local_port"] = 0
-            super().__init__(*args, **kwargs)
-
-    monkeypatch.setattr(drone_link_module, "DroneLink", LoopbackLink)
-    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
-    (tmp_path / "run").mkdir()
+pytestmark = [pytest.mark.timeout(90), pytest.mark.usefixtures("loopback_only")]
 
 
 def fly(tmp_path, drone: SdkDrone, *sets, duration_s=3.0):
