@@ -64,6 +64,7 @@ __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 #: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
 VBAT_LOW_PCT = 20.0
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
+_PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)  # a plain int: IntFlag arithmetic is slow per tick
 
 
 @dataclass
@@ -137,6 +138,7 @@ class DroneFirmware:
         self.ack = False
         self.pcmd = _HOVER_CMD
         self.applied: tuple | None = None
+        self._applied_pcmd: tuple | None = None  # the held command ``applied`` came from
         self.alt_capped = False
         self.nav_seq = 0
 
@@ -232,10 +234,36 @@ class DroneFirmware:
 
     def advance(self, dt_s: float, now: float) -> None:
         """Time passing: the plant by ``dt_s``, then the watchdogs and the held command (the
-        altitude cap) at ``now``."""
-        self.plant.advance(dt_s)
+        altitude cap) at ``now``. While a climb nears the cap, the cap is checked after every
+        integration step, as the drone's control loop does, however long ``dt_s`` (the
+        loopback server steps 5 ms, the lockstep link from one sensor event to the next)."""
+        plant = self.plant
+        h = plant.params.integration_step_s
+        if dt_s > h and self._climb_may_reach_cap(dt_s):
+            n = int(dt_s / h)
+            for _ in range(n):
+                plant.advance(h)
+                self.apply_command()
+            plant.advance(dt_s - n * h)  # the remainder (carried by the plant)
+        else:
+            plant.advance(dt_s)
         self.watchdogs(now)
         self.apply_command()
+
+    def _z_stop_m(self) -> float:
+        """Where a climb stops if gaz drops to 0 now: after the command delay, the first-order
+        vertical loop (τ_z) still rises v_z·(T_d + τ_z)."""
+        z, vz = self.plant.altitude_m_and_rate_mps
+        params = self.plant.params
+        lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
+        return float(z) + max(0.0, float(vz)) * lead
+
+    def _climb_may_reach_cap(self, dt_s: float) -> bool:
+        flags, _, _, gaz, _ = self.pcmd
+        if not (flags & _PROGRESSIVE and gaz > 0.0 and self.plant.mode.airborne):
+            return False
+        rise_m = self.plant.params.control_vz_max_mps * dt_s  # the most it climbs in dt_s
+        return self._z_stop_m() + rise_m >= self.config.altitude_max_m
 
     def silence(self, now: float) -> float:
         """Seconds since the last accepted command (inf before the first)."""
@@ -256,17 +284,17 @@ class DroneFirmware:
 
     def apply_command(self) -> None:
         """Send the effective PCMD (held command, altitude cap) to the plant when it changes."""
-        flags, roll, pitch, gaz, yaw = self.pcmd
-        progressive = bool(flags & PcmdFlag.PROGRESSIVE)
+        pcmd = self.pcmd
+        flags, roll, pitch, gaz, yaw = pcmd
+        progressive = bool(flags & _PROGRESSIVE)
+        climbing = progressive and gaz > 0.0
+        if pcmd is self._applied_pcmd and not climbing:  # applied, and no cap to watch
+            return
+        self._applied_pcmd = pcmd
         plant = self.plant
         at_cap = False
-        if progressive and gaz > 0.0 and plant.mode.airborne:  # only a climb is capped
-            truth, params = plant.truth, plant.params
-            # where the climb stops if gaz drops to 0 now: the command delay, then the
-            # first-order vertical loop (τ_z) still rises v_z·(T_d + τ_z)
-            lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
-            z_stop = float(truth.position_m[2]) + max(0.0, float(truth.velocity_mps[2])) * lead
-            at_cap = z_stop >= self.config.altitude_max_m
+        if climbing and plant.mode.airborne:  # only a climb is capped
+            at_cap = self._z_stop_m() >= self.config.altitude_max_m
         if at_cap:
             gaz = 0.0
         self.alt_capped = at_cap
@@ -282,7 +310,7 @@ class DroneFirmware:
         flags, roll, pitch, gaz, yaw = self.pcmd
         return DroneStatus(
             self.plant.mode.value,
-            moving=bool(flags & PcmdFlag.PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
+            moving=bool(flags & _PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
             alt_out_zone=self.alt_capped, lost_com=self.lost_com_hover,
             user_emergency=self.user_emergency, start_button=self.ref_start, ack=self.ack,
             bootstrap=self.config.bootstrap, demo=self.config.demo,

@@ -16,11 +16,12 @@ float32s); what the firmware does with them is the same.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from ardrone_nmpc.core.types import FlightMode, PlantTruth, TickInputs
 from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
-from ardrone_nmpc.protocol.at import AtBody, AtCommand, Config, ConfigIds, Pcmd, PcmdFlag, Ref
+from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
@@ -30,14 +31,27 @@ _HOVER = Pcmd.hover()
 _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
+_PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
+_set = object.__setattr__
+
+
+class _Numbered(NamedTuple):
+    """A command as the firmware takes it from a decoded datagram: its number and its body
+    (built every tick, so without :class:`AtCommand`'s wire checks)."""
+
+    seq: int
+    body: AtBody
+
+
 def _exact_pcmd(roll_frac: float, pitch_frac: float, gaz_frac: float, yaw_frac: float) -> Pcmd:
     """A progressive PCMD holding the tick's doubles: :class:`Pcmd`'s constructor rounds to the
     wire's float32, and no wire is crossed here."""
     body = object.__new__(Pcmd)
-    values = (int(PcmdFlag.PROGRESSIVE), float(roll_frac), float(pitch_frac), float(gaz_frac),
-              float(yaw_frac))
-    for name, value in zip(("flags", "roll_frac", "pitch_frac", "gaz_frac", "yaw_frac"), values):
-        object.__setattr__(body, name, value)
+    _set(body, "flags", _PROGRESSIVE)
+    _set(body, "roll_frac", float(roll_frac))
+    _set(body, "pitch_frac", float(pitch_frac))
+    _set(body, "gaz_frac", float(gaz_frac))
+    _set(body, "yaw_frac", float(yaw_frac))
     return body
 
 
@@ -152,10 +166,9 @@ class LockstepDrone(ConfigHandshake):
         self._send([ref, _HOVER])
 
     def _send(self, bodies: list[AtBody]) -> bool:
-        commands = []
-        for body in bodies:
-            self._seq += 1
-            commands.append(AtCommand(self._seq, body))
+        seq = self._seq
+        commands = [_Numbered(seq + i, body) for i, body in enumerate(bodies, start=1)]
+        self._seq = seq + len(bodies)
         return self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s)
 
     # ------------------------------------------------------------------ configuration port

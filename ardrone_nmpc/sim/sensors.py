@@ -18,7 +18,9 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   their golden trace).
 
 Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
-bits and ctrl_state major the drone reported — which the link's take-off guard watches.
+bits and ctrl_state major the drone reported — which the link's take-off guard watches (on
+the direct path only when the flight mode changes: between changes the guard would see the
+same flight bits and a flying major again).
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ class LockstepSensors:
         self.target_cfg = cfg.sim.target
         self.nav = None
         self.nav_rx_t_s = -math.inf
+        self._nav_mode = None
         self._next_mocap_k = 0
         self._next_nav_k = 0
         # direct: the newest samples
@@ -137,9 +140,11 @@ class LockstepSensors:
             else:
                 self.nav = self.plant.navdata()
                 self.nav_rx_t_s = t_event
-                status = self.firmware.status(t_event)
-                self.on_navdata(status.state_bits(),
-                                status.ctrl_state(self.firmware.ctrl_codes) >> 16)
+                if self.nav.mode is not self._nav_mode:  # what the guard sees changes with it
+                    self._nav_mode = self.nav.mode
+                    status = self.firmware.status(t_event)
+                    self.on_navdata(status.state_bits(),
+                                    status.ctrl_state(self.firmware.ctrl_codes) >> 16)
         self._run_to(t_s)
 
     # ------------------------------------------------------------------ through the wire
@@ -182,7 +187,7 @@ class LockstepSensors:
         items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
                             self.target_cfg, t_s)
         data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
-        arrival = t_s + self.mocap_latency_s + fault.extra_latency_s
+        arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
         for datagram in faults.mocap_datagrams(t_exp, data):
             self._push(arrival, _MOCAP, datagram)
 

@@ -15,10 +15,12 @@ from __future__ import annotations
 import time
 from contextlib import ExitStack
 
+import numpy as np
 import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.experiments.flight import run_flight
 from ardrone_nmpc.experiments.record import record_lockstep
 from ardrone_nmpc.links.backend import open_udp_drone
 from ardrone_nmpc.links.drone_config import verify_config
@@ -199,12 +201,16 @@ def test_a_controller_gone_silent_leaves_the_drone_hovering(backend):
     assert abs(mean_vz_mps(2.0)) < 0.08
 
 
+@pytest.mark.timeout(120)
 def test_simulate_and_fly_sim_fly_the_same_altitude_cap(tmp_path):
-    """The thesis' z step to 2.5 m with ``drone.altitude_max_m`` 1.5: the lockstep runner stops
-    where the loopback drone does (its firmware's cap), not at the reference."""
+    """The thesis' z step to 2.5 m with ``drone.altitude_max_m`` 1.5: ``simulate`` (lockstep)
+    stops where ``fly --sim`` (the same drone over UDP) does — at the firmware's cap, not at
+    the reference."""
     cfg = load_config("configs/step_z.yaml", [
         "duration_s=6", "sim.settle_s=2", f"drone.altitude_max_m={CAP_M}",
         "reference.target_m=[0,0,2.5]"])
-    run = read_run(record_lockstep(cfg, tmp_path).path)
-    z = run.columns["z_true_m"]
-    assert CAP_M - 0.1 <= z.max() <= CAP_M + 0.1, z.max()
+    lockstep = read_run(record_lockstep(cfg, tmp_path / "simulate").path)
+    loopback = read_run(run_flight(cfg=cfg, sim=True, log_dir=tmp_path / "fly", seed=None))
+    tops = [float(np.nanmax(run.columns["z_m"])) for run in (lockstep, loopback)]
+    assert CAP_M - 0.1 <= min(tops) and max(tops) <= CAP_M + 0.1, tops
+    assert abs(tops[0] - tops[1]) < 0.03, tops
