@@ -9,11 +9,12 @@ after a real divergence, while the log keeps what was solved.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Callable
 
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 
-__all__ = ["DivergingSolver"]
+__all__ = ["DivergingSolver", "diverging_wrapper"]
 
 
 class DivergingSolver:
@@ -33,3 +34,9 @@ class DivergingSolver:
 
     def __getattr__(self, name: str):
         return getattr(self._inner, name)
+
+
+def diverging_wrapper(diverges: Callable[[float], bool] | None) -> Callable | None:
+    """The tick's ``wrap_solver`` for a simulation whose solver diverges when ``diverges(t)``
+    (None: nothing to wrap)."""
+    return None if diverges is None else partial(DivergingSolver, diverges=diverges)

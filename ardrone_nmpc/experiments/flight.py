@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
+from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.experiments.record import record, record_lockstep
 from ardrone_nmpc.links.backend import DroneAddress, open_udp_drone, parse_drone_address
@@ -113,8 +113,7 @@ def run_flight(*, cfg, sim: bool = False, drone_host: str | None = None,
     with landing_signals(), opener(cfg, address, seed=seed,
                                    ports=(at_port, navdata_port, mocap_port),
                                    other_objects=(follow,) if follow else ()) as opened:
-        divergence = opened.solver_divergence
-        wrap_solver = (None if divergence is None else partial(_diverging, diverges=divergence))
+        wrap_solver = diverging_wrapper(opened.solver_divergence)
 
         def flight(recorder) -> None:
             result.path = recorder.path
@@ -125,12 +124,6 @@ def run_flight(*, cfg, sim: bool = False, drone_host: str | None = None,
 
         return record(cfg, log_dir, seed=seed, fly=flight,
                       summarise_failed=_write_summary_quietly).path
-
-
-def _diverging(nmpc, *, diverges):
-    from ardrone_nmpc.control.diverging import DivergingSolver
-
-    return DivergingSolver(nmpc, diverges)
 
 
 def _write_summary_quietly(path: Path) -> None:

@@ -35,6 +35,7 @@ from typing import Callable
 
 import numpy as np
 
+from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import IX_PSI, MocapPose
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
@@ -49,6 +50,7 @@ from ardrone_nmpc.runtime.schedule import phase, write_events
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
+from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -248,7 +250,9 @@ def rerun(*, run: RunData, cfg, recorder=None,
     if not inputs:
         raise ReplayError(f"{run.path}: log.csv holds no ticks")
     trajectory = experiment_trajectory(cfg)
-    tick = Tick(cfg, trajectory)
+    # the run's injected solver divergence, as the simulating runner that flew it wrapped it
+    tick = Tick(cfg, trajectory,
+                wrap_solver=diverging_wrapper(FaultSchedule(cfg.faults).solver_divergence))
     logged_mode = run.columns["mode"]
     rows: list[dict] = []
     for k, inp in enumerate(inputs):

@@ -24,11 +24,10 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Callable
 
-from ardrone_nmpc.control.diverging import DivergingSolver
+from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
@@ -79,12 +78,6 @@ def _configure(cfg, drone: LockstepDrone, events: list) -> None:
         raise TakeoffRefused(str(err)) from None
 
 
-def _solver_wrapper(drone: LockstepDrone):
-    """The drone's injected solver divergence as the tick's solver wrapper (None: none)."""
-    diverges = drone.sim.solver_divergence
-    return None if diverges is None else partial(DivergingSolver, diverges=diverges)
-
-
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
                  progress: Callable[[float], None] | None = None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
@@ -100,7 +93,8 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed)
-    tick = Tick(cfg, experiment_trajectory(cfg), wrap_solver=_solver_wrapper(drone))
+    tick = Tick(cfg, experiment_trajectory(cfg),
+                wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
     period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
 

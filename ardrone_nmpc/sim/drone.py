@@ -86,9 +86,7 @@ class SimulatedDrone:
         """When the ground station's solver is made to diverge — ``faults.solver_diverge``, a
         predicate of experiment time that a simulating runner wraps its solver with — or None
         if it never is."""
-        if self.faults is None or self.faults.schedule.cfg.solver_diverge is None:
-            return None
-        return self.faults.schedule.solver_diverges
+        return None if self.faults is None else self.faults.schedule.solver_divergence
 
     # ------------------------------------------------------------------ time passing
     def advance(self, dt_s: float, now_s: float) -> None:

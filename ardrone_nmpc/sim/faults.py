@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import struct
+from typing import Callable
 
 import numpy as np
 
@@ -168,6 +169,12 @@ class FaultSchedule:
         """The NMPC solution of the tick at ``t_s`` is replaced by a diverged, non-finite one
         (the tick's control stage asks, :class:`~ardrone_nmpc.runtime.stages.Control`)."""
         return _within(self.cfg.solver_diverge, t_s)
+
+    @property
+    def solver_divergence(self) -> Callable[[float], bool] | None:
+        """:meth:`solver_diverges`, or None when no divergence is configured (nothing for a
+        simulating runner to wrap its solver with)."""
+        return None if self.cfg.solver_diverge is None else self.solver_diverges
 
     def wind_mps(self, t_s: float) -> np.ndarray:
         """Air velocity at ``t_s``: the constant wind plus a gust in its window (m/s)."""
