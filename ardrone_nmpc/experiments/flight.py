@@ -100,15 +100,15 @@ def run_flight(*, cfg, sim: bool = False, drone_host: str | None = None,
     seed = cfg.sim.seed if seed is None else seed
     schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
     address = _address(cfg, drone_host, sim)
+    opener = DRONE_BACKENDS.get(str(address)) or DRONE_BACKENDS.get(address.scheme)
+    if opener is None and str(address) != LOCKSTEP:
+        raise UserError(f"--drone {address}: no such drone backend (known: udp://HOST, "
+                        f"{', '.join(SIMULATED)})")
     _refuse_faults_on_a_real_drone(cfg, address)
     if str(address) == LOCKSTEP:
         recording = record_lockstep(cfg, log_dir, seed=seed, live=sink)
         result.path, result.landed = recording.path, recording.result.final_mode.value == "landed"
         return recording.path
-    opener = DRONE_BACKENDS.get(str(address)) or DRONE_BACKENDS.get(address.scheme)
-    if opener is None:
-        raise UserError(f"--drone {address}: no such drone backend (known: udp://HOST, "
-                        f"{', '.join(SIMULATED)})")
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     with landing_signals(), opener(cfg, address, seed=seed,
                                    ports=(at_port, navdata_port, mocap_port),

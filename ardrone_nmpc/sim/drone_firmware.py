@@ -139,6 +139,8 @@ class DroneFirmware:
         self.pcmd = _HOVER_CMD
         self.applied: tuple | None = None
         self._applied_pcmd: tuple | None = None  # the held command ``applied`` came from
+        self._lead_params = None
+        self._lead = 0.0
         self.alt_capped = False
         self.nav_seq = 0
 
@@ -239,31 +241,44 @@ class DroneFirmware:
         loopback server steps 5 ms, the lockstep link from one sensor event to the next)."""
         plant = self.plant
         h = plant.params.integration_step_s
-        if dt_s > h and self._climb_may_reach_cap(dt_s):
-            n = int(dt_s / h)
-            for _ in range(n):
-                plant.advance(h)
-                self.apply_command()
-            plant.advance(dt_s - n * h)  # the remainder (carried by the plant)
-        else:
+        if not self._climb_may_reach_cap(dt_s):
             plant.advance(dt_s)
+            self.watchdogs(now)
+            if self.pcmd is not self._applied_pcmd or self.alt_capped:  # else nothing to do
+                self.apply_command()
+            return
+        n = int(dt_s / h)
+        for _ in range(n):
+            plant.advance(h)
+            self.apply_command()
+        plant.advance(dt_s - n * h)  # the remainder (carried by the plant)
         self.watchdogs(now)
         self.apply_command()
 
-    def _z_stop_m(self) -> float:
-        """Where a climb stops if gaz drops to 0 now: after the command delay, the first-order
-        vertical loop (τ_z) still rises v_z·(T_d + τ_z)."""
-        z, vz = self.plant.altitude_m_and_rate_mps
+    def _lead_s(self) -> float:
+        """After the command delay, the first-order vertical loop (τ_z) still rises
+        v_z·(T_d + τ_z): the lead of :meth:`_z_stop_m` (cached per plant params)."""
         params = self.plant.params
-        lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
-        return float(z) + max(0.0, float(vz)) * lead
+        if params is not self._lead_params:
+            self._lead_params = params
+            self._lead = (getattr(params, "command_delay_s", 0.0)
+                          + getattr(params, "tau_vz_s", 0.0))
+        return self._lead
+
+    def _z_stop_m(self) -> float:
+        """Where a climb stops if gaz drops to 0 now."""
+        z, vz = self.plant.altitude_m_and_rate_mps
+        return float(z) + max(0.0, float(vz)) * self._lead_s()
 
     def _climb_may_reach_cap(self, dt_s: float) -> bool:
+        """A climb is held and within reach of the cap in ``dt_s`` (a bound: at most
+        ``control_vz_max`` for ``dt_s``, its stop ``control_vz_max``·lead above)."""
         flags, _, _, gaz, _ = self.pcmd
         if not (flags & _PROGRESSIVE and gaz > 0.0 and self.plant.mode.airborne):
             return False
-        rise_m = self.plant.params.control_vz_max_mps * dt_s  # the most it climbs in dt_s
-        return self._z_stop_m() + rise_m >= self.config.altitude_max_m
+        z, _ = self.plant.altitude_m_and_rate_mps
+        reach_m = self.plant.params.control_vz_max_mps * (dt_s + self._lead_s())
+        return z + reach_m >= self.config.altitude_max_m
 
     def silence(self, now: float) -> float:
         """Seconds since the last accepted command (inf before the first)."""

@@ -156,7 +156,13 @@ class LockstepDrone(ConfigHandshake):
                     yaw_frac: float, *, progressive: bool = True) -> None:
         """REF (if held) and PCMD in one datagram (an injected AT loss may drop it)."""
         pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
-        self._send([self._ref, pcmd] if self._ref is not None else [pcmd])
+        ref, seq = self._ref, self._seq  # every tick: spelled out
+        if ref is None:
+            commands = (_Numbered(seq + 1, pcmd),)
+        else:
+            commands = (_Numbered(seq + 1, ref), _Numbered(seq + 2, pcmd))
+        self._seq = seq + len(commands)
+        self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s)
 
     def hover(self) -> None:
         self.set_command(0.0, 0.0, 0.0, 0.0, progressive=False)
