@@ -192,7 +192,7 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
         t_plant = t_first + k * period
         drone.advance_to(t_plant, t_plant - t_start)
         _write_drone_events(write_event, drone)
-        drone.hover()  # REF land, held as the link's keepalive holds it
+        drone.land()  # REF land, held as the link's keepalive holds it
         if logged:
             out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
             out.row["mode"] = "landing"

@@ -240,13 +240,14 @@ class DroneFirmware:
         integration step, as the drone's control loop does, however long ``dt_s`` (the
         loopback server steps 5 ms, the lockstep link from one sensor event to the next)."""
         plant = self.plant
-        h = plant.params.integration_step_s
-        if not self._climb_may_reach_cap(dt_s):
+        flags, _, _, gaz, _ = self.pcmd
+        if not (flags & _PROGRESSIVE and gaz > 0.0) or not self._climb_may_reach_cap(dt_s):
             plant.advance(dt_s)
             self.watchdogs(now)
             if self.pcmd is not self._applied_pcmd or self.alt_capped:  # else nothing to do
                 self.apply_command()
             return
+        h = plant.params.integration_step_s
         n = int(dt_s / h)
         for _ in range(n):
             plant.advance(h)

@@ -74,7 +74,8 @@ class LockstepDrone(ConfigHandshake):
         self.config_ids = cfg.drone.config_ids
         self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata)
         self._seq = 0
-        self._ref: Ref | None = None
+        self._ref: Ref | None = None        # the REF held
+        self._ref_unsent: Ref | None = None  # … not yet received by the drone
         self._guard = TakeoffGuard()
         self.self_landing: str | None = None
         self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
@@ -154,22 +155,28 @@ class LockstepDrone(ConfigHandshake):
 
     def set_command(self, roll_frac: float, pitch_frac: float, gaz_frac: float,
                     yaw_frac: float, *, progressive: bool = True) -> None:
-        """REF (if held) and PCMD in one datagram (an injected AT loss may drop it)."""
+        """PCMD — with the REF held until one datagram carrying it arrived: the firmware acts
+        on REF's level and edges, which a repeat does not change (the UDP link repeats it
+        against loss; here only an injected loss drops a datagram)."""
         pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
-        ref, seq = self._ref, self._seq  # every tick: spelled out
+        ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
         if ref is None:
             commands = (_Numbered(seq + 1, pcmd),)
         else:
             commands = (_Numbered(seq + 1, ref), _Numbered(seq + 2, pcmd))
         self._seq = seq + len(commands)
-        self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s)
+        if self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s):
+            self._ref_unsent = None
 
     def hover(self) -> None:
         self.set_command(0.0, 0.0, 0.0, 0.0, progressive=False)
 
     def _hold(self, ref: Ref) -> None:
         self._ref = ref
-        self._send([ref, _HOVER])
+        if self._send([ref, _HOVER]):
+            self._ref_unsent = None
+        else:  # lost (an injected AT loss): it goes with the next command
+            self._ref_unsent = ref
 
     def _send(self, bodies: list[AtBody]) -> bool:
         seq = self._seq
