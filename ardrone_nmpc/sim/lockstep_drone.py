@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from ardrone_nmpc.core.types import FlightMode, PlantTruth, TickInputs
+from ardrone_nmpc.core.types import PlantTruth, TickInputs
 from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
@@ -198,7 +198,3 @@ class LockstepDrone(ConfigHandshake):
         if mode != "serve":
             raise LinkError(f"fault control_port_drop: {mode}, no configuration dump")
         return parse_config_text(self.sim.firmware.config.text())
-
-    @property
-    def landed(self) -> bool:
-        return self.sim.plant.mode is FlightMode.LANDED
