@@ -192,7 +192,7 @@ def test_fly_records_an_mcap_file_as_it_flies(tmp_path):
     a /tf transform per pose, /config once and each whole path once — not the live view's
     re-sent paths."""
     from ardrone_nmpc.experiments.export import read_mcap
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
 
     cfg = load_config("configs/hover.yaml", ["duration_s=2", "sim.settle_s=0.5"])
     recording = tmp_path / "flight.mcap"
