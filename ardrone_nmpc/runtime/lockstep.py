@@ -179,8 +179,12 @@ def truth_columns(plant: AirframePlant) -> dict:
 
 
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
-                 progress: Callable[[float], None] | None = None) -> SimResult:
+                 progress: Callable[[float], None] | None = None, plant=None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
+
+    ``plant`` flies another airframe than the one ``sim.plant`` configures (an object with
+    :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface, landed at time 0: the tests'
+    emulators); ``sim.*`` then sets only the sensor rates.
 
     ``progress(fraction)`` is called every tick with the fraction of the run done. The
     supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
@@ -192,7 +196,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     """
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
-    plant = make_plant(cfg.sim, cfg.drone, seed=seed)
+    plant = make_plant(cfg.sim, cfg.drone, seed=seed) if plant is None else plant
     faults = FaultSchedule(cfg.faults, seed)
     tick = Tick(cfg, experiment_trajectory(cfg))
     sensors = WireSensors(cfg, plant, faults) if faults.touches_sensors else _Sensors(cfg, plant)

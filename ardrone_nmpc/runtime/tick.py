@@ -19,7 +19,7 @@ from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
-    OffsetFree, Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world,
+    OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world,
     tick_row,
 )
 from ardrone_nmpc.safety import Action, Supervisor
@@ -87,10 +87,19 @@ class Tick:
         self.supervisor = Supervisor(cfg.safety)
         self.follow = trajectory if isinstance(trajectory, LiveTarget) else None
         self.estimation = Estimation(cfg.estimator)
-        self.delay = DelayPrediction(ctl.delay_compensation_s, self.period_s)
+        adapt = ctl.adaptation
+        auto_delay = ctl.delay_compensation_s == "auto"
+        self.delay = DelayPrediction(adapt.delay_prior_s if auto_delay
+                                     else ctl.delay_compensation_s, self.period_s,
+                                     max_delay_s=adapt.delay_max_s if auto_delay else 0.0)
         # the one home of solver-divergence injection: the schedule's window (sim/faults.py)
         self.control = Control(cfg, self.limits, nmpc, self.delay, FaultSchedule(cfg.faults))
-        self.supervision = Supervision(self.supervisor, self.limits)
+        self.supervision = Supervision(
+            self.supervisor, self.limits,
+            adapt.gain_prior if ctl.attitude_gain == "auto" else ctl.attitude_gain)
+        # the flight's own delay and gain, for what is 'auto' (docs/solver-notes.md §10)
+        self.response = (ResponseEstimation(ctl, self.limits, self.delay, self.supervision)
+                         if auto_delay or ctl.attitude_gain == "auto" else None)
         self.offset = (OffsetFree(ctl.offset_free, self.period_s)
                        if nmpc is not None and ctl.offset_free.enabled else None)
         moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object]
@@ -130,6 +139,7 @@ class Tick:
         sent = self.supervision.command(
             decision, cmd, solution.zacc_mps2 if solution is not None else math.nan)
         self.delay.push(sent.u)
+        adapted = self.response.update(inputs, sent) if self.response is not None else []
         if self.offset is not None:  # integrates after the verdict: frozen unless flown
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
@@ -137,4 +147,4 @@ class Tick:
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action,
-                          sup.take_events())
+                          sup.take_events() + adapted)
