@@ -141,8 +141,9 @@ class OffsetFreeConfig(Section):
 class AdaptationConfig(Section):
     """How the controller uses the flight's own measurement of the drone's command delay and
     tilt per unit command (``delay_compensation_s: auto``, ``attitude_gain: auto``;
-    docs/solver-notes.md §10). The estimate is refitted every ``refit_s`` over the last
-    ``window_s`` of PCMD and navdata; it is used once confident (delay σ ≤ 20 ms, gain σ ≤
+    docs/solver-notes.md §10). Every navdata sample updates the estimate (the last
+    ``window_s`` of PCMD and navdata weigh most); every ``refit_s`` it is read, and used once
+    confident (delay σ ≤ 20 ms, gain σ ≤
     10 %, R² ≥ 0.6), clipped to the bounds."""
 
     delay_prior_s: NonNegative = Field(
@@ -153,12 +154,16 @@ class AdaptationConfig(Section):
     gain_prior: Positive = Field(
         1.0, le=5.0, description="Tilt per unit command relative to drone.euler_angle_max_rad "
         "assumed until the estimate is confident (attitude_gain auto).")
-    gain_min: Positive = Field(0.5, le=5.0, description="Smallest gain auto uses.")
+    gain_min: Positive = Field(
+        0.6, le=5.0, description="Smallest gain auto uses; at most planned_tilt_frac, so "
+        "that the largest tilt the NMPC plans, divided by it, is still a PCMD within ±1.")
     gain_max: Positive = Field(2.5, le=5.0, description="Largest gain auto uses.")
     window_s: Positive = Field(
-        30.0, ge=5.0, le=600.0, description="Seconds of PCMD and navdata each fit looks at.")
+        30.0, ge=5.0, le=600.0, description="Memory of the estimate (s): a sample's weight "
+        "is exp(−age / window_s).")
     refit_s: Positive = Field(
-        2.0, ge=0.2, le=60.0, description="Seconds between fits (each costs a few ms).")
+        1.0, ge=0.2, le=60.0, description="Seconds between readings of the estimate (each "
+        "one an event, and auto's chance to change what it uses).")
 
     _delay_bounds = require_increasing("delay_min_s", "delay_max_s")
     _gain_bounds = require_increasing("gain_min", "gain_max")
@@ -175,10 +180,13 @@ class ControllerConfig(Section):
                              description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
         defaults.Q_STATE,
-        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
+        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ]; the thesis' (§4.4) "
+        "are [12, 2, 7, 2, 5, 10, 13], x and y detuned here for robustness "
+        "(docs/solver-notes.md §10).")
     r: PositiveVec4 = Field(
         defaults.R_INPUT,
-        description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
+        description="Input weights diag r, order [z̈, φ, θ, ψ̇]; the thesis' 'Case 2' is "
+        "[4, 12, 12, 24], roll and pitch detuned here (docs/solver-notes.md §10).")
     q_terminal: NonNegativeVec7 = Field(
         defaults.Q_TERMINAL,
         description="Terminal state weights, order as q (the thesis has none).")
@@ -195,18 +203,24 @@ class ControllerConfig(Section):
         "thesis' integration (end of §4.4), which assumes a new vertical speed within a tick "
         "and overshoots altitude steps by 6–7 % in simulation (2.3 % with 0.5).")
     delay_compensation_s: auto_or_number(low=0.0, high=2.0) = Field(  # type: ignore[valid-type]
-        0.26, description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
+        "auto", description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
         "is rolled forward through the commands already sent and the OCP solved for the moment "
         "the new command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); "
         "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay. "
         "'auto': adaptation.delay_prior_s until the flight's own estimate of the delay is "
         "confident, then that estimate (bounded; an event when it changes).")
     attitude_gain: auto_or_number(low=0.0, high=5.0, low_open=True) = Field(  # type: ignore[valid-type]
-        1.0, description="The drone's tilt per unit PCMD roll/pitch relative to "
+        "auto", description="The drone's tilt per unit PCMD roll/pitch relative to "
         "drone.euler_angle_max_rad, which the command mapping divides by (1: the firmware's "
         "nominal gain; real drones measure 0.6 … 2). 'auto': adaptation.gain_prior until the "
         "flight's own estimate is confident, then that estimate (bounded; an event when it "
         "changes).")
+    planned_tilt_frac: float = Field(
+        0.55, gt=0.0, le=1.0, description="Largest roll/pitch the NMPC plans, as a fraction of "
+        "drone.euler_angle_max_rad (0 … 1]. Below 1 it keeps a margin: a drone that tilts less "
+        "per unit command than nominally still reaches the plan (attitude_gain auto divides "
+        "its gain out, down to adaptation.gain_min), one that tilts more stays under "
+        "safety.max_tilt_rad before its gain is measured.")
     adaptation: AdaptationConfig = Field(
         default_factory=AdaptationConfig, description="The priors and bounds of 'auto' "
         "delay_compensation_s and attitude_gain.")

@@ -60,6 +60,7 @@ CoordinateVec3 = vector(Coordinate, 3)
 Span = Annotated[float, Field(ge=MIN_SPAN_S, le=MAX_SPAN_S, allow_inf_nan=False)]
 NonNegativeSpan = Annotated[float, Field(ge=0, le=MAX_SPAN_S, allow_inf_nan=False)]
 PathSizeVec2 = vector(PathSize, 2)
+PathSizeVec3 = vector(PathSize, 3)
 PathSizeVec4 = vector(PathSize, 4)
 NonNegativeVec4 = vector(NonNegative, 4)
 NonNegativeVec7 = vector(NonNegative, 7)

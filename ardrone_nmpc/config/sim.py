@@ -37,14 +37,22 @@ AttitudeGain = Annotated[vector(Annotated[float, Field(ge=0.05, le=5.0, allow_in
                          BeforeValidator(_both_axes)]
 
 
+def is_profile_file(profile: str) -> bool:
+    """A ``sim.plant.profile`` that names a file rather than a built-in profile."""
+    return profile.lower().endswith((".yaml", ".yml"))
+
+
 class PlantConfig(Section):
     """The simulated AR.Drone closed loop (docs/plant.md, docs/plant-profiles.md)."""
 
-    profile: Literal["ardrone", "thesis_kit", "ardrone_lab"] = Field(
-        "ardrone", description="Plant backend and its defaults: 'ardrone' (tum_ardrone dynamics, "
-        "firmware limits, the thesis' 0.26 s delay), 'thesis_kit' (the ARDrone Simulink "
-        "Development Kit's linear identified channels; tau_*/drag_per_s unused), 'ardrone_lab' "
-        "(ardrone with a 0.12 s delay and calibrated turbulence). docs/plant-profiles.md.")
+    profile: str = Field(
+        "ardrone", min_length=1, max_length=4096, description="Plant backend and its defaults: "
+        "'ardrone' (tum_ardrone dynamics, firmware limits, the thesis' 0.26 s delay), "
+        "'thesis_kit' (the ARDrone Simulink Development Kit's linear identified channels; "
+        "tau_*/drag_per_s unused), 'ardrone_lab' (ardrone with a 0.12 s delay and calibrated "
+        "turbulence), or a profile file (*.yaml, e.g. written by `ardrone-nmpc identify`: the "
+        "ardrone backend with the file's values; relative paths in a config file are relative "
+        "to that file's directory). docs/plant-profiles.md.")
     # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
     command_delay_s: NonNegative = Field(
         0.26, le=2.0, description="Command transport delay T_d (s), ≤ 2.")
@@ -97,6 +105,14 @@ class PlantConfig(Section):
     yaw_gain: Positive = Field(
         1.0, ge=0.05, le=5.0, description="Yaw rate per unit PCMD yaw, relative to "
         "drone.control_yaw_radps; 0.05 … 5.")
+
+    @field_validator("profile")
+    @classmethod
+    def _known_profile(cls, value: str) -> str:
+        if value not in PLANT_PROFILE_DEFAULTS and not is_profile_file(value):
+            raise invalid(f"expected one of {', '.join(PLANT_PROFILE_DEFAULTS)} or a profile "
+                          f"file (*.yaml), got {value!r}")
+        return value
 
     @model_validator(mode="before")
     @classmethod

@@ -3,39 +3,45 @@
 A real AR.Drone's command delay (radio, firmware) and its tilt per unit PCMD are not known
 before it flies, and they change with the hull, the battery and the radio. Every flight
 measures both from what it sent (PCMD roll/pitch fractions, at their send times) and what the
-drone reported (navdata roll/pitch, at their receipt times): the model is
+drone reported (navdata roll/pitch, at their receipt times). The model, per axis (roll,
+pitch; the drone's signs, in which navdata and PCMD have the same sign)::
 
-    tilt(t) = k · E · [1/(τ s + 1)] c(t − d) + b        per axis (roll, pitch)
+    tilt(t) = k · E · [1/(τ s + 1)] c(t − d) + b
 
-(E: ``euler_angle_max``; the drone's signs, in which navdata roll/pitch and PCMD roll/pitch
-have the same sign), a pure delay d and a lag τ shared by both axes, a gain k and a trim
-offset b per axis. The fit is a grid search over d (5 ms steps) and τ with the gains and
-offsets in closed form; d is refined by a parabola through the residual around its minimum,
-whose curvature gives its uncertainty (docs/identification.md §3 derives it). The residual's
-lag-1 correlation inflates every uncertainty (a coloured residual holds less information than
-as many independent samples).
+with E the configured ``euler_angle_max``, a pure delay d and a lag τ shared by both axes, a
+gain k and a trim offset b per axis.
 
-:func:`fit_attitude_response` fits arrays (a log, ``identify``, the summary);
-:class:`AttitudeResponseEstimator` keeps a window of one flight's samples and refits now and
-then (the tick's ``DelayEstimation`` stage).
+The fit runs as the samples arrive, at a fixed cost per navdata sample: on a grid of delays
+(10 ms apart, 0–0.6 s) and lags, the lag's output is known exactly at any time from its value
+at the last command before it (the commands are held between sends), so each sample adds its
+model value at every grid point to running sums (Σx, Σx², Σxy per axis, with an exponential
+forgetting over ``window_s``), from which the gains and the residual of every grid point
+follow in closed form. The best grid point is the estimate; a parabola through the residual
+along the delay refines d and its curvature gives d's uncertainty, the sums give the gains'.
+Every σ is inflated by the residual's lag-1 correlation (a coloured residual holds less
+information than as many independent samples). docs/identification.md §3 derives it.
+
+:class:`AttitudeResponseEstimator` is the streaming fit (the tick's ``ResponseEstimation``
+stage feeds it); :func:`fit_attitude_response` feeds it whole arrays (a log: the summary,
+``identify``).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 
-__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "DELAY_GRID_S", "LAG_GRID_S",
-           "fit_attitude_response"]
+__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_STD_S",
+           "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE", "fit_attitude_response"]
 
-STEP_S = 0.005
-DELAY_GRID_S = (0.0, 0.6)                     # searched delays (s)
-LAG_GRID_S = (0.02, 0.04, 0.06, 0.08, 0.1, 0.13, 0.16, 0.2, 0.25, 0.3)
-#: Confident: the delay known to this (s, one σ) and the gain to this fraction of itself.
+DELAY_STEP_S = 0.01
+MAX_DELAY_S = 0.6
+LAG_GRID_S = (0.03, 0.06, 0.1, 0.15, 0.2, 0.3)
+#: Samples between refreshes of the best grid point whose residual is tracked.
+REFRESH_SAMPLES = 15
+#: Confident: the delay known to this (s, one σ) and the gain to this fraction of itself ...
 CONFIDENT_DELAY_STD_S = 0.02
 CONFIDENT_GAIN_REL_STD = 0.1
 #: ... with the fit explaining at least this share of the attitude's variance.
@@ -45,8 +51,8 @@ CONFIDENT_R2 = 0.6
 @dataclass(frozen=True)
 class AttitudeEstimate:
     """One fit: the delay (s) and its σ, the gain per axis [roll, pitch] relative to E and
-    their σ, the lag τ (s), the share of the attitude's variance it explains (R²), the
-    navdata samples used, and whether it is confident (module constants)."""
+    their σ, the lag τ (s), the share of the attitude's variance it explains (R²) and the
+    navdata samples behind it (their effective number, with the forgetting)."""
 
     delay_s: float
     delay_std_s: float
@@ -54,7 +60,7 @@ class AttitudeEstimate:
     gain_std: tuple[float, float]
     lag_s: float
     r2: float
-    samples: int
+    samples: float
 
     @property
     def gain_mean(self) -> float:
@@ -68,180 +74,193 @@ class AttitudeEstimate:
 
     @property
     def confident(self) -> bool:
+        """Delay σ ≤ 20 ms, gain σ ≤ 10 % of it, R² ≥ 0.6."""
         return (math.isfinite(self.delay_std_s) and self.delay_std_s <= CONFIDENT_DELAY_STD_S
                 and self.r2 >= CONFIDENT_R2
-                and self.gain_mean_std <= CONFIDENT_GAIN_REL_STD * self.gain_mean)
+                and self.gain_mean_std <= CONFIDENT_GAIN_REL_STD * abs(self.gain_mean))
 
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
-                               math.nan, math.nan, 0)
-
-
-def _held(t_cmd: np.ndarray, cmd: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """The commands (n, 2) held from each send time on, sampled on ``grid``."""
-    k = np.searchsorted(t_cmd, grid, side="right") - 1
-    out = cmd[np.clip(k, 0, len(t_cmd) - 1)]
-    out[k < 0] = 0.0
-    return out
-
-
-def _coloured(residual: np.ndarray) -> float:
-    """√((1 + ρ₁)/(1 − ρ₁)): how much a residual's lag-1 correlation ρ₁ inflates a σ."""
-    r = residual - residual.mean()
-    den = float(np.dot(r, r))
-    rho = float(np.dot(r[1:], r[:-1]) / den) if den > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.95)
-    return math.sqrt((1.0 + rho) / (1.0 - rho))
-
-
-def fit_attitude_response(t_cmd, cmd_frac, t_meas, meas_rad, *, euler_angle_max_rad: float,
-                          lags_s=LAG_GRID_S, delays_s=DELAY_GRID_S) -> AttitudeEstimate:
-    """Fit the module's model.
-
-    Parameters
-    ----------
-    t_cmd : (n,) send times of the commands (s), increasing.
-    cmd_frac : (n, 2) PCMD [roll, pitch] fractions sent then (held until the next).
-    t_meas : (m,) times of the navdata samples (s), increasing, on the same clock.
-    meas_rad : (m, 2) navdata [roll, pitch] (rad, the drone's signs).
-    euler_angle_max_rad : E, the tilt at PCMD ±1 the drone was configured with.
-
-    Returns :data:`NO_ESTIMATE` (NaN, infinite σ) when the data cannot say anything (too few
-    samples, no excitation).
-    """
-    t_cmd = np.asarray(t_cmd, float)
-    t_meas = np.asarray(t_meas, float)
-    u = np.asarray(cmd_frac, float).reshape(-1, 2) * euler_angle_max_rad
-    y = np.asarray(meas_rad, float).reshape(-1, 2)
-    ok = np.all(np.isfinite(y), axis=1)
-    t_meas, y = t_meas[ok], y[ok]
-    d_max = delays_s[1]
-    lags_s = tuple(lags_s)
-    keep = t_meas >= t_cmd[0] + d_max if len(t_cmd) else np.zeros(0, bool)
-    t_meas, y = t_meas[keep], y[keep]
-    m = len(t_meas)
-    if m < 20 or len(t_cmd) < 10:
-        return NO_ESTIMATE
-    grid = np.arange(t_cmd[0], t_meas[-1] + STEP_S, STEP_S)
-    held = _held(t_cmd, np.nan_to_num(u), grid)
-    shifts = np.arange(int(round(delays_s[0] / STEP_S)), int(round(d_max / STEP_S)) + 1)
-    idx = np.clip(np.rint((t_meas - grid[0]) / STEP_S).astype(int), 0, len(grid) - 1)
-    yc = y - y.mean(axis=0)
-    syy = np.sum(yc * yc, axis=0)
-    # coarse to fine: every other delay on every other lag, then all delays and lags next to
-    # the best (the residual is smooth in both)
-    coarse = _search(held, idx, shifts[::2], lags_s[::2], yc, syy)
-    j = lags_s.index(coarse[1])
-    near_lags = lags_s[max(j - 1, 0):j + 2]
-    i = int(np.searchsorted(shifts, coarse[2]))
-    near = shifts[max(i - 6, 0):i + 7]
-    rss, tau, shift, curve = _search(held, idx, near, near_lags, yc, syy)
-    k = int(np.searchsorted(near, shift))
-    return _estimate(curve, k, tau, held, idx[None, :] - near[:, None], near, y, yc, syy,
-                     len(t_meas))
-
-
-def _filtered(held: np.ndarray, tau: float) -> np.ndarray:
-    a = math.exp(-STEP_S / tau)
-    return lfilter([1.0 - a], [1.0, -a], held, axis=0)
-
-
-def _search(held, idx, shifts, lags, yc, syy):
-    """(rss, lag, shift, rss over ``shifts`` at that lag) of the best grid point."""
-    sample = idx[None, :] - shifts[:, None]            # (delays, m)
-    best = (math.inf, lags[0], shifts[0], None)
-    for tau in lags:
-        x = _filtered(held, tau)
-        rss = np.zeros(len(shifts))
-        for ax in range(2):
-            xs = x[sample, ax]                           # (delays, m)
-            xc = xs - xs.mean(axis=1, keepdims=True)
-            sxx = np.sum(xc * xc, axis=1)
-            sxy = xc @ yc[:, ax]
-            rss += syy[ax] - np.where(sxx > 0, sxy * sxy / np.maximum(sxx, 1e-300), 0.0)
-        i = int(np.argmin(rss))
-        if rss[i] < best[0]:
-            best = (float(rss[i]), tau, int(shifts[i]), rss)
-    return best
-
-
-def _estimate(rss, i, tau, held, sample, shifts, y, yc, syy, m) -> AttitudeEstimate:
-    """The estimate at grid point ``i`` of the delay curve ``rss`` for lag ``tau``."""
-    x = _filtered(held, tau)
-    gains, gain_var, residual = [], [], []
-    for ax in range(2):
-        xs = x[sample[i], ax]
-        xc = xs - xs.mean()
-        sxx = float(xc @ xc)
-        if sxx <= 0.0:
-            return NO_ESTIMATE
-        k = float(xc @ yc[:, ax]) / sxx
-        r = yc[:, ax] - k * xc
-        residual.append(r)
-        gains.append(k)
-        gain_var.append(float(r @ r) / max(m - 2, 1) / sxx)
-    sigma2 = float(rss[i]) / max(2 * m - 5, 1)
-    inflate = max(_coloured(residual[0]), _coloured(residual[1]))
-    # the delay: a parabola through the residual curve at its minimum; Δrss = (d − d̂)²·c/…
-    delay = shifts[i] * STEP_S
-    delay_var = math.inf
-    if 0 < i < len(rss) - 1:
-        lo, mid, hi = rss[i - 1], rss[i], rss[i + 1]
-        curv = (lo - 2.0 * mid + hi) / STEP_S ** 2
-        if curv > 0:
-            delay += 0.5 * STEP_S * (lo - hi) / (lo - 2.0 * mid + hi)
-            delay_var = 2.0 * sigma2 / curv
-    r2 = 1.0 - float(rss[i]) / float(syy.sum()) if syy.sum() > 0 else math.nan
-    s = inflate
-    return AttitudeEstimate(
-        float(delay), s * math.sqrt(delay_var), (gains[0], gains[1]),
-        (s * math.sqrt(gain_var[0]), s * math.sqrt(gain_var[1])), float(tau), r2, m)
+                               math.nan, math.nan, 0.0)
 
 
 class AttitudeResponseEstimator:
-    """One flight's estimate, refitted every ``refit_s`` over the last ``window_s``.
+    """The streaming fit (module docstring).
 
-    Feed every command sent (:meth:`command`) and every new navdata sample (:meth:`navdata`);
-    :attr:`estimate` is the newest fit (:data:`NO_ESTIMATE` before the first).
+    Feed every command sent (:meth:`command`, in time order) and every navdata sample
+    (:meth:`navdata`, each after the commands sent before it); :attr:`estimate` is the fit of
+    what it has seen, weighted by ``exp(−age / window_s)`` (``inf``: all alike).
     """
 
     def __init__(self, euler_angle_max_rad: float, *, window_s: float = 30.0,
-                 refit_s: float = 2.0, min_span_s: float = 5.0) -> None:
+                 lags_s=LAG_GRID_S, max_delay_s: float = MAX_DELAY_S) -> None:
         self.euler_angle_max_rad = float(euler_angle_max_rad)
         self.window_s = float(window_s)
-        self.refit_s = float(refit_s)
-        self.min_span_s = float(min_span_s)
-        self._cmd: deque = deque()    # (t, roll, pitch)
-        self._nav: deque = deque()    # (t, roll rad, pitch rad)
-        self._last_fit_t = -math.inf
-        self.estimate = NO_ESTIMATE
+        self.lags_s = np.asarray(lags_s, dtype=float)
+        self.delays_s = np.arange(0.0, max_delay_s + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+        shape = (len(self.delays_s), len(self.lags_s), 2)
+        self._sx, self._sxx, self._sxy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        self._n = 0.0
+        self._sy, self._syy = np.zeros(2), np.zeros(2)
+        self._res = np.zeros(3)           # Σr², Σr·r_prev, and r_prev's weight
+        self._last_r = None
+        self._last_t = math.nan
+        # the commands: send times, values (rad), the lags' outputs at those times (L, 2)
+        capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
+        self._t = np.zeros(capacity)
+        self._u = np.zeros((capacity, 2))
+        self._y = np.zeros((capacity, len(self.lags_s), 2))
+        self._count = 0
+        self._best = None
+        self._since_best = 0
+        self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
+    # ---------------------------------------------------------------------- feeding
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
-        self._cmd.append((t_s, roll_frac, pitch_frac))
-
-    def navdata(self, t_s: float, roll_deg: float, pitch_deg: float) -> None:
-        if self._nav and t_s <= self._nav[-1][0]:
-            return  # the same sample seen again
-        self._nav.append((t_s, math.radians(roll_deg), math.radians(pitch_deg)))
+        """A command sent at ``t_s``, held until the next."""
+        u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
+        n = self._count
+        if n:
+            t0 = self._t[n - 1]
+            if t_s <= t0:
+                return
+            u0, y0 = self._u[n - 1], self._y[n - 1]
+            y = u0 + (y0 - u0) * np.exp(-(t_s - t0) / self.lags_s)[:, None]
+        else:
+            y = np.tile(u, (len(self.lags_s), 1))  # no past: as if held for long
+        if n == len(self._t):  # full: keep the newest half (what the longest delay needs)
+            keep = n // 2
+            for a in (self._t, self._u, self._y):
+                a[:keep] = a[n - keep:n]
+            n = keep
+        self._t[n], self._u[n], self._y[n] = t_s, u, y
+        self._count = n + 1
 
     def restart(self) -> None:
-        """Forget the samples (the drone flew something else than the commands: a hover);
-        the last estimate stays."""
-        self._cmd.clear()
-        self._nav.clear()
+        """The drone flew something else than the commands (its own hover): forget the
+        commands; what the sums learned stays (and fades)."""
+        self._count = 0
+        self._last_r = None
 
-    def update(self, t_s: float) -> bool:
-        """Refit if it is time (``refit_s`` since the last); True when it did."""
-        if t_s - self._last_fit_t < self.refit_s or not self._nav or not self._cmd:
+    def navdata(self, t_s: float, roll_deg: float, pitch_deg: float) -> bool:
+        """A navdata sample received at ``t_s``; False if it could not be used (a sample seen
+        before, not finite, or commands not reaching back the longest delay)."""
+        n = self._count
+        y = np.radians([roll_deg, pitch_deg])
+        if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
+                or self._t[0] > t_s - self.delays_s[-1]):
             return False
-        for q in (self._cmd, self._nav):
-            while q and q[0][0] < t_s - self.window_s:
-                q.popleft()
-        if not self._cmd or self._nav[-1][0] - self._cmd[0][0] < self.min_span_s:
-            return False
-        self._last_fit_t = t_s
-        c = np.array(self._cmd)
-        n = np.array(self._nav)
-        self.estimate = fit_attitude_response(
-            c[:, 0], c[:, 1:], n[:, 0], n[:, 1:], euler_angle_max_rad=self.euler_angle_max_rad)
+        times = self._t[:n]
+        at = t_s - self.delays_s
+        j = np.searchsorted(times, at, side="right") - 1          # (K,)
+        u = self._u[j][:, None, :]                                # (K, 1, 2)
+        decay = np.exp(-(at - times[j])[:, None] / self.lags_s)[:, :, None]
+        x = u + (self._y[j] - u) * decay                          # (K, L, 2)
+        forget = (math.exp(-(t_s - self._last_t) / self.window_s)
+                  if math.isfinite(self._last_t) else 1.0)
+        self._last_t = t_s
+        self._residual(x, y, forget)
+        if forget != 1.0:
+            for a in (self._sx, self._sxx, self._sxy):
+                a *= forget
+        self._sx += x
+        self._sxx += x * x
+        self._sxy += x * y
+        self._n = self._n * forget + 1.0
+        self._sy = self._sy * forget + y
+        self._syy = self._syy * forget + y * y
+        self._estimate = None
+        self._since_best += 1
+        if self._since_best >= REFRESH_SAMPLES:  # the residual tracks a recent best model
+            self._since_best = 0
+            self._estimate = self._fit()
         return True
+
+    def _residual(self, x: np.ndarray, y: np.ndarray, forget: float) -> None:
+        """Track the residual of the current best model (its lag-1 correlation)."""
+        if self._best is None:
+            return
+        k, l, gain, offset = self._best
+        r = y - (gain * x[k, l] + offset)
+        self._res *= forget
+        if self._last_r is not None:
+            self._res += (float(r @ r), float(r @ self._last_r), 1.0)
+        self._last_r = r
+
+    # ---------------------------------------------------------------------- the fit
+    @property
+    def estimate(self) -> AttitudeEstimate:
+        if self._estimate is None:
+            self._estimate = self._fit()
+        return self._estimate
+
+    def _fit(self) -> AttitudeEstimate:
+        n = self._n
+        if n < 20:
+            return NO_ESTIMATE
+        sxx = self._sxx - self._sx ** 2 / n                       # centred, (K, L, 2)
+        sxy = self._sxy - self._sx * self._sy / n
+        syy = self._syy - self._sy ** 2 / n                        # (2,)
+        ok = sxx > 1e-12
+        if not ok.any() or syy.sum() <= 0.0:
+            return NO_ESTIMATE
+        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+        rss_axis = syy - gain * sxy                                # (K, L, 2)
+        rss = rss_axis.sum(axis=2)
+        rss[~ok.all(axis=2)] = np.inf
+        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
+        g = gain[k, l]
+        offset = (self._sy - g * self._sx[k, l]) / n
+        self._best = (k, l, g, offset)
+        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        inflate = self._inflation()
+        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        gain_std = tuple(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
+                                             / max(n - 2.0, 1.0) / float(sxx[k, l, a]))
+                         for a in range(2))
+        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+                                (float(g[0]), float(g[1])),
+                                gain_std, float(self.lags_s[l]),
+                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n))
+
+    def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
+        """The delay from a parabola through the residual at grid point ``k`` and its
+        neighbours (the first or last three on an edge of the grid: the vertex kept inside
+        it), and its variance 2σ²/curvature."""
+        i = min(max(k, 1), len(curve) - 2)
+        lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
+        second = lo - 2.0 * mid + hi
+        if not (np.isfinite(second) and second > 0.0):
+            return float(self.delays_s[k]), math.inf
+        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+        # the grid resolves no better than its step over √12, whatever the curvature
+        return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
+
+    def _inflation(self) -> float:
+        """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁."""
+        rr, rr1, w = self._res
+        if w < 10.0 or rr <= 0.0:
+            return 1.0
+        rho = min(max(rr1 / rr, 0.0), 0.95)
+        return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+def fit_attitude_response(t_cmd, cmd_frac, t_meas, meas_rad, *, euler_angle_max_rad: float,
+                          window_s: float = math.inf) -> AttitudeEstimate:
+    """The estimate of whole arrays: commands (n,) send times and (n, 2) [roll, pitch] PCMD
+    fractions; navdata (m,) receipt times and (m, 2) [roll, pitch] (rad, the drone's signs),
+    on the same clock. All samples weigh alike unless ``window_s`` is finite."""
+    est = AttitudeResponseEstimator(euler_angle_max_rad, window_s=window_s)
+    t_cmd = np.asarray(t_cmd, float)
+    cmd = np.asarray(cmd_frac, float).reshape(-1, 2)
+    t_meas = np.asarray(t_meas, float)
+    meas = np.degrees(np.asarray(meas_rad, float).reshape(-1, 2))
+    i = 0
+    for tm, (roll, pitch) in zip(t_meas, meas):
+        while i < len(t_cmd) and t_cmd[i] < tm:
+            if np.all(np.isfinite(cmd[i])):
+                est.command(t_cmd[i], cmd[i, 0], cmd[i, 1])
+            i += 1
+        est.navdata(tm, roll, pitch)
+    return est.estimate

@@ -344,8 +344,8 @@ class ResponseEstimation:
         self.supervision = supervision
         self.limits = limits
         self.estimator = AttitudeResponseEstimator(limits.euler_angle_max_rad,
-                                                   window_s=a.window_s, refit_s=a.refit_s)
-        self._reported = False
+                                                   window_s=a.window_s)
+        self._next_fit_s = -math.inf
 
     def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
@@ -357,9 +357,12 @@ class ResponseEstimation:
             est.restart()
             return []
         est.command(inputs.t_s, sent.pcmd.roll_frac, sent.pcmd.pitch_frac)
-        if not est.update(inputs.t_s):
+        if inputs.t_s < self._next_fit_s:
             return []
+        self._next_fit_s = inputs.t_s + self.cfg.refit_s
         e = est.estimate
+        if not math.isfinite(e.delay_s):
+            return []
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
                    "delay_std_s": e.delay_std_s, "gain": e.gain_mean,
                    "gain_std": e.gain_mean_std, "lag_s": e.lag_s, "r2": e.r2,

@@ -52,11 +52,15 @@ def effective_controller(controller, limits: DroneLimits):
     The thesis bounds φ, θ and ψ̇ by ±1 (rad, rad/s), but the AR.Drone clips tilt to
     ``euler_angle_max`` (0.21 rad by default) and yaw rate to ``control_yaw``: planning beyond
     them plans the impossible, and every command then saturates behind the command delay.
+    The NMPC plans roll and pitch up to ``planned_tilt_frac`` of ``euler_angle_max`` only: a
+    drone that tilts less per unit command (``attitude_gain`` divides it out) still reaches it,
+    one that tilts more stays under ``safety.max_tilt_rad`` before its gain is measured
+    (docs/solver-notes.md §10).
     """
     lo = list(controller.u_min)
     hi = list(controller.u_max)
-    for j, cap in ((IU_PHI, limits.euler_angle_max_rad), (IU_THETA, limits.euler_angle_max_rad),
-                   (IU_PSIRATE, limits.control_yaw_radps)):
+    tilt = limits.euler_angle_max_rad * controller.planned_tilt_frac
+    for j, cap in ((IU_PHI, tilt), (IU_THETA, tilt), (IU_PSIRATE, limits.control_yaw_radps)):
         lo[j], hi[j] = max(lo[j], -cap), min(hi[j], cap)
     return controller.model_copy(update={"u_min": tuple(lo), "u_max": tuple(hi)})
 

@@ -27,7 +27,7 @@ import yaml
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.experiments.sweep.grid import GridParam, value_text
 
-__all__ = ["DEFAULT_GRID", "RobustnessGrid", "load_grid"]
+__all__ = ["DEFAULT_GRID", "RobustnessGrid", "corner_variants", "grid_from_data", "load_grid"]
 
 DELAY = "sim.plant.command_delay_s"
 GAIN = "sim.plant.attitude_gain"
@@ -120,6 +120,38 @@ def load_grid(path: str | Path | None) -> RobustnessGrid:
     return grid_from_data(data, where=f"--grid-file {path}")
 
 
-def axis_label(path: str, values: Sequence[Any] | None = None) -> str:
-    """A short label of an axis path (its last component)."""
-    return path.rsplit(".", 1)[-1]
+def corner_variants(grid: RobustnessGrid) -> list[tuple[str, tuple[str, ...]]]:
+    """``tune --robust``'s plants: the corners of the grid (each axis at its first or last
+    value; beyond four axes of two ends, the half whose number of last values is even — a
+    resolution-V half fraction: every pair of axes still meets in all four combinations)
+    and its centre (each axis at its middle value), as (label, ``--set`` overrides)."""
+    from itertools import product
+
+    ends = [(path, (values[0], values[-1]) if len(values) > 1 else (values[0],))
+            for path, values in grid.axes]
+    varied = sum(len(e) > 1 for _, e in ends)
+    out = []
+    for pick in product(*(range(len(e)) for _, e in ends)):
+        if varied > 4 and sum(pick) % 2:
+            continue
+        values = [e[i] for (_, e), i in zip(ends, pick)]
+        out.append(_variant("".join("+" if i else "-" for i in pick), grid, values))
+    out.append(_variant("centre", grid, [_middle(values) for _, values in grid.axes]))
+    return out
+
+
+def _middle(values: Sequence[Any]) -> Any:
+    """The midpoint of an axis' ends (numbers, or vectors elementwise); else its middle
+    value."""
+    lo, hi = values[0], values[-1]
+    try:
+        if isinstance(lo, (list, tuple)):
+            return [round((a + b) / 2.0, 9) for a, b in zip(lo, hi)]
+        return round((lo + hi) / 2.0, 9)
+    except TypeError:
+        return values[len(values) // 2]
+
+
+def _variant(label: str, grid: RobustnessGrid, values) -> tuple[str, tuple[str, ...]]:
+    return label, tuple(f"{path}={value_text(_listed(v))}"
+                        for (path, _), v in zip(grid.axes, values))
