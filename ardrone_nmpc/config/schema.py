@@ -147,16 +147,21 @@ class FollowConfig(Section):
 
 class ExcitationConfig(Section):
     """Reference kind 'excitation': the identification flight (docs/identification.md §1) —
-    pseudo-random steps of set points ±amplitude on x, then y, then z, then ψ around start_m."""
+    pseudo-random steps of set points ±amplitude on x, then y, then z, then ψ around start_m,
+    and sweeps at a constant speed on x and y."""
 
     amplitude_m: PathSizeVec3 = Field(
         (0.25, 0.25, 0.15), description="Step size on x, y, z (m): small, within the geofence.")
     amplitude_psi_rad: Positive = Field(0.4, le=math.pi, description="Step size on ψ (rad).")
-    axis_s: Span = Field(12.0, description="Seconds of steps per axis.")
+    axis_s: Span = Field(10.0, description="Seconds of steps per axis.")
     bit_s: Positive = Field(
-        1.5, ge=0.2, le=60.0, description="Seconds per bit of the pseudo-random sequence "
+        1.2, ge=0.2, le=60.0, description="Seconds per bit of the pseudo-random sequence "
         "(0.2 … 60): long enough for the loop to answer, short enough to vary.")
-    rest_s: NonNegativeSpan = Field(3.0, description="Seconds at start_m after each axis.")
+    sweep_m: float = Field(
+        0.4, ge=0.0, le=5.0, description="Reach of the x and y sweeps (m): the set point "
+        "travels out to ±sweep_m and back at sweep_mps, so the drag shows; 0: no sweeps.")
+    sweep_mps: Positive = Field(0.2, le=2.0, description="Speed of the sweeps (m/s).")
+    rest_s: NonNegativeSpan = Field(2.0, description="Seconds at start_m after each axis.")
 
 
 class ReferenceConfig(Section):

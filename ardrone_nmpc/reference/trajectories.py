@@ -607,7 +607,8 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
 
         e = ref_cfg.excitation
         return Excitation(start, psi, e.amplitude_m, e.amplitude_psi_rad, axis_s=e.axis_s,
-                          bit_s=e.bit_s, rest_s=e.rest_s)
+                          bit_s=e.bit_s, rest_s=e.rest_s, sweep_m=e.sweep_m,
+                          sweep_mps=e.sweep_mps)
     if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/reference/live.py)
         from ardrone_nmpc.reference.live import LiveTarget
 
