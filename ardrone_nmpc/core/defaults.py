@@ -9,7 +9,8 @@ from __future__ import annotations
 # The OCP (thesis eq. 3.14, eq. 4.17 box).
 HORIZON_STEPS = 15  # N
 DTAU_S = 0.1  # Δτ (s)
-# The thesis' weights (§4.4, with the 'Case 2' input weights): its studies state them.
+# The thesis' weights (§4.4, with the 'Case 2' input weights): its studies state them, and
+# they are the solver classes' reference problem (control/ocp.OcpSpec).
 THESIS_Q_STATE = (12.0, 2.0, 7.0, 2.0, 5.0, 10.0, 13.0)  # diag q, order [x, ẋ, y, ẏ, z, ż, ψ]
 THESIS_R_INPUT = (4.0, 12.0, 12.0, 24.0)  # diag r, order [z̈, φ, θ, ψ̇]
 # The tool's: x and y detuned (q 4, 0.5; r 48) so that one set of weights, with the measured

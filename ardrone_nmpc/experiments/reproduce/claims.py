@@ -21,11 +21,12 @@ from ardrone_nmpc.experiments.reproduce.judges import NO_OVERSHOOT_PCT, RunFigur
 
 # The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), ẋ, ẏ from
 # the drone's navdata — and no disturbance estimate, where this tool has one.
-# Its weights too, where a config does not state its own (the r study does).
+# And its weights (where a config states its own — the r study — the config's win), a
+# drone of nominal gain and the full tilt.
 _THESIS = ["controller.delay_compensation_s=0", "controller.vz_lead_s=null",
            "estimator.horizontal_velocity=navdata", "controller.attitude_gain=1",
-           "controller.planned_tilt_frac=1"]
-_THESIS_WEIGHTS = {"q": list(defaults.THESIS_Q_STATE), "r": list(defaults.THESIS_R_INPUT)}
+           "controller.planned_tilt_frac=1", f"controller.q={list(defaults.THESIS_Q_STATE)}",
+           f"controller.r={list(defaults.THESIS_R_INPUT)}"]
 if "offset_free" in ControllerConfig.model_fields:
     _THESIS.append("controller.offset_free=false")
 FORMULATIONS = {"thesis": _THESIS, "ours": []}
@@ -189,15 +190,14 @@ def fly(config_dir: Path, name: str, overrides: list[str], form: str, log_dir: P
         seed: int, tag: str = "") -> RunFigures:
     """One run of ``name`` in formulation ``form``; the run directory ends in
     ``<name><tag>-<form>``."""
-    weights = []
-    if form == "thesis":
-        import yaml
+    import yaml
 
-        stated = (yaml.safe_load((config_dir / name).read_text(encoding="utf-8")) or {}
-                  ).get("controller") or {}
-        weights = [f"controller.{k}={v}" for k, v in _THESIS_WEIGHTS.items() if k not in stated]
-    cfg = load_config(config_dir / name,
-                      [*LAB_OVERRIDES, *FORMULATIONS[form], *weights, *overrides])
+    stated = (yaml.safe_load((config_dir / name).read_text(encoding="utf-8")) or {}
+              ).get("controller") or {}
+    formulation = [o for o in FORMULATIONS[form]  # a weight the config states is its own
+                   if not (o.startswith(("controller.q=", "controller.r="))
+                           and o.split("=")[0].split(".")[1] in stated)]
+    cfg = load_config(config_dir / name, [*LAB_OVERRIDES, *formulation, *overrides])
     tag = tag or ("-p" if "controller.kind=p" in overrides else "")
     cfg = cfg.model_copy(update={"name": f"{cfg.name}{tag}-{form}"})
     recording = record_lockstep(cfg, log_dir, seed=seed)

@@ -94,7 +94,7 @@ class Objective:
             return 10.0 * self.weights["abort"]
         total = 0.0
         for term, value in self.terms(m).items():
-            w = self.weights[term]
+            w = self.weights.get(term, 0.0)
             if w:
                 total += w * (value if math.isfinite(value) else self.weights["abort"])
         return total
