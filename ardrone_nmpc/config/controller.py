@@ -142,9 +142,9 @@ class AdaptationConfig(Section):
     """How the controller uses the flight's own measurement of the drone's command delay and
     tilt per unit command (``delay_compensation_s: auto``, ``attitude_gain: auto``;
     docs/solver-notes.md §10). Every navdata sample updates the estimate (the last
-    ``window_s`` of PCMD and navdata weigh most); every ``refit_s`` it is read, and used once
-    confident (delay σ ≤ 20 ms, gain σ ≤
-    10 %, R² ≥ 0.6), clipped to the bounds."""
+    ``window_s`` of PCMD and navdata weigh most); every ``refit_s`` it is read, and each of
+    the delay and the gain is used once confident (delay σ ≤ 20 ms with R² ≥ 0.2; gain σ ≤
+    10 % with R² ≥ 0.3), clipped to the bounds."""
 
     delay_prior_s: NonNegative = Field(
         0.26, le=2.0, description="Delay (s) compensated until the flight's estimate is "

@@ -33,19 +33,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_STD_S",
-           "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE", "fit_attitude_response"]
+__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_R2",
+           "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE",
+           "fit_attitude_response"]
 
 DELAY_STEP_S = 0.01
 MAX_DELAY_S = 0.6
 LAG_GRID_S = (0.03, 0.06, 0.1, 0.15, 0.2, 0.3)
 #: Samples between refreshes of the best grid point whose residual is tracked.
 REFRESH_SAMPLES = 15
-#: Confident: the delay known to this (s, one σ) and the gain to this fraction of itself ...
+#: The delay is known once its σ is at most this (s) and the fit explains at least
+#: CONFIDENT_DELAY_R2 of the attitude's variance; the gain once its σ is at most
+#: CONFIDENT_GAIN_REL_STD of itself and the fit explains CONFIDENT_R2. The delay shows
+#: first: its timing is in the shape of the response, the gain in its size against the noise.
 CONFIDENT_DELAY_STD_S = 0.02
+CONFIDENT_DELAY_R2 = 0.2
 CONFIDENT_GAIN_REL_STD = 0.1
-#: ... with the fit explaining at least this share of the attitude's variance.
-CONFIDENT_R2 = 0.6
+CONFIDENT_R2 = 0.3
 
 
 @dataclass(frozen=True)
@@ -73,11 +77,21 @@ class AttitudeEstimate:
         return float(1.0 / math.sqrt(sum(1.0 / max(s, 1e-9) ** 2 for s in self.gain_std)))
 
     @property
-    def confident(self) -> bool:
-        """Delay σ ≤ 20 ms, gain σ ≤ 10 % of it, R² ≥ 0.6."""
+    def delay_confident(self) -> bool:
+        """Delay σ ≤ 20 ms, R² ≥ 0.2."""
         return (math.isfinite(self.delay_std_s) and self.delay_std_s <= CONFIDENT_DELAY_STD_S
-                and self.r2 >= CONFIDENT_R2
+                and self.r2 >= CONFIDENT_DELAY_R2)
+
+    @property
+    def gain_confident(self) -> bool:
+        """Gain σ ≤ 10 % of it, R² ≥ 0.3."""
+        return (self.r2 >= CONFIDENT_R2
                 and self.gain_mean_std <= CONFIDENT_GAIN_REL_STD * abs(self.gain_mean))
+
+    @property
+    def confident(self) -> bool:
+        """Both the delay and the gain are known."""
+        return self.delay_confident and self.gain_confident
 
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),

@@ -325,8 +325,8 @@ class OffsetFree:
 class ResponseEstimation:
     """The flight's own measurement of the drone's command → attitude delay and gain
     (:mod:`ardrone_nmpc.estimation.attitude_response`), and what ``auto`` makes of it: the
-    delay the prediction compensates and the gain the command mapping divides by, once the
-    estimate is confident, clipped to ``controller.adaptation``'s bounds.
+    delay the prediction compensates and the gain the command mapping divides by, each once
+    its estimate is confident, clipped to ``controller.adaptation``'s bounds.
 
     Fed after each tick's verdict: the roll/pitch sent (a hover starts the window again: the
     drone's own hover is not the commands' response) and each new navdata sample, at its
@@ -366,20 +366,19 @@ class ResponseEstimation:
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
                    "delay_std_s": e.delay_std_s, "gain": e.gain_mean,
                    "gain_std": e.gain_mean_std, "lag_s": e.lag_s, "r2": e.r2,
-                   "confident": e.confident}]
-        if e.confident:
-            events += self._apply(e)
-        return events
+                   "delay_confident": e.delay_confident,
+                   "gain_confident": e.gain_confident}]
+        return events + self._apply(e)
 
     def _apply(self, e) -> list[dict]:
         a, events = self.cfg, []
-        if self.auto_delay:
+        if self.auto_delay and e.delay_confident:
             before = self.delay.lead_s
             if self.delay.set_delay_s(min(max(e.delay_s, a.delay_min_s), a.delay_max_s)):
                 events.append({"kind": "delay_compensation", "delay_s": self.delay.lead_s,
                                "previous_s": before, "estimate_s": e.delay_s,
                                "estimate_std_s": e.delay_std_s})
-        if self.auto_gain:
+        if self.auto_gain and e.gain_confident:
             gain = min(max(e.gain_mean, a.gain_min), a.gain_max)
             before = self.supervision.attitude_gain
             if abs(gain - before) > max(2.0 * e.gain_mean_std, 0.05 * before):
