@@ -68,13 +68,18 @@ class AttitudeEstimate:
 
     @property
     def gain_mean(self) -> float:
-        """The two axes' gains, weighted by their precision."""
-        w = [1.0 / max(s, 1e-9) ** 2 for s in self.gain_std]
-        return float(np.dot(w, self.gain) / sum(w))
+        """The two axes' gains, weighted by their precision (an axis never moved weighs
+        nothing); NaN without either."""
+        pairs = [(g, 1.0 / max(s, 1e-9) ** 2) for g, s in zip(self.gain, self.gain_std)
+                 if math.isfinite(g) and math.isfinite(s)]
+        if not pairs:
+            return math.nan
+        return float(sum(g * w for g, w in pairs) / sum(w for _, w in pairs))
 
     @property
     def gain_mean_std(self) -> float:
-        return float(1.0 / math.sqrt(sum(1.0 / max(s, 1e-9) ** 2 for s in self.gain_std)))
+        w = sum(1.0 / max(s, 1e-9) ** 2 for s in self.gain_std if math.isfinite(s))
+        return float(1.0 / math.sqrt(w)) if w > 0 else math.inf
 
     @property
     def delay_confident(self) -> bool:
@@ -219,9 +224,9 @@ class AttitudeResponseEstimator:
         if not ok.any() or syy.sum() <= 0.0:
             return NO_ESTIMATE
         gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-        rss_axis = syy - gain * sxy                                # (K, L, 2)
+        # an axis the commands did not move keeps its whole variance at every grid point
+        rss_axis = np.where(ok, syy - gain * sxy, syy)            # (K, L, 2)
         rss = rss_axis.sum(axis=2)
-        rss[~ok.all(axis=2)] = np.inf
         k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
         g = gain[k, l]
         offset = (self._sy - g * self._sx[k, l]) / n
@@ -229,12 +234,18 @@ class AttitudeResponseEstimator:
         sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
         inflate = self._inflation()
         delay, delay_var = self._refine(rss[:, l], k, sigma2)
-        gain_std = tuple(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
-                                             / max(n - 2.0, 1.0) / float(sxx[k, l, a]))
-                         for a in range(2))
+        gains, gain_std = [], []
+        for a in range(2):
+            if ok[k, l, a]:
+                gains.append(float(g[a]))
+                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
+                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+            else:
+                gains.append(math.nan)
+                gain_std.append(math.inf)
         return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
-                                (float(g[0]), float(g[1])),
-                                gain_std, float(self.lags_s[l]),
+                                (gains[0], gains[1]), (gain_std[0], gain_std[1]),
+                                float(self.lags_s[l]),
                                 1.0 - float(rss[k, l]) / float(syy.sum()), float(n))
 
     def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
@@ -243,8 +254,10 @@ class AttitudeResponseEstimator:
         it), and its variance 2σ²/curvature."""
         i = min(max(k, 1), len(curve) - 2)
         lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
+        if not np.all(np.isfinite((lo, mid, hi))):
+            return float(self.delays_s[k]), math.inf
         second = lo - 2.0 * mid + hi
-        if not (np.isfinite(second) and second > 0.0):
+        if not second > 0.0:
             return float(self.delays_s[k]), math.inf
         delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
         delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
