@@ -82,7 +82,7 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, airframe_rk4_array,
-                                       airframe_rk4_many)
+                                       airframe_rk4_many, rk4_step)
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -177,7 +177,7 @@ class PlantParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        for name in ("command_delay_s", "turbulence_std_mps"):
+        for name in ("command_delay_s", "turbulence_std_mps", "attitude_zero_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
@@ -189,9 +189,6 @@ class PlantParams:
         if self.attitude_model not in ATTITUDE_MODELS:
             raise ValueError(f"attitude_model must be one of {ATTITUDE_MODELS}, "
                              f"got {self.attitude_model!r}")
-        if not (math.isfinite(self.attitude_zero_s) and self.attitude_zero_s >= 0.0):
-            raise ValueError(f"attitude_zero_s must be finite and >= 0, "
-                             f"got {self.attitude_zero_s!r}")
         if not 0.0 <= self.battery_sag_frac < 1.0:
             raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
@@ -313,35 +310,6 @@ def freefall_derivative(state: tuple, command: tuple, params: PlantParams,
     kd = params.drag_per_s
     return (vx, vy, vz, -kd * (vx - wind_mps[0]), -kd * (vy - wind_mps[1]), -GRAVITY_MPS2,
             0.0, 0.0, state[9], 0.0)
-
-
-def rk4_step(deriv, state: tuple, h: float, command: tuple, params: PlantParams,
-             wind_mps: tuple = _NO_WIND) -> tuple:
-    """One classical RK4 step of ``deriv(state, command, params, wind_mps)`` over ``h``.
-
-    Unrolled over the 10 states: list comprehensions over ``zip`` cost 3× more here.
-    """
-    x0, x1, x2, x3, x4, x5, x6, x7, x8, x9 = state
-    hh = 0.5 * h
-    a0, a1, a2, a3, a4, a5, a6, a7, a8, a9 = deriv(state, command, params, wind_mps)
-    b0, b1, b2, b3, b4, b5, b6, b7, b8, b9 = deriv(
-        (x0 + hh * a0, x1 + hh * a1, x2 + hh * a2, x3 + hh * a3, x4 + hh * a4,
-         x5 + hh * a5, x6 + hh * a6, x7 + hh * a7, x8 + hh * a8, x9 + hh * a9),
-        command, params, wind_mps)
-    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = deriv(
-        (x0 + hh * b0, x1 + hh * b1, x2 + hh * b2, x3 + hh * b3, x4 + hh * b4,
-         x5 + hh * b5, x6 + hh * b6, x7 + hh * b7, x8 + hh * b8, x9 + hh * b9),
-        command, params, wind_mps)
-    d0, d1, d2, d3, d4, d5, d6, d7, d8, d9 = deriv(
-        (x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3, x4 + h * c4,
-         x5 + h * c5, x6 + h * c6, x7 + h * c7, x8 + h * c8, x9 + h * c9),
-        command, params, wind_mps)
-    h6 = h / 6.0
-    return (x0 + h6 * (a0 + 2.0 * (b0 + c0) + d0), x1 + h6 * (a1 + 2.0 * (b1 + c1) + d1),
-            x2 + h6 * (a2 + 2.0 * (b2 + c2) + d2), x3 + h6 * (a3 + 2.0 * (b3 + c3) + d3),
-            x4 + h6 * (a4 + 2.0 * (b4 + c4) + d4), x5 + h6 * (a5 + 2.0 * (b5 + c5) + d5),
-            x6 + h6 * (a6 + 2.0 * (b6 + c6) + d6), x7 + h6 * (a7 + 2.0 * (b7 + c7) + d7),
-            x8 + h6 * (a8 + 2.0 * (b8 + c8) + d8), x9 + h6 * (a9 + 2.0 * (b9 + c9) + d9))
 
 
 # ----------------------------------------------------------------------------- backends
@@ -617,14 +585,13 @@ class AirframePlant:
                             bool(hold), k, tuple(map(float, wind)), h)
 
     def _state_array(self) -> np.ndarray:
-        """The state as the kernels take it: 10 elements, or 12 with the second-order
-        attitude form's hidden states."""
+        """The state as the kernels take it (with the second-order form's hidden states)."""
         if self.params.second_order_attitude:
             return np.array((*self._state, *self._tilt_aux), dtype=np.float64)
         return np.array(self._state, dtype=np.float64)
 
     def _from_state_array(self, x: np.ndarray) -> tuple:
-        """The 10-tuple state of a kernel's array (keeping the hidden states aside)."""
+        """The 10-tuple state of a kernel's array, its hidden states kept aside."""
         values = x.tolist()
         if len(values) > N_STATE:
             self._tilt_aux = (values[N_STATE], values[N_STATE + 1])

@@ -24,7 +24,7 @@ SHORT = ["--set", "duration_s=2", "--set", "sim.settle_s=0.5", "--seeds", "2"]
 PROFILES = [label for label, _ in plant_variants()]
 LABELS = [f"seed{s}+{p}" for p in PROFILES for s in (0, 1)] if PROFILES else ["seed0", "seed1"]
 METRICS = ["score", "tracking_m", "rmse_m", "path_deviation_m", "settling_s", "overshoot_pct",
-           "effort", "solver_failures", "supervisor_ticks", "aborted", "after_step_s"]
+           "effort", "solver_failures", "supervisor_ticks", "aborted", "after_step_s", "unclean"]
 SPACE = [f"controller.q[{i}]" for i in range(7)] + [f"controller.r[{i}]" for i in range(4)]
 
 
