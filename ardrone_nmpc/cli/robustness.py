@@ -50,9 +50,28 @@ def _tables(outcome) -> list[Table]:
     return tables
 
 
+def _report(outcome, config: Path, report: Path, fig, command: str) -> None:
+    """Copy the CSV and the map into ``report`` and write its markdown."""
+    import shutil
+
+    from ardrone_nmpc.experiments.robustness.doc import commit_of, markdown
+    from ardrone_nmpc.viz.figure import save_figure
+
+    report.mkdir(parents=True, exist_ok=True)
+    name = config.stem
+    shutil.copyfile(outcome.csv_path, report / f"{name}.csv")
+    if fig is not None:
+        save_figure(fig, report / f"{name}.png")
+    text = markdown(name, outcome.rows, outcome.grid, command=command,
+                    commit=commit_of(Path(__file__).parent))
+    (report / f"{name}.md").write_text(text, encoding="utf-8")
+    typer.echo(f"report: {report / (name + '.md')}")
+
+
 def run_robustness_command(*, config: Path, overrides, grid_file: Optional[Path],
                            out_dir: Path, jobs: int, engine: str, scheduler: Optional[str],
-                           console: Console | None = None) -> Path:
+                           console: Console | None = None, report: Optional[Path] = None,
+                           command: str = "ardrone-nmpc robustness") -> Path:
     """Run it and print the tables and the clean region; returns ``robustness.csv``."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -82,6 +101,7 @@ def run_robustness_command(*, config: Path, overrides, grid_file: Optional[Path]
     console.print(f"{len(outcome.rows)} flights ({outcome.flown} flown, {outcome.resumed} "
                   f"resumed): {outcome.clean} clean; {counts}; {outcome.wall_s:.1f} s wall "
                   f"({engine}, {jobs} jobs)")
+    fig = None
     try:
         from ardrone_nmpc.viz.figure import save_figure
         from ardrone_nmpc.viz.robustness_map import figure_robustness_map
@@ -92,6 +112,8 @@ def run_robustness_command(*, config: Path, overrides, grid_file: Optional[Path]
     except ImportError:
         typer.echo("map: not drawn (matplotlib missing: pip install 'ardrone-nmpc[plot]')",
                    err=True)
+    if report is not None:
+        _report(outcome, config, Path(report), fig, command)
     return outcome.csv_path
 
 
@@ -108,6 +130,7 @@ def register(app: typer.Typer) -> None:
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers."),
         out: Optional[Path] = typer.Option(None, "--out", help="Directory: one run directory per flight, robustness.csv, robustness.png (default: logs/robustness/<config name>). Finished flights in it are judged again, not flown."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value: dotted.path=value (repeatable), before the grid."),
+        report: Optional[Path] = typer.Option(None, "--report", help="Also write DIR/<config>.csv, .png and .md (the committed docs/robustness/ files)."),
     ) -> None:
         """Fly the config in lockstep over a grid of plant deviations (delay, attitude gain
         and lag, vertical gain, wind), classify each flight (settled, limit cycle,
@@ -115,7 +138,12 @@ def register(app: typer.Typer) -> None:
         line: robustness: <robustness.csv>."""
         out_dir = out if out is not None else Path("logs") / "robustness" / config.stem
         n_jobs = jobs if jobs is not None else os.cpu_count() or 1
+        import shlex
+        import sys
+
+        command = ("ardrone-nmpc " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+                   if sys.argv[1:2] == ["robustness"] else f"ardrone-nmpc robustness {config}")
         path = run_robustness_command(config=config, overrides=set_, grid_file=grid_file,
                                       out_dir=out_dir, jobs=n_jobs, engine=engine,
-                                      scheduler=scheduler)
+                                      scheduler=scheduler, report=report, command=command)
         typer.echo(f"robustness: {path}")

@@ -83,3 +83,27 @@ def test_no_delay_no_lag_loop_is_stable_and_verdicts():
     assert verdict(float("nan")) == "unstable"
     with pytest.raises(ValueError):
         first_step_gain(horizon_steps=0, dtau_s=0.1, q_x=1, q_v=1, r_theta=1)
+
+
+def test_the_predicted_loop_reduces_to_the_plain_loop_without_prediction():
+    """Delay compensation 0 and the true velocity: the plain loop's spectrum."""
+    from ardrone_nmpc.experiments.xchannel import (XPlant, closed_loop_matrix, first_step_gain,
+                                                   predicted_loop_matrix)
+
+    k = first_step_gain(horizon_steps=15, dtau_s=0.1, q_x=12, q_v=2, r_theta=12)
+    plant = XPlant(delay_s=0.26)
+    plain = np.sort(np.abs(np.linalg.eigvals(closed_loop_matrix(k, plant))))
+    mine = np.abs(np.linalg.eigvals(predicted_loop_matrix(k, plant, compensation_s=0.0,
+                                                          difference_velocity=False)))
+    nonzero = np.sort(mine[mine > 1e-9])
+    np.testing.assert_allclose(nonzero, plain[plain > 1e-9], rtol=1e-9)
+
+
+def test_no_fixed_weights_cover_the_region_and_adaptation_does():
+    from ardrone_nmpc.experiments.xchannel import region_table
+
+    thesis, defaults, detuned = region_table()
+    assert thesis["worst_fixed"][0] > 1.05 and thesis["worst_adapted"] < 0.97
+    assert defaults["worst_fixed"][0] < thesis["worst_fixed"][0]
+    assert defaults["worst_fixed"][1:] == (0.4, 2.0, 0.2)  # the hardest corner
+    assert detuned["worst_fixed"][0] < 1.0 and defaults["worst_adapted"] < 0.96

@@ -76,26 +76,16 @@ class Channel:
 def simulate(num: Sequence[float], den: Sequence[float], t_in: np.ndarray, u: np.ndarray,
              t_out: np.ndarray, delay_s: float = 0.0) -> np.ndarray:
     """The output of ``num/den`` (continuous, a proper transfer function) driven by ``u``
-    (held from each ``t_in`` on; before the first, its first value, at rest) at ``t_out``
-    after a delay of ``delay_s``: (m,) for a (n,) input."""
-    t0 = t_in[0] - 1.0
-    grid = np.arange(t0, t_out[-1] - delay_s + 2 * GRID_S, GRID_S)
-    k = np.clip(np.searchsorted(t_in, grid, side="right") - 1, 0, len(t_in) - 1)
-    held = u[k]
+    (held from each ``t_in`` on; before the first, 0 and at rest: a flown stretch starts
+    from the drone's own hover) at ``t_out`` after a delay of ``delay_s``: (m,) for a (n,)
+    input."""
+    grid = np.arange(t_in[0] - 0.5, t_out[-1] - delay_s + 2 * GRID_S, GRID_S)
+    k = np.searchsorted(t_in, grid, side="right") - 1
+    held = np.where(k >= 0, u[np.clip(k, 0, len(t_in) - 1)], 0.0)
     numd, dend, _ = cont2discrete((np.atleast_1d(num), np.atleast_1d(den)), GRID_S,
                                   method="zoh")
-    numd = np.ravel(numd)
-    dc = float(np.polyval(num, 0.0) / np.polyval(den, 0.0)) if np.polyval(den, 0.0) else 0.0
-    zi = _rest(numd, dend, held[0]) if np.isfinite(dc) and dc else None
-    out = lfilter(numd, dend, held, zi=zi)[0] if zi is not None else lfilter(numd, dend, held)
+    out = lfilter(np.ravel(numd), dend, held)
     return np.interp(t_out - delay_s, grid, out)
-
-
-def _rest(numd: np.ndarray, dend: np.ndarray, u0: float) -> np.ndarray:
-    """``lfilter``'s initial conditions for the filter at rest under the constant ``u0``."""
-    from scipy.signal import lfilter_zi
-
-    return lfilter_zi(numd, dend) * u0
 
 
 def _fit_pct(y: np.ndarray, yhat: np.ndarray) -> float:
