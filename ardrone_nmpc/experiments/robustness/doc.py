@@ -50,8 +50,8 @@ def _worst(rows: Sequence[RobustnessRow]) -> str:
     err = max(v.steady_error_m for v in clean)
     amp = max(v.amplitude_m for v in clean)
     return (f"Over the clean flights: at most {sat:.1%} of ticks with roll/pitch on ±1, a "
-            f"steady error of at most {err * 100:.1f} cm, an oscillation of at most "
-            f"±{amp * 100:.1f} cm in the steady window.")
+            f"steady error of at most {err * 100:.1f} cm, a spread of at most "
+            f"±{amp * 100:.1f} cm about it in the steady window.")
 
 
 def markdown(name: str, rows: Sequence[RobustnessRow], grid: RobustnessGrid, *,
