@@ -54,3 +54,13 @@ def test_a_committed_flight_flies_the_same_today(name, index):
         now, then = getattr(v, field), getattr(was, field)
         assert (math.isnan(now) and math.isnan(then)) or now == pytest.approx(then, rel=1e-9,
                                                                                abs=1e-12)
+
+
+@pytest.mark.parametrize("name", CONFIGS)
+def test_docs_robustness_states_the_region_its_files_hold(name):
+    """docs/robustness.md quotes each config's clean region: the generated lines, verbatim."""
+    page = (ROOT / "docs" / "robustness.md").read_text(encoding="utf-8")
+    quoted = page.split(f"<!-- region: {name} -->\n")[1].split("<!-- end region -->")[0]
+    generated = (DOCS / f"{name}.md").read_text(encoding="utf-8")
+    lines = [line for line in generated.splitlines() if line.startswith("* ")]
+    assert quoted.strip().splitlines() == lines
