@@ -21,7 +21,7 @@ import yaml
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, config_from_dict
 
 __all__ = ["PROFILE_SECTIONS", "RETIRED_KEYS", "apply_overrides", "config_to_dict",
-           "dump_config", "load_config", "resolve_data"]
+           "dump_config", "load_config", "read_option_file", "resolve_data"]
 
 #: Settings that existed once and were removed, with the reason. A user's config naming one
 #: is an error that says so; a run directory written before the removal still reads (the
@@ -112,6 +112,18 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: the top level must be a mapping of section names to "
                           f"values, not a {type(data).__name__}")
     return data
+
+
+def read_option_file(path: str | Path, option: str) -> Any:
+    """The YAML of a file a command-line option names (``--space``, ``--grid-file``): its
+    parsed contents, or one ``option path: …`` ConfigError line."""
+    path = Path(path)
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{option} {path}: cannot read: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{option} {path}: invalid YAML: {str(err).splitlines()[0]}") from None
 
 
 def _retire(data: dict[str, Any], *, drop: bool) -> list[str]:

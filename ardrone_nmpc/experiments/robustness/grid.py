@@ -22,8 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.experiments.sweep.grid import GridParam, value_text
 
@@ -109,15 +107,9 @@ def load_grid(path: str | Path | None) -> RobustnessGrid:
     """The grid of a grid file, or :data:`DEFAULT_GRID` for None."""
     if path is None:
         return DEFAULT_GRID
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"--grid-file {path}: cannot read: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"--grid-file {path}: invalid YAML: "
-                          f"{str(err).splitlines()[0]}") from None
-    return grid_from_data(data, where=f"--grid-file {path}")
+    from ardrone_nmpc.config.io import read_option_file
+
+    return grid_from_data(read_option_file(path, "--grid-file"), where=f"--grid-file {path}")
 
 
 def corner_variants(grid: RobustnessGrid) -> list[tuple[str, tuple[str, ...]]]:

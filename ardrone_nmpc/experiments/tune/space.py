@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.config.schema import ConfigError
@@ -178,14 +177,9 @@ def load_space(path: str | Path | None, cfg) -> dict[str, Param]:
     """:func:`parse_space` of a YAML file (None: the default space)."""
     if path is None:
         return parse_space(None, cfg)
-    path = Path(path)
-    try:
-        spec = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"--space {path}: cannot read: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"--space {path}: invalid YAML: {str(err).splitlines()[0]}") from None
-    return parse_space(spec, cfg, where=f"--space {path}")
+    from ardrone_nmpc.config.io import read_option_file
+
+    return parse_space(read_option_file(path, "--space"), cfg, where=f"--space {path}")
 
 
 def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
