@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-
 from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.config.schema import ConfigError
 
