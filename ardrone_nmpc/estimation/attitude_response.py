@@ -103,6 +103,12 @@ NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.i
                                math.nan, math.nan, 0.0)
 
 
+def _microseconds(t_s: float) -> float:
+    """A time to the microsecond: the same sample, its time gone through a log's ms ages and
+    back (``replay --rerun``), is the same time, and the fit the same bits."""
+    return round(float(t_s), 6)
+
+
 class AttitudeResponseEstimator:
     """The streaming fit (module docstring).
 
@@ -137,6 +143,7 @@ class AttitudeResponseEstimator:
     # ---------------------------------------------------------------------- feeding
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
         """A command sent at ``t_s``, held until the next."""
+        t_s = _microseconds(t_s)
         u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
         n = self._count
         if n:
@@ -165,6 +172,7 @@ class AttitudeResponseEstimator:
         """A navdata sample received at ``t_s``; False if it could not be used (a sample seen
         before, not finite, or commands not reaching back the longest delay)."""
         n = self._count
+        t_s = _microseconds(t_s)
         y = np.radians([roll_deg, pitch_deg])
         if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
                 or self._t[0] > t_s - self.delays_s[-1]):
