@@ -112,8 +112,8 @@ def run_robustness(*, config: str | Path | None, overrides: Sequence[str],
     """
     wall0 = time.perf_counter()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     cases = build_cases(config_path=config, overrides=overrides, grid=grid.params())
+    out.mkdir(parents=True, exist_ok=True)  # once every case is valid
     by_id = {c.case_id: c for c in cases}
     done = resume_results(cases, out_dir=out)
     rows: dict[str, RobustnessRow] = {}
