@@ -18,6 +18,7 @@ def _same(a, b) -> bool:
     return a == b
 
 
+@pytest.mark.timeout(600)  # 63 flights, each measuring its own delay and gain
 def test_the_committed_fault_matrix_is_what_faults_gives_today(tmp_path):
     committed = json.loads((ROOT / "docs" / "fault-matrix.json").read_text())
     results = run_matrix(config_dir=ROOT / "configs", log_dir=tmp_path,
