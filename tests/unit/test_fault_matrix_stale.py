@@ -5,6 +5,8 @@ import json
 import math
 from pathlib import Path
 
+import pytest
+
 from ardrone_nmpc.experiments.faultmatrix import EXPERIMENTS, FAULT_CASES, run_matrix
 
 ROOT = Path(__file__).resolve().parents[2]
