@@ -11,10 +11,11 @@ __all__ = ["make_plant", "plant_backend"]
 
 def plant_backend(profile: str) -> type[AirframePlant]:
     """The kit's linear identified channels for ``thesis_kit``, :class:`AirframePlant` for the
-    ``ardrone`` profiles."""
+    ``ardrone`` profiles and a profile file (its values are in the config already:
+    :mod:`ardrone_nmpc.config.io` fills them in)."""
     if profile == "thesis_kit":
         return KitPlant
-    if profile.startswith("ardrone"):
+    if profile.startswith("ardrone") or profile.lower().endswith((".yaml", ".yml")):
         return AirframePlant
     raise ValueError(f"unknown plant profile {profile!r}")
 
