@@ -19,8 +19,9 @@ runner exchanges with any plant (``core.types``).
 
 The lockstep runner flies it through ``run_lockstep(cfg, plant=AirframeEmulator(...))``: the
 interface is the one the runner and the simulated control port use (``command``, ``advance``,
-``takeoff``, ``land``, ``mocap_pose``, ``navdata``, ``truth``, ``mode``, ``t_s``,
-``battery_pct``, ``wind_mps``, ``params``).
+``takeoff``, ``land``, ``emergency``, ``mocap_pose``, ``navdata``, ``truth``,
+``altitude_m_and_rate_mps``, ``mode``, ``t_s``, ``battery_pct``, ``wind_mps``, ``params``:
+``ardrone_nmpc.sim.backends.Airframe``).
 """
 
 from __future__ import annotations
@@ -43,11 +44,14 @@ KIT_PITCH = (2.5139 / (4.8661 / 11.9184), 4.8661 / (4.8661 / 11.9184), 3.9784, 1
 
 @dataclass(frozen=True)
 class EmulatorLimits:
-    """The limits the drone holds (written over the control port at connect)."""
+    """The limits the drone holds (written over the control port at connect), and the delay
+    and climb lag a simulated firmware's altitude cap leads by (sim.backends.Airframe)."""
 
     euler_angle_max_rad: float = 0.2094
     control_vz_max_mps: float = 0.7
     control_yaw_radps: float = 1.745
+    command_delay_s: float = 0.0
+    tau_vz_s: float = 0.0
 
     def replace(self, **changes) -> EmulatorLimits:
         return replace(self, **changes)
@@ -89,7 +93,8 @@ class AirframeEmulator:
         self.drag_per_s = float(drag_per_s)
         self.yaw_gain, self.tau_yaw_s = float(yaw_gain), float(tau_yaw_s)
         self.wind_mps = np.array([wind_mps[0], wind_mps[1], 0.0])
-        self.params = EmulatorLimits()
+        self.params = EmulatorLimits(command_delay_s=self.command_delay_s,
+                                     tau_vz_s=self.tau_vz_s)
         self._rng = np.random.default_rng(seed)
         self._t = 0.0
         self._pos = np.zeros(3)
@@ -225,6 +230,11 @@ class AirframeEmulator:
                           pitch_rad=float(self._tilt[1]), psi_rad=self._psi,
                           psi_rate_radps=self._psi_rate, mode=self._mode,
                           battery_pct=self._battery)
+
+    @property
+    def altitude_m_and_rate_mps(self) -> tuple[float, float]:
+        """(z, ż) now: what the firmware's altitude cap reads."""
+        return float(self._pos[2]), float(self._vel[2])
 
     def mocap_pose(self) -> MocapPose:
         phi, theta = self._tilt
