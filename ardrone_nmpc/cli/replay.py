@@ -24,7 +24,8 @@ from ardrone_nmpc.experiments.replay import (
     COMPARED_COLUMNS, RERUN_FILE, RerunResult, broadcast, missing_rerun_columns,
     require_rerun_columns, rerun, write_rerun_csv,
 )
-from ardrone_nmpc.runs.summary import render_summary, summarise
+from ardrone_nmpc.cli.tables import render_summary
+from ardrone_nmpc.runs.summary import summarise
 
 #: ``--rerun`` on an unchanged config must reproduce every command within this (issue target).
 REPRODUCE_TOLERANCE = 1e-9

@@ -10,7 +10,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from ardrone_nmpc.cli.console import stdout_console
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
-from ardrone_nmpc.runs.summary import render_summary
+from ardrone_nmpc.cli.tables import render_summary
 
 
 def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed: int | None,

@@ -31,7 +31,7 @@ def _labels(run_dirs: Sequence[Path]) -> list[str]:
 def fits_side_by_side(runs, width: int) -> bool:
     """Whether the side-by-side table of ``runs`` (``(label, rows)``) fits ``width``
     columns without cutting a name or a value."""
-    from ardrone_nmpc.runs.summary import format_value
+    from ardrone_nmpc.cli.tables import format_value
 
     keys = {(r.axis, r.metric, r.unit) for _, rows in runs for r in rows}
     fixed = [max((len(k[i]) for k in keys), default=0) for i in range(3)]
@@ -45,7 +45,7 @@ def render_long(runs, title: str | None = None):
     one metric together, metrics in order of first appearance."""
     from rich.table import Table
 
-    from ardrone_nmpc.runs.summary import format_value
+    from ardrone_nmpc.cli.tables import format_value
 
     order: dict[tuple[str, str], str] = {}
     for _, rows in runs:
@@ -86,7 +86,8 @@ def summary_command(*, run_dirs: Sequence[Path], csv: bool = False, console=None
     directory that cannot be read."""
     from ardrone_nmpc.cli.console import stdout_console, warn
     from ardrone_nmpc.runs.rundir import read_run
-    from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summarise
+    from ardrone_nmpc.cli.tables import render_side_by_side, render_summary
+    from ardrone_nmpc.runs.summary import summarise
 
     runs = []
     for label, run_dir in zip(_labels(run_dirs), run_dirs):

@@ -34,6 +34,8 @@ from typing import Callable
 
 import numpy as np
 
+from ardrone_nmpc.core.modes import Mode
+
 #: experiment kind → (config file, overrides)
 EXPERIMENTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "hover": ("hover.yaml", ("duration_s=12",)),
@@ -115,8 +117,7 @@ def _positions(run, upto_landing: bool = True) -> tuple[np.ndarray, np.ndarray]:
     t = c["t_s"]
     keep = np.ones(len(t), dtype=bool)
     if upto_landing:
-        mode = c["mode"]
-        keep = np.array([not (m == "landing" or str(m).startswith("land-")) for m in mode])
+        keep = np.array([not Mode.parse(m).is_landing for m in c["mode"]], dtype=bool)
     p = np.column_stack([c["x_true_m"], c["y_true_m"], c["z_true_m"]])
     return t[keep], p[keep]
 
@@ -159,20 +160,20 @@ def classify(run, ending: str, fault: str) -> str:
     """The outcome label of a finished (or refused) run (see the module docstring)."""
     if refused(run):
         return "refused"
-    mode = [str(m) for m in run.columns["mode"]]
+    modes = [Mode.parse(m) for m in run.columns["mode"]]
     z = run.columns["z_true_m"]
     t = run.columns["t_s"]
-    flying = np.array([m in ("track", "settle") or m.startswith(("hold", "fallback", "hover"))
-                       for m in mode])
+    flying = np.array([m.is_airborne for m in modes], dtype=bool)
     if np.any(flying & (t >= 0) & (z <= 0.02)):
         return "crashed"
-    if ending == "stop-emergency":
+    end = Mode.parse(ending)
+    if end.is_emergency_stop:
         return "stopped" if fault == "emergency" else "crashed"
-    if ending.startswith("land-"):
+    if end.action == "land" and end.reason:
         landed = any(e.get("kind") == "landed" for e in run.events)
         return "landed" if landed else "crashed"
-    last = next((m for m in reversed(mode) if m), "")
-    return "hovered" if last.startswith("hover") else "completed"
+    last = next((m for m in reversed(modes) if m.is_set), Mode(""))
+    return "hovered" if last.action == "hover" else "completed"
 
 
 def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:

@@ -35,6 +35,7 @@ from typing import Callable
 import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.modes import LANDING, Mode
 from ardrone_nmpc.core.types import IX_PSI, FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.reference.experiment import experiment_trajectory
@@ -347,8 +348,9 @@ def rerun(*, run: RunData, cfg, recorder=None,
     for k, inp in enumerate(inputs):
         # manual clock = the experiment clock: the tick's clock offset is 0
         out = tick.step(inp, t_exp_s=inp.t_s, mode=phase(inp.t_s))
-        if logged_mode[k] == "landing" and out.action in (Action.LAND, Action.STOP):
-            out.row["mode"] = "landing"  # the runner's label for its descent after a landing
+        if Mode.parse(logged_mode[k]).action == LANDING and out.action in (Action.LAND,
+                                                                            Action.STOP):
+            out.row["mode"] = LANDING  # the runner's label for its descent after a landing
         rows.append(out.row)
         if recorder is not None:
             recorder.write_row(out.row)
