@@ -7,10 +7,9 @@ ranked table (stdout).
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,16 +22,13 @@ from rich.table import Table
 from ardrone_nmpc.cli.console import stdout_console
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.errors import EXIT_INTERRUPTED, UserError
-from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
-                                CaseResult, SweepCsvAppender, build_cases, finished_result,
-                                iter_dask, iter_local, parse_grid, rank_rows, resume_results,
-                                sweep_columns, sweep_row, write_sweep_csv)
-
-ENGINES = ("local", "dask")
-
-
-class SweepEngineError(UserError, RuntimeError):
-    """The engine could not run (no Dask scheduler at the address, …): one line, exit 1."""
+from ardrone_nmpc.experiments.parallel import ExecutorError, engine_errors
+from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES,
+                                            SWEEP_FILE, Case, CaseResult, SweepCsvAppender,
+                                            build_cases, finished_result, parse_grid, rank_rows,
+                                            resume_results, sweep_columns, sweep_row,
+                                            write_sweep_csv)
+from ardrone_nmpc.experiments.sweep.engines import run_cases
 
 
 class SweepInterrupted(UserError):
@@ -57,20 +53,6 @@ class SweepOutcome:
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
     interrupted: bool = False
     wall_s: float = math.nan
-
-
-def engine_errors(*, engine: str, scheduler: str | None) -> list[str]:
-    """The ``--engine`` / ``--scheduler`` mistakes (one ``--option: message`` line each) of
-    the commands that fly many cases: ``sweep`` and ``tune``."""
-    errors = []
-    if engine not in ENGINES:
-        errors.append(f"--engine: unknown engine {engine!r}; choose {', '.join(ENGINES)}")
-    if scheduler is not None and engine != "dask":
-        errors.append("--scheduler: only with --engine dask")
-    if engine == "dask" and importlib.util.find_spec("distributed") is None:
-        errors.append("--engine dask: needs dask.distributed "
-                      "(pip install 'ardrone-nmpc[distributed]')")
-    return errors
 
 
 def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
@@ -106,14 +88,6 @@ def _check_inputs(cases: Sequence[Case]) -> None:
             checked.add(ref.path_file)
 
 
-def _engine(pending: Sequence[Case], *, engine: str, out_dir: Path, jobs: int,
-            scheduler: str | None, diverge_m: float) -> Iterator[CaseResult]:
-    if engine == "dask":
-        return iter_dask(pending, out_dir=out_dir, jobs=jobs, scheduler=scheduler,
-                         diverge_m=diverge_m)
-    return iter_local(pending, out_dir=out_dir, jobs=jobs, diverge_m=diverge_m)
-
-
 def _progress(console: Console) -> Progress:
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), TimeRemainingColumn(), console=console,
@@ -132,7 +106,7 @@ def _run_pending(pending: Sequence[Case], *, cases_by_id: Mapping[str, Case],
     """Fly ``pending``, appending each result to ``results`` and ``sweep.csv`` as it comes.
     Ctrl-C sets ``outcome.interrupted``: the cases not started are cancelled."""
     appender = SweepCsvAppender(csv_path, columns)
-    stream = _engine(pending, engine=engine, **engine_options)
+    stream = run_cases(pending, engine=engine, **engine_options)
     try:
         with _progress(err_console) as progress:
             task = progress.add_task(_describe(results), total=len(pending))
@@ -146,7 +120,7 @@ def _run_pending(pending: Sequence[Case], *, cases_by_id: Mapping[str, Case],
     except (OSError, TimeoutError) as err:
         if engine != "dask":
             raise
-        raise SweepEngineError(f"--engine dask: {' '.join(str(err).split())}") from None
+        raise ExecutorError(f"--engine dask: {' '.join(str(err).split())}") from None
     finally:
         try:
             stream.close()  # cancels what has not started, waits for what is running
@@ -229,7 +203,7 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
     """Run the sweep: validate every case, skip the finished ones, fly the rest with
     ``engine`` on ``jobs`` workers, keep ``out_dir/sweep.csv`` current, print the ranked
     table. Raises :class:`ConfigError` for bad input (before anything runs) and
-    :class:`SweepEngineError` if the engine cannot run."""
+    :class:`~ardrone_nmpc.experiments.parallel.ExecutorError` if the engine cannot run."""
     check_options(engine=engine, scheduler=scheduler, rank_by=rank_by)
     cases = build_cases(config_path=config, overrides=overrides, grid=parse_grid(grid))
     _check_inputs(cases)

@@ -5,7 +5,8 @@
 :func:`record`. A run directory's ``summary.csv`` is written last
 (:func:`~ardrone_nmpc.runs.summary.write_run_summary`, also used by the real-time flight),
 so its presence marks a recording that finished. A flight that raises leaves its partial
-run directory with a final ``exception`` event and no ``summary.csv``.
+run directory with a final ``exception`` event and no ``summary.csv``; one stopped by Ctrl-C
+or a terminating signal, with a final ``interrupted`` event (:mod:`ardrone_nmpc.runs.ending`).
 
 The simulation and the summary are imported when a recording starts: ``sweep`` (and
 ``plot``, through the sweep table) import this module without loading the solver kernels.
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Generic, TypeVar
 
+from ardrone_nmpc.runs.ending import FAILED_EVENT, note_interrupted
 from ardrone_nmpc.runs.rundir import RunRecorder
 from ardrone_nmpc.runtime.schedule import Schedule
 
@@ -31,8 +33,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 T = TypeVar("T")
 
-#: The event that ends the events of a flight that raised (``error``: the exception, one line).
-FAILED_EVENT = "exception"
+__all__ = ["FAILED_EVENT", "SIMULATED_EVENT", "Recording", "one_line", "record",
+           "record_lockstep"]
+
 #: The event that ends a lockstep recording (wall time, ticks, how it ended).
 SIMULATED_EVENT = "simulated"
 
@@ -74,7 +77,8 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
 
     If ``fly`` raises (an ``Exception``), the :data:`FAILED_EVENT` ends ``events.jsonl``
     (``t_s`` NaN), no summary is written, and the exception propagates — or, with ``catch``,
-    comes back as :attr:`Recording.error`.
+    comes back as :attr:`Recording.error`. A Ctrl-C or terminating signal ends it with the
+    ``interrupted`` event and propagates, carrying the run directory as ``run_dir``.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
@@ -87,6 +91,10 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
             if not catch:
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
+        except KeyboardInterrupt as err:  # Ctrl-C, or a signal (runtime/signals)
+            note_interrupted(recorder, err)
+            err.run_dir = recorder.path
+            raise
         wall_s = time.perf_counter() - wall0
     run, rows = write_run_summary(recorder.path)
     return Recording(recorder.path, result, "", wall_s, run, rows)

@@ -35,6 +35,7 @@ from typing import Callable
 import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.core.modes import LANDING, Mode
 from ardrone_nmpc.core.types import IX_PSI, FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
@@ -409,9 +410,7 @@ def write_rerun_csv(*, result: RerunResult, path: Path) -> Path:
         cells = [format_number(t), str(result.logged_mode[i]), str(result.mode[i])]
         cells += [format_number(result.diff[c][i]) for c in COMPARED_COLUMNS]
         lines.append(",".join(cells))
-    path = Path(path)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
+    return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 # ----------------------------------------------------------------------------- broadcast

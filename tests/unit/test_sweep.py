@@ -386,12 +386,12 @@ def test_a_worker_ends_when_the_write_end_of_its_pipe_closes():
     import subprocess
     import sys
 
-    from ardrone_nmpc.experiments.sweep.engines import ORPHAN_EXIT
+    from ardrone_nmpc.experiments.parallel import ORPHAN_EXIT
 
     code = ("import sys, time\n"
             "from multiprocessing.connection import Connection\n"
-            "from ardrone_nmpc.experiments.sweep.engines import _exit_with_sweep\n"
-            "_exit_with_sweep(Connection(int(sys.argv[1]), writable=False))\n"
+            "from ardrone_nmpc.experiments.parallel import _exit_with_parent\n"
+            "_exit_with_parent(Connection(int(sys.argv[1]), writable=False))\n"
             "print('watching', flush=True)\n"
             "time.sleep(120)\n")
     read_fd, write_fd = os.pipe()
