@@ -11,7 +11,7 @@ import sys
 from rich.console import Console
 from rich.markup import escape
 
-__all__ = ["PIPED_WIDTH", "run_notes", "stderr_console", "stdout_console",
+__all__ = ["PIPED_WIDTH", "config_notes", "run_notes", "stderr_console", "stdout_console",
            "stdout_is_terminal", "warn"]
 
 #: Width of the tables when stdout is not a terminal (a file or a pipe has no width).
@@ -59,3 +59,13 @@ def run_notes(run, *, label: str | None = None) -> str | None:
     if ending is not None:
         warn(f"{label or run.path}: {ending}")
     return ending
+
+
+def config_notes(cfg) -> None:
+    """Warn (stderr) about what a config sets and its choices ignore — the same lines from
+    ``check`` and from every command that flies it
+    (:func:`~ardrone_nmpc.reference.trajectories.ignored_fields`)."""
+    from ardrone_nmpc.reference.trajectories import ignored_fields
+
+    for note in ignored_fields(cfg.reference):
+        warn(note)

@@ -33,7 +33,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     """Fly ``config`` (see the module docstring for what is printed and the exit codes)."""
     from rich.live import Live
 
-    from ardrone_nmpc.cli.console import stderr_console
+    from ardrone_nmpc.cli.console import config_notes, stderr_console
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed, run_flight
     from ardrone_nmpc.runtime.signals import Terminated, exit_code_of
@@ -44,6 +44,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     if duration_s is not None:
         overrides.append(f"duration_s={duration_s!r}")
     cfg = load_config(config, overrides)
+    config_notes(cfg)
     # the land / cut-motors keys need a terminal to read them from and to show them on
     keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr and sys.stderr.isatty())
     view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}",

@@ -19,7 +19,7 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                            TimeElapsedColumn, TimeRemainingColumn)
 from rich.table import Table
 
-from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.cli.console import stdout_console, warn
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.errors import EXIT_INTERRUPTED, UserError
 from ardrone_nmpc.experiments.parallel import ExecutorError, engine_errors
@@ -29,6 +29,7 @@ from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS
                                             resume_results, sweep_columns, sweep_row,
                                             write_sweep_csv)
 from ardrone_nmpc.experiments.sweep.engines import run_cases
+from ardrone_nmpc.reference.trajectories import ignored_fields, input_files
 
 
 class SweepInterrupted(UserError):
@@ -77,15 +78,13 @@ def _out_dir(out_dir: Path) -> Path:
 
 
 def _check_inputs(cases: Sequence[Case]) -> None:
-    """Read and check every waypoint file the cases name, before any case flies."""
-    from ardrone_nmpc.reference.trajectories import path_file
-
+    """Read and check every file the cases name, before any case flies."""
     checked = set()
     for case in cases:
         ref = case.config.reference
-        if (ref.kind == "path" or ref.path_file) and ref.path_file not in checked:
-            path_file(ref)
-            checked.add(ref.path_file)
+        if (ref.kind, ref.path_file) not in checked:
+            input_files(ref)
+            checked.add((ref.kind, ref.path_file))
 
 
 def _progress(console: Console) -> Progress:
@@ -207,6 +206,8 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
     check_options(engine=engine, scheduler=scheduler, rank_by=rank_by)
     cases = build_cases(config_path=config, overrides=overrides, grid=parse_grid(grid))
     _check_inputs(cases)
+    for note in dict.fromkeys(n for c in cases for n in ignored_fields(c.config.reference)):
+        warn(note)
     out_dir = _out_dir(Path(out_dir))
     console = console or stdout_console()
     wall0 = time.perf_counter()

@@ -187,6 +187,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)
 
+    from ardrone_nmpc.cli.console import config_notes
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.parallel import open_executor
@@ -199,6 +200,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     wall0 = time.perf_counter()  # start-up included: the wall time a user waits
     _check_options(engine=engine, scheduler=scheduler)
     cfg = load_config(config, overrides)
+    config_notes(cfg)
     space = load_space(space_file, cfg)
     obj = parse_objective(objective)
     written = written_config(config, overrides)

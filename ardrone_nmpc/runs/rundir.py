@@ -60,7 +60,7 @@ from ardrone_nmpc.config.io import dump_config, load_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.errors import UserError
-from ardrone_nmpc.reference.trajectories import path_file
+from ardrone_nmpc.reference.trajectories import input_files
 
 __all__ = [
     "LOG_COLUMNS",
@@ -207,9 +207,7 @@ def _getter(names: list[str]) -> Callable[[Mapping[str, Any]], tuple]:
 
 def _read_inputs(cfg: ExperimentConfig) -> dict:
     """The input files ``cfg`` names, read and checked: ``{field: WaypointFile}``."""
-    if cfg.reference.kind == "path" or cfg.reference.path_file is not None:
-        return {"path_file": path_file(cfg.reference)}
-    return {}
+    return input_files(cfg.reference)
 
 
 def _copy_inputs(path: Path, cfg: ExperimentConfig, inputs: dict
