@@ -40,6 +40,13 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 
+    if sim:  # the loopback simulators listen on free ports of 127.0.0.1: nothing to choose
+        given = [name for name, value in (("--drone", drone), ("--at-port", at_port),
+                                          ("--navdata-port", navdata_port),
+                                          ("--mocap-port", mocap_port)) if value is not None]
+        if given:
+            raise UserError("\n".join(f"{name}: not with --sim (the loopback simulators listen "
+                                       "on free ports of 127.0.0.1)" for name in given))
     overrides = list(overrides)
     if duration_s is not None:
         overrides.append(f"duration_s={duration_s!r}")

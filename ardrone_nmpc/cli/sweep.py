@@ -33,9 +33,19 @@ from ardrone_nmpc.reference.trajectories import ignored_fields, input_files
 
 
 class SweepInterrupted(UserError):
-    """Ctrl-C stopped the sweep; what finished is in sweep.csv (exit 130)."""
+    """Ctrl-C (exit 130) or a signal (exit 128 + its number) stopped the sweep; what finished
+    is in sweep.csv."""
 
     exit_code = EXIT_INTERRUPTED
+
+    @classmethod
+    def of(cls, interrupt: BaseException) -> SweepInterrupted:
+        from ardrone_nmpc.runtime.signals import exit_code_of, signal_name
+
+        err = cls(f"interrupted by {signal_name(interrupt)}: the cases that finished are in "
+                  "sweep.csv; re-run the same command to resume")
+        err.exit_code = exit_code_of(interrupt)
+        return err
 
 
 class SweepFailures(UserError):
@@ -52,7 +62,7 @@ class SweepOutcome:
     flown: int = 0
     resumed: int = 0
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
-    interrupted: bool = False
+    interrupted: BaseException | None = None  # the Ctrl-C or signal that stopped it
     wall_s: float = math.nan
 
 
@@ -114,8 +124,8 @@ def _run_pending(pending: Sequence[Case], *, cases_by_id: Mapping[str, Case],
                 appender.append(sweep_row(cases_by_id[result.case_id], result))
                 outcome.flown += 1
                 progress.update(task, advance=1, description=_describe(results))
-    except KeyboardInterrupt:
-        outcome.interrupted = True
+    except KeyboardInterrupt as err:
+        outcome.interrupted = err
     except (OSError, TimeoutError) as err:
         if engine != "dask":
             raise
@@ -254,17 +264,16 @@ def sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[str]
 
     out_dir = out if out is not None else Path("logs") / "sweeps" / config.stem
     n_jobs = jobs if jobs is not None else os.cpu_count() or 1
-    resume = "interrupted: re-run the same command to resume"
     try:
         outcome = run_sweep_command(config=config, grid=grid, overrides=overrides,
                                     out_dir=out_dir, jobs=n_jobs, engine=engine,
                                     scheduler=scheduler, rank_by=rank_by, top=top,
                                     diverge_m=diverge_m)
-    except KeyboardInterrupt:
-        raise SweepInterrupted(resume) from None
+    except KeyboardInterrupt as err:
+        raise SweepInterrupted.of(err) from None
     typer.echo(f"sweep: {outcome.csv_path}")
     if outcome.interrupted:
-        raise SweepInterrupted(resume)
+        raise SweepInterrupted.of(outcome.interrupted)
     if outcome.counts["failed"]:
         raise SweepFailures(f"{outcome.counts['failed']} of {outcome.total} cases failed (see "
                             f"the message column of {outcome.csv_path})")

@@ -10,7 +10,7 @@ previous export:
   file; an existing file only with ``force`` (an export's ``--force``), and then only a regular
   file (never a device node, a pipe or a socket);
 * :func:`check_output_dir` — a folder a command creates things in (``--log-dir``, ``--out``):
-  not inside (or being) a run directory, not a file, not a link to nowhere.
+  not inside (or being) a run directory, not a link to nowhere.
 """
 
 from __future__ import annotations
@@ -93,13 +93,12 @@ def check_output_file(path: str | Path, *, option: str, force: bool = False,
 
 def check_output_dir(path: str | Path, *, option: str) -> Path:
     """Refuse a folder ``path`` a command would create things in when it is (or lies in) a
-    run directory, is a file, or is a link to nowhere. Returns it."""
+    run directory, or is a link to nowhere (creating it would fail with a baffling "File
+    exists"). Returns it; a file in its place is for the command to refuse."""
     path = Path(path)
     if path.is_symlink() and not path.exists():
         raise OutputError(f"{option} {path}: a symbolic link to {os.readlink(path)}, which "
                           "does not exist")
-    if path.exists() and not path.is_dir():
-        raise OutputError(f"{option} {path}: exists and is not a directory")
     run = run_dir_holding(path)
     if run is not None:
         raise _run_dir_error(option, path, run)

@@ -18,15 +18,20 @@ import time
 from typing import Any
 
 from ardrone_nmpc.core.extras import import_extra
+from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.runs import channels as ch
 
-__all__ = ["LiveView", "DEFAULT_PORT", "open_live_view"]
+__all__ = ["LiveView", "LiveViewError", "DEFAULT_PORT", "open_live_view"]
 
 DEFAULT_PORT = 8765          # Foxglove's default WebSocket port
 LOOPBACK = "127.0.0.1"
 _CONFIG_EVERY_S = 2.0        # /config is re-sent so that a late client sees it too
 _PATHS_EVERY_S = 1.0         # /flight_path and /reference_path, re-sent as they grow
 _PATH_POSES = 1500
+
+
+class LiveViewError(UserError):
+    """The live view cannot start (its port is taken): one line, exit 1."""
 
 
 class _Tee:
@@ -96,11 +101,17 @@ class LiveView:
 
     def start(self) -> None:
         """Start the server on 127.0.0.1 and the publisher thread; raises
-        :class:`~ardrone_nmpc.core.extras.MissingExtra` without foxglove-sdk."""
+        :class:`~ardrone_nmpc.core.extras.MissingExtra` without foxglove-sdk, and
+        :class:`LiveViewError` when the port cannot be bound."""
         fg = import_extra("foxglove", "foxglove", "--foxglove")
         context = self._context = fg.Context()  # channels close with their context
-        self._server = fg.start_server(name="ardrone-nmpc", host=LOOPBACK,
-                                       port=self._requested_port, context=context)
+        try:
+            self._server = fg.start_server(name="ardrone-nmpc", host=LOOPBACK,
+                                           port=self._requested_port, context=context)
+        except RuntimeError as err:  # the SDK reports a bind failure as FoxgloveError text
+            text = " ".join(str(err).split()).removeprefix("FoxgloveError: ")
+            raise LiveViewError(f"--foxglove-port {self._requested_port}: {text} (another "
+                                "port, or 0 for a free one)") from None
         for topic, (name, schema) in ch.SCHEMAS.items():
             self._channels[topic] = fg.Channel(
                 topic, message_encoding="json", context=context,

@@ -4,14 +4,24 @@ Bad numbers (out of range, NaN, 1e308, 1e-300), empty hosts, ports outside 1–6
 that are directories or sit under a file, inputs that do not exist or exceed the limits. Each
 must fail before anything is flown, sent or written (no run directory is left), with the
 exit code of :mod:`ardrone_nmpc.errors`: 2 for the command line itself, 1 for the rest.
+
+Issue 24's reproductions are here too: outputs aimed into a run directory, onto an existing
+file or a device; times MCAP cannot hold; a corrupt study; space files the sampler cannot
+draw from; a Dask scheduler that is garbage or never answers; a port in use; the interrupts
+(Ctrl-C, SIGTERM) of simulate, export and tune; and a test that every output option of every
+command is refused inside a run directory.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
+import signal
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -20,6 +30,7 @@ from typer.testing import CliRunner
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder
+from ardrone_nmpc.runs.summary import write_run_summary
 
 ROOT = Path(__file__).resolve().parents[2]
 HOVER = str(ROOT / "configs" / "hover.yaml")
@@ -29,19 +40,56 @@ SHORT = ["--set", "duration_s=0.3", "--set", "sim.settle_s=0.1"]
 runner = CliRunner()
 
 
+SPACES = {"space_inf": "params:\n  controller.dtau_s: {low: -.inf, high: 0.2}\n",
+          "space_factor_inf": "factor: .inf\n",
+          "space_no_int": "default: false\nparams:\n  controller.horizon_steps: "
+                          "{low: 10.2, high: 10.8, type: int}\n"}
+
+
+def _run(parent: Path, name: str, *t_s: float) -> Path:
+    cfg = load_config(overrides=[f"name={name}"])
+    with RunRecorder.create(parent, cfg, seed=0) as rec:
+        for t in t_s:
+            rec.write_row({"t_s": t, "x_m": 0.0, "y_m": 0.0, "z_m": 1.0, "psi_rad": 0.0,
+                           "mode": "track", "solver_status": "ok"})
+    write_run_summary(rec.path)  # a finished run
+    return rec.path
+
+
 @pytest.fixture
 def files(tmp_path) -> dict[str, str]:
-    """A plain file, an existing directory, a far path CSV, a run directory."""
+    """A plain file, an existing directory, a far path CSV, a run directory; and issue 24's
+    inputs: runs with times MCAP cannot hold, a corrupt study, a folder holding a sweep and a
+    tune, space files, a non-UTF-8 file, a dangling link, a TCP port in use (closed by the
+    test's teardown)."""
     (tmp_path / "afile").write_text("x")
     (tmp_path / "adir").mkdir()
     (tmp_path / "far.csv").write_text(FAR_PATH)
-    cfg = load_config(overrides=["name=r"])
-    with RunRecorder.create(tmp_path / "runs", cfg, seed=0) as rec:
-        rec.write_row({"t_s": 0.0, "x_m": 0.0, "y_m": 0.0, "z_m": 1.0, "psi_rad": 0.0,
-                       "mode": "track", "solver_status": "ok"})
-    return {"file": str(tmp_path / "afile"), "dir": str(tmp_path / "adir"),
-            "far": str(tmp_path / "far.csv"), "run": str(rec.path),
-            "logs": str(tmp_path / "logs"), "tmp": str(tmp_path)}
+    run = _run(tmp_path / "runs", "r", 0.0)
+    paths = {"file": tmp_path / "afile", "dir": tmp_path / "adir", "far": tmp_path / "far.csv",
+             "run": run, "logs": tmp_path / "logs", "tmp": tmp_path,
+             "huge": _run(tmp_path / "odd", "huge", 0.0, 1e308),
+             "big": _run(tmp_path / "odd", "big", 0.0, 1e11)}
+    (tmp_path / "corrupt").mkdir()
+    (tmp_path / "corrupt" / "study.db").write_bytes(bytes(range(256)) * 20)
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "shared" / "sweep.csv").write_text("case,status\n")
+    (tmp_path / "shared" / "study.db").write_bytes(b"")
+    for name, text in SPACES.items():
+        paths[name] = tmp_path / f"{name}.yaml"
+        paths[name].write_text(text)
+    paths["binary"] = tmp_path / "binary.yaml"
+    paths["binary"].write_bytes(b"params:\n  \xff\xfe: {}\n")
+    paths["dangling"] = tmp_path / "dangling"
+    os.symlink(tmp_path / "gone", paths["dangling"])
+    paths.update(corrupt=tmp_path / "corrupt", shared=tmp_path / "shared")
+    out = {k: str(v) for k, v in paths.items()}
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    out["busy_port"] = str(busy.getsockname()[1])
+    yield out
+    busy.close()
 
 
 # (id, arguments with {placeholders} from `files`, exit code, pattern of the error line)
@@ -101,9 +149,9 @@ CASES = [
                         "reference.kind=path", "--set", "reference.path_file={far}",
                         "--out", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
     ("reproduce-out-a-dir", ["reproduce", "--out", "{dir}"], 2,
-     r"^error: --out: .*adir is a directory; give a file name$"),
+     r"^error: --out: .*adir: is a directory; give a file name$"),
     ("bench-json-a-dir", ["bench", "--json", "{dir}"], 2,
-     r"^error: --json: .*adir is a directory; give a file name$"),
+     r"^error: --json: .*adir: is a directory; give a file name$"),
     ("bench-json-under-a-file", ["bench", "--json", "{file}/b.json"], 2,
      r"^error: --json: .*afile is not a directory$"),
     ("bench-steps-huge", ["bench", "--steps", "1000000000"], 2, r"^error: --steps: "),
@@ -139,6 +187,70 @@ CASES = [
      r"^error: --control-port: -1 is not a port \(1 … 65535\)$"),
     ("tune-missing", ["tune", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
     ("tune-zero-trials", ["tune", HOVER, "--trials", "0"], 2, r"^error: --trials: "),
+    # issue 24: data loss
+    ("export-mcap-onto-the-log", ["export", "{run}", "--format", "mcap", "-o", "{run}/log.csv"],
+     1, r"^error: -o .*/log\.csv: inside the run directory .*-r, which only its recording"),
+    ("export-parquet-onto-the-config", ["export", "{run}", "--format", "parquet", "-o",
+                                        "{run}/config.yaml"], 1,
+     r"^error: -o .*/config\.yaml: inside the run directory"),
+    ("export-onto-an-existing-file", ["export", "{run}", "-o", "{file}"], 1,
+     r"^error: -o .*afile: exists; --force replaces it$"),
+    ("export-onto-a-device", ["export", "{run}", "-o", "/dev/null", "--force"], 1,
+     r"^error: -o /dev/null: is not a regular file \(a device, a pipe or a socket\); it is "
+     r"never replaced$"),
+    # issue 24: tracebacks
+    ("export-t-1e308", ["export", "{huge}", "-o", "{tmp}/h.mcap"], 1,
+     r"^error: .*-huge/log\.csv:3: t_s = 1e\+308 s is beyond what an MCAP log time holds"),
+    ("export-t-1e11", ["export", "{big}", "-o", "{tmp}/b.mcap"], 1,
+     r"^error: .*-big/log\.csv:3: t_s = 100000000000\.0 s is beyond what an MCAP log time"),
+    ("export-a-config-file", ["export", HOVER], 1,
+     r"^error: .*hover\.yaml: a file, not a run directory$"),
+    ("tune-resume-a-corrupt-study", ["tune", HOVER, "--resume", "--out", "{corrupt}"], 1,
+     r"^error: .*corrupt/study\.db: file is not a database$"),
+    ("plot-a-corrupt-study", ["plot", "{corrupt}"], 1,
+     r"^error: .*corrupt/study\.db: file is not a database$"),
+    ("tune-space-inf", ["tune", HOVER, "--space", "{space_inf}", "--out", "{tmp}/t"], 1,
+     r"^error: --space .*space_inf\.yaml: params\.controller\.dtau_s: needs finite numbers"),
+    ("tune-space-factor-inf", ["tune", HOVER, "--space", "{space_factor_inf}", "--out",
+                               "{tmp}/t"], 1,
+     r"^error: --space .*: factor: inf must be a finite number > 1$"),
+    ("tune-space-int-without-an-integer", ["tune", HOVER, "--space", "{space_no_int}", "--out",
+                                           "{tmp}/t"], 1,
+     r"^error: --space .*: type int: no integer lies in 10\.2 … 10\.8$"),
+    ("tune-space-not-utf8", ["tune", HOVER, "--space", "{binary}", "--out", "{tmp}/t"], 1,
+     r"^error: --space .*binary\.yaml: not UTF-8 text"),
+    ("tune-dask-garbage-scheduler", ["tune", HOVER, "--engine", "dask", "--scheduler",
+                                     "garbage://x", "--out", "{tmp}/t"], 1,
+     r"^error: --engine dask: .*garbage://x.*unknown address scheme 'garbage'"),
+    ("simulate-foxglove-port-in-use", ["simulate", HOVER, "--foxglove", "--foxglove-port",
+                                       "{busy_port}", "--log-dir", "{logs}"], 1,
+     r"^error: --foxglove-port \d+: Failed to bind port: Address already in use"),
+    ("check-profile-as-a-list", ["check", HOVER, "--set", "sim.plant.profile=[ardrone]"], 1,
+     r"^error: sim\.plant\.profile: Input should be 'ardrone', 'thesis_kit' or 'ardrone_lab'$"),
+    ("fly-blank-host", ["fly", HOVER, "--set", 'drone.host=" "', "--log-dir", "{logs}"], 1,
+     r"^error: drone\.host: must be an address or host name, without spaces$"),
+    ("check-blank-host", ["check", HOVER, "--set", 'drone.host=" "'], 1,
+     r"^error: drone\.host: must be an address or host name, without spaces$"),
+    # issue 24: a hang and the misleading messages
+    ("check-connect-timeout-1e9", ["check", HOVER, "--set", "mocap.connect_timeout_s=1e9"], 1,
+     r"^error: mocap\.connect_timeout_s: Input should be less than or equal to 60$"),
+    ("check-missing-path-file-of-a-step", ["check", HOVER, "--set",
+                                           "reference.path_file={tmp}/nope.csv"], 1,
+     r"^error: reference\.path_file: no such file: .*nope\.csv$"),
+    ("simulate-missing-path-file-of-a-step", ["simulate", HOVER, "--set",
+                                              "reference.path_file={tmp}/nope.csv",
+                                              "--log-dir", "{logs}"], 1,
+     r"^error: reference\.path_file: no such file: .*nope\.csv$"),
+    ("fly-sim-mocap-port", ["fly", HOVER, "--sim", "--mocap-port", "5000", "--log-dir",
+                            "{logs}"], 1,
+     r"^error: --mocap-port: not with --sim \(the loopback simulators listen on free ports"),
+    ("plot-a-folder-of-a-sweep-and-a-tune", ["plot", "{shared}"], 1,
+     r"^error: .*shared: holds a sweep \(sweep\.csv\) and a tune study \(study\.db\); plot "),
+    ("summary-without-a-run", ["summary"], 2, r"^error: Missing argument 'run_dirs'"),
+    ("simulate-log-dir-a-dangling-link", ["simulate", HOVER, "--log-dir", "{dangling}"], 2,
+     r"^error: --log-dir: .*dangling: a symbolic link to .*gone, which does not exist$"),
+    ("simulate-log-dir-in-a-run", ["simulate", HOVER, "--log-dir", "{run}/inputs"], 2,
+     r"^error: --log-dir: .*inputs: inside the run directory .*-r, which only its recording"),
 ]
 
 
@@ -215,3 +327,172 @@ def test_a_broken_pipe_is_one_line(files):
     assert result.returncode == 1
     assert result.stderr.splitlines() == [
         "error: standard output was closed before everything was written (broken pipe)"]
+
+
+# ----------------------------------------------------------------------------- run directories
+
+#: Path options that name inputs; every other Path option of every command is an output.
+INPUT_OPTIONS = {"--config", "--config-dir", "--space"}
+#: The rest of a command line that would do work, per command with an output option.
+WORK = {"simulate": [HOVER, *SHORT], "fly": [HOVER, "--sim", "--no-dashboard", *SHORT],
+        "replay": ["{run}", "--rerun"], "sweep": [HOVER, "--grid", "duration_s=0.3"],
+        "reproduce": [], "bench": ["--steps", "10", "--repeats", "1"], "plot": ["{run}"],
+        "faults": ["--experiments", "hover", "--faults", "battery_floor"],
+        "export": ["{run}"], "tune": [HOVER, "--trials", "1", "--seeds", "1", *SHORT]}
+
+
+def _output_options() -> list[tuple[str, str]]:
+    """(command, option) for every Path-valued option of every command that is not an input."""
+    import inspect
+    import typing
+
+    from typer.models import OptionInfo
+
+    found = []
+    for info in app.registered_commands:
+        name = info.name or info.callback.__name__.replace("_", "-")
+        hints = typing.get_type_hints(info.callback)
+        for param in inspect.signature(info.callback).parameters.values():
+            default = param.default
+            if not isinstance(default, OptionInfo) or Path not in (
+                    hints[param.name], *typing.get_args(hints[param.name])):
+                continue
+            option = next(d for d in default.param_decls if d.startswith("--"))
+            if option not in INPUT_OPTIONS:
+                found.append((name, option))
+    return found
+
+
+def _snapshot(run: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(run)): p.read_bytes() for p in sorted(run.rglob("*"))
+            if p.is_file()}
+
+
+def test_the_output_options_found_are_the_known_ones():
+    found = set(_output_options())
+    assert {c for c, _ in found} <= set(WORK), "a new output option: add its command to WORK"
+    assert {("export", "--output"), ("plot", "--output"), ("simulate", "--log-dir"),
+            ("fly", "--log-dir"), ("replay", "--log-dir"), ("sweep", "--out"),
+            ("tune", "--out"), ("reproduce", "--out"), ("reproduce", "--log-dir"),
+            ("faults", "--json"), ("faults", "--markdown"), ("faults", "--log-dir"),
+            ("bench", "--json")} <= found
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("command, option", _output_options())
+@pytest.mark.parametrize("target", ["{run}", "{run}/log.csv", "{run}/config.yaml",
+                                    "{run}/inputs/new"])
+def test_no_output_option_reaches_a_file_inside_a_run_directory(files, command, option,
+                                                                target):
+    run = Path(files["run"])
+    before = _snapshot(run)
+    args = [command, *(a.format(**files) for a in WORK[command]), option, target.format(**files)]
+    result = runner.invoke(app, args)
+    assert "Traceback" not in result.output
+    if not (command == "plot" and result.exit_code == 0):  # plot's figures go beside the run
+        assert result.exit_code != 0, (args, result.output)
+        assert re.search(r"^error: .+", result.output, re.M), result.output
+    after = _snapshot(run)
+    assert {k: v for k, v in after.items() if k in before} == before, "a run file changed"
+    assert all(k.startswith("plot-") for k in set(after) - set(before)), sorted(after)
+
+
+# ----------------------------------------------------------------------------- interrupts
+
+
+def _start(*args: str, cwd: Path = ROOT) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", "ardrone_nmpc.cli.app", *args], env=env,
+                            cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(predicate, what: str, proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert proc.poll() is None, f"ended before {what}: {proc.communicate()}"
+        assert time.monotonic() < deadline, f"never {what}"
+        time.sleep(0.05)
+
+
+def _rows(path: Path) -> int:
+    try:
+        return path.read_text().count("\n") - 1
+    except OSError:
+        return -1
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_an_interrupted_hour_long_simulate_says_where_it_stopped(tmp_path, sig, code):
+    proc = _start("simulate", str(ROOT / "configs" / "square.yaml"), "--set", "duration_s=3600",
+                  "--log-dir", str(tmp_path), "--quiet")
+    try:
+        _wait_for(lambda: any(_rows(p / "log.csv") > 200 for p in tmp_path.iterdir()),
+                  "flying", proc)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    (run,) = tmp_path.iterdir()
+    assert proc.returncode == code
+    assert err.splitlines()[-1] == f"error: interrupted by {sig.name}; the run so far is in {run}"
+    last = json.loads((run / "events.jsonl").read_text().splitlines()[-1])
+    assert last["kind"] == "interrupted" and last["signal"] == sig.name
+    assert 0 < last["t_s"] < 3600 and not (run / "summary.csv").exists()
+    said = f"interrupted at t = {last['t_s']:.2f} s ({sig.name})"
+    for command in (["summary", str(run)], ["replay", str(run)],
+                    ["export", str(run), "-o", str(tmp_path / "x.parquet"), "--format",
+                     "parquet"]):
+        result = runner.invoke(app, command)
+        assert result.exit_code == 0, result.output
+        assert said in result.stderr, (command, result.stderr)
+    assert said in " ".join(runner.invoke(app, ["summary", str(run)]).stdout.split())
+
+
+@pytest.mark.timeout(300)
+def test_an_interrupted_mcap_export_leaves_nothing_and_keeps_the_earlier_export(tmp_path):
+    cfg = load_config(overrides=["name=big"])
+    with RunRecorder.create(tmp_path / "runs", cfg, seed=0) as rec:
+        for k in range(60_000):
+            rec.write_row({"t_s": 0.065 * k, "x_m": 0.001 * k, "y_m": 0.0, "z_m": 1.0,
+                           "psi_rad": 0.0, "x_ref_m": 1.0, "y_ref_m": 0.0, "z_ref_m": 1.0,
+                           "psi_ref_rad": 0.0, "mode": "track", "solver_status": "ok"})
+    write_run_summary(rec.path)
+    out = tmp_path / "big.mcap"
+    assert runner.invoke(app, ["export", str(rec.path), "-o", str(out)]).exit_code == 0
+    earlier = out.read_bytes()
+    proc = _start("export", str(rec.path), "-o", str(out), "--force")
+    try:
+        _wait_for(lambda: any(p.name.endswith(".part") for p in tmp_path.iterdir()),
+                  "writing", proc)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130
+    assert err.splitlines() == ["error: interrupted by SIGINT"]
+    assert out.read_bytes() == earlier                       # the earlier export is intact
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.mcap", "runs"]  # no remnant
+
+
+def test_a_failed_parquet_write_never_hands_pyarrow_a_path_and_keeps_the_earlier_file(
+        files, tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+    out = tmp_path / "r.parquet"
+    out.write_bytes(b"an earlier export")
+    given = []
+
+    def failing(table, where, **kwargs):
+        given.append(where)
+        where.write(b"PAR1 half a file")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", failing)
+    result = runner.invoke(app, ["export", files["run"], "--format", "parquet", "-o", str(out),
+                                 "--force"])
+    assert result.exit_code == 1 and "No space left on device" in result.stderr
+    assert len(given) == 1 and not isinstance(given[0], (str, Path))  # a stream, not a path
+    assert out.read_bytes() == b"an earlier export"
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
