@@ -92,6 +92,7 @@ def close_storage(store, db: Path) -> None:
     run switches to WAL again)."""
     import sqlite3
 
+    store.remove_session()
     store.engine.dispose()
     con = sqlite3.connect(str(db), timeout=30.0)
     try:

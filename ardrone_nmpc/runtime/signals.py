@@ -20,8 +20,8 @@ import signal
 import threading
 from contextlib import contextmanager
 
-__all__ = ["LANDING_SIGNALS", "STOPPING_SIGNALS", "Terminated", "exit_code_of",
-           "landing_signals", "signal_name", "stopping_signals"]
+__all__ = ["LANDING_SIGNALS", "STOPPING_SIGNALS", "Terminated", "deferred_signals",
+           "exit_code_of", "landing_signals", "signal_name", "stopping_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
@@ -81,3 +81,31 @@ def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS):
 def stopping_signals():
     """:func:`landing_signals` for :data:`STOPPING_SIGNALS` (every command but ``fly``)."""
     return landing_signals(STOPPING_SIGNALS)
+
+
+@contextmanager
+def deferred_signals():
+    """Within the block, Ctrl-C and :data:`STOPPING_SIGNALS` wait: the first one is raised
+    (as ``KeyboardInterrupt`` / :class:`Terminated`) when the block ends, so a write that must
+    not be cut in half (a database transaction) completes. Outside the main thread it changes
+    nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def note(signum, frame):
+        pending.append(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, *STOPPING_SIGNALS):
+            previous[sig] = signal.signal(sig, note)
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if pending:
+        if pending[0] == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise Terminated(pending[0])

@@ -496,3 +496,114 @@ def test_a_failed_parquet_write_never_hands_pyarrow_a_path_and_keeps_the_earlier
     assert len(given) == 1 and not isinstance(given[0], (str, Path))  # a stream, not a path
     assert out.read_bytes() == b"an earlier export"
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+# ----------------------------------------------------------------------------- tune
+
+TUNE_SHORT = ["--seeds", "1", "--set", "duration_s=0.3", "--set", "sim.settle_s=0.1"]
+
+
+def _trials_csv(out: Path) -> list[dict[str, str]]:
+    import csv
+
+    with open(out / "trials.csv", newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def _study_alone(out: Path, tmp_path: Path):
+    """The study read from a copy of ``study.db`` alone (no -wal, no -shm beside it)."""
+    import shutil
+
+    import optuna
+
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    shutil.copy(out / "study.db", alone / "study.db")
+    return optuna.load_study(study_name="tune", storage=f"sqlite:///{alone / 'study.db'}")
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("sig, code, jobs", [(signal.SIGTERM, 143, "1"),
+                                             (signal.SIGINT, 130, "2")])
+def test_a_signalled_tune_leaves_its_files_consistent_with_the_study(tmp_path, sig, code,
+                                                                     jobs):
+    from optuna.trial import TrialState
+
+    out = tmp_path / "study"
+    proc = _start("tune", HOVER, "--trials", "500", "--jobs", jobs, *TUNE_SHORT, "--out",
+                  str(out))
+    try:
+        _wait_for(lambda: _rows(out / "trials.csv") >= 3, "three trials stored", proc, 300)
+        proc.send_signal(sig)
+        stdout, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == code, err
+    assert f"interrupted ({sig.name})" in err and "Traceback" not in err
+    assert not (out / "study.db-wal").exists()  # checkpointed: study.db stands alone
+    study = _study_alone(out, tmp_path)
+    done = [t for t in study.trials if t.state is TrialState.COMPLETE]
+    rows = _trials_csv(out)
+    assert [(int(r["trial"]), float(r["score"])) for r in rows] == \
+        [(t.number, t.value) for t in done]
+    assert [t.number for t in study.trials] == list(range(len(study.trials)))
+    best = min(done, key=lambda t: t.value)
+    assert f"trial {best.number} of {len(done)}" in (out / "best.yaml").read_text()
+    assert f"{len(done)} trials ({len(done)} flown now, 0 before)" in " ".join(stdout.split())
+
+
+@pytest.mark.timeout(600)
+def test_kept_run_folders_are_named_by_the_trial_number_of_trials_csv(tmp_path):
+    out = tmp_path / "study"
+    result = runner.invoke(app, ["tune", HOVER, "--trials", "5", "--jobs", "2", "--keep-runs",
+                                 *TUNE_SHORT, "--variant", "one:sim.plant.tau_vz_s=0.5",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    rows = _trials_csv(out)
+    assert sorted(int(r["trial"]) for r in rows) == list(range(5))
+    for row in rows:
+        (run,) = (out / "runs" / f"trial-{int(row['trial']):05d}").iterdir()
+        q = load_config(run / "config.yaml").controller.q
+        assert [float(row[f"controller.q[{i}]"]) for i in range(7) if q[i]] == \
+            [v for v in q if v]
+
+
+@pytest.mark.timeout(300)
+def test_a_set_plant_profile_is_the_one_flown_and_written(tmp_path):
+    out = tmp_path / "study"
+    result = runner.invoke(app, ["tune", HOVER, "--trials", "1", "--jobs", "1", "--keep-runs",
+                                 *TUNE_SHORT, "--set", "sim.plant.profile=thesis_kit",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    labels = {c.split(":")[0] for c in _trials_csv(out)[0] if ":" in c}
+    assert labels == {"seed0"}  # not every profile: the one set
+    (run,) = (out / "runs" / "trial-00000").iterdir()
+    assert load_config(run / "config.yaml").sim.plant.profile == "thesis_kit"
+    assert load_config(out / "best.yaml").sim.plant.profile == "thesis_kit"
+    clash = runner.invoke(app, ["tune", HOVER, "--set", "sim.plant.profile=thesis_kit",
+                                "--variant", "lab:sim.plant.profile=ardrone_lab", "--out",
+                                str(tmp_path / "other")])
+    assert clash.exit_code == 1
+    assert clash.stderr.startswith("error: --set sim.plant.profile: --variant "
+                                   "'lab:sim.plant.profile=ardrone_lab' sets it per scenario")
+    assert not (tmp_path / "other").exists()
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("command", [["tune", HOVER, *TUNE_SHORT],
+                                     ["sweep", HOVER, "--grid", "duration_s=0.3"]])
+def test_a_dask_scheduler_that_never_answers_is_an_error_not_a_hang(tmp_path, monkeypatch,
+                                                                    command):
+    from ardrone_nmpc.experiments import parallel
+
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT_S", 1.0)
+    with socket.socket() as silent:  # accepts connections and never says a word
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        address = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        result = runner.invoke(app, [*command, "--engine", "dask", "--scheduler", address,
+                                     "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    assert result.stderr.splitlines()[-1] == (f"error: --engine dask: no Dask scheduler "
+                                              f"answers at {address}: no answer within 1 s")

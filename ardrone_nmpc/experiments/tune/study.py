@@ -35,7 +35,8 @@ from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
 from ardrone_nmpc.runs.sweep_table import write_csv_table
 from ardrone_nmpc.runs.tune_record import RESULT_ATTR, STUDY_FILE, STUDY_NAME, result_of
-from ardrone_nmpc.runs.tune_record import (checkpoint, close_storage, storage_errors)
+from ardrone_nmpc.runs.tune_record import checkpoint, close_storage, storage_errors
+from ardrone_nmpc.runtime.signals import deferred_signals
 from ardrone_nmpc.runs.tune_record import storage as record_storage
 
 __all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", "finished_trials",
@@ -74,13 +75,13 @@ class TuneStudy:
     def checkpoint(self) -> None:
         """``study.db`` alone holds every trial stored so far (see :func:`checkpoint`)."""
         if self.storage is not None:
-            with storage_errors(self.db):
+            with deferred_signals(), storage_errors(self.db):
                 checkpoint(self.storage)
 
     def close(self) -> None:
         """Close the storage, ``study.db`` self-contained (:func:`close_storage`)."""
         if self.storage is not None:
-            with storage_errors(self.db):
+            with deferred_signals(), storage_errors(self.db):
                 close_storage(self.storage, self.db)
             self.storage = None
 
@@ -257,13 +258,14 @@ def _result_attr(result: TrialResult) -> dict[str, Any]:
 
 
 def _store(study: TuneStudy, frozen, result: TrialResult):
-    """Add a told trial to the record; returns the stored trial."""
+    """Add a told trial to the record (a signal waits for the write); returns it."""
     import optuna
 
     trial = optuna.trial.create_trial(params=frozen.params, distributions=frozen.distributions,
                                       value=result.score,
                                       user_attrs={RESULT_ATTR: _result_attr(result)})
-    study.record.add_trial(trial)
+    with deferred_signals(), storage_errors(study.db):
+        study.record.add_trial(trial)
     return trial
 
 
@@ -276,7 +278,8 @@ def _store_failed(study: TuneStudy, asked):
                                       state=TrialState.FAIL,
                                       user_attrs={RESULT_ATTR: {"status": "failed",
                                                                 "message": "interrupted"}})
-    study.record.add_trial(trial)
+    with deferred_signals(), storage_errors(study.db):
+        study.record.add_trial(trial)
     return trial
 
 
