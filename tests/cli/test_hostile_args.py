@@ -607,3 +607,32 @@ def test_a_dask_scheduler_that_never_answers_is_an_error_not_a_hang(tmp_path, mo
     assert result.exit_code == 1, result.output
     assert result.stderr.splitlines()[-1] == (f"error: --engine dask: no Dask scheduler "
                                               f"answers at {address}: no answer within 1 s")
+
+
+# ----------------------------------------------------------------------------- check = simulate
+
+
+@pytest.mark.timeout(120)
+def test_check_and_simulate_warn_of_the_same_ignored_fields(files, tmp_path):
+    path = tmp_path / "wp.csv"
+    path.write_text("t_s,x_m,y_m,z_m,psi_rad\n0,0,0,1,0\n5,1,0,1,0\n")
+    extra = ["--set", f"reference.path_file={path}", "--set", "reference.side_m=2"]
+    check = runner.invoke(app, ["check", HOVER, *extra])
+    flown = runner.invoke(app, ["simulate", HOVER, *extra, *SHORT, "--quiet", "--log-dir",
+                                str(tmp_path / "logs")])
+    assert check.exit_code == 0 and flown.exit_code == 0, (check.output, flown.output)
+    warnings = [line for line in check.stderr.splitlines() if line.startswith("warning: ")]
+    assert warnings == [
+        "warning: reference.side_m: ignored by reference.kind 'hover' (read by: square, "
+        "square_altitudes)",
+        "warning: reference.path_file: ignored by reference.kind 'hover' (read by: path)"]
+    assert [line for line in flown.stderr.splitlines() if line.startswith("warning: ")] == \
+        warnings
+
+
+def test_the_reproduce_report_names_the_options_that_made_it():
+    from ardrone_nmpc.experiments.reproduce import COMMAND, command_line
+
+    assert command_line(config_dir=Path("configs"), seed=0) == COMMAND
+    assert command_line(config_dir=Path("my configs"), seed=3) == \
+        f"{COMMAND} --config-dir 'my configs' --seed 3"

@@ -108,6 +108,46 @@ def test_mocap_check_without_the_object_fails_in_one_line():
     assert "error: object 'ardrone' not seen from udp 127.0.0.1:" in result.output
 
 
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("translation_mm", [(0.0, 0.0, 0.0), (math.nan, 10.0, 800.0)])
+def test_an_object_streamed_with_zero_or_nan_poses_is_not_reported_unseen(translation_mm):
+    """Vicon Tracker sends an occluded object as an all-zero pose (docs/mocap-stream.md); a
+    corrupted one may carry NaN. The object is in the stream: say so, and why it has no pose."""
+    import socket
+
+    from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+
+    port = free_udp_port()
+    stop = threading.Event()
+
+    def stream() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            frame = 0
+            while not stop.is_set():
+                pose = MocapObjectPose("ardrone", translation_mm, (0.0, 0.0, 0.0))
+                sock.sendto(encode_mocap(MocapFrame(frame, {"ardrone": pose})),
+                            ("127.0.0.1", port))
+                frame += 1
+                stop.wait(0.01)
+
+    sender = threading.Thread(target=stream, daemon=True)
+    sender.start()
+    try:
+        result = CliRunner().invoke(app, [
+            "mocap-check", "configs/hover.yaml", "--seconds", "0.5", "--no-live",
+            "--set", "mocap.bind_host=127.0.0.1", "--set", f"mocap.port={port}"])
+    finally:
+        stop.set()
+        sender.join(timeout=10)
+    assert result.exit_code == 1
+    line = next(x for x in result.stdout.splitlines() if x.startswith("ardrone: "))
+    assert re.fullmatch(r"ardrone: in the stream, but no valid pose \(\d+ all-zero or "
+                        r"non-finite\): occluded or not tracked", line), line
+    (error,) = [x for x in result.stderr.splitlines() if x.startswith("error: ")]
+    assert error.startswith("error: object 'ardrone' in the stream, but no valid pose (")
+    assert "not seen" not in result.output
+
+
 def test_mocap_check_reports_a_missing_extra_in_one_line(monkeypatch):
     import sys
 
