@@ -20,7 +20,8 @@ app = typer.Typer(
     name="ardrone-nmpc",
     help="Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0.\n\n"
     "Exit codes: 0 success; 1 an error in a config, a file, a run directory or a flight; "
-    "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM.",
+    "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM "
+    "(128 + the number of any other terminating signal).",
     cls=CommandGroup,
     no_args_is_help=True,
     add_completion=False,
