@@ -553,13 +553,19 @@ def test_a_signalled_tune_leaves_its_files_consistent_with_the_study(tmp_path, s
     assert f"{len(done)} trials ({len(done)} flown now, 0 before)" in " ".join(stdout.split())
 
 
+def _kept_tune(tmp_path: Path, *args: str) -> Path:
+    """A short ``tune --keep-runs`` of hover into ``tmp_path/study``; its directory."""
+    out = tmp_path / "study"
+    result = runner.invoke(app, ["tune", HOVER, "--keep-runs", *TUNE_SHORT, *args, "--out",
+                                 str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
 @pytest.mark.timeout(600)
 def test_kept_run_folders_are_named_by_the_trial_number_of_trials_csv(tmp_path):
-    out = tmp_path / "study"
-    result = runner.invoke(app, ["tune", HOVER, "--trials", "5", "--jobs", "2", "--keep-runs",
-                                 *TUNE_SHORT, "--variant", "one:sim.plant.tau_vz_s=0.5",
-                                 "--out", str(out)])
-    assert result.exit_code == 0, result.output
+    out = _kept_tune(tmp_path, "--trials", "5", "--jobs", "2", "--variant",
+                     "one:sim.plant.tau_vz_s=0.5")
     rows = _trials_csv(out)
     assert sorted(int(r["trial"]) for r in rows) == list(range(5))
     for row in rows:
@@ -571,11 +577,8 @@ def test_kept_run_folders_are_named_by_the_trial_number_of_trials_csv(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_a_set_plant_profile_is_the_one_flown_and_written(tmp_path):
-    out = tmp_path / "study"
-    result = runner.invoke(app, ["tune", HOVER, "--trials", "1", "--jobs", "1", "--keep-runs",
-                                 *TUNE_SHORT, "--set", "sim.plant.profile=thesis_kit",
-                                 "--out", str(out)])
-    assert result.exit_code == 0, result.output
+    out = _kept_tune(tmp_path, "--trials", "1", "--jobs", "1", "--set",
+                     "sim.plant.profile=thesis_kit")
     labels = {c.split(":")[0] for c in _trials_csv(out)[0] if ":" in c}
     assert labels == {"seed0"}  # not every profile: the one set
     (run,) = (out / "runs" / "trial-00000").iterdir()
