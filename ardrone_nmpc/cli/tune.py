@@ -138,12 +138,14 @@ def _ranked_table(study, *, space, scenarios, top: int):
 def _trials_writer(out_dir: Path, study, *, cfg, space, scen, obj, command: str):
     """``(rewrite, append)``: rewrite ``trials.csv`` and ``best.yaml`` from the record, or add
     one stored trial (its ``trials.csv`` row at once; ``best.yaml`` when it is the best), so
-    both files match the study whenever the process stops."""
+    both files match the study whenever the process stops; ``study.db`` is checkpointed at
+    least every :data:`SAVE_EVERY_S` meanwhile (a copy of it alone misses no more)."""
     from ardrone_nmpc.experiments.tune import study as st
     from ardrone_nmpc.runs.sweep_table import SweepCsvAppender
 
     columns = st.trials_columns(list(space), scen)
     best = [min((t.value for t in st.finished_trials(study.record)), default=math.inf)]
+    checkpointed = [time.perf_counter()]
 
     def write_best() -> None:
         st.write_best(out_dir / st.BEST_FILE, study.record, cfg=cfg, space=space,
@@ -154,6 +156,7 @@ def _trials_writer(out_dir: Path, study, *, cfg, space, scen, obj, command: str)
                             st.trial_rows(study.record, list(space), scen))
         write_best()
         study.checkpoint()
+        checkpointed[0] = time.perf_counter()
 
     def append(trial) -> None:
         from optuna.trial import TrialState
@@ -168,6 +171,9 @@ def _trials_writer(out_dir: Path, study, *, cfg, space, scen, obj, command: str)
         if trial.value < best[0]:
             best[0] = trial.value
             write_best()
+        if time.perf_counter() - checkpointed[0] >= SAVE_EVERY_S:
+            study.checkpoint()
+            checkpointed[0] = time.perf_counter()
 
     return rewrite, append
 

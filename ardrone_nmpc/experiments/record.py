@@ -33,9 +33,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 T = TypeVar("T")
 
-__all__ = ["FAILED_EVENT", "SIMULATED_EVENT", "Recording", "one_line", "record",
-           "record_lockstep"]
-
 #: The event that ends a lockstep recording (wall time, ticks, how it ended).
 SIMULATED_EVENT = "simulated"
 
