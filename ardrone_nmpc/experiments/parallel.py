@@ -119,11 +119,11 @@ class Executor:
             self.submit(name, fn, item, **kwargs)
             order.append(name)
         waiting: dict[Hashable, Done] = {}
-        for key in order:
-            while key not in waiting:
+        for name in order:
+            while name not in waiting:
                 done = self.next_done()
                 waiting[done.key] = done
-            yield waiting.pop(key)
+            yield waiting.pop(name)
 
     def cancel(self) -> list[Hashable]:
         """Cancel the cases that have not started; return their keys."""
