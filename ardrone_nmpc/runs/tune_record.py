@@ -35,15 +35,20 @@ class StudyFileError(UserError):
 @contextmanager
 def storage_errors(db: Path) -> Iterator[None]:
     """Turn what SQLite, SQLAlchemy or Optuna's storage raise about ``db`` into one
-    :class:`StudyFileError` line."""
+    :class:`StudyFileError` line (SQLite's own words: Optuna wraps a failed commit, SQLAlchemy
+    the driver's error)."""
     import sqlite3
 
+    from optuna.exceptions import StorageInternalError
     from sqlalchemy.exc import SQLAlchemyError
 
     try:
         yield
-    except (SQLAlchemyError, sqlite3.Error) as err:
-        cause = getattr(err, "orig", None) or err
+    except (SQLAlchemyError, sqlite3.Error, StorageInternalError) as err:
+        cause = err
+        while isinstance(cause, StorageInternalError) and cause.__cause__ is not None:
+            cause = cause.__cause__
+        cause = getattr(cause, "orig", None) or cause
         text = " ".join(str(cause).split()) or type(cause).__name__
         raise StudyFileError(f"{db}: {text}") from None
 

@@ -639,3 +639,36 @@ def test_the_reproduce_report_names_the_options_that_made_it():
     assert command_line(config_dir=Path("configs"), seed=0) == COMMAND
     assert command_line(config_dir=Path("my configs"), seed=3) == \
         f"{COMMAND} --config-dir 'my configs' --seed 3"
+
+
+@pytest.mark.timeout(300)
+def test_resuming_a_read_only_study_is_one_line_before_anything_flies(tmp_path, monkeypatch):
+    """A study.db SQLite may read but not write (a read-only file or mount; root ignores the
+    file mode, so the test opens it read-only the way SQLite does for such a file)."""
+    import sqlite3
+
+    import optuna
+
+    from ardrone_nmpc.runs import tune_record
+
+    out = tmp_path / "study"
+    first = runner.invoke(app, ["tune", HOVER, "--trials", "1", "--jobs", "1", *TUNE_SHORT,
+                                "--variant", "one:sim.plant.tau_vz_s=0.5", "--out", str(out)])
+    assert first.exit_code == 0, first.output
+    before = (out / "study.db").read_bytes()
+
+    def read_only(db, *, read_only=False):
+        uri = f"file:{Path(db).resolve()}?mode=ro"
+        return optuna.storages.RDBStorage(f"sqlite:///{Path(db).resolve()}", engine_kwargs={
+            "creator": lambda: sqlite3.connect(uri, uri=True, check_same_thread=False)})
+
+    monkeypatch.setattr(tune_record, "storage", read_only)
+    monkeypatch.setattr("ardrone_nmpc.experiments.tune.study.record_storage", read_only)
+    result = runner.invoke(app, ["tune", HOVER, "--trials", "3", "--jobs", "1", *TUNE_SHORT,
+                                 "--variant", "one:sim.plant.tau_vz_s=0.5", "--resume",
+                                 "--out", str(out)])
+    assert result.exit_code == 1, (result.output, result.exception)
+    assert result.stderr.splitlines() == [
+        f"error: {out / 'study.db'}: attempt to write a readonly database"], \
+        (result.output, result.exception)
+    assert (out / "study.db").read_bytes() == before

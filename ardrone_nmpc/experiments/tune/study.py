@@ -47,6 +47,7 @@ __all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", 
 TRIALS_FILE = "trials.csv"
 BEST_FILE = "best.yaml"
 _SIGNATURE = "tune_signature"
+_OPENED = "tune_opened"  # when a run last opened the study
 
 
 def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
@@ -150,7 +151,9 @@ def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
         changed = [k for k in sig if (recorded or {}).get(k) != signature_data[k]]
         raise ConfigError(f"--resume: the study in {out_dir} optimises another "
                           f"{', '.join(changed) or 'setup'}; use another --out")
-    record.set_user_attr(_SIGNATURE, signature_data)  # a write: fails now if read-only
+    # a real write (an unchanged value is not one): a read-only file fails here, not after a
+    # trial has flown
+    record.set_user_attr(_OPENED, _dt.datetime.now().astimezone().isoformat())
     for t in record.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
     return record
