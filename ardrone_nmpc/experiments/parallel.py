@@ -32,6 +32,7 @@ import queue
 import signal
 import threading
 import uuid
+from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -48,6 +49,9 @@ CONNECT_TIMEOUT_S = 10.0
 #: Exit status of a pool worker that found its parent process gone.
 ORPHAN_EXIT = 70
 _PRELOAD = "ardrone_nmpc.experiments._sweep_preload"
+#: How often a pool waiting for a result looks for one whose notice an interrupt took (s).
+_RESCAN_S = 1.0
+_GONE = object()
 
 
 class ExecutorError(UserError, RuntimeError):
@@ -80,33 +84,30 @@ def engine_errors(*, engine: str, scheduler: str | None) -> list[str]:
 
 
 class Executor:
-    """Runs ``fn(*args, **kwargs)`` on ``slots`` workers (see the module docstring)."""
+    """Runs ``fn(*args, **kwargs)`` on ``slots`` workers (see the module docstring).
+
+    A case leaves :attr:`in_flight` the moment the engine hands it over, in one step, so an
+    interrupt at any point can lose at most the one result being handed over — never leave a
+    case counted that will not come (a caller draining after Ctrl-C would wait for ever).
+    """
 
     slots = 1
-
-    def __init__(self) -> None:
-        self._keys: dict[Hashable, None] = {}   # submitted, not yet returned by next_done
 
     def submit(self, key: Hashable, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
         """Start ``fn(*args, **kwargs)`` (queued when every worker is busy); ``key`` names it
         in :class:`Done` and must be unique among the cases in flight."""
-        if key in self._keys:
-            raise ValueError(f"key {key!r} is already in flight")
-        self._keys[key] = None
         self._submit(key, fn, args, kwargs)
 
     @property
     def in_flight(self) -> int:
-        """Cases submitted and not yet returned by :meth:`next_done`."""
-        return len(self._keys)
+        """Cases submitted and not yet handed over by :meth:`next_done` (or cancelled)."""
+        raise NotImplementedError
 
     def next_done(self) -> Done:
         """The next case to finish (blocks). ValueError when none is in flight."""
-        if not self._keys:
+        if not self.in_flight:
             raise ValueError("no case in flight")
-        done = self._next()
-        self._keys.pop(done.key, None)
-        return done
+        return self._next()
 
     def map(self, fn: Callable[..., Any], items: Iterable[Any], *,
             key: Callable[[Any], Hashable] | None = None, **kwargs: Any) -> Iterator[Done]:
@@ -127,10 +128,7 @@ class Executor:
 
     def cancel(self) -> list[Hashable]:
         """Cancel the cases that have not started; return their keys."""
-        cancelled = self._cancel()
-        for key in cancelled:
-            self._keys.pop(key, None)
-        return cancelled
+        return self._cancel()
 
     def close(self) -> None:
         """Cancel what has not started, wait for what runs (pool) or cancel it (Dask)."""
@@ -150,21 +148,21 @@ class _Inline(Executor):
     """One case after another in this process, each run by :meth:`next_done`."""
 
     def __init__(self) -> None:
-        super().__init__()
-        self._queue: list[tuple] = []
+        self._queue: deque[tuple] = deque()
+
+    @property
+    def in_flight(self) -> int:
+        return len(self._queue)
 
     def _submit(self, key, fn, args, kwargs) -> None:
         self._queue.append((key, fn, args, kwargs))
 
     def _next(self) -> Done:
-        key, fn, args, kwargs = self._queue.pop(0)
+        key, fn, args, kwargs = self._queue.popleft()  # a Ctrl-C in fn: no longer in flight
         try:
             return Done(key, fn(*args, **kwargs))
         except Exception as err:  # noqa: BLE001 - a failed case is a result
             return Done(key, error=err)
-        except BaseException:  # Ctrl-C stopped it: it is no longer in flight
-            self._keys.pop(key, None)
-            raise
 
     def _cancel(self) -> list[Hashable]:
         keys = [item[0] for item in self._queue]
@@ -229,7 +227,6 @@ class _Pool(Executor):
     """``slots`` worker processes forked from a warm forkserver."""
 
     def __init__(self, jobs: int) -> None:
-        super().__init__()
         self.slots = jobs
         self._ctx = _pool_context()
         self._alive_r, self._alive_w = self._ctx.Pipe(duplex=False)  # only we hold _w
@@ -259,17 +256,24 @@ class _Pool(Executor):
                                              initargs=(self._alive_r,))
         return self._pool
 
+    @property
+    def in_flight(self) -> int:
+        return len(self._futures)
+
     def _submit(self, key, fn, args, kwargs) -> None:
         future = self._ready().submit(fn, *args, **kwargs)
         self._futures[future] = key
         future.add_done_callback(self._finished.put)
 
     def _next(self) -> Done:
-        while True:  # a cancelled future is reported too: skip what is no longer ours
-            future = self._finished.get()
-            if future in self._futures:
+        while True:
+            try:
+                future = self._finished.get(timeout=_RESCAN_S)
+            except queue.Empty:  # a notice taken by a Ctrl-C before it was handled: look
+                future = next((f for f in list(self._futures) if f.done()), None)
+            key = self._futures.pop(future, _GONE) if future is not None else _GONE
+            if key is not _GONE:  # (a cancelled future is reported too: not ours any more)
                 break
-        key = self._futures.pop(future)
         try:
             return Done(key, future.result())
         except Exception as err:  # noqa: BLE001 - a dead worker fails its case
@@ -336,7 +340,6 @@ class _Dask(Executor):
     def __init__(self, jobs: int, scheduler: str | None) -> None:
         from dask.distributed import as_completed
 
-        super().__init__()
         self._client, self._cluster = _dask_client(scheduler=scheduler, jobs=jobs)
         info = self._client.scheduler_info()
         workers = info.get("workers", {}) if isinstance(info, dict) else {}
@@ -345,6 +348,10 @@ class _Dask(Executor):
         self._done = as_completed(loop=self._client.loop)
         self._futures: dict[str, tuple[Any, Hashable]] = {}
 
+    @property
+    def in_flight(self) -> int:
+        return len(self._futures)
+
     def _submit(self, key, fn, args, kwargs) -> None:
         name = f"{getattr(fn, '__name__', 'case')}-{self._token}-{key}"
         future = self._client.submit(fn, *args, key=name, pure=False, **kwargs)
@@ -352,8 +359,15 @@ class _Dask(Executor):
         self._done.add(future)
 
     def _next(self) -> Done:
-        future = next(self._done)
-        _, key = self._futures.pop(future.key)
+        while True:
+            if all(f.done() for f, _ in self._futures.values()):  # (after a cancel) no wait
+                future = next(iter(self._futures.values()))[0]
+            else:
+                future = next(self._done)
+            entry = self._futures.pop(future.key, None)
+            if entry is not None:  # (one taken before, or cancelled: skipped)
+                key = entry[1]
+                break
         try:
             return Done(key, future.result())
         except Exception as err:  # noqa: BLE001 - a lost worker fails its case

@@ -86,13 +86,6 @@ def _workers_busy(pool) -> bool:
     return sum(f.running() for f in pool._futures) >= 2
 
 
-def test_a_key_in_flight_twice_is_refused():
-    with open_executor("local", jobs=1) as executor:
-        executor.submit("k", _fails, "a")
-        with pytest.raises(ValueError, match="already in flight"):
-            executor.submit("k", _fails, "b")
-
-
 def test_a_pool_worker_ends_when_its_parent_s_pipe_closes():
     """The watch: running while the parent holds the pipe's write end, exit ORPHAN_EXIT once
     it is closed (what the kernel does when the parent dies, SIGKILL included)."""
