@@ -13,6 +13,8 @@ from typing import Optional
 
 import typer
 
+from ardrone_nmpc.cli.options import choice
+
 __all__ = ["register"]
 
 
@@ -22,7 +24,7 @@ def register(app: typer.Typer) -> None:
     @app.command("export")
     def export(
         run_dir: Path = typer.Argument(..., help="A run directory (logs/<run>)."),
-        fmt: str = typer.Option("mcap", "--format", help="mcap (the 'mcap' extra): /log, /events, /config, /pose, /reference channels; parquet (the 'parquet' extra): the log table, events and config in its metadata."),
+        fmt: str = typer.Option("mcap", "--format", **choice(("mcap", "parquet")), help="mcap (the 'mcap' extra): /log, /events, /config, /pose, /reference, /tf channels; parquet (the 'parquet' extra): the log table, events and config in its metadata."),
         output: Optional[Path] = typer.Option(None, "-o", "--output", help="Output file (default: <run dir>.<format> beside the run directory); never inside a run directory."),
         force: bool = typer.Option(False, "--force", help="Replace an existing output file (a previous export)."),
     ) -> None:

@@ -2,7 +2,7 @@
 
 The parts are in :mod:`ardrone_nmpc.experiments.tune` (space, objective, engines, study);
 this module drives them: options, the progress bar (stderr), the ranked table (stdout),
-``trials.csv`` and ``best.yaml`` in ``--out``. :func:`register` adds the command to the app.
+``trials.csv`` and ``best.yaml`` in ``-o/--output``. :func:`register` adds the command to the app.
 """
 
 from __future__ import annotations
@@ -183,6 +183,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                      out_dir: Path, seed: int = 0, n_seeds: int = 3, variants=(),
                      space_file: Path | None = None, objective: str | None = None,
                      resume: bool = False, keep_runs: bool = False, top: int = 10,
+                     robust: bool = False, grid_file: Path | None = None,
                      command: str = "ardrone-nmpc tune", console=None,
                      err_console=None) -> TuneOutcome:
     """Run (or resume) the study; see the module docstring. Raises ConfigError for bad
@@ -194,6 +195,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                                TimeElapsedColumn, TimeRemainingColumn)
 
     from ardrone_nmpc.cli.console import config_notes
+    from ardrone_nmpc.cli.narrow import fit
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.parallel import open_executor
@@ -208,16 +210,26 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     cfg = load_config(config, overrides)
     config_notes(cfg)
     space = load_space(space_file, cfg)
+    if robust:  # the grid's corners and centre; scored by the worst of them
+        from ardrone_nmpc.experiments.robustness.grid import corner_variants, load_grid
+
+        if variants:
+            raise ConfigError("--variant: not with --robust (its plants are the grid's)")
+        variants = corner_variants(load_grid(grid_file))
+        objective = objective or "robust"
+    elif grid_file is not None:
+        raise ConfigError("--grid-file: only with --robust")
     obj = parse_objective(objective)
     written = written_config(config, overrides)
     scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds,
-                         variants=_variants(variants, written=written, overrides=overrides))
+                         variants=variants if robust else
+                         _variants(variants, written=written, overrides=overrides))
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+        raise ConfigError(f"--output {out_dir}: exists and is not a directory")
     if not resume and stored_trials(out_dir):  # before any start-up
-        raise ConfigError(f"--out {out_dir}: holds a study already ({st.STUDY_FILE}); "
-                          "--resume continues it, or choose another --out")
+        raise ConfigError(f"--output {out_dir}: holds a study already ({st.STUDY_FILE}); "
+                          "--resume continues it, or choose another --output")
     base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
     sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
     console = console or Console(width=None if sys.stdout.isatty() else 160)
@@ -265,7 +277,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     record = load_record(out_dir)
     done = st.finished_trials(record)
     if done:
-        console.print(_ranked_table(record, space=space, scenarios=scen, top=top))
+        console.print(fit(_ranked_table(record, space=space, scenarios=scen, top=top), console))
     console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
                   f"{len(scen)} scenarios; {wall_s:.1f} s wall, {sim_s:.0f} s simulated "
                   f"({sim_s / wall_s if wall_s > 0 else math.nan:.0f}× real time; {engine}, "
@@ -278,24 +290,26 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
 def register(app: typer.Typer) -> None:
     """Add the ``tune`` command to ``app`` (errors go to the app's one handler,
     :mod:`ardrone_nmpc.cli.handler`)."""
-    from ardrone_nmpc.cli.options import MAX_JOBS, non_empty, output_dir
+    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty, output_dir
 
     @app.command()
     def tune(
         config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
         trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
-        engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-        out: Optional[Path] = typer.Option(None, "--out", callback=output_dir, help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
+        out: Optional[Path] = typer.Option(None, "-o", "--output", callback=output_dir, help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
-        seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
+        seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, … (default 3; 1 with --robust)."),
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
         space: Optional[Path] = typer.Option(None, "--space", help="Search-space YAML (default: q and r log-uniform ×0.1…×10 of the config's)."),
         objective: Optional[str] = typer.Option(None, "--objective", help="Preset (default, step, tracking) and/or term=weight items: tracking, settling, overshoot, effort, solver, supervisor, abort, worst."),
-        resume: bool = typer.Option(False, "--resume", help="Continue the study in --out (finished trials are not flown again)."),
+        resume: bool = typer.Option(False, "--resume", help="Continue the study in --output (finished trials are not flown again)."),
         keep_runs: bool = typer.Option(False, "--keep-runs", help="Write every flight's run directory under DIR/runs/ (default: metrics only)."),
         top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
+        robust: bool = typer.Option(False, "--robust", help="Fly every trial on the robustness grid's corners and centre (plant deviations: delay, attitude gain and lag, vertical gain, wind) and score it by the worst (objective preset 'robust'); docs/robustness.md."),
+        grid_file: Optional[Path] = typer.Option(None, "--grid-file", help="With --robust: the grid whose corners are flown (the format of robustness --grid-file)."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),
     ) -> None:
         """Tune the controller by optimisation (Optuna TPE): each trial flies the config
@@ -309,7 +323,8 @@ def register(app: typer.Typer) -> None:
             if sys.argv[1:2] == ["tune"] else f"ardrone-nmpc tune {config}"
         outcome = run_tune_command(config=config, overrides=set_, trials=trials, jobs=n_jobs,
                                    engine=engine, scheduler=scheduler, out_dir=out_dir,
-                                   seed=seed, n_seeds=seeds, variants=variant,
+                                   seed=seed, n_seeds=seeds or (1 if robust else 3),
+                                   variants=variant, robust=robust, grid_file=grid_file,
                                    space_file=space, objective=objective, resume=resume,
                                    keep_runs=keep_runs, top=top, command=command)
         if outcome.best_path is not None:

@@ -39,7 +39,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Optional
 
-from pydantic import Field, ValidationError, ValidationInfo, field_validator
+from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from ardrone_nmpc.config.controller import (ControllerConfig, ObstacleConfig, OffsetFreeConfig,
                                             PGainsConfig, SolverConfig)
@@ -47,10 +47,11 @@ from ardrone_nmpc.config.faults import FaultsConfig
 from ardrone_nmpc.config.sim import (PLANT_PROFILE_DEFAULTS, NoiseConfig, PlantConfig, SimConfig,
                                      TargetConfig)
 from ardrone_nmpc.config.fields import (
-    CoordinateVec2, CoordinateVec3, Finite, Host, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
+    CoordinateVec2, CoordinateVec3, Finite, Host, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec3, PathSizeVec4, Port, Positive, PositiveVec2,
     Section, Span, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
+from ardrone_nmpc.config.profiles import fill_profile_defaults
 from ardrone_nmpc.errors import UserError
 
 from ardrone_nmpc.core import defaults
@@ -145,16 +146,38 @@ class FollowConfig(Section):
     _name = field_validator("object_name")(classmethod(lambda cls, v: ascii_name(v)))
 
 
+class ExcitationConfig(Section):
+    """Reference kind 'excitation': the identification flight (docs/identification.md §1) —
+    pseudo-random steps of set points ±amplitude on x, then y, then z, then ψ around start_m,
+    and sweeps at a constant speed on x and y."""
+
+    amplitude_m: PathSizeVec3 = Field(
+        (0.25, 0.25, 0.15), description="Step size on x, y, z (m): small, within the geofence.")
+    amplitude_psi_rad: Positive = Field(0.4, le=math.pi, description="Step size on ψ (rad).")
+    axis_s: Span = Field(10.0, description="Seconds of steps per axis.")
+    bit_s: Positive = Field(
+        1.2, ge=0.2, le=60.0, description="Seconds per bit of the pseudo-random sequence "
+        "(0.2 … 60): long enough for the loop to answer, short enough to vary.")
+    sweep_m: float = Field(
+        0.4, ge=0.0, le=5.0, description="Reach of the x and y sweeps (m): the set point "
+        "travels out to ±sweep_m and back at sweep_mps, so the drag shows; 0: no sweeps.")
+    sweep_mps: Positive = Field(0.2, le=2.0, description="Speed of the sweeps (m/s).")
+    rest_s: NonNegativeSpan = Field(2.0, description="Seconds at start_m after each axis.")
+
+
 class ReferenceConfig(Section):
     """The desired trajectory x_d(t), world frame, metres and radians."""
 
     kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path",
-                  "follow"] = (
+                  "follow", "excitation"] = (
         Field("hover", description="Trajectory type; the fields below apply as noted. "
               "'follow' takes it live from a second mocap object (see follow)."))
     follow: FollowConfig = Field(
         default_factory=FollowConfig, description="Reference kind 'follow' only; before the "
         "object is seen, the reference holds start_m.")
+    excitation: ExcitationConfig = Field(
+        default_factory=ExcitationConfig, description="Reference kind 'excitation' only: the "
+        "identification flight's steps.")
     start_m: CoordinateVec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
     start_psi_rad: Finite = Field(0.0, description="Start heading ψ (rad, counter-clockwise).")
     target_m: CoordinateVec3 = Field(
@@ -216,6 +239,13 @@ class DroneConfig(Section):
         0.7, ge=0.2, le=2.0, description="control:control_vz_max (m/s): climb rate at PCMD gaz ±1.")
     control_yaw_radps: float = Field(
         1.745, ge=0.7, le=6.11, description="control:control_yaw (rad/s): yaw rate at PCMD yaw ±1.")
+    command_convention: Literal["sdk", "kit"] = Field(
+        "sdk", description="How a command becomes a PCMD fraction: 'sdk' — a fraction of the "
+        "limits above (roll φ/euler_angle_max, gaz ż/control_vz_max, yaw −ψ̇/control_yaw; "
+        "docs/design.md §4); 'kit' — the ARDrone Simulink Development Kit's: φ, θ in rad, ż in "
+        "m/s, ψ̇ in rad/s written as the fraction itself, so the NMPC's bounds are ±1 (thesis "
+        "eq. 4.17). The limits above still bound the drone. The thesis_kit profile sets 'kit' "
+        "(docs/plant-profiles.md §2).")
     altitude_max_m: Positive = Field(
         3.0, le=100.0, description="control:altitude_max (m), ≤ 100 (the AR.Drone 2.0's cap).")
     navdata_demo: bool = Field(True, description="general:navdata_demo: 15 Hz demo packets if true.")
@@ -389,6 +419,12 @@ class ExperimentConfig(Section):
     sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
     safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
     faults: FaultsConfig = Field(default_factory=FaultsConfig, description="Injected faults (simulation).")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _profile_defaults(cls, data: Any) -> Any:
+        # the plant profile's keys outside sim.plant (config/profiles.py); explicit values win
+        return fill_profile_defaults(data)
 
     @field_validator("reference")
     @classmethod

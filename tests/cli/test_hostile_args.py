@@ -137,31 +137,31 @@ CASES = [
     ("replay-empty-host", ["replay", "{run}", "--broadcast", "--host", ""], 2,
      r"^error: --host: must not be empty$"),
     ("replay-both-modes", ["replay", "{run}", "--rerun", "--broadcast"], 1, r"choose one"),
-    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                 "{file}/sweep"], 1,
-     r"^error: --out .*afile/sweep: cannot create the directory: Not a directory$"),
-    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out", "{file}"], 1,
-     r"^error: --out .*afile: exists and is not a directory$"),
+     r"^error: --output .*afile/sweep: cannot create the directory: Not a directory$"),
+    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o", "{file}"], 1,
+     r"^error: --output .*afile: exists and is not a directory$"),
     ("sweep-jobs-0", ["sweep", HOVER, "--jobs", "0"], 2, r"^error: --jobs: .*\b1\b"),
     ("sweep-jobs-huge", ["sweep", HOVER, "--jobs", "100000"], 2, r"^error: --jobs: .*\b256\b"),
     ("sweep-diverge-nan", ["sweep", HOVER, "--diverge-m", "nan"], 2, r"^error: --diverge-m: "),
     ("sweep-far-path", ["sweep", HOVER, "--grid", "duration_s=0.3,0.4", "--set",
                         "reference.kind=path", "--set", "reference.path_file={far}",
-                        "--out", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
-    ("reproduce-out-a-dir", ["reproduce", "--out", "{dir}"], 2,
-     r"^error: --out: .*adir: is a directory; give a file name$"),
+                        "-o", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
+    ("reproduce-out-a-dir", ["reproduce", "-o", "{dir}"], 2,
+     r"^error: -o / --output: .*adir: is a directory; give a file name$"),
     ("bench-json-a-dir", ["bench", "--json", "{dir}"], 2,
      r"^error: --json: .*adir: is a directory; give a file name$"),
     ("bench-json-under-a-file", ["bench", "--json", "{file}/b.json"], 2,
      r"^error: --json: .*afile is not a directory$"),
     ("bench-steps-huge", ["bench", "--steps", "1000000000"], 2, r"^error: --steps: "),
     ("bench-steps-float", ["bench", "--steps", "1e9"], 2, r"^error: --steps: "),
-    ("bench-unknown-solver", ["bench", "--solvers", "fast"], 1, r"--solvers: unknown solver"),
+    ("bench-unknown-solver", ["bench", "--solvers", "fast"], 2, r"--solvers: unknown 'fast'"),
     ("plot-missing", ["plot", "{tmp}/nope"], 1, r"nope: no such directory$"),
     ("plot-dpi-0", ["plot", "{run}", "--dpi", "0"], 2, r"^error: --dpi: .*\b30\b"),
-    ("faults-unknown-experiment", ["faults", "--experiments", "bogus"], 1,
-     r"^error: --experiments: unknown bogus; choose from hover, step, square$"),
-    ("faults-empty-list", ["faults", "--faults", ","], 1, r"^error: --faults: unknown \(empty\)"),
+    ("faults-unknown-experiment", ["faults", "--experiments", "bogus"], 2,
+     r"^error: --experiments: unknown 'bogus'; choose from hover, step, square$"),
+    ("faults-empty-list", ["faults", "--faults", ","], 2, r"^error: --faults: unknown \(empty\)"),
     ("faults-json-a-dir", ["faults", "--json", "{dir}"], 2, r"^error: --json: "),
     ("sim-drone-port-70000", ["sim-drone", "--at-port", "70000"], 2,
      r"^error: --at-port: 70000 is not a port \(0 … 65535\)$"),
@@ -172,8 +172,8 @@ CASES = [
      r"--mocap-to 'nohost': expected host:port"),
     ("export-missing", ["export", "{tmp}/nope", "--format", "mcap", "-o", "{tmp}/x.mcap"], 1,
      r"^error: .*nope: no such run directory$"),
-    ("export-bogus-format", ["export", "{run}", "--format", "bogus", "-o", "{tmp}/x.mcap"], 1,
-     r"^error: --format: unknown format 'bogus'; choose mcap, parquet$"),
+    ("export-bogus-format", ["export", "{run}", "--format", "bogus", "-o", "{tmp}/x.mcap"], 2,
+     r"^error: --format: unknown 'bogus'; choose mcap, parquet$"),
     ("mocap-check-missing", ["mocap-check", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
     ("mocap-check-negative-seconds", ["mocap-check", HOVER, "--seconds", "-1"], 2,
      r"^error: --seconds: "),
@@ -186,6 +186,13 @@ CASES = [
     ("status-control-port-negative", ["status", "--control-port", "-1"], 2,
      r"^error: --control-port: -1 is not a port \(1 … 65535\)$"),
     ("tune-missing", ["tune", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
+    ("robustness-missing", ["robustness", "{tmp}/nope.yaml", "-o", "{tmp}/rob"], 1,
+     r"nope\.yaml: no such file"),
+    ("robustness-zero-jobs", ["robustness", HOVER, "--jobs", "0"], 2, r"^error: --jobs: "),
+    ("identify-missing", ["identify", "{tmp}/nope", "-o", "{tmp}/p.yaml"], 1,
+     r"nope: no such run directory$"),
+    ("identify-too-short", ["identify", "{run}", "-o", "{tmp}/p.yaml"], 1,
+     r"too little flown with navdata and mocap"),
     ("tune-zero-trials", ["tune", HOVER, "--trials", "0"], 2, r"^error: --trials: "),
     # issue 24: data loss
     ("export-mcap-onto-the-log", ["export", "{run}", "--format", "mcap", "-o", "{run}/log.csv"],
@@ -205,22 +212,22 @@ CASES = [
      r"^error: .*-big/log\.csv:3: t_s = 100000000000\.0 s is beyond what an MCAP log time"),
     ("export-a-config-file", ["export", HOVER], 1,
      r"^error: .*hover\.yaml: a file, not a run directory$"),
-    ("tune-resume-a-corrupt-study", ["tune", HOVER, "--resume", "--out", "{corrupt}"], 1,
+    ("tune-resume-a-corrupt-study", ["tune", HOVER, "--resume", "-o", "{corrupt}"], 1,
      r"^error: .*corrupt/study\.db: file is not a database$"),
     ("plot-a-corrupt-study", ["plot", "{corrupt}"], 1,
      r"^error: .*corrupt/study\.db: file is not a database$"),
-    ("tune-space-inf", ["tune", HOVER, "--space", "{space_inf}", "--out", "{tmp}/t"], 1,
+    ("tune-space-inf", ["tune", HOVER, "--space", "{space_inf}", "-o", "{tmp}/t"], 1,
      r"^error: --space .*space_inf\.yaml: params\.controller\.dtau_s: needs finite numbers"),
-    ("tune-space-factor-inf", ["tune", HOVER, "--space", "{space_factor_inf}", "--out",
+    ("tune-space-factor-inf", ["tune", HOVER, "--space", "{space_factor_inf}", "-o",
                                "{tmp}/t"], 1,
      r"^error: --space .*: factor: inf must be a finite number > 1$"),
-    ("tune-space-int-without-an-integer", ["tune", HOVER, "--space", "{space_no_int}", "--out",
+    ("tune-space-int-without-an-integer", ["tune", HOVER, "--space", "{space_no_int}", "-o",
                                            "{tmp}/t"], 1,
      r"^error: --space .*: type int: no integer lies in 10\.2 … 10\.8$"),
-    ("tune-space-not-utf8", ["tune", HOVER, "--space", "{binary}", "--out", "{tmp}/t"], 1,
+    ("tune-space-not-utf8", ["tune", HOVER, "--space", "{binary}", "-o", "{tmp}/t"], 1,
      r"^error: --space .*binary\.yaml: not UTF-8 text"),
     ("tune-dask-garbage-scheduler", ["tune", HOVER, "--engine", "dask", "--scheduler",
-                                     "garbage://x", "--out", "{tmp}/t"], 1,
+                                     "garbage://x", "-o", "{tmp}/t"], 1,
      r"^error: --engine dask: .*garbage://x.*unknown address scheme 'garbage'"),
     ("simulate-foxglove-port-in-use", ["simulate", HOVER, "--foxglove", "--foxglove-port",
                                        "{busy_port}", "--log-dir", "{logs}"], 1,
@@ -286,11 +293,11 @@ def test_sweep_out_on_a_read_only_file_system_is_one_line(files, monkeypatch):
         raise OSError(30, "Read-only file system", str(self))
 
     monkeypatch.setattr(Path, "mkdir", read_only)
-    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                  f"{files['tmp']}/ro/sweep"])
     assert result.exit_code == 1, result.output
     assert result.stderr.strip().splitlines() == [
-        f"error: --out {files['tmp']}/ro/sweep: cannot create the directory: "
+        f"error: --output {files['tmp']}/ro/sweep: cannot create the directory: "
         "Read-only file system"]
 
 
@@ -332,13 +339,14 @@ def test_a_broken_pipe_is_one_line(files):
 # ----------------------------------------------------------------------------- run directories
 
 #: Path options that name inputs; every other Path option of every command is an output.
-INPUT_OPTIONS = {"--config", "--config-dir", "--space"}
+INPUT_OPTIONS = {"--config", "--config-dir", "--space", "--grid-file"}
 #: The rest of a command line that would do work, per command with an output option.
 WORK = {"simulate": [HOVER, *SHORT], "fly": [HOVER, "--sim", "--no-dashboard", *SHORT],
         "replay": ["{run}", "--rerun"], "sweep": [HOVER, "--grid", "duration_s=0.3"],
         "reproduce": [], "bench": ["--steps", "10", "--repeats", "1"], "plot": ["{run}"],
         "faults": ["--experiments", "hover", "--faults", "battery_floor"],
-        "export": ["{run}"], "tune": [HOVER, "--trials", "1", "--seeds", "1", *SHORT]}
+        "export": ["{run}"], "tune": [HOVER, "--trials", "1", "--seeds", "1", *SHORT],
+        "robustness": [HOVER, "--jobs", "1"], "identify": ["{run}"]}
 
 
 def _output_options() -> list[tuple[str, str]]:
@@ -372,8 +380,8 @@ def test_the_output_options_found_are_the_known_ones():
     found = set(_output_options())
     assert {c for c, _ in found} <= set(WORK), "a new output option: add its command to WORK"
     assert {("export", "--output"), ("plot", "--output"), ("simulate", "--log-dir"),
-            ("fly", "--log-dir"), ("replay", "--log-dir"), ("sweep", "--out"),
-            ("tune", "--out"), ("reproduce", "--out"), ("reproduce", "--log-dir"),
+            ("fly", "--log-dir"), ("replay", "--log-dir"), ("sweep", "--output"),
+            ("tune", "--output"), ("reproduce", "--output"), ("reproduce", "--log-dir"),
             ("faults", "--json"), ("faults", "--markdown"), ("faults", "--log-dir"),
             ("bench", "--json")} <= found
 
@@ -530,7 +538,7 @@ def test_a_signalled_tune_leaves_its_files_consistent_with_the_study(tmp_path, s
     from optuna.trial import TrialState
 
     out = tmp_path / "study"
-    proc = _start("tune", HOVER, "--trials", "500", "--jobs", jobs, *TUNE_SHORT, "--out",
+    proc = _start("tune", HOVER, "--trials", "500", "--jobs", jobs, *TUNE_SHORT, "-o",
                   str(out))
     try:
         _wait_for(lambda: _rows(out / "trials.csv") >= 3, "three trials stored", proc, 300)
@@ -556,7 +564,7 @@ def test_a_signalled_tune_leaves_its_files_consistent_with_the_study(tmp_path, s
 def _kept_tune(tmp_path: Path, *args: str) -> Path:
     """A short ``tune --keep-runs`` of hover into ``tmp_path/study``; its directory."""
     out = tmp_path / "study"
-    result = runner.invoke(app, ["tune", HOVER, "--keep-runs", *TUNE_SHORT, *args, "--out",
+    result = runner.invoke(app, ["tune", HOVER, "--keep-runs", *TUNE_SHORT, *args, "-o",
                                  str(out)])
     assert result.exit_code == 0, result.output
     return out
@@ -585,7 +593,7 @@ def test_a_set_plant_profile_is_the_one_flown_and_written(tmp_path):
     assert load_config(run / "config.yaml").sim.plant.profile == "thesis_kit"
     assert load_config(out / "best.yaml").sim.plant.profile == "thesis_kit"
     clash = runner.invoke(app, ["tune", HOVER, "--set", "sim.plant.profile=thesis_kit",
-                                "--variant", "lab:sim.plant.profile=ardrone_lab", "--out",
+                                "--variant", "lab:sim.plant.profile=ardrone_lab", "-o",
                                 str(tmp_path / "other")])
     assert clash.exit_code == 1
     assert clash.stderr.startswith("error: --set sim.plant.profile: --variant "
@@ -606,7 +614,7 @@ def test_a_dask_scheduler_that_never_answers_is_an_error_not_a_hang(tmp_path, mo
         silent.listen()
         address = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
         result = runner.invoke(app, [*command, "--engine", "dask", "--scheduler", address,
-                                     "--out", str(tmp_path / "out")])
+                                     "-o", str(tmp_path / "out")])
     assert result.exit_code == 1, result.output
     assert result.stderr.splitlines()[-1] == (f"error: --engine dask: no Dask scheduler "
                                               f"answers at {address}: no answer within 1 s")
@@ -653,7 +661,7 @@ def test_resuming_a_read_only_study_is_one_line_before_anything_flies(tmp_path, 
 
     out = tmp_path / "study"
     first = runner.invoke(app, ["tune", HOVER, "--trials", "1", "--jobs", "1", *TUNE_SHORT,
-                                "--variant", "one:sim.plant.tau_vz_s=0.5", "--out", str(out)])
+                                "--variant", "one:sim.plant.tau_vz_s=0.5", "-o", str(out)])
     assert first.exit_code == 0, first.output
     before = (out / "study.db").read_bytes()
 
@@ -666,7 +674,7 @@ def test_resuming_a_read_only_study_is_one_line_before_anything_flies(tmp_path, 
     monkeypatch.setattr("ardrone_nmpc.experiments.tune.study.record_storage", read_only)
     result = runner.invoke(app, ["tune", HOVER, "--trials", "3", "--jobs", "1", *TUNE_SHORT,
                                  "--variant", "one:sim.plant.tau_vz_s=0.5", "--resume",
-                                 "--out", str(out)])
+                                 "-o", str(out)])
     assert result.exit_code == 1, (result.output, result.exception)
     assert result.stderr.splitlines() == [
         f"error: {out / 'study.db'}: attempt to write a readonly database"], \

@@ -133,12 +133,12 @@ def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
         try:
             record = optuna.load_study(study_name=STUDY_NAME, storage=storage)
         except KeyError:
-            raise ConfigError(f"--out {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
+            raise ConfigError(f"--output {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
                               "study") from None
         if not resume:
             if record.trials:
-                raise ConfigError(f"--out {out_dir}: holds a study already ({STUDY_FILE}); "
-                                  "--resume continues it, or choose another --out")
+                raise ConfigError(f"--output {out_dir}: holds a study already ({STUDY_FILE}); "
+                                  "--resume continues it, or choose another --output")
             optuna.delete_study(study_name=STUDY_NAME, storage=storage)
             record = None
     if record is None:
@@ -150,7 +150,7 @@ def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
     if recorded != signature_data:
         changed = [k for k in sig if (recorded or {}).get(k) != signature_data[k]]
         raise ConfigError(f"--resume: the study in {out_dir} optimises another "
-                          f"{', '.join(changed) or 'setup'}; use another --out")
+                          f"{', '.join(changed) or 'setup'}; use another --output")
     # a real write (an unchanged value is not one): a read-only file fails here, not after a
     # trial has flown
     record.set_user_attr(_OPENED, _dt.datetime.now().astimezone().isoformat())
