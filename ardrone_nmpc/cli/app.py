@@ -46,7 +46,7 @@ def _main(
     """Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0."""
 
 def _sweep_engines():  # the closed sets of values, read where they live when an option is used
-    from ardrone_nmpc.cli.sweep import ENGINES
+    from ardrone_nmpc.experiments.parallel import ENGINES
 
     return ENGINES
 

@@ -291,13 +291,14 @@ def register(app: typer.Typer) -> None:
     """Add the ``tune`` command to ``app`` (errors go to the app's one handler,
     :mod:`ardrone_nmpc.cli.handler`)."""
     from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty, output_dir
+    from ardrone_nmpc.experiments.parallel import ENGINES as engines
 
     @app.command()
     def tune(
         config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
         trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
-        engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        engine: str = typer.Option("local", "--engine", **choice(engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
         out: Optional[Path] = typer.Option(None, "-o", "--output", callback=output_dir, help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),

@@ -19,7 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
-__all__ = ["GROUND_MODES", "LANDING", "Mode", "SETTLE", "SUPERVISOR_ACTIONS", "TRACK"]
+__all__ = ["GROUND_MODES", "LANDING", "Mode", "NOMINAL_MODES", "SETTLE", "SUPERVISOR_ACTIONS",
+           "TRACK"]
 
 SETTLE = "settle"
 TRACK = "track"
@@ -29,7 +30,9 @@ LANDING = "landing"
 GROUND_MODES = frozenset({"landed", "taking_off", LANDING})
 #: The supervisor's actions, in the order of the summary's ``supervisor`` rows.
 SUPERVISOR_ACTIONS = ("hold", "fallback", "hover", "land", "stop")
-_NOMINAL = frozenset({SETTLE, TRACK})
+#: The runner's own labels: the controller flies the experiment (no intervention).
+NOMINAL_MODES = (TRACK, SETTLE)
+_NOMINAL = frozenset(NOMINAL_MODES)
 _AIRBORNE_ACTIONS = frozenset({"hold", "fallback", "hover"})
 _ABORTING_ACTIONS = frozenset({"land", "stop"})
 

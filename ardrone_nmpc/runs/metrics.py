@@ -16,10 +16,24 @@ import numpy as np
 from ardrone_nmpc.control.obstacles import clearance_m
 
 __all__ = ["CLEARANCE_TOLERANCE_M", "clearance_stats", "input_stats", "path_deviation",
-           "skipped_deadlines", "solver_stats", "step_metrics"]
+           "percentiles", "rmse", "skipped_deadlines", "solver_stats", "step_metrics"]
 
 #: A tick violates an obstacle's constraint when its centre is closer than d − this (m).
 CLEARANCE_TOLERANCE_M = 0.05
+
+
+def rmse(e: np.ndarray) -> float:
+    """Root mean square of the finite values of ``e`` (NaN if none)."""
+    e = e[np.isfinite(e)]
+    return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
+
+
+def percentiles(x: np.ndarray) -> tuple[float, float, float] | None:
+    """(p50, p99, max) of the finite values of ``x``; None if none."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return None
+    return float(np.percentile(x, 50)), float(np.percentile(x, 99)), float(x.max())
 
 
 def _crossing_time(t: np.ndarray, e: np.ndarray, k: int) -> float:

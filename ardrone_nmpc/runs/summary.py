@@ -60,8 +60,8 @@ from ardrone_nmpc.core.modes import SUPERVISOR_ACTIONS, Mode
 from ardrone_nmpc.reference.trajectories import make_trajectory
 from ardrone_nmpc.reference.waypoints import ReferenceError
 from ardrone_nmpc.runs.metrics import (CLEARANCE_TOLERANCE_M, clearance_stats, input_stats,
-                                       path_deviation, skipped_deadlines, solver_stats,
-                                       step_metrics)
+                                       path_deviation, percentiles, rmse, skipped_deadlines,
+                                       solver_stats, step_metrics)
 from ardrone_nmpc.runs.rundir import RunData, SummaryRow, read_run, read_summary, write_summary
 from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows, flying_rows
 
@@ -122,24 +122,12 @@ def _strings(arr: np.ndarray | None, n: int) -> np.ndarray:
                      for v in arr], dtype=object)
 
 
-def _percentiles(x: np.ndarray) -> tuple[float, float, float] | None:
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return None
-    return float(np.percentile(x, 50)), float(np.percentile(x, 99)), float(x.max())
-
-
 def _per_solve(column: np.ndarray | None, solved: np.ndarray) -> np.ndarray:
     """The finite values of ``column`` on the rows with a solve (empty without the column)."""
     if column is None:
         return np.zeros(0)
     v = np.asarray(column, dtype=np.float64)[solved]
     return v[np.isfinite(v)]
-
-
-def _rmse(e: np.ndarray) -> float:
-    e = e[np.isfinite(e)]
-    return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
 
 
 def _prepare(run: RunData) -> _Run:
@@ -203,8 +191,8 @@ def _tracking_rows(r: _Run) -> list[SummaryRow]:
             e = np.asarray(wrap_angle_rad(e), dtype=np.float64)
         else:
             sq = sq + e * e
-        rows.append(SummaryRow(axis, "rmse", _rmse(e), unit))
-    rows.append(SummaryRow("xyz", "rmse", _rmse(np.sqrt(sq)), "m"))
+        rows.append(SummaryRow(axis, "rmse", rmse(e), unit))
+    rows.append(SummaryRow("xyz", "rmse", rmse(np.sqrt(sq)), "m"))
     return rows
 
 
@@ -286,7 +274,7 @@ def _loop_rows(r: _Run) -> list[SummaryRow]:
     for action in SUPERVISOR_ACTIONS:
         ticks = sum(1 for m in modes if m.action == action)
         rows.append(SummaryRow("supervisor", f"{action}_ticks", float(ticks), "count"))
-    pct = _percentiles(r.column("tick_late_ms"))
+    pct = percentiles(r.column("tick_late_ms"))
     if pct is not None:
         overruns = skipped_deadlines(r.t, r.run.config.loop.period_s)
         rows += [SummaryRow("loop", "overruns", float(overruns), "count"),
@@ -307,7 +295,7 @@ def _link_rows(r: _Run) -> list[SummaryRow]:
     rows = []
     for link in ("mocap", "navdata"):
         age = r.column(f"{link}_age_ms")
-        pct = _percentiles(age)
+        pct = percentiles(age)
         if pct is not None:
             rows += [SummaryRow(link, "age_p99", pct[1], "ms"),
                      SummaryRow(link, "age_max", pct[2], "ms")]
