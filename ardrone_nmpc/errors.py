@@ -14,8 +14,9 @@ Exit codes of ``ardrone-nmpc`` (also in ``ardrone-nmpc --help``):
       directory, a flight that ended early or without a confirmed landing
 2     the command line itself: an unknown option, a missing argument, an option value
       that is not a number or outside its range
-130   interrupted (Ctrl-C, SIGINT); a sweep resumes when re-run
-143   terminated (SIGTERM); ``fly`` lands first
+130   interrupted (Ctrl-C, SIGINT); a sweep resumes when re-run, a tune with ``--resume``
+143   terminated (SIGTERM); ``fly`` lands first; any other terminating signal (SIGHUP,
+      SIGQUIT, SIGUSR1/2): 128 + its number, the same way
 ====  ===============================================================================
 
 This module imports nothing, so every layer may raise these errors.

@@ -48,6 +48,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+from ardrone_nmpc.core.modes import Mode
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 __all__ = ["Action", "Decision", "Supervisor"]
@@ -82,7 +83,7 @@ class Decision:
     def mode(self, nominal: str) -> str:
         if self.action is Action.CONTROL:
             return nominal
-        return f"{self.action.value}-{self.reason}" if self.reason else self.action.value
+        return Mode(self.action.value, self.reason).label
 
 
 NOMINAL = Decision(Action.CONTROL)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runtime.lockstep import run_lockstep
-from ardrone_nmpc.runs.summary import CLEARANCE_TOLERANCE_M, clearance_stats
+from ardrone_nmpc.runs.metrics import CLEARANCE_TOLERANCE_M, clearance_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 

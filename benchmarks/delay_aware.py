@@ -12,7 +12,7 @@ run is reused, so a second call only redraws. ``--figures DIR`` writes
 top view). ``--mismatch`` also flies the delay-aware variants and the retuned delay-free one
 against plant command delays of 0.13–0.39 s (the controllers still assume 0.26 s).
 
-Step metrics (``ardrone_nmpc.runs.summary.step_metrics``, plant truth):
+Step metrics (``ardrone_nmpc.runs.metrics.step_metrics``, plant truth):
 
 * ``settle`` — the summary's settling time: from the step time until the response stays in the
   ±2 % band (for at least the summary's 1 s dwell); ``—`` = never.
@@ -40,7 +40,8 @@ import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.runs.rundir import read_run
-from ardrone_nmpc.runs.summary import read_summary, step_metrics
+from ardrone_nmpc.runs.metrics import step_metrics
+from ardrone_nmpc.runs.summary import read_summary
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("step_x", "step_y", "step_z", "step_psi", "square")

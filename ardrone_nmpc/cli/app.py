@@ -15,13 +15,14 @@ import typer
 
 from ardrone_nmpc.cli.handler import CommandGroup
 from ardrone_nmpc.cli.options import (MAX_JOBS, choice, finite, new_output_file, non_empty,
-                                      output_file, port)
+                                      output_dir, output_file, port)
 
 app = typer.Typer(
     name="ardrone-nmpc",
     help="Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0.\n\n"
     "Exit codes: 0 success; 1 an error in a config, a file, a run directory or a flight; "
-    "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM.",
+    "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM "
+    "(128 + the number of any other terminating signal).",
     cls=CommandGroup,
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion [bash|zsh|fish|powershell]
@@ -45,7 +46,7 @@ def _main(
     """Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0."""
 
 def _sweep_engines():  # the closed sets of values, read where they live when an option is used
-    from ardrone_nmpc.cli.sweep import ENGINES
+    from ardrone_nmpc.experiments.parallel import ENGINES
 
     return ENGINES
 
@@ -87,7 +88,7 @@ def check(
 def simulate(
     config: Path = CONFIG_ARG,
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
-    log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
+    log_dir: Path = typer.Option(Path("logs"), "--log-dir", callback=output_dir, help="Where the run directory is created."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random source (default: sim.seed)."),
     quiet: bool = typer.Option(False, "--quiet", help="Only print the run directory."),
     foxglove: bool = typer.Option(False, "--foxglove", help="Serve the run live on a Foxglove WebSocket (127.0.0.1), flown at real time (the 'foxglove' extra; docs/live-view.md)."),
@@ -110,7 +111,7 @@ def fly(
     navdata_port: Optional[int] = typer.Option(None, "--navdata-port", callback=port(), help="Navdata UDP port (default: drone.navdata_port, 5554)."),
     mocap_port: Optional[int] = typer.Option(None, "--mocap-port", callback=port(), help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
     duration_s: Optional[float] = typer.Option(None, "--duration-s", help="Experiment length (s), overriding duration_s."),
-    log_dir: Path = typer.Option(Path("logs"), "--log-dir", help="Where the run directory is created."),
+    log_dir: Path = typer.Option(Path("logs"), "--log-dir", callback=output_dir, help="Where the run directory is created."),
     dashboard: bool = typer.Option(True, "--dashboard/--no-dashboard", help="Live status (only on a terminal)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of the simulators (--sim)."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
@@ -146,7 +147,7 @@ def replay(
     run_dir: Path = typer.Argument(..., help="A run directory (logs/<run>)."),
     rerun: bool = typer.Option(False, "--rerun", help="Feed the logged measurements through the estimator and controller again; report recomputed − logged commands and write a new run directory."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP + " With --rerun: the counterfactual config."),
-    log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where --rerun creates its run directory (default: logs)."),
+    log_dir: Optional[Path] = typer.Option(None, "--log-dir", callback=output_dir, help="Where --rerun creates its run directory (default: logs)."),
     broadcast: bool = typer.Option(False, "--broadcast", help="Re-send the logged mocap poses as the UDP pose stream, with the logged timing."),
     speed: Optional[float] = typer.Option(None, "--speed", callback=finite(0.001, 1000.0), help="--broadcast playback speed factor, 0.001 … 1000 (default 1)."),
     port: Optional[int] = typer.Option(None, "--port", callback=port(), help="--broadcast UDP port (default: the run's mocap.port, 51001)."),
@@ -170,7 +171,7 @@ def sweep(
     jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Parallel workers (default: the CPU count); 1 = in this process."),
     engine: str = typer.Option("local", "--engine", **choice(_sweep_engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-    out: Optional[Path] = typer.Option(None, "-o", "--output", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
+    out: Optional[Path] = typer.Option(None, "-o", "--output", callback=output_dir, help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
     rank_by: str = typer.Option("rmse", "--rank-by", **choice(_rank_metrics), help="Rank the table by: rmse, settling, overshoot, path_deviation, solve_p99."),
     top: Optional[int] = typer.Option(None, "--top", min=1, help="Show only the best K cases."),
     diverge_m: float = typer.Option(0.5, "--diverge-m", callback=finite(0.0, 1000.0), help="A case is 'unstable' if it is farther than this (m) from the reference in the last quarter of the experiment (or leaves the geofence, or is landed by the supervisor)."),
@@ -187,7 +188,7 @@ def sweep(
 @app.command()
 def reproduce(
     out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "-o", "--output", callback=output_file, help="Markdown report to write."),
-    log_dir: Path = typer.Option(Path("logs/reproduce"), "--log-dir", help="Where the run directories go."),
+    log_dir: Path = typer.Option(Path("logs/reproduce"), "--log-dir", callback=output_dir, help="Where the run directories go."),
     config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="The experiment configs."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every run."),
 ) -> None:
@@ -242,8 +243,9 @@ def faults(
     experiments: str = typer.Option("hover,step,square", "--experiments", **choice(("hover", "step", "square"), many=True), help="Comma-separated experiment kinds: hover, step, square."),
     only: Optional[str] = typer.Option(None, "--faults", **choice(_fault_cases, many=True), help="Comma-separated fault cases (default: all)."),
     config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="Where hover.yaml, step_x.yaml, square.yaml are."),
-    log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where the case run directories go (default: logs/faults-<time>)."),
+    log_dir: Optional[Path] = typer.Option(None, "--log-dir", callback=output_dir, help="Where the case run directories go (default: logs/faults-<time>)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every case."),
+    jobs: int = typer.Option(1, "--jobs", min=1, max=MAX_JOBS, help="Cases flown at once on local worker processes (1 = in this process); the results are the same."),
 ) -> None:
     """Run every injected fault against hover, step and square in lockstep simulation and
     report each case's outcome, deviation, recovery and log completeness (exit 1 if any case
@@ -251,7 +253,7 @@ def faults(
     from ardrone_nmpc.cli.faults import faults_command
 
     faults_command(json_out=json_out, markdown=markdown, experiments=experiments, only=only,
-                   config_dir=config_dir, log_dir=log_dir, seed=seed)
+                   config_dir=config_dir, log_dir=log_dir, seed=seed, jobs=jobs)
 
 
 @app.command("sim-drone")

@@ -12,6 +12,7 @@ from rich.table import Table
 from ardrone_nmpc.cli.console import stdout_console
 from ardrone_nmpc.cli.narrow import fit
 from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.errors import UserError
@@ -90,7 +91,7 @@ def run_bench_command(*, cfg, solvers: list[str], steps: int, compare_casadi: bo
                                               "cost_ratio": r.closed_loop_cost / ipopt.closed_loop_cost}
                                    for r in rows if r is not ipopt}
         json_path.parent.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+        write_text_atomic(json_path, json.dumps(payload, indent=2) + "\n")
         console.print(f"wrote {json_path}")
     return rows
 

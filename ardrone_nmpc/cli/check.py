@@ -1,7 +1,9 @@
 """``ardrone-nmpc check``: validate a config and the files it names; print the resolved values.
 
-It rejects what a run would: the reference is built, so a waypoint file is read and checked
-exactly as ``simulate`` and ``fly`` read it before they create a run directory.
+It applies the rules a run applies, in the same functions: the files the config names are
+read and checked (a missing one is an error, whatever the reference kind) and the reference
+is built, exactly as ``simulate`` and ``fly`` do before they create a run directory; a field
+the chosen kind ignores is a warning naming it, from both.
 """
 
 from __future__ import annotations
@@ -13,9 +15,12 @@ import typer
 
 def run_check(*, config: Path, overrides: list[str]) -> None:
     """Print the resolved config as YAML; a ConfigError or ReferenceError otherwise."""
+    from ardrone_nmpc.cli.console import config_notes
     from ardrone_nmpc.config.io import dump_config, load_config
-    from ardrone_nmpc.reference.trajectories import make_trajectory
+    from ardrone_nmpc.reference.trajectories import input_files, make_trajectory
 
     cfg = load_config(config, overrides)
+    config_notes(cfg)
+    input_files(cfg.reference)
     make_trajectory(cfg.reference, duration_s=cfg.duration_s)
     typer.echo(dump_config(cfg), nl=False)

@@ -27,7 +27,7 @@ def _names(text: str | None, known, option: str) -> None:
 
 def faults_command(*, json_out: Path | None, markdown: Path | None, experiments: str,
                    only: str | None, config_dir: Path, log_dir: Path | None,
-                   seed: int) -> None:
+                   seed: int, jobs: int = 1) -> None:
     """Check the options, run the matrix, write the reports; FaultCasesFailed if a case
     does not pass."""
     from ardrone_nmpc.experiments.faultmatrix import (EXPERIMENTS, FAULT_CASES,
@@ -42,6 +42,7 @@ def faults_command(*, json_out: Path | None, markdown: Path | None, experiments:
         if report is not None:
             report.parent.mkdir(parents=True, exist_ok=True)
     ok = run_faults_command(json_out=json_out, markdown=markdown, experiments=experiments,
-                            only=only, config_dir=config_dir, log_dir=log_dir, seed=seed)
+                            only=only, config_dir=config_dir, log_dir=log_dir, seed=seed,
+                            jobs=jobs)
     if not ok:
         raise FaultCasesFailed("not every fault case passes (see the table)")

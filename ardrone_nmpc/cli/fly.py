@@ -34,7 +34,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     """Fly ``config`` (see the module docstring for what is printed and the exit codes)."""
     from rich.live import Live
 
-    from ardrone_nmpc.cli.console import stderr_console
+    from ardrone_nmpc.cli.console import config_notes, stderr_console
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.experiments.flight import run_flight
     from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed
@@ -42,10 +42,18 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 
+    if sim:  # the loopback simulators listen on free ports of 127.0.0.1: nothing to choose
+        given = [name for name, value in (("--drone", drone), ("--at-port", at_port),
+                                          ("--navdata-port", navdata_port),
+                                          ("--mocap-port", mocap_port)) if value is not None]
+        if given:
+            raise UserError("\n".join(f"{name}: not with --sim (the loopback simulators listen "
+                                       "on free ports of 127.0.0.1)" for name in given))
     overrides = list(overrides)
     if duration_s is not None:
         overrides.append(f"duration_s={duration_s!r}")
     cfg = load_config(config, overrides)
+    config_notes(cfg)
     # the land / cut-motors keys need a terminal to read them from and to show them on
     keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr and sys.stderr.isatty())
     view = LiveStatus(f"{cfg.name} — {'sim://loopback' if sim else drone or cfg.drone.host}",

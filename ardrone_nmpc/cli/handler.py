@@ -3,11 +3,15 @@
 :class:`CommandGroup` is the click group behind the typer app. Whatever a command raises
 passes through :meth:`CommandGroup.invoke`:
 
-* :class:`~ardrone_nmpc.errors.UserError` — its lines, its exit code (1 unless it says);
+* :class:`~ardrone_nmpc.errors.UserError` — its lines, its exit code (1 unless it says); a
+  missing optional library (:class:`~ardrone_nmpc.core.extras.MissingExtra`) — one line;
 * a command-line problem (unknown option, bad or out-of-range value) — one line, exit 2;
 * an ``OSError`` of the file system or the network (a directory that is a file, a read-only
   disk, a port in use) — one line naming the file, exit 1;
-* a closed or broken standard output — one line on stderr (if it is open), exit 1.
+* a closed or broken standard output — one line on stderr (if it is open), exit 1;
+* Ctrl-C or a terminating signal (SIGTERM, SIGHUP, …: turned into ``KeyboardInterrupt`` while
+  a command runs, :func:`~ardrone_nmpc.runtime.signals.stopping_signals`) — ``error:
+  interrupted by <signal>`` naming the run directory it left, if any; exit 128 + the signal.
 
 Anything else is a bug and keeps its traceback. The exit codes are listed in
 :mod:`ardrone_nmpc.errors`.
@@ -22,6 +26,7 @@ from collections.abc import Iterable
 import typer
 from typer.core import TyperGroup
 
+from ardrone_nmpc.core.extras import MissingExtra
 from ardrone_nmpc.errors import EXIT_ERROR, UserError
 
 __all__ = ["CommandGroup", "report"]
@@ -46,7 +51,8 @@ def report(lines: Iterable[str]) -> None:
 
 def _usage_line(err: ClickException) -> str:
     """One line for a command-line error: ``--option: message`` rather than click's box."""
-    if isinstance(err, typer.BadParameter) and (err.param is not None or err.param_hint):
+    if isinstance(err, typer.BadParameter) and (err.param is not None or err.param_hint) \
+            and err.message:  # a missing argument has no message: click's own line says it
         hint = err.param_hint or getattr(err.param, "opts", None) or [err.param.name]
         if not isinstance(hint, str):
             hint = " / ".join(hint)
@@ -97,16 +103,27 @@ class CommandGroup(TyperGroup):
         if sys.stdout is None:  # started with `>&-`: there is nowhere to print the results
             report([STDOUT_CLOSED])
             raise typer.Exit(EXIT_ERROR)
+        from ardrone_nmpc.runtime.signals import exit_code_of, signal_name, stopping_signals
+
         try:
-            return super().invoke(ctx)
+            with stopping_signals():
+                return super().invoke(ctx)
         except _PASS_THROUGH:
             raise
+        except KeyboardInterrupt as err:
+            run_dir = getattr(err, "run_dir", None)
+            where = f"; the run so far is in {run_dir}" if run_dir is not None else ""
+            report([f"interrupted by {signal_name(err)}{where}"])
+            raise typer.Exit(exit_code_of(err)) from None
         except ClickException as err:
             report([_usage_line(err)])
             raise typer.Exit(err.exit_code) from None
         except UserError as err:
             report(err.messages)
             raise typer.Exit(err.exit_code) from None
+        except MissingExtra as err:  # an optional library a command needs
+            report([str(err)])
+            raise typer.Exit(EXIT_ERROR) from None
         except BrokenPipeError:
             _silence_stdout()
             report(["standard output was closed before everything was written (broken pipe)"])

@@ -124,11 +124,20 @@ class CheckResult:
         self.max_gap_s = source.max_gap_s
 
 
-def final_line(track: _Track) -> str:
-    """``<name>: x=… y=… z=… psi=… rate=…`` of one object (``<name>: not seen``)."""
+def _unseen(name: str, names_seen, invalid: int | None) -> str:
+    """Why an object has no pose: absent from the stream, or there with no valid pose."""
+    if name not in names_seen:
+        return "not seen"
+    count = f" ({invalid} all-zero or non-finite)" if invalid else ""
+    return f"in the stream, but no valid pose{count}: occluded or not tracked"
+
+
+def final_line(track: _Track, names_seen=(), invalid: int | None = None) -> str:
+    """``<name>: x=… y=… z=… psi=… rate=…`` of one object; without a pose, why
+    (``<name>: not seen``, or in the stream with ``invalid`` all-zero/NaN poses)."""
     p = track.pose
     if p is None:
-        return f"{track.name}: not seen"
+        return f"{track.name}: {_unseen(track.name, names_seen, invalid)}"
     x, y, z = (float(v) for v in p.position_m)
     return (f"{track.name}: x={_num(x)} y={_num(y)} z={_num(z)} psi={_num(p.psi_rad)} "
             f"rate={_num(track.rate_hz())}")
@@ -256,13 +265,16 @@ def register(app: typer.Typer) -> None:
         if as_json:
             typer.echo(json.dumps(result_json(result, seconds), allow_nan=False))
         else:
-            for tr in result.tracks:
-                typer.echo(final_line(tr))
+            for k, tr in enumerate(result.tracks):
+                typer.echo(final_line(tr, result.names_seen, result.zero if k == 0 else None))
             typer.echo(quality_line(result))
             typer.echo(result.axes.line())
         if result.tracks[0].pose is None:
             seen = ", ".join(result.names_seen) or "no objects"
-            typer.echo(f"error: object {names[0]!r} not seen from {result.where} in "
+            why = _unseen(names[0], result.names_seen, result.zero)
+            typer.echo(f"error: object {names[0]!r} {why} — {result.where}, {seconds:g} s "
+                       f"(stream: {seen})" if why != "not seen" else
+                       f"error: object {names[0]!r} not seen from {result.where} in "
                        f"{seconds:g} s (stream: {seen})", err=True)
             raise typer.Exit(code=1)
 

@@ -15,7 +15,8 @@ from typing import Any, Optional, Union
 import typer
 
 __all__ = ["DEPRECATED_SPELLINGS", "MAX_JOBS", "PORT_MAX", "choice", "finite",
-           "modern_spellings", "new_output_file", "non_empty", "output_file", "port"]
+           "modern_spellings", "new_output_file", "non_empty", "output_dir", "output_file",
+           "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -60,18 +61,31 @@ def non_empty(value: Optional[str]) -> Optional[str]:
 
 
 def output_file(value: Optional[Path]) -> Optional[Path]:
-    """A callback for a file the command will write: not a directory, and no file where a
-    parent directory has to be (checked before the work, not after it)."""
+    """A callback for a report the command will (re)write: not a directory, not inside a run
+    directory, not a device, and no file where a parent directory has to be (checked before
+    the work, not after it; :func:`~ardrone_nmpc.runs.outputs.check_output_file`)."""
     if value is None:
         return None
-    if value.is_dir():
-        raise typer.BadParameter(f"{value} is a directory; give a file name")
-    for parent in value.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise typer.BadParameter(f"{parent} is not a directory")
-            break
-    return value
+    from ardrone_nmpc.runs.outputs import OutputError, check_output_file
+
+    try:
+        return check_output_file(value, option="", replace=True)
+    except OutputError as err:
+        raise typer.BadParameter(str(err).strip()) from None
+
+
+def output_dir(value: Optional[Path]) -> Optional[Path]:
+    """A callback for a folder the command creates things in (``--log-dir``, ``-o/--output``): not
+    a run directory nor inside one, not a file, not a link to nowhere
+    (:func:`~ardrone_nmpc.runs.outputs.check_output_dir`)."""
+    if value is None:
+        return None
+    from ardrone_nmpc.runs.outputs import OutputError, check_output_dir
+
+    try:
+        return check_output_dir(value, option="")
+    except OutputError as err:
+        raise typer.BadParameter(str(err).strip()) from None
 
 
 def new_output_file(value: Optional[Path]) -> Optional[Path]:

@@ -60,6 +60,17 @@ def _check_format(path: Path) -> Path:
     return path
 
 
+def _check_target(target: Path) -> Path:
+    """An image may go anywhere but inside a run directory — except the figures
+    (``plot-*``) beside its files (:func:`~ardrone_nmpc.runs.outputs.check_output_file`)."""
+    from ardrone_nmpc.runs.outputs import OutputError, check_output_file
+
+    try:
+        return check_output_file(target, option="-o", figures=True, replace=True)
+    except OutputError as err:
+        raise PlotError(str(err)) from None
+
+
 def _save(fig, path: Path, dpi: int) -> Path:
     from ardrone_nmpc.viz.plots import save_figure
 
@@ -84,12 +95,19 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
     dpi : resolution, pixels per inch.
     warn : called with notes on recoverable damage (a torn last log line).
     """
+    from ardrone_nmpc.runs.tune_record import STUDY_FILE
     from ardrone_nmpc.viz.tune_figures import is_tune_dir, plot_tune_dir
 
     _require_matplotlib()
     path = Path(path)
+    if path.is_file() and path.name == STUDY_FILE:  # a tune's study.db: its directory
+        path = path.parent
+    elif is_tune_dir(path) and (path / SWEEP_FILE).is_file():
+        raise PlotError(f"{path}: holds a sweep ({SWEEP_FILE}) and a tune study ({STUDY_FILE});"
+                        f" plot {path / SWEEP_FILE} for the heat map or {path / STUDY_FILE} for "
+                        "the tune's history")
     if is_tune_dir(path):  # a tune directory: history and importances
-        return plot_tune_dir(path, output=output, dpi=dpi)
+        return plot_tune_dir(path, output=output, dpi=dpi, check=_check_target)
     if (path.is_file() and path.name == SWEEP_FILE) or (path / SWEEP_FILE).is_file():
         if kind not in (None, "heatmap"):
             raise PlotError(f"--kind: {path} is a sweep directory; it has one figure, the "
@@ -121,6 +139,8 @@ def _plot_run(path: Path, *, output: Path | None, kind: str, dpi: int,
         output = _check_format(output)
         targets = [output] if kind != "all" else \
             [output.with_name(f"{output.stem}-{k}{output.suffix}") for k in kinds]
+    for target in targets:
+        _check_target(target)
     run = read_run(path)
     for note in run.warnings:  # a torn last row: plot the rest, but say so
         if warn is not None:
@@ -142,4 +162,5 @@ def _plot_sweep(path: Path, *, output: Path | None, metric: str, x: str | None,
         target = (output or sweep_dir) / f"plot-heatmap-{metric}.png"
     else:
         target = _check_format(output)
+    _check_target(target)
     return _save(figure_sweep_heatmap(table, metric=metric, x=x, y=y), target, dpi)

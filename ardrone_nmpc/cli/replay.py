@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
-from ardrone_nmpc.cli.console import stdout_console, warn
+from ardrone_nmpc.cli.console import run_notes, stdout_console
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.config.limits import MAX_NAME_CHARS, RERUN_SUFFIX
 from ardrone_nmpc.errors import UserError
@@ -24,7 +24,8 @@ from ardrone_nmpc.experiments.replay import (
     COMPARED_COLUMNS, RERUN_FILE, RerunResult, broadcast, missing_rerun_columns,
     require_rerun_columns, rerun, write_rerun_csv,
 )
-from ardrone_nmpc.runs.summary import render_summary, summarise
+from ardrone_nmpc.cli.tables import render_summary
+from ardrone_nmpc.runs.summary import summarise
 
 #: ``--rerun`` on an unchanged config must reproduce every command within this (issue target).
 REPRODUCE_TOLERANCE = 1e-9
@@ -70,8 +71,7 @@ def run_replay_command(*, run_dir: Path, rerun_: bool = False, overrides: list[s
                    speed=speed, port=port, host=host)
     console = console or stdout_console()
     run = read_run(run_dir)
-    for note in run.warnings:
-        warn(note)
+    run_notes(run)
     if rerun_:
         return _rerun(run=run, overrides=overrides, log_dir=log_dir or Path("logs"),
                       console=console)

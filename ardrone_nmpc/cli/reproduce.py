@@ -19,8 +19,10 @@ def reproduce_command(*, out: Path, log_dir: Path, config_dir: Path, seed: int) 
         text, outcomes = reproduce(
             config_dir=config_dir, log_dir=log_dir, seed=seed,
             progress=lambda text: progress.update(task, description=text))
+    from ardrone_nmpc.core.atomic import write_text_atomic
+
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
+    write_text_atomic(out, text)
     held = {form: sum(o.verdict(o.claim.plants[0], form).holds for o in outcomes)
             for form in FORMULATIONS}
     stdout_console().print(f"{len(outcomes)} claims on their own plants: {held['thesis']} hold "

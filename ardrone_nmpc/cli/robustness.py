@@ -75,7 +75,7 @@ def run_robustness_command(*, config: Path, overrides, grid_file: Optional[Path]
     """Run it and print the tables and the clean region; returns ``robustness.csv``."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ardrone_nmpc.cli.sweep import engine_errors
+    from ardrone_nmpc.experiments.parallel import engine_errors
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.robustness.grid import load_grid
     from ardrone_nmpc.experiments.robustness.report import region_lines
@@ -119,18 +119,19 @@ def run_robustness_command(*, config: Path, overrides, grid_file: Optional[Path]
 
 def register(app: typer.Typer) -> None:
     """Add the ``robustness`` command to ``app``."""
-    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty
+    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty, output_dir
+    from ardrone_nmpc.experiments.parallel import ENGINES as engines
 
     @app.command()
     def robustness(
         config: Path = typer.Argument(..., help="Experiment YAML file."),
         grid_file: Optional[Path] = typer.Option(None, "--grid-file", help="YAML of the grid's axes (dotted.path: [values]) and map (x, y, panel); default: delay 0–0.4 s × attitude gain 0.6–2 × lag 0.05/0.2 s × vertical gain 0.6/1.4 × wind 0/0.4 m/s (160 flights)."),
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Parallel workers (default: the CPU count); 1 = in this process."),
-        engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        engine: str = typer.Option("local", "--engine", **choice(engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers."),
-        out: Optional[Path] = typer.Option(None, "-o", "--output", help="Directory: one run directory per flight, robustness.csv, robustness.png (default: logs/robustness/<config name>). Finished flights in it are judged again, not flown."),
+        out: Optional[Path] = typer.Option(None, "-o", "--output", callback=output_dir, help="Directory: one run directory per flight, robustness.csv, robustness.png (default: logs/robustness/<config name>). Finished flights in it are judged again, not flown."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value: dotted.path=value (repeatable), before the grid."),
-        report: Optional[Path] = typer.Option(None, "--report", help="Also write DIR/<config>.csv, .png and .md (the committed docs/robustness/ files)."),
+        report: Optional[Path] = typer.Option(None, "--report", callback=output_dir, help="Also write DIR/<config>.csv, .png and .md (the committed docs/robustness/ files)."),
     ) -> None:
         """Fly the config in lockstep over a grid of plant deviations (delay, attitude gain
         and lag, vertical gain, wind), classify each flight (settled, limit cycle,

@@ -7,10 +7,10 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.cli.console import config_notes, stdout_console
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
-from ardrone_nmpc.runs.summary import render_summary
+from ardrone_nmpc.cli.tables import render_summary
 
 
 def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed: int | None,
@@ -22,6 +22,7 @@ def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed:
     from ardrone_nmpc.viz.live import open_live_view
 
     cfg = load_config(config, overrides)
+    config_notes(cfg)
     with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, pace=True,
                         echo=lambda line: typer.echo(line, err=True)) as live:
         path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet, live=live)

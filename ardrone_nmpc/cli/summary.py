@@ -9,7 +9,8 @@ Layouts, chosen so that every run name is shown whole and every value as a numbe
   grouped by metric so the runs can be compared metric by metric;
 * ``--csv``: ``run,axis,metric,value,unit`` lines (values at full precision) for scripts.
 
-Warnings about a run (a torn last line) go to stderr.
+Warnings about a run (a torn last line; a run that did not finish: interrupted, failed,
+killed) go to stderr; a single run's table names how it ended in its title too.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def _labels(run_dirs: Sequence[Path]) -> list[str]:
 def fits_side_by_side(runs, width: int) -> bool:
     """Whether the side-by-side table of ``runs`` (``(label, rows)``) fits ``width``
     columns without cutting a name or a value."""
-    from ardrone_nmpc.runs.summary import format_value
+    from ardrone_nmpc.cli.tables import format_value
 
     keys = {(r.axis, r.metric, r.unit) for _, rows in runs for r in rows}
     fixed = [max((len(k[i]) for k in keys), default=0) for i in range(3)]
@@ -45,7 +46,7 @@ def render_long(runs, title: str | None = None):
     one metric together, metrics in order of first appearance."""
     from rich.table import Table
 
-    from ardrone_nmpc.runs.summary import format_value
+    from ardrone_nmpc.cli.tables import format_value
 
     order: dict[tuple[str, str], str] = {}
     for _, rows in runs:
@@ -84,22 +85,23 @@ def _print_csv(runs) -> None:
 def summary_command(*, run_dirs: Sequence[Path], csv: bool = False, console=None) -> None:
     """Print the summaries of ``run_dirs`` (see the module docstring). LogError for a run
     directory that cannot be read."""
-    from ardrone_nmpc.cli.console import stdout_console, warn
+    from ardrone_nmpc.cli.console import run_notes, stdout_console
     from ardrone_nmpc.runs.rundir import read_run
-    from ardrone_nmpc.runs.summary import render_side_by_side, render_summary, summarise
+    from ardrone_nmpc.cli.tables import render_side_by_side, render_summary
+    from ardrone_nmpc.runs.summary import summarise
 
-    runs = []
+    runs, endings = [], []
     for label, run_dir in zip(_labels(run_dirs), run_dirs):
         run = read_run(run_dir)
-        for note in run.warnings:
-            warn(note)
+        endings.append(run_notes(run, label=label))
         runs.append((label, summarise(run)))
     if csv:
         _print_csv(runs)
         return
     console = console or stdout_console()
     if len(runs) == 1:
-        console.print(render_summary(runs[0][1], title=runs[0][0]))
+        title = runs[0][0] + (f" — {endings[0]}" if endings[0] else "")
+        console.print(render_summary(runs[0][1], title=title))
     elif fits_side_by_side(runs, console.width):
         console.print(render_side_by_side(runs))
     else:

@@ -7,10 +7,9 @@ ranked table (stdout).
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,26 +19,34 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                            TimeElapsedColumn, TimeRemainingColumn)
 from rich.table import Table
 
-from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.cli.console import stdout_console, warn
 from ardrone_nmpc.cli.narrow import fit
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.errors import EXIT_INTERRUPTED, UserError
-from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
-                                CaseResult, SweepCsvAppender, build_cases, finished_result,
-                                iter_dask, iter_local, parse_grid, rank_rows, resume_results,
-                                sweep_columns, sweep_row, write_sweep_csv)
-
-ENGINES = ("local", "dask")
-
-
-class SweepEngineError(UserError, RuntimeError):
-    """The engine could not run (no Dask scheduler at the address, …): one line, exit 1."""
+from ardrone_nmpc.experiments.parallel import ExecutorError, engine_errors
+from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES,
+                                            SWEEP_FILE, Case, CaseResult, SweepCsvAppender,
+                                            build_cases, finished_result, parse_grid, rank_rows,
+                                            resume_results, sweep_columns, sweep_row,
+                                            write_sweep_csv)
+from ardrone_nmpc.experiments.sweep.engines import run_cases
+from ardrone_nmpc.reference.trajectories import ignored_fields, input_files
 
 
 class SweepInterrupted(UserError):
-    """Ctrl-C stopped the sweep; what finished is in sweep.csv (exit 130)."""
+    """Ctrl-C (exit 130) or a signal (exit 128 + its number) stopped the sweep; what finished
+    is in sweep.csv."""
 
     exit_code = EXIT_INTERRUPTED
+
+    @classmethod
+    def of(cls, interrupt: BaseException) -> SweepInterrupted:
+        from ardrone_nmpc.runtime.signals import exit_code_of, signal_name
+
+        err = cls(f"interrupted by {signal_name(interrupt)}: the cases that finished are in "
+                  "sweep.csv; re-run the same command to resume")
+        err.exit_code = exit_code_of(interrupt)
+        return err
 
 
 class SweepFailures(UserError):
@@ -56,22 +63,8 @@ class SweepOutcome:
     flown: int = 0
     resumed: int = 0
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(STATUSES, 0))
-    interrupted: bool = False
+    interrupted: BaseException | None = None  # the Ctrl-C or signal that stopped it
     wall_s: float = math.nan
-
-
-def engine_errors(*, engine: str, scheduler: str | None) -> list[str]:
-    """The ``--engine`` / ``--scheduler`` mistakes (one ``--option: message`` line each) of
-    the commands that fly many cases: ``sweep`` and ``tune``."""
-    errors = []
-    if engine not in ENGINES:
-        errors.append(f"--engine: unknown engine {engine!r}; choose {', '.join(ENGINES)}")
-    if scheduler is not None and engine != "dask":
-        errors.append("--scheduler: only with --engine dask")
-    if engine == "dask" and importlib.util.find_spec("distributed") is None:
-        errors.append("--engine dask: needs dask.distributed "
-                      "(pip install 'ardrone-nmpc[distributed]')")
-    return errors
 
 
 def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
@@ -96,23 +89,13 @@ def _out_dir(out_dir: Path) -> Path:
 
 
 def _check_inputs(cases: Sequence[Case]) -> None:
-    """Read and check every waypoint file the cases name, before any case flies."""
-    from ardrone_nmpc.reference.trajectories import path_file
-
+    """Read and check every file the cases name, before any case flies."""
     checked = set()
     for case in cases:
         ref = case.config.reference
-        if (ref.kind == "path" or ref.path_file) and ref.path_file not in checked:
-            path_file(ref)
-            checked.add(ref.path_file)
-
-
-def _engine(pending: Sequence[Case], *, engine: str, out_dir: Path, jobs: int,
-            scheduler: str | None, diverge_m: float) -> Iterator[CaseResult]:
-    if engine == "dask":
-        return iter_dask(pending, out_dir=out_dir, jobs=jobs, scheduler=scheduler,
-                         diverge_m=diverge_m)
-    return iter_local(pending, out_dir=out_dir, jobs=jobs, diverge_m=diverge_m)
+        if (ref.kind, ref.path_file) not in checked:
+            input_files(ref)
+            checked.add((ref.kind, ref.path_file))
 
 
 def _progress(console: Console) -> Progress:
@@ -133,7 +116,7 @@ def _run_pending(pending: Sequence[Case], *, cases_by_id: Mapping[str, Case],
     """Fly ``pending``, appending each result to ``results`` and ``sweep.csv`` as it comes.
     Ctrl-C sets ``outcome.interrupted``: the cases not started are cancelled."""
     appender = SweepCsvAppender(csv_path, columns)
-    stream = _engine(pending, engine=engine, **engine_options)
+    stream = run_cases(pending, engine=engine, **engine_options)
     try:
         with _progress(err_console) as progress:
             task = progress.add_task(_describe(results), total=len(pending))
@@ -142,12 +125,12 @@ def _run_pending(pending: Sequence[Case], *, cases_by_id: Mapping[str, Case],
                 appender.append(sweep_row(cases_by_id[result.case_id], result))
                 outcome.flown += 1
                 progress.update(task, advance=1, description=_describe(results))
-    except KeyboardInterrupt:
-        outcome.interrupted = True
+    except KeyboardInterrupt as err:
+        outcome.interrupted = err
     except (OSError, TimeoutError) as err:
         if engine != "dask":
             raise
-        raise SweepEngineError(f"--engine dask: {' '.join(str(err).split())}") from None
+        raise ExecutorError(f"--engine dask: {' '.join(str(err).split())}") from None
     finally:
         try:
             stream.close()  # cancels what has not started, waits for what is running
@@ -230,10 +213,12 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
     """Run the sweep: validate every case, skip the finished ones, fly the rest with
     ``engine`` on ``jobs`` workers, keep ``out_dir/sweep.csv`` current, print the ranked
     table. Raises :class:`ConfigError` for bad input (before anything runs) and
-    :class:`SweepEngineError` if the engine cannot run."""
+    :class:`~ardrone_nmpc.experiments.parallel.ExecutorError` if the engine cannot run."""
     check_options(engine=engine, scheduler=scheduler, rank_by=rank_by)
     cases = build_cases(config_path=config, overrides=overrides, grid=parse_grid(grid))
     _check_inputs(cases)
+    for note in dict.fromkeys(n for c in cases for n in ignored_fields(c.config.reference)):
+        warn(note)
     out_dir = _out_dir(Path(out_dir))
     console = console or stdout_console()
     wall0 = time.perf_counter()
@@ -280,17 +265,16 @@ def sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[str]
 
     out_dir = out if out is not None else Path("logs") / "sweeps" / config.stem
     n_jobs = jobs if jobs is not None else os.cpu_count() or 1
-    resume = "interrupted: re-run the same command to resume"
     try:
         outcome = run_sweep_command(config=config, grid=grid, overrides=overrides,
                                     out_dir=out_dir, jobs=n_jobs, engine=engine,
                                     scheduler=scheduler, rank_by=rank_by, top=top,
                                     diverge_m=diverge_m)
-    except KeyboardInterrupt:
-        raise SweepInterrupted(resume) from None
+    except KeyboardInterrupt as err:
+        raise SweepInterrupted.of(err) from None
     typer.echo(f"sweep: {outcome.csv_path}")
     if outcome.interrupted:
-        raise SweepInterrupted(resume)
+        raise SweepInterrupted.of(outcome.interrupted)
     if outcome.counts["failed"]:
         raise SweepFailures(f"{outcome.counts['failed']} of {outcome.total} cases failed (see "
                             f"the message column of {outcome.csv_path})")

@@ -25,8 +25,8 @@ SAVE_EVERY_S = 5.0
 @dataclass
 class TuneOutcome:
     """Where the study's files are, how many trials it holds and how many were flown now,
-    the best score, the wall time (s), the simulated time flown (s), and whether Ctrl-C
-    stopped it."""
+    the best score, the wall time (s), the simulated time flown (s), and the interrupt (Ctrl-C,
+    a signal) that stopped it, if any."""
 
     out_dir: Path
     total: int
@@ -35,14 +35,18 @@ class TuneOutcome:
     best_path: Path | None
     wall_s: float
     sim_s: float
-    interrupted: bool = False
+    interrupt: BaseException | None = None  # the Ctrl-C or signal that stopped it
+
+    @property
+    def interrupted(self) -> bool:
+        return self.interrupt is not None
 
 
 def _check_options(*, engine: str, scheduler: str | None) -> None:
     import importlib.util
 
-    from ardrone_nmpc.cli.sweep import engine_errors
     from ardrone_nmpc.config.schema import ConfigError
+    from ardrone_nmpc.experiments.parallel import engine_errors
 
     errors = engine_errors(engine=engine, scheduler=scheduler)
     if importlib.util.find_spec("optuna") is None:
@@ -51,23 +55,43 @@ def _check_options(*, engine: str, scheduler: str | None) -> None:
         raise ConfigError(errors)
 
 
-def _variants(texts) -> list[tuple[str, tuple[str, ...]]]:
+def _set_paths(overrides) -> set[str]:
+    return {o.partition("=")[0].strip() for o in overrides if "=" in o}
+
+
+def _named(data, path: str) -> bool:
+    """Whether the config mapping ``data`` (as written) names the dotted ``path``."""
+    node = data
+    for key in path.split("."):
+        if not isinstance(node, dict) or key not in node:
+            return False
+        node = node[key]
+    return True
+
+
+def _variants(texts, *, written, overrides) -> list[tuple[str, tuple[str, ...]]]:
     """``--variant`` texts (``label:path=v;path=v`` or ``path=v;…``) → (label, overrides);
-    none given: the plant profiles, if the schema has them."""
+    none given: the plant profiles, if the schema has them and the config (or ``--set``) does
+    not name one — a named profile is flown, alone. A ``--set`` of a path a variant sets per
+    scenario is refused: it would be overridden on every flight."""
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.tune.engine import plant_variants
 
     if not texts:
-        return plant_variants()
+        return [] if _named(written, "sim.plant.profile") else plant_variants()
     out, errors = [], []
     for i, text in enumerate(texts):
         label, sep, rest = text.partition(":")
         if not sep or "=" in label:
             label, rest = f"v{i}", text
-        overrides = tuple(s.strip() for s in rest.split(";") if s.strip())
-        if not overrides or any("=" not in o for o in overrides):
+        items = tuple(s.strip() for s in rest.split(";") if s.strip())
+        if not items or any("=" not in o for o in items):
             errors.append(f"--variant {text!r}: expected [label:]path=value;path=value…")
-        out.append((label.strip(), overrides))
+        clash = sorted(_set_paths(items) & _set_paths(overrides))
+        if clash:
+            errors.append(f"--set {', '.join(clash)}: --variant {text!r} sets it per scenario; "
+                          "give it in the variants only")
+        out.append((label.strip(), items))
     if errors:
         raise ConfigError(errors)
     return out
@@ -111,6 +135,49 @@ def _ranked_table(study, *, space, scenarios, top: int):
     return table
 
 
+def _trials_writer(out_dir: Path, study, *, cfg, space, scen, obj, command: str):
+    """``(rewrite, append)``: rewrite ``trials.csv`` and ``best.yaml`` from the record, or add
+    one stored trial (its ``trials.csv`` row at once; ``best.yaml`` when it is the best), so
+    both files match the study whenever the process stops; ``study.db`` is checkpointed at
+    least every :data:`SAVE_EVERY_S` meanwhile (a copy of it alone misses no more)."""
+    from ardrone_nmpc.experiments.tune import study as st
+    from ardrone_nmpc.runs.sweep_table import SweepCsvAppender
+
+    columns = st.trials_columns(list(space), scen)
+    best = [min((t.value for t in st.finished_trials(study.record)), default=math.inf)]
+    checkpointed = [time.perf_counter()]
+
+    def write_best() -> None:
+        st.write_best(out_dir / st.BEST_FILE, study.record, cfg=cfg, space=space,
+                      command=command, objective=obj, scenarios=scen)
+
+    def rewrite() -> None:
+        st.write_trials_csv(out_dir / st.TRIALS_FILE, columns,
+                            st.trial_rows(study.record, list(space), scen))
+        write_best()
+        study.checkpoint()
+        checkpointed[0] = time.perf_counter()
+
+    def append(trial) -> None:
+        from optuna.trial import TrialState
+
+        if trial.state is not TrialState.COMPLETE:
+            return
+        appender = SweepCsvAppender(out_dir / st.TRIALS_FILE, columns)
+        try:
+            appender.append(st.trial_row(trial, list(space), scen))
+        finally:
+            appender.close()
+        if trial.value < best[0]:
+            best[0] = trial.value
+            write_best()
+        if time.perf_counter() - checkpointed[0] >= SAVE_EVERY_S:
+            study.checkpoint()
+            checkpointed[0] = time.perf_counter()
+
+    return rewrite, append
+
+
 def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int = 1,
                      engine: str = "local", scheduler: str | None = None,
                      out_dir: Path, seed: int = 0, n_seeds: int = 3, variants=(),
@@ -120,23 +187,28 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                      command: str = "ardrone-nmpc tune", console=None,
                      err_console=None) -> TuneOutcome:
     """Run (or resume) the study; see the module docstring. Raises ConfigError for bad
-    input, before anything flies."""
+    input, before anything is created or flies. A signal (Ctrl-C, SIGTERM…) stops it with
+    ``interrupted`` set: the trials in flight finish and are stored (Ctrl-C again stops
+    waiting), ``trials.csv`` and ``best.yaml`` match the study, ``study.db`` stands alone."""
     from rich.console import Console
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)
 
+    from ardrone_nmpc.cli.console import config_notes
     from ardrone_nmpc.cli.narrow import fit
-
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.config.schema import ConfigError
+    from ardrone_nmpc.experiments.parallel import open_executor
     from ardrone_nmpc.experiments.tune import engine as eng
     from ardrone_nmpc.experiments.tune import study as st
     from ardrone_nmpc.experiments.tune.objective import parse_objective
     from ardrone_nmpc.experiments.tune.space import load_space, written_config
+    from ardrone_nmpc.runs.tune_record import load_record, stored_trials
 
     wall0 = time.perf_counter()  # start-up included: the wall time a user waits
     _check_options(engine=engine, scheduler=scheduler)
     cfg = load_config(config, overrides)
+    config_notes(cfg)
     space = load_space(space_file, cfg)
     if robust:  # the grid's corners and centre; scored by the worst of them
         from ardrone_nmpc.experiments.robustness.grid import corner_variants, load_grid
@@ -148,109 +220,87 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     elif grid_file is not None:
         raise ConfigError("--grid-file: only with --robust")
     obj = parse_objective(objective)
+    written = written_config(config, overrides)
     scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds,
-                         variants=variants if robust else _variants(variants))
+                         variants=variants if robust else
+                         _variants(variants, written=written, overrides=overrides))
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--output {out_dir}: exists and is not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
-    sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
-    if resume is False and (out_dir / st.STUDY_FILE).is_file():  # before any start-up
+    if not resume and stored_trials(out_dir):  # before any start-up
         raise ConfigError(f"--output {out_dir}: holds a study already ({st.STUDY_FILE}); "
                           "--resume continues it, or choose another --output")
-    # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
-    try:
-        runner = eng.make_engine(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler)
-    except (OSError, TimeoutError) as err:
-        if engine != "dask":
-            raise
-        raise ConfigError(f"--engine dask: {' '.join(str(err).split())}") from None
-    try:
-        pair = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
-                             base_values=base_values)
-    except BaseException:
-        runner.close()
-        raise
-    study = pair.record
-    columns = st.trials_columns(list(space), scen)
+    base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
+    sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
     console = console or Console(width=None if sys.stdout.isatty() else 160)
     err_console = err_console or Console(stderr=True)
-    make_spec = st.spec_factory(cfg=cfg, written=written_config(config, overrides),
-                                space=space, scenarios=scen, objective=obj,
+    make_spec = st.spec_factory(cfg=cfg, written=written, space=space, scenarios=scen,
+                                objective=obj,
                                 keep_dir=out_dir / "runs" if keep_runs else None)
-
-    last_save = [-math.inf]
-    best_score = [min((t.value for t in st.finished_trials(study)), default=math.inf)]
-
-    def save(*, now: bool = True) -> None:
-        """Rewrite trials.csv and best.yaml from the record (during the run at most every
-        SAVE_EVERY_S: the record holds every trial meanwhile)."""
-        if not now and time.perf_counter() - last_save[0] < SAVE_EVERY_S:
-            return
-        last_save[0] = time.perf_counter()
-        st.write_trials_csv(out_dir / st.TRIALS_FILE, columns,
-                            st.trial_rows(study, list(space), scen))
-        st.write_best(out_dir / st.BEST_FILE, study, cfg=cfg, space=space, command=command,
-                      objective=obj, scenarios=scen)
-
-    sim_s, flown, interrupted = 0.0, 0, False
-    todo = max(0, trials - len(st.finished_trials(study)))
-    if not todo:
-        runner.close()
-    else:
-        progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                            TimeElapsedColumn(), TimeRemainingColumn(), console=err_console,
-                            transient=True)
+    sim_s, flown, interrupted, best_score = 0.0, 0, None, math.inf
+    # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
+    with open_executor(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler) as ex:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
+                              base_values=base_values)
+        rewrite, append = _trials_writer(out_dir, study, cfg=cfg, space=space, scen=scen,
+                                         obj=obj, command=command)
         try:
+            rewrite()
+            best_score = min((t.value for t in st.finished_trials(study.record)),
+                             default=math.inf)
+            todo = max(0, trials - len(st.finished_trials(study.record)))
+            progress = Progress(TextColumn("{task.description}"), BarColumn(),
+                                MofNCompleteColumn(), TimeElapsedColumn(),
+                                TimeRemainingColumn(), console=err_console, transient=True)
             with progress:
                 task = progress.add_task("tune", total=todo)
 
                 def on_result(result) -> None:
-                    nonlocal sim_s
+                    nonlocal sim_s, flown, best_score
                     sim_s += result.sim_s
-                    best_score[0] = min(best_score[0], result.score)
-                    save(now=False)
-                    progress.update(task, advance=1,
-                                    description=f"tune · best {best_score[0]:.4g}")
+                    flown += 1
+                    best_score = min(best_score, result.score)
+                    progress.update(task, advance=1, description=f"tune · best {best_score:.4g}")
 
-                flown = st.run_study(pair, n_trials=trials, engine=runner, make_spec=make_spec,
-                                     space=space, on_result=on_result)
-        except KeyboardInterrupt:
-            interrupted = True
-        except (OSError, TimeoutError) as err:
-            if engine != "dask":
-                raise
-            raise ConfigError(f"--engine dask: {' '.join(str(err).split())}") from None
+                try:
+                    st.run_study(study, n_trials=trials, executor=ex, make_spec=make_spec,
+                                 space=space, on_result=on_result, on_record=append)
+                except KeyboardInterrupt as err:
+                    interrupted = err
         finally:
-            runner.close()
-    save()
+            try:
+                rewrite()
+            finally:
+                study.close()
     wall_s = time.perf_counter() - wall0
-    done = st.finished_trials(study)
+    record = load_record(out_dir)
+    done = st.finished_trials(record)
     if done:
-        console.print(fit(_ranked_table(study, space=space, scenarios=scen, top=top), console))
+        console.print(fit(_ranked_table(record, space=space, scenarios=scen, top=top), console))
     console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
                   f"{len(scen)} scenarios; {wall_s:.1f} s wall, {sim_s:.0f} s simulated "
                   f"({sim_s / wall_s if wall_s > 0 else math.nan:.0f}× real time; {engine}, "
                   f"{jobs} jobs){' (interrupted)' if interrupted else ''}")
     best = out_dir / st.BEST_FILE
-    return TuneOutcome(out_dir, len(done), flown, study.best_value if done else math.nan,
+    return TuneOutcome(out_dir, len(done), flown, record.best_value if done else math.nan,
                        best if done else None, wall_s, sim_s, interrupted)
 
 
 def register(app: typer.Typer) -> None:
     """Add the ``tune`` command to ``app`` (errors go to the app's one handler,
     :mod:`ardrone_nmpc.cli.handler`)."""
-    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty
+    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty, output_dir
+    from ardrone_nmpc.experiments.parallel import ENGINES as engines
 
     @app.command()
     def tune(
         config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
         trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
-        engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        engine: str = typer.Option("local", "--engine", **choice(engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-        out: Optional[Path] = typer.Option(None, "-o", "--output", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
+        out: Optional[Path] = typer.Option(None, "-o", "--output", callback=output_dir, help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
         seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, … (default 3; 1 with --robust)."),
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
@@ -281,7 +331,9 @@ def register(app: typer.Typer) -> None:
         if outcome.best_path is not None:
             typer.echo(f"best: {outcome.best_path}")
         if outcome.interrupted:
-            from ardrone_nmpc.errors import EXIT_INTERRUPTED
+            from ardrone_nmpc.runtime.signals import exit_code_of, signal_name
 
-            typer.echo("interrupted: --resume continues the study", err=True)
-            raise typer.Exit(code=EXIT_INTERRUPTED)
+            typer.echo(f"interrupted ({signal_name(outcome.interrupt)}): the trials that "
+                       f"finished are in {outcome.out_dir}; --resume continues the study",
+                       err=True)
+            raise typer.Exit(code=exit_code_of(outcome.interrupt))

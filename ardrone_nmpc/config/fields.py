@@ -10,7 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field,
+                      ValidationInfo, field_validator)
 from pydantic_core import PydanticCustomError
 
 from ardrone_nmpc.config.limits import MAX_COORDINATE_M, MAX_SPAN_S, MIN_SPAN_S
@@ -65,6 +66,18 @@ PathSizeVec4 = vector(PathSize, 4)
 NonNegativeVec4 = vector(NonNegative, 4)
 NonNegativeVec7 = vector(NonNegative, 7)
 Port = Annotated[int, Field(ge=1, le=65535)]
+
+
+def _host(value: str) -> str:
+    # the links refuse a blank or spaced host (links/udp.check_host): refuse it here first,
+    # so `check` and every command agree before anything opens a socket
+    if not value.strip() or any(c.isspace() for c in value):
+        raise invalid("must be an address or host name, without spaces")
+    return value
+
+
+#: An IP address or host name (DNS allows 253 characters).
+Host = Annotated[str, Field(min_length=1, max_length=253), AfterValidator(_host)]
 
 
 def auto_or_number(*, low: float, high: float, low_open: bool = False) -> Any:

@@ -122,6 +122,8 @@ def read_option_file(path: str | Path, option: str) -> Any:
         return yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as err:
         raise ConfigError(f"{option} {path}: cannot read: {err.strerror or err}") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{option} {path}: not UTF-8 text (byte {err.start})") from None
     except yaml.YAMLError as err:
         raise ConfigError(f"{option} {path}: invalid YAML: {str(err).splitlines()[0]}") from None
 

@@ -47,7 +47,7 @@ from ardrone_nmpc.config.faults import FaultsConfig
 from ardrone_nmpc.config.sim import (PLANT_PROFILE_DEFAULTS, NoiseConfig, PlantConfig, SimConfig,
                                      TargetConfig)
 from ardrone_nmpc.config.fields import (
-    CoordinateVec2, CoordinateVec3, Finite, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec3, PathSizeVec4, Port, Positive, PositiveVec2,
+    CoordinateVec2, CoordinateVec3, Finite, Host, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec3, PathSizeVec4, Port, Positive, PositiveVec2,
     Section, Span, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
@@ -230,7 +230,7 @@ class LoopConfig(Section):
 class DroneConfig(Section):
     """The AR.Drone link and the limits written to its configuration at connect (docs/protocol.md §3.1)."""
 
-    host: str = Field("192.168.1.1", min_length=1, description="Drone IP address or host name.")
+    host: Host = Field("192.168.1.1", description="Drone IP address or host name.")
     at_port: Port = Field(5556, description="UDP port of AT commands.")
     navdata_port: Port = Field(5554, description="UDP port of navdata.")
     euler_angle_max_rad: float = Field(
@@ -295,14 +295,13 @@ class MocapConfig(Section):
         "vicon_udp", description="'vicon_udp': Vicon Tracker's UDP object stream (bind_host, "
         "port); 'motioncapture': any system of the libmotioncapture library (system, hostname, "
         "options; the 'mocap' extra).")
-    bind_host: str = Field("0.0.0.0", min_length=1, description="vicon_udp: local address to "
-                           "listen on.")
+    bind_host: Host = Field("0.0.0.0", description="vicon_udp: local address to listen on.")
     port: Port = Field(51001, description="vicon_udp: UDP port of the pose stream.")
     system: Literal[MOCAP_SYSTEMS] = Field(  # type: ignore[valid-type]
         "vicon", description="motioncapture: the library's system type (vicon = DataStream "
         "SDK, optitrack = NatNet, qualisys, vrpn, nokov, motionanalysis, fzmotion, mock).")
-    hostname: str = Field("localhost", min_length=1, description="motioncapture: the mocap "
-                          "server's address (the library's 'hostname' option).")
+    hostname: Host = Field("localhost", description="motioncapture: the mocap server's "
+                           "address (the library's 'hostname' option).")
     options: dict[str, str | int | float | bool] = Field(
         default_factory=dict, description="motioncapture: more library options, passed through "
         "as strings (e.g. port_command, interface_ip; mock: rigid_bodies, frequency).")
@@ -311,7 +310,8 @@ class MocapConfig(Section):
         "Y-up frame into ours (x, -z, y). null: 'y' for optitrack, 'z' otherwise (set 'z' when "
         "Motive streams Z up).")
     connect_timeout_s: Positive = Field(
-        5.0, description="motioncapture: how long to wait for the connection (s).")
+        5.0, le=60.0, description="motioncapture: how long to wait for the connection (s), "
+        "≤ 60 (a longer wait would look like a hang).")
     object_name: str = Field(
         "ardrone", min_length=1, max_length=24, description="Tracked object name (≤ 24 ASCII).")
 

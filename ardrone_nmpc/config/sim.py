@@ -119,7 +119,8 @@ class PlantConfig(Section):
     def _profile_defaults(cls, data: Any) -> Any:
         # a profile fills only the keys the config leaves out: explicit values win
         if isinstance(data, Mapping):
-            defaults = PLANT_PROFILE_DEFAULTS.get(data.get("profile", "ardrone"), {})
+            profile = data.get("profile", "ardrone")  # anything but a name: refused below
+            defaults = PLANT_PROFILE_DEFAULTS.get(profile, {}) if isinstance(profile, str) else {}
             data = {**defaults, **data}
         return data
 

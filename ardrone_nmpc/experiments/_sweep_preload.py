@@ -1,5 +1,6 @@
-"""Imported by the sweep's forkserver (``ardrone-nmpc sweep --engine local``): loads every
-numba kernel a case uses, once, so the pool workers forked from it start warm.
+"""Imported by the local pool's forkserver (:mod:`ardrone_nmpc.experiments.parallel`: sweep,
+tune, faults): loads every numba kernel a case uses, once, so the workers forked from it start
+warm.
 
 Importing this module runs a 0.2 s lockstep simulation into a temporary directory (~2 s);
 nothing else imports it.

@@ -13,12 +13,16 @@
   field's unit in its metadata (:mod:`ardrone_nmpc.runs.table_schema`) — with the events
   (JSON lines) and ``config.yaml`` in the file's key-value metadata.
 
-Both keep every float bit for bit (``read_mcap`` reads an MCAP file back).
+Both keep every float bit for bit (``read_mcap`` reads an MCAP file back). The file is
+written beside its final name and renamed into place (:mod:`ardrone_nmpc.core.atomic`): an
+export that fails or is interrupted leaves nothing under that name (a previous export there
+stays as it was), and nothing but its own temporary file is ever deleted.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,14 +31,16 @@ from typing import Any
 import numpy as np
 
 from ardrone_nmpc.config.io import config_to_dict
+from ardrone_nmpc.core.atomic import atomic_path
 from ardrone_nmpc.core.extras import import_extra
+from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs import foxglove_channels as fox
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, EVENTS_FILE, LOG_FILE, RunData, read_run
 from ardrone_nmpc.runs.table_schema import log_table
-from ardrone_nmpc.runs.rundir import CONFIG_FILE, RunData, read_run
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "export_run", "write_mcap", "write_parquet",
-           "read_mcap", "McapContents", "run_rows"]
+__all__ = ["EXPORT_FORMATS", "ExportError", "default_output", "export_run", "require_format",
+           "write_mcap", "write_parquet", "read_mcap", "McapContents", "run_rows"]
 
 EXPORT_FORMATS = ("mcap", "parquet")
 PARQUET_EVENTS_KEY = b"ardrone_nmpc.events"
@@ -42,8 +48,25 @@ PARQUET_CONFIG_KEY = b"ardrone_nmpc.config"
 _CREATED = re.compile(r"^#\s*created:\s*(\S+)\s*$", re.MULTILINE)
 
 
-class ExportError(ValueError):
-    """A user-facing export problem (unknown format, unwritable output): one line."""
+#: The latest MCAP log time: nanoseconds since 1970 in an unsigned 64-bit field.
+MAX_LOG_TIME_NS = 2 ** 64 - 1
+
+
+class ExportError(UserError, ValueError):
+    """A user-facing export problem (unknown format, a time MCAP cannot hold): one line."""
+
+
+def _log_ns(origin_ns: int, t_s: float, where: str) -> int:
+    """:func:`~ardrone_nmpc.runs.channels.time_ns`, refusing a time MCAP cannot hold."""
+    if math.isfinite(t_s) and origin_ns + t_s * 1e9 > MAX_LOG_TIME_NS:  # before: clamped to 0
+        raise _beyond(where, t_s)
+    return ch.time_ns(origin_ns, t_s)
+
+
+def _beyond(where: str, t_s: float) -> ExportError:
+    return ExportError(f"{where}: t_s = {t_s!r} s is beyond what an MCAP log time holds "
+                       "(nanoseconds since 1970, up to the year 2554); export it as "
+                       "--format parquet")
 
 
 def run_rows(run: RunData) -> list[dict[str, Any]]:
@@ -67,6 +90,8 @@ def _origin_ns(run: RunData) -> int:
     times = [float(t) for t in run.columns["t_s"][:1]] + [
         float(e["t_s"]) for e in run.events[:1] if isinstance(e.get("t_s"), (int, float))]
     first = min((t for t in times if np.isfinite(t)), default=0.0)
+    if min(first, 0.0) * 1e9 < -MAX_LOG_TIME_NS:  # the run would start before 1970 − 584 y
+        raise _beyond(f"{run.path}", first)
     return _created_ns(run) - round(min(first, 0.0) * 1e9)
 
 
@@ -77,13 +102,14 @@ def write_mcap(run: RunData, out: Path) -> int:
     origin = _origin_ns(run)
     messages: list[tuple[int, int, str, Any]] = []  # (log ns, order, topic, payload)
     paths = ch.PathBuilder()
-    for row in run_rows(run):
-        t_ns = ch.time_ns(origin, row["t_s"])
+    for i, row in enumerate(run_rows(run)):
+        t_ns = _log_ns(origin, row["t_s"], f"{run.path / LOG_FILE}:{i + 2}")
         for topic, data in ch.row_messages(row, paths):
             messages.append((t_ns, len(messages), topic, data))
-    for event in run.events:  # experiment time, as the rows (read_run moves older runs)
+    for i, event in enumerate(run.events):  # experiment time, as the rows (read_run moves older runs)
         t = event.get("t_s")
-        t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
+        t_ns = _log_ns(origin, float(t) if isinstance(t, (int, float)) else math.nan,
+                       f"{run.path / EVENTS_FILE}: event {i + 1}")
         messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
     config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)
     t0_ns = ch.time_ns(origin, float(run.columns["t_s"][0]) if run.n_rows else 0.0)
@@ -91,7 +117,7 @@ def write_mcap(run: RunData, out: Path) -> int:
     for topic, poses in paths.messages():   # whole paths, shown from the start
         messages.append((t0_ns, -1, topic, poses))
     messages.sort(key=lambda m: m[:2])
-    with open(out, "wb") as stream:
+    with atomic_path(out) as tmp, open(tmp, "wb") as stream:
         return fox.write_mcap_messages(stream, ((t, topic, data) for t, _, topic, data in messages))
 
 
@@ -164,17 +190,36 @@ def write_parquet(run: RunData, out: Path) -> int:
     config = (run.path / CONFIG_FILE).read_bytes()
     table = table.replace_schema_metadata(
         {**table.schema.metadata, PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
-    pq.write_table(table, out)
+    # an open stream, not a path: pyarrow deletes a *path* it failed to write
+    with atomic_path(out) as tmp, open(tmp, "wb") as stream:
+        pq.write_table(table, stream)
     return table.num_rows
 
 
-def export_run(run_dir: Path, fmt: str, out: Path) -> str:
-    """Export the run at ``run_dir`` as ``fmt`` to ``out``; return a one-line report."""
+#: The module each format is written with (MCAP: foxglove-sdk's writer) and its extra.
+_EXTRAS = {"mcap": ("foxglove", "mcap"), "parquet": ("pyarrow.parquet", "parquet")}
+
+
+def require_format(fmt: str) -> None:
+    """Refuse an unknown ``--format``, or one whose library is not installed (one line)."""
     if fmt not in EXPORT_FORMATS:
         raise ExportError(f"--format: unknown format {fmt!r}; choose {', '.join(EXPORT_FORMATS)}")
-    run = read_run(run_dir)
-    if out.is_dir():
-        raise ExportError(f"{out}: is a directory; give the output file")
+    module, extra = _EXTRAS[fmt]
+    import_extra(module, extra, f"export --format {fmt}")
+
+
+def default_output(run_dir: Path, fmt: str) -> Path:
+    """``<run dir>.<format>`` beside the run directory (``.`` and ``..`` resolved first)."""
+    run_dir = Path(run_dir).resolve()
+    return run_dir.with_name(f"{run_dir.name}.{fmt}")
+
+
+def export_run(run_dir: Path, fmt: str, out: Path, *, run: RunData | None = None) -> str:
+    """Export the run at ``run_dir`` (or ``run``, read already) as ``fmt`` to ``out``;
+    return a one-line report. ``out`` is checked by the caller
+    (:func:`~ardrone_nmpc.runs.outputs.check_output_file`)."""
+    require_format(fmt)
+    run = run if run is not None else read_run(run_dir)
     if fmt == "mcap":
         n = write_mcap(run, out)
         return f"{out}: {n} messages ({run.n_rows} rows, {len(run.events)} events)"

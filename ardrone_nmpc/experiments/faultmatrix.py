@@ -34,6 +34,9 @@ from typing import Callable
 
 import numpy as np
 
+from ardrone_nmpc.core.atomic import write_text_atomic
+from ardrone_nmpc.core.modes import Mode
+
 #: experiment kind → (config file, overrides)
 EXPERIMENTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "hover": ("hover.yaml", ("duration_s=12",)),
@@ -115,8 +118,7 @@ def _positions(run, upto_landing: bool = True) -> tuple[np.ndarray, np.ndarray]:
     t = c["t_s"]
     keep = np.ones(len(t), dtype=bool)
     if upto_landing:
-        mode = c["mode"]
-        keep = np.array([not (m == "landing" or str(m).startswith("land-")) for m in mode])
+        keep = np.array([not Mode.parse(m).is_landing for m in c["mode"]], dtype=bool)
     p = np.column_stack([c["x_true_m"], c["y_true_m"], c["z_true_m"]])
     return t[keep], p[keep]
 
@@ -159,20 +161,20 @@ def classify(run, ending: str, fault: str) -> str:
     """The outcome label of a finished (or refused) run (see the module docstring)."""
     if refused(run):
         return "refused"
-    mode = [str(m) for m in run.columns["mode"]]
+    modes = [Mode.parse(m) for m in run.columns["mode"]]
     z = run.columns["z_true_m"]
     t = run.columns["t_s"]
-    flying = np.array([m in ("track", "settle") or m.startswith(("hold", "fallback", "hover"))
-                       for m in mode])
+    flying = np.array([m.is_airborne for m in modes], dtype=bool)
     if np.any(flying & (t >= 0) & (z <= 0.02)):
         return "crashed"
-    if ending == "stop-emergency":
+    end = Mode.parse(ending)
+    if end.is_emergency_stop:
         return "stopped" if fault == "emergency" else "crashed"
-    if ending.startswith("land-"):
+    if end.action == "land" and end.reason:
         landed = any(e.get("kind") == "landed" for e in run.events)
         return "landed" if landed else "crashed"
-    last = next((m for m in reversed(mode) if m), "")
-    return "hovered" if last.startswith("hover") else "completed"
+    last = next((m for m in reversed(modes) if m.is_set), Mode(""))
+    return "hovered" if last.action == "hover" else "completed"
 
 
 def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
@@ -258,24 +260,36 @@ def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, 
                       passed, str(run_dir), why)
 
 
+def _fly(case: tuple[str, str | None], **options) -> tuple[Path | None, str, int, str]:
+    """:func:`run_case` of one ``(experiment, fault or None)`` (an executor's work item)."""
+    return run_case(experiment=case[0], fault=case[1], **options)
+
+
 def run_matrix(*, config_dir: Path, log_dir: Path, experiments: list[str], faults: list[str],
-               seed: int = 0, progress: Callable[[str], None] | None = None) -> list[CaseResult]:
-    """Every fault × experiment (plus one fault-free baseline per experiment)."""
-    results = []
-    for experiment in experiments:
-        if progress:
-            progress(f"{experiment} baseline")
-        base_dir, ending, _, error = run_case(config_dir=config_dir, log_dir=log_dir,
-                                              experiment=experiment, fault=None, seed=seed)
-        if error or ending != "completed":
-            raise RuntimeError(f"the fault-free {experiment} run did not complete: "
-                               f"{error or ending}")
-        for fault in faults:
+               seed: int = 0, progress: Callable[[str], None] | None = None,
+               jobs: int = 1) -> list[CaseResult]:
+    """Every fault × experiment (plus one fault-free baseline per experiment), flown on
+    ``jobs`` workers (:mod:`ardrone_nmpc.experiments.parallel`) and evaluated in that order."""
+    from ardrone_nmpc.experiments.parallel import open_executor
+
+    cases = [(e, f) for e in experiments for f in (None, *faults)]
+    results, baselines = [], {}
+    with open_executor("local", jobs=max(1, min(jobs, len(cases)))) as executor:
+        for done in executor.map(_fly, cases, config_dir=Path(config_dir).resolve(),
+                                 log_dir=Path(log_dir).resolve(), seed=seed):
+            experiment, fault = done.key
+            if done.error is not None:
+                raise done.error
+            run_dir, ending, rows, error = done.value
             if progress:
-                progress(f"{experiment} × {fault}")
-            run_dir, ending, rows, error = run_case(config_dir=config_dir, log_dir=log_dir,
-                                                    experiment=experiment, fault=fault, seed=seed)
-            results.append(evaluate(run_dir=run_dir, baseline_dir=base_dir,
+                progress(f"{experiment} × {fault}" if fault else f"{experiment} baseline")
+            if fault is None:
+                if error or ending != "completed":
+                    raise RuntimeError(f"the fault-free {experiment} run did not complete: "
+                                       f"{error or ending}")
+                baselines[experiment] = run_dir
+                continue
+            results.append(evaluate(run_dir=run_dir, baseline_dir=baselines[experiment],
                                     experiment=experiment, fault=fault, ending=ending,
                                     rows=rows, error=error))
     return results
@@ -365,7 +379,7 @@ def _choose(text: str | None, known, what: str) -> list[str]:
 
 def run_faults_command(*, json_out: Path | None, markdown: Path | None, experiments: str,
                        only: str | None, config_dir: Path, log_dir: Path | None,
-                       seed: int) -> bool:
+                       seed: int, jobs: int = 1) -> bool:
     """The ``faults`` command: run, print, write the reports; True if every case passed."""
     import datetime as dt
     import json
@@ -388,15 +402,15 @@ def run_faults_command(*, json_out: Path | None, markdown: Path | None, experime
         console.print(f"[{done[0]}/{total}] {label}", highlight=False)
 
     results = run_matrix(config_dir=config_dir, log_dir=log_dir, experiments=kinds,
-                         faults=cases, seed=seed, progress=progress)
+                         faults=cases, seed=seed, progress=progress, jobs=jobs)
     Console().print(render_table(results))
     n_pass = sum(r.passed for r in results)
     print(f"{n_pass}/{len(results)} cases pass; run directories under {log_dir}")
     if json_out is not None:
-        json_out.write_text(json.dumps([r.as_dict() for r in results], indent=1,
+        write_text_atomic(json_out, json.dumps([r.as_dict() for r in results], indent=1,
                                        allow_nan=True) + "\n")
     if markdown is not None:
         command = "ardrone-nmpc faults " + " ".join(sys.argv[2:]) if len(sys.argv) > 1 else \
             "ardrone-nmpc faults"
-        markdown.write_text(render_markdown(results, command=command.strip()))
+        write_text_atomic(markdown, render_markdown(results, command=command.strip()))
     return n_pass == len(results)

@@ -6,7 +6,9 @@
 recomputed ticks through :func:`record`. A run directory's ``summary.csv`` is written last
 (:func:`~ardrone_nmpc.runs.summary.write_run_summary`), so its presence marks a recording
 that finished. A flight that raises leaves its partial run directory with a final
-``exception`` event and no ``summary.csv`` (``fly`` summarises it all the same).
+``exception`` event and no ``summary.csv`` (``fly`` summarises it all the same); one stopped
+by Ctrl-C or a terminating signal, with a final ``interrupted`` event
+(:mod:`ardrone_nmpc.runs.ending`).
 
 The simulation and the summary are imported when a recording starts: ``sweep`` (and
 ``plot``, through the sweep table) import this module without loading the solver kernels.
@@ -21,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Generic, TypeVar
 
+from ardrone_nmpc.runs.ending import FAILED_EVENT, note_interrupted
 from ardrone_nmpc.runs.rundir import RunRecorder
 from ardrone_nmpc.runtime.schedule import Schedule
 
@@ -32,8 +35,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 T = TypeVar("T")
 
-#: The event that ends the events of a flight that raised (``error``: the exception, one line).
-FAILED_EVENT = "exception"
 #: The event that ends a lockstep recording (wall time, ticks, how it ended).
 SIMULATED_EVENT = "simulated"
 
@@ -77,8 +78,9 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     If ``fly`` raises (an ``Exception``), the :data:`FAILED_EVENT` ends ``events.jsonl``
     (``t_s`` NaN), no summary is written — unless ``summarise_failed(path)`` writes one: a
     real flight's run directory is complete however it ended — and the exception propagates
-    (any ``BaseException``: a flight interrupted by a signal too) — or, with ``catch``, comes
-    back as :attr:`Recording.error`.
+    — or, with ``catch``, comes back as :attr:`Recording.error`. A Ctrl-C or terminating
+    signal ends it with the ``interrupted`` event and propagates (never caught), carrying
+    the run directory as ``run_dir``.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
@@ -87,7 +89,10 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
         try:
             result = fly(recorder)
         except BaseException as err:
-            if isinstance(err, Exception):
+            if isinstance(err, KeyboardInterrupt):  # Ctrl-C, or a signal (runtime/signals)
+                note_interrupted(recorder, err)
+                err.run_dir = recorder.path
+            elif isinstance(err, Exception):
                 recorder.event(math.nan, FAILED_EVENT, error=one_line(err))
             recorder.close()
             if summarise_failed is not None:

@@ -37,6 +37,8 @@ import numpy as np
 
 from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.atomic import write_text_atomic
+from ardrone_nmpc.core.modes import LANDING, Mode
 from ardrone_nmpc.core.types import IX_PSI, MocapPose
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.reference.experiment import experiment_trajectory
@@ -258,8 +260,9 @@ def rerun(*, run: RunData, cfg, recorder=None,
     for k, inp in enumerate(inputs):
         # manual clock = the experiment clock: the tick's clock offset is 0
         out = tick.step(inp, t_exp_s=inp.t_s, mode=phase(inp.t_s))
-        if logged_mode[k] == "landing" and out.action in (Action.LAND, Action.STOP):
-            out.row["mode"] = "landing"  # the runner's label for its descent after a landing
+        if Mode.parse(logged_mode[k]).action == LANDING and out.action in (Action.LAND,
+                                                                            Action.STOP):
+            out.row["mode"] = LANDING  # the runner's label for its descent after a landing
         rows.append(out.row)
         if recorder is not None:
             recorder.write_row(out.row)
@@ -318,9 +321,7 @@ def write_rerun_csv(*, result: RerunResult, path: Path) -> Path:
         cells = [format_number(t), str(result.logged_mode[i]), str(result.mode[i])]
         cells += [format_number(result.diff[c][i]) for c in COMPARED_COLUMNS]
         lines.append(",".join(cells))
-    path = Path(path)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
+    return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 # ----------------------------------------------------------------------------- broadcast

@@ -39,6 +39,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "Ellipse",
     "Hover",
+    "KIND_FIELDS",
     "LORENZ_BETA",
     "LORENZ_RHO",
     "LORENZ_SIGMA",
@@ -51,6 +52,8 @@ __all__ = [
     "Trajectory",
     "Waypoints",
     "horizon",
+    "ignored_fields",
+    "input_files",
     "make_trajectory",
     "path_file",
 ]
@@ -553,6 +556,39 @@ def path_file(ref_cfg: ReferenceConfig) -> WaypointFile:
         return read_waypoint_file(ref_cfg.path_file)
     except ReferenceError as err:
         raise ReferenceError(f"reference.path_file: {err}") from None
+
+
+def input_files(ref_cfg: ReferenceConfig) -> dict[str, WaypointFile]:
+    """The input files a reference names, read and checked: ``{"path_file": …}`` for kind
+    'path' and for any kind that names one (a named file must exist even where the kind
+    ignores it — :func:`ignored_fields` warns of that). ``check`` and every run read them
+    here, before anything is created."""
+    if ref_cfg.kind == "path" or ref_cfg.path_file is not None:
+        return {"path_file": path_file(ref_cfg)}
+    return {}
+
+
+#: The reference fields that only some kinds read (the others are read by every kind).
+KIND_FIELDS: dict[str, tuple[str, ...]] = {
+    "target_m": ("step",), "target_psi_rad": ("step",), "step_time_s": ("step",),
+    "side_m": ("square", "square_altitudes"), "leg_duration_s": ("square", "square_altitudes"),
+    "altitudes_m": ("square_altitudes",), "center_m": ("ellipse", "lorenz"),
+    "semi_axes_m": ("ellipse",), "period_s": ("ellipse",), "lorenz_scale_m": ("lorenz",),
+    "lorenz_time_scale": ("lorenz",), "path_file": ("path",), "follow": ("follow",),
+}
+
+
+def ignored_fields(ref_cfg: ReferenceConfig) -> list[str]:
+    """One line per reference field set away from its default that the chosen kind does not
+    read (``reference.path_file: ignored by reference.kind 'step' (read by: path)``)."""
+    notes = []
+    for name, kinds in KIND_FIELDS.items():
+        info = type(ref_cfg).model_fields[name]
+        default = info.get_default(call_default_factory=True)
+        if ref_cfg.kind not in kinds and getattr(ref_cfg, name) != default:
+            notes.append(f"reference.{name}: ignored by reference.kind {ref_cfg.kind!r} "
+                         f"(read by: {', '.join(kinds)})")
+    return notes
 
 
 # ----------------------------------------------------------------------------- from config

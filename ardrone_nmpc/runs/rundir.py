@@ -63,8 +63,9 @@ import orjson
 from ardrone_nmpc import __version__
 from ardrone_nmpc.config.io import dump_config, load_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
+from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.errors import UserError
-from ardrone_nmpc.reference.trajectories import path_file
+from ardrone_nmpc.reference.trajectories import input_files
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
 
 __all__ = [
@@ -171,9 +172,7 @@ def _getter(names: list[str]) -> Callable[[Mapping[str, Any]], tuple]:
 
 def _read_inputs(cfg: ExperimentConfig) -> dict:
     """The input files ``cfg`` names, read and checked: ``{field: WaypointFile}``."""
-    if cfg.reference.kind == "path" or cfg.reference.path_file is not None:
-        return {"path_file": path_file(cfg.reference)}
-    return {}
+    return input_files(cfg.reference)
 
 
 def _copy_inputs(path: Path, cfg: ExperimentConfig, inputs: dict
@@ -212,6 +211,8 @@ class RunRecorder:
         self._log = log_file
         self._events = events_file
         self.rows_written = 0
+        #: ``t_s`` of the last row written (NaN before the first).
+        self.last_t_s = math.nan
         self._plans: dict[tuple, tuple] = {}
 
     # -- creation ---------------------------------------------------------------------------
@@ -304,6 +305,7 @@ class RunRecorder:
             line = self._careful_line(row)  # NaN/inf/bool cells, or a value to refuse
         _write_all(self._log, line)
         self.rows_written += 1
+        self.last_t_s = row.get("t_s", self.last_t_s)
 
     def _plan(self, keys: tuple) -> tuple:
         """Cell template, slots and getter for rows with these keys (cached per key order)."""
@@ -415,11 +417,7 @@ def write_summary(run_dir: str | Path, rows: Iterable[SummaryRow]) -> Path:
             if _FORBIDDEN.search(c):
                 raise ValueError(f"summary cell {c!r} contains ',', '\"' or a line break")
         lines.append(",".join(cells))
-    target = Path(run_dir) / SUMMARY_FILE
-    tmp = target.with_name(SUMMARY_FILE + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    os.replace(tmp, target)
-    return target
+    return write_text_atomic(Path(run_dir) / SUMMARY_FILE, "\n".join(lines) + "\n")
 
 
 def read_summary(run_dir: str | Path) -> list[SummaryRow]:
@@ -649,7 +647,8 @@ def read_run(run_dir: str | Path) -> RunData:
     """
     path = Path(run_dir)
     if not path.is_dir():
-        raise LogError(f"{path}: no such run directory")
+        raise LogError(f"{path}: " + ("a file, not a run directory" if path.exists()
+                                      else "no such run directory"))
     cfg_path = path / CONFIG_FILE
     cfg_text = _read_text(cfg_path)
     try:

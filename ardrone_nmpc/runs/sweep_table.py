@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from ardrone_nmpc.core.atomic import atomic_write
 
 #: Metric columns of ``sweep.csv``, in order (after ``case`` and the swept parameters).
 METRIC_COLUMNS: tuple[str, ...] = ("rmse_m", "settling_s", "overshoot_pct", "path_deviation_m",
@@ -44,13 +45,10 @@ def write_sweep_csv(path: str | Path, columns: Sequence[str],
 def write_csv_table(path: str | Path, columns: Sequence[str], rows: Sequence[Mapping]) -> None:
     """Write a results table (``sweep.csv``, a tune's ``trials.csv``) atomically: a temporary
     file renamed over it, so a reader never sees half a table."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
+    with atomic_write(path, newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(columns))
         writer.writeheader()
         writer.writerows(rows)
-    os.replace(tmp, path)
 
 
 class SweepCsvAppender:

@@ -9,16 +9,48 @@ when a record is opened.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RESULT_ATTR", "STUDY_FILE", "STUDY_NAME", "load_record", "result_of", "storage"]
+from ardrone_nmpc.errors import UserError
+
+__all__ = ["RESULT_ATTR", "STUDY_FILE", "STUDY_NAME", "StudyFileError", "checkpoint",
+           "close_storage", "load_record", "result_of", "storage", "storage_errors",
+           "stored_trials"]
 
 STUDY_FILE = "study.db"
 STUDY_NAME = "tune"
 #: The user attribute of a finished trial: status, message, metrics (scenario → metric →
 #: value), wall_s, sim_s.
 RESULT_ATTR = "result"
+
+
+class StudyFileError(UserError):
+    """``study.db`` cannot be read or written (not a database, read-only, disk full): one
+    line naming the file, exit 1."""
+
+
+@contextmanager
+def storage_errors(db: Path) -> Iterator[None]:
+    """Turn what SQLite, SQLAlchemy or Optuna's storage raise about ``db`` into one
+    :class:`StudyFileError` line (SQLite's own words: Optuna wraps a failed commit, SQLAlchemy
+    the driver's error)."""
+    import sqlite3
+
+    from optuna.exceptions import StorageInternalError
+    from sqlalchemy.exc import SQLAlchemyError
+
+    try:
+        yield
+    except (SQLAlchemyError, sqlite3.Error, StorageInternalError) as err:
+        cause = err
+        while isinstance(cause, StorageInternalError) and cause.__cause__ is not None:
+            cause = cause.__cause__
+        cause = getattr(cause, "orig", None) or cause
+        text = " ".join(str(cause).split()) or type(cause).__name__
+        raise StudyFileError(f"{db}: {text}") from None
 
 
 def quiet_optuna():
@@ -29,8 +61,9 @@ def quiet_optuna():
     return optuna
 
 
-def storage(db: Path):
-    """Optuna's SQLite storage of ``db`` in write-ahead-log mode without a sync per commit:
+def storage(db: Path, *, read_only: bool = False):
+    """Optuna's SQLite storage of ``db`` (``read_only``: as it is, for reading — no journal
+    change, no write) or, to record, in write-ahead-log mode without a sync per commit:
     Optuna commits every parameter and attribute it stores, and a synced commit costs
     milliseconds, on the process that also feeds the workers. A power cut may lose the last
     trials recorded (a resumed run flies others in their place); the file stays consistent."""
@@ -41,17 +74,59 @@ def storage(db: Path):
 
     def connect():
         con = sqlite3.connect(path, check_same_thread=False, timeout=30.0)
-        con.execute("PRAGMA journal_mode=WAL")
-        con.execute("PRAGMA synchronous=NORMAL")
+        if read_only:
+            con.execute("PRAGMA query_only=ON")
+        else:
+            con.execute("PRAGMA journal_mode=WAL")
+            con.execute("PRAGMA synchronous=NORMAL")
         return con
 
     return optuna.storages.RDBStorage(f"sqlite:///{path}", engine_kwargs={"creator": connect})
 
 
+def checkpoint(store) -> None:
+    """Copy the write-ahead log into ``study.db`` itself, so that the file alone holds every
+    trial recorded so far (a copy of it without ``study.db-wal`` is not missing any)."""
+    with store.engine.connect() as con:
+        con.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
+
+
+def close_storage(store, db: Path) -> None:
+    """Close the storage and leave ``study.db`` self-contained: the log checkpointed into it
+    and the journal back in rollback mode (``study.db-wal`` and ``-shm`` removed; a resumed
+    run switches to WAL again)."""
+    import sqlite3
+
+    store.remove_session()
+    store.engine.dispose()
+    con = sqlite3.connect(str(db), timeout=30.0)
+    try:
+        con.execute("PRAGMA journal_mode=DELETE")
+    finally:
+        con.close()
+
+
 def load_record(out_dir: Path):
-    """The study of the tune directory ``out_dir``. KeyError if ``study.db`` holds none."""
+    """The study of the tune directory ``out_dir``: KeyError if ``study.db`` holds none,
+    :class:`StudyFileError` if it cannot be read."""
     optuna = quiet_optuna()
-    return optuna.load_study(study_name=STUDY_NAME, storage=storage(Path(out_dir) / STUDY_FILE))
+    db = Path(out_dir) / STUDY_FILE
+    with storage_errors(db):
+        return optuna.load_study(study_name=STUDY_NAME, storage=storage(db, read_only=True))
+
+
+def stored_trials(out_dir: Path) -> int:
+    """How many trials the study in ``out_dir`` holds (0 without ``study.db`` or a study in
+    it); :class:`StudyFileError` if the file cannot be read."""
+    db = Path(out_dir) / STUDY_FILE
+    if not db.is_file():
+        return 0
+    try:
+        record = load_record(out_dir)
+    except KeyError:
+        return 0
+    with storage_errors(db):
+        return len(record.trials)
 
 
 def result_of(trial) -> dict[str, Any]:

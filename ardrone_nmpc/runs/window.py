@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Modes in which the drone is not under the experiment's control (excluded from path metrics).
-GROUND_MODES = frozenset({"landed", "taking_off", "landing"})
+from ardrone_nmpc.core.modes import GROUND_MODES
+
+__all__ = ["GROUND_MODES", "experiment_rows", "flying_rows"]
 
 
 def experiment_rows(t_s: np.ndarray, *, among: np.ndarray | None = None) -> np.ndarray:

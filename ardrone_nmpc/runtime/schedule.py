@@ -15,14 +15,13 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ardrone_nmpc.core.modes import SETTLE, TRACK
+
 #: Take-off must show the drone flying (navdata, or the simulated plant) within this (s).
 TAKEOFF_TIMEOUT_S = 10.0
 #: The simulated landing must show the drone on the ground within this (s); a real landing
 #: has no timeout (the session lands until navdata confirms it).
 LANDING_TIMEOUT_S = 15.0
-
-SETTLE = "settle"
-TRACK = "track"
 
 #: Largest tick count a schedule takes: tick times ``k · period`` stay exact doubles.
 MAX_TICKS = 2 ** 53

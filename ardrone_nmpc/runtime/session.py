@@ -30,7 +30,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.links.drone_config import LinkError, verify_config
 from ardrone_nmpc.runtime.operator_input import OperatorAbort
 from ardrone_nmpc.runtime.schedule import TAKEOFF_TIMEOUT_S
-from ardrone_nmpc.runtime.signals import Terminated
+from ardrone_nmpc.runtime.signals import Terminated, signal_name
 from ardrone_nmpc.errors import UserError
 
 __all__ = ["DroneLandedItself", "FlightSession", "PreflightError"]
@@ -116,7 +116,7 @@ class FlightSession:
         except BaseException as err:
             self._interrupted(err)
             try:
-                self._log("landing", reason=type(err).__name__)
+                self._log("landing", reason=_why(err))
             finally:
                 self.land()  # whatever went wrong, the motors may have started
                 self._release()
@@ -226,9 +226,8 @@ class FlightSession:
     # -- leaving: land, always ------------------------------------------------------------
     def __exit__(self, exc_type, exc, tb) -> bool:
         self._interrupted(exc)
-        reason = "end" if exc_type is None else exc_type.__name__
         try:
-            self._log("landing", reason=reason)
+            self._log("landing", reason="end" if exc is None else _why(exc))
         finally:  # a failing log (disk full) must not keep the drone in the air
             try:
                 self.land()
@@ -415,3 +414,9 @@ class FlightSession:
 
 def _ctrl(nav) -> str:
     return "none" if nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"
+
+
+def _why(err: BaseException) -> str:
+    """The ``landing`` event's reason: the signal (``SIGINT``, ``SIGHUP``, …) or the error's
+    type."""
+    return signal_name(err) if isinstance(err, KeyboardInterrupt) else type(err).__name__

@@ -7,6 +7,11 @@ hovering. Inside :func:`landing_signals` each raises :class:`Terminated` instead
 swallow it and the flight session's exit lands the drone — and the process exits with
 128 + the signal's number (:func:`exit_code_of`). SIGKILL and SIGSTOP cannot be caught; the
 drone's own watchdog then holds it hovering (docs/first-flight.md says what to do).
+
+Every other command runs inside :func:`stopping_signals` (the command line's handler), which
+does the same for :data:`STOPPING_SIGNALS`: a ``simulate``, ``sweep`` or ``tune`` that is
+sent SIGTERM or loses its terminal ends the way Ctrl-C ends it — its run directory says it
+was interrupted, its files are consistent — instead of dying mid-write.
 """
 
 from __future__ import annotations
@@ -15,12 +20,17 @@ import signal
 import threading
 from contextlib import contextmanager
 
-__all__ = ["LANDING_SIGNALS", "Terminated", "exit_code_of", "landing_signals"]
+__all__ = ["LANDING_SIGNALS", "STOPPING_SIGNALS", "Terminated", "deferred_signals",
+           "exit_code_of", "landing_signals", "signal_name", "stopping_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
     signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2, signal.SIGPIPE,
     signal.SIGTERM)
+#: The signals :func:`stopping_signals` turns into :class:`Terminated` (SIGPIPE stays a
+#: BrokenPipeError there: a closed pipe is no reason to stop a flight that is not flying).
+STOPPING_SIGNALS: tuple[signal.Signals, ...] = (
+    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2, signal.SIGTERM)
 
 
 class Terminated(KeyboardInterrupt):
@@ -38,13 +48,20 @@ def exit_code_of(interrupt: BaseException) -> int:
     return 128 + int(signal.SIGINT)
 
 
+def signal_name(interrupt: BaseException) -> str:
+    """The signal behind ``interrupt``: ``SIGTERM``, ``SIGHUP``, … (``SIGINT`` for Ctrl-C)."""
+    if isinstance(interrupt, Terminated):
+        return signal.Signals(interrupt.signum).name
+    return signal.SIGINT.name
+
+
 def _raise_terminated(signum, frame):
     raise Terminated(signum)
 
 
 @contextmanager
-def landing_signals():
-    """Within the block, :data:`LANDING_SIGNALS` raise :class:`Terminated` and SIGINT raises
+def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS):
+    """Within the block, ``signals`` raise :class:`Terminated` and SIGINT raises
     KeyboardInterrupt (whatever handler was set before); the previous handlers come back after.
     Outside the main thread (where Python delivers signals) it changes nothing."""
     if threading.current_thread() is not threading.main_thread():
@@ -53,9 +70,42 @@ def landing_signals():
     previous = {}
     try:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
-        for sig in LANDING_SIGNALS:
+        for sig in signals:
             previous[sig] = signal.signal(sig, _raise_terminated)
         yield
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def stopping_signals():
+    """:func:`landing_signals` for :data:`STOPPING_SIGNALS` (every command but ``fly``)."""
+    return landing_signals(STOPPING_SIGNALS)
+
+
+@contextmanager
+def deferred_signals():
+    """Within the block, Ctrl-C and :data:`STOPPING_SIGNALS` wait: the first one is raised
+    (as ``KeyboardInterrupt`` / :class:`Terminated`) when the block ends, so a write that must
+    not be cut in half (a database transaction) completes. Outside the main thread it changes
+    nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def note(signum, frame):
+        pending.append(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, *STOPPING_SIGNALS):
+            previous[sig] = signal.signal(sig, note)
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if pending:
+        if pending[0] == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise Terminated(pending[0])

@@ -40,7 +40,11 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = 100) -> Path:
     The image is exactly ``figsize × dpi`` pixels (no tight bounding box), so callers and tests
     know its size.
     """
+    from ardrone_nmpc.core.atomic import atomic_path
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    fmt = path.suffix[1:].lower() or None
+    with atomic_path(path) as tmp:  # a figure interrupted half-drawn leaves nothing
+        fig.savefig(tmp, dpi=dpi, format=fmt)
     return path

@@ -27,7 +27,7 @@ from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs import foxglove_channels as fox
 
-__all__ = ["LiveView", "DEFAULT_PORT", "SdkNotices", "open_live_view"]
+__all__ = ["LiveView", "LiveViewError", "DEFAULT_PORT", "SdkNotices", "open_live_view"]
 
 DEFAULT_PORT = 8765          # Foxglove's default WebSocket port
 LOOPBACK = "127.0.0.1"
@@ -79,6 +79,10 @@ class SdkNotices:
         while self._pending:
             out.append(self._pending.popleft())
         return out
+
+
+class LiveViewError(UserError):
+    """The live view cannot start (its port is taken): one line, exit 1."""
 
 
 class _Tee:
@@ -169,10 +173,20 @@ class LiveView:
 
     def start(self) -> None:
         """Open the MCAP file, start the server on 127.0.0.1 and the publisher thread; raises
-        :class:`~ardrone_nmpc.core.extras.MissingExtra` without foxglove-sdk."""
+        :class:`~ardrone_nmpc.core.extras.MissingExtra` without foxglove-sdk, and
+        :class:`LiveViewError` when the port cannot be bound."""
         fg = fox.sdk("--mcap" if not self._serve else "--foxglove")
-        fox.add_log_listener(self.notices)
         context = fg.Context()  # channels close with their context
+        if self._serve:  # first: a busy port leaves no MCAP file behind
+            try:
+                self._server = fg.start_server(name="ardrone-nmpc", host=LOOPBACK,
+                                               port=self._requested_port, context=context,
+                                               server_listener=_listener(self._config_wanted))
+            except RuntimeError as err:  # the SDK reports a bind failure as FoxgloveError text
+                text = " ".join(str(err).split()).removeprefix("FoxgloveError: ")
+                raise LiveViewError(f"--foxglove-port {self._requested_port}: {text} (another "
+                                    "port, or 0 for a free one)") from None
+        fox.add_log_listener(self.notices)
         if self._mcap_path is not None:
             try:
                 self._mcap_path.parent.mkdir(parents=True, exist_ok=True)
@@ -180,11 +194,10 @@ class LiveView:
                                             channel_filter=_recorded)
             except Exception as err:  # the SDK's errors name no file
                 fox.remove_log_listener(self.notices)
+                if self._server is not None:
+                    self._server.stop()
+                    self._server = None
                 raise UserError(f"--mcap {self._mcap_path}: cannot write it: {err}") from None
-        if self._serve:
-            self._server = fg.start_server(name="ardrone-nmpc", host=LOOPBACK,
-                                           port=self._requested_port, context=context,
-                                           server_listener=_listener(self._config_wanted))
         self._channels = fox.FoxgloveChannels(fg, context, live_only_paths=self._serve)
         self._paths = self._channels.path_builder()
         self._thread = threading.Thread(target=self._publish_loop, name="live-view",

@@ -26,6 +26,7 @@ import numpy as np
 
 from ardrone_nmpc.control.mapping import command_scales
 from ardrone_nmpc.core.angles import unwrap_near_turns
+from ardrone_nmpc.core.modes import Mode
 from ardrone_nmpc.runs.window import experiment_rows, flying_rows
 from ardrone_nmpc.viz.figure import PlotError, new_figure
 
@@ -42,8 +43,6 @@ __all__ = ["KINDS", "OFF_SCALE_FACTOR", "figure_inputs", "figure_path3d", "figur
 KINDS = ("tracking", "inputs", "solver", "path3d")
 #: A bound further from zero than this many times the data's largest magnitude is off scale.
 OFF_SCALE_FACTOR = 3.0
-#: Modes that are not fallbacks (docs/design.md §2: anything else is the supervisor stepping in).
-_NOMINAL_MODES = frozenset({"track", "settle", ""})
 
 _TRUTH = ("x_true_m", "y_true_m", "z_true_m", "psi_true_rad")
 _REF_STYLE = {"color": "black", "linestyle": "--", "linewidth": 1.2}
@@ -100,7 +99,7 @@ def _spans(flags: np.ndarray) -> list[tuple[int, int]]:
 
 def _shade_fallbacks(axes: Sequence[Axes], t: np.ndarray, mode: np.ndarray) -> None:
     """Shade ticks whose mode is a fallback (hover, p, land…) on every axis; legend on top."""
-    bad = np.array([m not in _NOMINAL_MODES for m in mode], dtype=bool)
+    bad = np.array([not Mode.parse(m).is_nominal for m in mode], dtype=bool)
     period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     for k, ax in enumerate(axes):
         labelled = set()  # one legend entry per mode, on the top panel only
@@ -489,7 +488,8 @@ def figure_path3d(run: RunData) -> Figure:
     -------
     Figure : 13 × 6.5 in (1300 × 650 px at 100 dpi).
     """
-    from ardrone_nmpc.runs.summary import PATH_KINDS, path_deviation
+    from ardrone_nmpc.runs.metrics import path_deviation
+    from ardrone_nmpc.runs.summary import PATH_KINDS
 
     xyz, source = _flown(run)
     if xyz.shape[0] == 0:

@@ -95,16 +95,21 @@ def figure_importance(study):
     return fig
 
 
-def plot_tune_dir(path: Path, *, output: Path | None = None, dpi: int = 100) -> list[Path]:
+def plot_tune_dir(path: Path, *, output: Path | None = None, dpi: int = 100,
+                  check=None) -> list[Path]:
     """Write ``plot-history.png`` and ``plot-importance.png`` (or ``FILE-history.png``,
-    ``FILE-importance.png`` for ``output=FILE.png``); returns the files."""
+    ``FILE-importance.png`` for ``output=FILE.png``); returns the files. ``check(target)``
+    is called on every file before anything is drawn."""
     path = Path(path)
-    study = load_study(path)
     if output is None:
         targets = {k: path / f"plot-{k}.png" for k in ("history", "importance")}
     else:
         output = Path(output) if Path(output).suffix else Path(output).with_suffix(".png")
         targets = {k: output.with_name(f"{output.stem}-{k}{output.suffix}")
                    for k in ("history", "importance")}
+    for target in targets.values():
+        if check is not None:
+            check(target)
+    study = load_study(path)
     figures = {"history": figure_history, "importance": figure_importance}
     return [save_figure(figures[k](study), target, dpi=dpi) for k, target in targets.items()]

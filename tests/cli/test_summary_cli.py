@@ -14,7 +14,8 @@ from typer.testing import CliRunner
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
-from ardrone_nmpc.runs.summary import format_value, summarise
+from ardrone_nmpc.cli.tables import format_value
+from ardrone_nmpc.runs.summary import summarise
 
 runner = CliRunner()  # stdout is not a terminal: the piped layout
 

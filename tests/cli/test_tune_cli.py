@@ -142,7 +142,7 @@ def test_resume_refuses_a_study_of_another_setup(tmp_path):
                    "--objective", "tracking")
     assert result.exit_code == 1
     assert result.output == (f"error: --resume: the study in {tmp_path} optimises another "
-                             "objective; use another --out\n")
+                             "objective; use another --output\n")
 
 
 def test_keep_runs_writes_each_flight_s_run_directory(tmp_path):

@@ -31,6 +31,18 @@ def _lines(output: str) -> dict[str, dict[str, float]]:
     return out
 
 
+def _check_while(streamer: threading.Thread, stop: threading.Event, port: int, *,
+                 seconds: float):
+    """``mocap-check`` of the loopback port ``port`` while ``streamer`` sends to it."""
+    try:
+        return CliRunner().invoke(app, [
+            "mocap-check", "configs/hover.yaml", "--seconds", str(seconds), "--no-live",
+            "--set", "mocap.bind_host=127.0.0.1", "--set", f"mocap.port={port}"])
+    finally:
+        stop.set()
+        streamer.join(timeout=10)
+
+
 def _mock_body(name, xyz, yaw_rad):
     c, s = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
     return f"{name}({xyz[0]},{xyz[1]},{xyz[2]},{c!r},0,0,{s!r})"
@@ -83,13 +95,7 @@ def test_mocap_check_reads_the_sim_drone_stream():
         cfg=load_config(None, overrides), at_port=0, navdata_port=0,
         mocap_to=f"127.0.0.1:{port}", echo=lambda *_: None, stop_event=stop), daemon=True)
     server.start()
-    try:
-        result = CliRunner().invoke(app, [
-            "mocap-check", "configs/hover.yaml", "--seconds", "1", "--no-live",
-            "--set", "mocap.bind_host=127.0.0.1", "--set", f"mocap.port={port}"])
-    finally:
-        stop.set()
-        server.join(timeout=10)
+    result = _check_while(server, stop, port, seconds=1.0)
     assert result.exit_code == 0, result.output
     drone = _lines(result.output)["ardrone"]
     assert abs(drone["x"] - 0.8) <= 1e-3 and abs(drone["y"] + 0.3) <= 1e-3
@@ -106,6 +112,40 @@ def test_mocap_check_without_the_object_fails_in_one_line():
     assert result.exit_code == 1
     assert "ardrone: not seen" in result.output
     assert "error: object 'ardrone' not seen from udp 127.0.0.1:" in result.output
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("translation_mm", [(0.0, 0.0, 0.0), (math.nan, 10.0, 800.0)])
+def test_an_object_streamed_with_zero_or_nan_poses_is_not_reported_unseen(translation_mm):
+    """Vicon Tracker sends an occluded object as an all-zero pose (docs/mocap-stream.md); a
+    corrupted one may carry NaN. The object is in the stream: say so, and why it has no pose."""
+    import socket
+
+    from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+
+    port = free_udp_port()
+    stop = threading.Event()
+
+    def stream() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            frame = 0
+            while not stop.is_set():
+                pose = MocapObjectPose("ardrone", translation_mm, (0.0, 0.0, 0.0))
+                sock.sendto(encode_mocap(MocapFrame(frame, {"ardrone": pose})),
+                            ("127.0.0.1", port))
+                frame += 1
+                stop.wait(0.01)
+
+    sender = threading.Thread(target=stream, daemon=True)
+    sender.start()
+    result = _check_while(sender, stop, port, seconds=0.5)
+    assert result.exit_code == 1
+    line = next(x for x in result.stdout.splitlines() if x.startswith("ardrone: "))
+    assert re.fullmatch(r"ardrone: in the stream, but no valid pose \(\d+ all-zero or "
+                        r"non-finite\): occluded or not tracked", line), line
+    (error,) = [x for x in result.stderr.splitlines() if x.startswith("error: ")]
+    assert error.startswith("error: object 'ardrone' in the stream, but no valid pose (")
+    assert "not seen" not in result.output
 
 
 def test_mocap_check_reports_a_missing_extra_in_one_line(monkeypatch):

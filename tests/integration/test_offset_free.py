@@ -16,7 +16,7 @@ import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import read_run
-from ardrone_nmpc.runs.summary import step_metrics
+from ardrone_nmpc.runs.metrics import step_metrics
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from tests.standins.offset_emulator import OffsetEmulator
 

@@ -19,7 +19,8 @@ from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runtime.lockstep import run_lockstep
-from ardrone_nmpc.runs.summary import CLEARANCE_TOLERANCE_M, clearance_stats, summarise
+from ardrone_nmpc.runs.metrics import CLEARANCE_TOLERANCE_M, clearance_stats
+from ardrone_nmpc.runs.summary import summarise
 from tests.conftest import thesis_cost
 
 CONFIG = "configs/obstacle.yaml"

@@ -1,4 +1,4 @@
-"""Tests of the run metrics and their tables (ardrone_nmpc.runs.summary)."""
+"""Tests of the run metrics (runs.metrics), the summary (runs.summary) and its tables (cli.tables)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,10 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.reference.trajectories import make_trajectory
 from ardrone_nmpc.runs.rundir import SummaryRow, read_summary
-from ardrone_nmpc.runs.summary import (
-    input_stats,
-    path_deviation,
-    render_side_by_side,
-    render_summary,
-    skipped_deadlines,
-    solver_stats,
-    step_metrics,
-    summarise,
-)
+from ardrone_nmpc.cli.tables import render_side_by_side, render_summary
+from ardrone_nmpc.runs.metrics import (input_stats, path_deviation, skipped_deadlines,
+                                       solver_stats, step_metrics)
+from ardrone_nmpc.runs.summary import summarise
 
 TAU = 0.7
 T_STEP = 1.0

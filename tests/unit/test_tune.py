@@ -15,7 +15,7 @@ from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial,
 from ardrone_nmpc.experiments.tune.objective import (PRESETS, TERMS, Objective,
                                                      parse_objective, scenario_metrics)
 from ardrone_nmpc.experiments.tune.space import (apply_params, config_with, default_space,
-                                                 parse_space)
+                                                 load_space, parse_space)
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runs.summary import summarise
 
@@ -93,15 +93,41 @@ def test_space_mistakes_fail_one_line_each_before_anything_flies(step_z):
     assert len(messages) == 9
     assert "--space s.yaml: colour: unknown key" in messages[0]
     expected = ["params.controller.nope: no such config value",
-                "params.controller.dtau_s: needs numbers low < high",
+                "params.controller.dtau_s: needs finite numbers low < high",
                 "params.controller.horizon_steps: log: true needs low > 0",
                 "params.controller.kind: not a number",
                 "params.controller.q: a vector takes {factor: F}",
                 "params.controller.obstacle_weight: give factor or low/high, not both",
-                "params.controller.vz_lead_s: factor 0.5: must be a number > 1",
+                "params.controller.vz_lead_s: factor 0.5: must be a finite number > 1",
                 "params.estimator.kalman_r: unknown key(s) lo"]
     for text in expected:
         assert any(text in m for m in messages), text
+
+
+@pytest.mark.parametrize("spec, message", [
+    ({"params": {"controller.dtau_s": {"low": -math.inf, "high": 0.2}}},
+     "params.controller.dtau_s: needs finite numbers low < high"),
+    ({"params": {"controller.dtau_s": {"low": 0.05, "high": math.inf}}},
+     "params.controller.dtau_s: needs finite numbers low < high"),
+    ({"params": {"estimator.kalman_q": {"factor": math.inf}}},
+     "params.estimator.kalman_q: factor inf: must be a finite number > 1"),
+    ({"factor": math.inf}, "factor: inf must be a finite number > 1"),
+    ({"factor": 1e308}, "factor: 1e+308: the range"),
+    ({"default": False, "params": {"controller.horizon_steps":
+                                   {"low": 10.2, "high": 10.8, "type": "int"}}},
+     "params.controller.horizon_steps: type int: no integer lies in 10.2 … 10.8"),
+])
+def test_a_space_the_sampler_cannot_draw_from_is_refused(step_z, spec, message):
+    with pytest.raises(ConfigError) as err:
+        parse_space(spec, step_z, where="--space s.yaml")
+    assert any(message in m for m in err.value.messages), err.value.messages
+
+
+def test_a_space_file_that_is_not_text_is_one_line(step_z, tmp_path):
+    bad = tmp_path / "s.yaml"
+    bad.write_bytes(b"params:\n  \xff\xfe: {}\n")
+    with pytest.raises(ConfigError, match=r"s\.yaml: not UTF-8 text"):
+        load_space(bad, step_z)
 
 
 def test_an_empty_space_is_refused(step_z):

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.modes import NOMINAL_MODES
 
 __all__ = ["Flight", "IdentifyError", "read_flight", "series"]
 
-_FLOWN = ("track", "settle")
 
 
 class IdentifyError(ValueError):
@@ -73,7 +73,7 @@ def series(name: str, columns, drone, period_s: float) -> Flight:
     c = columns
     t = np.asarray(c["t_s"], dtype=float)
     mode = np.array(["" if not isinstance(m, str) else m for m in c["mode"]], dtype=object)
-    flown = np.isin(mode, _FLOWN) & np.isfinite(t)
+    flown = np.isin(mode, NOMINAL_MODES) & np.isfinite(t)
     cmd = np.column_stack([np.asarray(c[f"cmd_{a}_frac"], dtype=float)
                            for a in ("roll", "pitch", "gaz", "yaw")])
     flown &= np.all(np.isfinite(cmd), axis=1)

@@ -25,7 +25,8 @@ from ardrone_nmpc.experiments.reproduce.report import COMMAND, render_markdown
 
 __all__ = ["BESIDE", "COMMAND", "FORMULATIONS", "HOME_PLANTS", "LAB_OVERRIDES", "Claim",
            "Motion", "Outcome", "RunFigures", "Verdict", "classify_motion", "claims",
-           "flown_by_config", "render_markdown", "reproduce", "run_claims", "report_sections"]
+           "command_line", "flown_by_config", "render_markdown", "reproduce", "run_claims",
+           "report_sections"]
 
 
 def flown_by_config(outcomes: list[Outcome]) -> dict:
@@ -57,11 +58,22 @@ def report_sections(outcomes: list[Outcome], *, config_dir: Path, log_dir: Path,
     return lines + s.narrowings(config_dir)
 
 
+def command_line(*, config_dir: Path, seed: int) -> str:
+    """The command that regenerates a report of these options: :data:`COMMAND` with the ones
+    that change its content and differ from the defaults."""
+    import shlex
+
+    options = ([f"--config-dir {shlex.quote(str(config_dir))}"]
+               if Path(config_dir) != Path("configs") else [])
+    options += [f"--seed {seed}"] if seed != 0 else []
+    return " ".join([COMMAND, *options])
+
+
 def reproduce(*, config_dir: Path, log_dir: Path, seed: int = 0,
               progress: Callable[[str], None] | None = None) -> tuple[str, list[Outcome]]:
     """Fly every claim and the sections' runs; the report's text and the outcomes."""
     outcomes = run_claims(config_dir=config_dir, log_dir=log_dir, seed=seed, progress=progress)
     sections = report_sections(outcomes, config_dir=config_dir, log_dir=log_dir, seed=seed,
                                progress=progress)
-    command = COMMAND if seed == 0 else f"{COMMAND} --seed {seed}"
+    command = command_line(config_dir=config_dir, seed=seed)
     return render_markdown(outcomes, command=command, sections=sections), outcomes

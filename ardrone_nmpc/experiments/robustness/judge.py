@@ -26,7 +26,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC
-from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows
+from ardrone_nmpc.core.modes import NOMINAL_MODES, Mode
+from ardrone_nmpc.runs.window import experiment_rows
 
 __all__ = ["CLASSES", "CLEAN_ERROR_M", "CLEAN_SATURATION", "CYCLE_AMPLITUDE_M",
            "FlightVerdict", "judge_columns"]
@@ -39,7 +40,6 @@ STEADY_FRACTION = 0.3
 STEADY_MIN_S = 5.0
 CLEAN_SATURATION = 0.02
 CLEAN_ERROR_M = 0.03
-_NOMINAL_MODES = ("track", "settle")
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ def judge_columns(cols, *, geofence_min_m, geofence_max_m, ending: str = "comple
     pitch = _column(cols, "cmd_pitch_frac", window)
     saturated = (np.abs(roll) >= SATURATION_FRAC) | (np.abs(pitch) >= SATURATION_FRAC)
     sat = float(saturated.mean()) if saturated.size else math.nan
-    off_nominal = ~np.isin(mode, _NOMINAL_MODES)
+    off_nominal = ~np.isin(mode, NOMINAL_MODES)
     supervisor = int(off_nominal.sum())
     span = t[-1] - t[0] if t.size else 0.0
     steady = t >= (t[-1] - max(STEADY_MIN_S, STEADY_FRACTION * span)) if t.size else t > 0
@@ -128,8 +128,7 @@ def judge_columns(cols, *, geofence_min_m, geofence_max_m, ending: str = "comple
                              reason)
 
     lo, hi = np.asarray(geofence_min_m), np.asarray(geofence_max_m)
-    aborted = next((m for m in mode if m in GROUND_MODES or m.startswith(("land", "stop"))
-                    or "emergency" in m), None)
+    aborted = next((m for m in mode if Mode.parse(m).is_abort), None)
     if not t.size or not np.all(np.isfinite(pos)):
         return verdict("diverged", "non-finite position")
     if np.any((pos < lo) | (pos > hi)):

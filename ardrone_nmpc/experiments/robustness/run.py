@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ardrone_nmpc.experiments.robustness.grid import RobustnessGrid
 from ardrone_nmpc.experiments.robustness.judge import CLASSES, FlightVerdict, judge_columns
-from ardrone_nmpc.experiments.sweep import (Case, CaseResult, build_cases, iter_dask,
-                                            iter_local, resume_results)
+from ardrone_nmpc.experiments.sweep import (Case, CaseResult, build_cases, resume_results,
+                                            run_cases)
 from ardrone_nmpc.runs.rundir import format_number
 from ardrone_nmpc.runs.sweep_table import write_csv_table
 
@@ -93,13 +93,6 @@ def _failed(message: str) -> FlightVerdict:
                          " ".join(message.split()))
 
 
-def _engine(cases: Sequence[Case], *, engine: str, out_dir: Path, jobs: int,
-            scheduler: str | None) -> Iterator[CaseResult]:
-    if engine == "dask":
-        return iter_dask(cases, out_dir=out_dir, jobs=jobs, scheduler=scheduler)
-    return iter_local(cases, out_dir=out_dir, jobs=jobs)
-
-
 def run_robustness(*, config: str | Path | None, overrides: Sequence[str],
                    grid: RobustnessGrid, out_dir: str | Path, jobs: int,
                    engine: str = "local", scheduler: str | None = None,
@@ -129,7 +122,7 @@ def run_robustness(*, config: str | Path | None, overrides: Sequence[str],
     for result in done.values():
         add(result)
     pending = [c for c in cases if c.case_id not in done]
-    stream = _engine(pending, engine=engine, out_dir=out, jobs=jobs, scheduler=scheduler)
+    stream = run_cases(pending, engine=engine, out_dir=out, jobs=jobs, scheduler=scheduler)
     try:
         for result in stream:
             add(result)

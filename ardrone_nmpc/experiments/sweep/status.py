@@ -30,7 +30,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ardrone_nmpc.runs.window import GROUND_MODES, experiment_rows, flying_rows
+from ardrone_nmpc.core.modes import Mode
+from ardrone_nmpc.runs.window import experiment_rows, flying_rows
 
 if TYPE_CHECKING:  # pragma: no cover
     from ardrone_nmpc.runs.rundir import RunData
@@ -100,10 +101,7 @@ def case_metrics(*, run: RunData, rows: Sequence[SummaryRow]) -> dict[str, float
 
 
 def _aborted(mode: np.ndarray) -> str | None:
-    for m in mode:
-        if m in GROUND_MODES or "land" in m or "emergency" in m:
-            return m
-    return None
+    return next((m for m in mode if Mode.parse(m).is_abort), None)
 
 
 def classify(*, run: RunData, diverge_m: float = DIVERGE_M) -> tuple[str, str]:

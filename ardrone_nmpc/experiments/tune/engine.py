@@ -7,9 +7,8 @@ schema has ``sim.plant.profile``, or ``--variant`` sets). A trial writes no run 
 unless ``keep_dir`` is given: its flights are recorded in memory
 (:class:`~ardrone_nmpc.runs.memory.MemoryRecorder`) and summarised from there.
 
-Engines reuse the sweep's machinery (:mod:`ardrone_nmpc.experiments.sweep`): the pool forks
-its workers from a forkserver that loaded the numba kernels once, and the Dask engine makes
-its client the sweep's way.
+Trials run on the one parallel executor (:mod:`ardrone_nmpc.experiments.parallel`), as a
+sweep's cases do: in this process, on a warm local pool, or on Dask.
 """
 
 from __future__ import annotations
@@ -25,8 +24,8 @@ from ardrone_nmpc.experiments.record import one_line
 from ardrone_nmpc.experiments.tune.objective import FAILED_METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, apply_params
 
-__all__ = ["DaskEngine", "InlineEngine", "PoolEngine", "Scenario", "TrialResult",
-           "TrialSpec", "make_engine", "plant_variants", "run_trial", "scenarios"]
+__all__ = ["Scenario", "TrialResult", "TrialSpec", "plant_variants", "run_trial", "scenarios",
+           "trial_result"]
 
 
 @dataclass(frozen=True)
@@ -141,7 +140,7 @@ def run_trial(spec: TrialSpec) -> TrialResult:
                        messages[0] if messages else "", time.perf_counter() - wall0, sim_s)
 
 
-def _failed(spec: TrialSpec, err: BaseException) -> TrialResult:
+def _failed(spec: TrialSpec, err: BaseException | None) -> TrialResult:
     metrics = {}
     for sc in spec.scenarios:
         m = dict(FAILED_METRICS)
@@ -149,136 +148,12 @@ def _failed(spec: TrialSpec, err: BaseException) -> TrialResult:
         metrics[sc.label] = m
     return TrialResult(spec.number, spec.objective.combine([m["score"] for m in
                                                             metrics.values()]),
-                       "failed", metrics, f"worker: {one_line(err)}")
+                       "failed", metrics,
+                       f"worker: {one_line(err)}" if err is not None else "not flown")
 
 
-# ----------------------------------------------------------------------------- engines
-
-
-class InlineEngine:
-    """Trials one after another in this process (``--jobs 1``)."""
-
-    slots = 1
-
-    def __init__(self) -> None:
-        self._queue: list[TrialSpec] = []
-
-    def submit(self, spec: TrialSpec) -> None:
-        self._queue.append(spec)
-
-    def next_result(self) -> TrialResult:
-        return run_trial(self._queue.pop(0))
-
-    def close(self) -> None:
-        self._queue.clear()
-
-
-class PoolEngine:
-    """A pool of ``jobs`` worker processes forked from the sweep's warm forkserver. The
-    forkserver warms up (loads the kernels, ~2 s) in the background from construction on,
-    so the caller can open its study meanwhile; the first :meth:`submit` waits for it."""
-
-    def __init__(self, jobs: int) -> None:
-        import threading
-
-        from ardrone_nmpc.experiments.sweep.engines import _pool_context, _start_forkserver
-
-        self.slots = jobs
-        self._ctx = _pool_context()
-        # the workers end with this process, however it ends (the sweep's worker watch)
-        self._alive_r, self._alive_w = self._ctx.Pipe(duplex=False)
-        self._warm = None
-        self._pool = None
-        self._futures: dict[Any, TrialSpec] = {}
-
-        def start() -> None:
-            self._warm = _start_forkserver(self._ctx)
-
-        self._starter = threading.Thread(target=start, name="tune-forkserver", daemon=True)
-        self._starter.start()
-
-    def _ready(self):
-        if self._pool is None:
-            from concurrent.futures import ProcessPoolExecutor
-
-            from ardrone_nmpc.experiments.sweep.engines import _init_worker
-
-            self._starter.join()
-            self._pool = ProcessPoolExecutor(self.slots, mp_context=self._ctx,
-                                             initializer=_init_worker,
-                                             initargs=(self._alive_r,))
-        return self._pool
-
-    def submit(self, spec: TrialSpec) -> None:
-        self._futures[self._ready().submit(run_trial, spec)] = spec
-
-    def next_result(self) -> TrialResult:
-        from concurrent.futures import FIRST_COMPLETED, wait
-
-        done, _ = wait(list(self._futures), return_when=FIRST_COMPLETED)
-        future = next(iter(done))
-        spec = self._futures.pop(future)
-        try:
-            return future.result()
-        except Exception as err:  # noqa: BLE001 - a dead worker fails its trial
-            return _failed(spec, err)
-
-    def close(self) -> None:
-        self._starter.join()
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-        if self._warm is not None:
-            self._warm.join()
-        self._alive_r.close()
-        self._alive_w.close()  # after the workers have ended: closing it would end them
-
-
-class DaskEngine:
-    """Trials on a Dask cluster: ``scheduler``'s, or a local cluster of ``jobs`` workers
-    on 127.0.0.1 (made as the sweep makes it)."""
-
-    def __init__(self, jobs: int, scheduler: str | None = None) -> None:
-        import uuid
-
-        from dask.distributed import as_completed
-
-        from ardrone_nmpc.experiments.sweep.engines import _dask_client
-
-        self._client, self._cluster = _dask_client(scheduler=scheduler, jobs=jobs)
-        info = self._client.scheduler_info()
-        workers = info.get("workers", {}) if isinstance(info, dict) else {}
-        self.slots = max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()) or jobs)
-        self._token = uuid.uuid4().hex[:8]
-        self._done = as_completed(loop=self._client.loop)
-        self._specs: dict[str, TrialSpec] = {}
-        self._futures: dict[str, Any] = {}
-
-    def submit(self, spec: TrialSpec) -> None:
-        key = f"tune-{self._token}-{spec.number}"
-        self._specs[key] = spec
-        self._futures[key] = self._client.submit(run_trial, spec, key=key, pure=False)
-        self._done.add(self._futures[key])
-
-    def next_result(self) -> TrialResult:
-        future = next(self._done)
-        spec = self._specs.pop(future.key)
-        self._futures.pop(future.key, None)
-        try:
-            return future.result()
-        except Exception as err:  # noqa: BLE001 - a lost worker fails its trial
-            return _failed(spec, err)
-
-    def close(self) -> None:
-        try:
-            self._client.cancel(list(self._futures.values()))
-        finally:
-            self._client.close()
-            if self._cluster is not None:
-                self._cluster.close()
-
-
-def make_engine(engine: str, *, jobs: int, scheduler: str | None = None):
-    """``local`` (inline for one job, else a pool) or ``dask``."""
-    if engine == "dask":
-        return DaskEngine(jobs, scheduler)
-    return InlineEngine() if jobs == 1 else PoolEngine(jobs)
+def trial_result(spec: TrialSpec, error: BaseException | None = None,
+                 result: TrialResult | None = None) -> TrialResult:
+    """What the executor returned for ``spec``: its result, or — the worker died, or the
+    trial was interrupted or cancelled — a failed trial with the objective's penalty."""
+    return result if error is None and result is not None else _failed(spec, error)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ardrone_nmpc.config.schema import ConfigError
+from ardrone_nmpc.core.modes import Mode
 
 __all__ = ["FAILED_METRICS", "METRICS", "Objective", "PRESETS", "TERMS", "parse_objective",
            "scenario_metrics"]
@@ -179,9 +180,7 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
     ref = run.config.reference
     after = (float(t[window][-1]) - ref.step_time_s
              if ref.kind == "step" and window.any() else math.nan)
-    mode = cols["mode"][window]
-    aborted = ending != "completed" or any(
-        m.startswith(("land", "stop")) or "emergency" in m for m in mode)
+    aborted = ending != "completed" or any(Mode.parse(m).is_abort for m in cols["mode"][window])
     safety = run.config.safety
     verdict = judge_columns(cols, geofence_min_m=safety.geofence_min_m,
                             geofence_max_m=safety.geofence_max_m, ending=ending)

@@ -85,8 +85,22 @@ def _numeric(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _finite(value: Any) -> bool:
+    return _numeric(value) and math.isfinite(value)
+
+
+def _checked(p: Param) -> Param:
+    """``p`` if the sampler can draw from it: finite bounds (an int range holding an
+    integer); ValueError otherwise."""
+    if not (math.isfinite(p.low) and math.isfinite(p.high)):
+        raise ValueError(f"the range {p.low:g} … {p.high:g} is not finite")
+    if p.kind == "int" and math.ceil(p.low) > math.floor(p.high):
+        raise ValueError(f"type int: no integer lies in {p.low:g} … {p.high:g}")
+    return p
+
+
 def _around(name: str, base: float, factor: float, kind: str = "float") -> Param:
-    return Param(name, base / factor, base * factor, True, kind, base)
+    return _checked(Param(name, base / factor, base * factor, True, kind, base))
 
 
 def default_space(cfg, *, factor: float = DEFAULT_FACTOR) -> dict[str, Param]:
@@ -125,18 +139,18 @@ def _one(name: str, spec: Any, data: Mapping[str, Any]) -> list[Param]:
         if {"low", "high"} & set(spec):
             raise ValueError("give factor or low/high, not both")
         factor = spec["factor"]
-        if not _numeric(factor) or factor <= 1:
-            raise ValueError(f"factor {factor!r}: must be a number > 1")
+        if not _finite(factor) or factor <= 1:
+            raise ValueError(f"factor {factor!r}: must be a finite number > 1")
         if base <= 0:
             raise ValueError(f"factor needs a positive config value (it is {value!r})")
         return [_around(name, base, float(factor), kind)]
     low, high = spec.get("low"), spec.get("high")
-    if not (_numeric(low) and _numeric(high)) or not low < high:
-        raise ValueError("needs numbers low < high")
+    if not (_finite(low) and _finite(high)) or not low < high:
+        raise ValueError("needs finite numbers low < high")
     log = bool(spec.get("log", False))
     if log and low <= 0:
         raise ValueError("log: true needs low > 0")
-    return [Param(name, float(low), float(high), log, kind, base)]
+    return [_checked(Param(name, float(low), float(high), log, kind, base))]
 
 
 def parse_space(spec: Mapping[str, Any] | None, cfg, *, where: str = "--space") -> dict[str, Param]:
@@ -150,10 +164,14 @@ def parse_space(spec: Mapping[str, Any] | None, cfg, *, where: str = "--space") 
     errors = [f"{where}: {k}: unknown key (expected default, factor, params)"
               for k in spec if k not in ("default", "factor", "params")]
     factor = spec.get("factor", DEFAULT_FACTOR)
-    if not _numeric(factor) or factor <= 1:
-        errors.append(f"{where}: factor: {factor!r} must be a number > 1")
+    if not _finite(factor) or factor <= 1:
+        errors.append(f"{where}: factor: {factor!r} must be a finite number > 1")
         factor = DEFAULT_FACTOR
-    space = default_space(cfg, factor=float(factor)) if spec.get("default", True) else {}
+    try:
+        space = default_space(cfg, factor=float(factor)) if spec.get("default", True) else {}
+    except ValueError as err:  # a factor that takes a weight beyond the doubles
+        errors.append(f"{where}: factor: {factor!r}: {err}")
+        space = {}
     params = spec.get("params") or {}
     if not isinstance(params, Mapping):
         errors.append(f"{where}: params: expected a mapping of config paths to ranges")

@@ -21,7 +21,6 @@ import datetime as _dt
 import hashlib
 import json
 import math
-import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,20 +28,26 @@ from typing import Any
 
 from ardrone_nmpc.config.io import config_to_dict, dump_config
 from ardrone_nmpc.config.schema import ConfigError
-from ardrone_nmpc.experiments.tune.engine import Scenario, TrialResult, TrialSpec
+from ardrone_nmpc.core.atomic import write_text_atomic
+from ardrone_nmpc.experiments.tune.engine import (Scenario, TrialResult, TrialSpec, run_trial,
+                                                  trial_result)
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
 from ardrone_nmpc.runs.sweep_table import write_csv_table
 from ardrone_nmpc.runs.tune_record import RESULT_ATTR, STUDY_FILE, STUDY_NAME, result_of
+from ardrone_nmpc.runs.tune_record import checkpoint, close_storage, storage_errors
+from ardrone_nmpc.runtime.signals import deferred_signals
 from ardrone_nmpc.runs.tune_record import storage as record_storage
 
 __all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", "finished_trials",
-           "open_study", "result_of", "run_study", "trial_rows", "trials_columns", "write_best",
+           "open_study", "result_of", "run_study", "trial_row", "trial_rows", "trials_columns",
+           "write_best",
            "write_trials_csv"]
 
 TRIALS_FILE = "trials.csv"
 BEST_FILE = "best.yaml"
 _SIGNATURE = "tune_signature"
+_OPENED = "tune_opened"  # when a run last opened the study
 
 
 def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
@@ -59,53 +64,99 @@ def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
 @dataclass
 class TuneStudy:
     """The study of a tune run: ``record`` in ``DIR/study.db`` holds every finished trial
-    (numbered in the order they finished); ``search`` is its in-memory twin the sampler asks
-    and is told — Optuna's SQLite storage costs milliseconds per stored parameter, on the
+    (numbered as the sampler asked for them; a trial a signal stopped is stored as failed);
+    ``search`` is its in-memory twin the sampler asks and is told — Optuna's SQLite storage costs milliseconds per stored parameter, on the
     process that feeds the workers, where a whole flight takes ~0.1 s."""
 
     record: Any
     search: Any
+    storage: Any = None
+    db: Path | None = None
+
+    def checkpoint(self) -> None:
+        """``study.db`` alone holds every trial stored so far (see :func:`checkpoint`)."""
+        if self.storage is not None:
+            with deferred_signals(), storage_errors(self.db):
+                checkpoint(self.storage)
+
+    def close(self) -> None:
+        """Close the storage, ``study.db`` self-contained (:func:`close_storage`)."""
+        if self.storage is not None:
+            with deferred_signals(), storage_errors(self.db):
+                close_storage(self.storage, self.db)
+            self.storage = None
 
 
 def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any],
                base_values: Mapping[str, float] | None = None) -> TuneStudy:
-    """Create the study in ``out_dir`` (refusing an existing one without ``resume``), or
-    load it (refusing one that optimises something else; trials left running in the
-    storage are marked failed). Raises :class:`ConfigError`."""
+    """Create the study in ``out_dir`` (refusing an existing one that holds trials without
+    ``resume``), or load it (refusing one that optimises something else; trials left running
+    in the storage are marked failed). Raises :class:`ConfigError`, or
+    :class:`~ardrone_nmpc.runs.tune_record.StudyFileError` for a file SQLite cannot use; a
+    ``study.db`` this call created is removed again if it fails."""
     import optuna
-    from optuna.trial import TrialState
 
     db = out_dir / STUDY_FILE
     exists = db.is_file()
-    if exists and not resume:
-        raise ConfigError(f"--out {out_dir}: holds a study already ({STUDY_FILE}); "
-                          "--resume continues it, or choose another --out")
-    storage = record_storage(db)
+    with storage_errors(db):
+        storage = record_storage(db)
+        try:
+            record = _open_record(storage, out_dir, exists=exists, resume=resume, sig=sig)
+        except BaseException:
+            storage.engine.dispose()
+            if not exists:  # ours: no empty study left to block the next run
+                for suffix in ("", "-wal", "-shm", "-journal"):
+                    db.with_name(db.name + suffix).unlink(missing_ok=True)
+            raise
+    done = finished_trials(record)
+    sampler = optuna.samplers.TPESampler(seed=seed + len(record.trials), multivariate=True)
+    search = optuna.create_study(sampler=sampler, direction="minimize")
+    # every stored trial, failed ones too: the next asked number is the next stored one
+    search.add_trials(record.get_trials(deepcopy=False))
+    if not done and base_values:
+        search.enqueue_trial(dict(base_values))
+    return TuneStudy(record, search, storage, db)
+
+
+def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
+                 sig: Mapping[str, Any]):
+    """Load the study of ``storage`` (refusing one that optimises something else) and mark
+    its trials left running failed, or create it; either writes, so a read-only file fails
+    here, before anything flies. A study without any trial (a run stopped before its first)
+    is taken over by a new run."""
+    import optuna
+    from optuna.trial import TrialState
+
+    signature_data = json.loads(json.dumps(sig))
+    record = None
     if exists:
         try:
             record = optuna.load_study(study_name=STUDY_NAME, storage=storage)
         except KeyError:
-            raise ConfigError(f"--out {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
+            raise ConfigError(f"--output {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
                               "study") from None
-        recorded = record.user_attrs.get(_SIGNATURE)
-        if recorded != json.loads(json.dumps(sig)):
-            changed = [k for k in sig if (recorded or {}).get(k) != json.loads(
-                json.dumps(sig[k]))]
-            raise ConfigError(f"--resume: the study in {out_dir} optimises another "
-                              f"{', '.join(changed) or 'setup'}; use another --out")
-        for t in record.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
-            storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
-    else:
+        if not resume:
+            if record.trials:
+                raise ConfigError(f"--output {out_dir}: holds a study already ({STUDY_FILE}); "
+                                  "--resume continues it, or choose another --output")
+            optuna.delete_study(study_name=STUDY_NAME, storage=storage)
+            record = None
+    if record is None:
         record = optuna.create_study(study_name=STUDY_NAME, storage=storage,
                                      direction="minimize")
-        record.set_user_attr(_SIGNATURE, json.loads(json.dumps(sig)))
-    done = finished_trials(record)
-    sampler = optuna.samplers.TPESampler(seed=seed + len(record.trials), multivariate=True)
-    search = optuna.create_study(sampler=sampler, direction="minimize")
-    search.add_trials(done)
-    if not done and base_values:
-        search.enqueue_trial(dict(base_values))
-    return TuneStudy(record, search)
+        record.set_user_attr(_SIGNATURE, signature_data)
+        return record
+    recorded = record.user_attrs.get(_SIGNATURE)
+    if recorded != signature_data:
+        changed = [k for k in sig if (recorded or {}).get(k) != signature_data[k]]
+        raise ConfigError(f"--resume: the study in {out_dir} optimises another "
+                          f"{', '.join(changed) or 'setup'}; use another --output")
+    # a real write (an unchanged value is not one): a read-only file fails here, not after a
+    # trial has flown
+    record.set_user_attr(_OPENED, _dt.datetime.now().astimezone().isoformat())
+    for t in record.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+        storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
+    return record
 
 
 def finished_trials(study) -> list:
@@ -126,43 +177,113 @@ def _suggest(trial, space: Mapping[str, Param]) -> dict[str, float]:
     return values
 
 
-def run_study(study: TuneStudy, *, n_trials: int, engine,
+def run_study(study: TuneStudy, *, n_trials: int, executor,
               make_spec: Callable[[int, dict], TrialSpec], space: Mapping[str, Param],
-              on_result: Callable[[TrialResult], None] | None = None) -> int:
+              on_result: Callable[[TrialResult], None] | None = None,
+              on_record: Callable[[Any], None] | None = None) -> int:
     """Fly trials until the record holds ``n_trials`` finished ones, keeping
-    ``engine.slots`` in flight (ask, submit; tell as each finishes, then store it in the
-    record). Returns how many were flown now. Ctrl-C stops it; trials in flight are lost
-    (never recorded: a resumed run flies others in their place)."""
-    import optuna
+    ``executor.slots`` in flight: ask, submit; tell the sampler as each finishes
+    (``on_result``), and store it in the record in trial-number order (``on_record`` with the
+    stored trial), so the record's numbers are the sampler's and ``--keep-runs``' folder
+    names. Returns how many were flown now.
+
+    Ctrl-C (or a terminating signal): nothing more is asked, the trials not started are
+    cancelled, the running ones finish and are stored (a second Ctrl-C stops waiting); a trial
+    that did not finish is stored as failed, keeping the numbering; then the interrupt is
+    raised again.
+    """
+    from collections import deque
+
+    from optuna.trial import TrialState
 
     todo = max(0, n_trials - len(finished_trials(study.record)))
-    asked, in_flight, flown = 0, {}, 0
+    order: deque[int] = deque()                     # asked, not yet stored, in ask order
+    pending: dict[int, tuple[Any, TrialSpec]] = {}  # the same, by number
+    finished: dict[int, tuple[TrialResult, Any]] = {}  # result and told trial, by number
+    asked = flown = 0
 
     def fill() -> None:  # keep every worker busy
         nonlocal asked
-        while asked < todo and len(in_flight) < engine.slots:
+        while asked < todo and executor.in_flight < executor.slots:
             trial = study.search.ask()
-            engine.submit(make_spec(trial.number, _suggest(trial, space)))
-            in_flight[trial.number] = trial
+            spec = make_spec(trial.number, _suggest(trial, space))
+            executor.submit(trial.number, run_trial, spec)
+            order.append(trial.number)
+            pending[trial.number] = (trial, spec)
             asked += 1
 
-    fill()
-    while in_flight:
-        result = engine.next_result()
-        trial = in_flight.pop(result.number)
-        attrs = {RESULT_ATTR: {"status": result.status, "message": result.message,
-                            "metrics": result.metrics, "wall_s": result.wall_s,
-                            "sim_s": result.sim_s}}
-        trial.set_user_attr(RESULT_ATTR, attrs[RESULT_ATTR])
-        frozen = study.search.tell(trial, result.score)
-        fill()  # before the slow SQLite write: the freed worker starts at once
-        study.record.add_trial(optuna.trial.create_trial(
-            params=frozen.params, distributions=frozen.distributions, value=result.score,
-            user_attrs=attrs))
+    def finish(done) -> None:
+        nonlocal flown
+        trial, spec = pending[done.key]
+        result = trial_result(spec, done.error, done.value)
+        trial.set_user_attr(RESULT_ATTR, _result_attr(result))
+        finished[done.key] = (result, study.search.tell(trial, result.score))
         flown += 1
         if on_result is not None:
             on_result(result)
+
+    def store(*, unfinished_too: bool = False) -> None:
+        """Store the asked trials in ask order, up to the first still flying (or all: one
+        that did not finish as failed, keeping the numbering)."""
+        while order and (unfinished_too or order[0] in finished):
+            number = order.popleft()
+            trial, _ = pending.pop(number)
+            if number in finished:
+                result, told = finished.pop(number)
+                stored = _store(study, told, result)
+            else:
+                study.search.tell(trial, state=TrialState.FAIL)
+                stored = _store_failed(study, trial)
+            if on_record is not None:
+                on_record(stored)
+
+    try:
+        fill()
+        while executor.in_flight:
+            finish(executor.next_done())
+            fill()  # before the slow SQLite write: the freed worker starts at once
+            store()
+    except KeyboardInterrupt:
+        executor.cancel()
+        try:
+            while executor.in_flight:
+                finish(executor.next_done())
+        except KeyboardInterrupt:  # a second Ctrl-C: stop waiting
+            pass
+        store(unfinished_too=True)
+        raise
     return flown
+
+
+def _result_attr(result: TrialResult) -> dict[str, Any]:
+    return {"status": result.status, "message": result.message, "metrics": result.metrics,
+            "wall_s": result.wall_s, "sim_s": result.sim_s}
+
+
+def _store(study: TuneStudy, frozen, result: TrialResult):
+    """Add a told trial to the record (a signal waits for the write); returns it."""
+    import optuna
+
+    trial = optuna.trial.create_trial(params=frozen.params, distributions=frozen.distributions,
+                                      value=result.score,
+                                      user_attrs={RESULT_ATTR: _result_attr(result)})
+    with deferred_signals(), storage_errors(study.db):
+        study.record.add_trial(trial)
+    return trial
+
+
+def _store_failed(study: TuneStudy, asked):
+    """Add a trial that was asked and never finished to the record, as failed."""
+    import optuna
+    from optuna.trial import TrialState
+
+    trial = optuna.trial.create_trial(params=asked.params, distributions=asked.distributions,
+                                      state=TrialState.FAIL,
+                                      user_attrs={RESULT_ATTR: {"status": "failed",
+                                                                "message": "interrupted"}})
+    with deferred_signals(), storage_errors(study.db):
+        study.record.add_trial(trial)
+    return trial
 
 
 # ----------------------------------------------------------------------------- files
@@ -181,22 +302,24 @@ def _num(value: Any) -> str:
     return "nan" if value is None else format_number(value)
 
 
+def trial_row(t, space: Sequence[str], scenarios: Sequence[Scenario]) -> dict[str, str]:
+    """The ``trials.csv`` row (text cells) of a finished trial."""
+    res = result_of(t)
+    row = {"trial": str(t.number), "status": res.get("status", ""), "score": _num(t.value)}
+    row.update({n: _num(t.params.get(n)) for n in space})
+    row["wall_s"] = _num(res.get("wall_s"))
+    row["sim_s"] = _num(res.get("sim_s"))
+    metrics = res.get("metrics", {})
+    for s in scenarios:
+        for m in METRICS:
+            row[f"{s.label}:{m}"] = _num(metrics.get(s.label, {}).get(m))
+    row["message"] = res.get("message", "")
+    return row
+
+
 def trial_rows(study, space: Sequence[str], scenarios: Sequence[Scenario]) -> list[dict]:
     """One ``trials.csv`` row (text cells) per finished trial, in trial order."""
-    rows = []
-    for t in finished_trials(study):
-        res = result_of(t)
-        row = {"trial": str(t.number), "status": res.get("status", ""), "score": _num(t.value)}
-        row.update({n: _num(t.params.get(n)) for n in space})
-        row["wall_s"] = _num(res.get("wall_s"))
-        row["sim_s"] = _num(res.get("sim_s"))
-        metrics = res.get("metrics", {})
-        for s in scenarios:
-            for m in METRICS:
-                row[f"{s.label}:{m}"] = _num(metrics.get(s.label, {}).get(m))
-        row["message"] = res.get("message", "")
-        rows.append(row)
-    return rows
+    return [trial_row(t, space, scenarios) for t in finished_trials(study)]
 
 
 def write_trials_csv(path: Path, columns: Sequence[str], rows: Sequence[Mapping]) -> None:
@@ -225,11 +348,7 @@ def write_best(path: Path, study, *, cfg, space: Mapping[str, Param], command: s
         "Scenarios: " + ", ".join(s.label for s in scenarios) + ".",
         f"Tuned:\n  {changed}.",
     ])
-    text = dump_config(best_cfg, header=header)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, dump_config(best_cfg, header=header))
 
 
 def spec_factory(*, cfg, written: Mapping[str, Any], space: Mapping[str, Param],
