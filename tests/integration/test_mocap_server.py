@@ -76,7 +76,11 @@ def test_stream_rate_frame_numbers_name_and_pose(rx, make_streamer):
     assert len(got) >= 2
     numbers = [f.frame_number for f in frames]
     assert numbers[0] == 1
-    assert numbers == list(range(1, len(numbers) + 1)), "consecutive frame numbers"
+    # consecutive, but for deadlines a stalled process skipped (documented, counted): a loaded
+    # machine can stall the streamer beyond max_catchup_s
+    assert all(b > a for a, b in zip(numbers, numbers[1:])), "frame numbers increase"
+    gaps = sum(b - a - 1 for a, b in zip(numbers, numbers[1:]))
+    assert gaps <= m.counters.skipped, "every gap in the frame numbers is a counted skip"
     assert m.counters.sent >= len(frames) and m.counters.dropped == 0
     pos = np.array([f.poses["ardrone"].position_m for f in frames])
     assert all(set(f.poses) == {"ardrone"} for f in frames)
