@@ -538,7 +538,7 @@ def _study_alone(out: Path, tmp_path: Path):
     alone = tmp_path / "alone"
     alone.mkdir()
     shutil.copy(out / "study.db", alone / "study.db")
-    return optuna.load_study(study_name="tune", storage=f"sqlite:///{alone / 'study.db'}")
+    return optuna.load_study(study_name="hover", storage=f"sqlite:///{alone / 'study.db'}")
 
 
 @pytest.mark.timeout(600)

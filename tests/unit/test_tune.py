@@ -337,3 +337,19 @@ def test_importances_refuse_too_few_trials_and_rank_the_parameter_that_matters()
     ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_yticklabels()] == ["b", "a"]  # the largest on top
     assert f"over {MIN_IMPORTANCE_TRIALS} trials" in ax.get_title()
+
+
+def test_a_study_file_of_an_earlier_version_is_read_whatever_its_name(tmp_path):
+    """Studies were named 'tune' before they were named after the config: the record is
+    the one study the file holds."""
+    import optuna
+
+    from ardrone_nmpc.runs.tune_record import STUDY_FILE, load_record, stored_trials
+
+    old = optuna.create_study(study_name="tune", storage=f"sqlite:///{tmp_path / STUDY_FILE}")
+    old.add_trial(optuna.trial.create_trial(
+        params={"q": 1.0}, distributions={"q": optuna.distributions.FloatDistribution(0, 2)},
+        value=3.0, user_attrs={"result": {"status": "ok"}}))
+    record = load_record(tmp_path)
+    assert record.study_name == "tune" and record.best_value == 3.0
+    assert stored_trials(tmp_path) == 1
