@@ -241,10 +241,16 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     sim_s, flown, interrupted, best_score = 0.0, 0, None, math.inf
     # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
     with open_executor(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler) as ex:
+        created = not out_dir.exists()
         out_dir.mkdir(parents=True, exist_ok=True)
-        study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
-                              base_values=base_values, name=study_name or cfg.name,
-                              storage_url=storage_url)
+        try:
+            study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
+                                  base_values=base_values, name=study_name or cfg.name,
+                                  storage_url=storage_url)
+        except BaseException:
+            if created and not any(out_dir.iterdir()):  # nothing of ours left behind
+                out_dir.rmdir()
+            raise
         rewrite, append = _trials_writer(out_dir, study, cfg=cfg, space=space, scen=scen,
                                          obj=obj, command=command)
         try:
