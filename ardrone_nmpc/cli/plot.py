@@ -107,7 +107,7 @@ def run_plot_command(*, path: Path, output: Path | None = None, kind: str | None
                         f" plot {path / SWEEP_FILE} for the heat map or {path / STUDY_FILE} for "
                         "the tune's history")
     if is_tune_dir(path):  # a tune directory: history and importances
-        return plot_tune_dir(path, output=output, dpi=dpi, check=_check_target)
+        return plot_tune_dir(path, output=output, dpi=dpi, check=_check_target, warn=warn)
     if (path.is_file() and path.name == SWEEP_FILE) or (path / SWEEP_FILE).is_file():
         if kind not in (None, "heatmap"):
             raise PlotError(f"--kind: {path} is a sweep directory; it has one figure, the "

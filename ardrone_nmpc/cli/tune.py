@@ -184,6 +184,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                      space_file: Path | None = None, objective: str | None = None,
                      resume: bool = False, keep_runs: bool = False, top: int = 10,
                      robust: bool = False, grid_file: Path | None = None,
+                     study_name: str | None = None, storage_url: str | None = None,
                      command: str = "ardrone-nmpc tune", console=None,
                      err_console=None) -> TuneOutcome:
     """Run (or resume) the study; see the module docstring. Raises ConfigError for bad
@@ -240,9 +241,16 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     sim_s, flown, interrupted, best_score = 0.0, 0, None, math.inf
     # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
     with open_executor(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler) as ex:
+        created = not out_dir.exists()
         out_dir.mkdir(parents=True, exist_ok=True)
-        study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
-                              base_values=base_values)
+        try:
+            study = st.open_study(out_dir, resume=resume, seed=seed, sig=sig,
+                                  base_values=base_values, name=study_name or cfg.name,
+                                  storage_url=storage_url)
+        except BaseException:
+            if created and not any(out_dir.iterdir()):  # nothing of ours left behind
+                out_dir.rmdir()
+            raise
         rewrite, append = _trials_writer(out_dir, study, cfg=cfg, space=space, scen=scen,
                                          obj=obj, command=command)
         try:
@@ -311,6 +319,8 @@ def register(app: typer.Typer) -> None:
         top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
         robust: bool = typer.Option(False, "--robust", help="Fly every trial on the robustness grid's corners and centre (plant deviations: delay, attitude gain and lag, vertical gain, wind) and score it by the worst (objective preset 'robust'); docs/robustness.md."),
         grid_file: Optional[Path] = typer.Option(None, "--grid-file", help="With --robust: the grid whose corners are flown (the format of robustness --grid-file)."),
+        study: Optional[str] = typer.Option(None, "--study", callback=non_empty, help="The Optuna study's name (default: the config's name)."),
+        storage: Optional[str] = typer.Option(None, "--storage", callback=non_empty, help="Also store every trial in this Optuna storage URL (sqlite:///dash.db, postgresql://…), e.g. a database optuna-dashboard serves for several studies; DIR/study.db stays the record --resume and plot read."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),
     ) -> None:
         """Tune the controller by optimisation (Optuna TPE): each trial flies the config
@@ -327,7 +337,8 @@ def register(app: typer.Typer) -> None:
                                    seed=seed, n_seeds=seeds or (1 if robust else 3),
                                    variants=variant, robust=robust, grid_file=grid_file,
                                    space_file=space, objective=objective, resume=resume,
-                                   keep_runs=keep_runs, top=top, command=command)
+                                   keep_runs=keep_runs, top=top, study_name=study,
+                                   storage_url=storage, command=command)
         if outcome.best_path is not None:
             typer.echo(f"best: {outcome.best_path}")
         if outcome.interrupted:

@@ -1,6 +1,12 @@
 """A ``tune`` directory's record: the Optuna study in ``DIR/study.db`` and what each finished
 trial carries.
 
+The file holds one study, named after the config (``tune --study`` names it otherwise; runs
+before that named it ``tune``): a reader loads whichever one it holds. Each finished trial
+carries its score as the study's one objective (metric name :data:`METRIC_NAME`), the nested
+:data:`RESULT_ATTR` this tool reads back, and every metric again as a flat number (what
+optuna-dashboard sorts and plots; :func:`flat_metrics`).
+
 ``tune`` (:mod:`ardrone_nmpc.experiments.tune.study`) writes the record and ``plot``
 (:mod:`ardrone_nmpc.viz.tune_figures`) reads it; this is their one definition of the file,
 the study's name, the storage settings and the per-trial result attribute. Optuna is imported
@@ -16,12 +22,13 @@ from typing import Any
 
 from ardrone_nmpc.errors import UserError
 
-__all__ = ["RESULT_ATTR", "STUDY_FILE", "STUDY_NAME", "StudyFileError", "checkpoint",
-           "close_storage", "load_record", "result_of", "storage", "storage_errors",
-           "stored_trials"]
+__all__ = ["METRIC_NAME", "RESULT_ATTR", "STUDY_FILE", "StudyFileError", "checkpoint",
+           "close_storage", "flat_metrics", "load_record", "result_of", "storage",
+           "storage_errors", "stored_trials", "study_name_in"]
 
 STUDY_FILE = "study.db"
-STUDY_NAME = "tune"
+#: The name of the study's one objective (Optuna's metric name; the dashboard's axis label).
+METRIC_NAME = "score"
 #: The user attribute of a finished trial: status, message, metrics (scenario → metric →
 #: value), wall_s, sim_s.
 RESULT_ATTR = "result"
@@ -106,13 +113,23 @@ def close_storage(store, db: Path) -> None:
         con.close()
 
 
+def study_name_in(store) -> str:
+    """The name of the one study ``store`` holds; KeyError if it holds none."""
+    optuna = quiet_optuna()
+    names = optuna.study.get_all_study_names(store)
+    if not names:
+        raise KeyError("no study")
+    return names[0]
+
+
 def load_record(out_dir: Path):
     """The study of the tune directory ``out_dir``: KeyError if ``study.db`` holds none,
     :class:`StudyFileError` if it cannot be read."""
     optuna = quiet_optuna()
     db = Path(out_dir) / STUDY_FILE
     with storage_errors(db):
-        return optuna.load_study(study_name=STUDY_NAME, storage=storage(db, read_only=True))
+        store = storage(db, read_only=True)
+        return optuna.load_study(study_name=study_name_in(store), storage=store)
 
 
 def stored_trials(out_dir: Path) -> int:
@@ -127,6 +144,25 @@ def stored_trials(out_dir: Path) -> int:
         return 0
     with storage_errors(db):
         return len(record.trials)
+
+
+def flat_metrics(result: dict[str, Any]) -> dict[str, float]:
+    """A trial's :data:`RESULT_ATTR` as flat numeric user attributes: each metric's mean over
+    the scenarios (``settling_s``), each scenario's (``seed0+ardrone:settling_s``), ``wall_s``
+    and ``sim_s``. Values that are not finite numbers are left out (JSON has no NaN)."""
+    import math
+
+    flat: dict[str, float] = {}
+    per_metric: dict[str, list[float]] = {}
+    for label, metrics in (result.get("metrics") or {}).items():
+        for name, value in metrics.items():
+            if isinstance(value, (int, float)) and math.isfinite(value):
+                flat[f"{label}:{name}"] = float(value)
+                per_metric.setdefault(name, []).append(float(value))
+    means = {name: sum(v) / len(v) for name, v in per_metric.items()}
+    extra = {k: float(result[k]) for k in ("wall_s", "sim_s")
+             if isinstance(result.get(k), (int, float)) and math.isfinite(result[k])}
+    return {**means, **extra, **flat}
 
 
 def result_of(trial) -> dict[str, Any]:

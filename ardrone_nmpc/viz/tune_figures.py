@@ -3,7 +3,9 @@
 A tune directory holds ``study.db`` (the Optuna study) and ``trials.csv``. Both figures read
 the study: :func:`figure_history` plots every finished trial's score against its number with
 the best so far; :func:`figure_importance` the parameters' importances by Optuna's default
-evaluator (:func:`optuna.importance.get_param_importances`, fANOVA), largest on top. Like the
+evaluator (:func:`optuna.importance.get_param_importances`, fANOVA), largest on top, over at
+least :data:`MIN_IMPORTANCE_TRIALS` finished trials (fewer rank noise: a forest fitted on ten
+points of an 11-parameter space ranks whatever it happened to split on). Like the
 other figures (:mod:`ardrone_nmpc.viz.figure`): object-oriented matplotlib on an Agg canvas,
 no pyplot. The record is read through :mod:`ardrone_nmpc.runs.tune_record`.
 """
@@ -13,11 +15,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ardrone_nmpc.runs.tune_record import STUDY_FILE, STUDY_NAME, load_record, result_of
+from ardrone_nmpc.runs.tune_record import STUDY_FILE, load_record, result_of
 from ardrone_nmpc.viz.figure import PlotError, new_figure, save_figure
 
-__all__ = ["figure_history", "figure_importance", "is_tune_dir", "load_study",
-           "plot_tune_dir"]
+__all__ = ["MIN_IMPORTANCE_TRIALS", "figure_history", "figure_importance", "is_tune_dir",
+           "load_study", "plot_tune_dir"]
+
+#: The fewest finished trials the parameter importances are drawn from (docs/tuning.md §4).
+MIN_IMPORTANCE_TRIALS = 20
 
 _STATUS_COLOURS = {"ok": "tab:blue", "aborted": "tab:orange", "failed": "tab:red"}
 
@@ -36,7 +41,7 @@ def load_study(path: Path):
     try:
         return load_record(path)
     except KeyError:
-        raise PlotError(f"{path}: {STUDY_FILE} holds no '{STUDY_NAME}' study") from None
+        raise PlotError(f"{path}: {STUDY_FILE} holds no study") from None
 
 
 def _finished(study) -> list:
@@ -78,8 +83,10 @@ def figure_importance(study):
     import optuna
 
     trials = _finished(study)
-    if len(trials) < 2:
-        raise PlotError("parameter importances need at least 2 finished trials")
+    if len(trials) < MIN_IMPORTANCE_TRIALS:
+        raise PlotError(f"parameter importances need at least {MIN_IMPORTANCE_TRIALS} "
+                        f"finished trials; the study has {len(trials)} (tune --resume "
+                        "--trials N adds more)")
     try:
         imp = optuna.importance.get_param_importances(study)
     except (RuntimeError, ValueError) as err:
@@ -89,17 +96,18 @@ def figure_importance(study):
     ax = fig.add_subplot()
     ax.barh(range(len(names)), [imp[n] for n in names], color="tab:blue")
     ax.set_yticks(range(len(names)), names)
-    ax.set_xlabel("importance (fANOVA, sums to 1)")
+    ax.set_xlabel(f"importance (fANOVA over {len(trials)} finished trials, sums to 1)")
     ax.set_title(f"parameter importances over {len(trials)} trials")
     ax.grid(True, axis="x", alpha=0.3)
     return fig
 
 
 def plot_tune_dir(path: Path, *, output: Path | None = None, dpi: int = 100,
-                  check=None) -> list[Path]:
+                  check=None, warn=None) -> list[Path]:
     """Write ``plot-history.png`` and ``plot-importance.png`` (or ``FILE-history.png``,
     ``FILE-importance.png`` for ``output=FILE.png``); returns the files. ``check(target)``
-    is called on every file before anything is drawn."""
+    is called on every file before anything is drawn. Below :data:`MIN_IMPORTANCE_TRIALS`
+    finished trials the importances are not drawn: ``warn(line)`` says why."""
     path = Path(path)
     if output is None:
         targets = {k: path / f"plot-{k}.png" for k in ("history", "importance")}
@@ -111,5 +119,11 @@ def plot_tune_dir(path: Path, *, output: Path | None = None, dpi: int = 100,
         if check is not None:
             check(target)
     study = load_study(path)
-    figures = {"history": figure_history, "importance": figure_importance}
-    return [save_figure(figures[k](study), target, dpi=dpi) for k, target in targets.items()]
+    written = [save_figure(figure_history(study), targets["history"], dpi=dpi)]
+    n = len(_finished(study))
+    if n < MIN_IMPORTANCE_TRIALS:
+        if warn is not None:
+            warn(f"{targets['importance']}: not drawn: parameter importances need at least "
+                 f"{MIN_IMPORTANCE_TRIALS} finished trials, the study has {n}")
+        return written
+    return written + [save_figure(figure_importance(study), targets["importance"], dpi=dpi)]

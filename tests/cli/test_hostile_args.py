@@ -226,6 +226,8 @@ CASES = [
      r"^error: --space .*: type int: no integer lies in 10\.2 … 10\.8$"),
     ("tune-space-not-utf8", ["tune", HOVER, "--space", "{binary}", "-o", "{tmp}/t"], 1,
      r"^error: --space .*binary\.yaml: not UTF-8 text"),
+    ("tune-storage-garbage", ["tune", HOVER, "--storage", "garbage", "-o", "{tmp}/t"], 1,
+     r"^error: --storage garbage: Could not parse SQLAlchemy URL"),
     ("tune-dask-garbage-scheduler", ["tune", HOVER, "--engine", "dask", "--scheduler",
                                      "garbage://x", "-o", "{tmp}/t"], 1,
      r"^error: --engine dask: .*garbage://x.*unknown address scheme 'garbage'"),
@@ -538,7 +540,7 @@ def _study_alone(out: Path, tmp_path: Path):
     alone = tmp_path / "alone"
     alone.mkdir()
     shutil.copy(out / "study.db", alone / "study.db")
-    return optuna.load_study(study_name="tune", storage=f"sqlite:///{alone / 'study.db'}")
+    return optuna.load_study(study_name="hover", storage=f"sqlite:///{alone / 'study.db'}")
 
 
 @pytest.mark.timeout(600)

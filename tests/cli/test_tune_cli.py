@@ -38,8 +38,9 @@ def _rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _study(out: Path):
-    return optuna.load_study(study_name="tune", storage=f"sqlite:///{out / 'study.db'}")
+def _study(out: Path, name: str = "step_z"):
+    """The study in ``out/study.db``, loaded by the name a tune of step_z.yaml gives it."""
+    return optuna.load_study(study_name=name, storage=f"sqlite:///{out / 'study.db'}")
 
 
 def _check_trials(out: Path, n: int) -> list[dict[str, str]]:
@@ -197,13 +198,70 @@ def test_a_space_file_and_variants_shape_the_study(tmp_path):
     assert load_config(tmp_path / "out" / "best.yaml").controller.horizon_steps in range(8, 21)
 
 
-def test_plot_draws_history_and_importances_of_a_tune_directory(tmp_path):
+def test_plot_draws_the_history_and_no_importances_from_three_trials(tmp_path):
+    from ardrone_nmpc.viz.tune_figures import MIN_IMPORTANCE_TRIALS
+
     pytest.importorskip("matplotlib")
     assert _tune(tmp_path, "--trials", "3", "--jobs", "1").exit_code == 0
     result = runner.invoke(app, ["plot", str(tmp_path)])
     assert result.exit_code == 0, result.output
     files = [Path(line.split(": ", 1)[1]) for line in result.stdout.splitlines()]
-    assert files == [tmp_path / "plot-history.png", tmp_path / "plot-importance.png"]
-    for f in files:
-        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 5000
+    assert files == [tmp_path / "plot-history.png"]
+    assert files[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and files[0].stat().st_size > 5000
+    assert (f"plot-importance.png: not drawn: parameter importances need at least "
+            f"{MIN_IMPORTANCE_TRIALS} finished trials, the study has 3") in result.stderr
+    assert not (tmp_path / "plot-importance.png").exists()
     assert not math.isnan(_study(tmp_path).best_value)
+
+
+def test_the_study_is_what_optuna_and_its_dashboard_read(tmp_path):
+    """Named after the config (or --study), its metric named, each metric a flat number,
+    real durations, trials_dataframe(); --storage holds the same trials."""
+    shared = f"sqlite:///{tmp_path / 'dash.db'}"
+    out = tmp_path / "a"
+    assert _tune(out, "--trials", "2", "--jobs", "1", "--storage", shared).exit_code == 0
+    study = _study(out)
+    assert study.metric_names == ["score"]
+    rows = _rows(out)
+    for trial, row in zip(sorted(study.trials, key=lambda t: t.number), rows):
+        numbers = {k: v for k, v in trial.user_attrs.items()
+                   if isinstance(v, float) and math.isfinite(v)}
+        assert numbers["tracking_m"] == pytest.approx(
+            sum(float(row[f"{label}:tracking_m"]) for label in LABELS) / len(LABELS))
+        assert numbers[f"{LABELS[0]}:rmse_m"] == float(row[f"{LABELS[0]}:rmse_m"])
+        assert numbers["wall_s"] == float(row["wall_s"]) and len(numbers) >= 3
+        # a metric with no finite value (a 2 s flight never settles) is left out, not NaN
+        assert ("settling_s" in numbers) == any(
+            math.isfinite(float(row[f"{label}:settling_s"])) for label in LABELS)
+        assert 0.0 < trial.duration.total_seconds() < 600.0
+    frame = study.trials_dataframe()
+    assert list(frame["number"]) == [0, 1] and "user_attrs_tracking_m" in frame.columns
+    assert "value_score" in frame.columns  # the metric name
+    mirror = optuna.load_study(study_name="step_z", storage=shared)
+    assert [t.params for t in mirror.trials] == [t.params for t in study.trials]
+    assert [t.value for t in mirror.trials] == [t.value for t in study.trials]
+    # the shared database refuses a second study of the same name; --study names another
+    again = _tune(tmp_path / "b", "--trials", "1", "--jobs", "1", "--storage", shared)
+    assert again.exit_code == 1
+    assert again.stderr.splitlines()[-1] == (
+        f"error: --storage {shared}: holds a study 'step_z' with 2 trials of another run; "
+        "name this one with --study")
+    assert not (tmp_path / "b" / "study.db").exists()
+    named = _tune(tmp_path / "b", "--trials", "1", "--jobs", "1", "--storage", shared,
+                  "--study", "z-second")
+    assert named.exit_code == 0, named.output
+    assert _study(tmp_path / "b", "z-second").trials[0].number == 0
+    assert set(optuna.get_all_study_names(shared)) == {"step_z", "z-second"}
+
+
+def test_the_same_seed_asks_the_same_trials_whatever_the_jobs(tmp_path):
+    """The sampler is told in trial order (study.ASK_AHEAD): two runs with two workers and
+    one in this process ask for the same parameters, trial by trial."""
+    runs = {}
+    for name, jobs in (("a", "2"), ("b", "2"), ("c", "1")):
+        result = _tune(tmp_path / name, "--trials", "12", "--jobs", jobs, "--seed", "3")
+        assert result.exit_code == 0, result.output
+        runs[name] = [[r[k] for k in ("trial", "score", *SPACE)] for r in _rows(tmp_path / name)]
+    assert len(runs["a"]) == 12
+    assert runs["a"] == runs["b"] == runs["c"]
+    assert len({tuple(r[2:]) for r in runs["a"]}) == 12  # twelve different trials

@@ -305,3 +305,51 @@ def test_the_written_config_keeps_left_out_keys_out(step_z, tmp_path):
     assert data["sim"] == {"settle_s": 8.0, "seed": 5}
     assert data["controller"] == {"r": [1, 2, 3, 4]}
     assert "plant" not in data["sim"] and "estimator" not in data
+
+
+def test_importances_refuse_too_few_trials_and_rank_the_parameter_that_matters():
+    """fANOVA on a score that is one of two parameters (a closed form), with the minimum
+    number of trials: that one ranks first; one trial fewer is refused."""
+    import random
+
+    import optuna
+
+    from ardrone_nmpc.viz.figure import PlotError
+    from ardrone_nmpc.viz.tune_figures import MIN_IMPORTANCE_TRIALS, figure_importance
+
+    dist = {"a": optuna.distributions.FloatDistribution(0.0, 1.0),
+            "b": optuna.distributions.FloatDistribution(0.0, 1.0)}
+    rng = random.Random(0)
+
+    def study_of(n: int):
+        study = optuna.create_study()
+        for _ in range(n):
+            a, b = rng.random(), rng.random()
+            study.add_trial(optuna.trial.create_trial(params={"a": a, "b": b},
+                                                      distributions=dist,
+                                                      value=a))
+        return study
+
+    with pytest.raises(PlotError, match=f"at least {MIN_IMPORTANCE_TRIALS} finished trials; "
+                                        f"the study has {MIN_IMPORTANCE_TRIALS - 1}"):
+        figure_importance(study_of(MIN_IMPORTANCE_TRIALS - 1))
+    fig = figure_importance(study_of(MIN_IMPORTANCE_TRIALS))
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["b", "a"]  # the largest on top
+    assert f"over {MIN_IMPORTANCE_TRIALS} trials" in ax.get_title()
+
+
+def test_a_study_file_of_an_earlier_version_is_read_whatever_its_name(tmp_path):
+    """Studies were named 'tune' before they were named after the config: the record is
+    the one study the file holds."""
+    import optuna
+
+    from ardrone_nmpc.runs.tune_record import STUDY_FILE, load_record, stored_trials
+
+    old = optuna.create_study(study_name="tune", storage=f"sqlite:///{tmp_path / STUDY_FILE}")
+    old.add_trial(optuna.trial.create_trial(
+        params={"q": 1.0}, distributions={"q": optuna.distributions.FloatDistribution(0, 2)},
+        value=3.0, user_attrs={"result": {"status": "ok"}}))
+    record = load_record(tmp_path)
+    assert record.study_name == "tune" and record.best_value == 3.0
+    assert stored_trials(tmp_path) == 1

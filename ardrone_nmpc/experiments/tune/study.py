@@ -13,6 +13,15 @@ Sampler: Optuna's TPE (multivariate), seeded with ``--seed`` plus the number of 
 already in the study (a resumed run does not replay the first run's random start). A new
 study first flies the config's own values (when they lie in the space), so the best found is
 never worse than the start.
+
+Reproducible: the sampler is told the results in trial order, and trial ``k`` is asked right
+after trial ``k − ASK_AHEAD`` is told — whatever ``--jobs``, the engine or the machine's load,
+the sampler sees the same history at every ask, so the same ``--seed`` asks for the same
+trials. Up to :data:`ASK_AHEAD` trials fly at once (more workers than that idle).
+
+``--storage URL`` mirrors every stored trial into a study of that name in another Optuna
+storage (a database several tunes share with optuna-dashboard); ``DIR/study.db`` stays the
+record ``--resume`` and ``plot`` read.
 """
 
 from __future__ import annotations
@@ -21,7 +30,8 @@ import datetime as _dt
 import hashlib
 import json
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,15 +44,20 @@ from ardrone_nmpc.experiments.tune.engine import (Scenario, TrialResult, TrialSp
 from ardrone_nmpc.experiments.tune.objective import METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, config_with
 from ardrone_nmpc.runs.sweep_table import write_csv_table
-from ardrone_nmpc.runs.tune_record import RESULT_ATTR, STUDY_FILE, STUDY_NAME, result_of
+from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.runs.tune_record import (METRIC_NAME, RESULT_ATTR, STUDY_FILE, flat_metrics,
+                                           result_of, study_name_in)
 from ardrone_nmpc.runs.tune_record import checkpoint, close_storage, storage_errors
 from ardrone_nmpc.runtime.signals import deferred_signals
 from ardrone_nmpc.runs.tune_record import storage as record_storage
 
-__all__ = ["BEST_FILE", "STUDY_FILE", "STUDY_NAME", "TRIALS_FILE", "TuneStudy", "finished_trials",
+__all__ = ["ASK_AHEAD", "BEST_FILE", "STUDY_FILE", "TRIALS_FILE", "TuneStudy", "finished_trials",
            "open_study", "result_of", "run_study", "trial_row", "trial_rows", "trials_columns",
-           "write_best",
-           "write_trials_csv"]
+           "write_best", "write_trials_csv"]
+
+#: Trials asked ahead of the last one told (and so at most in flight at once): the sampler's
+#: history at each ask depends on this, never on --jobs (module docstring).
+ASK_AHEAD = 8
 
 TRIALS_FILE = "trials.csv"
 BEST_FILE = "best.yaml"
@@ -61,17 +76,24 @@ def signature(*, cfg, space: Mapping[str, Param], scenarios: Sequence[Scenario],
             "objective": {**objective.weights, "worst": objective.worst}}
 
 
+class StorageUrlError(UserError):
+    """``--storage URL`` cannot be opened or written: one line naming it, exit 1."""
+
+
 @dataclass
 class TuneStudy:
     """The study of a tune run: ``record`` in ``DIR/study.db`` holds every finished trial
     (numbered as the sampler asked for them; a trial a signal stopped is stored as failed);
-    ``search`` is its in-memory twin the sampler asks and is told — Optuna's SQLite storage costs milliseconds per stored parameter, on the
-    process that feeds the workers, where a whole flight takes ~0.1 s."""
+    ``search`` is its in-memory twin the sampler asks and is told — Optuna's SQLite storage
+    costs milliseconds per stored parameter, on the process that feeds the workers, where a
+    whole flight takes ~0.1 s; ``mirror`` the same study in ``--storage URL`` (or None)."""
 
     record: Any
     search: Any
     storage: Any = None
     db: Path | None = None
+    mirror: Any = None
+    mirror_url: str = ""
 
     def checkpoint(self) -> None:
         """``study.db`` alone holds every trial stored so far (see :func:`checkpoint`)."""
@@ -86,12 +108,37 @@ class TuneStudy:
                 close_storage(self.storage, self.db)
             self.storage = None
 
+    def add(self, trial) -> None:
+        """Store a finished (or failed) trial in the record and the mirror; a signal waits
+        for the writes."""
+        with deferred_signals():
+            with storage_errors(self.db):
+                self.record.add_trial(trial)
+            if self.mirror is not None:
+                with mirror_errors(self.mirror_url):
+                    self.mirror.add_trial(trial)
+
+
+@contextmanager
+def mirror_errors(url: str) -> Iterator[None]:
+    """What opening or writing ``--storage URL`` raises, as one :class:`StorageUrlError`."""
+    try:
+        yield
+    except (UserError, KeyboardInterrupt):
+        raise
+    except Exception as err:  # noqa: BLE001 - SQLAlchemy, drivers, Optuna: their words
+        cause = getattr(err, "orig", None) or err.__cause__ or err
+        text = " ".join(str(cause).split()) or type(cause).__name__
+        raise StorageUrlError(f"--storage {url}: {text}") from None
+
 
 def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any],
-               base_values: Mapping[str, float] | None = None) -> TuneStudy:
-    """Create the study in ``out_dir`` (refusing an existing one that holds trials without
-    ``resume``), or load it (refusing one that optimises something else; trials left running
-    in the storage are marked failed). Raises :class:`ConfigError`, or
+               base_values: Mapping[str, float] | None = None, name: str = "tune",
+               storage_url: str | None = None) -> TuneStudy:
+    """Create the study ``name`` in ``out_dir`` (refusing an existing one that holds trials
+    without ``resume``), or load it (refusing one that optimises something else; trials left
+    running in the storage are marked failed); and its mirror in ``storage_url``. Raises
+    :class:`ConfigError`, :class:`StorageUrlError`, or
     :class:`~ardrone_nmpc.runs.tune_record.StudyFileError` for a file SQLite cannot use; a
     ``study.db`` this call created is removed again if it fails."""
     import optuna
@@ -101,7 +148,10 @@ def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any]
     with storage_errors(db):
         storage = record_storage(db)
         try:
-            record = _open_record(storage, out_dir, exists=exists, resume=resume, sig=sig)
+            record = _open_record(storage, out_dir, exists=exists, resume=resume, sig=sig,
+                                  name=name)
+            mirror = (_open_mirror(storage_url, record, resume=resume)
+                      if storage_url else None)
         except BaseException:
             storage.engine.dispose()
             if not exists:  # ours: no empty study left to block the next run
@@ -115,15 +165,15 @@ def open_study(out_dir: Path, *, resume: bool, seed: int, sig: Mapping[str, Any]
     search.add_trials(record.get_trials(deepcopy=False))
     if not done and base_values:
         search.enqueue_trial(dict(base_values))
-    return TuneStudy(record, search, storage, db)
+    return TuneStudy(record, search, storage, db, mirror, storage_url or "")
 
 
 def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
-                 sig: Mapping[str, Any]):
+                 sig: Mapping[str, Any], name: str):
     """Load the study of ``storage`` (refusing one that optimises something else) and mark
-    its trials left running failed, or create it; either writes, so a read-only file fails
-    here, before anything flies. A study without any trial (a run stopped before its first)
-    is taken over by a new run."""
+    its trials left running failed, or create it as ``name``; either writes, so a read-only
+    file fails here, before anything flies. A study without any trial (a run stopped before
+    its first) is taken over by a new run."""
     import optuna
     from optuna.trial import TrialState
 
@@ -131,19 +181,18 @@ def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
     record = None
     if exists:
         try:
-            record = optuna.load_study(study_name=STUDY_NAME, storage=storage)
+            record = optuna.load_study(study_name=study_name_in(storage), storage=storage)
         except KeyError:
-            raise ConfigError(f"--output {out_dir}: {STUDY_FILE} holds no '{STUDY_NAME}' "
-                              "study") from None
+            raise ConfigError(f"--output {out_dir}: {STUDY_FILE} holds no study") from None
         if not resume:
             if record.trials:
                 raise ConfigError(f"--output {out_dir}: holds a study already ({STUDY_FILE}); "
                                   "--resume continues it, or choose another --output")
-            optuna.delete_study(study_name=STUDY_NAME, storage=storage)
+            optuna.delete_study(study_name=record.study_name, storage=storage)
             record = None
     if record is None:
-        record = optuna.create_study(study_name=STUDY_NAME, storage=storage,
-                                     direction="minimize")
+        record = optuna.create_study(study_name=name, storage=storage, direction="minimize")
+        _name_metric(record)
         record.set_user_attr(_SIGNATURE, signature_data)
         return record
     recorded = record.user_attrs.get(_SIGNATURE)
@@ -154,9 +203,45 @@ def _open_record(storage, out_dir: Path, *, exists: bool, resume: bool,
     # a real write (an unchanged value is not one): a read-only file fails here, not after a
     # trial has flown
     record.set_user_attr(_OPENED, _dt.datetime.now().astimezone().isoformat())
+    if record.metric_names is None:  # a study of an earlier version
+        _name_metric(record)
     for t in record.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
     return record
+
+
+def _name_metric(study) -> None:
+    """Name the study's objective :data:`METRIC_NAME` (Optuna calls the API experimental:
+    its warning would land in the middle of the progress bar)."""
+    import warnings
+
+    from optuna.exceptions import ExperimentalWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExperimentalWarning)
+        study.set_metric_names([METRIC_NAME])
+
+
+def _open_mirror(url: str, record, *, resume: bool):
+    """The study of ``record``'s name in ``url``, created, or loaded and brought up to date
+    (the trials the record holds beyond it added). Refuses a study there that holds trials
+    the record does not (another tune's, or a new run's name clash)."""
+    import optuna
+
+    name = record.study_name
+    with mirror_errors(url):
+        mirror = optuna.create_study(study_name=name, storage=url, direction="minimize",
+                                     load_if_exists=True)
+        stored = len(mirror.trials)
+        if stored and (not resume or stored > len(record.trials)):
+            raise StorageUrlError(f"--storage {url}: holds a study {name!r} with {stored} "
+                                  "trials of another run; name this one with --study")
+        if mirror.metric_names is None:
+            _name_metric(mirror)
+        for key, value in record.user_attrs.items():
+            mirror.set_user_attr(key, value)
+        mirror.add_trials(record.get_trials(deepcopy=False)[stored:])
+    return mirror
 
 
 def finished_trials(study) -> list:
@@ -181,11 +266,13 @@ def run_study(study: TuneStudy, *, n_trials: int, executor,
               make_spec: Callable[[int, dict], TrialSpec], space: Mapping[str, Param],
               on_result: Callable[[TrialResult], None] | None = None,
               on_record: Callable[[Any], None] | None = None) -> int:
-    """Fly trials until the record holds ``n_trials`` finished ones, keeping
-    ``executor.slots`` in flight: ask, submit; tell the sampler as each finishes
-    (``on_result``), and store it in the record in trial-number order (``on_record`` with the
-    stored trial), so the record's numbers are the sampler's and ``--keep-runs``' folder
-    names. Returns how many were flown now.
+    """Fly trials until the record holds ``n_trials`` finished ones: ask up to
+    :data:`ASK_AHEAD` ahead and submit them (the executor queues what its workers cannot
+    start yet); as results come (``on_result``), tell the sampler and store the trials in
+    trial-number order (``on_record`` with the stored trial), asking the next one after each
+    tell — so the trials asked do not depend on which finished first (module docstring), and
+    the record's numbers are the sampler's and ``--keep-runs``' folder names. Returns how
+    many were flown now.
 
     Ctrl-C (or a terminating signal): nothing more is asked, the trials not started are
     cancelled, the running ones finish and are stored (a second Ctrl-C stops waiting); a trial
@@ -197,52 +284,62 @@ def run_study(study: TuneStudy, *, n_trials: int, executor,
     from optuna.trial import TrialState
 
     todo = max(0, n_trials - len(finished_trials(study.record)))
-    order: deque[int] = deque()                     # asked, not yet stored, in ask order
-    pending: dict[int, tuple[Any, TrialSpec]] = {}  # the same, by number
-    finished: dict[int, tuple[TrialResult, Any]] = {}  # result and told trial, by number
+    order: deque[int] = deque()                     # asked, not yet told, in ask order
+    pending: dict[int, tuple[Any, TrialSpec, _dt.datetime]] = {}  # the same, by number
+    finished: dict[int, tuple[TrialResult, _dt.datetime]] = {}    # result, when it came
     asked = flown = 0
 
-    def fill() -> None:  # keep every worker busy
+    def fill() -> None:  # ask what the window allows (never depends on the workers)
         nonlocal asked
-        while asked < todo and executor.in_flight < executor.slots:
+        while asked < todo and len(order) < ASK_AHEAD:
             trial = study.search.ask()
             spec = make_spec(trial.number, _suggest(trial, space))
             executor.submit(trial.number, run_trial, spec)
             order.append(trial.number)
-            pending[trial.number] = (trial, spec)
+            pending[trial.number] = (trial, spec, _now())
             asked += 1
 
     def finish(done) -> None:
         nonlocal flown
-        trial, spec = pending[done.key]
+        _, spec, _ = pending[done.key]
         result = trial_result(spec, done.error, done.value)
-        trial.set_user_attr(RESULT_ATTR, _result_attr(result))
-        finished[done.key] = (result, study.search.tell(trial, result.score))
+        finished[done.key] = (result, _now())
         flown += 1
         if on_result is not None:
             on_result(result)
 
-    def store(*, unfinished_too: bool = False) -> None:
-        """Store the asked trials in ask order, up to the first still flying (or all: one
-        that did not finish as failed, keeping the numbering)."""
+    def tell_in_order(*, unfinished_too: bool = False) -> None:
+        """Tell and store the asked trials in ask order, up to the first still flying (or
+        all: one that did not finish as failed, keeping the numbering), asking the next one
+        after each."""
         while order and (unfinished_too or order[0] in finished):
             number = order.popleft()
-            trial, _ = pending.pop(number)
+            trial, _, started = pending.pop(number)
             if number in finished:
-                result, told = finished.pop(number)
-                stored = _store(study, told, result)
+                result, ended = finished.pop(number)
+                if math.isfinite(result.wall_s):  # its flights, not its wait in the queue
+                    started = ended - _dt.timedelta(seconds=result.wall_s)
+                attrs = _result_attr(result)
+                trial.set_user_attr(RESULT_ATTR, attrs)
+                told = study.search.tell(trial, result.score)
+                stored = _stored(told.params, told.distributions, attrs, started, ended,
+                                 value=result.score)
             else:
                 study.search.tell(trial, state=TrialState.FAIL)
-                stored = _store_failed(study, trial)
+                stored = _stored(trial.params, trial.distributions,
+                                 {"status": "failed", "message": "interrupted"}, started,
+                                 _now(), state=TrialState.FAIL)
+            study.add(stored)
             if on_record is not None:
                 on_record(stored)
+            if not unfinished_too:
+                fill()
 
     try:
         fill()
         while executor.in_flight:
             finish(executor.next_done())
-            fill()  # before the slow SQLite write: the freed worker starts at once
-            store()
+            tell_in_order()
     except KeyboardInterrupt:
         executor.cancel()
         try:
@@ -250,9 +347,13 @@ def run_study(study: TuneStudy, *, n_trials: int, executor,
                 finish(executor.next_done())
         except KeyboardInterrupt:  # a second Ctrl-C: stop waiting
             pass
-        store(unfinished_too=True)
+        tell_in_order(unfinished_too=True)
         raise
     return flown
+
+
+def _now() -> _dt.datetime:
+    return _dt.datetime.now()
 
 
 def _result_attr(result: TrialResult) -> dict[str, Any]:
@@ -260,29 +361,17 @@ def _result_attr(result: TrialResult) -> dict[str, Any]:
             "wall_s": result.wall_s, "sim_s": result.sim_s}
 
 
-def _store(study: TuneStudy, frozen, result: TrialResult):
-    """Add a told trial to the record (a signal waits for the write); returns it."""
+def _stored(params, distributions, attrs: dict[str, Any], started: _dt.datetime,
+            ended: _dt.datetime, **state):
+    """The record's trial: the told values, the nested result and its metrics flat
+    (:func:`~ardrone_nmpc.runs.tune_record.flat_metrics`), the time from its ask to its
+    result (Optuna's duration)."""
     import optuna
 
-    trial = optuna.trial.create_trial(params=frozen.params, distributions=frozen.distributions,
-                                      value=result.score,
-                                      user_attrs={RESULT_ATTR: _result_attr(result)})
-    with deferred_signals(), storage_errors(study.db):
-        study.record.add_trial(trial)
-    return trial
-
-
-def _store_failed(study: TuneStudy, asked):
-    """Add a trial that was asked and never finished to the record, as failed."""
-    import optuna
-    from optuna.trial import TrialState
-
-    trial = optuna.trial.create_trial(params=asked.params, distributions=asked.distributions,
-                                      state=TrialState.FAIL,
-                                      user_attrs={RESULT_ATTR: {"status": "failed",
-                                                                "message": "interrupted"}})
-    with deferred_signals(), storage_errors(study.db):
-        study.record.add_trial(trial)
+    trial = optuna.trial.create_trial(params=params, distributions=distributions,
+                                      user_attrs={RESULT_ATTR: attrs, **flat_metrics(attrs)},
+                                      **state)
+    trial.datetime_start, trial.datetime_complete = started, ended
     return trial
 
 
