@@ -32,12 +32,13 @@ def _child_cpu_s() -> float:
 
 def simulate_once(tree: Path, config: Path, cache_dir: Path) -> tuple[float, float]:
     """Wall and CPU seconds of one ``simulate`` on ``tree`` with the numba cache ``cache_dir``."""
+    # cwd=tree: ``python -m`` puts the working directory first on sys.path
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(tree))
     with tempfile.TemporaryDirectory(prefix="cold-logs-") as logs:
         cpu0, t0 = _child_cpu_s(), time.perf_counter()
         done = subprocess.run(
             [sys.executable, "-m", "ardrone_nmpc.cli.app", "simulate", str(config), "--quiet",
-             "--log-dir", logs], env=env, capture_output=True, text=True)
+             "--log-dir", logs], env=env, cwd=tree, capture_output=True, text=True)
         wall, cpu = time.perf_counter() - t0, _child_cpu_s() - cpu0
     if done.returncode != 0:
         sys.exit(f"{tree}: simulate failed ({done.returncode}):\n{done.stderr[-2000:]}")
@@ -50,6 +51,7 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--config", type=Path, default=ROOT / "configs" / "hover.yaml")
     args = ap.parse_args()
+    args.config = args.config.resolve()
     trees = {"after": ROOT} | ({"before": args.base.resolve()} if args.base else {})
     print(f"load average at start: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")
     cold: dict[str, list[tuple[float, float]]] = {name: [] for name in trees}
