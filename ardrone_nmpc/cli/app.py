@@ -210,10 +210,16 @@ def bench(
     solvers: str = typer.Option("cgmres,newton", "--solvers", **choice(("cgmres", "newton"), many=True), help="Comma-separated: cgmres, newton."),
     compare: Optional[str] = typer.Option(None, "--compare", **choice(("casadi",)), help="'casadi': also solve the OCP exactly with CasADi/IPOPT."),
     json_path: Optional[Path] = typer.Option(None, "--json", callback=output_file, help="Write the rows as JSON to this file."),
+    tick: bool = typer.Option(False, "--tick", help="Instead: fly --config in lockstep and split a tick's time by stage (solver update, controller, simulated drone and runner)."),
 ) -> None:
-    """Time the NMPC solvers in a closed loop (1 m step in x, y, z and 1 rad in ψ)."""
-    from ardrone_nmpc.cli.bench import bench_command
+    """Time the NMPC solvers in a closed loop (1 m step in x, y, z and 1 rad in ψ), or with
+    --tick a whole lockstep tick, split by stage."""
+    from ardrone_nmpc.cli.bench import bench_command, bench_tick_command
 
+    if tick:
+        bench_tick_command(config=config, overrides=set_, repeats=repeats,
+                           json_path=json_path)
+        return
     bench_command(config=config, overrides=set_, horizon_steps=horizon_steps, kmax=kmax,
                   steps=steps, repeats=repeats, solvers=solvers, compare=compare,
                   json_path=json_path)

@@ -17,6 +17,7 @@ from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.experiments.bench import BenchRow, bench_ipopt, bench_nmpc
+from ardrone_nmpc.experiments.tick_bench import TickSplit, bench_tick
 
 SOLVERS = ("cgmres", "newton")
 
@@ -111,3 +112,42 @@ def render_table(rows: list[BenchRow]) -> Table:
                       f"{r.call_mean_us:.1f}", f"{r.call_p99_us:.1f}",
                       res, resmax, f"{r.closed_loop_cost:.4f}", str(r.failures))
     return table
+
+
+def bench_tick_command(*, config: Path | None, overrides: list[str], repeats: int,
+                       json_path: Path | None, console: Console | None = None) -> TickSplit:
+    """``bench --tick``: one lockstep flight of ``config``, a tick's time split by stage."""
+    if config is None:
+        raise BenchUsageError("--tick needs --config: the flight to time "
+                              "(e.g. --config configs/square.yaml)")
+    cfg = load_config(config, overrides)
+    console = console or stdout_console()
+    with console.status(f"{config}: one untimed flight, then the best of {repeats}…"):
+        split = bench_tick(cfg, repeats=repeats)
+    console.print(fit(render_tick_table(split), console))
+    console.print(f"a tick is {split.tick_per_update:.1f}× the solver update; "
+                  f"{split.real_time_factor:.0f}× real time")
+    if json_path is not None:
+        payload = {"machine": platform.machine(), "python": platform.python_version(),
+                   "config": str(config), "repeats": repeats, **split.to_json()}
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+        console.print(f"wrote {json_path}")
+    return split
+
+
+def render_tick_table(split: TickSplit) -> Table:
+    table = Table(title=f"lockstep tick (µs per tick; {split.ticks} ticks, "
+                        f"{split.solved_ticks} solved; the fastest flight)",
+                  caption="update: solve_us; controller: compute_us − solve_us; drone and "
+                  "runner: the flight's wall time − compute_us")
+    table.add_column("stage")
+    table.add_column("µs/tick", justify="right")
+    table.add_column("share", justify="right")
+    total = split.tick_us
+    for name, us in (("solver update", split.solver_us), ("controller", split.controller_us),
+                     ("drone and runner", split.drone_runner_us), ("tick", total)):
+        table.add_row(name, f"{us:.1f}", f"{us / total:.1%}")
+    table.add_row("update (per solve)", f"{split.update_us:.1f}", "")
+    return table
+

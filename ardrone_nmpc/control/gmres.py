@@ -103,7 +103,8 @@ def gmres_finish(k, V, H, g, x0, out):
         g[i] = acc / H[i, i] if H[i, i] != 0.0 else 0.0
     n = out.shape[0]
     if out is not x0:
-        out[:] = x0
+        for i in range(n):
+            out[i] = x0[i]
     for j in range(k):
         yj = g[j]
         vj = V[j]

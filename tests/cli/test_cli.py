@@ -1,6 +1,7 @@
 """The command line through typer's CliRunner: output, exit codes, error lines."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +76,40 @@ def test_bench_rejects_bad_options(args, code, message):
     result = runner.invoke(app, ["bench", "--steps", "10", *args])
     assert result.exit_code == code
     assert message in result.output
+
+
+def test_bench_tick_splits_a_lockstep_tick_into_stages_that_add_up(tmp_path):
+    from ardrone_nmpc.config.io import load_config
+    from ardrone_nmpc.runs.memory import MemoryRecorder
+    from ardrone_nmpc.runtime.lockstep import run_lockstep
+
+    short = ["--set", "duration_s=2.0", "--set", "sim.settle_s=0.5"]
+    out = tmp_path / "tick.json"
+    result = runner.invoke(app, ["bench", "--tick", "--config", "configs/step_x.yaml", *short,
+                                 "--repeats", "1", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    # the same flight, recorded in full: its rows are the ticks timed
+    recorder = MemoryRecorder()
+    flown = run_lockstep(load_config("configs/step_x.yaml", [short[1], short[3]]),
+                         recorder=recorder)
+    solve_us = [row.get("solve_us") for row in recorder.rows]
+    assert data["ticks"] == len(recorder.rows) >= flown.ticks
+    assert data["simulated_s"] == flown.end_t_s
+    assert data["solved_ticks"] == sum(1 for v in solve_us
+                                       if isinstance(v, float) and math.isfinite(v))
+    parts = data["solver_us"] + data["controller_us"] + data["drone_runner_us"]
+    assert parts == pytest.approx(data["tick_us"], rel=1e-9)
+    assert data["tick_us"] == pytest.approx(data["wall_s"] * 1e6 / data["ticks"], rel=1e-12)
+    assert 0 < data["update_us"] < data["tick_us"]
+    assert data["tick_per_update"] == pytest.approx(data["tick_us"] / data["update_us"])
+    assert "solver update" in result.output and "× the solver update" in result.output
+
+
+def test_bench_tick_needs_the_flight(tmp_path):
+    result = runner.invoke(app, ["bench", "--tick"])
+    assert result.exit_code == 1
+    assert "error: --tick needs --config" in result.output
 
 
 def _simulate(tmp_path, *extra):

@@ -51,13 +51,15 @@ from ardrone_nmpc.control.kernels.residual import (aim_obstacles, bound_barrier,
                                                   condensed_cost, penalty, penalty_gradient,
                                                   residual, rollout_rk4, sincos_small)
 from ardrone_nmpc.control.kernels.solve import fdgmres, newton_solve, prepare_reference
-from ardrone_nmpc.control.kernels.steps import cgmres_step, newton_step
+from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
+                                                newton_step_obstacles)
 
 __all__ = [
     "FLAG_BAD_INPUT", "FLAG_NON_FINITE", "FLAG_OK", "NO_ACTIVE", "STAGE_ACTIVE",
     "STAGE_CONDENSED", "STAGE_DUMMY", "SolverMemory", "SolverStats", "aim_obstacles",
-    "bound_barrier", "bound_gradient", "carve_workspace", "cgmres_step", "condensed_cost",
-    "fdgmres", "memory_size", "newton_solve", "newton_step", "penalty", "penalty_gradient",
+    "bound_barrier", "bound_gradient", "carve_workspace", "cgmres_step", "cgmres_step_obstacles",
+    "condensed_cost", "fdgmres", "memory_size", "newton_solve", "newton_step",
+    "newton_step_obstacles", "penalty", "penalty_gradient",
     "prepare_reference", "residual", "rollout_rk4", "sincos_small", "workspace_size",
 ]
 

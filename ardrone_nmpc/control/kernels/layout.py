@@ -38,6 +38,9 @@ P_DTAU, P_DTAU_NEXT, P_RHO, P_ZETA, P_H, P_RTOL, P_PERIOD, P_TOL, P_TRIGGER = ra
 N_PRM = 9
 NO_ACTIVE = np.zeros((1, 1), dtype=np.int8)  # the active set argument of layouts without one
 NO_BASE = np.zeros((1, 3))  # the base positions argument of exact evaluations
+# A False that numba types as a plain bool: a literal False argument compiles a specialisation
+# of its own of every kernel it reaches (the cold start pays for each).
+NO = np.bool_(False)
 # return flags
 FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE = 0, 1, 2
 

@@ -15,7 +15,8 @@ import numpy as np
 from ardrone_nmpc.control.kernels.layout import (
     P_DTAU, P_DTAU_NEXT, P_H, P_PERIOD, P_RHO, P_RTOL, P_TOL, P_TRIGGER, P_ZETA, carve_workspace,
     memory_size, unpack)
-from ardrone_nmpc.control.kernels.steps import cgmres_step, newton_step
+from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
+                                                newton_step_obstacles)
 
 __all__ = ["SolverMemory", "SolverStats"]
 
@@ -81,6 +82,9 @@ class SolverMemory:
         self.obstacles[:] = obstacles
         self._iprm = np.array([stage_dim, kmax, max_newton_iterations, newton_kmax, n_obs,
                                gauss_newton], dtype=np.int64)
+        # the entry points of this obstacle table: only the one called is ever compiled
+        self._cgmres = cgmres_step_obstacles if n_obs else cgmres_step
+        self._newton = newton_step_obstacles if n_obs else newton_step
 
     @property
     def kmax(self) -> int:
@@ -129,12 +133,13 @@ class SolverMemory:
         return SolverStats(*self._stats.tolist())
 
     def cgmres_step(self, x: np.ndarray, ref: np.ndarray, initialise: bool) -> int:
-        """One C/GMRES tick (:func:`~ardrone_nmpc.control.kernels.steps.cgmres_step`)."""
-        return cgmres_step(self._mem, x, ref, self._iprm, initialise)
+        """One C/GMRES tick (:func:`~ardrone_nmpc.control.kernels.steps.cgmres_step`, or
+        ``cgmres_step_obstacles`` with obstacles)."""
+        return self._cgmres(self._mem, x, ref, self._iprm, initialise)
 
     def newton_step(self, x: np.ndarray, ref: np.ndarray, active: np.ndarray) -> int:
         """One Newton tick with the eq. 3.25 active set ``active`` (N, 4) int8."""
-        return newton_step(self._mem, x, ref, self._iprm, active)
+        return self._newton(self._mem, x, ref, self._iprm, active)
 
     # --- for tests and benchmarks of single kernels -----------------------------------
     @property

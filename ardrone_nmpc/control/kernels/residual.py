@@ -40,7 +40,8 @@ aim_obstacles = njit(cache=True, error_model="numpy", fastmath=FAST_MATH)(
 def rollout_rk4(x, inputs, dt, out):
     """``out`` = ``x`` integrated through ``inputs`` (k, 4), each held for ``dt`` (RK4 of
     eq. 3.13) — the delay compensation's prediction of the state a new command will meet."""
-    out[:] = x
+    for i in range(NX):
+        out[i] = x[i]
     k1 = np.empty(NX)
     k2 = np.empty(NX)
     k3 = np.empty(NX)
@@ -164,7 +165,8 @@ def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_input
     products with Gauss–Newton curvature of the penalty (:func:`fdgmres`).
     """
     n_stages = ref.shape[0] - 1
-    xs[0, :] = x0
+    for k in range(NX):
+        xs[0, k] = x0[k]
     spsi = math.sin(x0[6])
     cpsi = math.cos(x0[6])
     for i in range(n_stages):

@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.gmres import FAST_MATH, gmres_finish, gmres_iterate, gmres_start
-from ardrone_nmpc.control.kernels.layout import NU, NX, STAGE_ACTIVE, STAGE_CONDENSED
+from ardrone_nmpc.control.kernels.layout import NO, NU, NX, STAGE_ACTIVE, STAGE_CONDENSED
 from ardrone_nmpc.control.kernels.residual import condensed_cost, keep_inside, residual
 from ardrone_nmpc.core.angles import unwrap_near_turns
 
@@ -35,7 +35,8 @@ def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax
     n = U.shape[0]
     if obs is not None:
         if gauss_newton:  # the base rollout's positions (one more evaluation)
-            residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs)
+            residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, NO, obs, pbase,
+                     NO)
             for i in range(xs.shape[0]):
                 pbase[i, 0] = xs[i, 0]
                 pbase[i, 1] = xs[i, 2]
@@ -49,23 +50,24 @@ def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax
     if warm:
         for i in range(n):
             Ut[i] = U[i] + h * guess[i]
-        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs, pbase,
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, NO, obs, pbase,
                  gauss_newton)
         for i in range(n):
             w[i] = rhs[i] - (Ft[i] - Fbase[i]) * inv_h
     else:  # a zero guess needs no product: one F evaluation saved
-        w[:] = rhs
+        for i in range(n):
+            w[i] = rhs[i]
     res = gmres_start(w, V, g)
     target = 0.0
     for i in range(n):
         target += rhs[i] * rhs[i]
     target = rtol * math.sqrt(target)
-    k = 0
+    k = np.int64(0)  # not a literal 0: that would compile gmres_iterate for it alone
     while k < kmax and res > target:
         vk = V[k]
         for i in range(n):
             Ut[i] = U[i] + h * vk[i]
-        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs, pbase,
+        residual(Ut, m, x0, ref, dtau, W, rho, eps, active, xs, trig, Ft, NO, obs, pbase,
                  gauss_newton)
         for i in range(n):
             w[i] = (Ft[i] - Fbase[i]) * inv_h
@@ -115,8 +117,9 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
     a minimum: ‖F‖ falls just as well towards the stationary path through an obstacle's
     centre, and an obstacle ahead on the reference line puts Newton right next to it.
     """
-    xs, _, _, trig, _, _, _, _, _, F0, _, rhs, Ut, Ft, _, dU, _, _ = views
-    norm = residual(U, m, x, ref, dtau, W, rho, eps, active, xs, trig, F0, False, obs)
+    xs, _, _, trig, _, _, _, _, _, F0, _, rhs, Ut, Ft, _, dU, _, pbase = views
+    n = U.shape[0]
+    norm = residual(U, m, x, ref, dtau, W, rho, eps, active, xs, trig, F0, NO, obs, pbase, NO)
     by_cost = False
     cost = 0.0
     if obs is not None:
@@ -125,7 +128,8 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
     it = 0
     gm_total = 0
     while it < max_iter and norm > tol and math.isfinite(norm):
-        rhs[:] = -F0
+        for i in range(n):
+            rhs[i] = -F0[i]
         dU[:] = 0.0
         k, _ = fdgmres(U, m, x, ref, dtau, W, rho, eps, active, F0, rhs, dU, h, kmax, rtol,
                        views, dU, obs, gauss_newton)
@@ -142,10 +146,12 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
         trial_cost = cost
         accepted = False
         for _ in range(12):
-            Ut[:] = U + step * dU
+            for i in range(n):
+                Ut[i] = U[i] + step * dU[i]
             if m == STAGE_CONDENSED:
                 keep_inside(U, Ut, W)
-            trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft, False, obs)
+            trial = residual(Ut, m, x, ref, dtau, W, rho, eps, active, xs, trig, Ft, NO, obs,
+                             pbase, NO)
             accepted = math.isfinite(trial) and trial < (1.0 - 1e-4 * step) * norm
             if obs is not None:
                 if by_cost:
@@ -157,8 +163,9 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
             step *= 0.5
         if not accepted:
             break
-        U[:] = Ut
-        F0[:] = Ft
+        for i in range(n):
+            U[i] = Ut[i]
+            F0[i] = Ft[i]
         norm = trial
         cost = trial_cost
     return it, gm_total, norm

@@ -13,7 +13,7 @@ from numba import njit
 
 from ardrone_nmpc.control.gmres import FAST_MATH
 from ardrone_nmpc.control.kernels.layout import (
-    FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK, NO_ACTIVE, NU, NX, P_DTAU, P_DTAU_NEXT, P_H,
+    FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK, NO, NO_ACTIVE, NU, NX, P_DTAU, P_DTAU_NEXT, P_H,
     P_PERIOD, P_RHO, P_RTOL, P_TOL, P_TRIGGER, P_ZETA, STAGE_ACTIVE, STAGE_CONDENSED,
     carve_workspace, unpack)
 from ardrone_nmpc.control.kernels.residual import aim_obstacles, dynamics, keep_inside, residual
@@ -44,7 +44,7 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
     kmax = iprm[1]
     n_stages = ref.shape[0] - 1
     views = carve_workspace(buf, n_stages, m, max(kmax, iprm[3]))
-    xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1, _ = views
+    xs, ref0, ref1, trig, _, _, _, _, _, F0, F1, rhs, _, _, _, _, x1, pbase = views
     gauss_newton = iprm[5] != 0
     stats[:] = 0.0
     if not prepare_reference(x, ref, ref0):
@@ -65,7 +65,8 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
         stats[2] = norm
         dU[:] = 0.0
     else:
-        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, xs, trig, F0, False, obs)
+        norm = residual(U, m, x, ref0, dtau, W, rho, 0.0, NO_ACTIVE, xs, trig, F0, NO, obs,
+                        pbase, NO)
         if norm > prm[P_TRIGGER]:
             newton_ran = True
             # A jump the continuation cannot follow (a reference step is an impulse in F_t):
@@ -95,7 +96,7 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
     norm0 = norm  # F0 holds F(U, x, t): computed above, or left current by newton_solve
     # F0's input trig is valid for U unless a Newton line search evaluated other points last
     residual(U, m, x1, ref1, dtau_next, W, rho, 0.0, NO_ACTIVE, xs, trig, F1, not newton_ran,
-             obs)
+             obs, pbase, NO)
     zeta = prm[P_ZETA]
     for i in range(F0.shape[0]):
         rhs[i] = -zeta * F0[i] - (F1[i] - F0[i]) / h
@@ -112,7 +113,8 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
         Unew[i] = U[i] + period * dU[i]
     if m == STAGE_CONDENSED:
         keep_inside(U, Unew, W)
-    U[:] = Unew
+    for i in range(U.shape[0]):
+        U[i] = Unew[i]
     stats[1] += k
     stats[3] = norm0
     if not (math.isfinite(norm0) and applied_ok and math.isfinite(U[0])):
@@ -121,21 +123,34 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
 
 
 
+# The per-tick entry points from Python, on packed memory: one per scheme and per obstacle
+# table (empty or not), so that a run compiles only the one its solver calls.
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def cgmres_step(mem, x, ref, iprm, initialise):
-    """:func:`cgmres_tick` on packed memory (the per-tick entry point from Python)."""
+    """:func:`cgmres_tick` without obstacles (the obstacle-free specialisation: the
+    ``obs is not None`` branches are not compiled, see the layout's docstring)."""
+    U, dU, u_out, stats, W, prm, _, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
+    return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def cgmres_step_obstacles(mem, x, ref, iprm, initialise):
+    """:func:`cgmres_tick` with the obstacle table of the memory."""
     U, dU, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
-    if obs.shape[0] == 0:  # the obstacle-free specialisation (see the module docstring)
-        return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
     return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
 def newton_step(mem, x, ref, iprm, active):
-    """:func:`newton_tick` on packed memory (the per-tick entry point from Python)."""
+    """:func:`newton_tick` without obstacles."""
+    U, _, u_out, stats, W, prm, _, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
+    return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+def newton_step_obstacles(mem, x, ref, iprm, active):
+    """:func:`newton_tick` with the obstacle table of the memory."""
     U, _, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
-    if obs.shape[0] == 0:  # the obstacle-free specialisation (see the module docstring)
-        return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
     return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs)
 
 

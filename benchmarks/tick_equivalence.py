@@ -1,0 +1,199 @@
+"""Every row of ~30 lockstep flights, bit for bit, on two trees: is a change behaviour-neutral?
+
+    python benchmarks/tick_equivalence.py record FILE [--only NAME,…]
+    python benchmarks/tick_equivalence.py compare A B
+
+``record`` flies each case (a config, ``--set`` overrides and a seed: clean flights of every
+reference kind, both solvers, the P controller, both plant profiles, the estimators, the
+disturbance options and every fault of the matrix) with the tree on ``sys.path`` and stores
+every ``log.csv`` cell it would write (numbers as float64, strings as text) and every event
+into ``FILE`` (a pickle). Run it on the base commit and on the change — e.g.
+``git archive <commit> | tar -x -C /tmp/base`` then
+``PYTHONPATH=/tmp/base python benchmarks/tick_equivalence.py record base.pkl`` — and
+``compare`` prints, per case, whether the two are the same bits (the wall-clock columns
+``solve_us``, ``compute_us``, ``tick_late_ms`` and the events' ``wall_s`` excepted), and the
+first differing row and column when they are not. Exit 1 on any difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CLOCK_COLUMNS = frozenset({"solve_us", "compute_us", "tick_late_ms"})
+
+# (name, config, overrides, seed): short flights, each through what its name says.
+SHORT = ["duration_s=8", "sim.settle_s=1"]
+CASES: list[tuple[str, str, list[str], int]] = [
+    ("hover", "hover", SHORT, 0),
+    ("step_x", "step_x", SHORT, 1),
+    ("step_y", "step_y", SHORT, 2),
+    ("step_z", "step_z", SHORT, 3),
+    ("step_psi", "step_psi", SHORT, 4),
+    ("square", "square", ["duration_s=25"], 0),
+    ("square_long", "square", ["duration_s=60"], 7),
+    ("ellipse", "ellipse", ["duration_s=12"], 0),
+    ("lorenz", "lorenz", ["duration_s=10"], 0),
+    ("obstacle", "obstacle", ["duration_s=10"], 0),
+    ("moving_obstacle", "moving_obstacle", ["duration_s=8"], 0),
+    ("follow_car", "follow_car", ["duration_s=8"], 0),
+    ("newton", "step_x", SHORT + ["controller.solver.method=newton"], 0),
+    ("uncondensed", "step_z", SHORT + ["controller.solver.condensed=false"], 0),
+    ("p_controller", "step_x", SHORT + ["controller.kind=p"], 0),
+    ("kit", "step_x", SHORT + ["sim.plant.profile=thesis_kit"], 0),
+    ("kit_convention", "step_x", SHORT + ["drone.command_convention=kit"], 0),
+    ("luenberger", "altitude_luenberger", SHORT, 0),
+    ("no_vz", "altitude_none", SHORT, 0),
+    ("navdata_velocity", "step_y", SHORT + ["estimator.horizontal_velocity=navdata"], 0),
+    ("no_offset_free", "step_x", SHORT + ["controller.offset_free.enabled=false"], 0),
+    ("no_delay_comp", "step_x", SHORT + ["controller.delay_compensation_s=0"], 0),
+    ("disturbances", "hover", SHORT + ["sim.vz_gain=0.8", "sim.battery_sag_frac=0.3",
+                                       "sim.navdata_velocity_bias_mps=[0.05,-0.03]",
+                                       "sim.plant.turbulence_std_mps=0.3"], 5),
+    ("wind", "hover", SHORT + ["faults.wind.velocity_mps=[0.6,0.2,0]"], 0),
+    ("wind_gust", "square", ["duration_s=10", "faults.wind_gust.start_s=3"], 0),
+    ("delay_jump", "step_x", SHORT + ["faults.delay_jump.start_s=2"], 0),
+    ("battery_floor", "hover", SHORT + ["faults.battery_floor.start_s=3"], 0),
+    ("emergency", "hover", SHORT + ["faults.emergency.start_s=3"], 0),
+    ("self_land", "hover", SHORT + ["faults.self_land.start_s=3"], 0),
+    ("at_loss", "hover", SHORT + ["faults.at_loss.start_s=3", "faults.at_loss.probability=0.7"],
+     0),
+    ("solver_diverge", "step_x", SHORT + ["faults.solver_diverge.start_s=2"], 0),
+    ("mocap_dropout", "hover", SHORT + ["faults.mocap_dropout.start_s=3",
+                                        "faults.mocap_dropout.duration_s=0.2"], 0),
+    ("navdata_loss", "hover", SHORT + ["faults.navdata_loss.start_s=3"], 0),
+    ("geofence", "step_x", SHORT + ["safety.geofence_min_m=[-1.0,-3,0]"], 0),
+    ("low_battery_start", "hover", SHORT + ["sim.plant.battery_start_pct=22",
+                                            "sim.plant.battery_drain_pct_per_min=30"], 0),
+    ("altitude_cap", "step_z", SHORT + ["drone.altitude_max_m=1.3"], 0),
+]
+
+
+class _Capture:
+    """A recorder that keeps every row and event."""
+
+    path = None
+
+    def __init__(self) -> None:
+        self.rows: list[dict] = []
+        self.events: list[tuple] = []
+
+    def write_row(self, row) -> None:
+        self.rows.append(dict(row))
+
+    def event(self, t_s, kind, **fields) -> None:
+        fields.pop("wall_s", None)
+        self.events.append((t_s, kind, fields))
+
+
+def _table(rows: list[dict]) -> tuple[np.ndarray, dict]:
+    from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+
+    numeric = [c for c in LOG_COLUMNS if c not in STRING_COLUMNS and c not in CLOCK_COLUMNS]
+    values = np.full((len(rows), len(numeric)), np.nan)
+    strings = {c: [] for c in STRING_COLUMNS}
+    for i, row in enumerate(rows):
+        for j, c in enumerate(numeric):
+            v = row.get(c, math.nan)
+            values[i, j] = math.nan if v is None or v == "" else float(v)
+        for c in STRING_COLUMNS:
+            v = row.get(c, "")
+            strings[c].append(getattr(v, "value", v))
+    return values, {"numeric": numeric, "strings": strings}
+
+
+def record(path: str, only: set[str] | None) -> None:
+    import ardrone_nmpc
+    from ardrone_nmpc.config.io import load_config
+    from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
+
+    out = {"tree": str(Path(ardrone_nmpc.__file__).parents[1]), "cases": {}}
+    for name, config, overrides, seed in CASES:
+        if only and name not in only:
+            continue
+        cfg = load_config(ROOT / "configs" / f"{config}.yaml", overrides)
+        capture = _Capture()
+        t0 = time.perf_counter()
+        try:
+            result = run_lockstep(cfg, recorder=capture, seed=seed)
+            ending = (result.ticks, result.ending, result.final_mode.value, result.end_t_s)
+        except TakeoffRefused as err:
+            ending = ("refused", str(err))
+        wall = time.perf_counter() - t0
+        values, meta = _table(capture.rows)
+        out["cases"][name] = {"values": values, **meta, "events": capture.events,
+                              "ending": ending}
+        print(f"{name:<20} {len(capture.rows):5d} rows {wall:6.2f} s  {ending}", flush=True)
+    with open(path, "wb") as f:
+        pickle.dump(out, f)
+
+
+def _same(a, b) -> bool:
+    return pickle.dumps(a) == pickle.dumps(b)
+
+
+def compare(path_a: str, path_b: str) -> int:
+    with open(path_a, "rb") as f:
+        a = pickle.load(f)
+    with open(path_b, "rb") as f:
+        b = pickle.load(f)
+    print(f"A: {a['tree']}\nB: {b['tree']}")
+    bad = 0
+    for name in a["cases"]:
+        if name not in b["cases"]:
+            print(f"{name:<20} missing in B")
+            continue
+        ca, cb = a["cases"][name], b["cases"][name]
+        problems = []
+        va, vb = ca["values"], cb["values"]
+        if va.shape != vb.shape:
+            problems.append(f"shape {va.shape} vs {vb.shape}")
+        else:
+            diff = va.view(np.int64) != vb.view(np.int64)
+            if diff.any():
+                i, j = np.argwhere(diff)[0]
+                problems.append(f"{diff.sum()} cells, first row {i} {ca['numeric'][j]}: "
+                                f"{va[i, j]!r} vs {vb[i, j]!r}")
+        for c, sa in ca["strings"].items():
+            sb = cb["strings"].get(c)
+            if sa != sb:
+                i = next((k for k, (x, y) in enumerate(zip(sa, sb or [])) if x != y), None)
+                problems.append(f"strings {c} first row {i}")
+        if not _same(ca["events"], cb["events"]):
+            k = next((k for k, (x, y) in enumerate(zip(ca["events"], cb["events"]))
+                      if not _same(x, y)), min(len(ca["events"]), len(cb["events"])))
+            problems.append(f"events differ from #{k}: "
+                            f"{ca['events'][k:k + 1]} vs {cb['events'][k:k + 1]}")
+        if ca["ending"] != cb["ending"]:
+            problems.append(f"ending {ca['ending']} vs {cb['ending']}")
+        bad += bool(problems)
+        print(f"{name:<20} {'same bits' if not problems else '; '.join(problems)}")
+    print(f"{len(a['cases']) - bad} of {len(a['cases'])} cases bit-identical")
+    return 1 if bad else 0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    r = sub.add_parser("record")
+    r.add_argument("file")
+    r.add_argument("--only", default="")
+    c = sub.add_parser("compare")
+    c.add_argument("a")
+    c.add_argument("b")
+    args = parser.parse_args()
+    if args.what == "record":
+        record(args.file, set(filter(None, args.only.split(","))))
+    else:
+        sys.exit(compare(args.a, args.b))
+
+
+if __name__ == "__main__":
+    main()
