@@ -154,10 +154,12 @@ def _navdata_of_row(cols: dict, i: int, rx_t_s: float) -> NavdataSample | None:
     # navdata attitude is not among the measurement columns (yet): taken when a log has it
     roll, pitch = (float(cols[c][i]) if c in cols else nan
                    for c in ("nav_roll_deg", "nav_pitch_deg"))
+    state = float(cols["nav_state_bits"][i]) if "nav_state_bits" in cols else nan
     return NavdataSample(t_s=rx_t_s, mode=flight_mode, battery_pct=float(cols["battery_pct"][i]),
                          roll_deg=roll, pitch_deg=pitch, yaw_deg=nan, altitude_m=nan,
                          vx_body_mps=float(cols["nav_vx_body_mps"][i]),
-                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan)
+                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan,
+                         state_bits=int(state) if math.isfinite(state) else None)
 
 
 def rows_to_inputs(*, run: RunData) -> list[TickInputs]:

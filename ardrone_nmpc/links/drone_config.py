@@ -67,8 +67,9 @@ class ConfigMismatch:
         """The one-line refusal: the key, both values and what to do."""
         held = "nothing (key missing)" if self.held is None else repr(self.held)
         return (f"the drone holds {self.key} = {held}, not the {self.written!r} written: it "
-                "ignored the write (another multiconfig session or an outdoor profile?) — "
-                "power-cycle the drone, or set drone.config_ids to its session, then retry")
+                "did not keep the write — a drone in another multiconfig session keeps its "
+                "own limits: set drone.config_ids to that session (`ardrone-nmpc status` shows "
+                "its ids and what it holds), then retry")
 
 
 def _same(written: str, held: str) -> bool:

@@ -15,7 +15,16 @@ Navdata (§1.1, §4)
     :attr:`DroneLink.stats`, never raised. A packet whose sequence is not newer than the last is
     dropped (SDK, node-ar-drone) unless it is 1 or carries the com-watchdog bit 30 (the drone
     re-initialised). Sequence gaps count as loss. Packets without the demo option (bootstrap)
-    update :attr:`DroneLink.state` only.
+    update :attr:`DroneLink.state` and :attr:`DroneLink.packet_mode` only — the state word is
+    in every packet, so a landing is confirmed by any of them.
+
+Bootstrap after connecting
+    A drone that lost its client (a Wi-Fi blackout) restarts its stream in bootstrap: no
+    option, no demo sample. As the SDK does (``ardrone_general_navdata.c``: on a bootstrap
+    packet it re-sends the session id, then ``navdata_demo`` and ``navdata_options``), the
+    link answers the first bootstrap packet after :meth:`DroneLink.connect` by writing the
+    session ids (with ``config_ids``) and ``general:navdata_demo`` again, from a thread of its
+    own (the handshake waits for navdata); :attr:`DroneLink.bootstrap_answers` counts them.
 
 Connecting (§1.1 step 3)
     A drone whose first packet shows it airborne (state bit 0) is somebody else's flight:
@@ -99,6 +108,7 @@ __all__ = [
 DEFAULT_HOST = "192.168.1.1"
 _HOVER = Pcmd.hover()
 _RX_POLL_S = 0.05                    # receiver recv timeout: how fast it notices stop / silence
+_BOOTSTRAP_ANSWER_S = 1.0            # each key of the bootstrap answer waits this for its ACK
 
 
 class DroneAirborne(LinkError):
@@ -143,7 +153,8 @@ def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
         t_s=t_s, mode=flight_mode_of(packet.state, d.ctrl_major),
         battery_pct=float(d.battery_pct), roll_deg=d.roll_deg, pitch_deg=d.pitch_deg,
         yaw_deg=wrap_angle_deg(d.yaw_deg), altitude_m=d.altitude_m, vx_body_mps=d.vx_body_mps,
-        vy_body_mps=d.vy_body_mps, vz_mps=d.vz_mps, ctrl_state=d.ctrl_state)
+        vy_body_mps=d.vy_body_mps, vz_mps=d.vz_mps, ctrl_state=d.ctrl_state,
+        state_bits=int(packet.state))
 
 
 def _check_frac(name: str, v: float) -> float:
@@ -261,6 +272,10 @@ class DroneLink(FlightCommands, ConfigHandshake):
         self._state: DroneState | None = None
         self._navdata: NavdataSample | None = None
         self._navdata_rx_t_s = -math.inf
+        self._state_rx_t_s = -math.inf
+        self._packet_mode: FlightMode | None = None
+        self._bootstrap_thread: threading.Thread | None = None
+        self._bootstrap_answers = 0
         self._last_nav_mono = -math.inf
         self._last_wake_mono = -math.inf
         self._wakeups = 0
@@ -398,6 +413,23 @@ class DroneLink(FlightCommands, ConfigHandshake):
     def state(self) -> DroneState | None:
         """State bits of the latest accepted navdata packet (bootstrap packets included)."""
         return self._state
+
+    @property
+    def state_rx_t_s(self) -> float:
+        """Receipt time (link clock) of :attr:`state`: the latest accepted packet of any kind;
+        −inf before the first."""
+        return self._state_rx_t_s
+
+    @property
+    def packet_mode(self) -> FlightMode | None:
+        """The flight mode the latest accepted packet shows (:func:`flight_mode_of`; a
+        bootstrap packet has no ctrl_state, so state bit 0 alone decides); None before one."""
+        return self._packet_mode
+
+    @property
+    def bootstrap_answers(self) -> int:
+        """Times a bootstrap packet after connecting was answered (module doc)."""
+        return self._bootstrap_answers
 
     @property
     def sent_count(self) -> int:
@@ -609,8 +641,11 @@ class DroneLink(FlightCommands, ConfigHandshake):
             else:
                 return
         sample = navdata_sample_of(packet, t_s)
+        major = packet.demo.ctrl_major if packet.demo is not None else None
         with self._nav_cond:
             self._state = state
+            self._state_rx_t_s = t_s
+            self._packet_mode = flight_mode_of(state, major)
             self._nav_index += 1
             if sample is not None:
                 self._navdata = sample
@@ -618,6 +653,27 @@ class DroneLink(FlightCommands, ConfigHandshake):
             self._nav_cond.notify_all()
         stats.record_packet(t_s)
         self._watch_takeoff(state, packet)
-        if (DroneState.COM_WATCHDOG in state
-                and DroneState.NAVDATA_BOOTSTRAP not in state):
+        if DroneState.NAVDATA_BOOTSTRAP in state:
+            self._answer_bootstrap()
+        elif DroneState.COM_WATCHDOG in state:
             self._comwdg_pending = True
+
+    def _answer_bootstrap(self) -> None:
+        """Start the bootstrap answer (module doc) unless one runs or the link is not up."""
+        if not self._connected or self._stop.is_set() or (
+                self._bootstrap_thread is not None and self._bootstrap_thread.is_alive()):
+            return
+        self._bootstrap_thread = threading.Thread(target=self._rewrite_navdata_demo,
+                                                  name="drone-bootstrap-answer", daemon=True)
+        self._bootstrap_thread.start()
+
+    def _rewrite_navdata_demo(self) -> None:
+        self._bootstrap_answers += 1
+        try:
+            if self.config_ids is not None:
+                self.write_config("custom:session_id", self.config_ids[0],
+                                  timeout_s=_BOOTSTRAP_ANSWER_S)
+            self.write_config("general:navdata_demo", self.navdata_demo,
+                              timeout_s=_BOOTSTRAP_ANSWER_S)
+        except LinkError as err:  # the next bootstrap packet tries again
+            self._last_send_error = f"bootstrap answer: {err}"

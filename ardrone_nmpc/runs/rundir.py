@@ -81,8 +81,9 @@ __all__ = [
 #: simulated plant's truth (empty in real flight). ``mocap_t_s`` (the pose's own time stamp on
 #: the link's clock, as the tick saw it), ``nav_vx_body_mps``/``nav_vy_body_mps``,
 #: ``nav_roll_deg``/``nav_pitch_deg`` and ``nav_mode`` complete the raw measurements the tick
-#: saw, so ``replay --rerun`` can feed them through it again; ``nav_ctrl_state`` is the raw
-#: ctrl_state word of that navdata (``fly`` only). ``target_*`` are the followed
+#: saw, so ``replay --rerun`` can feed them through it again (``nav_state_bits``: the state
+#: word of that navdata, whose fault bits the supervisor reads; empty without a wire);
+#: ``nav_ctrl_state`` is the raw ctrl_state word of that navdata (``fly`` only). ``target_*`` are the followed
 #: object's pose, stamp and age (reference kind ``follow``; empty otherwise).
 LOG_COLUMNS: tuple[str, ...] = (
     "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
@@ -92,7 +93,7 @@ LOG_COLUMNS: tuple[str, ...] = (
     "solve_us", "solver_status", "residual_norm", "gmres_iterations", "newton_iterations",
     "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct", "tick_late_ms", "compute_us",
     "mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode", "nav_roll_deg",
-    "nav_pitch_deg", "nav_ctrl_state", "target_x_m", "target_y_m", "target_z_m", "target_psi_rad", "target_t_s",
+    "nav_pitch_deg", "nav_state_bits", "nav_ctrl_state", "target_x_m", "target_y_m", "target_z_m", "target_psi_rad", "target_t_s",
     "target_age_ms",
     "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps",
 )

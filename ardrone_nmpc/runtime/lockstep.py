@@ -28,17 +28,18 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import Config
 from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime.tick import Tick
-from ardrone_nmpc.safety import Action
+from ardrone_nmpc.safety import Action, takeoff_refusal
 from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
 from ardrone_nmpc.sim.backends import make_plant
 from ardrone_nmpc.sim.drone_config import ConfigStore
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.sensors import WireSensors
+from ardrone_nmpc.sim.sensors import WireSensors, drone_status
 from ardrone_nmpc.sim.target import target_pose
 from ardrone_nmpc.errors import UserError
 
@@ -47,9 +48,11 @@ from ardrone_nmpc.errors import UserError
 class SimResult:
     """What a lockstep run produced (the rows are also in the recorder, if one was given).
 
-    ``ending`` says how the flight ended: ``"completed"`` (the experiment ran to its end),
-    ``"land-<reason>"`` (the supervisor landed it), ``"stop-emergency"`` (the drone cut its
-    motors); ``final_mode`` is the drone's mode after the run.
+    ``ending`` says how the flight ended: ``"completed"`` (the experiment ran to its end and
+    did its job), a failed verdict of :mod:`ardrone_nmpc.runs.verdict` (it ran to its end
+    without tracking, or never saw the object it follows), ``"land-<reason>"`` (the
+    supervisor landed it), ``"stop-<reason>"`` (the drone cut its motors, or reported a motor
+    fault and was cut); ``final_mode`` is the drone's mode after the run.
     """
 
     ticks: int
@@ -91,6 +94,9 @@ class _SimConfigPort(ConfigHandshake):
 
     def write_config(self, key, value, timeout_s: float = 1.0) -> str:
         text = Config.of(key, value).value
+        if not self.store.acknowledges(key, self.config_ids):
+            raise LinkError(f"config {key}={text!r}: no ACK from the drone (a multiconfig "
+                            "session that ignores plain CONFIG: set drone.config_ids to it)")
         self.store.write(key, text, self.config_ids)  # acknowledged, applied or not
         return text
 
@@ -103,13 +109,13 @@ class _SimConfigPort(ConfigHandshake):
 def _configure(cfg, plant, faults: FaultSchedule, events: list) -> None:
     """Write the limits, read them back and refuse as ``fly`` does (TakeoffRefused)."""
     store = ConfigStore(plant, altitude_max_m=cfg.drone.altitude_max_m,
-                        session=faults.held_session())
+                        session=faults.held_session(), outdoor=faults.outdoor_profiles())
     port = _SimConfigPort(cfg, store, faults.control_port_mode())
     session = FlightSession(cfg, port, None, event=lambda kind, **f: events.append((kind, f)),
                             warn=lambda message: None)  # the warning is in the events
     try:
         session.configure()
-    except PreflightError as err:
+    except (PreflightError, LinkError) as err:
         raise TakeoffRefused(str(err)) from None
 
 
@@ -206,6 +212,9 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
             raise TakeoffRefused(f"battery {plant.battery_pct:.0f} % is at or below the floor "
                                  f"safety.battery_floor_pct = "
                                  f"{cfg.safety.battery_floor_pct:.0f} %: take-off refused")
+        refusal = takeoff_refusal(int(drone_status(plant).state_bits()))  # as fly's preflight
+        if refusal is not None:
+            raise TakeoffRefused(refusal)
         _configure(cfg, plant, faults, preflight_events)
     except TakeoffRefused as err:  # no experiment time: nothing took off
         for kind, fields in preflight_events:
@@ -230,6 +239,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
         write_event(schedule.t_exp_s(0), "faults", windows=[list(w) for w in faults.windows()])
     wall0 = time.perf_counter()
     ending, k, flown = "completed", 0, 0
+    tally = VerdictTally(follow=tick.follow is not None)
     for k in range(schedule.n_ticks):
         t_exp = schedule.t_exp_s(k)
         write_events(write_event, t_exp, plant_faults.update(t_exp))
@@ -246,19 +256,23 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
             plant.command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
                           progressive=out.progressive)
         _record(recorder, out.row, plant)
+        tally.add(out.row)
         if progress is not None:
             progress(schedule.fraction_done(k))
         if out.action in (Action.LAND, Action.STOP):
             ending = out.row["mode"]
             break
+    ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
     t_end = t_first + flown * period - t_start
     if ending.startswith("stop"):
+        if plant.emergency():  # a motor fault bit: the tool cuts, as the session does
+            write_event(t_end, "emergency", reason=ending)
         write_event(t_end, "stopped", reason=ending, drone_mode=plant.mode.value)
         sensors.advance_to(plant.t_s + 3.0)  # let it come to rest: the truth shows the fall
     else:
         _land(cfg, tick, sensors, plant, plant_faults, recorder, write_event,
-              t_first, t_start, flown, logged=ending != "completed")
+              t_first, t_start, flown, logged=ending.startswith("land"))
     return SimResult(flown, plant.mode, recorder.path if recorder is not None else None,
                      loop_wall_s, ending, plant.t_s - t_start)
 

@@ -21,13 +21,14 @@ from ardrone_nmpc.config.schema import tracked_object
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.rundir import RunRecorder
 from ardrone_nmpc.runs.summary import write_run_summary
+from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, VerdictTally, verdict_message
 from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_events
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
-from ardrone_nmpc.runtime.session import DroneLandedItself, FlightSession
+from ardrone_nmpc.runtime.session import CutMotors, DroneLandedItself, FlightSession
 from ardrone_nmpc.runtime.signals import landing_signals
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime.tick import Tick
-from ardrone_nmpc.safety import Action
+from ardrone_nmpc.safety import Action, drone_faults
 from ardrone_nmpc.errors import UserError
 
 class LandingNotConfirmed(UserError, RuntimeError):
@@ -51,6 +52,10 @@ class SupervisorLanding(UserError, RuntimeError):
 
 class DroneEmergency(UserError, RuntimeError):
     """The drone reported an emergency (motors cut)."""
+
+
+class FlightFailed(UserError, RuntimeError):
+    """The flight ran to its end without doing its job (:mod:`ardrone_nmpc.runs.verdict`)."""
 
 
 def _endpoints(cfg, drone_host, at_port, navdata_port, mocap_port):
@@ -132,10 +137,11 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                                     start_position_m=_start_position(tick),
                                     **({"warn": warn} if warn is not None else {}))
             fault_clock = loop.set_fault_clock if sim else None
+            tally = VerdictTally(follow=tick.follow is not None)
             try:
                 with session:
                     _control_loop(cfg, schedule, tick, drone, mocap, recorder, event,
-                                  status, fault_clock, requests)
+                                  status, fault_clock, requests, tally)
             finally:
                 result.landed = session.landed_cleanly
                 for ev in mocap.take_events():  # senders seen since the last tick
@@ -144,9 +150,14 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                     # the loopback's injected faults, on experiment time
                     write_events(on_wall_clock(event), t_exp, [ev])
                 event("session_end", landed=session.landed_cleanly)
+            verdict = tally.verdict("completed")
+            if verdict in FAILED_VERDICTS:
+                event("verdict", verdict=verdict)
             path = recorder.path
         if result.landed is False:
             raise LandingNotConfirmed("navdata never showed the drone landed: check it")
+        if verdict in FAILED_VERDICTS:
+            raise FlightFailed(f"{verdict}: {verdict_message(verdict)}")
         return path
     finally:
         if result.path is not None:  # however the flight ended: the run dir is complete
@@ -181,10 +192,12 @@ def _start_position(tick):
 
 
 def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, event, status,
-                  fault_clock=None, requests=None) -> None:
+                  fault_clock=None, requests=None, tally: VerdictTally | None = None) -> None:
     """The 65 ms loop until the experiment ends or the supervisor, the drone or the operator
-    ends it (an exception: the session's exit lands the drone). ``fault_clock(t0)`` receives
-    the monotonic time of experiment time 0 (the loopback's fault injection runs on it)."""
+    ends it (an exception: the session's exit lands the drone, or cuts it on
+    :class:`~ardrone_nmpc.runtime.session.CutMotors`). ``fault_clock(t0)`` receives the
+    monotonic time of experiment time 0 (the loopback's fault injection runs on it);
+    ``tally`` sees every row written."""
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     write = on_wall_clock(event)
     rate = Rate(schedule.period_s)
@@ -217,15 +230,21 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, e
         row["nav_ctrl_state"] = (nav.ctrl_state if nav is not None and nav.ctrl_state is not None
                                  else math.nan)
         recorder.write_row(row)
+        if tally is not None:
+            tally.add(row)
         if status is not None:
             status({**row, "progress": schedule.fraction_done(k), "overruns": rate.overruns,
                     "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz,
                     "mocap_sender": mocap.sender, "mocap_foreign": mocap.foreign_senders})
+        faults = drone_faults(nav.state_bits if nav is not None else None)
+        said = f" — the drone reports {faults[0].line()}" if faults else ""
         if out.action is Action.LAND:   # the session's exit lands it
             if row["mode"] == "land-navdata-lost":
                 raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
-            raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}")
+            raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}{said}")
         if out.action is Action.STOP:
+            if row["mode"] != "stop-emergency":  # a motor fault bit: the session's exit cuts
+                raise CutMotors(f"the supervisor cut the motors: {row['mode']}{said}")
             raise DroneEmergency("the drone reports an emergency (motors cut): check it")
         _stop_if_ended_outside(drone, requests, event, t_exp)  # after the tick's row: logged
     _stop_if_ended_outside(drone, requests, event, schedule.t_exp_s(schedule.n_ticks - 1))

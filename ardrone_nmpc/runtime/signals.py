@@ -1,12 +1,15 @@
 """Nothing ends a flight without landing it: every catchable terminating signal lands.
 
-A closed terminal (SIGHUP), Ctrl-\\ (SIGQUIT), ``kill`` (SIGTERM), SIGUSR1/2 and a write to a
+A closed terminal (SIGHUP), Ctrl-\\ (SIGQUIT), ``kill`` (SIGTERM), SIGUSR1 and a write to a
 closed pipe (SIGPIPE) would each end the process at once by default and leave the drone
 hovering. Inside :func:`landing_signals` each raises :class:`Terminated` instead — a
 ``KeyboardInterrupt``, exactly like Ctrl-C (SIGINT), so no ``except Exception`` on the way can
 swallow it and the flight session's exit lands the drone — and the process exits with
-128 + the signal's number (:func:`exit_code_of`). SIGKILL and SIGSTOP cannot be caught; the
-drone's own watchdog then holds it hovering (docs/first-flight.md says what to do).
+128 + the signal's number (:func:`exit_code_of`). :data:`EMERGENCY_SIGNAL` (SIGUSR2) is the
+operator's ``emergency`` command reaching the flight that holds the drone: it raises
+:class:`EmergencyRequested` (a :class:`Terminated`), and the session cuts the motors instead of
+landing. SIGKILL and SIGSTOP cannot be caught; the drone's own watchdog then holds it hovering
+(docs/first-flight.md says what to do).
 """
 
 from __future__ import annotations
@@ -15,12 +18,14 @@ import signal
 import threading
 from contextlib import contextmanager
 
-__all__ = ["LANDING_SIGNALS", "Terminated", "exit_code_of", "landing_signals"]
+__all__ = ["EMERGENCY_SIGNAL", "EmergencyRequested", "LANDING_SIGNALS", "Terminated",
+           "exit_code_of", "landing_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
-    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2, signal.SIGPIPE,
-    signal.SIGTERM)
+    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGPIPE, signal.SIGTERM)
+#: The signal ``ardrone-nmpc emergency`` sends the flight holding the drone: cut the motors.
+EMERGENCY_SIGNAL = signal.SIGUSR2
 
 
 class Terminated(KeyboardInterrupt):
@@ -29,6 +34,14 @@ class Terminated(KeyboardInterrupt):
     def __init__(self, signum: int) -> None:
         self.signum = int(signum)
         super().__init__(signal.Signals(self.signum).name)
+
+
+class EmergencyRequested(Terminated):
+    """:data:`EMERGENCY_SIGNAL` arrived: the operator's ``emergency`` command — cut the motors
+    (the session does), do not land."""
+
+    def __str__(self) -> str:
+        return f"the operator's `emergency` command ({signal.Signals(self.signum).name})"
 
 
 def exit_code_of(interrupt: BaseException) -> int:
@@ -42,10 +55,15 @@ def _raise_terminated(signum, frame):
     raise Terminated(signum)
 
 
+def _raise_emergency(signum, frame):
+    raise EmergencyRequested(signum)
+
+
 @contextmanager
 def landing_signals():
-    """Within the block, :data:`LANDING_SIGNALS` raise :class:`Terminated` and SIGINT raises
-    KeyboardInterrupt (whatever handler was set before); the previous handlers come back after.
+    """Within the block, :data:`LANDING_SIGNALS` raise :class:`Terminated`,
+    :data:`EMERGENCY_SIGNAL` :class:`EmergencyRequested`, and SIGINT raises KeyboardInterrupt
+    (whatever handler was set before); the previous handlers come back after.
     Outside the main thread (where Python delivers signals) it changes nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -55,6 +73,7 @@ def landing_signals():
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
         for sig in LANDING_SIGNALS:
             previous[sig] = signal.signal(sig, _raise_terminated)
+        previous[EMERGENCY_SIGNAL] = signal.signal(EMERGENCY_SIGNAL, _raise_emergency)
         yield
     finally:
         for sig, handler in previous.items():

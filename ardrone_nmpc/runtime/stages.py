@@ -409,6 +409,8 @@ def measurement_columns(inputs: TickInputs) -> dict:
         "nav_mode": nav.mode.value if nav is not None else "",
         "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
         "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
+        "nav_state_bits": (nav.state_bits if nav is not None and nav.state_bits is not None
+                           else math.nan),
     } | _target_columns(inputs)
 
 

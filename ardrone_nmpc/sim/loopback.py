@@ -157,6 +157,7 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
                    step_s=cfg.sim.plant.integration_step_s,
                    altitude_max_m=cfg.drone.altitude_max_m,
                    ctrl_codes=schedule.ctrl_codes(), session=schedule.held_session(),
+                   outdoor=schedule.outdoor_profiles(),
                    control_port_mode=schedule.control_port_mode())
     options.update(drone_options)
     drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,

@@ -49,7 +49,9 @@ delayed PCMD drives the loops; with the progressive flag at 0 the drone ignores 
 values (references 0) and its optical-flow position hold damps v_xy with τ = ``hover_tau_s``.
 An initial altitude above 0 starts the plant ``FLYING`` (hovering). The battery drains at
 ``battery_drain_pct_per_min`` while the motors run (TAKING_OFF, FLYING, LANDING); at 0 % the
-drone lands by itself. Take-off is refused below ``takeoff_min_battery_pct``.
+drone lands by itself. Take-off is refused below ``takeoff_min_battery_pct`` — the firmware's
+VBAT_LOW level (:attr:`AirframePlant.vbat_low`) — and while VBAT_LOW is among the injected
+:attr:`AirframePlant.fault_bits` (the state bits the firmware reports about its hardware).
 
 Sensors
 -------
@@ -81,6 +83,7 @@ import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.protocol.navdata import DroneState
 from ardrone_nmpc.sim.airframe import _airframe_rhs, airframe_rk4, airframe_rk4_many
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
@@ -365,6 +368,7 @@ class AirframePlant:
         self._state = (x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
         self._mode = FlightMode.FLYING if z > 0.0 else FlightMode.LANDED
         self._battery = float(params.battery_start_pct)
+        self.fault_bits = 0   # DroneState bits the firmware reports (injected: faults.drone_faults)
         self._steps = 0
         self._pending_s = 0.0
         self._current = _HOVER
@@ -398,6 +402,13 @@ class AirframePlant:
         return self._battery
 
     @property
+    def vbat_low(self) -> bool:
+        """The firmware's VBAT_LOW (state bit 15): battery below ``takeoff_min_battery_pct``,
+        or the bit injected in :attr:`fault_bits`."""
+        return (self._battery < self.params.takeoff_min_battery_pct
+                or bool(self.fault_bits & DroneState.VBAT_LOW))
+
+    @property
     def moving(self) -> bool:
         """The current PCMD is progressive with a non-zero value (the drone is *flying* a
         command rather than hovering; its navdata ctrl_state tells the two apart)."""
@@ -420,9 +431,8 @@ class AirframePlant:
         self._current = (*values, False) if progressive else _HOVER
 
     def takeoff(self) -> bool:
-        """LANDED → TAKING_OFF (refused below ``takeoff_min_battery_pct``). True if accepted."""
-        if (self._mode is not FlightMode.LANDED
-                or self._battery < self.params.takeoff_min_battery_pct):
+        """LANDED → TAKING_OFF (refused while :attr:`vbat_low`). True if accepted."""
+        if self._mode is not FlightMode.LANDED or self.vbat_low:
             return False
         self._mode = FlightMode.TAKING_OFF
         self._new_flight_biases()

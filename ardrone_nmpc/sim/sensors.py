@@ -28,20 +28,25 @@ from ardrone_nmpc.protocol.navdata import (
     decode_navdata,
     encode_drone_navdata,
 )
-from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT
 from ardrone_nmpc.sim.mocap_server import frame_items
 
 
-def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:
-    """The demo navdata packet the lockstep drone sends now, through the one drone encoder.
+def drone_status(plant) -> DroneStatus:
+    """What the lockstep drone reports about itself now.
 
     This drone has no AT link (the runner commands the plant directly), so the bits that
-    echo the client's commands — REF start, ACK, com watchdog, link lost — stay clear.
+    echo the client's commands — REF start, ACK, com watchdog, link lost — stay clear; its
+    VBAT_LOW and injected fault bits are the plant's.
     """
-    s = plant.navdata()
-    status = DroneStatus(s.mode.value, moving=plant.moving,
-                         battery_low=plant.battery_pct < VBAT_LOW_PCT)
-    return encode_drone_navdata(status, sequence, s, codes=codes, t_s=plant.t_s)
+    return DroneStatus(plant.mode.value, moving=plant.moving, battery_low=plant.vbat_low,
+                       faults=plant.fault_bits)
+
+
+def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:
+    """The demo navdata packet the lockstep drone sends now, through the one drone encoder
+    (its status: :func:`drone_status`)."""
+    return encode_drone_navdata(drone_status(plant), sequence, plant.navdata(), codes=codes,
+                                t_s=plant.t_s)
 
 
 class WireSensors:

@@ -17,9 +17,11 @@ from ardrone_nmpc.runtime.operator_input import OperatorAbort, OperatorRequests
 from ardrone_nmpc.runtime.session import (
     NOTICE_EVERY_S,
     TRIM_TO_TAKEOFF_S,
+    CutMotors,
     DroneLandedItself,
     FlightSession,
     PreflightError,
+    TakeoffFailed,
 )
 from ardrone_nmpc.runtime.signals import Terminated
 from tests.conftest import ManualClock as Clock
@@ -60,6 +62,8 @@ class Drone:
         self.connected = True
         self.at_bind_warning = None
         self.land_errors: list[Exception] = []
+        self.state_bits = None                # the state word navdata carries (fault bits)
+        self.bootstrap_only = False           # packets arrive, but no demo sample
 
     def connect(self, timeout_s):
         self.calls.append("connect")
@@ -134,12 +138,25 @@ class Drone:
                 return None
         yaw = self.yaw[1] if mode is FlightMode.FLYING else self.yaw[0]
         return NavdataSample(self.clock(), mode, self.battery, self.roll, self.pitch, yaw,
-                             0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000)
+                             0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000,
+                             state_bits=self.state_bits)
 
     @property
-    def navdata_rx_t_s(self):
+    def state_rx_t_s(self):  # any packet: bootstrap ones too
         t = self.clock()
         return t - 10.0 if t < self.nav_lost_until else t - self.nav_age_s(t)
+
+    @property
+    def navdata_rx_t_s(self):  # demo packets only
+        return -math.inf if self.bootstrap_only else self.state_rx_t_s
+
+    @property
+    def packet_mode(self):
+        return self.mode
+
+    @property
+    def state(self):
+        return self.state_bits
 
 
 class Mocap:
@@ -200,7 +217,9 @@ def test_enter_verifies_trims_and_takes_off_in_order_then_exit_lands():
     session, drone, events, warnings, clock = make()
     with session:
         assert session.lock.held
-        assert drone.calls == ["connect", "configure_limits", "profile:False", "read_config",
+        # the profile (control:outdoor, the hull) before the limits: outdoor selects the
+        # stored triple the limits are written into
+        assert drone.calls == ["connect", "profile:False", "configure_limits", "read_config",
                                "flat_trim", "takeoff"]
         assert drone.mode is FlightMode.FLYING
         assert drone.t_takeoff - drone.t_trim >= TRIM_TO_TAKEOFF_S
@@ -234,7 +253,7 @@ def test_a_held_value_that_differs_refuses_naming_key_written_and_held():
         session.__enter__()
     msg = str(err.value)
     assert "control:euler_angle_max" in msg and "'0.52'" in msg and "'0.2094'" in msg
-    assert "power-cycle" in msg and "more key" not in msg
+    assert "set drone.config_ids" in msg and "more key" not in msg
     assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
     assert "land" not in drone.calls  # nothing that could start the motors went out
     assert ("config_mismatch", {"key": "control:euler_angle_max", "written": "0.2094",
@@ -246,7 +265,7 @@ def test_several_differences_are_counted_and_a_missing_key_is_one():
     held = {**WRITTEN, **PROFILE, "control:control_vz_max": "2000"}
     del held["control:flying_mode"]
     session, drone, events, _, _ = make(drone_kw={"held": held})
-    with pytest.raises(PreflightError, match=r"control:control_vz_max.*and 1 more key"):
+    with pytest.raises(PreflightError, match=r"control:flying_mode.*and 1 more key"):
         session.__enter__()
     assert kinds(events).count("config_mismatch") == 2
     assert ("config_mismatch", {"key": "control:flying_mode", "written": "0", "held": None}) \
@@ -361,12 +380,13 @@ def test_an_operator_request_before_take_off_aborts_without_taking_off():
 def test_a_take_off_that_never_completes_lands_then_raises():
     session, drone, events, _, clock = make(drone_kw={"never_flies": True})
     t0 = clock()
-    with pytest.raises(RuntimeError, match=r"take-off did not complete in 10 s \(landed\)"):
+    with pytest.raises(TakeoffFailed, match=r"take-off did not complete in 10 s \(landed\): the "
+                                            r"drone never showed flying — landing"):
         session.__enter__()
     assert clock() - t0 >= FlightSession.TAKEOFF_TIMEOUT_S
     assert drone.calls.index("takeoff") < drone.calls.index("land")
     assert session.landed_cleanly is True
-    assert ("landing", {"reason": "RuntimeError"}) in events and "landed" in kinds(events)
+    assert ("landing", {"reason": "TakeoffFailed"}) in events and "landed" in kinds(events)
     assert not session.lock.held
 
 
@@ -645,9 +665,10 @@ def test_config_refusal_messages_word_for_word():
     with pytest.raises(PreflightError) as err:
         session.__enter__()
     assert str(err.value) == (
-        "the drone holds control:control_yaw = '6.11', not the '1.745' written: it ignored the "
-        "write (another multiconfig session or an outdoor profile?) — power-cycle the drone, "
-        "or set drone.config_ids to its session, then retry")
+        "the drone holds control:control_yaw = '6.11', not the '1.745' written: it did not "
+        "keep the write — a drone in another multiconfig session keeps its own limits: set "
+        "drone.config_ids to that session (`ardrone-nmpc status` shows its ids and what it "
+        "holds), then retry")
     session, *_ = make(drone_kw={"read_error": LinkError("timed out")})
     with pytest.raises(PreflightError) as err:
         session.__enter__()
@@ -748,13 +769,13 @@ def test_the_take_off_deadline_is_one_for_both_phases():
     t0 = clock()
     with pytest.raises(RuntimeError) as err:
         session.takeoff()
-    assert str(err.value) == "take-off did not complete in 10 s (taking_off)"
+    assert str(err.value).startswith("take-off did not complete in 10 s (taking_off): ")
     assert 10.0 < clock() - t0 < 10.05
     drone.nav_gone = (clock(), math.inf)
     drone._mode = FlightMode.LANDED
     with pytest.raises(RuntimeError) as err:
         session.takeoff()
-    assert str(err.value) == "take-off did not complete in 10 s (no navdata)"
+    assert str(err.value).startswith("take-off did not complete in 10 s (no navdata): ")
 
 
 def test_mocap_age_is_in_milliseconds_against_the_hover_limit():
@@ -851,8 +872,9 @@ def test_notices_come_every_3_s_exactly():
                                 setattr(drone, "nav_lost_until", -math.inf))
     session.land()
     lost = [f for k, f in events if k == "landing_navdata_lost"][0]
-    assert lost == {"message": "landing: no navdata for 10 s — still sending land; watch the "
-                               "drone (Ctrl-C twice within 2 s cuts the motors)", "age_s": 10.0}
+    assert lost == {"message": "landing: no navdata for 10 s — still sending land (for up to "
+                               "10 s without any); watch the drone (Ctrl-C twice within 2 s "
+                               "cuts the motors)", "age_s": 10.0}
 
 
 def test_the_default_warning_goes_to_stderr_and_survives_a_dead_terminal(capsys, monkeypatch):
