@@ -326,20 +326,30 @@ class SafetyConfig(Section):
         (3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
     geofence_action: Literal["land", "hover"] = Field(
         "land", description="What the drone does when its measured position leaves the geofence.")
-    max_tilt_rad: Positive = Field(
-        0.35, description="Largest roll/pitch (rad): commands are clipped to it, a measured "
-        "(navdata) tilt beyond it makes the drone hover.")
-    max_speed_mps: Positive = Field(
-        2.0, description="Largest estimated speed (m/s); beyond it the drone hovers (brakes).")
-    mocap_hold_ms: Positive = Field(
-        100.0, description="Mocap pose age (ms) above which the last command is held.")
-    mocap_hover_ms: Positive = Field(
-        250.0, description="Mocap pose age (ms) above which the drone hovers; > mocap_hold_ms.")
-    mocap_land_ms: Positive = Field(
-        1000.0, description="Mocap pose age (ms) above which the drone lands; > mocap_hover_ms.")
-    navdata_land_ms: Positive = Field(500.0, description="Navdata age (ms) above which it lands.")
+    # The limits below are bounded by the drone's physics and its firmware (docs/protocol.md
+    # §2.6, §3.1, §5): a supervisor limit beyond them would never act.
+    max_tilt_rad: float = Field(
+        0.35, gt=0, le=0.52, description="Largest roll/pitch (rad), ≤ 0.52 (the firmware's "
+        "euler_angle_max cap): commands are clipped to it, a measured (navdata) tilt beyond "
+        "it makes the drone hover.")
+    max_speed_mps: float = Field(
+        2.0, gt=0, le=5.0, description="Largest estimated speed (m/s), ≤ 5 (the AR.Drone "
+        "2.0's top speed); beyond it the drone hovers (brakes).")
+    mocap_hold_ms: float = Field(
+        100.0, gt=0, le=1000.0, description="Mocap pose age (ms) above which the last command "
+        "is held; ≤ 1000.")
+    mocap_hover_ms: float = Field(
+        250.0, gt=0, le=2000.0, description="Mocap pose age (ms) above which the drone hovers; "
+        "> mocap_hold_ms, ≤ 2000.")
+    mocap_land_ms: float = Field(
+        1000.0, gt=0, le=5000.0, description="Mocap pose age (ms) above which the drone lands; "
+        "> mocap_hover_ms, ≤ 5000.")
+    navdata_land_ms: float = Field(
+        500.0, gt=0, le=2000.0, description="Navdata age (ms) above which it lands; ≤ 2000 "
+        "(the drone itself declares the link lost after 2 s).")
     battery_floor_pct: float = Field(
-        20.0, ge=0, le=100, description="Battery level (%) below which the drone lands.")
+        20.0, ge=20, le=100, description="Battery level (%) below which the drone lands; ≥ 20 "
+        "(the firmware's own take-off threshold: a lower floor would never act).")
     start_tolerance_m: Positive = Field(
         0.5, description="Largest horizontal distance (m) between the drone's mocap position "
         "on the ground and the experiment's start; farther, take-off is refused.")

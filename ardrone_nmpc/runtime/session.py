@@ -497,4 +497,4 @@ class FlightSession:
 
 
 def _ctrl(nav) -> str:
-    return "none" if nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"
+    return "none" if nav is None or nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"
