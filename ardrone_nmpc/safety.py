@@ -14,8 +14,8 @@ condition                              action
 =====================================  ==========================================================
 drone in emergency (navdata)           ``stop`` (latched; reported)
 CUTOUT or MOTORS fault bit (navdata)   ``stop`` (latched; the runner cuts the motors)
-SOFTWARE_FAULT or VBAT_LOW bit         ``land`` (latched)
 battery ≤ ``battery_floor_pct``        ``land`` (latched)
+SOFTWARE_FAULT or VBAT_LOW bit         ``land`` (latched)
 navdata age > ``navdata_land_ms``      ``land`` (latched)
 mocap age > ``mocap_land_ms``          ``land`` (latched)
 mocap age > ``mocap_hover_ms``         ``hover``
@@ -185,11 +185,15 @@ class Supervisor:
         cfg = self.cfg
         if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
             return self._latch(Decision(Action.STOP, "emergency"))
-        for fault in drone_faults(navdata.state_bits if navdata is not None else None):
-            if fault.in_flight is not None:
-                return self._latch(Decision(fault.in_flight, fault.reason))
+        faults = drone_faults(navdata.state_bits if navdata is not None else None)
+        for fault in faults:
+            if fault.in_flight is Action.STOP:
+                return self._latch(Decision(Action.STOP, fault.reason))
         if navdata is not None and not navdata.battery_pct > cfg.battery_floor_pct:
             return self._latch(Decision(Action.LAND, "battery"))
+        for fault in faults:
+            if fault.in_flight is Action.LAND:
+                return self._latch(Decision(Action.LAND, fault.reason))
         if not navdata_age_ms <= cfg.navdata_land_ms:  # NaN/inf (never received) included
             return self._latch(Decision(Action.LAND, "navdata-lost"))
         if not mocap_age_ms <= cfg.mocap_land_ms:

@@ -15,9 +15,11 @@ watchdog), or the drone is somebody else's. Each exits 0 on success, non-zero wi
   the landing is the session's: until a packet shows the drone down, Ctrl-C twice within 2 s
   cuts the motors, and with no navdata at all it stops after
   :data:`~ardrone_nmpc.runtime.schedule.BLIND_LANDING_S` with an ``error:`` line.
-* ``emergency`` — cut the motors now; a ``fly`` holding the drone is sent SIGUSR2
-  (:data:`~ardrone_nmpc.runtime.signals.EMERGENCY_SIGNAL`), on which it cuts them too (not a
-  landing, which would fight the cut); confirmed by navdata's emergency bit.
+* ``emergency`` — cut the motors now: the edge of REF bit 8 in the first datagram, REF land
+  after it (a second edge would undo the cut). A ``fly`` holding the drone is sent SIGUSR2
+  (:data:`~ardrone_nmpc.runtime.signals.EMERGENCY_SIGNAL`): it stops flying and holds the cut
+  (its session makes an edge of its own only if navdata does not show this one), and lets go.
+  Confirmed by navdata's emergency bit; a fresh packet without it gets one more edge.
 * ``reset`` — clear an emergency on the ground.
 * ``status`` — one navdata snapshot: state bits, ctrl_state, battery, altitude, attitude and
   the limits the firmware holds (read back over the control port).
@@ -42,6 +44,7 @@ __all__ = ["register"]
 HANDOVER_S = 10.0          # how long a holding `fly` gets to land (or cut) and let go
 EMERGENCY_CONFIRM_S = 3.0  # how long navdata gets to show the cut, once it is woken
 _FRESH_S = 0.5
+_EDGE_ACTS_S = 0.2         # a packet this long after an edge shows whether it acted
 _LIMIT_KEYS = ("control:euler_angle_max", "control:control_vz_max", "control:control_yaw",
                "control:altitude_max", "control:outdoor", "control:flight_without_shell",
                "control:flying_mode", "custom:session_id", "custom:profile_id",
@@ -154,6 +157,29 @@ def _take_lock(drone: str, at_port: int):
     return lock
 
 
+def _confirm_cut(link) -> bool:
+    """Wait up to :data:`EMERGENCY_CONFIRM_S` for a fresh packet showing the emergency; one
+    that shows none (received well after the last edge) gets one more edge."""
+    from ardrone_nmpc.core.types import FlightMode
+
+    deadline = time.monotonic() + EMERGENCY_CONFIRM_S
+    recut = False
+    while True:
+        def seen(lk):  # a packet sent after the last edge had time to act
+            return lk.state_rx_t_s > max(lk.last_edge_t + _EDGE_ACTS_S,
+                                         time.monotonic() - _FRESH_S)
+        if not link.wait_for(seen, deadline - time.monotonic()):
+            return False
+        if link.packet_mode is FlightMode.EMERGENCY:
+            return True
+        if recut:
+            return False
+        recut = True
+        typer.echo(f"navdata shows the drone {link.packet_mode.value}, not cut: cutting again",
+                   err=True)
+        link.emergency()
+
+
 def _unheard(link, what: str) -> str:
     return (f"{what} sent to {link.host}:{link.at_port} ({link.sent_datagrams} datagrams) but "
             f"no navdata from {link.host}:{link.navdata_port} confirmed it — look at the drone")
@@ -166,8 +192,8 @@ def land(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDATA
     from ardrone_nmpc.runtime.session import FlightSession
     from ardrone_nmpc.runtime.signals import exit_code_of, landing_signals
 
-    pid = _holder(drone, at_port)
     with _act(drone, at_port, navdata_port, config_ids, "land") as link:
+        pid = _holder(drone, at_port)
         if pid is not None and _tell_holder(pid, signal.SIGTERM, "land (SIGTERM)"):
             _wait_for_release(drone, at_port, pid)
         link.wake_navdata()
@@ -192,18 +218,15 @@ def emergency(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NA
               config_ids: str | None = CONFIG_IDS) -> None:
     """Cut the motors now (the drone falls); a `fly` holding it cuts them too. Confirmed by
     navdata's emergency bit."""
-    from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.runtime.signals import EMERGENCY_SIGNAL
 
-    pid = _holder(drone, at_port)
     with _act(drone, at_port, navdata_port, config_ids, "emergency") as link:
+        pid = _holder(drone, at_port)
         if pid is not None and _tell_holder(pid, EMERGENCY_SIGNAL, "cut the motors too "
                                             f"({signal.Signals(EMERGENCY_SIGNAL).name})"):
             _wait_for_release(drone, at_port, pid)
         link.wake_navdata()
-        cut = link.wait_for(lambda lk: lk.packet_mode is FlightMode.EMERGENCY
-                            and time.monotonic() - lk.state_rx_t_s <= _FRESH_S,
-                            EMERGENCY_CONFIRM_S)
+        cut = _confirm_cut(link)
     if cut:
         typer.echo("motors cut (emergency); clear it on the ground with `ardrone-nmpc reset`")
         return

@@ -6,13 +6,18 @@ bring a drone down cannot wait for that — a drone left in another multiconfig 
 acknowledges a plain CONFIG, and a dead navdata stream answers nothing. :class:`OperatorLink`
 turns the order round (docs/protocol.md §2.2, §2.4):
 
-* :meth:`OperatorLink.start` sends the command — REF land, or REF emergency as a 0 → 1 edge of
-  bit 8 — in the very first datagram, from the caller's thread, before a navdata socket has
-  seen anything; a thread repeats it every ``interval_s`` (30 ms) until :meth:`close`.
+* :meth:`OperatorLink.start` sends the command — REF land, or the emergency: REF land then REF
+  emergency, a 0 → 1 edge of bit 8 — in the very first datagram, from the caller's thread,
+  before a navdata socket has seen anything; a thread repeats REF land every ``interval_s``
+  (30 ms) until :meth:`close`.
 * Every datagram is self-contained and numbered from 1: seq 1 restarts the drone's counter, so
   whatever client spoke before — a ``fly`` at seq 40 000, a crashed FreeFlight — the drone
-  takes each of them whole (REF, then ``AT*PCMD`` hover). Repeats of an emergency hold bit 8
-  high (no new edge from this link: a second one would clear the emergency on the ground).
+  takes each of them whole (REF, then ``AT*PCMD`` hover).
+* Bit 8 acts on each 0 → 1 edge: a second edge toggles the emergency (on the ground it clears
+  it). So after its edge the link holds bit 8 low again, as the repeats of REF land: no datagram
+  of its own, interleaved with another client's, can make a second edge; and a drone that
+  missed the edge (a lost datagram) lands on them instead. Another edge is made only when asked
+  (:meth:`emergency`: the caller saw a fresh packet without the cut).
 * Navdata only confirms, and only once asked (:meth:`wake_navdata`: a ``fly`` holding the drone
   keeps its stream until it lets go). Any packet counts — the state word is in every one,
   bootstrap packets included (:attr:`state`, :attr:`packet_mode`). A bootstrap packet is
@@ -107,7 +112,6 @@ class OperatorLink:
         self._at: socket.socket | None = None
         self._nav: socket.socket | None = None
         self._host_ip: str | None = None
-        self._command: str | None = None
         self._prime = False            # the next datagram carries the emergency's 0 → 1 edge
         self._waking = False
         self._last_wake = -math.inf
@@ -126,6 +130,10 @@ class OperatorLink:
         """Datagrams from the drone's address that did not decode."""
         self.bootstrap_answers = 0
         """Datagrams that carried the bootstrap answer."""
+        self.edges = 0
+        """Emergency edges sent (REF bit 8 low, then high, in one datagram)."""
+        self.last_edge_t = -math.inf
+        """Monotonic time of the last edge."""
         self.last_error: str | None = None
         """The last send error (diagnostics)."""
 
@@ -148,7 +156,6 @@ class OperatorLink:
             self.close()
             raise LinkError(f"cannot open a link to {self.host}: {exc}") from exc
         with self._lock:
-            self._command = command
             self._prime = command == "emergency"
             self._send_locked(raise_errors=True)
         self._thread = threading.Thread(target=self._loop, name="operator-link", daemon=True)
@@ -185,24 +192,20 @@ class OperatorLink:
     # ----------------------------------------------------------------------------- commands
 
     def land(self) -> None:
-        """Hold REF land from the next datagram on (what the session's landing calls)."""
-        self._hold("land")
+        """Send REF land now (it is what every datagram holds; the session's landing calls)."""
+        self._send_now(edge=False)
 
     def emergency(self) -> None:
-        """Cut the motors: REF emergency with a fresh 0 → 1 edge in the next datagram — unless
+        """Cut the motors: an edge of bit 8 in a datagram now (then REF land again) — unless
         the latest packet shows the drone in emergency already (an edge would clear it)."""
         state = self._state
-        if state is not None and DroneState.EMERGENCY in state:
-            self._hold("land")
-            return
-        self._hold("emergency")
+        self._send_now(edge=state is None or DroneState.EMERGENCY not in state)
 
-    def _hold(self, command: str) -> None:
+    def _send_now(self, edge: bool) -> None:
         with self._lock:
             if self._stop.is_set() or self._at is None:
                 raise LinkError("the operator link is closed")
-            self._prime = command == "emergency" and self._command != "emergency"
-            self._command = command
+            self._prime = edge
             self._send_locked(raise_errors=True)
 
     def wake_navdata(self) -> None:
@@ -216,10 +219,6 @@ class OperatorLink:
     def connected(self) -> bool:
         """True while the command is being sent."""
         return self._at is not None and not self._stop.is_set()
-
-    @property
-    def command(self) -> str | None:
-        return self._command
 
     @property
     def state(self) -> DroneState | None:
@@ -259,12 +258,12 @@ class OperatorLink:
     # ----------------------------------------------------------------------------- the thread
 
     def _bodies_locked(self, now: float) -> list[AtBody]:
-        if self._command == "emergency":
-            bodies: list[AtBody] = [Ref.landing(), Ref.emergency()] if self._prime \
-                else [Ref.emergency()]
+        bodies: list[AtBody] = [Ref.landing()]
+        if self._prime:               # the edge: low (the REF land above), then high
+            bodies.append(Ref.emergency())
             self._prime = False
-        else:
-            bodies = [Ref.landing()]
+            self.edges += 1
+            self.last_edge_t = now
         bodies.append(Pcmd.hover())
         state = self._state
         if state is not None and DroneState.NAVDATA_BOOTSTRAP in state \

@@ -53,9 +53,9 @@ def check_inside_geofence(cfg, trajectory: Trajectory) -> None:
         x, y, z = (float(v) for v in pos[i])
         box = " × ".join(f"[{a:g}, {b:g}]" for a, b in zip(lo, hi))
         raise ReferenceError(
-            f"reference: the {cfg.reference.kind} reference leaves the geofence at t = {t[i]:.2f} s, "
-            f"at ({x:.2f}, {y:.2f}, {z:.2f}) m outside {box} m (safety.geofence_min_m / "
-            "geofence_max_m) — bring the reference inside the fence")
+            f"reference: the {cfg.reference.kind} reference leaves the geofence at t = "
+            f"{t[i]:.2f} s, at ({x:.2f}, {y:.2f}, {z:.2f}) m outside {box} m "
+            "(safety.geofence_min_m / geofence_max_m) — bring the reference inside the fence")
 
 
 def experiment_trajectory(cfg):

@@ -149,6 +149,8 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
                 for t_exp, ev in loop.fault_events if sim else ():
                     # the loopback's injected faults, on experiment time
                     write_events(on_wall_clock(event), t_exp, [ev])
+                event("drone_link", rewakes=drone.rewakes, stale_hovers=drone.stale_hovers,
+                      bootstrap_answers=drone.bootstrap_answers)
                 event("session_end", landed=session.landed_cleanly)
             verdict = tally.verdict("completed")
             if verdict in FAILED_VERDICTS:

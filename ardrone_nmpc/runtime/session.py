@@ -117,6 +117,7 @@ class FlightSession:
         self.landed_cleanly: bool | None = None
         self._last_sigint: float | None = None
         self._cut_t: float | None = None  # when the motors were cut (None: not cut)
+        self._own_edge_due = False  # the operator made the edge: ours only if it did not act
 
     # -- entering: connect, verify, preflight, trim, take off -----------------------------
     def __enter__(self) -> "FlightSession":
@@ -211,7 +212,8 @@ class FlightSession:
 
     def trim(self) -> None:
         """FTRIM on the ground and level (checked again on fresh navdata), then wait
-        :data:`TRIM_TO_TAKEOFF_S` before anything may take off."""
+        :data:`TRIM_TO_TAKEOFF_S` before anything may take off — and no take-off on navdata
+        that went stale meanwhile."""
         nav = self._wait_navdata(1.0)
         if nav.mode is not FlightMode.LANDED:
             raise PreflightError(f"the drone left the ground state before the flat trim "
@@ -223,12 +225,13 @@ class FlightSession:
         while self.clock() < until:
             self._check_operator("before take-off")
             self.sleep(_POLL_S)
+        self._require_fresh_navdata()
 
     def takeoff(self) -> None:
         """REF take-off until navdata shows flying, then the heading check: the turn of the
         mocap heading and of navdata's yaw from the first airborne sample (the drone re-zeroes
-        its yaw as it takes off) to flying. No take-off REF goes out on navdata that is not
-        fresh; from it on, navdata must stay fresh (module doc)."""
+        its yaw as it takes off) to flying. From the take-off REF on, navdata must stay fresh
+        (module doc)."""
         self._require_fresh_navdata()
         deadline = self.clock() + self.TAKEOFF_TIMEOUT_S
         self.drone.takeoff()
@@ -320,13 +323,18 @@ class FlightSession:
                 and self.drone.packet_mode in (FlightMode.LANDED, FlightMode.EMERGENCY)):
             return True
         if self._cut_t is not None and now - self._cut_t > EMERGENCY_CONFIRM_S:
+            if self._own_edge_due:  # the operator's cut did not show: now this link cuts
+                self._own_edge_due = False
+                self._cut_t = now
+                self.drone.emergency()
+                return None
             self._log("landing_failed", error="motor cut not confirmed by navdata")
             return False
         blind_s = now - max(self.drone.state_rx_t_s, t_start)
         if blind_s > BLIND_LANDING_S:
-            state = self.drone.state
+            state, mode = self.drone.state, self.drone.packet_mode
             self._log("landing_failed", error=f"no navdata for {blind_s:.0f} s while landing",
-                      last_mode=self.drone.packet_mode.value,
+                      last_mode=None if mode is None else mode.value,
                       last_state=None if state is None else int(state),
                       last_age_s=now - self.drone.state_rx_t_s)
             return False
@@ -349,7 +357,7 @@ class FlightSession:
         ``emergency`` command's signal and a motor fault cut at once."""
         if isinstance(err, (EmergencyRequested, CutMotors)):
             if self._cut_t is None:
-                self._cut_motors(str(err))
+                self._cut_motors(str(err), edge=not isinstance(err, EmergencyRequested))
             return
         if not isinstance(err, KeyboardInterrupt) or isinstance(err, Terminated):
             return
@@ -361,11 +369,19 @@ class FlightSession:
         self._last_sigint = now
         self.warn("landing — press Ctrl-C again within 2 s to cut the motors (emergency)")
 
-    def _cut_motors(self, why: str) -> None:
+    def _cut_motors(self, why: str, edge: bool = True) -> None:
+        """Cut the motors: REF bit 8's edge (the drone link holds it). Without ``edge`` the
+        ``emergency`` command has made it already, from its own link: this one holds bit 8
+        low (a second edge, from either link, would undo the cut) and bit 9 low, and makes its
+        own edge only if navdata has not shown the cut within :data:`EMERGENCY_CONFIRM_S`."""
         self.warn(f"cutting the motors (emergency): {why}")
         self._cut_t = self.clock()
+        self._own_edge_due = not edge
         try:
-            self.drone.emergency()
+            if edge:
+                self.drone.emergency()
+            else:
+                self.drone.land()
         finally:
             self._log("emergency", reason=why)
 

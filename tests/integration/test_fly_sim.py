@@ -79,7 +79,11 @@ def test_every_terminating_signal_lands_and_exits_with_its_code(tmp_path, sig, c
     kinds = [e["kind"] for e in _events(run_dir)]
     assert "landed" in kinds, kinds
     landing = [e for e in _events(run_dir) if e["kind"] == "landing"]
-    assert landing[0]["reason"] in ("KeyboardInterrupt", "Terminated")
+    if sig == signal.SIGUSR2:   # the operator's `emergency`: the cut is held, not a landing
+        assert landing[0]["reason"] == "EmergencyRequested"
+        assert any(e["kind"] == "emergency" for e in _events(run_dir))
+    else:
+        assert landing[0]["reason"] in ("KeyboardInterrupt", "Terminated")
     assert "Traceback" not in err
     assert _run_line(out) == str(run_dir)
     read_run(run_dir)  # complete and readable

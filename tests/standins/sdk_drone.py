@@ -43,7 +43,8 @@ Options model what a real lab meets: ``ignore_config_writes`` (acknowledge, keep
 ``airborne_at_start``, ``attitude_deg``, ``battery_pct``, ``takeoff_yaw_dps`` (navdata yaw
 turning during take-off, clockwise positive as the SDK reports it), ``vbat_low_pct`` (its
 VBAT_LOW level), ``last_flown_outdoors`` (``control:outdoor`` TRUE, with an indoor profile
-other than the defaults), :attr:`SdkDrone.fault_bits` and :meth:`SdkDrone.blackout` (a Wi-Fi
+other than the defaults), ``navdata_gap_at_takeoff`` (navdata silent from a delay after the
+take-off REF, for a while), :attr:`SdkDrone.fault_bits` and :meth:`SdkDrone.blackout` (a Wi-Fi
 blackout: nothing passes either way for a while).
 """
 
@@ -104,7 +105,7 @@ class SdkDrone:
     def __init__(self, *, ignore_config_writes=False, held=None, serve_control_port=True,
                  land_by_itself_after_s=None, airborne_at_start=False, ctrl_codes="sdk",
                  attitude_deg=(0.3, -0.2), battery_pct=80, takeoff_yaw_dps=0.0,
-                 vbat_low_pct=20.0, last_flown_outdoors=False):
+                 vbat_low_pct=20.0, last_flown_outdoors=False, navdata_gap_at_takeoff=None):
         self.ignore_config_writes = ignore_config_writes
         indoor = {f"control:indoor_{k}": DEFAULT_CONFIG[f"control:{k}"] for k in LIMITS}
         self.config = dict(DEFAULT_CONFIG, **indoor, **OUTDOOR_PROFILE)
@@ -138,11 +139,14 @@ class SdkDrone:
         self.ftrims = []            # accepted FTRIM times
         self.wakeups: list = []     # times of datagrams on the navdata port
         self.at_sources: set = set()  # (address, port) AT datagrams came from
-        self.silent_until = -1.0    # no navdata before this time (a Wi-Fi hiccup)
+        self.silent_until = -1.0    # no navdata before this time (a Wi-Fi hiccup) …
+        self.silent_from = -1e18    # … from this time on
+        self.navdata_gap_at_takeoff = navdata_gap_at_takeoff  # (delay s, duration s) or None
         self.blackout_until = -1.0  # nothing passes either way before this time
         self.accepted_from: dict = {}  # source address → AT commands accepted
         self.ignored_from: dict = {}   # source address → AT commands ignored (stale seq)
         self.link_losses = 0
+        self.phases: list = []         # (time, phase) of every change
         self._stop = threading.Event()
         self._client = None
         self._ctl_clients: list = []
@@ -315,6 +319,9 @@ class SdkDrone:
     def _set(self, phase, now):
         if phase == "takeoff":
             self._takeoff_yaw0 = self.yaw_deg
+            if self.navdata_gap_at_takeoff is not None:  # the link fails as it climbs
+                delay, duration = self.navdata_gap_at_takeoff
+                self.silent_from, self.silent_until = now + delay, now + delay + duration
         if phase == "hovering":
             self.hover_since = now
         if phase == "landed" and self.phase == "landing" and self._landing_by_itself:
@@ -322,6 +329,7 @@ class SdkDrone:
         if phase == "landing":
             self._landing_by_itself = False
         self.phase, self.phase_t = phase, now
+        self.phases.append((now, phase))
 
     _landing_by_itself = False
 
@@ -371,7 +379,8 @@ class SdkDrone:
     def _send_navdata(self, now):
         with self.lock:
             client = self._client
-            if client is None or now < self.silent_until or now < self.blackout_until:
+            if client is None or self.silent_from <= now < self.silent_until \
+                    or now < self.blackout_until:
                 return
             self.last_navdata_t = now
             self._nav_seq += 1

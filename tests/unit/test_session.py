@@ -64,6 +64,7 @@ class Drone:
         self.land_errors: list[Exception] = []
         self.state_bits = None                # the state word navdata carries (fault bits)
         self.bootstrap_only = False           # packets arrive, but no demo sample
+        self.silent_since = None              # no packet at all from this time on
 
     def connect(self, timeout_s):
         self.calls.append("connect")
@@ -144,6 +145,8 @@ class Drone:
     @property
     def state_rx_t_s(self):  # any packet: bootstrap ones too
         t = self.clock()
+        if self.silent_since is not None and t >= self.silent_since:
+            return self.silent_since
         return t - 10.0 if t < self.nav_lost_until else t - self.nav_age_s(t)
 
     @property
@@ -994,3 +997,171 @@ def test_preflight_waits_for_fresh_navdata_and_refuses_a_silent_drone():
     with pytest.raises(PreflightError, match="no fresh navdata from the drone"):
         session.__enter__()
     assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
+
+
+# ----------------------------------------------------------------------------- issue 21
+# The drone's own alarms, navdata freshness from the first take-off REF to the last landing
+# REF, a landing confirmed by any packet and bounded without one, the operator's emergency.
+
+def test_preflight_refuses_a_drone_reporting_fault_bits_naming_them():
+    session, drone, events, *_ = make()
+    drone.state_bits = 1 << 22 | 1 << 21
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value).startswith("the drone reports CUTOUT (state bit 22: motor cut-out "
+                                     "detected), ULTRASOUND (state bit 21: ")
+    assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
+    assert "land" not in drone.calls and not session.lock.held
+    assert ("drone_faults", {"phase": "preflight", "bits": ["CUTOUT", "ULTRASOUND"]}) in events
+    session, drone, *_ = make()
+    drone.state_bits = 1 << 18 | 1 << 13      # calibration wanted, com lost: no fault
+    with session:
+        pass
+    assert "takeoff" in drone.calls
+
+
+def test_no_take_off_on_navdata_that_went_stale_during_the_trim_wait():
+    session, drone, events, _, clock = make()
+    drone.nav_age_s = lambda t: 0.6 if drone.calls[-1:] == ["flat_trim"] else 0.0
+    with pytest.raises(PreflightError, match=r"no fresh navdata before take-off \(the newest is "
+                                             r"600 ms old, safety.navdata_land_ms 500 ms\)"):
+        session.__enter__()
+    assert "takeoff" not in drone.calls and "land" not in drone.calls
+
+
+def test_navdata_lost_during_take_off_fails_it_in_half_a_second_and_lands():
+    session, drone, events, warnings, clock = make()
+    drone.nav_age_s = lambda t: (0.0 if drone.t_takeoff is None or t < drone.t_takeoff + 0.3
+                                 else 0.0 if t > drone.t_takeoff + 2.0
+                                 else t - (drone.t_takeoff + 0.3))
+    with pytest.raises(TakeoffFailed) as err:
+        session.__enter__()
+    assert str(err.value).startswith("take-off failed: navdata lost (none for 5")
+    assert "safety.navdata_land_ms 500 ms) — landing" in str(err.value)
+    assert drone.calls[-2:] == ["takeoff", "land"]
+    assert 0.8 <= drone.t_land - drone.t_takeoff <= 0.85   # 0.3 s flowing + 0.5 s lost
+    assert session.landed_cleanly is True                  # navdata came back: confirmed
+    assert ("landing", {"reason": "TakeoffFailed"}) in events and not session.lock.held
+
+
+@pytest.mark.parametrize("bit, cut", [(14, False), (15, False), (12, True), (22, True)])
+def test_a_fault_bit_during_take_off_ends_it_by_a_landing_or_a_cut(bit, cut):
+    session, drone, events, warnings, clock = make(drone_kw={"takeoff_s": 3.0})
+    real = session.sleep
+
+    def sleep(dt):
+        real(dt)
+        if drone.t_takeoff is not None and clock() - drone.t_takeoff > 1.0:
+            drone.state_bits = 1 << bit
+    session.sleep = sleep
+    with pytest.raises(CutMotors if cut else TakeoffFailed) as err:
+        session.__enter__()
+    assert f"(state bit {bit}: " in str(err.value)
+    assert str(err.value).endswith("cutting the motors" if cut else "landing")
+    assert ("emergency" in drone.calls) is cut and ("land" in drone.calls) is not cut
+    assert session.landed_cleanly is True
+    assert dict(events)["drone_faults"]["phase"] == "takeoff"
+
+
+def test_a_landing_is_confirmed_by_bootstrap_packets_alone():
+    session, drone, events, warnings, clock = flying(landing_s=2.0)
+    drone.bootstrap_only = True            # the stream fell back to bootstrap: no demo sample
+    t0 = clock()
+    assert session.land() is True
+    assert 2.0 <= clock() - t0 < 2.1 and kinds(events)[-1] == "landed"
+
+
+def test_a_landing_without_any_navdata_ends_after_the_blind_bound():
+    from ardrone_nmpc.runtime.schedule import BLIND_LANDING_S
+
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.state_bits = 0x1
+    drone.silent_since = clock() - 0.7     # the link died before the landing began
+    t0 = clock()
+    assert session.land() is False and session.landed_cleanly is False
+    assert BLIND_LANDING_S < clock() - t0 < BLIND_LANDING_S + 0.05  # from the first land REF
+    failed = dict(events)["landing_failed"]
+    assert failed["error"] == "no navdata for 10 s while landing"
+    assert failed["last_mode"] == "flying" and failed["last_state"] == 1
+    assert failed["last_age_s"] == pytest.approx(BLIND_LANDING_S + 0.7, abs=0.05)
+    assert "landed" not in kinds(events)
+
+
+def test_a_blind_landing_never_ends_while_packets_arrive():
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.bootstrap_only = True             # no demo sample, but the state word arrives
+    real = session.sleep
+    t0 = clock()
+    session.sleep = lambda dt: (real(dt), clock() - t0 > 60.0
+                                and setattr(drone, "never_lands", False))
+    assert session.land() is True and clock() - t0 > 60.0
+
+
+def test_a_ctrl_c_during_a_blind_landing_does_not_hang_it():
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.silent_since = clock()
+    real = session.sleep
+    presses = [clock() + 1.0]
+
+    def sleep(dt):
+        real(dt)
+        if presses and clock() >= presses[0]:
+            presses.pop()
+            raise KeyboardInterrupt
+    session.sleep = sleep
+    with pytest.raises(KeyboardInterrupt):
+        session.land()
+    assert session.landed_cleanly is False and "emergency" not in drone.calls
+
+
+@pytest.mark.parametrize("operator_cut_acts", [True, False])
+@pytest.mark.parametrize("where", ["flight", "landing"])
+def test_the_emergency_command_holds_the_cut_instead_of_landing(where, operator_cut_acts):
+    """SIGUSR2: the operator's own link made the edge; the session holds bit 8 low (REF land:
+    a second edge would undo the cut) and makes its own edge only if navdata has not shown
+    the cut within 2 s."""
+    from ardrone_nmpc.runtime.session import EMERGENCY_CONFIRM_S
+    from ardrone_nmpc.runtime.signals import EMERGENCY_SIGNAL, EmergencyRequested
+
+    session, drone, events, warnings, clock = flying(landing_s=50.0)
+    signal_in = EmergencyRequested(EMERGENCY_SIGNAL)
+
+    def operator_cuts():
+        if operator_cut_acts:
+            drone._mode = FlightMode.EMERGENCY      # the operator's edge reached the drone
+    t0 = clock()
+    if where == "flight":
+        operator_cuts()
+        assert session.__exit__(EmergencyRequested, signal_in, None) is False
+    else:
+        real = session.sleep
+        raised = []
+
+        def sleep(dt):
+            real(dt)
+            if not raised:
+                raised.append(1)
+                operator_cuts()
+                raise signal_in
+        session.sleep = sleep
+        with pytest.raises(EmergencyRequested):
+            session.land()
+    after = drone.calls[drone.calls.index("takeoff") + 1:]
+    assert ("emergency", {"reason": "the operator's `emergency` command (SIGUSR2)"}) in events
+    assert warnings[-1] == ("cutting the motors (emergency): the operator's `emergency` "
+                            "command (SIGUSR2)")
+    assert session.landed_cleanly is True and dict(events)["landed"] == {"mode": "emergency"}
+    if operator_cut_acts:
+        assert "emergency" not in after and clock() - t0 < 0.1
+    else:                                         # its own edge, once, after 2 s
+        assert after.count("emergency") == 1 and after[-1] == "emergency"
+        assert EMERGENCY_CONFIRM_S < clock() - t0 < EMERGENCY_CONFIRM_S + 0.1
+
+
+def test_a_motor_fault_in_flight_cuts_through_the_sessions_exit():
+    session, drone, events, warnings, clock = flying()
+    err = CutMotors("the supervisor cut the motors: stop-cutout")
+    assert session.__exit__(CutMotors, err, None) is False
+    assert drone.calls[-1] == "emergency" and "land" not in drone.calls[-2:]
+    assert ("landing", {"reason": "CutMotors"}) in events
+    assert session.landed_cleanly is True

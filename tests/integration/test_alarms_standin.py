@@ -1,0 +1,377 @@
+"""Issue 21 end to end against the SDK stand-in (tests/standins/sdk_drone.py: written from
+ARDroneLib's documented behaviour, importing nothing of this project), over UDP/TCP on
+127.0.0.1, through the command line in-process (typer's CliRunner):
+
+* ``land`` / ``emergency`` act first: REF in the first datagram, taken by a drone in another
+  multiconfig session, by a drone whose sequence counter another client drove high, by a
+  drone that sends no navdata at all; ``--config-ids`` on every operator command;
+* ``fly`` reads the drone's fault bits (refusals naming the bit, VBAT_LOW above the tool's
+  floor, a landing on SOFTWARE_FAULT, a cut on CUTOUT), holds the navdata freshness rule during
+  take-off, answers bootstrap after a Wi-Fi blackout, writes the outdoor key before the limits,
+  and ends a landing it cannot confirm in bounded time with its run directory complete and its
+  flight lock released.
+
+Every wait has a timeout; tests wait for states, not wall time.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import socket
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+import ardrone_nmpc.links.drone_link as drone_link_module
+import ardrone_nmpc.links.operator_link as operator_link_module
+from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.links.flight_lock import FlightLock
+from tests.standins.sdk_drone import (CUTOUT, INDOOR_PROFILE, REF_EMERGENCY, REF_TAKEOFF,
+                                      SOFTWARE_FAULT, ULTRASOUND, MocapStandIn, SdkDrone)
+
+ROOT = Path(__file__).parents[2]
+HOVER = str(ROOT / "configs" / "hover.yaml")
+IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
+SESSION = {"custom:session_id": IDS[0], "custom:profile_id": IDS[1],
+           "custom:application_id": IDS[2]}
+LAND, EMERGENCY = 290717696, 290717952
+pytestmark = pytest.mark.timeout(90)
+
+
+@pytest.fixture(autouse=True)
+def loopback_only(monkeypatch, tmp_path):
+    """The links' lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
+    and the flight locks live in this test's directory."""
+    for module, name in ((drone_link_module, "DroneLink"), (operator_link_module,
+                                                             "OperatorLink")):
+        base = getattr(module, name)
+
+        def init(self, *args, _base=base, **kwargs):
+            kwargs.setdefault("bind_host", "127.0.0.1")
+            kwargs["at_local_port"] = 0
+            _base.__init__(self, *args, **kwargs)
+        monkeypatch.setattr(module, name, type(name, (base,), {"__init__": init}))
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
+    (tmp_path / "run").mkdir()
+
+
+@pytest.fixture
+def short_blind_landing(monkeypatch):
+    """A landing with no navdata at all gives up after 1.5 s instead of 10."""
+    import ardrone_nmpc.runtime.session as session_module
+
+    monkeypatch.setattr(session_module, "BLIND_LANDING_S", 1.5)
+
+
+def wait_until(predicate, timeout_s=10.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def dead_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def operator(command, drone, *extra, navdata_port=None):
+    args = [command, "--drone", "127.0.0.1", "--at-port", str(drone.at_port),
+            "--navdata-port", str(navdata_port or drone.navdata_port), *extra]
+    return CliRunner().invoke(app, args)
+
+
+def refs(drone):
+    return [(t, args[0]) for t, _, args, _ in drone.commands("REF")]
+
+
+# ----------------------------------------------------------------------------- operator
+def test_land_reaches_a_drone_in_another_session_with_its_first_datagram():
+    with SdkDrone(airborne_at_start=True, held=SESSION) as drone:
+        result = operator("land", drone)
+        assert result.exit_code == 0, result.stderr
+        assert result.stdout.strip().endswith("landed (landed)")
+        first_t, first = refs(drone)[0]
+        assert drone.log[0][1] == "REF" and first == LAND
+        assert first_t <= drone.wakeups[0]             # acted before it asked
+        assert drone.phase == "landed"
+        # the session ignored the plain navdata_demo of the bootstrap answer: the landing was
+        # confirmed from bootstrap packets alone (state bit 0)
+        assert drone.bootstrap and not drone.ack
+
+
+def test_land_and_emergency_reach_a_drone_that_sends_no_navdata(short_blind_landing):
+    with SdkDrone(airborne_at_start=True, held=SESSION) as drone:
+        result = operator("land", drone, navdata_port=dead_port())
+        assert drone.phase == "landed"                 # the drone is down …
+        assert result.exit_code == 1                   # … but nobody could confirm it
+        assert re.fullmatch(rf"error: REF land sent to 127\.0\.0\.1:{drone.at_port} \(\d+ "
+                            r"datagrams\) but no navdata from 127\.0\.0\.1:\d+ confirmed it "
+                            r"— look at the drone", result.stderr.strip())
+    with SdkDrone(airborne_at_start=True) as drone:
+        result = operator("emergency", drone, navdata_port=dead_port())
+        assert drone.phase == "emergency" and result.exit_code == 1
+        assert "REF emergency sent to" in result.stderr and "no navdata from" in result.stderr
+        assert refs(drone)[0][1] == LAND and refs(drone)[1][1] == EMERGENCY   # the edge
+
+
+def test_emergency_wins_over_a_client_whose_sequence_is_far_ahead():
+    with SdkDrone(airborne_at_start=True) as drone:
+        other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        other.bind(("127.0.0.1", 0))
+        theirs = other.getsockname()
+        try:   # another client at seq 40 000 holding take-off
+            other.sendto(f"AT*REF=40000,{LAND + 512}\r".encode(), ("127.0.0.1", drone.at_port))
+            assert wait_until(lambda: drone.last_seq == 40000, 2.0)
+            result = operator("emergency", drone)
+        finally:
+            other.close()
+        assert result.exit_code == 0, result.stderr
+        assert "motors cut (emergency)" in result.stdout and drone.phase == "emergency"
+        ours = [a for a in drone.accepted_from if a != theirs]
+        assert ours and drone.ignored_from.get(ours[0], 0) == 0   # every datagram taken
+
+
+def test_every_operator_command_takes_config_ids():
+    with SdkDrone(held=SESSION, attitude_deg=(0.0, 0.0)) as drone:
+        # status connects with the handshake: without the ids the session ignores it …
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        assert result.exit_code == 1 and "no ACK" in result.stderr
+        # … with them it is answered, and says what the drone holds
+        result = operator("status", drone, "--control-port", str(drone.control_port),
+                          "--config-ids", ",".join(IDS))
+        assert result.exit_code == 0, result.stderr
+        assert f"custom:session_id            {IDS[0]}" in result.stdout
+        assert "faults     none" in result.stdout
+        for command in ("land", "emergency", "reset"):
+            result = operator(command, drone, "--config-ids", "nothex,0,0")
+            assert result.exit_code == 2 and len(result.stderr.strip().splitlines()) == 1
+            assert result.stderr.startswith("error: --config-ids: ")
+
+
+def test_status_names_the_fault_bits():
+    with SdkDrone(battery_pct=25, vbat_low_pct=30) as drone:
+        drone.fault_bits = ULTRASOUND
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        assert result.exit_code == 0, result.stderr
+        faults = next(line for line in result.stdout.splitlines() if line.startswith("faults"))
+        assert faults == ("faults     VBAT_LOW (state bit 15: battery too low for the "
+                          "firmware), ULTRASOUND (state bit 21: ultrasound sensor deaf)")
+
+
+# ----------------------------------------------------------------------------- fly
+def fly(tmp_path, drone, *sets, duration_s=3.0):
+    from ardrone_nmpc.links.udp import open_udp
+
+    probe = open_udp("127.0.0.1", 0, timeout_s=None)
+    mocap_port = probe.getsockname()[1]
+    probe.close()
+    alt = {"hovering": 1.0, "takeoff": 0.5, "landing": 0.3}
+    stream = MocapStandIn(mocap_port, lambda: ((0.0, 0.0, alt.get(drone.phase, 0.0)),
+                                               drone.true_psi_rad))
+    args = ["fly", HOVER, "--no-dashboard", "--drone", "127.0.0.1", "--at-port",
+            str(drone.at_port), "--navdata-port", str(drone.navdata_port), "--mocap-port",
+            str(mocap_port), "--log-dir", str(tmp_path / "logs"), "--duration-s",
+            str(duration_s), "--set", "sim.settle_s=0.5", "--set", "mocap.bind_host=127.0.0.1",
+            "--set", f"drone.control_port={drone.control_port}"]
+    for s in sets:
+        args += ["--set", s]
+    with stream:
+        t0 = time.monotonic()
+        result = CliRunner().invoke(app, args)
+        result.took_s = time.monotonic() - t0
+    runs = [line[len("run: "):] for line in result.stdout.splitlines()
+            if line.startswith("run: ")]
+    return result, (Path(runs[-1]) if runs else None)
+
+
+def events(run: Path) -> list[dict]:
+    return [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+
+
+def assert_ended_cleanly(result, run, drone):
+    """An ``error:`` line saying why (after the session's own notices, if any), no
+    traceback, a complete run directory, the flight lock free."""
+    assert "Traceback" not in result.stderr
+    assert any(line.startswith("error: ") for line in result.stderr.splitlines())
+    assert (run / "summary.csv").read_text().startswith("axis,metric,value,unit")
+    assert events(run)[-1]["kind"] in ("session_end", "verdict")
+    assert FlightLock("127.0.0.1", drone.at_port).holder() is None
+
+
+@pytest.mark.parametrize("options, bit, name", [
+    ({}, CUTOUT | ULTRASOUND, "CUTOUT (state bit 22"),
+    ({"battery_pct": 25, "vbat_low_pct": 30}, 0, "VBAT_LOW (state bit 15"),  # above our 20 %
+])
+def test_fly_refuses_a_drone_that_reports_a_fault_bit(tmp_path, options, bit, name):
+    with SdkDrone(**options) as drone:
+        drone.fault_bits = bit
+        result, run = fly(tmp_path, drone)
+        assert result.exit_code == 1
+        assert result.stderr.startswith(f"error: the drone reports {name}")
+        assert [a for _, a in refs(drone)] == [] and drone.takeoffs == 0
+        assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("bit, mode, phase", [(SOFTWARE_FAULT, "land-software-fault", "landed"),
+                                              (CUTOUT, "stop-cutout", "emergency")])
+def test_a_fault_bit_in_flight_lands_or_cuts(tmp_path, bit, mode, phase):
+    with SdkDrone(land_by_itself_after_s=None) as drone:
+        import threading
+
+        def raise_bit():
+            if wait_until(lambda: drone.phase == "hovering", 20.0):
+                time.sleep(1.0)
+                drone.fault_bits = bit
+        threading.Thread(target=raise_bit, daemon=True).start()
+        result, run = fly(tmp_path, drone, duration_s=15.0)
+        assert result.exit_code == 1 and mode in result.stderr, result.stderr
+        assert drone.phase == phase
+        if phase == "emergency":   # cut by the tool: an edge of bit 8, no take-off since
+            assert any(a & REF_EMERGENCY for _, a in refs(drone))
+        modes = [e for e in events(run) if e["kind"] == "mode"]
+        assert modes[-1]["mode"] == mode
+        assert_ended_cleanly(result, run, drone)
+
+
+def test_navdata_lost_during_take_off_fails_it_in_one_line_and_lands(tmp_path):
+    with SdkDrone(navdata_gap_at_takeoff=(0.5, 2.0)) as drone:
+        result, run = fly(tmp_path, drone, duration_s=10.0)
+        assert result.exit_code == 1
+        assert result.stderr.startswith("error: take-off failed: navdata lost (none for ")
+        takeoff = next(t for t, a in refs(drone) if a & REF_TAKEOFF)
+        first_land = next(t for t, a in refs(drone) if t > takeoff and not a & REF_TAKEOFF)
+        assert first_land - takeoff < 1.5                  # 0.5 s flowing + 0.5 s lost
+        assert wait_until(lambda: drone.phase == "landed", 5.0)
+        assert_ended_cleanly(result, run, drone)
+
+
+def test_a_blackout_is_answered_and_the_flight_ends_landed(tmp_path):
+    """A 3 s Wi-Fi blackout: the supervisor lands (navdata lost), the drone comes back in
+    bootstrap, the link re-writes navdata_demo, and the landing is confirmed."""
+    with SdkDrone() as drone:
+        import threading
+
+        def blackout():
+            if wait_until(lambda: drone.phase == "hovering", 20.0):
+                time.sleep(1.0)
+                drone.blackout(3.0)
+        threading.Thread(target=blackout, daemon=True).start()
+        result, run = fly(tmp_path, drone, duration_s=20.0)
+        assert result.exit_code == 1 and "navdata silent" in result.stderr, result.stderr
+        assert drone.link_losses == 1 and drone.phase == "landed"
+        after = [args for t, name, args, _ in drone.log
+                 if name == "CONFIG" and t > drone.blackout_until]
+        assert ["general:navdata_demo", "TRUE"] in after      # bootstrap answered
+        link = next(e for e in events(run) if e["kind"] == "drone_link")
+        assert link["bootstrap_answers"] >= 1
+        assert next(e for e in events(run) if e["kind"] == "session_end")["landed"] is True
+        assert result.took_s < 40.0
+        assert_ended_cleanly(result, run, drone)
+
+
+def test_a_landing_nobody_can_confirm_ends_in_bounded_time(tmp_path, short_blind_landing):
+    with SdkDrone() as drone:
+        import threading
+
+        def silence():
+            if wait_until(lambda: drone.phase == "hovering", 20.0):
+                time.sleep(1.0)
+                drone.silent_from, drone.silent_until = time.monotonic(), float("inf")
+        threading.Thread(target=silence, daemon=True).start()
+        result, run = fly(tmp_path, drone, duration_s=20.0)
+        assert result.exit_code == 1
+        lines = result.stderr.strip().splitlines()
+        assert lines[0].startswith("error: navdata silent for more than 500 ms")
+        assert lines[-1] == "error: landing not confirmed by navdata — check the drone"
+        failed = next(e for e in events(run) if e["kind"] == "landing_failed")
+        assert failed["last_mode"] == "flying" and failed["error"].startswith("no navdata for")
+        assert result.took_s < 20.0                       # not the 20 s flight, no hang
+        assert drone.phase == "landed"                    # the REF land still got there
+        assert_ended_cleanly(result, run, drone)
+
+
+def test_a_drone_last_flown_outdoors_keeps_its_outdoor_profile(tmp_path):
+    with SdkDrone(last_flown_outdoors=True) as drone:
+        assert drone.config["control:euler_angle_max"] == "0.3491"
+        result, run = fly(tmp_path, drone, duration_s=1.0)
+        assert result.exit_code == 0, result.stderr
+        configs = [args[0] for _, _, args, _ in drone.commands("CONFIG")]
+        assert configs.index("control:outdoor") < configs.index("control:euler_angle_max")
+        assert drone.config["control:outdoor_euler_angle_max"] == "0.3491"  # untouched
+        assert drone.config["control:indoor_euler_angle_max"] == "0.2094"
+        assert INDOOR_PROFILE["control:indoor_euler_angle_max"] == "0.25"
+
+
+# ----------------------------------------------------------------------------- two clients
+def start_fly(tmp_path, drone, mocap_port, duration_s=30.0):
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, XDG_RUNTIME_DIR=str(tmp_path / "run"))
+    return subprocess.Popen(
+        [sys.executable, "-m", "ardrone_nmpc.cli.app", "fly", HOVER, "--no-dashboard",
+         "--drone", "127.0.0.1", "--at-port", str(drone.at_port), "--navdata-port",
+         str(drone.navdata_port), "--mocap-port", str(mocap_port), "--log-dir",
+         str(tmp_path / "logs"), "--duration-s", str(duration_s), "--set", "sim.settle_s=0.5",
+         "--set", "mocap.bind_host=127.0.0.1", "--set",
+         f"drone.control_port={drone.control_port}"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+
+
+@pytest.mark.timeout(150)
+def test_emergency_cuts_a_drone_a_running_fly_holds_and_that_fly_cuts_too(tmp_path):
+    """A second AT client (the operator's) against a ``fly`` in full flight: the drone takes
+    the operator's cut at once, the ``fly`` cuts too (SIGUSR2) instead of landing, and neither
+    ever sends take-off again."""
+    from ardrone_nmpc.links.udp import open_udp
+
+    probe = open_udp("127.0.0.1", 0, timeout_s=None)
+    mocap_port = probe.getsockname()[1]
+    probe.close()
+    with SdkDrone() as drone:
+        alt = {"hovering": 1.0, "takeoff": 0.5, "landing": 0.3}
+        with MocapStandIn(mocap_port, lambda: ((0.0, 0.0, alt.get(drone.phase, 0.0)),
+                                               drone.true_psi_rad)):
+            proc = start_fly(tmp_path, drone, mocap_port)
+            try:
+                assert wait_until(lambda: drone.phase == "hovering", 90.0), \
+                    proc.stderr.read() if proc.poll() is not None else "not flying"
+                assert wait_until(lambda: FlightLock("127.0.0.1", drone.at_port).holder()
+                                  == proc.pid, 10.0)
+                time.sleep(1.0)                           # in the loop, well after take-off
+                t0 = time.monotonic()
+                result = operator("emergency", drone)
+                out, err = proc.communicate(timeout=60)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.communicate()
+    assert result.exit_code == 0, result.stderr
+    assert "told it to cut the motors too (SIGUSR2)" in result.stderr
+    # one cut, from the operator's first datagram (a priming REF land, then the edge), never
+    # undone by the two clients' REFs
+    i_cut = next(i for i, (_, phase) in enumerate(drone.phases) if phase == "emergency")
+    t_cut = drone.phases[i_cut][0]
+    assert drone.phases[i_cut:] == [(t_cut, "emergency")]
+    assert drone.phase == "emergency" and t_cut > t0
+    assert proc.returncode == 140, err
+    assert "Traceback" not in err
+    run = Path([line for line in out.splitlines() if line.startswith("run: ")][-1][5:])
+    kinds = [e["kind"] for e in events(run)]
+    cut = next(e for e in events(run) if e["kind"] == "emergency")
+    assert cut["reason"] == "the operator's `emergency` command (SIGUSR2)"
+    assert next(e for e in events(run) if e["kind"] == "landing")["reason"] == \
+        "EmergencyRequested"
+    assert "landed" in kinds and (run / "summary.csv").exists()
+    # the fly's take-off level still in flight while it handled the signal, then none
+    assert all(t - t_cut < 0.1 for t, a in refs(drone) if t > t_cut and a & REF_TAKEOFF)

@@ -1,0 +1,143 @@
+"""The operator's link (ardrone_nmpc/links/operator_link.py) byte by byte against two bare UDP
+sockets on 127.0.0.1 playing the drone: the command in the first datagram, every datagram
+numbered from 1 (docs/protocol.md §2.2), the REF values of §2.4 (land 290717696, emergency
+290717952), navdata only once asked, bootstrap packets answered as ARDroneLib does. Expected
+bytes are typed by hand; navdata packets are packed here from the documented layout (§4.1).
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import time
+
+import pytest
+
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.links.operator_link import OperatorLink
+
+pytestmark = pytest.mark.timeout(30)
+IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
+FLY, ACK, BOOTSTRAP, EMERGENCY = 1 << 0, 1 << 6, 1 << 11, 1 << 31
+
+
+def packet(state: int, seq: int = 1) -> bytes:
+    """A bootstrap-style packet: the header, then only the checksum option."""
+    body = struct.pack("<IIIi", 0x55667788, state, seq, 0)
+    return body + struct.pack("<HHI", 0xFFFF, 8, sum(body) & 0xFFFFFFFF)
+
+
+class Drone:
+    """The drone's two UDP ports; it records what arrives and answers wake-ups on demand."""
+
+    def __init__(self):
+        self.at = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.nav = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for s in (self.at, self.nav):
+            s.bind(("127.0.0.1", 0))
+            s.settimeout(2.0)
+
+    def link(self, **kw) -> OperatorLink:
+        return OperatorLink("127.0.0.1", at_port=self.at.getsockname()[1],
+                            navdata_port=self.nav.getsockname()[1], bind_host="127.0.0.1",
+                            at_local_port=0, **kw)
+
+    def datagrams(self, n: int) -> list[bytes]:
+        return [self.at.recvfrom(4096)[0] for _ in range(n)]
+
+    def close(self):
+        self.at.close()
+        self.nav.close()
+
+
+@pytest.fixture
+def drone():
+    d = Drone()
+    yield d
+    d.close()
+
+
+def test_land_goes_out_in_the_first_datagram_and_every_one_is_whole(drone):
+    with drone.link() as link:
+        t0 = time.monotonic()
+        link.start("land")
+        first = drone.at.recvfrom(4096)[0]
+        assert first == b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r"
+        assert drone.datagrams(5) == [first] * 5            # repeated, numbered from 1 again
+        drone.nav.settimeout(0.2)
+        with pytest.raises(socket.timeout):                  # navdata: not asked yet
+            drone.nav.recvfrom(64)
+        assert time.monotonic() - t0 < 1.0 and link.packets == 0
+
+
+def test_emergency_makes_its_edge_once_then_holds_bit_8_low(drone):
+    """One edge: a second one, from any client's REFs interleaved, would undo the cut."""
+    with drone.link() as link:
+        link.start("emergency")
+        first, *repeats = drone.datagrams(4)
+        assert first == (b"AT*REF=1,290717696\rAT*REF=2,290717952\r"
+                         b"AT*PCMD=3,0,0,0,0,0\r")
+        assert repeats == [b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r"] * 3
+        assert link.edges == 1
+        link.emergency()                                     # asked again: a new edge
+        assert drone.datagrams(1)[0] == (b"AT*REF=1,290717696\rAT*REF=2,290717952\r"
+                                         b"AT*PCMD=3,0,0,0,0,0\r")
+        assert link.edges == 2 and drone.datagrams(1)[0].count(b"AT*REF") == 1
+
+
+def test_navdata_is_woken_once_asked_and_any_packet_confirms(drone):
+    with drone.link() as link:
+        link.start("land")
+        link.wake_navdata()
+        wake, client = drone.nav.recvfrom(64)
+        assert wake == b"\x01\x00\x00\x00"
+        assert link.packet_mode is None and link.state is None
+        drone.nav.sendto(packet(FLY | BOOTSTRAP), client)
+        assert link.wait_for(lambda lk: lk.packets == 1, 2.0)
+        assert link.packet_mode is FlightMode.FLYING and link.navdata is None
+        drone.nav.sendto(packet(BOOTSTRAP, seq=2), client)   # touched down: bit 0 clear
+        assert link.wait_for(lambda lk: lk.packet_mode is FlightMode.LANDED, 2.0)
+        assert time.monotonic() - link.state_rx_t_s < 1.0
+        drone.nav.sendto(b"\x88\x77\x66\x55garbage", client)
+        assert link.wait_for(lambda lk: lk.malformed == 1, 2.0)
+
+
+def test_bootstrap_is_answered_with_the_session_ids_and_an_ack_cleared(drone):
+    with drone.link(config_ids=IDS) as link:
+        link.start("land")
+        link.wake_navdata()
+        _, client = drone.nav.recvfrom(64)
+        drone.nav.sendto(packet(BOOTSTRAP | FLY), client)
+        assert link.wait_for(lambda lk: lk.packets == 1, 2.0)
+        answer = next(d for d in drone.datagrams(10) if b"CONFIG" in d)
+        assert answer == (b'AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r'
+                          b'AT*CONFIG_IDS=3,"d2e081a3","be27e2e4","d87f7e0c"\r'
+                          b'AT*CONFIG=4,"general:navdata_demo","TRUE"\r')
+        drone.nav.sendto(packet(FLY | ACK, seq=2), client)    # demo now, ACK raised
+        assert link.wait_for(lambda lk: lk.packets == 2, 2.0)
+        assert any(d.endswith(b"AT*CTRL=3,5,0\r") for d in drone.datagrams(5))
+        assert link.bootstrap_answers == 1
+
+
+def test_no_edge_is_sent_to_a_drone_already_in_emergency(drone):
+    with drone.link() as link:
+        link.start("land")
+        link.wake_navdata()
+        _, client = drone.nav.recvfrom(64)
+        drone.nav.sendto(packet(EMERGENCY), client)
+        assert link.wait_for(lambda lk: lk.packet_mode is FlightMode.EMERGENCY, 2.0)
+        link.emergency()                        # on the ground an edge would clear it
+        assert all(b"290717952" not in d for d in drone.datagrams(5))
+
+
+def test_arguments_are_checked_before_anything_is_sent(drone):
+    with pytest.raises(ValueError, match="config ids must be 8 hex digits"):
+        drone.link(config_ids=("xyz", "0", "0"))
+    with pytest.raises(ValueError, match="interval_s"):
+        drone.link(interval_s=0.5)
+    link = drone.link()
+    with pytest.raises(ValueError, match="command must be one of"):
+        link.start("takeoff")
+    link.close()
+    with pytest.raises(Exception, match="started already|closed"):
+        link.start("land")
