@@ -5,10 +5,12 @@ run_flight`; this module shows its figures while it flies (on a terminal) and de
 command ends. Whatever happens, the landing outcome and the run directory are printed:
 
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
-* a flight error (link lost, supervisor landing, emergency, pre-flight refusal): its
+* a flight error (link lost, supervisor landing or cut, emergency, pre-flight refusal, a
+  take-off that failed, a flight that ended without doing its job — a failed verdict): its
   ``error:`` line, exit 1;
-* Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1/2, PIPE): exit
-  128 + its number (the session has landed in every case);
+* Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1, PIPE): exit
+  128 + its number (the session has landed in every case); USR2 — the operator's
+  ``emergency`` — exit 140, the motors cut;
 * navdata never confirmed the landing: ``error: landing not confirmed by navdata — check
   the drone`` in every case, and at least exit 1.
 """
