@@ -157,6 +157,57 @@ def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
         state_bits=int(packet.state))
 
 
+class PacketReadings:
+    """What a link keeps of the drone's newest navdata packets — the state word of any packet
+    (bootstrap ones included), the flight mode it shows, and the newest demo sample — each with
+    its receipt time. A mixin: the link calls :meth:`_init_readings` in its constructor and
+    :meth:`_note_packet` under its lock for every packet it accepts. This is what a landing
+    reads (:meth:`~ardrone_nmpc.runtime.session.FlightSession.land`)."""
+
+    def _init_readings(self) -> None:
+        self._state: DroneState | None = None
+        self._state_rx_t_s = -math.inf
+        self._packet_mode: FlightMode | None = None
+        self._navdata: NavdataSample | None = None
+        self._navdata_rx_t_s = -math.inf
+
+    def _note_packet(self, packet: Navdata, t_s: float) -> None:
+        major = packet.demo.ctrl_major if packet.demo is not None else None
+        self._state = packet.state
+        self._state_rx_t_s = t_s
+        self._packet_mode = flight_mode_of(packet.state, major)
+        sample = navdata_sample_of(packet, t_s)
+        if sample is not None:
+            self._navdata, self._navdata_rx_t_s = sample, t_s
+
+    @property
+    def navdata(self) -> NavdataSample | None:
+        """The latest demo navdata sample (None before the first)."""
+        return self._navdata
+
+    @property
+    def navdata_rx_t_s(self) -> float:
+        """Receipt time (link clock) of :attr:`navdata`; −inf before the first."""
+        return self._navdata_rx_t_s
+
+    @property
+    def state(self) -> DroneState | None:
+        """State bits of the latest accepted navdata packet (bootstrap packets included)."""
+        return self._state
+
+    @property
+    def state_rx_t_s(self) -> float:
+        """Receipt time (link clock) of :attr:`state`: the latest accepted packet of any kind;
+        −inf before the first."""
+        return self._state_rx_t_s
+
+    @property
+    def packet_mode(self) -> FlightMode | None:
+        """The flight mode the latest accepted packet shows (:func:`flight_mode_of`; a
+        bootstrap packet has no ctrl_state, so state bit 0 alone decides); None before one."""
+        return self._packet_mode
+
+
 def _check_frac(name: str, v: float) -> float:
     if isinstance(v, bool):
         raise TypeError(f"{name} must be a number, got bool")
@@ -178,7 +229,7 @@ def _check_config_id(v: str) -> str:
 # ----------------------------------------------------------------------------- the link
 
 
-class DroneLink(FlightCommands, ConfigHandshake):
+class DroneLink(FlightCommands, ConfigHandshake, PacketReadings):
     """AT commands out (UDP ``at_port``), navdata in (UDP ``navdata_port``) — see the module doc.
 
     Parameters
@@ -269,11 +320,7 @@ class DroneLink(FlightCommands, ConfigHandshake):
         # navdata side (guarded by _nav_cond)
         self._nav_cond = threading.Condition()
         self._nav_index = 0                   # accepted packets so far
-        self._state: DroneState | None = None
-        self._navdata: NavdataSample | None = None
-        self._navdata_rx_t_s = -math.inf
-        self._state_rx_t_s = -math.inf
-        self._packet_mode: FlightMode | None = None
+        self._init_readings()
         self._bootstrap_thread: threading.Thread | None = None
         self._bootstrap_answers = 0
         self._last_nav_mono = -math.inf
@@ -398,33 +445,6 @@ class DroneLink(FlightCommands, ConfigHandshake):
         return r
 
     # ----------------------------------------------------------------------------- readings
-
-    @property
-    def navdata(self) -> NavdataSample | None:
-        """The latest demo navdata sample (None before the first)."""
-        return self._navdata
-
-    @property
-    def navdata_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`navdata`; −inf before the first."""
-        return self._navdata_rx_t_s
-
-    @property
-    def state(self) -> DroneState | None:
-        """State bits of the latest accepted navdata packet (bootstrap packets included)."""
-        return self._state
-
-    @property
-    def state_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`state`: the latest accepted packet of any kind;
-        −inf before the first."""
-        return self._state_rx_t_s
-
-    @property
-    def packet_mode(self) -> FlightMode | None:
-        """The flight mode the latest accepted packet shows (:func:`flight_mode_of`; a
-        bootstrap packet has no ctrl_state, so state bit 0 alone decides); None before one."""
-        return self._packet_mode
 
     @property
     def bootstrap_answers(self) -> int:
@@ -640,16 +660,9 @@ class DroneLink(FlightCommands, ConfigHandshake):
                 stats.accept_sequence(packet.sequence)
             else:
                 return
-        sample = navdata_sample_of(packet, t_s)
-        major = packet.demo.ctrl_major if packet.demo is not None else None
         with self._nav_cond:
-            self._state = state
-            self._state_rx_t_s = t_s
-            self._packet_mode = flight_mode_of(state, major)
+            self._note_packet(packet, t_s)
             self._nav_index += 1
-            if sample is not None:
-                self._navdata = sample
-                self._navdata_rx_t_s = t_s
             self._nav_cond.notify_all()
         stats.record_packet(t_s)
         self._watch_takeoff(state, packet)

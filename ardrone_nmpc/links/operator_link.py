@@ -26,9 +26,9 @@ turns the order round (docs/protocol.md §2.2, §2.4):
   never waited for; a raised ACK bit is cleared with ``AT*CTRL 5``.
 
 It offers what :meth:`~ardrone_nmpc.runtime.session.FlightSession.land` reads of a link
-(``land``, ``emergency``, ``connected``, ``navdata``, ``state``, ``state_rx_t_s``,
-``packet_mode``), so the operator's landing is the session's landing. Closing never sends
-anything more.
+(``land``, ``emergency``, ``connected`` and the
+:class:`~ardrone_nmpc.links.drone_link.PacketReadings`), so the operator's landing is the
+session's landing. Closing never sends anything more.
 """
 
 from __future__ import annotations
@@ -40,13 +40,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ardrone_nmpc.core.types import FlightMode, NavdataSample
-from ardrone_nmpc.links.drone_link import (
-    LinkError,
-    _check_config_id,
-    flight_mode_of,
-    navdata_sample_of,
-)
+from ardrone_nmpc.links.drone_link import LinkError, PacketReadings, _check_config_id
 from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, check_host, check_port
 from ardrone_nmpc.protocol.at import (
     AT_PORT,
@@ -74,7 +68,7 @@ BOOTSTRAP_ANSWER_EVERY_S = 0.5      # navdata_demo re-sent at most this often in
 _COMMANDS = ("land", "emergency")
 
 
-class OperatorLink:
+class OperatorLink(PacketReadings):
     """REF land / emergency first, navdata after (module doc).
 
     Parameters
@@ -117,11 +111,7 @@ class OperatorLink:
         self._last_wake = -math.inf
         self._last_rx = -math.inf      # monotonic time of the last packet (wake-up timing)
         self._last_answer = -math.inf
-        self._state: DroneState | None = None
-        self._state_rx_t_s = -math.inf
-        self._packet_mode: FlightMode | None = None
-        self._navdata: NavdataSample | None = None
-        self._navdata_rx_t_s = -math.inf
+        self._init_readings()
         self.sent_datagrams = 0
         """AT datagrams sent."""
         self.packets = 0
@@ -220,30 +210,6 @@ class OperatorLink:
         """True while the command is being sent."""
         return self._at is not None and not self._stop.is_set()
 
-    @property
-    def state(self) -> DroneState | None:
-        """The state word of the latest packet (any kind); None before one."""
-        return self._state
-
-    @property
-    def state_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`state`; −inf before a packet."""
-        return self._state_rx_t_s
-
-    @property
-    def packet_mode(self) -> FlightMode | None:
-        """The flight mode the latest packet shows (state bit 0 alone in bootstrap)."""
-        return self._packet_mode
-
-    @property
-    def navdata(self) -> NavdataSample | None:
-        """The latest demo sample (None until the drone sends demo packets)."""
-        return self._navdata
-
-    @property
-    def navdata_rx_t_s(self) -> float:
-        return self._navdata_rx_t_s
-
     def wait_for(self, predicate, timeout_s: float) -> bool:
         """Wait until ``predicate(self)`` holds (checked on every packet); False on timeout."""
         deadline = time.monotonic() + timeout_s
@@ -326,14 +292,8 @@ class OperatorLink:
         except NavdataError:
             self.malformed += 1
             return
-        major = packet.demo.ctrl_major if packet.demo is not None else None
-        sample = navdata_sample_of(packet, t_s)
         with self._lock:
             self._last_rx = time.monotonic()
             self.packets += 1
-            self._state = packet.state
-            self._state_rx_t_s = t_s
-            self._packet_mode = flight_mode_of(packet.state, major)
-            if sample is not None:
-                self._navdata, self._navdata_rx_t_s = sample, t_s
+            self._note_packet(packet, t_s)
             self._lock.notify_all()

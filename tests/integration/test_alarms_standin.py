@@ -16,7 +16,6 @@ Every wait has a timeout; tests wait for states, not wall time.
 
 from __future__ import annotations
 
-import json
 import re
 import socket
 import time
@@ -29,6 +28,9 @@ import ardrone_nmpc.links.drone_link as drone_link_module
 import ardrone_nmpc.links.operator_link as operator_link_module
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.links.flight_lock import FlightLock
+from tests.integration.test_fly_standin import events
+from tests.integration.test_fly_standin import fly as fly_standin
+from tests.integration.test_session_standin import wait_until
 from tests.standins.sdk_drone import (CUTOUT, INDOOR_PROFILE, REF_EMERGENCY, REF_TAKEOFF,
                                       SOFTWARE_FAULT, ULTRASOUND, MocapStandIn, SdkDrone)
 
@@ -64,15 +66,6 @@ def short_blind_landing(monkeypatch):
     import ardrone_nmpc.runtime.session as session_module
 
     monkeypatch.setattr(session_module, "BLIND_LANDING_S", 1.5)
-
-
-def wait_until(predicate, timeout_s=10.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return False
 
 
 def dead_port() -> int:
@@ -169,32 +162,11 @@ def test_status_names_the_fault_bits():
 
 # ----------------------------------------------------------------------------- fly
 def fly(tmp_path, drone, *sets, duration_s=3.0):
-    from ardrone_nmpc.links.udp import open_udp
-
-    probe = open_udp("127.0.0.1", 0, timeout_s=None)
-    mocap_port = probe.getsockname()[1]
-    probe.close()
-    alt = {"hovering": 1.0, "takeoff": 0.5, "landing": 0.3}
-    stream = MocapStandIn(mocap_port, lambda: ((0.0, 0.0, alt.get(drone.phase, 0.0)),
-                                               drone.true_psi_rad))
-    args = ["fly", HOVER, "--no-dashboard", "--drone", "127.0.0.1", "--at-port",
-            str(drone.at_port), "--navdata-port", str(drone.navdata_port), "--mocap-port",
-            str(mocap_port), "--log-dir", str(tmp_path / "logs"), "--duration-s",
-            str(duration_s), "--set", "sim.settle_s=0.5", "--set", "mocap.bind_host=127.0.0.1",
-            "--set", f"drone.control_port={drone.control_port}"]
-    for s in sets:
-        args += ["--set", s]
-    with stream:
-        t0 = time.monotonic()
-        result = CliRunner().invoke(app, args)
-        result.took_s = time.monotonic() - t0
-    runs = [line[len("run: "):] for line in result.stdout.splitlines()
-            if line.startswith("run: ")]
-    return result, (Path(runs[-1]) if runs else None)
-
-
-def events(run: Path) -> list[dict]:
-    return [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    """``fly`` in-process against the stand-in (test_fly_standin's), timed."""
+    t0 = time.monotonic()
+    result, run = fly_standin(tmp_path, drone, *sets, duration_s=duration_s)
+    result.took_s = time.monotonic() - t0
+    return result, run
 
 
 def assert_ended_cleanly(result, run, drone):
