@@ -142,7 +142,7 @@ def _wait_for_release(drone: str, at_port: int, pid: int) -> None:
             typer.echo(f"the flight (pid {pid}) let go of the drone", err=True)
             return
         time.sleep(0.05)
-    typer.echo(f"pid {pid} still holds the drone after {HANDOVER_S:.0f} s: confirming from "
+    typer.echo(f"pid {pid} still holds the drone after {HANDOVER_S:g} s: confirming from "
                "here", err=True)
 
 

@@ -1,163 +1,34 @@
-"""Issue 21 end to end against the SDK stand-in (tests/standins/sdk_drone.py: written from
+"""Issue 21's ``fly`` against the SDK stand-in (tests/standins/sdk_drone.py: written from
 ARDroneLib's documented behaviour, importing nothing of this project), over UDP/TCP on
-127.0.0.1, through the command line in-process (typer's CliRunner):
-
-* ``land`` / ``emergency`` act first: REF in the first datagram, taken by a drone in another
-  multiconfig session, by a drone whose sequence counter another client drove high, by a
-  drone that sends no navdata at all; ``--config-ids`` on every operator command;
-* ``fly`` reads the drone's fault bits (refusals naming the bit, VBAT_LOW above the tool's
-  floor, a landing on SOFTWARE_FAULT, a cut on CUTOUT), holds the navdata freshness rule during
-  take-off, answers bootstrap after a Wi-Fi blackout, writes the outdoor key before the limits,
-  and ends a landing it cannot confirm in bounded time with its run directory complete and its
-  flight lock released.
+127.0.0.1, through the command line: ``fly`` reads the drone's fault bits (refusals naming the
+bit, VBAT_LOW above the tool's floor, a landing on SOFTWARE_FAULT, a cut on CUTOUT), holds the
+navdata freshness rule during take-off, answers bootstrap after a Wi-Fi blackout, writes the
+outdoor key before the limits, ends a landing it cannot confirm in bounded time with its run
+directory complete and its flight lock released, and — a second AT client — an operator's
+``emergency`` cuts a drone a running ``fly`` holds, and that ``fly`` cuts too.
 
 Every wait has a timeout; tests wait for states, not wall time.
 """
 
 from __future__ import annotations
 
-import re
-import socket
 import time
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-import ardrone_nmpc.links.drone_link as drone_link_module
-import ardrone_nmpc.links.operator_link as operator_link_module
-from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.links.flight_lock import FlightLock
 from tests.integration.test_fly_standin import events
 from tests.integration.test_fly_standin import fly as fly_standin
+from tests.integration.test_operator_standin import (  # noqa: F401 - fixtures used here
+    loopback_only, operator, refs, short_blind_landing)
 from tests.integration.test_session_standin import wait_until
 from tests.standins.sdk_drone import (CUTOUT, INDOOR_PROFILE, REF_EMERGENCY, REF_TAKEOFF,
                                       SOFTWARE_FAULT, ULTRASOUND, MocapStandIn, SdkDrone)
 
 ROOT = Path(__file__).parents[2]
 HOVER = str(ROOT / "configs" / "hover.yaml")
-IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
-SESSION = {"custom:session_id": IDS[0], "custom:profile_id": IDS[1],
-           "custom:application_id": IDS[2]}
-LAND, EMERGENCY = 290717696, 290717952
 pytestmark = pytest.mark.timeout(90)
-
-
-@pytest.fixture(autouse=True)
-def loopback_only(monkeypatch, tmp_path):
-    """The links' lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
-    and the flight locks live in this test's directory."""
-    for module, name in ((drone_link_module, "DroneLink"), (operator_link_module,
-                                                             "OperatorLink")):
-        base = getattr(module, name)
-
-        def init(self, *args, _base=base, **kwargs):
-            kwargs.setdefault("bind_host", "127.0.0.1")
-            kwargs["at_local_port"] = 0
-            _base.__init__(self, *args, **kwargs)
-        monkeypatch.setattr(module, name, type(name, (base,), {"__init__": init}))
-    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
-    (tmp_path / "run").mkdir()
-
-
-@pytest.fixture
-def short_blind_landing(monkeypatch):
-    """A landing with no navdata at all gives up after 1.5 s instead of 10."""
-    import ardrone_nmpc.runtime.session as session_module
-
-    monkeypatch.setattr(session_module, "BLIND_LANDING_S", 1.5)
-
-
-def dead_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-def operator(command, drone, *extra, navdata_port=None):
-    args = [command, "--drone", "127.0.0.1", "--at-port", str(drone.at_port),
-            "--navdata-port", str(navdata_port or drone.navdata_port), *extra]
-    return CliRunner().invoke(app, args)
-
-
-def refs(drone):
-    return [(t, args[0]) for t, _, args, _ in drone.commands("REF")]
-
-
-# ----------------------------------------------------------------------------- operator
-def test_land_reaches_a_drone_in_another_session_with_its_first_datagram():
-    with SdkDrone(airborne_at_start=True, held=SESSION) as drone:
-        result = operator("land", drone)
-        assert result.exit_code == 0, result.stderr
-        assert result.stdout.strip().endswith("landed (landed)")
-        first_t, first = refs(drone)[0]
-        assert drone.log[0][1] == "REF" and first == LAND
-        assert first_t <= drone.wakeups[0]             # acted before it asked
-        assert drone.phase == "landed"
-        # the session ignored the plain navdata_demo of the bootstrap answer: the landing was
-        # confirmed from bootstrap packets alone (state bit 0)
-        assert drone.bootstrap and not drone.ack
-
-
-def test_land_and_emergency_reach_a_drone_that_sends_no_navdata(short_blind_landing):
-    with SdkDrone(airborne_at_start=True, held=SESSION) as drone:
-        result = operator("land", drone, navdata_port=dead_port())
-        assert drone.phase == "landed"                 # the drone is down …
-        assert result.exit_code == 1                   # … but nobody could confirm it
-        assert re.fullmatch(rf"error: REF land sent to 127\.0\.0\.1:{drone.at_port} \(\d+ "
-                            r"datagrams\) but no navdata from 127\.0\.0\.1:\d+ confirmed it "
-                            r"— look at the drone", result.stderr.strip())
-    with SdkDrone(airborne_at_start=True) as drone:
-        result = operator("emergency", drone, navdata_port=dead_port())
-        assert drone.phase == "emergency" and result.exit_code == 1
-        assert "REF emergency sent to" in result.stderr and "no navdata from" in result.stderr
-        assert refs(drone)[0][1] == LAND and refs(drone)[1][1] == EMERGENCY   # the edge
-
-
-def test_emergency_wins_over_a_client_whose_sequence_is_far_ahead():
-    with SdkDrone(airborne_at_start=True) as drone:
-        other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        other.bind(("127.0.0.1", 0))
-        theirs = other.getsockname()
-        try:   # another client at seq 40 000 holding take-off
-            other.sendto(f"AT*REF=40000,{LAND + 512}\r".encode(), ("127.0.0.1", drone.at_port))
-            assert wait_until(lambda: drone.last_seq == 40000, 2.0)
-            result = operator("emergency", drone)
-        finally:
-            other.close()
-        assert result.exit_code == 0, result.stderr
-        assert "motors cut (emergency)" in result.stdout and drone.phase == "emergency"
-        ours = [a for a in drone.accepted_from if a != theirs]
-        assert ours and drone.ignored_from.get(ours[0], 0) == 0   # every datagram taken
-
-
-def test_every_operator_command_takes_config_ids():
-    with SdkDrone(held=SESSION, attitude_deg=(0.0, 0.0)) as drone:
-        # status connects with the handshake: without the ids the session ignores it …
-        result = operator("status", drone, "--control-port", str(drone.control_port))
-        assert result.exit_code == 1 and "no ACK" in result.stderr
-        # … with them it is answered, and says what the drone holds
-        result = operator("status", drone, "--control-port", str(drone.control_port),
-                          "--config-ids", ",".join(IDS))
-        assert result.exit_code == 0, result.stderr
-        assert f"custom:session_id            {IDS[0]}" in result.stdout
-        assert "faults     none" in result.stdout
-        for command in ("land", "emergency", "reset"):
-            result = operator(command, drone, "--config-ids", "nothex,0,0")
-            assert result.exit_code == 2 and len(result.stderr.strip().splitlines()) == 1
-            assert result.stderr.startswith("error: --config-ids: ")
-
-
-def test_status_names_the_fault_bits():
-    with SdkDrone(battery_pct=25, vbat_low_pct=30) as drone:
-        drone.fault_bits = ULTRASOUND
-        result = operator("status", drone, "--control-port", str(drone.control_port))
-        assert result.exit_code == 0, result.stderr
-        faults = next(line for line in result.stdout.splitlines() if line.startswith("faults"))
-        assert faults == ("faults     VBAT_LOW (state bit 15: battery too low for the "
-                          "firmware), ULTRASOUND (state bit 21: ultrasound sensor deaf)")
 
 
 # ----------------------------------------------------------------------------- fly

@@ -256,3 +256,4 @@ def test_emergency_primes_the_edge_on_a_fresh_link():
         assert refs[0] & REF_TAKEOFF and not refs[0] & (1 << 8)  # hovering: bit 9 kept
         assert refs[1] & (1 << 8)
         assert math.isfinite(link.navdata.battery_pct)
+

@@ -1,0 +1,40 @@
+"""The drone link answers bootstrap after connecting, as ARDroneLib does
+(``ardrone_general_navdata.c``: on a bootstrap packet, the session id again, then
+``navdata_demo``), against the SDK stand-in (tests/standins/sdk_drone.py) over UDP on 127.0.0.1.
+A drone that lost its client — a Wi-Fi blackout — restarts its stream in bootstrap, and a link
+that only read demo packets would go blind although packets arrive.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from tests.integration.test_session_standin import IDS, link_to, wait_until
+from tests.standins.sdk_drone import SdkDrone
+
+pytestmark = pytest.mark.timeout(30)
+
+
+@pytest.mark.parametrize("ids", [None, IDS])
+def test_a_bootstrap_packet_after_connecting_is_answered_as_the_sdk_does(ids):
+    """ardrone_general_navdata.c: on a bootstrap packet, the session id again, then
+    navdata_demo — the stream is demo again, and the link never waited in the receiver."""
+    held = None if ids is None else dict(zip(("custom:session_id", "custom:profile_id",
+                                              "custom:application_id"), IDS))
+    with SdkDrone(held=held) as drone, link_to(drone, config_ids=ids) as link:
+        link.connect(timeout_s=3.0)
+        assert link.bootstrap_answers == 0
+        with drone.lock:
+            t0 = time.monotonic()
+            drone.bootstrap = True                  # the drone lost us and came back
+        assert wait_until(lambda: not drone.bootstrap, 3.0)
+        assert wait_until(lambda: time.monotonic() - link.navdata_rx_t_s < 0.2, 3.0)
+        writes = [args[:2] for t, name, args, _ in drone.log if name == "CONFIG" and t > t0]
+        keys = [k for k, _ in writes]
+        assert keys[-1] == "general:navdata_demo" and writes[-1][1] == "TRUE"
+        assert ("custom:session_id" in keys) is (ids is not None)
+        if ids is not None:
+            assert keys.index("custom:session_id") < keys.index("general:navdata_demo")
+        assert link.bootstrap_answers == 1 and link.connected
