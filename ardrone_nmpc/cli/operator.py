@@ -21,8 +21,9 @@ watchdog), or the drone is somebody else's. Each exits 0 on success, non-zero wi
   (its session makes an edge of its own only if navdata does not show this one), and lets go.
   Confirmed by navdata's emergency bit; a fresh packet without it gets one more edge.
 * ``reset`` — clear an emergency on the ground.
-* ``status`` — one navdata snapshot: state bits, ctrl_state, battery, altitude, attitude and
-  the limits the firmware holds (read back over the control port).
+* ``status`` — one navdata snapshot: state bits, the fault bits by name, ctrl_state, battery,
+  altitude, attitude, and the limits and session ids the firmware holds (read back over the
+  control port).
 
 ``land`` and ``emergency`` always go through; ``reset`` and ``status`` take the drone's flight
 lock (a running ``fly`` would lose its navdata to them) and connect with the configuration
@@ -53,13 +54,20 @@ _LIMIT_KEYS = ("control:euler_angle_max", "control:control_vz_max", "control:con
 
 def _config_ids(value: str | None) -> tuple[str, str, str] | None:
     """``--config-ids SESSION,PROFILE,APPLICATION`` (8 hex digits each)."""
+    from ardrone_nmpc.links.drone_link import check_config_id
+
     if value is None:
         return None
     ids = tuple(v.strip() for v in value.split(","))
-    if len(ids) != 3 or not all(len(v) == 8 and all(c in "0123456789abcdefABCDEF" for c in v)
-                                for v in ids):
+    try:
+        if len(ids) != 3:
+            raise ValueError("three are needed")
+        for v in ids:
+            check_config_id(v)
+    except ValueError:
         raise typer.BadParameter(f"{value!r}: three ids of 8 hex digits, "
-                                 "session,profile,application (e.g. d2e081a3,be27e2e4,d87f7e0c)")
+                                 "session,profile,application (e.g. d2e081a3,be27e2e4,d87f7e0c)"
+                                 ) from None
     return ids  # type: ignore[return-value]
 
 

@@ -101,8 +101,8 @@ from ardrone_nmpc.core.angles import wrap_angle_deg
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 __all__ = [
-    "CONTROL_PORT", "DEFAULT_HOST", "DroneAirborne", "LinkError", "DroneLink", "flight_mode_of",
-    "navdata_sample_of", "parse_config_text",
+    "CONTROL_PORT", "DEFAULT_HOST", "DroneAirborne", "LinkError", "DroneLink", "PacketReadings",
+    "check_config_id", "flight_mode_of", "navdata_sample_of", "parse_config_text",
 ]
 
 DEFAULT_HOST = "192.168.1.1"
@@ -219,7 +219,8 @@ def _check_frac(name: str, v: float) -> float:
     return v
 
 
-def _check_config_id(v: str) -> str:
+def check_config_id(v: str) -> str:
+    """A multiconfig id: 8 hex digits (ValueError otherwise)."""
     if not (isinstance(v, str) and len(v) == 8
             and all(c in "0123456789abcdefABCDEF" for c in v)):
         raise ValueError(f"config ids must be 8 hex digits, got {v!r}")
@@ -281,7 +282,7 @@ class DroneLink(FlightCommands, ConfigHandshake, PacketReadings):
         self.wake_retry_s = _check_positive("wake_retry_s", wake_retry_s)
         self.config_resend_s = _check_positive("config_resend_s", config_resend_s)
         if config_ids is not None:
-            config_ids = tuple(_check_config_id(v) for v in config_ids)
+            config_ids = tuple(check_config_id(v) for v in config_ids)
             if len(config_ids) != 3:
                 raise ValueError("config_ids must be (session, profile, application)")
         self.config_ids: tuple[str, str, str] | None = config_ids  # type: ignore[assignment]

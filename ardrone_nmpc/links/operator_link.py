@@ -40,7 +40,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ardrone_nmpc.links.drone_link import LinkError, PacketReadings, _check_config_id
+from ardrone_nmpc.links.drone_link import LinkError, PacketReadings, check_config_id
 from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, check_host, check_port
 from ardrone_nmpc.protocol.at import (
     AT_PORT,
@@ -90,7 +90,7 @@ class OperatorLink(PacketReadings):
         self.at_port = check_port("AT port", at_port)
         self.navdata_port = check_port("navdata port", navdata_port)
         if config_ids is not None:
-            config_ids = tuple(_check_config_id(v) for v in config_ids)
+            config_ids = tuple(check_config_id(v) for v in config_ids)
             if len(config_ids) != 3:
                 raise ValueError("config_ids must be (session, profile, application)")
         self.config_ids = config_ids
