@@ -6,9 +6,11 @@ Per case: a normal run directory (``<log_dir>/<case>/…``), then
 * ``outcome`` — ``completed`` (flew to the end, tracking again), ``hovered`` (ended hovering
   by policy), ``landed`` (the supervisor landed it; touch-down confirmed), ``stopped``
   (the drone itself cut its motors — the emergency fault; the tool stopped sending and
-  reported), ``refused`` (the pre-flight check refused the take-off: the run directory holds
-  its ``takeoff_refused`` event and no flight), ``crashed`` (the truth hit the ground outside
-  a landing, or an emergency nobody injected), ``exception`` (the tool raised otherwise);
+  reported — or reported a motor fault bit and the tool cut them), ``refused`` (the pre-flight
+  check refused the take-off: the run directory holds its ``takeoff_refused`` event and no
+  flight), ``crashed`` (the truth hit the ground outside a landing, or an emergency nobody
+  injected), a failed verdict (``failed-no-tracking``, ``failed-no-target``: it reached its
+  end without doing its job), ``exception`` (the tool raised otherwise);
 * ``max_dev_m`` — the largest distance between the faulted flight's true position and the
   fault-free flight's (same seed, same tick), until a landing began;
 * ``recover_s`` — for flights that went on: seconds from the fault's start until that
@@ -345,9 +347,17 @@ def render_markdown(results: list[CaseResult], *, command: str) -> str:
         "",
         "Outcome: `completed` (flew to the end), `hovered` (ended hovering by policy), "
         "`landed` (the supervisor landed it, touch-down confirmed), `stopped` (the drone cut "
-        "its motors itself — the emergency fault; nothing more is sent), `refused` (the "
-        "pre-flight check refused the take-off: the drone holds other limits, or its "
-        "configuration could not be read back; nothing took off), `crashed`, `exception`. *Max dev*: largest distance between the faulted flight's true position "
+        "its motors itself — the emergency fault; nothing more is sent — or reported a motor "
+        "fault bit, CUTOUT or MOTORS, and the tool cut them), `refused` (the pre-flight check "
+        "refused the take-off: the drone holds other limits, its configuration could not be "
+        "read back or written, or it reports a fault bit; nothing took off), `crashed`, "
+        "`failed-no-tracking` / `failed-no-target` (it reached its end without doing its "
+        "job), `exception`. The drone's own alarms (`cutout`, `motors`, `software_fault`, "
+        "`faults_at_power_on`, `vbat_low_*`), a Wi-Fi `blackout`, a session that ignores plain "
+        "CONFIG and a drone last flown outdoors are rows of their own; what only a link shows "
+        "— the bootstrap answer after a blackout, a second AT client — is tested against the "
+        "loopback drone and the SDK stand-in (tests/integration). *Max dev*: largest distance "
+        "between the faulted flight's true position "
         "and the fault-free flight's (same seed, same tick) until a landing began. *Recover*: "
         f"seconds from the fault's start until that distance stays below {RECOVERED_M:g} m "
         "(– for landings, or never). *Supervisor*: how the run ended (`completed`, or the "
