@@ -54,7 +54,7 @@ _LIMIT_KEYS = ("control:euler_angle_max", "control:control_vz_max", "control:con
 
 def _config_ids(value: str | None) -> tuple[str, str, str] | None:
     """``--config-ids SESSION,PROFILE,APPLICATION`` (8 hex digits each)."""
-    from ardrone_nmpc.links.drone_link import check_config_id
+    from ardrone_nmpc.links.drone_config import check_config_id
 
     if value is None:
         return None

@@ -68,9 +68,11 @@ from ardrone_nmpc.protocol.config_text import CONTROL_PORT
 from ardrone_nmpc.links.drone_config import (
     ConfigHandshake,
     LinkError,
+    check_config_id,
     check_positive as _check_positive,
     parse_config_text,
 )
+from ardrone_nmpc.links.readings import PacketReadings
 from ardrone_nmpc.links.udp import (
     RECV_BUFFER_BYTES,
     Clock,
@@ -157,57 +159,6 @@ def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
         state_bits=int(packet.state))
 
 
-class PacketReadings:
-    """What a link keeps of the drone's newest navdata packets — the state word of any packet
-    (bootstrap ones included), the flight mode it shows, and the newest demo sample — each with
-    its receipt time. A mixin: the link calls :meth:`_init_readings` in its constructor and
-    :meth:`_note_packet` under its lock for every packet it accepts. This is what a landing
-    reads (:meth:`~ardrone_nmpc.runtime.session.FlightSession.land`)."""
-
-    def _init_readings(self) -> None:
-        self._state: DroneState | None = None
-        self._state_rx_t_s = -math.inf
-        self._packet_mode: FlightMode | None = None
-        self._navdata: NavdataSample | None = None
-        self._navdata_rx_t_s = -math.inf
-
-    def _note_packet(self, packet: Navdata, t_s: float) -> None:
-        major = packet.demo.ctrl_major if packet.demo is not None else None
-        self._state = packet.state
-        self._state_rx_t_s = t_s
-        self._packet_mode = flight_mode_of(packet.state, major)
-        sample = navdata_sample_of(packet, t_s)
-        if sample is not None:
-            self._navdata, self._navdata_rx_t_s = sample, t_s
-
-    @property
-    def navdata(self) -> NavdataSample | None:
-        """The latest demo navdata sample (None before the first)."""
-        return self._navdata
-
-    @property
-    def navdata_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`navdata`; −inf before the first."""
-        return self._navdata_rx_t_s
-
-    @property
-    def state(self) -> DroneState | None:
-        """State bits of the latest accepted navdata packet (bootstrap packets included)."""
-        return self._state
-
-    @property
-    def state_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`state`: the latest accepted packet of any kind;
-        −inf before the first."""
-        return self._state_rx_t_s
-
-    @property
-    def packet_mode(self) -> FlightMode | None:
-        """The flight mode the latest accepted packet shows (:func:`flight_mode_of`; a
-        bootstrap packet has no ctrl_state, so state bit 0 alone decides); None before one."""
-        return self._packet_mode
-
-
 def _check_frac(name: str, v: float) -> float:
     if isinstance(v, bool):
         raise TypeError(f"{name} must be a number, got bool")
@@ -216,14 +167,6 @@ def _check_frac(name: str, v: float) -> float:
         raise ValueError(f"{name} must be finite, got {v!r}")
     if not -1.0 <= v <= 1.0:
         raise ValueError(f"{name} must be in [-1, 1], got {v!r}")
-    return v
-
-
-def check_config_id(v: str) -> str:
-    """A multiconfig id: 8 hex digits (ValueError otherwise)."""
-    if not (isinstance(v, str) and len(v) == 8
-            and all(c in "0123456789abcdefABCDEF" for c in v)):
-        raise ValueError(f"config ids must be 8 hex digits, got {v!r}")
     return v
 
 
@@ -661,8 +604,10 @@ class DroneLink(FlightCommands, ConfigHandshake, PacketReadings):
                 stats.accept_sequence(packet.sequence)
             else:
                 return
+        major = packet.demo.ctrl_major if packet.demo is not None else None
+        mode, sample = flight_mode_of(state, major), navdata_sample_of(packet, t_s)
         with self._nav_cond:
-            self._note_packet(packet, t_s)
+            self._note_packet(state, mode, sample, t_s)
             self._nav_index += 1
             self._nav_cond.notify_all()
         stats.record_packet(t_s)

@@ -27,8 +27,9 @@ turns the order round (docs/protocol.md §2.2, §2.4):
 
 It offers what :meth:`~ardrone_nmpc.runtime.session.FlightSession.land` reads of a link
 (``land``, ``emergency``, ``connected`` and the
-:class:`~ardrone_nmpc.links.drone_link.PacketReadings`), so the operator's landing is the
-session's landing. Closing never sends anything more.
+:class:`~ardrone_nmpc.links.readings.PacketReadings`), so the operator's landing is the
+session's landing. Closing never sends anything more. Nothing it imports loads the numerical
+stack: the first datagram goes out as soon as the command line is parsed.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ardrone_nmpc.links.drone_link import LinkError, PacketReadings, check_config_id
+from ardrone_nmpc.links.drone_config import LinkError, check_config_id
+from ardrone_nmpc.links.readings import PacketReadings
 from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, check_host, check_port
 from ardrone_nmpc.protocol.at import (
     AT_PORT,
@@ -286,14 +288,20 @@ class OperatorLink(PacketReadings):
                     return
 
     def _on_packet(self, data: bytes) -> None:
+        # the conversions load the numerical stack: imported at the first packet, long after
+        # the first datagram went out
+        from ardrone_nmpc.links.drone_link import flight_mode_of, navdata_sample_of
+
         t_s = self._clock()
         try:
             packet = decode_navdata(data)
         except NavdataError:
             self.malformed += 1
             return
+        major = packet.demo.ctrl_major if packet.demo is not None else None
+        mode, sample = flight_mode_of(packet.state, major), navdata_sample_of(packet, t_s)
         with self._lock:
             self._last_rx = time.monotonic()
             self.packets += 1
-            self._note_packet(packet, t_s)
+            self._note_packet(packet.state, mode, sample, t_s)
             self._lock.notify_all()
