@@ -28,7 +28,7 @@ from tests.standins.sdk_drone import (CUTOUT, MOTORS, SOFTWARE_FAULT, ULTRASOUND
 
 SESSION = {"custom:session_id": "d2e081a3", "custom:profile_id": "be27e2e4",
            "custom:application_id": "d87f7e0c"}
-APP = [sys.executable, "-m", "ardrone_nmpc.cli.app"]
+APP = [sys.executable, "-m", "ardrone_nmpc.cli.launch"]  # the entry point, as a user runs it
 
 
 def free_port() -> int:

@@ -107,14 +107,16 @@ def _connect(link) -> None:
 
 
 def _act(drone: str, at_port: int, navdata_port: int, config_ids, command: str):
-    """An :class:`OperatorLink` already sending ``command`` (its first datagram is out)."""
+    """An :class:`OperatorLink` already sending ``command`` (its first datagram is out — or
+    was sent by the entry point, :mod:`ardrone_nmpc.cli.first_datagram`, before typer loaded)."""
+    from ardrone_nmpc.cli import first_datagram
     from ardrone_nmpc.links.drone_config import LinkError
     from ardrone_nmpc.links.operator_link import OperatorLink
 
     try:
         link = OperatorLink(drone, at_port=at_port, navdata_port=navdata_port,
                             config_ids=config_ids)
-        link.start(command)
+        link.start(command, edge_sent=first_datagram.SENT == (command, drone, at_port))
     except (ValueError, LinkError) as err:
         _fail(str(err))
     return link

@@ -131,8 +131,10 @@ class OperatorLink(PacketReadings):
 
     # ----------------------------------------------------------------------------- lifecycle
 
-    def start(self, command: str) -> None:
+    def start(self, command: str, *, edge_sent: bool = False) -> None:
         """Open the sockets, send ``command`` ("land" or "emergency") now, and keep sending it.
+        ``edge_sent``: the emergency's edge went out already (the entry point,
+        :mod:`ardrone_nmpc.cli.first_datagram`): this link's first datagram holds bit 8 low.
 
         Raises :class:`LinkError` if the address does not resolve or the first datagram
         cannot be sent."""
@@ -148,7 +150,7 @@ class OperatorLink(PacketReadings):
             self.close()
             raise LinkError(f"cannot open a link to {self.host}: {exc}") from exc
         with self._lock:
-            self._prime = command == "emergency"
+            self._prime = command == "emergency" and not edge_sent
             self._send_locked(raise_errors=True)
         self._thread = threading.Thread(target=self._loop, name="operator-link", daemon=True)
         self._thread.start()

@@ -141,3 +141,75 @@ def test_arguments_are_checked_before_anything_is_sent(drone):
     link.close()
     with pytest.raises(Exception, match="started already|closed"):
         link.start("land")
+
+
+# ----------------------------------------------------------------------------- the entry point
+@pytest.mark.parametrize("args, where", [
+    ([], ("192.168.1.1", 5556)),
+    (["--drone", "10.0.0.7", "--at-port", "7000"], ("10.0.0.7", 7000)),
+    (["--navdata-port", "5554", "--drone=h.local", "--at-port=6000"], ("h.local", 6000)),
+    (["--config-ids", "a,b,c", "--drone", "127.0.0.1"], ("127.0.0.1", 5556)),
+    (["--help"], None), (["--drone"], None), (["--drone", " "], None),
+    (["--at-port", "0"], None), (["--at-port", "70000"], None), (["--at-port", "-1"], None),
+    (["--at-port", "x"], None), (["--at-port"], None),
+])
+def test_the_entry_point_reads_only_what_it_is_sure_of(args, where):
+    from ardrone_nmpc.cli.first_datagram import target
+
+    assert target(args) == where
+
+
+@pytest.mark.parametrize("command, expected", [
+    ("emergency", b"AT*REF=1,290717696\rAT*REF=2,290717952\rAT*PCMD=3,0,0,0,0,0\r"),
+    ("land", b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r")])
+def test_the_entry_point_sends_the_first_datagram_before_typer_loads(drone, monkeypatch,
+                                                                      command, expected):
+    from ardrone_nmpc.cli import first_datagram as launch
+
+    monkeypatch.setattr(launch, "SENT", None)
+    port = drone.at.getsockname()[1]
+    launch.send_first([command, "--drone", "127.0.0.1", "--at-port", str(port)])
+    assert drone.at.recvfrom(4096)[0] == expected
+    assert launch.SENT == (command, "127.0.0.1", port)
+    with drone.link() as link:                     # the command's own link: no second edge
+        link.start(command, edge_sent=launch.SENT[0] == "emergency")
+        assert drone.datagrams(1)[0] == b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r"
+        assert link.edges == 0
+
+
+def test_the_entry_point_leaves_other_commands_and_doubtful_lines_alone(drone, monkeypatch):
+    from ardrone_nmpc.cli import first_datagram as launch
+
+    monkeypatch.setattr(launch, "SENT", None)
+    port = str(drone.at.getsockname()[1])
+    for argv in (["status", "--drone", "127.0.0.1", "--at-port", port], [],
+                 ["emergency", "--drone", "127.0.0.1", "--at-port", port, "--help"],
+                 ["emergency", "--drone", "no.such.host.invalid", "--at-port", port]):
+        launch.send_first(argv)
+    drone.at.settimeout(0.3)
+    with pytest.raises(socket.timeout):
+        drone.at.recvfrom(4096)
+    assert launch.SENT is None
+
+
+def test_ardrone_nmpc_emergency_cuts_from_its_first_datagram(drone, tmp_path):
+    """The installed command as an operator types it: its first datagram (the edge) arrives
+    before typer has loaded, then the command's own link holds REF land."""
+    import os
+    import subprocess
+    import sys
+
+    port = drone.at.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "ardrone_nmpc.cli.launch", "emergency",
+                             "--drone", "127.0.0.1", "--at-port", str(port), "--navdata-port",
+                             str(drone.nav.getsockname()[1])],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, XDG_RUNTIME_DIR=str(tmp_path)))
+    try:
+        drone.at.settimeout(20)
+        datagrams = drone.datagrams(3)
+    finally:
+        proc.kill()
+        proc.communicate()
+    assert datagrams[0] == b"AT*REF=1,290717696\rAT*REF=2,290717952\rAT*PCMD=3,0,0,0,0,0\r"
+    assert datagrams[1:] == [b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r"] * 2
