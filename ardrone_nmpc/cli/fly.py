@@ -38,7 +38,8 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     from ardrone_nmpc.cli.console import stderr_console
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed, run_flight
-    from ardrone_nmpc.runtime.signals import Terminated, exit_code_of
+    from ardrone_nmpc.runtime.signals import (Terminated, exit_code_of,
+                                              ignoring_emergency_signal)
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 
@@ -56,9 +57,10 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     result = FlightResult()
     code = 0
     error: BaseException | None = None
-    try:
-        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed,
-                            echo=lambda line: typer.echo(line, err=True)) as sink:
+    try:  # a late `emergency` (SIGUSR2) outside the flight must not kill the summary
+        with ignoring_emergency_signal(), open_live_view(
+                foxglove, foxglove_port, cfg=cfg, seed=seed,
+                echo=lambda line: typer.echo(line, err=True)) as sink:
             if use_live:
                 live.start()
             run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,

@@ -19,7 +19,7 @@ import threading
 from contextlib import contextmanager
 
 __all__ = ["EMERGENCY_SIGNAL", "EmergencyRequested", "LANDING_SIGNALS", "Terminated",
-           "exit_code_of", "landing_signals"]
+           "exit_code_of", "ignoring_emergency_signal", "landing_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
@@ -78,3 +78,19 @@ def landing_signals():
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+@contextmanager
+def ignoring_emergency_signal():
+    """Within the block :data:`EMERGENCY_SIGNAL` is ignored, outside any inner
+    :func:`landing_signals` (which raise on it): an operator's ``emergency`` that reaches a
+    flight already past its landing — writing its summary — must not kill it (the default
+    action) before its run directory is complete. Outside the main thread it changes nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(EMERGENCY_SIGNAL, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(EMERGENCY_SIGNAL, previous)
