@@ -38,3 +38,21 @@ def test_a_bootstrap_packet_after_connecting_is_answered_as_the_sdk_does(ids):
         if ids is not None:
             assert keys.index("custom:session_id") < keys.index("general:navdata_demo")
         assert link.bootstrap_answers == 1 and link.connected
+
+
+def test_every_bootstrap_is_answered_and_an_unanswered_one_is_said():
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=3.0)
+        for n in (1, 2):                            # two blackouts, two answers
+            with drone.lock:
+                drone.bootstrap = True
+            assert wait_until(lambda: not drone.bootstrap, 3.0)
+            assert wait_until(lambda: link.bootstrap_answers == n, 3.0)
+        with drone.lock:                            # now left in another session: no ACK
+            drone.config.update(dict(zip(("custom:session_id", "custom:profile_id",
+                                          "custom:application_id"), IDS)))
+            drone.bootstrap = True
+        assert wait_until(lambda: (link.last_error or "").startswith("bootstrap answer: "),
+                          5.0)
+        assert "general:navdata_demo='TRUE': no ACK" in link.last_error
+        assert link.connected and drone.bootstrap

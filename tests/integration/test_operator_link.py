@@ -18,12 +18,17 @@ from ardrone_nmpc.links.operator_link import OperatorLink
 
 pytestmark = pytest.mark.timeout(30)
 IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
-FLY, ACK, BOOTSTRAP, EMERGENCY = 1 << 0, 1 << 6, 1 << 11, 1 << 31
+FLY, ACK, DEMO, BOOTSTRAP, EMERGENCY = 1 << 0, 1 << 6, 1 << 10, 1 << 11, 1 << 31
 
 
-def packet(state: int, seq: int = 1) -> bytes:
-    """A bootstrap-style packet: the header, then only the checksum option."""
+def packet(state: int, seq: int = 1, major: int | None = None) -> bytes:
+    """A bootstrap-style packet — the header, then only the checksum option — or, with a
+    ctrl_state ``major``, a demo packet (the 148-byte demo option, §4.4)."""
     body = struct.pack("<IIIi", 0x55667788, state, seq, 0)
+    if major is not None:
+        demo = struct.pack("<HHIIfffifffI", 0, 148, major << 16, 60, 0.0, 0.0, 0.0, 300, 0.0,
+                           0.0, 0.0, 0)
+        body += demo + bytes(148 - len(demo))
     return body + struct.pack("<HHI", 0xFFFF, 8, sum(body) & 0xFFFFFFFF)
 
 
@@ -99,7 +104,17 @@ def test_navdata_is_woken_once_asked_and_any_packet_confirms(drone):
         assert link.wait_for(lambda lk: lk.packet_mode is FlightMode.LANDED, 2.0)
         assert time.monotonic() - link.state_rx_t_s < 1.0
         drone.nav.sendto(b"\x88\x77\x66\x55garbage", client)
-        assert link.wait_for(lambda lk: lk.malformed == 1, 2.0)
+        drone.nav.sendto(b"\x00", client)
+        assert link.wait_for(lambda lk: lk.malformed == 2, 2.0)
+        # a demo packet: its ctrl_state decides (bit 0 clear but major 8 is still landing)
+        drone.nav.sendto(packet(DEMO, seq=3, major=8), client)
+        assert link.wait_for(lambda lk: lk.packet_mode is FlightMode.LANDING, 2.0)
+        assert link.navdata is not None and link.navdata.battery_pct == 60.0
+        assert link.navdata.t_s == link.navdata_rx_t_s == link.state_rx_t_s
+        assert link.navdata.altitude_m == pytest.approx(0.3)
+        drone.nav.sendto(packet(DEMO, seq=4, major=2), client)
+        assert link.wait_for(lambda lk: lk.packet_mode is FlightMode.LANDED, 2.0)
+        assert link.packets == 4
 
 
 def test_bootstrap_is_answered_with_the_session_ids_and_an_ack_cleared(drone):
@@ -149,9 +164,10 @@ def test_arguments_are_checked_before_anything_is_sent(drone):
     (["--drone", "10.0.0.7", "--at-port", "7000"], ("10.0.0.7", 7000)),
     (["--navdata-port", "5554", "--drone=h.local", "--at-port=6000"], ("h.local", 6000)),
     (["--config-ids", "a,b,c", "--drone", "127.0.0.1"], ("127.0.0.1", 5556)),
-    (["--help"], None), (["--drone"], None), (["--drone", " "], None),
-    (["--at-port", "0"], None), (["--at-port", "70000"], None), (["--at-port", "-1"], None),
-    (["--at-port", "x"], None), (["--at-port"], None),
+    (["--help"], None), (["-h"], None), (["--drone"], None), (["--drone", " "], None),
+    (["--at-port", "1"], ("192.168.1.1", 1)), (["--at-port", "65535"], ("192.168.1.1", 65535)),
+    (["--at-port", "0"], None), (["--at-port", "65536"], None), (["--at-port", "-1"], None),
+    (["--at-port", "x"], None), (["--at-port"], None), (["--at-port=2", "-x"], ("192.168.1.1", 2)),
 ])
 def test_the_entry_point_reads_only_what_it_is_sure_of(args, where):
     from ardrone_nmpc.cli.first_datagram import target
@@ -167,9 +183,14 @@ def test_the_entry_point_sends_the_first_datagram_before_typer_loads(drone, monk
     from ardrone_nmpc.cli import first_datagram as launch
 
     monkeypatch.setattr(launch, "SENT", None)
+    source = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    source.bind(("127.0.0.1", 0))                 # a free port stands for the guide's 5556
+    monkeypatch.setattr(launch, "_LOCAL_AT_PORT", source.getsockname()[1])
+    source.close()
     port = drone.at.getsockname()[1]
     launch.send_first([command, "--drone", "127.0.0.1", "--at-port", str(port)])
-    assert drone.at.recvfrom(4096)[0] == expected
+    data, sender = drone.at.recvfrom(4096)
+    assert data == expected and sender[1] == launch._LOCAL_AT_PORT
     assert launch.SENT == (command, "127.0.0.1", port)
     with drone.link() as link:                     # the command's own link: no second edge
         link.start(command, edge_sent=launch.SENT[0] == "emergency")

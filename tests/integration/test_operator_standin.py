@@ -181,7 +181,9 @@ def test_a_flight_holding_the_drone_is_told_and_given_time_to_let_go(tmp_path, c
             holder.kill() if holder.poll() is None else None
             holder.wait(timeout=10)
         assert told == sig
-        assert f"a flight (pid {holder.pid}) holds the drone: told it to " in result.stderr
+        what = "land (SIGTERM)" if sig == "SIGTERM" else "cut the motors too (SIGUSR2)"
+        assert f"a flight (pid {holder.pid}) holds the drone: told it to {what}\n" in \
+            result.stderr
         assert f"the flight (pid {holder.pid}) let go of the drone" in result.stderr
         assert result.exit_code == 0, result.stderr   # a landed drone: down, or cut
         assert drone.log[0][1] == "REF"               # its command went first
@@ -207,3 +209,65 @@ def test_a_flight_that_does_not_let_go_is_waited_for_only_so_long(monkeypatch):
         assert f"pid {holder.pid} still holds the drone after 0.5 s: confirming from here" in \
             result.stderr
         assert result.exit_code == 0 and drone.phase == "landed", result.stderr
+
+
+def test_a_holder_that_cannot_be_signalled_is_said_and_not_waited_for(tmp_path):
+    """The lock file names a pid that no longer exists (held through another descriptor)."""
+    import fcntl
+    import os
+
+    from ardrone_nmpc.links.flight_lock import FlightLock
+
+    with SdkDrone(airborne_at_start=True) as drone:
+        lock = FlightLock("127.0.0.1", drone.at_port)
+        fd = os.open(lock.path, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.write(fd, b"4194999\nghost\n")          # above any pid_max: no such process
+            result = operator("land", drone)
+        finally:
+            os.close(fd)
+        assert result.stderr.startswith("warning: cannot signal the flight (pid 4194999): ")
+        assert "let go" not in result.stderr and "still holds" not in result.stderr
+        assert result.exit_code == 0 and drone.phase == "landed"
+
+
+def test_emergency_on_a_drone_already_cut_cuts_it_again_once_navdata_shows_the_clear():
+    """On the ground in emergency the first edge clears it (the stand-in's model, and the
+    documented one); the packet that shows it brings one more edge."""
+    with SdkDrone() as drone:
+        with drone.lock:
+            drone._set("emergency", drone.phase_t)
+        result = operator("emergency", drone)
+        assert result.exit_code == 0, result.stderr
+        assert result.stderr == "navdata shows the drone landed, not cut: cutting again\n"
+        assert [p for _, p in drone.phases] == ["emergency", "landed", "emergency"]
+
+
+def test_emergency_gives_up_after_its_one_extra_edge():
+    """A drone whose REF is taken by nobody (its AT port is ours): the packets never show
+    the cut; one more edge, then one error line."""
+    with SdkDrone() as drone:
+        black_hole = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        black_hole.bind(("127.0.0.1", 0))
+        try:
+            result = CliRunner().invoke(app, [
+                "emergency", "--drone", "127.0.0.1", "--at-port",
+                str(black_hole.getsockname()[1]), "--navdata-port", str(drone.navdata_port)])
+        finally:
+            black_hole.close()
+        assert result.exit_code == 1
+        lines = result.stderr.strip().splitlines()
+        assert lines == ["navdata shows the drone landed, not cut: cutting again",
+                         "error: emergency not confirmed by navdata within 3 s (mode landed) — "
+                         "check the drone"]
+
+
+def test_emergency_and_land_answer_bootstrap_with_the_config_ids():
+    with SdkDrone(held=SESSION) as drone:
+        result = operator("emergency", drone, "--config-ids", ",".join(IDS))
+        assert result.exit_code == 0, result.stderr
+        assert not drone.bootstrap                   # navdata_demo taken, with the session ids
+    with SdkDrone(held=SESSION, airborne_at_start=True) as drone:
+        result = operator("land", drone, "--config-ids", ",".join(IDS))
+        assert result.exit_code == 0 and not drone.bootstrap, result.stderr

@@ -1165,3 +1165,84 @@ def test_a_motor_fault_in_flight_cuts_through_the_sessions_exit():
     assert drone.calls[-1] == "emergency" and "land" not in drone.calls[-2:]
     assert ("landing", {"reason": "CutMotors"}) in events
     assert session.landed_cleanly is True
+
+
+# ----------------------------------------------------------------------------- issue 21, exact
+def on_step_clock(session, drone, t=200.0):
+    step = StepClock()
+    step.t = t
+    for obj in (session, drone, session.mocap):
+        obj.clock = step
+    session.sleep = step.sleep
+    return step
+
+
+def test_take_off_failure_messages_word_for_word():
+    session, drone, events, _, _ = make(cfg_sets=["safety.navdata_land_ms=1000"],
+                                        drone_kw={"takeoff_s": 3.0})
+    session.configure()
+    session.preflight()
+    session.trim()
+    clock = on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 0.0 if t < clock.t0 + 0.5 else t - (clock.t0 + 0.5)
+    clock.t0 = clock.t
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off failed: navdata lost (none for 1250 ms, "
+                              "safety.navdata_land_ms 1000 ms) — landing; check the Wi-Fi "
+                              "link (docs/first-flight.md §3)")
+    session, drone, events, _, _ = make(drone_kw={"never_flies": True})
+    session.configure()
+    session.preflight()
+    session.trim()
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off did not complete in 10 s (landed): the drone never "
+                              "showed flying — landing; check battery, propellers and hull")
+
+
+def test_navdata_exactly_at_the_limit_is_fresh_for_the_take_off():
+    session, drone, events, _, _ = make()
+    session.configure()
+    session.preflight()
+    clock = on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 0.5                       # exactly safety.navdata_land_ms
+    session.trim()                                         # no refusal at 0.5 s …
+    drone.nav_age_s = lambda t: 0.5 if t < clock.t + 0.5 else 0.0
+    session.takeoff()                                      # … nor during the take-off
+    assert "takeoff" in drone.calls
+    drone._mode = FlightMode.LANDED
+    drone.t_takeoff = None
+    drone.nav_age_s = lambda t: 0.75 if drone.calls[-1] == "flat_trim" else 0.0
+    with pytest.raises(PreflightError) as err:
+        session.trim()
+    assert str(err.value) == ("no fresh navdata before take-off (the newest is 750 ms old, "
+                              "safety.navdata_land_ms 500 ms): no take-off")
+    session, drone, *_ = make(cfg_sets=["safety.navdata_land_ms=1000"])
+    session.configure()
+    session.preflight()
+    on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 1.25 if drone.calls[-1] == "flat_trim" else 0.0
+    with pytest.raises(PreflightError, match=r"is 1250 ms old, safety.navdata_land_ms 1000 ms"):
+        session.trim()
+
+
+def test_a_fault_during_take_off_is_one_line_naming_bit_mode_and_ctrl_state():
+    session, drone, events, warnings, clock = make(drone_kw={"takeoff_s": 3.0})
+    session.configure()
+    session.preflight()
+    session.trim()
+    real = session.sleep
+
+    def sleep(dt):
+        real(dt)
+        if clock() - drone.t_takeoff > 1.0:
+            drone.state_bits = 1 << 14 | 1 << 21
+    session.sleep = sleep
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off failed: the drone reports SOFTWARE_FAULT (state bit 14: "
+                              "software fault, land as soon as possible) (mode taking_off, "
+                              "ctrl_state 0x00020000) — landing")
+    assert ("drone_faults", {"phase": "takeoff", "bits": ["SOFTWARE_FAULT", "ULTRASOUND"]}) \
+        in events

@@ -40,6 +40,8 @@ def test_a_run_that_only_hovered_in_its_track_window_is_not_completed():
         "completed"
     assert tally(rows("settle", "settle", "fallback-solver")).verdict("completed") == \
         "completed"
+    counted = tally(rows("settle", "settle", "track", "hover-speed", "track", "fallback-p"))
+    assert counted.tracking_ticks == 3 and not counted.target_seen
 
 
 def test_a_landing_or_a_stop_keeps_its_own_ending():
