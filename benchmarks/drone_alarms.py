@@ -179,13 +179,13 @@ def reproductions(b: Bench) -> list[dict]:
     out.append(outcome("7 tune over a safety field", p, s, "not flown"))
     # 8. flights that never did their job
     p, s = b.run("simulate", "configs/hover.yaml", "--quiet", "--set", "duration_s=5", "--set",
-                 "safety.max_speed_mps=0.01", "--log-dir", str(b.tmp / "logs8"))
+                 "safety.max_speed_mps=0.001", "--log-dir", str(b.tmp / "logs8"))
     out.append(outcome("8 simulate, every tick hover-speed", p, s, "landed", complete(p)))
     p, s = b.run("simulate", "configs/follow_car.yaml", "--quiet", "--set", "duration_s=5",
                  "--set", "sim.target=null", "--log-dir", str(b.tmp / "logs8"))
     out.append(outcome("8 simulate follow, target never seen", p, s, "landed", complete(p)))
     p, s = b.run("fly", "configs/hover.yaml", "--sim", "--no-dashboard", "--duration-s", "3",
-                 "--set", "safety.max_speed_mps=0.01", "--log-dir", str(b.tmp / "logs8"))
+                 "--set", "safety.max_speed_mps=0.001", "--log-dir", str(b.tmp / "logs8"))
     out.append(outcome("8 fly --sim, every tick hover-speed", p, s, "landed", complete(p)))
     return out
 

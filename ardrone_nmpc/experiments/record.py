@@ -106,11 +106,15 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too.
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
-    created for times that give no tick count.
+    created for times that give no tick count, and
+    :class:`~ardrone_nmpc.reference.trajectories.ReferenceError` for a reference that leaves
+    the geofence.
     """
+    from ardrone_nmpc.reference.experiment import experiment_trajectory
     from ardrone_nmpc.runtime import lockstep  # when used (module docstring)
 
     Schedule.from_config(cfg)  # refused before a run directory exists
+    experiment_trajectory(cfg)  # so is a reference outside the geofence
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})

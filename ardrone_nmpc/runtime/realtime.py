@@ -88,6 +88,7 @@ def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
 
     seed = cfg.sim.seed if seed is None else seed
     schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
+    experiment_trajectory(cfg)  # nor does a reference that leaves the geofence
     if not sim:
         host, at_port, navdata_port, mocap_port = _endpoints(cfg, drone_host, at_port,
                                                              navdata_port, mocap_port)

@@ -113,3 +113,27 @@ def test_a_sweep_case_and_a_tune_trial_that_did_not_track_failed(tmp_path):
     trial = run_trial(TrialSpec(0, {}, config_to_dict(cfg), default_space(cfg),
                                 (Scenario("seed0", 0),), parse_objective(None)))
     assert trial.status == "failed" and trial.message.startswith("seed0: failed-no-tracking")
+
+
+def test_a_reference_outside_the_fence_flies_nothing_and_leaves_no_run_directory(tmp_path):
+    from typer.testing import CliRunner
+
+    from ardrone_nmpc.cli.app import app
+
+    for command in (["simulate", "configs/square.yaml", "--quiet"],
+                    ["check", "configs/square.yaml"]):
+        result = CliRunner().invoke(app, [*command, "--set", "reference.side_m=50",
+                                          *(["--log-dir", str(tmp_path / "logs")]
+                                            if command[0] == "simulate" else [])])
+        assert result.exit_code == 1 and result.stderr.startswith(
+            "error: reference: the square reference leaves the geofence at t = 0.31 s, at "
+            "(3.10, 0.00, 1.00) m outside [-3, 3] × [-3, 3] × [-0.2, 2.5] m")
+    assert not (tmp_path / "logs").exists()
+    step = load_config(None, ["reference.kind=step", "reference.target_m=[0,0,2.6]"])
+    from ardrone_nmpc.reference.experiment import experiment_trajectory
+    from ardrone_nmpc.reference.trajectories import ReferenceError
+
+    with pytest.raises(ReferenceError, match=r"step reference leaves the geofence .* 2\.60\) m"):
+        experiment_trajectory(step)
+    inside = load_config(None, ["reference.kind=step", "reference.target_m=[0,0,2.5]"])
+    experiment_trajectory(inside)                       # on the fence is inside
