@@ -199,6 +199,7 @@ def land(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDATA
          config_ids: str | None = CONFIG_IDS) -> None:
     """Land the drone: REF land at once and until navdata shows it on the ground (a `fly`
     holding it is told to land too). Ctrl-C twice within 2 s cuts the motors instead."""
+    from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.runtime.session import FlightSession
     from ardrone_nmpc.runtime.signals import exit_code_of, landing_signals
 
@@ -212,8 +213,10 @@ def land(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDATA
         try:
             with landing_signals():
                 landed = session.land()
-        except KeyboardInterrupt as err:
-            done = ("motors cut (emergency)" if session.landed_cleanly
+        except KeyboardInterrupt as err:  # the session landed (or cut) first
+            mode = link.packet_mode
+            done = ("motors cut (emergency)" if mode is FlightMode.EMERGENCY
+                    else f"landed ({mode.value})" if session.landed_cleanly
                     else "landing not confirmed by navdata — check the drone")
             _fail(f"interrupted: {done}", exit_code_of(err))
     if not landed:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import socket
+import time
 
 import pytest
 from typer.testing import CliRunner
@@ -113,7 +114,8 @@ def test_emergency_wins_over_a_client_whose_sequence_is_far_ahead():
         finally:
             other.close()
         assert result.exit_code == 0, result.stderr
-        assert "motors cut (emergency)" in result.stdout and drone.phase == "emergency"
+        assert result.stdout == ("motors cut (emergency); clear it on the ground with "
+                                 "`ardrone-nmpc reset`\n") and drone.phase == "emergency"
         ours = [a for a in drone.accepted_from if a != theirs]
         assert ours and drone.ignored_from.get(ours[0], 0) == 0   # every datagram taken
 
@@ -271,3 +273,46 @@ def test_emergency_and_land_answer_bootstrap_with_the_config_ids():
     with SdkDrone(held=SESSION, airborne_at_start=True) as drone:
         result = operator("land", drone, "--config-ids", ",".join(IDS))
         assert result.exit_code == 0 and not drone.bootstrap, result.stderr
+
+
+class SlowLanding(SdkDrone):
+    LANDING_S = 3.5       # long enough for the landing's first notice (every 3 s)
+
+
+def interrupt_after(*delays_s):
+    """SIGINT to this process (the command line runs in its main thread) at each delay."""
+    import os
+    import signal
+    import threading
+
+    def fire():
+        for delay in delays_s:
+            time.sleep(delay)
+            os.kill(os.getpid(), signal.SIGINT)
+    threading.Thread(target=fire, daemon=True).start()
+
+
+def test_land_says_what_it_waits_for():
+    with SlowLanding(airborne_at_start=True) as drone:
+        result = operator("land", drone)
+        assert result.exit_code == 0, result.stderr
+        assert result.stderr == ("landing: waiting for the drone to touch down (mode landing, "
+                                 "ctrl_state 0x00080000)\n")
+        assert result.stdout == "landed (landed)\n"
+
+
+def test_a_ctrl_c_during_land_lands_first_two_cut():
+    with SlowLanding(airborne_at_start=True) as drone:
+        interrupt_after(1.0)
+        result = operator("land", drone)
+        assert result.exit_code == 130 and drone.phase == "landed"
+        assert result.stderr.splitlines() == [
+            "landing — press Ctrl-C again within 2 s to cut the motors (emergency)",
+            "landing: waiting for the drone to touch down (mode landing, ctrl_state 0x00080000)",
+            "error: interrupted: landed (landed)"]
+    with SlowLanding(airborne_at_start=True) as drone:
+        interrupt_after(1.0, 0.5)
+        result = operator("land", drone)
+        assert result.exit_code == 130 and drone.phase == "emergency"
+        assert result.stderr.splitlines()[-1] == "error: interrupted: motors cut (emergency)"
+        assert "cutting the motors (emergency): a second Ctrl-C" in result.stderr
