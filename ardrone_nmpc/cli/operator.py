@@ -43,6 +43,7 @@ from ardrone_nmpc.cli.options import non_empty, port
 __all__ = ["register"]
 
 HANDOVER_S = 10.0          # how long a holding `fly` gets to land (or cut) and let go
+CONNECT_TIMEOUT_S = 5.0    # reset, status: the configuration handshake
 EMERGENCY_CONFIRM_S = 3.0  # how long navdata gets to show the cut, once it is woken
 _FRESH_S = 0.5
 _EDGE_ACTS_S = 0.2         # a packet this long after an edge shows whether it acted
@@ -99,7 +100,7 @@ def _connect(link) -> None:
     from ardrone_nmpc.links.drone_link import LinkError
 
     try:
-        link.connect(timeout_s=5.0)
+        link.connect(timeout_s=CONNECT_TIMEOUT_S)
     except LinkError as err:
         _fail(str(err))
     if link.at_bind_warning:

@@ -48,10 +48,13 @@ def loopback_only(monkeypatch, tmp_path):
 
 @pytest.fixture
 def short_blind_landing(monkeypatch):
-    """A landing with no navdata at all gives up after 1.5 s instead of 10."""
+    """A landing with no navdata at all gives up after 1 s instead of 10, an emergency after
+    1 s instead of 3."""
+    import ardrone_nmpc.cli.operator as operator_module
     import ardrone_nmpc.runtime.session as session_module
 
-    monkeypatch.setattr(session_module, "BLIND_LANDING_S", 1.5)
+    monkeypatch.setattr(session_module, "BLIND_LANDING_S", 1.0)
+    monkeypatch.setattr(operator_module, "EMERGENCY_CONFIRM_S", 1.0)
 
 
 def dead_port() -> int:
@@ -120,7 +123,10 @@ def test_emergency_wins_over_a_client_whose_sequence_is_far_ahead():
         assert ours and drone.ignored_from.get(ours[0], 0) == 0   # every datagram taken
 
 
-def test_every_operator_command_takes_config_ids():
+def test_every_operator_command_takes_config_ids(monkeypatch):
+    import ardrone_nmpc.cli.operator as operator_module
+
+    monkeypatch.setattr(operator_module, "CONNECT_TIMEOUT_S", 1.0)
     with SdkDrone(held=SESSION, attitude_deg=(0.0, 0.0)) as drone:
         # status connects with the handshake: without the ids the session ignores it …
         result = operator("status", drone, "--control-port", str(drone.control_port))
@@ -276,7 +282,7 @@ def test_emergency_and_land_answer_bootstrap_with_the_config_ids():
 
 
 class SlowLanding(SdkDrone):
-    LANDING_S = 3.5       # long enough for the landing's first notice (every 3 s)
+    LANDING_S = 1.5       # long enough for two Ctrl-C, or the landing's first notice
 
 
 def interrupt_after(*delays_s):
@@ -292,7 +298,10 @@ def interrupt_after(*delays_s):
     threading.Thread(target=fire, daemon=True).start()
 
 
-def test_land_says_what_it_waits_for():
+def test_land_says_what_it_waits_for(monkeypatch):
+    import ardrone_nmpc.runtime.session as session_module
+
+    monkeypatch.setattr(session_module, "NOTICE_EVERY_S", 1.0)
     with SlowLanding(airborne_at_start=True) as drone:
         result = operator("land", drone)
         assert result.exit_code == 0, result.stderr
@@ -303,15 +312,14 @@ def test_land_says_what_it_waits_for():
 
 def test_a_ctrl_c_during_land_lands_first_two_cut():
     with SlowLanding(airborne_at_start=True) as drone:
-        interrupt_after(1.0)
+        interrupt_after(0.5)
         result = operator("land", drone)
         assert result.exit_code == 130 and drone.phase == "landed"
         assert result.stderr.splitlines() == [
             "landing — press Ctrl-C again within 2 s to cut the motors (emergency)",
-            "landing: waiting for the drone to touch down (mode landing, ctrl_state 0x00080000)",
             "error: interrupted: landed (landed)"]
     with SlowLanding(airborne_at_start=True) as drone:
-        interrupt_after(1.0, 0.5)
+        interrupt_after(0.5, 0.3)
         result = operator("land", drone)
         assert result.exit_code == 130 and drone.phase == "emergency"
         assert result.stderr.splitlines()[-1] == "error: interrupted: motors cut (emergency)"
