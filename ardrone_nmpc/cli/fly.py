@@ -31,7 +31,8 @@ LANDING_NOT_CONFIRMED = "landing not confirmed by navdata — check the drone"
 def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | None,
                 at_port: int | None, navdata_port: int | None, mocap_port: int | None,
                 duration_s: float | None, log_dir: Path, dashboard: bool,
-                seed: int | None, foxglove: bool = False, foxglove_port: int = 8765) -> None:
+                seed: int | None, foxglove: bool = False, foxglove_port: int = 8765,
+                mcap: Path | None = None) -> None:
     """Fly ``config`` (see the module docstring for what is printed and the exit codes)."""
     from rich.live import Live
 
@@ -59,7 +60,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     error: BaseException | None = None
     try:  # a late `emergency` (SIGUSR2) outside the flight must not kill the summary
         with ignoring_emergency_signal(), open_live_view(
-                foxglove, foxglove_port, cfg=cfg, seed=seed,
+                foxglove, foxglove_port, cfg=cfg, seed=seed, mcap=mcap,
                 echo=lambda line: typer.echo(line, err=True)) as sink:
             if use_live:
                 live.start()

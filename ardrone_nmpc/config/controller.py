@@ -66,7 +66,9 @@ class SolverConfig(Section):
 
 
 class PGainsConfig(Section):
-    """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none)."""
+    """Gains of the baseline proportional controller (thesis eq. 4.16; the thesis gives none).
+    The defaults are tuned on the ``ardrone`` plant; the ``thesis_kit`` profile sets the kit's
+    Baseline Controller's (config/profiles.py)."""
 
     k1_per_s: Positive = Field(0.7, description="ż_ref = k1 (z_d − z), 1/s (tuned in "
                                "simulation: see control/proportional.py PGains).")

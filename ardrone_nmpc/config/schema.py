@@ -39,7 +39,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Optional
 
-from pydantic import Field, ValidationError, ValidationInfo, field_validator
+from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from ardrone_nmpc.config.controller import (ControllerConfig, ObstacleConfig, OffsetFreeConfig,
                                             PGainsConfig, SolverConfig)
@@ -51,6 +51,7 @@ from ardrone_nmpc.config.fields import (
     Section, Span, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
+from ardrone_nmpc.config.profiles import fill_profile_defaults
 from ardrone_nmpc.errors import UserError
 
 from ardrone_nmpc.core import defaults
@@ -216,6 +217,13 @@ class DroneConfig(Section):
         0.7, ge=0.2, le=2.0, description="control:control_vz_max (m/s): climb rate at PCMD gaz ±1.")
     control_yaw_radps: float = Field(
         1.745, ge=0.7, le=6.11, description="control:control_yaw (rad/s): yaw rate at PCMD yaw ±1.")
+    command_convention: Literal["sdk", "kit"] = Field(
+        "sdk", description="How a command becomes a PCMD fraction: 'sdk' — a fraction of the "
+        "limits above (roll φ/euler_angle_max, gaz ż/control_vz_max, yaw −ψ̇/control_yaw; "
+        "docs/design.md §4); 'kit' — the ARDrone Simulink Development Kit's: φ, θ in rad, ż in "
+        "m/s, ψ̇ in rad/s written as the fraction itself, so the NMPC's bounds are ±1 (thesis "
+        "eq. 4.17). The limits above still bound the drone. The thesis_kit profile sets 'kit' "
+        "(docs/plant-profiles.md §2).")
     altitude_max_m: Positive = Field(
         3.0, le=100.0, description="control:altitude_max (m), ≤ 100 (the AR.Drone 2.0's cap).")
     navdata_demo: bool = Field(True, description="general:navdata_demo: 15 Hz demo packets if true.")
@@ -399,6 +407,12 @@ class ExperimentConfig(Section):
     sim: SimConfig = Field(default_factory=SimConfig, description="Simulation.")
     safety: SafetyConfig = Field(default_factory=SafetyConfig, description="Supervisor limits.")
     faults: FaultsConfig = Field(default_factory=FaultsConfig, description="Injected faults (simulation).")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _profile_defaults(cls, data: Any) -> Any:
+        # the plant profile's keys outside sim.plant (config/profiles.py); explicit values win
+        return fill_profile_defaults(data)
 
     @field_validator("reference")
     @classmethod

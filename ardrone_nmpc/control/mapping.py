@@ -5,6 +5,10 @@
 with E, V, Y the drone's configured ``euler_angle_max``, ``control_vz_max`` and ``control_yaw``.
 Each fraction is clipped to [−1, 1] and the clipping is flagged, never silent. A non-finite
 value anywhere is refused: no command is ever built from NaN.
+
+That is the SDK's convention (``drone.command_convention: sdk``). The ARDrone Simulink
+Development Kit's (``kit``) writes rad, m/s and rad/s as the fraction itself: E = V = Y = 1
+(:func:`command_scales`); the drone's configured limits still bound what it does.
 """
 
 from __future__ import annotations
@@ -14,7 +18,8 @@ from dataclasses import dataclass
 
 from ardrone_nmpc.core.types import AttitudeCommand
 
-__all__ = ["DroneLimits", "PcmdCommand", "MappingError", "map_to_pcmd", "vz_reference_mps"]
+__all__ = ["DroneLimits", "PcmdCommand", "MappingError", "command_scales", "map_to_pcmd",
+           "vz_reference_mps"]
 
 
 class MappingError(ValueError):
@@ -30,7 +35,8 @@ def _finite(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class DroneLimits:
-    """The drone's configured command scales (AR.Drone SDK defaults).
+    """The command at PCMD ±1: the drone's configured limits (AR.Drone SDK defaults) under the
+    SDK convention, 1 rad, 1 m/s, 1 rad/s under the kit's (:func:`command_scales`).
 
     Attributes
     ----------
@@ -51,6 +57,20 @@ class DroneLimits:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+
+
+#: The kit's convention: one unit of command (rad, m/s, rad/s) per unit of PCMD fraction.
+KIT_SCALES = DroneLimits(1.0, 1.0, 1.0)
+
+
+def command_scales(drone) -> DroneLimits:
+    """The command at PCMD ±1 under ``drone.command_convention`` (a ``drone`` config section):
+    the configured limits (``sdk``), or one unit per unit of fraction (``kit``). The mapping
+    divides by them, the NMPC plans within them and the ż reference is clipped to them."""
+    if drone.command_convention == "kit":
+        return KIT_SCALES
+    return DroneLimits(drone.euler_angle_max_rad, drone.control_vz_max_mps,
+                       drone.control_yaw_radps)
 
 
 @dataclass(frozen=True)

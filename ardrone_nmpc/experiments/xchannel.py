@@ -8,9 +8,13 @@ at the tilt limit; ρ < 1: it settles). ``reproduce`` prints it next to the simu
 Linearisation (docs/thesis.md §3.3, eq. 3.13–3.14 at hover, ψ = 0): the NMPC predicts
 ``ẍ = g θ`` over N forward-Euler steps of Δτ with stage cost Δτ·(q_x x² + q_v ẋ² + r θ²)
 and terminal cost q_f,x x² + q_f,v ẋ² (the ½ of eq. 3.14 cancels in the gain). Its
-first input is the finite-horizon LQ gain K₀ of the Riccati recursion. The plant
-(docs/plant.md): θ follows the command with the tilt lag τ, ``v̇ = k g θ − k_d v`` (k: tilt
-gain factor, k_d: drag), the command arrives ``delay_s`` later, held over each ``period_s``.
+first input is the finite-horizon LQ gain K₀ of the Riccati recursion. The plant is a
+continuous state space on ``[x, v, …]`` driven by the tilt command: the ``ardrone`` profile's
+first-order tilt lag, tilt gain and drag (:class:`XPlant`, docs/plant.md), or the kit's
+identified second-order attitude and velocity channel under its command convention
+(:class:`KitXPlant`, docs/plant-profiles.md §2). The command arrives ``delay_s`` later, in
+whole periods, held over each ``period_s``; the velocity the NMPC is fed is
+``velocity_age_s`` old (navdata's sample age; the position, from mocap, is fresh).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from ardrone_nmpc.core.types import GRAVITY_MPS2
+from ardrone_nmpc.sim.plant_kit import KIT, KitModel
 
 
 def first_step_gain(*, horizon_steps: int, dtau_s: float, q_x: float, q_v: float, r_theta: float,
@@ -46,56 +51,159 @@ def first_step_gain(*, horizon_steps: int, dtau_s: float, q_x: float, q_v: float
     return k
 
 
-@dataclass(frozen=True)
-class XPlant:
-    """The plant's x channel at hover (docs/plant.md): tilt lag, gain, drag, delay, period."""
+def first_step_law(*, horizon_steps: int, dtau_s: float, q_x: float, q_v: float,
+                   r_theta: float) -> tuple[np.ndarray, np.ndarray]:
+    """(K₀, F): the NMPC's first input ``θ = −K₀ [x, ẋ] + F·r`` with the reference positions
+    ``r`` at stages 1 … N (reference velocities 0: a step), linearised at hover — the tracking
+    form of :func:`first_step_gain` (its affine term run back from stage N), so a reference
+    step the horizon already sees acts before it happens, as in flight. For a constant
+    reference ``F`` sums to ``K₀[0]``: only the error counts."""
+    k0 = first_step_gain(horizon_steps=horizon_steps, dtau_s=dtau_s, q_x=q_x, q_v=q_v,
+                         r_theta=r_theta)
+    a = np.array([[1.0, dtau_s], [0.0, 1.0]])
+    b = np.array([[0.0], [GRAVITY_MPS2 * dtau_s]])
+    q = dtau_s * np.diag([q_x, q_v])
+    r = np.array([[dtau_s * r_theta]])
+    # value x'P x + 2 s'x, s linear in the references: s = S r, S (2 × N), from P_N = 0, s_N = 0
+    p = np.zeros((2, 2))
+    s = np.zeros((2, horizon_steps))
+    for j in range(horizon_steps - 1, -1, -1):  # stage j's input from stage j + 1's value
+        g = np.linalg.inv(r + b.T @ p @ b)
+        k = g @ b.T @ p @ a
+        f = -g @ b.T @ s  # u_j = −K_j x − g Bᵀ s_{j+1}
+        if j == 0:
+            return k0, f.reshape(1, -1)
+        closed = a - b @ k
+        p = q + a.T @ p @ closed
+        s = closed.T @ s
+        s[:, j - 1] -= q[:, 0]  # −Q_j r_j with r_j = [x_ref,j, 0] (reference j is column j − 1)
+    raise AssertionError("unreachable")
 
-    tau_tilt_s: float = 0.10
-    tilt_gain: float = 1.0
-    drag_per_s: float = 0.58
-    delay_s: float = 0.26
-    period_s: float = 0.065
+
+def _zoh(ac: np.ndarray, bc: np.ndarray, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(e^{A t}, ∫₀ᵗ e^{A s} ds B): the state and a held input's effect after ``t_s``."""
+    n = ac.shape[0]
+    m = np.zeros((n + 1, n + 1))
+    m[:n, :n], m[:n, n:] = ac, bc
+    e = expm(m * t_s)
+    return e[:n, :n], e[:n, n:]
+
+
+class _Channel:
+    """What every x-channel plant shares: ZOH over a period, the delay in whole periods."""
+
+    delay_s: float
+    period_s: float
+    velocity_age_s: float
+
+    def continuous(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - abstract
+        raise NotImplementedError
 
     def discrete(self) -> tuple[np.ndarray, np.ndarray]:
-        """(A, B) of ``[x, v, θ]`` over one period with the command held (zero-order hold)."""
-        ac = np.array([[0.0, 1.0, 0.0],
-                       [0.0, -self.drag_per_s, self.tilt_gain * GRAVITY_MPS2],
-                       [0.0, 0.0, -1.0 / self.tau_tilt_s]])
-        bc = np.array([[0.0], [0.0], [1.0 / self.tau_tilt_s]])
-        m = np.zeros((4, 4))
-        m[:3, :3], m[:3, 3:] = ac, bc
-        e = expm(m * self.period_s)
-        return e[:3, :3], e[:3, 3:]
+        """(A, B) over one period with the tilt command held (zero-order hold)."""
+        return _zoh(*self.continuous(), self.period_s)
 
     @property
     def delay_ticks(self) -> int:
         """The transport delay in whole periods (the kit's 4 · 65 ms = 0.26 s is exact)."""
         return int(round(self.delay_s / self.period_s))
 
+    def velocity_row(self) -> tuple[np.ndarray, np.ndarray]:
+        """(c_s, c_u): the measured velocity ``c_s·s_k + c_u·u_prev``, ``velocity_age_s`` old,
+        from this tick's state ``s_k`` and the command applied over the last period
+        ``u_prev`` (run backwards: s(t − a) = e^{−A a}(s_k − Γ(a)·u_prev))."""
+        n = self.continuous()[0].shape[0]
+        e_v = np.zeros(n)
+        e_v[1] = 1.0
+        if self.velocity_age_s == 0.0:
+            return e_v, np.zeros(1)
+        phi, gamma = _zoh(*self.continuous(), self.velocity_age_s)
+        back = np.linalg.inv(phi)
+        return e_v @ back, -(e_v @ back @ gamma)
 
-def closed_loop_matrix(gain: np.ndarray, plant: XPlant) -> np.ndarray:
-    """The loop ``θ_cmd,k = −K [x_k, v_k]`` acting ``delay_ticks`` periods later, as one matrix
-    on ``[x, v, θ, u_{k−1}, …, u_{k−d}]`` (the commands in flight)."""
+
+@dataclass(frozen=True)
+class XPlant(_Channel):
+    """The ``ardrone`` profile's x channel at hover (docs/plant.md): ``[x, v, θ]`` with the tilt
+    lag τ, ``v̇ = k g θ − k_d v`` (k: tilt gain factor, k_d: drag)."""
+
+    tau_tilt_s: float = 0.10
+    tilt_gain: float = 1.0
+    drag_per_s: float = 0.58
+    delay_s: float = 0.26
+    period_s: float = 0.065
+    velocity_age_s: float = 0.0
+
+    def continuous(self) -> tuple[np.ndarray, np.ndarray]:
+        ac = np.array([[0.0, 1.0, 0.0],
+                       [0.0, -self.drag_per_s, self.tilt_gain * GRAVITY_MPS2],
+                       [0.0, 0.0, -1.0 / self.tau_tilt_s]])
+        bc = np.array([[0.0], [0.0], [1.0 / self.tau_tilt_s]])
+        return ac, bc
+
+
+@dataclass(frozen=True)
+class KitXPlant(_Channel):
+    """The ``thesis_kit`` profile's x channel at hover, ψ = 0, under the kit's command
+    convention (the tilt command in rad is the port's fraction): ``[x, v, q₁, q₂]`` with the
+    kit's ``ssPitch`` (θ = C_p q, nose-down positive) and ``ssPitch2U`` (v̇ = a_u v − b_u c_u θ).
+    ``tilt_gain`` scales the attitude channel (a weaker or stronger kit)."""
+
+    model: KitModel = KIT
+    tilt_gain: float = 1.0
+    delay_s: float = 0.26
+    period_s: float = 0.065
+    velocity_age_s: float = 0.0
+
+    def continuous(self) -> tuple[np.ndarray, np.ndarray]:
+        k = self.model
+        au, bu, cu = k.pitch2u_abc
+        (p11, p12), (p21, p22) = k.pitch_a
+        c1, c2 = (self.tilt_gain * c for c in k.pitch_c)
+        # world θ = −θ_k, the port's pitch = −θ_cmd: q = −(ssPitch state) follows θ_cmd
+        ac = np.array([[0.0, 1.0, 0.0, 0.0],
+                       [0.0, au, -bu * cu * c1, -bu * cu * c2],
+                       [0.0, 0.0, p11, p12],
+                       [0.0, 0.0, p21, p22]])
+        bc = np.array([[0.0], [0.0], [k.pitch_b[0]], [k.pitch_b[1]]])
+        return ac, bc
+
+
+def closed_loop_matrix(gain: np.ndarray, plant: _Channel) -> np.ndarray:
+    """The loop ``θ_cmd,k = −K [x_k, v_meas,k]`` acting ``delay_ticks`` periods later, as one
+    matrix on ``[s, u_{k−1}, …, u_{k−d}]`` (the plant's state and the commands in flight, the
+    oldest last), and with a velocity age, ``u_prev`` (the command applied over the last
+    period) appended."""
     a, b = plant.discrete()
+    n = a.shape[0]
     d = plant.delay_ticks
-    n = 3 + d
-    m = np.zeros((n, n))
-    k_row = np.zeros(n)
-    k_row[:2] = -np.asarray(gain, float).reshape(-1)[:2]
+    aged = plant.velocity_age_s > 0.0
+    size = n + d + (1 if aged else 0)
+    k = np.asarray(gain, float).reshape(-1)[:2]
+    c_s, c_u = plant.velocity_row()
+    k_row = np.zeros(size)  # θ_cmd,k as a row on the loop's state
+    k_row[0] -= k[0]
+    k_row[:n] -= k[1] * c_s
+    if aged:
+        k_row[size - 1] -= k[1] * c_u[0]
+    m = np.zeros((size, size))
+    m[:n, :n] = a
     if d == 0:
-        m[:3, :3] = a
-        m[:3, :] += b @ k_row[None, :]
+        m[:n, :] += b @ k_row[None, :]
+        if aged:
+            m[size - 1, :] = k_row
         return m
-    m[:3, :3] = a
-    m[:3, 2 + d] = b[:, 0]  # the oldest command in flight acts over this period
-    m[3, :] = k_row        # the command computed now enters the queue
+    m[:n, n + d - 1] = b[:, 0]  # the oldest command in flight acts over this period
+    m[n, :] = k_row            # the command computed now enters the queue
     for i in range(1, d):
-        m[3 + i, 2 + i] = 1.0
+        m[n + i, n + i - 1] = 1.0
+    if aged:
+        m[size - 1, n + d - 1] = 1.0  # … and is the last period's applied command next tick
     return m
 
 
 def spectral_radius(*, horizon_steps: int, dtau_s: float, q_x: float, q_v: float,
-                    r_theta: float, plant: XPlant = XPlant()) -> float:
+                    r_theta: float, plant: _Channel = XPlant()) -> float:
     """ρ of the linearised x loop: > 1 unstable (a limit cycle at the tilt limit in flight)."""
     k = first_step_gain(horizon_steps=horizon_steps, dtau_s=dtau_s, q_x=q_x, q_v=q_v,
                         r_theta=r_theta)
@@ -103,7 +211,7 @@ def spectral_radius(*, horizon_steps: int, dtau_s: float, q_x: float, q_v: float
 
 
 def stability_table(cases, *, q_x: float, q_v: float, r_theta: float,
-                    plants: dict[str, XPlant]) -> list[dict]:
+                    plants: dict[str, _Channel]) -> list[dict]:
     """One row per ``(N, Δτ)`` case: K₀ and ρ against each named plant."""
     rows = []
     for n, dtau in cases:
@@ -113,6 +221,30 @@ def stability_table(cases, *, q_x: float, q_v: float, r_theta: float,
             row[f"rho_{name}"] = float(max(abs(np.linalg.eigvals(closed_loop_matrix(k, plant)))))
         rows.append(row)
     return rows
+
+
+def step_response(law: tuple[np.ndarray, np.ndarray], plant: _Channel, *, dtau_s: float,
+                  step_m: float, step_s: float, ticks: int) -> np.ndarray:
+    """x at ticks 0 … ``ticks`` of the linear loop (``law`` from :func:`first_step_law`) from
+    rest at 0 when the reference steps to ``step_m`` at ``step_s`` (no input bound): what a
+    flight small enough not to saturate follows."""
+    k0, f = law
+    m = closed_loop_matrix(k0, plant)  # the feedback; the preview enters the queue as well
+    n = plant.continuous()[0].shape[0]
+    entry = np.zeros(m.shape[0])
+    entry[n if plant.delay_ticks else 0] = 1.0  # where the tick's command enters
+    if not plant.delay_ticks:
+        entry[:n] = plant.discrete()[1][:, 0]
+        if plant.velocity_age_s > 0.0:
+            entry[-1] = 1.0
+    stages_s = dtau_s * np.arange(1, f.shape[1] + 1)
+    z = np.zeros(m.shape[0])
+    out = np.empty(ticks + 1)
+    for i in range(ticks + 1):
+        out[i] = z[0]
+        preview = np.where(i * plant.period_s + stages_s >= step_s - 1e-9, step_m, 0.0)
+        z = m @ z + entry * float(f[0] @ preview)
+    return out
 
 
 def verdict(rho: float, tol: float = 1e-3) -> str:

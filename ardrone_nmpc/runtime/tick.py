@@ -13,7 +13,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand
+from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
@@ -76,8 +76,7 @@ class Tick:
         self.cfg = cfg
         self.trajectory = trajectory
         self.period_s = cfg.loop.period_s
-        self.limits = DroneLimits(cfg.drone.euler_angle_max_rad, cfg.drone.control_vz_max_mps,
-                                  cfg.drone.control_yaw_radps)
+        self.limits = command_scales(cfg.drone)  # the command at PCMD ±1
         ctl = cfg.controller
         nmpc = None
         if ctl.kind == "nmpc":

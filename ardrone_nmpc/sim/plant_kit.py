@@ -23,8 +23,9 @@ unchanged (the modes, take-off/landing, ground, battery, sensors and faults are
 the progressive flag at 0 the tilt commands are 0 and the position hold adds damping so that
 u, v decay with ``hover_tau_s``; the automatic take-off and landing command the climb rate
 through the kit's vertical gain. The firmware limits (``drone.euler_angle_max_rad`` …) are part
-of the identified gains and do not act separately. Constants and sources:
-docs/plant-profiles.md.
+of the identified gains and do not act separately. As the kit's block, it draws no navdata
+trims, yaw drift or velocity bias; the profile sets the sensor noise to 0 (config/profiles.py),
+and ``sim.noise`` adds it back where set. Constants and sources: docs/plant-profiles.md.
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ if TYPE_CHECKING:
 __all__ = ["KIT", "KitModel", "KitPlant", "kit_rk4"]
 
 N_KIT = 12   # x, y, z, ψ (world) + roll (2), pitch (2), u, v, vertical (1), ψ_k states
+NO_SENSOR_BIASES = {"navdata_trim_bias_max_rad": 0.0, "navdata_yaw_drift_radps": 0.0,
+                    "navdata_yaw_walk_rad_per_sqrt_s": 0.0, "navdata_velocity_bias_std_mps": 0.0}
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,7 +167,9 @@ class KitPlant(AirframePlant):
 
     def __init__(self, params: PlantParams, noise=None, *, seed: int = 0,
                  model: KitModel = KIT) -> None:
-        params = params.replace(tau_vz_s=1.0 / model.gz_pole)
+        # the kit's block outputs its states as they are: no navdata trims, drift or bias
+        # (the constant sim.navdata_velocity_bias_mps, a disturbance option, still acts)
+        params = params.replace(tau_vz_s=1.0 / model.gz_pole, **NO_SENSOR_BIASES)
         super().__init__(params, noise, seed=seed)
         self.model = model
         self._coefficients = model.coefficients(params.hover_tau_s)

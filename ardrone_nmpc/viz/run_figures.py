@@ -4,8 +4,8 @@
   the estimator's ż against the true ż; experiment time from t = 0 (the settle phase of a
   simulated run, t < 0, is left out); ticks in a fallback mode are shaded.
 * :func:`figure_inputs` — the NMPC inputs z̈, φ, θ, ψ̇ with ``controller.u_min``/``u_max`` and
-  the drone's own limits (tilt ``drone.euler_angle_max_rad``, yaw rate
-  ``drone.control_yaw_radps``), and the PCMD fractions sent, saturated ticks marked.
+  the command at PCMD ±1 (tilt ``drone.euler_angle_max_rad``, yaw rate
+  ``drone.control_yaw_radps``; 1 under the kit's convention), and the PCMD fractions sent, saturated ticks marked.
 * :func:`figure_solver` — solve and tick compute time, residual ‖F‖, iterations, mocap/navdata
   ages with the supervisor's thresholds; every row, the settle phase shaded.
 * :func:`figure_path3d` — the flown path in 3-D and from above, with the reference polyline.
@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ardrone_nmpc.control.mapping import command_scales
 from ardrone_nmpc.core.angles import unwrap_near_turns
 from ardrone_nmpc.runs.window import experiment_rows, flying_rows
 from ardrone_nmpc.viz.figure import PlotError, new_figure
@@ -247,8 +248,8 @@ def figure_inputs(run: RunData) -> Figure:
     """The controller's inputs with their bounds, and the PCMD fractions sent to the drone.
 
     Panels: z̈ (m/s²), φ (rad), θ (rad), ψ̇ (rad/s) with ``controller.u_min``/``u_max`` and, for
-    φ, θ, ψ̇, the drone's limit at PCMD ±1 (``drone.euler_angle_max_rad``,
-    ``drone.control_yaw_radps``); then the four PCMD fractions on [−1, 1] with the ticks whose
+    φ, θ, ψ̇, the command at PCMD ±1 (``drone.euler_angle_max_rad``,
+    ``drone.control_yaw_radps``, or 1 under the kit's ``drone.command_convention``); then the four PCMD fractions on [−1, 1] with the ticks whose
     command was saturated marked. Experiment rows only (t ≥ 0 s).
 
     Returns
@@ -259,7 +260,8 @@ def figure_inputs(run: RunData) -> Figure:
     t = _col(run, "t_s")[rows]
     cfg = run.config
     u_min, u_max = cfg.controller.u_min, cfg.controller.u_max
-    tilt, yaw = cfg.drone.euler_angle_max_rad, cfg.drone.control_yaw_radps
+    scales = command_scales(cfg.drone)  # the command at PCMD ±1 (its convention)
+    tilt, yaw = scales.euler_angle_max_rad, scales.control_yaw_radps
     panels = (("u_zacc_mps2", "vertical acceleration input z̈", "z̈ (m/s²)", "m/s²", None),
               ("u_phi_rad", "roll input φ", "φ (rad)", "rad", tilt),
               ("u_theta_rad", "pitch input θ", "θ (rad)", "rad", tilt),

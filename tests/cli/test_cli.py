@@ -64,14 +64,15 @@ def test_bench_writes_the_json_rows(tmp_path):
     assert "cgmres" in result.output
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--solvers", "fast"], "--solvers: unknown solver(s) fast"),
-    (["--compare", "acados"], "--compare: unknown comparison"),
-    (["--set", "controller.horizon_steps=0"], "controller.horizon_steps:"),
+@pytest.mark.parametrize("args, code, message", [
+    (["--solvers", "fast"], 2, "--solvers: unknown 'fast'; choose from cgmres, newton"),
+    (["--solvers", ","], 2, "--solvers: unknown (empty); choose from cgmres, newton"),
+    (["--compare", "acados"], 2, "--compare: unknown 'acados'; choose casadi"),
+    (["--set", "controller.horizon_steps=0"], 1, "controller.horizon_steps:"),
 ])
-def test_bench_rejects_bad_options(args, message):
+def test_bench_rejects_bad_options(args, code, message):
     result = runner.invoke(app, ["bench", "--steps", "10", *args])
-    assert result.exit_code == 1
+    assert result.exit_code == code
     assert message in result.output
 
 

@@ -4,22 +4,25 @@ repository root):
 
     python -m ardrone_nmpc.cli.app reproduce
 
-and commit docs/thesis-reproduction.md. The claims checked here fly in a few seconds; the
-full report takes about a minute (every claim in both formulations).
+and commit docs/thesis-reproduction.md. The claims checked here fly in well under a minute;
+the full report takes a few (every claim on its own plant and on `ardrone`, in both
+formulations).
 """
 
 from pathlib import Path
 
 import pytest
 
-from ardrone_nmpc.experiments.reproduce import COMMAND, run_claims
+from ardrone_nmpc.experiments.reproduce import COMMAND, flown_by_config, run_claims
 from ardrone_nmpc.experiments.reproduce import sections as s
-from ardrone_nmpc.experiments.reproduce.report import claim_rows
+from ardrone_nmpc.experiments.reproduce.report import beside_rows, claim_rows, failures
+from ardrone_nmpc.experiments.reproduce.xloop import x_loop_section
 
 REPORT = Path("docs/thesis-reproduction.md")
 CONFIGS = Path("configs")
-# one claim per kind of judge that a code change could move: a step pair, the stability pair
-QUICK = ["ψ: 0 → 1 rad", "N = 5 vs 6 at Δτ = 0.3", "r Case 1 / 2 / 3"]
+# one claim per kind of judge that a code change could move: a step pair, the two stability
+# pairs (every run the linearised section sets beside), the r cases
+QUICK = ["ψ: 0 → 1 rad", "N = 5 vs 6 at Δτ = 0.3", "Δτ at N = 15", "r Case 1 / 2 / 3"]
 STALE = f"docs/thesis-reproduction.md is stale: regenerate it with `{COMMAND}`"
 
 
@@ -30,26 +33,27 @@ def committed() -> str:
 
 
 @pytest.fixture(scope="module")
-def quick_outcomes(tmp_path_factory):
-    return run_claims(config_dir=CONFIGS, log_dir=tmp_path_factory.mktemp("reproduce"),
-                      only=QUICK)
+def log_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("reproduce")
+
+
+@pytest.fixture(scope="module")
+def quick_outcomes(log_dir):
+    return run_claims(config_dir=CONFIGS, log_dir=log_dir, only=QUICK)
 
 
 def test_regenerated_claim_rows_are_the_committed_ones(committed, quick_outcomes):
     assert [o.claim.experiment for o in quick_outcomes] == QUICK
-    for row in claim_rows(quick_outcomes):
-        assert row in committed, f"{STALE}\nregenerated row not in the report:\n{row}"
+    lines = (claim_rows(quick_outcomes) + beside_rows(quick_outcomes) + failures(quick_outcomes)
+             + failures(quick_outcomes, beside=True))
+    for line in lines:
+        assert line in committed, f"{STALE}\nregenerated line not in the report:\n{line}"
 
 
-def test_regenerated_x_loop_table_and_narrowings_are_the_committed_ones(committed,
-                                                                         quick_outcomes):
-    flown = {}
-    for o in quick_outcomes:
-        for form, figs in o.runs.items():
-            for label, (name, _) in o.claim.runs.items():
-                flown.setdefault(name, {})[form] = figs[label]
-    rows, plant, weights = s.x_loop_rows(CONFIGS)
-    for line in s.render_x_loop(rows, plant, weights, flown) + s.narrowings(CONFIGS):
+def test_regenerated_x_loop_section_and_narrowings_are_the_committed_ones(committed, log_dir,
+                                                                          quick_outcomes):
+    section = x_loop_section(CONFIGS, log_dir, 0, flown_by_config(quick_outcomes))
+    for line in section + s.narrowings(CONFIGS):
         if "not flown" in line:  # a case whose runs this quick subset does not fly
             line = line.split("| not flown")[0]
         assert line in committed, f"{STALE}\nregenerated line not in the report:\n{line}"

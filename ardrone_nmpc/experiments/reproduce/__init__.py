@@ -1,11 +1,13 @@
 """``ardrone-nmpc reproduce``: every thesis experiment in simulation, judged against its claim.
 
-Each claim of the thesis' results table (docs/thesis.md) names the runs it needs; every run
+Each claim of the thesis' results table (docs/thesis.md) names the runs it needs and where it
+was made: simulation claims are judged on ``thesis_kit`` (the thesis' own simulator), the
+experimental ones on ``ardrone_lab``, and every claim is shown on ``ardrone`` beside. Every run
 is flown twice — in the thesis' own formulation (a delay-free prediction model, the ż
 reference integrated over one period, navdata ẋ, ẏ) and in this tool's default — and the
-claim is judged on each (``claims``, ``judges``). Beside the table the report shows the
-linearised x loop for the N/Δτ claims, the thesis' Newton solver on the ψ step, and where the
-formulations narrow the thesis' (``sections``). :func:`reproduce` writes the report
+claim is judged on each (``claims``, ``judges``). Beside the tables the report shows the
+linearised x loop for the N/Δτ claims (``xloop``), the thesis' Newton solver on the ψ step,
+and where the formulations narrow the thesis' (``sections``). :func:`reproduce` writes the report
 (``report``) to ``docs/thesis-reproduction.md``; it is deterministic, and
 tests/unit/test_reproduce_stale.py checks the committed file against a regenerated part.
 """
@@ -16,27 +18,36 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.experiments.reproduce.claims import (
-    FORMULATIONS, LAB_OVERRIDES, Claim, Outcome, claims, run_claims)
-from ardrone_nmpc.experiments.reproduce.judges import Motion, RunFigures, classify_motion
+    BESIDE, FORMULATIONS, HOME_PLANTS, LAB_OVERRIDES, Claim, Outcome, claims, run_claims)
+from ardrone_nmpc.experiments.reproduce.judges import (Motion, RunFigures, Verdict,
+                                                       classify_motion)
 from ardrone_nmpc.experiments.reproduce.report import COMMAND, render_markdown
 
-__all__ = ["COMMAND", "FORMULATIONS", "LAB_OVERRIDES", "Claim", "Motion", "Outcome",
-           "RunFigures", "classify_motion", "claims", "render_markdown", "reproduce",
-           "run_claims", "report_sections"]
+__all__ = ["BESIDE", "COMMAND", "FORMULATIONS", "HOME_PLANTS", "LAB_OVERRIDES", "Claim",
+           "Motion", "Outcome", "RunFigures", "Verdict", "classify_motion", "claims",
+           "flown_by_config", "render_markdown", "reproduce", "run_claims", "report_sections"]
+
+
+def flown_by_config(outcomes: list[Outcome]) -> dict:
+    """config name -> {(plant, formulation): RunFigures} of the claims' runs."""
+    flown: dict = {}
+    for o in outcomes:
+        for key, figs in o.runs.items():
+            for label, (name, overrides) in o.claim.runs.items():
+                if not overrides:
+                    flown.setdefault(name, {})[key] = figs[label]
+    return flown
 
 
 def report_sections(outcomes: list[Outcome], *, config_dir: Path, log_dir: Path, seed: int,
                     progress: Callable[[str], None] | None = None) -> list[str]:
     """The sections beside the claims table (flies the Newton runs)."""
     from ardrone_nmpc.experiments.reproduce import sections as s
+    from ardrone_nmpc.experiments.reproduce.xloop import x_loop_section
 
-    flown = {}
-    for o in outcomes:
-        for form, figs in o.runs.items():
-            for label, (name, _) in o.claim.runs.items():
-                flown.setdefault(name, {})[form] = figs[label]
-    rows, plant, weights = s.x_loop_rows(config_dir)
-    lines = s.render_x_loop(rows, plant, weights, flown)
+    if progress:
+        progress("linearised x loop — Newton flights and the small-step check")
+    lines = x_loop_section(config_dir, log_dir, seed, flown_by_config(outcomes))
     if progress:
         progress("thesis Newton solver — ψ step")
     runs = s.newton_runs(config_dir, log_dir, seed)

@@ -1,5 +1,6 @@
-"""The report's sections beside the claims table: the linearised x loop for the N/Δτ claims,
-the thesis' own Newton solver on the ψ step, and where our formulation narrows the thesis'.
+"""The report's sections beside the claims table: the thesis' own Newton solver on the ψ step,
+and where the simulated formulations narrow the thesis' (the linearised x loop for the N/Δτ
+claims is :mod:`.xloop`).
 """
 
 from __future__ import annotations
@@ -11,83 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.control.mapping import DroneLimits
-from ardrone_nmpc.core.types import IU_PSIRATE, IU_THETA, IU_ZACC, IX_VX, IX_X
-from ardrone_nmpc.experiments.reproduce.claims import FORMULATIONS, LAB_OVERRIDES, fly
-from ardrone_nmpc.experiments.xchannel import XPlant, stability_table, verdict
-
-# (N, Δτ) of the thesis' tuning claims (fig. 4.14–4.17) and the config flying each, if any
-STABILITY_CASES = [(5, 0.3, "stability_n5_dtau03.yaml"), (6, 0.3, "stability_n6_dtau03.yaml"),
-                   (15, 0.08, "stability_n15_dtau008.yaml"), (15, 0.1, None),
-                   (15, 0.15, "stability_n15_dtau015.yaml")]
-TILT_GAINS = (1.0, 0.7)  # the plant's g·tanθ as configured, and 0.7× (a weaker drone)
-
-
-def x_loop_rows(config_dir: Path) -> tuple[list[dict], XPlant, tuple[float, float, float]]:
-    """The spectral radius of the linearised x loop (experiments/xchannel.py) per N/Δτ case
-    and tilt gain: the thesis' x weights, the configured plant's lag, drag, delay, period."""
-    cfg = load_config(config_dir / STABILITY_CASES[0][2], LAB_OVERRIDES)
-    ctl, plant = cfg.controller, cfg.sim.plant
-    base = XPlant(tau_tilt_s=plant.tau_tilt_s, drag_per_s=plant.drag_per_s,
-                  delay_s=plant.command_delay_s, period_s=cfg.loop.period_s)
-    plants = {f"{g:g}": XPlant(base.tau_tilt_s, g, base.drag_per_s, base.delay_s, base.period_s)
-              for g in TILT_GAINS}
-    weights = (ctl.q[IX_X], ctl.q[IX_VX], ctl.r[IU_THETA])
-    rows = stability_table([(n, d) for n, d, _ in STABILITY_CASES], q_x=weights[0],
-                           q_v=weights[1], r_theta=weights[2], plants=plants)
-    for row, (_, _, name) in zip(rows, STABILITY_CASES):
-        row["config"] = name
-    return rows, base, weights
-
-
-def render_x_loop(rows, plant: XPlant, weights, flown: dict) -> list[str]:
-    """``flown``: config name -> {formulation: RunFigures} of the simulated runs."""
-    q_x, q_v, r = weights
-    lines = [
-        "## N and Δτ: the linearised x loop", "",
-        f"The x channel at hover (`experiments/xchannel.py`): the NMPC's first-step gain K₀ of "
-        f"the Euler-discretised prediction (q = [{q_x:g}, {q_v:g}], r_θ = {r:g}, no terminal "
-        f"weight) against the plant's tilt lag τ = {plant.tau_tilt_s:g} s, drag "
-        f"{plant.drag_per_s:g} /s, the {plant.delay_s:g} s command delay and the "
-        f"{plant.period_s * 1e3:g} ms period — the thesis formulation (no delay compensation). "
-        "ρ is the closed loop's spectral radius (> 1: unstable, within 0.001 of 1: marginal), "
-        "at the configured tilt gain g·tanθ and at 0.7 of it.", "",
-        "| N | Δτ (s) | K₀ [x, ẋ] | " + " | ".join(f"ρ, tilt gain {g:g}" for g in TILT_GAINS)
-        + " | flown, thesis formulation | flown, ours |",
-        "|--:|--:|---|" + "---|" * len(TILT_GAINS) + "---|---|",
-    ]
-    for row in rows:
-        rhos = [row[f"rho_{g:g}"] for g in TILT_GAINS]
-        figs = flown.get(row["config"], {})
-        sims = [figs[f].end("x").describe() if f in figs else "not flown" for f in FORMULATIONS]
-        lines.append(f"| {row['N']} | {row['dtau_s']:g} | [{row['k_x']:.3f}, {row['k_v']:.3f}] | "
-                     + " | ".join(f"{v:.4f} ({verdict(v)})" for v in rhos)
-                     + " | " + " | ".join(sims) + " |")
-    lines += ["", *x_loop_conclusion(rows), ""]
-    return lines
-
-
-def x_loop_conclusion(rows) -> list[str]:
-    """What the table says about the two claims, from its verdicts."""
-    by_case = {(r["N"], r["dtau_s"]): r for r in rows}
-    n5, n6 = by_case[(5, 0.3)], by_case[(6, 0.3)]
-    gains = [f"{g:g}" for g in TILT_GAINS]
-    thesis_like = [g for g in gains if verdict(n5[f"rho_{g}"]) == "unstable"
-                   and verdict(n6[f"rho_{g}"]) == "stable"]
-    gap = max(abs(n5[f"rho_{g}"] - n6[f"rho_{g}"]) for g in gains)
-    out = [f"* N = 5 vs 6 at Δτ = 0.3 s: K₀,x {n5['k_x']:.3f} vs {n6['k_x']:.3f}, ρ within "
-           f"{gap:.4f} of each other at every tilt gain; "
-           + (f"N = 5 unstable and N = 6 stable at tilt gain {', '.join(thesis_like)}."
-              if thesis_like else "at no gain is N = 5 unstable and N = 6 stable — the two are "
-              "equally close to the edge, so no plant separates them and a flight cannot either.")]
-    for g in gains:
-        v = {d: verdict(by_case[(15, d)][f"rho_{g}"]) for d in (0.08, 0.1, 0.15)}
-        thesis_like = v[0.08] == "unstable" and v[0.15] == "stable"
-        out.append(f"* Δτ at N = 15, tilt gain {g}: 0.08 s {v[0.08]}, 0.1 s {v[0.1]}, 0.15 s "
-                   f"{v[0.15]}" + (" — the thesis' boundary." if thesis_like else
-                                   " — not the thesis' boundary."))
-    return out
-
+from ardrone_nmpc.control.mapping import command_scales
+from ardrone_nmpc.core.types import IU_PSIRATE, IU_THETA, IU_ZACC
+from ardrone_nmpc.experiments.reproduce.claims import (BESIDE, FORMULATIONS, HOME_PLANTS,
+                                                       LAB_OVERRIDES, fly)
 
 @dataclass
 class NewtonRun:
@@ -135,8 +63,7 @@ def newton_traces(path: Path) -> dict[int, dict[int, list[float]]]:
 
     run = read_run(path)
     cfg, cols = run.config, run.columns
-    limits = DroneLimits(cfg.drone.euler_angle_max_rad, cfg.drone.control_vz_max_mps,
-                         cfg.drone.control_yaw_radps)
+    limits = command_scales(cfg.drone)
     ctl = effective_controller(cfg.controller, limits)
     ctl = ctl.model_copy(update={"solver": ctl.solver.model_copy(
         update={"newton_kmax": max(NEWTON_KMAX)})})  # memory for the largest k_max traced
@@ -177,7 +104,8 @@ def render_newton(runs: list[NewtonRun], traces, tolerance: float,
     lines = [
         "## The thesis' Newton solver on the ψ step", "",
         "`controller.solver.method=newton` (thesis Algorithm 1: Newton steps by fdgmres, "
-        f"eq. 3.25 bounds) on `step_psi.yaml` in the thesis formulation; tolerance ‖F‖ ≤ "
+        f"eq. 3.25 bounds) on `step_psi.yaml` in the thesis formulation on `{BESIDE}`; "
+        f"tolerance ‖F‖ ≤ "
         f"{tolerance:g}, at most {max_iterations} Newton iterations per active-set round. "
         "k_max is the Krylov dimension of each Newton step (the thesis gives none).", "",
         "| k_max | solves | ended at max-iterations | Newton iterations mean / max "
@@ -222,49 +150,87 @@ def newton_conclusion(traces, tolerance: float) -> list[str]:
 def _narrowed(name: str, thesis: float, drone: float, unit: str, field: str) -> str:
     if drone < thesis:
         return f"{name} within ±{drone:.4f} {unit} (`{field}`), not ±{thesis:g}"
-    return f"{name} within ±{thesis:g} {unit} as in the thesis (`{field}` = {drone:g})"
+    return f"{name} within ±{thesis:g} {unit} as in the thesis"
+
+
+def _bounds(cfg) -> str:
+    """What the NMPC plans within on one plant, and why."""
+    ctl, scales = cfg.controller, command_scales(cfg.drone)
+    convention = cfg.drone.command_convention
+    field = ("drone.euler_angle_max_rad" if convention == "sdk"
+             else "the port's ±1, `drone.command_convention: kit`")
+    tilt = _narrowed("φ, θ", ctl.u_max[IU_THETA], scales.euler_angle_max_rad, "rad", field)
+    yaw = _narrowed("ψ̇", ctl.u_max[IU_PSIRATE], scales.control_yaw_radps, "rad/s",
+                    "drone.control_yaw_radps" if convention == "sdk" else field)
+    return (f"`{cfg.sim.plant.profile}` ({convention} convention): {tilt}; {yaw}; the ż "
+            f"reference sent clipped to ±{scales.control_vz_max_mps:g} m/s")
 
 
 def narrowings(config_dir: Path) -> list[str]:
     """Where both formulations depart from the thesis' (bounds, estimator, solver, …)."""
-    cfg = load_config(config_dir / "step_x.yaml", [*LAB_OVERRIDES, *FORMULATIONS["thesis"]])
-    ctl, drone, est = cfg.controller, cfg.drone, cfg.estimator
-    g = ctl.p_gains
-    tilt = _narrowed("φ, θ", ctl.u_max[IU_THETA], drone.euler_angle_max_rad, "rad",
-                     "drone.euler_angle_max_rad")
-    yaw = _narrowed("ψ̇", ctl.u_max[IU_PSIRATE], drone.control_yaw_radps, "rad/s",
-                    "drone.control_yaw_radps")
+    over = [*LAB_OVERRIDES, *FORMULATIONS["thesis"]]
+    kit, lab = HOME_PLANTS["simulation"], HOME_PLANTS["experiment"]
+    cfgs = {plant: load_config(config_dir / "step_x.yaml", [*over, f"sim.plant.profile={plant}"])
+            for plant in (kit, lab, BESIDE)}
+    cfg = cfgs[BESIDE]
+    ours = load_config(config_dir / "step_x.yaml", LAB_OVERRIDES)
+    ctl, est = cfg.controller, cfg.estimator
+    gains = {plant: c.controller.p_gains for plant, c in cfgs.items()}
+    noise = cfgs[kit].sim.noise
+    quiet = all(v == 0.0 for v in noise.model_dump().values())
     lines = ["## Where the simulated formulations narrow the thesis'", "",
+             "* **Plants.** The simulation claims on `" + kit + "`: the ARDrone Simulink "
+             "Development Kit the thesis simulated with, driven as its Baseline Controller "
+             "drives it (docs/plant-profiles.md §2). The experimental claims on `" + lab + "`, "
+             "calibrated on the thesis' experimental square (§3). Every claim also on `"
+             + BESIDE + "` (the tum_ardrone airframe with the thesis simulator's 0.26 s delay).",
              f"* **Input bounds.** Eq. 4.17 bounds every input by ±1; the configs keep "
-             f"u_min = {list(ctl.u_min)}, u_max = {list(ctl.u_max)}, but the NMPC plans within "
-             f"the drone's own limits (`effective_controller`, runtime/tick.py) in both "
-             f"formulations: {tilt}; {yaw}. "
+             f"u_min = {list(ctl.u_min)}, u_max = {list(ctl.u_max)}, and the NMPC plans within "
+             "what a PCMD ±1 commands (`effective_controller`, runtime/tick.py): "
+             + "; ".join(_bounds(cfgs[p]) for p in (kit, BESIDE)) + ". "
              f"u1 is z̈, bounded by ±{ctl.u_max[IU_ZACC]:g} m/s² (the thesis' text calls it a "
-             f"velocity in m/s); the ż reference sent is clipped to ±{drone.control_vz_max_mps:g} "
-             "m/s (`drone.control_vz_max_mps`).",
+             "velocity in m/s).",
              f"* **Estimator.** ż from the estimator each altitude config names "
              f"(`estimator.kind`; the others use {est.kind}): the Kalman filter with the thesis' "
              f"Q = {est.kalman_q:g}, R = {est.kalman_r:g}; the Luenberger observer with its "
              f"double pole at −{est.luenberger_lambda0_per_s:g} /s (K = [2λ0, λ0²]: eq. 4.12 "
              "as printed puts the poles in the right half-plane, eq. 4.15's K = [10, 25] at −5). "
-             "ẋ, ẏ from navdata in the thesis formulation (the simulator adds an optical-flow "
-             "bias), from differenced mocap positions in ours; x, y, z, ψ from mocap in both.",
-             "* **Prediction.** Thesis formulation: delay-free, ż reference = ż + z̈·65 ms. Ours: "
-             "the state predicted through the commands in flight over the command delay, "
-             "ż reference = ż + z̈·0.5 s (the vertical lag inverted).",
+             "ẋ, ẏ from navdata in the thesis formulation, from differenced mocap positions in "
+             "ours; x, y, z, ψ from mocap in both. "
+             + (f"On `{kit}` the sensors are noise-free, as the kit's outputs; "
+                if quiet else f"On `{kit}` the sensors carry `sim.noise`; ")
+             + "on the others they carry the noise and navdata biases of docs/plant.md §3.",
+             f"* **Prediction.** Thesis formulation: delay-free, ż reference = ż + "
+             f"z̈·{cfg.loop.period_s * 1e3:g} ms. Ours: the state predicted through the commands "
+             f"in flight over {_lead(ours.controller.delay_compensation_s)}, ż reference = ż + "
+             f"z̈·{_lead(ours.controller.vz_lead_s)} (the `{BESIDE}` plant's vertical lag "
+             "inverted).",
              f"* **Solver.** The claims are flown with `controller.solver.method="
-             f"{ctl.solver.method}` in both formulations; the thesis' Newton scheme is shown "
-             "on the ψ step above.",
-             f"* **P controller (eq. 4.16).** The thesis gives no gains; ours: k1 = "
-             f"{g.k1_per_s:g}, k2 = {g.k2_rad_per_mps:g}, k3 = {g.k3_rad_per_mps:g}, "
-             f"k4 = {g.k4_per_s:g}, tuned to its P settling times; the velocity error is rotated "
-             "into the body frame and φ's sign fixed (as printed the law holds only at ψ = 0).",
+             f"{ctl.solver.method}` in both formulations; the thesis' Newton scheme flies the "
+             "stability cases beside the linearised x loop and the ψ step below.",
+             "* **P controller (eq. 4.16).** On `" + kit + "` the kit's Baseline Controller "
+             "gains: " + _gains(gains[kit]) + " (ARBlocks.slx); on `" + BESIDE + "` and `" + lab
+             + "` ours, tuned to the thesis' P settling times on `" + BESIDE + "`: "
+             + _gains(gains[BESIDE]) + ". The velocity error is rotated into the body frame "
+             "and φ's sign fixed (as printed the law holds only at ψ = 0), as the kit does.",
              "* **Supervisor.** The geofence is widened (`" + "`, `".join(LAB_OVERRIDES)
-             + "`) so that the supervisor does not end a run the controller would fly on.",
-             "* **Plant.** The simulator of `docs/plant.md`, not the thesis' Simulink kit.",
+             + "`) so that the supervisor does not end a run the controller would fly on; "
+             f"on `{kit}` its tilt limit is {cfgs[kit].safety.max_tilt_rad:g} (the port's "
+             "saturation in the kit's convention; the kit cannot tilt beyond 0.86 rad with its "
+             "ports within ±1), elsewhere "
+             f"{cfg.safety.max_tilt_rad:g} rad. A claim fails if the supervisor flew any tick "
+             "of its experiments.",
              ]
     if "controller.offset_free=false" in FORMULATIONS["thesis"]:
         lines.append("* **Offset-free tracking.** Off in the thesis formulation "
                      "(`controller.offset_free=false`), on in ours.")
     return lines + [""]
 
+
+def _gains(g) -> str:
+    return (f"k1 = {g.k1_per_s:g}, k2 = {g.k2_rad_per_mps:g}, k3 = {g.k3_rad_per_mps:g}, "
+            f"k4 = {g.k4_per_s:g}")
+
+
+def _lead(seconds) -> str:
+    return "one period" if seconds is None else f"{seconds:g} s"
