@@ -56,3 +56,29 @@ def test_every_bootstrap_is_answered_and_an_unanswered_one_is_said():
                           5.0)
         assert "general:navdata_demo='TRUE': no ACK" in link.last_error
         assert link.connected and drone.bootstrap
+
+
+def test_every_packet_updates_what_a_landing_reads():
+    """DroneLink's receiver, packet by packet (packed here from docs/protocol.md §4): the state
+    word and mode of any packet; the demo sample of demo packets only; a demo packet's
+    ctrl_state decides (bit 0 clear but major 8 is still landing)."""
+    from ardrone_nmpc.core.types import FlightMode
+    from ardrone_nmpc.links.drone_link import DroneLink
+    from tests.integration.test_operator_link import BOOTSTRAP, DEMO, FLY, packet
+
+    clock = iter(float(t) for t in range(100, 200))
+    link = DroneLink("127.0.0.1", clock=lambda: next(clock))
+    link._host_ip = "127.0.0.1"
+    here = ("127.0.0.1", 5554)
+    link._handle_navdata(packet(FLY | BOOTSTRAP, seq=1), here)
+    assert (link.packet_mode, link.navdata, link.state_rx_t_s) == (FlightMode.FLYING, None, 100.0)
+    assert link.state == FLY | BOOTSTRAP and link.bootstrap_answers == 0  # not connected yet
+    link._handle_navdata(packet(DEMO, seq=2, major=8), here)
+    assert link.packet_mode is FlightMode.LANDING and link.state_rx_t_s == 101.0
+    assert link.navdata.mode is FlightMode.LANDING and link.navdata.t_s == 101.0
+    assert link.navdata_rx_t_s == 101.0 and link.navdata.battery_pct == 60.0
+    link._handle_navdata(packet(BOOTSTRAP, seq=3), here)    # the demo sample stays
+    assert link.packet_mode is FlightMode.LANDED and link.navdata_rx_t_s == 101.0
+    link._handle_navdata(b"\x88\x77\x66\x55bad", here)
+    assert link.stats.malformed == 1 and link.last_error.startswith("navdata: ")
+    link.close()

@@ -1246,3 +1246,13 @@ def test_a_fault_during_take_off_is_one_line_naming_bit_mode_and_ctrl_state():
                               "ctrl_state 0x00020000) — landing")
     assert ("drone_faults", {"phase": "takeoff", "bits": ["SOFTWARE_FAULT", "ULTRASOUND"]}) \
         in events
+
+
+def test_the_second_sender_refusal_word_for_word():
+    session, *_ = make(mocap_kw={"contenders": ["127.0.0.1:40000", "127.0.0.1:40001"]})
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == (
+        "mocap object 'ardrone' comes from more than one sender: the link took 10.0.0.2:4000, "
+        "127.0.0.1:40000, 127.0.0.1:40001 also sends it — stop the other stream (a replay "
+        "--broadcast?) before flying")
