@@ -82,3 +82,14 @@ def test_every_packet_updates_what_a_landing_reads():
     link._handle_navdata(b"\x88\x77\x66\x55bad", here)
     assert link.stats.malformed == 1 and link.last_error.startswith("navdata: ")
     link.close()
+
+
+def test_the_bootstrap_answer_runs_in_a_named_daemon_thread():
+    """Named for diagnostics; a daemon, so a process that ends never waits for an answer."""
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=3.0)
+        with drone.lock:
+            drone.bootstrap = True
+        assert wait_until(lambda: link._bootstrap_thread is not None, 3.0)
+        assert link._bootstrap_thread.name == "drone-bootstrap-answer"
+        assert link._bootstrap_thread.daemon is True

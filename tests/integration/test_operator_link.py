@@ -234,3 +234,17 @@ def test_ardrone_nmpc_emergency_cuts_from_its_first_datagram(drone, tmp_path):
         proc.communicate()
     assert datagrams[0] == b"AT*REF=1,290717696\rAT*REF=2,290717952\rAT*PCMD=3,0,0,0,0,0\r"
     assert datagrams[1:] == [b"AT*REF=1,290717696\rAT*PCMD=2,0,0,0,0,0\r"] * 2
+
+
+def test_wait_for_waits_its_whole_timeout_for_a_late_packet(drone):
+    import threading
+
+    with drone.link() as link:
+        link.start("land")
+        link.wake_navdata()
+        _, client = drone.nav.recvfrom(64)
+        threading.Timer(0.8, lambda: drone.nav.sendto(packet(0), client)).start()
+        t0 = time.monotonic()
+        assert link.wait_for(lambda lk: lk.packets == 1, 1.5)          # arrives at 0.8 s
+        assert 0.7 < time.monotonic() - t0 < 1.5
+        assert not link.wait_for(lambda lk: lk.packets == 2, 0.2)     # and a timeout is one

@@ -324,3 +324,41 @@ def test_a_ctrl_c_during_land_lands_first_two_cut():
         assert result.exit_code == 130 and drone.phase == "emergency"
         assert result.stderr.splitlines()[-1] == "error: interrupted: motors cut (emergency)"
         assert "cutting the motors (emergency): a second Ctrl-C" in result.stderr
+
+
+def test_a_landing_whose_navdata_stops_says_the_last_mode_it_saw(short_blind_landing):
+    import threading
+
+    with SdkDrone(airborne_at_start=True) as drone:
+        drone.LANDING_S = 5.0                         # it is still coming down, unseen
+
+        def silence():                                # once the operator hears it, no more
+            if wait_until(lambda: getattr(drone, "last_navdata_t", None) is not None, 10.0):
+                with drone.lock:
+                    drone.silent_from, drone.silent_until = time.monotonic(), float("inf")
+        threading.Thread(target=silence, daemon=True).start()
+        result = operator("land", drone)
+        assert result.exit_code == 1
+        assert re.fullmatch(r"error: landing not confirmed by navdata \(the drone's last mode "
+                            r"(flying|landing), \d s ago\) — look at the drone",
+                            result.stderr.strip().splitlines()[-1]), result.stderr
+
+
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_an_interrupted_blind_landing_says_it_was_not_confirmed(short_blind_landing, sig, code):
+    import os
+    import signal
+    import threading
+
+    with SdkDrone(airborne_at_start=True) as drone:
+        drone.silent_until = float("inf")            # it hears, it never answers
+
+        def interrupt():                             # once the landing waits for navdata
+            if wait_until(lambda: drone.wakeups, 10.0):
+                time.sleep(0.2)
+                os.kill(os.getpid(), getattr(signal, sig))
+        threading.Thread(target=interrupt, daemon=True).start()
+        result = operator("land", drone)
+        assert result.exit_code == code, result.stderr
+        assert result.stderr.strip().splitlines()[-1] == (
+            "error: interrupted: landing not confirmed by navdata — check the drone")
