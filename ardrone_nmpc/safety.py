@@ -35,7 +35,7 @@ commanded tilt > ``max_tilt_rad``      clipped (flagged in ``cmd_saturated``)
 Every comparison is written so that a NaN fails it: a non-finite age, battery level, tilt or
 estimate is a breach of its check, never a pass (``max(abs(nan), 1.0) > cap`` is False).
 
-The fault bits are those of the navdata state word (:data:`DRONE_FAULTS`, docs/protocol.md
+The fault bits are those of the navdata state word (:data:`DRONE_ALARMS`, docs/protocol.md
 §4.2), read when the sample carries one; :func:`takeoff_refusal` is the pre-flight side of the
 same table (every fault bit there refuses a take-off).
 
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
-__all__ = ["Action", "DRONE_FAULTS", "Decision", "DroneFault", "Supervisor", "drone_faults",
+__all__ = ["Action", "DRONE_ALARMS", "Decision", "DroneAlarm", "Supervisor", "drone_alarms",
            "takeoff_refusal"]
 
 
@@ -96,7 +96,7 @@ NOMINAL = Decision(Action.CONTROL)
 
 
 @dataclass(frozen=True, slots=True)
-class DroneFault:
+class DroneAlarm:
     """A fault bit of the drone's navdata state word (``def_ardrone_state_mask_t``).
 
     ``in_flight`` is what the supervisor does when it is set airborne: ``stop`` (the runner
@@ -125,26 +125,26 @@ class DroneFault:
 
 #: The fault bits the tool acts on, most severe first (docs/protocol.md §4.2; ARDroneLib
 #: config.h). COM_LOST (13) is not among them: it reports the link this packet just crossed.
-DRONE_FAULTS: tuple[DroneFault, ...] = (
-    DroneFault(22, "CUTOUT", "motor cut-out detected", Action.STOP),
-    DroneFault(12, "MOTORS", "motor problem", Action.STOP),
-    DroneFault(14, "SOFTWARE_FAULT", "software fault, land as soon as possible", Action.LAND),
-    DroneFault(15, "VBAT_LOW", "battery too low for the firmware", Action.LAND),
-    DroneFault(21, "ULTRASOUND", "ultrasound sensor deaf", None),
+DRONE_ALARMS: tuple[DroneAlarm, ...] = (
+    DroneAlarm(22, "CUTOUT", "motor cut-out detected", Action.STOP),
+    DroneAlarm(12, "MOTORS", "motor problem", Action.STOP),
+    DroneAlarm(14, "SOFTWARE_FAULT", "software fault, land as soon as possible", Action.LAND),
+    DroneAlarm(15, "VBAT_LOW", "battery too low for the firmware", Action.LAND),
+    DroneAlarm(21, "ULTRASOUND", "ultrasound sensor deaf", None),
 )
 
 
-def drone_faults(state_bits: int | None) -> list[DroneFault]:
-    """The :data:`DRONE_FAULTS` set in ``state_bits`` (none for None), most severe first."""
+def drone_alarms(state_bits: int | None) -> list[DroneAlarm]:
+    """The :data:`DRONE_ALARMS` set in ``state_bits`` (none for None), most severe first."""
     if state_bits is None:
         return []
-    return [f for f in DRONE_FAULTS if state_bits & f.mask]
+    return [f for f in DRONE_ALARMS if state_bits & f.mask]
 
 
 def takeoff_refusal(state_bits: int | None) -> str | None:
     """One line naming every fault bit set in ``state_bits`` (None when there is none): the
     drone reports a fault, so nothing takes off."""
-    faults = drone_faults(state_bits)
+    faults = drone_alarms(state_bits)
     if not faults:
         return None
     return ("the drone reports " + ", ".join(f.line() for f in faults)
@@ -185,7 +185,7 @@ class Supervisor:
         cfg = self.cfg
         if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
             return self._latch(Decision(Action.STOP, "emergency"))
-        faults = drone_faults(navdata.state_bits if navdata is not None else None)
+        faults = drone_alarms(navdata.state_bits if navdata is not None else None)
         for fault in faults:
             if fault.in_flight is Action.STOP:
                 return self._latch(Decision(Action.STOP, fault.reason))

@@ -104,8 +104,8 @@ def simulate(
 @app.command()
 def fly(
     config: Path = CONFIG_ARG,
-    sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone."),
-    drone: Optional[str] = typer.Option(None, "--drone", callback=non_empty, help="Drone address (default: drone.host, 192.168.1.1)."),
+    sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone: --drone sim://loopback."),
+    drone: Optional[str] = typer.Option(None, "--drone", callback=non_empty, help="Drone address or URI: 192.168.1.1 or udp://HOST (an AR.Drone 2.0), sim://loopback (the simulated drone over UDP), sim://lockstep (the simulated drone in lockstep, as simulate) (default: drone.host, 192.168.1.1)."),
     at_port: Optional[int] = typer.Option(None, "--at-port", callback=port(), help="AT command UDP port (default: drone.at_port, 5556)."),
     navdata_port: Optional[int] = typer.Option(None, "--navdata-port", callback=port(), help="Navdata UDP port (default: drone.navdata_port, 5554)."),
     mocap_port: Optional[int] = typer.Option(None, "--mocap-port", callback=port(), help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
@@ -275,9 +275,12 @@ def sim_drone(
 
 
 from ardrone_nmpc.cli import export as _export, mocap_check as _mocap_check, tune as _tune  # noqa: E402
+from ardrone_nmpc.cli import identify as _identify, robustness as _robustness  # noqa: E402
 _mocap_check.register(app)  # commands that live in their own modules
 _export.register(app)
 _tune.register(app)
+_robustness.register(app)
+_identify.register(app)
 
 
 from ardrone_nmpc.cli.operator import register as register_operator_commands  # noqa: E402

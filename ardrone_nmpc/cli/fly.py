@@ -1,13 +1,14 @@
 """``ardrone-nmpc fly``: the live display around a real-time flight, and its exit codes.
 
-The flight itself (links, session, loop, landing) is :func:`~ardrone_nmpc.runtime.realtime.
-run_flight`; this module shows its figures while it flies (on a terminal) and decides how the
-command ends. Whatever happens, the landing outcome and the run directory are printed:
+The flight itself (the drone's backend, session, loop, landing, the run directory) is
+:func:`~ardrone_nmpc.experiments.flight.run_flight`; this module shows its figures while it
+flies (on a terminal) and decides how the command ends. Whatever happens, the landing outcome
+and the run directory are printed:
 
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
 * a flight error (link lost, supervisor landing or cut, emergency, pre-flight refusal, a
-  take-off that failed, a flight that ended without doing its job — a failed verdict): its
-  ``error:`` line, exit 1;
+  ``faults`` section on a drone that is not simulated, a take-off that failed, a flight that
+  ended without doing its job — a failed verdict): its ``error:`` line, exit 1;
 * Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1, PIPE): exit
   128 + its number (the session has landed in every case); USR2 — the operator's
   ``emergency`` — exit 140, the motors cut;
@@ -38,7 +39,8 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
 
     from ardrone_nmpc.cli.console import stderr_console
     from ardrone_nmpc.config.io import load_config
-    from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed, run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
+    from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed
     from ardrone_nmpc.runtime.signals import (Terminated, exit_code_of,
                                               ignoring_emergency_signal)
     from ardrone_nmpc.viz.dashboard import LiveStatus
@@ -50,7 +52,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     cfg = load_config(config, overrides)
     # the land / cut-motors keys need a terminal to read them from and to show them on
     keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr and sys.stderr.isatty())
-    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}",
+    view = LiveStatus(f"{cfg.name} — {'sim://loopback' if sim else drone or cfg.drone.host}",
                       **({} if keys else {"keys_help": None}))
     use_live = dashboard and sys.stderr is not None and sys.stderr.isatty()
     console = stderr_console()

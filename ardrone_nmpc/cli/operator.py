@@ -277,7 +277,7 @@ def status(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDA
     limits."""
     from ardrone_nmpc.links.drone_link import LinkError
     from ardrone_nmpc.protocol.navdata import CtrlMajor, DroneState
-    from ardrone_nmpc.safety import drone_faults
+    from ardrone_nmpc.safety import drone_alarms
 
     link = _link(drone, at_port, navdata_port, control_port=control_port,
                  config_ids=config_ids)
@@ -293,7 +293,7 @@ def status(drone: str = DRONE, at_port: int = AT_PORT, navdata_port: int = NAVDA
         lines = [f"drone      {drone}:{at_port}/{navdata_port}",
                  f"mode       {nav.mode.value}",
                  f"state      0x{int(state):08x} {' '.join(names)}",
-                 f"faults     {', '.join(f.line() for f in drone_faults(int(state))) or 'none'}",
+                 f"faults     {', '.join(f.line() for f in drone_alarms(int(state))) or 'none'}",
                  f"ctrl_state 0x{nav.ctrl_state or 0:08x} (major {major} {major_name}, "
                  f"minor {(nav.ctrl_state or 0) & 0xFFFF})",
                  f"battery    {nav.battery_pct:.0f} %",

@@ -4,8 +4,10 @@
   by foxglove-sdk — ``/log`` (one message per row), ``/events``, ``/config`` (JSON, each with
   its JSON schema), ``/pose`` and ``/reference`` (``foxglove.PoseInFrame``), ``/tf``
   (``foxglove.FrameTransform``), ``/flight_path`` and ``/reference_path`` (whole, once) — for
-  Foxglove, PlotJuggler or the ``mcap`` CLI. A message's log time is its run time ``t_s`` (an event's ``t_exp_s`` when it has one) on an
-  epoch that puts the run's first row at the creation time recorded in ``config.yaml``.
+  Foxglove, PlotJuggler or the ``mcap`` CLI. A message's log time is its experiment time
+  ``t_s`` (rows and events alike; an event of a flight that never started, ``t_s`` NaN, at the
+  origin) on an epoch that puts the run's first row (or an earlier first event) at the
+  creation time recorded in ``config.yaml``.
 * ``parquet`` (the ``parquet`` extra, pyarrow): the log as one typed table — integer counts,
   categorical labels, saturation flags as booleans, an absolute UTC ``time_utc``, every
   field's unit in its metadata (:mod:`ardrone_nmpc.runs.table_schema`) — with the events
@@ -79,8 +81,8 @@ def write_mcap(run: RunData, out: Path) -> int:
         t_ns = ch.time_ns(origin, row["t_s"])
         for topic, data in ch.row_messages(row, paths):
             messages.append((t_ns, len(messages), topic, data))
-    for event in run.events:  # a real flight's loop events carry experiment time apart
-        t = event.get("t_exp_s", event.get("t_s"))
+    for event in run.events:  # experiment time, as the rows (read_run moves older runs)
+        t = event.get("t_s")
         t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
         messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
     config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)
@@ -101,6 +103,7 @@ class McapContents:
     rows: list[dict[str, Any]] = field(default_factory=list)
     row_log_times_ns: list[int] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
+    event_log_times_ns: list[int] = field(default_factory=list)
     config: dict[str, Any] | None = None
     n_configs: int = 0
     poses: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
@@ -140,6 +143,7 @@ def read_mcap(path: Path) -> McapContents:
                 out.row_log_times_ns.append(message.log_time)
             elif topic == ch.TOPIC_EVENTS:
                 out.events.append(json.loads(message.data))
+                out.event_log_times_ns.append(message.log_time)
             elif topic == ch.TOPIC_CONFIG:
                 out.config = json.loads(message.data)
                 out.n_configs += 1

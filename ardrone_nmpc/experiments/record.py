@@ -1,11 +1,12 @@
 """Fly a config into a run directory, then summarise it: the one recording of every caller.
 
 ``simulate``, ``sweep``, ``faults`` and ``reproduce`` fly the lockstep simulation through
-:func:`record_lockstep`; ``replay --rerun`` records its recomputed ticks through
-:func:`record`. A run directory's ``summary.csv`` is written last
-(:func:`~ardrone_nmpc.runs.summary.write_run_summary`, also used by the real-time flight),
-so its presence marks a recording that finished. A flight that raises leaves its partial
-run directory with a final ``exception`` event and no ``summary.csv``.
+:func:`record_lockstep`; ``fly`` records a real-time flight through :func:`record`
+(:func:`~ardrone_nmpc.experiments.flight.run_flight`); ``replay --rerun`` records its
+recomputed ticks through :func:`record`. A run directory's ``summary.csv`` is written last
+(:func:`~ardrone_nmpc.runs.summary.write_run_summary`), so its presence marks a recording
+that finished. A flight that raises leaves its partial run directory with a final
+``exception`` event and no ``summary.csv`` (``fly`` summarises it all the same).
 
 The simulation and the summary are imported when a recording starts: ``sweep`` (and
 ``plot``, through the sweep table) import this module without loading the solver kernels.
@@ -68,13 +69,16 @@ def one_line(err: BaseException) -> str:
 
 
 def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
-           fly: Callable[[RunRecorder], T], catch: bool = False) -> Recording[T]:
+           fly: Callable[[RunRecorder], T], catch: bool = False,
+           summarise_failed: Callable[[Path], None] | None = None) -> Recording[T]:
     """Create a run directory for ``cfg`` under ``log_dir``, run ``fly(recorder)`` into it,
     then write its ``summary.csv``.
 
     If ``fly`` raises (an ``Exception``), the :data:`FAILED_EVENT` ends ``events.jsonl``
-    (``t_s`` NaN), no summary is written, and the exception propagates — or, with ``catch``,
-    comes back as :attr:`Recording.error`.
+    (``t_s`` NaN), no summary is written — unless ``summarise_failed(path)`` writes one: a
+    real flight's run directory is complete however it ended — and the exception propagates
+    (any ``BaseException``: a flight interrupted by a signal too) — or, with ``catch``, comes
+    back as :attr:`Recording.error`.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
@@ -82,9 +86,13 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
         try:
             result = fly(recorder)
-        except Exception as err:
-            recorder.event(math.nan, FAILED_EVENT, error=one_line(err))
-            if not catch:
+        except BaseException as err:
+            if isinstance(err, Exception):
+                recorder.event(math.nan, FAILED_EVENT, error=one_line(err))
+            recorder.close()
+            if summarise_failed is not None:
+                summarise_failed(recorder.path)
+            if not catch or not isinstance(err, Exception):
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
         wall_s = time.perf_counter() - wall0
@@ -94,7 +102,7 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
 
 def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None = None,
                     progress: Callable[[float], None] | None = None,
-                    catch: bool = False, live=None) -> Recording[SimResult]:
+                    catch: bool = False, live=None, plant=None) -> Recording[SimResult]:
     """Fly ``cfg`` in the lockstep simulation into a new run directory under ``log_dir`` and
     summarise it (see :func:`record`).
 
@@ -103,7 +111,8 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     stamped with the experiment time at which the simulation ended (touch-down, or rest
     after an emergency stop): ``wall_s``, ``ticks``, ``ending``, ``final_mode``.
     ``progress(fraction)`` is called every tick. ``live`` (a
-    :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too.
+    :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too. ``plant`` flies
+    another airframe (see :func:`~ardrone_nmpc.runtime.lockstep.run_lockstep`).
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
     created for times that give no tick count, and
@@ -124,7 +133,7 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
         sink = live.tee(recorder) if live is not None else recorder
         # the run flies its own copy of its input files (the path CSV in the run directory)
         result = lockstep.run_lockstep(recorder.config, recorder=sink, seed=seed,
-                                       progress=progress)
+                                       progress=progress, plant=plant)
         recorder.event(result.end_t_s, SIMULATED_EVENT, wall_s=time.perf_counter() - wall0,
                        ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)

@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
 
 __all__ = ["TOPIC_LOG", "TOPIC_EVENTS", "TOPIC_CONFIG", "TOPIC_POSE", "TOPIC_REFERENCE",
            "TOPIC_TF", "TOPIC_FLIGHT_PATH", "TOPIC_REFERENCE_PATH", "WORLD_FRAME",

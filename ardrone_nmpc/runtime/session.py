@@ -40,7 +40,7 @@ from ardrone_nmpc.links.drone_config import LinkError, verify_config
 from ardrone_nmpc.runtime.operator_input import OperatorAbort
 from ardrone_nmpc.runtime.schedule import BLIND_LANDING_S, TAKEOFF_TIMEOUT_S
 from ardrone_nmpc.runtime.signals import EmergencyRequested, Terminated
-from ardrone_nmpc.safety import Action, drone_faults, takeoff_refusal
+from ardrone_nmpc.safety import Action, drone_alarms, takeoff_refusal
 from ardrone_nmpc.errors import UserError
 
 __all__ = ["CutMotors", "DroneLandedItself", "FlightSession", "PreflightError",
@@ -194,7 +194,7 @@ class FlightSession:
         refusal = takeoff_refusal(nav.state_bits)
         if refusal is not None:
             self._log("drone_faults", phase="preflight",
-                      bits=[f.name for f in drone_faults(nav.state_bits)])
+                      bits=[f.name for f in drone_alarms(nav.state_bits)])
             raise PreflightError(refusal)
         self._require_level(nav)
         pose = self._wait_mocap(2.0)
@@ -485,7 +485,7 @@ class FlightSession:
             if nav is not None:
                 if done(nav.mode):
                     return
-                self._check_takeoff_faults(nav)
+                self._check_takeoff_alarms(nav)
             if self.drone.self_landing:
                 raise DroneLandedItself(f"take-off: {self.drone.self_landing}")
             if self.clock() > deadline:
@@ -497,16 +497,16 @@ class FlightSession:
             self._check_operator("during take-off")
             self.sleep(_POLL_S)
 
-    def _check_takeoff_faults(self, nav) -> None:
+    def _check_takeoff_alarms(self, nav) -> None:
         """A fault bit during take-off ends it: the motor faults by a cut, the others by a
         landing (the supervisor is not running yet)."""
-        faults = drone_faults(nav.state_bits)
-        if not faults:
+        alarms = drone_alarms(nav.state_bits)
+        if not alarms:
             return
-        self._log("drone_faults", phase="takeoff", bits=[f.name for f in faults])
-        line = (f"take-off failed: the drone reports {faults[0].line()} (mode "
+        self._log("drone_faults", phase="takeoff", bits=[f.name for f in alarms])
+        line = (f"take-off failed: the drone reports {alarms[0].line()} (mode "
                 f"{nav.mode.value}, ctrl_state {_ctrl(nav)})")
-        if faults[0].in_flight is Action.STOP:
+        if alarms[0].in_flight is Action.STOP:
             raise CutMotors(f"{line} — cutting the motors")
         raise TakeoffFailed(f"{line} — landing")
 

@@ -1,10 +1,11 @@
 """Fault injection (config section ``faults``, simulation only): when each fault is active, the
 byte-level corruptions, and the plant-side faults.
 
-Times are experiment times (s; 0 = the first tick after the settle phase). The runners ask a
-:class:`FaultSchedule` per sensor frame or tick; the lockstep runner feeds the faulted datagrams
-through the real decoders and link logic (:mod:`ardrone_nmpc.runtime.lockstep`), ``fly --sim`` through
-the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
+Times are experiment times (s; 0 = the first tick after the settle phase). The simulated drone
+(:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`) asks a :class:`FaultSchedule` per sensor
+frame, datagram or tick; the runners never do: the lockstep link feeds the faulted datagrams
+through the real decoders and link logic (:mod:`ardrone_nmpc.sim.sensors`), ``fly --sim``
+through the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
 seeded by the run's seed, so a faulted run is as reproducible as a clean one.
 
 Firmware faults make the simulated drone behave like a real one a careless client trips over:
@@ -14,18 +15,21 @@ stored indoor/outdoor profiles of a drone last flown outdoors (``outdoor_profile
 VBAT_LOW level above the tool's floor (``vbat_low``) — all from the start, before any
 experiment time — a landing of its own (``self_land``, at a time; a take-off REF afterwards
 launches it again), fault bits in its state word (``drone_faults``, at a time or from
-power-on) and a Wi-Fi blackout (``blackout``: nothing passes either way).
+power-on) and a Wi-Fi blackout (``blackout``: nothing passes either way). The firmware holds
+the VBAT_LOW level and the fault bits (:class:`~ardrone_nmpc.sim.drone.SimulatedDrone` hands
+them over).
 """
 
 from __future__ import annotations
 
 import math
 import struct
+from typing import Callable
 
 import numpy as np
 
 from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES, CtrlCodes, DroneState
-from ardrone_nmpc.sim.drone_config import HeldSession, OutdoorProfiles, apply_limits
+from ardrone_nmpc.sim.drone_config import HeldSession, OutdoorProfiles
 
 __all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS",
            "PLANT_FAULTS", "LINK_FAULTS"]
@@ -180,6 +184,12 @@ class FaultSchedule:
         (the tick's control stage asks, :class:`~ardrone_nmpc.runtime.stages.Control`)."""
         return _within(self.cfg.solver_diverge, t_s)
 
+    @property
+    def solver_divergence(self) -> Callable[[float], bool] | None:
+        """:meth:`solver_diverges`, or None when no divergence is configured (nothing for a
+        simulating runner to wrap its solver with)."""
+        return None if self.cfg.solver_diverge is None else self.solver_diverges
+
     def wind_mps(self, t_s: float) -> np.ndarray:
         """Air velocity at ``t_s``: the constant wind plus a gust in its window (m/s)."""
         w = np.zeros(3)
@@ -209,6 +219,16 @@ class FaultSchedule:
         """The state bits of the ``drone_faults`` fault (0 without one)."""
         f = self.cfg.drone_faults
         return 0 if f is None else sum(int(DroneState[name]) for name in set(f.bits))
+
+    def power_on_fault_bits(self) -> int:
+        """The state bits the drone reports from power-on (``drone_faults`` without a start)."""
+        f = self.cfg.drone_faults
+        return self.drone_fault_bits() if f is not None and f.start_s is None else 0
+
+    def vbat_low_pct(self) -> float | None:
+        """The firmware's VBAT_LOW level (%) of the ``vbat_low`` fault, or None."""
+        f = self.cfg.vbat_low
+        return None if f is None else f.threshold_pct
 
     def outdoor_profiles(self) -> OutdoorProfiles | None:
         """The profiles of a drone last flown outdoors (from the start), or None."""
@@ -249,11 +269,11 @@ class PlantFaults:
     """Applies a schedule's plant-side faults to an
     :class:`~ardrone_nmpc.sim.plant.AirframePlant` as experiment time passes.
 
-    ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``).
-    From the start: a drone left in another configuration session flies that session's
-    limits; the firmware's VBAT_LOW level and the fault bits reported from power-on are set.
-    (The outdoor profiles are the configuration store's: :class:`~ardrone_nmpc.sim.drone_config.
-    ConfigStore`.)
+    ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``);
+    fault bits that start are announced here and reported by the firmware
+    (:meth:`~ardrone_nmpc.sim.drone.SimulatedDrone.update_faults`).
+    (A drone left in another configuration session is the firmware's configuration store's:
+    :meth:`FaultSchedule.held_session`.)
     """
 
     def __init__(self, schedule: FaultSchedule, plant) -> None:
@@ -261,14 +281,6 @@ class PlantFaults:
         self.plant = plant
         self._pending = schedule.plant_events()
         self._gust_on = False
-        session = schedule.held_session()
-        if session is not None:
-            apply_limits(plant, session.limits())
-        c = schedule.cfg
-        if c.vbat_low is not None:
-            plant.params = plant.params.replace(takeoff_min_battery_pct=c.vbat_low.threshold_pct)
-        if c.drone_faults is not None and c.drone_faults.start_s is None:
-            plant.fault_bits |= schedule.drone_fault_bits()
 
     def update(self, t_s: float) -> list[dict]:
         events = []
@@ -288,7 +300,6 @@ class PlantFaults:
                 events.append({"kind": "fault", "fault": "self_land",
                                "accepted": plant.land()})
             elif kind == "drone_faults":
-                plant.fault_bits |= int(value)
                 events.append({"kind": "fault", "fault": "drone_faults",
                                "bits": sorted(self.schedule.cfg.drone_faults.bits)})
         plant.wind_mps = sched.wind_mps(t_s)

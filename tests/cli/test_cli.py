@@ -10,6 +10,7 @@ import yaml
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.core import defaults
 from ardrone_nmpc.config.schema import ExperimentConfig
 
 runner = CliRunner()
@@ -31,7 +32,7 @@ def test_check_prints_the_resolved_config(tmp_path):
     assert resolved.name == "demo"
     assert resolved.controller.horizon_steps == 8
     assert resolved.controller.solver.kmax == 7
-    assert resolved.controller.q == (12, 2, 7, 2, 5, 10, 13)
+    assert resolved.controller.q == defaults.Q_STATE  # the default, resolved
 
 
 def test_check_reports_every_error_with_its_field_path(tmp_path):
@@ -187,3 +188,23 @@ def test_overruns_agree_between_summary_and_loop_timing_at_1_ms(tmp_path):
             for r in csv.DictReader(open(run.path / "summary.csv"))}
     assert timing["overruns"] > 0  # the case the issue found: deadlines were skipped
     assert rows[("loop", "overruns")] == timing["overruns"]
+
+
+def test_fly_opens_the_drone_its_address_names(tmp_path):
+    """--drone takes an address or a URI: sim://lockstep flies the simulated drone as simulate
+    does; a scheme no backend serves, or faults on a drone that is not simulated, are one
+    error line each and leave no run directory."""
+    base = ["fly", "configs/hover.yaml", "--no-dashboard", "--log-dir", str(tmp_path),
+            "--duration-s", "2", "--set", "sim.settle_s=0.5"]
+    flown = runner.invoke(app, [*base, "--drone", "sim://lockstep"])
+    assert flown.exit_code == 0, flown.output
+    run = Path(flown.stdout.strip().splitlines()[-1][len("run: "):])
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert [e["kind"] for e in events][-1] == "simulated" and (run / "summary.csv").exists()
+    for drone, message in (("radio://0/80/2M", "no such drone backend"),
+                           ("udp://127.0.0.1", "only in simulation")):
+        refused = runner.invoke(app, [*base, "--drone", drone,
+                                      "--set", "faults.wind.velocity_mps=[0.5,0,0]"])
+        assert refused.exit_code == 1 and message in refused.stderr, refused.output
+        assert refused.stderr.count("error:") == 1 and "Traceback" not in refused.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == [run.name]

@@ -37,7 +37,7 @@ def _listening_addresses(port: int) -> set[str]:
 
 @pytest.mark.timeout(120)
 def test_a_client_receives_the_ticks_of_a_fly_sim_run(tmp_path):
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
 
     cfg = load_config("configs/hover.yaml", ["duration_s=2", "sim.settle_s=0.5"])
     with LiveView(0, config=cfg, seed=1) as view:
@@ -192,7 +192,7 @@ def test_fly_records_an_mcap_file_as_it_flies(tmp_path):
     a /tf transform per pose, /config once and each whole path once — not the live view's
     re-sent paths."""
     from ardrone_nmpc.experiments.export import read_mcap
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
 
     cfg = load_config("configs/hover.yaml", ["duration_s=2", "sim.settle_s=0.5"])
     recording = tmp_path / "flight.mcap"

@@ -17,7 +17,8 @@ from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.export import read_mcap, run_rows, write_mcap, write_parquet
 from ardrone_nmpc.runs import channels as ch
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder, read_run
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 
 TRICKY = [0.1, -0.0, 0.0, 5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, math.inf,
           -math.inf, math.nan, 1e-7, -123456.789e-3, 2.0 ** 53 + 2.0, 1 / 3]

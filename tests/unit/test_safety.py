@@ -147,12 +147,12 @@ def with_bits(*names, mode=FlightMode.FLYING, battery=80.0):
 
 def test_the_fault_table_is_the_firmwares_state_word():
     from ardrone_nmpc.protocol.navdata import DroneState
-    from ardrone_nmpc.safety import DRONE_FAULTS
+    from ardrone_nmpc.safety import DRONE_ALARMS
 
-    assert {f.name: f.mask for f in DRONE_FAULTS} == {
+    assert {f.name: f.mask for f in DRONE_ALARMS} == {
         "CUTOUT": 1 << 22, "MOTORS": 1 << 12, "SOFTWARE_FAULT": 1 << 14, "VBAT_LOW": 1 << 15,
         "ULTRASOUND": 1 << 21}
-    assert all(int(DroneState[f.name]) == f.mask for f in DRONE_FAULTS)
+    assert all(int(DroneState[f.name]) == f.mask for f in DRONE_ALARMS)
 
 
 @pytest.mark.parametrize("bits, expected", [
@@ -189,7 +189,7 @@ def test_fault_bits_rank_between_the_emergency_and_the_rest():
 
 
 def test_every_fault_bit_refuses_a_take_off_in_one_line_naming_it():
-    from ardrone_nmpc.safety import drone_faults, takeoff_refusal
+    from ardrone_nmpc.safety import drone_alarms, takeoff_refusal
 
     assert takeoff_refusal(None) is None and takeoff_refusal(0) is None
     assert takeoff_refusal(1 << 18 | 1 << 13 | 1 << 0) is None  # calibration, com lost, fly
@@ -204,5 +204,5 @@ def test_every_fault_bit_refuses_a_take_off_in_one_line_naming_it():
                     "(state bit 21: ultrasound sensor deaf): refusing take-off — check the "
                     "drone (`ardrone-nmpc status`)")
     assert "\n" not in both
-    assert [f.name for f in drone_faults(1 << 15 | 1 << 22)] == ["CUTOUT", "VBAT_LOW"]
-    assert [f.reason for f in drone_faults(1 << 14)] == ["software-fault"]
+    assert [f.name for f in drone_alarms(1 << 15 | 1 << 22)] == ["CUTOUT", "VBAT_LOW"]
+    assert [f.reason for f in drone_alarms(1 << 14)] == ["software-fault"]

@@ -13,10 +13,11 @@ import pytest
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.protocol.navdata import DroneState, decode_navdata
+from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession, OutdoorProfiles
 from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import ServerFaults
-from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.sim.plant import AirframePlant
 
 IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
@@ -56,12 +57,16 @@ def make():
 
 
 # ----------------------------------------------------------------------------- fault bits
+def served(make, *sets):
+    """The experiment's simulated drone (its faults from ``sets``) behind an unstarted server."""
+    cfg = load_config(None, list(sets))
+    drone = SimulatedDrone.from_config(cfg, seed=1)
+    return make(drone.plant, drone=drone), drone
+
+
 def test_injected_fault_bits_and_vbat_low_are_in_the_state_word(make):
-    p = plant()
-    cfg = load_config(None, ["faults.drone_faults.start_s=null",
-                             "faults.drone_faults.bits=[CUTOUT,ULTRASOUND]"])
-    PlantFaults(FaultSchedule(cfg.faults), p)  # from power-on
-    srv = make(p)
+    srv, _ = served(make, "faults.drone_faults.start_s=null",
+                    "faults.drone_faults.bits=[CUTOUT,ULTRASOUND]")        # from power-on
     bits = srv.state_bits()
     assert DroneState.CUTOUT in bits and DroneState.ULTRASOUND in bits
     assert DroneState.VBAT_LOW not in bits and DroneState.MOTORS not in bits
@@ -70,11 +75,9 @@ def test_injected_fault_bits_and_vbat_low_are_in_the_state_word(make):
 
 
 def test_the_vbat_low_level_sets_bit_15_and_refuses_the_take_off(make):
-    p = plant()
-    cfg = load_config(None, ["faults.vbat_low.threshold_pct=30"])
-    PlantFaults(FaultSchedule(cfg.faults), p)
+    srv, drone = served(make, "faults.vbat_low.threshold_pct=30")
+    p = drone.plant
     p.set_battery_pct(25.0)             # above the tool's 20 % floor, below the firmware's 30
-    srv = make(p)
     assert DroneState.VBAT_LOW in srv.state_bits()
     srv.handle_at_datagram(at(f"AT*REF=1,{TAKEOFF}\n"))
     assert p.mode is FlightMode.LANDED                       # refused
@@ -85,23 +88,25 @@ def test_the_vbat_low_level_sets_bit_15_and_refuses_the_take_off(make):
 
 
 def test_an_injected_vbat_low_refuses_the_take_off_whatever_the_charge(make):
-    p = plant()
-    p.fault_bits = int(DroneState.VBAT_LOW)
-    srv = make(p)
+    srv, drone = served(make)
+    drone.firmware.fault_bits = int(DroneState.VBAT_LOW)
     srv.handle_at_datagram(at(f"AT*REF=1,{TAKEOFF}\n"))
-    assert p.battery_pct == 100.0 and p.mode is FlightMode.LANDED
+    assert drone.plant.battery_pct == 100.0 and drone.plant.mode is FlightMode.LANDED
 
 
 def test_fault_bits_start_at_their_time_with_an_event():
-    p = plant()
     cfg = load_config(None, ["faults.drone_faults.start_s=2",
                              "faults.drone_faults.bits=[SOFTWARE_FAULT,MOTORS]"])
-    faults = PlantFaults(FaultSchedule(cfg.faults), p)
-    assert faults.update(1.9) == [] and p.fault_bits == 0
-    events = faults.update(2.0)
-    assert events == [{"kind": "fault", "fault": "drone_faults",
-                       "bits": ["MOTORS", "SOFTWARE_FAULT"]}]
-    assert p.fault_bits == int(DroneState.SOFTWARE_FAULT | DroneState.MOTORS)
+    drone = SimulatedDrone.from_config(cfg, seed=1)
+    drone.faults.set_clock(100.0)
+    drone.update_faults(101.9)
+    assert drone.take_events() == [] and drone.firmware.fault_bits == 0
+    drone.update_faults(102.0)
+    assert drone.take_events() == [(2.0, {"kind": "fault", "fault": "drone_faults",
+                                          "bits": ["MOTORS", "SOFTWARE_FAULT"]})]
+    assert drone.firmware.fault_bits == int(DroneState.SOFTWARE_FAULT | DroneState.MOTORS)
+    state = drone.firmware.status(drone.plant.t_s).state_bits()
+    assert DroneState.SOFTWARE_FAULT in state and DroneState.MOTORS in state
 
 
 # ----------------------------------------------------------------------------- link loss
@@ -125,8 +130,8 @@ def test_a_blackout_loses_commands_wake_ups_and_navdata_in_its_window():
     faults.set_clock(100.0)
     assert not faults.wakeup_lost(100.9) and not faults.at_lost(100.9)
     assert faults.wakeup_lost(101.0) and faults.at_lost(103.9)
-    assert faults.navdata_datagrams(102.0, b"x") == []
-    assert not faults.wakeup_lost(104.0) and faults.navdata_datagrams(104.0, b"x") == [b"x"]
+    assert faults.navdata_lost(102.0)
+    assert not faults.wakeup_lost(104.0) and not faults.navdata_lost(104.0)
 
 
 # ----------------------------------------------------------------------------- sessions
@@ -148,8 +153,8 @@ def test_the_strict_session_fault_refuses_the_lockstep_take_off():
     from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
 
     cfg = load_config(None, ["duration_s=1", "faults.foreign_session.ignores_plain_config=true"])
-    with pytest.raises(TakeoffRefused, match=r"config control:outdoor='FALSE': no ACK from the "
-                                             r"drone .*set drone.config_ids"):
+    with pytest.raises(TakeoffRefused, match=r"config general:navdata_demo='TRUE': no ACK from "
+                                             r"the drone .*set drone.config_ids"):
         run_lockstep(cfg)
     ok = load_config(None, ["duration_s=1", "faults.foreign_session.ignores_plain_config=true",
                             f"drone.config_ids=[{','.join(IDS)}]"])
