@@ -46,7 +46,11 @@ def assert_ended_cleanly(result, run, drone):
     assert "Traceback" not in result.stderr
     assert any(line.startswith("error: ") for line in result.stderr.splitlines())
     assert (run / "summary.csv").read_text().startswith("axis,metric,value,unit")
-    assert events(run)[-1]["kind"] in ("session_end", "verdict")
+    kinds = [e["kind"] for e in events(run)]
+    assert "session_end" in kinds  # the session's exit ran; after it at most the verdict and
+    assert set(kinds[kinds.index("session_end") + 1:]) <= {"verdict", "exception"}  # the error
+    if kinds[-1] == "exception":
+        assert ": " in events(run)[-1]["error"] and "\n" not in events(run)[-1]["error"]
     assert FlightLock("127.0.0.1", drone.at_port).holder() is None
 
 
