@@ -231,3 +231,42 @@ def test_a_second_client_counts_only_by_the_one_sequence_rule(make):
     assert srv.counters.at_commands_stale == 1 and srv.plant.mode is FlightMode.EMERGENCY
     srv.handle_at_datagram(at("AT*PCMD=5001,0,0,0,0,0\n"))
     assert srv.counters.at_commands_stale == 1
+
+
+# ----------------------------------------------------------------------------- lockstep
+def test_the_lockstep_drone_answers_bootstrap_after_a_blackout_as_the_link_does():
+    """A 3 s blackout: the firmware loses its client (2 s), its navdata restarts in bootstrap;
+    the lockstep drone writes navdata_demo again at the first bootstrap packet it receives,
+    and demo samples come back."""
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+
+    cfg = load_config(None, ["faults.blackout.start_s=1", "faults.blackout.duration_s=3"])
+    drone = LockstepDrone(cfg, seed=1)
+    drone.connect()
+    drone.takeoff()
+    t_zero = drone.truth.t_s
+    drone.start_experiment(t_zero)
+    period = cfg.loop.period_s
+    fresh_after = []
+    for k in range(int(6.0 / period)):
+        t = t_zero + k * period
+        drone.advance_to(t, t - t_zero)
+        drone.hover()
+        fresh_after.append((t - t_zero, t - drone.navdata_rx_t_s))
+    assert drone.sim.counters.link_losses == 1 and drone.bootstrap_answers >= 1
+    assert not drone.sim.firmware.config.bootstrap                 # demo again
+    assert max(age for t, age in fresh_after if 1.2 < t < 3.9) > 2.0  # nothing in the blackout
+    assert all(age < 0.2 for t, age in fresh_after if t > 4.5)      # samples came back
+
+
+def test_the_lockstep_run_refuses_a_drone_reporting_a_fault_bit_and_cuts_a_motor_fault():
+    from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
+
+    at_power_on = load_config(None, ["duration_s=1", "faults.drone_faults.start_s=null",
+                                     "faults.drone_faults.bits=[ULTRASOUND]"])
+    with pytest.raises(TakeoffRefused, match=r"^the drone reports ULTRASOUND \(state bit 21"):
+        run_lockstep(at_power_on)
+    in_flight = load_config(None, ["duration_s=2", "faults.drone_faults.start_s=1",
+                                   "faults.drone_faults.bits=[MOTORS]"])
+    result = run_lockstep(in_flight)
+    assert result.ending == "stop-motors" and result.final_mode is FlightMode.EMERGENCY
