@@ -248,3 +248,56 @@ def test_wait_for_waits_its_whole_timeout_for_a_late_packet(drone):
         assert link.wait_for(lambda lk: lk.packets == 1, 1.5)          # arrives at 0.8 s
         assert 0.7 < time.monotonic() - t0 < 1.5
         assert not link.wait_for(lambda lk: lk.packets == 2, 0.2)     # and a timeout is one
+
+
+def test_a_link_not_started_or_closed_sends_nothing_and_says_so(drone):
+    from ardrone_nmpc.links.drone_config import LinkError
+
+    never = drone.link()
+    with pytest.raises(LinkError, match=r"^the operator link is closed$"):
+        never.land()
+    with drone.link() as link:
+        link.start("land")
+        drone.datagrams(1)
+    with pytest.raises(LinkError, match=r"^the operator link is closed$"):
+        link.emergency()
+    assert link.edges == 0
+
+
+class _BrokenSocket:
+    """An AT socket whose every send fails (the Wi-Fi interface gone)."""
+
+    def sendto(self, data, address):
+        raise OSError("network is unreachable")
+
+    def close(self):
+        pass
+
+
+def test_a_command_whose_datagram_cannot_be_sent_raises(drone):
+    from ardrone_nmpc.links.drone_config import LinkError
+
+    with drone.link() as link:
+        link.start("land")
+        real, link._at = link._at, _BrokenSocket()
+        try:
+            with pytest.raises(LinkError, match=r"^AT send to 127\.0\.0\.1:\d+: network is "
+                                                r"unreachable$"):
+                link.emergency()
+        finally:
+            link._at = real
+
+
+def test_a_busy_local_at_port_falls_back_to_any_port(drone):
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("127.0.0.1", 0))
+    try:
+        port = busy.getsockname()[1]
+        with OperatorLink("127.0.0.1", at_port=drone.at.getsockname()[1],
+                          navdata_port=drone.nav.getsockname()[1], bind_host="127.0.0.1",
+                          at_local_port=port) as link:
+            link.start("land")
+            data, source = drone.at.recvfrom(4096)
+            assert data.startswith(b"AT*REF=1,290717696\r") and source[1] != port
+    finally:
+        busy.close()
