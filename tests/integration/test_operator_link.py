@@ -301,3 +301,83 @@ def test_a_busy_local_at_port_falls_back_to_any_port(drone):
             assert data.startswith(b"AT*REF=1,290717696\r") and source[1] != port
     finally:
         busy.close()
+
+
+def drain(sock) -> list[bytes]:
+    """Every datagram waiting on ``sock`` (after the sender closed)."""
+    sock.settimeout(0.2)
+    out = []
+    try:
+        while True:
+            out.append(sock.recvfrom(4096)[0])
+    except socket.timeout:
+        return out
+
+
+def test_every_datagram_sent_is_counted(drone):
+    with drone.link() as link:
+        link.start("emergency")
+        drone.datagrams(4)
+    assert link.sent_datagrams == 4 + len(drain(drone.at)) and link.sent_datagrams >= 4
+
+
+def test_the_keepalive_outlives_a_failed_send_and_says_why(drone):
+    with drone.link() as link:
+        link.start("land")
+        drone.datagrams(1)
+        with link._lock:
+            real, link._at = link._at, _BrokenSocket()
+        time.sleep(0.1)                                       # sends fail for a while …
+        with link._lock:
+            link._at = real
+            sent = link.sent_datagrams
+        assert link.last_error.endswith(": network is unreachable")
+        assert link.last_error.startswith("AT send to 127.0.0.1:")
+        assert link.wait_for(lambda lk: lk.sent_datagrams >= sent + 3, 5.0)  # … then on
+
+
+class _MuteSocket:
+    """The navdata socket, whose sends (the wake-ups) fail."""
+
+    def __init__(self, real):
+        self.real = real
+
+    def fileno(self):
+        return self.real.fileno()
+
+    def sendto(self, data, address):
+        raise OSError("network is unreachable")
+
+    def recvfrom(self, n):
+        return self.real.recvfrom(n)
+
+    def close(self):
+        self.real.close()
+
+
+def test_a_wake_up_that_cannot_be_sent_is_said(drone):
+    with drone.link() as link:
+        link.start("land")
+        with link._lock:
+            link._nav = _MuteSocket(link._nav)
+        link.wake_navdata()
+        deadline = time.monotonic() + 2.0
+        while link.last_error is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert link.last_error == "navdata wake-up: network is unreachable"
+
+
+def test_bootstrap_is_answered_again_while_it_lasts(drone):
+    """Every BOOTSTRAP_ANSWER_EVERY_S while the newest packet shows bootstrap; each answer
+    counted once, as it goes out."""
+    with drone.link() as link:
+        link.start("land")
+        link.wake_navdata()
+        _, client = drone.nav.recvfrom(64)
+        drone.nav.sendto(packet(BOOTSTRAP | FLY), client)
+        deadline = time.monotonic() + 5.0
+        while link.bootstrap_answers < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    sent = drain(drone.at)
+    assert link.bootstrap_answers >= 2
+    assert sum(b"navdata_demo" in d for d in sent) == link.bootstrap_answers
