@@ -381,3 +381,29 @@ def test_bootstrap_is_answered_again_while_it_lasts(drone):
     sent = drain(drone.at)
     assert link.bootstrap_answers >= 2
     assert sum(b"navdata_demo" in d for d in sent) == link.bootstrap_answers
+
+
+@pytest.mark.parametrize("host, ports, ids, message", [
+    ("", (5556, 5554), None, "drone address must be an address or host name, got ''"),
+    ("127.0.0.1", (0, 5554), None, "AT port must be a port number 1–65535, got 0"),
+    ("127.0.0.1", (5556, 70000), None, "navdata port must be a port number 1–65535, got 70000"),
+    ("127.0.0.1", (5556, 5554), ("d2e081a3", "be27e2e4"),
+     "config_ids must be (session, profile, application)"),
+])
+def test_each_argument_is_named_in_its_refusal(host, ports, ids, message):
+    with pytest.raises(ValueError) as err:
+        OperatorLink(host, at_port=ports[0], navdata_port=ports[1], config_ids=ids)
+    assert str(err.value) == message
+
+
+def test_a_link_starts_once_on_the_default_interface_in_a_named_daemon_thread(drone):
+    from ardrone_nmpc.links.drone_config import LinkError
+
+    with OperatorLink("127.0.0.1", at_port=drone.at.getsockname()[1],
+                      navdata_port=drone.nav.getsockname()[1], at_local_port=0) as link:
+        link.start("land")                      # bound on every interface, sent to 127.0.0.1
+        assert drone.datagrams(1)[0].startswith(b"AT*REF=1,290717696\r")
+        assert (link._thread.name, link._thread.daemon) == ("operator-link", True)
+        with pytest.raises(LinkError) as err:
+            link.start("emergency")
+        assert str(err.value) == "this OperatorLink was started already"
