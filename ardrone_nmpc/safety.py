@@ -13,7 +13,9 @@ Policies (``safety`` config section, :class:`~ardrone_nmpc.config.schema.SafetyC
 condition                              action
 =====================================  ==========================================================
 drone in emergency (navdata)           ``stop`` (latched; reported)
+CUTOUT or MOTORS fault bit (navdata)   ``stop`` (latched; the runner cuts the motors)
 battery ≤ ``battery_floor_pct``        ``land`` (latched)
+SOFTWARE_FAULT or VBAT_LOW bit         ``land`` (latched)
 navdata age > ``navdata_land_ms``      ``land`` (latched)
 mocap age > ``mocap_land_ms``          ``land`` (latched)
 mocap age > ``mocap_hover_ms``         ``hover``
@@ -33,6 +35,10 @@ commanded tilt > ``max_tilt_rad``      clipped (flagged in ``cmd_saturated``)
 Every comparison is written so that a NaN fails it: a non-finite age, battery level, tilt or
 estimate is a breach of its check, never a pass (``max(abs(nan), 1.0) > cap`` is False).
 
+The fault bits are those of the navdata state word (:data:`DRONE_ALARMS`, docs/protocol.md
+§4.2), read when the sample carries one; :func:`takeoff_refusal` is the pre-flight side of the
+same table (every fault bit there refuses a take-off).
+
 A solve *failed* when its status is ``diverged`` or ``non-finite``, when its input is not finite,
 or when it is ``max-iterations`` and ``solver_accept_max_iterations`` is false.
 
@@ -51,7 +57,8 @@ from dataclasses import dataclass
 from ardrone_nmpc.core.modes import Mode
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
-__all__ = ["Action", "Decision", "Supervisor"]
+__all__ = ["Action", "DRONE_ALARMS", "Decision", "DroneAlarm", "Supervisor", "drone_alarms",
+           "takeoff_refusal"]
 
 
 class Action(str, enum.Enum):
@@ -89,6 +96,62 @@ class Decision:
 NOMINAL = Decision(Action.CONTROL)
 
 
+@dataclass(frozen=True, slots=True)
+class DroneAlarm:
+    """A fault bit of the drone's navdata state word (``def_ardrone_state_mask_t``).
+
+    ``in_flight`` is what the supervisor does when it is set airborne: ``stop`` (the runner
+    cuts the motors: a motor that cut out or fails cannot be flown on), ``land``, or None
+    (reported before take-off only). Every fault bit refuses a take-off.
+    """
+
+    bit: int
+    name: str
+    meaning: str
+    in_flight: Action | None
+
+    @property
+    def mask(self) -> int:
+        return 1 << self.bit
+
+    @property
+    def reason(self) -> str:
+        """The supervisor's reason label (``cutout``, ``software-fault``, …)."""
+        return self.name.lower().replace("_", "-")
+
+    def line(self) -> str:
+        """``NAME (state bit N: meaning)``."""
+        return f"{self.name} (state bit {self.bit}: {self.meaning})"
+
+
+#: The fault bits the tool acts on, most severe first (docs/protocol.md §4.2; ARDroneLib
+#: config.h). COM_LOST (13) is not among them: it reports the link this packet just crossed.
+DRONE_ALARMS: tuple[DroneAlarm, ...] = (
+    DroneAlarm(22, "CUTOUT", "motor cut-out detected", Action.STOP),
+    DroneAlarm(12, "MOTORS", "motor problem", Action.STOP),
+    DroneAlarm(14, "SOFTWARE_FAULT", "software fault, land as soon as possible", Action.LAND),
+    DroneAlarm(15, "VBAT_LOW", "battery too low for the firmware", Action.LAND),
+    DroneAlarm(21, "ULTRASOUND", "ultrasound sensor deaf", None),
+)
+
+
+def drone_alarms(state_bits: int | None) -> list[DroneAlarm]:
+    """The :data:`DRONE_ALARMS` set in ``state_bits`` (none for None), most severe first."""
+    if state_bits is None:
+        return []
+    return [f for f in DRONE_ALARMS if state_bits & f.mask]
+
+
+def takeoff_refusal(state_bits: int | None) -> str | None:
+    """One line naming every fault bit set in ``state_bits`` (None when there is none): the
+    drone reports a fault, so nothing takes off."""
+    faults = drone_alarms(state_bits)
+    if not faults:
+        return None
+    return ("the drone reports " + ", ".join(f.line() for f in faults)
+            + ": refusing take-off — check the drone (`ardrone-nmpc status`)")
+
+
 class Supervisor:
     """Stateful policy of :mod:`ardrone_nmpc.safety` for one flight.
 
@@ -123,8 +186,15 @@ class Supervisor:
         cfg = self.cfg
         if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
             return self._latch(Decision(Action.STOP, "emergency"))
+        faults = drone_alarms(navdata.state_bits if navdata is not None else None)
+        for fault in faults:
+            if fault.in_flight is Action.STOP:
+                return self._latch(Decision(Action.STOP, fault.reason))
         if navdata is not None and not navdata.battery_pct > cfg.battery_floor_pct:
             return self._latch(Decision(Action.LAND, "battery"))
+        for fault in faults:
+            if fault.in_flight is Action.LAND:
+                return self._latch(Decision(Action.LAND, fault.reason))
         if not navdata_age_ms <= cfg.navdata_land_ms:  # NaN/inf (never received) included
             return self._latch(Decision(Action.LAND, "navdata-lost"))
         if not mocap_age_ms <= cfg.mocap_land_ms:

@@ -2,13 +2,16 @@
 
 The flight itself (the drone's backend, session, loop, landing, the run directory) is
 :func:`~ardrone_nmpc.experiments.flight.run_flight`; this module shows its figures while it
-flies (on a terminal) and decides how the command ends. Whatever happens, the landing outcome and the run directory are printed:
+flies (on a terminal) and decides how the command ends. Whatever happens, the landing outcome
+and the run directory are printed:
 
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
-* a flight error (link lost, supervisor landing, emergency, pre-flight refusal, a ``faults``
-  section on a drone that is not simulated): its ``error:`` line, exit 1;
-* Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1/2, PIPE): exit
-  128 + its number (the session has landed in every case);
+* a flight error (link lost, supervisor landing or cut, emergency, pre-flight refusal, a
+  ``faults`` section on a drone that is not simulated, a take-off that failed, a flight that
+  ended without doing its job — a failed verdict): its ``error:`` line, exit 1;
+* Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1, PIPE): exit
+  128 + its number (the session has landed in every case); USR2 — the operator's
+  ``emergency`` — exit 140, the motors cut;
 * navdata never confirmed the landing: ``error: landing not confirmed by navdata — check
   the drone`` in every case, and at least exit 1.
 """
@@ -38,7 +41,8 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.experiments.flight import run_flight
     from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed
-    from ardrone_nmpc.runtime.signals import Terminated, exit_code_of
+    from ardrone_nmpc.runtime.signals import (Terminated, exit_code_of,
+                                              ignoring_emergency_signal)
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
 
@@ -64,9 +68,10 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     result = FlightResult()
     code = 0
     error: BaseException | None = None
-    try:
-        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, mcap=mcap,
-                            echo=lambda line: typer.echo(line, err=True)) as sink:
+    try:  # a late `emergency` (SIGUSR2) outside the flight must not kill the summary
+        with ignoring_emergency_signal(), open_live_view(
+                foxglove, foxglove_port, cfg=cfg, seed=seed, mcap=mcap,
+                echo=lambda line: typer.echo(line, err=True)) as sink:
             if use_live:
                 live.start()
             run_flight(cfg=cfg, sim=sim, drone_host=drone, at_port=at_port,

@@ -1,4 +1,8 @@
-"""``ardrone-nmpc simulate``: fly a config in lockstep simulation into a run directory."""
+"""``ardrone-nmpc simulate``: fly a config in lockstep simulation into a run directory.
+
+A flight that reached its end without doing its job (a failed verdict,
+:mod:`ardrone_nmpc.runs.verdict`) prints its summary and ``run: <dir>`` like any other, with
+one ``error:`` line before, and exits 1."""
 
 from __future__ import annotations
 
@@ -9,7 +13,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ardrone_nmpc.cli.console import config_notes, stdout_console
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.experiments.record import record_lockstep
+from ardrone_nmpc.experiments.record import Recording, record_lockstep
 from ardrone_nmpc.cli.tables import render_summary
 
 
@@ -21,17 +25,27 @@ def simulate_command(*, config: Path, overrides: list[str], log_dir: Path, seed:
 
     from ardrone_nmpc.viz.live import open_live_view
 
+    from ardrone_nmpc.cli.handler import report
+    from ardrone_nmpc.errors import EXIT_ERROR
+    from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, verdict_message
+
     cfg = load_config(config, overrides)
     config_notes(cfg)
     with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, pace=True,
                         echo=lambda line: typer.echo(line, err=True)) as live:
-        path = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet, live=live)
-    typer.echo(f"run: {path}")
+        recording = run_simulate_command(cfg=cfg, log_dir=log_dir, seed=seed, quiet=quiet,
+                                         live=live)
+    ending = recording.result.ending
+    if ending in FAILED_VERDICTS:
+        report([f"{ending}: {verdict_message(ending)}"])
+    typer.echo(f"run: {recording.path}")
+    if ending in FAILED_VERDICTS:
+        raise typer.Exit(code=EXIT_ERROR)
 
 
 def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
-                         console: Console | None = None, live=None) -> Path:
-    """Fly ``cfg`` in lockstep simulation into a new run directory; return its path.
+                         console: Console | None = None, live=None) -> Recording:
+    """Fly ``cfg`` in lockstep simulation into a new run directory; return its recording.
     ``live`` (a :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too."""
     console = console or stdout_console()
     seed = cfg.sim.seed if seed is None else seed
@@ -55,4 +69,4 @@ def run_simulate_command(*, cfg, log_dir: Path, seed: int | None, quiet: bool,
                       f"({sim_s / loop_s:.0f}× real time); {recording.wall_s:.1f} s in all, "
                       f"kernels loaded or compiled included; ended: {result.ending}, drone "
                       f"{result.final_mode.value}")
-    return path
+    return recording

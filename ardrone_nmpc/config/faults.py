@@ -102,8 +102,9 @@ class DelayJumpFault(Section):
 
 class ForeignSessionFault(Section):
     """The drone was left in another multiconfig session: writes of per-session keys (the
-    command limits) without that session's ``AT*CONFIG_IDS`` are acknowledged but not applied;
-    it flies, and reports on the control port, the limits it holds."""
+    command limits) without that session's ``AT*CONFIG_IDS`` are acknowledged but not applied
+    (or, with ``ignores_plain_config``, no write without them is even acknowledged); it flies,
+    and reports on the control port, the limits it holds."""
 
     session_id: str = Field("d2e081a3", pattern=r"^[0-9a-fA-F]{8}$", description="Its session id.")
     profile_id: str = Field("be27e2e4", pattern=r"^[0-9a-fA-F]{8}$", description="Its profile id.")
@@ -111,6 +112,48 @@ class ForeignSessionFault(Section):
     euler_angle_max_rad: float = Field(0.52, gt=0, le=0.52, description="Tilt limit it holds (rad).")
     control_vz_max_mps: float = Field(2.0, ge=0.2, le=2.0, description="Climb-rate limit it holds (m/s).")
     control_yaw_radps: float = Field(6.11, ge=0.7, le=6.11, description="Yaw-rate limit it holds (rad/s).")
+    ignores_plain_config: bool = Field(
+        False, description="Any AT*CONFIG without the session's AT*CONFIG_IDS goes "
+        "unacknowledged (true), not only the per-session keys unapplied (false).")
+
+
+class OutdoorProfileFault(Section):
+    """The drone was last flown outdoors: ``control:outdoor`` TRUE, flying its outdoor profile;
+    its indoor profile holds other limits than the config's. Limits written before
+    ``control:outdoor FALSE`` would land in the outdoor profile."""
+
+    euler_angle_max_rad: float = Field(0.35, gt=0, le=0.52, description="Outdoor tilt limit (rad).")
+    control_vz_max_mps: float = Field(1.0, ge=0.2, le=2.0, description="Outdoor climb-rate limit (m/s).")
+    control_yaw_radps: float = Field(3.49, ge=0.7, le=6.11, description="Outdoor yaw-rate limit (rad/s).")
+    indoor_euler_angle_max_rad: float = Field(0.25, gt=0, le=0.52, description="Indoor tilt limit it holds (rad).")
+    indoor_control_vz_max_mps: float = Field(0.8, ge=0.2, le=2.0, description="Indoor climb-rate limit it holds (m/s).")
+    indoor_control_yaw_radps: float = Field(2.0, ge=0.7, le=6.11, description="Indoor yaw-rate limit it holds (rad/s).")
+
+
+#: The navdata state bits a drone reports about itself that the tool acts on (docs/protocol.md
+#: §4.2; ardrone_nmpc/safety.py).
+DRONE_FAULT_BITS = ("CUTOUT", "MOTORS", "SOFTWARE_FAULT", "VBAT_LOW", "ULTRASOUND")
+
+
+class DroneFaultsFault(Section):
+    """The drone reports fault bits in its navdata state word from ``start_s`` (null: from
+    power-on, before take-off); with VBAT_LOW it also refuses to take off."""
+
+    bits: tuple[Literal[DRONE_FAULT_BITS], ...] = Field(  # type: ignore[valid-type]
+        ("CUTOUT",), min_length=1, description="Which bits: " + ", ".join(DRONE_FAULT_BITS) + ".")
+    start_s: Optional[Finite] = Field(5.0, description="When (s, experiment time); null: from power-on.")
+
+
+class VbatLowFault(Section):
+    """The firmware's VBAT_LOW level is ``threshold_pct`` (above the tool's floor, say a worn
+    battery): below it the drone sets state bit 15 and refuses to take off."""
+
+    threshold_pct: float = Field(30.0, ge=0, le=100, description="Battery level (%) below which VBAT_LOW is set.")
+
+
+class BlackoutFault(_FaultWindow):
+    """A Wi-Fi blackout: nothing passes either way (AT commands, wake-ups, navdata). After a
+    link loss the drone restarts its navdata in bootstrap."""
 
 
 class SelfLandFault(Section):
@@ -156,6 +199,10 @@ class FaultsConfig(Section):
     self_land: Optional[SelfLandFault] = Field(None, description="Drone lands by itself.")
     ctrl_codes: Optional[CtrlCodesFault] = Field(None, description="Other firmware's ctrl_state codes.")
     control_port_drop: Optional[ControlPortDropFault] = Field(None, description="Control port does not answer.")
+    outdoor_profile: Optional[OutdoorProfileFault] = Field(None, description="Drone last flown outdoors.")
+    drone_faults: Optional[DroneFaultsFault] = Field(None, description="Fault bits in the drone's state word.")
+    vbat_low: Optional[VbatLowFault] = Field(None, description="The firmware's VBAT_LOW level.")
+    blackout: Optional[BlackoutFault] = Field(None, description="Wi-Fi blackout (both directions).")
 
     def active(self) -> list[str]:
         """Names of the faults that are set."""

@@ -47,3 +47,12 @@ RERUN_SUFFIX = "-rerun"
 #: Longest Lorenz-system time a 'lorenz' path is integrated over (lorenz_time_scale ×
 #: duration_s, dimensionless): ≈ 2 s and 60 MB to build; the configs use 6.
 MAX_LORENZ_TIME = 200.0
+
+#: The bound of a command under ``drone.command_convention: kit`` (and of the tilt limit in
+#: its units): the Simulink kit's ports saturate at ±1.
+KIT_PORT_LIMIT = 1.0
+
+#: The firmware's cap of ``control:euler_angle_max`` (rad), the largest tilt a real drone flies:
+#: the protocol's range (``protocol.config_text.EULER_ANGLE_MAX_LIMIT_RAD``, equal by a test),
+#: here for the schema, which imports no protocol.
+FIRMWARE_TILT_MAX_RAD = 0.52

@@ -36,10 +36,16 @@ PROFILE_SECTION_DEFAULTS: dict[str, dict[str, Any]] = {
         # commanded tilt is clipped to max_tilt_rad in the command's own units, here the
         # port's: 1 is the port's saturation. The kit cannot tilt beyond 0.86 rad with its
         # ports within ±1 (the L1 norm of ssPitch's impulse response), so the measured-tilt
-        # check stays as the catch for a broken plant
+        # check stays as the catch for a broken plant. Only under the kit's convention
+        # (KIT_UNITS): under the SDK's the firmware's 0.52 rad caps it (config/schema.py)
         "safety": {"max_tilt_rad": 1.0},
     },
 }
+
+
+#: Keys a profile fills only where the config flies the kit's command convention: they are in
+#: the kit's port units (the schema bounds them by the firmware otherwise).
+KIT_UNITS: tuple[tuple[str, str], ...] = (("safety", "max_tilt_rad"),)
 
 
 def _fill(data: dict, defaults: Mapping) -> None:
@@ -67,4 +73,11 @@ def fill_profile_defaults(data: Any) -> Any:
         return data
     filled = copy.deepcopy(dict(data))
     _fill(filled, defaults)
+    drone = filled.get("drone")
+    if isinstance(drone, Mapping) and drone.get("command_convention") != "kit":
+        for section, key in KIT_UNITS:  # the profile's value, not the config's: dropped
+            given = data.get(section)
+            if not (isinstance(given, Mapping) and key in given) and isinstance(
+                    filled.get(section), dict):
+                filled[section].pop(key, None)
     return filled

@@ -50,7 +50,8 @@ from ardrone_nmpc.config.fields import (
     CoordinateVec2, CoordinateVec3, Finite, Host, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec3, PathSizeVec4, Port, Positive, PositiveVec2,
     Section, Span, ascii_name, invalid, require_increasing,
 )
-from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
+from ardrone_nmpc.config.limits import (FIRMWARE_TILT_MAX_RAD, KIT_PORT_LIMIT, MAX_LORENZ_TIME,
+                                       MAX_NAME_CHARS)
 from ardrone_nmpc.config.profiles import fill_profile_defaults
 from ardrone_nmpc.errors import UserError
 
@@ -356,20 +357,32 @@ class SafetyConfig(Section):
         (3.0, 3.0, 2.5), description="Geofence upper corner [x, y, z] (m).")
     geofence_action: Literal["land", "hover"] = Field(
         "land", description="What the drone does when its measured position leaves the geofence.")
-    max_tilt_rad: Positive = Field(
-        0.35, description="Largest roll/pitch (rad): commands are clipped to it, a measured "
-        "(navdata) tilt beyond it makes the drone hover.")
-    max_speed_mps: Positive = Field(
-        2.0, description="Largest estimated speed (m/s); beyond it the drone hovers (brakes).")
-    mocap_hold_ms: Positive = Field(
-        100.0, description="Mocap pose age (ms) above which the last command is held.")
-    mocap_hover_ms: Positive = Field(
-        250.0, description="Mocap pose age (ms) above which the drone hovers; > mocap_hold_ms.")
-    mocap_land_ms: Positive = Field(
-        1000.0, description="Mocap pose age (ms) above which the drone lands; > mocap_hover_ms.")
-    navdata_land_ms: Positive = Field(500.0, description="Navdata age (ms) above which it lands.")
+    # The limits below are bounded by the drone's physics and its firmware (docs/protocol.md
+    # §2.6, §3.1, §5): a supervisor limit beyond them would never act.
+    max_tilt_rad: float = Field(
+        0.35, gt=0, le=KIT_PORT_LIMIT, description="Largest roll/pitch (rad), ≤ 0.52 (the "
+        "firmware's euler_angle_max cap) under drone.command_convention 'sdk'; ≤ 1 (the "
+        "port's saturation, in the port's units) under 'kit', which flies only simulated "
+        "drones: commands are clipped to it, a measured (navdata) tilt beyond it makes the "
+        "drone hover.")
+    max_speed_mps: float = Field(
+        2.0, gt=0, le=5.0, description="Largest estimated speed (m/s), ≤ 5 (the AR.Drone "
+        "2.0's top speed); beyond it the drone hovers (brakes).")
+    mocap_hold_ms: float = Field(
+        100.0, gt=0, le=1000.0, description="Mocap pose age (ms) above which the last command "
+        "is held; ≤ 1000.")
+    mocap_hover_ms: float = Field(
+        250.0, gt=0, le=2000.0, description="Mocap pose age (ms) above which the drone hovers; "
+        "> mocap_hold_ms, ≤ 2000.")
+    mocap_land_ms: float = Field(
+        1000.0, gt=0, le=5000.0, description="Mocap pose age (ms) above which the drone lands; "
+        "> mocap_hover_ms, ≤ 5000.")
+    navdata_land_ms: float = Field(
+        500.0, gt=0, le=2000.0, description="Navdata age (ms) above which it lands; ≤ 2000 "
+        "(the drone itself declares the link lost after 2 s).")
     battery_floor_pct: float = Field(
-        20.0, ge=0, le=100, description="Battery level (%) below which the drone lands.")
+        20.0, ge=20, le=100, description="Battery level (%) below which the drone lands; ≥ 20 "
+        "(the firmware's own take-off threshold: a lower floor would never act).")
     start_tolerance_m: Positive = Field(
         0.5, description="Largest horizontal distance (m) between the drone's mocap position "
         "on the ground and the experiment's start; farther, take-off is refused.")
@@ -425,6 +438,21 @@ class ExperimentConfig(Section):
     def _profile_defaults(cls, data: Any) -> Any:
         # the plant profile's keys outside sim.plant (config/profiles.py); explicit values win
         return fill_profile_defaults(data)
+
+    @field_validator("safety")
+    @classmethod
+    def _tilt_within_the_firmware(cls, value: SafetyConfig, info: ValidationInfo
+                                  ) -> SafetyConfig:
+        """Under the SDK's convention the tilt limit is a real angle the firmware caps at
+        0.52 rad; the kit's convention (simulation only) measures it in the port's ±1."""
+        drone = info.data.get("drone")
+        if (drone is not None and drone.command_convention == "sdk"
+                and value.max_tilt_rad > FIRMWARE_TILT_MAX_RAD):
+            raise invalid(f"max_tilt_rad {value.max_tilt_rad:g} rad is beyond the firmware's "
+                          f"euler_angle_max cap {FIRMWARE_TILT_MAX_RAD:g} rad (the "
+                          "supervisor would never act); above it only under "
+                          "drone.command_convention 'kit', in the port's units")
+        return value
 
     @field_validator("reference")
     @classmethod

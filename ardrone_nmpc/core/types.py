@@ -137,6 +137,8 @@ class NavdataSample:
     vz_mps : vertical speed (m/s), **down positive** (navdata body z down).
     ctrl_state : the raw ctrl_state word (``major << 16 | minor``) it came with; None when the
         source has none (simulation without a wire).
+    state_bits : the packet's drone state word (docs/protocol.md §4.2: fault bits among
+        them); None when the source has none (simulation without a wire).
     """
 
     t_s: float
@@ -150,6 +152,7 @@ class NavdataSample:
     vy_body_mps: float
     vz_mps: float
     ctrl_state: int | None = None
+    state_bits: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

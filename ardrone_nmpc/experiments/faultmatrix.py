@@ -6,9 +6,11 @@ Per case: a normal run directory (``<log_dir>/<case>/…``), then
 * ``outcome`` — ``completed`` (flew to the end, tracking again), ``hovered`` (ended hovering
   by policy), ``landed`` (the supervisor landed it; touch-down confirmed), ``stopped``
   (the drone itself cut its motors — the emergency fault; the tool stopped sending and
-  reported), ``refused`` (the pre-flight check refused the take-off: the run directory holds
-  its ``takeoff_refused`` event and no flight), ``crashed`` (the truth hit the ground outside
-  a landing, or an emergency nobody injected), ``exception`` (the tool raised otherwise);
+  reported — or reported a motor fault bit and the tool cut them), ``refused`` (the pre-flight
+  check refused the take-off: the run directory holds its ``takeoff_refused`` event and no
+  flight), ``crashed`` (the truth hit the ground outside a landing, or an emergency nobody
+  injected), a failed verdict (``failed-no-tracking``, ``failed-no-target``: it reached its
+  end without doing its job), ``exception`` (the tool raised otherwise);
 * ``max_dev_m`` — the largest distance between the faulted flight's true position and the
   fault-free flight's (same seed, same tick), until a landing began;
 * ``recover_s`` — for flights that went on: seconds from the fault's start until that
@@ -78,16 +80,42 @@ FAULT_CASES: dict[str, tuple[str, ...]] = {
     "foreign_session": ("faults.foreign_session.session_id=d2e081a3",),
     "control_port_silent": ("faults.control_port_drop.mode=silent",),
     "self_land": (f"faults.self_land.start_s={_T0}",),
+    # the drone's own alarms, its profiles and its link (issue 21)
+    "cutout": (f"faults.drone_faults.start_s={_T0}", "faults.drone_faults.bits=[CUTOUT]"),
+    "motors": (f"faults.drone_faults.start_s={_T0}", "faults.drone_faults.bits=[MOTORS]"),
+    "software_fault": (f"faults.drone_faults.start_s={_T0}",
+                       "faults.drone_faults.bits=[SOFTWARE_FAULT]"),
+    "faults_at_power_on": ("faults.drone_faults.start_s=null",
+                           "faults.drone_faults.bits=[MOTORS,SOFTWARE_FAULT,ULTRASOUND]"),
+    "vbat_low_at_power_on": ("faults.drone_faults.start_s=null",
+                             "faults.drone_faults.bits=[VBAT_LOW]"),
+    "vbat_low_threshold": ("faults.vbat_low.threshold_pct=30",
+                           f"faults.battery_floor.start_s={_T0}",
+                           "faults.battery_floor.level_pct=25"),
+    "blackout": (f"faults.blackout.start_s={_T0}", "faults.blackout.duration_s=3"),
+    "session_ignores_config": ("faults.foreign_session.ignores_plain_config=true",),
+    "outdoor_profile": ("faults.outdoor_profile.euler_angle_max_rad=0.35",),
 }
 
 #: Rows whose required outcome is narrower than "any policy outcome": the lockstep runner
 #: refuses take-off when the read-back differs from what was written or cannot be read, and
-#: ends the run without taking off again once the drone landed by itself (issue 17 items 1-2).
+#: ends the run without taking off again once the drone landed by itself (issue 17 items 1-2);
+#: it refuses a drone that reports fault bits, lands on SOFTWARE_FAULT / VBAT_LOW in flight
+#: and cuts on CUTOUT / MOTORS (issue 21).
 REQUIRED_OUTCOME: dict[str, frozenset[str]] = {
     "ctrl_codes_fw24": frozenset({"completed"}),  # 7/9 instead of 6/8 must change nothing
     "foreign_session": frozenset({"refused"}),    # read back 0.52 / 2000 / 6.11: no take-off
     "control_port_silent": frozenset({"refused"}),  # nothing read back: no take-off
     "self_land": frozenset({"landed"}),   # stays down (zero take-offs after touch-down)
+    "cutout": frozenset({"stopped"}),     # a motor fault bit in flight: the tool cuts
+    "motors": frozenset({"stopped"}),
+    "software_fault": frozenset({"landed"}),
+    "faults_at_power_on": frozenset({"refused"}),   # naming the bits
+    "vbat_low_at_power_on": frozenset({"refused"}),
+    "vbat_low_threshold": frozenset({"landed"}),    # bit 15 at 25 %, above the 20 % floor
+    "blackout": frozenset({"landed"}),
+    "session_ignores_config": frozenset({"refused"}),  # no ACK without its ids: no take-off
+    "outdoor_profile": frozenset({"completed"}),  # outdoor FALSE first, then the limits
 }
 
 RECOVERED_M = 0.10  # back "on track": within 10 cm of the fault-free flight
@@ -159,8 +187,12 @@ def refused(run) -> bool:
 
 def classify(run, ending: str, fault: str) -> str:
     """The outcome label of a finished (or refused) run (see the module docstring)."""
+    from ardrone_nmpc.runs.verdict import FAILED_VERDICTS
+
     if refused(run):
         return "refused"
+    if ending in FAILED_VERDICTS:  # flown to its end without doing its job: no policy outcome
+        return ending
     modes = [Mode.parse(m) for m in run.columns["mode"]]
     z = run.columns["z_true_m"]
     t = run.columns["t_s"]
@@ -168,8 +200,8 @@ def classify(run, ending: str, fault: str) -> str:
     if np.any(flying & (t >= 0) & (z <= 0.02)):
         return "crashed"
     end = Mode.parse(ending)
-    if end.is_emergency_stop:
-        return "stopped" if fault == "emergency" else "crashed"
+    if end.action == "stop":  # the drone's emergency, or a motor fault bit it was cut for
+        return "stopped" if fault == "emergency" or not end.is_emergency_stop else "crashed"
     if end.action == "land" and end.reason:
         landed = any(e.get("kind") == "landed" for e in run.events)
         return "landed" if landed else "crashed"
@@ -329,9 +361,17 @@ def render_markdown(results: list[CaseResult], *, command: str) -> str:
         "",
         "Outcome: `completed` (flew to the end), `hovered` (ended hovering by policy), "
         "`landed` (the supervisor landed it, touch-down confirmed), `stopped` (the drone cut "
-        "its motors itself — the emergency fault; nothing more is sent), `refused` (the "
-        "pre-flight check refused the take-off: the drone holds other limits, or its "
-        "configuration could not be read back; nothing took off), `crashed`, `exception`. *Max dev*: largest distance between the faulted flight's true position "
+        "its motors itself — the emergency fault; nothing more is sent — or reported a motor "
+        "fault bit, CUTOUT or MOTORS, and the tool cut them), `refused` (the pre-flight check "
+        "refused the take-off: the drone holds other limits, its configuration could not be "
+        "read back or written, or it reports a fault bit; nothing took off), `crashed`, "
+        "`failed-no-tracking` / `failed-no-target` (it reached its end without doing its "
+        "job), `exception`. The drone's own alarms (`cutout`, `motors`, `software_fault`, "
+        "`faults_at_power_on`, `vbat_low_*`), a Wi-Fi `blackout`, a session that ignores plain "
+        "CONFIG and a drone last flown outdoors are rows of their own; what only a link shows "
+        "— the bootstrap answer after a blackout, a second AT client — is tested against the "
+        "loopback drone and the SDK stand-in (tests/integration). *Max dev*: largest distance "
+        "between the faulted flight's true position "
         "and the fault-free flight's (same seed, same tick) until a landing began. *Recover*: "
         f"seconds from the fault's start until that distance stays below {RECOVERED_M:g} m "
         "(– for landings, or never). *Supervisor*: how the run ended (`completed`, or the "

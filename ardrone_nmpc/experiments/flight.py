@@ -4,8 +4,9 @@ The drone is opened by its backend (:data:`DRONE_BACKENDS`, by the scheme of its
 docs/architecture.md §4) and flown by :func:`~ardrone_nmpc.runtime.realtime.fly` into a run
 directory made by :func:`~ardrone_nmpc.experiments.record.record` — the one recording of every
 command. Everything that can fail before the motors start is checked first, in this order, and
-a refusal leaves no run directory: tick counts, the address, a ``faults`` section on a drone
-that is not simulated (faults are injected only in simulation), ports, the drone's flight lock.
+a refusal leaves no run directory: tick counts, a reference that leaves the geofence, the
+address, a ``faults`` section or the kit's command convention on a drone that is not simulated
+(both exist only in simulation), ports, the drone's flight lock.
 ``sim://lockstep`` owns its clock: it is flown by the lockstep runner, as ``simulate`` flies it.
 """
 
@@ -22,11 +23,16 @@ from ardrone_nmpc.links.backend import DroneAddress, open_udp_drone, parse_drone
 from ardrone_nmpc.runtime.realtime import FlightResult, fly
 from ardrone_nmpc.runtime.schedule import Schedule
 
-__all__ = ["DRONE_BACKENDS", "FaultsNotSimulated", "run_flight"]
+__all__ = ["DRONE_BACKENDS", "FaultsNotSimulated", "KitConventionNotSimulated", "run_flight"]
 
 
 class FaultsNotSimulated(UserError, ValueError):
     """A ``faults`` section on a drone that is not simulated: refused before anything flies."""
+
+
+class KitConventionNotSimulated(UserError, ValueError):
+    """The kit's command convention on a drone that is not simulated: refused before anything
+    flies (its commands and its tilt limit are in the kit's port units, not radians)."""
 
 
 def _udp(cfg, address: DroneAddress, *, seed, ports, other_objects):
@@ -70,12 +76,20 @@ def _address(cfg, drone: str | None, sim: bool) -> DroneAddress:
 
 
 def _refuse_faults_on_a_real_drone(cfg, address: DroneAddress) -> None:
+    if str(address) in SIMULATED:
+        return
     active = cfg.faults.active()
-    if active and str(address) not in SIMULATED:
+    if active:
         raise FaultsNotSimulated(
             f"faults: {', '.join(sorted(active))} — faults are injected only in simulation, "
             f"and {address} is no simulated drone: remove the faults section (or fly "
             "--drone sim://loopback)")
+    if cfg.drone.command_convention != "sdk":
+        raise KitConventionNotSimulated(
+            f"drone.command_convention {cfg.drone.command_convention!r} (the Simulink kit's "
+            f"±1 ports, its tilt limit safety.max_tilt_rad {cfg.safety.max_tilt_rad:g} in "
+            f"their units) flies only a simulated drone, and {address} is none: set "
+            "drone.command_convention sdk (and a plant profile other than thesis_kit)")
 
 
 def run_flight(*, cfg, sim: bool = False, drone_host: str | None = None,
@@ -94,11 +108,13 @@ def run_flight(*, cfg, sim: bool = False, drone_host: str | None = None,
     ended.
     """
     from ardrone_nmpc.config.schema import tracked_object
+    from ardrone_nmpc.reference.experiment import experiment_trajectory
     from ardrone_nmpc.runtime.signals import landing_signals
 
     result = result if result is not None else FlightResult()
     seed = cfg.sim.seed if seed is None else seed
     schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
+    experiment_trajectory(cfg)  # nor does a reference that leaves the geofence
     address = _address(cfg, drone_host, sim)
     opener = DRONE_BACKENDS.get(str(address)) or DRONE_BACKENDS.get(address.scheme)
     if opener is None and str(address) != LOCKSTEP:

@@ -120,11 +120,15 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     another airframe (see :func:`~ardrone_nmpc.runtime.lockstep.run_lockstep`).
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
-    created for times that give no tick count.
+    created for times that give no tick count, and
+    :class:`~ardrone_nmpc.reference.trajectories.ReferenceError` for a reference that leaves
+    the geofence.
     """
+    from ardrone_nmpc.reference.experiment import experiment_trajectory
     from ardrone_nmpc.runtime import lockstep  # when used (module docstring)
 
     Schedule.from_config(cfg)  # refused before a run directory exists
+    experiment_trajectory(cfg)  # so is a reference outside the geofence
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})

@@ -100,9 +100,14 @@ class FlightCommands:
         """Cut the motors: hold REF with bit 8 (its rising edge acts) and bit 9 = 0. If this
         link has sent no REF yet, one with bit 8 low goes first in the same datagram (bit 9 as
         the drone's state bit 0, so it changes nothing), so the drone sees the edge whatever the
-        previous client left."""
+        previous client left. A drone whose latest packet shows it in emergency already is not
+        sent an edge (on the ground one clears the emergency): REF land is held instead."""
         with self._at_lock:
             self._require_open()
+            if self._state is not None and DroneState.EMERGENCY in self._state:
+                self._hold_ref_locked(Ref.landing(), "the drone is in emergency")
+                self._send_current_locked(raise_errors=True)
+                return
             first = self._ref is None
             self._hold_ref_locked(Ref.emergency(), "the link cut the motors")
             bodies = self._current_bodies_locked(self._clock(), count=False)

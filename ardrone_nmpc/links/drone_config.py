@@ -39,7 +39,7 @@ from ardrone_nmpc.protocol.config_text import EULER_ANGLE_MAX_LIMIT_RAD, parse_c
 from ardrone_nmpc.protocol.navdata import DroneState
 
 __all__ = ["ConfigHandshake", "ConfigMismatch", "EULER_ANGLE_MAX_LIMIT_RAD", "LinkError",
-           "parse_config_text", "verify_config"]
+           "check_config_id", "parse_config_text", "verify_config"]
 
 _CTRL_ACK_RESEND_S = 0.05            # node-ar-drone resends CTRL 5 every 50 ms
 _CONFIG_DUMP_MAX_BYTES = 1 << 20
@@ -67,8 +67,9 @@ class ConfigMismatch:
         """The one-line refusal: the key, both values and what to do."""
         held = "nothing (key missing)" if self.held is None else repr(self.held)
         return (f"the drone holds {self.key} = {held}, not the {self.written!r} written: it "
-                "ignored the write (another multiconfig session or an outdoor profile?) — "
-                "power-cycle the drone, or set drone.config_ids to its session, then retry")
+                "did not keep the write — a drone in another multiconfig session keeps its "
+                "own limits: set drone.config_ids to that session (`ardrone-nmpc status` shows "
+                "its ids and what it holds), then retry")
 
 
 def _same(written: str, held: str) -> bool:
@@ -99,6 +100,15 @@ def _number_text(x: float) -> int | float:
     """A config number: whole values as int (``1000``), others as the float (``0.35``)."""
     r = round(x, 6)
     return int(r) if r == int(r) else x
+
+
+def check_config_id(v: str) -> str:
+    """A multiconfig id: 8 hex digits (ValueError otherwise)."""
+    if not (isinstance(v, str) and len(v) == 8
+            and all(c in "0123456789abcdefABCDEF" for c in v)):
+        raise ValueError(f"config ids must be 8 hex digits, got {v!r}")
+    return v
+
 
 
 def check_positive(name: str, v: float) -> float:

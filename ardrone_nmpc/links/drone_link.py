@@ -15,7 +15,16 @@ Navdata (§1.1, §4)
     :attr:`DroneLink.stats`, never raised. A packet whose sequence is not newer than the last is
     dropped (SDK, node-ar-drone) unless it is 1 or carries the com-watchdog bit 30 (the drone
     re-initialised). Sequence gaps count as loss. Packets without the demo option (bootstrap)
-    update :attr:`DroneLink.state` only.
+    update :attr:`DroneLink.state` and :attr:`DroneLink.packet_mode` only — the state word is
+    in every packet, so a landing is confirmed by any of them.
+
+Bootstrap after connecting
+    A drone that lost its client (a Wi-Fi blackout) restarts its stream in bootstrap: no
+    option, no demo sample. As the SDK does (``ardrone_general_navdata.c``: on a bootstrap
+    packet it re-sends the session id, then ``navdata_demo`` and ``navdata_options``), the
+    link answers the first bootstrap packet after :meth:`DroneLink.connect` by writing the
+    session ids (with ``config_ids``) and ``general:navdata_demo`` again, from a thread of its
+    own (the handshake waits for navdata); :attr:`DroneLink.bootstrap_answers` counts them.
 
 Connecting (§1.1 step 3)
     A drone whose first packet shows it airborne (state bit 0) is somebody else's flight:
@@ -59,9 +68,11 @@ from ardrone_nmpc.protocol.config_text import CONTROL_PORT
 from ardrone_nmpc.links.drone_config import (
     ConfigHandshake,
     LinkError,
+    check_config_id,
     check_positive as _check_positive,
     parse_config_text,
 )
+from ardrone_nmpc.links.readings import PacketReadings
 from ardrone_nmpc.links.udp import (
     RECV_BUFFER_BYTES,
     Clock,
@@ -92,13 +103,14 @@ from ardrone_nmpc.core.angles import wrap_angle_deg
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
 __all__ = [
-    "CONTROL_PORT", "DEFAULT_HOST", "DroneAirborne", "LinkError", "DroneLink", "flight_mode_of",
-    "navdata_sample_of", "parse_config_text",
+    "CONTROL_PORT", "DEFAULT_HOST", "DroneAirborne", "LinkError", "DroneLink", "PacketReadings",
+    "check_config_id", "flight_mode_of", "navdata_sample_of", "parse_config_text",
 ]
 
 DEFAULT_HOST = "192.168.1.1"
 _HOVER = Pcmd.hover()
 _RX_POLL_S = 0.05                    # receiver recv timeout: how fast it notices stop / silence
+_BOOTSTRAP_ANSWER_S = 1.0            # each key of the bootstrap answer waits this for its ACK
 
 
 class DroneAirborne(LinkError):
@@ -143,7 +155,8 @@ def navdata_sample_of(packet: Navdata, t_s: float) -> NavdataSample | None:
         t_s=t_s, mode=flight_mode_of(packet.state, d.ctrl_major),
         battery_pct=float(d.battery_pct), roll_deg=d.roll_deg, pitch_deg=d.pitch_deg,
         yaw_deg=wrap_angle_deg(d.yaw_deg), altitude_m=d.altitude_m, vx_body_mps=d.vx_body_mps,
-        vy_body_mps=d.vy_body_mps, vz_mps=d.vz_mps, ctrl_state=d.ctrl_state)
+        vy_body_mps=d.vy_body_mps, vz_mps=d.vz_mps, ctrl_state=d.ctrl_state,
+        state_bits=int(packet.state))
 
 
 def _check_frac(name: str, v: float) -> float:
@@ -157,17 +170,10 @@ def _check_frac(name: str, v: float) -> float:
     return v
 
 
-def _check_config_id(v: str) -> str:
-    if not (isinstance(v, str) and len(v) == 8
-            and all(c in "0123456789abcdefABCDEF" for c in v)):
-        raise ValueError(f"config ids must be 8 hex digits, got {v!r}")
-    return v
-
-
 # ----------------------------------------------------------------------------- the link
 
 
-class DroneLink(FlightCommands, ConfigHandshake):
+class DroneLink(FlightCommands, ConfigHandshake, PacketReadings):
     """AT commands out (UDP ``at_port``), navdata in (UDP ``navdata_port``) — see the module doc.
 
     Parameters
@@ -219,7 +225,7 @@ class DroneLink(FlightCommands, ConfigHandshake):
         self.wake_retry_s = _check_positive("wake_retry_s", wake_retry_s)
         self.config_resend_s = _check_positive("config_resend_s", config_resend_s)
         if config_ids is not None:
-            config_ids = tuple(_check_config_id(v) for v in config_ids)
+            config_ids = tuple(check_config_id(v) for v in config_ids)
             if len(config_ids) != 3:
                 raise ValueError("config_ids must be (session, profile, application)")
         self.config_ids: tuple[str, str, str] | None = config_ids  # type: ignore[assignment]
@@ -257,9 +263,9 @@ class DroneLink(FlightCommands, ConfigHandshake):
         # navdata side (guarded by _nav_cond)
         self._nav_cond = threading.Condition()
         self._nav_index = 0                   # accepted packets so far
-        self._state: DroneState | None = None
-        self._navdata: NavdataSample | None = None
-        self._navdata_rx_t_s = -math.inf
+        self._init_readings()
+        self._bootstrap_thread: threading.Thread | None = None
+        self._bootstrap_answers = 0
         self._last_nav_mono = -math.inf
         self._last_wake_mono = -math.inf
         self._wakeups = 0
@@ -384,19 +390,9 @@ class DroneLink(FlightCommands, ConfigHandshake):
     # ----------------------------------------------------------------------------- readings
 
     @property
-    def navdata(self) -> NavdataSample | None:
-        """The latest demo navdata sample (None before the first)."""
-        return self._navdata
-
-    @property
-    def navdata_rx_t_s(self) -> float:
-        """Receipt time (link clock) of :attr:`navdata`; −inf before the first."""
-        return self._navdata_rx_t_s
-
-    @property
-    def state(self) -> DroneState | None:
-        """State bits of the latest accepted navdata packet (bootstrap packets included)."""
-        return self._state
+    def bootstrap_answers(self) -> int:
+        """Times a bootstrap packet after connecting was answered (module doc)."""
+        return self._bootstrap_answers
 
     @property
     def sent_count(self) -> int:
@@ -607,16 +603,35 @@ class DroneLink(FlightCommands, ConfigHandshake):
                 stats.accept_sequence(packet.sequence)
             else:
                 return
-        sample = navdata_sample_of(packet, t_s)
+        major = packet.demo.ctrl_major if packet.demo is not None else None
+        mode, sample = flight_mode_of(state, major), navdata_sample_of(packet, t_s)
         with self._nav_cond:
-            self._state = state
+            self._note_packet(state, mode, sample, t_s)
             self._nav_index += 1
-            if sample is not None:
-                self._navdata = sample
-                self._navdata_rx_t_s = t_s
             self._nav_cond.notify_all()
         stats.record_packet(t_s)
         self._watch_takeoff(state, packet)
-        if (DroneState.COM_WATCHDOG in state
-                and DroneState.NAVDATA_BOOTSTRAP not in state):
+        if DroneState.NAVDATA_BOOTSTRAP in state:
+            self._answer_bootstrap()
+        elif DroneState.COM_WATCHDOG in state:
             self._comwdg_pending = True
+
+    def _answer_bootstrap(self) -> None:
+        """Start the bootstrap answer (module doc) unless one runs or the link is not up."""
+        if not self._connected or self._stop.is_set() or (
+                self._bootstrap_thread is not None and self._bootstrap_thread.is_alive()):
+            return
+        self._bootstrap_thread = threading.Thread(target=self._rewrite_navdata_demo,
+                                                  name="drone-bootstrap-answer", daemon=True)
+        self._bootstrap_thread.start()
+
+    def _rewrite_navdata_demo(self) -> None:
+        self._bootstrap_answers += 1
+        try:
+            if self.config_ids is not None:
+                self.write_config("custom:session_id", self.config_ids[0],
+                                  timeout_s=_BOOTSTRAP_ANSWER_S)
+            self.write_config("general:navdata_demo", self.navdata_demo,
+                              timeout_s=_BOOTSTRAP_ANSWER_S)
+        except LinkError as err:  # the next bootstrap packet tries again
+            self._last_send_error = f"bootstrap answer: {err}"

@@ -531,6 +531,8 @@ class DroneStatus:
     bootstrap : no ``general:navdata_demo`` written yet (bits 10 + 11, no options).
     demo : demo packets (bit 10); False = full-rate packets with every option.
     com_watchdog, com_lost, battery_low : state bits 30, 13, 15.
+    faults : further state bits the drone reports about itself (MOTORS, SOFTWARE_FAULT,
+        ULTRASOUND, CUTOUT, …), OR-ed into the state word as they are.
     """
 
     phase: str
@@ -545,6 +547,7 @@ class DroneStatus:
     com_watchdog: bool = False
     com_lost: bool = False
     battery_low: bool = False
+    faults: int = 0
 
     def __post_init__(self) -> None:
         if self.phase not in DRONE_PHASES:
@@ -552,7 +555,7 @@ class DroneStatus:
 
     def state_bits(self) -> DroneState:
         """The header's state bits."""
-        s = ALWAYS_ON_STATE
+        s = ALWAYS_ON_STATE | DroneState(self.faults & 0xFFFFFFFF)
         flags = ((self.phase in _AIRBORNE_PHASES, DroneState.FLY),
                  (self.phase == "emergency", DroneState.EMERGENCY),
                  (self.phase == "emergency" and self.user_emergency, DroneState.USER_EL),

@@ -2,14 +2,21 @@
 
 Every runner (lockstep, real time, ``replay --rerun``) holds the configured trajectory's
 start point through the settle phase (experiment time t < 0) and flies the trajectory from
-t = 0; a followed object (reference kind ``follow``) is live from the first tick.
+t = 0; a followed object (reference kind ``follow``) is live from the first tick. A reference
+that leaves the geofence anywhere over the experiment is refused before anything flies
+(:func:`check_inside_geofence`; ``check`` runs it too): the supervisor would land the drone
+there, after flying it towards the fence.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ardrone_nmpc.reference.trajectories import Trajectory, make_trajectory
+from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
+from ardrone_nmpc.reference.trajectories import ReferenceError, Trajectory, make_trajectory
+
+#: Sampling step of :func:`check_inside_geofence` (s).
+FENCE_CHECK_STEP_S = 0.01
 
 
 class HoldStartThen:
@@ -32,10 +39,32 @@ class HoldStartThen:
         return self.inner.polyline_m()
 
 
+def check_inside_geofence(cfg, trajectory: Trajectory) -> None:
+    """Raise :class:`ReferenceError` if ``trajectory`` leaves ``cfg.safety``'s geofence at any
+    time of the experiment (sampled every :data:`FENCE_CHECK_STEP_S` over [0, duration_s])."""
+    n = int(np.ceil(cfg.duration_s / FENCE_CHECK_STEP_S)) + 1
+    t = np.minimum(np.arange(n) * FENCE_CHECK_STEP_S, cfg.duration_s)
+    pos = trajectory.state_at(t)[:, [IX_X, IX_Y, IX_Z]]
+    lo = np.asarray(cfg.safety.geofence_min_m, dtype=float)
+    hi = np.asarray(cfg.safety.geofence_max_m, dtype=float)
+    outside = np.any(~((pos >= lo) & (pos <= hi)), axis=1)  # NaN is outside too
+    if outside.any():
+        i = int(np.argmax(outside))
+        x, y, z = (float(v) for v in pos[i])
+        box = " × ".join(f"[{a:g}, {b:g}]" for a, b in zip(lo, hi))
+        raise ReferenceError(
+            f"reference: the {cfg.reference.kind} reference leaves the geofence at t = "
+            f"{t[i]:.2f} s, at ({x:.2f}, {y:.2f}, {z:.2f}) m outside {box} m "
+            "(safety.geofence_min_m / geofence_max_m) — bring the reference inside the fence")
+
+
 def experiment_trajectory(cfg):
     """The reference a runner hands the tick: the configured trajectory held at its start
     through the settle phase, or — kind ``follow`` — the live object (it follows from the
-    first tick)."""
+    first tick; it cannot be checked against the geofence before it flies). Raises
+    :class:`ReferenceError` for a reference that leaves the geofence."""
     if cfg.reference.kind == "follow":
         return make_trajectory(cfg.reference)
-    return HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    trajectory = make_trajectory(cfg.reference, duration_s=cfg.duration_s)
+    check_inside_geofence(cfg, trajectory)
+    return HoldStartThen(trajectory)

@@ -81,6 +81,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("nav_mode", "", "the drone's flight mode in its newest navdata"),
     Column("nav_roll_deg", "°", "navdata roll"),
     Column("nav_pitch_deg", "°", "navdata pitch"),
+    Column("nav_state_bits", "1", "the state word of that navdata (its fault bits: the "
+           "supervisor reads them)"),
     Column("nav_ctrl_state", "1", "raw ctrl_state word of that navdata (fly)"),
     Column("target_x_m", "m", "followed object x"),
     Column("target_y_m", "m", "followed object y"),
@@ -138,6 +140,8 @@ def measurement_columns(inputs: TickInputs) -> dict:
         "nav_mode": nav.mode.value if nav is not None else "",
         "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
         "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
+        "nav_state_bits": (nav.state_bits if nav is not None and nav.state_bits is not None
+                           else math.nan),
     } | _target_columns(inputs)
 
 
@@ -274,10 +278,12 @@ def _navdata_of_row(cols: dict, i: int, rx_t_s: float) -> NavdataSample | None:
     # navdata attitude is not among the measurement columns (yet): taken when a log has it
     roll, pitch = (float(cols[c][i]) if c in cols else nan
                    for c in ("nav_roll_deg", "nav_pitch_deg"))
+    state = float(cols["nav_state_bits"][i]) if "nav_state_bits" in cols else nan
     return NavdataSample(t_s=rx_t_s, mode=flight_mode, battery_pct=float(cols["battery_pct"][i]),
                          roll_deg=roll, pitch_deg=pitch, yaw_deg=nan, altitude_m=nan,
                          vx_body_mps=float(cols["nav_vx_body_mps"][i]),
-                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan)
+                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan,
+                         state_bits=int(state) if math.isfinite(state) else None)
 
 
 def _target_of_row(cols, i: int) -> tuple[MocapPose | None, float]:

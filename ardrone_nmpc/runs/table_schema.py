@@ -1,7 +1,8 @@
 """A run's log as a typed table (``export --format parquet``): the column types and units.
 
-* counts (``gmres_iterations``, ``newton_iterations``) and the raw ``nav_ctrl_state`` word are
-  64-bit integers (null where the log has NaN) — float64 if a value is not a whole number;
+* counts (``gmres_iterations``, ``newton_iterations``) and the raw ``nav_ctrl_state`` and
+  ``nav_state_bits`` words are 64-bit integers (null where the log has NaN) — float64 if a
+  value is not a whole number;
 * the closed sets of strings (``mode``, ``solver_status``, ``nav_mode``) are categorical
   (dictionary-encoded);
 * ``cmd_saturated`` (four ``0``/``1`` flags) is four booleans, ``cmd_saturated_roll``,
@@ -29,7 +30,8 @@ from ardrone_nmpc.runs.rundir import STRING_COLUMNS, RunData
 __all__ = ["CATEGORY_COLUMNS", "INTEGER_COLUMNS", "SATURATION_AXES", "TIME_COLUMN",
            "UNITLESS", "UNITS_KEY", "column_unit", "log_table"]
 
-INTEGER_COLUMNS = frozenset({"gmres_iterations", "newton_iterations", "nav_ctrl_state"})
+INTEGER_COLUMNS = frozenset({"gmres_iterations", "newton_iterations", "nav_ctrl_state",
+                             "nav_state_bits"})
 CATEGORY_COLUMNS = frozenset({"mode", "solver_status", "nav_mode"})
 SATURATION_AXES = ("roll", "pitch", "gaz", "yaw")
 TIME_COLUMN = "time_utc"
@@ -42,8 +44,8 @@ _SUFFIXES = (("_mps2", "m/s²"), ("_radps", "rad/s"), ("_per_s", "1/s"), ("_mps"
 #: Columns whose name carries no unit: their unit ("" for codes and labels).
 UNITLESS: dict[str, str] = {
     "residual_norm": "1", "gmres_iterations": "count", "newton_iterations": "count",
-    "nav_ctrl_state": "", "cmd_saturated": "", "solver_status": "", "mode": "",
-    "nav_mode": "", **{f"cmd_saturated_{a}": "" for a in SATURATION_AXES},
+    "nav_ctrl_state": "", "nav_state_bits": "", "cmd_saturated": "", "solver_status": "",
+    "mode": "", "nav_mode": "", **{f"cmd_saturated_{a}": "" for a in SATURATION_AXES},
     TIME_COLUMN: "UTC",
 }
 

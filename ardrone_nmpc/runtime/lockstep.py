@@ -30,13 +30,15 @@ from typing import Callable
 from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import truth_columns
+from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
 from ardrone_nmpc.runtime.tick import Tick
-from ardrone_nmpc.safety import Action
+from ardrone_nmpc.safety import Action, takeoff_refusal
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
 
@@ -44,9 +46,11 @@ from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 class SimResult:
     """What a lockstep run produced (the rows are also in the recorder, if one was given).
 
-    ``ending`` says how the flight ended: ``"completed"`` (the experiment ran to its end),
-    ``"land-<reason>"`` (the supervisor landed it), ``"stop-emergency"`` (the drone cut its
-    motors); ``final_mode`` is the drone's mode after the run.
+    ``ending`` says how the flight ended: ``"completed"`` (the experiment ran to its end and
+    did its job), a failed verdict of :mod:`ardrone_nmpc.runs.verdict` (it ran to its end
+    without tracking, or never saw the object it follows), ``"land-<reason>"`` (the
+    supervisor landed it), ``"stop-<reason>"`` (the drone cut its motors, or reported a motor
+    fault and was cut); ``final_mode`` is the drone's mode after the run.
     """
 
     ticks: int
@@ -58,8 +62,9 @@ class SimResult:
 
 
 class TakeoffRefused(UserError, RuntimeError):
-    """The pre-flight check failed (battery at or below the floor, limits the drone does not
-    hold, no configuration read back): nothing took off."""
+    """The pre-flight check failed (battery at or below the floor, a fault bit, limits the
+    drone does not hold or did not acknowledge, no configuration read back): nothing took
+    off."""
 
 
 #: The event of a refused take-off (``reason``: the one-line refusal); no flight follows.
@@ -74,7 +79,7 @@ def _configure(cfg, drone: LockstepDrone, events: list) -> None:
                             warn=lambda message: None)  # the warning is in the events
     try:
         session.configure()
-    except PreflightError as err:
+    except (PreflightError, LinkError) as err:
         raise TakeoffRefused(str(err)) from None
 
 
@@ -91,7 +96,8 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
     touch-down), ``stop`` (emergency) ends the run. Events are stamped with experiment time.
     Raises :class:`TakeoffRefused` (after a :data:`REFUSED_EVENT`) when the battery is at or
-    below ``safety.battery_floor_pct`` or the configuration read back refuses (module doc),
+    below ``safety.battery_floor_pct``, the drone reports a fault bit, or the configuration
+    (written, acknowledged, read back) refuses (module doc),
     :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` for times that give no tick count.
     A drone that lands by itself ends the run with :data:`SELF_LANDED`.
     """
@@ -110,7 +116,13 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
             raise TakeoffRefused(f"battery {battery_pct:.0f} % is at or below the floor "
                                  f"safety.battery_floor_pct = "
                                  f"{cfg.safety.battery_floor_pct:.0f} %: take-off refused")
-        drone.connect()
+        refusal = takeoff_refusal(drone.state_word)  # as fly's preflight
+        if refusal is not None:
+            raise TakeoffRefused(refusal)
+        try:
+            drone.connect()
+        except LinkError as err:  # a session that ignores plain CONFIG
+            raise TakeoffRefused(str(err)) from None
         _configure(cfg, drone, preflight_events)
     except TakeoffRefused as err:  # no experiment time: nothing took off
         for kind, fields in preflight_events:
@@ -134,6 +146,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     write_events(write_event, schedule.t_exp_s(0), announced)
     wall0 = time.perf_counter()
     ending, k, flown = "completed", 0, 0
+    tally = VerdictTally(follow=tick.follow is not None)
     for k in range(schedule.n_ticks):
         t_exp = schedule.t_exp_s(k)
         drone.advance_to(t_first + k * period, t_exp)
@@ -152,19 +165,24 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
         drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
                           progressive=out.progressive)
         _record(recorder, out.row, drone)
+        tally.add(out.row)
         if progress is not None:
             progress(schedule.fraction_done(k))
         if out.action in (Action.LAND, Action.STOP):
             ending = out.row["mode"]
             break
+    ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
     t_end = t_first + flown * period - t_start
     if ending.startswith("stop"):
+        if drone.truth.mode is not FlightMode.EMERGENCY:  # a motor fault bit: the tool cuts
+            drone.emergency()                             # (as the session does)
+            write_event(t_end, "emergency", reason=ending)
         write_event(t_end, "stopped", reason=ending, drone_mode=drone.truth.mode.value)
         drone.advance_to(drone.truth.t_s + 3.0)  # let it come to rest: the truth shows the fall
     else:
         _land(cfg, tick, drone, recorder, write_event, t_first, t_start, flown,
-              logged=ending != "completed")
+              logged=ending.startswith("land"))
     return SimResult(flown, drone.truth.mode, recorder.path if recorder is not None else None,
                      loop_wall_s, ending, drone.truth.t_s - t_start)
 

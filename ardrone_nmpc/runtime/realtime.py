@@ -24,12 +24,13 @@ from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.backend import OpenedDrone
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import link_columns
+from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, VerdictTally, verdict_message
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
 from ardrone_nmpc.runtime.schedule import EventClock, Schedule, phase, write_events
-from ardrone_nmpc.runtime.session import DroneLandedItself, FlightSession
+from ardrone_nmpc.runtime.session import CutMotors, DroneLandedItself, FlightSession
 from ardrone_nmpc.runtime.signals import landing_signals
 from ardrone_nmpc.runtime.tick import Tick
-from ardrone_nmpc.safety import Action
+from ardrone_nmpc.safety import Action, drone_alarms
 
 
 class LandingNotConfirmed(UserError, RuntimeError):
@@ -55,6 +56,10 @@ class DroneEmergency(UserError, RuntimeError):
     """The drone reported an emergency (motors cut)."""
 
 
+class FlightFailed(UserError, RuntimeError):
+    """The flight ran to its end without doing its job (:mod:`ardrone_nmpc.runs.verdict`)."""
+
+
 def fly(*, cfg, drone: OpenedDrone, recorder, schedule: Schedule, status=None,
         result: FlightResult | None = None, warn=None, operator_keys: bool = False,
         wrap_solver=None) -> None:
@@ -66,7 +71,8 @@ def fly(*, cfg, drone: OpenedDrone, recorder, schedule: Schedule, status=None,
     ``operator_keys`` reads the land and emergency keys from the terminal on stdin;
     ``wrap_solver`` is handed to the tick. Events are stamped on the experiment clock
     (:class:`~ardrone_nmpc.runtime.schedule.EventClock`). Raises
-    :class:`LandingNotConfirmed` when navdata never showed the drone landed.
+    :class:`LandingNotConfirmed` when navdata never showed the drone landed, then
+    :class:`FlightFailed` when it ran to its end without doing its job.
     """
     result = result if result is not None else FlightResult()
     link, mocap = drone.link, drone.mocap
@@ -85,20 +91,35 @@ def fly(*, cfg, drone: OpenedDrone, recorder, schedule: Schedule, status=None,
             session = FlightSession(cfg, link, mocap, event=event, requests=requests,
                                     start_position_m=_start_position(tick),
                                     **({"warn": warn} if warn is not None else {}))
+            tally = VerdictTally(follow=tick.follow is not None)
             try:
                 with session:
                     _control_loop(cfg, schedule, tick, drone, recorder, clock, status,
-                                  requests)
+                                  requests, tally)
             finally:
                 result.landed = session.landed_cleanly
                 for ev in mocap.take_events():  # senders seen since the last tick
                     event(ev.pop("kind"), **ev)
                 _drone_events(drone, clock)
+                event("drone_link", **_link_counts(link))
                 event("session_end", landed=session.landed_cleanly)
+            verdict = tally.verdict("completed")
+            if verdict in FAILED_VERDICTS:
+                event("verdict", verdict=verdict)
     finally:
         clock.close()
     if result.landed is False:
         raise LandingNotConfirmed("navdata never showed the drone landed: check it")
+    if verdict in FAILED_VERDICTS:
+        raise FlightFailed(f"{verdict}: {verdict_message(verdict)}")
+
+
+#: What a link counts of its own recoveries (a backend's link may count none of them).
+_LINK_COUNTS = ("rewakes", "stale_hovers", "bootstrap_answers")
+
+
+def _link_counts(link) -> dict:
+    return {name: getattr(link, name) for name in _LINK_COUNTS if hasattr(link, name)}
 
 
 def _drone_events(drone: OpenedDrone, clock: EventClock) -> None:
@@ -127,10 +148,13 @@ def _start_position(tick):
 
 
 def _control_loop(cfg, schedule: Schedule, tick: Tick, drone: OpenedDrone, recorder,
-                  clock: EventClock, status, requests=None) -> None:
+                  clock: EventClock, status, requests=None,
+                  tally: VerdictTally | None = None) -> None:
     """The 65 ms loop until the experiment ends or the supervisor, the drone or the operator
-    ends it (an exception: the session's exit lands the drone). At the first tick experiment
-    time 0 is fixed, ``sim.settle_s`` ahead, for the events and for the drone."""
+    ends it (an exception: the session's exit lands the drone, or cuts it on
+    :class:`~ardrone_nmpc.runtime.session.CutMotors`). At the first tick experiment time 0 is
+    fixed, ``sim.settle_s`` ahead, for the events and for the drone; ``tally`` sees every row
+    written."""
     link, mocap = drone.link, drone.mocap
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
     rate = Rate(schedule.period_s)
@@ -164,15 +188,21 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone: OpenedDrone, recor
         row = out.row
         row |= link_columns(late_s, nav)
         recorder.write_row(row)
+        if tally is not None:
+            tally.add(row)
         if status is not None:
             status({**row, "progress": schedule.fraction_done(k), "overruns": rate.overruns,
                     "navdata_rate_hz": link.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz,
                     "mocap_sender": mocap.sender, "mocap_foreign": mocap.foreign_senders})
+        alarms = drone_alarms(nav.state_bits if nav is not None else None)
+        said = f" — the drone reports {alarms[0].line()}" if alarms else ""
         if out.action is Action.LAND:   # the session's exit lands it
             if row["mode"] == "land-navdata-lost":
                 raise LinkLost(f"navdata silent for more than {cfg.safety.navdata_land_ms:.0f} ms")
-            raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}")
+            raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}{said}")
         if out.action is Action.STOP:
+            if row["mode"] != "stop-emergency":  # a motor fault bit: the session's exit cuts
+                raise CutMotors(f"the supervisor cut the motors: {row['mode']}{said}")
             raise DroneEmergency("the drone reports an emergency (motors cut): check it")
         _stop_if_ended_outside(link, requests, clock, t_exp)  # after the tick's row: logged
     _stop_if_ended_outside(link, requests, clock, schedule.t_exp_s(schedule.n_ticks - 1))

@@ -20,8 +20,12 @@ from ardrone_nmpc.core.modes import SETTLE, TRACK
 #: Take-off must show the drone flying (navdata, or the simulated plant) within this (s).
 TAKEOFF_TIMEOUT_S = 10.0
 #: The simulated landing must show the drone on the ground within this (s); a real landing
-#: has no timeout (the session lands until navdata confirms it).
+#: has no timeout while navdata flows (the session lands until navdata confirms it).
 LANDING_TIMEOUT_S = 15.0
+#: A real landing without a single navdata packet: how long REF land is held before the
+#: session stops waiting for a confirmation it cannot get (s; a landing from the 3 m default
+#: ceiling takes about 5 s).
+BLIND_LANDING_S = 10.0
 
 #: Largest tick count a schedule takes: tick times ``k · period`` stay exact doubles.
 MAX_TICKS = 2 ** 53

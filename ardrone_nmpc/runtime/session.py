@@ -10,12 +10,21 @@ before take-off sends nothing that could start the motors.
 
 Landing is structure, not the caller's job: leaving the ``with`` block for any reason after
 take-off was commanded — the end, Ctrl-C or another terminating signal, an exception, a lost
-link, the operator's key — lands the drone, and :meth:`FlightSession.land` never gives up on
-its own: it holds REF land until navdata shows the drone landed or in emergency, saying every
-few seconds what it waits for (and that navdata is lost, if it is). A second Ctrl-C within 2 s
-cuts the motors instead (announced on the first); so does the operator's emergency key. Whether
-the landing is confirmed is decided by navdata alone — a log that cannot be written is
-reported as such, not as a landing failure.
+link, the operator's key — lands the drone, and :meth:`FlightSession.land` holds REF land
+until a fresh navdata packet — any packet, bootstrap ones included: the state word is in every
+one — shows the drone landed or in emergency, saying every few seconds what it waits for.
+While navdata flows it never gives up; with no packet at all for
+:data:`~ardrone_nmpc.runtime.schedule.BLIND_LANDING_S` it stops waiting (``landing_failed``,
+with the drone's last known state), so the process ends, writes its summary and lets go of
+the drone. A second Ctrl-C within 2 s cuts the motors instead (announced on the first); so do
+the operator's emergency key, the ``emergency`` command (SIGUSR2,
+:class:`~ardrone_nmpc.runtime.signals.EmergencyRequested`) and a motor fault bit
+(:class:`CutMotors`). Whether the landing is confirmed is decided by navdata alone — a log that
+cannot be written is reported as such, not as a landing failure.
+
+The navdata freshness rule holds from the first take-off REF to the last landing REF: the
+take-off fails (:class:`TakeoffFailed`, one line) on navdata older than
+``safety.navdata_land_ms``, on a drone fault bit, or when the drone does not fly in time.
 """
 
 from __future__ import annotations
@@ -29,11 +38,13 @@ from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.links.drone_config import LinkError, verify_config
 from ardrone_nmpc.runtime.operator_input import OperatorAbort
-from ardrone_nmpc.runtime.schedule import TAKEOFF_TIMEOUT_S
-from ardrone_nmpc.runtime.signals import Terminated, signal_name
+from ardrone_nmpc.runtime.schedule import BLIND_LANDING_S, TAKEOFF_TIMEOUT_S
+from ardrone_nmpc.runtime.signals import EmergencyRequested, Terminated, signal_name
+from ardrone_nmpc.safety import Action, drone_alarms, takeoff_refusal
 from ardrone_nmpc.errors import UserError
 
-__all__ = ["DroneLandedItself", "FlightSession", "PreflightError"]
+__all__ = ["CutMotors", "DroneLandedItself", "FlightSession", "PreflightError",
+           "TakeoffFailed"]
 
 LEVEL_MAX_DEG = 2.0          # flat trim only this level: it takes the attitude as horizontal
 TRIM_TO_TAKEOFF_S = 0.5      # the drone re-zeroes its attitude after FTRIM: no take-off meanwhile
@@ -50,6 +61,16 @@ class PreflightError(UserError, RuntimeError):
 
 class DroneLandedItself(UserError, RuntimeError):
     """The drone landed or cut its motors by itself during the flight."""
+
+
+class TakeoffFailed(UserError, RuntimeError):
+    """The take-off REF went out but the take-off did not complete: the message says why
+    (navdata lost, a drone fault bit, no flight in time); the drone has been landed (or cut)."""
+
+
+class CutMotors(UserError, RuntimeError):
+    """The flight ends with the motors cut, not a landing: the drone reports a motor fault
+    (CUTOUT, MOTORS). The session's exit cuts them."""
 
 
 def _stderr(message: str) -> None:
@@ -96,6 +117,7 @@ class FlightSession:
         self.landed_cleanly: bool | None = None
         self._last_sigint: float | None = None
         self._cut_t: float | None = None  # when the motors were cut (None: not cut)
+        self._own_edge_due = False  # the operator made the edge: ours only if it did not act
 
     # -- entering: connect, verify, preflight, trim, take off -----------------------------
     def __enter__(self) -> "FlightSession":
@@ -124,13 +146,16 @@ class FlightSession:
         return self
 
     def configure(self) -> None:
-        """Write the limits and the profile keys, read them back, refuse on any difference."""
+        """Write the profile keys, then the limits; read them back, refuse on any difference.
+
+        The profile keys go first: ``control:outdoor`` selects which stored triple the limit
+        keys are written into (and, changed afterwards, would load the other one over them)."""
         d = self.cfg.drone
         drone = self.drone
-        written = drone.configure_limits(
+        written = drone.configure_profile(flight_without_shell=d.hull == "outdoor")
+        written.update(drone.configure_limits(
             euler_angle_max_rad=d.euler_angle_max_rad, control_vz_max_mps=d.control_vz_max_mps,
-            control_yaw_radps=d.control_yaw_radps, altitude_max_m=d.altitude_max_m)
-        written.update(drone.configure_profile(flight_without_shell=d.hull == "outdoor"))
+            control_yaw_radps=d.control_yaw_radps, altitude_max_m=d.altitude_max_m))
         self.event("config_written", **written)
         try:
             held = drone.read_config(timeout_s=2.0)
@@ -166,6 +191,11 @@ class FlightSession:
         if not nav.battery_pct > floor:
             raise PreflightError(f"battery {nav.battery_pct:.0f} % at or below the floor "
                                  f"({floor:.0f} %, safety.battery_floor_pct): charge it")
+        refusal = takeoff_refusal(nav.state_bits)
+        if refusal is not None:
+            self._log("drone_faults", phase="preflight",
+                      bits=[f.name for f in drone_alarms(nav.state_bits)])
+            raise PreflightError(refusal)
         self._require_level(nav)
         pose = self._wait_mocap(2.0)
         contenders = self.mocap.contenders
@@ -182,7 +212,8 @@ class FlightSession:
 
     def trim(self) -> None:
         """FTRIM on the ground and level (checked again on fresh navdata), then wait
-        :data:`TRIM_TO_TAKEOFF_S` before anything may take off."""
+        :data:`TRIM_TO_TAKEOFF_S` before anything may take off — and no take-off on navdata
+        that went stale meanwhile."""
         nav = self._wait_navdata(1.0)
         if nav.mode is not FlightMode.LANDED:
             raise PreflightError(f"the drone left the ground state before the flat trim "
@@ -194,11 +225,13 @@ class FlightSession:
         while self.clock() < until:
             self._check_operator("before take-off")
             self.sleep(_POLL_S)
+        self._require_fresh_navdata()
 
     def takeoff(self) -> None:
         """REF take-off until navdata shows flying, then the heading check: the turn of the
         mocap heading and of navdata's yaw from the first airborne sample (the drone re-zeroes
-        its yaw as it takes off) to flying."""
+        its yaw as it takes off) to flying. From the take-off REF on, navdata must stay fresh
+        (module doc)."""
         deadline = self.clock() + self.TAKEOFF_TIMEOUT_S
         self.drone.takeoff()
         self.event("takeoff")
@@ -244,7 +277,8 @@ class FlightSession:
         at all any more (closed), or a cut was not confirmed.
         """
         interrupt: BaseException | None = None
-        next_notice = self.clock() + NOTICE_EVERY_S
+        t_start = self.clock()
+        next_notice = t_start + NOTICE_EVERY_S
         commanded = False
         while True:
             try:
@@ -253,7 +287,7 @@ class FlightSession:
                 if not commanded and self._cut_t is None:  # after a cut, REF emergency stays held
                     self.drone.land()  # the link holds REF land from now on
                     commanded = True
-                done = self._landing_done()
+                done = self._landing_done(t_start)
                 if done is not None:
                     self.landed_cleanly = done
                     break
@@ -272,36 +306,57 @@ class FlightSession:
                 commanded = False  # a send failed (Wi-Fi gone?): keep trying
                 self.sleep(_POLL_S)
         if self.landed_cleanly:
-            self._log("landed", mode=self.drone.navdata.mode.value)
+            self._log("landed", mode=self.drone.packet_mode.value)
         if interrupt is not None:
             raise interrupt
         return bool(self.landed_cleanly)
 
     # -- helpers --------------------------------------------------------------------------
-    def _landing_done(self) -> bool | None:
-        """True once fresh navdata shows landed/emergency; False after an unconfirmed cut."""
-        nav = self.drone.navdata
-        fresh = nav is not None and self.clock() - self.drone.navdata_rx_t_s <= NAVDATA_FRESH_S
-        if fresh and nav.mode in (FlightMode.LANDED, FlightMode.EMERGENCY):
+    def _landing_done(self, t_start: float) -> bool | None:
+        """True once a fresh packet (any: the state word is in every one) shows landed or
+        emergency; False after an unconfirmed cut, or after :data:`BLIND_LANDING_S` of REF
+        land without a single packet (the module doc)."""
+        now = self.clock()
+        if (now - self.drone.state_rx_t_s <= NAVDATA_FRESH_S
+                and self.drone.packet_mode in (FlightMode.LANDED, FlightMode.EMERGENCY)):
             return True
-        if self._cut_t is not None and self.clock() - self._cut_t > EMERGENCY_CONFIRM_S:
+        if self._cut_t is not None and now - self._cut_t > EMERGENCY_CONFIRM_S:
+            if self._own_edge_due:  # the operator's cut did not show: now this link cuts
+                self._own_edge_due = False
+                self._cut_t = now
+                self.drone.emergency()
+                return None
             self._log("landing_failed", error="motor cut not confirmed by navdata")
+            return False
+        blind_s = now - max(self.drone.state_rx_t_s, t_start)
+        if blind_s > BLIND_LANDING_S:
+            state, mode = self.drone.state, self.drone.packet_mode
+            self._log("landing_failed", error=f"no navdata for {blind_s:.0f} s while landing",
+                      last_mode=None if mode is None else mode.value,
+                      last_state=None if state is None else int(state),
+                      last_age_s=now - self.drone.state_rx_t_s)
             return False
         return None
 
     def _landing_notice(self) -> None:
         nav = self.drone.navdata
-        age_s = self.clock() - self.drone.navdata_rx_t_s
-        if nav is None or not age_s <= NAVDATA_FRESH_S:
+        age_s = self.clock() - self.drone.state_rx_t_s
+        if not age_s <= NAVDATA_FRESH_S:
             self._note("landing_navdata_lost",
-                       f"landing: no navdata for {age_s:.0f} s — still sending land; watch the "
-                       "drone (Ctrl-C twice within 2 s cuts the motors)", age_s=age_s)
+                       f"landing: no navdata for {age_s:.0f} s — still sending land (for up "
+                       f"to {BLIND_LANDING_S:.0f} s without any); watch the drone (Ctrl-C "
+                       "twice within 2 s cuts the motors)", age_s=age_s)
         else:
             self._note("landing_wait", f"landing: waiting for the drone to touch down "
-                       f"(mode {nav.mode.value}, ctrl_state {_ctrl(nav)})")
+                       f"(mode {self.drone.packet_mode.value}, ctrl_state {_ctrl(nav)})")
 
     def _interrupted(self, err) -> None:
-        """A Ctrl-C: the first announces the motor cut, a second within 2 s does it."""
+        """A Ctrl-C: the first announces the motor cut, a second within 2 s does it. The
+        ``emergency`` command's signal and a motor fault cut at once."""
+        if isinstance(err, (EmergencyRequested, CutMotors)):
+            if self._cut_t is None:
+                self._cut_motors(str(err), edge=not isinstance(err, EmergencyRequested))
+            return
         if not isinstance(err, KeyboardInterrupt) or isinstance(err, Terminated):
             return
         now = self.clock()
@@ -312,11 +367,19 @@ class FlightSession:
         self._last_sigint = now
         self.warn("landing — press Ctrl-C again within 2 s to cut the motors (emergency)")
 
-    def _cut_motors(self, why: str) -> None:
+    def _cut_motors(self, why: str, edge: bool = True) -> None:
+        """Cut the motors: REF bit 8's edge (the drone link holds it). Without ``edge`` the
+        ``emergency`` command has made it already, from its own link: this one holds bit 8
+        low (a second edge, from either link, would undo the cut) and bit 9 low, and makes its
+        own edge only if navdata has not shown the cut within :data:`EMERGENCY_CONFIRM_S`."""
         self.warn(f"cutting the motors (emergency): {why}")
         self._cut_t = self.clock()
+        self._own_edge_due = not edge
         try:
-            self.drone.emergency()
+            if edge:
+                self.drone.emergency()
+            else:
+                self.drone.land()
         finally:
             self._log("emergency", reason=why)
 
@@ -397,23 +460,58 @@ class FlightSession:
             self._check_operator("before take-off")
             self.sleep(_POLL_S)
 
+    def _require_fresh_navdata(self) -> None:
+        """Refuse (nothing sent) unless the newest navdata is fresh (``navdata_land_ms``)."""
+        age_s = self.clock() - self.drone.navdata_rx_t_s
+        if not age_s <= self._fresh_s:
+            raise PreflightError(f"no fresh navdata before take-off (the newest is "
+                                 f"{age_s * 1e3:.0f} ms old, safety.navdata_land_ms "
+                                 f"{self._fresh_s * 1e3:.0f} ms): no take-off")
+
+    @property
+    def _fresh_s(self) -> float:
+        return self.cfg.safety.navdata_land_ms * 1e-3
+
     def _wait_takeoff(self, done, deadline: float) -> None:
         while True:
             nav = self.drone.navdata
-            if nav is not None and done(nav.mode):
-                return
+            age_s = self.clock() - self.drone.navdata_rx_t_s
+            if not age_s <= self._fresh_s:
+                raise TakeoffFailed(
+                    f"take-off failed: navdata lost (none for {age_s * 1e3:.0f} ms, "
+                    f"safety.navdata_land_ms {self._fresh_s * 1e3:.0f} ms) — landing; check "
+                    "the Wi-Fi link (docs/first-flight.md §3)")
+            if nav is not None:
+                if done(nav.mode):
+                    return
+                self._check_takeoff_alarms(nav)
             if self.drone.self_landing:
                 raise DroneLandedItself(f"take-off: {self.drone.self_landing}")
             if self.clock() > deadline:
                 mode = nav.mode.value if nav is not None else "no navdata"
-                raise RuntimeError(f"take-off did not complete in "
-                                   f"{self.TAKEOFF_TIMEOUT_S:.0f} s ({mode})")
+                raise TakeoffFailed(f"take-off did not complete in "
+                                    f"{self.TAKEOFF_TIMEOUT_S:.0f} s ({mode}): the "
+                                    "drone never showed flying — landing; check battery, "
+                                    "propellers and hull")
             self._check_operator("during take-off")
             self.sleep(_POLL_S)
 
+    def _check_takeoff_alarms(self, nav) -> None:
+        """A fault bit during take-off ends it: the motor faults by a cut, the others by a
+        landing (the supervisor is not running yet)."""
+        alarms = drone_alarms(nav.state_bits)
+        if not alarms:
+            return
+        self._log("drone_faults", phase="takeoff", bits=[f.name for f in alarms])
+        line = (f"take-off failed: the drone reports {alarms[0].line()} (mode "
+                f"{nav.mode.value}, ctrl_state {_ctrl(nav)})")
+        if alarms[0].in_flight is Action.STOP:
+            raise CutMotors(f"{line} — cutting the motors")
+        raise TakeoffFailed(f"{line} — landing")
+
 
 def _ctrl(nav) -> str:
-    return "none" if nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"
+    return "none" if nav is None or nav.ctrl_state is None else f"0x{nav.ctrl_state:08x}"
 
 
 def _why(err: BaseException) -> str:

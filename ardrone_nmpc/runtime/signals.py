@@ -1,12 +1,15 @@
 """Nothing ends a flight without landing it: every catchable terminating signal lands.
 
-A closed terminal (SIGHUP), Ctrl-\\ (SIGQUIT), ``kill`` (SIGTERM), SIGUSR1/2 and a write to a
+A closed terminal (SIGHUP), Ctrl-\\ (SIGQUIT), ``kill`` (SIGTERM), SIGUSR1 and a write to a
 closed pipe (SIGPIPE) would each end the process at once by default and leave the drone
 hovering. Inside :func:`landing_signals` each raises :class:`Terminated` instead — a
 ``KeyboardInterrupt``, exactly like Ctrl-C (SIGINT), so no ``except Exception`` on the way can
 swallow it and the flight session's exit lands the drone — and the process exits with
-128 + the signal's number (:func:`exit_code_of`). SIGKILL and SIGSTOP cannot be caught; the
-drone's own watchdog then holds it hovering (docs/first-flight.md says what to do).
+128 + the signal's number (:func:`exit_code_of`). :data:`EMERGENCY_SIGNAL` (SIGUSR2) is the
+operator's ``emergency`` command reaching the flight that holds the drone: it raises
+:class:`EmergencyRequested` (a :class:`Terminated`), and the session cuts the motors instead of
+landing. SIGKILL and SIGSTOP cannot be caught; the drone's own watchdog then holds it hovering
+(docs/first-flight.md says what to do).
 
 Every other command runs inside :func:`stopping_signals` (the command line's handler), which
 does the same for :data:`STOPPING_SIGNALS`: a ``simulate``, ``sweep`` or ``tune`` that is
@@ -20,13 +23,15 @@ import signal
 import threading
 from contextlib import contextmanager
 
-__all__ = ["LANDING_SIGNALS", "STOPPING_SIGNALS", "Terminated", "deferred_signals",
-           "exit_code_of", "landing_signals", "signal_name", "stopping_signals"]
+__all__ = ["EMERGENCY_SIGNAL", "EmergencyRequested", "LANDING_SIGNALS", "STOPPING_SIGNALS",
+           "Terminated", "deferred_signals", "exit_code_of", "ignoring_emergency_signal",
+           "landing_signals", "signal_name", "stopping_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
-    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2, signal.SIGPIPE,
-    signal.SIGTERM)
+    signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGPIPE, signal.SIGTERM)
+#: The signal ``ardrone-nmpc emergency`` sends the flight holding the drone: cut the motors.
+EMERGENCY_SIGNAL = signal.SIGUSR2
 #: The signals :func:`stopping_signals` turns into :class:`Terminated` (SIGPIPE stays a
 #: BrokenPipeError there: a closed pipe is no reason to stop a flight that is not flying).
 STOPPING_SIGNALS: tuple[signal.Signals, ...] = (
@@ -39,6 +44,14 @@ class Terminated(KeyboardInterrupt):
     def __init__(self, signum: int) -> None:
         self.signum = int(signum)
         super().__init__(signal.Signals(self.signum).name)
+
+
+class EmergencyRequested(Terminated):
+    """:data:`EMERGENCY_SIGNAL` arrived: the operator's ``emergency`` command — cut the motors
+    (the session does), do not land."""
+
+    def __str__(self) -> str:
+        return f"the operator's `emergency` command ({signal.Signals(self.signum).name})"
 
 
 def exit_code_of(interrupt: BaseException) -> int:
@@ -59,9 +72,15 @@ def _raise_terminated(signum, frame):
     raise Terminated(signum)
 
 
+def _raise_emergency(signum, frame):
+    raise EmergencyRequested(signum)
+
+
 @contextmanager
-def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS):
-    """Within the block, ``signals`` raise :class:`Terminated` and SIGINT raises
+def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS, *,
+                    emergency: bool = True):
+    """Within the block, ``signals`` raise :class:`Terminated`, :data:`EMERGENCY_SIGNAL`
+    :class:`EmergencyRequested` (if ``emergency``: a flight holding the drone), and SIGINT raises
     KeyboardInterrupt (whatever handler was set before); the previous handlers come back after.
     Outside the main thread (where Python delivers signals) it changes nothing."""
     if threading.current_thread() is not threading.main_thread():
@@ -72,6 +91,8 @@ def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS):
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
         for sig in signals:
             previous[sig] = signal.signal(sig, _raise_terminated)
+        if emergency:
+            previous[EMERGENCY_SIGNAL] = signal.signal(EMERGENCY_SIGNAL, _raise_emergency)
         yield
     finally:
         for sig, handler in previous.items():
@@ -80,7 +101,7 @@ def landing_signals(signals: tuple[signal.Signals, ...] = LANDING_SIGNALS):
 
 def stopping_signals():
     """:func:`landing_signals` for :data:`STOPPING_SIGNALS` (every command but ``fly``)."""
-    return landing_signals(STOPPING_SIGNALS)
+    return landing_signals(STOPPING_SIGNALS, emergency=False)
 
 
 @contextmanager
@@ -109,3 +130,19 @@ def deferred_signals():
         if pending[0] == signal.SIGINT:
             raise KeyboardInterrupt
         raise Terminated(pending[0])
+
+
+@contextmanager
+def ignoring_emergency_signal():
+    """Within the block :data:`EMERGENCY_SIGNAL` is ignored, outside any inner
+    :func:`landing_signals` (which raise on it): an operator's ``emergency`` that reaches a
+    flight already past its landing — writing its summary — must not kill it (the default
+    action) before its run directory is complete. Outside the main thread it changes nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(EMERGENCY_SIGNAL, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(EMERGENCY_SIGNAL, previous)

@@ -7,7 +7,9 @@ a manual clock; ``fly --sim`` serves it over UDP: the
 navdata, the :class:`~ardrone_nmpc.sim.mocap_server.MocapServer` streams its pose. So the
 firmware's rules — altitude cap, watchdogs, REF semantics, the configuration store
 (:class:`~ardrone_nmpc.sim.drone_firmware.DroneFirmware`) — and the fault decisions
-(:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`) exist once and hold in both.
+(:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`) exist once and hold in both — also
+what a real drone reports about itself (fault bits, VBAT_LOW at its own level, bootstrap after a
+link loss, a session that ignores plain CONFIG, indoor/outdoor profiles, a Wi-Fi blackout).
 
 Not thread-safe by itself: the servers call it under their shared lock.
 """
@@ -56,14 +58,19 @@ class SimulatedDrone:
         :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface landed at time 0, such as
         the tests' emulators), the altitude cap it is configured with, and the
         ``faults`` — the firmware's own (ctrl_state codes, a configuration session left by
-        another application, a control port that does not answer) from the start, a constant
-        wind blowing from the start, the others on the experiment clock."""
+        another application, a control port that does not answer, the profiles of a drone
+        last flown outdoors, its VBAT_LOW level, fault bits from power-on) from the start, a
+        constant wind blowing from the start, the others on the experiment clock."""
         seed = cfg.sim.seed if seed is None else int(seed)
         plant = make_plant(cfg.sim, cfg.drone, seed=seed) if plant is None else plant
         schedule = FaultSchedule(cfg.faults, seed)
         plant.wind_mps = schedule.wind_mps(-math.inf)
         options = {"altitude_max_m": cfg.drone.altitude_max_m,
-                   "ctrl_codes": schedule.ctrl_codes(), "session": schedule.held_session()}
+                   "ctrl_codes": schedule.ctrl_codes(), "session": schedule.held_session(),
+                   "outdoor": schedule.outdoor_profiles(),
+                   "fault_bits": schedule.power_on_fault_bits()}
+        if schedule.vbat_low_pct() is not None:
+            options["vbat_low_pct"] = schedule.vbat_low_pct()
         options.update(firmware_options)
         faults = ServerFaults(schedule, plant) if schedule.any else None
         return cls(plant, faults=faults, control_port_mode=schedule.control_port_mode(),
@@ -95,9 +102,17 @@ class SimulatedDrone:
     def advance(self, dt_s: float, now_s: float) -> None:
         """The plant faults due at ``now_s``, then ``dt_s`` of physics and the firmware's
         watchdogs and altitude cap (the servers' physics step)."""
-        if self.faults is not None:
-            self.faults.update_plant(now_s)
+        self.update_faults(now_s)
         self.firmware.advance(dt_s, now_s)
+
+    def update_faults(self, fault_t_s: float) -> None:
+        """The plant faults due at ``fault_t_s`` (the faults' clock) act; fault bits that
+        start go into the firmware's state word."""
+        if self.faults is None:
+            return
+        for event in self.faults.update_plant(fault_t_s):
+            if event.get("fault") == "drone_faults":
+                self.firmware.fault_bits |= self.faults.schedule.drone_fault_bits()
 
     # ------------------------------------------------------------------ AT commands in
     def receive_at(self, data: bytes, now_s: float) -> bool:
@@ -117,6 +132,10 @@ class SimulatedDrone:
         self.counters.at_datagrams_in += 1
         self.firmware.execute_datagram(commands, now_s)
         return True
+
+    def wakeup_lost(self, now_s: float) -> bool:
+        """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""
+        return self.faults is not None and self.faults.wakeup_lost(now_s)
 
     def _at_lost(self, fault_t_s: float) -> bool:
         if self.faults is not None and self.faults.at_lost(fault_t_s):

@@ -12,24 +12,30 @@ so it is testable datagram by datagram and every rule here holds in ``simulate``
 * Sequence numbers: a command runs only if ``seq == 1`` or ``seq > last``; ``last`` resets to
   0 after ``link_loss_s`` without an accepted command [?]. Ignored commands are counted
   (``at_commands_stale``) and are no traffic for the watchdogs.
-* ``AT*REF``: bit 9 is a level — set while landed (no emergency, battery above the plant's
-  take-off floor) takes off, so a REF still asking for take-off after the drone landed by
-  itself launches it again; clear while taking off or flying lands. Bit 8 acts on its 0→1
-  edge: not in emergency → emergency (motors cut, state bits 31 and 16); in emergency on the
-  ground → cleared [?].
+* ``AT*REF``: bit 9 is a level — set while landed (no emergency, no VBAT_LOW) takes off, so a
+  REF still asking for take-off after the drone landed by itself launches it again; clear
+  while taking off or flying lands. Bit 8 acts on its 0→1 edge: not in emergency → emergency
+  (motors cut, state bits 31 and 16); in emergency on the ground → cleared [?]. The sequence
+  rule makes a second client's commands count only when their seq is 1 or above the last
+  accepted, whoever sent it.
 * ``AT*PCMD`` / ``PCMD_MAG``: flag bit 0 set → the fractions go to the plant; clear → hover.
 * Altitude cap: a climbing gaz becomes 0 (minor ALT_OUT_ZONE) once z + v_z·(command delay +
   τ_z), where the climb would stop, reaches ``control:altitude_max`` (checked whenever time
   passes or a command arrives).
 * ``AT*FTRIM`` counted only when landed, ``AT*CALIB`` only in flight (no manoeuvre).
 * ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`; applied or, in another
-  multiconfig session, ignored) sets the ACK bit 6;
+  multiconfig session, ignored) sets the ACK bit 6 — except in a session that ignores plain
+  CONFIG, where a write without its ids is not even acknowledged;
   ``AT*CTRL`` 5 clears it, 4 dumps the configuration on the control port and sets it, 6 dumps
   an empty custom-config list and sets it. ``AT*COMWDG`` clears the com-watchdog bit.
 * Watchdogs from the last accepted command: > ``comwdg_s`` → bit 30 (cleared by any command,
   or with ``comwdg_clear="comwdg"`` only by ``AT*COMWDG``); > ``hover_after_s`` airborne → the
   held PCMD is dropped (HOVERING / LOST_COM); > ``link_loss_s`` → bit 13 and the sequence
-  resets, the drone keeps hovering.
+  resets, the drone keeps hovering, and its navdata falls back to bootstrap until
+  ``general:navdata_demo`` is written again (the client "disconnected" [?]: ARDroneLib's
+  ``ardrone_general_navdata.c`` answers exactly that bootstrap after a reconnection).
+* Status: VBAT_LOW (battery below ``vbat_low_pct``, or the bit injected) and the injected
+  hardware fault bits (:attr:`DroneFirmware.fault_bits`) go into the state word.
 """
 
 from __future__ import annotations
@@ -56,13 +62,15 @@ from ardrone_nmpc.protocol.at import (
     Ref,
     parse_datagram_lenient,
 )
-from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneStatus, encode_drone_navdata
-from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession
+from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState, DroneStatus, encode_drone_navdata
+from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession, OutdoorProfiles
 
 __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 
-#: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
+#: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW) and refuses to
+#: take off.
 VBAT_LOW_PCT = 20.0
+
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)  # a plain int: IntFlag arithmetic is slow per tick
 # The firmware's 200 Hz control loop: how often a climb near the cap is checked on a plant
@@ -83,6 +91,7 @@ class DroneServerCounters:
     malformed_commands: int = 0       # malformed commands (an oversized datagram counts one)
     config_writes: int = 0            # acknowledged AT*CONFIG
     config_writes_ignored: int = 0    # … of them not applied (another multiconfig session)
+    config_writes_unacknowledged: int = 0  # CONFIG without the session's ids, not even ACKed
     ftrim_accepted: int = 0
     calib_accepted: int = 0
     navdata_datagrams_in: int = 0     # wake-ups (any datagram on the navdata port)
@@ -110,8 +119,12 @@ class DroneFirmware:
     comwdg_clear : "any" or "comwdg" (who clears state bit 30).
     ctrl_codes : the transition codes navdata reports (:class:`CtrlCodes`).
     altitude_max_m : initial ``control:altitude_max`` (m).
-    vbat_low_pct : battery level (%) below which state bit 15 is set.
+    vbat_low_pct : battery level (%) below which state bit 15 is set and take-off refused.
+    fault_bits : the hardware fault bits reported from power-on (:class:`DroneState` values;
+        :attr:`fault_bits` takes more as injected faults start).
     session : a multiconfig session the drone is in (:class:`HeldSession`), None = default.
+    outdoor : the drone's stored profiles, last flown outdoors
+        (:class:`~ardrone_nmpc.sim.drone_config.OutdoorProfiles`), None = indoor defaults.
     """
 
     def __init__(self, plant, *, counters: DroneServerCounters,
@@ -119,7 +132,8 @@ class DroneFirmware:
                  hover_after_s: float = 0.25, link_loss_s: float = 2.0,
                  comwdg_clear: str = "any", ctrl_codes: CtrlCodes = CtrlCodes.SDK,
                  altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
-                 session: Optional[HeldSession] = None) -> None:
+                 fault_bits: int = 0, session: Optional[HeldSession] = None,
+                 outdoor: Optional[OutdoorProfiles] = None) -> None:
         self.plant = plant
         self.counters = counters
         self.dump_config = dump_config
@@ -128,8 +142,10 @@ class DroneFirmware:
         self.link_loss_s = link_loss_s
         self.comwdg_clear = comwdg_clear
         self.ctrl_codes = CtrlCodes(ctrl_codes)
-        self.vbat_low_pct = vbat_low_pct
-        self.config = ConfigStore(plant, altitude_max_m=altitude_max_m, session=session)
+        self.vbat_low_pct = float(vbat_low_pct)
+        self.fault_bits = int(fault_bits)
+        self.config = ConfigStore(plant, altitude_max_m=altitude_max_m, session=session,
+                                  outdoor=outdoor)
         self.last_seq = 0
         self.last_cmd_t: Optional[float] = None      # last accepted AT command
         self.comwdg_latched = True
@@ -195,9 +211,12 @@ class DroneFirmware:
         elif isinstance(body, Comwdg):
             self.comwdg_latched = False
         elif isinstance(body, Config):
+            if not self.config.acknowledges(body.key, ids):
+                c.config_writes_unacknowledged += 1
+                return
             c.config_writes += 1
             c.config_writes_ignored += not self.config.write(body.key, body.value, ids)
-            self.ack = True                              # acknowledged either way
+            self.ack = True                              # acknowledged, applied or not
         elif isinstance(body, ConfigIds):
             self.config.config_ids = (body.session_id, body.profile_id, body.application_id)
         elif isinstance(body, Ctrl):
@@ -222,8 +241,8 @@ class DroneFirmware:
         self.ref_emergency = emergency
         self.ref_start = start
         mode = plant.mode
-        if start and mode is FlightMode.LANDED:
-            plant.takeoff()                              # refused on low battery
+        if start and mode is FlightMode.LANDED and not self.vbat_low:
+            plant.takeoff()                              # the plant refuses an empty battery
         elif not start and mode in (FlightMode.TAKING_OFF, FlightMode.FLYING):
             plant.land()
 
@@ -299,6 +318,7 @@ class DroneFirmware:
         if silence > self.link_loss_s and not self.link_lost and self.last_cmd_t is not None:
             self.link_lost = True
             self.last_seq = 0
+            self.config.bootstrap = True       # navdata restarts in bootstrap (module doc)
             self.counters.link_losses += 1
 
     def apply_command(self) -> None:
@@ -335,7 +355,13 @@ class DroneFirmware:
             bootstrap=self.config.bootstrap, demo=self.config.demo,
             com_watchdog=self.comwdg_latched or (self.comwdg_clear == "any"
                                                  and self.silence(now) > self.comwdg_s),
-            com_lost=self.link_lost, battery_low=self.plant.battery_pct < self.vbat_low_pct)
+            com_lost=self.link_lost, battery_low=self.vbat_low, faults=self.fault_bits)
+
+    @property
+    def vbat_low(self) -> bool:
+        """State bit 15: the battery below :attr:`vbat_low_pct`, or the bit injected."""
+        return (self.plant.battery_pct < self.vbat_low_pct
+                or bool(self.fault_bits & DroneState.VBAT_LOW))
 
     def skip_packet(self) -> None:
         """A packet lost on the way: its sequence number is used all the same."""

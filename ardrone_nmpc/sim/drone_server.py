@@ -24,12 +24,17 @@ given the same lock):
 
 Firmware-like options (also fault kinds, see :mod:`~ardrone_nmpc.sim.faults`): ``ctrl_codes``
 (the transition codes of another firmware), ``session`` (left in another multiconfig session:
-writes acknowledged, not applied; its own limits flown and reported), ``control_port_mode``
-and :meth:`DroneServer.land_by_itself` (a REF still asking for take-off relaunches it).
+writes acknowledged, not applied — or, in a session that ignores plain CONFIG, not even
+acknowledged; its own limits flown and reported), ``outdoor`` (last flown outdoors: its
+indoor and outdoor profiles, ``control:outdoor`` TRUE), ``vbat_low_pct``, ``control_port_mode``
+and :meth:`DroneServer.land_by_itself` (a REF still asking for take-off relaunches it). The
+firmware's fault bits and VBAT_LOW are reported in the state word; a link loss sends navdata
+back to bootstrap; a Wi-Fi blackout (fault ``blackout``) loses wake-ups too.
 
 Not simulated: video (TCP 5555), multicast navdata, animations and LEDs, magnetometer
-calibration, the tilt / cut-out / motor emergencies, navdata options other than demo, time and
-an empty vision_detect.
+calibration, the firmware's own reaction to its tilt / cut-out / motor faults (the bits are
+reported, the drone flies on), navdata options other than demo, time and an empty
+vision_detect.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ from typing import Callable, Literal, Optional
 from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState
 from ardrone_nmpc.sim.addresses import is_loopback_peer, require_loopback_host
 from ardrone_nmpc.sim.control_port import ControlPort
-from ardrone_nmpc.sim.drone_config import EULER_ANGLE_MAX_LIMIT_RAD, HeldSession
+from ardrone_nmpc.sim.drone_config import EULER_ANGLE_MAX_LIMIT_RAD, HeldSession, OutdoorProfiles
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT, DroneServerCounters
 from ardrone_nmpc.sim.plant import AirframePlant
@@ -81,6 +86,8 @@ class DroneServer:
     vbat_low_pct : battery level (%) below which state bit 15 is set.
     session : a multiconfig session the drone was left in (:class:`HeldSession`), None =
         the default session.
+    outdoor : the profiles of a drone last flown outdoors (:class:`OutdoorProfiles`), None =
+        indoor.
     lock : the lock to share (default: a new ``threading.RLock``).
     clock : the time source (s), ``time.monotonic`` by default.
     faults : injected faults (:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`, None =
@@ -101,7 +108,9 @@ class DroneServer:
                  comwdg_clear: Literal["any", "comwdg"] = "any",
                  ctrl_codes: CtrlCodes | str = CtrlCodes.SDK,
                  altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
-                 session: Optional[HeldSession] = None, lock: Optional[threading.RLock] = None,
+                 session: Optional[HeldSession] = None,
+                 outdoor: Optional[OutdoorProfiles] = None,
+                 lock: Optional[threading.RLock] = None,
                  clock: Callable[[], float] = time.monotonic, faults=None,
                  drone: Optional[SimulatedDrone] = None) -> None:
         self.bind_host = require_loopback_host(bind_host, "bind address")
@@ -127,7 +136,7 @@ class DroneServer:
                 hover_after_s=float(hover_after_s), link_loss_s=float(link_loss_s),
                 comwdg_clear=comwdg_clear, ctrl_codes=CtrlCodes(ctrl_codes),
                 altitude_max_m=float(altitude_max_m), vbat_low_pct=float(vbat_low_pct),
-                session=session)
+                session=session, outdoor=outdoor)
         self._drone = drone
         self._counters = drone.counters
         self._firmware = drone.firmware
@@ -401,6 +410,8 @@ class DroneServer:
                     _, addr = sock.recvfrom(_RECV_BYTES)
                 except OSError:
                     continue
+                if self._drone.wakeup_lost(clock()):
+                    continue   # a Wi-Fi blackout: the datagram never reached the drone
                 if is_loopback_peer(addr) and self._on_wakeup(addr, clock()):
                     next_send = clock()
                 continue

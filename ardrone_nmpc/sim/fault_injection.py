@@ -12,7 +12,7 @@ only the constant wind blows.
 The decisions: a mocap frame is dropped, occluded (object missing or an all-zero pose) or
 delayed by its sampling time; a navdata packet is lost or corrupted by its send time; either
 stream's datagrams are duplicated or held back behind the next one; an AT datagram is lost by
-its arrival time. Plant faults (battery floor, emergency, command-delay jump, wind, landing by
+its arrival time, and in a blackout so is a wake-up on the navdata port. Plant faults (battery floor, emergency, command-delay jump, wind, landing by
 itself) go through :class:`~ardrone_nmpc.sim.faults.PlantFaults`; the drone's firmware options
 (ctrl_state codes, config session, control port) are read from the same schedule by
 :meth:`SimulatedDrone.from_config`.
@@ -125,6 +125,10 @@ class ServerFaults:
             with self._lock:
                 self._events.extend((t, ev) for ev in events)
         return events
+
+    def wakeup_lost(self, now_s: float) -> bool:
+        """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""
+        return self.schedule.blackout(self.t_exp(now_s))
 
     def at_lost(self, now_s: float) -> bool:
         """The AT datagram arriving at ``now_s`` never reaches the drone."""

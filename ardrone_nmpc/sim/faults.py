@@ -10,9 +10,14 @@ seeded by the run's seed, so a faulted run is as reproducible as a clean one.
 
 Firmware faults make the simulated drone behave like a real one a careless client trips over:
 another firmware's ctrl_state codes (``ctrl_codes``), a drone left in another configuration
-session (``foreign_session``), a control port that does not answer (``control_port_drop``) —
-all three from the start, before any experiment time — and a landing of its own (``self_land``,
-at a time; a take-off REF afterwards launches it again).
+session (``foreign_session``), a control port that does not answer (``control_port_drop``),
+stored indoor/outdoor profiles of a drone last flown outdoors (``outdoor_profile``), a
+VBAT_LOW level above the tool's floor (``vbat_low``) — all from the start, before any
+experiment time — a landing of its own (``self_land``, at a time; a take-off REF afterwards
+launches it again), fault bits in its state word (``drone_faults``, at a time or from
+power-on) and a Wi-Fi blackout (``blackout``: nothing passes either way). The firmware holds
+the VBAT_LOW level and the fault bits (:class:`~ardrone_nmpc.sim.drone.SimulatedDrone` hands
+them over).
 """
 
 from __future__ import annotations
@@ -23,18 +28,21 @@ from typing import Callable
 
 import numpy as np
 
-from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES, CtrlCodes
-from ardrone_nmpc.sim.drone_config import HeldSession
+from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES, CtrlCodes, DroneState
+from ardrone_nmpc.sim.drone_config import HeldSession, OutdoorProfiles
 
 __all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS",
            "PLANT_FAULTS", "LINK_FAULTS"]
 
 #: Faults that act on the sensor datagrams (the lockstep runner then goes through the bytes).
+#: The drone's own reports (state bits) exist only on the wire, so their faults are here too.
 SENSOR_FAULTS = frozenset({"mocap_dropout", "mocap_occlusion", "mocap_latency",
-                           "navdata_loss", "navdata_corrupt", "disorder", "ctrl_codes"})
+                           "navdata_loss", "navdata_corrupt", "disorder", "ctrl_codes",
+                           "drone_faults", "vbat_low", "blackout"})
 #: Faults that act on the simulated drone itself.
 PLANT_FAULTS = frozenset({"at_loss", "battery_floor", "emergency", "wind_gust", "wind",
-                          "delay_jump", "self_land", "foreign_session"})
+                          "delay_jump", "self_land", "foreign_session", "outdoor_profile",
+                          "drone_faults", "vbat_low", "blackout"})
 #: Faults of the drone's configuration link (the TCP control port): the loopback drone serves
 #: one; the lockstep runner reads its configuration store directly and takes this fault as
 #: "no dump".
@@ -144,7 +152,11 @@ class FaultSchedule:
 
     # ------------------------------------------------------------------ navdata
     def navdata_lost(self, t_s: float) -> bool:
-        return _within(self.cfg.navdata_loss, t_s)
+        return _within(self.cfg.navdata_loss, t_s) or self.blackout(t_s)
+
+    def blackout(self, t_s: float) -> bool:
+        """Nothing passes either way at ``t_s`` (a Wi-Fi blackout)."""
+        return _within(self.cfg.blackout, t_s)
 
     def navdata_corruption(self, t_s: float) -> str | None:
         f = self.cfg.navdata_corrupt
@@ -162,6 +174,8 @@ class FaultSchedule:
     # ------------------------------------------------------------------ the drone
     def at_lost(self, t_s: float) -> bool:
         """The AT datagram of the tick at ``t_s`` never reaches the drone."""
+        if self.blackout(t_s):
+            return True
         f = self.cfg.at_loss
         return _within(f, t_s) and bool(self.rng.random() < f.probability)
 
@@ -197,7 +211,29 @@ class FaultSchedule:
             out.append((c.delay_jump.start_s, "delay", c.delay_jump.delay_s))
         if c.self_land is not None:
             out.append((c.self_land.start_s, "self_land", math.nan))
+        if c.drone_faults is not None and c.drone_faults.start_s is not None:
+            out.append((c.drone_faults.start_s, "drone_faults", self.drone_fault_bits()))
         return sorted(out)
+
+    def drone_fault_bits(self) -> int:
+        """The state bits of the ``drone_faults`` fault (0 without one)."""
+        f = self.cfg.drone_faults
+        return 0 if f is None else sum(int(DroneState[name]) for name in set(f.bits))
+
+    def power_on_fault_bits(self) -> int:
+        """The state bits the drone reports from power-on (``drone_faults`` without a start)."""
+        f = self.cfg.drone_faults
+        return self.drone_fault_bits() if f is not None and f.start_s is None else 0
+
+    def vbat_low_pct(self) -> float | None:
+        """The firmware's VBAT_LOW level (%) of the ``vbat_low`` fault, or None."""
+        f = self.cfg.vbat_low
+        return None if f is None else f.threshold_pct
+
+    def outdoor_profiles(self) -> OutdoorProfiles | None:
+        """The profiles of a drone last flown outdoors (from the start), or None."""
+        f = self.cfg.outdoor_profile
+        return None if f is None else OutdoorProfiles.of_fault(f)
 
     # ------------------------------------------------------------------ the firmware
     def ctrl_codes(self) -> CtrlCodes:
@@ -233,7 +269,9 @@ class PlantFaults:
     """Applies a schedule's plant-side faults to an
     :class:`~ardrone_nmpc.sim.plant.AirframePlant` as experiment time passes.
 
-    ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``).
+    ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``);
+    fault bits that start are announced here and reported by the firmware
+    (:meth:`~ardrone_nmpc.sim.drone.SimulatedDrone.update_faults`).
     (A drone left in another configuration session is the firmware's configuration store's:
     :meth:`FaultSchedule.held_session`.)
     """
@@ -261,6 +299,9 @@ class PlantFaults:
             elif kind == "self_land":   # the firmware's own decision: through landing
                 events.append({"kind": "fault", "fault": "self_land",
                                "accepted": plant.land()})
+            elif kind == "drone_faults":
+                events.append({"kind": "fault", "fault": "drone_faults",
+                               "bits": sorted(self.schedule.cfg.drone_faults.bits)})
         plant.wind_mps = sched.wind_mps(t_s)
         gust = _within(sched.cfg.wind_gust, t_s)
         if gust != self._gust_on:

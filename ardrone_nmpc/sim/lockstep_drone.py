@@ -72,7 +72,9 @@ class LockstepDrone(ConfigHandshake):
             self.sim.faults.set_clock(0.0)  # the faults' clock is experiment time itself
         self.control_port = cfg.drone.control_port
         self.config_ids = cfg.drone.config_ids
-        self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata)
+        self.bootstrap_answers = 0
+        self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata,
+                                       on_bootstrap=self._answer_bootstrap)
         self._seq = 0
         self._ref: Ref | None = None        # the REF held
         self._ref_unsent: Ref | None = None  # … not yet received by the drone
@@ -100,14 +102,18 @@ class LockstepDrone(ConfigHandshake):
         step of the clock) the plant faults due by then act first."""
         if t_exp_s is not None:
             self.t_exp_s = t_exp_s
-            if self.sim.faults is not None:
-                self.sim.faults.update_plant(t_exp_s)
+            self.sim.update_faults(t_exp_s)
         self.sensors.advance_to(t_s)
 
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
         call."""
         return self.sim.take_events()
+
+    @property
+    def state_word(self) -> int:
+        """The state word the drone reports now (its fault bits: the preflight reads them)."""
+        return int(self.sim.firmware.status(self.sim.plant.t_s).state_bits())
 
     @property
     def truth(self) -> PlantTruth:
@@ -136,6 +142,14 @@ class LockstepDrone(ConfigHandshake):
         if what is not None:  # the take-off bit is dropped at once, and for good
             self.self_landing = f"the drone {what}"
             self._hold(Ref.landing())
+
+    def _answer_bootstrap(self) -> None:
+        """A bootstrap packet (the drone lost its client): write ``navdata_demo`` again, as
+        :class:`~ardrone_nmpc.links.drone_link.DroneLink` does."""
+        self.bootstrap_answers += 1
+        if self.config_ids is not None:
+            self.write_config("custom:session_id", self.config_ids[0])
+        self.write_config("general:navdata_demo", True)
 
     # ------------------------------------------------------------------ AT sender
     def takeoff(self) -> None:
@@ -186,10 +200,17 @@ class LockstepDrone(ConfigHandshake):
 
     # ------------------------------------------------------------------ configuration port
     def write_config(self, key, value, timeout_s: float = 1.0) -> str:
-        """``AT*CONFIG`` (after ``AT*CONFIG_IDS`` if configured), acknowledged at once."""
+        """``AT*CONFIG`` (after ``AT*CONFIG_IDS`` if configured), acknowledged at once — or
+        never, by a session that ignores plain CONFIG (LinkError, as the link's handshake
+        times out)."""
         cfg = Config.of(key, value)
         bodies: list[AtBody] = [ConfigIds(*self.config_ids)] if self.config_ids else []
+        counters = self.sim.counters
+        unacknowledged = counters.config_writes_unacknowledged
         self._send([*bodies, cfg])
+        if counters.config_writes_unacknowledged > unacknowledged:
+            raise LinkError(f"config {key}={cfg.value!r}: no ACK from the drone (a multiconfig "
+                            "session that ignores plain CONFIG: set drone.config_ids to it)")
         return cfg.value
 
     def read_config(self, timeout_s: float = 2.0) -> dict[str, str]:

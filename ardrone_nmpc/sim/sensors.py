@@ -20,7 +20,9 @@ altitude cap) forward between those events. Two ways to hand the samples over:
 Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
 bits and ctrl_state major the drone reported — which the link's take-off guard watches (on
 the direct path only when the flight mode changes: between changes the guard would see the
-same flight bits and a flying major again).
+same flight bits and a flying major again). A bootstrap packet received through the wire (the
+drone lost its client: a blackout) is shown to ``on_bootstrap()``, which answers it as the
+link does.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
-from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
+from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.sim.target import target_pose
@@ -54,17 +56,19 @@ class LockstepSensors:
     cfg : ExperimentConfig.
     drone : the simulated drone (advanced by :meth:`advance_to`).
     on_navdata : ``(state bits, ctrl_state major)`` of each navdata sample received.
+    on_bootstrap : called for each bootstrap packet received (through the wire).
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
-                 t_zero_s: float = math.inf):
+                 t_zero_s: float = math.inf, on_bootstrap: Callable | None = None):
         self.drone = drone
         self.plant = drone.plant
         self.firmware = drone.firmware
         faults = drone.faults
         self.wire = faults is not None and bool(faults.schedule.active & SENSOR_FAULTS)
         self.on_navdata = on_navdata or (lambda state, major: None)
+        self.on_bootstrap = on_bootstrap or (lambda: None)
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
@@ -205,6 +209,8 @@ class LockstepSensors:
             return
         if not stats.accept_sequence(packet.sequence):
             return
+        if DroneState.NAVDATA_BOOTSTRAP in packet.state:
+            self.on_bootstrap()
         sample = navdata_sample_of(packet, arrival_s)
         if sample is not None:
             stats.record_packet(arrival_s)

@@ -105,6 +105,8 @@ def test_every_terminating_signal_lands_and_exits_with_its_code(tmp_path, sig, c
     assert "landed" in kinds, kinds
     landing = [e for e in _events(run_dir) if e["kind"] == "landing"]
     assert landing[0]["reason"] == sig.name  # SIGHUP lands with reason SIGHUP
+    if sig == signal.SIGUSR2:   # the operator's `emergency`: the cut is held, not a landing
+        assert any(e["kind"] == "emergency" for e in _events(run_dir))
     assert "Traceback" not in err
     assert _run_line(out) == str(run_dir)
     read_run(run_dir)  # complete and readable

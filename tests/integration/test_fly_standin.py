@@ -58,7 +58,9 @@ def test_fly_refuses_a_drone_that_ignores_config_writes(tmp_path):
     with SdkDrone(ignore_config_writes=True, held=OUTDOOR_HELD) as drone:
         result, run = fly(tmp_path, drone)
         assert result.exit_code == 1
-        assert "control:euler_angle_max" in result.stderr and "'0.52'" in result.stderr
+        # the profile key is written (and checked) first: outdoor selects the limits' profile
+        assert "control:outdoor = 'TRUE', not the 'FALSE'" in result.stderr
+        assert "(and 3 more key(s))" in result.stderr
         assert drone.commands("REF") == [] and drone.takeoffs == 0
     assert "Traceback" not in result.stderr
     assert (run / "summary.csv").exists()

@@ -72,8 +72,8 @@ class _MotionCaptureWire:
 
 
 class _SwappedSensors(LockstepSensors):
-    def __init__(self, cfg, drone, on_navdata=None, t_zero_s=math.inf):
-        super().__init__(cfg, drone, on_navdata, t_zero_s)
+    def __init__(self, cfg, drone, on_navdata=None, t_zero_s=math.inf, **options):
+        super().__init__(cfg, drone, on_navdata, t_zero_s, **options)
         link = self.mocap
         self.mocap = _MotionCaptureWire(link.object_name, link.other_objects)
 

@@ -104,8 +104,8 @@ def test_a_drone_that_ignores_config_writes_gets_no_take_off(flight):
     with pytest.raises(PreflightError) as err:
         f.session.__enter__()
     msg = str(err.value)
-    assert "control:euler_angle_max" in msg and "'0.52'" in msg and "'0.2094'" in msg
-    assert "and 3 more key(s)" in msg  # vz 2000, yaw 6.11, outdoor TRUE
+    assert "control:outdoor = 'TRUE', not the 'FALSE' written" in msg
+    assert "and 3 more key(s)" in msg  # tilt 0.52, vz 2000, yaw 6.11
     assert f.drone.commands("REF") == [] and f.drone.ftrims == [] and f.drone.takeoffs == 0
     mismatched = {fields["key"] for kind, fields in f.events if kind == "config_mismatch"}
     assert mismatched == {"control:euler_angle_max", "control:control_vz_max",
@@ -256,3 +256,4 @@ def test_emergency_primes_the_edge_on_a_fresh_link():
         assert refs[0] & REF_TAKEOFF and not refs[0] & (1 << 8)  # hovering: bit 9 kept
         assert refs[1] & (1 << 8)
         assert math.isfinite(link.navdata.battery_pct)
+

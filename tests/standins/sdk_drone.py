@@ -13,8 +13,9 @@ the ROS driver ardrone_autonomy builds on; docs/protocol.md summarises the same)
   (unsigned sum of every byte before it); bootstrap packets (state bit 11, no demo option)
   until ``general:navdata_demo`` is written, then demo packets (tag 0, 148 bytes) at 15 Hz;
 * state word (``config.h`` ``def_ardrone_state_mask_t``): bit 0 FLY, 6 COMMAND (config ACK),
-  10 NAVDATA_DEMO, 11 NAVDATA_BOOTSTRAP, 30 COM_WATCHDOG (no AT command for 50 ms), 31
-  EMERGENCY;
+  10 NAVDATA_DEMO, 11 NAVDATA_BOOTSTRAP, 12 MOTORS, 14 SOFTWARE_FAULT, 15 VBAT_LOW (battery
+  below ``vbat_low_pct``: no take-off then), 21 ULTRASOUND, 22 CUTOUT (any of these set through
+  :attr:`SdkDrone.fault_bits`), 30 COM_WATCHDOG (no AT command for 50 ms), 31 EMERGENCY;
 * ctrl_state (``control_states.h``): major << 16 | minor; 2 LANDED, 4 HOVERING, 6 TRANS_TAKEOFF,
   8 TRANS_LANDING — or firmware 2.4's observed 7 take-off / 9 landing (``ctrl_codes="fw24"``);
 * AT (``ardrone_at_mutex.c``, ATcodec): ``AT*NAME=seq,args\\r``, several per datagram; a
@@ -24,13 +25,27 @@ the ROS driver ardrone_autonomy builds on; docs/protocol.md summarises the same)
   ``AT*CTRL=seq,5,0`` clears it; once a non-default multiconfig session is active an
   ``AT*CONFIG`` counts only right after an ``AT*CONFIG_IDS`` with the current ids;
 * control port (``ardrone_control_configuration.c``): ``AT*CTRL=seq,4,0`` → every
-  ``section:key = value`` line on the TCP connection, a NUL byte, then the ACK bit.
+  ``section:key = value`` line on the TCP connection, a NUL byte, then the ACK bit;
+* profiles (``config_keys.h``: ``control:outdoor`` and the ``indoor_*`` / ``outdoor_*``
+  triples): ``control:outdoor`` loads the stored triple of its profile into the three limit
+  keys, a write of a limit key is stored into the active profile;
+* a client "disconnects" after 2 s without an AT command (the guide's link loss): the
+  sequence counter resets, the stream stops, and the next wake-up gets bootstrap packets again
+  until ``general:navdata_demo`` is written (``ardrone_general_navdata.c`` answers exactly that
+  bootstrap: "the navdata stream will be resumed if the drone is disconnected and
+  reconnected");
+* several AT clients: one sequence counter for all of them (the seq rule above), counted per
+  source address (:attr:`SdkDrone.accepted_from`, :attr:`SdkDrone.ignored_from`).
 
 Options model what a real lab meets: ``ignore_config_writes`` (acknowledge, keep its own values
 — a drone in another session, an outdoor profile), ``serve_control_port``,
 ``land_by_itself_after_s`` (low battery, a cut-out: it lands after hovering that long),
 ``airborne_at_start``, ``attitude_deg``, ``battery_pct``, ``takeoff_yaw_dps`` (navdata yaw
-turning during take-off, clockwise positive as the SDK reports it).
+turning during take-off, clockwise positive as the SDK reports it), ``vbat_low_pct`` (its
+VBAT_LOW level), ``last_flown_outdoors`` (``control:outdoor`` TRUE, with an indoor profile
+other than the defaults), ``navdata_gap_at_takeoff`` (navdata silent from a delay after the
+take-off REF, for a while), :attr:`SdkDrone.fault_bits` and :meth:`SdkDrone.blackout` (a Wi-Fi
+blackout: nothing passes either way for a while).
 """
 
 from __future__ import annotations
@@ -46,6 +61,9 @@ import time
 LOOPBACK = "127.0.0.1"
 FLY, COMMAND, DEMO, BOOTSTRAP, COM_WATCHDOG, EMERGENCY = (1 << 0, 1 << 6, 1 << 10, 1 << 11,
                                                           1 << 30, 1 << 31)
+MOTORS, SOFTWARE_FAULT, VBAT_LOW, ULTRASOUND, CUTOUT = (1 << 12, 1 << 14, 1 << 15, 1 << 21,
+                                                        1 << 22)
+LINK_LOSS_S = 2.0
 REF_EMERGENCY, REF_TAKEOFF = 1 << 8, 1 << 9
 LANDED, HOVERING = 2, 4
 SDK_CODES = {"takeoff": 6, "landing": 8}
@@ -60,6 +78,14 @@ DEFAULT_CONFIG = {  # config_keys.h defaults, indoor profile
 }
 OUTDOOR_HELD = {"control:euler_angle_max": "0.52", "control:control_vz_max": "2000",
                 "control:control_yaw": "6.11", "control:outdoor": "TRUE"}
+LIMITS = ("euler_angle_max", "control_vz_max", "control_yaw")
+#: The stored profiles of a drone last flown outdoors: the user's indoor triple and the
+#: config_keys.h outdoor defaults (20°, 1000 mm/s, 200°/s).
+INDOOR_PROFILE = {"control:indoor_euler_angle_max": "0.25",
+                  "control:indoor_control_vz_max": "800", "control:indoor_control_yaw": "2.0"}
+OUTDOOR_PROFILE = {"control:outdoor_euler_angle_max": "0.3491",
+                   "control:outdoor_control_vz_max": "1000",
+                   "control:outdoor_control_yaw": "3.491"}
 _COMMAND_RE = re.compile(rb'AT\*([A-Z_]+)=(\d+)((?:,(?:"[^"]*"|-?\d*))*)')
 _ARG_RE = re.compile(rb'"([^"]*)"|(-?\d+)')
 
@@ -78,9 +104,17 @@ class SdkDrone:
 
     def __init__(self, *, ignore_config_writes=False, held=None, serve_control_port=True,
                  land_by_itself_after_s=None, airborne_at_start=False, ctrl_codes="sdk",
-                 attitude_deg=(0.3, -0.2), battery_pct=80, takeoff_yaw_dps=0.0):
+                 attitude_deg=(0.3, -0.2), battery_pct=80, takeoff_yaw_dps=0.0,
+                 vbat_low_pct=20.0, last_flown_outdoors=False, navdata_gap_at_takeoff=None):
         self.ignore_config_writes = ignore_config_writes
-        self.config = dict(DEFAULT_CONFIG, **(held or {}))
+        indoor = {f"control:indoor_{k}": DEFAULT_CONFIG[f"control:{k}"] for k in LIMITS}
+        self.config = dict(DEFAULT_CONFIG, **indoor, **OUTDOOR_PROFILE)
+        if last_flown_outdoors:
+            self.config.update(INDOOR_PROFILE, **{"control:outdoor": "TRUE"})
+            self._load_profile()
+        self.config.update(held or {})
+        self.vbat_low_pct = vbat_low_pct
+        self.fault_bits = 0         # MOTORS, SOFTWARE_FAULT, ULTRASOUND, CUTOUT … as reported
         self.serve_control_port = serve_control_port
         self.land_by_itself_after_s = land_by_itself_after_s
         self.codes = FW24_CODES if ctrl_codes == "fw24" else SDK_CODES
@@ -105,7 +139,14 @@ class SdkDrone:
         self.ftrims = []            # accepted FTRIM times
         self.wakeups: list = []     # times of datagrams on the navdata port
         self.at_sources: set = set()  # (address, port) AT datagrams came from
-        self.silent_until = -1.0    # no navdata before this time (a Wi-Fi hiccup)
+        self.silent_until = -1.0    # no navdata before this time (a Wi-Fi hiccup) …
+        self.silent_from = -1e18    # … from this time on
+        self.navdata_gap_at_takeoff = navdata_gap_at_takeoff  # (delay s, duration s) or None
+        self.blackout_until = -1.0  # nothing passes either way before this time
+        self.accepted_from: dict = {}  # source address → AT commands accepted
+        self.ignored_from: dict = {}   # source address → AT commands ignored (stale seq)
+        self.link_losses = 0
+        self.phases: list = []         # (time, phase) of every change
         self._stop = threading.Event()
         self._client = None
         self._ctl_clients: list = []
@@ -151,6 +192,11 @@ class SdkDrone:
         with self.lock:
             return [entry for entry in self.log if entry[1] == name and entry[0] >= since_t]
 
+    def blackout(self, seconds):
+        """A Wi-Fi blackout from now: no datagram passes either way for ``seconds``."""
+        with self.lock:
+            self.blackout_until = time.monotonic() + seconds
+
     def takeoff_refs_after_touchdown(self):
         """REFs with bit 9 accepted after the drone landed by itself and touched down."""
         if self.self_landed_t is None:
@@ -176,24 +222,28 @@ class SdkDrone:
                     continue
                 data, addr = s.recvfrom(4096)
                 with self.lock:
+                    if now < self.blackout_until:
+                        continue                       # lost on the way
                     if s is self.nav:
                         self._client = addr            # wake-up: stream there
                         self.wakeups.append(now)
                     else:
                         self.at_sources.add(addr)
-                        self._on_datagram(data, now)
+                        self._on_datagram(data, now, addr)
             with self.lock:
                 self._advance(now)
             if now >= next_nav:
                 next_nav = now + self.NAVDATA_PERIOD_S
                 self._send_navdata(now)
 
-    def _on_datagram(self, data, now):
+    def _on_datagram(self, data, now, addr=None):
         self.pending_ids = None
         for m in _COMMAND_RE.finditer(data):
             name, seq = m.group(1).decode(), int(m.group(2))
             if not (seq == 1 or seq > self.last_seq):
+                self.ignored_from[addr] = self.ignored_from.get(addr, 0) + 1
                 continue
+            self.accepted_from[addr] = self.accepted_from.get(addr, 0) + 1
             self.last_seq = seq
             self.last_cmd_t = now
             args = [int(b) if b else a.decode() for a, b in _ARG_RE.findall(m.group(3))]
@@ -213,7 +263,7 @@ class SdkDrone:
             return
         if self.phase == "emergency":
             return
-        if bits & REF_TAKEOFF and self.phase == "landed" and self.battery_pct > 20:
+        if bits & REF_TAKEOFF and self.phase == "landed" and not self._state_faults() & VBAT_LOW:
             self.takeoffs += 1
             self._set("takeoff", now)
         elif not bits & REF_TAKEOFF and self.phase in ("takeoff", "hovering"):
@@ -239,6 +289,18 @@ class SdkDrone:
         if self.ignore_config_writes and key.startswith("control:"):
             return  # acknowledged, not applied
         self.config[key] = value
+        if key == "control:outdoor":
+            self._load_profile()
+        elif key[len("control:"):] in LIMITS:  # stored into the active profile
+            self.config[f"control:{self._profile()}_{key[len('control:'):]}"] = value
+
+    def _profile(self):
+        return "outdoor" if self.config["control:outdoor"].upper() == "TRUE" else "indoor"
+
+    def _load_profile(self):
+        profile = self._profile()
+        for k in LIMITS:
+            self.config[f"control:{k}"] = self.config[f"control:{profile}_{k}"]
 
     def _at_ctrl(self, args, now):
         mode = int(args[0])
@@ -257,6 +319,9 @@ class SdkDrone:
     def _set(self, phase, now):
         if phase == "takeoff":
             self._takeoff_yaw0 = self.yaw_deg
+            if self.navdata_gap_at_takeoff is not None:  # the link fails as it climbs
+                delay, duration = self.navdata_gap_at_takeoff
+                self.silent_from, self.silent_until = now + delay, now + delay + duration
         if phase == "hovering":
             self.hover_since = now
         if phase == "landed" and self.phase == "landing" and self._landing_by_itself:
@@ -264,10 +329,17 @@ class SdkDrone:
         if phase == "landing":
             self._landing_by_itself = False
         self.phase, self.phase_t = phase, now
+        self.phases.append((now, phase))
 
     _landing_by_itself = False
 
     def _advance(self, now):
+        if self.last_cmd_t > 0 and now - self.last_cmd_t > LINK_LOSS_S and self._client:
+            self.link_losses += 1                       # the client "disconnected"
+            self.last_seq = 0
+            self._client = None
+            self.bootstrap = True
+            self.last_cmd_t = -1e9
         dt = now - self.phase_t
         if self.phase == "takeoff":
             self.yaw_deg = self._takeoff_yaw0 + self.takeoff_yaw_dps * min(dt, self.TAKEOFF_S)
@@ -299,12 +371,16 @@ class SdkDrone:
         state |= BOOTSTRAP if self.bootstrap else DEMO
         if now - self.last_cmd_t > 0.05:
             state |= COM_WATCHDOG
-        return state, major << 16
+        return state | self._state_faults(), major << 16
+
+    def _state_faults(self):
+        return self.fault_bits | (VBAT_LOW if self.battery_pct < self.vbat_low_pct else 0)
 
     def _send_navdata(self, now):
         with self.lock:
             client = self._client
-            if client is None or now < self.silent_until:
+            if client is None or self.silent_from <= now < self.silent_until \
+                    or now < self.blackout_until:
                 return
             self.last_navdata_t = now
             self._nav_seq += 1

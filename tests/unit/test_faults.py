@@ -166,9 +166,16 @@ EXPECTED = {
     "wind_constant": ("completed", ("faults", None, None)),
     "delay_jump": ("completed", ("fault", "fault", "delay_jump")),
     "ctrl_codes_fw24": ("completed", ("faults", None, None)),
+    "cutout": ("stop-cutout", ("emergency", "reason", "stop-cutout")),
+    "motors": ("stop-motors", ("stopped", "reason", "stop-motors")),
+    "software_fault": ("land-software-fault", ("mode", "mode", "land-software-fault")),
+    "vbat_low_threshold": ("land-vbat-low", ("mode", "mode", "land-vbat-low")),
+    "blackout": ("land-navdata-lost", ("mode", "mode", "land-navdata-lost")),
+    "outdoor_profile": ("completed", ("config_read", "control:euler_angle_max", "0.2094")),
 }
 #: Rows the pre-flight check refuses (nothing flies), and the row that lands by itself.
-REFUSED = {"foreign_session", "control_port_silent"}
+REFUSED = {"foreign_session", "control_port_silent", "faults_at_power_on",
+           "vbat_low_at_power_on", "session_ignores_config"}
 SELF_LANDED = {"self_land"}
 
 
@@ -210,7 +217,8 @@ def test_each_fault_ends_by_policy_with_a_complete_log(tmp_path, baseline, fault
                                                      "cmd_gaz_frac", "cmd_yaw_frac")])
     assert np.all(np.isfinite(cmds))
     outcome = classify(run, result.ending, fault)
-    assert outcome == {"completed": "completed", "stop-emergency": "stopped"}.get(ending, "landed")
+    assert outcome == ("completed" if ending == "completed" else
+                       "stopped" if ending.startswith("stop") else "landed")
     if ending.startswith("land"):
         assert result.final_mode is FlightMode.LANDED
         assert run.columns["mode"][-1] == "landing"  # the descent is in the log

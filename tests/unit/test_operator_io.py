@@ -16,9 +16,12 @@ import pytest
 from ardrone_nmpc.links.flight_lock import DroneBusy, FlightLock, lock_dir
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorRequests
 from ardrone_nmpc.runtime.signals import (
+    EMERGENCY_SIGNAL,
     LANDING_SIGNALS,
+    EmergencyRequested,
     Terminated,
     exit_code_of,
+    ignoring_emergency_signal,
     landing_signals,
 )
 
@@ -43,6 +46,35 @@ def test_each_landing_signal_raises_terminated_inside_and_nothing_after(sig):
                 time.sleep(0.001)
     assert err.value.signum == sig
     assert signal.getsignal(sig) == before
+
+
+def test_the_emergency_signal_raises_its_own_terminated_inside_and_nothing_after():
+    assert EMERGENCY_SIGNAL == signal.SIGUSR2 and EMERGENCY_SIGNAL not in LANDING_SIGNALS
+    before = signal.getsignal(EMERGENCY_SIGNAL)
+    with pytest.raises(EmergencyRequested) as err:
+        with landing_signals():
+            os.kill(os.getpid(), EMERGENCY_SIGNAL)
+            for _ in range(1000):
+                time.sleep(0.001)
+    assert isinstance(err.value, Terminated) and exit_code_of(err.value) == 140
+    assert str(err.value) == "the operator's `emergency` command (SIGUSR2)"
+    assert signal.getsignal(EMERGENCY_SIGNAL) == before
+
+
+def test_around_a_flight_a_late_emergency_signal_is_ignored_not_fatal():
+    before = signal.getsignal(EMERGENCY_SIGNAL)
+    with ignoring_emergency_signal():
+        os.kill(os.getpid(), EMERGENCY_SIGNAL)          # the default action would kill us
+        time.sleep(0.05)
+        with pytest.raises(EmergencyRequested):
+            with landing_signals():
+                os.kill(os.getpid(), EMERGENCY_SIGNAL)
+                for _ in range(1000):
+                    time.sleep(0.001)
+        assert signal.getsignal(EMERGENCY_SIGNAL) == signal.SIG_IGN
+        os.kill(os.getpid(), EMERGENCY_SIGNAL)
+        time.sleep(0.05)
+    assert signal.getsignal(EMERGENCY_SIGNAL) == before
 
 
 def test_sigint_raises_keyboard_interrupt_whatever_was_installed():

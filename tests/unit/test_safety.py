@@ -128,3 +128,81 @@ def test_config_validation_of_the_new_fields():
         load_config(None, ["faults.navdata_corrupt.kind=garbled"])
     cfg = load_config(None, ["faults.wind.velocity_mps=[1,0,0]"])
     assert cfg.faults.active() == ["wind"]
+
+
+# ----------------------------------------------------------------------------- fault bits
+# The state word's fault bits (docs/protocol.md §4.2, ARDroneLib config.h): in flight CUTOUT and
+# MOTORS stop (the runner cuts the motors), SOFTWARE_FAULT and VBAT_LOW land; before take-off
+# every one of them refuses.
+
+def with_bits(*names, mode=FlightMode.FLYING, battery=80.0):
+    from ardrone_nmpc.protocol.navdata import DroneState
+
+    bits = 0
+    for name in names:
+        bits |= int(DroneState[name])
+    return NavdataSample(0.0, mode, battery, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0,
+                         state_bits=bits)
+
+
+def test_the_fault_table_is_the_firmwares_state_word():
+    from ardrone_nmpc.protocol.navdata import DroneState
+    from ardrone_nmpc.safety import DRONE_ALARMS
+
+    assert {f.name: f.mask for f in DRONE_ALARMS} == {
+        "CUTOUT": 1 << 22, "MOTORS": 1 << 12, "SOFTWARE_FAULT": 1 << 14, "VBAT_LOW": 1 << 15,
+        "ULTRASOUND": 1 << 21}
+    assert all(int(DroneState[f.name]) == f.mask for f in DRONE_ALARMS)
+
+
+@pytest.mark.parametrize("bits, expected", [
+    (("CUTOUT",), Decision(Action.STOP, "cutout")),
+    (("MOTORS",), Decision(Action.STOP, "motors")),
+    (("SOFTWARE_FAULT",), Decision(Action.LAND, "software-fault")),
+    (("VBAT_LOW",), Decision(Action.LAND, "vbat-low")),
+    (("VBAT_LOW", "MOTORS"), Decision(Action.STOP, "motors")),     # a cut outranks a landing
+    (("SOFTWARE_FAULT", "CUTOUT"), Decision(Action.STOP, "cutout")),
+    (("ULTRASOUND",), Decision(Action.CONTROL)),                     # before take-off only
+    (("MAGNETO_NEEDS_CALIB", "COM_LOST", "WIND"), Decision(Action.CONTROL)),  # not faults here
+])
+def test_fault_bits_in_flight(bits, expected):
+    sup = Supervisor(CFG)
+    assert feedback(sup, navdata=with_bits(*bits)) == expected
+    if expected.action is not Action.CONTROL:  # latched: the bit clearing changes nothing
+        assert feedback(sup) == expected and sup.latched == expected
+
+
+def test_fault_bits_rank_between_the_emergency_and_the_rest():
+    # the drone's own emergency first; a motor fault before the battery floor; the battery
+    # floor (the tool's own measurement) before the firmware's landing requests
+    assert feedback(Supervisor(CFG), navdata=with_bits("CUTOUT", mode=FlightMode.EMERGENCY)) \
+        == Decision(Action.STOP, "emergency")
+    assert feedback(Supervisor(CFG), navdata=with_bits("MOTORS", battery=5.0)) == \
+        Decision(Action.STOP, "motors")
+    assert feedback(Supervisor(CFG), navdata=with_bits("VBAT_LOW", battery=5.0)) == \
+        Decision(Action.LAND, "battery")
+    assert feedback(Supervisor(CFG), navdata_ms=math.inf, mocap_ms=math.inf,
+                    navdata=with_bits("SOFTWARE_FAULT")) == Decision(Action.LAND,
+                                                                      "software-fault")
+    # no state word (simulation without a wire): nothing to read
+    assert feedback(Supervisor(CFG), navdata=nav()) == Decision(Action.CONTROL)
+
+
+def test_every_fault_bit_refuses_a_take_off_in_one_line_naming_it():
+    from ardrone_nmpc.safety import drone_alarms, takeoff_refusal
+
+    assert takeoff_refusal(None) is None and takeoff_refusal(0) is None
+    assert takeoff_refusal(1 << 18 | 1 << 13 | 1 << 0) is None  # calibration, com lost, fly
+    for name, bit in (("CUTOUT", 22), ("MOTORS", 12), ("SOFTWARE_FAULT", 14), ("VBAT_LOW", 15),
+                      ("ULTRASOUND", 21)):
+        line = takeoff_refusal(1 << bit)
+        assert f"{name} (state bit {bit}: " in line and line.count("state bit") == 1
+        assert line.startswith("the drone reports ") and "refusing take-off" in line
+    both = takeoff_refusal(1 << 12 | 1 << 14 | 1 << 18 | 1 << 21)  # issue 21's drone
+    assert both == ("the drone reports MOTORS (state bit 12: motor problem), SOFTWARE_FAULT "
+                    "(state bit 14: software fault, land as soon as possible), ULTRASOUND "
+                    "(state bit 21: ultrasound sensor deaf): refusing take-off — check the "
+                    "drone (`ardrone-nmpc status`)")
+    assert "\n" not in both
+    assert [f.name for f in drone_alarms(1 << 15 | 1 << 22)] == ["CUTOUT", "VBAT_LOW"]
+    assert [f.reason for f in drone_alarms(1 << 14)] == ["software-fault"]

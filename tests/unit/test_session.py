@@ -17,9 +17,11 @@ from ardrone_nmpc.runtime.operator_input import OperatorAbort, OperatorRequests
 from ardrone_nmpc.runtime.session import (
     NOTICE_EVERY_S,
     TRIM_TO_TAKEOFF_S,
+    CutMotors,
     DroneLandedItself,
     FlightSession,
     PreflightError,
+    TakeoffFailed,
 )
 from ardrone_nmpc.runtime.signals import Terminated
 from tests.conftest import ManualClock as Clock
@@ -60,6 +62,9 @@ class Drone:
         self.connected = True
         self.at_bind_warning = None
         self.land_errors: list[Exception] = []
+        self.state_bits = None                # the state word navdata carries (fault bits)
+        self.bootstrap_only = False           # packets arrive, but no demo sample
+        self.silent_since = None              # no packet at all from this time on
 
     def connect(self, timeout_s):
         self.calls.append("connect")
@@ -134,12 +139,27 @@ class Drone:
                 return None
         yaw = self.yaw[1] if mode is FlightMode.FLYING else self.yaw[0]
         return NavdataSample(self.clock(), mode, self.battery, self.roll, self.pitch, yaw,
-                             0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000)
+                             0.0, 0.0, 0.0, 0.0, ctrl_state=0x20000,
+                             state_bits=self.state_bits)
 
     @property
-    def navdata_rx_t_s(self):
+    def state_rx_t_s(self):  # any packet: bootstrap ones too
         t = self.clock()
+        if self.silent_since is not None and t >= self.silent_since:
+            return self.silent_since
         return t - 10.0 if t < self.nav_lost_until else t - self.nav_age_s(t)
+
+    @property
+    def navdata_rx_t_s(self):  # demo packets only
+        return -math.inf if self.bootstrap_only else self.state_rx_t_s
+
+    @property
+    def packet_mode(self):
+        return self.mode
+
+    @property
+    def state(self):
+        return self.state_bits
 
 
 class Mocap:
@@ -200,7 +220,9 @@ def test_enter_verifies_trims_and_takes_off_in_order_then_exit_lands():
     session, drone, events, warnings, clock = make()
     with session:
         assert session.lock.held
-        assert drone.calls == ["connect", "configure_limits", "profile:False", "read_config",
+        # the profile (control:outdoor, the hull) before the limits: outdoor selects the
+        # stored triple the limits are written into
+        assert drone.calls == ["connect", "profile:False", "configure_limits", "read_config",
                                "flat_trim", "takeoff"]
         assert drone.mode is FlightMode.FLYING
         assert drone.t_takeoff - drone.t_trim >= TRIM_TO_TAKEOFF_S
@@ -234,7 +256,7 @@ def test_a_held_value_that_differs_refuses_naming_key_written_and_held():
         session.__enter__()
     msg = str(err.value)
     assert "control:euler_angle_max" in msg and "'0.52'" in msg and "'0.2094'" in msg
-    assert "power-cycle" in msg and "more key" not in msg
+    assert "set drone.config_ids" in msg and "more key" not in msg
     assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
     assert "land" not in drone.calls  # nothing that could start the motors went out
     assert ("config_mismatch", {"key": "control:euler_angle_max", "written": "0.2094",
@@ -246,7 +268,7 @@ def test_several_differences_are_counted_and_a_missing_key_is_one():
     held = {**WRITTEN, **PROFILE, "control:control_vz_max": "2000"}
     del held["control:flying_mode"]
     session, drone, events, _, _ = make(drone_kw={"held": held})
-    with pytest.raises(PreflightError, match=r"control:control_vz_max.*and 1 more key"):
+    with pytest.raises(PreflightError, match=r"control:flying_mode.*and 1 more key"):
         session.__enter__()
     assert kinds(events).count("config_mismatch") == 2
     assert ("config_mismatch", {"key": "control:flying_mode", "written": "0", "held": None}) \
@@ -361,12 +383,13 @@ def test_an_operator_request_before_take_off_aborts_without_taking_off():
 def test_a_take_off_that_never_completes_lands_then_raises():
     session, drone, events, _, clock = make(drone_kw={"never_flies": True})
     t0 = clock()
-    with pytest.raises(RuntimeError, match=r"take-off did not complete in 10 s \(landed\)"):
+    with pytest.raises(TakeoffFailed, match=r"take-off did not complete in 10 s \(landed\): the "
+                                            r"drone never showed flying — landing"):
         session.__enter__()
     assert clock() - t0 >= FlightSession.TAKEOFF_TIMEOUT_S
     assert drone.calls.index("takeoff") < drone.calls.index("land")
     assert session.landed_cleanly is True
-    assert ("landing", {"reason": "RuntimeError"}) in events and "landed" in kinds(events)
+    assert ("landing", {"reason": "TakeoffFailed"}) in events and "landed" in kinds(events)
     assert not session.lock.held
 
 
@@ -645,9 +668,10 @@ def test_config_refusal_messages_word_for_word():
     with pytest.raises(PreflightError) as err:
         session.__enter__()
     assert str(err.value) == (
-        "the drone holds control:control_yaw = '6.11', not the '1.745' written: it ignored the "
-        "write (another multiconfig session or an outdoor profile?) — power-cycle the drone, "
-        "or set drone.config_ids to its session, then retry")
+        "the drone holds control:control_yaw = '6.11', not the '1.745' written: it did not "
+        "keep the write — a drone in another multiconfig session keeps its own limits: set "
+        "drone.config_ids to that session (`ardrone-nmpc status` shows its ids and what it "
+        "holds), then retry")
     session, *_ = make(drone_kw={"read_error": LinkError("timed out")})
     with pytest.raises(PreflightError) as err:
         session.__enter__()
@@ -748,13 +772,13 @@ def test_the_take_off_deadline_is_one_for_both_phases():
     t0 = clock()
     with pytest.raises(RuntimeError) as err:
         session.takeoff()
-    assert str(err.value) == "take-off did not complete in 10 s (taking_off)"
+    assert str(err.value).startswith("take-off did not complete in 10 s (taking_off): ")
     assert 10.0 < clock() - t0 < 10.05
     drone.nav_gone = (clock(), math.inf)
     drone._mode = FlightMode.LANDED
     with pytest.raises(RuntimeError) as err:
         session.takeoff()
-    assert str(err.value) == "take-off did not complete in 10 s (no navdata)"
+    assert str(err.value).startswith("take-off did not complete in 10 s (no navdata): ")
 
 
 def test_mocap_age_is_in_milliseconds_against_the_hover_limit():
@@ -851,8 +875,9 @@ def test_notices_come_every_3_s_exactly():
                                 setattr(drone, "nav_lost_until", -math.inf))
     session.land()
     lost = [f for k, f in events if k == "landing_navdata_lost"][0]
-    assert lost == {"message": "landing: no navdata for 10 s — still sending land; watch the "
-                               "drone (Ctrl-C twice within 2 s cuts the motors)", "age_s": 10.0}
+    assert lost == {"message": "landing: no navdata for 10 s — still sending land (for up to "
+                               "10 s without any); watch the drone (Ctrl-C twice within 2 s "
+                               "cuts the motors)", "age_s": 10.0}
 
 
 def test_the_default_warning_goes_to_stderr_and_survives_a_dead_terminal(capsys, monkeypatch):
@@ -972,3 +997,262 @@ def test_preflight_waits_for_fresh_navdata_and_refuses_a_silent_drone():
     with pytest.raises(PreflightError, match="no fresh navdata from the drone"):
         session.__enter__()
     assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
+
+
+# ----------------------------------------------------------------------------- issue 21
+# The drone's own alarms, navdata freshness from the first take-off REF to the last landing
+# REF, a landing confirmed by any packet and bounded without one, the operator's emergency.
+
+def test_preflight_refuses_a_drone_reporting_fault_bits_naming_them():
+    session, drone, events, *_ = make()
+    drone.state_bits = 1 << 22 | 1 << 21
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value).startswith("the drone reports CUTOUT (state bit 22: motor cut-out "
+                                     "detected), ULTRASOUND (state bit 21: ")
+    assert "takeoff" not in drone.calls and "flat_trim" not in drone.calls
+    assert "land" not in drone.calls and not session.lock.held
+    assert ("drone_faults", {"phase": "preflight", "bits": ["CUTOUT", "ULTRASOUND"]}) in events
+    session, drone, *_ = make()
+    drone.state_bits = 1 << 18 | 1 << 13      # calibration wanted, com lost: no fault
+    with session:
+        pass
+    assert "takeoff" in drone.calls
+
+
+def test_no_take_off_on_navdata_that_went_stale_during_the_trim_wait():
+    session, drone, events, _, clock = make()
+    drone.nav_age_s = lambda t: 0.6 if drone.calls[-1:] == ["flat_trim"] else 0.0
+    with pytest.raises(PreflightError, match=r"no fresh navdata before take-off \(the newest is "
+                                             r"600 ms old, safety.navdata_land_ms 500 ms\)"):
+        session.__enter__()
+    assert "takeoff" not in drone.calls and "land" not in drone.calls
+
+
+def test_navdata_lost_during_take_off_fails_it_in_half_a_second_and_lands():
+    session, drone, events, warnings, clock = make()
+    drone.nav_age_s = lambda t: (0.0 if drone.t_takeoff is None or t < drone.t_takeoff + 0.3
+                                 else 0.0 if t > drone.t_takeoff + 2.0
+                                 else t - (drone.t_takeoff + 0.3))
+    with pytest.raises(TakeoffFailed) as err:
+        session.__enter__()
+    assert str(err.value).startswith("take-off failed: navdata lost (none for 5")
+    assert "safety.navdata_land_ms 500 ms) — landing" in str(err.value)
+    assert drone.calls[-2:] == ["takeoff", "land"]
+    assert 0.8 <= drone.t_land - drone.t_takeoff <= 0.85   # 0.3 s flowing + 0.5 s lost
+    assert session.landed_cleanly is True                  # navdata came back: confirmed
+    assert ("landing", {"reason": "TakeoffFailed"}) in events and not session.lock.held
+
+
+@pytest.mark.parametrize("bit, cut", [(14, False), (15, False), (12, True), (22, True)])
+def test_a_fault_bit_during_take_off_ends_it_by_a_landing_or_a_cut(bit, cut):
+    session, drone, events, warnings, clock = make(drone_kw={"takeoff_s": 3.0})
+    real = session.sleep
+
+    def sleep(dt):
+        real(dt)
+        if drone.t_takeoff is not None and clock() - drone.t_takeoff > 1.0:
+            drone.state_bits = 1 << bit
+    session.sleep = sleep
+    with pytest.raises(CutMotors if cut else TakeoffFailed) as err:
+        session.__enter__()
+    assert f"(state bit {bit}: " in str(err.value)
+    assert str(err.value).endswith("cutting the motors" if cut else "landing")
+    assert ("emergency" in drone.calls) is cut and ("land" in drone.calls) is not cut
+    assert session.landed_cleanly is True
+    assert dict(events)["drone_faults"]["phase"] == "takeoff"
+
+
+def test_a_landing_is_confirmed_by_bootstrap_packets_alone():
+    session, drone, events, warnings, clock = flying(landing_s=2.0)
+    drone.bootstrap_only = True            # the stream fell back to bootstrap: no demo sample
+    t0 = clock()
+    assert session.land() is True
+    assert 2.0 <= clock() - t0 < 2.1 and kinds(events)[-1] == "landed"
+
+
+def test_a_landing_without_any_navdata_ends_after_the_blind_bound():
+    from ardrone_nmpc.runtime.schedule import BLIND_LANDING_S
+
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.state_bits = 0x1
+    drone.silent_since = clock() - 0.7     # the link died before the landing began
+    t0 = clock()
+    assert session.land() is False and session.landed_cleanly is False
+    assert BLIND_LANDING_S < clock() - t0 < BLIND_LANDING_S + 0.05  # from the first land REF
+    failed = dict(events)["landing_failed"]
+    assert failed["error"] == "no navdata for 10 s while landing"
+    assert failed["last_mode"] == "flying" and failed["last_state"] == 1
+    assert failed["last_age_s"] == pytest.approx(BLIND_LANDING_S + 0.7, abs=0.05)
+    assert "landed" not in kinds(events)
+
+
+def test_a_blind_landing_never_ends_while_packets_arrive():
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.bootstrap_only = True             # no demo sample, but the state word arrives
+    real = session.sleep
+    t0 = clock()
+    session.sleep = lambda dt: (real(dt), clock() - t0 > 60.0
+                                and setattr(drone, "never_lands", False))
+    assert session.land() is True and clock() - t0 > 60.0
+
+
+def test_a_ctrl_c_during_a_blind_landing_does_not_hang_it():
+    session, drone, events, warnings, clock = flying(never_lands=True)
+    drone.silent_since = clock()
+    real = session.sleep
+    presses = [clock() + 1.0]
+
+    def sleep(dt):
+        real(dt)
+        if presses and clock() >= presses[0]:
+            presses.pop()
+            raise KeyboardInterrupt
+    session.sleep = sleep
+    with pytest.raises(KeyboardInterrupt):
+        session.land()
+    assert session.landed_cleanly is False and "emergency" not in drone.calls
+
+
+@pytest.mark.parametrize("operator_cut_acts", [True, False])
+@pytest.mark.parametrize("where", ["flight", "landing"])
+def test_the_emergency_command_holds_the_cut_instead_of_landing(where, operator_cut_acts):
+    """SIGUSR2: the operator's own link made the edge; the session holds bit 8 low (REF land:
+    a second edge would undo the cut) and makes its own edge only if navdata has not shown
+    the cut within 2 s."""
+    from ardrone_nmpc.runtime.session import EMERGENCY_CONFIRM_S
+    from ardrone_nmpc.runtime.signals import EMERGENCY_SIGNAL, EmergencyRequested
+
+    session, drone, events, warnings, clock = flying(landing_s=50.0)
+    signal_in = EmergencyRequested(EMERGENCY_SIGNAL)
+
+    def operator_cuts():
+        if operator_cut_acts:
+            drone._mode = FlightMode.EMERGENCY      # the operator's edge reached the drone
+    t0 = clock()
+    if where == "flight":
+        operator_cuts()
+        assert session.__exit__(EmergencyRequested, signal_in, None) is False
+    else:
+        real = session.sleep
+        raised = []
+
+        def sleep(dt):
+            real(dt)
+            if not raised:
+                raised.append(1)
+                operator_cuts()
+                raise signal_in
+        session.sleep = sleep
+        with pytest.raises(EmergencyRequested):
+            session.land()
+    after = drone.calls[drone.calls.index("takeoff") + 1:]
+    assert ("emergency", {"reason": "the operator's `emergency` command (SIGUSR2)"}) in events
+    assert warnings[-1] == ("cutting the motors (emergency): the operator's `emergency` "
+                            "command (SIGUSR2)")
+    assert session.landed_cleanly is True and dict(events)["landed"] == {"mode": "emergency"}
+    if operator_cut_acts:
+        assert "emergency" not in after and clock() - t0 < 0.1
+    else:                                         # its own edge, once, after 2 s
+        assert after.count("emergency") == 1 and after[-1] == "emergency"
+        assert EMERGENCY_CONFIRM_S < clock() - t0 < EMERGENCY_CONFIRM_S + 0.1
+
+
+def test_a_motor_fault_in_flight_cuts_through_the_sessions_exit():
+    session, drone, events, warnings, clock = flying()
+    err = CutMotors("the supervisor cut the motors: stop-cutout")
+    assert session.__exit__(CutMotors, err, None) is False
+    assert drone.calls[-1] == "emergency" and "land" not in drone.calls[-2:]
+    assert ("landing", {"reason": "CutMotors"}) in events
+    assert session.landed_cleanly is True
+
+
+# ----------------------------------------------------------------------------- issue 21, exact
+def on_step_clock(session, drone, t=200.0):
+    step = StepClock()
+    step.t = t
+    for obj in (session, drone, session.mocap):
+        obj.clock = step
+    session.sleep = step.sleep
+    return step
+
+
+def test_take_off_failure_messages_word_for_word():
+    session, drone, events, _, _ = make(cfg_sets=["safety.navdata_land_ms=1000"],
+                                        drone_kw={"takeoff_s": 3.0})
+    session.configure()
+    session.preflight()
+    session.trim()
+    clock = on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 0.0 if t < clock.t0 + 0.5 else t - (clock.t0 + 0.5)
+    clock.t0 = clock.t
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off failed: navdata lost (none for 1250 ms, "
+                              "safety.navdata_land_ms 1000 ms) — landing; check the Wi-Fi "
+                              "link (docs/first-flight.md §3)")
+    session, drone, events, _, _ = make(drone_kw={"never_flies": True})
+    session.configure()
+    session.preflight()
+    session.trim()
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off did not complete in 10 s (landed): the drone never "
+                              "showed flying — landing; check battery, propellers and hull")
+
+
+def test_navdata_exactly_at_the_limit_is_fresh_for_the_take_off():
+    session, drone, events, _, _ = make()
+    session.configure()
+    session.preflight()
+    clock = on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 0.5                       # exactly safety.navdata_land_ms
+    session.trim()                                         # no refusal at 0.5 s …
+    drone.nav_age_s = lambda t: 0.5 if t < clock.t + 0.5 else 0.0
+    session.takeoff()                                      # … nor during the take-off
+    assert "takeoff" in drone.calls
+    drone._mode = FlightMode.LANDED
+    drone.t_takeoff = None
+    drone.nav_age_s = lambda t: 0.75 if drone.calls[-1] == "flat_trim" else 0.0
+    with pytest.raises(PreflightError) as err:
+        session.trim()
+    assert str(err.value) == ("no fresh navdata before take-off (the newest is 750 ms old, "
+                              "safety.navdata_land_ms 500 ms): no take-off")
+    session, drone, *_ = make(cfg_sets=["safety.navdata_land_ms=1000"])
+    session.configure()
+    session.preflight()
+    on_step_clock(session, drone)
+    drone.nav_age_s = lambda t: 1.25 if drone.calls[-1] == "flat_trim" else 0.0
+    with pytest.raises(PreflightError, match=r"is 1250 ms old, safety.navdata_land_ms 1000 ms"):
+        session.trim()
+
+
+def test_a_fault_during_take_off_is_one_line_naming_bit_mode_and_ctrl_state():
+    session, drone, events, warnings, clock = make(drone_kw={"takeoff_s": 3.0})
+    session.configure()
+    session.preflight()
+    session.trim()
+    real = session.sleep
+
+    def sleep(dt):
+        real(dt)
+        if clock() - drone.t_takeoff > 1.0:
+            drone.state_bits = 1 << 14 | 1 << 21
+    session.sleep = sleep
+    with pytest.raises(TakeoffFailed) as err:
+        session.takeoff()
+    assert str(err.value) == ("take-off failed: the drone reports SOFTWARE_FAULT (state bit 14: "
+                              "software fault, land as soon as possible) (mode taking_off, "
+                              "ctrl_state 0x00020000) — landing")
+    assert ("drone_faults", {"phase": "takeoff", "bits": ["SOFTWARE_FAULT", "ULTRASOUND"]}) \
+        in events
+
+
+def test_the_second_sender_refusal_word_for_word():
+    session, *_ = make(mocap_kw={"contenders": ["127.0.0.1:40000", "127.0.0.1:40001"]})
+    with pytest.raises(PreflightError) as err:
+        session.__enter__()
+    assert str(err.value) == (
+        "mocap object 'ardrone' comes from more than one sender: the link took 10.0.0.2:4000, "
+        "127.0.0.1:40000, 127.0.0.1:40001 also sends it — stop the other stream (a replay "
+        "--broadcast?) before flying")

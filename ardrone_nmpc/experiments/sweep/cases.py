@@ -27,6 +27,7 @@ from ardrone_nmpc.experiments.sweep.status import DIVERGE_M, case_metrics, class
 from ardrone_nmpc.runs.sweep_table import (METRIC_COLUMNS, SWEEP_FILE, SweepTableError,
                                                   as_float, read_sweep)
 from ardrone_nmpc.runs.rundir import SUMMARY_FILE
+from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, verdict_message
 
 if TYPE_CHECKING:  # pragma: no cover
     from ardrone_nmpc.config.schema import ExperimentConfig
@@ -60,9 +61,17 @@ def nan_metrics() -> dict[str, float]:
 
 def _fly(cfg: ExperimentConfig, log_dir: Path) -> tuple[RunData, list[SummaryRow]]:
     """Record ``cfg`` in lockstep under ``log_dir`` (the run read back and its summary);
-    a flight that raises leaves its run directory without ``summary.csv``."""
+    a flight that raises leaves its run directory without ``summary.csv``. A flight that
+    reached its end without doing its job raises :class:`VerdictFailed`."""
     recording = record.record_lockstep(cfg, log_dir)  # looked up per call: tests replace it
+    ending = recording.result.ending
+    if ending in FAILED_VERDICTS:
+        raise VerdictFailed(f"{ending}: {verdict_message(ending)}")
     return recording.run, recording.summary
+
+
+class VerdictFailed(RuntimeError):
+    """The case flew to its end without doing its job (:mod:`ardrone_nmpc.runs.verdict`)."""
 
 
 def _move_into_place(staging: Path, final: Path, *, finished: bool) -> None:
@@ -99,6 +108,8 @@ def run_case(case: Case, *, out_dir: str | Path, diverge_m: float = DIVERGE_M) -
         run, rows = _fly(case.config, staging)
         metrics = case_metrics(run=run, rows=rows)
         status, message = classify(run=run, diverge_m=diverge_m)
+    except VerdictFailed as err:  # flown, but it did not do its job
+        status, message, metrics = "failed", str(err), nan_metrics()
     except Exception as err:  # noqa: BLE001 - a failed case is a row of the table
         status, message, metrics = "failed", one_line(err), nan_metrics()
     _move_into_place(staging, final, finished=status != "failed")

@@ -2,7 +2,9 @@
 
 Status
 ------
-``failed``: the simulation raised (``message`` holds the exception). ``unstable``: the run
+``failed``: the simulation raised (``message`` holds the exception), or it flew to its end
+without doing its job (a failed verdict of :mod:`ardrone_nmpc.runs.verdict`: no tracking tick,
+or a followed object never seen). ``unstable``: the run
 completed, but over the experiment window (``t_s ≥ 0``) one of these holds (``message`` says
 which): a non-finite position; a position outside the geofence
 (``safety.geofence_min_m``/``geofence_max_m``); a tick whose mode is a ground mode or names a

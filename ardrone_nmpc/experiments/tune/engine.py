@@ -23,6 +23,7 @@ from typing import Any
 from ardrone_nmpc.experiments.record import one_line
 from ardrone_nmpc.experiments.tune.objective import FAILED_METRICS, Objective
 from ardrone_nmpc.experiments.tune.space import Param, apply_params
+from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, verdict_message
 
 __all__ = ["Scenario", "TrialResult", "TrialSpec", "plant_variants", "run_trial", "scenarios",
            "trial_result"]
@@ -74,7 +75,8 @@ class TrialSpec:
 @dataclass
 class TrialResult:
     """A trial's ``score`` (lower is better), ``status`` (ok: every flight completed
-    without abort; aborted; failed: a flight could not run), per-scenario metrics, the
+    without abort; aborted; failed: a flight could not run, or ran to its end without doing
+    its job — :mod:`ardrone_nmpc.runs.verdict`), per-scenario metrics, the
     first problem's one-line ``message``, its wall time and the simulated time flown (s)."""
 
     number: int
@@ -87,8 +89,9 @@ class TrialResult:
 
 
 def _fly(cfg, keep_dir: str | None, number: int):
-    """(metrics, simulated seconds) of one flight: recorded in memory, or with ``keep_dir``
-    the way every caller records a run directory (:mod:`ardrone_nmpc.experiments.record`)."""
+    """(metrics, simulated seconds, ending) of one flight: recorded in memory, or with
+    ``keep_dir`` the way every caller records a run directory
+    (:mod:`ardrone_nmpc.experiments.record`)."""
     from ardrone_nmpc.experiments.tune.objective import scenario_metrics
 
     if keep_dir is None:
@@ -105,7 +108,8 @@ def _fly(cfg, keep_dir: str | None, number: int):
 
         rec = record_lockstep(cfg, Path(keep_dir) / f"trial-{number:05d}")
         result, run, rows = rec.result, rec.run, rec.summary
-    return scenario_metrics(run, rows, ending=result.ending), result.ticks * cfg.loop.period_s
+    return (scenario_metrics(run, rows, ending=result.ending), result.ticks * cfg.loop.period_s,
+            result.ending)
 
 
 def run_trial(spec: TrialSpec) -> TrialResult:
@@ -124,9 +128,12 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     for sc in spec.scenarios:
         try:
             cfg = resolve_data(apply_overrides(data, [*sc.overrides, f"sim.seed={sc.seed}"]))
-            m, flown_s = _fly(cfg, spec.keep_dir, spec.number)
+            m, flown_s, ending = _fly(cfg, spec.keep_dir, spec.number)
             sim_s += flown_s
-            if m["aborted"] and status == "ok":
+            if ending in FAILED_VERDICTS:  # flown to its end without doing its job
+                m, status = dict(FAILED_METRICS), "failed"
+                messages.insert(0, f"{sc.label}: {ending}: {verdict_message(ending)}")
+            elif m["aborted"] and status == "ok":
                 status = "aborted"
                 messages.append(f"{sc.label}: aborted by the supervisor")
         except (ConfigError, Exception) as err:  # noqa: BLE001 - a failed flight is a result

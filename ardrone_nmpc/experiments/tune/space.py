@@ -20,7 +20,9 @@ A space file (YAML) replaces or extends it::
 ``low``/``high`` bound a parameter (``log: true`` samples log-uniformly; needs low > 0);
 ``factor`` centres a log range on the config's value. ``type`` is ``float`` (default) or
 ``int``. Every path must name a numeric config value; mistakes fail before anything flies,
-one ``--space FILE: params.<path>: message`` line each.
+one ``--space FILE: params.<path>: message`` line each. The ``safety`` section is never
+searched: a trial that loosened a limit would be scored by flying past what the supervisor is
+there to stop.
 """
 
 from __future__ import annotations
@@ -178,6 +180,10 @@ def parse_space(spec: Mapping[str, Any] | None, cfg, *, where: str = "--space") 
         params = {}
     data = config_to_dict(cfg)
     for name, entry in params.items():
+        if str(name).split(".")[0] == "safety":
+            errors.append(f"{where}: params.{name}: the safety limits are not searched (set "
+                          "them with --set; tune the controller, not the supervisor)")
+            continue
         try:
             for p in _one(str(name), entry, data):
                 space[p.name] = p
