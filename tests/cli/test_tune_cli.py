@@ -7,6 +7,7 @@ import csv
 import math
 from pathlib import Path
 
+import optuna
 import pytest
 from typer.testing import CliRunner
 
@@ -14,8 +15,6 @@ from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.tune.engine import plant_variants
 from ardrone_nmpc.runtime.lockstep import run_lockstep
-
-optuna = pytest.importorskip("optuna")
 
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_z.yaml")
@@ -101,7 +100,6 @@ def test_a_pool_tune_gives_the_same_flights(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_a_two_trial_dask_tune(tmp_path):
-    pytest.importorskip("distributed")
     from dask.distributed import LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
@@ -190,7 +188,6 @@ def test_a_space_file_and_variants_shape_the_study(tmp_path):
 
 
 def test_plot_draws_history_and_importances_of_a_tune_directory(tmp_path):
-    pytest.importorskip("matplotlib")
     assert _tune(tmp_path, "--trials", "3", "--jobs", "1").exit_code == 0
     result = runner.invoke(app, ["plot", str(tmp_path)])
     assert result.exit_code == 0, result.output
