@@ -73,7 +73,7 @@ def fly(seconds: float, log_dir: Path, foxglove: bool) -> dict:
 def row_cost_us(n: int = 20000) -> float:
     """Median cost of LiveView.row (the control thread's share), µs, server running."""
     sys.path.insert(0, str(ROOT))
-    from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS
+    from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
     from ardrone_nmpc.viz.live import LiveView
 
     row = {c: ("track" if c in STRING_COLUMNS else 0.123456789) for c in LOG_COLUMNS}

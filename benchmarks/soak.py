@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.runtime.realtime import run_flight
+from ardrone_nmpc.experiments.flight import run_flight
 from ardrone_nmpc.runs.rundir import read_run
 
 PAGE = os.sysconf("SC_PAGE_SIZE")

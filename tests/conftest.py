@@ -7,6 +7,7 @@ import pytest
 from hypothesis import settings
 
 from ardrone_nmpc import model
+import ardrone_nmpc.links.drone_link as drone_link_module
 
 # Timings live in benchmarks, not in unit tests: Hypothesis' per-example deadline (200 ms)
 # fails a correct test whenever the machine is loaded (or the first example JIT-compiles).
@@ -45,3 +46,18 @@ class ManualClock:
 @pytest.fixture
 def rng():
     return np.random.default_rng(20191)
+
+
+@pytest.fixture
+def loopback_only(monkeypatch, tmp_path):
+    """The link's lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
+    and the flight locks live in this test's directory."""
+    class LoopbackLink(drone_link_module.DroneLink):
+        def __init__(self, *args, **kwargs):
+            kwargs.setdefault("bind_host", "127.0.0.1")
+            kwargs["at_local_port"] = 0
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(drone_link_module, "DroneLink", LoopbackLink)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
+    (tmp_path / "run").mkdir()

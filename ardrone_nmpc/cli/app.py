@@ -14,7 +14,8 @@ from typing import List, Optional
 import typer
 
 from ardrone_nmpc.cli.handler import CommandGroup
-from ardrone_nmpc.cli.options import MAX_JOBS, finite, non_empty, output_file, port
+from ardrone_nmpc.cli.options import (MAX_JOBS, choice, finite, new_output_file, non_empty,
+                                      output_file, port)
 
 app = typer.Typer(
     name="ardrone-nmpc",
@@ -23,9 +24,49 @@ app = typer.Typer(
     "2 a bad command line (unknown option, value out of range); 130 Ctrl-C; 143 SIGTERM.",
     cls=CommandGroup,
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion [bash|zsh|fish|powershell]
     pretty_exceptions_enable=False,
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from ardrone_nmpc import __version__
+
+        typer.echo(f"ardrone-nmpc {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Fast nonlinear MPC (C/GMRES) flight experiments for the Parrot AR.Drone 2.0."""
+
+def _sweep_engines():  # the closed sets of values, read where they live when an option is used
+    from ardrone_nmpc.cli.sweep import ENGINES
+
+    return ENGINES
+
+
+def _rank_metrics():
+    from ardrone_nmpc.runs.sweep_table import RANK_METRICS
+
+    return RANK_METRICS
+
+
+def _figure_kinds():
+    from ardrone_nmpc.viz.run_figures import KINDS
+
+    return (*KINDS, "all")
+
+
+def _fault_cases():
+    from ardrone_nmpc.experiments.faultmatrix import FAULT_CASES
+
+    return FAULT_CASES
+
 
 SET_HELP = "Override a config value before validation: dotted.path=value (repeatable)."
 CONFIG_ARG = typer.Argument(..., help="Experiment YAML file.")
@@ -63,8 +104,8 @@ def simulate(
 @app.command()
 def fly(
     config: Path = CONFIG_ARG,
-    sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone."),
-    drone: Optional[str] = typer.Option(None, "--drone", callback=non_empty, help="Drone address (default: drone.host, 192.168.1.1)."),
+    sim: bool = typer.Option(False, "--sim", help="Fly the loopback simulators (started in-process on 127.0.0.1) instead of a drone: --drone sim://loopback."),
+    drone: Optional[str] = typer.Option(None, "--drone", callback=non_empty, help="Drone address or URI: 192.168.1.1 or udp://HOST (an AR.Drone 2.0), sim://loopback (the simulated drone over UDP), sim://lockstep (the simulated drone in lockstep, as simulate) (default: drone.host, 192.168.1.1)."),
     at_port: Optional[int] = typer.Option(None, "--at-port", callback=port(), help="AT command UDP port (default: drone.at_port, 5556)."),
     navdata_port: Optional[int] = typer.Option(None, "--navdata-port", callback=port(), help="Navdata UDP port (default: drone.navdata_port, 5554)."),
     mocap_port: Optional[int] = typer.Option(None, "--mocap-port", callback=port(), help="Mocap UDP port to listen on (default: mocap.port, 51001)."),
@@ -75,6 +116,7 @@ def fly(
     set_: List[str] = typer.Option([], "--set", help=SET_HELP),
     foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live on a Foxglove WebSocket (127.0.0.1; the 'foxglove' extra; docs/live-view.md)."),
     foxglove_port: int = typer.Option(8765, "--foxglove-port", min=0, max=65535, help="--foxglove port (0: a free one)."),
+    mcap: Optional[Path] = typer.Option(None, "--mcap", callback=new_output_file, help="Record the flight's Foxglove channels to this new MCAP file as it flies (the 'foxglove' extra; the same channels as --foxglove and export)."),
 ) -> None:
     """Fly an experiment over UDP: the AR.Drone (with mocap), or with --sim the loopback
     simulators. Takes off, flies the 65 ms loop, lands at the end, on Ctrl-C, on any error
@@ -84,7 +126,7 @@ def fly(
     fly_command(config=config, overrides=set_, sim=sim, drone=drone, at_port=at_port,
                 navdata_port=navdata_port, mocap_port=mocap_port, duration_s=duration_s,
                 log_dir=log_dir, dashboard=dashboard, seed=seed, foxglove=foxglove,
-                foxglove_port=foxglove_port)
+                foxglove_port=foxglove_port, mcap=mcap)
 
 
 @app.command()
@@ -126,10 +168,10 @@ def sweep(
     grid: List[str] = typer.Option([], "--grid", help="Swept field and its values: dotted.path=v1,v2,… (repeatable; the Cartesian product is flown). Values parse like --set; commas inside [] separate vector items: controller.r=[4,12,12,24],[1,12,12,24]."),
     set_: List[str] = typer.Option([], "--set", help=SET_HELP + " Applied to every case, before the grid."),
     jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Parallel workers (default: the CPU count); 1 = in this process."),
-    engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+    engine: str = typer.Option("local", "--engine", **choice(_sweep_engines), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
-    rank_by: str = typer.Option("rmse", "--rank-by", help="Rank the table by: rmse, settling, overshoot, path_deviation, solve_p99."),
+    out: Optional[Path] = typer.Option(None, "-o", "--output", help="Sweep directory: one run directory per case and sweep.csv (default: logs/sweeps/<config name>). Finished cases in it are skipped."),
+    rank_by: str = typer.Option("rmse", "--rank-by", **choice(_rank_metrics), help="Rank the table by: rmse, settling, overshoot, path_deviation, solve_p99."),
     top: Optional[int] = typer.Option(None, "--top", min=1, help="Show only the best K cases."),
     diverge_m: float = typer.Option(0.5, "--diverge-m", callback=finite(0.0, 1000.0), help="A case is 'unstable' if it is farther than this (m) from the reference in the last quarter of the experiment (or leaves the geofence, or is landed by the supervisor)."),
 ) -> None:
@@ -144,7 +186,7 @@ def sweep(
 
 @app.command()
 def reproduce(
-    out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "--out", callback=output_file, help="Markdown report to write."),
+    out: Path = typer.Option(Path("docs/thesis-reproduction.md"), "-o", "--output", callback=output_file, help="Markdown report to write."),
     log_dir: Path = typer.Option(Path("logs/reproduce"), "--log-dir", help="Where the run directories go."),
     config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="The experiment configs."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every run."),
@@ -164,8 +206,8 @@ def bench(
     kmax: Optional[int] = typer.Option(None, "--kmax", min=1, max=1000, help="GMRES iterations per solve (overrides the config)."),
     steps: int = typer.Option(300, "--steps", min=10, max=100_000, help="Timed control ticks per solver."),
     repeats: int = typer.Option(5, "--repeats", min=1, max=100, help="Identical closed-loop repeats; each tick's best time is kept (strips machine noise)."),
-    solvers: str = typer.Option("cgmres,newton", "--solvers", help="Comma-separated: cgmres, newton."),
-    compare: Optional[str] = typer.Option(None, "--compare", help="'casadi': also solve the OCP exactly with CasADi/IPOPT."),
+    solvers: str = typer.Option("cgmres,newton", "--solvers", **choice(("cgmres", "newton"), many=True), help="Comma-separated: cgmres, newton."),
+    compare: Optional[str] = typer.Option(None, "--compare", **choice(("casadi",)), help="'casadi': also solve the OCP exactly with CasADi/IPOPT."),
     json_path: Optional[Path] = typer.Option(None, "--json", callback=output_file, help="Write the rows as JSON to this file."),
 ) -> None:
     """Time the NMPC solvers in a closed loop (1 m step in x, y, z and 1 rad in ψ)."""
@@ -180,7 +222,7 @@ def bench(
 def plot(
     path: Path = typer.Argument(..., help="A run directory, or a sweep directory (holding sweep.csv)."),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Image file (default: <dir>/plot-<kind>.png), or a directory to write the default file names into; with --kind all one file per kind: FILE-tracking.png, FILE-inputs.png, …"),
-    kind: Optional[str] = typer.Option(None, "--kind", help="Run figure: tracking, inputs, solver, path3d or all (default: all)."),
+    kind: Optional[str] = typer.Option(None, "--kind", **choice(_figure_kinds), help="Run figure: tracking, inputs, solver, path3d or all (default: all)."),
     metric: Optional[str] = typer.Option(None, "--metric", help="Sweep heat map: metric column of sweep.csv (default: rmse_m)."),
     x: Optional[str] = typer.Option(None, "--x", help="Sweep heat map: swept parameter on the x axis (default: the first)."),
     y: Optional[str] = typer.Option(None, "--y", help="Sweep heat map: swept parameter on the y axis (default: the next); any others are minimised over."),
@@ -197,8 +239,8 @@ def plot(
 def faults(
     json_out: Optional[Path] = typer.Option(None, "--json", callback=output_file, help="Write the results as JSON to this file."),
     markdown: Optional[Path] = typer.Option(None, "--markdown", callback=output_file, help="Write the Markdown report (docs/fault-matrix.md) to this file."),
-    experiments: str = typer.Option("hover,step,square", "--experiments", help="Comma-separated experiment kinds: hover, step, square."),
-    only: Optional[str] = typer.Option(None, "--faults", help="Comma-separated fault cases (default: all)."),
+    experiments: str = typer.Option("hover,step,square", "--experiments", **choice(("hover", "step", "square"), many=True), help="Comma-separated experiment kinds: hover, step, square."),
+    only: Optional[str] = typer.Option(None, "--faults", **choice(_fault_cases, many=True), help="Comma-separated fault cases (default: all)."),
     config_dir: Path = typer.Option(Path("configs"), "--config-dir", help="Where hover.yaml, step_x.yaml, square.yaml are."),
     log_dir: Optional[Path] = typer.Option(None, "--log-dir", help="Where the case run directories go (default: logs/faults-<time>)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every case."),

@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.cli.narrow import fit
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.control.ocp import OcpSpec
@@ -73,7 +74,7 @@ def run_bench_command(*, cfg, solvers: list[str], steps: int, compare_casadi: bo
             status.update(f"ipopt: {steps} closed-loop ticks (slow)…")
             rows.append(bench_ipopt(OcpSpec.from_config(cfg.controller), steps=steps,
                                     period_s=period_s))
-    console.print(render_table(rows))
+    console.print(fit(render_table(rows), console))
     ipopt = next((r for r in rows if r.solver == "ipopt"), None)
     if ipopt is not None:
         for row in rows:

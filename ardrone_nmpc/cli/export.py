@@ -8,6 +8,8 @@ from typing import Optional
 
 import typer
 
+from ardrone_nmpc.cli.options import choice
+
 __all__ = ["register"]
 
 
@@ -17,7 +19,7 @@ def register(app: typer.Typer) -> None:
     @app.command("export")
     def export(
         run_dir: Path = typer.Argument(..., help="A run directory (logs/<run>)."),
-        fmt: str = typer.Option("mcap", "--format", help="mcap (the 'mcap' extra): /log, /events, /config, /pose, /reference channels; parquet (the 'parquet' extra): the log table, events and config in its metadata."),
+        fmt: str = typer.Option("mcap", "--format", **choice(("mcap", "parquet")), help="mcap (the 'mcap' extra): /log, /events, /config, /pose, /reference channels; parquet (the 'parquet' extra): the log table, events and config in its metadata."),
         output: Optional[Path] = typer.Option(None, "-o", "--output", help="Output file (default: <run dir>.<format> beside the run directory)."),
     ) -> None:
         """Export a run directory as MCAP (Foxglove's 3-D panel draws /pose and /reference)

@@ -1,12 +1,12 @@
 """``ardrone-nmpc fly``: the live display around a real-time flight, and its exit codes.
 
-The flight itself (links, session, loop, landing) is :func:`~ardrone_nmpc.runtime.realtime.
-run_flight`; this module shows its figures while it flies (on a terminal) and decides how the
-command ends. Whatever happens, the landing outcome and the run directory are printed:
+The flight itself (the drone's backend, session, loop, landing, the run directory) is
+:func:`~ardrone_nmpc.experiments.flight.run_flight`; this module shows its figures while it
+flies (on a terminal) and decides how the command ends. Whatever happens, the landing outcome and the run directory are printed:
 
 * the flight completed: its summary table, then ``run: <dir>``; exit 0;
-* a flight error (link lost, supervisor landing, emergency, pre-flight refusal): its
-  ``error:`` line, exit 1;
+* a flight error (link lost, supervisor landing, emergency, pre-flight refusal, a ``faults``
+  section on a drone that is not simulated): its ``error:`` line, exit 1;
 * Ctrl-C: exit 130; any other terminating signal (TERM, HUP, QUIT, USR1/2, PIPE): exit
   128 + its number (the session has landed in every case);
 * navdata never confirmed the landing: ``error: landing not confirmed by navdata — check
@@ -29,13 +29,15 @@ LANDING_NOT_CONFIRMED = "landing not confirmed by navdata — check the drone"
 def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | None,
                 at_port: int | None, navdata_port: int | None, mocap_port: int | None,
                 duration_s: float | None, log_dir: Path, dashboard: bool,
-                seed: int | None, foxglove: bool = False, foxglove_port: int = 8765) -> None:
+                seed: int | None, foxglove: bool = False, foxglove_port: int = 8765,
+                mcap: Path | None = None) -> None:
     """Fly ``config`` (see the module docstring for what is printed and the exit codes)."""
     from rich.live import Live
 
     from ardrone_nmpc.cli.console import stderr_console
     from ardrone_nmpc.config.io import load_config
-    from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed, run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
+    from ardrone_nmpc.runtime.realtime import FlightResult, LandingNotConfirmed
     from ardrone_nmpc.runtime.signals import Terminated, exit_code_of
     from ardrone_nmpc.viz.dashboard import LiveStatus
     from ardrone_nmpc.viz.live import open_live_view
@@ -46,7 +48,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     cfg = load_config(config, overrides)
     # the land / cut-motors keys need a terminal to read them from and to show them on
     keys = bool(sys.stdin and sys.stdin.isatty() and sys.stderr and sys.stderr.isatty())
-    view = LiveStatus(f"{cfg.name} — {'loopback simulators' if sim else drone or cfg.drone.host}",
+    view = LiveStatus(f"{cfg.name} — {'sim://loopback' if sim else drone or cfg.drone.host}",
                       **({} if keys else {"keys_help": None}))
     use_live = dashboard and sys.stderr is not None and sys.stderr.isatty()
     console = stderr_console()
@@ -55,7 +57,7 @@ def fly_command(*, config: Path, overrides: list[str], sim: bool, drone: str | N
     code = 0
     error: BaseException | None = None
     try:
-        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed,
+        with open_live_view(foxglove, foxglove_port, cfg=cfg, seed=seed, mcap=mcap,
                             echo=lambda line: typer.echo(line, err=True)) as sink:
             if use_live:
                 live.start()

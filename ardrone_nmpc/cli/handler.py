@@ -84,6 +84,15 @@ class CommandGroup(TyperGroup):
             report([_usage_line(err)])
             raise typer.Exit(err.exit_code) from None
 
+    def resolve_command(self, ctx, args):
+        """The command, with its deprecated option spellings replaced (and warned about)."""
+        from ardrone_nmpc.cli.options import modern_spellings
+
+        name, cmd, rest = super().resolve_command(ctx, args)
+        if name is not None:
+            rest = modern_spellings(name, list(rest), lambda line: typer.echo(line, err=True))
+        return name, cmd, rest
+
     def invoke(self, ctx: typer.Context):
         if sys.stdout is None:  # started with `>&-`: there is nowhere to print the results
             report([STDOUT_CLOSED])

@@ -5,11 +5,15 @@ Connects to the configured source (``mocap.kind``), shows a live table of the tr
 carry the drone ≥ 10 cm along +x (forward), +y (left), +z (up) and turn it ≥ 20°
 counter-clockwise; each shows ✔ when the measured sign is right, ✘ when only the opposite
 sign was seen (a mirrored or swapped axis, a wrong ``mocap.up_axis``). It ends with one line
-per tracked object: ``<name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>`` (3 decimals).
+per tracked object: ``<name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>`` (3 decimals), the
+stream's quality (:func:`quality_line`: missing, zero and frozen frames of the controlled
+object, the largest age a reader saw and the largest gap between fresh poses) and the axis
+test; ``--json`` prints all of it as one JSON object instead.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -19,7 +23,8 @@ from typing import List, Optional
 
 import typer
 
-__all__ = ["AxisTest", "CheckResult", "register", "run_check", "final_line"]
+__all__ = ["AxisTest", "CheckResult", "register", "run_check", "final_line", "quality_line",
+           "result_json"]
 
 AXIS_STEP_M = 0.10      # a hand-carried move the test counts
 YAW_STEP_RAD = 0.35     # ≈ 20°
@@ -77,10 +82,14 @@ class _Track:
     count: int = 0
     t_s: float = math.nan
     window: list = field(default_factory=list)   # (t, count) of the last second
+    max_age_s: float = math.nan    # the oldest the newest pose was at a sample, once seen
 
     def sample(self, source, now_s: float, main: bool) -> None:
         self.pose, self.rx_t_s = source.latest() if main else source.latest_of(self.name)
         self.count, self.t_s = source.fresh_count(self.name), now_s
+        if self.pose is not None:
+            age = now_s - self.rx_t_s
+            self.max_age_s = age if math.isnan(self.max_age_s) else max(self.max_age_s, age)
         if self.count0 is None:
             self.count0, self.t0_s = self.count, now_s
         self.window.append((now_s, self.count))
@@ -103,6 +112,16 @@ class CheckResult:
     axes: AxisTest
     where: str
     names_seen: tuple[str, ...]
+    missing: int = 0      # frames without the controlled object
+    zero: int = 0         # frames with it all-zero or non-finite
+    frozen: int = 0       # frames ignored as bit-identical repeats
+    max_gap_s: float = 0.0  # the longest time between two fresh poses of it
+
+    def read_counts(self, source) -> None:
+        self.names_seen = source.names_seen
+        self.missing, self.zero, self.frozen = (source.missing, source.zero_poses,
+                                                source.repeats)
+        self.max_gap_s = source.max_gap_s
 
 
 def final_line(track: _Track) -> str:
@@ -113,6 +132,45 @@ def final_line(track: _Track) -> str:
     x, y, z = (float(v) for v in p.position_m)
     return (f"{track.name}: x={_num(x)} y={_num(y)} z={_num(z)} psi={_num(p.psi_rad)} "
             f"rate={_num(track.rate_hz())}")
+
+
+def _ms(seconds: float) -> str:
+    return "—" if not math.isfinite(seconds) else f"{seconds * 1e3:.0f}"
+
+
+def quality_line(result: CheckResult) -> str:
+    """``stream: missing=… zero=… frozen=… max_age_ms=… max_gap_ms=…`` of the controlled
+    object (``—``: no pose, or only one)."""
+    main = result.tracks[0]
+    gap = result.max_gap_s if result.max_gap_s > 0 else math.nan
+    return (f"stream: missing={result.missing} zero={result.zero} frozen={result.frozen} "
+            f"max_age_ms={_ms(main.max_age_s)} max_gap_ms={_ms(gap)}")
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def result_json(result: CheckResult, seconds: float) -> dict:
+    """The check as JSON: every object's pose, rate and largest age; the stream's counts;
+    the axis test (``ok``, ``wrong sign``, ``not done``). Units in the names; null where
+    there is no value."""
+    objects = []
+    for tr in result.tracks:
+        p = tr.pose
+        pose = {} if p is None else {
+            "x_m": float(p.position_m[0]), "y_m": float(p.position_m[1]),
+            "z_m": float(p.position_m[2]), "psi_rad": float(p.psi_rad)}
+        objects.append({"name": tr.name, "seen": p is not None, **pose,
+                        "rate_hz": tr.rate_hz(), "fresh_poses": tr.count - (tr.count0 or 0),
+                        "max_age_ms": _finite(tr.max_age_s * 1e3)})
+    marks = {"✔": "ok", "✘": "wrong sign", "·": "not done"}
+    return {"source": result.where, "seconds": seconds, "objects": objects,
+            "stream_objects": list(result.names_seen),
+            "missing_frames": result.missing, "zero_frames": result.zero,
+            "frozen_frames": result.frozen,
+            "max_gap_ms": _finite(result.max_gap_s * 1e3) if result.max_gap_s > 0 else None,
+            "axis_test": {a: marks[result.axes.mark(a)] for a in _AXES}}
 
 
 def _table(result: CheckResult, source, now_s: float, seconds_left: float):
@@ -146,7 +204,7 @@ def run_check(source, names: list[str], seconds: float, *, live=None,
             now = clock()
             for k, tr in enumerate(tracks):
                 tr.sample(source, now, main=k == 0)
-            result.names_seen = source.names_seen
+            result.read_counts(source)
             if tracks[0].pose is not None:
                 result.axes.update(tracks[0].pose.position_m, tracks[0].pose.psi_rad)
             if live is not None:
@@ -167,10 +225,13 @@ def register(app: typer.Typer) -> None:
         seconds: float = typer.Option(10.0, "--seconds", min=0.1, max=3600.0, help="How long to watch (s)."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before validation: dotted.path=value (repeatable)."),
         live: Optional[bool] = typer.Option(None, "--live/--no-live", help="Live table and axis test (default: on a terminal)."),
+        as_json: bool = typer.Option(False, "--json", help="Print the result as one JSON object (poses, rates, ages, the stream's counts, the axis test) instead of lines."),
     ) -> None:
         """Check the motion capture before a flight: a live table of the tracked objects (rate,
         age, occlusion), the hand-carry axis test (+x, +y, +z, yaw CCW → ✔), and one final line
-        per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>."""
+        per object: <name>: x=<m> y=<m> z=<m> psi=<rad> rate=<Hz>, then the stream's counts
+        (stream: missing= zero= frozen= max_age_ms= max_gap_ms=) and the axis test; --json
+        for all of it as JSON."""
         from ardrone_nmpc.config.schema import ConfigError, tracked_object
         from ardrone_nmpc.config.io import load_config
         from ardrone_nmpc.links.mocap_factory import open_mocap_source
@@ -192,9 +253,13 @@ def register(app: typer.Typer) -> None:
         except (RuntimeError, OSError, ValueError) as err:  # connect, missing extra, bind
             typer.echo(f"error: {err}", err=True)
             raise typer.Exit(code=1)
-        for tr in result.tracks:
-            typer.echo(final_line(tr))
-        typer.echo(result.axes.line())
+        if as_json:
+            typer.echo(json.dumps(result_json(result, seconds), allow_nan=False))
+        else:
+            for tr in result.tracks:
+                typer.echo(final_line(tr))
+            typer.echo(quality_line(result))
+            typer.echo(result.axes.line())
         if result.tracks[0].pose is None:
             seen = ", ".join(result.names_seen) or "no objects"
             typer.echo(f"error: object {names[0]!r} not seen from {result.where} in "

@@ -8,13 +8,14 @@ typo never silently becomes a default.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional, Union
 
 import typer
 
-__all__ = ["MAX_JOBS", "PORT_MAX", "finite", "non_empty", "output_file", "port"]
+__all__ = ["DEPRECATED_SPELLINGS", "MAX_JOBS", "PORT_MAX", "choice", "finite",
+           "modern_spellings", "new_output_file", "non_empty", "output_file", "port"]
 
 PORT_MAX = 65535
 #: Upper bound of ``sweep --jobs`` (processes started at once).
@@ -71,3 +72,74 @@ def output_file(value: Optional[Path]) -> Optional[Path]:
                 raise typer.BadParameter(f"{parent} is not a directory")
             break
     return value
+
+
+def new_output_file(value: Optional[Path]) -> Optional[Path]:
+    """:func:`output_file` that must not exist yet (a recording never replaces a file)."""
+    value = output_file(value)
+    if value is not None and value.exists():
+        raise typer.BadParameter(f"{value} exists; give a new file name")
+    return value
+
+
+Values = Union[Iterable[str], Callable[[], Iterable[str]]]
+
+
+def choice(values: Values, *, many: bool = False) -> dict[str, Any]:
+    """``typer.Option`` keywords for a closed set of values: a callback refusing any other
+    (exit 2, naming the choices) and shell completion of them. ``many``: a comma-separated
+    list of them. ``values`` may be a function (called when the option is used: a list that
+    lives in a module too heavy to import at start-up)."""
+
+    def known() -> list[str]:
+        return list(values() if callable(values) else values)
+
+    def check(value: Optional[str]) -> Optional[str]:
+        if value is None:
+            return None
+        names = [n.strip() for n in value.split(",") if n.strip()] if many else [value]
+        bad = [n for n in names if n not in known()]
+        if bad or not names:
+            what = ", ".join(repr(n) for n in bad) or "(empty)"
+            raise typer.BadParameter(f"unknown {what}; choose {'from ' if many else ''}"
+                                     f"{', '.join(known())}")
+        return value
+
+    def complete(incomplete: str) -> list[str]:
+        head, _, last = incomplete.rpartition(",") if many else ("", "", incomplete)
+        prefix = head + "," if head else ""
+        return [prefix + v for v in known() if v.startswith(last)]
+
+    return {"callback": check, "autocompletion": complete}
+
+
+#: Old spellings of options, per command, still accepted (with a warning on stderr): what a
+#: command writes is ``-o/--output`` everywhere (a file, or the folder it fills); where new
+#: run directories are created is ``--log-dir``.
+DEPRECATED_SPELLINGS: dict[str, dict[str, str]] = {
+    "reproduce": {"--out": "--output"},
+    "sweep": {"--out": "--output"},
+    "tune": {"--out": "--output"},
+}
+
+
+def modern_spellings(command: str, args: list[str], warn: Callable[[str], None]) -> list[str]:
+    """``args`` of ``command`` with each deprecated option spelling (``--out DIR``,
+    ``--out=DIR``) replaced by the current one, and ``warn(line)`` once per spelling used.
+    Nothing after ``--`` is touched."""
+    table = DEPRECATED_SPELLINGS.get(command, {})
+    out: list[str] = []
+    warned: set[str] = set()
+    for k, arg in enumerate(args):
+        if arg == "--":
+            return out + args[k:]
+        name, eq, value = arg.partition("=")
+        if name in table:
+            if name not in warned:
+                warned.add(name)
+                new = table[name]
+                warn(f"warning: {name} is deprecated; use "
+                     f"{'-o/--output' if new == '--output' else new}")
+            arg = table[name] + eq + value
+        out.append(arg)
+    return out

@@ -21,6 +21,7 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
 from rich.table import Table
 
 from ardrone_nmpc.cli.console import stdout_console
+from ardrone_nmpc.cli.narrow import fit
 from ardrone_nmpc.config.schema import ConfigError
 from ardrone_nmpc.errors import EXIT_INTERRUPTED, UserError
 from ardrone_nmpc.experiments.sweep import (DIVERGE_M, PARTIAL_DIR, RANK_METRICS, STATUSES, SWEEP_FILE, Case,
@@ -85,11 +86,11 @@ def check_options(*, engine: str, scheduler: str | None, rank_by: str) -> None:
 
 def _out_dir(out_dir: Path) -> Path:
     if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+        raise ConfigError(f"--output {out_dir}: exists and is not a directory")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:  # under a file, on a read-only disk, no permission
-        raise ConfigError(f"--out {out_dir}: cannot create the directory: "
+        raise ConfigError(f"--output {out_dir}: cannot create the directory: "
                           f"{err.strerror or err}") from None
     return out_dir
 
@@ -259,8 +260,8 @@ def run_sweep_command(*, config: Path, grid: Sequence[str], overrides: Sequence[
     title = (f"{cases[0].config.name}: {len(rows)} of {len(cases)} cases, best "
              f"{RANK_METRICS[rank_by]} first")
     if rows:
-        console.print(render_ranked(rows, params=params, rank_by=rank_by, top=top,
-                                    title=title))
+        console.print(fit(render_ranked(rows, params=params, rank_by=rank_by, top=top,
+                                        title=title), console))
     console.print(f"{outcome.total} cases: {outcome.flown} flown, {outcome.resumed} resumed"
                   f"{' (interrupted)' if outcome.interrupted else ''}; "
                   + ", ".join(f"{n} {s}" for s, n in outcome.counts.items())

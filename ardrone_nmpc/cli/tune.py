@@ -2,7 +2,7 @@
 
 The parts are in :mod:`ardrone_nmpc.experiments.tune` (space, objective, engines, study);
 this module drives them: options, the progress bar (stderr), the ranked table (stdout),
-``trials.csv`` and ``best.yaml`` in ``--out``. :func:`register` adds the command to the app.
+``trials.csv`` and ``best.yaml`` in ``-o/--output``. :func:`register` adds the command to the app.
 """
 
 from __future__ import annotations
@@ -124,6 +124,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)
 
+    from ardrone_nmpc.cli.narrow import fit
+
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.config.schema import ConfigError
     from ardrone_nmpc.experiments.tune import engine as eng
@@ -139,13 +141,13 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds, variants=_variants(variants))
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir}: exists and is not a directory")
+        raise ConfigError(f"--output {out_dir}: exists and is not a directory")
     out_dir.mkdir(parents=True, exist_ok=True)
     base_values = {n: p.base for n, p in space.items() if p.contains(p.base)}
     sig = st.signature(cfg=cfg, space=space, scenarios=scen, objective=obj)
     if resume is False and (out_dir / st.STUDY_FILE).is_file():  # before any start-up
-        raise ConfigError(f"--out {out_dir}: holds a study already ({st.STUDY_FILE}); "
-                          "--resume continues it, or choose another --out")
+        raise ConfigError(f"--output {out_dir}: holds a study already ({st.STUDY_FILE}); "
+                          "--resume continues it, or choose another --output")
     # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
     try:
         runner = eng.make_engine(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler)
@@ -215,7 +217,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     wall_s = time.perf_counter() - wall0
     done = st.finished_trials(study)
     if done:
-        console.print(_ranked_table(study, space=space, scenarios=scen, top=top))
+        console.print(fit(_ranked_table(study, space=space, scenarios=scen, top=top), console))
     console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
                   f"{len(scen)} scenarios; {wall_s:.1f} s wall, {sim_s:.0f} s simulated "
                   f"({sim_s / wall_s if wall_s > 0 else math.nan:.0f}× real time; {engine}, "
@@ -228,22 +230,22 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
 def register(app: typer.Typer) -> None:
     """Add the ``tune`` command to ``app`` (errors go to the app's one handler,
     :mod:`ardrone_nmpc.cli.handler`)."""
-    from ardrone_nmpc.cli.options import MAX_JOBS, non_empty
+    from ardrone_nmpc.cli.options import MAX_JOBS, choice, non_empty
 
     @app.command()
     def tune(
         config: Path = typer.Argument(..., help="Experiment YAML file (its values are the search's centre)."),
         trials: int = typer.Option(40, "--trials", min=1, help="Trials the study should hold when done (with --resume: in total)."),
         jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=MAX_JOBS, help="Trials flown at once (default: the CPU count); 1 = in this process."),
-        engine: str = typer.Option("local", "--engine", help="'local': a process pool on this machine; 'dask': a Dask cluster."),
+        engine: str = typer.Option("local", "--engine", **choice(("local", "dask")), help="'local': a process pool on this machine; 'dask': a Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
+        out: Optional[Path] = typer.Option(None, "-o", "--output", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
         seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
         space: Optional[Path] = typer.Option(None, "--space", help="Search-space YAML (default: q and r log-uniform ×0.1…×10 of the config's)."),
         objective: Optional[str] = typer.Option(None, "--objective", help="Preset (default, step, tracking) and/or term=weight items: tracking, settling, overshoot, effort, solver, supervisor, abort, worst."),
-        resume: bool = typer.Option(False, "--resume", help="Continue the study in --out (finished trials are not flown again)."),
+        resume: bool = typer.Option(False, "--resume", help="Continue the study in --output (finished trials are not flown again)."),
         keep_runs: bool = typer.Option(False, "--keep-runs", help="Write every flight's run directory under DIR/runs/ (default: metrics only)."),
         top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),

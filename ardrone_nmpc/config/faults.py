@@ -58,7 +58,8 @@ class DisorderFault(_FaultWindow):
 
 
 class AtLossFault(_FaultWindow):
-    """AT datagrams lost before the drone: it keeps flying its last command."""
+    """AT datagrams lost before the drone: it flies its last command until the firmware's
+    watchdog, 250 ms after the last one that arrived, drops it for hover."""
 
     probability: float = Field(1.0, gt=0, le=1, description="Chance each command is lost.")
 

@@ -1,13 +1,17 @@
 """``export RUN``: a run directory as one file the robotics viewers open.
 
-* ``mcap`` (the ``mcap`` extra): the channels of :mod:`ardrone_nmpc.runs.channels` — ``/log``
-  (one message per row), ``/events``, ``/config``, ``/pose`` and ``/reference``
-  (``foxglove.PoseInFrame``), ``/flight_path`` and ``/reference_path`` (whole, once) —
-  JSON-encoded, each with its JSON schema, for Foxglove, PlotJuggler or the ``mcap`` CLI. A
-  message's log time is its run time ``t_s`` (an event's ``t_exp_s`` when it has one) on an
-  epoch that puts the run's first row at the creation time recorded in ``config.yaml``.
-* ``parquet`` (the ``parquet`` extra, pyarrow): the log as one table (float64 and string
-  columns), the events (JSON lines) and ``config.yaml`` in the file's key-value metadata.
+* ``mcap`` (the ``mcap`` extra): the channels of :mod:`ardrone_nmpc.runs.channels`, written
+  by foxglove-sdk — ``/log`` (one message per row), ``/events``, ``/config`` (JSON, each with
+  its JSON schema), ``/pose`` and ``/reference`` (``foxglove.PoseInFrame``), ``/tf``
+  (``foxglove.FrameTransform``), ``/flight_path`` and ``/reference_path`` (whole, once) — for
+  Foxglove, PlotJuggler or the ``mcap`` CLI. A message's log time is its experiment time
+  ``t_s`` (rows and events alike; an event of a flight that never started, ``t_s`` NaN, at the
+  origin) on an epoch that puts the run's first row (or an earlier first event) at the
+  creation time recorded in ``config.yaml``.
+* ``parquet`` (the ``parquet`` extra, pyarrow): the log as one typed table — integer counts,
+  categorical labels, saturation flags as booleans, an absolute UTC ``time_utc``, every
+  field's unit in its metadata (:mod:`ardrone_nmpc.runs.table_schema`) — with the events
+  (JSON lines) and ``config.yaml`` in the file's key-value metadata.
 
 Both keep every float bit for bit (``read_mcap`` reads an MCAP file back).
 """
@@ -25,7 +29,9 @@ import numpy as np
 from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.core.extras import import_extra
 from ardrone_nmpc.runs import channels as ch
-from ardrone_nmpc.runs.rundir import CONFIG_FILE, STRING_COLUMNS, RunData, read_run
+from ardrone_nmpc.runs import foxglove_channels as fox
+from ardrone_nmpc.runs.table_schema import log_table
+from ardrone_nmpc.runs.rundir import CONFIG_FILE, RunData, read_run
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "export_run", "write_mcap", "write_parquet",
            "read_mcap", "McapContents", "run_rows"]
@@ -65,72 +71,87 @@ def _origin_ns(run: RunData) -> int:
 
 
 def write_mcap(run: RunData, out: Path) -> int:
-    """Write ``run`` as MCAP to ``out``; return the number of messages."""
-    writer_mod = import_extra("mcap.writer", "mcap", "export --format mcap")
+    """Write ``run`` as MCAP to ``out`` (foxglove-sdk's writer); return the number of
+    messages."""
+    fox.sdk("export --format mcap", extra="mcap")
     origin = _origin_ns(run)
-    messages: list[tuple[int, int, str, bytes]] = []  # (log ns, order, topic, data)
+    messages: list[tuple[int, int, str, Any]] = []  # (log ns, order, topic, payload)
     paths = ch.PathBuilder()
     for row in run_rows(run):
         t_ns = ch.time_ns(origin, row["t_s"])
-        for topic, data in ch.row_messages(row, t_ns, paths):
+        for topic, data in ch.row_messages(row, paths):
             messages.append((t_ns, len(messages), topic, data))
-    for event in run.events:  # a real flight's loop events carry experiment time apart
-        t = event.get("t_exp_s", event.get("t_s"))
+    for event in run.events:  # experiment time, as the rows (read_run moves older runs)
+        t = event.get("t_s")
         t_ns = ch.time_ns(origin, float(t) if isinstance(t, (int, float)) else float("nan"))
         messages.append((t_ns, len(messages), ch.TOPIC_EVENTS, ch.event_message(event)))
     config = ch.config_message(config_to_dict(run.config), seed=run.seed, version=run.version)
     t0_ns = ch.time_ns(origin, float(run.columns["t_s"][0]) if run.n_rows else 0.0)
     messages.append((t0_ns, -2, ch.TOPIC_CONFIG, config))
-    for topic, data in paths.messages(t0_ns):   # whole paths, shown from the start
-        messages.append((t0_ns, -1, topic, data))
-    messages.sort()
+    for topic, poses in paths.messages():   # whole paths, shown from the start
+        messages.append((t0_ns, -1, topic, poses))
+    messages.sort(key=lambda m: m[:2])
     with open(out, "wb") as stream:
-        writer = writer_mod.Writer(stream)
-        writer.start(profile="", library="ardrone-nmpc")
-        ids = {}
-        for topic, (name, schema) in ch.SCHEMAS.items():
-            schema_id = writer.register_schema(name=name, encoding="jsonschema", data=schema)
-            ids[topic] = writer.register_channel(topic=topic, message_encoding="json",
-                                                 schema_id=schema_id)
-        for seq, (t_ns, _, topic, data) in enumerate(messages):
-            writer.add_message(channel_id=ids[topic], log_time=t_ns, publish_time=t_ns,
-                               data=data, sequence=seq & 0xFFFFFFFF)
-        writer.finish()
-    return len(messages)
+        return fox.write_mcap_messages(stream, ((t, topic, data) for t, _, topic, data in messages))
 
 
 @dataclass
 class McapContents:
-    """An MCAP file of :func:`write_mcap` read back: messages per topic, in file order."""
+    """An MCAP file of :func:`write_mcap` read back: messages per topic, in file order; the
+    typed (protobuf) messages as plain dicts with the schema's field names."""
 
     rows: list[dict[str, Any]] = field(default_factory=list)
     row_log_times_ns: list[int] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
+    event_log_times_ns: list[int] = field(default_factory=list)
     config: dict[str, Any] | None = None
+    n_configs: int = 0
     poses: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     schemas: dict[str, str] = field(default_factory=dict)   # topic → schema name
+    encodings: dict[str, str] = field(default_factory=dict)   # topic → message encoding
+
+
+def _as_dict(message) -> dict[str, Any]:
+    """A decoded protobuf message as a dict of its fields (all of them, zeros included)."""
+    out: dict[str, Any] = {}
+    for fd in message.DESCRIPTOR.fields:
+        value = getattr(message, fd.name)
+        if fd.message_type is not None:   # a message, or a repeated one (no DESCRIPTOR)
+            value = (_as_dict(value) if hasattr(value, "DESCRIPTOR")
+                     else [_as_dict(v) for v in value])
+        out[fd.name] = value
+    return out
 
 
 def read_mcap(path: Path) -> McapContents:
-    """Read an exported MCAP file with the ``mcap`` library."""
+    """Read an exported or recorded MCAP file with the ``mcap`` library (protobuf messages
+    through ``mcap-protobuf-support``)."""
     import json
 
     reader_mod = import_extra("mcap.reader", "mcap", "reading MCAP")
+    decoder_mod = import_extra("mcap_protobuf.decoder", "mcap", "reading MCAP")
     out = McapContents()
+    factory, decoders = decoder_mod.DecoderFactory(), {}
     with open(path, "rb") as stream:
         reader = reader_mod.make_reader(stream)
         for schema, channel, message in reader.iter_messages(log_time_order=False):
             topic = channel.topic
             out.schemas[topic] = schema.name if schema is not None else ""
+            out.encodings[topic] = channel.message_encoding
             if topic == ch.TOPIC_LOG:
                 out.rows.append(ch.decode_row(message.data))
                 out.row_log_times_ns.append(message.log_time)
             elif topic == ch.TOPIC_EVENTS:
                 out.events.append(json.loads(message.data))
+                out.event_log_times_ns.append(message.log_time)
             elif topic == ch.TOPIC_CONFIG:
                 out.config = json.loads(message.data)
+                out.n_configs += 1
             else:
-                out.poses.setdefault(topic, []).append(json.loads(message.data))
+                if channel.id not in decoders:
+                    decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+                decoded = decoders[channel.id](message.data)
+                out.poses.setdefault(topic, []).append(_as_dict(decoded))
     return out
 
 
@@ -138,15 +159,11 @@ def write_parquet(run: RunData, out: Path) -> int:
     """Write the log of ``run`` as a Parquet table to ``out``; return the number of rows."""
     pa = import_extra("pyarrow", "parquet", "export --format parquet")
     pq = import_extra("pyarrow.parquet", "parquet", "export --format parquet")
-    arrays, names = [], []
-    for name, values in run.columns.items():
-        arrays.append(pa.array(values.tolist(), type=pa.string()) if name in STRING_COLUMNS
-                      else pa.array(np.asarray(values, dtype=np.float64), type=pa.float64()))
-        names.append(name)
+    table = log_table(pa, run, _origin_ns(run))   # typed columns, units (runs/table_schema)
     events = b"\n".join(ch.event_message(e) for e in run.events)
     config = (run.path / CONFIG_FILE).read_bytes()
-    table = pa.Table.from_arrays(arrays, names=names).replace_schema_metadata(
-        {PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
+    table = table.replace_schema_metadata(
+        {**table.schema.metadata, PARQUET_EVENTS_KEY: events, PARQUET_CONFIG_KEY: config})
     pq.write_table(table, out)
     return table.num_rows
 

@@ -1,11 +1,12 @@
 """Fly a config into a run directory, then summarise it: the one recording of every caller.
 
 ``simulate``, ``sweep``, ``faults`` and ``reproduce`` fly the lockstep simulation through
-:func:`record_lockstep`; ``replay --rerun`` records its recomputed ticks through
-:func:`record`. A run directory's ``summary.csv`` is written last
-(:func:`~ardrone_nmpc.runs.summary.write_run_summary`, also used by the real-time flight),
-so its presence marks a recording that finished. A flight that raises leaves its partial
-run directory with a final ``exception`` event and no ``summary.csv``.
+:func:`record_lockstep`; ``fly`` records a real-time flight through :func:`record`
+(:func:`~ardrone_nmpc.experiments.flight.run_flight`); ``replay --rerun`` records its
+recomputed ticks through :func:`record`. A run directory's ``summary.csv`` is written last
+(:func:`~ardrone_nmpc.runs.summary.write_run_summary`), so its presence marks a recording
+that finished. A flight that raises leaves its partial run directory with a final
+``exception`` event and no ``summary.csv`` (``fly`` summarises it all the same).
 
 The simulation and the summary are imported when a recording starts: ``sweep`` (and
 ``plot``, through the sweep table) import this module without loading the solver kernels.
@@ -68,13 +69,16 @@ def one_line(err: BaseException) -> str:
 
 
 def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
-           fly: Callable[[RunRecorder], T], catch: bool = False) -> Recording[T]:
+           fly: Callable[[RunRecorder], T], catch: bool = False,
+           summarise_failed: Callable[[Path], None] | None = None) -> Recording[T]:
     """Create a run directory for ``cfg`` under ``log_dir``, run ``fly(recorder)`` into it,
     then write its ``summary.csv``.
 
     If ``fly`` raises (an ``Exception``), the :data:`FAILED_EVENT` ends ``events.jsonl``
-    (``t_s`` NaN), no summary is written, and the exception propagates — or, with ``catch``,
-    comes back as :attr:`Recording.error`.
+    (``t_s`` NaN), no summary is written — unless ``summarise_failed(path)`` writes one: a
+    real flight's run directory is complete however it ended — and the exception propagates
+    (any ``BaseException``: a flight interrupted by a signal too) — or, with ``catch``, comes
+    back as :attr:`Recording.error`.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
@@ -82,9 +86,13 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
         try:
             result = fly(recorder)
-        except Exception as err:
-            recorder.event(math.nan, FAILED_EVENT, error=one_line(err))
-            if not catch:
+        except BaseException as err:
+            if isinstance(err, Exception):
+                recorder.event(math.nan, FAILED_EVENT, error=one_line(err))
+            recorder.close()
+            if summarise_failed is not None:
+                summarise_failed(recorder.path)
+            if not catch or not isinstance(err, Exception):
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
         wall_s = time.perf_counter() - wall0

@@ -3,7 +3,8 @@
 The same :class:`~ardrone_nmpc.runtime.tick.Tick` serves ``fly``, ``simulate`` and
 ``replay --rerun``; only the clock and the links change. Here the clock is manual — the
 experiment clock of the log itself (``t_s``) — and the "links" are the logged measurements
-(``log.csv`` columns written by :func:`~ardrone_nmpc.runtime.tick.measurement_columns`):
+(``log.csv`` columns written by :func:`~ardrone_nmpc.runs.log_columns.measurement_columns`,
+decoded by :func:`~ardrone_nmpc.runs.log_columns.tick_inputs_of_rows`):
 
 * the mocap pose: ``x_m, y_m, z_m, psi_rad`` (the pose's position and ψ, exactly), its own time
   ``mocap_t_s`` and its age ``mocap_age_ms`` at the tick;
@@ -34,17 +35,22 @@ from typing import Callable
 
 import numpy as np
 
+from ardrone_nmpc.control.diverging import diverging_wrapper
 from ardrone_nmpc.core.angles import wrap_angle_rad
-from ardrone_nmpc.core.types import IX_PSI, FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.core.types import IX_PSI, MocapPose
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.reference.experiment import experiment_trajectory
+from ardrone_nmpc.runs.log_columns import (
+    RERUN_COLUMNS, SAME_POSE_TOLERANCE_S, ReplayError, pose_of_row, tick_inputs_of_rows,
+    unlogged_pose,
+)
 from ardrone_nmpc.runs.rundir import LOG_FILE, RunData, format_number
 from ardrone_nmpc.runs.window import experiment_rows
 from ardrone_nmpc.runtime.schedule import phase, write_events
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = [
     "CMD_COLUMNS", "COMPARED_COLUMNS", "INPUT_COLUMNS", "RERUN_COLUMNS", "RERUN_FILE",
@@ -53,28 +59,13 @@ __all__ = [
     "rows_to_inputs", "write_rerun_csv",
 ]
 
-#: Columns a log needs beyond the required ones (docs/design.md) for ``--rerun`` (added with
-#: the raw measurements).
-RERUN_COLUMNS: tuple[str, ...] = ("mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps",
-                                  "nav_mode")
 CMD_COLUMNS = ("cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac")
 INPUT_COLUMNS = ("u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps")
 COMPARED_COLUMNS = CMD_COLUMNS + INPUT_COLUMNS
 #: The per-tick differences written next to the recomputed ``log.csv``.
 RERUN_FILE = "rerun.csv"
 
-#: Two rows whose ``mocap_t_s`` differ by less than this saw the same pose: distinct poses are
-#: a mocap frame (≥ 1 ms) apart. Logs whose ``mocap_t_s`` is the pose stamp moved to the
-#: experiment clock by a per-tick offset (written since 5b5377e) can show one pose a few ulps
-#: apart on two ticks in simulation — and, in ``fly``, by the tick's lateness (≈ ms), which
-#: no tolerance can absorb: such logs do not re-run exactly (see the report on the issue).
-SAME_POSE_TOLERANCE_S = 1e-9
-
 _STATE_COLUMNS = ("x_m", "vx_mps", "y_m", "vy_mps", "z_m", "vz_mps", "psi_rad")
-
-
-class ReplayError(UserError, ValueError):
-    """A run that cannot be replayed as asked (one line for the user)."""
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -105,67 +96,9 @@ def require_rerun_columns(*, run: RunData) -> None:
                           f"it can be re-summarised, not re-run")
 
 
-def _pose_of_row(cols: dict, i: int, previous: MocapPose | None) -> MocapPose | None:
-    """The pose row ``i`` saw: the previous one again, a new one, or None before the first.
-
-    A new pose without a logged position (a stale-mocap hover row of a tick that did not
-    estimate) never reached the estimators in the flight, so the previous pose stands in — its
-    time stays the estimators' last sample time, as it did in the flight — and only the
-    row's age (the supervisor's input) moves on. NaN position if there is no previous pose.
-    """
-    t_pose = float(cols["mocap_t_s"][i])
-    if math.isnan(t_pose):
-        return None
-    x, y, z, psi = (float(cols[c][i]) for c in ("x_m", "y_m", "z_m", "psi_rad"))
-    logged = not math.isnan(x)
-    if previous is not None:
-        if abs(t_pose - previous.t_s) <= SAME_POSE_TOLERANCE_S:
-            if not logged or not math.isnan(previous.position_m[0]):
-                return previous  # the same object: the tick recognises it by its time
-            t_pose = previous.t_s  # first logged sighting of a pose first seen unlogged
-        elif not logged:
-            return previous
-    position = np.array([x, y, z])
-    rotation = np.array([0.0, 0.0, psi])  # roll and pitch are not logged (nor used)
-    position.setflags(write=False)
-    rotation.setflags(write=False)
-    return MocapPose(t_s=t_pose, position_m=position, rotation_xyz_rad=rotation, psi_rad=psi)
-
-
-def _unlogged(cols: dict, i: int, pose: MocapPose | None) -> bool:
-    """Row ``i`` saw a pose the replay could not rebuild (see :func:`_pose_of_row`)."""
-    if pose is None:
-        return False
-    return (math.isnan(pose.position_m[0])
-            or abs(float(cols["mocap_t_s"][i]) - pose.t_s) > SAME_POSE_TOLERANCE_S)
-
-
-def _navdata_of_row(cols: dict, i: int, rx_t_s: float) -> NavdataSample | None:
-    """The navdata sample row ``i`` saw (None before the first): logged fields, NaN others."""
-    mode = str(cols["nav_mode"][i])
-    if not mode or not math.isfinite(rx_t_s):
-        return None
-    try:
-        flight_mode = FlightMode(mode)
-    except ValueError:
-        raise ReplayError(f"log.csv row {i + 2}: nav_mode {mode!r} is not a flight mode "
-                          f"({', '.join(m.value for m in FlightMode)})") from None
-    nan = math.nan
-    # navdata attitude is not among the measurement columns (yet): taken when a log has it
-    roll, pitch = (float(cols[c][i]) if c in cols else nan
-                   for c in ("nav_roll_deg", "nav_pitch_deg"))
-    return NavdataSample(t_s=rx_t_s, mode=flight_mode, battery_pct=float(cols["battery_pct"][i]),
-                         roll_deg=roll, pitch_deg=pitch, yaw_deg=nan, altitude_m=nan,
-                         vx_body_mps=float(cols["nav_vx_body_mps"][i]),
-                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan)
-
-
 def rows_to_inputs(*, run: RunData) -> list[TickInputs]:
-    """The :class:`TickInputs` of every logged tick, on the experiment clock.
-
-    The tick's clock is the row's ``t_s`` (so the tick's clock offset is 0 and the pose keeps
-    its logged ``mocap_t_s``); receipt times are ``t_s − age``. A pose seen on several ticks
-    is one object (the estimators update on a *new* pose only).
+    """The :class:`TickInputs` of every logged tick, on the experiment clock
+    (:func:`~ardrone_nmpc.runs.log_columns.tick_inputs_of_rows`).
 
     Raises
     ------
@@ -173,31 +106,7 @@ def rows_to_inputs(*, run: RunData) -> list[TickInputs]:
         The log lacks :data:`RERUN_COLUMNS`, or a ``nav_mode`` cell is not a flight mode.
     """
     require_rerun_columns(run=run)
-    cols = run.columns
-    inputs: list[TickInputs] = []
-    pose: MocapPose | None = None
-    for i in range(run.n_rows):
-        t = float(cols["t_s"][i])
-        pose = _pose_of_row(cols, i, pose)
-        mocap_age_s = float(cols["mocap_age_ms"][i]) * 1e-3
-        nav_age_s = float(cols["navdata_age_ms"][i]) * 1e-3
-        pose_rx = t - mocap_age_s if pose is not None else -math.inf
-        nav_rx = t - nav_age_s if math.isfinite(nav_age_s) else -math.inf
-        target, target_rx = _target_of_row(cols, i)
-        inputs.append(TickInputs(t, pose, pose_rx, _navdata_of_row(cols, i, nav_rx), nav_rx,
-                                 target, target_rx))
-    return inputs
-
-
-def _target_of_row(cols, i: int) -> tuple[MocapPose | None, float]:
-    """The followed object's pose of row ``i`` (reference kind ``follow``), if logged."""
-    if "target_t_s" not in cols or not math.isfinite(float(cols["target_t_s"][i])):
-        return None, -math.inf
-    position = np.array([float(cols[c][i]) for c in ("target_x_m", "target_y_m", "target_z_m")])
-    psi = float(cols["target_psi_rad"][i])
-    pose = MocapPose(t_s=float(cols["target_t_s"][i]), position_m=position,
-                     rotation_xyz_rad=np.array([0.0, 0.0, psi]), psi_rad=psi)
-    return pose, float(cols["t_s"][i]) - float(cols["target_age_ms"][i]) * 1e-3
+    return tick_inputs_of_rows(run.columns, run.n_rows)
 
 
 # ----------------------------------------------------------------------------- rerun
@@ -341,7 +250,9 @@ def rerun(*, run: RunData, cfg, recorder=None,
     if not inputs:
         raise ReplayError(f"{run.path}: log.csv holds no ticks")
     trajectory = experiment_trajectory(cfg)
-    tick = Tick(cfg, trajectory)
+    # the run's injected solver divergence, as the simulating runner that flew it wrapped it
+    tick = Tick(cfg, trajectory,
+                wrap_solver=diverging_wrapper(FaultSchedule(cfg.faults).solver_divergence))
     logged_mode = run.columns["mode"]
     rows: list[dict] = []
     for k, inp in enumerate(inputs):
@@ -390,7 +301,7 @@ def _compare(*, run: RunData, cfg, trajectory, inputs: list[TickInputs],
     cost = _cost(cfg=cfg, trajectory=trajectory, t_s=t_s, states=states,
                  u_logged=np.column_stack([logged[c] for c in INPUT_COLUMNS]),
                  u_rerun=np.column_stack([recomputed[c] for c in INPUT_COLUMNS]))
-    unlogged = sum(1 for i, inp in enumerate(inputs) if _unlogged(cols, i, inp.pose))
+    unlogged = sum(1 for i, inp in enumerate(inputs) if unlogged_pose(cols, i, inp.pose))
     mode = np.array([str(row.get("mode", "")) for row in rows], dtype=object)
     return RerunResult(t_s=t_s, rows=rows, logged=logged, recomputed=recomputed, diff=diff,
                        max_abs_diff=max_abs, logged_mode=np.asarray(cols["mode"], dtype=object),
@@ -447,8 +358,8 @@ def logged_poses(*, run: RunData) -> tuple[list[MocapPose], int]:
     unlogged_times: list[float] = []
     pose = None
     for i in range(run.n_rows):
-        new = _pose_of_row(cols, i, pose)
-        if _unlogged(cols, i, new):
+        new = pose_of_row(cols, i, pose)
+        if unlogged_pose(cols, i, new):
             t = float(cols["mocap_t_s"][i])
             if not unlogged_times or abs(t - unlogged_times[-1]) > SAME_POSE_TOLERANCE_S:
                 unlogged_times.append(t)

@@ -20,12 +20,40 @@ from ardrone_nmpc.links.drone_config import LinkError, check_positive as _check_
 from ardrone_nmpc.protocol.at import Ftrim, Pcmd, Ref
 from ardrone_nmpc.protocol.navdata import CtrlMajor, DroneState, Navdata
 
-__all__ = ["FlightCommands"]
+__all__ = ["FlightCommands", "TakeoffGuard"]
 
 _HOVER = Pcmd.hover()
 _FLYING_MAJORS = (int(CtrlMajor.FLYING), int(CtrlMajor.HOVERING))
 # landing in the SDK header (8) and in firmware 2.4 (9); either, after flight, means "going down"
 _SELF_LANDING_MAJORS = (int(CtrlMajor.TRANS_LANDING), int(CtrlMajor.TRANS_LOOPING))
+
+
+class TakeoffGuard:
+    """The one detection of a drone that lands or cuts its motors by itself while held in
+    take-off (module doc): fed each navdata packet's state bits and ctrl_state major, it says
+    what the drone showed — every client of a drone (this link, the lockstep simulation's)
+    asks it."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """A new take-off: nothing seen yet."""
+        self.seen_airborne = False   # since take-off: state bit 0 seen set
+        self.seen_flying = False     # since take-off: ctrl_state major 3/4 seen
+
+    def observe(self, state: DroneState, ctrl_major: int | None) -> str | None:
+        """What the drone did by itself, as ``"the drone <what>"`` completes it, or None."""
+        airborne = DroneState.FLY in state
+        self.seen_airborne |= airborne
+        self.seen_flying |= airborne and ctrl_major in _FLYING_MAJORS
+        if DroneState.EMERGENCY in state:
+            return "reported an emergency (state bit 31: motors cut)"
+        if self.seen_airborne and not airborne:
+            return "touched down (state bit 0 cleared)"
+        if self.seen_flying and ctrl_major in _SELF_LANDING_MAJORS:
+            return f"began to land (ctrl_state major {ctrl_major})"
+        return None
 
 
 class FlightCommands:
@@ -55,7 +83,7 @@ class FlightCommands:
             if self._state is not None and DroneState.EMERGENCY in self._state:
                 raise LinkError("take-off refused: the drone is in emergency (state bit 31); "
                                 "call reset_emergency() on the ground first")
-            self._seen_airborne = self._seen_flying = False
+            self._guard.reset()
             self._ref = Ref.takeoff()
             self._set_pcmd_locked(_HOVER, None)
             self._send_current_locked(raise_errors=True)
@@ -136,17 +164,9 @@ class FlightCommands:
         ref = self._ref
         if ref is None or not ref.is_takeoff or ref.is_emergency:
             return
-        major = packet.demo.ctrl_major if packet.demo is not None else None
-        airborne = DroneState.FLY in state
-        self._seen_airborne |= airborne
-        self._seen_flying |= airborne and major in _FLYING_MAJORS
-        if DroneState.EMERGENCY in state:
-            what = "reported an emergency (state bit 31: motors cut)"
-        elif self._seen_airborne and not airborne:
-            what = "touched down (state bit 0 cleared)"
-        elif self._seen_flying and major in _SELF_LANDING_MAJORS:
-            what = f"began to land (ctrl_state major {major})"
-        else:
+        what = self._guard.observe(state, packet.demo.ctrl_major
+                                   if packet.demo is not None else None)
+        if what is None:
             return
         ctrl = f"0x{packet.demo.ctrl_state:08x}" if packet.demo is not None else "none"
         with self._at_lock:

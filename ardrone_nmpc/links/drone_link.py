@@ -54,7 +54,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ardrone_nmpc.links.drone_commands import _FLYING_MAJORS, FlightCommands
+from ardrone_nmpc.links.drone_commands import _FLYING_MAJORS, FlightCommands, TakeoffGuard
 from ardrone_nmpc.protocol.config_text import CONTROL_PORT
 from ardrone_nmpc.links.drone_config import (
     ConfigHandshake,
@@ -252,8 +252,7 @@ class DroneLink(FlightCommands, ConfigHandshake):
         self._last_send_error: str | None = None
         self._takeoff_barred: str | None = None   # why the take-off bit may never go out again
         self._self_landing: str | None = None     # the drone landed/cut by itself: what it showed
-        self._seen_airborne = False               # since take-off: state bit 0 seen set
-        self._seen_flying = False                 # since take-off: ctrl_state major 3/4 seen
+        self._guard = TakeoffGuard()              # the drone landing by itself, since take-off
 
         # navdata side (guarded by _nav_cond)
         self._nav_cond = threading.Condition()

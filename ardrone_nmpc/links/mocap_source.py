@@ -97,6 +97,7 @@ class MocapSource:
         self._zero = 0
         self._repeats = 0
         self._poses = 0
+        self._max_gap_s = 0.0
         self._last_error: str | None = None
         self._others: dict[str, tuple[MocapPose, float]] = {}
         self._fresh_counts: dict[str, int] = {}
@@ -195,6 +196,11 @@ class MocapSource:
         return self._zero
 
     @property
+    def max_gap_s(self) -> float:
+        """The longest time between two fresh poses of the object (s; 0 before the second)."""
+        return self._max_gap_s
+
+    @property
     def repeats(self) -> int:
         """Frames ignored as a bit-identical repeat (``repeat_limit`` or more in a row)."""
         return self._repeats
@@ -234,6 +240,8 @@ class MocapSource:
             self._repeats += 1
             return
         record = mocap_pose_of(pose, t_s)
+        if math.isfinite(self._rx_t_s):
+            self._max_gap_s = max(self._max_gap_s, t_s - self._rx_t_s)
         with self._lock:
             self._pose = record
             self._rx_t_s = t_s

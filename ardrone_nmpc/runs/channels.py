@@ -1,20 +1,30 @@
-"""A run as Foxglove channels: topics, schemas and JSON messages, for the MCAP export and the
-live view alike (docs/live-view.md).
+"""A run as Foxglove channels: topics, what each message holds, and the JSON encoding of the
+run's own records — for the MCAP export, ``fly --mcap`` and the live view alike
+(docs/live-view.md; the foxglove-sdk side is :mod:`ardrone_nmpc.runs.foxglove_channels`).
 
-* ``/log`` — one message per log row; its fields are the log's columns.
-* ``/events`` — one message per event, the object of ``events.jsonl``.
-* ``/config`` — the resolved configuration (``{"seed", "version", "config"}``).
-* ``/pose``, ``/reference`` — ``foxglove.PoseInFrame`` in frame ``world``: the measured pose
-  and the reference at each row (ψ as a yaw quaternion; rows without a finite position
-  publish none);
-* ``/flight_path``, ``/reference_path`` — ``foxglove.PosesInFrame``: those poses as paths, so
-  Foxglove's 3-D panel draws the flight and the path it follows (the export writes each once,
-  whole, at the first row's time; the live view re-sends them as they grow).
+* ``/log`` — one message per log row; its fields are the log's columns (JSON).
+* ``/events`` — one message per event, the object of ``events.jsonl`` (JSON).
+* ``/config`` — the resolved configuration (``{"seed", "version", "config"}``, JSON).
+* ``/pose`` — ``foxglove.PoseInFrame`` in frame ``world``: the measured position (mocap) and
+  the full attitude — heading ψ from the mocap, roll and pitch from the drone's navdata
+  (yaw-only where a row has no navdata attitude); rows without a finite position publish none.
+* ``/reference`` — ``foxglove.PoseInFrame``: the reference position and heading.
+* ``/tf`` — ``foxglove.FrameTransform`` ``world → drone`` (the ``/pose``) and
+  ``world → reference`` per row, so Foxglove's 3-D panel has a drone frame to follow and to
+  attach a model to.
+* ``/flight_path``, ``/reference_path`` — ``foxglove.PosesInFrame``: those poses as paths (the
+  export writes each once, whole, at the first row's time; the live view re-sends them as they
+  grow).
 
 JSON has no NaN or infinity: NaN is written as ``null``, ±inf as ``±1e999`` — a number every
 JSON parser reads back as ±infinity (Python's ``json``, JavaScript's ``JSON.parse``). Other
 floats are written as ``repr`` (the shortest decimal that reads back to the same double,
 −0.0 included), so every float of a row round-trips bit for bit.
+
+Frames (docs/design.md §4): ``world`` is the mocap frame, x forward, y left, z up. The drone
+frame is its body with the same axes (x forward, y left, z up); its attitude is
+``Rz(ψ) · Ry(θ) · Rx(φ)`` with φ = navdata roll (> 0 right wing down) and θ = −navdata pitch
+(navdata pitch > 0 is nose up; about +y, > 0 is nose down).
 """
 
 from __future__ import annotations
@@ -22,68 +32,87 @@ from __future__ import annotations
 import enum
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import PurePath
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
 
 __all__ = ["TOPIC_LOG", "TOPIC_EVENTS", "TOPIC_CONFIG", "TOPIC_POSE", "TOPIC_REFERENCE",
-           "TOPIC_FLIGHT_PATH", "TOPIC_REFERENCE_PATH", "WORLD_FRAME", "SCHEMAS", "PathBuilder",
-           "json_bytes", "row_messages", "event_message", "config_message", "time_ns",
-           "decode_row"]
+           "TOPIC_TF", "TOPIC_FLIGHT_PATH", "TOPIC_REFERENCE_PATH", "WORLD_FRAME",
+           "DRONE_FRAME", "REFERENCE_FRAME", "JSON_SCHEMAS", "TOPICS", "Pose", "Transform",
+           "PathBuilder", "attitude_quaternion", "json_bytes", "row_messages",
+           "event_message", "config_message", "time_ns", "decode_row"]
 
 TOPIC_LOG = "/log"
 TOPIC_EVENTS = "/events"
 TOPIC_CONFIG = "/config"
 TOPIC_POSE = "/pose"
 TOPIC_REFERENCE = "/reference"
+TOPIC_TF = "/tf"
 TOPIC_FLIGHT_PATH = "/flight_path"
 TOPIC_REFERENCE_PATH = "/reference_path"
 WORLD_FRAME = "world"
-_POSE_FIELDS = {TOPIC_POSE: ("x_m", "y_m", "z_m", "psi_rad"),
-                TOPIC_REFERENCE: ("x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad")}
-_PATH_OF = {TOPIC_POSE: TOPIC_FLIGHT_PATH, TOPIC_REFERENCE: TOPIC_REFERENCE_PATH}
+DRONE_FRAME = "drone"
+REFERENCE_FRAME = "reference"
 
-_NUMBER = {"type": ["number", "null"]}
-_XYZ = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
-_POSE_IN_FRAME = {  # foxglove.PoseInFrame, JSON form (docs.foxglove.dev message schemas)
-    "title": "foxglove.PoseInFrame", "type": "object",
-    "properties": {
-        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"},
-                                                        "nsec": {"type": "integer"}}},
-        "frame_id": {"type": "string"},
-        "pose": {"type": "object", "properties": {
-            "position": _XYZ,
-            "orientation": {"type": "object",
-                            "properties": {k: {"type": "number"} for k in "xyzw"}}}},
-    },
-}
-_POSES_IN_FRAME = {  # foxglove.PosesInFrame, JSON form
-    "title": "foxglove.PosesInFrame", "type": "object",
-    "properties": {"timestamp": _POSE_IN_FRAME["properties"]["timestamp"],
-                   "frame_id": {"type": "string"},
-                   "poses": {"type": "array",
-                             "items": _POSE_IN_FRAME["properties"]["pose"]}},
-}
 _LOG_SCHEMA = {"title": "ardrone_nmpc.LogRow", "type": "object",
-               "properties": {c: {"type": "string"} if c in STRING_COLUMNS else _NUMBER
-                              for c in LOG_COLUMNS}}
+               "properties": {c: {"type": "string"} if c in STRING_COLUMNS
+                              else {"type": ["number", "null"]} for c in LOG_COLUMNS}}
 _EVENT_SCHEMA = {"title": "ardrone_nmpc.Event", "type": "object",
                  "properties": {"t_s": {"type": "number"}, "kind": {"type": "string"}},
                  "required": ["t_s", "kind"]}
 _CONFIG_SCHEMA = {"title": "ardrone_nmpc.Config", "type": "object"}
 
-#: topic → (schema name, JSON schema text); every channel's messages are JSON.
-SCHEMAS: dict[str, tuple[str, bytes]] = {
+#: topic → (schema name, JSON schema text) of the JSON channels (the run's own records).
+JSON_SCHEMAS: dict[str, tuple[str, bytes]] = {
     topic: (schema["title"], json.dumps(schema, separators=(",", ":")).encode())
     for topic, schema in ((TOPIC_LOG, _LOG_SCHEMA), (TOPIC_EVENTS, _EVENT_SCHEMA),
-                          (TOPIC_CONFIG, _CONFIG_SCHEMA), (TOPIC_POSE, _POSE_IN_FRAME),
-                          (TOPIC_REFERENCE, _POSE_IN_FRAME),
-                          (TOPIC_FLIGHT_PATH, _POSES_IN_FRAME),
-                          (TOPIC_REFERENCE_PATH, _POSES_IN_FRAME))}
+                          (TOPIC_CONFIG, _CONFIG_SCHEMA))}
+
+#: topic → schema name of every channel (the JSON ones and foxglove-sdk's typed ones).
+TOPICS: dict[str, str] = {
+    **{topic: name for topic, (name, _) in JSON_SCHEMAS.items()},
+    TOPIC_POSE: "foxglove.PoseInFrame", TOPIC_REFERENCE: "foxglove.PoseInFrame",
+    TOPIC_TF: "foxglove.FrameTransform",
+    TOPIC_FLIGHT_PATH: "foxglove.PosesInFrame", TOPIC_REFERENCE_PATH: "foxglove.PosesInFrame",
+}
+
+
+class Pose(NamedTuple):
+    """A position (m, frame ``world``) and an attitude quaternion (x, y, z, w)."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+    qx: float
+    qy: float
+    qz: float
+    qw: float
+
+
+class Transform(NamedTuple):
+    """``parent → child`` placed at ``pose`` (a ``foxglove.FrameTransform``)."""
+
+    parent: str
+    child: str
+    pose: Pose
+
+
+def attitude_quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float
+                        ) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of ``Rz(yaw) · Ry(pitch) · Rx(roll)`` (intrinsic
+    z-y'-x'' angles: the heading, then the pitch about the new y, then the roll about the
+    new x)."""
+    cr, sr = math.cos(0.5 * roll_rad), math.sin(0.5 * roll_rad)
+    cp, sp = math.cos(0.5 * pitch_rad), math.sin(0.5 * pitch_rad)
+    cy, sy = math.cos(0.5 * yaw_rad), math.sin(0.5 * yaw_rad)
+    return (sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
 
 
 def _float_text(v: float) -> str:
@@ -129,11 +158,6 @@ def time_ns(origin_ns: int, t_s: float) -> int:
     return max(origin_ns + round(t_s * 1e9), 0)
 
 
-def _stamp(log_ns: int) -> str:
-    sec, nsec = divmod(log_ns, 1_000_000_000)
-    return f'"timestamp":{{"sec":{sec},"nsec":{nsec}}},"frame_id":"{WORLD_FRAME}"'
-
-
 def _number(row: Mapping[str, Any], key: str) -> float:
     v = row.get(key)
     try:
@@ -142,44 +166,70 @@ def _number(row: Mapping[str, Any], key: str) -> float:
         return math.nan
 
 
-def _pose_text(row: Mapping[str, Any], keys: tuple[str, ...]) -> str | None:
-    """The ``foxglove.Pose`` JSON of a row's position and heading; None without a position."""
+def _pose(row: Mapping[str, Any], keys: tuple[str, str, str, str],
+          tilt: tuple[str, str] | None) -> Pose | None:
+    """The pose of a row's position, heading and (``tilt``: navdata roll and pitch columns,
+    degrees) attitude; None without a finite position. A missing angle counts as 0."""
     x, y, z, psi = (_number(row, k) for k in keys)
     if not all(math.isfinite(v) for v in (x, y, z)):
         return None
-    half = 0.5 * psi if math.isfinite(psi) else 0.0
-    return (f'{{"position":{{"x":{_text(x)},"y":{_text(y)},"z":{_text(z)}}},'
-            f'"orientation":{{"x":0.0,"y":0.0,"z":{_text(math.sin(half))},'
-            f'"w":{_text(math.cos(half))}}}}}')
+    roll = pitch = 0.0
+    if tilt is not None:
+        nav_roll, nav_pitch = (_number(row, k) for k in tilt)
+        if math.isfinite(nav_roll) and math.isfinite(nav_pitch):
+            roll, pitch = math.radians(nav_roll), -math.radians(nav_pitch)
+    return Pose(x, y, z, *attitude_quaternion(roll, pitch, psi if math.isfinite(psi) else 0.0))
 
 
-def row_messages(row: Mapping[str, Any], log_ns: int,
-                 paths: PathBuilder | None = None) -> list[tuple[str, bytes]]:
-    """``(topic, message)`` of one log row: ``/log`` always, ``/pose`` and ``/reference`` when
-    their position is finite; their poses are added to ``paths`` too."""
-    out = [(TOPIC_LOG, json_bytes(row))]
-    for topic, keys in _POSE_FIELDS.items():
-        pose = _pose_text(row, keys)
+def drone_pose(row: Mapping[str, Any]) -> Pose | None:
+    """The measured pose of a row: mocap position and ψ, navdata roll and pitch."""
+    return _pose(row, ("x_m", "y_m", "z_m", "psi_rad"), ("nav_roll_deg", "nav_pitch_deg"))
+
+
+def reference_pose(row: Mapping[str, Any]) -> Pose | None:
+    """The reference of a row: its position and heading (a reference has no tilt)."""
+    return _pose(row, ("x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad"), None)
+
+
+_POSES = ((TOPIC_POSE, drone_pose, DRONE_FRAME, TOPIC_FLIGHT_PATH),
+          (TOPIC_REFERENCE, reference_pose, REFERENCE_FRAME, TOPIC_REFERENCE_PATH))
+
+
+def row_messages(row: Mapping[str, Any],
+                 paths: PathBuilder | None = None) -> list[tuple[str, Any]]:
+    """``(topic, payload)`` of one log row: ``/log`` always (JSON bytes); ``/pose`` and
+    ``/reference`` (a :class:`Pose`) and their ``/tf`` (a :class:`Transform`) when the position
+    is finite. Their poses are added to ``paths`` too."""
+    out: list[tuple[str, Any]] = [(TOPIC_LOG, json_bytes(row))]
+    for topic, pose_of, frame, path_topic in _POSES:
+        pose = pose_of(row)
         if pose is not None:
-            out.append((topic, f'{{{_stamp(log_ns)},"pose":{pose}}}'.encode()))
+            out.append((topic, pose))
+            out.append((TOPIC_TF, Transform(WORLD_FRAME, frame, pose)))
             if paths is not None:
-                paths.poses[_PATH_OF[topic]].append(pose)
+                paths.add(path_topic, pose)
     return out
 
 
 class PathBuilder:
-    """The poses of ``/pose`` and ``/reference`` so far, as ``foxglove.PosesInFrame``
-    messages on ``/flight_path`` and ``/reference_path`` (the 3-D panel draws them as lines).
+    """The poses of ``/pose`` and ``/reference`` so far, as ``(topic, [pose, …])`` for
+    ``/flight_path`` and ``/reference_path`` (the 3-D panel draws them as lines).
 
-    ``every`` keeps one pose in so many (a live view re-sends the whole path)."""
+    ``every`` keeps one pose in so many (a live view re-sends the whole path); ``convert``
+    turns each :class:`Pose` into what the writer logs, once, as it is added (a live view
+    re-sends thousands of poses a second: converting them again each time would cost tens of
+    milliseconds)."""
 
-    def __init__(self, every: int = 1):
+    def __init__(self, every: int = 1, convert: Callable[[Pose], Any] | None = None):
         self.every = max(int(every), 1)
-        self.poses: dict[str, list[str]] = {TOPIC_FLIGHT_PATH: [], TOPIC_REFERENCE_PATH: []}
+        self.convert = convert
+        self.poses: dict[str, list[Any]] = {TOPIC_FLIGHT_PATH: [], TOPIC_REFERENCE_PATH: []}
 
-    def messages(self, log_ns: int) -> list[tuple[str, bytes]]:
-        return [(topic, f'{{{_stamp(log_ns)},"poses":[{",".join(poses[::self.every])}]}}'
-                 .encode()) for topic, poses in self.poses.items() if poses]
+    def add(self, topic: str, pose: Pose) -> None:
+        self.poses[topic].append(pose if self.convert is None else self.convert(pose))
+
+    def messages(self) -> list[tuple[str, list[Pose]]]:
+        return [(topic, poses[::self.every]) for topic, poses in self.poses.items() if poses]
 
 
 def event_message(event: Mapping[str, Any]) -> bytes:

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunData
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = ["MEMORY_PATH", "MemoryRecorder"]
 

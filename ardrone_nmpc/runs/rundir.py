@@ -11,14 +11,19 @@ another machine) and holds:
   kind 'path'), checked before the directory is made; ``config.yaml`` names the copy by a
   path relative to the run directory, and the run reads the copy. Runs written before the
   copy existed name the original by its absolute path and still read.
-* ``log.csv`` — a header row, then one row per control tick, columns :data:`LOG_COLUMNS`.
+* ``log.csv`` — a header row, then one row per control tick, columns :data:`LOG_COLUMNS`
+  (names, units and builders: :mod:`~ardrone_nmpc.runs.log_columns`).
   Plain CSV without quoting: string cells never contain ``,``, ``"`` or line breaks (the writer
   refuses them). Numbers are written as the *shortest* decimal that reads back to the same
   double — Python's ``repr(float(v))`` without a trailing ``.0`` (``0.1``, ``-0``, ``5``,
   ``1e-05``, ``1.7976931348623157e+308``) — so every double, −0.0 and subnormals included,
   round-trips bit for bit; NaN and ±inf are ``nan``/``inf``/``-inf``; a missing key is an empty
   cell (read back as NaN).
-* ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``.
+* ``events.jsonl`` — one JSON object per line, ``{"t_s": …, "kind": …, …}``; ``t_s`` is
+  experiment time in every runner (negative before the experiment starts, NaN for events
+  of a flight that never started), a real-time run's wall time in ``wall_s``.
+  :func:`read_run` moves the events of older ``fly`` runs (wall time in ``t_s``) onto the
+  experiment clock.
 * ``summary.csv`` — ``axis,metric,value,unit`` rows (:class:`SummaryRow`), computed by
   :mod:`ardrone_nmpc.runs.summary`, written and read here (:func:`write_summary`,
   :func:`read_summary`).
@@ -60,58 +65,18 @@ from ardrone_nmpc.config.io import dump_config, load_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.trajectories import path_file
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
 
 __all__ = [
-    "LOG_COLUMNS",
     "LogError",
-    "REQUIRED_COLUMNS",
     "RunData",
     "RunRecorder",
-    "STRING_COLUMNS",
     "SummaryRow",
     "format_number",
     "read_run",
     "read_summary",
     "write_summary",
 ]
-
-#: The columns of ``log.csv``, in order. Units are in the names (s, m, rad, m/s, m/s², rad/s,
-#: fraction of full PCMD deflection, µs, ms, %); ``*_ref_*`` is the reference at the tick,
-#: ``u_*`` the controller's input, ``cmd_*`` the PCMD fractions sent, ``*_true_*`` the
-#: simulated plant's truth (empty in real flight). ``mocap_t_s`` (the pose's own time stamp on
-#: the link's clock, as the tick saw it), ``nav_vx_body_mps``/``nav_vy_body_mps``,
-#: ``nav_roll_deg``/``nav_pitch_deg`` and ``nav_mode`` complete the raw measurements the tick
-#: saw, so ``replay --rerun`` can feed them through it again; ``nav_ctrl_state`` is the raw
-#: ctrl_state word of that navdata (``fly`` only). ``target_*`` are the followed
-#: object's pose, stamp and age (reference kind ``follow``; empty otherwise).
-LOG_COLUMNS: tuple[str, ...] = (
-    "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
-    "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
-    "u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps", "vz_ref_mps",
-    "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac", "cmd_saturated",
-    "solve_us", "solver_status", "residual_norm", "gmres_iterations", "newton_iterations",
-    "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct", "tick_late_ms", "compute_us",
-    "mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode", "nav_roll_deg",
-    "nav_pitch_deg", "nav_ctrl_state", "target_x_m", "target_y_m", "target_z_m", "target_psi_rad", "target_t_s",
-    "target_age_ms",
-    "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps",
-)
-
-#: Columns holding strings: ``cmd_saturated`` (4 flags ``0``/``1``, roll, pitch, gaz, yaw),
-#: ``solver_status`` (``ok``, ``max-iterations``, …; empty without a solve), ``mode`` (the
-#: supervisor's verdict) and ``nav_mode`` (the drone's flight mode from its newest navdata).
-STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode",
-                                            "nav_mode"})
-
-#: Columns a ``log.csv`` header must name (docs/design.md); the others of :data:`LOG_COLUMNS`
-#: are filled with NaN (or ``""``) by :func:`read_run` when absent.
-REQUIRED_COLUMNS: tuple[str, ...] = (
-    "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
-    "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
-    "u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps",
-    "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac",
-    "solve_us", "solver_status", "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct",
-)
 
 CONFIG_FILE = "config.yaml"
 LOG_FILE = "log.csv"
@@ -642,7 +607,31 @@ def _read_events(path: Path, warnings: list[str]) -> list[dict[str, Any]]:
         if not isinstance(obj, dict):
             raise LogError(f"{path}:{i}: expected a JSON object, got {type(obj).__name__}")
         events.append(obj)
-    return events
+    return _on_experiment_clock(events)
+
+
+def _on_experiment_clock(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The events of a real-time run written before every runner stamped ``t_s`` with
+    experiment time (``fly`` wrote its session's wall time there, and experiment time into
+    ``t_exp_s``): ``t_s`` becomes experiment time and the old stamp ``wall_s``. The clocks'
+    offset comes from the events that carry both; without any, ``t_s`` is NaN."""
+    old = (any(e.get("kind") == "links" for e in events)
+           and not any("wall_s" in e for e in events))
+    if not old:
+        return events
+    offsets = [e["t_s"] - e["t_exp_s"] for e in events
+               if isinstance(e.get("t_s"), (int, float)) and isinstance(e.get("t_exp_s"),
+                                                                       (int, float))]
+    offset = float(np.median(offsets)) if offsets else math.nan
+    out = []
+    for e in events:
+        e = dict(e)
+        wall = e.pop("t_s", math.nan)
+        t_exp = e.pop("t_exp_s", None)
+        wall = float(wall) if isinstance(wall, (int, float)) else math.nan
+        t_s = float(t_exp) if isinstance(t_exp, (int, float)) else wall - offset
+        out.append({"t_s": t_s, **e, "wall_s": wall})
+    return out
 
 
 def read_run(run_dir: str | Path) -> RunData:

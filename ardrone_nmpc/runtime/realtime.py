@@ -1,11 +1,12 @@
-"""``ardrone-nmpc fly``: the real-time loop over real UDP — the drone, or the loopback simulators.
+"""The real-time loop of ``ardrone-nmpc fly``: an opened drone flown on the wall clock.
 
-The same :class:`~ardrone_nmpc.runtime.tick.Tick` as ``simulate``; here the clock is the wall clock
-(absolute deadlines, :class:`~ardrone_nmpc.core.clock.Rate`) and the measurements come from the
-links. The session lands the drone however the loop ends; every catchable terminating signal
-is turned into an exception so that it lands too (:mod:`ardrone_nmpc.runtime.signals`).
-Everything that can fail before the motors start is checked first: tick counts, addresses and
-ports, the drone's flight lock — a refusal leaves no run directory.
+The same :class:`~ardrone_nmpc.runtime.tick.Tick` as ``simulate``; here the clock is the wall
+clock (absolute deadlines, :class:`~ardrone_nmpc.core.clock.Rate`) and the measurements come
+from the links of whatever drone a backend opened (:class:`~ardrone_nmpc.links.backend.
+OpenedDrone`: a real AR.Drone or the loopback simulators — this loop does not ask which). The
+session lands the drone however the loop ends; every catchable terminating signal is turned
+into an exception so that it lands too (:mod:`ardrone_nmpc.runtime.signals`). Opening the
+drone and the run directory is :func:`~ardrone_nmpc.experiments.flight.run_flight`'s.
 """
 
 from __future__ import annotations
@@ -16,19 +17,20 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from ardrone_nmpc.core.clock import Rate
 from ardrone_nmpc.config.schema import tracked_object
+from ardrone_nmpc.core.clock import Rate
+from ardrone_nmpc.core.types import TickInputs
+from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.links.backend import OpenedDrone
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.rundir import RunRecorder
-from ardrone_nmpc.runs.summary import write_run_summary
-from ardrone_nmpc.runtime.schedule import Schedule, on_wall_clock, phase, write_events
+from ardrone_nmpc.runs.log_columns import link_columns
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
+from ardrone_nmpc.runtime.schedule import EventClock, Schedule, phase, write_events
 from ardrone_nmpc.runtime.session import DroneLandedItself, FlightSession
 from ardrone_nmpc.runtime.signals import landing_signals
-from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action
-from ardrone_nmpc.errors import UserError
+
 
 class LandingNotConfirmed(UserError, RuntimeError):
     """Navdata never showed the drone landed: go and look at it."""
@@ -53,112 +55,56 @@ class DroneEmergency(UserError, RuntimeError):
     """The drone reported an emergency (motors cut)."""
 
 
-def _endpoints(cfg, drone_host, at_port, navdata_port, mocap_port):
-    """The drone's and the mocap's addresses and ports, checked (an option given as 0 or ''
-    is an error, never a silent fall-back to the default)."""
-    from ardrone_nmpc.links.udp import check_host, check_port
+def fly(*, cfg, drone: OpenedDrone, recorder, schedule: Schedule, status=None,
+        result: FlightResult | None = None, warn=None, operator_keys: bool = False,
+        wrap_solver=None) -> None:
+    """Fly ``cfg`` with the opened ``drone`` into ``recorder``: the session (connect, verify,
+    preflight, take off … land, whatever happens) around the 65 ms loop.
 
-    pick = lambda given, default: default if given is None else given  # noqa: E731
-    return (check_host("--drone", pick(drone_host, cfg.drone.host)),
-            check_port("--at-port", pick(at_port, cfg.drone.at_port)),
-            check_port("--navdata-port", pick(navdata_port, cfg.drone.navdata_port)),
-            check_port("--mocap-port", pick(mocap_port, cfg.mocap.port)))
-
-
-def run_flight(*, cfg, sim: bool, drone_host: str | None, at_port: int | None,
-               navdata_port: int | None, mocap_port: int | None, log_dir: Path,
-               seed: int | None, status=None, result: FlightResult | None = None,
-               sink=None, warn=None, operator_keys: bool = False) -> Path:
-    """Fly ``cfg``; return the run directory. ``status(dict)`` receives live figures;
-    ``result`` holds the run directory and the landing outcome whatever happens; ``sink``
-    (e.g. :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event as the recorder
-    does (``sink.tee(recorder)``) and must never block; ``warn(line)`` shows the session's
-    messages (stderr by default); ``operator_keys`` reads the land and emergency keys from the
-    terminal on stdin."""
+    ``status(dict)`` receives live figures; ``result.landed`` tells the landing's outcome
+    whatever happens; ``warn(line)`` shows the session's messages (stderr by default);
+    ``operator_keys`` reads the land and emergency keys from the terminal on stdin;
+    ``wrap_solver`` is handed to the tick. Events are stamped on the experiment clock
+    (:class:`~ardrone_nmpc.runtime.schedule.EventClock`). Raises
+    :class:`LandingNotConfirmed` when navdata never showed the drone landed.
+    """
     result = result if result is not None else FlightResult()
-    from ardrone_nmpc.links.drone_link import DroneLink
-    from ardrone_nmpc.links.flight_lock import FlightLock
-    from ardrone_nmpc.links.mocap_link import MocapLink
-    from ardrone_nmpc.links.mocap_factory import open_mocap_source
-
-    seed = cfg.sim.seed if seed is None else seed
-    schedule = Schedule.from_config(cfg)  # before anything starts: its errors fly nothing
-    if not sim:
-        host, at_port, navdata_port, mocap_port = _endpoints(cfg, drone_host, at_port,
-                                                             navdata_port, mocap_port)
-    follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
-    others = (follow,) if follow else ()
+    link, mocap = drone.link, drone.mocap
+    clock = EventClock(recorder.event, time.monotonic)
+    event = clock.event
     try:
         with landing_signals(), ExitStack() as stack:
-            if sim:
-                from ardrone_nmpc.sim.loopback import start_loopback
-
-                mocap = stack.enter_context(MocapLink(
-                    "127.0.0.1", 0, object_name=cfg.mocap.object_name, other_objects=others))
-                loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port,
-                                                          control_port=0))
-                host, at_port, navdata_port = loop.drone_host, loop.at_port, loop.navdata_port
-                link_options = {"bind_host": "127.0.0.1", "at_local_port": 0,
-                                "control_port": loop.control_port}
-            else:
-                link_options = {"control_port": cfg.drone.control_port}
-            lock = FlightLock(host, at_port)
-            lock.acquire()  # one flight per drone: refused before a datagram or a run dir
-            stack.callback(lock.release)
-            if not sim:  # mocap.kind: Vicon UDP or a libmotioncapture system
-                mocap = stack.enter_context(open_mocap_source(
-                    cfg.mocap, other_objects=others, port=mocap_port))
-            recorder = stack.enter_context(RunRecorder.create(log_dir, cfg, seed=seed))
-            cfg = recorder.config  # the run reads its own copy of its input files
-            if sink is not None:
-                recorder = sink.tee(recorder)
-            result.path = recorder.path
-            t_origin = time.monotonic()
-            event = lambda kind, **f: recorder.event(time.monotonic() - t_origin, kind, **f)
-            event("links", drone=f"{host}:{at_port}/{navdata_port}", mocap_port=mocap.port,
-                  mocap=mocap.where, sim=sim)
-            drone = stack.enter_context(DroneLink(
-                host, at_port=at_port, navdata_port=navdata_port,
-                keepalive_interval_s=cfg.drone.keepalive_interval_s,
-                config_ids=cfg.drone.config_ids, navdata_demo=cfg.drone.navdata_demo,
-                **link_options))
-            tick = Tick(cfg, experiment_trajectory(cfg))
+            event("links", drone=drone.address, mocap_port=mocap.port, mocap=mocap.where,
+                  sim=drone.simulated)
+            tick = Tick(cfg, experiment_trajectory(cfg), wrap_solver=wrap_solver)
             requests = OperatorRequests()
             if operator_keys:
                 stack.enter_context(KeyReader(
                     sys.stdin.fileno(), on_land=requests.request_land,
-                    on_emergency=lambda: _emergency_now(drone, requests)))
-            session = FlightSession(cfg, drone, mocap, event=event, requests=requests,
+                    on_emergency=lambda: _emergency_now(link, requests)))
+            session = FlightSession(cfg, link, mocap, event=event, requests=requests,
                                     start_position_m=_start_position(tick),
                                     **({"warn": warn} if warn is not None else {}))
-            fault_clock = loop.set_fault_clock if sim else None
             try:
                 with session:
-                    _control_loop(cfg, schedule, tick, drone, mocap, recorder, event,
-                                  status, fault_clock, requests)
+                    _control_loop(cfg, schedule, tick, drone, recorder, clock, status,
+                                  requests)
             finally:
                 result.landed = session.landed_cleanly
                 for ev in mocap.take_events():  # senders seen since the last tick
                     event(ev.pop("kind"), **ev)
-                for t_exp, ev in loop.fault_events if sim else ():
-                    # the loopback's injected faults, on experiment time
-                    write_events(on_wall_clock(event), t_exp, [ev])
+                _drone_events(drone, clock)
                 event("session_end", landed=session.landed_cleanly)
-            path = recorder.path
-        if result.landed is False:
-            raise LandingNotConfirmed("navdata never showed the drone landed: check it")
-        return path
     finally:
-        if result.path is not None:  # however the flight ended: the run dir is complete
-            _write_summary_quietly(result.path)
+        clock.close()
+    if result.landed is False:
+        raise LandingNotConfirmed("navdata never showed the drone landed: check it")
 
 
-def _write_summary_quietly(path: Path) -> None:
-    """summary.csv of the run at ``path``; a failure here must not mask the flight's outcome."""
-    try:
-        write_run_summary(path)
-    except Exception as err:  # noqa: BLE001 - the log is intact; `summary RUN` redoes it
-        print(f"warning: {path / 'summary.csv'} not written: {err}", file=sys.stderr)
+def _drone_events(drone: OpenedDrone, clock: EventClock) -> None:
+    """What the drone did on its own (a simulation's injected faults), at its times."""
+    for t_exp, ev in drone.take_events():
+        write_events(clock.at, t_exp, [ev])
 
 
 def _emergency_now(drone, requests) -> None:
@@ -180,13 +126,13 @@ def _start_position(tick):
     return (float(state[0]), float(state[2]), float(state[4]))
 
 
-def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, event, status,
-                  fault_clock=None, requests=None) -> None:
+def _control_loop(cfg, schedule: Schedule, tick: Tick, drone: OpenedDrone, recorder,
+                  clock: EventClock, status, requests=None) -> None:
     """The 65 ms loop until the experiment ends or the supervisor, the drone or the operator
-    ends it (an exception: the session's exit lands the drone). ``fault_clock(t0)`` receives
-    the monotonic time of experiment time 0 (the loopback's fault injection runs on it)."""
+    ends it (an exception: the session's exit lands the drone). At the first tick experiment
+    time 0 is fixed, ``sim.settle_s`` ahead, for the events and for the drone."""
+    link, mocap = drone.link, drone.mocap
     follow = tracked_object(cfg)  # the second mocap object: followed, or a moving obstacle
-    write = on_wall_clock(event)
     rate = Rate(schedule.period_s)
     while True:
         skipped = rate.overruns
@@ -196,30 +142,31 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, e
             rate.overruns = skipped  # counted, so loop_timing agrees with summary.csv
             break
         now = time.monotonic()
-        if k == 0 and fault_clock is not None:  # experiment time 0 for the injected faults
-            fault_clock(now + schedule.settle_span_s)
-        pose, pose_rx = mocap.latest()
-        nav, nav_rx = drone.navdata, drone.navdata_rx_t_s
-        target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
         t_exp = schedule.t_exp_s(k)
+        if k == 0:  # experiment time 0 on the monotonic clock
+            t0 = now + schedule.settle_span_s
+            clock.start(t0)
+            write_events(clock.at, t_exp, drone.start_experiment(t0))
+        pose, pose_rx = mocap.latest()
+        nav, nav_rx = link.navdata, link.navdata_rx_t_s
+        target, target_rx = mocap.latest_of(follow) if follow else (None, -math.inf)
         for ev in mocap.take_events():  # a foreign sender: logged and shown, never used
-            event(ev.pop("kind"), t_exp_s=t_exp, **ev)
+            clock.at(t_exp, ev.pop("kind"), **ev)
+        _drone_events(drone, clock)
         out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
                         t_exp_s=t_exp, mode=phase(t_exp))
-        write_events(write, t_exp, out.events)
+        write_events(clock.at, t_exp, out.events)
         pcmd = out.pcmd
         if out.progressive:
-            drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac)
+            link.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac)
         else:
-            drone.hover()
+            link.hover()
         row = out.row
-        row["tick_late_ms"] = late_s * 1e3
-        row["nav_ctrl_state"] = (nav.ctrl_state if nav is not None and nav.ctrl_state is not None
-                                 else math.nan)
+        row |= link_columns(late_s, nav)
         recorder.write_row(row)
         if status is not None:
             status({**row, "progress": schedule.fraction_done(k), "overruns": rate.overruns,
-                    "navdata_rate_hz": drone.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz,
+                    "navdata_rate_hz": link.stats.rate_hz, "mocap_rate_hz": mocap.stats.rate_hz,
                     "mocap_sender": mocap.sender, "mocap_foreign": mocap.foreign_senders})
         if out.action is Action.LAND:   # the session's exit lands it
             if row["mode"] == "land-navdata-lost":
@@ -227,22 +174,22 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone, mocap, recorder, e
             raise SupervisorLanding(f"the supervisor landed the drone: {row['mode']}")
         if out.action is Action.STOP:
             raise DroneEmergency("the drone reports an emergency (motors cut): check it")
-        _stop_if_ended_outside(drone, requests, event, t_exp)  # after the tick's row: logged
-    _stop_if_ended_outside(drone, requests, event, schedule.t_exp_s(schedule.n_ticks - 1))
+        _stop_if_ended_outside(link, requests, clock, t_exp)  # after the tick's row: logged
+    _stop_if_ended_outside(link, requests, clock, schedule.t_exp_s(schedule.n_ticks - 1))
     jitter = rate.jitter_ms()
-    event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],
-          jitter_p99_ms=jitter["p99"], jitter_max_ms=jitter["max"])
+    clock.event("loop_timing", overruns=rate.overruns, jitter_p50_ms=jitter["p50"],
+                jitter_p99_ms=jitter["p99"], jitter_max_ms=jitter["max"])
 
 
-def _stop_if_ended_outside(drone, requests, event, t_exp: float) -> None:
+def _stop_if_ended_outside(link, requests, clock: EventClock, t_exp: float) -> None:
     """Leave the loop if the drone landed by itself or the operator pressed a key."""
-    landed_itself = drone.self_landing
+    landed_itself = link.self_landing
     if landed_itself:
-        event("drone_landed_itself", t_exp_s=t_exp, what=landed_itself)
+        clock.at(t_exp, "drone_landed_itself", what=landed_itself)
         raise DroneLandedItself(f"the drone landed by itself at t = {t_exp:.1f} s: "
                                 f"{landed_itself} — the take-off bit was dropped at once and "
                                 "never sent again; check battery and motors")
     if requests is not None and requests.land:
         what = "cut the motors" if requests.emergency else "land"
-        event("operator", t_exp_s=t_exp, action=what)
+        clock.at(t_exp, "operator", action=what)
         raise OperatorAbort(f"the operator asked to {what} at t = {t_exp:.1f} s")

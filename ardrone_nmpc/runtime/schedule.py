@@ -3,8 +3,9 @@
 One definition for the lockstep simulation, the real-time flight and ``replay --rerun``: how
 many whole ticks of ``loop.period_s`` the settle phase and the experiment take, the
 experiment time of tick k (0 = the start of the experiment; the settle phase is t < 0), the
-phase label a tick is stepped with, the take-off and landing timeouts, and how events that
-happen at an experiment time are stamped into ``events.jsonl``.
+phase label a tick is stepped with, the take-off and landing timeouts, and how events are
+stamped into ``events.jsonl`` — on the experiment clock in every runner (:class:`EventClock`
+for the real-time one).
 """
 
 from __future__ import annotations
@@ -108,16 +109,60 @@ def write_events(write: EventWriter, t_exp_s: float,
     """Write ``events`` (dicts with a ``kind``: a tick's mode changes, injected faults) that
     happened at experiment time ``t_exp_s`` through ``write(t_exp_s, kind, **fields)``.
 
-    On a manual clock (lockstep, rerun) ``write`` is the recorder's ``event``: ``t_s`` is
-    the experiment time. On the wall clock use :func:`on_wall_clock`.
+    On a manual clock (lockstep, rerun) ``write`` is the recorder's ``event``; on the wall
+    clock :meth:`EventClock.at`: ``t_s`` is the experiment time either way.
     """
     for event in events:
         fields = dict(event)
         write(t_exp_s, fields.pop("kind"), **fields)
 
 
-def on_wall_clock(event: Callable[..., None]) -> EventWriter:
-    """The writer of a run on the wall clock, whose ``event(kind, **fields)`` stamps
-    ``t_s`` with the wall time (the real-time flight: its session events come before
-    experiment time 0 exists): the experiment time goes into the field ``t_exp_s``."""
-    return lambda t_exp_s, kind, **fields: event(kind, t_exp_s=t_exp_s, **fields)
+class EventClock:
+    """The stamps of a real-time run's events (docs/design.md §5): ``t_s`` on the experiment
+    clock — as the log's rows, and as every lockstep run's events — and ``wall_s``, the
+    run's own monotonic time since the clock was made.
+
+    Events before experiment time 0 is known (connecting, configuring, pre-flight, take-off)
+    are held until :meth:`start` stamps them, with negative ``t_s``; if it never comes (a
+    refused take-off), :meth:`close` writes them with ``t_s`` NaN. Held events are in memory
+    only: a SIGKILL before the experiment starts loses them (every other exit writes them).
+
+    Parameters
+    ----------
+    write : ``write(t_s, kind, **fields)`` — the recorder's ``event``.
+    clock : the monotonic clock the loop runs on (s).
+    """
+
+    def __init__(self, write: EventWriter, clock: Callable[[], float]) -> None:
+        self._write = write
+        self._clock = clock
+        self._wall0_s = clock()
+        self._t0_s: float | None = None
+        self._held: list[tuple[float, str, dict]] = []
+
+    def event(self, kind: str, **fields: Any) -> None:
+        """An event that happens now."""
+        now = self._clock()
+        if self._t0_s is None:
+            self._held.append((now, kind, fields))
+        else:
+            self._write(now - self._t0_s, kind, wall_s=now - self._wall0_s, **fields)
+
+    def at(self, t_exp_s: float, kind: str, **fields: Any) -> None:
+        """An event of experiment time ``t_exp_s`` (a tick's), written now."""
+        self._write(t_exp_s, kind, wall_s=self._clock() - self._wall0_s, **fields)
+
+    def start(self, t0_s: float) -> None:
+        """Experiment time 0 is ``t0_s`` on the clock: the held events are written."""
+        self._t0_s = t0_s
+        self._flush(t0_s)
+
+    def close(self) -> None:
+        """Write what is still held (no experiment time: ``t_s`` NaN)."""
+        self._flush(None)
+
+    def _flush(self, t0_s: float | None) -> None:
+        held, self._held = self._held, []
+        for now, kind, fields in held:
+            t_s = math.nan if t0_s is None else now - t0_s
+            self._write(t_s, kind, wall_s=now - self._wall0_s, **fields)

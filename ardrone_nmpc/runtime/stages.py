@@ -4,7 +4,8 @@
 estimation → delay prediction → control → supervision → row, with the moving obstacles fed
 from the second tracked object first. Each stage owns the state that carries over from one tick
 to the next — the estimators, the inputs sent but not yet acting, the NMPC warm start, the
-last command sent — and nothing else; the log row is built in one place from their results.
+last command sent — and nothing else; the log row is built from their results by
+:func:`~ardrone_nmpc.runs.log_columns.tick_row`.
 """
 
 from __future__ import annotations
@@ -28,11 +29,10 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
-from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
            "MovingObstacles", "OffsetFree", "Sent", "Solution", "Supervision", "feedback_ages_ms",
-           "measurement_columns", "navdata_velocity_world", "tick_row"]
+           "navdata_velocity_world"]
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
@@ -177,8 +177,8 @@ class Solution:
     """What the controller computed in one tick (logged whether or not it is flown).
 
     ``result`` is None for the P controller, whose command is ``p_command``. ``u_flown`` is
-    the NMPC input the supervisor judges (all NaN while a divergence is injected), ``ok``
-    whether the solver may be trusted, ``status`` the ``solver_status`` column.
+    the NMPC input the supervisor judges, ``ok`` whether the solver may be trusted,
+    ``status`` the ``solver_status`` column.
     """
 
     ref_now: np.ndarray
@@ -205,17 +205,13 @@ class Control:
     limits : what the drone is configured to do (mapping and ż clipping).
     nmpc : the solver (None: the P controller flies).
     delay : the delay predictor the NMPC solves from.
-    faults : the run's fault schedule; a divergence it injects replaces the NMPC input by NaN
-        after the solve (the warm start carries on as it would).
     """
 
-    def __init__(self, cfg, limits: DroneLimits, nmpc, delay: DelayPrediction,
-                 faults: FaultSchedule | None = None) -> None:
+    def __init__(self, cfg, limits: DroneLimits, nmpc, delay: DelayPrediction) -> None:
         ctl = cfg.controller
         self.nmpc = nmpc
         self.delay = delay
         self.limits = limits
-        self.faults = faults
         g = ctl.p_gains
         self.p_gains = PGains(g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else cfg.loop.period_s
@@ -251,9 +247,6 @@ class Control:
         states = traj.state_at(times)
         horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
         result = solver.solve(t_exp_s, x_solve, horizon)
-        if self.faults is not None and self.faults.solver_diverges(t_exp_s):
-            return Solution(states[0], x_solve, result, np.full(INPUT_DIM, math.nan), False,
-                            SolverStatus.DIVERGED.value, ref_horizon=states[1:])
         ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
                            and self.accept_max_iterations)
         return Solution(states[0], x_solve, result, result.u, ok, result.status.value,
@@ -389,81 +382,3 @@ def feedback_ages_ms(inputs: TickInputs) -> tuple[float, float]:
     mocap = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose is not None else math.inf
     nav = (inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata is not None else math.inf
     return mocap, nav
-
-
-def measurement_columns(inputs: TickInputs) -> dict:
-    """The raw measurements of ``inputs`` as log columns (replay feeds them back).
-
-    ``mocap_t_s`` is the pose's own time stamp as the tick saw it (the link's clock: receipt
-    time in ``fly``, plant time in simulation), bit for bit: the estimators difference it, and
-    moved to the experiment clock it would carry the tick's offset (rounding; in ``fly`` its
-    lateness) into those differences.
-    """
-    nav = inputs.navdata
-    pose = inputs.pose
-    return {
-        "mocap_t_s": pose.t_s if pose is not None else math.nan,
-        "battery_pct": nav.battery_pct if nav is not None else math.nan,
-        "nav_vx_body_mps": nav.vx_body_mps if nav is not None else math.nan,
-        "nav_vy_body_mps": nav.vy_body_mps if nav is not None else math.nan,
-        "nav_mode": nav.mode.value if nav is not None else "",
-        "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
-        "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
-    } | _target_columns(inputs)
-
-
-def _target_columns(inputs: TickInputs) -> dict:
-    target = inputs.target
-    if target is None:
-        return {}
-    p = target.position_m
-    return {"target_x_m": p[0], "target_y_m": p[1], "target_z_m": p[2],
-            "target_psi_rad": target.psi_rad, "target_t_s": target.t_s,
-            "target_age_ms": (inputs.t_s - inputs.target_rx_t_s) * 1e3}
-
-
-def _solution_columns(sol: Solution) -> dict:
-    ref = sol.ref_now
-    cols = {"x_ref_m": ref[IX_X], "y_ref_m": ref[IX_Y], "z_ref_m": ref[IX_Z],
-            "psi_ref_rad": ref[IX_PSI]}
-    result = sol.result
-    if result is None:  # the P controller: no z̈
-        cmd = sol.p_command
-        return cols | {"u_zacc_mps2": math.nan, "u_phi_rad": cmd.phi_rad,
-                       "u_theta_rad": cmd.theta_rad, "u_psirate_radps": cmd.psirate_radps}
-    u = result.u  # as solved, also when the supervisor flies something else
-    return cols | {"u_zacc_mps2": u[IU_ZACC], "u_phi_rad": u[IU_PHI], "u_theta_rad": u[IU_THETA],
-                   "u_psirate_radps": u[IU_PSIRATE], "solve_us": result.solve_time_us,
-                   "residual_norm": result.residual_norm,
-                   "gmres_iterations": result.gmres_iterations,
-                   "newton_iterations": result.newton_iterations}
-
-
-def tick_row(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
-             x: np.ndarray | None, solution: Solution | None, sent: Sent, mode: str,
-             compute_us: float) -> dict:
-    """The tick's ``log.csv`` row (columns of :data:`~ardrone_nmpc.runs.rundir.LOG_COLUMNS`).
-
-    ``x`` is the estimate (None without a pose), ``solution`` the controller's (None when the
-    supervisor stopped the tick before it), ``sent`` what went out, ``mode`` the label.
-    """
-    row = {"t_s": t_exp_s, "mocap_age_ms": ages_ms[0], "navdata_age_ms": ages_ms[1],
-           "solver_status": solution.status if solution is not None else "",
-           "cmd_saturated": sent.saturated if sent.saturated is not None else "0000"}
-    row |= measurement_columns(inputs)
-    if x is not None:  # logged even when stale (mocap_age_ms says so)
-        row |= {"x_m": x[IX_X], "y_m": x[IX_Y], "z_m": x[IX_Z], "psi_rad": x[IX_PSI],
-                "vx_mps": x[IX_VX], "vy_mps": x[IX_VY], "vz_mps": x[IX_VZ]}
-    if solution is not None:
-        row |= _solution_columns(solution)
-    flown = sent.flown
-    if flown is not None:
-        row["vz_ref_mps"] = flown.vz_ref_mps
-        if sent.decision.action is Action.FALLBACK:  # the P command flown instead
-            row |= {"u_phi_rad": flown.phi_rad, "u_theta_rad": flown.theta_rad,
-                    "u_psirate_radps": flown.psirate_radps}
-    pcmd = sent.pcmd
-    row |= {"cmd_roll_frac": pcmd.roll_frac, "cmd_pitch_frac": pcmd.pitch_frac,
-            "cmd_gaz_frac": pcmd.gaz_frac, "cmd_yaw_frac": pcmd.yaw_frac,
-            "mode": mode, "compute_us": compute_us}
-    return row

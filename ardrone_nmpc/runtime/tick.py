@@ -12,21 +12,21 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
+from ardrone_nmpc.runs.log_columns import tick_row
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
-    OffsetFree, Supervision, feedback_ages_ms, measurement_columns, navdata_velocity_world,
-    tick_row,
+    OffsetFree, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
 from ardrone_nmpc.safety import Action, Supervisor
-from ardrone_nmpc.sim.faults import FaultSchedule
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
-           "effective_controller", "measurement_columns", "navdata_velocity_world"]
+           "effective_controller", "navdata_velocity_world"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,9 +70,12 @@ class Tick:
     trajectory : the experiment's reference (time 0 = experiment start); a
         :class:`~ardrone_nmpc.reference.live.LiveTarget` (kind ``follow``) is fed the second
         object's pose every tick.
+    wrap_solver : what the runner wraps the NMPC solver in (a simulation's injected
+        divergence, :class:`~ardrone_nmpc.control.diverging.DivergingSolver`); None: nothing.
     """
 
-    def __init__(self, cfg, trajectory: Trajectory):
+    def __init__(self, cfg, trajectory: Trajectory, *,
+                 wrap_solver: Callable | None = None):
         self.cfg = cfg
         self.trajectory = trajectory
         self.period_s = cfg.loop.period_s
@@ -83,12 +86,13 @@ class Tick:
             from ardrone_nmpc.control.solver import make_nmpc
 
             nmpc = make_nmpc(effective_controller(ctl, self.limits), period_s=self.period_s)
+            if wrap_solver is not None:
+                nmpc = wrap_solver(nmpc)
         self.supervisor = Supervisor(cfg.safety)
         self.follow = trajectory if isinstance(trajectory, LiveTarget) else None
         self.estimation = Estimation(cfg.estimator)
         self.delay = DelayPrediction(ctl.delay_compensation_s, self.period_s)
-        # the one home of solver-divergence injection: the schedule's window (sim/faults.py)
-        self.control = Control(cfg, self.limits, nmpc, self.delay, FaultSchedule(cfg.faults))
+        self.control = Control(cfg, self.limits, nmpc, self.delay)
         self.supervision = Supervision(self.supervisor, self.limits)
         self.offset = (OffsetFree(ctl.offset_free, self.period_s)
                        if nmpc is not None and ctl.offset_free.enabled else None)

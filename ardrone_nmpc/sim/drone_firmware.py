@@ -2,8 +2,12 @@
 watchdogs, the altitude cap, and the status its navdata reports (docs/protocol.md, "behaviour a
 faithful simulator should reproduce"; [?] marks that document's design choices).
 
-No sockets, threads or clock of its own: :class:`~ardrone_nmpc.sim.drone_server.DroneServer`
-calls it under its lock with the time, so it is testable datagram by datagram.
+No sockets, threads or clock of its own: both runners' simulated drone
+(:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`) owns one — the loopback
+:class:`~ardrone_nmpc.sim.drone_server.DroneServer` calls it under its lock with the wall time,
+the lockstep link (:class:`~ardrone_nmpc.sim.lockstep_drone.LockstepDrone`) with plant time —
+so it is testable datagram by datagram and every rule here holds in ``simulate`` and ``fly
+--sim`` alike.
 
 * Sequence numbers: a command runs only if ``seq == 1`` or ``seq > last``; ``last`` resets to
   0 after ``link_loss_s`` without an accepted command [?]. Ignored commands are counted
@@ -15,7 +19,8 @@ calls it under its lock with the time, so it is testable datagram by datagram.
   ground → cleared [?].
 * ``AT*PCMD`` / ``PCMD_MAG``: flag bit 0 set → the fractions go to the plant; clear → hover.
 * Altitude cap: a climbing gaz becomes 0 (minor ALT_OUT_ZONE) once z + v_z·(command delay +
-  τ_z), where the climb would stop, reaches ``control:altitude_max``.
+  τ_z), where the climb would stop, reaches ``control:altitude_max`` (checked whenever time
+  passes or a command arrives).
 * ``AT*FTRIM`` counted only when landed, ``AT*CALIB`` only in flight (no manoeuvre).
 * ``AT*CONFIG`` (see :mod:`~ardrone_nmpc.sim.drone_config`; applied or, in another
   multiconfig session, ignored) sets the ACK bit 6;
@@ -59,6 +64,7 @@ __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 #: Battery level (%) below which a simulated drone sets state bit 15 (VBAT_LOW).
 VBAT_LOW_PCT = 20.0
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
+_PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)  # a plain int: IntFlag arithmetic is slow per tick
 
 
 @dataclass
@@ -132,6 +138,9 @@ class DroneFirmware:
         self.ack = False
         self.pcmd = _HOVER_CMD
         self.applied: tuple | None = None
+        self._applied_pcmd: tuple | None = None  # the held command ``applied`` came from
+        self._lead_params = None
+        self._lead = 0.0
         self.alt_capped = False
         self.nav_seq = 0
 
@@ -145,9 +154,13 @@ class DroneFirmware:
         if errors:
             c.malformed_datagrams += 1
             c.malformed_commands += len(errors)
+        self.execute_datagram(commands, now)
+
+    def execute_datagram(self, commands, now: float) -> None:
+        """The decoded commands of one datagram, in order, then the held command applied."""
         ids = None   # those of an AT*CONFIG_IDS right before (the SDK sends the pair together)
         for cmd in commands:
-            c.at_commands_in += 1
+            self.counters.at_commands_in += 1
             self.execute(cmd, now, ids)
             b = cmd.body
             ids = (b.session_id, b.profile_id, b.application_id) if isinstance(b, ConfigIds) \
@@ -221,6 +234,53 @@ class DroneFirmware:
 
     # ------------------------------------------------------------------ time passing
 
+    def advance(self, dt_s: float, now: float) -> None:
+        """Time passing: the plant by ``dt_s``, then the watchdogs and the held command (the
+        altitude cap) at ``now``. While a climb nears the cap, the cap is checked after every
+        integration step, as the drone's control loop does, however long ``dt_s`` (the
+        loopback server steps 5 ms, the lockstep link from one sensor event to the next)."""
+        plant = self.plant
+        flags, _, _, gaz, _ = self.pcmd
+        if not (flags & _PROGRESSIVE and gaz > 0.0) or not self._climb_may_reach_cap(dt_s):
+            plant.advance(dt_s)
+            self.watchdogs(now)
+            if self.pcmd is not self._applied_pcmd or self.alt_capped:  # else nothing to do
+                self.apply_command()
+            return
+        h = plant.params.integration_step_s
+        n = int(dt_s / h)
+        for _ in range(n):
+            plant.advance(h)
+            self.apply_command()
+        plant.advance(dt_s - n * h)  # the remainder (carried by the plant)
+        self.watchdogs(now)
+        self.apply_command()
+
+    def _lead_s(self) -> float:
+        """After the command delay, the first-order vertical loop (τ_z) still rises
+        v_z·(T_d + τ_z): the lead of :meth:`_z_stop_m` (cached per plant params)."""
+        params = self.plant.params
+        if params is not self._lead_params:
+            self._lead_params = params
+            self._lead = (getattr(params, "command_delay_s", 0.0)
+                          + getattr(params, "tau_vz_s", 0.0))
+        return self._lead
+
+    def _z_stop_m(self) -> float:
+        """Where a climb stops if gaz drops to 0 now."""
+        z, vz = self.plant.altitude_m_and_rate_mps
+        return float(z) + max(0.0, float(vz)) * self._lead_s()
+
+    def _climb_may_reach_cap(self, dt_s: float) -> bool:
+        """A climb is held and within reach of the cap in ``dt_s`` (a bound: at most
+        ``control_vz_max`` for ``dt_s``, its stop ``control_vz_max``·lead above)."""
+        flags, _, _, gaz, _ = self.pcmd
+        if not (flags & _PROGRESSIVE and gaz > 0.0 and self.plant.mode.airborne):
+            return False
+        z, _ = self.plant.altitude_m_and_rate_mps
+        reach_m = self.plant.params.control_vz_max_mps * (dt_s + self._lead_s())
+        return z + reach_m >= self.config.altitude_max_m
+
     def silence(self, now: float) -> float:
         """Seconds since the last accepted command (inf before the first)."""
         return math.inf if self.last_cmd_t is None else now - self.last_cmd_t
@@ -240,18 +300,18 @@ class DroneFirmware:
 
     def apply_command(self) -> None:
         """Send the effective PCMD (held command, altitude cap) to the plant when it changes."""
-        flags, roll, pitch, gaz, yaw = self.pcmd
-        progressive = bool(flags & PcmdFlag.PROGRESSIVE)
-        at_cap = False
+        pcmd = self.pcmd
+        flags, roll, pitch, gaz, yaw = pcmd
+        progressive = bool(flags & _PROGRESSIVE)
+        climbing = progressive and gaz > 0.0
+        if pcmd is self._applied_pcmd and not climbing:  # applied, and no cap to watch
+            return
+        self._applied_pcmd = pcmd
         plant = self.plant
-        if plant.mode.airborne:
-            truth, params = plant.truth, plant.params
-            # where the climb stops if gaz drops to 0 now: the command delay, then the
-            # first-order vertical loop (τ_z) still rises v_z·(T_d + τ_z)
-            lead = getattr(params, "command_delay_s", 0.0) + getattr(params, "tau_vz_s", 0.0)
-            z_stop = float(truth.position_m[2]) + max(0.0, float(truth.velocity_mps[2])) * lead
-            at_cap = z_stop >= self.config.altitude_max_m
-        if at_cap and progressive and gaz > 0.0:
+        at_cap = False
+        if climbing and plant.mode.airborne:  # only a climb is capped
+            at_cap = self._z_stop_m() >= self.config.altitude_max_m
+        if at_cap:
             gaz = 0.0
         self.alt_capped = at_cap
         cmd = (roll, pitch, gaz, yaw, True) if progressive else (0.0, 0.0, 0.0, 0.0, False)
@@ -266,13 +326,17 @@ class DroneFirmware:
         flags, roll, pitch, gaz, yaw = self.pcmd
         return DroneStatus(
             self.plant.mode.value,
-            moving=bool(flags & PcmdFlag.PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
+            moving=bool(flags & _PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
             alt_out_zone=self.alt_capped, lost_com=self.lost_com_hover,
             user_emergency=self.user_emergency, start_button=self.ref_start, ack=self.ack,
             bootstrap=self.config.bootstrap, demo=self.config.demo,
             com_watchdog=self.comwdg_latched or (self.comwdg_clear == "any"
                                                  and self.silence(now) > self.comwdg_s),
             com_lost=self.link_lost, battery_low=self.plant.battery_pct < self.vbat_low_pct)
+
+    def skip_packet(self) -> None:
+        """A packet lost on the way: its sequence number is used all the same."""
+        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
 
     def packet(self, now: float) -> bytes:
         """The next navdata packet (its sequence counts up from 1 across stream restarts)."""

@@ -1,9 +1,10 @@
 """Loopback AR.Drone 2.0: AT commands in, navdata out, over real UDP on 127.0.0.1.
 
-Serves an :class:`~ardrone_nmpc.sim.plant.AirframePlant` with the drone's wire protocol
-(docs/protocol.md) so that the project's own links — or an unmodified third-party client
-(python-ardrone, node-ar-drone style) — fly it as they would fly the real drone. What the drone
-does with each command is :mod:`~ardrone_nmpc.sim.drone_firmware`; its configuration
+Serves a :class:`~ardrone_nmpc.sim.drone.SimulatedDrone` (plant, firmware, injected faults —
+the drone ``simulate`` flies in lockstep) with the drone's wire protocol (docs/protocol.md) so
+that the project's own links — or an unmodified third-party client (python-ardrone,
+node-ar-drone style) — fly it as they would fly the real drone. What the drone does with each
+command is :mod:`~ardrone_nmpc.sim.drone_firmware`; its configuration
 :mod:`~ardrone_nmpc.sim.drone_config`; this module owns the sockets and the threads, all sharing
 :attr:`DroneServer.lock` (also with a :class:`~ardrone_nmpc.sim.mocap_server.MocapServer`
 given the same lock):
@@ -45,7 +46,8 @@ from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState
 from ardrone_nmpc.sim.addresses import is_loopback_peer, require_loopback_host
 from ardrone_nmpc.sim.control_port import ControlPort
 from ardrone_nmpc.sim.drone_config import EULER_ANGLE_MAX_LIMIT_RAD, HeldSession
-from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT, DroneFirmware, DroneServerCounters
+from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT, DroneServerCounters
 from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["DroneServer", "DroneServerCounters", "require_loopback_host",
@@ -84,6 +86,9 @@ class DroneServer:
     faults : injected faults (:class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`, None =
         none): plant faults each physics step, navdata packets lost / corrupted / disordered,
         AT datagrams lost on arrival; their experiment time runs on ``clock``.
+    drone : the :class:`~ardrone_nmpc.sim.drone.SimulatedDrone` to serve (its plant is
+        ``plant``); it brings its own firmware and faults, and the firmware options above
+        (``comwdg_s`` … ``session``, ``faults``) are then not taken.
     """
 
     def __init__(self, plant: AirframePlant, *, bind_host: str = "127.0.0.1", at_port: int = 0,
@@ -97,7 +102,8 @@ class DroneServer:
                  ctrl_codes: CtrlCodes | str = CtrlCodes.SDK,
                  altitude_max_m: float = 3.0, vbat_low_pct: float = VBAT_LOW_PCT,
                  session: Optional[HeldSession] = None, lock: Optional[threading.RLock] = None,
-                 clock: Callable[[], float] = time.monotonic, faults=None) -> None:
+                 clock: Callable[[], float] = time.monotonic, faults=None,
+                 drone: Optional[SimulatedDrone] = None) -> None:
         self.bind_host = require_loopback_host(bind_host, "bind address")
         for name, v in (("step_s", step_s), ("demo_rate_hz", demo_rate_hz),
                         ("full_rate_hz", full_rate_hz), ("comwdg_s", comwdg_s),
@@ -115,14 +121,16 @@ class DroneServer:
         self.bootstrap_rate_hz = float(bootstrap_rate_hz or demo_rate_hz)
         self.navdata_timeout_s = None if navdata_timeout_s is None else float(navdata_timeout_s)
         self._clock = clock
-        self._faults = faults
-        self._counters = DroneServerCounters()
-        self._firmware = DroneFirmware(
-            plant, counters=self._counters, comwdg_s=float(comwdg_s),
-            hover_after_s=float(hover_after_s), link_loss_s=float(link_loss_s),
-            comwdg_clear=comwdg_clear, ctrl_codes=CtrlCodes(ctrl_codes),
-            altitude_max_m=float(altitude_max_m), vbat_low_pct=float(vbat_low_pct),
-            session=session)
+        if drone is None:
+            drone = SimulatedDrone(
+                plant, faults=faults, comwdg_s=float(comwdg_s),
+                hover_after_s=float(hover_after_s), link_loss_s=float(link_loss_s),
+                comwdg_clear=comwdg_clear, ctrl_codes=CtrlCodes(ctrl_codes),
+                altitude_max_m=float(altitude_max_m), vbat_low_pct=float(vbat_low_pct),
+                session=session)
+        self._drone = drone
+        self._counters = drone.counters
+        self._firmware = drone.firmware
 
         # navdata stream (under self.lock)
         self._last_traffic_t: Optional[float] = None  # last datagram on either port
@@ -310,14 +318,11 @@ class DroneServer:
             with self.lock:
                 c = self._counters
                 c.physics_max_lag_s = max(c.physics_max_lag_s, now - deadline)
-                if self._faults is not None:   # battery, emergency, delay jump, wind
-                    self._faults.update_plant(now)
-                self.plant.advance(due * step)
+                # plant faults (battery, emergency, delay jump, wind), physics, watchdogs, cap
+                self._drone.advance(due * step, now)
                 done += due
                 c.physics_steps += due
-                self._firmware.watchdogs(now)
                 self._stream_watchdog(now)
-                self._firmware.apply_command()
 
     def _stream_watchdog(self, now: float) -> None:
         if (self._streaming and self.navdata_timeout_s is not None
@@ -345,14 +350,10 @@ class DroneServer:
 
     def handle_at_datagram(self, data: bytes) -> None:
         """Apply one AT datagram (as received on the AT port)."""
-        if self._faults is not None and self._faults.at_lost(self._clock()):
-            with self.lock:   # lost before the drone: no traffic for its watchdogs either
-                self._counters.at_datagrams_lost += 1
-            return
         now = self._clock()
-        with self.lock:
-            self._last_traffic_t = now
-            self._firmware.receive(data, now)
+        with self.lock:   # one lost before the drone is no traffic for its watchdogs either
+            if self._drone.receive_at(data, now):
+                self._last_traffic_t = now
 
     # ------------------------------------------------------------------ navdata
 
@@ -410,12 +411,10 @@ class DroneServer:
                     continue
                 if now < next_send:
                     continue
-                packet = self._packet(now)
                 target = self._nav_client
                 period = self._navdata_period()
                 # injected faults: none (lost), corrupted, duplicated or held back
-                datagrams = ([packet] if self._faults is None
-                             else self._faults.navdata_datagrams(now, packet))
+                datagrams = self._drone.navdata_datagrams(now)
             self._send_navdata(sock, datagrams, target)
             next_send += period
             if next_send < now - period:   # fell behind by more than a period: re-anchor

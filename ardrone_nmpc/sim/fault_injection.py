@@ -1,20 +1,21 @@
-"""Fault injection in the loopback servers (``fly --sim``): a
-:class:`~ardrone_nmpc.sim.faults.FaultSchedule` asked datagram by datagram on the real-time clock.
+"""Fault injection datagram by datagram: a :class:`~ardrone_nmpc.sim.faults.FaultSchedule` asked
+by the simulated drone (:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`) on its clock.
 
-One :class:`ServerFaults` is shared by the drone server and the mocap streamer of a
-:class:`~ardrone_nmpc.sim.loopback.Loopback`. Experiment time is ``now − t0`` (s), ``now`` on
-the servers' clock (``time.monotonic`` unless injected) and ``t0`` set by
-:meth:`ServerFaults.set_clock` — ``fly`` calls it with the monotonic time of experiment time 0.
-Until then experiment time is −inf: no window fault acts, only the constant wind blows.
+One :class:`ServerFaults` per simulated drone, shared by whatever serves it: the drone server
+and the mocap streamer of a :class:`~ardrone_nmpc.sim.loopback.Loopback` (``fly --sim``), or the
+lockstep link and its sensors (``simulate``). Experiment time is ``now − t0`` (s): the servers
+pass their clock (``time.monotonic`` unless injected) and ``t0`` is set by
+:meth:`ServerFaults.set_clock` when the runner starts the experiment; the lockstep drone passes
+experiment time itself (``t0`` = 0). Until then experiment time is −inf: no window fault acts,
+only the constant wind blows.
 
-The decisions are those of the lockstep runner (:mod:`ardrone_nmpc.sim.sensors`): a mocap
-frame is dropped, occluded (object missing or an all-zero pose) or delayed by its sampling
-time; a navdata packet is lost or corrupted by its send time; either stream's datagrams are
-duplicated or held back behind the next one; an AT datagram is lost by its arrival time.
-Plant faults (battery floor, emergency, command-delay jump, wind, landing by itself, the limits
-of another config session) go through :class:`~ardrone_nmpc.sim.faults.PlantFaults`; the
-drone's firmware options (ctrl_state codes, config session, control port) are read from the
-same schedule by :func:`~ardrone_nmpc.sim.loopback.start_loopback`.
+The decisions: a mocap frame is dropped, occluded (object missing or an all-zero pose) or
+delayed by its sampling time; a navdata packet is lost or corrupted by its send time; either
+stream's datagrams are duplicated or held back behind the next one; an AT datagram is lost by
+its arrival time. Plant faults (battery floor, emergency, command-delay jump, wind, landing by
+itself) go through :class:`~ardrone_nmpc.sim.faults.PlantFaults`; the drone's firmware options
+(ctrl_state codes, config session, control port) are read from the same schedule by
+:meth:`SimulatedDrone.from_config`.
 
 Thread safety: the random draws and the held-back datagrams are guarded by an internal lock
 (the schedule's generator is shared by the AT, navdata and mocap threads);
@@ -82,6 +83,7 @@ class ServerFaults:
         self._disorder = {"mocap": Disorder(), "navdata": Disorder()}
         self._counters = FaultCounters()
         self._events: list[tuple[float, dict]] = []
+        self._taken = 0
 
     # ------------------------------------------------------------------ the clock
 
@@ -104,6 +106,12 @@ class ServerFaults:
         with self._lock:
             return list(self._events)
 
+    def take_events(self) -> list[tuple[float, dict]]:
+        """:attr:`events` not taken before, in order."""
+        with self._lock:
+            taken, self._taken = self._events[self._taken:], len(self._events)
+        return taken
+
     # ------------------------------------------------------------------ the drone
 
     def update_plant(self, now_s: float) -> list[dict]:
@@ -125,15 +133,19 @@ class ServerFaults:
             self._counters.at_lost += lost
         return lost
 
+    def navdata_lost(self, now_s: float) -> bool:
+        """The navdata packet due at ``now_s`` is lost (it need not be built)."""
+        with self._lock:
+            lost = self.schedule.navdata_lost(self.t_exp(now_s))
+            self._counters.navdata_lost += lost
+        return lost
+
     def navdata_datagrams(self, now_s: float, packet: bytes) -> list[bytes]:
-        """The datagrams to send, in order, for the navdata ``packet`` due at ``now_s``:
-        none while navdata is lost, the packet corrupted, duplicated or held back."""
+        """The datagrams to send, in order, for the navdata ``packet`` due at ``now_s`` (not
+        :meth:`navdata_lost`): the packet corrupted, duplicated or held back."""
         t = self.t_exp(now_s)
         sched = self.schedule
         with self._lock:
-            if sched.navdata_lost(t):
-                self._counters.navdata_lost += 1
-                return []
             kind = sched.navdata_corruption(t)
             if kind is not None:
                 packet = corrupt_navdata(packet, kind)

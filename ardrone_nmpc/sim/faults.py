@@ -1,10 +1,11 @@
 """Fault injection (config section ``faults``, simulation only): when each fault is active, the
 byte-level corruptions, and the plant-side faults.
 
-Times are experiment times (s; 0 = the first tick after the settle phase). The runners ask a
-:class:`FaultSchedule` per sensor frame or tick; the lockstep runner feeds the faulted datagrams
-through the real decoders and link logic (:mod:`ardrone_nmpc.runtime.lockstep`), ``fly --sim`` through
-the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
+Times are experiment times (s; 0 = the first tick after the settle phase). The simulated drone
+(:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`) asks a :class:`FaultSchedule` per sensor
+frame, datagram or tick; the runners never do: the lockstep link feeds the faulted datagrams
+through the real decoders and link logic (:mod:`ardrone_nmpc.sim.sensors`), ``fly --sim``
+through the loopback servers. Randomness (duplicate/reorder/AT-loss draws) comes from one generator
 seeded by the run's seed, so a faulted run is as reproducible as a clean one.
 
 Firmware faults make the simulated drone behave like a real one a careless client trips over:
@@ -18,11 +19,12 @@ from __future__ import annotations
 
 import math
 import struct
+from typing import Callable
 
 import numpy as np
 
 from ardrone_nmpc.protocol.navdata import HEADER_BYTES, OPTION_HEAD_BYTES, CtrlCodes
-from ardrone_nmpc.sim.drone_config import HeldSession, apply_limits
+from ardrone_nmpc.sim.drone_config import HeldSession
 
 __all__ = ["Disorder", "FaultSchedule", "PlantFaults", "corrupt_navdata", "SENSOR_FAULTS",
            "PLANT_FAULTS", "LINK_FAULTS"]
@@ -168,6 +170,12 @@ class FaultSchedule:
         (the tick's control stage asks, :class:`~ardrone_nmpc.runtime.stages.Control`)."""
         return _within(self.cfg.solver_diverge, t_s)
 
+    @property
+    def solver_divergence(self) -> Callable[[float], bool] | None:
+        """:meth:`solver_diverges`, or None when no divergence is configured (nothing for a
+        simulating runner to wrap its solver with)."""
+        return None if self.cfg.solver_diverge is None else self.solver_diverges
+
     def wind_mps(self, t_s: float) -> np.ndarray:
         """Air velocity at ``t_s``: the constant wind plus a gust in its window (m/s)."""
         w = np.zeros(3)
@@ -226,7 +234,8 @@ class PlantFaults:
     :class:`~ardrone_nmpc.sim.plant.AirframePlant` as experiment time passes.
 
     ``update(t_s)`` returns the events of faults that started (``{"kind": "fault", …}``).
-    A drone left in another configuration session flies that session's limits from the start.
+    (A drone left in another configuration session is the firmware's configuration store's:
+    :meth:`FaultSchedule.held_session`.)
     """
 
     def __init__(self, schedule: FaultSchedule, plant) -> None:
@@ -234,9 +243,6 @@ class PlantFaults:
         self.plant = plant
         self._pending = schedule.plant_events()
         self._gust_on = False
-        session = schedule.held_session()
-        if session is not None:
-            apply_limits(plant, session.limits())
 
     def update(self, t_s: float) -> list[dict]:
         events = []

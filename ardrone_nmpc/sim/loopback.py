@@ -1,13 +1,14 @@
-"""The loopback simulators of one experiment: plant + AR.Drone server + mocap streamer.
+"""The loopback simulators of one experiment: the simulated drone served over UDP.
 
 :func:`start_loopback` is what ``fly --sim`` (in-process, free ports) and ``sim-drone``
-(fixed ports) use: it builds the plant from the config's ``sim`` and ``drone`` sections, serves
-it with a :class:`~ardrone_nmpc.sim.drone_server.DroneServer` on 127.0.0.1 and streams its pose
-with a :class:`~ardrone_nmpc.sim.mocap_server.MocapServer`, all sharing one lock.
+(fixed ports) use: it builds the experiment's :class:`~ardrone_nmpc.sim.drone.SimulatedDrone`
+(the one ``simulate`` flies in lockstep), serves it with a
+:class:`~ardrone_nmpc.sim.drone_server.DroneServer` on 127.0.0.1 and streams its pose with a
+:class:`~ardrone_nmpc.sim.mocap_server.MocapServer`, all sharing one lock.
 
-The config's ``faults`` are injected by both servers through one
+The config's ``faults`` are injected by both servers through the drone's one
 :class:`~ardrone_nmpc.sim.fault_injection.ServerFaults`; their experiment time starts when the
-runner calls :meth:`Loopback.set_fault_clock` (``sim-drone`` calls it when it starts serving).
+runner calls :meth:`Loopback.start_experiment` (``sim-drone`` calls it when it starts serving).
 The firmware faults (ctrl_state codes, another config session, a silent control port) act from
 the start. The drone serves its TCP control port (a free port by default), so a client's
 configuration read-back works as against the real drone.
@@ -15,19 +16,21 @@ configuration read-back works as against the real drone.
 
 from __future__ import annotations
 
-import math
 import socket
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from typing import Optional
 
-from ardrone_nmpc.sim.faults import FaultSchedule
+from ardrone_nmpc.links.backend import OpenedDrone
+
 from ardrone_nmpc.sim.addresses import require_loopback_host
+from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
-from ardrone_nmpc.sim.backends import make_plant
 from ardrone_nmpc.sim.plant import AirframePlant
 
-__all__ = ["Loopback", "start_loopback", "free_udp_port"]
+__all__ = ["Loopback", "free_udp_port", "open_loopback_drone", "start_loopback"]
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -55,17 +58,27 @@ class Loopback:
     """
 
     def __init__(self, plant: AirframePlant, drone: DroneServer, mocap: MocapServer,
-                 faults: Optional[ServerFaults] = None) -> None:
+                 faults: Optional[ServerFaults] = None,
+                 simulated: Optional[SimulatedDrone] = None) -> None:
         self.plant = plant
         self.drone = drone
         self.mocap = mocap
         self.lock = drone.lock
         self.faults = faults
+        self.simulated = (simulated if simulated is not None
+                          else SimulatedDrone(plant, faults=faults))
 
-    def set_fault_clock(self, t0_mono: float) -> None:
-        """Experiment time 0 of the injected faults is ``t0_mono`` (``time.monotonic()``, s)."""
-        if self.faults is not None:
-            self.faults.set_clock(t0_mono)
+    def start_experiment(self, t0_mono: float) -> list[dict]:
+        """Experiment time 0 (of the injected faults) is ``t0_mono`` (``time.monotonic()``, s);
+        returns the events announcing what is injected."""
+        with self.lock:
+            return self.simulated.start_experiment(t0_mono)
+
+    set_fault_clock = start_experiment
+
+    def take_events(self) -> list[tuple[float, dict]]:
+        """``(experiment time s, event)`` of the plant faults that started since the last call."""
+        return self.simulated.take_events()
 
     @property
     def fault_events(self) -> list[tuple[float, dict]]:
@@ -149,18 +162,17 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
     mocap_host = require_loopback_host(mocap_host, "mocap target")
     if mocap_port is None:
         mocap_port = free_udp_port(mocap_host)
-    plant = make_plant(cfg.sim, cfg.drone, seed=seed)
-    schedule = FaultSchedule(cfg.faults, seed)
-    faults = ServerFaults(schedule, plant) if schedule.any else None
-    plant.wind_mps = schedule.wind_mps(-math.inf)  # a constant wind blows from the start
+    server_keys = ("step_s", "demo_rate_hz", "full_rate_hz", "bootstrap_rate_hz",
+                   "navdata_timeout_s", "control_port_mode", "lock", "clock")
+    server_options = {k: drone_options.pop(k) for k in server_keys if k in drone_options}
+    simulated = SimulatedDrone.from_config(cfg, seed=seed, **drone_options)  # firmware options
+    plant, faults = simulated.plant, simulated.faults
     options = dict(demo_rate_hz=cfg.sim.navdata_rate_hz,
                    step_s=cfg.sim.plant.integration_step_s,
-                   altitude_max_m=cfg.drone.altitude_max_m,
-                   ctrl_codes=schedule.ctrl_codes(), session=schedule.held_session(),
-                   control_port_mode=schedule.control_port_mode())
-    options.update(drone_options)
+                   control_port_mode=simulated.control_port_mode)
+    options.update(server_options)
     drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,
-                        control_port=control_port, faults=faults, **options)
+                        control_port=control_port, drone=simulated, **options)
     try:
         mocap = MocapServer(plant, target=(mocap_host, mocap_port), rate_hz=cfg.sim.mocap_rate_hz,
                             object_name=cfg.mocap.object_name,
@@ -177,4 +189,33 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
         mocap.stop()
         drone.stop()
         raise
-    return Loopback(plant, drone, mocap, faults)
+    return Loopback(plant, drone, mocap, faults, simulated)
+
+
+@contextmanager
+def open_loopback_drone(cfg, *, seed: Optional[int] = None,
+                        other_objects: tuple[str, ...] = ()) -> Iterator[OpenedDrone]:
+    """The ``sim://loopback`` backend (``fly --sim``): the experiment's simulated drone served
+    on free loopback ports, its pose streamed to a mocap link, and the link to it — an
+    :class:`~ardrone_nmpc.links.backend.OpenedDrone` like a real drone's."""
+    from ardrone_nmpc.links import drone_link
+    from ardrone_nmpc.links.flight_lock import FlightLock
+    from ardrone_nmpc.links.mocap_link import MocapLink
+
+    with ExitStack() as stack:
+        mocap = stack.enter_context(MocapLink("127.0.0.1", 0, object_name=cfg.mocap.object_name,
+                                              other_objects=other_objects))
+        loop = stack.enter_context(start_loopback(cfg, seed=seed, mocap_port=mocap.port,
+                                                  control_port=0))
+        lock = FlightLock(loop.drone_host, loop.at_port)
+        lock.acquire()
+        stack.callback(lock.release)
+        link = stack.enter_context(drone_link.DroneLink(
+            loop.drone_host, at_port=loop.at_port, navdata_port=loop.navdata_port,
+            keepalive_interval_s=cfg.drone.keepalive_interval_s,
+            config_ids=cfg.drone.config_ids, navdata_demo=cfg.drone.navdata_demo,
+            bind_host="127.0.0.1", at_local_port=0, control_port=loop.control_port))
+        yield OpenedDrone(link, mocap, f"sim://loopback ({loop.drone_host}:{loop.at_port}/"
+                          f"{loop.navdata_port})", simulated=True,
+                          start_experiment=loop.start_experiment, take_events=loop.take_events,
+                          solver_divergence=loop.simulated.solver_divergence)

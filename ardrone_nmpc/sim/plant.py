@@ -632,6 +632,13 @@ class AirframePlant:
             roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
             mode=self._mode, battery_pct=self._battery)
 
+    @property
+    def altitude_m_and_rate_mps(self) -> tuple[float, float]:
+        """(z, ż) now, without building :attr:`truth`: the firmware's altitude cap reads them
+        whenever time passes or a command arrives."""
+        state = self._state
+        return state[2], state[5]
+
     def mocap_pose(self) -> MocapPose:
         """A mocap pose now: position + N(0, σ_p) per axis, each XYZ angle + N(0, σ_a)."""
         x, y, z, _, _, _, phi, theta, psi, _ = self._state

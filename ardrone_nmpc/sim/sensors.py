@@ -1,120 +1,198 @@
-"""Lockstep sensors through the wire: every mocap frame and navdata packet is encoded to bytes,
-faulted (dropped, occluded, delayed, duplicated, reordered, corrupted), and handed to the real
-receiving logic — :class:`~ardrone_nmpc.links.mocap_link.MocapLink` and the navdata decoder —
-at its arrival time on the manual clock.
+"""The lockstep sensor sampler: which mocap pose and navdata sample the links hold at time t.
 
-The lockstep runner uses this instead of its direct sampling when a sensor fault is configured
-(:data:`~ardrone_nmpc.sim.faults.SENSOR_FAULTS`): sampling every frame costs a little speed and
-draws the sensor noise in another order than the direct path, so clean runs keep the direct
-path (and their golden trace). Mocap latency here may be anything (the direct path is limited
-to 50 ms); a frame's receipt time is its pose time, as on the real link.
+One sampler for every lockstep run. Mocap frames are sampled every ``1 / sim.mocap_rate_hz``
+and arrive ``noise.mocap_latency_ms`` later; navdata samples every ``1 / sim.navdata_rate_hz``
+(the firmware's packets, body-frame velocities). It runs the simulated drone
+(:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`: physics, the firmware's watchdogs and
+altitude cap) forward between those events. Two ways to hand the samples over:
+
+* **direct** (no fault touches the sensors): only the newest sample of each stream before t is
+  what a link would hand the tick, so only that one is drawn — intermediate mocap frames are
+  skipped with their noise draws; the stream stays deterministic for a seed;
+* **through the wire** (a fault touches the bytes, :data:`~ardrone_nmpc.sim.faults.SENSOR_FAULTS`):
+  every frame and packet is encoded, faulted by the drone's fault injection (dropped, occluded,
+  delayed, duplicated, reordered, corrupted) and handed to the real receiving logic —
+  :class:`~ardrone_nmpc.links.mocap_link.MocapLink` and the navdata decoder — at its arrival
+  time; a frame's receipt time is its pose time, as on the real link. Every frame costs a
+  little speed and draws the noise in another order, so clean runs keep the direct path (and
+  their golden trace).
+
+Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
+bits and ctrl_state major the drone reported — which the link's take-off guard watches (on
+the direct path only when the flight mode changes: between changes the guard would see the
+same flight bits and a flying major again).
 """
 
 from __future__ import annotations
 
 import heapq
 import math
+from typing import Callable
 
-from ardrone_nmpc.sim.faults import Disorder, FaultSchedule, corrupt_navdata
+import numpy as np
+
+from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
-from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
-from ardrone_nmpc.protocol.navdata import (
-    CtrlCodes,
-    DroneStatus,
-    NavdataError,
-    decode_navdata,
-    encode_drone_navdata,
-)
-from ardrone_nmpc.sim.drone_firmware import VBAT_LOW_PCT
+from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
+from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.mocap_server import frame_items
+from ardrone_nmpc.sim.target import target_pose
+
+__all__ = ["LockstepSensors"]
+
+_MOCAP, _NAV = 0, 1
 
 
-def navdata_packet(plant, sequence: int, codes: CtrlCodes = CtrlCodes.SDK) -> bytes:
-    """The demo navdata packet the lockstep drone sends now, through the one drone encoder.
-
-    This drone has no AT link (the runner commands the plant directly), so the bits that
-    echo the client's commands — REF start, ACK, com watchdog, link lost — stay clear.
-    """
-    s = plant.navdata()
-    status = DroneStatus(s.mode.value, moving=plant.moving,
-                         battery_low=plant.battery_pct < VBAT_LOW_PCT)
-    return encode_drone_navdata(status, sequence, s, codes=codes, t_s=plant.t_s)
-
-
-class WireSensors:
-    """The sensor side of a lockstep run, datagram by datagram.
+class LockstepSensors:
+    """The sensor side of a lockstep run (module docstring).
 
     Parameters
     ----------
     cfg : ExperimentConfig.
-    plant : the simulated drone (advanced by :meth:`advance_to`).
-    schedule : the run's :class:`~ardrone_nmpc.sim.faults.FaultSchedule`.
+    drone : the simulated drone (advanced by :meth:`advance_to`).
+    on_navdata : ``(state bits, ctrl_state major)`` of each navdata sample received.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 
-    def __init__(self, cfg, plant, schedule: FaultSchedule, t_zero_s: float = math.inf):
-        self.plant = plant
-        self.schedule = schedule
-        self.ctrl_codes = schedule.ctrl_codes()
+    def __init__(self, cfg, drone, on_navdata: Callable | None = None,
+                 t_zero_s: float = math.inf):
+        self.drone = drone
+        self.plant = drone.plant
+        self.firmware = drone.firmware
+        faults = drone.faults
+        self.wire = faults is not None and bool(faults.schedule.active & SENSOR_FAULTS)
+        self.on_navdata = on_navdata or (lambda state, major: None)
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
         self.mocap_latency_s = cfg.sim.noise.mocap_latency_ms * 1e-3
         self.nav_period_s = 1.0 / cfg.sim.navdata_rate_hz
         self.target_cfg = cfg.sim.target
+        self.nav = None
+        self.nav_rx_t_s = -math.inf
+        self._nav_mode = None
+        self._next_mocap_k = 0
+        self._next_nav_k = 0
+        # direct: the newest samples
+        self.pose = None
+        self.pose_rx_t_s = -math.inf
+        self.target = None
+        self.target_rx_t_s = -math.inf
+        self._target_rng = np.random.default_rng([cfg.sim.seed, 0x7A26])
+        self._target_std_m = cfg.sim.noise.mocap_position_std_m
+        # through the wire: the receiving links and the datagrams on their way
         others = (self.target_cfg.object_name,) if self.target_cfg is not None else ()
         self.mocap = MocapLink("127.0.0.1", 0, object_name=self.object_name,  # never opened
                                other_objects=others)
         self.nav_stats = LinkStats(window_s=1.0)
-        self.nav = None
-        self.nav_rx_t_s = -math.inf
         self.nav_malformed = 0
         self._queue: list = []  # (arrival_s, order, stream, bytes)
         self._order = 0
-        self._next_mocap_k = 0
-        self._next_nav_k = 0
-        self._disorder = {"mocap": Disorder(), "navdata": Disorder()}
 
-    # ------------------------------------------------------------------ sending side
-    def _send(self, stream: str, sent_s: float, arrival_s: float, data: bytes) -> None:
-        duplicate, hold = self.schedule.disorder(stream, sent_s - self.t_zero_s)
+    # ------------------------------------------------------------------ the clock
+    def _run_to(self, t_s: float) -> None:
+        """The drone's time passes to plant time ``t_s`` (physics, watchdogs, altitude cap)."""
+        plant = self.plant
+        if t_s > plant.t_s:
+            self.firmware.advance(t_s - plant.t_s, t_s)
+
+    def advance_to(self, t_s: float) -> None:
+        """Run the drone to plant time ``t_s``, sampling the sensors on their own grids on the
+        way (module docstring: only the newest, or every one through the wire)."""
+        if self.wire:
+            self._advance_through_wire(t_s)
+        else:
+            self._advance_direct(t_s)
+
+    def inputs(self, t_s: float) -> TickInputs:
+        """What the links hold at ``t_s``: the tick's input."""
+        if not self.wire:
+            return TickInputs(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
+                              self.target, self.target_rx_t_s)
+        pose, pose_rx = self.mocap.latest()
+        target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
+                             if self.target_cfg is not None else (None, -math.inf))
+        return TickInputs(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
+
+    # ------------------------------------------------------------------ direct
+    def _advance_direct(self, t_s: float) -> None:
+        k_mocap = math.floor((t_s - self.mocap_latency_s) / self.mocap_period_s + 1e-9)
+        k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
+        events = []
+        if k_mocap >= self._next_mocap_k:
+            events.append((k_mocap * self.mocap_period_s, _MOCAP))
+            self._next_mocap_k = k_mocap + 1
+        if k_nav >= self._next_nav_k:
+            events.append((k_nav * self.nav_period_s, _NAV))
+            self._next_nav_k = k_nav + 1
+        for t_event, kind in sorted(events):
+            self._run_to(t_event)
+            if kind == _MOCAP:
+                self.pose = self.plant.mocap_pose()
+                self.pose_rx_t_s = t_event + self.mocap_latency_s
+                if self.target_cfg is not None:  # the scripted second object, same frame
+                    self.target = target_pose(self.target_cfg, t_event, self._target_rng,
+                                              self._target_std_m)
+                    self.target_rx_t_s = self.pose_rx_t_s
+            else:
+                self.nav = self.plant.navdata()
+                self.nav_rx_t_s = t_event
+                if self.nav.mode is not self._nav_mode:  # what the guard sees changes with it
+                    self._nav_mode = self.nav.mode
+                    status = self.firmware.status(t_event)
+                    self.on_navdata(status.state_bits(),
+                                    status.ctrl_state(self.firmware.ctrl_codes) >> 16)
+        self._run_to(t_s)
+
+    # ------------------------------------------------------------------ through the wire
+    def _advance_through_wire(self, t_s: float) -> None:
+        """Send every frame due by ``t_s`` and deliver every datagram arrived by then, in
+        arrival order."""
+        k_mocap = math.floor(t_s / self.mocap_period_s + 1e-9)
+        k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
+        events = [(k * self.mocap_period_s, _MOCAP, k)
+                  for k in range(self._next_mocap_k, k_mocap + 1)]
+        events += [(k * self.nav_period_s, _NAV, k) for k in range(self._next_nav_k, k_nav + 1)]
+        self._next_mocap_k = max(self._next_mocap_k, k_mocap + 1)
+        self._next_nav_k = max(self._next_nav_k, k_nav + 1)
+        for t_event, kind, k in sorted(events):
+            self._run_to(t_event)
+            if kind == _MOCAP:
+                self._mocap_frame(k, t_event)
+            else:
+                t_exp = t_event - self.t_zero_s
+                for data in self.drone.navdata_datagrams(t_event, t_exp):
+                    self._push(t_event, _NAV, data)
+        self._run_to(t_s)
+        queue = self._queue
+        while queue and queue[0][0] <= t_s + 1e-12:
+            arrival, _, stream, data = heapq.heappop(queue)
+            self._receive(arrival, stream, data)
+
+    def _push(self, arrival_s: float, stream: int, data: bytes) -> None:
         # equal arrival times leave in push order: a held-back datagram arrives just after
         # the one that overtook it
-        for datagram in self._disorder[stream](data, duplicate, hold):
-            self._push(arrival_s, stream, datagram)
-
-    def _push(self, arrival_s: float, stream: str, data: bytes) -> None:
         heapq.heappush(self._queue, (arrival_s, self._order, stream, data))
         self._order += 1
 
     def _mocap_frame(self, k: int, t_s: float) -> None:
+        faults = self.drone.faults
         t_exp = t_s - self.t_zero_s
-        sched = self.schedule
-        if sched.mocap_dropped(t_exp):
+        fault = faults.mocap_frame(t_exp)
+        if fault.dropped:
             return
-        pose = self.plant.mocap_pose()
-        items = frame_items(self.object_name, pose, sched.mocap_occlusion(t_exp),
+        items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
                             self.target_cfg, t_s)
         data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
-        latency = self.mocap_latency_s + sched.mocap_extra_latency_s(t_exp)
-        self._send("mocap", t_s, t_s + latency, data)
+        arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
+        for datagram in faults.mocap_datagrams(t_exp, data):
+            self._push(arrival, _MOCAP, datagram)
 
-    def _navdata_packet(self, k: int, t_s: float) -> None:
-        t_exp = t_s - self.t_zero_s
-        if self.schedule.navdata_lost(t_exp):
-            return
-        data = navdata_packet(self.plant, (k + 1) & 0xFFFFFFFF or 1, self.ctrl_codes)
-        kind = self.schedule.navdata_corruption(t_exp)
-        if kind is not None:
-            data = corrupt_navdata(data, kind)
-        self._send("navdata", t_s, t_s, data)
-
-    # ------------------------------------------------------------------ receiving side
-    def _receive(self, arrival_s: float, stream: str, data: bytes) -> None:
-        if stream == "mocap":
+    def _receive(self, arrival_s: float, stream: int, data: bytes) -> None:
+        if stream == _MOCAP:
             self.mocap.feed(data, arrival_s)
             return
         stats = self.nav_stats
@@ -131,34 +209,4 @@ class WireSensors:
         if sample is not None:
             stats.record_packet(arrival_s)
             self.nav, self.nav_rx_t_s = sample, arrival_s
-
-    # ------------------------------------------------------------------ the clock
-    def advance_to(self, t_s: float) -> None:
-        """Run the plant to ``t_s``, sending every frame due on the way and delivering every
-        datagram that has arrived by ``t_s``, in arrival order."""
-        plant = self.plant
-        k_mocap = math.floor(t_s / self.mocap_period_s + 1e-9)
-        k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
-        events = [(k * self.mocap_period_s, 0, k) for k in range(self._next_mocap_k, k_mocap + 1)]
-        events += [(k * self.nav_period_s, 1, k) for k in range(self._next_nav_k, k_nav + 1)]
-        self._next_mocap_k = max(self._next_mocap_k, k_mocap + 1)
-        self._next_nav_k = max(self._next_nav_k, k_nav + 1)
-        for t_event, kind, k in sorted(events):
-            if t_event > plant.t_s:
-                plant.advance(t_event - plant.t_s)
-            if kind == 0:
-                self._mocap_frame(k, t_event)
-            else:
-                self._navdata_packet(k, t_event)
-        if t_s > plant.t_s:
-            plant.advance(t_s - plant.t_s)
-        queue = self._queue
-        while queue and queue[0][0] <= t_s + 1e-12:
-            arrival, _, stream, data = heapq.heappop(queue)
-            self._receive(arrival, stream, data)
-
-    def inputs(self, t_s: float) -> TickInputs:
-        pose, pose_rx = self.mocap.latest()
-        target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
-                             if self.target_cfg is not None else (None, -math.inf))
-        return TickInputs(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
+            self.on_navdata(packet.state, packet.demo.ctrl_major)

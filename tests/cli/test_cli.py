@@ -64,14 +64,15 @@ def test_bench_writes_the_json_rows(tmp_path):
     assert "cgmres" in result.output
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--solvers", "fast"], "--solvers: unknown solver(s) fast"),
-    (["--compare", "acados"], "--compare: unknown comparison"),
-    (["--set", "controller.horizon_steps=0"], "controller.horizon_steps:"),
+@pytest.mark.parametrize("args, code, message", [
+    (["--solvers", "fast"], 2, "--solvers: unknown 'fast'; choose from cgmres, newton"),
+    (["--solvers", ","], 2, "--solvers: unknown (empty); choose from cgmres, newton"),
+    (["--compare", "acados"], 2, "--compare: unknown 'acados'; choose casadi"),
+    (["--set", "controller.horizon_steps=0"], 1, "controller.horizon_steps:"),
 ])
-def test_bench_rejects_bad_options(args, message):
+def test_bench_rejects_bad_options(args, code, message):
     result = runner.invoke(app, ["bench", "--steps", "10", *args])
-    assert result.exit_code == 1
+    assert result.exit_code == code
     assert message in result.output
 
 
@@ -186,3 +187,23 @@ def test_overruns_agree_between_summary_and_loop_timing_at_1_ms(tmp_path):
             for r in csv.DictReader(open(run.path / "summary.csv"))}
     assert timing["overruns"] > 0  # the case the issue found: deadlines were skipped
     assert rows[("loop", "overruns")] == timing["overruns"]
+
+
+def test_fly_opens_the_drone_its_address_names(tmp_path):
+    """--drone takes an address or a URI: sim://lockstep flies the simulated drone as simulate
+    does; a scheme no backend serves, or faults on a drone that is not simulated, are one
+    error line each and leave no run directory."""
+    base = ["fly", "configs/hover.yaml", "--no-dashboard", "--log-dir", str(tmp_path),
+            "--duration-s", "2", "--set", "sim.settle_s=0.5"]
+    flown = runner.invoke(app, [*base, "--drone", "sim://lockstep"])
+    assert flown.exit_code == 0, flown.output
+    run = Path(flown.stdout.strip().splitlines()[-1][len("run: "):])
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert [e["kind"] for e in events][-1] == "simulated" and (run / "summary.csv").exists()
+    for drone, message in (("radio://0/80/2M", "no such drone backend"),
+                           ("udp://127.0.0.1", "only in simulation")):
+        refused = runner.invoke(app, [*base, "--drone", drone,
+                                      "--set", "faults.wind.velocity_mps=[0.5,0,0]"])
+        assert refused.exit_code == 1 and message in refused.stderr, refused.output
+        assert refused.stderr.count("error:") == 1 and "Traceback" not in refused.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == [run.name]

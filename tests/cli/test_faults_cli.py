@@ -31,13 +31,13 @@ def test_faults_subset_writes_json_and_markdown(tmp_path):
     assert "**2 of 2 cases pass**" in text and "| hover | battery_floor | landed |" in text
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--faults", "meteor"], "--faults: unknown meteor"),
-    (["--experiments", "loop"], "--experiments: unknown loop"),
-    (["--config-dir", "/nonexistent-dir"], "not found"),
+@pytest.mark.parametrize("args, code, message", [
+    (["--faults", "meteor"], 2, "--faults: unknown 'meteor'"),
+    (["--experiments", "loop"], 2, "--experiments: unknown 'loop'"),
+    (["--config-dir", "/nonexistent-dir"], 1, "not found"),
 ])
-def test_faults_errors_are_one_line(args, message, tmp_path):
+def test_faults_errors_are_one_line(args, code, message, tmp_path):
     result = runner.invoke(app, ["faults", "--log-dir", str(tmp_path), *args])
-    assert result.exit_code == 1
+    assert result.exit_code == code
     assert message in result.output
     assert "Traceback" not in result.output

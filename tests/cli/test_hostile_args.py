@@ -89,31 +89,31 @@ CASES = [
     ("replay-empty-host", ["replay", "{run}", "--broadcast", "--host", ""], 2,
      r"^error: --host: must not be empty$"),
     ("replay-both-modes", ["replay", "{run}", "--rerun", "--broadcast"], 1, r"choose one"),
-    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    ("sweep-out-under-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                 "{file}/sweep"], 1,
-     r"^error: --out .*afile/sweep: cannot create the directory: Not a directory$"),
-    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "--out", "{file}"], 1,
-     r"^error: --out .*afile: exists and is not a directory$"),
+     r"^error: --output .*afile/sweep: cannot create the directory: Not a directory$"),
+    ("sweep-out-a-file", ["sweep", HOVER, "--grid", "duration_s=0.3", "-o", "{file}"], 1,
+     r"^error: --output .*afile: exists and is not a directory$"),
     ("sweep-jobs-0", ["sweep", HOVER, "--jobs", "0"], 2, r"^error: --jobs: .*\b1\b"),
     ("sweep-jobs-huge", ["sweep", HOVER, "--jobs", "100000"], 2, r"^error: --jobs: .*\b256\b"),
     ("sweep-diverge-nan", ["sweep", HOVER, "--diverge-m", "nan"], 2, r"^error: --diverge-m: "),
     ("sweep-far-path", ["sweep", HOVER, "--grid", "duration_s=0.3,0.4", "--set",
                         "reference.kind=path", "--set", "reference.path_file={far}",
-                        "--out", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
-    ("reproduce-out-a-dir", ["reproduce", "--out", "{dir}"], 2,
-     r"^error: --out: .*adir is a directory; give a file name$"),
+                        "-o", "{tmp}/sw"], 1, r"far\.csv:3: column 'x_m'"),
+    ("reproduce-out-a-dir", ["reproduce", "-o", "{dir}"], 2,
+     r"^error: -o / --output: .*adir is a directory; give a file name$"),
     ("bench-json-a-dir", ["bench", "--json", "{dir}"], 2,
      r"^error: --json: .*adir is a directory; give a file name$"),
     ("bench-json-under-a-file", ["bench", "--json", "{file}/b.json"], 2,
      r"^error: --json: .*afile is not a directory$"),
     ("bench-steps-huge", ["bench", "--steps", "1000000000"], 2, r"^error: --steps: "),
     ("bench-steps-float", ["bench", "--steps", "1e9"], 2, r"^error: --steps: "),
-    ("bench-unknown-solver", ["bench", "--solvers", "fast"], 1, r"--solvers: unknown solver"),
+    ("bench-unknown-solver", ["bench", "--solvers", "fast"], 2, r"--solvers: unknown 'fast'"),
     ("plot-missing", ["plot", "{tmp}/nope"], 1, r"nope: no such directory$"),
     ("plot-dpi-0", ["plot", "{run}", "--dpi", "0"], 2, r"^error: --dpi: .*\b30\b"),
-    ("faults-unknown-experiment", ["faults", "--experiments", "bogus"], 1,
-     r"^error: --experiments: unknown bogus; choose from hover, step, square$"),
-    ("faults-empty-list", ["faults", "--faults", ","], 1, r"^error: --faults: unknown \(empty\)"),
+    ("faults-unknown-experiment", ["faults", "--experiments", "bogus"], 2,
+     r"^error: --experiments: unknown 'bogus'; choose from hover, step, square$"),
+    ("faults-empty-list", ["faults", "--faults", ","], 2, r"^error: --faults: unknown \(empty\)"),
     ("faults-json-a-dir", ["faults", "--json", "{dir}"], 2, r"^error: --json: "),
     ("sim-drone-port-70000", ["sim-drone", "--at-port", "70000"], 2,
      r"^error: --at-port: 70000 is not a port \(0 … 65535\)$"),
@@ -124,8 +124,8 @@ CASES = [
      r"--mocap-to 'nohost': expected host:port"),
     ("export-missing", ["export", "{tmp}/nope", "--format", "mcap", "-o", "{tmp}/x.mcap"], 1,
      r"^error: .*nope: no such run directory$"),
-    ("export-bogus-format", ["export", "{run}", "--format", "bogus", "-o", "{tmp}/x.mcap"], 1,
-     r"^error: --format: unknown format 'bogus'; choose mcap, parquet$"),
+    ("export-bogus-format", ["export", "{run}", "--format", "bogus", "-o", "{tmp}/x.mcap"], 2,
+     r"^error: --format: unknown 'bogus'; choose mcap, parquet$"),
     ("mocap-check-missing", ["mocap-check", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
     ("mocap-check-negative-seconds", ["mocap-check", HOVER, "--seconds", "-1"], 2,
      r"^error: --seconds: "),
@@ -174,11 +174,11 @@ def test_sweep_out_on_a_read_only_file_system_is_one_line(files, monkeypatch):
         raise OSError(30, "Read-only file system", str(self))
 
     monkeypatch.setattr(Path, "mkdir", read_only)
-    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "--out",
+    result = runner.invoke(app, ["sweep", HOVER, "--grid", "duration_s=0.3", "-o",
                                  f"{files['tmp']}/ro/sweep"])
     assert result.exit_code == 1, result.output
     assert result.stderr.strip().splitlines() == [
-        f"error: --out {files['tmp']}/ro/sweep: cannot create the directory: "
+        f"error: --output {files['tmp']}/ro/sweep: cannot create the directory: "
         "Read-only file system"]
 
 

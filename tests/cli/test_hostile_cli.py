@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder
 
 runner = CliRunner()
 

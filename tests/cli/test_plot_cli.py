@@ -123,8 +123,14 @@ def test_plot_sweep_metric_and_axes(sweep_dir, tmp_path):
 # ----------------------------------------------------------------------------- errors
 
 
+def test_an_unknown_kind_is_a_command_line_error(run_dir):
+    result = runner.invoke(app, ["plot", str(run_dir), "--kind", "bode"])
+    assert result.exit_code == 2
+    assert result.output == ("error: --kind: unknown 'bode'; choose tracking, inputs, solver, "
+                             "path3d, all\n")
+
+
 @pytest.mark.parametrize("args, message", [
-    (["--kind", "bode"], "--kind: unknown kind 'bode'"),
     (["--metric", "rmse_m"], "--metric: only for sweep directories"),
     (["--kind", "tracking", "-o", "x.docx"], "-o: cannot write '.docx' images"),
 ])

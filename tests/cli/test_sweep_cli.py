@@ -32,7 +32,7 @@ DETERMINISTIC = [c for c in COLUMNS if c not in ("solve_mean_us", "solve_p99_us"
 
 
 def _sweep(out, *extra):
-    return runner.invoke(app, ["sweep", CONFIG, *GRID, *SHORT, "--out", str(out), *extra])
+    return runner.invoke(app, ["sweep", CONFIG, *GRID, *SHORT, "-o", str(out), *extra])
 
 
 def _summary_value(rows, axis, metric):
@@ -136,24 +136,35 @@ def test_sweep_on_the_default_dask_local_cluster(tmp_path):
     (["--grid", "controller.horizn_steps=5,6"], "error: controller.horizn_steps: "),
     (["--grid", "controller.horizon_steps=0"], "error: controller.horizon_steps: "),
     (["--grid", "controller.dtau_s=0.1", "--set", "duration_s=-1"], "error: duration_s: "),
-    (["--grid", "controller.dtau_s=0.1", "--engine", "ray"], "error: --engine: unknown engine"),
     (["--grid", "controller.dtau_s=0.1", "--scheduler", "tcp://127.0.0.1:1"],
      "error: --scheduler: only with --engine dask"),
-    (["--grid", "controller.dtau_s=0.1", "--rank-by", "speed"], "error: --rank-by: unknown"),
     ([], "error: --grid: give at least one"),
 ])
 def test_bad_input_is_one_error_line_and_nothing_runs(tmp_path, args, message):
     out = tmp_path / "sweep"
-    result = runner.invoke(app, ["sweep", CONFIG, "--out", str(out), *args])
+    result = runner.invoke(app, ["sweep", CONFIG, "-o", str(out), *args])
     assert result.exit_code == 1
     assert message in result.output
     assert "Traceback" not in result.output
     assert not out.exists()
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--engine", "ray"], "error: --engine: unknown 'ray'; choose local, dask"),
+    (["--rank-by", "speed"], "error: --rank-by: unknown 'speed'; choose rmse, settling, "),
+])
+def test_a_bad_choice_is_a_command_line_error(tmp_path, args, message):
+    out = tmp_path / "sweep"
+    result = runner.invoke(app, ["sweep", CONFIG, "-o", str(out),
+                                 "--grid", "controller.dtau_s=0.1", *args])
+    assert result.exit_code == 2
+    assert result.output.startswith(message) and len(result.output.splitlines()) == 1
+    assert not out.exists()
+
+
 def test_a_missing_config_file_is_an_error_line(tmp_path):
     result = runner.invoke(app, ["sweep", str(tmp_path / "nope.yaml"),
-                                 "--grid", "controller.dtau_s=0.1", "--out", str(tmp_path / "s")])
+                                 "--grid", "controller.dtau_s=0.1", "-o", str(tmp_path / "s")])
     assert result.exit_code == 1
     assert "no such file" in result.output and "Traceback" not in result.output
 
@@ -246,7 +257,7 @@ def test_the_processes_of_a_killed_sweep_end_with_it(tmp_path):
     sweep = subprocess.Popen(
         [sys.executable, "-m", "ardrone_nmpc.cli.app", "sweep", CONFIG, "--grid",
          "controller.horizon_steps=8,9,10", "--set", "duration_s=3000", "--jobs", "2",
-         "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+         "-o", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     family: list[tuple[int, str]] = []
     try:
         partial = out / ".partial"

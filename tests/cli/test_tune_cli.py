@@ -28,7 +28,7 @@ SPACE = [f"controller.q[{i}]" for i in range(7)] + [f"controller.r[{i}]" for i i
 
 
 def _tune(out, *extra):
-    return runner.invoke(app, ["tune", CONFIG, *SHORT, "--out", str(out), *extra])
+    return runner.invoke(app, ["tune", CONFIG, *SHORT, "-o", str(out), *extra])
 
 
 def _rows(out: Path) -> list[dict[str, str]]:
@@ -116,7 +116,7 @@ def test_resume_continues_without_flying_finished_trials_again(tmp_path):
     first = _rows(tmp_path)
     again = _tune(tmp_path, "--trials", "2", "--jobs", "1")
     assert again.exit_code == 1
-    assert again.output.startswith(f"error: --out {tmp_path}: holds a study already")
+    assert again.output.startswith(f"error: --output {tmp_path}: holds a study already")
     # a run stopped with a trial in flight: it was asked, never told
     _study(tmp_path).ask()
     result = _tune(tmp_path, "--trials", "4", "--jobs", "1", "--resume")
@@ -155,7 +155,6 @@ def test_keep_runs_writes_each_flight_s_run_directory(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--objective", "fast"], "error: --objective: unknown preset 'fast'"),
-    (["--engine", "ray"], "error: --engine: unknown engine 'ray'"),
     (["--scheduler", "tcp://127.0.0.1:1"], "error: --scheduler: only with --engine dask"),
     (["--variant", "nothing"], "error: --variant 'nothing': expected"),
     (["--space", "/nonexistent/space.yaml"], "error: --space /nonexistent/space.yaml: cannot read"),
@@ -167,6 +166,13 @@ def test_mistakes_are_one_line_and_nothing_flies(tmp_path, args, message):
     assert result.output.startswith(message), result.output
     assert "Traceback" not in result.output
     assert not (tmp_path / "out" / "study.db").exists()
+
+
+def test_an_unknown_engine_is_a_command_line_error(tmp_path):
+    result = _tune(tmp_path / "out", "--trials", "1", "--jobs", "1", "--engine", "ray")
+    assert result.exit_code == 2
+    assert result.output == "error: --engine: unknown 'ray'; choose local, dask\n"
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_space_file_and_variants_shape_the_study(tmp_path):

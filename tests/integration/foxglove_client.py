@@ -1,7 +1,9 @@
-"""A minimal Foxglove WebSocket client (subprotocol ``foxglove.sdk.v1``) on tornado's client,
-written from the protocol's documented messages, not from our server code: it reads
-``serverInfo`` and ``advertise`` (JSON text), subscribes to every advertised channel and keeps
-each binary ``messageData`` frame (opcode 1, u32 subscription id, u64 log time, payload).
+"""A minimal Foxglove WebSocket client (subprotocol ``foxglove.sdk.v1``, or another one asked
+for) on tornado's client, written from the protocol's documented messages, not from our server
+code: it reads ``serverInfo`` and ``advertise`` (JSON text), subscribes to every advertised
+channel and keeps each binary ``messageData`` frame (opcode 1, u32 subscription id, u64 log
+time, payload). :meth:`FoxgloveClient.decode` reads a protobuf payload with the channel's
+advertised schema (a base64 FileDescriptorSet) through ``mcap-protobuf-support``.
 
 Runs its own asyncio loop in a thread; used by tests/integration/test_live_view.py and
 benchmarks/live_view_jitter.py. Connects to 127.0.0.1 only.
@@ -22,8 +24,10 @@ _HEADER = struct.Struct("<BIQ")
 class FoxgloveClient:
     """Collect the messages of every channel of ``ws://127.0.0.1:<port>``."""
 
-    def __init__(self, port: int, *, connect_timeout_s: float = 10.0) -> None:
+    def __init__(self, port: int, *, connect_timeout_s: float = 10.0,
+                 subprotocol: str = "foxglove.sdk.v1") -> None:
         self.url = f"ws://127.0.0.1:{port}"
+        self.subprotocol = subprotocol
         self.connect_timeout_s = connect_timeout_s
         self.channels: dict[int, dict] = {}          # channel id → advertised channel
         self.messages: list[tuple[str, int, bytes]] = []   # (topic, log time ns, payload)
@@ -50,6 +54,19 @@ class FoxgloveClient:
     def topic_messages(self, topic: str) -> list[tuple[int, bytes]]:
         return [(t, data) for top, t, data in list(self.messages) if top == topic]
 
+    def decode(self, topic: str, data: bytes):
+        """A protobuf message of ``topic`` decoded with its advertised schema."""
+        import base64
+
+        from mcap.records import Schema
+        from mcap_protobuf.decoder import DecoderFactory
+
+        (channel,) = [c for c in self.channels.values() if c["topic"] == topic]
+        assert channel["encoding"] == "protobuf", channel
+        schema = Schema(id=1, name=channel["schemaName"], encoding="protobuf",
+                        data=base64.b64decode(channel["schema"]))
+        return DecoderFactory().decoder_for("protobuf", schema)(data)
+
     def _run(self) -> None:
         try:
             asyncio.run(self._main())
@@ -63,7 +80,7 @@ class FoxgloveClient:
         deadline = time.monotonic() + self.connect_timeout_s
         while True:   # the server may not be up yet (a subprocess starting)
             try:
-                return await websocket_connect(self.url, subprotocols=["foxglove.sdk.v1"])
+                return await websocket_connect(self.url, subprotocols=[self.subprotocol])
             except OSError:
                 if time.monotonic() > deadline or self._stop.is_set():
                     raise

@@ -148,5 +148,5 @@ def test_fly_sim_never_relaunches_a_drone_that_landed_by_itself(tmp_path):
     assert landed["accepted"]
     run = read_run(sorted(Path(tmp_path).glob("*-hover"))[-1])
     t, z = run.columns["t_s"], run.columns["z_m"]
-    after = z[t > landed["t_exp_s"] + 3.0]                     # landing takes < 3 s from 1 m
+    after = z[t > landed["t_s"] + 3.0]                         # landing takes < 3 s from 1 m
     assert after.size == 0 or after.max() < 0.1                # and it stays down

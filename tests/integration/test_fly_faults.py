@@ -235,7 +235,8 @@ def test_drone_server_discards_lost_at_datagrams():
 def test_start_loopback_shares_one_fault_clock_between_the_servers(tmp_path):
     cfg = load_config(None, ["faults.navdata_loss.start_s=1"])
     with loopback_module.start_loopback(cfg, seed=1) as loop:
-        assert loop.faults is not None and loop.drone._faults is loop.mocap._faults is loop.faults
+        assert loop.faults is not None and loop.mocap._faults is loop.faults
+        assert loop.drone._drone is loop.simulated and loop.simulated.faults is loop.faults
         assert loop.faults.t_exp(NOW) == -math.inf
         loop.set_fault_clock(NOW)
         assert loop.faults.t_exp(NOW + 2.0) == pytest.approx(2.0)

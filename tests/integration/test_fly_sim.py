@@ -54,6 +54,31 @@ def test_fly_sim_flies_and_lands(tmp_path):
     assert set(run.columns["mode"]) <= {"settle", "track"}
     z = run.columns["z_m"][t > 0]
     assert abs(z.mean() - 1.0) < 0.3  # hovering near the reference over UDP
+    _assert_one_clock(run, tmp_path)
+
+
+def _assert_one_clock(run, tmp_path):
+    """events.jsonl's t_s is the rows' experiment time: the take-off before the first row
+    (negative, as the settle rows), the landing at the last; the wall time apart; and the
+    MCAP export places each event at its t_s on the rows' time line."""
+    from ardrone_nmpc.experiments.export import read_mcap, write_mcap
+
+    raw = {e["kind"]: e for e in reversed(_events(run.path))}  # the first of each kind
+    t = run.columns["t_s"]
+    assert raw["takeoff"]["t_s"] <= t[0] < 0
+    assert 0.0 <= raw["landing"]["t_s"] - t[-1] <= 2.0
+    assert raw["landed"]["t_s"] >= raw["landing"]["t_s"]
+    assert all(isinstance(e["wall_s"], float) for e in raw.values())
+    assert raw["landing"]["wall_s"] - raw["takeoff"]["wall_s"] == pytest.approx(
+        raw["landing"]["t_s"] - raw["takeoff"]["t_s"], abs=1e-6)
+    write_mcap(run, tmp_path / "run.mcap")
+    mcap = read_mcap(tmp_path / "run.mcap")
+    rows_ns = mcap.row_log_times_ns
+    for event, t_ns in zip(mcap.events, mcap.event_log_times_ns):
+        expected_ns = rows_ns[0] + (event["t_s"] - t[0]) * 1e9
+        assert abs(t_ns - expected_ns) < 1e3, event     # on the rows' time line
+        if t[0] <= event["t_s"] <= t[-1]:
+            assert rows_ns[0] <= t_ns <= rows_ns[-1], event
 
 
 @pytest.mark.timeout(120)

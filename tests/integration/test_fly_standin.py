@@ -19,29 +19,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-import ardrone_nmpc.links.drone_link as drone_link_module
 from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.links.flight_lock import FlightLock
 from tests.standins.sdk_drone import OUTDOOR_HELD, REF_TAKEOFF, MocapStandIn, SdkDrone
 
 ROOT = Path(__file__).parents[2]
 HOVER = str(ROOT / "configs" / "hover.yaml")
-pytestmark = pytest.mark.timeout(90)
-
-
-@pytest.fixture(autouse=True)
-def loopback_only(monkeypatch, tmp_path):
-    """The link's lab defaults (all interfaces, local port 5556) become loopback/ephemeral,
-    and the flight locks live in this test's directory."""
-    class LoopbackLink(drone_link_module.DroneLink):
-        def __init__(self, *args, **kwargs):
-            kwargs.setdefault("bind_host", "127.0.0.1")
-            kwargs["at_local_port"] = 0
-            super().__init__(*args, **kwargs)
-
-    monkeypatch.setattr(drone_link_module, "DroneLink", LoopbackLink)
-    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
-    (tmp_path / "run").mkdir()
+pytestmark = [pytest.mark.timeout(90), pytest.mark.usefixtures("loopback_only")]
 
 
 def fly(tmp_path, drone: SdkDrone, *sets, duration_s=3.0):
@@ -95,12 +79,26 @@ def test_fly_against_a_drone_that_lands_itself_4_s_after_take_off(tmp_path):
         assert len(refs_after) >= 5
         assert all(not args[0] & REF_TAKEOFF for _, _, args, _ in refs_after)
     kinds = [e["kind"] for e in events(run)]
-    assert "drone_landed_itself" in kinds and kinds[-1] == "session_end"
+    assert "drone_landed_itself" in kinds and kinds[-2:] == ["session_end", "exception"]
     assert (run / "summary.csv").read_text().startswith("axis,metric,value,unit")
     log = (run / "log.csv").read_text().splitlines()
     col = log[0].split(",").index("nav_ctrl_state")
     states = {row.split(",")[col] for row in log[1:]}
     assert str(4 << 16) in states  # hovering, logged raw each tick
+
+
+def test_fly_refuses_a_faults_section_on_a_drone_that_is_not_simulated(tmp_path):
+    """Faults are injected only in simulation: a real drone with a faults section is refused
+    with one line naming it, before any datagram (no take-off REF, no run directory)."""
+    with SdkDrone() as drone:
+        result, run = fly(tmp_path, drone, "faults.solver_diverge.start_s=5")
+        assert result.exit_code == 1 and run is None
+        assert drone.commands("REF") == [] and drone.takeoffs == 0
+        assert drone.commands("CONFIG") == []
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "faults: solver_diverge" in errors[0]
+    assert "only in simulation" in errors[0] and "udp://127.0.0.1" in errors[0]
+    assert "Traceback" not in result.stderr
 
 
 def test_a_second_fly_at_a_held_drone_is_refused_before_any_datagram(tmp_path):

@@ -158,6 +158,7 @@ def test_run_check_renders_the_live_table_and_runs_the_axis_test():
 
     class Source:   # a source whose drone is carried 20 cm forward during the check
         where, names_seen, missing, zero_poses, repeats = "test", ("ardrone", "wand"), 2, 0, 0
+        max_gap_s = 0.01
 
         def __init__(self):
             self.n = 0
@@ -177,3 +178,76 @@ def test_run_check_renders_the_live_table_and_runs_the_axis_test():
     shown = text.export_text()
     assert "ardrone" in shown and "stream objects: ardrone, wand" in shown and "2/0/0" in shown
     assert result.axes.mark("+x") == "✔" and result.tracks[0].rate_hz() > 0
+
+
+@pytest.mark.timeout(60)
+def test_mocap_check_json_through_the_motioncapture_mock():
+    import json
+
+    body = _mock_body("ardrone", (0.5, 0.25, 1.0), 0.3)
+    result = CliRunner().invoke(app, [
+        "mocap-check", "configs/hover.yaml", "--seconds", "1.5", "--no-live", "--json",
+        "--set", "mocap.kind=motioncapture", "--set", "mocap.system=mock",
+        "--set", f"mocap.options.rigid_bodies={body}"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    (drone,) = doc["objects"]
+    assert drone["name"] == "ardrone" and drone["seen"]
+    assert (drone["x_m"], drone["y_m"], drone["z_m"]) == pytest.approx((0.5, 0.25, 1.0),
+                                                                       abs=1e-6)
+    assert drone["psi_rad"] == pytest.approx(0.3, abs=1e-3)
+    assert drone["rate_hz"] > 50.0 and drone["fresh_poses"] > 50
+    # a ≈ 100 Hz stream read every 50 ms: a reader never saw it older than a few samples
+    assert 0.0 <= drone["max_age_ms"] < 1000.0
+    assert 0.0 < doc["max_gap_ms"] < 1000.0
+    assert (doc["missing_frames"], doc["zero_frames"], doc["frozen_frames"]) == (0, 0, 0)
+    assert doc["stream_objects"] == ["ardrone"]
+    assert doc["axis_test"] == {"+x": "not done", "+y": "not done", "+z": "not done",
+                                "yaw CCW": "not done"}
+
+
+@pytest.mark.timeout(60)
+def test_piped_mocap_check_prints_the_streams_counts():
+    """Piped (no live table), the counts are a line of their own: a streaming object, then
+    one the mock streams as the all-zero pose (what Vicon sends for an occluded object)."""
+    def check(xyz):
+        return CliRunner().invoke(app, [
+            "mocap-check", "configs/hover.yaml", "--seconds", "1.0", "--no-live",
+            "--set", "mocap.kind=motioncapture", "--set", "mocap.system=mock",
+            "--set", f"mocap.options.rigid_bodies={_mock_body('ardrone', xyz, 0)}"])
+
+    pattern = (r"stream: missing=(\d+) zero=(\d+) frozen=(\d+) max_age_ms=(\d+|—) "
+               r"max_gap_ms=(\d+|—)")
+    seen = check((0, 0, 1))
+    assert seen.exit_code == 0, seen.output
+    (line,) = [ln for ln in seen.stdout.splitlines() if ln.startswith("stream: ")]
+    m = re.fullmatch(pattern, line)
+    assert m and m.groups()[:3] == ("0", "0", "0") and int(m[5]) > 0, line
+    occluded = check((0, 0, 0))
+    assert occluded.exit_code == 1
+    (line,) = [ln for ln in occluded.stdout.splitlines() if ln.startswith("stream: ")]
+    m = re.fullmatch(pattern, line)
+    assert m and int(m[2]) > 10 and (m[4], m[5]) == ("—", "—"), line
+
+
+def test_the_largest_gap_between_fresh_poses_is_measured_at_receipt():
+    """docs/mocap-stream.md: missing, all-zero and repeated frames are not fresh; the gap is
+    the time from one fresh pose to the next (receipt stamps)."""
+    from ardrone_nmpc.links.mocap_source import MocapSource
+    from ardrone_nmpc.protocol.mocap import MocapObjectPose
+
+    class Fed(MocapSource):   # the base class's rules, fed by hand
+        def start(self): pass
+        def close(self): pass
+        where = "hand"
+
+    src = Fed(object_name="ardrone")
+    pose = lambda x: {"ardrone": MocapObjectPose("ardrone", (x, 0.0, 1000.0), (0.0, 0.0, 0.0))}
+    zero = {"ardrone": MocapObjectPose("ardrone", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))}
+    frames = [(0.00, pose(1.0)), (0.01, pose(2.0)), (0.02, {}), (0.03, zero), (0.04, zero),
+              (0.05, pose(3.0)), (0.06, pose(3.0)), (0.07, pose(3.0)), (0.08, pose(3.0)),
+              (0.09, pose(4.0))]
+    for t, frame in frames:
+        src.accept_frame(frame, t)
+    assert (src.missing, src.zero_poses, src.repeats) == (1, 2, 2)   # 3rd and 4th repeat
+    assert src.max_gap_s == pytest.approx(0.04)   # 0.01 → 0.05, longer than 0.06 → 0.09

@@ -15,11 +15,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import ardrone_nmpc.runtime.lockstep as lockstep
+import ardrone_nmpc.sim.lockstep_drone as lockstep_drone
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
 from ardrone_nmpc.protocol.mocap import decode_mocap
-from ardrone_nmpc.runs.rundir import STRING_COLUMNS, RunRecorder, read_run
-from ardrone_nmpc.sim.sensors import WireSensors
+from ardrone_nmpc.runs.log_columns import STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
+from ardrone_nmpc.sim.sensors import LockstepSensors
 
 
 class _Q:
@@ -45,7 +47,7 @@ class _TrackedSystem:
 
 
 class _MotionCaptureWire:
-    """What WireSensors needs of its mocap link (feed, latest, latest_of), served by a
+    """What the lockstep sensors need of their mocap link (feed, latest, latest_of), served by a
     MotionCaptureSource: each simulated frame becomes the library's next frame."""
 
     def __init__(self, object_name: str, others: tuple[str, ...]):
@@ -69,9 +71,9 @@ class _MotionCaptureWire:
         return self.source.latest_of(name)
 
 
-class _SwappedSensors(WireSensors):
-    def __init__(self, cfg, plant, schedule, t_zero_s=math.inf):
-        super().__init__(cfg, plant, schedule, t_zero_s)
+class _SwappedSensors(LockstepSensors):
+    def __init__(self, cfg, drone, on_navdata=None, t_zero_s=math.inf):
+        super().__init__(cfg, drone, on_navdata, t_zero_s)
         link = self.mocap
         self.mocap = _MotionCaptureWire(link.object_name, link.other_objects)
 
@@ -102,7 +104,7 @@ def test_swapped_source_gives_the_same_log(case, tmp_path, monkeypatch):
     config, overrides = CASES[case]
     cfg = load_config(config, overrides)
     vicon = _fly(cfg, tmp_path / "vicon")
-    monkeypatch.setattr(lockstep, "WireSensors", _SwappedSensors)
+    monkeypatch.setattr(lockstep_drone, "LockstepSensors", _SwappedSensors)
     swapped = _fly(cfg, tmp_path / "motioncapture")
     assert swapped.n_rows == vicon.n_rows > 40
     assert [(e["t_s"], e["kind"]) for e in swapped.events] == \
@@ -132,7 +134,7 @@ def test_fly_reads_a_motioncapture_source(tmp_path):
     libmotioncapture `mock` system (the real library, in its child process)."""
     import threading
 
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
     from ardrone_nmpc.sim.loopback import free_udp_port
     from ardrone_nmpc.sim.serve import serve
 

@@ -114,7 +114,7 @@ def test_fly_against_an_independent_emulator_hovers_within_3_cm(tmp_path):
     roll = +0.46·0.2/(4.774·0.21) (bank right) and gaz = 0.05/(0.7·0.7) PCMD fractions — the
     commands must converge there while the position error vanishes.
     """
-    from ardrone_nmpc.runtime.realtime import run_flight
+    from ardrone_nmpc.experiments.flight import run_flight
 
     port = _free_udp_port()
     # the emulator is a plant behind AT/navdata only: no TCP control port to read limits back

@@ -16,7 +16,8 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.protocol.navdata import DroneState
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession
 from ardrone_nmpc.sim.drone_server import DroneServer
-from ardrone_nmpc.sim.faults import FaultSchedule, PlantFaults
+from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.sim.plant import AirframePlant
 
 IDS = ("d2e081a3", "be27e2e4", "d87f7e0c")
@@ -114,13 +115,14 @@ def test_the_default_session_applies_plain_writes_and_reports_the_clamped_value(
         HeldSession(("00000000",) * 3)
 
 
-def test_the_foreign_session_fault_reaches_the_lockstep_plant_and_the_server():
+def test_the_foreign_session_fault_reaches_the_one_simulated_drone():
     cfg = load_config(None, ["faults.foreign_session.control_vz_max_mps=1.5"])
     schedule = FaultSchedule(cfg.faults)
     assert schedule.held_session().ids == IDS
-    lockstep = plant()
-    PlantFaults(schedule, lockstep)
-    assert lockstep.params.control_vz_max_mps == 1.5 and lockstep.params.euler_angle_max_rad == 0.52
+    drone = SimulatedDrone.from_config(cfg)  # what simulate flies and fly --sim serves
+    assert drone.firmware.config.active_ids == IDS
+    p = drone.plant.params
+    assert p.control_vz_max_mps == 1.5 and p.euler_angle_max_rad == 0.52
     assert load_config(None).faults.foreign_session is None
     with pytest.raises(ConfigError, match="session_id"):
         load_config(None, ["faults.foreign_session.session_id=xyz"])

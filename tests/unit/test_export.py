@@ -1,6 +1,6 @@
 """`export RUN --format mcap|parquet`: every row and event read back bit for bit with the
-`mcap` library's reader and pyarrow; the pose channels checked against foxglove-sdk's own
-message classes."""
+`mcap` library's reader and pyarrow; the typed channels (written by foxglove-sdk) decoded by
+`mcap-protobuf-support` and their attitudes checked against scipy's rotations."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from ardrone_nmpc.cli.app import app
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.export import read_mcap, run_rows, write_mcap, write_parquet
 from ardrone_nmpc.runs import channels as ch
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder, read_run
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 
 TRICKY = [0.1, -0.0, 0.0, 5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, math.inf,
           -math.inf, math.nan, 1e-7, -123456.789e-3, 2.0 ** 53 + 2.0, 1 / 3]
@@ -71,7 +72,9 @@ def test_mcap_round_trips_every_row_and_event_bit_for_bit(run_dir, tmp_path):
         assert json.dumps(got, sort_keys=True) == json.dumps(want, sort_keys=True)
         assert all(_same_bits(got[k], want[k]) for k in want if isinstance(want[k], float))
     assert back.config["seed"] == 3 and back.config["config"]["name"] == "export"
-    assert n == 40 + 6 + 1 + 2 + len(back.poses["/pose"]) + len(back.poses["/reference"])
+    n_poses = len(back.poses["/pose"]) + len(back.poses["/reference"])
+    assert n == 40 + 6 + 1 + 2 + 2 * n_poses          # every pose has its /tf transform too
+    assert len(back.poses["/tf"]) == n_poses
     finite = np.isfinite(np.c_[run.columns["x_m"], run.columns["y_m"], run.columns["z_m"]])
     assert len(back.poses["/pose"]) == finite.all(axis=1).sum() < 40   # none without a position
 
@@ -87,33 +90,80 @@ def test_mcap_log_time_is_the_row_time(run_dir, tmp_path):
     assert back.row_log_times_ns[0] > 1.6e18          # on the run's creation date (epoch ns)
 
 
-def test_pose_channels_are_foxglove_pose_in_frame(run_dir, tmp_path):
-    import foxglove.messages as fg  # the 'foxglove' extra (in 'test')
-
+def test_pose_channels_are_foxglove_typed_channels(run_dir, tmp_path):
     out = tmp_path / "run.mcap"
-    write_mcap(read_run(run_dir), out)
+    run = read_run(run_dir)
+    write_mcap(run, out)
     back = read_mcap(out)
     assert back.schemas["/pose"] == back.schemas["/reference"] == "foxglove.PoseInFrame"
-    msg = back.poses["/pose"][0]
-    # the SDK's own class takes exactly these fields (a misspelt one raises TypeError)
-    pose = fg.PoseInFrame(
-        timestamp=fg.Timestamp(**msg["timestamp"]), frame_id=msg["frame_id"],
-        pose=fg.Pose(position=fg.Vector3(**msg["pose"]["position"]),
-                     orientation=fg.Quaternion(**msg["pose"]["orientation"])))
-    assert len(pose.encode()) > 0 and msg["frame_id"] == "world"
-    # the paths: one PosesInFrame each, every pose of its channel, at the first row's time
+    assert back.schemas["/tf"] == "foxglove.FrameTransform"
     assert back.schemas["/flight_path"] == "foxglove.PosesInFrame"
+    assert {back.encodings[t] for t in ("/pose", "/tf", "/flight_path")} == {"protobuf"}
+    assert back.encodings["/log"] == "json"
+    msg = back.poses["/pose"][0]
+    assert msg["frame_id"] == "world"
+    q = msg["pose"]["orientation"]
+    assert q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2 == pytest.approx(1.0)
+    # /tf: world → drone at the /pose, world → reference at the /reference
+    drone = [m for m in back.poses["/tf"] if m["child_frame_id"] == "drone"]
+    ref = [m for m in back.poses["/tf"] if m["child_frame_id"] == "reference"]
+    assert {m["parent_frame_id"] for m in back.poses["/tf"]} == {"world"}
+    assert [m["translation"] for m in drone] == [m["pose"]["position"]
+                                                 for m in back.poses["/pose"]]
+    assert [m["rotation"] for m in drone] == [m["pose"]["orientation"]
+                                              for m in back.poses["/pose"]]
+    assert len(ref) == len(back.poses["/reference"])
+    # the paths: one PosesInFrame each, every pose of its channel, at the first row's time
     (path,) = back.poses["/flight_path"]
     (ref_path,) = back.poses["/reference_path"]
     assert [p_["position"] for p_ in path["poses"]] == \
         [m["pose"]["position"] for m in back.poses["/pose"]]
     assert len(ref_path["poses"]) == len(back.poses["/reference"])
-    fg.PosesInFrame(timestamp=fg.Timestamp(**path["timestamp"]), frame_id=path["frame_id"],
-                    poses=[fg.Pose(position=fg.Vector3(**p_["position"]),
-                                   orientation=fg.Quaternion(**p_["orientation"]))
-                           for p_ in path["poses"]])
-    q = msg["pose"]["orientation"]
-    assert q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2 == pytest.approx(1.0)
+
+
+def _body_axes_in_world(q: dict) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat([q["x"], q["y"], q["z"], q["w"]]).as_matrix()  # columns: axes
+
+
+def test_pose_attitude_is_navdata_roll_and_pitch_with_mocap_heading(tmp_path):
+    """docs/protocol.md §4.4: navdata roll > 0 is right wing down, pitch > 0 nose up; the
+    world is x forward, y left, z up, ψ counter-clockwise (docs/design.md §4)."""
+    from scipy.spatial.transform import Rotation
+
+    cfg = load_config(None, ["name=tilt"])
+    cases = [(10.0, 0.0, 0.0), (0.0, 10.0, 0.0), (5.0, -7.0, 2.0), (math.nan, 3.0, 1.0)]
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        for k, (roll, pitch, psi) in enumerate(cases):
+            rec.write_row({"t_s": 0.065 * k, "x_m": 1.0, "y_m": 2.0, "z_m": 1.5, "psi_rad": psi,
+                           "nav_roll_deg": roll, "nav_pitch_deg": pitch,
+                           "x_ref_m": 0.0, "y_ref_m": 0.0, "z_ref_m": 1.0, "psi_ref_rad": psi})
+    out = tmp_path / "tilt.mcap"
+    write_mcap(read_run(rec.path), out)
+    poses = [m["pose"]["orientation"] for m in read_mcap(out).poses["/pose"]]
+    right_down, nose_up, mixed, no_nav = (_body_axes_in_world(q) for q in poses)
+    assert right_down[2, 1] > 0.15       # body y (left wing) points up: right wing down
+    assert abs(right_down[2, 0]) < 1e-12  # no pitch
+    assert nose_up[2, 0] > 0.15          # body x (nose) points up
+    assert abs(nose_up[2, 1]) < 1e-12
+    # the whole rotation: scipy's intrinsic Z-Y-X (ψ, −pitch, roll), up to the quaternion's sign
+    want = Rotation.from_euler("ZYX", [2.0, math.radians(7.0), math.radians(5.0)])
+    assert (Rotation.from_matrix(mixed) * want.inv()).magnitude() < 1e-12
+    # no navdata attitude: heading only
+    assert np.allclose(no_nav, Rotation.from_euler("z", 1.0).as_matrix(), atol=1e-12)
+    q = poses[3]
+    assert q["x"] == q["y"] == 0.0
+
+
+def test_attitude_quaternion_is_scipys_zyx():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(2)
+    for roll, pitch, yaw in rng.uniform(-3.0, 3.0, size=(200, 3)):
+        got = np.array(ch.attitude_quaternion(roll, pitch, yaw))
+        want = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
+        assert min(np.abs(got - want).max(), np.abs(got + want).max()) < 1e-12
 
 
 def test_json_has_no_nan_or_infinity_tokens():
@@ -123,19 +173,88 @@ def test_json_has_no_nan_or_infinity_tokens():
     json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard {c}"))
 
 
-def test_parquet_round_trips_the_log(run_dir, tmp_path):
+def _parquet(run_dir, tmp_path):
     import pyarrow.parquet as pq  # the 'parquet' extra (in 'test')
 
     out = tmp_path / "run.parquet"
     run = read_run(run_dir)
-    assert write_parquet(run, out) == 40
-    table = pq.read_table(out)
+    assert write_parquet(run, out) == run.n_rows
+    return run, pq.read_table(out)
+
+
+def test_parquet_round_trips_the_log(run_dir, tmp_path):
+    run, table = _parquet(run_dir, tmp_path)
+    assert table.num_rows == 40
     for name, values in run.columns.items():
+        if name == "cmd_saturated":
+            continue                       # four boolean columns: test_parquet_types
         got = table.column(name).to_pylist()
-        assert all(_same_bits(a, b) for a, b in zip(got, values.tolist())), name
+        want = values.tolist()
+        if name in ("gmres_iterations", "newton_iterations", "nav_ctrl_state") and \
+                str(table.column(name).type) == "int64":
+            want = [None if math.isnan(v) else int(v) for v in want]
+        assert all(_same_bits(a, b) or (a is None and b != b) for a, b in zip(got, want)), name
     events = [json.loads(line) for line in
               table.schema.metadata[b"ardrone_nmpc.events"].splitlines()]
     assert [e["kind"] for e in events] == [e["kind"] for e in run.events]
+
+
+def test_parquet_types_units_and_utc_time(tmp_path):
+    """Counts are integers, labels categorical, saturation flags booleans, time_utc an
+    absolute UTC timestamp; every field has its unit."""
+    import datetime as dt
+
+    import pyarrow as pa
+
+    cfg = load_config(None, ["name=types"])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        for k in range(6):
+            rec.write_row({"t_s": -0.13 + 0.065 * k, "x_m": 0.1 * k, "gmres_iterations": k,
+                           "newton_iterations": math.nan if k == 2 else 0,
+                           "nav_ctrl_state": 262144 + k, "mode": ("settle", "track")[k > 1],
+                           "solver_status": "ok", "nav_mode": "flying",
+                           "cmd_saturated": ("0000", "1010", "0001")[k % 3],
+                           "battery_pct": 80.0 - k})
+    created = dt.datetime.fromisoformat(
+        next(line.split("created: ")[1] for line in
+             (rec.path / "config.yaml").read_text().splitlines() if "created: " in line))
+    run, table = _parquet(rec.path, tmp_path)
+    schema = table.schema
+    assert schema.field("gmres_iterations").type == pa.int64()
+    assert table.column("gmres_iterations").to_pylist() == [0, 1, 2, 3, 4, 5]
+    assert table.column("newton_iterations").to_pylist() == [0, 0, None, 0, 0, 0]
+    assert table.column("nav_ctrl_state").to_pylist() == [262144 + k for k in range(6)]
+    for name in ("mode", "solver_status", "nav_mode"):
+        assert pa.types.is_dictionary(schema.field(name).type), name
+    assert table.column("mode").to_pylist() == ["settle", "settle", "track", "track", "track",
+                                                "track"]
+    assert "cmd_saturated" not in schema.names
+    assert table.column("cmd_saturated_roll").to_pylist() == [False, True, False] * 2
+    assert table.column("cmd_saturated_gaz").to_pylist() == [False, True, False] * 2
+    assert table.column("cmd_saturated_yaw").to_pylist() == [False, False, True] * 2
+    assert schema.field("battery_pct").type == pa.float64()
+    # the absolute time: the creation time for the first row, t_s apart after it
+    assert schema.field("time_utc").type == pa.timestamp("ns", tz="UTC")
+    assert schema.names.index("time_utc") == schema.names.index("t_s") + 1
+    stamps = table.column("time_utc").cast(pa.int64()).to_pylist()
+    assert stamps[0] == int(created.timestamp()) * 10 ** 9
+    assert np.diff(stamps).tolist() == [65_000_000] * 5
+    # units: per field and as one map in the schema
+    units = json.loads(schema.metadata[b"ardrone_nmpc.units"])
+    assert units["x_m"] == "m" and units["t_s"] == "s" and units["mocap_age_ms"] == "ms"
+    assert units["u_zacc_mps2"] == "m/s²" and units["u_psirate_radps"] == "rad/s"
+    assert units["solve_us"] == "µs" and units["battery_pct"] == "%"
+    assert units["nav_roll_deg"] == "°" and units["cmd_roll_frac"] == "1"
+    assert units["time_utc"] == "UTC" and units["gmres_iterations"] == "count"
+    assert set(units) == set(schema.names)
+    assert all(schema.field(n).metadata[b"unit"].decode() == u for n, u in units.items())
+
+
+def test_every_log_column_has_a_unit():
+    from ardrone_nmpc.runs.table_schema import column_unit
+
+    for name in LOG_COLUMNS:
+        column_unit(name)          # a column added without a unit fails here
 
 
 def test_export_command(run_dir, tmp_path):
@@ -150,13 +269,13 @@ def test_export_command(run_dir, tmp_path):
 
 def test_export_errors_are_one_line(run_dir, tmp_path, monkeypatch):
     result = CliRunner().invoke(app, ["export", str(run_dir), "--format", "csv"])
-    assert result.exit_code == 1
-    assert result.output == "error: --format: unknown format 'csv'; choose mcap, parquet\n"
+    assert result.exit_code == 2              # a command-line error
+    assert result.output == "error: --format: unknown 'csv'; choose mcap, parquet\n"
     result = CliRunner().invoke(app, ["export", str(tmp_path / "nope"), "-o", "x.mcap"])
     assert result.exit_code == 1 and result.output.startswith("error: ")
     assert len(result.output.splitlines()) == 1
-    monkeypatch.setitem(sys.modules, "mcap.writer", None)
+    monkeypatch.setitem(sys.modules, "foxglove", None)
     result = CliRunner().invoke(app, ["export", str(run_dir), "-o", str(tmp_path / "y.mcap")])
     assert result.exit_code == 1
-    assert result.output == ("error: export --format mcap needs the 'mcap' library: "
+    assert result.output == ("error: export --format mcap needs the 'foxglove' library: "
                              "pip install 'ardrone-nmpc[mcap]'\n")

@@ -17,7 +17,8 @@ from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.runtime.lockstep import REFUSED_EVENT, TakeoffRefused, run_lockstep
 from ardrone_nmpc.runs.summary import summarise
 from ardrone_nmpc.core.types import FlightMode
-from ardrone_nmpc.sim.sensors import WireSensors, navdata_packet
+from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+from tests.standins.navdata_packets import plain_packet
 
 CONFIGS = Path(__file__).parents[2] / "configs"
 SHORT = ["duration_s=5", "sim.settle_s=1"]
@@ -37,7 +38,7 @@ def flying_plant(cfg, seed=0) -> AirframePlant:
     ("zero_option", "invalid size 0")])
 def test_each_corruption_is_rejected_by_the_decoder(kind, message):
     cfg = load_config(None)
-    data = navdata_packet(flying_plant(cfg), 7)
+    data = plain_packet(flying_plant(cfg), 7)
     assert decode_navdata(data).sequence == 7  # the clean packet decodes
     with pytest.raises(NavdataError, match=message):
         decode_navdata(corrupt_navdata(data, kind))
@@ -108,11 +109,14 @@ def test_wire_sensors_reject_duplicates_and_reordered_frames():
     cfg = load_config(None, ["faults.disorder.start_s=-100", "faults.disorder.duration_s=1000",
                              "faults.disorder.duplicate_probability=0.5",
                              "faults.disorder.reorder_probability=0.5"])
-    plant = flying_plant(cfg)
-    sensors = WireSensors(cfg, plant, FaultSchedule(cfg.faults, 1), t_zero_s=0.0)
+    drone = LockstepDrone(cfg, seed=1)
+    drone.connect()
+    drone.start_experiment(0.0)
+    drone.takeoff()
+    sensors = drone.sensors
     times = []
     for k in range(1, 60):
-        sensors.advance_to(plant.t_s + 0.065)
+        drone.advance_to(drone.truth.t_s + 0.065)
         pose, rx = sensors.mocap.latest()
         times.append(pose.t_s)
     stats = sensors.mocap.stats

@@ -50,7 +50,8 @@ from ardrone_nmpc.protocol.navdata import (
     NavdataError,
     decode_navdata,
 )
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, LogError, RunRecorder, read_run
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import LogError, RunRecorder, read_run
 
 settings.register_profile(
     "hostile-input", max_examples=int(os.environ.get("HOSTILE_EXAMPLES", "500")),

@@ -9,7 +9,8 @@ import numpy as np
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, STRING_COLUMNS, RunRecorder, read_run
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import RunRecorder, read_run
 from ardrone_nmpc.runs.summary import summarise
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 

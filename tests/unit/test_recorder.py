@@ -22,16 +22,8 @@ from hypothesis import strategies as st
 
 from ardrone_nmpc import __version__
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.runs.rundir import (
-    LOG_COLUMNS,
-    REQUIRED_COLUMNS,
-    STRING_COLUMNS,
-    LogError,
-    RunRecorder,
-    _fast_line,
-    format_number,
-    read_run,
-)
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.rundir import LogError, RunRecorder, _fast_line, format_number, read_run
 
 NUMERIC_COLUMNS = [c for c in LOG_COLUMNS if c not in STRING_COLUMNS]
 NOW = dt.datetime(2024, 5, 1, 12, 34, 56, tzinfo=dt.timezone.utc)
@@ -592,3 +584,26 @@ def test_sigkill_loses_at_most_one_row(tmp_path):
     assert_same_floats(run.columns["x_m"], t + 1e-3)
     assert len(run.events) >= reported - 1
     assert len(run.warnings) <= 2
+
+
+def test_events_of_an_older_fly_run_are_read_on_the_experiment_clock(tmp_path, cfg):
+    """fly runs written before one clock stamped their session's wall time in ``t_s`` and the
+    loop's experiment time in ``t_exp_s``: read back, ``t_s`` is experiment time for all (the
+    offset from the events carrying both) and the old stamp ``wall_s``."""
+    old = [{"t_s": 0.01, "kind": "links", "sim": True},
+           {"t_s": 2.48, "kind": "takeoff"},
+           {"t_s": 11.5, "kind": "mode", "t_exp_s": 1.0, "mode": "hold-solver"},
+           {"t_s": 27.5, "kind": "landing", "reason": "end"},
+           {"t_s": math.nan, "kind": "exception", "error": "x"}]
+    as_written = lambda events: [(e.pop("t_s"), e.pop("kind"), e) for e in map(dict, events)]  # noqa: E731
+    path = write_run(tmp_path, cfg, [full_row(0)], as_written(old))
+    events = read_run(path).events
+    assert [e["kind"] for e in events] == [e["kind"] for e in old]
+    assert [e["t_s"] for e in events[:4]] == pytest.approx([-10.49, -8.02, 1.0, 17.0])
+    assert [e["wall_s"] for e in events[:4]] == [0.01, 2.48, 11.5, 27.5]
+    assert "t_exp_s" not in events[2] and events[2]["mode"] == "hold-solver"
+    assert math.isnan(events[4]["t_s"])
+    # a run of one clock is read as written
+    new = [{"t_s": -3.0, "kind": "links", "wall_s": 0.0}, {"t_s": 2.0, "kind": "mode"}]
+    path = write_run(tmp_path / "new", cfg, [full_row(0)], as_written(new))
+    assert read_run(path).events == new

@@ -18,6 +18,7 @@ from ardrone_nmpc.runs.rundir import read_run
 from ardrone_nmpc.runtime import schedule as sched
 from ardrone_nmpc.runtime.schedule import Schedule, ScheduleError, phase
 from ardrone_nmpc.runtime.session import FlightSession
+from tests.conftest import ManualClock
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 PERIODS = ("0.065", "0.05", "0.1", "0.03", "0.02", "0.001")
@@ -106,17 +107,34 @@ def test_timeouts_are_defined_once():
     assert lockstep.LANDING_TIMEOUT_S is sched.LANDING_TIMEOUT_S
 
 
-def test_events_are_stamped_with_experiment_time_or_carry_it_on_the_wall_clock():
+def test_events_are_stamped_with_experiment_time_on_every_clock():
+    manual_clock = ManualClock()
     written = []
     events = [{"kind": "mode", "mode": "hover-stale-mocap", "previous": "track"}]
     sched.write_events(lambda t, kind, **f: written.append((t, kind, f)), -0.13, events)
     assert written == [(-0.13, "mode", {"mode": "hover-stale-mocap", "previous": "track"})]
     assert events[0]["kind"] == "mode"  # the tick's own dicts are left alone
+    # the real-time run's clock: held until experiment time 0 is known, then stamped on it
     wall = []
-    write = sched.on_wall_clock(lambda kind, **f: wall.append((kind, f)))
-    sched.write_events(write, 2.6, events)
-    assert wall == [("mode", {"t_exp_s": 2.6, "mode": "hover-stale-mocap",
-                              "previous": "track"})]
+    manual_clock.t = 100.0
+    clock = sched.EventClock(lambda t, kind, **f: wall.append((t, kind, f)), manual_clock)
+    manual_clock.t = 101.0
+    clock.event("takeoff")
+    assert wall == []                                       # no experiment time yet
+    manual_clock.t = 104.0
+    clock.start(104.5)                                      # t = 0 half a second from now
+    sched.write_events(clock.at, 2.6, events)
+    manual_clock.t = 110.0
+    clock.event("landing", reason="end")
+    assert wall == [(101.0 - 104.5, "takeoff", {"wall_s": 1.0}),
+                    (2.6, "mode", {"wall_s": 4.0, "mode": "hover-stale-mocap",
+                                   "previous": "track"}),
+                    (5.5, "landing", {"wall_s": 10.0, "reason": "end"})]
+    refused = []
+    clock = sched.EventClock(lambda t, kind, **f: refused.append((t, kind, f)), manual_clock)
+    clock.event("preflight_failed")
+    clock.close()                                           # the experiment never started
+    assert len(refused) == 1 and math.isnan(refused[0][0]) and refused[0][2] == {"wall_s": 0.0}
 
 
 def test_a_lockstep_run_flies_the_schedule_tick_for_tick(tmp_path):

@@ -13,7 +13,7 @@ from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import Disorder
 from ardrone_nmpc.sim.fault_injection import ServerFaults
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.sensors import navdata_packet
+from tests.standins.navdata_packets import plain_packet
 
 NOW = 1000.0  # a monotonic time (s); experiment time 0 is set to it where the clock is set
 
@@ -28,7 +28,7 @@ def server_faults(*overrides, plant=None, seed=0, clock_set=True) -> ServerFault
 
 def packet(seq=5) -> bytes:
     cfg = load_config(None)
-    return navdata_packet(AirframePlant.from_config(cfg.sim, cfg.drone), seq)
+    return plain_packet(AirframePlant.from_config(cfg.sim, cfg.drone), seq)
 
 
 # ----------------------------------------------------------------------------- disorder
@@ -50,12 +50,13 @@ def test_no_window_fault_acts_before_the_clock_is_set():
     faults = server_faults(*args, clock_set=False)
     assert faults.t_exp(NOW) == -math.inf
     assert not faults.mocap_frame(NOW).dropped
+    assert not faults.navdata_lost(NOW)
     assert faults.navdata_datagrams(NOW, b"x") == [b"x"]
     assert not faults.at_lost(NOW)
     faults.set_clock(NOW - 2.0)
     assert faults.t_exp(NOW) == pytest.approx(2.0)
     assert faults.mocap_frame(NOW).dropped
-    assert faults.navdata_datagrams(NOW, b"x") == []
+    assert faults.navdata_lost(NOW)
     assert faults.at_lost(NOW)
     c = faults.counters
     assert (c.mocap_dropped, c.navdata_lost, c.at_lost) == (1, 1, 1)
@@ -178,22 +179,22 @@ def test_firmware_fault_options(overrides, codes, port):
 
 def test_wire_sensors_report_the_configured_codes_in_transitions():
     from ardrone_nmpc.core.types import FlightMode
-    from ardrone_nmpc.sim.sensors import WireSensors
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
     majors = {}
     for codes in ("sdk", "fw2.4"):
         cfg = load_config(None, [f"faults.ctrl_codes.codes={codes}"])
-        plant = AirframePlant.from_config(cfg.sim, cfg.drone)
-        sensors = WireSensors(cfg, plant, FaultSchedule(cfg.faults), t_zero_s=0.0)
-        plant.takeoff()
+        drone = LockstepDrone(cfg)
+        assert drone.sensors.wire                       # the codes are in the bytes
         seen = []
-        while plant.mode is not FlightMode.FLYING:
-            sensors.advance_to(plant.t_s + 0.1)
-            data = navdata_packet(plant, 1, sensors.ctrl_codes)
-            seen.append(decode_navdata(data).demo.ctrl_major)
-        plant.land()
-        sensors.advance_to(plant.t_s + 0.1)
-        seen.append(decode_navdata(navdata_packet(plant, 1, sensors.ctrl_codes)).demo.ctrl_major)
-        majors[codes] = (seen[0], seen[-1])
-        assert sensors.nav.mode is FlightMode.LANDING    # the client reads both codes alike
+        drone.sensors.on_navdata = lambda state, major: seen.append(major)
+        drone.connect()
+        drone.takeoff()
+        while drone.truth.mode is not FlightMode.FLYING:
+            drone.advance_to(drone.truth.t_s + 0.1)
+        takeoff_major = seen[0]
+        drone.land()
+        drone.advance_to(drone.truth.t_s + 0.1)
+        majors[codes] = (takeoff_major, seen[-1])
+        assert drone.navdata.mode is FlightMode.LANDING  # the client reads both codes alike
     assert majors == {"sdk": (6, 8), "fw2.4": (7, 9)}

@@ -1,6 +1,6 @@
-"""Every simulated drone encodes a flight state the same way: the loopback drone server and the
-lockstep wire sensors go through the one drone encoder (protocol.navdata.encode_drone_navdata),
-so the same plant state gives the same ctrl_state and flight bits on both."""
+"""The simulated drone's firmware (served over UDP by the loopback drone server, flown in
+lockstep by the same object) encodes a flight state as the plant's state alone says: the same
+ctrl_state and flight bits as a packet encoded from the plant (tests/standins/navdata_packets)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from ardrone_nmpc.protocol.at import AtCommand, Config, Pcmd
 from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState, decode_navdata
 from ardrone_nmpc.sim.drone_server import DroneServer
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.sensors import navdata_packet
+from tests.standins.navdata_packets import plain_packet
 
 FLIGHT_BITS = DroneState.FLY | DroneState.EMERGENCY | DroneState.VBAT_LOW
 
@@ -49,7 +49,7 @@ def test_server_and_wire_sensors_report_a_state_alike(mode, moving, codes):
         pcmd = Pcmd.move(0.1, 0.0, 0.0, 0.0) if moving else Pcmd.hover()
         server.handle_at_datagram(AtCommand(2, pcmd).encode())   # the server sets the plant's
         served = decode_navdata(server._packet(100.0))
-        wired = decode_navdata(navdata_packet(plant, 7, codes))
+        wired = decode_navdata(plain_packet(plant, 7, codes))
     finally:
         server.stop()
     assert served.demo.ctrl_state == wired.demo.ctrl_state

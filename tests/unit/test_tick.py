@@ -20,6 +20,7 @@ import pytest
 from ardrone_nmpc.config.schema import SafetyConfig
 
 from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.control.diverging import DivergingSolver
 from ardrone_nmpc.control.mapping import DroneLimits, map_to_pcmd
 from ardrone_nmpc.control.obstacles import OBS_COLS, OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
@@ -27,12 +28,11 @@ from ardrone_nmpc.core.types import (
     IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, AttitudeCommand, FlightMode, MocapPose,
     NavdataSample, TickInputs,
 )
-from ardrone_nmpc.runs.rundir import LOG_COLUMNS, REQUIRED_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, tick_row
 from ardrone_nmpc.runtime import tick as tick_module
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runtime.stages import (
     HOVER, Control, DelayPrediction, Estimation, MovingObstacles, Sent, Solution, Supervision,
-    tick_row,
 )
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action, Decision, Supervisor
@@ -249,22 +249,27 @@ def test_nmpc_is_dispatched_and_solves_from_the_delay_predicted_state():
 
 def test_injected_divergence_acts_in_its_window_only_and_the_solver_still_runs():
     cfg = config("faults.solver_diverge.start_s=1.0", "faults.solver_diverge.duration_s=0.5")
-    tick = Tick(cfg, experiment_trajectory(cfg))
+    diverges = FaultSchedule(cfg.faults).solver_diverges
+    tick = Tick(cfg, experiment_trajectory(cfg),
+                wrap_solver=lambda nmpc: DivergingSolver(nmpc, diverges))
     before, inside, after = (tick.control.solve(t, state(), tick.trajectory)
                              for t in (0.935, 1.0, 1.5))
     assert before.ok and after.ok and "diverged" not in (before.status, after.status)
     assert not inside.ok and inside.status == SolverStatus.DIVERGED.value
-    assert np.isnan(inside.u_flown).all()
     assert np.isfinite(inside.result.u).all()  # solved (warm start carries on), not flown
+    assert tick.supervisor.check_solution(inside.ok, inside.u_flown).action is Action.HOLD
 
 
-def test_fault_schedule_is_the_one_source_of_divergence(monkeypatch):
-    monkeypatch.setattr(FaultSchedule, "solver_diverges", lambda self, t_s: t_s >= 0.0)
-    cfg = config()  # no solver_diverge configured: only the schedule's answer can inject
-    tick = Tick(cfg, experiment_trajectory(cfg))
-    settle = tick.step(inputs(0.0, pose(0.0, [0, 0, 1])), t_exp_s=-0.065, mode="settle")
-    track = tick.step(inputs(0.065, pose(0.065, [0, 0, 1])), t_exp_s=0.0)
-    assert settle.row["solver_status"] != "diverged" and settle.row["mode"] == "settle"
+def test_only_a_wrapper_the_runner_builds_makes_the_solver_diverge():
+    cfg = config("faults.solver_diverge.start_s=-100", "faults.solver_diverge.duration_s=1e3")
+    plain = Tick(cfg, experiment_trajectory(cfg))  # a faults section alone injects nothing
+    wrapped = Tick(cfg, experiment_trajectory(cfg),
+                   wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: t_s >= 0.0))
+    for tick, status in ((plain, "ok"), (wrapped, "diverged")):
+        settle = tick.step(inputs(0.0, pose(0.0, [0, 0, 1])), t_exp_s=-0.065, mode="settle")
+        track = tick.step(inputs(0.065, pose(0.065, [0, 0, 1])), t_exp_s=0.0)
+        assert settle.row["solver_status"] != "diverged" and settle.row["mode"] == "settle"
+        assert track.row["solver_status"] in (status, "max-iterations")
     assert track.row["solver_status"] == "diverged" and track.row["mode"] == "hold-solver"
 
 

@@ -1,0 +1,315 @@
+"""The columns of ``log.csv`` — name, unit, meaning — with the builders that fill a row and the
+decoder that turns logged rows back into what the tick saw (docs/design.md §5).
+
+One home: the recorder (:mod:`~ardrone_nmpc.runs.rundir`) writes and reads these columns; the
+tick fills them through :func:`tick_row` (with :func:`measurement_columns`, the raw
+measurements); a simulating runner adds :func:`truth_columns`, the real-time runner
+:func:`link_columns`; ``replay --rerun`` rebuilds each tick's
+:class:`~ardrone_nmpc.core.types.TickInputs` from them (:func:`tick_inputs_of_rows`). The
+builders read the tick's stage results by attribute (they live in the runtime, a layer above).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ardrone_nmpc.core.types import (
+    IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z,
+    FlightMode, MocapPose, NavdataSample, TickInputs,
+)
+from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.safety import Action
+
+__all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMNS",
+           "ReplayError", "SAME_POSE_TOLERANCE_S", "STRING_COLUMNS", "UNITS", "link_columns",
+           "pose_of_row", "unlogged_pose",
+           "measurement_columns", "tick_inputs_of_rows", "tick_row", "truth_columns"]
+
+
+class Column(NamedTuple):
+    """One ``log.csv`` column: its name (unit in the name), the unit alone, what it holds."""
+
+    name: str
+    unit: str
+    meaning: str
+
+
+#: The columns of ``log.csv``, in order. ``*_ref_*`` is the reference at the tick, ``u_*`` the
+#: controller's input, ``cmd_*`` the PCMD fractions sent, ``*_true_*`` the simulated plant's
+#: truth (empty in real flight). The raw measurements (``mocap_t_s`` … ``nav_pitch_deg``,
+#: ``target_*``) are what ``replay --rerun`` feeds through the tick again.
+COLUMNS: tuple[Column, ...] = (
+    Column("t_s", "s", "experiment time of the tick (negative while settling)"),
+    Column("x_m", "m", "estimated x (mocap)"),
+    Column("y_m", "m", "estimated y (mocap)"),
+    Column("z_m", "m", "estimated z (mocap)"),
+    Column("psi_rad", "rad", "estimated heading ψ (mocap)"),
+    Column("vx_mps", "m/s", "estimated ẋ"),
+    Column("vy_mps", "m/s", "estimated ẏ"),
+    Column("vz_mps", "m/s", "estimated ż (Kalman / Luenberger)"),
+    Column("x_ref_m", "m", "reference x at the tick"),
+    Column("y_ref_m", "m", "reference y at the tick"),
+    Column("z_ref_m", "m", "reference z at the tick"),
+    Column("psi_ref_rad", "rad", "reference ψ at the tick"),
+    Column("u_zacc_mps2", "m/s²", "controller input z̈"),
+    Column("u_phi_rad", "rad", "controller input φ"),
+    Column("u_theta_rad", "rad", "controller input θ"),
+    Column("u_psirate_radps", "rad/s", "controller input ψ̇"),
+    Column("vz_ref_mps", "m/s", "ż reference flown"),
+    Column("cmd_roll_frac", "1", "PCMD roll fraction sent"),
+    Column("cmd_pitch_frac", "1", "PCMD pitch fraction sent"),
+    Column("cmd_gaz_frac", "1", "PCMD gaz fraction sent"),
+    Column("cmd_yaw_frac", "1", "PCMD yaw fraction sent"),
+    Column("cmd_saturated", "", "saturation flags roll, pitch, gaz, yaw (0/1 each)"),
+    Column("solve_us", "µs", "NMPC solve time"),
+    Column("solver_status", "", "ok, max-iterations, diverged, non-finite (empty: no solve)"),
+    Column("residual_norm", "1", "‖F‖ of the optimality conditions"),
+    Column("gmres_iterations", "1", "Krylov iterations this tick"),
+    Column("newton_iterations", "1", "Newton steps this tick"),
+    Column("mode", "", "the supervisor's verdict (settle, track, hold-…, land-…, landing …)"),
+    Column("mocap_age_ms", "ms", "age of the newest mocap pose at the tick"),
+    Column("navdata_age_ms", "ms", "age of the newest navdata at the tick"),
+    Column("battery_pct", "%", "battery level (navdata)"),
+    Column("tick_late_ms", "ms", "lateness of the tick's wake-up (fly)"),
+    Column("compute_us", "µs", "time spent in the tick"),
+    Column("mocap_t_s", "s", "the pose's own stamp on the link's clock"),
+    Column("nav_vx_body_mps", "m/s", "navdata forward velocity (body frame)"),
+    Column("nav_vy_body_mps", "m/s", "navdata right velocity (body frame)"),
+    Column("nav_mode", "", "the drone's flight mode in its newest navdata"),
+    Column("nav_roll_deg", "°", "navdata roll"),
+    Column("nav_pitch_deg", "°", "navdata pitch"),
+    Column("nav_ctrl_state", "1", "raw ctrl_state word of that navdata (fly)"),
+    Column("target_x_m", "m", "followed object x"),
+    Column("target_y_m", "m", "followed object y"),
+    Column("target_z_m", "m", "followed object z"),
+    Column("target_psi_rad", "rad", "followed object ψ"),
+    Column("target_t_s", "s", "followed object's pose stamp"),
+    Column("target_age_ms", "ms", "followed object's pose age at the tick"),
+    Column("x_true_m", "m", "simulated truth x"),
+    Column("y_true_m", "m", "simulated truth y"),
+    Column("z_true_m", "m", "simulated truth z"),
+    Column("psi_true_rad", "rad", "simulated truth ψ"),
+    Column("vz_true_mps", "m/s", "simulated truth ż"),
+)
+LOG_COLUMNS: tuple[str, ...] = tuple(c.name for c in COLUMNS)
+UNITS: dict[str, str] = {c.name: c.unit for c in COLUMNS}
+
+#: Columns holding strings: ``cmd_saturated`` (4 flags ``0``/``1``, roll, pitch, gaz, yaw),
+#: ``solver_status`` (``ok``, ``max-iterations``, …; empty without a solve), ``mode`` (the
+#: supervisor's verdict) and ``nav_mode`` (the drone's flight mode from its newest navdata).
+STRING_COLUMNS: frozenset[str] = frozenset({"cmd_saturated", "solver_status", "mode",
+                                            "nav_mode"})
+
+#: Columns a ``log.csv`` header must name (docs/design.md); the others of :data:`LOG_COLUMNS`
+#: are filled with NaN (or ``""``) by :func:`~ardrone_nmpc.runs.rundir.read_run` when absent.
+REQUIRED_COLUMNS: tuple[str, ...] = (
+    "t_s", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps", "vz_mps",
+    "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad",
+    "u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps",
+    "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac", "cmd_yaw_frac",
+    "solve_us", "solver_status", "mode", "mocap_age_ms", "navdata_age_ms", "battery_pct",
+)
+
+#: Columns a log needs beyond the required ones for ``replay --rerun`` (added with the raw
+#: measurements).
+RERUN_COLUMNS: tuple[str, ...] = ("mocap_t_s", "nav_vx_body_mps", "nav_vy_body_mps",
+                                  "nav_mode")
+
+
+# ----------------------------------------------------------------------------- builders
+def measurement_columns(inputs: TickInputs) -> dict:
+    """The raw measurements of ``inputs`` as log columns (replay feeds them back).
+
+    ``mocap_t_s`` is the pose's own time stamp as the tick saw it (the link's clock: receipt
+    time in ``fly``, plant time in simulation), bit for bit: the estimators difference it, and
+    moved to the experiment clock it would carry the tick's offset (rounding; in ``fly`` its
+    lateness) into those differences.
+    """
+    nav = inputs.navdata
+    pose = inputs.pose
+    return {
+        "mocap_t_s": pose.t_s if pose is not None else math.nan,
+        "battery_pct": nav.battery_pct if nav is not None else math.nan,
+        "nav_vx_body_mps": nav.vx_body_mps if nav is not None else math.nan,
+        "nav_vy_body_mps": nav.vy_body_mps if nav is not None else math.nan,
+        "nav_mode": nav.mode.value if nav is not None else "",
+        "nav_roll_deg": nav.roll_deg if nav is not None else math.nan,
+        "nav_pitch_deg": nav.pitch_deg if nav is not None else math.nan,
+    } | _target_columns(inputs)
+
+
+def _target_columns(inputs: TickInputs) -> dict:
+    target = inputs.target
+    if target is None:
+        return {}
+    p = target.position_m
+    return {"target_x_m": p[0], "target_y_m": p[1], "target_z_m": p[2],
+            "target_psi_rad": target.psi_rad, "target_t_s": target.t_s,
+            "target_age_ms": (inputs.t_s - inputs.target_rx_t_s) * 1e3}
+
+
+def _solution_columns(sol) -> dict:
+    ref = sol.ref_now
+    cols = {"x_ref_m": ref[IX_X], "y_ref_m": ref[IX_Y], "z_ref_m": ref[IX_Z],
+            "psi_ref_rad": ref[IX_PSI]}
+    result = sol.result
+    if result is None:  # the P controller: no z̈
+        cmd = sol.p_command
+        return cols | {"u_zacc_mps2": math.nan, "u_phi_rad": cmd.phi_rad,
+                       "u_theta_rad": cmd.theta_rad, "u_psirate_radps": cmd.psirate_radps}
+    u = result.u  # as solved, also when the supervisor flies something else
+    return cols | {"u_zacc_mps2": u[IU_ZACC], "u_phi_rad": u[IU_PHI], "u_theta_rad": u[IU_THETA],
+                   "u_psirate_radps": u[IU_PSIRATE], "solve_us": result.solve_time_us,
+                   "residual_norm": result.residual_norm,
+                   "gmres_iterations": result.gmres_iterations,
+                   "newton_iterations": result.newton_iterations}
+
+
+def tick_row(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
+             x: np.ndarray | None, solution, sent, mode: str, compute_us: float) -> dict:
+    """The tick's ``log.csv`` row.
+
+    ``x`` is the estimate (None without a pose), ``solution`` the controller's
+    (:class:`~ardrone_nmpc.runtime.stages.Solution`; None when the supervisor stopped the
+    tick before it), ``sent`` what went out (:class:`~ardrone_nmpc.runtime.stages.Sent`),
+    ``mode`` the label.
+    """
+    row = {"t_s": t_exp_s, "mocap_age_ms": ages_ms[0], "navdata_age_ms": ages_ms[1],
+           "solver_status": solution.status if solution is not None else "",
+           "cmd_saturated": sent.saturated if sent.saturated is not None else "0000"}
+    row |= measurement_columns(inputs)
+    if x is not None:  # logged even when stale (mocap_age_ms says so)
+        row |= {"x_m": x[IX_X], "y_m": x[IX_Y], "z_m": x[IX_Z], "psi_rad": x[IX_PSI],
+                "vx_mps": x[IX_VX], "vy_mps": x[IX_VY], "vz_mps": x[IX_VZ]}
+    if solution is not None:
+        row |= _solution_columns(solution)
+    flown = sent.flown
+    if flown is not None:
+        row["vz_ref_mps"] = flown.vz_ref_mps
+        if sent.decision.action is Action.FALLBACK:  # the P command flown instead
+            row |= {"u_phi_rad": flown.phi_rad, "u_theta_rad": flown.theta_rad,
+                    "u_psirate_radps": flown.psirate_radps}
+    pcmd = sent.pcmd
+    row |= {"cmd_roll_frac": pcmd.roll_frac, "cmd_pitch_frac": pcmd.pitch_frac,
+            "cmd_gaz_frac": pcmd.gaz_frac, "cmd_yaw_frac": pcmd.yaw_frac,
+            "mode": mode, "compute_us": compute_us}
+    return row
+
+
+def truth_columns(truth) -> dict:
+    """The simulated plant's true state (a :class:`~ardrone_nmpc.core.types.PlantTruth`)."""
+    return {"x_true_m": truth.position_m[0], "y_true_m": truth.position_m[1],
+            "z_true_m": truth.position_m[2], "psi_true_rad": truth.psi_rad,
+            "vz_true_mps": truth.velocity_mps[2]}
+
+
+def link_columns(late_s: float, navdata: NavdataSample | None) -> dict:
+    """What the real-time runner adds: the tick's lateness and the navdata's raw ctrl_state."""
+    ctrl = navdata.ctrl_state if navdata is not None else None
+    return {"tick_late_ms": late_s * 1e3, "nav_ctrl_state": ctrl if ctrl is not None else math.nan}
+
+
+# ----------------------------------------------------------------------------- decoder
+#: Two rows whose ``mocap_t_s`` differ by less than this saw the same pose: distinct poses are
+#: a mocap frame (≥ 1 ms) apart. Logs whose ``mocap_t_s`` is the pose stamp moved to the
+#: experiment clock by a per-tick offset (written since 5b5377e) can show one pose a few ulps
+#: apart on two ticks in simulation — and, in ``fly``, by the tick's lateness (≈ ms), which
+#: no tolerance can absorb: such logs do not re-run exactly (see the report on the issue).
+SAME_POSE_TOLERANCE_S = 1e-9
+
+
+class ReplayError(UserError, ValueError):
+    """A run that cannot be replayed as asked (one line for the user)."""
+
+
+def pose_of_row(cols: dict, i: int, previous: MocapPose | None) -> MocapPose | None:
+    """The pose row ``i`` saw: the previous one again, a new one, or None before the first.
+
+    A new pose without a logged position (a stale-mocap hover row of a tick that did not
+    estimate) never reached the estimators in the flight, so the previous pose stands in — its
+    time stays the estimators' last sample time, as it did in the flight — and only the
+    row's age (the supervisor's input) moves on. NaN position if there is no previous pose.
+    """
+    t_pose = float(cols["mocap_t_s"][i])
+    if math.isnan(t_pose):
+        return None
+    x, y, z, psi = (float(cols[c][i]) for c in ("x_m", "y_m", "z_m", "psi_rad"))
+    logged = not math.isnan(x)
+    if previous is not None:
+        if abs(t_pose - previous.t_s) <= SAME_POSE_TOLERANCE_S:
+            if not logged or not math.isnan(previous.position_m[0]):
+                return previous  # the same object: the tick recognises it by its time
+            t_pose = previous.t_s  # first logged sighting of a pose first seen unlogged
+        elif not logged:
+            return previous
+    position = np.array([x, y, z])
+    rotation = np.array([0.0, 0.0, psi])  # roll and pitch are not logged (nor used)
+    position.setflags(write=False)
+    rotation.setflags(write=False)
+    return MocapPose(t_s=t_pose, position_m=position, rotation_xyz_rad=rotation, psi_rad=psi)
+
+
+def unlogged_pose(cols: dict, i: int, pose: MocapPose | None) -> bool:
+    """Row ``i`` saw a pose the decoder could not rebuild (see :func:`pose_of_row`)."""
+    if pose is None:
+        return False
+    return (math.isnan(pose.position_m[0])
+            or abs(float(cols["mocap_t_s"][i]) - pose.t_s) > SAME_POSE_TOLERANCE_S)
+
+
+def _navdata_of_row(cols: dict, i: int, rx_t_s: float) -> NavdataSample | None:
+    """The navdata sample row ``i`` saw (None before the first): logged fields, NaN others."""
+    mode = str(cols["nav_mode"][i])
+    if not mode or not math.isfinite(rx_t_s):
+        return None
+    try:
+        flight_mode = FlightMode(mode)
+    except ValueError:
+        raise ReplayError(f"log.csv row {i + 2}: nav_mode {mode!r} is not a flight mode "
+                          f"({', '.join(m.value for m in FlightMode)})") from None
+    nan = math.nan
+    # navdata attitude is not among the measurement columns (yet): taken when a log has it
+    roll, pitch = (float(cols[c][i]) if c in cols else nan
+                   for c in ("nav_roll_deg", "nav_pitch_deg"))
+    return NavdataSample(t_s=rx_t_s, mode=flight_mode, battery_pct=float(cols["battery_pct"][i]),
+                         roll_deg=roll, pitch_deg=pitch, yaw_deg=nan, altitude_m=nan,
+                         vx_body_mps=float(cols["nav_vx_body_mps"][i]),
+                         vy_body_mps=float(cols["nav_vy_body_mps"][i]), vz_mps=nan)
+
+
+def _target_of_row(cols, i: int) -> tuple[MocapPose | None, float]:
+    """The followed object's pose of row ``i`` (reference kind ``follow``), if logged."""
+    if "target_t_s" not in cols or not math.isfinite(float(cols["target_t_s"][i])):
+        return None, -math.inf
+    position = np.array([float(cols[c][i]) for c in ("target_x_m", "target_y_m", "target_z_m")])
+    psi = float(cols["target_psi_rad"][i])
+    pose = MocapPose(t_s=float(cols["target_t_s"][i]), position_m=position,
+                     rotation_xyz_rad=np.array([0.0, 0.0, psi]), psi_rad=psi)
+    return pose, float(cols["t_s"][i]) - float(cols["target_age_ms"][i]) * 1e-3
+
+
+def tick_inputs_of_rows(cols: dict, n_rows: int) -> list[TickInputs]:
+    """The :class:`TickInputs` of every logged tick (``cols``: column → values over the rows,
+    with :data:`RERUN_COLUMNS`), on the experiment clock.
+
+    The tick's clock is the row's ``t_s`` (so the tick's clock offset is 0 and the pose keeps
+    its logged ``mocap_t_s``); receipt times are ``t_s − age``. A pose seen on several ticks
+    is one object (the estimators update on a *new* pose only). Raises :class:`ReplayError`
+    for a ``nav_mode`` cell that is not a flight mode.
+    """
+    inputs: list[TickInputs] = []
+    pose: MocapPose | None = None
+    for i in range(n_rows):
+        t = float(cols["t_s"][i])
+        pose = pose_of_row(cols, i, pose)
+        mocap_age_s = float(cols["mocap_age_ms"][i]) * 1e-3
+        nav_age_s = float(cols["navdata_age_ms"][i]) * 1e-3
+        pose_rx = t - mocap_age_s if pose is not None else -math.inf
+        nav_rx = t - nav_age_s if math.isfinite(nav_age_s) else -math.inf
+        target, target_rx = _target_of_row(cols, i)
+        inputs.append(TickInputs(t, pose, pose_rx, _navdata_of_row(cols, i, nav_rx), nav_rx,
+                                 target, target_rx))
+    return inputs

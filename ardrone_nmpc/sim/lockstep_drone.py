@@ -1,0 +1,200 @@
+"""The simulated drone as ``simulate`` flies it: the interface of the drone's link on a manual
+clock — no sockets, no threads, no sleeping.
+
+:class:`LockstepDrone` offers what :class:`~ardrone_nmpc.links.drone_link.DroneLink` offers a
+runner — an AT sender (REF levels, PCMD: numbered commands the firmware applies under its
+sequence rule), a navdata receiver (the newest sample, with the link's take-off guard), the
+configuration port (the same :class:`~ardrone_nmpc.links.drone_config.ConfigHandshake` writes,
+the dump read back) — over the experiment's
+:class:`~ardrone_nmpc.sim.drone.SimulatedDrone`, the drone ``fly --sim`` serves over UDP. The
+runner owns the clock: :meth:`LockstepDrone.advance_to` runs the drone and its sensors
+(:class:`~ardrone_nmpc.sim.sensors.LockstepSensors`) to a plant time. Commands skip the bytes
+(their fractions reach the firmware as the doubles the tick computed, not as the wire's
+float32s); what the firmware does with them is the same.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from ardrone_nmpc.core.types import PlantTruth, TickInputs
+from ardrone_nmpc.links.drone_commands import TakeoffGuard
+from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
+from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
+from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.sensors import LockstepSensors
+
+__all__ = ["LockstepDrone"]
+
+_HOVER = Pcmd.hover()
+_ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
+
+
+_PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
+_set = object.__setattr__
+
+
+class _Numbered(NamedTuple):
+    """A command as the firmware takes it from a decoded datagram: its number and its body
+    (built every tick, so without :class:`AtCommand`'s wire checks)."""
+
+    seq: int
+    body: AtBody
+
+
+def _exact_pcmd(roll_frac: float, pitch_frac: float, gaz_frac: float, yaw_frac: float) -> Pcmd:
+    """A progressive PCMD holding the tick's doubles: :class:`Pcmd`'s constructor rounds to the
+    wire's float32, and no wire is crossed here."""
+    body = object.__new__(Pcmd)
+    _set(body, "flags", _PROGRESSIVE)
+    _set(body, "roll_frac", float(roll_frac))
+    _set(body, "pitch_frac", float(pitch_frac))
+    _set(body, "gaz_frac", float(gaz_frac))
+    _set(body, "yaw_frac", float(yaw_frac))
+    return body
+
+
+class LockstepDrone(ConfigHandshake):
+    """The experiment's simulated drone behind the link's interface (module docstring).
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig.
+    seed : seed of the plant and the fault draws (default ``sim.seed``).
+    """
+
+    host = "simulated-drone"
+
+    def __init__(self, cfg, *, seed: int | None = None) -> None:
+        self.sim = SimulatedDrone.from_config(cfg, seed=seed)
+        if self.sim.faults is not None:
+            self.sim.faults.set_clock(0.0)  # the faults' clock is experiment time itself
+        self.control_port = cfg.drone.control_port
+        self.config_ids = cfg.drone.config_ids
+        self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata)
+        self._seq = 0
+        self._ref: Ref | None = None        # the REF held
+        self._ref_unsent: Ref | None = None  # … not yet received by the drone
+        self._guard = TakeoffGuard()
+        self.self_landing: str | None = None
+        self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
+
+    # ------------------------------------------------------------------ the manual clock
+    def connect(self) -> None:
+        """What :meth:`DroneLink.connect` writes: the session ids (if configured), then
+        ``general:navdata_demo`` — the drone leaves bootstrap and sends demo navdata."""
+        if self.config_ids is not None:
+            for key, value in zip(_ID_KEYS, self.config_ids):
+                self.write_config(key, value)
+        self.write_config("general:navdata_demo", True)
+
+    def start_experiment(self, t_zero_s: float) -> list[dict]:
+        """Experiment time 0 is plant time ``t_zero_s``; returns the events announcing what the
+        drone injects."""
+        self.sensors.t_zero_s = t_zero_s
+        return self.sim.start_experiment(0.0)
+
+    def advance_to(self, t_s: float, t_exp_s: float | None = None) -> None:
+        """Run the drone to plant time ``t_s``; with ``t_exp_s`` (the experiment time of this
+        step of the clock) the plant faults due by then act first."""
+        if t_exp_s is not None:
+            self.t_exp_s = t_exp_s
+            if self.sim.faults is not None:
+                self.sim.faults.update_plant(t_exp_s)
+        self.sensors.advance_to(t_s)
+
+    def take_events(self) -> list[tuple[float, dict]]:
+        """``(experiment time s, event)`` of the injected faults that started since the last
+        call."""
+        return self.sim.take_events()
+
+    @property
+    def truth(self) -> PlantTruth:
+        """The plant's true state (a simulating runner logs it)."""
+        return self.sim.plant.truth
+
+    # ------------------------------------------------------------------ navdata receiver
+    def inputs(self, t_s: float) -> TickInputs:
+        """What the links hold at plant time ``t_s``."""
+        return self.sensors.inputs(t_s)
+
+    @property
+    def navdata(self):
+        """The newest navdata sample (None before the first)."""
+        return self.sensors.nav
+
+    @property
+    def navdata_rx_t_s(self) -> float:
+        return self.sensors.nav_rx_t_s
+
+    def _on_navdata(self, state, ctrl_major) -> None:
+        ref = self._ref
+        if ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing:
+            return
+        what = self._guard.observe(state, ctrl_major)
+        if what is not None:  # the take-off bit is dropped at once, and for good
+            self.self_landing = f"the drone {what}"
+            self._hold(Ref.landing())
+
+    # ------------------------------------------------------------------ AT sender
+    def takeoff(self) -> None:
+        """Hold REF take-off; the command is reset to hover."""
+        if self.self_landing is not None:
+            raise LinkError(f"take-off refused: {self.self_landing}")
+        self._guard.reset()
+        self._hold(Ref.takeoff())
+
+    def land(self) -> None:
+        """Hold REF land; the command is reset to hover."""
+        self._hold(Ref.landing())
+
+    def emergency(self) -> None:
+        """Cut the motors (REF bit 8 rising)."""
+        self._hold(Ref.emergency())
+
+    def set_command(self, roll_frac: float, pitch_frac: float, gaz_frac: float,
+                    yaw_frac: float, *, progressive: bool = True) -> None:
+        """PCMD — with the REF held until one datagram carrying it arrived: the firmware acts
+        on REF's level and edges, which a repeat does not change (the UDP link repeats it
+        against loss; here only an injected loss drops a datagram)."""
+        pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
+        ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
+        if ref is None:
+            commands = (_Numbered(seq + 1, pcmd),)
+        else:
+            commands = (_Numbered(seq + 1, ref), _Numbered(seq + 2, pcmd))
+        self._seq = seq + len(commands)
+        if self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s):
+            self._ref_unsent = None
+
+    def hover(self) -> None:
+        self.set_command(0.0, 0.0, 0.0, 0.0, progressive=False)
+
+    def _hold(self, ref: Ref) -> None:
+        self._ref = ref
+        if self._send([ref, _HOVER]):
+            self._ref_unsent = None
+        else:  # lost (an injected AT loss): it goes with the next command
+            self._ref_unsent = ref
+
+    def _send(self, bodies: list[AtBody]) -> bool:
+        seq = self._seq
+        commands = [_Numbered(seq + i, body) for i, body in enumerate(bodies, start=1)]
+        self._seq = seq + len(bodies)
+        return self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s)
+
+    # ------------------------------------------------------------------ configuration port
+    def write_config(self, key, value, timeout_s: float = 1.0) -> str:
+        """``AT*CONFIG`` (after ``AT*CONFIG_IDS`` if configured), acknowledged at once."""
+        cfg = Config.of(key, value)
+        bodies: list[AtBody] = [ConfigIds(*self.config_ids)] if self.config_ids else []
+        self._send([*bodies, cfg])
+        return cfg.value
+
+    def read_config(self, timeout_s: float = 2.0) -> dict[str, str]:
+        """The configuration dump, unless the control port does not answer."""
+        mode = self.sim.control_port_mode
+        if mode != "serve":
+            raise LinkError(f"fault control_port_drop: {mode}, no configuration dump")
+        return parse_config_text(self.sim.firmware.config.text())
