@@ -101,7 +101,7 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
     HandMutant("real-time loop: one extra tick", "runtime/realtime.py",
                "if k >= schedule.n_ticks:", "if k > schedule.n_ticks:", _LOOP),
     HandMutant("real-time loop: fault clock started at settle start", "runtime/realtime.py",
-               "fault_clock(now + schedule.settle_span_s)", "fault_clock(now)", _LOOP),
+               "t0 = now + schedule.settle_span_s", "t0 = now", _LOOP),
     HandMutant("lockstep: one extra tick", "runtime/lockstep.py",
                "for k in range(schedule.n_ticks):", "for k in range(schedule.n_ticks + 1):",
                _LOOP),
