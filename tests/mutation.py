@@ -62,6 +62,7 @@ _MOCAP = ("tests/unit/test_mocap_sources.py", "tests/unit/test_follow.py",
           "tests/unit/test_mocap_senders.py")
 _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
+_EXPORT = ("tests/unit/test_export.py",)
 
 #: The hand-mutation audit's survivors (issue 25) and their neighbours: each must be killed.
 HAND_MUTANTS: tuple[HandMutant, ...] = (
@@ -105,6 +106,24 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
     HandMutant("lockstep: one extra tick", "runtime/lockstep.py",
                "for k in range(schedule.n_ticks):", "for k in range(schedule.n_ticks + 1):",
                _LOOP),
+    HandMutant("export: the MCAP origin's sign", "experiments/export.py",
+               "return _created_ns(run) - round(min(first, 0.0) * 1e9)",
+               "return _created_ns(run) + round(min(first, 0.0) * 1e9)", _EXPORT),
+    HandMutant("export: an event's time ignored", "experiments/export.py",
+               'float(t) if isinstance(t, (int, float)) else float("nan"))',
+               'float("nan"))', _EXPORT),
+    HandMutant("export: an older run's event t_exp_s ignored", "runs/rundir.py",
+               "t_s = float(t_exp) if isinstance(t_exp, (int, float)) else wall - offset",
+               "t_s = wall - offset", _EXPORT),
+    HandMutant("export: the yaw quaternion's sign", "runs/channels.py",
+               "psi if math.isfinite(psi) else 0.0", "-psi if math.isfinite(psi) else 0.0",
+               _EXPORT),
+    HandMutant("export: /reference from the measured positions", "runs/channels.py",
+               '("x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad")',
+               '("x_m", "y_m", "z_m", "psi_ref_rad")', _EXPORT),
+    HandMutant("export: navdata pitch's sign", "runs/channels.py",
+               "roll, pitch = math.radians(nav_roll), -math.radians(nav_pitch)",
+               "roll, pitch = math.radians(nav_roll), math.radians(nav_pitch)", _EXPORT),
     HandMutant("judges: swing threshold halved", "experiments/reproduce/judges.py",
                "swinging = ptp_tail > 2.0 * band", "swinging = ptp_tail > 1.0 * band", _JUDGES),
     HandMutant("judges: crossing hysteresis halved", "experiments/reproduce/judges.py",
@@ -128,7 +147,10 @@ def _mutmut_table(files: list[str], tests: list[str]) -> str:
             'source_paths = ["ardrone_nmpc"]\n'
             f"only_mutate = [{only}]\n"
             'also_copy = ["configs/", "trajectories/", "docs/", "README.md"]\n'
-            'pytest_add_cli_args = ["-p", "no:cacheprovider", "-p", "tests.mutmut_plugin"]\n'
+            # no per-test limit: the first run compiles the numba kernels in mutants/ (minutes
+            # under load); a mutant that hangs is mutmut's own timeout
+            'pytest_add_cli_args = ["-p", "no:cacheprovider", "-p", "tests.mutmut_plugin", '
+            '"--timeout=0"]\n'
             f"pytest_add_cli_args_test_selection = [{sel}]\n")
 
 
@@ -179,8 +201,8 @@ def run_hand(workdir: Path, only: str | None) -> int:
     # the unmutated tree first: every selection passes (and the numba caches are warm, so a
     # compile under load cannot time a test out and pass for a kill)
     for tests in dict.fromkeys(m.tests for m in mutants):
-        res = subprocess.run([*pytest, *tests], cwd=workdir, env=env, capture_output=True,
-                             text=True)
+        res = subprocess.run([*pytest, "--timeout=0", *tests], cwd=workdir, env=env,
+                             capture_output=True, text=True)
         if res.returncode != 0:
             print(f"the unmutated tree fails {' '.join(tests)}:\n{res.stdout[-2000:]}")
             return 2
