@@ -37,7 +37,8 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                "tests/integration/test_mocap_source_swap.py"]),
     "schedule": (["runtime/schedule.py"],
                  ["tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py"]),
-    "judges": (["experiments/reproduce/judges.py"], ["tests/unit/test_reproduce.py"]),
+    "judges": (["experiments/reproduce/judges.py"],
+               ["tests/unit/test_reproduce.py", "tests/unit/test_judges.py"]),
     "xchannel": (["experiments/xchannel.py"], ["tests/unit/test_xchannel.py"]),
 }
 
