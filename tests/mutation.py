@@ -64,6 +64,7 @@ _MOCAP = ("tests/unit/test_mocap_sources.py", "tests/unit/test_follow.py",
 _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
 _EXPORT = ("tests/unit/test_export.py",)
+_TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py")
 
 #: The hand-mutation audit's survivors (issue 25) and their neighbours: each must be killed.
 HAND_MUTANTS: tuple[HandMutant, ...] = (
@@ -125,6 +126,19 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
     HandMutant("export: navdata pitch's sign", "runs/channels.py",
                "roll, pitch = math.radians(nav_roll), -math.radians(nav_pitch)",
                "roll, pitch = math.radians(nav_roll), math.radians(nav_pitch)", _EXPORT),
+    HandMutant("tune: a non-finite term scores 0", "experiments/tune/objective.py",
+               '(value if math.isfinite(value) else self.weights["abort"])',
+               "(value if math.isfinite(value) else 0.0)", _TUNE),
+    HandMutant("tune: tracking always RMSE", "experiments/tune/objective.py",
+               '"tracking_m": path_dev if not math.isnan(path_dev) else sweep["rmse_m"],',
+               '"tracking_m": sweep["rmse_m"],', _TUNE),
+    HandMutant("tune: the sampler ignores log (float)", "experiments/tune/study.py",
+               "trial.suggest_float(name, p.low, p.high, log=p.log)",
+               "trial.suggest_float(name, p.low, p.high, log=False)", _TUNE),
+    HandMutant("tune: the sampler ignores log (int)", "experiments/tune/study.py",
+               "int(math.floor(p.high)),\n                                             log=p.log)",
+               "int(math.floor(p.high)),\n                                             log=False)",
+               _TUNE),
     HandMutant("judges: swing threshold halved", "experiments/reproduce/judges.py",
                "swinging = ptp_tail > 2.0 * band", "swinging = ptp_tail > 1.0 * band", _JUDGES),
     HandMutant("judges: crossing hysteresis halved", "experiments/reproduce/judges.py",
