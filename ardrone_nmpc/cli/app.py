@@ -275,9 +275,12 @@ def sim_drone(
 
 
 from ardrone_nmpc.cli import export as _export, mocap_check as _mocap_check, tune as _tune  # noqa: E402
+from ardrone_nmpc.cli import identify as _identify, robustness as _robustness  # noqa: E402
 _mocap_check.register(app)  # commands that live in their own modules
 _export.register(app)
 _tune.register(app)
+_robustness.register(app)
+_identify.register(app)
 
 
 from ardrone_nmpc.cli.operator import register as register_operator_commands  # noqa: E402

@@ -118,6 +118,7 @@ def choice(values: Values, *, many: bool = False) -> dict[str, Any]:
 #: run directories are created is ``--log-dir``.
 DEPRECATED_SPELLINGS: dict[str, dict[str, str]] = {
     "reproduce": {"--out": "--output"},
+    "robustness": {"--out": "--output"},
     "sweep": {"--out": "--output"},
     "tune": {"--out": "--output"},
 }

@@ -116,6 +116,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                      out_dir: Path, seed: int = 0, n_seeds: int = 3, variants=(),
                      space_file: Path | None = None, objective: str | None = None,
                      resume: bool = False, keep_runs: bool = False, top: int = 10,
+                     robust: bool = False, grid_file: Path | None = None,
                      command: str = "ardrone-nmpc tune", console=None,
                      err_console=None) -> TuneOutcome:
     """Run (or resume) the study; see the module docstring. Raises ConfigError for bad
@@ -137,8 +138,18 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     _check_options(engine=engine, scheduler=scheduler)
     cfg = load_config(config, overrides)
     space = load_space(space_file, cfg)
+    if robust:  # the grid's corners and centre; scored by the worst of them
+        from ardrone_nmpc.experiments.robustness.grid import corner_variants, load_grid
+
+        if variants:
+            raise ConfigError("--variant: not with --robust (its plants are the grid's)")
+        variants = corner_variants(load_grid(grid_file))
+        objective = objective or "robust"
+    elif grid_file is not None:
+        raise ConfigError("--grid-file: only with --robust")
     obj = parse_objective(objective)
-    scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds, variants=_variants(variants))
+    scen = eng.scenarios(base_seed=cfg.sim.seed, n_seeds=n_seeds,
+                         variants=variants if robust else _variants(variants))
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--output {out_dir}: exists and is not a directory")
@@ -241,13 +252,15 @@ def register(app: typer.Typer) -> None:
         scheduler: Optional[str] = typer.Option(None, "--scheduler", callback=non_empty, help="Dask scheduler address (tcp://host:8786); default: a local cluster of --jobs workers on 127.0.0.1."),
         out: Optional[Path] = typer.Option(None, "-o", "--output", help="Study directory: study.db, trials.csv, best.yaml (default: logs/tune/<config name>)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sampler."),
-        seeds: int = typer.Option(3, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, …"),
+        seeds: Optional[int] = typer.Option(None, "--seeds", min=1, help="Flight seeds per trial: sim.seed, sim.seed + 1, … (default 3; 1 with --robust)."),
         variant: List[str] = typer.Option([], "--variant", help="A scenario override set, [label:]path=value;path=value (repeatable; each is flown on every seed). Default: each plant profile, if the config has sim.plant.profile."),
         space: Optional[Path] = typer.Option(None, "--space", help="Search-space YAML (default: q and r log-uniform ×0.1…×10 of the config's)."),
         objective: Optional[str] = typer.Option(None, "--objective", help="Preset (default, step, tracking) and/or term=weight items: tracking, settling, overshoot, effort, solver, supervisor, abort, worst."),
         resume: bool = typer.Option(False, "--resume", help="Continue the study in --output (finished trials are not flown again)."),
         keep_runs: bool = typer.Option(False, "--keep-runs", help="Write every flight's run directory under DIR/runs/ (default: metrics only)."),
         top: int = typer.Option(10, "--top", min=1, help="Rows of the ranked table."),
+        robust: bool = typer.Option(False, "--robust", help="Fly every trial on the robustness grid's corners and centre (plant deviations: delay, attitude gain and lag, vertical gain, wind) and score it by the worst (objective preset 'robust'); docs/robustness.md."),
+        grid_file: Optional[Path] = typer.Option(None, "--grid-file", help="With --robust: the grid whose corners are flown (the format of robustness --grid-file)."),
         set_: List[str] = typer.Option([], "--set", help="Override a config value before tuning: dotted.path=value (repeatable)."),
     ) -> None:
         """Tune the controller by optimisation (Optuna TPE): each trial flies the config
@@ -261,7 +274,8 @@ def register(app: typer.Typer) -> None:
             if sys.argv[1:2] == ["tune"] else f"ardrone-nmpc tune {config}"
         outcome = run_tune_command(config=config, overrides=set_, trials=trials, jobs=n_jobs,
                                    engine=engine, scheduler=scheduler, out_dir=out_dir,
-                                   seed=seed, n_seeds=seeds, variants=variant,
+                                   seed=seed, n_seeds=seeds or (1 if robust else 3),
+                                   variants=variant, robust=robust, grid_file=grid_file,
                                    space_file=space, objective=objective, resume=resume,
                                    keep_runs=keep_runs, top=top, command=command)
         if outcome.best_path is not None:

@@ -10,7 +10,8 @@ from pydantic import Field, model_validator
 
 from ardrone_nmpc.config.fields import (
     CoordinateVec3, NonNegative, NonNegativeVec4,
-    NonNegativeVec7, PathSize, Positive, PositiveVec4, Section, Vec4, require_increasing,
+    NonNegativeVec7, PathSize, Positive, PositiveVec4, Section, Vec4, auto_or_number,
+    require_increasing,
 )
 from ardrone_nmpc.core import defaults
 
@@ -139,6 +140,37 @@ class OffsetFreeConfig(Section):
         "sensor cannot drag the drone further than this from the reference.")
 
 
+class AdaptationConfig(Section):
+    """How the controller uses the flight's own measurement of the drone's command delay and
+    tilt per unit command (``delay_compensation_s: auto``, ``attitude_gain: auto``;
+    docs/solver-notes.md §10). Every navdata sample updates the estimate (the last
+    ``window_s`` of PCMD and navdata weigh most); every ``refit_s`` it is read, and each of
+    the delay and the gain is used once confident (delay σ ≤ 20 ms with R² ≥ 0.2; gain σ ≤
+    10 % with R² ≥ 0.3), clipped to the bounds."""
+
+    delay_prior_s: NonNegative = Field(
+        0.26, le=2.0, description="Delay (s) compensated until the flight's estimate is "
+        "confident (auto); 0.26 = the thesis simulator's.")
+    delay_min_s: NonNegative = Field(0.0, le=2.0, description="Smallest delay (s) auto uses.")
+    delay_max_s: NonNegative = Field(0.5, le=2.0, description="Largest delay (s) auto uses.")
+    gain_prior: Positive = Field(
+        1.0, le=5.0, description="Tilt per unit command relative to drone.euler_angle_max_rad "
+        "assumed until the estimate is confident (attitude_gain auto).")
+    gain_min: Positive = Field(
+        0.6, le=5.0, description="Smallest gain auto uses; at most planned_tilt_frac, so "
+        "that the largest tilt the NMPC plans, divided by it, is still a PCMD within ±1.")
+    gain_max: Positive = Field(2.5, le=5.0, description="Largest gain auto uses.")
+    window_s: Positive = Field(
+        30.0, ge=5.0, le=600.0, description="Memory of the estimate (s): a sample's weight "
+        "is exp(−age / window_s).")
+    refit_s: Positive = Field(
+        1.0, ge=0.2, le=60.0, description="Seconds between readings of the estimate (each "
+        "one an event, and auto's chance to change what it uses).")
+
+    _delay_bounds = require_increasing("delay_min_s", "delay_max_s")
+    _gain_bounds = require_increasing("gain_min", "gain_max")
+
+
 class ControllerConfig(Section):
     """Controller choice and the optimal control problem (thesis eq. 3.14–3.16, 4.17)."""
 
@@ -150,10 +182,13 @@ class ControllerConfig(Section):
                              description="Prediction step Δτ (s), ≤ 1; horizon T = N·Δτ.")
     q: NonNegativeVec7 = Field(
         defaults.Q_STATE,
-        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ] (thesis §4.4).")
+        description="State weights diag q, order [x, ẋ, y, ẏ, z, ż, ψ]; the thesis' (§4.4) "
+        "are [12, 2, 7, 2, 5, 10, 13], x and y detuned here for robustness "
+        "(docs/solver-notes.md §10).")
     r: PositiveVec4 = Field(
         defaults.R_INPUT,
-        description="Input weights diag r, order [z̈, φ, θ, ψ̇] (thesis 'Case 2').")
+        description="Input weights diag r, order [z̈, φ, θ, ψ̇]; the thesis' 'Case 2' is "
+        "[4, 12, 12, 24], roll and pitch detuned here (docs/solver-notes.md §10).")
     q_terminal: NonNegativeVec7 = Field(
         defaults.Q_TERMINAL,
         description="Terminal state weights, order as q (the thesis has none).")
@@ -169,11 +204,29 @@ class ControllerConfig(Section):
         "constant (0.5 s: docs/plant.md, sim.plant.tau_vz_s). null = one control period, the "
         "thesis' integration (end of §4.4), which assumes a new vertical speed within a tick "
         "and overshoots altitude steps by 6–7 % in simulation (2.3 % with 0.5).")
-    delay_compensation_s: NonNegative = Field(
-        0.26, le=2.0, description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
+    delay_compensation_s: auto_or_number(low=0.0, high=2.0) = Field(  # type: ignore[valid-type]
+        "auto", description="Command delay (s, ≤ 2) the NMPC predicts through: the state "
         "is rolled forward through the commands already sent and the OCP solved for the moment "
         "the new command takes effect. 0.26 = the thesis simulator's delay (and sim.plant's); "
-        "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay.")
+        "0 = the thesis' delay-free formulation, which limit-cycles (±0.3 m) against that delay. "
+        "'auto': adaptation.delay_prior_s until the flight's own estimate of the delay is "
+        "confident, then that estimate (bounded; an event when it changes).")
+    attitude_gain: auto_or_number(low=0.0, high=5.0, low_open=True) = Field(  # type: ignore[valid-type]
+        "auto", description="The drone's tilt per unit PCMD roll/pitch relative to "
+        "drone.euler_angle_max_rad, which the NMPC's commands are divided by (1: the firmware's "
+        "nominal gain; real drones measure 0.6 … 2). 'auto': adaptation.gain_prior until the "
+        "flight's own estimate is confident, then that estimate (bounded; an event when it "
+        "changes). The P controller's commands (kind p, or the fallback) are not divided: its "
+        "gains are chosen on the plant (eq. 4.16).")
+    planned_tilt_frac: float = Field(
+        0.55, gt=0.0, le=1.0, description="Largest roll/pitch the NMPC plans, as a fraction of "
+        "drone.euler_angle_max_rad (0 … 1]. Below 1 it keeps a margin: a drone that tilts less "
+        "per unit command than nominally still reaches the plan (attitude_gain auto divides "
+        "its gain out, down to adaptation.gain_min), one that tilts more stays under "
+        "safety.max_tilt_rad before its gain is measured.")
+    adaptation: AdaptationConfig = Field(
+        default_factory=AdaptationConfig, description="The priors and bounds of 'auto' "
+        "delay_compensation_s and attitude_gain.")
     solver: SolverConfig = Field(default_factory=SolverConfig, description="NMPC solver settings.")
     obstacles: tuple[ObstacleConfig, ...] = Field(
         (), max_length=32, description="Obstacles the NMPC avoids (exterior penalty on "

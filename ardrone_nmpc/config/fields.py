@@ -8,7 +8,7 @@ expected, and validates its defaults too. The bounded types take their limits fr
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
@@ -60,10 +60,31 @@ CoordinateVec3 = vector(Coordinate, 3)
 Span = Annotated[float, Field(ge=MIN_SPAN_S, le=MAX_SPAN_S, allow_inf_nan=False)]
 NonNegativeSpan = Annotated[float, Field(ge=0, le=MAX_SPAN_S, allow_inf_nan=False)]
 PathSizeVec2 = vector(PathSize, 2)
+PathSizeVec3 = vector(PathSize, 3)
 PathSizeVec4 = vector(PathSize, 4)
 NonNegativeVec4 = vector(NonNegative, 4)
 NonNegativeVec7 = vector(NonNegative, 7)
 Port = Annotated[int, Field(ge=1, le=65535)]
+
+
+def auto_or_number(*, low: float, high: float, low_open: bool = False) -> Any:
+    """A number in [low, high] (``(low, high]`` with ``low_open``) or the word ``auto``: one
+    error line for anything else (not one per member of the union)."""
+    bracket = "(" if low_open else "["
+
+    def check(value: Any) -> Any:
+        if value == "auto":
+            return value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise invalid(f"expected a number in {bracket}{low:g}, {high:g}] or 'auto', "
+                          f"got {value!r}")
+        v = float(value)
+        if not (v > low if low_open else v >= low) or not v <= high:  # NaN fails too
+            raise invalid(f"expected a number in {bracket}{low:g}, {high:g}] or 'auto', "
+                          f"got {value!r}")
+        return v
+
+    return Annotated[Union[float, Literal["auto"]], BeforeValidator(check)]
 
 
 def require_increasing(lower_name: str, upper_name: str) -> Callable[..., Any]:

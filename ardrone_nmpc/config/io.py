@@ -2,7 +2,8 @@
 
 :func:`load_config` reads a YAML file (duplicate keys are errors), merges ``dotted.path=value``
 overrides, resolves ``reference.path_file`` to an absolute path (relative to the config file,
-or to the working directory for an override) and validates the result with
+or to the working directory for an override), fills in the values of a plant profile file
+(``sim.plant.profile: PLANT.yaml``, the same way) and validates the result with
 :func:`~ardrone_nmpc.config.schema.config_from_dict`. :func:`dump_config` writes a config back
 as YAML that :func:`load_config` reads. Every problem is a
 :class:`~ardrone_nmpc.config.schema.ConfigError` line.
@@ -19,7 +20,8 @@ import yaml
 
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig, config_from_dict
 
-__all__ = ["RETIRED_KEYS", "apply_overrides", "config_to_dict", "dump_config", "load_config"]
+__all__ = ["PROFILE_SECTIONS", "RETIRED_KEYS", "apply_overrides", "config_to_dict",
+           "dump_config", "load_config", "read_option_file", "resolve_data"]
 
 #: Settings that existed once and were removed, with the reason. A user's config naming one
 #: is an error that says so; a run directory written before the removal still reads (the
@@ -112,6 +114,18 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     return data
 
 
+def read_option_file(path: str | Path, option: str) -> Any:
+    """The YAML of a file a command-line option names (``--space``, ``--grid-file``): its
+    parsed contents, or one ``option path: …`` ConfigError line."""
+    path = Path(path)
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{option} {path}: cannot read: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{option} {path}: invalid YAML: {str(err).splitlines()[0]}") from None
+
+
 def _retire(data: dict[str, Any], *, drop: bool) -> list[str]:
     """Remove retired keys from ``data`` (``drop``) or return one error line per key found."""
     errors = []
@@ -134,6 +148,74 @@ def _path_file(data: dict[str, Any], base: Path) -> None:
                                      .resolve())
 
 
+#: The keys of a plant profile file: ``plant:`` holds ``sim.plant`` keys, ``vz_gain`` is
+#: ``sim.vz_gain`` (docs/plant-profiles.md §5).
+PROFILE_SECTIONS = ("plant", "vz_gain")
+
+
+def _profile_node(data: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``sim.plant`` mapping of ``data`` if its profile names a file."""
+    from ardrone_nmpc.config.sim import is_profile_file
+
+    sim = data.get("sim")
+    plant = sim.get("plant") if isinstance(sim, dict) else None
+    profile = plant.get("profile") if isinstance(plant, dict) else None
+    return plant if isinstance(profile, str) and is_profile_file(profile) else None
+
+
+def _profile_path(data: dict[str, Any], base: Path) -> None:
+    """Make a relative profile file absolute against ``base`` (in place)."""
+    plant = _profile_node(data)
+    if plant is not None:
+        plant["profile"] = str((base / Path(plant["profile"]).expanduser()).resolve())
+
+
+def _plant_profile(data: dict[str, Any], *, missing_ok: bool = False) -> None:
+    """A ``sim.plant.profile`` naming a file (absolute by now) fills the ``sim.plant`` keys
+    (and ``sim.vz_gain``) the config leaves out with the file's values (in place).
+    ``missing_ok``: a file that is gone fills nothing (a run directory's config holds every
+    value)."""
+    from ardrone_nmpc.config.sim import PlantConfig
+
+    plant = _profile_node(data)
+    if plant is None:
+        return
+    sim = data["sim"]
+    path = Path(plant["profile"])
+    if missing_ok and not path.is_file():
+        return
+    where = f"sim.plant.profile {path}"
+    try:
+        values = _read_yaml(path)
+    except ConfigError as err:
+        raise ConfigError([f"sim.plant.profile: {m}" for m in err.messages]) from None
+    errors = [f"{where}: unknown key {k!r} (expected {', '.join(PROFILE_SECTIONS)})"
+              for k in values if k not in PROFILE_SECTIONS]
+    own = values.get("plant") or {}
+    if not isinstance(own, dict):
+        errors.append(f"{where}: plant: expected a mapping of sim.plant keys")
+        own = {}
+    for key in own:
+        if key == "profile" or key not in PlantConfig.model_fields:
+            errors.append(f"{where}: plant.{key}: not a sim.plant key")
+    if errors:
+        raise ConfigError(errors)
+    for key, value in own.items():
+        plant.setdefault(key, value)
+    if "vz_gain" in values:
+        sim.setdefault("vz_gain", values["vz_gain"])
+
+
+def resolve_data(data: Mapping[str, Any], base: Path | None = None) -> ExperimentConfig:
+    """Validate a config mapping (a config as written, overrides applied) the way
+    :func:`load_config` does: a profile file fills its values first (relative to ``base``,
+    default the working directory)."""
+    data = copy.deepcopy(dict(data))
+    _profile_path(data, base or Path.cwd())
+    _plant_profile(data)
+    return config_from_dict(data)
+
+
 def load_config(path: str | Path | None = None, overrides: Sequence[str] = (), *,
                 allow_retired: bool = False) -> ExperimentConfig:
     """Load and validate an experiment.
@@ -150,8 +232,11 @@ def load_config(path: str | Path | None = None, overrides: Sequence[str] = (), *
         path = Path(path)
         data = _read_yaml(path)
         _path_file(data, path.parent)
+        _profile_path(data, path.parent)
     data = apply_overrides(data, overrides)
     _path_file(data, Path.cwd())
+    _profile_path(data, Path.cwd())
+    _plant_profile(data, missing_ok=allow_retired)
     errors = _retire(data, drop=allow_retired)
     if errors:
         raise ConfigError(errors)

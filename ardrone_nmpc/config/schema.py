@@ -47,7 +47,7 @@ from ardrone_nmpc.config.faults import FaultsConfig
 from ardrone_nmpc.config.sim import (PLANT_PROFILE_DEFAULTS, NoiseConfig, PlantConfig, SimConfig,
                                      TargetConfig)
 from ardrone_nmpc.config.fields import (
-    CoordinateVec2, CoordinateVec3, Finite, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec4, Port, Positive, PositiveVec2,
+    CoordinateVec2, CoordinateVec3, Finite, NonNegativeSpan, PathSize, PathSizeVec2, PathSizeVec3, PathSizeVec4, Port, Positive, PositiveVec2,
     Section, Span, ascii_name, invalid, require_increasing,
 )
 from ardrone_nmpc.config.limits import MAX_LORENZ_TIME, MAX_NAME_CHARS
@@ -146,16 +146,38 @@ class FollowConfig(Section):
     _name = field_validator("object_name")(classmethod(lambda cls, v: ascii_name(v)))
 
 
+class ExcitationConfig(Section):
+    """Reference kind 'excitation': the identification flight (docs/identification.md §1) —
+    pseudo-random steps of set points ±amplitude on x, then y, then z, then ψ around start_m,
+    and sweeps at a constant speed on x and y."""
+
+    amplitude_m: PathSizeVec3 = Field(
+        (0.25, 0.25, 0.15), description="Step size on x, y, z (m): small, within the geofence.")
+    amplitude_psi_rad: Positive = Field(0.4, le=math.pi, description="Step size on ψ (rad).")
+    axis_s: Span = Field(10.0, description="Seconds of steps per axis.")
+    bit_s: Positive = Field(
+        1.2, ge=0.2, le=60.0, description="Seconds per bit of the pseudo-random sequence "
+        "(0.2 … 60): long enough for the loop to answer, short enough to vary.")
+    sweep_m: float = Field(
+        0.4, ge=0.0, le=5.0, description="Reach of the x and y sweeps (m): the set point "
+        "travels out to ±sweep_m and back at sweep_mps, so the drag shows; 0: no sweeps.")
+    sweep_mps: Positive = Field(0.2, le=2.0, description="Speed of the sweeps (m/s).")
+    rest_s: NonNegativeSpan = Field(2.0, description="Seconds at start_m after each axis.")
+
+
 class ReferenceConfig(Section):
     """The desired trajectory x_d(t), world frame, metres and radians."""
 
     kind: Literal["hover", "step", "square", "square_altitudes", "ellipse", "lorenz", "path",
-                  "follow"] = (
+                  "follow", "excitation"] = (
         Field("hover", description="Trajectory type; the fields below apply as noted. "
               "'follow' takes it live from a second mocap object (see follow)."))
     follow: FollowConfig = Field(
         default_factory=FollowConfig, description="Reference kind 'follow' only; before the "
         "object is seen, the reference holds start_m.")
+    excitation: ExcitationConfig = Field(
+        default_factory=ExcitationConfig, description="Reference kind 'excitation' only: the "
+        "identification flight's steps.")
     start_m: CoordinateVec3 = Field((0.0, 0.0, 1.0), description="Start position [x, y, z] (m).")
     start_psi_rad: Finite = Field(0.0, description="Start heading ψ (rad, counter-clockwise).")
     target_m: CoordinateVec3 = Field(

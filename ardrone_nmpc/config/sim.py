@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, Literal, Optional
+from typing import Annotated, Any, Literal, Optional
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import BeforeValidator, Field, ValidationInfo, field_validator, model_validator
 
 from ardrone_nmpc.config.fields import (
     CoordinateVec3, Finite, NonNegative, NonNegativeSpan, PathSize, Positive, Section, Vec2, ascii_name, invalid,
+    vector,
 )
 
 
@@ -25,14 +26,33 @@ PLANT_PROFILE_DEFAULTS: dict[str, dict[str, float]] = {
 }
 
 
+def _both_axes(value: Any) -> Any:
+    """A single number for both roll and pitch."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return (value, value)
+    return value
+
+
+AttitudeGain = Annotated[vector(Annotated[float, Field(ge=0.05, le=5.0, allow_inf_nan=False)], 2),
+                         BeforeValidator(_both_axes)]
+
+
+def is_profile_file(profile: str) -> bool:
+    """A ``sim.plant.profile`` that names a file rather than a built-in profile."""
+    return profile.lower().endswith((".yaml", ".yml"))
+
+
 class PlantConfig(Section):
     """The simulated AR.Drone closed loop (docs/plant.md, docs/plant-profiles.md)."""
 
-    profile: Literal["ardrone", "thesis_kit", "ardrone_lab"] = Field(
-        "ardrone", description="Plant backend and its defaults: 'ardrone' (tum_ardrone dynamics, "
-        "firmware limits, the thesis' 0.26 s delay), 'thesis_kit' (the ARDrone Simulink "
-        "Development Kit's linear identified channels; tau_*/drag_per_s unused), 'ardrone_lab' "
-        "(ardrone with a 0.12 s delay and calibrated turbulence). docs/plant-profiles.md.")
+    profile: str = Field(
+        "ardrone", min_length=1, max_length=4096, description="Plant backend and its defaults: "
+        "'ardrone' (tum_ardrone dynamics, firmware limits, the thesis' 0.26 s delay), "
+        "'thesis_kit' (the ARDrone Simulink Development Kit's linear identified channels; "
+        "tau_*/drag_per_s unused), 'ardrone_lab' (ardrone with a 0.12 s delay and calibrated "
+        "turbulence), or a profile file (*.yaml, e.g. written by `ardrone-nmpc identify`: the "
+        "ardrone backend with the file's values; relative paths in a config file are relative "
+        "to that file's directory). docs/plant-profiles.md.")
     # Thesis simulator (ARDrone Simulink Development Kit) command delay block.
     command_delay_s: NonNegative = Field(
         0.26, le=2.0, description="Command transport delay T_d (s), ≤ 2.")
@@ -65,6 +85,34 @@ class PlantConfig(Section):
     # Project choice (not identified): slow room-air drift, far slower than the tilt loops.
     turbulence_tau_s: Positive = Field(
         5.0, description="Turbulence correlation time τ (s) of the Gauss–Markov wind.")
+    # --- how this airframe differs from the nominal one (docs/plant-profiles.md §4): the
+    # region a real drone can be in, and what `identify` measures
+    attitude_gain: AttitudeGain = Field(
+        (1.0, 1.0), description="Tilt per unit PCMD roll/pitch, relative to "
+        "drone.euler_angle_max_rad, [roll, pitch] (a number sets both); 1 = the firmware's "
+        "nominal gain, the Simulink kit identified [1.33, 1.95]; 0.05 … 5.")
+    attitude_model: Literal["lag", "second_order"] = Field(
+        "lag", description="Form of the attitude loops: 'lag' (first order, tau_tilt_s) or "
+        "'second_order' (ω_n² (1 + T_z s)/(s² + 2ζω_n s + ω_n²), the kit's identified form: "
+        "attitude_wn_radps, attitude_damping, attitude_zero_s).")
+    attitude_wn_radps: Positive = Field(
+        3.45, le=100.0, description="second_order: natural frequency ω_n (rad/s); kit pitch "
+        "3.45.")
+    attitude_damping: Positive = Field(
+        0.58, le=10.0, description="second_order: damping ratio ζ; kit pitch 0.58.")
+    attitude_zero_s: NonNegative = Field(
+        0.5, le=10.0, description="second_order: zero time constant T_z (s); kit pitch 0.52.")
+    yaw_gain: Positive = Field(
+        1.0, ge=0.05, le=5.0, description="Yaw rate per unit PCMD yaw, relative to "
+        "drone.control_yaw_radps; 0.05 … 5.")
+
+    @field_validator("profile")
+    @classmethod
+    def _known_profile(cls, value: str) -> str:
+        if value not in PLANT_PROFILE_DEFAULTS and not is_profile_file(value):
+            raise invalid(f"expected one of {', '.join(PLANT_PROFILE_DEFAULTS)} or a profile "
+                          f"file (*.yaml), got {value!r}")
+        return value
 
     @model_validator(mode="before")
     @classmethod
@@ -80,6 +128,16 @@ class PlantConfig(Section):
     def _above_ground(cls, value: tuple[float, ...]) -> tuple[float, ...]:
         if value[2] < 0:
             raise invalid("z must be ≥ 0 (the ground)")
+        return value
+
+    @field_validator("attitude_zero_s")
+    @classmethod
+    def _stable_second_order(cls, value: float, info: ValidationInfo) -> float:
+        # the second-order loops' fastest mode must stay well inside RK4's stability bound
+        wn, step = info.data.get("attitude_wn_radps"), info.data.get("integration_step_s")
+        if info.data.get("attitude_model") == "second_order" and wn and step and step * wn > 0.5:
+            raise invalid(f"integration_step_s × attitude_wn_radps must be at most 0.5 "
+                          f"({step} × {wn})")
         return value
 
     @field_validator("integration_step_s")

@@ -70,6 +70,9 @@ def _vector(values, length: int, name: str) -> np.ndarray:
 class OcpSpec:
     """Thesis eq. 3.14 with eq. 4.17 bounds: weights (diagonals), horizon and input box.
 
+    Its defaults are the thesis' problem (its weights: the solver tests' reference problem);
+    a flight's comes from its config (:meth:`from_config`), whose weights default otherwise.
+
     Parameters
     ----------
     horizon_steps : N, prediction steps.
@@ -86,8 +89,8 @@ class OcpSpec:
 
     horizon_steps: int = defaults.HORIZON_STEPS
     dtau_s: float = defaults.DTAU_S
-    q: np.ndarray = field(default_factory=lambda: np.array(defaults.Q_STATE))
-    r: np.ndarray = field(default_factory=lambda: np.array(defaults.R_INPUT))
+    q: np.ndarray = field(default_factory=lambda: np.array(defaults.THESIS_Q_STATE))
+    r: np.ndarray = field(default_factory=lambda: np.array(defaults.THESIS_R_INPUT))
     q_terminal: np.ndarray = field(default_factory=lambda: np.array(defaults.Q_TERMINAL))
     u_min: np.ndarray = field(default_factory=lambda: np.array(defaults.U_MIN))
     u_max: np.ndarray = field(default_factory=lambda: np.array(defaults.U_MAX))

@@ -102,7 +102,7 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
 
 def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None = None,
                     progress: Callable[[float], None] | None = None,
-                    catch: bool = False, live=None) -> Recording[SimResult]:
+                    catch: bool = False, live=None, plant=None) -> Recording[SimResult]:
     """Fly ``cfg`` in the lockstep simulation into a new run directory under ``log_dir`` and
     summarise it (see :func:`record`).
 
@@ -111,7 +111,8 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     stamped with the experiment time at which the simulation ended (touch-down, or rest
     after an emergency stop): ``wall_s``, ``ticks``, ``ending``, ``final_mode``.
     ``progress(fraction)`` is called every tick. ``live`` (a
-    :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too.
+    :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too. ``plant`` flies
+    another airframe (see :func:`~ardrone_nmpc.runtime.lockstep.run_lockstep`).
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
     created for times that give no tick count.
@@ -128,7 +129,7 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
         sink = live.tee(recorder) if live is not None else recorder
         # the run flies its own copy of its input files (the path CSV in the run directory)
         result = lockstep.run_lockstep(recorder.config, recorder=sink, seed=seed,
-                                       progress=progress)
+                                       progress=progress, plant=plant)
         recorder.event(result.end_t_s, SIMULATED_EVENT, wall_s=time.perf_counter() - wall0,
                        ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)

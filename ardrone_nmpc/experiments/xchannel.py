@@ -252,3 +252,76 @@ def verdict(rho: float, tol: float = 1e-3) -> str:
     if not math.isfinite(rho):
         return "unstable"
     return "stable" if rho < 1.0 - tol else ("unstable" if rho > 1.0 + tol else "marginal")
+
+
+# ----------------------------------------------------------------------------- robustness
+def predicted_loop_matrix(gain: np.ndarray, plant: XPlant, *, compensation_s: float,
+                          difference_velocity: bool = True) -> np.ndarray:
+    """The loop as the tick runs it (docs/solver-notes.md §10): ẋ from the backward
+    difference of the measured x (or the true ẋ), the state predicted through the commands of
+    the last ``ceil(compensation_s / period)`` ticks by the model (ẍ = g θ, held per tick),
+    ``θ = −K x_pred``; the plant's delay need not be whole ticks (its command changes within
+    a tick). The state is ``[x, v, θ, x_prev, u_{k−1}, …, u_{k−M}]``."""
+    t = plant.period_s
+    nc = math.ceil(compensation_s / t - 1e-9)
+    m = int(math.floor(plant.delay_s / t + 1e-9))
+    f = plant.delay_s / t - m
+    a, b_late = plant.discrete()
+    a_early, b_early = XPlant(plant.tau_tilt_s, plant.tilt_gain, plant.drag_per_s, 0.0,
+                              f * t).discrete()
+    a_rest, b_rest = XPlant(plant.tau_tilt_s, plant.tilt_gain, plant.drag_per_s, 0.0,
+                            t - f * t).discrete()
+    big = max(m + 1, nc, 1)
+    n = 4 + big
+    u = lambda j: 3 + j  # noqa: E731 - column of u_{k−j}
+    meas = np.zeros((2, n))
+    meas[0, 0] = 1.0
+    if difference_velocity:
+        meas[1, 0], meas[1, 3] = 1.0 / t, -1.0 / t
+    else:
+        meas[1, 1] = 1.0
+    am = np.array([[1.0, t], [0.0, 1.0]])
+    bm = np.array([GRAVITY_MPS2 * t * t / 2.0, GRAVITY_MPS2 * t])
+    pred = np.linalg.matrix_power(am, nc) @ meas
+    for i in range(1, nc + 1):
+        pred[:, u(nc - i + 1)] += np.linalg.matrix_power(am, nc - i) @ bm
+    k_row = -(np.asarray(gain, float).reshape(1, 2) @ pred)[0]
+    mat = np.zeros((n, n))
+    mat[:3, :3] = a
+    # over a tick the command u_{k−m−1} acts for f·T, then u_{k−m} for the rest
+    for j, bj in ((m + 1, a_rest @ b_early), (m, b_rest)):
+        if j == 0:
+            mat[:3, :] += bj @ k_row[None, :]
+        else:
+            mat[:3, u(j)] += bj[:, 0]
+    mat[3, 0] = 1.0
+    mat[u(1), :] = k_row
+    for j in range(2, big + 1):
+        mat[u(j), u(j - 1)] = 1.0
+    return mat
+
+
+def region_table(weights=((12.0, 2.0, 12.0), (4.0, 0.5, 48.0), (2.0, 0.0, 96.0)), *,
+                 delays_s=(0.0, 0.2, 0.4), gains=(0.6, 1.0, 2.0), lags_s=(0.05, 0.2),
+                 prior_s: float = 0.26) -> list[dict]:
+    """Per x weights (q_x, q_ẋ, r_θ; N = 15, Δτ = 0.1 s): K, the worst ρ over the region with
+    a fixed ``prior_s`` prediction and with the delay compensated and the gain divided out,
+    and ρ on the nominal plant (docs/solver-notes.md §10)."""
+    rows = []
+    for q_x, q_v, r in weights:
+        k = first_step_gain(horizon_steps=15, dtau_s=0.1, q_x=q_x, q_v=q_v, r_theta=r)
+
+        def rho(plant: XPlant, comp: float) -> float:
+            m = predicted_loop_matrix(k, plant, compensation_s=comp)
+            return float(max(abs(np.linalg.eigvals(m))))
+
+        fixed, adapted = [], []
+        for d in delays_s:
+            for g in gains:
+                for lag in lags_s:
+                    fixed.append((rho(XPlant(lag, g, 0.58, d), prior_s), d, g, lag))
+                    adapted.append(rho(XPlant(lag, 1.0, 0.58, d), d))
+        rows.append({"weights": (q_x, q_v, r), "K": tuple(float(v) for v in k[0]),
+                     "worst_fixed": max(fixed), "worst_adapted": max(adapted),
+                     "nominal": rho(XPlant(), prior_s)})
+    return rows

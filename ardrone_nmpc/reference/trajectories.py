@@ -574,6 +574,8 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
                               ``lorenz_scale_m``, ``lorenz_time_scale``
     ``path``                  :class:`Waypoints` of ``path_file`` (:func:`path_file`)
     ``follow``                :class:`~ardrone_nmpc.reference.live.LiveTarget` (a second mocap object)
+    ``excitation``            :class:`~ardrone_nmpc.reference.excitation.Excitation` around
+                              ``start_m`` (the identification flight)
     ========================  =================================================================
 
     Paths use ``start_psi_rad`` as their constant heading. ``duration_s`` (s) is the flight
@@ -600,6 +602,13 @@ def make_trajectory(ref_cfg: ReferenceConfig, duration_s: float | None = None) -
                       start[2], psi, **extra)
     if kind == "path":
         return Waypoints.from_file(path_file(ref_cfg))
+    if kind == "excitation":
+        from ardrone_nmpc.reference.excitation import Excitation
+
+        e = ref_cfg.excitation
+        return Excitation(start, psi, e.amplitude_m, e.amplitude_psi_rad, axis_s=e.axis_s,
+                          bit_s=e.bit_s, rest_s=e.rest_s, sweep_m=e.sweep_m,
+                          sweep_mps=e.sweep_mps)
     if kind == "follow":  # live: fed each tick by the runner (ardrone_nmpc/reference/live.py)
         from ardrone_nmpc.reference.live import LiveTarget
 

@@ -79,8 +79,13 @@ def _configure(cfg, drone: LockstepDrone, events: list) -> None:
 
 
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
-                 progress: Callable[[float], None] | None = None) -> SimResult:
+                 progress: Callable[[float], None] | None = None, plant=None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
+
+    ``plant`` flies another airframe than the one ``sim.plant`` configures (an object with
+    :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface, landed at time 0: the tests'
+    emulators) inside the same simulated drone (firmware, sensors, faults); ``sim.plant`` is
+    then unused.
 
     ``progress(fraction)`` is called every tick with the fraction of the run done. The
     supervisor's verdicts are obeyed as on the real drone: ``land`` lands (rows go on until
@@ -92,7 +97,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     """
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
-    drone = LockstepDrone(cfg, seed=seed)
+    drone = LockstepDrone(cfg, seed=seed, plant=plant)
     tick = Tick(cfg, experiment_trajectory(cfg),
                 wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
     period = schedule.period_s

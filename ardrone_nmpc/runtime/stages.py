@@ -26,13 +26,14 @@ from ardrone_nmpc.core.types import (
     IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
 )
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
-           "MovingObstacles", "OffsetFree", "Sent", "Solution", "Supervision", "feedback_ages_ms",
-           "navdata_velocity_world"]
+           "MovingObstacles", "OffsetFree", "ResponseEstimation", "Sent", "Solution", "Supervision",
+           "feedback_ages_ms", "navdata_velocity_world"]
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
@@ -104,33 +105,45 @@ class DelayPrediction:
     ----------
     delay_s : the command delay to compensate (s); rounded up to whole ticks.
     period_s : control period (s).
+    max_delay_s : the largest delay :meth:`set_delay_s` may set later (s): the inputs sent
+        over that span are kept.
     """
 
-    def __init__(self, delay_s: float, period_s: float) -> None:
+    def __init__(self, delay_s: float, period_s: float, *, max_delay_s: float = 0.0) -> None:
         self.period_s = period_s
         self.delay_ticks = math.ceil(delay_s / period_s - 1e-9)
-        self._pending: deque = deque(maxlen=max(self.delay_ticks, 1))  # newest last
-        self._sent = np.zeros((self.delay_ticks, INPUT_DIM))
+        capacity = max(self.delay_ticks, math.ceil(max_delay_s / period_s - 1e-9), 1)
+        self._pending: deque = deque(maxlen=capacity)  # newest last
+        self._sent = np.zeros((capacity, INPUT_DIM))
 
     @property
     def lead_s(self) -> float:
         """How far ahead of the measurement the next command takes effect (s)."""
         return self.delay_ticks * self.period_s
 
+    def set_delay_s(self, delay_s: float) -> bool:
+        """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the
+        capacity); True if the ticks changed."""
+        ticks = min(max(int(round(delay_s / self.period_s)), 0), self._sent.shape[0])
+        changed = ticks != self.delay_ticks
+        self.delay_ticks = ticks
+        return changed
+
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        if self.delay_ticks:
-            self._pending.append(u_sent)
+        self._pending.append(u_sent)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
         period) — the state the new command will meet; ``x`` itself if nothing is pending."""
-        if self.delay_ticks == 0 or not self._pending:
+        n = self.delay_ticks
+        if n == 0 or not self._pending:
             return x
-        sent = self._sent
-        missing = self.delay_ticks - len(self._pending)  # start-up: hover for those
+        sent = self._sent[:n]
+        pending = list(self._pending)[-n:]
+        missing = n - len(pending)  # start-up: hover for those
         sent[:missing] = 0.0
-        for k, u in enumerate(self._pending):
+        for k, u in enumerate(pending):
             sent[missing + k] = u
         out = np.empty(STATE_DIM)
         rollout_rk4(x, sent, self.period_s, out)
@@ -139,7 +152,7 @@ class DelayPrediction:
     def warm_up(self, x: np.ndarray) -> None:
         """Load (or compile) the rollout kernel now, not on the first tick in the air."""
         if self.delay_ticks:
-            rollout_rk4(x, self._sent, self.period_s, np.empty(STATE_DIM))
+            rollout_rk4(x, self._sent[:self.delay_ticks], self.period_s, np.empty(STATE_DIM))
 
 
 # ----------------------------------------------------------------------------- obstacles
@@ -301,6 +314,73 @@ class OffsetFree:
         self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
+# ----------------------------------------------------------------------------- adaptation
+class ResponseEstimation:
+    """The flight's own measurement of the drone's command → attitude delay and gain
+    (:mod:`ardrone_nmpc.estimation.attitude_response`), and what ``auto`` makes of it: the
+    delay the prediction compensates and the gain the command mapping divides by, each once
+    its estimate is confident, clipped to ``controller.adaptation``'s bounds.
+
+    Fed after each tick's verdict: the roll/pitch sent (a hover starts the window again: the
+    drone's own hover is not the commands' response) and each new navdata sample, at its
+    receipt time. Built only when something is ``auto`` (the summary measures every flight
+    from its log).
+    """
+
+    def __init__(self, ctl, limits: DroneLimits, delay: DelayPrediction,
+                 supervision: Supervision, *, auto_gain: bool) -> None:
+        a = ctl.adaptation
+        self.cfg = a
+        self.auto_delay = ctl.delay_compensation_s == "auto"
+        self.auto_gain = auto_gain  # attitude_gain auto, and an NMPC whose commands it divides
+        self.delay = delay
+        self.supervision = supervision
+        self.limits = limits
+        self.estimator = AttitudeResponseEstimator(limits.euler_angle_max_rad,
+                                                   window_s=a.window_s)
+        self._next_fit_s = -math.inf
+
+    def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
+        """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
+        est = self.estimator
+        nav = inputs.navdata
+        if nav is not None:
+            est.navdata(inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
+        if not sent.progressive:
+            est.restart()
+            return []
+        est.command(inputs.t_s, sent.pcmd.roll_frac, sent.pcmd.pitch_frac)
+        if inputs.t_s < self._next_fit_s:
+            return []
+        self._next_fit_s = inputs.t_s + self.cfg.refit_s
+        e = est.estimate
+        if not math.isfinite(e.delay_s):
+            return []
+        events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
+                   "delay_std_s": e.delay_std_s, "gain": e.gain_mean,
+                   "gain_std": e.gain_mean_std, "lag_s": e.lag_s, "r2": e.r2,
+                   "delay_confident": e.delay_confident,
+                   "gain_confident": e.gain_confident}]
+        return events + self._apply(e)
+
+    def _apply(self, e) -> list[dict]:
+        a, events = self.cfg, []
+        if self.auto_delay and e.delay_confident:
+            before = self.delay.lead_s
+            if self.delay.set_delay_s(min(max(e.delay_s, a.delay_min_s), a.delay_max_s)):
+                events.append({"kind": "delay_compensation", "delay_s": self.delay.lead_s,
+                               "previous_s": before, "estimate_s": e.delay_s,
+                               "estimate_std_s": e.delay_std_s})
+        if self.auto_gain and e.gain_confident:
+            gain = min(max(e.gain_mean, a.gain_min), a.gain_max)
+            before = self.supervision.attitude_gain
+            if abs(gain - before) > max(2.0 * e.gain_mean_std, 0.05 * before):
+                self.supervision.attitude_gain = gain
+                events.append({"kind": "attitude_gain", "gain": gain, "previous": before,
+                               "estimate": e.gain_mean, "estimate_std": e.gain_mean_std})
+        return events
+
+
 # ----------------------------------------------------------------------------- supervision
 @dataclass(frozen=True, slots=True, eq=False)
 class Sent:
@@ -330,11 +410,16 @@ class Supervision:
     ----------
     supervisor : the flight's :class:`~ardrone_nmpc.safety.Supervisor`.
     limits : for the mapping to PCMD fractions.
+    attitude_gain : the drone's tilt per unit command over the nominal one; the NMPC's
+        commands (:attr:`Action.CONTROL`) are divided by it, the P fallback's are not (its
+        gains are chosen on the plant, thesis eq. 4.16). 1 for the P controller itself.
     """
 
-    def __init__(self, supervisor: Supervisor, limits: DroneLimits) -> None:
+    def __init__(self, supervisor: Supervisor, limits: DroneLimits,
+                 attitude_gain: float = 1.0) -> None:
         self.supervisor = supervisor
         self.limits = limits
+        self.attitude_gain = attitude_gain  # the drone's tilt per unit command, over E
         self._last: tuple[PcmdCommand, np.ndarray] | None = None  # for a hold
         self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
         self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
@@ -357,7 +442,9 @@ class Supervision:
             pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
             flown = AttitudeCommand(cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps)
             if all(map(math.isfinite, (flown.vz_ref_mps, roll, pitch, flown.psirate_radps))):
-                pcmd = map_to_pcmd(flown, self.limits)
+                # the NMPC's tilt per its model's gain; P's gains are chosen on the plant
+                asked = self._per_gain(flown) if action is Action.CONTROL else flown
+                pcmd = map_to_pcmd(asked, self.limits)
                 flags = (pcmd.saturated[0] or roll_clipped, pcmd.saturated[1] or pitch_clipped,
                          *pcmd.saturated[2:])
                 zacc = zacc_mps2 if action is Action.CONTROL and math.isfinite(zacc_mps2) else 0.0
@@ -374,6 +461,15 @@ class Supervision:
         self.vz_ref_mps = 0.0
         self._last = None
         return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
+
+
+    def _per_gain(self, cmd: AttitudeCommand) -> AttitudeCommand:
+        """The tilt to ask for so that the drone tilts by ``cmd``'s (its gain divided out)."""
+        k = self.attitude_gain
+        if k == 1.0:
+            return cmd
+        return AttitudeCommand(cmd.vz_ref_mps, cmd.phi_rad / k, cmd.theta_rad / k,
+                               cmd.psirate_radps)
 
 
 # ----------------------------------------------------------------------------- the row

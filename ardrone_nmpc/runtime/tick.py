@@ -21,7 +21,7 @@ from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_row
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
-    OffsetFree, Supervision, feedback_ages_ms, navdata_velocity_world,
+    OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
 from ardrone_nmpc.safety import Action, Supervisor
 
@@ -52,11 +52,15 @@ def effective_controller(controller, limits: DroneLimits):
     The thesis bounds φ, θ and ψ̇ by ±1 (rad, rad/s), but the AR.Drone clips tilt to
     ``euler_angle_max`` (0.21 rad by default) and yaw rate to ``control_yaw``: planning beyond
     them plans the impossible, and every command then saturates behind the command delay.
+    The NMPC plans roll and pitch up to ``planned_tilt_frac`` of ``euler_angle_max`` only: a
+    drone that tilts less per unit command (``attitude_gain`` divides it out) still reaches it,
+    one that tilts more stays under ``safety.max_tilt_rad`` before its gain is measured
+    (docs/solver-notes.md §10).
     """
     lo = list(controller.u_min)
     hi = list(controller.u_max)
-    for j, cap in ((IU_PHI, limits.euler_angle_max_rad), (IU_THETA, limits.euler_angle_max_rad),
-                   (IU_PSIRATE, limits.control_yaw_radps)):
+    tilt = limits.euler_angle_max_rad * controller.planned_tilt_frac
+    for j, cap in ((IU_PHI, tilt), (IU_THETA, tilt), (IU_PSIRATE, limits.control_yaw_radps)):
         lo[j], hi[j] = max(lo[j], -cap), min(hi[j], cap)
     return controller.model_copy(update={"u_min": tuple(lo), "u_max": tuple(hi)})
 
@@ -91,9 +95,22 @@ class Tick:
         self.supervisor = Supervisor(cfg.safety)
         self.follow = trajectory if isinstance(trajectory, LiveTarget) else None
         self.estimation = Estimation(cfg.estimator)
-        self.delay = DelayPrediction(ctl.delay_compensation_s, self.period_s)
+        adapt = ctl.adaptation
+        auto_delay = ctl.delay_compensation_s == "auto"
+        self.delay = DelayPrediction(adapt.delay_prior_s if auto_delay
+                                     else ctl.delay_compensation_s, self.period_s,
+                                     max_delay_s=adapt.delay_max_s if auto_delay else 0.0)
         self.control = Control(cfg, self.limits, nmpc, self.delay)
-        self.supervision = Supervision(self.supervisor, self.limits)
+        # the attitude gain divides the NMPC's commands (its model's tilt per unit command is
+        # the nominal one); the P controller's gains are chosen on the plant (eq. 4.16)
+        auto_gain = ctl.attitude_gain == "auto" and nmpc is not None
+        gain = (adapt.gain_prior if auto_gain else
+                1.0 if nmpc is None else ctl.attitude_gain)
+        self.supervision = Supervision(self.supervisor, self.limits, gain)
+        # the flight's own delay and gain, for what is 'auto' (docs/solver-notes.md §10)
+        self.response = (ResponseEstimation(ctl, self.limits, self.delay, self.supervision,
+                                            auto_gain=auto_gain)
+                         if auto_delay or auto_gain else None)
         self.offset = (OffsetFree(ctl.offset_free, self.period_s)
                        if nmpc is not None and ctl.offset_free.enabled else None)
         moving = [k for k, o in enumerate(ctl.obstacles) if o.mocap_object]
@@ -133,6 +150,7 @@ class Tick:
         sent = self.supervision.command(
             decision, cmd, solution.zacc_mps2 if solution is not None else math.nan)
         self.delay.push(sent.u)
+        adapted = self.response.update(inputs, sent) if self.response is not None else []
         if self.offset is not None:  # integrates after the verdict: frozen unless flown
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
@@ -140,4 +158,4 @@ class Tick:
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action,
-                          sup.take_events())
+                          sup.take_events() + adapted)

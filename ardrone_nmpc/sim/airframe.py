@@ -2,7 +2,13 @@
 
 :mod:`ardrone_nmpc.sim.plant` defines the model (its module docstring) and calls these:
 :func:`airframe_rk4` is one fixed RK4 step of the motors-on plant, :func:`airframe_rk4_many`
-many in one call (a whole control tick's substeps without Python in between).
+many in one call (a whole control tick's substeps without Python in between);
+:func:`rk4_step` is the plain-Python RK4 of any right-hand side (the falling drone's, and the
+reference the compiled steps are tested against).
+
+The attitude loops are a first-order lag on a 10-element state; with the second-order form
+(``sim.plant.attitude_model: second_order``) the state carries two more elements, the hidden
+states η_φ, η_θ of each loop's observable canonical form (:func:`airframe_rk4_array`).
 """
 
 from __future__ import annotations
@@ -14,14 +20,40 @@ from numba import njit
 
 from ardrone_nmpc.core.types import GRAVITY_MPS2
 
-__all__ = ["airframe_rk4", "airframe_rk4_many"]
+__all__ = ["N_AUX_STATE", "N_STATE", "airframe_rk4", "airframe_rk4_array",
+           "airframe_rk4_many", "freefall_derivative", "rk4_step"]
+
+N_STATE = 10      # x, y, z, vx, vy, vz, φ, θ, ψ, r
+_NO_WIND = (0.0, 0.0, 0.0)
+N_AUX_STATE = 12  # + η_φ, η_θ of the second-order attitude form
+
+
+@njit(cache=True)
+def _tilt_rates(x, ref_phi, ref_theta, k, out):
+    """φ', θ' (and η' with the second-order form, a state of 12) towards the tilt references.
+
+    First order: (ref − φ)/τ_a. Second order with a zero, observable canonical form of
+    (b1·s + b0)/(s² + a1·s + a0): φ' = −a1·φ + η + b1·ref, η' = −a0·φ + b0·ref.
+    """
+    phi, theta = x[6], x[7]
+    if x.shape[0] > N_STATE:
+        a1, a0, b1, b0 = k[9], k[10], k[11], k[12]
+        out[6] = -a1 * phi + x[10] + b1 * ref_phi
+        out[7] = -a1 * theta + x[11] + b1 * ref_theta
+        out[10] = -a0 * phi + b0 * ref_phi
+        out[11] = -a0 * theta + b0 * ref_theta
+    else:
+        inv_tau_tilt = k[5]
+        out[6] = (ref_phi - phi) * inv_tau_tilt
+        out[7] = (ref_theta - theta) * inv_tau_tilt
 
 
 @njit(cache=True)
 def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     """The motors-on right-hand side on arrays (the one definition: :func:`airframe_derivative`
-    and :func:`airframe_rk4` both call it)."""
-    e, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw, inv_tau_tilt, kd, hold_damping = k
+    and :func:`airframe_rk4` both call it). ``k`` is ``PlantParams.rhs_coefficients``."""
+    e_roll, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw = k[0], k[1], k[2], k[3], k[4]
+    kd, hold_damping, e_pitch = k[6], k[7], k[8]
     vx, vy, vz, phi, theta, psi, r = x[3], x[4], x[5], x[6], x[7], x[8], x[9]
     forward = GRAVITY_MPS2 * math.tan(theta)
     right = GRAVITY_MPS2 * math.tan(phi)
@@ -32,55 +64,112 @@ def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     if hold:
         ax -= hold_damping * vx
         ay -= hold_damping * vy
-        phi_dot = -phi * inv_tau_tilt
-        theta_dot = -theta * inv_tau_tilt
+        _tilt_rates(x, 0.0, 0.0, k, out)
     else:
-        phi_dot = (roll * e - phi) * inv_tau_tilt
-        theta_dot = (-pitch * e - theta) * inv_tau_tilt
+        _tilt_rates(x, roll * e_roll, -pitch * e_pitch, k, out)
     out[0], out[1], out[2], out[3], out[4] = vx, vy, vz, ax, ay
     out[5] = gaz * vz_gain - vz * inv_tau_vz + kd * w[2]
-    out[6], out[7], out[8], out[9] = phi_dot, theta_dot, r, -yaw * yaw_gain - r * inv_tau_yaw
+    out[8], out[9] = r, -yaw * yaw_gain - r * inv_tau_yaw
+
+
+@njit(cache=True)
+def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
+    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x``; a new array."""
+    n = x.shape[0]
+    a = np.empty(n)
+    b = np.empty(n)
+    c = np.empty(n)
+    d = np.empty(n)
+    t = np.empty(n)
+    hh = 0.5 * h
+    _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, a)
+    for i in range(n):
+        t[i] = x[i] + hh * a[i]
+    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
+    for i in range(n):
+        t[i] = x[i] + hh * b[i]
+    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
+    for i in range(n):
+        t[i] = x[i] + h * c[i]
+    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
+    h6 = h / 6.0
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
+    return out
 
 
 @njit(cache=True)
 def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
     """:func:`rk4_step` of :func:`airframe_derivative`, compiled: the simulator's hot path
-    (13 substeps per control tick). ``k`` is ``PlantParams.rhs_coefficients``; returns the
-    new 10-tuple state."""
-    x = np.empty(10)
-    for i in range(10):
+    (13 substeps per control tick) for the first-order attitude form. ``k`` is
+    ``PlantParams.rhs_coefficients``; returns the new 10-tuple state."""
+    x = np.empty(N_STATE)
+    for i in range(N_STATE):
         x[i] = state[i]
-    a = np.empty(10)
-    b = np.empty(10)
-    c = np.empty(10)
-    d = np.empty(10)
-    t = np.empty(10)
-    hh = 0.5 * h
-    _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, a)
-    for i in range(10):
-        t[i] = x[i] + hh * a[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
-    for i in range(10):
-        t[i] = x[i] + hh * b[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
-    for i in range(10):
-        t[i] = x[i] + h * c[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
-    h6 = h / 6.0
-    for i in range(10):
-        x[i] = x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
+    x = _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h)
     return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9])
 
 
 @njit(cache=True)
+def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
+    """:func:`airframe_rk4` on a state array of 10 or, with the second-order attitude form,
+    12 elements; returns a new array."""
+    return _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h)
+
+
+@njit(cache=True)
 def airframe_rk4_many(state, commands, k, w, h):
-    """:func:`airframe_rk4` once per row of ``commands`` (n, 5: roll, pitch, gaz, yaw, hold
-    as 0/1), each step from the last; stops after a step that ends at z ≤ 0 (ground
-    contact is the caller's). Returns (steps done, state)."""
+    """One RK4 step per row of ``commands`` (n, 5: roll, pitch, gaz, yaw, hold as 0/1),
+    each from the last, on a state array of 10 or 12 elements; stops after a step that ends
+    at z ≤ 0 (ground contact is the caller's). Returns (steps done, state array)."""
     x = state
     for i in range(commands.shape[0]):
         c = commands[i]
-        x = airframe_rk4(x, c[0], c[1], c[2], c[3], c[4] != 0.0, k, w, h)
+        x = _rk4_array(x, c[0], c[1], c[2], c[3], c[4] != 0.0, k, w, h)
         if x[2] <= 0.0:
             return i + 1, x
     return commands.shape[0], x
+
+
+def rk4_step(deriv, state: tuple, h: float, command: tuple, params,
+             wind_mps: tuple = _NO_WIND) -> tuple:
+    """One classical RK4 step of ``deriv(state, command, params, wind_mps)`` over ``h``.
+
+    Unrolled over the 10 states: list comprehensions over ``zip`` cost 3× more here.
+    """
+    x0, x1, x2, x3, x4, x5, x6, x7, x8, x9 = state
+    hh = 0.5 * h
+    a0, a1, a2, a3, a4, a5, a6, a7, a8, a9 = deriv(state, command, params, wind_mps)
+    b0, b1, b2, b3, b4, b5, b6, b7, b8, b9 = deriv(
+        (x0 + hh * a0, x1 + hh * a1, x2 + hh * a2, x3 + hh * a3, x4 + hh * a4,
+         x5 + hh * a5, x6 + hh * a6, x7 + hh * a7, x8 + hh * a8, x9 + hh * a9),
+        command, params, wind_mps)
+    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = deriv(
+        (x0 + hh * b0, x1 + hh * b1, x2 + hh * b2, x3 + hh * b3, x4 + hh * b4,
+         x5 + hh * b5, x6 + hh * b6, x7 + hh * b7, x8 + hh * b8, x9 + hh * b9),
+        command, params, wind_mps)
+    d0, d1, d2, d3, d4, d5, d6, d7, d8, d9 = deriv(
+        (x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3, x4 + h * c4,
+         x5 + h * c5, x6 + h * c6, x7 + h * c7, x8 + h * c8, x9 + h * c9),
+        command, params, wind_mps)
+    h6 = h / 6.0
+    return (x0 + h6 * (a0 + 2.0 * (b0 + c0) + d0), x1 + h6 * (a1 + 2.0 * (b1 + c1) + d1),
+            x2 + h6 * (a2 + 2.0 * (b2 + c2) + d2), x3 + h6 * (a3 + 2.0 * (b3 + c3) + d3),
+            x4 + h6 * (a4 + 2.0 * (b4 + c4) + d4), x5 + h6 * (a5 + 2.0 * (b5 + c5) + d5),
+            x6 + h6 * (a6 + 2.0 * (b6 + c6) + d6), x7 + h6 * (a7 + 2.0 * (b7 + c7) + d7),
+            x8 + h6 * (a8 + 2.0 * (b8 + c8) + d8), x9 + h6 * (a9 + 2.0 * (b9 + c9) + d9))
+
+
+def freefall_derivative(state: tuple, command: tuple, params,
+                        wind_mps: tuple = _NO_WIND) -> tuple:
+    """Right-hand side with the motors cut (EMERGENCY): gravity, horizontal drag; φ, θ and the
+    yaw rate r stay as they were (ψ keeps turning at r).
+
+    Same signature as :func:`~ardrone_nmpc.sim.plant.airframe_derivative` (``params`` a
+    :class:`~ardrone_nmpc.sim.plant.PlantParams`); ``command`` is ignored.
+    """
+    vx, vy, vz = state[3:6]
+    kd = params.drag_per_s
+    return (vx, vy, vz, -kd * (vx - wind_mps[0]), -kd * (vy - wind_mps[1]), -GRAVITY_MPS2,
+            0.0, 0.0, state[9], 0.0)

@@ -49,14 +49,17 @@ class SimulatedDrone:
         self.firmware = DroneFirmware(plant, counters=self.counters, **firmware_options)
 
     @classmethod
-    def from_config(cls, cfg, *, seed: int | None = None, **firmware_options) -> SimulatedDrone:
+    def from_config(cls, cfg, *, seed: int | None = None, plant=None,
+                    **firmware_options) -> SimulatedDrone:
         """The drone of an experiment: the plant of its ``sim`` and ``drone`` sections (seeded
-        by ``seed``, default ``sim.seed``), the altitude cap it is configured with, and the
+        by ``seed``, default ``sim.seed``; or ``plant``, another airframe with
+        :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface landed at time 0, such as
+        the tests' emulators), the altitude cap it is configured with, and the
         ``faults`` — the firmware's own (ctrl_state codes, a configuration session left by
         another application, a control port that does not answer) from the start, a constant
         wind blowing from the start, the others on the experiment clock."""
         seed = cfg.sim.seed if seed is None else int(seed)
-        plant = make_plant(cfg.sim, cfg.drone, seed=seed)
+        plant = make_plant(cfg.sim, cfg.drone, seed=seed) if plant is None else plant
         schedule = FaultSchedule(cfg.faults, seed)
         plant.wind_mps = schedule.wind_mps(-math.inf)
         options = {"altitude_max_m": cfg.drone.altitude_max_m,

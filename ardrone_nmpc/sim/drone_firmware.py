@@ -65,6 +65,9 @@ __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 VBAT_LOW_PCT = 20.0
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)  # a plain int: IntFlag arithmetic is slow per tick
+# The firmware's 200 Hz control loop: how often a climb near the cap is checked on a plant
+# that does not integrate in steps of its own (``params.integration_step_s``).
+CONTROL_LOOP_S = 0.005
 
 
 @dataclass
@@ -247,7 +250,7 @@ class DroneFirmware:
             if self.pcmd is not self._applied_pcmd or self.alt_capped:  # else nothing to do
                 self.apply_command()
             return
-        h = plant.params.integration_step_s
+        h = getattr(plant.params, "integration_step_s", CONTROL_LOOP_S)
         n = int(dt_s / h)
         for _ in range(n):
             plant.advance(h)

@@ -66,8 +66,8 @@ class LockstepDrone(ConfigHandshake):
 
     host = "simulated-drone"
 
-    def __init__(self, cfg, *, seed: int | None = None) -> None:
-        self.sim = SimulatedDrone.from_config(cfg, seed=seed)
+    def __init__(self, cfg, *, seed: int | None = None, plant=None) -> None:
+        self.sim = SimulatedDrone.from_config(cfg, seed=seed, plant=plant)
         if self.sim.faults is not None:
             self.sim.faults.set_clock(0.0)  # the faults' clock is experiment time itself
         self.control_port = cfg.drone.control_port

@@ -81,7 +81,8 @@ import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
-from ardrone_nmpc.sim.airframe import _airframe_rhs, airframe_rk4, airframe_rk4_many
+from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, airframe_rk4_array,
+                                       airframe_rk4_many, freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -105,6 +106,7 @@ STATE_NAMES = ("x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps",
 # Command tuple layout: PCMD fractions (drone signs) and the position-hold flag.
 COMMAND_NAMES = ("roll_frac", "pitch_frac", "gaz_frac", "yaw_frac", "position_hold")
 
+ATTITUDE_MODELS = ("lag", "second_order")
 _HOVER = (0.0, 0.0, 0.0, 0.0, True)   # what the drone does with the progressive flag at 0
 _NO_WIND = (0.0, 0.0, 0.0)
 _TIME_TOL_S = 1e-9
@@ -151,23 +153,42 @@ class PlantParams:
     vz_gain: float = 1.0
     battery_sag_frac: float = 0.0
     navdata_velocity_bias_mps: tuple[float, float] = (0.0, 0.0)  # (forward, right)
+    # --- airframe deviations (sim.plant; docs/plant-profiles.md §4): tilt per unit command
+    # relative to E, [roll, pitch]; the attitude loops' form; yaw rate per unit command
+    # relative to Y
+    attitude_gain: tuple[float, float] = (1.0, 1.0)
+    attitude_model: str = "lag"              # "lag" (τ_a) or "second_order" (below)
+    attitude_wn_radps: float = 3.45          # second order: natural frequency ω_n
+    attitude_damping: float = 0.58           # second order: damping ratio ζ
+    attitude_zero_s: float = 0.5             # second order: zero time constant T_z
+    yaw_gain: float = 1.0
     # derived: extra damping of the position hold so that v_xy decays with τ = hover_tau_s
     hover_damping_per_s: float = field(init=False, repr=False)
-    # derived: (E, V/τ_z, 1/τ_z, Y/τ_r, 1/τ_r, 1/τ_a, k_d, hover damping) for the RHS
+    # derived: (E·gain_φ, G·V/τ_z, 1/τ_z, Y·gain_ψ/τ_r, 1/τ_r, 1/τ_a, k_d, hover damping,
+    # E·gain_θ, a1, a0, b1, b0 of the second-order attitude form) for the RHS
     rhs_coefficients: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("euler_angle_max_rad", "control_vz_max_mps", "control_yaw_radps",
                      "tau_tilt_s", "tau_yaw_s", "tau_vz_s", "integration_step_s", "hover_tau_s",
                      "takeoff_altitude_m", "takeoff_climb_mps", "landing_speed_mps",
-                     "navdata_velocity_bias_tau_s", "turbulence_tau_s", "vz_gain"):
+                     "navdata_velocity_bias_tau_s", "turbulence_tau_s", "vz_gain",
+                     "attitude_wn_radps", "attitude_damping", "yaw_gain"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        for name in ("command_delay_s", "turbulence_std_mps"):
+        for name in ("command_delay_s", "turbulence_std_mps", "attitude_zero_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        gains = tuple(float(g) for g in self.attitude_gain)
+        if len(gains) != 2 or not all(math.isfinite(g) and g > 0.0 for g in gains):
+            raise ValueError(f"attitude_gain must be [roll, pitch], finite and > 0, "
+                             f"got {self.attitude_gain!r}")
+        object.__setattr__(self, "attitude_gain", gains)
+        if self.attitude_model not in ATTITUDE_MODELS:
+            raise ValueError(f"attitude_model must be one of {ATTITUDE_MODELS}, "
+                             f"got {self.attitude_model!r}")
         if not 0.0 <= self.battery_sag_frac < 1.0:
             raise ValueError(f"battery_sag_frac must be in [0, 1), got {self.battery_sag_frac!r}")
         if len(self.initial_position_m) != 3 or self.initial_position_m[2] < 0.0:
@@ -179,11 +200,18 @@ class PlantParams:
                            tuple(float(v) for v in self.navdata_velocity_bias_mps))
         damping = max(0.0, 1.0 / self.hover_tau_s - self.drag_per_s)
         object.__setattr__(self, "hover_damping_per_s", damping)
+        wn, zeta = self.attitude_wn_radps, self.attitude_damping
         object.__setattr__(self, "rhs_coefficients", (
-            self.euler_angle_max_rad, self.vz_gain * self.control_vz_max_mps / self.tau_vz_s,
-            1.0 / self.tau_vz_s,
-            self.control_yaw_radps / self.tau_yaw_s, 1.0 / self.tau_yaw_s, 1.0 / self.tau_tilt_s,
-            self.drag_per_s, damping))
+            self.euler_angle_max_rad * gains[0],
+            self.vz_gain * self.control_vz_max_mps / self.tau_vz_s, 1.0 / self.tau_vz_s,
+            self.control_yaw_radps * self.yaw_gain / self.tau_yaw_s, 1.0 / self.tau_yaw_s,
+            1.0 / self.tau_tilt_s, self.drag_per_s, damping, self.euler_angle_max_rad * gains[1],
+            2.0 * zeta * wn, wn * wn, wn * wn * self.attitude_zero_s, wn * wn))
+
+    @property
+    def second_order_attitude(self) -> bool:
+        """The attitude loops are the second-order form with a zero (two more states)."""
+        return self.attitude_model == "second_order"
 
     @classmethod
     def from_config(cls, sim_cfg: SimConfig, drone_cfg: DroneConfig, **overrides) -> PlantParams:
@@ -208,6 +236,12 @@ class PlantParams:
             vz_gain=sim_cfg.vz_gain,
             battery_sag_frac=sim_cfg.battery_sag_frac,
             navdata_velocity_bias_mps=tuple(sim_cfg.navdata_velocity_bias_mps),
+            attitude_gain=tuple(plant.attitude_gain),
+            attitude_model=plant.attitude_model,
+            attitude_wn_radps=plant.attitude_wn_radps,
+            attitude_damping=plant.attitude_damping,
+            attitude_zero_s=plant.attitude_zero_s,
+            yaw_gain=plant.yaw_gain,
             **overrides,
         )
 
@@ -250,58 +284,19 @@ def airframe_derivative(state: tuple, command: tuple, params: PlantParams,
     params : PlantParams
     wind_mps : (wx, wy, wz) air velocity; drag acts on v − w, the vertical loop sees k_d·w_z.
 
+    A 12-tuple state (the hidden states η_φ, η_θ appended) takes the second-order attitude
+    form of ``params``; a 10-tuple the first-order lag.
+
     Returns
     -------
-    10-tuple, the time derivative of ``state``.
+    tuple, the time derivative of ``state``.
     """
     roll, pitch, gaz, yaw, hold = command
-    out = np.empty(10)
+    out = np.empty(len(state))
     _airframe_rhs(np.asarray(state, dtype=np.float64), float(roll), float(pitch), float(gaz),
                   float(yaw), bool(hold), params.rhs_coefficients,
                   tuple(float(w) for w in wind_mps), out)
     return tuple(out.tolist())
-
-
-def freefall_derivative(state: tuple, command: tuple, params: PlantParams,
-                        wind_mps: tuple = _NO_WIND) -> tuple:
-    """Right-hand side with the motors cut (EMERGENCY): gravity, horizontal drag; φ, θ and the
-    yaw rate r stay as they were (ψ keeps turning at r).
-
-    Same signature as :func:`airframe_derivative`; ``command`` is ignored.
-    """
-    vx, vy, vz = state[3:6]
-    kd = params.drag_per_s
-    return (vx, vy, vz, -kd * (vx - wind_mps[0]), -kd * (vy - wind_mps[1]), -GRAVITY_MPS2,
-            0.0, 0.0, state[9], 0.0)
-
-
-def rk4_step(deriv, state: tuple, h: float, command: tuple, params: PlantParams,
-             wind_mps: tuple = _NO_WIND) -> tuple:
-    """One classical RK4 step of ``deriv(state, command, params, wind_mps)`` over ``h``.
-
-    Unrolled over the 10 states: list comprehensions over ``zip`` cost 3× more here.
-    """
-    x0, x1, x2, x3, x4, x5, x6, x7, x8, x9 = state
-    hh = 0.5 * h
-    a0, a1, a2, a3, a4, a5, a6, a7, a8, a9 = deriv(state, command, params, wind_mps)
-    b0, b1, b2, b3, b4, b5, b6, b7, b8, b9 = deriv(
-        (x0 + hh * a0, x1 + hh * a1, x2 + hh * a2, x3 + hh * a3, x4 + hh * a4,
-         x5 + hh * a5, x6 + hh * a6, x7 + hh * a7, x8 + hh * a8, x9 + hh * a9),
-        command, params, wind_mps)
-    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = deriv(
-        (x0 + hh * b0, x1 + hh * b1, x2 + hh * b2, x3 + hh * b3, x4 + hh * b4,
-         x5 + hh * b5, x6 + hh * b6, x7 + hh * b7, x8 + hh * b8, x9 + hh * b9),
-        command, params, wind_mps)
-    d0, d1, d2, d3, d4, d5, d6, d7, d8, d9 = deriv(
-        (x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3, x4 + h * c4,
-         x5 + h * c5, x6 + h * c6, x7 + h * c7, x8 + h * c8, x9 + h * c9),
-        command, params, wind_mps)
-    h6 = h / 6.0
-    return (x0 + h6 * (a0 + 2.0 * (b0 + c0) + d0), x1 + h6 * (a1 + 2.0 * (b1 + c1) + d1),
-            x2 + h6 * (a2 + 2.0 * (b2 + c2) + d2), x3 + h6 * (a3 + 2.0 * (b3 + c3) + d3),
-            x4 + h6 * (a4 + 2.0 * (b4 + c4) + d4), x5 + h6 * (a5 + 2.0 * (b5 + c5) + d5),
-            x6 + h6 * (a6 + 2.0 * (b6 + c6) + d6), x7 + h6 * (a7 + 2.0 * (b7 + c7) + d7),
-            x8 + h6 * (a8 + 2.0 * (b8 + c8) + d8), x9 + h6 * (a9 + 2.0 * (b9 + c9) + d9))
 
 
 # ----------------------------------------------------------------------------- backends
@@ -369,6 +364,7 @@ class AirframePlant:
         self._pending_s = 0.0
         self._current = _HOVER
         self._fifo: deque = deque([_HOVER] * params.command_delay_steps)
+        self._tilt_aux = (0.0, 0.0)  # η_φ, η_θ of the second-order attitude form
         self._vel_bias = tuple(params.navdata_velocity_bias_std_mps * v
                                for v in self._bias_rng.standard_normal(2))
         self._new_flight_biases()
@@ -426,6 +422,7 @@ class AirframePlant:
             return False
         self._mode = FlightMode.TAKING_OFF
         self._new_flight_biases()
+        self._tilt_aux = (0.0, 0.0)
         return True
 
     def land(self) -> bool:
@@ -526,9 +523,9 @@ class AirframePlant:
         fifo, current = self._fifo, self._current
         delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
         delayed += [current] * (n - len(delayed))
-        done, state = airframe_rk4_many(tuple(map(float, self._state)),
-                                        np.array(delayed, dtype=np.float64),
-                                        self.params.rhs_coefficients, wind, h)
+        done, x = airframe_rk4_many(self._state_array(), np.array(delayed, dtype=np.float64),
+                                    self.params.rhs_coefficients, wind, h)
+        state = self._from_state_array(x)
         for _ in range(done):
             fifo.append(current)
             fifo.popleft()
@@ -566,9 +563,26 @@ class AirframePlant:
         """One step of the motors-on dynamics from ``self._state`` (the backend's hook: a
         profile with other dynamics overrides this, the modes, sensors and faults stay)."""
         roll, pitch, gaz, yaw, hold = command  # the compiled twin of rk4_step(airframe_derivative)
+        k = self.params.coefficients_at(self._battery)
+        if self.params.second_order_attitude:
+            x = airframe_rk4_array(self._state_array(), float(roll), float(pitch), float(gaz),
+                                   float(yaw), bool(hold), k, tuple(map(float, wind)), h)
+            return self._from_state_array(x)
         return airframe_rk4(self._state, float(roll), float(pitch), float(gaz), float(yaw),
-                            bool(hold), self.params.coefficients_at(self._battery),
-                            tuple(map(float, wind)), h)
+                            bool(hold), k, tuple(map(float, wind)), h)
+
+    def _state_array(self) -> np.ndarray:
+        """The state as the kernels take it (with the second-order form's hidden states)."""
+        if self.params.second_order_attitude:
+            return np.array((*self._state, *self._tilt_aux), dtype=np.float64)
+        return np.array(self._state, dtype=np.float64)
+
+    def _from_state_array(self, x: np.ndarray) -> tuple:
+        """The 10-tuple state of a kernel's array, its hidden states kept aside."""
+        values = x.tolist()
+        if len(values) > N_STATE:
+            self._tilt_aux = (values[N_STATE], values[N_STATE + 1])
+        return tuple(values[:N_STATE])
 
     def _auto_command(self, mode: FlightMode) -> tuple:
         p = self.params

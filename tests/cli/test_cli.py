@@ -10,6 +10,7 @@ import yaml
 from typer.testing import CliRunner
 
 from ardrone_nmpc.cli.app import app
+from ardrone_nmpc.core import defaults
 from ardrone_nmpc.config.schema import ExperimentConfig
 
 runner = CliRunner()
@@ -31,7 +32,7 @@ def test_check_prints_the_resolved_config(tmp_path):
     assert resolved.name == "demo"
     assert resolved.controller.horizon_steps == 8
     assert resolved.controller.solver.kmax == 7
-    assert resolved.controller.q == (12, 2, 7, 2, 5, 10, 13)
+    assert resolved.controller.q == defaults.Q_STATE  # the default, resolved
 
 
 def test_check_reports_every_error_with_its_field_path(tmp_path):

@@ -138,6 +138,13 @@ CASES = [
     ("status-control-port-negative", ["status", "--control-port", "-1"], 2,
      r"^error: --control-port: -1 is not a port \(1 … 65535\)$"),
     ("tune-missing", ["tune", "{tmp}/nope.yaml"], 1, r"nope\.yaml: no such file$"),
+    ("robustness-missing", ["robustness", "{tmp}/nope.yaml", "--out", "{tmp}/rob"], 1,
+     r"nope\.yaml: no such file"),
+    ("robustness-zero-jobs", ["robustness", HOVER, "--jobs", "0"], 2, r"^error: --jobs: "),
+    ("identify-missing", ["identify", "{tmp}/nope", "-o", "{tmp}/p.yaml"], 1,
+     r"nope: no such run directory$"),
+    ("identify-too-short", ["identify", "{run}", "-o", "{tmp}/p.yaml"], 1,
+     r"too little flown with navdata and mocap"),
     ("tune-zero-trials", ["tune", HOVER, "--trials", "0"], 2, r"^error: --trials: "),
 ]
 

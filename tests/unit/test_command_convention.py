@@ -40,12 +40,16 @@ def test_kit_convention_writes_rad_ms_rads_as_the_fraction_and_saturates_at_one(
 
 def test_the_nmpc_plans_within_plus_minus_one_under_the_kits_convention():
     """Eq. 4.17's ±1 on φ, θ, ψ̇: under the SDK's convention the tilt bound narrows to the
-    drone's 0.21 rad; under the kit's it stays ±1."""
-    for convention, tilt in (("sdk", 0.2094), ("kit", 1.0)):
-        cfg = load_config(None, [f"drone.command_convention={convention}"])
-        ctl = effective_controller(cfg.controller, command_scales(cfg.drone))
-        assert ctl.u_max[IU_PHI] == ctl.u_max[IU_THETA] == pytest.approx(tilt)
-        assert ctl.u_min[IU_THETA] == pytest.approx(-tilt) and ctl.u_max[IU_PSIRATE] == 1.0
+    drone's 0.21 rad; under the kit's it stays ±1 — each times planned_tilt_frac (the thesis
+    formulation plans all of it; the default keeps a 0.55 margin)."""
+    for frac in (1.0, 0.55):
+        for convention, tilt in (("sdk", 0.2094), ("kit", 1.0)):
+            cfg = load_config(None, [f"drone.command_convention={convention}",
+                                     f"controller.planned_tilt_frac={frac}"])
+            ctl = effective_controller(cfg.controller, command_scales(cfg.drone))
+            assert ctl.u_max[IU_PHI] == ctl.u_max[IU_THETA] == pytest.approx(tilt * frac)
+            assert ctl.u_min[IU_THETA] == pytest.approx(-tilt * frac)
+            assert ctl.u_max[IU_PSIRATE] == 1.0
 
 
 def test_the_convention_is_a_choice_of_two_and_the_firmware_cap_stays():

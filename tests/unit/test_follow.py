@@ -124,7 +124,9 @@ def test_closed_loop_follows_the_car_and_prediction_helps(tmp_path):
     gap = np.sqrt((c["x_true_m"] - c["target_x_m"]) ** 2 + (c["y_true_m"] - c["target_y_m"]) ** 2)
     assert np.max(gap[late]) < 0.2
     np.testing.assert_allclose(c["z_true_m"][late] - c["target_z_m"][late], 1.0, atol=0.05)
-    assert figures[("xyz", "rmse")] < 0.15
+    # 0.155 m with the robust default weights (0.097 m with the thesis', which fly only a
+    # drone like the simulator's: docs/robustness.md)
+    assert figures[("xyz", "rmse")] < 0.2
     _, blind = fly(tmp_path, "reference.follow.predict=false")
     assert blind[("xyz", "rmse")] > 2 * figures[("xyz", "rmse")]
 

@@ -235,7 +235,7 @@ def test_solvers_build_from_the_config():
     solver = make_nmpc(cfg.controller, period_s=cfg.loop.period_s)
     assert isinstance(solver, NewtonGMRESController)
     assert solver.spec.horizon_steps == 8 and solver.kmax == 7
-    np.testing.assert_array_equal(solver.spec.q, [12, 2, 7, 2, 5, 10, 13])
+    np.testing.assert_array_equal(solver.spec.q, cfg.controller.q)
 
 
 @pytest.mark.parametrize("kwargs, match", [

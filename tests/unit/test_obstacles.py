@@ -390,7 +390,7 @@ def test_clearance_stats_sphere_and_cylinder():
 def test_the_drone_goes_round_a_cylinder_on_the_straight_path(tmp_path, seed):
     """configs/obstacle.yaml, shortened: the x step runs through a cylinder; the drone passes
     it, its truth never closer than d − 5 cm, and the summary says so."""
-    cfg = load_config(CONFIG, ["duration_s=4.0"])
+    cfg = load_config(CONFIG, ["duration_s=6.0"])
     (obs,) = cfg.controller.obstacles
     d = obs.radius_m + obs.margin_m
     with RunRecorder.create(tmp_path, cfg, seed=seed) as rec:

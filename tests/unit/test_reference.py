@@ -503,7 +503,7 @@ def config_for(kind, tmp_path):
 
 def test_every_config_kind_is_covered():
     assert set(KINDS) == {"hover", "step", "square", "square_altitudes", "ellipse", "lorenz",
-                          "path", "follow"}
+                          "path", "follow", "excitation"}
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -518,7 +518,8 @@ def test_make_trajectory_every_kind_from_defaults(kind, tmp_path):
     assert poly.ndim == 2 and poly.shape[1] == 3 and len(poly) >= 1
     if len(poly) > 1:
         assert segment_lengths(poly).min() > 0
-    if kind not in ("hover", "step", "follow"):  # follow: a live point until the object is seen
+    # follow: a live point until the object is seen; excitation: set points, as a step's
+    if kind not in ("hover", "step", "follow", "excitation"):
         assert segment_lengths(poly).max() <= POLYLINE_SPACING_M + 1e-12
 
 

@@ -298,9 +298,12 @@ def test_control_command_of_each_verdict():
 
 
 def test_effective_controller_plans_within_the_drones_limits():
-    ctl = tick_module.effective_controller(config().controller, DroneLimits(0.21, 0.7, 1.5))
-    assert ctl.u_max == pytest.approx((1.0, 0.21, 0.21, 1.0))
-    assert ctl.u_min == pytest.approx((-1.0, -0.21, -0.21, -1.0))
+    cfg = config()
+    ctl = tick_module.effective_controller(cfg.controller, DroneLimits(0.21, 0.7, 1.5))
+    tilt = 0.21 * cfg.controller.planned_tilt_frac  # the margin below the drone's tilt limit
+    assert tilt < 0.21
+    assert ctl.u_max == pytest.approx((1.0, tilt, tilt, 1.0))
+    assert ctl.u_min == pytest.approx((-1.0, -tilt, -tilt, -1.0))
 
 
 # ----------------------------------------------------------------------------- supervision

@@ -48,6 +48,8 @@ def test_a_zero_state_weight_is_not_searched():
 
 
 def test_a_space_file_adds_ranges_factors_vectors_and_overrides_elements(step_z):
+    # a tuned delay compensation is a number (its default, 'auto', is the flight's estimate)
+    step_z = load_config(CONFIGS / "step_z.yaml", ["controller.delay_compensation_s=0.26"])
     space = parse_space({
         "factor": 4,
         "params": {
@@ -57,7 +59,7 @@ def test_a_space_file_adds_ranges_factors_vectors_and_overrides_elements(step_z)
             "controller.delay_compensation_s": {"low": 0.1, "high": 0.35},
             "controller.q[4]": {"low": 10, "high": 500, "log": True},
         }}, step_z)
-    assert space["controller.q[0]"].low == pytest.approx(12 / 4)  # default space at ×1/4…×4
+    assert space["controller.q[0]"].low == pytest.approx(step_z.controller.q[0] / 4)  # ×1/4…×4
     assert space["controller.q[4]"].low == 10 and space["controller.q[4]"].high == 500
     hs = space["controller.horizon_steps"]
     assert (hs.kind, hs.log, hs.low, hs.high, hs.base) == ("int", False, 8, 30, 15)
@@ -113,7 +115,9 @@ def test_params_apply_to_vector_elements_and_round_ints(step_z):
     data = config_to_dict(step_z)
     out = apply_params(data, {"controller.q[4]": 80.0, "controller.r[0]": 2.0,
                               "controller.horizon_steps": 11.6}, space)
-    assert out["controller"]["q"] == [12.0, 2.0, 7.0, 2.0, 80.0, 10.0, 13.0]
+    q = list(step_z.controller.q)
+    q[4] = 80.0
+    assert out["controller"]["q"] == q
     assert out["controller"]["r"][0] == 2.0 and out["controller"]["horizon_steps"] == 12
     assert data["controller"]["q"][4] == 5.0  # the original is untouched
     cfg = config_with(step_z, {"controller.q[4]": 80.0}, space, ["sim.seed=7"])
@@ -262,8 +266,9 @@ def test_params_on_a_config_as_written_copy_only_what_they_set(step_z):
     out = apply_params({"name": "w", "sim": {"seed": 4}}, {"controller.q[4]": 80.0,
                                                           "estimator.kalman_q": 1e-3},
                        resolved=config_to_dict(step_z))
-    assert out == {"name": "w", "sim": {"seed": 4},
-                   "controller": {"q": [12.0, 2.0, 7.0, 2.0, 80.0, 10.0, 13.0]},
+    q = list(step_z.controller.q)
+    q[4] = 80.0
+    assert out == {"name": "w", "sim": {"seed": 4}, "controller": {"q": q},
                    "estimator": {"kalman_q": 1e-3}}
 
 

@@ -209,3 +209,27 @@ def test_the_linear_kit_loop_predicts_a_small_flown_step(tmp_path):
     checks = {c.solver: c for c in small_step_checks(Path("configs"), tmp_path, 0)}
     assert checks["newton"].max_error_frac < 0.06 and checks["newton"].theta_peak_rad < 0.1
     assert 0.0 < checks["newton"].age_s < 0.065
+
+
+def test_the_predicted_loop_reduces_to_the_plain_loop_without_prediction():
+    """Delay compensation 0 and the true velocity: the plain loop's spectrum."""
+    from ardrone_nmpc.experiments.xchannel import (XPlant, closed_loop_matrix, first_step_gain,
+                                                   predicted_loop_matrix)
+
+    k = first_step_gain(horizon_steps=15, dtau_s=0.1, q_x=12, q_v=2, r_theta=12)
+    plant = XPlant(delay_s=0.26)
+    plain = np.sort(np.abs(np.linalg.eigvals(closed_loop_matrix(k, plant))))
+    mine = np.abs(np.linalg.eigvals(predicted_loop_matrix(k, plant, compensation_s=0.0,
+                                                          difference_velocity=False)))
+    nonzero = np.sort(mine[mine > 1e-9])
+    np.testing.assert_allclose(nonzero, plain[plain > 1e-9], rtol=1e-9)
+
+
+def test_no_fixed_weights_cover_the_region_and_adaptation_does():
+    from ardrone_nmpc.experiments.xchannel import region_table
+
+    thesis, defaults, detuned = region_table()
+    assert thesis["worst_fixed"][0] > 1.05 and thesis["worst_adapted"] < 0.97
+    assert defaults["worst_fixed"][0] < thesis["worst_fixed"][0]
+    assert defaults["worst_fixed"][1:] == (0.4, 2.0, 0.2)  # the hardest corner
+    assert detuned["worst_fixed"][0] < 1.0 and defaults["worst_adapted"] < 0.96

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.config.schema import ControllerConfig
+from ardrone_nmpc.core import defaults
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.experiments.record import record_lockstep
@@ -25,8 +26,12 @@ from ardrone_nmpc.experiments.reproduce.judges import (NO_OVERSHOOT_PCT, Conditi
 
 # The thesis' formulation: a delay-free prediction, ż_ref = ż + z̈·Δt (Δt = 65 ms), ẋ, ẏ from
 # the drone's navdata — and no disturbance estimate, where this tool has one.
+# And its weights (where a config states its own — the r study — the config's win), a
+# drone of nominal gain and the full tilt.
 _THESIS = ["controller.delay_compensation_s=0", "controller.vz_lead_s=null",
-           "estimator.horizontal_velocity=navdata"]
+           "estimator.horizontal_velocity=navdata", "controller.attitude_gain=1",
+           "controller.planned_tilt_frac=1", f"controller.q={list(defaults.THESIS_Q_STATE)}",
+           f"controller.r={list(defaults.THESIS_R_INPUT)}"]
 if "offset_free" in ControllerConfig.model_fields:
     _THESIS.append("controller.offset_free=false")
 FORMULATIONS = {"thesis": _THESIS, "ours": []}
@@ -315,8 +320,16 @@ BESIDE_NOTES = {
 def fly(config_dir: Path, name: str, overrides: list[str], form: str, log_dir: Path,
         seed: int, tag: str = "", plant: str = BESIDE) -> RunFigures:
     """One run of ``name`` in formulation ``form`` on the plant profile ``plant``; the run
-    directory ends in ``<name><tag>-<plant>-<form>``."""
-    cfg = load_config(config_dir / name, [*LAB_OVERRIDES, *FORMULATIONS[form],
+    directory ends in ``<name><tag>-<plant>-<form>``. A weight the config states is its own:
+    the formulation's q, r apply only where the config leaves them out."""
+    import yaml
+
+    stated = (yaml.safe_load((config_dir / name).read_text(encoding="utf-8")) or {}
+              ).get("controller") or {}
+    formulation = [o for o in FORMULATIONS[form]
+                   if not (o.startswith(("controller.q=", "controller.r="))
+                           and o.split("=")[0].split(".")[1] in stated)]
+    cfg = load_config(config_dir / name, [*LAB_OVERRIDES, *formulation,
                                           f"sim.plant.profile={plant}", *overrides])
     tag = tag or ("-p" if "controller.kind=p" in overrides else "")
     cfg = cfg.model_copy(update={"name": f"{cfg.name}{tag}-{plant}-{form}"})

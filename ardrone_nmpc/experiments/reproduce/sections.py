@@ -202,9 +202,10 @@ def narrowings(config_dir: Path) -> list[str]:
              + "on the others they carry the noise and navdata biases of docs/plant.md §3.",
              f"* **Prediction.** Thesis formulation: delay-free, ż reference = ż + "
              f"z̈·{cfg.loop.period_s * 1e3:g} ms. Ours: the state predicted through the commands "
-             f"in flight over {_lead(ours.controller.delay_compensation_s)}, ż reference = ż + "
+             f"in flight over {_delay(ours.controller)}, ż reference = ż + "
              f"z̈·{_lead(ours.controller.vz_lead_s)} (the `{BESIDE}` plant's vertical lag "
-             "inverted).",
+             f"inverted); the NMPC plans φ, θ within {ours.controller.planned_tilt_frac:g} of the "
+             f"tilt limit and its tilt is divided by {_gain(ours.controller)}.",
              f"* **Solver.** The claims are flown with `controller.solver.method="
              f"{ctl.solver.method}` in both formulations; the thesis' Newton scheme flies the "
              "stability cases beside the linearised x loop and the ψ step below.",
@@ -234,3 +235,20 @@ def _gains(g) -> str:
 
 def _lead(seconds) -> str:
     return "one period" if seconds is None else f"{seconds:g} s"
+
+
+def _delay(ctl) -> str:
+    """The delay the prediction compensates: configured, or measured in flight (auto)."""
+    if ctl.delay_compensation_s == "auto":
+        return (f"the command delay the flight measures (`delay_compensation_s: auto`, "
+                f"{ctl.adaptation.delay_prior_s:g} s until its estimate is confident)")
+    return _lead(ctl.delay_compensation_s)
+
+
+def _gain(ctl) -> str:
+    """What the NMPC's tilt is divided by: a configured gain, or the measured one (auto)."""
+    if ctl.attitude_gain == "auto":
+        return ("the drone's attitude gain the flight measures (`attitude_gain: auto`, "
+                f"{ctl.adaptation.gain_prior:g} until confident, within "
+                f"{ctl.adaptation.gain_min:g}–{ctl.adaptation.gain_max:g})")
+    return f"{ctl.attitude_gain:g}"

@@ -42,15 +42,11 @@ class Scenario:
 def plant_variants() -> list[tuple[str, tuple[str, ...]]]:
     """(label, overrides) per plant profile, if the config schema has ``sim.plant.profile``
     with a fixed set of values; else none (every trial flies the config's plant)."""
-    import typing
+    from ardrone_nmpc.config import schema
 
-    from ardrone_nmpc.config.schema import PlantConfig
-
-    info = PlantConfig.model_fields.get("profile")
-    if info is None:
+    if "profile" not in schema.PlantConfig.model_fields:
         return []
-    choices = [a for a in typing.get_args(info.annotation) if isinstance(a, str)]
-    return [(c, (f"sim.plant.profile={c}",)) for c in choices]
+    return [(c, (f"sim.plant.profile={c}",)) for c in schema.PLANT_PROFILE_DEFAULTS]
 
 
 def scenarios(*, base_seed: int, n_seeds: int,
@@ -117,8 +113,8 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     """Fly ``spec`` on each of its scenarios and score it. Never raises: a flight that
     cannot run (an invalid config, an exception) makes the trial ``failed`` with the
     objective's penalty."""
-    from ardrone_nmpc.config.io import apply_overrides
-    from ardrone_nmpc.config.schema import ConfigError, config_from_dict
+    from ardrone_nmpc.config.io import apply_overrides, resolve_data
+    from ardrone_nmpc.config.schema import ConfigError
 
     wall0 = time.perf_counter()
     # the trial's values on the config as written: a scenario's plant profile still fills
@@ -128,8 +124,7 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     status = "ok"
     for sc in spec.scenarios:
         try:
-            cfg = config_from_dict(apply_overrides(data, [*sc.overrides,
-                                                          f"sim.seed={sc.seed}"]))
+            cfg = resolve_data(apply_overrides(data, [*sc.overrides, f"sim.seed={sc.seed}"]))
             m, flown_s = _fly(cfg, spec.keep_dir, spec.number)
             sim_s += flown_s
             if m["aborted"] and status == "ok":

@@ -17,12 +17,16 @@ term            value                                                           
 ``supervisor``  ticks of the window whose mode is not ``track`` (holds, fallbacks,
                 hovers, landings: the supervisor acted)                                 ticks
 ``abort``       1 if the supervisor landed or stopped the flight, or it failed to run   1
+``unclean``     1 if the flight is not clean as ``robustness`` judges it (a limit
+                cycle, the supervisor, > 2 % of ticks with roll/pitch on ±1, or a
+                steady error > 3 cm; docs/robustness.md §2)                             1
 ==============  ======================================================================  =====
 
 score(scenario) = Σ weight·term; a trial's score = (1 − worst)·mean + worst·max over its
 scenarios (``worst`` ∈ [0, 1] weighs the worst scenario: robustness across seeds and plants).
 
-``--objective`` picks a preset and/or weights: ``default``, ``step``, ``tracking``, or
+``--objective`` picks a preset and/or weights: ``default``, ``step``, ``tracking``,
+``robust`` (``tune --robust``'s: the worst scenario alone, an unclean flight penalised), or
 ``PRESET,term=w,…`` / ``term=w,…`` (unnamed terms keep the preset's — ``default``'s —
 weights). Presets (:data:`PRESETS`): failures always weigh heavily — 1 per solver-failed or
 supervised tick, 1000 per aborted flight — so a trial that needs the safety net loses.
@@ -42,8 +46,8 @@ __all__ = ["FAILED_METRICS", "METRICS", "Objective", "PRESETS", "TERMS", "parse_
            "scenario_metrics"]
 
 TERMS: tuple[str, ...] = ("tracking", "settling", "overshoot", "effort", "solver",
-                          "supervisor", "abort")
-_PENALTIES = {"solver": 1.0, "supervisor": 1.0, "abort": 1000.0}
+                          "supervisor", "abort", "unclean")
+_PENALTIES = {"solver": 1.0, "supervisor": 1.0, "abort": 1000.0, "unclean": 0.0}
 PRESETS: dict[str, dict[str, float]] = {
     "default": {"tracking": 10.0, "settling": 1.0, "overshoot": 0.2, "effort": 1.0,
                 **_PENALTIES, "worst": 0.5},
@@ -51,11 +55,14 @@ PRESETS: dict[str, dict[str, float]] = {
              **_PENALTIES, "worst": 0.5},
     "tracking": {"tracking": 10.0, "settling": 0.0, "overshoot": 0.0, "effort": 0.0,
                  **_PENALTIES, "worst": 0.5},
+    # tune --robust: a trial is as good as its worst plant of the grid
+    "robust": {"tracking": 10.0, "settling": 1.0, "overshoot": 0.2, "effort": 1.0,
+               **_PENALTIES, "unclean": 10.0, "worst": 1.0},
 }
 #: The metrics recorded per scenario (``trials.csv``), units in the names.
 METRICS: tuple[str, ...] = ("score", "tracking_m", "rmse_m", "path_deviation_m", "settling_s",
                             "overshoot_pct", "effort", "solver_failures", "supervisor_ticks",
-                            "aborted", "after_step_s")
+                            "aborted", "after_step_s", "unclean")
 #: A flight that did not run: aborted, every other metric NaN.
 FAILED_METRICS = {**{m: math.nan for m in METRICS}, "aborted": 1.0}
 
@@ -77,7 +84,8 @@ class Objective:
         overshoot = 0.0 if math.isnan(m["overshoot_pct"]) else m["overshoot_pct"]
         return {"tracking": m["tracking_m"], "settling": settling, "overshoot": overshoot,
                 "effort": m["effort"], "solver": m["solver_failures"],
-                "supervisor": m["supervisor_ticks"], "abort": m["aborted"]}
+                "supervisor": m["supervisor_ticks"], "abort": m["aborted"],
+                "unclean": 0.0 if math.isnan(m["unclean"]) else m["unclean"]}
 
     def score(self, m: Mapping[str, float]) -> float:
         """Σ weight·term of one scenario; an aborted flight without metrics scores its
@@ -86,7 +94,7 @@ class Objective:
             return 10.0 * self.weights["abort"]
         total = 0.0
         for term, value in self.terms(m).items():
-            w = self.weights[term]
+            w = self.weights.get(term, 0.0)
             if w:
                 total += w * (value if math.isfinite(value) else self.weights["abort"])
         return total
@@ -156,6 +164,7 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
     ``rows`` its :func:`~ardrone_nmpc.runs.summary.summarise` rows, ``ending`` the runner's
     ``SimResult.ending``.
     """
+    from ardrone_nmpc.experiments.robustness.judge import judge_columns
     from ardrone_nmpc.experiments.sweep import case_metrics
     from ardrone_nmpc.runs.window import experiment_rows
 
@@ -173,6 +182,9 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
     mode = cols["mode"][window]
     aborted = ending != "completed" or any(
         m.startswith(("land", "stop")) or "emergency" in m for m in mode)
+    safety = run.config.safety
+    verdict = judge_columns(cols, geofence_min_m=safety.geofence_min_m,
+                            geofence_max_m=safety.geofence_max_m, ending=ending)
     return {
         "score": math.nan,
         "tracking_m": path_dev if not math.isnan(path_dev) else sweep["rmse_m"],
@@ -185,4 +197,5 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
         "supervisor_ticks": _summary_value(rows, "loop", "fallbacks"),
         "aborted": 1.0 if aborted else 0.0,
         "after_step_s": after,
+        "unclean": 0.0 if verdict.clean else 1.0,
     }

@@ -32,10 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from ardrone_nmpc.config.io import config_to_dict
-from ardrone_nmpc.config.schema import ConfigError, config_from_dict
+from ardrone_nmpc.config.schema import ConfigError
 
 __all__ = ["DEFAULT_FACTOR", "Param", "apply_params", "config_with", "default_space",
            "load_space", "parse_space", "written_config"]
@@ -178,14 +176,9 @@ def load_space(path: str | Path | None, cfg) -> dict[str, Param]:
     """:func:`parse_space` of a YAML file (None: the default space)."""
     if path is None:
         return parse_space(None, cfg)
-    path = Path(path)
-    try:
-        spec = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"--space {path}: cannot read: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"--space {path}: invalid YAML: {str(err).splitlines()[0]}") from None
-    return parse_space(spec, cfg, where=f"--space {path}")
+    from ardrone_nmpc.config.io import read_option_file
+
+    return parse_space(read_option_file(path, "--space"), cfg, where=f"--space {path}")
 
 
 def apply_params(data: Mapping[str, Any], values: Mapping[str, float],
@@ -226,14 +219,16 @@ def written_config(path: str | Path | None, overrides: Sequence[str]) -> dict[st
     """The config as written in ``path`` with the ``--set`` overrides, as a mapping (keys
     left out stay out, so defaults that depend on other keys — a plant profile's — still
     follow them), read as :func:`~ardrone_nmpc.config.io.load_config` reads it."""
-    from ardrone_nmpc.config.io import _path_file, _read_yaml, apply_overrides
+    from ardrone_nmpc.config.io import _path_file, _profile_path, _read_yaml, apply_overrides
 
     data: dict[str, Any] = {}
     if path is not None:
         data = _read_yaml(Path(path))
         _path_file(data, Path(path).parent)
+        _profile_path(data, Path(path).parent)
     data = apply_overrides(data, overrides)
     _path_file(data, Path.cwd())
+    _profile_path(data, Path.cwd())
     return data
 
 
@@ -241,7 +236,7 @@ def config_with(cfg, values: Mapping[str, float], space: Mapping[str, Param] | N
                 overrides: Sequence[str] = ()):
     """``cfg`` with the parameter values (and then ``--set``-style overrides) applied,
     validated. Raises :class:`ConfigError`."""
-    from ardrone_nmpc.config.io import apply_overrides
+    from ardrone_nmpc.config.io import apply_overrides, resolve_data
 
     data = apply_params(config_to_dict(cfg), values, space)
-    return config_from_dict(apply_overrides(data, overrides))
+    return resolve_data(apply_overrides(data, overrides))

@@ -1,0 +1,301 @@
+"""The drone's command → attitude response, measured from its own commands and navdata.
+
+A real AR.Drone's command delay (radio, firmware) and its tilt per unit PCMD are not known
+before it flies, and they change with the hull, the battery and the radio. Every flight
+measures both from what it sent (PCMD roll/pitch fractions, at their send times) and what the
+drone reported (navdata roll/pitch, at their receipt times). The model, per axis (roll,
+pitch; the drone's signs, in which navdata and PCMD have the same sign)::
+
+    tilt(t) = k · E · [1/(τ s + 1)] c(t − d) + b
+
+with E the configured ``euler_angle_max``, a pure delay d and a lag τ shared by both axes, a
+gain k and a trim offset b per axis.
+
+The fit runs as the samples arrive, at a fixed cost per navdata sample: on a grid of delays
+(10 ms apart, 0–0.6 s) and lags, the lag's output is known exactly at any time from its value
+at the last command before it (the commands are held between sends), so each sample adds its
+model value at every grid point to running sums (Σx, Σx², Σxy per axis, with an exponential
+forgetting over ``window_s``), from which the gains and the residual of every grid point
+follow in closed form. The best grid point is the estimate; a parabola through the residual
+along the delay refines d and its curvature gives d's uncertainty, the sums give the gains'.
+Every σ is inflated by the residual's lag-1 correlation (a coloured residual holds less
+information than as many independent samples). docs/identification.md §3 derives it.
+
+:class:`AttitudeResponseEstimator` is the streaming fit (the tick's ``ResponseEstimation``
+stage feeds it); :func:`fit_attitude_response` feeds it whole arrays (a log: the summary,
+``identify``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_R2",
+           "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE",
+           "fit_attitude_response"]
+
+DELAY_STEP_S = 0.01
+MAX_DELAY_S = 0.6
+LAG_GRID_S = (0.03, 0.06, 0.1, 0.15, 0.2, 0.3)
+#: Samples between refreshes of the best grid point whose residual is tracked.
+REFRESH_SAMPLES = 15
+#: The delay is known once its σ is at most this (s) and the fit explains at least
+#: CONFIDENT_DELAY_R2 of the attitude's variance; the gain once its σ is at most
+#: CONFIDENT_GAIN_REL_STD of itself and the fit explains CONFIDENT_R2. The delay shows
+#: first: its timing is in the shape of the response, the gain in its size against the noise.
+CONFIDENT_DELAY_STD_S = 0.02
+CONFIDENT_DELAY_R2 = 0.2
+CONFIDENT_GAIN_REL_STD = 0.1
+CONFIDENT_R2 = 0.3
+
+
+@dataclass(frozen=True)
+class AttitudeEstimate:
+    """One fit: the delay (s) and its σ, the gain per axis [roll, pitch] relative to E and
+    their σ, the lag τ (s), the share of the attitude's variance it explains (R²) and the
+    navdata samples behind it (their effective number, with the forgetting)."""
+
+    delay_s: float
+    delay_std_s: float
+    gain: tuple[float, float]
+    gain_std: tuple[float, float]
+    lag_s: float
+    r2: float
+    samples: float
+
+    @property
+    def gain_mean(self) -> float:
+        """The two axes' gains, weighted by their precision (an axis never moved weighs
+        nothing); NaN without either."""
+        pairs = [(g, 1.0 / max(s, 1e-9) ** 2) for g, s in zip(self.gain, self.gain_std)
+                 if math.isfinite(g) and math.isfinite(s)]
+        if not pairs:
+            return math.nan
+        return float(sum(g * w for g, w in pairs) / sum(w for _, w in pairs))
+
+    @property
+    def gain_mean_std(self) -> float:
+        w = sum(1.0 / max(s, 1e-9) ** 2 for s in self.gain_std if math.isfinite(s))
+        return float(1.0 / math.sqrt(w)) if w > 0 else math.inf
+
+    @property
+    def delay_confident(self) -> bool:
+        """Delay σ ≤ 20 ms, R² ≥ 0.2."""
+        return (math.isfinite(self.delay_std_s) and self.delay_std_s <= CONFIDENT_DELAY_STD_S
+                and self.r2 >= CONFIDENT_DELAY_R2)
+
+    @property
+    def gain_confident(self) -> bool:
+        """Gain σ ≤ 10 % of it, R² ≥ 0.3."""
+        return (self.r2 >= CONFIDENT_R2
+                and self.gain_mean_std <= CONFIDENT_GAIN_REL_STD * abs(self.gain_mean))
+
+    @property
+    def confident(self) -> bool:
+        """Both the delay and the gain are known."""
+        return self.delay_confident and self.gain_confident
+
+
+NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
+                               math.nan, math.nan, 0.0)
+
+
+def _microseconds(t_s: float) -> float:
+    """A time to the microsecond: the same sample, its time gone through a log's ms ages and
+    back (``replay --rerun``), is the same time, and the fit the same bits."""
+    return round(float(t_s), 6)
+
+
+class AttitudeResponseEstimator:
+    """The streaming fit (module docstring).
+
+    Feed every command sent (:meth:`command`, in time order) and every navdata sample
+    (:meth:`navdata`, each after the commands sent before it); :attr:`estimate` is the fit of
+    what it has seen, weighted by ``exp(−age / window_s)`` (``inf``: all alike).
+    """
+
+    def __init__(self, euler_angle_max_rad: float, *, window_s: float = 30.0,
+                 lags_s=LAG_GRID_S, max_delay_s: float = MAX_DELAY_S) -> None:
+        self.euler_angle_max_rad = float(euler_angle_max_rad)
+        self.window_s = float(window_s)
+        self.lags_s = np.asarray(lags_s, dtype=float)
+        self.delays_s = np.arange(0.0, max_delay_s + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+        shape = (len(self.delays_s), len(self.lags_s), 2)
+        self._sx, self._sxx, self._sxy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        self._n = 0.0
+        self._sy, self._syy = np.zeros(2), np.zeros(2)
+        self._res = np.zeros(3)           # Σr², Σr·r_prev, and r_prev's weight
+        self._last_r = None
+        self._last_t = math.nan
+        # the commands: send times, values (rad), the lags' outputs at those times (L, 2)
+        capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
+        self._t = np.zeros(capacity)
+        self._u = np.zeros((capacity, 2))
+        self._y = np.zeros((capacity, len(self.lags_s), 2))
+        self._count = 0
+        self._best = None
+        self._since_best = 0
+        self._estimate: AttitudeEstimate | None = NO_ESTIMATE
+
+    # ---------------------------------------------------------------------- feeding
+    def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
+        """A command sent at ``t_s``, held until the next."""
+        t_s = _microseconds(t_s)
+        u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
+        n = self._count
+        if n:
+            t0 = self._t[n - 1]
+            if t_s <= t0:
+                return
+            u0, y0 = self._u[n - 1], self._y[n - 1]
+            y = u0 + (y0 - u0) * np.exp(-(t_s - t0) / self.lags_s)[:, None]
+        else:
+            y = np.tile(u, (len(self.lags_s), 1))  # no past: as if held for long
+        if n == len(self._t):  # full: keep the newest half (what the longest delay needs)
+            keep = n // 2
+            for a in (self._t, self._u, self._y):
+                a[:keep] = a[n - keep:n]
+            n = keep
+        self._t[n], self._u[n], self._y[n] = t_s, u, y
+        self._count = n + 1
+
+    def restart(self) -> None:
+        """The drone flew something else than the commands (its own hover): forget the
+        commands; what the sums learned stays (and fades)."""
+        self._count = 0
+        self._last_r = None
+
+    def navdata(self, t_s: float, roll_deg: float, pitch_deg: float) -> bool:
+        """A navdata sample received at ``t_s``; False if it could not be used (a sample seen
+        before, not finite, or commands not reaching back the longest delay)."""
+        n = self._count
+        t_s = _microseconds(t_s)
+        y = np.radians([roll_deg, pitch_deg])
+        if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
+                or self._t[0] > t_s - self.delays_s[-1]):
+            return False
+        times = self._t[:n]
+        at = t_s - self.delays_s
+        j = np.searchsorted(times, at, side="right") - 1          # (K,)
+        u = self._u[j][:, None, :]                                # (K, 1, 2)
+        decay = np.exp(-(at - times[j])[:, None] / self.lags_s)[:, :, None]
+        x = u + (self._y[j] - u) * decay                          # (K, L, 2)
+        forget = (math.exp(-(t_s - self._last_t) / self.window_s)
+                  if math.isfinite(self._last_t) else 1.0)
+        self._last_t = t_s
+        self._residual(x, y, forget)
+        if forget != 1.0:
+            for a in (self._sx, self._sxx, self._sxy):
+                a *= forget
+        self._sx += x
+        self._sxx += x * x
+        self._sxy += x * y
+        self._n = self._n * forget + 1.0
+        self._sy = self._sy * forget + y
+        self._syy = self._syy * forget + y * y
+        self._estimate = None
+        self._since_best += 1
+        if self._since_best >= REFRESH_SAMPLES:  # the residual tracks a recent best model
+            self._since_best = 0
+            self._estimate = self._fit()
+        return True
+
+    def _residual(self, x: np.ndarray, y: np.ndarray, forget: float) -> None:
+        """Track the residual of the current best model (its lag-1 correlation)."""
+        if self._best is None:
+            return
+        k, l, gain, offset = self._best
+        r = y - (gain * x[k, l] + offset)
+        self._res *= forget
+        if self._last_r is not None:
+            self._res += (float(r @ r), float(r @ self._last_r), 1.0)
+        self._last_r = r
+
+    # ---------------------------------------------------------------------- the fit
+    @property
+    def estimate(self) -> AttitudeEstimate:
+        if self._estimate is None:
+            self._estimate = self._fit()
+        return self._estimate
+
+    def _fit(self) -> AttitudeEstimate:
+        n = self._n
+        if n < 20:
+            return NO_ESTIMATE
+        sxx = self._sxx - self._sx ** 2 / n                       # centred, (K, L, 2)
+        sxy = self._sxy - self._sx * self._sy / n
+        syy = self._syy - self._sy ** 2 / n                        # (2,)
+        ok = sxx > 1e-12
+        if not ok.any() or syy.sum() <= 0.0:
+            return NO_ESTIMATE
+        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+        # an axis the commands did not move keeps its whole variance at every grid point
+        rss_axis = np.where(ok, syy - gain * sxy, syy)            # (K, L, 2)
+        rss = rss_axis.sum(axis=2)
+        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
+        g = gain[k, l]
+        offset = (self._sy - g * self._sx[k, l]) / n
+        self._best = (k, l, g, offset)
+        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        inflate = self._inflation()
+        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        gains, gain_std = [], []
+        for a in range(2):
+            if ok[k, l, a]:
+                gains.append(float(g[a]))
+                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
+                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+            else:
+                gains.append(math.nan)
+                gain_std.append(math.inf)
+        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+                                (gains[0], gains[1]), (gain_std[0], gain_std[1]),
+                                float(self.lags_s[l]),
+                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n))
+
+    def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
+        """The delay from a parabola through the residual at grid point ``k`` and its
+        neighbours (the first or last three on an edge of the grid: the vertex kept inside
+        it), and its variance 2σ²/curvature."""
+        i = min(max(k, 1), len(curve) - 2)
+        lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
+        if not np.all(np.isfinite((lo, mid, hi))):
+            return float(self.delays_s[k]), math.inf
+        second = lo - 2.0 * mid + hi
+        if not second > 0.0:
+            return float(self.delays_s[k]), math.inf
+        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+        # the grid resolves no better than its step over √12, whatever the curvature
+        return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
+
+    def _inflation(self) -> float:
+        """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁."""
+        rr, rr1, w = self._res
+        if w < 10.0 or rr <= 0.0:
+            return 1.0
+        rho = min(max(rr1 / rr, 0.0), 0.95)
+        return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+def fit_attitude_response(t_cmd, cmd_frac, t_meas, meas_rad, *, euler_angle_max_rad: float,
+                          window_s: float = math.inf) -> AttitudeEstimate:
+    """The estimate of whole arrays: commands (n,) send times and (n, 2) [roll, pitch] PCMD
+    fractions; navdata (m,) receipt times and (m, 2) [roll, pitch] (rad, the drone's signs),
+    on the same clock. All samples weigh alike unless ``window_s`` is finite."""
+    est = AttitudeResponseEstimator(euler_angle_max_rad, window_s=window_s)
+    t_cmd = np.asarray(t_cmd, float)
+    cmd = np.asarray(cmd_frac, float).reshape(-1, 2)
+    t_meas = np.asarray(t_meas, float)
+    meas = np.degrees(np.asarray(meas_rad, float).reshape(-1, 2))
+    i = 0
+    for tm, (roll, pitch) in zip(t_meas, meas):
+        while i < len(t_cmd) and t_cmd[i] < tm:
+            if np.all(np.isfinite(cmd[i])):
+                est.command(t_cmd[i], cmd[i, 0], cmd[i, 1])
+            i += 1
+        est.navdata(tm, roll, pitch)
+    return est.estimate
