@@ -40,6 +40,13 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "judges": (["experiments/reproduce/judges.py"],
                ["tests/unit/test_reproduce.py", "tests/unit/test_judges.py"]),
     "xchannel": (["experiments/xchannel.py"], ["tests/unit/test_xchannel.py"]),
+    "drone_config": (["links/drone_config.py"],
+                     ["tests/unit/test_drone_config.py", "tests/unit/test_drone_config_verify.py",
+                      "tests/integration/test_links.py",
+                      "tests/integration/test_backend_conformance.py"]),
+    "tune": (["experiments/tune/objective.py", "experiments/tune/space.py"],
+             ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py"]),
+    "export": (["experiments/export.py"], ["tests/unit/test_export.py"]),
 }
 
 @dataclass(frozen=True)
@@ -65,6 +72,7 @@ _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
 _EXPORT = ("tests/unit/test_export.py",)
 _TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py")
+_CONFIG = ("tests/unit/test_drone_config_verify.py",)
 
 #: The hand-mutation audit's survivors (issue 25) and their neighbours: each must be killed.
 HAND_MUTANTS: tuple[HandMutant, ...] = (
@@ -99,6 +107,15 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
     HandMutant("airframe: battery sag ignored", "sim/plant.py",
                "if self.battery_sag_frac == 0.0:\n            return k",
                "if True:\n            return k", _AIR),
+    HandMutant("drone_config: held-limit tolerance 10 %", "links/drone_config.py",
+               "_REL_TOLERANCE = 1e-3", "_REL_TOLERANCE = 0.1", _CONFIG),
+    HandMutant("drone_config: held-limit tolerance 50 %", "links/drone_config.py",
+               "_REL_TOLERANCE = 1e-3", "_REL_TOLERANCE = 0.5", _CONFIG),
+    HandMutant("drone_config: tolerance on the written value only", "links/drone_config.py",
+               "max(abs(a), abs(b), 1e-9)", "max(abs(a), 1e-9)", _CONFIG),
+    HandMutant("config_text: a value holding '=' cut at its last '='",
+               "protocol/config_text.py", 'line.partition("=")', 'line.rpartition("=")',
+               ("tests/unit/test_protocol_config_text.py",)),
     HandMutant("mocap: followed object accepted without .fresh", "links/mocap_source.py",
                "if other is not None and other.fresh:", "if other is not None:", _MOCAP),
     HandMutant("real-time loop: one extra tick", "runtime/realtime.py",

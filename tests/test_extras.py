@@ -17,7 +17,7 @@ MODULES = {
     "pytest": "pytest", "hypothesis": "hypothesis", "pytest-timeout": "pytest_timeout",
     "pytest-benchmark": "pytest_benchmark", "casadi": "casadi", "dask": "dask.distributed",
     "matplotlib": "matplotlib", "optuna": "optuna", "motioncapture": "motioncapture",
-    "mcap": "mcap", "foxglove-sdk": "foxglove", "pyarrow": "pyarrow", "tornado": "tornado",
+    "mcap": "mcap", "mcap-protobuf-support": "mcap_protobuf", "foxglove-sdk": "foxglove", "pyarrow": "pyarrow", "tornado": "tornado",
     "import-linter": "importlinter",
 }
 
