@@ -17,8 +17,8 @@ MODULES = {
     "pytest": "pytest", "hypothesis": "hypothesis", "pytest-timeout": "pytest_timeout",
     "pytest-benchmark": "pytest_benchmark", "casadi": "casadi", "dask": "dask.distributed",
     "matplotlib": "matplotlib", "optuna": "optuna", "motioncapture": "motioncapture",
-    "mcap": "mcap", "mcap-protobuf-support": "mcap_protobuf", "foxglove-sdk": "foxglove", "pyarrow": "pyarrow", "tornado": "tornado",
-    "import-linter": "importlinter",
+    "mcap": "mcap", "mcap-protobuf-support": "mcap_protobuf", "foxglove-sdk": "foxglove",
+    "pyarrow": "pyarrow", "tornado": "tornado", "import-linter": "importlinter",
 }
 
 
