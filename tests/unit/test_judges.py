@@ -45,6 +45,17 @@ def test_the_middle_and_last_thirds_hold_the_documented_samples(n):
         assert (m.kind, m.ptp, m.unit) == (*want, "rad"), (n, j)
 
 
+def test_a_sample_exactly_at_two_thirds_is_in_the_last_third_only():
+    """t = 0 … 9: the last third starts exactly at t = 6. A step of the error there leaves the
+    middle third flat, so a tail that swings at all is diverging (it would not be if the
+    middle third also held t = 6)."""
+    t = np.arange(10, dtype=float)
+    e = np.zeros(10)
+    e[6:] = [1.0, 0.0, 1.0, 0.0]
+    m = classify_motion(t, e, t_step_s=0.0, band=0.01, settled=False, unit="rad")
+    assert (m.kind, m.ptp) == ("diverging", 1.0)
+
+
 def test_samples_before_the_step_and_non_finite_ones_are_not_judged():
     t = np.arange(30, dtype=float)
     e = np.where(t < 10, 5.0, 0.1 * np.exp(-0.3 * (t - 10)) * np.cos(np.pi * t))
