@@ -189,6 +189,9 @@ def test_verdicts_and_their_tolerance():
     assert verdict(math.inf) == "unstable" and verdict(math.nan) == "unstable"
     assert verdict(0.95, tol=0.1) == "marginal" and verdict(1.05, tol=0.01) == "unstable"
     assert verdict(0.95, tol=0.01) == "stable"
+    # "within tol of 1" includes both edges
+    assert verdict(1.0 - 1e-3) == "marginal" and verdict(1.0 + 1e-3) == "marginal"
+    assert verdict(0.9, tol=0.1) == "marginal" and verdict(1.1, tol=0.1) == "marginal"
 
 
 @pytest.mark.parametrize("delay_s, ticks", [(0.26, 4), (0.29, 4), (0.30, 5), (0.03, 0),
@@ -222,7 +225,7 @@ def test_the_stability_table_is_each_cases_gain_and_radius():
 
 
 def _rho(k, plant, comp):
-    m = predicted_loop_matrix(k, plant, compensation_s=comp)
+    m = predicted_loop_matrix(k, plant, compensation_s=comp, difference_velocity=True)
     return float(np.max(np.abs(np.linalg.eigvals(m))))
 
 
