@@ -22,15 +22,18 @@ from ardrone_nmpc.runs.summary import summarise
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 WEIGHTS = {"tracking": 2.0, "settling": 0.5, "overshoot": 3.0, "effort": 7.0, "solver": 1.5,
-           "supervisor": 0.25, "abort": 1000.0}
+           "supervisor": 0.25, "abort": 1000.0, "unclean": 4.0}
 FINITE = {"score": math.nan, "tracking_m": 0.1, "rmse_m": 0.1, "path_deviation_m": math.nan,
           "settling_s": 2.0, "overshoot_pct": 4.0, "effort": 0.05, "solver_failures": 2.0,
-          "supervisor_ticks": 8.0, "aborted": 0.0, "after_step_s": 9.0}
+          "supervisor_ticks": 8.0, "aborted": 0.0, "after_step_s": 9.0, "unclean": 1.0}
 
 
 def test_the_score_is_the_weighted_sum_of_the_terms():
-    expected = 2.0 * 0.1 + 0.5 * 2.0 + 3.0 * 4.0 + 7.0 * 0.05 + 1.5 * 2.0 + 0.25 * 8.0
+    expected = 2.0 * 0.1 + 0.5 * 2.0 + 3.0 * 4.0 + 7.0 * 0.05 + 1.5 * 2.0 + 0.25 * 8.0 + 4.0
     assert Objective(WEIGHTS).score(FINITE) == pytest.approx(expected, rel=1e-12)
+    # a flight robustness could not judge (unclean NaN) is not penalised as unclean
+    assert Objective(WEIGHTS).score(dict(FINITE, unclean=math.nan)) == pytest.approx(
+        expected - 4.0, rel=1e-12)
 
 
 @pytest.mark.parametrize("metric, term", [("tracking_m", "tracking"), ("effort", "effort"),
