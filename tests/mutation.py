@@ -47,7 +47,8 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                       "tests/integration/test_backend_conformance.py"]),
     "tune": (["experiments/tune/objective.py", "experiments/tune/space.py"],
              ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py"]),
-    "export": (["experiments/export.py"], ["tests/unit/test_export.py"]),
+    "export": (["experiments/export.py"],
+               ["tests/unit/test_export.py", "tests/unit/test_export_edges.py"]),
 }
 
 @dataclass(frozen=True)
@@ -71,7 +72,7 @@ _MOCAP = ("tests/unit/test_mocap_sources.py", "tests/unit/test_follow.py",
           "tests/unit/test_mocap_senders.py")
 _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
-_EXPORT = ("tests/unit/test_export.py",)
+_EXPORT = ("tests/unit/test_export.py", "tests/unit/test_export_edges.py")
 _TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py")
 _CONFIG = ("tests/unit/test_drone_config_verify.py",)
 
