@@ -33,6 +33,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "mocap": (["links/mocap_source.py", "links/mocap_link.py", "links/motioncapture_source.py",
                "links/mocap_factory.py"],
               ["tests/unit/test_mocap_sources.py", "tests/unit/test_mocap_senders.py",
+               "tests/unit/test_motioncapture_child_lines.py",
                "tests/unit/test_follow.py", "tests/unit/test_hostile_input.py",
                "tests/integration/test_mocap_source_swap.py"]),
     "schedule": (["runtime/schedule.py"],
