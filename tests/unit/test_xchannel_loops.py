@@ -69,7 +69,7 @@ def test_terminal_weights_enter_the_gain_as_the_quadratic_program_says(n_h, dtau
                                  dict(horizon_steps=5, dtau_s=-0.1),
                                  dict(horizon_steps=5, dtau_s=math.nan)])
 def test_a_horizon_of_no_steps_or_no_length_is_refused(bad):
-    with pytest.raises(ValueError, match="horizon_steps must be"):
+    with pytest.raises(ValueError, match="^horizon_steps must be ≥ 1 and dtau_s > 0$"):
         first_step_gain(q_x=1.0, q_v=1.0, r_theta=1.0, **bad)
 
 
