@@ -137,3 +137,29 @@ def test_export_run_refuses_an_unknown_format_and_a_directory(tmp_path):
     with pytest.raises(ExportError, match="is a directory; give the output file"):
         export_run(run_dir, "mcap", tmp_path)
     assert not list(tmp_path.glob("*.mcap"))
+
+
+def test_the_config_channel_names_the_seed_and_version_the_run_recorded(tmp_path):
+    import yaml
+
+    run_dir = _run(tmp_path)
+    out = tmp_path / "run.mcap"
+    write_mcap(read_run(run_dir), out)
+    config = read_mcap(out).config
+    first, seed = (run_dir / "config.yaml").read_text().splitlines()[:2]
+    assert config["seed"] == 1 and seed == "# seed: 1"
+    assert first == f"# ardrone-nmpc {config['version']}"   # the header's version line
+    assert config["config"]["name"] == yaml.safe_load((run_dir / "config.yaml").read_text())[
+        "name"] == "edges"
+
+
+def test_reading_mcap_without_the_library_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    from ardrone_nmpc.core.extras import MissingExtra
+
+    monkeypatch.setitem(sys.modules, "mcap.reader", None)
+    with pytest.raises(MissingExtra) as err:
+        read_mcap(tmp_path / "absent.mcap")
+    assert str(err.value) == ("reading MCAP needs the 'mcap' library: "
+                              "pip install 'ardrone-nmpc[mcap]'")
