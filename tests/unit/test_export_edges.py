@@ -153,13 +153,16 @@ def test_the_config_channel_names_the_seed_and_version_the_run_recorded(tmp_path
         "name"] == "edges"
 
 
-def test_reading_mcap_without_the_library_names_the_extra(tmp_path, monkeypatch):
+@pytest.mark.parametrize("module, library", [("mcap.reader", "mcap"),
+                                             ("mcap_protobuf.decoder", "mcap_protobuf")])
+def test_reading_mcap_without_the_library_names_the_extra(tmp_path, monkeypatch, module,
+                                                          library):
     import sys
 
     from ardrone_nmpc.core.extras import MissingExtra
 
-    monkeypatch.setitem(sys.modules, "mcap.reader", None)
+    monkeypatch.setitem(sys.modules, module, None)
     with pytest.raises(MissingExtra) as err:
         read_mcap(tmp_path / "absent.mcap")
-    assert str(err.value) == ("reading MCAP needs the 'mcap' library: "
+    assert str(err.value) == (f"reading MCAP needs the '{library}' library: "
                               "pip install 'ardrone-nmpc[mcap]'")
