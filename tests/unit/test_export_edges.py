@@ -145,7 +145,9 @@ def test_the_config_channel_names_the_seed_and_version_the_run_recorded(tmp_path
     run_dir = _run(tmp_path)
     out = tmp_path / "run.mcap"
     write_mcap(read_run(run_dir), out)
-    config = read_mcap(out).config
+    back = read_mcap(out)
+    config = back.config
+    assert back.n_configs == 1
     first, seed = (run_dir / "config.yaml").read_text().splitlines()[:2]
     assert config["seed"] == 1 and seed == "# seed: 1"
     assert first == f"# ardrone-nmpc {config['version']}"   # the header's version line
@@ -166,3 +168,17 @@ def test_reading_mcap_without_the_library_names_the_extra(tmp_path, monkeypatch,
         read_mcap(tmp_path / "absent.mcap")
     assert str(err.value) == (f"reading MCAP needs the '{library}' library: "
                               "pip install 'ardrone-nmpc[mcap]'")
+
+
+@pytest.mark.parametrize("module", ["pyarrow", "pyarrow.parquet"])
+def test_writing_parquet_without_pyarrow_names_the_extra(tmp_path, monkeypatch, module):
+    import sys
+
+    from ardrone_nmpc.core.extras import MissingExtra
+
+    run = read_run(_run(tmp_path))
+    monkeypatch.setitem(sys.modules, module, None)
+    with pytest.raises(MissingExtra) as err:
+        write_parquet(run, tmp_path / "x.parquet")
+    assert str(err.value) == ("export --format parquet needs the 'pyarrow' library: "
+                              "pip install 'ardrone-nmpc[parquet]'")
