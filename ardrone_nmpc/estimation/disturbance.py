@@ -32,6 +32,14 @@ SATURATION_FRAC = 0.999
 STEADY_FRACTION = 0.2
 
 
+def _per_axis(values) -> np.ndarray:
+    """One float per axis of :data:`AXES` (a config vector)."""
+    a = np.asarray(values, dtype=float)
+    if a.shape != (len(AXES),):
+        raise ValueError(f"one value per axis {AXES} expected, got {values!r}")
+    return a
+
+
 def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
                 flags: str | None) -> tuple[bool, bool, bool, bool]:
     """Which of [x, y, z, ψ] must not integrate, from the command sent.
@@ -61,24 +69,25 @@ class ReferenceIntegrator:
     def __init__(self, ki_per_s, error_band, speed_band, max_shift, hold_s,
                  period_s: float, kp=(0.0,) * 4, release_speed=(math.inf,) * 4,
                  steady_band=(math.inf,) * 4) -> None:
-        self.steady_band = np.asarray(steady_band, dtype=float)
-        self.release_speed = np.asarray(release_speed, dtype=float)
-        self.kp = np.asarray(kp, dtype=float)
-        self.hold_s = np.asarray(hold_s, dtype=float)
-        self._rest_s = np.zeros(4)  # how long each axis has been at rest inside its band
-        self.latched = np.zeros(4, dtype=bool)  # learning until the error or reference moves
-        self._last = np.full(4, math.nan)  # the reference components of the last update
+        n = len(AXES)
+        self.steady_band = _per_axis(steady_band)
+        self.release_speed = _per_axis(release_speed)
+        self.kp = _per_axis(kp)
+        self.hold_s = _per_axis(hold_s)
+        self._rest_s = np.zeros(n)  # how long each axis has been at rest inside its band
+        self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
+        self._last = np.full(n, math.nan)  # the reference components of the last update
         self._last_error_psi = math.nan
-        self._integral = np.zeros(4)  # the integral part of the shift
-        self._rest_lo = np.zeros(4)  # the error's range since the axis came to rest
-        self._rest_hi = np.zeros(4)
-        self.ki_per_s = np.asarray(ki_per_s, dtype=float)
-        self.error_band = np.asarray(error_band, dtype=float)
-        self.speed_band = np.asarray(speed_band, dtype=float)
-        self.max_shift = np.asarray(max_shift, dtype=float)
+        self._integral = np.zeros(n)  # the integral part of the shift
+        self._rest_lo = np.zeros(n)  # the error's range since the axis came to rest
+        self._rest_hi = np.zeros(n)
+        self.ki_per_s = _per_axis(ki_per_s)
+        self.error_band = _per_axis(error_band)
+        self.speed_band = _per_axis(speed_band)
+        self.max_shift = _per_axis(max_shift)
         self.period_s = float(period_s)
-        self.shift = np.zeros(4)
-        self.learning = np.zeros(4, dtype=bool)  # which axes integrated on the last update
+        self.shift = np.zeros(n)
+        self.learning = np.zeros(n, dtype=bool)  # which axes integrated on the last update
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:

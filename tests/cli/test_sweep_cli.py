@@ -104,7 +104,6 @@ def test_sweep_on_a_process_pool_gives_the_in_process_results(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_sweep_on_a_dask_cluster_gives_the_local_results(tmp_path):
-    pytest.importorskip("distributed")
     from dask.distributed import LocalCluster
 
     assert _sweep(tmp_path / "local", "--jobs", "1").exit_code == 0
@@ -124,7 +123,6 @@ def test_sweep_on_a_dask_cluster_gives_the_local_results(tmp_path):
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_sweep_on_the_default_dask_local_cluster(tmp_path):
-    pytest.importorskip("distributed")
     result = _sweep(tmp_path, "--engine", "dask", "--jobs", "1")
     assert result.exit_code == 0, result.output
     assert "2 cases: 2 flown" in result.stdout
@@ -173,7 +171,6 @@ def test_a_missing_config_file_is_an_error_line(tmp_path):
 
 @pytest.mark.timeout(120)
 def test_an_unreachable_scheduler_is_an_error_line(tmp_path):
-    pytest.importorskip("distributed")
     import socket
 
     with socket.socket() as s:  # a free loopback port nobody listens on

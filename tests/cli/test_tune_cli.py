@@ -7,6 +7,7 @@ import csv
 import math
 from pathlib import Path
 
+import optuna
 import pytest
 from typer.testing import CliRunner
 
@@ -15,8 +16,6 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core import defaults
 from ardrone_nmpc.experiments.tune.engine import plant_variants
 from ardrone_nmpc.runtime.lockstep import run_lockstep
-
-optuna = pytest.importorskip("optuna")
 
 runner = CliRunner()
 CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "step_z.yaml")
@@ -104,7 +103,6 @@ def test_a_pool_tune_gives_the_same_flights(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_a_two_trial_dask_tune(tmp_path):
-    pytest.importorskip("distributed")
     from dask.distributed import LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
@@ -201,7 +199,6 @@ def test_a_space_file_and_variants_shape_the_study(tmp_path):
 def test_plot_draws_the_history_and_no_importances_from_three_trials(tmp_path):
     from ardrone_nmpc.viz.tune_figures import MIN_IMPORTANCE_TRIALS
 
-    pytest.importorskip("matplotlib")
     assert _tune(tmp_path, "--trials", "3", "--jobs", "1").exit_code == 0
     result = runner.invoke(app, ["plot", str(tmp_path)])
     assert result.exit_code == 0, result.output

@@ -17,7 +17,8 @@ from scipy.integrate import solve_ivp
 
 from ardrone_nmpc.config.schema import OffsetFreeConfig
 from ardrone_nmpc.control.mapping import DroneLimits, map_to_pcmd
-from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VZ, IX_X, IX_Y, IX_Z, AttitudeCommand
+from ardrone_nmpc.core.types import (IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z,
+                                     AttitudeCommand)
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.runtime.stages import OffsetFree, Sent, Solution
 from ardrone_nmpc.safety import Action, Decision
@@ -32,9 +33,10 @@ def integrator(ki=(0.5, 0.5, 0.4, 0.15), kp=(0.0,) * 4, hold_s=(0.0,) * 4, perio
     return ReferenceIntegrator(ki, band, speed, max_shift, hold_s, period_s, kp, release, steady)
 
 
-def state(x=0.0, y=0.0, z=1.0, psi=0.0, vx=0.0, vz=0.0) -> np.ndarray:
+def state(x=0.0, y=0.0, z=1.0, psi=0.0, vx=0.0, vz=0.0, vy=0.0) -> np.ndarray:
     s = np.zeros(7)
     s[IX_X], s[IX_Y], s[IX_Z], s[IX_PSI], s[IX_VX], s[IX_VZ] = x, y, z, psi, vx, vz
+    s[IX_VY] = vy
     return s
 
 
@@ -241,3 +243,189 @@ def test_offset_free_switch_and_its_bool_shorthand(override, enabled):
     cfg = load_config(None, [override])
     assert cfg.controller.offset_free.enabled is enabled
     assert cfg.controller.offset_free.ki_per_s == OffsetFreeConfig().ki_per_s
+
+
+# --- the bugs a developer writes: windup, one-sided checks, crossed axes, units, edges -----
+
+def test_after_windup_a_reversed_error_moves_the_shift_off_its_limit_at_once():
+    """The integral itself is clipped, not only the shift: once the error reverses, the shift
+    leaves −max_shift on the next tick by ki·|e|·T a tick (a wound-up integral would hold it
+    on the limit for as long as it had been pushed beyond)."""
+    ki, lim, e = 0.5, 0.05, 0.1
+    integ = integrator(ki=(ki,) * 4, max_shift=(lim,) * 4)
+    for _ in range(2000):  # 130 s pushing against the limit
+        integ.update(state(x=0.4), REF)
+    assert integ.shift[0] == -lim
+    for k in range(1, 31):
+        integ.update(state(x=-e), REF)
+        assert integ.learning[0]
+        assert integ.shift[0] == pytest.approx(-lim + k * ki * e * T, abs=1e-12)
+
+
+@pytest.mark.parametrize("axis, kwargs", [
+    (0, {"vx": 0.6}), (0, {"vx": -0.6}), (1, {"vy": 0.6}), (1, {"vy": -0.6}),
+    (2, {"vz": 0.6}), (2, {"vz": -0.6})])
+def test_a_gust_either_way_releases_its_axis_only(axis, kwargs):
+    integ = integrator(release=(0.3,) * 4)
+    for _ in range(5):
+        integ.update(state(x=0.1, y=0.1, z=1.1), REF)
+    assert integ.learning[:3].all()
+    before = integ.shift.copy()
+    integ.update(state(x=0.1, y=0.1, z=1.1, **kwargs), REF)
+    assert not integ.learning[axis] and integ.shift[axis] == before[axis]
+    others = [k for k in range(3) if k != axis]
+    assert integ.learning[others].all()
+
+
+@pytest.mark.parametrize("axis, kwargs", [(0, {"vx": 0.3}), (1, {"vy": 0.3}),
+                                          (1, {"vy": -0.3}), (2, {"vz": 0.3})])
+def test_each_axis_is_at_rest_on_its_own_rate(axis, kwargs):
+    """ė per axis: x from ẋ, y from ẏ, z from ż — a moving axis does not start learning,
+    the still ones do."""
+    integ = integrator(hold_s=(0.2,) * 4, speed=(0.15, 0.15, 0.15, 0.3))
+    for _ in range(10):
+        integ.update(state(x=0.1, y=0.1, z=1.1, **kwargs), REF)
+    assert not integ.learning[axis] and integ.shift[axis] == 0.0
+    others = [k for k in range(3) if k != axis]
+    assert integ.learning[others].all()
+
+
+def _psi_ramp(rate_radps: float, ticks: int, **kw) -> ReferenceIntegrator:
+    """ψ error ramping at ``rate_radps`` (inside the band) from 0.05 rad."""
+    integ = integrator(**kw)
+    for k in range(ticks):
+        integ.update(state(x=0.1, psi=0.05 + rate_radps * k * T), REF)
+    return integ
+
+
+def test_the_heading_rate_is_per_second():
+    """ψ's ė is the change of its error over one period divided by the period: a drift of
+    0.2 rad/s (0.013 rad a tick) is beyond a 0.1 rad/s speed band, 0.05 rad/s is inside."""
+    kw = {"hold_s": (0.3,) * 4, "speed": (0.15, 0.15, 0.05, 0.1)}
+    fast = _psi_ramp(0.2, 20, **kw)
+    assert not fast.learning[3] and fast.shift[3] == 0.0
+    assert fast.learning[0]  # x was at rest all along
+    slow = _psi_ramp(0.05, 20, **kw)
+    assert slow.learning[3] and slow.shift[3] < 0.0
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_fast_heading_change_either_way_releases_psi(sign):
+    integ = integrator(release=(0.3, 0.3, 0.3, 0.5))
+    for _ in range(5):
+        integ.update(state(psi=0.1), REF)
+    assert integ.learning[3]
+    s = integ.shift[3]
+    integ.update(state(psi=0.1 + sign * 0.05), REF)  # 0.77 rad/s
+    assert not integ.learning[3] and integ.shift[3] == s
+    integ = integrator(release=(0.3, 0.3, 0.3, 0.5))
+    for _ in range(5):
+        integ.update(state(psi=0.1), REF)
+    integ.update(state(psi=0.1 + sign * 0.02), REF)  # 0.31 rad/s: still learning
+    assert integ.learning[3]
+
+
+def test_a_reference_that_moves_stops_learning_on_that_tick():
+    integ = integrator()
+    for _ in range(5):
+        integ.update(state(x=0.1), REF)
+    assert integ.learning[0]
+    s = integ.shift[0]
+    moved = REF.copy()
+    moved[IX_X] = 0.01
+    integ.update(state(x=0.11), moved)
+    assert not integ.learning[0] and integ.shift[0] == s
+    assert integ.learning[1:].all()
+
+
+def test_the_edges_of_the_bands_are_outside_them():
+    """|e| < error_band, |ė| < speed_band to be at rest; a release needs |ė| > release_speed;
+    a reference (or its preview) moves when it changes by more than 1e-9."""
+    integ = integrator()
+    integ.update(state(x=0.5), REF)  # exactly on the 0.5 m band
+    assert not integ.learning[0]
+    integ = integrator(hold_s=(0.1,) * 4)
+    for _ in range(10):
+        integ.update(state(x=0.1, vx=0.15), REF)  # exactly the 0.15 m/s speed band
+    assert not integ.learning[0]
+    integ = integrator(release=(0.3,) * 4)
+    for _ in range(3):
+        integ.update(state(x=0.1), REF)
+    integ.update(state(x=0.1, vx=0.3), REF)  # exactly the release speed: no release
+    assert integ.learning[0]
+    integ = integrator()
+    still = REF.copy()
+    for k in range(4):  # steps of exactly 1e-9 in x: not a move
+        still[IX_X] = 1e-9 * (k % 2)
+        preview = np.tile(still, (3, 1))
+        preview[-1, IX_Y] = still[IX_Y] + 1e-9
+        integ.update(state(x=0.1), still, preview=preview)
+    assert integ.learning[0] and integ.learning[1]
+
+
+def test_a_range_exactly_the_steady_band_wide_is_steady():
+    integ = integrator(hold_s=(0.5,) * 4, band=(1.0,) * 4, steady=(0.125,) * 4)
+    for k in range(10):
+        integ.update(state(x=0.25 if k % 2 else 0.375), REF)  # range exactly 0.125
+    assert integ.learning[0]
+
+
+def _ticks_to_learn(integ, errors) -> int:
+    """The first tick (1-based) on which x learns while its error goes through ``errors``."""
+    for k, e in enumerate(errors, start=1):
+        integ.update(state(x=e), REF)
+        if integ.learning[0]:
+            return k
+    return 0
+
+
+def test_a_rest_that_restarts_learns_hold_s_after_the_restart():
+    """Learning starts on the first tick at which the time at rest exceeds hold_s — counted
+    from the last restart (a range beyond the steady band), the range then measured from the
+    restart's error."""
+    kw = {"hold_s": (1.0,) * 4, "steady": (0.002,) * 4}
+    # 3 ticks at 5 cm, then 3 cm for good: the drop restarts the rest on tick 4
+    assert _ticks_to_learn(integrator(**kw), [0.05] * 3 + [0.03] * 30) == 3 + 16
+    # a new rest after a fast tick forgets the last rest's range: 4.5 cm then 4.1 cm is
+    # steady (0.004 ≤ 0.2·4.1 cm), whereas 5 cm … 4.1 cm would not be
+    integ = integrator(**kw)
+    for _ in range(5):
+        integ.update(state(x=0.05), REF)
+    integ.update(state(x=0.05, vx=0.3), REF)
+    assert _ticks_to_learn(integ, [0.045] + [0.041] * 30) == 16
+
+
+def test_from_config_takes_every_field_to_its_axis():
+    cfg = OffsetFreeConfig(ki_per_s=(0.1, 0.2, 0.3, 0.4), kp=(0.5, 0.6, 0.7, 0.8),
+                           error_band=(0.11, 0.12, 0.13, 0.14), hold_s=(1.1, 1.2, 1.3, 1.4),
+                           steady_band=(0.021, 0.022, 0.023, 0.024),
+                           speed_band=(0.31, 0.32, 0.33, 0.34),
+                           release_speed=(0.41, 0.42, 0.43, 0.44),
+                           max_shift=(0.51, 0.52, 0.53, 0.54))
+    integ = ReferenceIntegrator.from_config(cfg, 0.05)
+    assert integ.period_s == 0.05
+    for name in ("ki_per_s", "kp", "error_band", "hold_s", "steady_band", "speed_band",
+                 "release_speed", "max_shift"):
+        np.testing.assert_array_equal(getattr(integ, name), getattr(cfg, name), err_msg=name)
+
+
+def test_shifted_integer_states_come_back_as_floats():
+    integ = integrator()
+    integ.shift[:] = [0.25, -0.5, 0.75, 0.125]
+    out = integ.shifted(np.zeros((2, 7), dtype=int))
+    assert out.dtype == float
+    np.testing.assert_array_equal(out[:, [IX_X, IX_Y, IX_Z, IX_PSI]],
+                                  [[0.25, -0.5, 0.75, 0.125]] * 2)
+
+
+def test_a_fraction_exactly_on_the_saturation_threshold_freezes():
+    assert frozen_axes((0.0, 0.0, 0.999, -0.999), None) == (False, False, True, True)
+
+
+def test_per_axis_vectors_are_four_floats():
+    integ = integrator(ki=(1, 1, 0, 0), hold_s=(0, 0, 0, 0))
+    assert integ.ki_per_s.dtype == float and integ.hold_s.dtype == float
+    with pytest.raises(ValueError, match="one value per axis"):
+        integrator(ki=(0.5, 0.5, 0.4))
+    with pytest.raises(ValueError, match="one value per axis"):
+        integrator(max_shift=(0.5,) * 5)

@@ -279,3 +279,108 @@ def test_export_errors_are_one_line(run_dir, tmp_path, monkeypatch):
     assert result.exit_code == 1
     assert result.output == ("error: export --format mcap needs the 'foxglove' library: "
                              "pip install 'ardrone-nmpc[mcap]'\n")
+
+
+# --- every channel against the run's own files (log.csv, events.jsonl, config.yaml) --------
+
+def _flown(tmp_path):
+    """A short lockstep ψ step (the heading moves, the drone tilts), exported as MCAP."""
+    from pathlib import Path
+
+    from ardrone_nmpc.experiments.record import record_lockstep
+
+    cfg = load_config(Path("configs/step_psi.yaml"), ["duration_s=2", "sim.settle_s=0.5"])
+    run_dir = record_lockstep(cfg, tmp_path / "runs").path
+    write_mcap(read_run(run_dir), tmp_path / "run.mcap")
+    return run_dir, read_mcap(tmp_path / "run.mcap")
+
+
+def _log_csv(run_dir) -> list[dict]:
+    import csv
+
+    with open(run_dir / "log.csv", newline="") as f:
+        lines = [line for line in f if not line.startswith("#")]
+    return list(csv.DictReader(lines))
+
+
+def _created_ns(run_dir) -> int:
+    import datetime as dt
+    import re
+
+    stamp = re.search(r"created: (\S+)", (run_dir / "config.yaml").read_text()).group(1)
+    return int(dt.datetime.fromisoformat(stamp).timestamp()) * 10**9
+
+
+def _rotation(q: dict):
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat([q["x"], q["y"], q["z"], q["w"]])
+
+
+def test_the_export_is_the_log_and_the_events_channel_by_channel(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    run_dir, back = _flown(tmp_path)
+    rows = _log_csv(run_dir)
+    events = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    num = lambda r, c: float(r[c]) if r[c] != "" else math.nan  # noqa: E731
+    # /log: every row, every cell as log.csv has it
+    assert len(back.rows) == len(rows)
+    for got, want in zip(back.rows, rows):
+        for c, text in want.items():
+            v = got[c]
+            assert (str(v) == text) if isinstance(v, str) else _same_bits(v, num(want, c)), c
+    # log times: the earliest row or event on the creation time, the rest at their t_s
+    t_rows = [num(r, "t_s") for r in rows]
+    t_first = min(t_rows[0], events[0]["t_s"], 0.0)
+    origin = _created_ns(run_dir) - round(t_first * 1e9)
+    assert back.row_log_times_ns == [origin + round(t * 1e9) for t in t_rows]
+    assert min(back.row_log_times_ns + back.event_log_times_ns) == _created_ns(run_dir)
+    # /events: each event of events.jsonl at its own experiment time
+    assert [e["kind"] for e in back.events] == [e["kind"] for e in events]
+    assert back.event_log_times_ns == [origin + round(e["t_s"] * 1e9) for e in events]
+    assert len({e["t_s"] for e in events}) >= 3
+    # /pose: the measured position; attitude Rz(ψ)·Ry(−navdata pitch)·Rx(navdata roll)
+    posed = [r for r in rows if all(math.isfinite(num(r, c)) for c in ("x_m", "y_m", "z_m"))]
+    assert len(back.poses["/pose"]) == len(posed) > 0
+    for msg, r in zip(back.poses["/pose"], posed):
+        p = msg["pose"]["position"]
+        assert (p["x"], p["y"], p["z"]) == (num(r, "x_m"), num(r, "y_m"), num(r, "z_m"))
+        want = Rotation.from_euler("ZYX", [num(r, "psi_rad"), -math.radians(
+            num(r, "nav_pitch_deg")), math.radians(num(r, "nav_roll_deg"))])
+        assert (_rotation(msg["pose"]["orientation"]) * want.inv()).magnitude() < 1e-9
+    psi = [num(r, "psi_rad") for r in posed]
+    assert max(psi) - min(psi) > 0.5  # the heading moved: its sign is seen
+    # /reference: the reference columns, not the measured ones
+    refs = [r for r in rows if all(math.isfinite(num(r, c))
+                                   for c in ("x_ref_m", "y_ref_m", "z_ref_m"))]
+    assert len(back.poses["/reference"]) == len(refs)
+    for msg, r in zip(back.poses["/reference"], refs):
+        p = msg["pose"]["position"]
+        assert (p["x"], p["y"], p["z"]) == (num(r, "x_ref_m"), num(r, "y_ref_m"),
+                                            num(r, "z_ref_m"))
+        want = Rotation.from_euler("z", num(r, "psi_ref_rad"))
+        assert (_rotation(msg["pose"]["orientation"]) * want.inv()).magnitude() < 1e-9
+    assert any(num(r, "z_m") != num(r, "z_ref_m") for r in refs)
+
+
+def test_an_older_runs_events_go_to_their_experiment_time(tmp_path):
+    """A run written before every event carried experiment time in ``t_s`` (fly stamped its
+    wall time there and the experiment time in ``t_exp_s``): an event with ``t_exp_s`` is
+    placed at it, one without it at its wall time less the clocks' offset."""
+    cfg = load_config(None, ["name=old"])
+    with RunRecorder.create(tmp_path, cfg, seed=0) as rec:
+        for k in range(10):
+            rec.write_row({"t_s": -0.13 + 0.065 * k, "x_m": 0.0, "y_m": 0.0, "z_m": 1.0})
+    old = [{"t_s": 100.0, "kind": "links"}, {"t_s": 101.0, "kind": "takeoff"},
+           {"t_s": 110.0, "kind": "mode", "t_exp_s": 0.0},
+           {"t_s": 110.1, "kind": "mode", "t_exp_s": 0.1},
+           {"t_s": 110.6, "kind": "fault", "t_exp_s": 0.3}]   # written 0.3 s late
+    (rec.path / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in old))
+    run = read_run(rec.path)
+    assert [e["t_s"] for e in run.events] == [-10.0, -9.0, 0.0, 0.1, 0.3]
+    write_mcap(run, tmp_path / "old.mcap")
+    back = read_mcap(tmp_path / "old.mcap")
+    origin = back.row_log_times_ns[0] + round(0.13 * 1e9)
+    assert back.event_log_times_ns == [origin + round(t * 1e9) for t in
+                                       (-10.0, -9.0, 0.0, 0.1, 0.3)]

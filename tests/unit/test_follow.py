@@ -140,7 +140,6 @@ def test_rerun_of_a_follow_flight_is_exact(tmp_path):
 
 
 def test_path_plot_draws_the_followed_object(tmp_path):
-    pytest.importorskip("matplotlib")
     from ardrone_nmpc.viz.plots import figure_path3d
 
     run, _ = fly(tmp_path, "duration_s=3")

@@ -219,6 +219,53 @@ def test_same_frames_give_the_same_readings_as_the_vicon_udp_link(rng):
     assert src.missing > 0 and src.zero_poses > 0
 
 
+def _vicon_frames(link: MocapLink):
+    """Deliver ``[(name, position_m, rotation_xyz_rad)]`` frames as datagrams at t = 1, 2, …"""
+    k = 0
+
+    def deliver(bodies):
+        nonlocal k
+        k += 1
+        items = [MocapObjectPose.from_si(n, p, r) for n, p, r in bodies]
+        link.feed(encode_mocap(MocapFrame.of(k, items)), float(k))
+    return deliver
+
+
+def _library_frames(src: MotionCaptureSource):
+    k = 0
+
+    def deliver(bodies):
+        nonlocal k
+        k += 1
+        src.receive_bodies([(n, p, _wxyz(Rotation.from_euler("XYZ", r))) for n, p, r in bodies],
+                           float(k))
+    return deliver
+
+
+@pytest.mark.parametrize("kind", ["vicon_udp", "motioncapture"])
+def test_a_followed_object_is_kept_only_from_fresh_poses(kind):
+    """The other objects (a followed car) obey the same freshness as the drone: an all-zero or
+    non-finite pose of the car must not replace its last good one (it would drive the follow
+    reference to the origin), and before its first fresh pose there is none."""
+    if kind == "vicon_udp":
+        src = MocapLink("127.0.0.1", 0, object_name="ardrone", other_objects=("car",))
+        deliver = _vicon_frames(src)
+    else:
+        src = _source(ScriptedMotionCapture(), other_objects=("car",))
+        deliver = _library_frames(src)
+    drone = ("ardrone", (0.0, 0.0, 1.0), (0.0, 0.0, 0.1))
+    deliver([drone, ("car", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))])          # t = 1: zero car
+    assert src.latest_of("car") == (None, -math.inf) and src.fresh_count("car") == 0
+    deliver([drone, ("car", (3.0, -1.0, 0.0), (0.0, 0.0, 0.5))])         # t = 2: fresh
+    deliver([drone, ("car", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))])          # t = 3: zero
+    deliver([drone, ("car", (math.nan, 1.0, 0.0), (0.0, 0.0, 0.5))])     # t = 4: NaN
+    car, rx = src.latest_of("car")
+    assert rx == 2.0 and car.position_m.tolist() == pytest.approx([3.0, -1.0, 0.0])
+    assert car.psi_rad == pytest.approx(0.5) and src.fresh_count("car") == 1
+    deliver([drone, ("car", (3.5, -1.0, 0.0), (0.0, 0.0, 0.5))])         # t = 5: fresh
+    assert src.latest_of("car")[1] == 5.0 and src.fresh_count("car") == 2
+
+
 # ----------------------------------------------------------------------------- lifecycle
 
 

@@ -224,3 +224,66 @@ def test_ardrone_lab_square_matches_the_thesis_experiment_within_30_percent():
         rows = record_lockstep(cfg, d, seed=0).summary
     deviation = {(r.axis, r.metric): r.value for r in rows}[("path", "mean_deviation")]
     assert 0.7 * 0.1045 <= deviation <= 1.3 * 0.1045
+
+
+# --- the kit's speed channels in closed form: hold and wind at a heading -------------------
+
+U_POLE, V_POLE = 0.6650, 0.4596   # ssPitch2U, ssRoll2V poles as docs/plant.md §4 prints them
+
+
+def _kit_steps(x0, hold: bool, wind, hover_tau_s: float, seconds: float):
+    """kit_rk4 from ``x0`` with zero commands; the state and outputs at each 5 ms step."""
+    from ardrone_nmpc.sim.plant_kit import KIT, kit_rk4
+
+    k = KIT.coefficients(hover_tau_s)
+    x, states, outs = np.asarray(x0, float), [], []
+    for _ in range(int(round(seconds / H))):
+        x, out = kit_rk4(x, 0.0, 0.0, 0.0, 0.0, hold, k, tuple(map(float, wind)), H)
+        states.append(x.copy())
+        outs.append(out)
+    t = H * np.arange(1, len(states) + 1)
+    return t, np.array(states), np.array(outs)
+
+
+@pytest.mark.parametrize("hover_tau_s", [0.5, 3.0])
+@pytest.mark.parametrize("psi", [0.0, 0.7, -2.5])
+def test_the_kit_hold_damps_both_body_speeds_at_any_heading(psi, hover_tau_s):
+    """The position hold (PCMD flag 0): the tilt commands are 0, so u and v decay from their
+    values alone, each at the faster of 1/hover_tau_s and the kit's own pole (the hold adds
+    damping, it never removes the pole's); the drone coasts along the body axes turned by ψ
+    (forward (cos ψ, sin ψ), right (sin ψ, −cos ψ): world y is left)."""
+    u0, v0 = -0.3, 0.5
+    x0 = np.zeros(12)
+    x0[0], x0[1], x0[2], x0[3], x0[8], x0[9] = 1.0, -2.0, 1.5, psi, u0, v0
+    t, x, out = _kit_steps(x0, True, (0.0, 0.0, 0.0), hover_tau_s, 2.0)
+    ru, rv = max(1.0 / hover_tau_s, U_POLE), max(1.0 / hover_tau_s, V_POLE)
+    u, v = u0 * np.exp(-ru * t), v0 * np.exp(-rv * t)
+    np.testing.assert_allclose(x[:, 8], u, rtol=2e-4, atol=1e-9)
+    np.testing.assert_allclose(x[:, 9], v, rtol=2e-4, atol=1e-9)
+    c, s = math.cos(psi), math.sin(psi)
+    du, dv = u0 * (1 - np.exp(-ru * t)) / ru, v0 * (1 - np.exp(-rv * t)) / rv
+    np.testing.assert_allclose(x[:, 0], 1.0 + c * du + s * dv, atol=2e-4)
+    np.testing.assert_allclose(x[:, 1], -2.0 + s * du - c * dv, atol=2e-4)
+    np.testing.assert_allclose(out[:, 0], c * u + s * v, atol=2e-4)   # the world velocity
+    np.testing.assert_allclose(out[:, 1], s * u - c * v, atol=2e-4)
+    assert np.all(x[:, 2] == 1.5) and np.all(x[:, 3] == psi)
+
+
+@pytest.mark.parametrize("psi", [0.0, 1.0, -2.2])
+def test_the_kit_drifts_with_a_wind_at_any_heading(psi):
+    """No command, no hold, a constant horizontal wind (wx, wy): the air-relative body speeds
+    decay through the kit's poles, u → w_u, v → w_v with w turned into the body frame, so the
+    drone's world velocity tends to the wind's — and its vertical channel ignores the wind
+    (the kit has no vertical drag: docs/plant-profiles.md)."""
+    wx, wy = 0.4, -0.25
+    x0 = np.zeros(12)
+    x0[2], x0[3] = 1.0, psi
+    t, x, out = _kit_steps(x0, False, (wx, wy, 0.3), 0.5, 6.0)
+    c, s = math.cos(psi), math.sin(psi)
+    w_u, w_v = c * wx + s * wy, s * wx - c * wy
+    u, v = w_u * (1 - np.exp(-U_POLE * t)), w_v * (1 - np.exp(-V_POLE * t))
+    np.testing.assert_allclose(x[:, 8], u, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(x[:, 9], v, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(out[:, 0], c * u + s * v, atol=1e-4)
+    np.testing.assert_allclose(out[:, 1], s * u - c * v, atol=1e-4)
+    assert np.all(x[:, 2] == 1.0) and np.all(out[:, 2] == 0.0)

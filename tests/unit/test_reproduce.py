@@ -62,9 +62,17 @@ def test_offset_without_swing_is_unsettled_and_the_summary_verdict_wins():
                            ended_early=True).kind == "ended early"
 
 
-def test_a_swing_inside_the_band_is_not_a_limit_cycle():
-    small = 0.2 * BAND * np.sin(2 * np.pi * T / 2.0)
-    assert classify_motion(T, small, t_step_s=1.0, band=BAND, settled=False).kind == "unsettled"
+@pytest.mark.parametrize("ptp_bands, kind", [(0.4, "unsettled"), (1.5, "unsettled"),
+                                             (2.5, "limit cycle")])
+def test_a_swing_is_a_limit_cycle_only_beyond_twice_the_band(ptp_bands, kind):
+    """A steady swing counts once its peak-to-peak leaves the band on both sides (> 2 band)."""
+    swing = 0.5 * ptp_bands * BAND * np.sin(2 * np.pi * T / 2.0)
+    assert classify_motion(T, swing, t_step_s=1.0, band=BAND, settled=False).kind == kind
+
+
+def test_a_growing_swing_inside_twice_the_band_is_not_diverging():
+    grow = 0.5 * 1.5 * BAND * np.exp(0.1 * (T - T[-1])) * np.sin(2 * np.pi * T / 2.0)
+    assert classify_motion(T, grow, t_step_s=1.0, band=BAND, settled=False).kind != "diverging"
 
 
 def test_square_wave_period_and_no_period_without_a_swing():
@@ -76,6 +84,18 @@ def test_square_wave_period_and_no_period_without_a_swing():
     rng = np.random.default_rng(2)
     drift = np.linspace(0.0, 1.0, T.size) + rng.normal(0, 0.01, T.size)
     assert math.isnan(swing_period_s(T, drift)[0])  # one crossing of its mean: no swing
+
+
+def test_excursions_inside_a_quarter_of_the_swing_are_no_crossings():
+    """A ±1 square wave of period 3 s with a blip to ∓0.35 in each half (inside the ±0.5
+    hysteresis, a quarter of its 2 peak-to-peak): still period 3 s."""
+    square = np.where((T // 1.5) % 2 == 0, 1.0, -1.0)
+    middle = (T % 1.5 > 0.7) & (T % 1.5 < 0.8)
+    blipped = np.where(middle, -0.35 * square, square)
+    assert np.ptp(blipped) == 2.0
+    period, periods = swing_period_s(T, blipped)
+    assert period == pytest.approx(3.0, abs=0.07)
+    assert periods == swing_period_s(T, square)[1]
 
 
 # ----------------------------------------------------------------------------- judges
@@ -257,21 +277,46 @@ def _synthetic_run(cfg_overrides, cols, duration_s=10.0, period_s=0.065):
     return SimpleNamespace(config=cfg, columns=base, path=Path("/runs/20260101-000000-synthetic"))
 
 
-def test_figures_of_wraps_the_heading_error_across_pi():
-    """ψ settles on 3.1 rad, its truth swinging across ±π: a converging swing of 0.1 rad, not
-    a 2π limit cycle."""
+@pytest.mark.parametrize("decay_per_s, kind", [(0.2, "converging"), (0.0, "limit cycle")])
+def test_figures_of_wraps_the_heading_error_across_pi(decay_per_s, kind):
+    """ψ steps to 3.1 rad and swings across ±π to the end of the run (0.3 rad, decaying or
+    not): the error is the wrapped one — a swing of 0.6 rad p-p, not 2π jumps."""
     from ardrone_nmpc.core.angles import wrap_angle_rad
     from ardrone_nmpc.experiments.reproduce.judges import figures_of
 
     t = np.arange(-1.0, 10.0, 0.065)
-    swing = 0.1 * np.exp(-0.3 * np.clip(t - 1.0, 0, None)) * np.sin(2 * np.pi * t / 1.5)
+    swing = 0.3 * np.exp(-decay_per_s * np.clip(t - 1.0, 0, None)) * np.sin(2 * np.pi * t / 1.5)
     psi = np.asarray(wrap_angle_rad(3.1 + np.where(t >= 1.0, swing, -3.1)), float)
+    assert np.ptp(psi[t >= 7.0]) > 6.0  # the truth jumps across ±π in the last third
     run = _synthetic_run(["reference.kind=step", "reference.target_psi_rad=3.1"],
                          {"t_s": t, "psi_true_rad": psi, "z_true_m": np.ones_like(t)})
     f = figures_of(run, [])
     m = f.end("psi")
-    assert m.kind == "converging" and m.ptp < 0.25 and not f.unstable
+    assert m.kind == kind and m.unit == "rad"
+    assert m.ptp == pytest.approx(np.ptp(swing[t >= 7.0]), rel=0.05)
+    if kind == "limit cycle":
+        assert m.period_s == pytest.approx(1.5, rel=0.05) and f.unstable
+    else:
+        assert not f.unstable
     assert f.supervised == {} and not f.ended_early and f.ticks == int(np.sum(t >= 0))
+
+
+@pytest.mark.parametrize("statuses", [
+    ["", "ok"],                      # the P controller logs no solver status
+    ["ok"] * 7 + ["maxiter"] * 3,
+    ["", "nan", "", "ok"],
+])
+def test_figures_of_counts_failed_solves_of_the_experiment_ticks(statuses):
+    from ardrone_nmpc.experiments.reproduce.judges import BAD_SOLVES, figures_of
+
+    t = np.arange(-1.0, 10.0, 0.065)
+    status = np.array([statuses[k % len(statuses)] for k in range(t.size)], dtype=object)
+    status[t < 0] = "maxiter"  # the settle phase is not judged
+    run = _synthetic_run(["reference.kind=hover"], {"t_s": t, "solver_status": status})
+    f = figures_of(run, [])
+    failed = [s in ("maxiter", "nan") for s in status[t >= 0]]
+    assert f.bad_solves == pytest.approx(sum(failed) / len(failed), abs=1e-12)
+    assert f.unstable is (f.bad_solves > BAD_SOLVES)
 
 
 def test_figures_of_counts_the_supervisors_experiment_ticks_not_the_settle_phase():

@@ -95,6 +95,16 @@ def test_times_without_a_tick_count_are_refused_naming_the_field(settle, duratio
 def test_the_largest_tick_count_is_still_taken():
     s = Schedule.of(settle_s=0.0, duration_s=2.0 ** 53 - 2.0, period_s=1.0)
     assert s.n_ticks == 2 ** 53 - 1 == sched.MAX_TICKS - 1
+    s = Schedule.of(settle_s=0.0, duration_s=2.0 ** 53 - 1.0, period_s=1.0)
+    assert s.n_ticks == sched.MAX_TICKS            # "at most MAX_TICKS": the bound itself
+    with pytest.raises(ScheduleError):
+        Schedule.of(settle_s=1.0, duration_s=2.0 ** 53 - 1.0, period_s=1.0)
+
+
+def test_too_many_ticks_together_names_the_sum_of_the_times():
+    with pytest.raises(ScheduleError) as err:
+        Schedule.of(settle_s=2.0 ** 51, duration_s=2.0 ** 51, period_s=0.5)
+    assert str(err.value).startswith(f"sim.settle_s + duration_s = {2.0 ** 52:g} s: ")
 
 
 def test_timeouts_are_defined_once():
@@ -132,9 +142,16 @@ def test_events_are_stamped_with_experiment_time_on_every_clock():
                     (5.5, "landing", {"wall_s": 10.0, "reason": "end"})]
     refused = []
     clock = sched.EventClock(lambda t, kind, **f: refused.append((t, kind, f)), manual_clock)
-    clock.event("preflight_failed")
+    clock.event("preflight_failed", check="battery", value=9.1)
     clock.close()                                           # the experiment never started
-    assert len(refused) == 1 and math.isnan(refused[0][0]) and refused[0][2] == {"wall_s": 0.0}
+    assert len(refused) == 1 and math.isnan(refused[0][0])
+    assert refused[0][1:] == ("preflight_failed", {"wall_s": 0.0, "check": "battery",
+                                                   "value": 9.1})
+    held = []   # a held event keeps its fields when experiment time 0 stamps it
+    clock = sched.EventClock(lambda t, kind, **f: held.append((t, kind, f)), manual_clock)
+    clock.event("connected", host="127.0.0.1", port=5556)
+    clock.start(manual_clock.t + 1.0)
+    assert held == [(-1.0, "connected", {"wall_s": 0.0, "host": "127.0.0.1", "port": 5556})]
 
 
 def test_a_lockstep_run_flies_the_schedule_tick_for_tick(tmp_path):
