@@ -209,6 +209,15 @@ def classify(run, ending: str, fault: str) -> str:
     return "hovered" if last.action == "hover" else "completed"
 
 
+def _shown(run_dir: Path) -> str:
+    """A run directory as the report names it: relative to the working directory when inside
+    it (the committed report names no machine's folders), else as given."""
+    try:
+        return str(Path(run_dir).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(run_dir)
+
+
 def log_complete(run_dir: Path, ticks_expected: int) -> tuple[bool, str]:
     """Whether the run directory holds everything the log contract asks for: the flight's
     events end in ``landed``/``stopped`` (the recording's own ``simulated`` event aside)."""
@@ -271,10 +280,10 @@ def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, 
     if error and run is not None and refused(run):
         required = REQUIRED_OUTCOME.get(fault, POLICY_OUTCOMES)
         return CaseResult(experiment, fault, "refused", "refused", math.nan, math.nan, complete,
-                          0, "refused" in required, str(run_dir), error)
+                          0, "refused" in required, _shown(run_dir), error)
     if error:
         return CaseResult(experiment, fault, "exception", ending, math.nan, math.nan, complete,
-                          0, False, str(run_dir), error)
+                          0, False, _shown(run_dir), error)
     base = read_run(baseline_dir)
     outcome = classify(run, ending, fault)
     t, dev = deviation_from(run, base)
@@ -289,7 +298,7 @@ def evaluate(*, run_dir: Path, baseline_dir: Path, experiment: str, fault: str, 
     required = REQUIRED_OUTCOME.get(fault, POLICY_OUTCOMES)
     passed = outcome in required and complete and nonfinite == 0
     return CaseResult(experiment, fault, outcome, ending, max_dev, recover, complete, nonfinite,
-                      passed, str(run_dir), why)
+                      passed, _shown(run_dir), why)
 
 
 def _fly(case: tuple[str, str | None], **options) -> tuple[Path | None, str, int, str]:

@@ -13,7 +13,8 @@ runner = CliRunner()
 
 
 @pytest.mark.timeout(300)
-def test_faults_subset_writes_json_and_markdown(tmp_path):
+def test_faults_subset_writes_json_and_markdown(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the report names run directories relative to the cwd
     out_json, out_md = tmp_path / "m.json", tmp_path / "m.md"
     result = runner.invoke(app, ["faults", "--experiments", "hover", "--faults",
                                  "battery_floor,solver_diverge", "--config-dir", str(CONFIGS),
@@ -27,6 +28,7 @@ def test_faults_subset_writes_json_and_markdown(tmp_path):
     assert cases["solver_diverge"]["outcome"] == "completed"
     assert all(c["log_complete"] and c["nonfinite_cmds"] == 0 for c in cases.values())
     assert Path(cases["battery_floor"]["run_dir"]).is_dir()
+    assert all(c["run_dir"].startswith("runs/") for c in cases.values())
     text = out_md.read_text()
     assert "**2 of 2 cases pass**" in text and "| hover | battery_floor | landed |" in text
 
