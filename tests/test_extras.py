@@ -18,7 +18,7 @@ MODULES = {
     "pytest-benchmark": "pytest_benchmark", "casadi": "casadi", "dask": "dask.distributed",
     "matplotlib": "matplotlib", "optuna": "optuna", "motioncapture": "motioncapture",
     "mcap": "mcap", "mcap-protobuf-support": "mcap_protobuf", "foxglove-sdk": "foxglove",
-    "pyarrow": "pyarrow", "tornado": "tornado", "import-linter": "importlinter",
+    "pyarrow": "pyarrow", "pandas": "pandas", "tornado": "tornado", "import-linter": "importlinter",
 }
 
 

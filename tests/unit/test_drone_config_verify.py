@@ -121,7 +121,8 @@ def test_written_values_that_are_not_text_are_compared_as_their_text():
 def test_a_mismatch_line_names_the_key_both_values_and_the_way_out():
     line = ConfigMismatch(KEY, "0.21", "0.35").line()
     assert KEY in line and "'0.35'" in line and "'0.21'" in line
-    assert "power-cycle" in line and "drone.config_ids" in line
+    # the way out: the session whose limits the drone holds, and where to read its ids
+    assert "drone.config_ids" in line and "ardrone-nmpc status" in line
     missing = ConfigMismatch(KEY, "0.21", None).line()
     assert "nothing (key missing)" in missing and "None" not in missing
 
