@@ -67,6 +67,15 @@ class Done:
     value: Any = None
     error: BaseException | None = None
 
+    @classmethod
+    def of_future(cls, key: Hashable, future) -> Done:
+        """The case ``key`` of a finished pool future: its result, or the exception it raised
+        (a dead or lost worker, a cancellation fails its case)."""
+        try:
+            return cls(key, future.result())
+        except Exception as err:  # noqa: BLE001 - whatever ended the worker fails the case
+            return cls(key, error=err)
+
 
 def engine_errors(*, engine: str, scheduler: str | None) -> list[str]:
     """The ``--engine`` / ``--scheduler`` mistakes, one ``--option: message`` line each."""
@@ -274,10 +283,7 @@ class _Pool(Executor):
             key = self._futures.pop(future, _GONE) if future is not None else _GONE
             if key is not _GONE:  # (a cancelled future is reported too: not ours any more)
                 break
-        try:
-            return Done(key, future.result())
-        except Exception as err:  # noqa: BLE001 - a dead worker fails its case
-            return Done(key, error=err)
+        return Done.of_future(key, future)
 
     def _cancel(self) -> list[Hashable]:
         cancelled = [f for f in self._futures if f.cancel()]
@@ -368,10 +374,7 @@ class _Dask(Executor):
             if entry is not None:  # (one taken before, or cancelled: skipped)
                 key = entry[1]
                 break
-        try:
-            return Done(key, future.result())
-        except Exception as err:  # noqa: BLE001 - a lost worker fails its case
-            return Done(key, error=err)
+        return Done.of_future(key, future)
 
     def _cancel(self) -> list[Hashable]:
         futures = [f for f, _ in self._futures.values() if not f.done()]
