@@ -37,6 +37,7 @@ from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
+from ardrone_nmpc.runtime.signals import polled_signals
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action, takeoff_refusal
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
@@ -99,8 +100,16 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     below ``safety.battery_floor_pct``, the drone reports a fault bit, or the configuration
     (written, acknowledged, read back) refuses (module doc),
     :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` for times that give no tick count.
-    A drone that lands by itself ends the run with :data:`SELF_LANDED`.
+    A drone that lands by itself ends the run with :data:`SELF_LANDED`. A Ctrl-C or
+    terminating signal ends it at the next tick (:func:`~ardrone_nmpc.runtime.signals.
+    polled_signals`: raised from its handler, it could land inside a compiled call and be lost).
     """
+    with polled_signals() as check_signals:
+        return _fly(cfg, recorder, seed, progress, plant, check_signals)
+
+
+def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> SimResult:
+    """:func:`run_lockstep`'s flight; ``check_signals()`` raises a signal that arrived."""
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
@@ -132,6 +141,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     t_takeoff = drone.truth.t_s
     drone.takeoff()
     while drone.truth.mode is not FlightMode.FLYING and drone.truth.t_s < TAKEOFF_TIMEOUT_S:
+        check_signals()
         drone.advance_to(drone.truth.t_s + period)
     if drone.truth.mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "
@@ -148,6 +158,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     ending, k, flown = "completed", 0, 0
     tally = VerdictTally(follow=tick.follow is not None)
     for k in range(schedule.n_ticks):
+        check_signals()
         t_exp = schedule.t_exp_s(k)
         drone.advance_to(t_first + k * period, t_exp)
         _write_drone_events(write_event, drone)

@@ -28,7 +28,7 @@ from ardrone_nmpc.runs.verdict import FAILED_VERDICTS, VerdictTally, verdict_mes
 from ardrone_nmpc.runtime.operator_input import KeyReader, OperatorAbort, OperatorRequests
 from ardrone_nmpc.runtime.schedule import EventClock, Schedule, phase, write_events
 from ardrone_nmpc.runtime.session import CutMotors, DroneLandedItself, FlightSession
-from ardrone_nmpc.runtime.signals import landing_signals
+from ardrone_nmpc.runtime.signals import landing_signals, polled_signals
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.safety import Action, drone_alarms
 
@@ -177,8 +177,9 @@ def _control_loop(cfg, schedule: Schedule, tick: Tick, drone: OpenedDrone, recor
         for ev in mocap.take_events():  # a foreign sender: logged and shown, never used
             clock.at(t_exp, ev.pop("kind"), **ev)
         _drone_events(drone, clock)
-        out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
-                        t_exp_s=t_exp, mode=phase(t_exp))
+        with polled_signals():  # a signal inside the compiled calls is raised after them
+            out = tick.step(TickInputs(now, pose, pose_rx, nav, nav_rx, target, target_rx),
+                            t_exp_s=t_exp, mode=phase(t_exp))
         write_events(clock.at, t_exp, out.events)
         pcmd = out.pcmd
         if out.progressive:

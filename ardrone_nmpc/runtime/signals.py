@@ -25,7 +25,7 @@ from contextlib import contextmanager
 
 __all__ = ["EMERGENCY_SIGNAL", "EmergencyRequested", "LANDING_SIGNALS", "STOPPING_SIGNALS",
            "Terminated", "deferred_signals", "exit_code_of", "ignoring_emergency_signal",
-           "landing_signals", "signal_name", "stopping_signals"]
+           "landing_signals", "polled_signals", "signal_name", "stopping_signals"]
 
 #: Besides SIGINT (Python's own KeyboardInterrupt), the signals that land the drone.
 LANDING_SIGNALS: tuple[signal.Signals, ...] = (
@@ -130,6 +130,54 @@ def deferred_signals():
         if pending[0] == signal.SIGINT:
             raise KeyboardInterrupt
         raise Terminated(pending[0])
+
+
+#: Every signal :func:`polled_signals` may hold back (those whose handler is Python's).
+_POLLABLE: tuple[signal.Signals, ...] = tuple(dict.fromkeys(
+    (signal.SIGINT, *LANDING_SIGNALS, EMERGENCY_SIGNAL, *STOPPING_SIGNALS)))
+
+
+@contextmanager
+def polled_signals():
+    """Within the block, a signal whose handler would raise (Ctrl-C, or one of the handlers
+    above) is only noted; the yielded ``check()`` hands it to that handler — raising
+    ``KeyboardInterrupt`` / :class:`Terminated` / :class:`EmergencyRequested` — at the
+    caller's safe point, and the block's end does if ``check`` did not. Signals that are
+    ignored or left to the system stay so (a pool worker ignores Ctrl-C).
+
+    Why: Python runs a handler between any two bytecodes, and an exception raised there is
+    not always an exception the caller sees. Inside a numba dispatcher call it comes out as
+    ``SystemError: CPUDispatcher(...) returned a result with an exception set``; inside a
+    finaliser it is printed and dropped. A lockstep flight is compiled calls from end to end:
+    its ``kill`` became a failure, or was lost and the hour-long flight flew on to exit 0.
+    A loop that calls ``check()`` once a tick ends at the tick the signal arrived in.
+    Outside the main thread it changes nothing (``check`` does nothing)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    pending: list[int] = []
+    previous = {}
+
+    def note(signum, frame):
+        pending.append(signum)
+
+    def deliver() -> None:
+        if pending:
+            signum = pending[0]
+            pending.clear()
+            previous[signum](signum, None)
+
+    try:
+        for sig in _POLLABLE:
+            handler = signal.getsignal(sig)
+            if callable(handler):
+                previous[sig] = handler
+                signal.signal(sig, note)
+        yield deliver
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    deliver()
 
 
 @contextmanager
