@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.sorted_search import count_at_or_below
+
 __all__ = ["fold_sample", "lag_exponents"]
 
 
@@ -24,17 +26,7 @@ def lag_exponents(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
     (K, L) the exponent ``−(t_s − d − times[j]) / τ`` of each lag τ."""
     for k in range(delays_s.size):
         at = t_s - delays_s[k]
-        if at != at:
-            j = n - 1
-        else:
-            lo, hi = 0, n  # the count of times ≤ at lies in [lo, hi]
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if times[mid] <= at:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            j = lo - 1
+        j = count_at_or_below(times, n, at) - 1
         j_out[k] = j
         d = at - times[j]
         for m in range(lags_s.size):

@@ -14,25 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
 __all__ = ["waypoint_states"]
-
-
-@njit(cache=True)
-def _segment(t_knots: np.ndarray, t: float) -> int:
-    """``clip(searchsorted(t_knots, t, side="right") − 1, 0, K − 2)``; NaN sorts last."""
-    n_seg = t_knots.size - 1
-    if t != t:
-        return n_seg - 1
-    lo, hi = 0, t_knots.size  # the count of knots ≤ t lies in [lo, hi]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if t_knots[mid] <= t:
-            lo = mid + 1
-        else:
-            hi = mid
-    return min(max(lo - 1, 0), n_seg - 1)
 
 
 @njit(cache=True)
@@ -44,7 +29,8 @@ def waypoint_states(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad: np.nd
     t_first, t_last = t_knots[0], t_knots[-1]
     for j in range(t_s.size):
         t = t_s[j]
-        k = _segment(t_knots, t)
+        # clip(searchsorted(t_knots, t, side="right") − 1, 0, K − 2)
+        k = min(max(count_at_or_below(t_knots, t_knots.size, t) - 1, 0), t_knots.size - 2)
         inside = t >= t_first and t < t_last
         after = t >= t_last
         frac = 1.0 if after else ((t - t_knots[k]) / dt_s[k] if inside else 0.0)
