@@ -15,16 +15,18 @@ stages (monkeypatched here, nothing in the package changes) and prints the cost 
 
 The wrappers add ~0.3 µs per wrapped call; the total is measured without them too.
 
-``python benchmarks/lockstep_profile.py throughput [--jobs 2] [--rounds 2]`` flies the same
-24 configs (step_x, 20 s: horizon 10/15/20 × Δτ 0.08/0.1 × four r) the sweep's way (run
+``python benchmarks/lockstep_profile.py throughput [--jobs 2] [--rounds 2] [--flights
+step_x|square]`` flies the same 24 configs (step_x, 20 s: horizon 10/15/20 × Δτ 0.08/0.1 ×
+four r; ``square``: issue 26's 24 × 60 s squares, seeds 0–23) the sweep's way (run
 directories, ``experiments/sweep`` ``iter_local``) and ``tune``'s way (in-memory recorder,
 ``experiments/tune/engine.PoolEngine``), alternating, and prints simulated seconds per wall
 second of each: the ratio holds on a loaded machine, the absolute figures do not.
 
-``python benchmarks/lockstep_profile.py cpu --way sweep|tune [--rounds 3]`` flies the same 24
-flights in this process and prints their CPU seconds (``time.process_time``), which other
-load hardly changes: run ``--way sweep`` from another tree (``PYTHONPATH=...``) to compare
-commits.
+``python benchmarks/lockstep_profile.py cpu --way sweep|tune [--rounds 3] [--flights …]``
+flies the same 24 flights in this process and prints their CPU seconds
+(``time.process_time``), which other load hardly changes: run ``--way sweep`` from another tree
+(``PYTHONPATH=...``, from outside this tree: ``python -m`` and ``-c`` put the working
+directory first on ``sys.path``) to compare commits.
 """
 
 from __future__ import annotations
@@ -116,9 +118,12 @@ def profile(config: str, repeats: int) -> None:
     print(f"\nrun directory / in-memory wall: {plain['rundir'] / plain['memory']:.2f}")
 
 
-def _configs():
+def _configs(flights: str = "step_x"):
     from ardrone_nmpc.config.io import load_config
 
+    if flights == "square":  # issue 26's target set: 24 × 60 s squares, seeds 0–23
+        return [load_config(ROOT / "configs" / "square.yaml",
+                            ["duration_s=60", f"sim.seed={seed}"]) for seed in range(24)]
     rs = ("[4,12,12,24]", "[1,12,12,24]", "[2,12,12,24]", "[4,6,6,24]")
     return [load_config(ROOT / "configs" / "step_x.yaml",
                         ["duration_s=20", f"controller.horizon_steps={n}",
@@ -208,8 +213,8 @@ def _report(title: str, walls: dict, sim_s: float) -> None:
     print(f"  ratio of throughputs (second / first): {a / b:.2f}")
 
 
-def throughput(jobs: int, rounds: int) -> None:
-    cfgs = _configs()
+def throughput(jobs: int, rounds: int, flights: str = "step_x") -> None:
+    cfgs = _configs(flights)
     sim_s = sum(c.duration_s + c.sim.settle_s for c in cfgs)
     print(f"{len(cfgs)} flights, {sim_s:.0f} s simulated (settle + experiment), {jobs} jobs")
     walls = defaultdict(list)
@@ -220,13 +225,13 @@ def throughput(jobs: int, rounds: int) -> None:
     _report("per-flight work on one warm pool:", _warm_pool(cfgs, jobs, rounds), sim_s)
 
 
-def cpu(way: str, rounds: int) -> None:
+def cpu(way: str, rounds: int, flights: str = "step_x") -> None:
     """CPU seconds (``time.process_time``: little affected by other load, unlike wall time)
     and wall seconds of the 24 flights in this process, the sweep's way or tune's."""
     from ardrone_nmpc.config.io import config_to_dict
     from ardrone_nmpc.experiments.sweep import Case, case_id, run_case, warm_up
 
-    cfgs = _configs()
+    cfgs = _configs(flights)
     sim_s = sum(c.duration_s + c.sim.settle_s for c in cfgs)
     warm_up()
     if way == "tune":
@@ -260,16 +265,18 @@ def main() -> None:
     t = sub.add_parser("throughput")
     t.add_argument("--jobs", type=int, default=2)
     t.add_argument("--rounds", type=int, default=2)
+    t.add_argument("--flights", choices=("step_x", "square"), default="step_x")
     c = sub.add_parser("cpu")
     c.add_argument("--way", choices=("sweep", "tune"), required=True)
     c.add_argument("--rounds", type=int, default=3)
+    c.add_argument("--flights", choices=("step_x", "square"), default="step_x")
     args = parser.parse_args()
     if args.what == "profile":
         profile(args.config, args.repeats)
     elif args.what == "cpu":
-        cpu(args.way, args.rounds)
+        cpu(args.way, args.rounds, args.flights)
     else:
-        throughput(args.jobs, args.rounds)
+        throughput(args.jobs, args.rounds, args.flights)
 
 
 if __name__ == "__main__":

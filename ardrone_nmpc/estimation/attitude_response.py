@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_exponents
+
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_R2",
            "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE",
            "fit_attitude_response"]
@@ -136,6 +138,10 @@ class AttitudeResponseEstimator:
         self._u = np.zeros((capacity, 2))
         self._y = np.zeros((capacity, len(self.lags_s), 2))
         self._count = 0
+        # the compiled steps' buffers
+        self._j = np.zeros(len(self.delays_s), dtype=np.int64)
+        self._arg = np.zeros((len(self.delays_s), len(self.lags_s)))
+        self._x = np.zeros(shape)
         self._best = None
         self._since_best = 0
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
@@ -177,22 +183,14 @@ class AttitudeResponseEstimator:
         if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
                 or self._t[0] > t_s - self.delays_s[-1]):
             return False
-        times = self._t[:n]
-        at = t_s - self.delays_s
-        j = np.searchsorted(times, at, side="right") - 1          # (K,)
-        u = self._u[j][:, None, :]                                # (K, 1, 2)
-        decay = np.exp(-(at - times[j])[:, None] / self.lags_s)[:, :, None]
-        x = u + (self._y[j] - u) * decay                          # (K, L, 2)
+        lag_exponents(self._t, n, t_s, self.delays_s, self.lags_s, self._j, self._arg)
         forget = (math.exp(-(t_s - self._last_t) / self.window_s)
                   if math.isfinite(self._last_t) else 1.0)
         self._last_t = t_s
-        self._residual(x, y, forget)
-        if forget != 1.0:
-            for a in (self._sx, self._sxx, self._sxy):
-                a *= forget
-        self._sx += x
-        self._sxx += x * x
-        self._sxy += x * y
+        x = self._x
+        fold_sample(self._u, self._y, self._j, np.exp(self._arg), y, forget, x,
+                    self._sx, self._sxx, self._sxy)
+        self._residual(x, y, forget)  # reads x only: the sums' update may come first
         self._n = self._n * forget + 1.0
         self._sy = self._sy * forget + y
         self._syy = self._syy * forget + y * y

@@ -22,6 +22,7 @@ __all__ = ["AXES", "SATURATION_FRAC", "STEADY_FRACTION", "ReferenceIntegrator", 
 
 AXES = ("x", "y", "z", "psi")
 _POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
+_POS_LIST = list(_POS)
 _VEL = (IX_VX, IX_VY, IX_VZ)
 _REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
@@ -74,13 +75,6 @@ class ReferenceIntegrator:
         self.release_speed = _per_axis(release_speed)
         self.kp = _per_axis(kp)
         self.hold_s = _per_axis(hold_s)
-        self._rest_s = np.zeros(n)  # how long each axis has been at rest inside its band
-        self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
-        self._last = np.full(n, math.nan)  # the reference components of the last update
-        self._last_error_psi = math.nan
-        self._integral = np.zeros(n)  # the integral part of the shift
-        self._rest_lo = np.zeros(n)  # the error's range since the axis came to rest
-        self._rest_hi = np.zeros(n)
         self.ki_per_s = _per_axis(ki_per_s)
         self.error_band = _per_axis(error_band)
         self.speed_band = _per_axis(speed_band)
@@ -88,6 +82,18 @@ class ReferenceIntegrator:
         self.period_s = float(period_s)
         self.shift = np.zeros(n)
         self.learning = np.zeros(n, dtype=bool)  # which axes integrated on the last update
+        self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
+        # the law per axis, and the state carried between updates, as plain floats
+        self._law = list(zip(*(a.tolist() for a in (
+            self.error_band, self.speed_band, self.steady_band, self.release_speed,
+            self.hold_s, self.ki_per_s, self.kp, self.max_shift))))
+        self._latched = [False] * n
+        self._rest_s = [0.0] * n  # how long each axis has been at rest inside its band
+        self._last = [math.nan] * n  # the reference components of the last update
+        self._last_error_psi = math.nan
+        self._integral = [0.0] * n  # the integral part of the shift
+        self._rest_lo = [0.0] * n  # the error's range since the axis came to rest
+        self._rest_hi = [0.0] * n
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
@@ -118,49 +124,59 @@ class ReferenceIntegrator:
         The shift is clipped to ±max_shift. ė is the estimate's velocity, for ψ the
         difference of its error over one period.
         """
-        e = self.errors(x, ref)
-        rate = [x[i] for i in _VEL] + [0.0]
+        # plain floats per axis (numpy scalars cost ten times as much; the same IEEE ops)
+        e = self.errors(x, ref).tolist()
+        xs, refs = x.tolist(), ref.tolist()
+        rate = [xs[i] for i in _VEL] + [0.0]
         if math.isfinite(self._last_error_psi):
             rate[3] = wrap_angle_rad(e[3] - self._last_error_psi) / self.period_s
         self._last_error_psi = e[3]
+        still = ((np.abs(preview[:, _POS_LIST] - ref[_POS_LIST]) <= _REF_STILL).all(axis=0).tolist()
+                 if preview is not None else (True,) * len(AXES))
+        law = self._law
+        last, rest_s, rest_lo, rest_hi = self._last, self._rest_s, self._rest_lo, self._rest_hi
+        latched, integ = self._latched, self._integral
+        shift, learning = self.shift.tolist(), [False] * len(AXES)
+        period = self.period_s
         for k, i in enumerate(_POS):
-            moved = abs(ref[i] - self._last[k]) > _REF_STILL  # False on the first update (NaN)
-            if preview is not None:
-                moved = moved or not np.all(np.abs(preview[:, i] - ref[i]) <= _REF_STILL)
-            self._last[k] = ref[i]
-            inside = math.isfinite(e[k]) and abs(e[k]) < self.error_band[k]
-            at_rest = inside and abs(rate[k]) < self.speed_band[k] and not moved
-            if at_rest and self._rest_s[k] > 0.0:
-                lo = min(self._rest_lo[k], e[k])
-                hi = max(self._rest_hi[k], e[k])
+            error_band, speed_band, steady_band, release, hold, ki, kp, lim = law[k]
+            ek = e[k]
+            moved = abs(refs[i] - last[k]) > _REF_STILL or not still[k]  # first update: NaN
+            last[k] = refs[i]
+            inside = math.isfinite(ek) and abs(ek) < error_band
+            at_rest = inside and abs(rate[k]) < speed_band and not moved
+            if at_rest and rest_s[k] > 0.0:
+                lo = min(rest_lo[k], ek)
+                hi = max(rest_hi[k], ek)
                 # steady: the range within the band or a fifth of the error — a converging tail
                 # changes by (1 − e^(−hold/τ)) of itself, most of it for hold ≳ τ
-                if hi - lo <= max(self.steady_band[k], STEADY_FRACTION * abs(e[k])):
-                    self._rest_lo[k], self._rest_hi[k] = lo, hi
-                    self._rest_s[k] += self.period_s
+                if hi - lo <= max(steady_band, STEADY_FRACTION * abs(ek)):
+                    rest_lo[k], rest_hi[k] = lo, hi
+                    rest_s[k] += period
                 else:  # still converging by itself: the rest starts again from here
-                    self._rest_lo[k] = self._rest_hi[k] = e[k]
-                    self._rest_s[k] = self.period_s
+                    rest_lo[k] = rest_hi[k] = ek
+                    rest_s[k] = period
             elif at_rest:
-                self._rest_lo[k] = self._rest_hi[k] = e[k]
-                self._rest_s[k] = self.period_s
+                rest_lo[k] = rest_hi[k] = ek
+                rest_s[k] = period
             else:
-                self._rest_s[k] = 0.0
-            if not inside or moved or abs(rate[k]) > self.release_speed[k]:
-                self.latched[k] = False
-            elif self._rest_s[k] > self.hold_s[k]:
-                self.latched[k] = True
-            self.learning[k] = self.latched[k] and not frozen[k]
-            if self.learning[k]:
-                lim = self.max_shift[k]
-                integral = self._integral[k] - self.ki_per_s[k] * e[k] * self.period_s
-                self._integral[k] = min(max(integral, -lim), lim)
-                self.shift[k] = min(max(self._integral[k] - self.kp[k] * e[k], -lim), lim)
+                rest_s[k] = 0.0
+            if not inside or moved or abs(rate[k]) > release:
+                latched[k] = False
+            elif rest_s[k] > hold:
+                latched[k] = True
+            learning[k] = latched[k] and not frozen[k]
+            if learning[k]:
+                integral = integ[k] - ki * ek * period
+                integ[k] = min(max(integral, -lim), lim)
+                shift[k] = min(max(integ[k] - kp * ek, -lim), lim)
+        self.shift[:] = shift
+        self.learning[:] = learning
+        self.latched[:] = latched
         return self.shift
 
     def shifted(self, states: np.ndarray) -> np.ndarray:
         """Reference states (n, 7) with the shift added to x, y, z, ψ (a new array)."""
         out = np.array(states, dtype=float, copy=True)
-        for k, i in enumerate(_POS):
-            out[..., i] += self.shift[k]
+        out[..., _POS_LIST] += self.shift
         return out

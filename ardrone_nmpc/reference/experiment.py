@@ -31,6 +31,8 @@ class HoldStartThen:
 
     def state_at(self, t_s):
         t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        if t.size and t.min() > 0.0:  # all inside the experiment (NaN is not): nothing held
+            return self.inner.state_at(t)
         out = self.inner.state_at(np.maximum(t, 0.0))
         out[t < 0.0] = self._start
         return out

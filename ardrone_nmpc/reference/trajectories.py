@@ -273,6 +273,9 @@ class Waypoints:
         self.psi_rad = np.unwrap(psi)
         self._dt = np.diff(t)
         self._vel = np.diff(p, axis=0) / self._dt[:, None]  # (K-1, 3) segment velocities
+        # one layout for the compiled lookup (one specialisation)
+        self._kernel_args = tuple(np.ascontiguousarray(a) for a in
+                                  (t, p, self.psi_rad, self._dt, self._vel))
 
     @classmethod
     def from_file(cls, waypoints: WaypointFile) -> Waypoints:
@@ -286,25 +289,11 @@ class Waypoints:
         return float(self.t_s[-1])
 
     def state_at(self, t_s: np.ndarray) -> np.ndarray:
-        t = _times(t_s)
-        n_seg = self._dt.size
-        k = np.clip(np.searchsorted(self.t_s, t, side="right") - 1, 0, n_seg - 1)
-        inside = (t >= self.t_s[0]) & (t < self.t_s[-1])
-        frac = np.where(inside, (t - self.t_s[k]) / self._dt[k], 0.0)
-        after = t >= self.t_s[-1]
-        frac = np.where(after, 1.0, frac)
-        a = self.positions_m[k]
-        b = self.positions_m[k + 1]
-        pos = a + frac[:, None] * (b - a)
-        # exact corners (no rounding in a + 1·(b − a))
-        pos = np.where(after[:, None], b, pos)
-        vel = np.where(inside[:, None], self._vel[k], 0.0)
-        psi_a = self.psi_rad[k]
-        psi = np.where(after, self.psi_rad[k + 1], psi_a + frac * (self.psi_rad[k + 1] - psi_a))
-        out = _states(t.size)
-        out[:, list(_POS)] = pos
-        out[:, list(_VEL)] = vel
-        out[:, IX_PSI] = psi
+        from ardrone_nmpc.reference.kernels import waypoint_states  # numba: not at start-up
+
+        t = np.ascontiguousarray(_times(t_s))
+        out = np.empty((t.size, STATE_DIM))
+        waypoint_states(*self._kernel_args, t, out)
         return out
 
     def polyline_m(self) -> np.ndarray:

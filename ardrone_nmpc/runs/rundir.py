@@ -117,12 +117,16 @@ def _fast_line(cells: list, quotes: int) -> bytes | None:
 
     orjson prints floats as the shortest text that reads back to the same double (Ryu), so
     rows replay bit for bit. ``quotes``: how many ``"`` the string and empty cells account
-    for — any other count means a string sat in a numeric column. None when a cell needs
-    :meth:`RunRecorder._careful_line` (orjson writes NaN/±inf as ``null``, bools as
+    for — any other count means a string sat in a numeric column. NaN, ±inf and None, which
+    orjson writes as ``null``, are printed as text first (:func:`_print_non_finite`). None
+    when a cell needs :meth:`RunRecorder._careful_line` (orjson writes bools as
     ``true``/``false``; lists and dicts are refused there).
     """
     try:
         text = orjson.dumps(cells, default=_as_float)[1:-1]
+        if b"null" in text:  # NaN, ±inf or None (a lockstep row's nav_state_bits, every tick)
+            quotes += _print_non_finite(cells)
+            text = orjson.dumps(cells, default=_as_float)[1:-1]
     except TypeError:
         return None
     # plain `in` tests: ~5× cheaper than one regex with alternatives on a 600-byte row
@@ -130,6 +134,22 @@ def _fast_line(cells: list, quotes: int) -> bytes | None:
             or b"[" in text or b"{" in text):
         return None
     return text.replace(b'"', b"") + b"\n"
+
+
+def _print_non_finite(cells: list) -> int:
+    """Replace each NaN, ±inf and None cell of ``cells`` by its text as
+    :meth:`RunRecorder._careful_line` prints it (``nan``, ``inf``, ``-inf``; None is NaN);
+    returns the ``"`` those strings add."""
+    added = 0
+    for i, c in enumerate(cells):
+        if c is None:
+            cells[i] = "nan"
+        elif isinstance(c, (float, np.floating)) and not math.isfinite(c):
+            cells[i] = format_number(c)
+        else:
+            continue
+        added += 2
+    return added
 
 
 class LogError(UserError, ValueError):

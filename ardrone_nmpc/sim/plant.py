@@ -493,7 +493,7 @@ class AirframePlant:
         self._pending_s = max(0.0, pending - n * h)
         if n == 0:
             return
-        wind = tuple(float(w) for w in self.wind_mps)
+        wind = tuple(map(float, self.wind_mps))
         if self.params.turbulence_std_mps > 0.0:
             wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
         done = self._flying_substeps(n, h, wind) if self._mode is FlightMode.FLYING else 0

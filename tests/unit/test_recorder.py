@@ -219,14 +219,14 @@ def test_fast_row_text_reads_back_bit_exact_on_random_doubles():
     rng = np.random.default_rng(11)
     raw = rng.integers(np.iinfo(np.int64).min, np.iinfo(np.int64).max, 200_000,
                        dtype=np.int64, endpoint=True).view(np.float64)
-    raw = raw[np.isfinite(raw)]  # NaN/inf take the careful path (tested above)
+    raw = raw[np.isfinite(raw)]  # NaN/inf: printed as text (tested below)
     powers = [s * 10.0**e for e in range(-323, 309) for s in (1, -1, 3, 7)]
     twos = [2.0**e for e in range(-1074, 1024)]
     near = [np.nextafter(v, d) for v in twos + powers[::4] for d in (0.0, math.inf)]
     subnormal = np.arange(1, 5000, dtype=np.int64).view(np.float64)
     for values in (raw, powers, twos, near, subnormal, np.arange(-3000.0, 3000.0), [-0.0]):
         values = np.asarray(values, dtype=np.float64)
-        values = values[np.isfinite(values)]  # 7e308 overflows: inf takes the careful path
+        values = values[np.isfinite(values)]  # 7e308 overflows to inf (tested below)
         for chunk in np.array_split(values, max(1, values.size // 38)):
             line = _fast_line(list(chunk), 0)
             assert line is not None and line.endswith(b"\n")
@@ -234,9 +234,24 @@ def test_fast_row_text_reads_back_bit_exact_on_random_doubles():
             assert np.array_equal(back.view(np.int64), chunk.view(np.int64))
 
 
-def test_fast_row_defers_non_finite_and_bools_to_the_careful_path():
-    assert _fast_line([1.0, math.nan], 0) is None
-    assert _fast_line([math.inf, 2.0], 0) is None
+def test_fast_row_prints_non_finite_cells_as_the_careful_path():
+    """orjson writes NaN, ±inf and None as ``null``: the fast row prints them as
+    ``format_number`` does (None is NaN), numpy scalars too, and still refuses a string in a
+    numeric cell beside them."""
+    assert _fast_line([1.0, math.nan], 0) == b"1.0,nan\n"
+    assert _fast_line([math.inf, 2.0, -math.inf], 0) == b"inf,2.0,-inf\n"
+    assert _fast_line([None, np.float32("nan"), np.float64("-inf"), "", 0.5], 2) == (
+        b"nan,nan,-inf,,0.5\n")
+    assert _fast_line([math.nan, "abc"], 0) is None
+    for cells in ([math.nan, 1e-05, -0.0], [None, 3.0], [np.float64(math.inf)]):
+        line = _fast_line(list(cells), 0)
+        back = [float(c) for c in line[:-1].split(b",")]
+        assert np.array_equal(np.array(back, dtype=np.float64),
+                              np.array([math.nan if c is None else c for c in cells],
+                                       dtype=np.float64), equal_nan=True)
+
+
+def test_fast_row_defers_bools_and_containers_to_the_careful_path():
     assert _fast_line([True, 2.0], 0) is None
     assert _fast_line([[1.0], 2.0], 0) is None
     assert _fast_line(["abc", 2.0], 0) is None  # a string where a number belongs

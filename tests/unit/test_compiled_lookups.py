@@ -1,0 +1,90 @@
+"""The compiled per-tick lookups give the bits of the numpy expressions they replace (issue 26):
+the waypoint reference (``reference/kernels``) and the attitude-response fit's fold
+(``estimation/response_kernels``), each against the vectorised numpy formula written from its
+documented definition (``searchsorted``, broadcasting), at ordinary times, on the knots, next
+to them, and at NaN and ±inf."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_exponents
+from ardrone_nmpc.reference.trajectories import Square, Waypoints
+
+
+def _numpy_waypoints(t_knots, p, psi, t):
+    """Linear interpolation between timed waypoints, the first held before, the last after."""
+    dt = np.diff(t_knots)
+    vel = np.diff(p, axis=0) / dt[:, None]
+    k = np.clip(np.searchsorted(t_knots, t, side="right") - 1, 0, dt.size - 1)
+    inside = (t >= t_knots[0]) & (t < t_knots[-1])
+    after = t >= t_knots[-1]
+    frac = np.where(after, 1.0, np.where(inside, (t - t_knots[k]) / dt[k], 0.0))
+    pos = np.where(after[:, None], p[k + 1], p[k] + frac[:, None] * (p[k + 1] - p[k]))
+    out = np.zeros((t.size, 7))
+    out[:, [IX_X, IX_Y, IX_Z]] = pos
+    out[:, [IX_VX, IX_VY, IX_VZ]] = np.where(inside[:, None], vel[k], 0.0)
+    out[:, IX_PSI] = np.where(after, psi[k + 1], psi[k] + frac * (psi[k + 1] - psi[k]))
+    return out
+
+
+def _trajectories():
+    rng = np.random.default_rng(7)
+    return [Square([0.0, 0.0, 1.0]), Square([-0.3, 0.7, 1.2], 1.3, 4.1, 2.0),
+            Waypoints([0.0, 0.3, 1.1, 2.0, 7.0], rng.normal(size=(5, 3)), rng.normal(size=5)),
+            Waypoints([-1.0, 2.0], np.array([[-0.0, 0.0, -0.0], [0.0, -0.0, 0.0]]), [0.0, -0.0])]
+
+
+@pytest.mark.parametrize("traj", _trajectories())
+def test_waypoint_lookup_is_the_numpy_interpolation_bit_for_bit(traj):
+    rng = np.random.default_rng(1)
+    knots = traj.t_s
+    for t in (rng.uniform(-3.0, 25.0, 3000), knots.copy(), np.nextafter(knots, np.inf),
+              np.nextafter(knots, -np.inf), np.array([np.nan, np.inf, -np.inf, -0.0, 0.0])):
+        expected = _numpy_waypoints(knots, traj.positions_m, traj.psi_rad, t)
+        assert traj.state_at(t).tobytes() == expected.tobytes()
+
+
+def test_waypoint_lookup_takes_a_scalar_and_any_layout():
+    traj = Square([0.0, 0.0, 1.0])
+    assert traj.state_at(7.5).shape == (1, 7)
+    t = np.linspace(0.0, 20.0, 40)
+    assert traj.state_at(t[::2]).tobytes() == traj.state_at(t[::2].copy()).tobytes()
+    np.testing.assert_array_equal(traj.state_at(7.5)[0, [IX_X, IX_Y]], [1.0, 0.5])
+
+
+def test_lag_exponents_and_fold_are_the_numpy_broadcast_bit_for_bit():
+    rng = np.random.default_rng(3)
+    n, cap = 40, 64
+    times = np.zeros(cap)
+    times[:n] = np.cumsum(rng.uniform(0.02, 0.1, n))
+    u, ylag = rng.normal(size=(cap, 2)), rng.normal(size=(cap, 6, 2))
+    delays, lags = np.arange(0.0, 0.605, 0.01), np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
+    sums = [rng.normal(size=(delays.size, lags.size, 2)) for _ in range(3)]
+    for t_s, forget in ((float(times[n - 1]) + 0.013, 0.97), (float(times[n - 1]), 1.0)):
+        j = np.zeros(delays.size, dtype=np.int64)
+        arg = np.zeros((delays.size, lags.size))
+        lag_exponents(times, n, t_s, delays, lags, j, arg)
+        at = t_s - delays
+        j_np = np.searchsorted(times[:n], at, side="right") - 1
+        assert np.array_equal(j, j_np)
+        assert arg.tobytes() == (-(at - times[j_np])[:, None] / lags).tobytes()
+
+        y = rng.normal(size=2)
+        decay = np.exp(arg)
+        x = np.zeros_like(sums[0])
+        expected = [s.copy() for s in sums]
+        fold_sample(u, ylag, j, decay, y, forget, x, *sums)
+        uj = u[j_np][:, None, :]
+        x_np = uj + (ylag[j_np] - uj) * decay[:, :, None]
+        if forget != 1.0:
+            for s in expected:
+                s *= forget
+        expected[0] += x_np
+        expected[1] += x_np * x_np
+        expected[2] += x_np * y
+        assert x.tobytes() == x_np.tobytes()
+        for got, want in zip(sums, expected):
+            assert got.tobytes() == want.tobytes()
