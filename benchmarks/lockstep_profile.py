@@ -19,7 +19,7 @@ The wrappers add ~0.3 µs per wrapped call; the total is measured without them t
 step_x|square]`` flies the same 24 configs (step_x, 20 s: horizon 10/15/20 × Δτ 0.08/0.1 ×
 four r; ``square``: issue 26's 24 × 60 s squares, seeds 0–23) the sweep's way (run
 directories, ``experiments/sweep`` ``iter_local``) and ``tune``'s way (in-memory recorder,
-``experiments/tune/engine.PoolEngine``), alternating, and prints simulated seconds per wall
+``experiments/parallel``'s pool), alternating, and prints simulated seconds per wall
 second of each: the ratio holds on a loaded machine, the absolute figures do not.
 
 ``python benchmarks/lockstep_profile.py cpu --way sweep|tune [--rounds 3] [--flights …]``
@@ -32,7 +32,6 @@ directory first on ``sys.path``) to compare commits.
 from __future__ import annotations
 
 import argparse
-import functools
 import itertools
 import tempfile
 import time
@@ -144,22 +143,28 @@ def _sweep_way(cfgs, jobs: int) -> float:
     return wall
 
 
+def _values(done) -> list:
+    """The values of finished cases (``experiments.parallel.Done``); an error is raised."""
+    out = []
+    for d in done:
+        if d.error is not None:
+            raise d.error
+        out.append(d.value)
+    return out
+
+
 def _tune_way(cfgs, jobs: int) -> float:
     from ardrone_nmpc.config.io import config_to_dict
-    from ardrone_nmpc.experiments.tune.engine import PoolEngine, Scenario, TrialSpec
+    from ardrone_nmpc.experiments.parallel import open_executor
+    from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
     from ardrone_nmpc.experiments.tune.objective import parse_objective
 
     obj = parse_objective(None)
     specs = [TrialSpec(i, {}, config_to_dict(c), {}, (Scenario("seed0", 0),), obj)
              for i, c in enumerate(cfgs)]
     t0 = time.perf_counter()
-    engine = PoolEngine(jobs)
-    try:
-        for s in specs:
-            engine.submit(s)
-        results = [engine.next_result() for _ in specs]
-    finally:
-        engine.close()
+    with open_executor("local", jobs=jobs) as executor:  # tune's executor
+        results = _values(executor.map(run_trial, specs, key=id))
     wall = time.perf_counter() - t0
     assert all(r.status != "failed" for r in results), [r.message for r in results]
     return wall
@@ -168,12 +173,9 @@ def _tune_way(cfgs, jobs: int) -> float:
 def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
     """Walls of the per-flight work alone: one warm pool runs the sweep's ``run_case`` and
     tune's ``run_trial`` on the same configs, alternating."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from ardrone_nmpc.config.io import config_to_dict
+    from ardrone_nmpc.experiments.parallel import open_executor
     from ardrone_nmpc.experiments.sweep import Case, case_id, run_case
-    from ardrone_nmpc.experiments.sweep.engines import (_init_worker, _pool_context,
-                                                        _start_forkserver)
     from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
     from ardrone_nmpc.experiments.tune.objective import parse_objective
 
@@ -182,25 +184,17 @@ def _warm_pool(cfgs, jobs: int, rounds: int) -> dict:
     obj = parse_objective(None)
     specs = [TrialSpec(i, {}, config_to_dict(c), {}, (Scenario("seed0", 0),), obj)
              for i, c in enumerate(cfgs)]
-    ctx = _pool_context()
-    warm = _start_forkserver(ctx)
-    alive_r, alive_w = ctx.Pipe(duplex=False)  # the sweep's worker watch
     walls = defaultdict(list)
-    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
-                             initargs=(alive_r,)) as pool:
-        list(pool.map(run_trial, specs[:jobs]))  # every worker started and warm
+    with open_executor("local", jobs=jobs) as executor:
+        _values(executor.map(run_trial, specs[:jobs], key=id))  # every worker started and warm
         for _ in range(rounds):
             with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()
-                list(pool.map(functools.partial(run_case, out_dir=tmp), cases))
+                _values(executor.map(run_case, cases, key=id, out_dir=tmp))
                 walls["sweep run_case (run dirs)"].append(time.perf_counter() - t0)
             t0 = time.perf_counter()
-            list(pool.map(run_trial, specs))
+            _values(executor.map(run_trial, specs, key=id))
             walls["tune run_trial (memory)"].append(time.perf_counter() - t0)
-    if warm is not None:
-        warm.join()
-    alive_r.close()
-    alive_w.close()
     return walls
 
 
