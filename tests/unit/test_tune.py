@@ -258,6 +258,38 @@ def test_second_order_overshoot_meets_its_closed_form(step_z):
     assert 0.5 * envelope_s < m["settling_s"] <= envelope_s
 
 
+def _first_order(tau_s):
+    return lambda t: np.where(t < 1.0, 0.3, 1.0 - 0.7 * np.exp(-(t - 1.0) / tau_s))
+
+
+def _second_order(zeta, wn):
+    wd = wn * math.sqrt(1 - zeta ** 2)
+
+    def z(t):
+        s = np.maximum(t - 1.0, 0.0)
+        return 1.0 - 0.7 * np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta * wn / wd * np.sin(wd * s))
+    return z
+
+
+@pytest.mark.parametrize("preset", ["default", "step"])
+def test_the_objective_ranks_a_slow_or_overshooting_step_below_a_fast_clean_one(step_z, preset):
+    """What a step's user asks for (settled within 3 s, overshoot ≤ 5 %) scores best: a fast
+    first-order climb (settles in 1.2 s) beats a slow one (5.9 s) and a ringing one (ζ 0.3:
+    37 % overshoot) with the same effort, and a critically damped climb (ζ 0.9, 0.2 %
+    overshoot) beats a faster one that overshoots 16 %."""
+    obj = parse_objective(preset)
+
+    def score(z):
+        return obj.score(scenario_metrics(*_synthetic_step(step_z, z)))
+
+    good = score(_first_order(0.3))
+    assert good < score(_first_order(1.5))
+    assert good < score(_second_order(0.3, 4.0))
+    assert score(_second_order(0.9, 4.0)) < score(_second_order(0.5, 6.0))
+    # and a trial is ranked by its scenarios: one slow seed costs it the lead
+    assert obj.combine([good, good]) < obj.combine([good, score(_first_order(1.5))])
+
+
 def test_score_is_the_weighted_sum_and_never_settling_counts_the_window(step_z):
     run, rows = _synthetic_step(step_z, lambda t: np.where(t < 1.0, 0.3, 0.8))  # stalls short
     m = scenario_metrics(run, rows)
