@@ -73,10 +73,8 @@ def main() -> None:
         done = sum(int(f[("run", "completed")]) for f in flights)
         ref = cfg.reference
         if ref.kind == "step":
-            axes = [a for a, y0, yf in zip(("x", "y", "z", "psi"), (*ref.start_m, ref.start_psi_rad),
-                                           (*ref.target_m, ref.target_psi_rad)) if y0 != yf]
             cells = []
-            for axis in axes:
+            for axis in ref.stepped_axes:
                 settle = [f[(axis, "settling_time")] for f in flights]
                 over = [f[(axis, "overshoot")] for f in flights]
                 cells.append(f"{axis} settling {_stat(settle, 's')}; overshoot {_stat(over, '%', 1)}")

@@ -26,12 +26,6 @@ SETTLE_MAX_S = 3.0
 OVERSHOOT_MAX_PCT = 5.0
 
 
-def _stepped_axis(cfg) -> str:
-    ref = cfg.reference
-    return next(a for a, y0, yf in zip(("x", "y", "z", "psi"), (*ref.start_m, ref.start_psi_rad),
-                                       (*ref.target_m, ref.target_psi_rad)) if y0 != yf)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("config", nargs="?", default="configs/step_z.yaml")
@@ -56,7 +50,7 @@ def main() -> None:
                             str(k), "-o", str(out)], check=True, stdout=subprocess.DEVNULL)
             wall_s = time.perf_counter() - t0
         cfg = _load(str(out / "best.yaml"), [], None)
-        axis = _stepped_axis(cfg)
+        axis = cfg.reference.stepped_axes[0]
         flights = [_flight(cfg, s) for s in held_out]
         settle = max(f[(axis, "settling_time")] for f in flights)   # NaN: never settled
         over = max(f[(axis, "overshoot")] for f in flights)

@@ -209,6 +209,16 @@ class ReferenceConfig(Section):
         "checked by `check` and before a run starts (reference/waypoints.py: at most 10 000 "
         "waypoints, coordinates within ±1000 m).")
 
+    @property
+    def stepped_axes(self) -> tuple[str, ...]:
+        """A step's axes (``x``, ``y``, ``z``, ``psi``) whose target differs from their start;
+        none for other kinds."""
+        if self.kind != "step":
+            return ()
+        return tuple(a for a, y0, yf in zip(("x", "y", "z", "psi"),
+                                            (*self.start_m, self.start_psi_rad),
+                                            (*self.target_m, self.target_psi_rad)) if y0 != yf)
+
     @field_validator("path_file")
     @classmethod
     def _path_file_for_paths(cls, value: Optional[str], info: ValidationInfo) -> Optional[str]:

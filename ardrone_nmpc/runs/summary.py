@@ -154,7 +154,7 @@ def _step_rows(r: _Run) -> list[SummaryRow]:
     starts = (*ref.start_m, ref.start_psi_rad)
     targets = (*ref.target_m, ref.target_psi_rad)
     for (axis, _, _, _, unit), y0, yf in zip(_AXES, starts, targets):
-        if y0 == yf:
+        if axis not in ref.stepped_axes:
             continue
         y = r.pos[axis][r.window]
         if axis == "psi":  # compare with the target the short way round

@@ -30,15 +30,41 @@ def step_z():
 # ----------------------------------------------------------------------------- space
 
 
-def test_default_space_is_q_and_r_log_uniform_a_decade_each_way(step_z):
-    space = default_space(step_z)
+def test_default_space_is_q_and_r_log_uniform_a_decade_each_way():
+    square = load_config(CONFIGS / "square.yaml")
+    space = default_space(square)
     assert list(space) == [f"controller.q[{i}]" for i in range(7)] + \
         [f"controller.r[{i}]" for i in range(4)]
     for name, p in space.items():
         vec, i = name[len("controller."):-3], int(name[-2])
-        base = getattr(step_z.controller, vec)[i]
+        base = getattr(square.controller, vec)[i]
         assert (p.low, p.high, p.log, p.kind, p.base) == pytest.approx(
             (base / 10, base * 10, True, "float", base))
+
+
+@pytest.mark.parametrize("sets, expected", [
+    ([], ["q[4]", "q[5]", "r[0]"]),                                  # z: ż weight and z̈ input
+    (["reference.start_m=[0,0,1]", "reference.target_m=[1,0,1]"], ["q[0]", "q[1]", "r[2]"]),
+    (["reference.start_m=[0,0,1]", "reference.target_m=[0,1,1]"], ["q[2]", "q[3]", "r[1]"]),
+    (["reference.start_m=[0,0,1]", "reference.target_m=[0,0,1]",
+      "reference.target_psi_rad=1"], ["q[6]", "r[3]"]),
+    (["reference.target_m=[1,0,1]"], ["q[0]", "q[1]", "q[4]", "q[5]", "r[0]", "r[2]"]),
+])
+def test_a_steps_default_space_is_its_stepped_axes_weights(sets, expected):
+    cfg = load_config(CONFIGS / "step_z.yaml", sets)
+    space = default_space(cfg)
+    assert list(space) == [f"controller.{w}" for w in expected]
+    for name, p in space.items():  # the same decade each way as the full space
+        vec, i = name[len("controller."):-3], int(name[-2])
+        assert (p.low, p.high) == pytest.approx((getattr(cfg.controller, vec)[i] / 10,
+                                                 getattr(cfg.controller, vec)[i] * 10))
+
+
+def test_the_full_space_of_a_step_is_one_space_file_away(step_z):
+    space = parse_space({"params": {"controller.q": {"factor": 10},
+                                    "controller.r": {"factor": 10}}}, step_z)
+    assert sorted(space) == sorted([f"controller.q[{i}]" for i in range(7)]
+                                   + [f"controller.r[{i}]" for i in range(4)])
 
 
 def test_a_zero_state_weight_is_not_searched():
@@ -59,7 +85,8 @@ def test_a_space_file_adds_ranges_factors_vectors_and_overrides_elements(step_z)
             "controller.delay_compensation_s": {"low": 0.1, "high": 0.35},
             "controller.q[4]": {"low": 10, "high": 500, "log": True},
         }}, step_z)
-    assert space["controller.q[0]"].low == pytest.approx(step_z.controller.q[0] / 4)  # ×1/4…×4
+    assert space["controller.q[5]"].low == pytest.approx(step_z.controller.q[5] / 4)  # ×1/4…×4
+    assert "controller.q[0]" not in space  # a z step: x's weight keeps the config's value
     assert space["controller.q[4]"].low == 10 and space["controller.q[4]"].high == 500
     hs = space["controller.horizon_steps"]
     assert (hs.kind, hs.log, hs.low, hs.high, hs.base) == ("int", False, 8, 30, 15)
@@ -229,6 +256,38 @@ def test_second_order_overshoot_meets_its_closed_form(step_z):
     # settled once the envelope 0.7·e^(−ζωn s)/√(1−ζ²) is inside the band, at the latest
     envelope_s = math.log(50.0 / math.sqrt(1 - zeta ** 2)) / (zeta * wn)
     assert 0.5 * envelope_s < m["settling_s"] <= envelope_s
+
+
+def _first_order(tau_s):
+    return lambda t: np.where(t < 1.0, 0.3, 1.0 - 0.7 * np.exp(-(t - 1.0) / tau_s))
+
+
+def _second_order(zeta, wn):
+    wd = wn * math.sqrt(1 - zeta ** 2)
+
+    def z(t):
+        s = np.maximum(t - 1.0, 0.0)
+        return 1.0 - 0.7 * np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta * wn / wd * np.sin(wd * s))
+    return z
+
+
+@pytest.mark.parametrize("preset", ["default", "step"])
+def test_the_objective_ranks_a_slow_or_overshooting_step_below_a_fast_clean_one(step_z, preset):
+    """What a step's user asks for (settled within 3 s, overshoot ≤ 5 %) scores best: a fast
+    first-order climb (settles in 1.2 s) beats a slow one (5.9 s) and a ringing one (ζ 0.3:
+    37 % overshoot) with the same effort, and a critically damped climb (ζ 0.9, 0.2 %
+    overshoot) beats a faster one that overshoots 16 %."""
+    obj = parse_objective(preset)
+
+    def score(z):
+        return obj.score(scenario_metrics(*_synthetic_step(step_z, z)))
+
+    good = score(_first_order(0.3))
+    assert good < score(_first_order(1.5))
+    assert good < score(_second_order(0.3, 4.0))
+    assert score(_second_order(0.9, 4.0)) < score(_second_order(0.5, 6.0))
+    # and a trial is ranked by its scenarios: one slow seed costs it the lead
+    assert obj.combine([good, good]) < obj.combine([good, score(_first_order(1.5))])
 
 
 def test_score_is_the_weighted_sum_and_never_settling_counts_the_window(step_z):

@@ -2,8 +2,11 @@
 
 Default space: each weight of ``controller.q`` (7) and ``controller.r`` (4), log-uniform
 within ×0.1…×10 of the config's value (a zero state weight stays zero: there is nothing to
-scale). Parameter names are dotted config paths, ``[i]`` for an element of a vector:
-``controller.q[4]``.
+scale). For a step only the weights that shape the stepped axes' response are searched
+(:data:`STEP_WEIGHTS`: the axis' position and velocity weights and the input that moves it);
+the others keep the config's values — 40 trials in 3 dimensions find what 40 in 11 miss
+(docs/tuning.md §4). Parameter names are dotted config paths, ``[i]`` for an element of a
+vector: ``controller.q[4]``.
 
 A space file (YAML) replaces or extends it::
 
@@ -37,8 +40,8 @@ from typing import Any
 from ardrone_nmpc.config.io import config_to_dict
 from ardrone_nmpc.config.schema import ConfigError
 
-__all__ = ["DEFAULT_FACTOR", "Param", "apply_params", "config_with", "default_space",
-           "load_space", "parse_space", "written_config"]
+__all__ = ["DEFAULT_FACTOR", "STEP_WEIGHTS", "Param", "apply_params", "config_with",
+           "default_space", "load_space", "parse_space", "written_config"]
 
 DEFAULT_FACTOR = 10.0
 _NAME = re.compile(r"^(?P<path>[A-Za-z_][A-Za-z0-9_.]*?)(?:\[(?P<index>\d+)\])?$")
@@ -101,16 +104,27 @@ def _checked(p: Param) -> Param:
     return p
 
 
+#: Per axis, the weights (of ``controller``) that shape its step response: its position and
+#: velocity state weights, q = [x, ẋ, y, ẏ, z, ż, ψ], and the input that moves it, r = [z̈, φ,
+#: θ, ψ̇] (θ tilts towards x, φ towards y).
+STEP_WEIGHTS: dict[str, tuple[str, ...]] = {
+    "x": ("q[0]", "q[1]", "r[2]"), "y": ("q[2]", "q[3]", "r[1]"),
+    "z": ("q[4]", "q[5]", "r[0]"), "psi": ("q[6]", "r[3]")}
+
+
 def _around(name: str, base: float, factor: float, kind: str = "float") -> Param:
     return _checked(Param(name, base / factor, base * factor, True, kind, base))
 
 
 def default_space(cfg, *, factor: float = DEFAULT_FACTOR) -> dict[str, Param]:
-    """q (7) and r (4) log-uniform within ×1/factor…×factor of ``cfg``'s values."""
+    """q (7) and r (4) log-uniform within ×1/factor…×factor of ``cfg``'s values; for a step,
+    only the stepped axes' :data:`STEP_WEIGHTS`."""
+    axes = cfg.reference.stepped_axes
+    wanted = {w for a in axes for w in STEP_WEIGHTS[a]}
     space = {}
     for vec in ("q", "r"):
         for i, v in enumerate(getattr(cfg.controller, vec)):
-            if v > 0:
+            if v > 0 and (not axes or f"{vec}[{i}]" in wanted):
                 name = f"controller.{vec}[{i}]"
                 space[name] = _around(name, float(v), factor)
     return space
