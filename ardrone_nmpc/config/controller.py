@@ -145,8 +145,8 @@ class AdaptationConfig(Section):
     tilt per unit command (``delay_compensation_s: auto``, ``attitude_gain: auto``;
     docs/solver-notes.md §10). Every navdata sample updates the estimate (the last
     ``window_s`` of PCMD and navdata weigh most); every ``refit_s`` it is read, and each of
-    the delay and the gain is used once confident (delay σ ≤ 20 ms with R² ≥ 0.2; gain σ ≤
-    10 % with R² ≥ 0.3), clipped to the bounds."""
+    the delay and the gain is used once confident (delay σ ≤ 20 ms with R² ≥ 0.2 and no rival
+    delay a tick away; gain σ ≤ 10 % with R² ≥ 0.3), clipped to the bounds."""
 
     delay_prior_s: NonNegative = Field(
         0.26, le=2.0, description="Delay (s) compensated until the flight's estimate is "

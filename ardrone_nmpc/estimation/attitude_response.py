@@ -35,8 +35,9 @@ import numpy as np
 
 from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_exponents
 
-__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_R2",
-           "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2", "NO_ESTIMATE",
+__all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
+           "CONFIDENT_DELAY_R2", "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2",
+           "NO_ESTIMATE",
            "fit_attitude_response"]
 
 DELAY_STEP_S = 0.01
@@ -50,6 +51,14 @@ REFRESH_SAMPLES = 15
 #: first: its timing is in the shape of the response, the gain in its size against the noise.
 CONFIDENT_DELAY_STD_S = 0.02
 CONFIDENT_DELAY_R2 = 0.2
+#: ... and no delay a control tick (65 ms) or more from it explains the attitude nearly as
+#: well at the same lag: its residual is at least CONFIDENT_DELAY_CONTRAST σ² (inflated) above
+#: the best's. The parabola's σ sees only the best dip of the residual; with little excitation
+#: (a take-off's first seconds) the commands, held a whole tick, fit almost as well one or more
+#: ticks off, and a confident 0.10 s was locked in for a 0.26 s drone (docs/identification.md
+#: §3). A single dip with σ ≤ 20 ms rises by (65/20)² ≈ 10.6 σ² at a tick: it passes.
+DELAY_RIVAL_SEPARATION_S = 0.065
+CONFIDENT_DELAY_CONTRAST = 9.0
 CONFIDENT_GAIN_REL_STD = 0.1
 CONFIDENT_R2 = 0.3
 
@@ -67,6 +76,10 @@ class AttitudeEstimate:
     lag_s: float
     r2: float
     samples: float
+    #: How much worse the best delay DELAY_RIVAL_SEPARATION_S or more away fits (at the same
+    #: lag): the rise of the residual over σ², inflated like every σ (a χ², one degree of
+    #: freedom).
+    delay_contrast: float = math.inf
 
     @property
     def gain_mean(self) -> float:
@@ -85,9 +98,11 @@ class AttitudeEstimate:
 
     @property
     def delay_confident(self) -> bool:
-        """Delay σ ≤ 20 ms, R² ≥ 0.2."""
+        """Delay σ ≤ 20 ms, R² ≥ 0.2, and no rival delay a tick (65 ms) or more away within
+        a contrast of 9 (3 σ)."""
         return (math.isfinite(self.delay_std_s) and self.delay_std_s <= CONFIDENT_DELAY_STD_S
-                and self.r2 >= CONFIDENT_DELAY_R2)
+                and self.r2 >= CONFIDENT_DELAY_R2
+                and self.delay_contrast >= CONFIDENT_DELAY_CONTRAST)
 
     @property
     def gain_confident(self) -> bool:
@@ -102,7 +117,7 @@ class AttitudeEstimate:
 
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
-                               math.nan, math.nan, 0.0)
+                               math.nan, math.nan, 0.0, 0.0)
 
 
 def _microseconds(t_s: float) -> float:
@@ -252,7 +267,17 @@ class AttitudeResponseEstimator:
         return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
                                 (gains[0], gains[1]), (gain_std[0], gain_std[1]),
                                 float(self.lags_s[l]),
-                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n))
+                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
+                                self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
+
+    def _contrast(self, curve: np.ndarray, k: int, sigma2: float) -> float:
+        """(least RSS along ``curve`` — the residual over the delays at the best lag — at
+        DELAY_RIVAL_SEPARATION_S or more from grid point ``k``) − its RSS at ``k``, over
+        ``sigma2``; ∞ when the grid holds no such delay."""
+        away = np.abs(self.delays_s - self.delays_s[k]) >= DELAY_RIVAL_SEPARATION_S - 1e-9
+        if not away.any() or not sigma2 > 0.0:
+            return math.inf
+        return float(curve[away].min() - curve[k]) / sigma2
 
     def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
         """The delay from a parabola through the residual at grid point ``k`` and its

@@ -357,7 +357,8 @@ class ResponseEstimation:
         if not math.isfinite(e.delay_s):
             return []
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
-                   "delay_std_s": e.delay_std_s, "gain": e.gain_mean,
+                   "delay_std_s": e.delay_std_s, "delay_contrast": e.delay_contrast,
+                   "gain": e.gain_mean,
                    "gain_std": e.gain_mean_std, "lag_s": e.lag_s, "r2": e.r2,
                    "delay_confident": e.delay_confident,
                    "gain_confident": e.gain_confident}]
