@@ -29,7 +29,10 @@ REPROJECTION_FRACTION = 0.5
 REPROJECTION_RTOL = 0.1
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+# The ticks are inlined into their entry points (numba IR), not compiled as functions of their
+# own: every compiled function re-optimises and re-emits the machine code of all it calls, so a
+# level less is ~2 CPU s less of the cold start (docs/benchmarks.md "Cold start").
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
 def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=None):
     """One C/GMRES control tick (Ohtsuka 2004); ``U``, ``dU``, ``u_out``, ``stats`` are written.
 
@@ -154,7 +157,7 @@ def newton_step_obstacles(mem, x, ref, iprm, active):
     return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
 def newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats, obs=None):
     """One tick of the thesis' method (m = 8): Newton/fdgmres to tolerance, then eq. 3.25.
 
