@@ -122,10 +122,11 @@ def test_a_sample_seen_again_or_before_the_commands_reach_back_is_ignored():
 def test_a_take_off_s_few_weak_samples_never_lock_a_delay_a_tick_or_more_wrong():
     # 2–3 s of navdata from small commands (a take-off's first fit): the residual's dip at
     # the true delay is barely deeper than those a tick or more off. The parabola's σ alone
-    # called 21 of these 400 fits confident with the delay more than a tick wrong (a step_z
-    # flight locked 0.10 s for a 0.26 s drone); the rival-delay contrast leaves at most 1.
+    # called 9 of these 200 fits confident with the delay more than a tick wrong (a step_z
+    # flight locked 0.10 s for a 0.26 s drone); with the rival-delay contrast none is here (one
+    # allowed: numpy's exp may differ in the last bit on another CPU, and a fit sit on the edge).
     wrong = []
-    for seed in range(200):
+    for seed in range(100):
         for seconds, amplitude in ((3.0, 0.03), (4.0, 0.02)):
             est = fit_attitude_response(
                 *_flight(delay_s=0.26, gains=(1.0, 1.0), lag_s=0.1, amplitude=amplitude,
