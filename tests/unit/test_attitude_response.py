@@ -124,7 +124,7 @@ def test_a_take_off_s_few_weak_samples_never_lock_a_delay_a_tick_or_more_wrong()
     # the true delay is barely deeper than those a tick or more off. The parabola's σ alone
     # called 9 of these 200 fits confident with the delay more than a tick wrong (a step_z
     # flight locked 0.10 s for a 0.26 s drone); with the rival-delay contrast none is here (one
-    # allowed: numpy's exp may differ in the last bit on another CPU, and a fit sit on the edge).
+    # allowed: numpy's exp may differ in the last bit on another CPU, and a fit sits on the edge).
     wrong = []
     for seed in range(100):
         for seconds, amplitude in ((3.0, 0.03), (4.0, 0.02)):
