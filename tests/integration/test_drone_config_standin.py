@@ -48,6 +48,14 @@ def ctrl4_args(drone: SdkDrone, since_t: float) -> list:
     return [args for _, _, args, _ in drone.commands("CTRL", since_t) if args[0] == 4]
 
 
+def read_timed(link: DroneLink, timeout_s: float) -> tuple[dict, int]:
+    """``read_config`` and how many ``CTRL 4`` it may send: the first, then one re-send per
+    0.5 s (``_CONFIG_GET_RESEND_S``) while no byte of the dump has come."""
+    t0 = time.monotonic()
+    held = link.read_config(timeout_s=timeout_s)
+    return held, 1 + int((time.monotonic() - t0) / 0.5)
+
+
 class NetworkDown:
     """The link's AT socket once the network is down: every ``sendto`` fails with
     ENETUNREACH — after the first ``lost`` ``CTRL 4`` datagrams went out (and were lost)."""
@@ -211,15 +219,16 @@ def test_a_byte_outside_ascii_in_the_dump_is_replaced_not_fatal():
 
 
 def test_a_dump_in_many_pieces_is_asked_for_once():
-    """``AT*CTRL=seq,4,0`` once: it is re-sent only while nothing of the dump has come (a
-    second one would start a second dump), and 1 s is time enough on loopback."""
+    """``AT*CTRL=seq,4,0``, re-sent only while nothing of the dump has come (a re-send per
+    piece would start a dump per piece), and 1 s is time enough on loopback."""
     with SdkDrone() as drone, link_to(drone) as link:
         for i in range(400):                         # ~16 kB: many TCP reads
             drone.config[f"custom:filler_{i:03d}"] = "x" * 16
         link.connect(timeout_s=5.0)
         t0 = time.monotonic()
-        held = link.read_config(timeout_s=1.0)
-        assert ctrl4_args(drone, t0) == [[4, 0]]
+        held, most = read_timed(link, 1.0)
+        sent = ctrl4_args(drone, t0)
+        assert sent[0] == [4, 0] and len(sent) <= most
     assert held["custom:filler_399"] == "x" * 16 and held["control:control_vz_max"] == "700"
 
 
@@ -228,8 +237,9 @@ def test_a_lost_dump_request_is_sent_again_the_same():
         link.connect(timeout_s=5.0)
         lose_ctrl4(drone, 1)
         t0 = time.monotonic()
-        held = link.read_config(timeout_s=3.0)
-        assert ctrl4_args(drone, t0) == [[4, 0], [4, 0]]
+        held, most = read_timed(link, 3.0)
+        sent = ctrl4_args(drone, t0)
+        assert sent[:2] == [[4, 0], [4, 0]] and len(sent) <= most
     assert held["control:euler_angle_max"] == "0.2094"
 
 
@@ -337,3 +347,26 @@ def test_the_altitude_limit_is_whole_millimetres_at_least_one():
         lose_every_config(drone)
         with pytest.raises(LinkError, match=r"not set within 0\.30 s"):
             link.configure_limits(0.2, 0.7, 1.75, 3.0, timeout_s=0.3)
+
+
+def test_a_lost_config_is_re_sent_every_config_resend_s_and_no_more_often():
+    """UDP may lose ``AT*CONFIG``: re-sent every ``config_resend_s`` (0.3 s) until the ACK —
+    at most 1 + 1.0/0.3 times in a 1 s wait, not on every navdata packet (15 Hz)."""
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        lose_every_config(drone)
+        t0 = time.monotonic()
+        with pytest.raises(LinkError, match="no ACK"):
+            link.write_config("control:flying_mode", 0, timeout_s=1.0)
+        sent = drone.commands("CONFIG", t0)
+    assert 2 <= len(sent) <= 4
+
+
+def test_a_drone_gone_silent_fails_a_config_write_in_its_time():
+    """No navdata at all (a Wi-Fi blackout): the wait for the ACK ends at its timeout, it
+    does not wait for a packet that never comes."""
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        drone.blackout(20.0)
+        with pytest.raises(LinkError, match=r"not set within 0\.50 s"):
+            link.write_config("control:flying_mode", 0, timeout_s=0.5)
