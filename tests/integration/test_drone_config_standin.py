@@ -286,11 +286,13 @@ def test_the_tilt_limit_takes_30_degrees_itself_and_each_key_its_time():
             link.configure_limits(0.2, 0.7, 1.75, 3.0)
 
 
-def serve_once(listener: socket.socket, answer) -> threading.Thread:
-    """Accept one connection on ``listener`` (the drone's control port) and ``answer`` it."""
+def serve_once(listener: socket.socket, drone: SdkDrone, answer) -> threading.Thread:
+    """Accept one connection on ``listener`` (the drone's control port) and ``answer`` it
+    once the dump has been asked for (``CTRL 4`` at the drone: the link is reading)."""
     def run():
         conn, _ = listener.accept()
         with conn:
+            wait_until(lambda: ctrl4_args(drone, 0.0), 5.0)
             answer(conn)
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
@@ -314,7 +316,7 @@ def test_a_control_port_that_fails_mid_dump_is_named(answer, error):
         listener.listen(1)
         with link_to(drone, control_port=listener.getsockname()[1]) as link:
             link.connect(timeout_s=5.0)
-            thread = serve_once(listener, answer)
+            thread = serve_once(listener, drone, answer)
             with pytest.raises(LinkError, match=error):
                 link.read_config(timeout_s=3.0)
             thread.join(timeout=5.0)
@@ -329,7 +331,7 @@ def test_a_dump_of_exactly_1_mib_with_its_nul_is_read():
         listener.listen(1)
         with link_to(drone, control_port=listener.getsockname()[1]) as link:
             link.connect(timeout_s=5.0)
-            thread = serve_once(listener, lambda conn: conn.sendall(dump))
+            thread = serve_once(listener, drone, lambda conn: conn.sendall(dump))
             held = link.read_config(timeout_s=3.0)
             thread.join(timeout=5.0)
     assert held["control:outdoor"] == "FALSE" and len(held["custom:pad"]) == (1 << 20) - 39
