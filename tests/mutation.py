@@ -44,12 +44,19 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                  ["tests/unit/test_xchannel.py", "tests/unit/test_xchannel_loops.py"]),
     "drone_config": (["links/drone_config.py"],
                      ["tests/unit/test_drone_config.py", "tests/unit/test_drone_config_verify.py",
+                      "tests/integration/test_drone_config_standin.py",
                       "tests/integration/test_links.py",
                       "tests/integration/test_backend_conformance.py"]),
     "tune": (["experiments/tune/objective.py", "experiments/tune/space.py"],
              ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py"]),
     "export": (["experiments/export.py"],
                ["tests/unit/test_export.py", "tests/unit/test_export_edges.py"]),
+    # the operator commands run in-process (typer's CliRunner) against the SDK stand-in; the
+    # alarms file holds the operator's `emergency` against a running `fly` (issue 21)
+    "operator": (["cli/operator.py"],
+                 ["tests/integration/test_operator_standin.py",
+                  "tests/integration/test_alarms_standin.py",
+                  "tests/integration/test_fly_standin.py", "tests/cli/test_hostile_args.py"]),
 }
 
 @dataclass(frozen=True)
@@ -278,7 +285,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fresh", action="store_true", help="discard earlier results in the workdir")
     p.add_argument("--only", default=None, help="hand: the mutants whose name contains this")
     p.add_argument("--survivors", action="store_true", help="print each survivor's diff")
+    p.add_argument("--rerun", action="store_true",
+                   help="keep the workdir's results and re-run only its survivors (and the "
+                        "mutants it did not check) against the tree as it is now")
+    p.add_argument("--also", action="append", default=[], metavar="PATTERN",
+                   help="with --rerun: mutants matching this too (e.g. 'MODULE.x_FUNC__mutmut_*' "
+                        "for a function changed since)")
     args = p.parse_args(argv)
+    if args.rerun and args.fresh:
+        p.error("--rerun keeps the earlier results: not with --fresh")
     workdir = args.workdir or Path(f"/tmp/mutmut-{args.target}")
     if args.fresh:
         shutil.rmtree(workdir, ignore_errors=True)
@@ -289,9 +304,19 @@ def main(argv: list[str] | None = None) -> int:
     pyproject = workdir / "pyproject.toml"
     pyproject.write_text(_with_table(pyproject.read_text(), _mutmut_table(files, tests)))
     mutmut = [sys.executable, "-m", "mutmut"]
-    with open(workdir / "mutmut-run.log", "w") as log:
-        subprocess.run([*mutmut, "run", "--max-children", "1"], cwd=workdir, check=False,
-                       stdout=log, stderr=subprocess.STDOUT)
+    names: list[str] = []
+    if args.rerun:  # the earlier run's survivors (and what it did not check) against new tests
+        res = subprocess.run([*mutmut, "results", "--all", "true"], cwd=workdir,
+                             capture_output=True, text=True)
+        names = re.findall(r"^\s*(\S+): (?:survived|not checked|no tests)", res.stdout,
+                           flags=re.M)
+        names += args.also  # functions whose source changed since: all their mutants
+        if not names:
+            print("nothing to re-run")
+    with open(workdir / "mutmut-run.log", "a" if args.rerun else "w") as log:
+        if names or not args.rerun:
+            subprocess.run([*mutmut, "run", "--max-children", "1", *names], cwd=workdir,
+                           check=False, stdout=log, stderr=subprocess.STDOUT)
     total = Counter()
     for rel, c in counts(workdir).items():
         total += c

@@ -74,7 +74,9 @@ class ConfigMismatch:
 
 def _same(written: str, held: str) -> bool:
     w, h = written.strip(), held.strip()
-    if w.upper() in ("TRUE", "FALSE") or h.upper() in ("TRUE", "FALSE"):
+    # A boolean written compares case-insensitively. One held against a number needs no case
+    # of its own: float() reads neither TRUE nor FALSE, so it ends in the exact text comparison.
+    if w.upper() in ("TRUE", "FALSE"):
         return w.upper() == h.upper()
     try:
         a, b = float(w), float(h)

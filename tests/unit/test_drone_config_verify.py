@@ -11,12 +11,18 @@ import math
 
 import pytest
 
+import re
+from pathlib import Path
+
 from ardrone_nmpc.links.drone_config import (
     ConfigMismatch,
     _number_text,
+    check_config_id,
     check_positive,
     verify_config,
 )
+
+ROOT = Path(__file__).parents[2]
 
 KEY = "control:euler_angle_max"
 
@@ -125,6 +131,36 @@ def test_a_mismatch_line_names_the_key_both_values_and_the_way_out():
     assert "drone.config_ids" in line and "ardrone-nmpc status" in line
     missing = ConfigMismatch(KEY, "0.21", None).line()
     assert "nothing (key missing)" in missing and "None" not in missing
+    # the same sentence, "nothing (key missing)" where the held value would stand
+    assert missing == line.replace("'0.35'", "nothing (key missing)")
+
+
+def test_a_mismatch_line_is_the_one_docs_first_flight_lists():
+    """docs/first-flight.md's table of refusals quotes the line's start (up to its "…") for
+    its example, and gives the way out: set drone.config_ids, `ardrone-nmpc status` shows
+    the ids."""
+    table = (ROOT / "docs" / "first-flight.md").read_text()
+    row = next(r for r in table.splitlines() if r.startswith("| `the drone holds "))
+    quoted = re.match(r"\| `(.*) …` \|", row).group(1)
+    key, held, written = re.match(r"the drone holds (\S+) = '(.*)', not the '(.*)' written",
+                                  quoted).groups()
+    line = ConfigMismatch(key, written, held).line()
+    assert line.startswith(quoted + " ")
+    assert "set drone.config_ids to that session (`ardrone-nmpc status` shows its ids" in line
+    assert "\n" not in line and line.endswith("then retry")
+
+
+@pytest.mark.parametrize("good", ["d2e081a3", "D2E081A3", "00000000", "aBcDeF09"])
+def test_a_config_id_is_eight_hex_digits_of_either_case(good):
+    """docs/protocol.md §3.3: 8 hex digits each."""
+    assert check_config_id(good) == good
+
+
+@pytest.mark.parametrize("bad", ["d2e081a", "d2e081a3f", "", "abc", "g2e081a3", "XXXXXXXX",
+                                 "d2e081a ", "0x2e081a", 12345678, None])
+def test_anything_but_eight_hex_digits_is_no_config_id(bad):
+    with pytest.raises(ValueError, match="config ids must be 8 hex digits"):
+        check_config_id(bad)
 
 
 @pytest.mark.parametrize("bad", [0.0, -0.0, -1.0, math.nan, math.inf, -math.inf])
