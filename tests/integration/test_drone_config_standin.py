@@ -372,3 +372,59 @@ def test_a_drone_gone_silent_fails_a_config_write_in_its_time():
         drone.blackout(20.0)
         with pytest.raises(LinkError, match=r"not set within 0\.50 s"):
             link.write_config("control:flying_mode", 0, timeout_s=0.5)
+
+
+# ----------------------------------------------------------------------------- write_config
+# What mutmut's full drone_config run left alive in write_config: its timeout's name and 1 s
+# default, the ACK left pending before the write and the one after it, a send that fails.
+KEY_TEXT = r"config control:flying_mode='0'"
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan")])
+def test_write_config_refuses_a_timeout_that_is_not_positive(bad):
+    link = DroneLink(LOOPBACK, at_port=5556, navdata_port=5554, bind_host=LOOPBACK)
+    with pytest.raises(ValueError, match="^timeout_s must be finite and > 0"):
+        link.write_config("control:flying_mode", 0, timeout_s=bad)
+
+
+def test_a_config_write_waits_1_s_for_its_ack_unless_told():
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        lose_every_config(drone)
+        with pytest.raises(LinkError, match=rf"^{KEY_TEXT}: no ACK from the drone \(state bit "
+                                            r"6 not set within 1\.00 s\)"):
+            link.write_config("control:flying_mode", 0)
+
+
+def test_an_ack_left_pending_that_never_clears_fails_the_write_naming_it():
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        with drone.lock:
+            drone.ack = True
+        drone._at_ctrl = lambda args, now: None  # the drone keeps its ACK bit
+        assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+        t0 = time.monotonic()
+        with pytest.raises(LinkError, match=rf"^{KEY_TEXT}: a previous ACK: ACK \(state bit 6\) "
+                                            r"not cleared"):
+            link.write_config("control:flying_mode", 0, timeout_s=0.5)
+        assert not drone.commands("CONFIG", t0)  # nothing written over a pending ACK
+
+
+def test_the_write_s_own_ack_that_never_clears_fails_it_naming_the_key():
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        answer = drone._at_ctrl
+        drone._at_ctrl = lambda args, now: None if int(args[0]) == 5 else answer(args, now)
+        with pytest.raises(LinkError, match=rf"^{KEY_TEXT}: ACK \(state bit 6\) not cleared"):
+            link.write_config("control:flying_mode", 0, timeout_s=0.5)
+
+
+def test_a_network_gone_down_fails_a_config_write_at_once_naming_the_send():
+    with SdkDrone() as drone, link_to(drone) as link:
+        link.connect(timeout_s=5.0)
+        with link._at_lock:
+            link._at_sock = NetworkDown(link._at_sock)
+        t0 = time.monotonic()
+        with pytest.raises(LinkError, match=rf"^AT send to {LOOPBACK}:{drone.at_port}: "):
+            link.write_config("control:flying_mode", 0, timeout_s=5.0)
+        assert time.monotonic() - t0 < 4.0  # at once, not at the ACK's timeout
