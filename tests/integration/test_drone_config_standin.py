@@ -426,5 +426,5 @@ def test_a_network_gone_down_fails_a_config_write_at_once_naming_the_send():
             link._at_sock = NetworkDown(link._at_sock)
         t0 = time.monotonic()
         with pytest.raises(LinkError, match=rf"^AT send to {LOOPBACK}:{drone.at_port}: "):
-            link.write_config("control:flying_mode", 0, timeout_s=5.0)
-        assert time.monotonic() - t0 < 4.0  # at once, not at the ACK's timeout
+            link.write_config("control:flying_mode", 0, timeout_s=20.0)
+        assert time.monotonic() - t0 < 10.0  # at once, not at the ACK's 20 s timeout
