@@ -44,6 +44,20 @@ def lose_ctrl4(drone: SdkDrone, n: int) -> None:
     drone._at_ctrl = at_ctrl
 
 
+def drop_ctrl(drone: SdkDrone, mode: int | None = None) -> None:
+    """Every ``AT*CTRL`` of ``mode`` (every one, if None) lost on the way (UDP)."""
+    answer = drone._at_ctrl
+    drone._at_ctrl = lambda args, now: (None if mode is None or int(args[0]) == mode
+                                        else answer(args, now))
+
+
+def raise_ack(drone: SdkDrone, link: DroneLink) -> None:
+    """An earlier write's ACK (state bit 6) still raised, and the link has seen it."""
+    with drone.lock:
+        drone.ack = True
+    assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+
+
 def ctrl4_args(drone: SdkDrone, since_t: float) -> list:
     return [args for _, _, args, _ in drone.commands("CTRL", since_t) if args[0] == 4]
 
@@ -139,9 +153,7 @@ def test_read_config_first_clears_an_ack_left_pending(lost):
     and the dump is read."""
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        with drone.lock:
-            drone.ack = True
-        assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+        raise_ack(drone, link)
         answer, gone = drone._at_ctrl, [lost]
 
         def at_ctrl(args, now):  # the first ``lost`` CTRL 5 lost on the way
@@ -175,8 +187,7 @@ def test_a_drone_that_raises_no_ack_after_the_dump_still_gives_it():
 def test_an_ack_after_the_dump_that_never_clears_fails_read_config_naming_it():
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        answer = drone._at_ctrl
-        drone._at_ctrl = lambda args, now: None if int(args[0]) == 5 else answer(args, now)
+        drop_ctrl(drone, 5)
         with pytest.raises(LinkError, match=r"^read_config: ACK \(state bit 6\) not cleared "
                                             r"by AT\*CTRL 5 in time"):
             link.read_config(timeout_s=1.0)
@@ -185,10 +196,8 @@ def test_an_ack_after_the_dump_that_never_clears_fails_read_config_naming_it():
 def test_an_ack_that_never_clears_fails_read_config_naming_the_step():
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        with drone.lock:
-            drone.ack = True
-        drone._at_ctrl = lambda args, now: None  # the drone keeps its ACK bit
-        assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+        drop_ctrl(drone)  # the drone keeps its ACK bit
+        raise_ack(drone, link)
         with pytest.raises(LinkError, match=r"^read_config: a previous ACK: ACK \(state bit 6\) "
                                             r"not cleared"):
             link.read_config(timeout_s=0.5)
@@ -198,8 +207,7 @@ def test_a_dump_that_never_comes_fails_read_config_saying_how_long_it_waited():
     """The port accepts but ``CTRL 4`` is never answered (lost each time it is re-sent)."""
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        answer = drone._at_ctrl
-        drone._at_ctrl = lambda args, now: None if int(args[0]) == 4 else answer(args, now)
+        drop_ctrl(drone, 4)
         t0 = time.monotonic()
         with pytest.raises(LinkError, match=r"^configuration dump not finished within 0\.90 s "
                                             r"\(0 bytes read\)"):
@@ -251,9 +259,7 @@ def test_a_network_gone_down_fails_read_config_at_once_naming_the_send(lost, pen
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
         if pending_ack:
-            with drone.lock:
-                drone.ack = True
-            assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+            raise_ack(drone, link)
         with link._at_lock:
             link._at_sock = NetworkDown(link._at_sock, lost)
         with pytest.raises(LinkError, match=rf"^AT send to {LOOPBACK}:{drone.at_port}: "):
@@ -399,10 +405,8 @@ def test_a_config_write_waits_1_s_for_its_ack_unless_told():
 def test_an_ack_left_pending_that_never_clears_fails_the_write_naming_it():
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        with drone.lock:
-            drone.ack = True
-        drone._at_ctrl = lambda args, now: None  # the drone keeps its ACK bit
-        assert wait_until(lambda: DroneState.COMMAND in link.state, 3.0)
+        drop_ctrl(drone)  # the drone keeps its ACK bit
+        raise_ack(drone, link)
         t0 = time.monotonic()
         with pytest.raises(LinkError, match=rf"^{KEY_TEXT}: a previous ACK: ACK \(state bit 6\) "
                                             r"not cleared"):
@@ -413,8 +417,7 @@ def test_an_ack_left_pending_that_never_clears_fails_the_write_naming_it():
 def test_the_write_s_own_ack_that_never_clears_fails_it_naming_the_key():
     with SdkDrone() as drone, link_to(drone) as link:
         link.connect(timeout_s=5.0)
-        answer = drone._at_ctrl
-        drone._at_ctrl = lambda args, now: None if int(args[0]) == 5 else answer(args, now)
+        drop_ctrl(drone, 5)
         with pytest.raises(LinkError, match=rf"^{KEY_TEXT}: ACK \(state bit 6\) not cleared"):
             link.write_config("control:flying_mode", 0, timeout_s=0.5)
 
