@@ -105,6 +105,33 @@ def stopping_signals():
 
 
 @contextmanager
+def _held(handlers: dict[int, object]):
+    """Within the block each signal of ``handlers`` is only noted; the yielded ``deliver()``
+    hands the first one noted to its handler (``handlers[signum](signum, None)``), and the
+    block's end does if ``deliver`` was not asked. The handlers in force before come back."""
+    pending: list[int] = []
+
+    def note(signum, frame):
+        pending.append(signum)
+
+    def deliver() -> None:
+        if pending:
+            signum = pending[0]
+            pending.clear()
+            handlers[signum](signum, None)
+
+    previous = {}
+    try:
+        for sig in handlers:
+            previous[sig] = signal.signal(sig, note)
+        yield deliver
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    deliver()
+
+
+@contextmanager
 def deferred_signals():
     """Within the block, Ctrl-C and :data:`STOPPING_SIGNALS` wait: the first one is raised
     (as ``KeyboardInterrupt`` / :class:`Terminated`) when the block ends, so a write that must
@@ -113,23 +140,9 @@ def deferred_signals():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    pending: list[int] = []
-
-    def note(signum, frame):
-        pending.append(signum)
-
-    previous = {}
-    try:
-        for sig in (signal.SIGINT, *STOPPING_SIGNALS):
-            previous[sig] = signal.signal(sig, note)
+    with _held({signal.SIGINT: signal.default_int_handler,
+                **{sig: _raise_terminated for sig in STOPPING_SIGNALS}}):
         yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    if pending:
-        if pending[0] == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise Terminated(pending[0])
 
 
 #: Every signal :func:`polled_signals` may hold back (those whose handler is Python's).
@@ -155,29 +168,9 @@ def polled_signals():
     if threading.current_thread() is not threading.main_thread():
         yield lambda: None
         return
-    pending: list[int] = []
-    previous = {}
-
-    def note(signum, frame):
-        pending.append(signum)
-
-    def deliver() -> None:
-        if pending:
-            signum = pending[0]
-            pending.clear()
-            previous[signum](signum, None)
-
-    try:
-        for sig in _POLLABLE:
-            handler = signal.getsignal(sig)
-            if callable(handler):
-                previous[sig] = handler
-                signal.signal(sig, note)
-        yield deliver
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    deliver()
+    current = {sig: signal.getsignal(sig) for sig in _POLLABLE}
+    with _held({sig: h for sig, h in current.items() if callable(h)}) as check:
+        yield check
 
 
 @contextmanager
