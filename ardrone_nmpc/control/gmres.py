@@ -19,11 +19,13 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+
 # LLVM fast-math without 'nnan'/'ninf': the kernels must still see NaN and inf to report them.
 FAST_MATH = {"contract", "reassoc", "arcp", "nsz", "afn"}
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def gmres_start(r0, V, g):
     """Set ``V[0] = r0/‖r0‖`` and ``g = ‖r0‖ e1``; return ``β = ‖r0‖``."""
     beta = 0.0
@@ -40,7 +42,7 @@ def gmres_start(r0, V, g):
     return beta
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def gmres_iterate(k, w, V, H, cs, sn, g):
     """Arnoldi step ``k`` on ``w = A V[k]`` (overwritten); return the new residual ``|g[k+1]|``.
 
@@ -89,7 +91,7 @@ def gmres_iterate(k, w, V, H, cs, sn, g):
     return abs(g[k + 1])
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def gmres_finish(k, V, H, g, x0, out):
     """``out = x0 + V[:k]ᵀ y`` with ``y`` from ``H[:k,:k] y = g[:k]``; ``out`` may be ``x0``.
 
@@ -112,7 +114,7 @@ def gmres_finish(k, V, H, g, x0, out):
             out[i] += yj * vj[i]
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def gmres_dense(A, b, x0, kmax, rtol):
     """Solve ``A x = b`` by GMRES(kmax) without restart from the guess ``x0``.
 

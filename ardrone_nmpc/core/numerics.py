@@ -39,3 +39,32 @@ def pin_numba_target() -> None:
     if config is not None:  # numba came first: its configuration was read already
         config.CPU_NAME = PINNED_CPU_NAME
         config.CPU_FEATURES = PINNED_CPU_FEATURES
+
+
+#: numba options of a kernel that only other kernels call (``njit(**INNER_KERNEL, …)``):
+#: numba builds no wrapper for Python (nor a C-callable one, which nothing here uses) —
+#: building them is a good part of a cold start's compile time (docs/benchmarks.md, "Cold
+#: start without the wrappers"). Such a kernel cannot be called from Python: use
+#: :func:`callable_from_python` for that.
+INNER_KERNEL = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+#: numba options of a kernel called from Python: no C-callable wrapper (nothing uses it).
+OUTER_KERNEL = {"no_cfunc_wrapper": True}
+
+
+def callable_from_python(kernel):
+    """A twin of the :data:`INNER_KERNEL` ``kernel`` that Python can call (tests, the
+    reference solver): the same source and options, so the same machine code, compiled only
+    when first called from Python and cached under a name of its own (numba's cache index is
+    keyed by the function's name, not its options: the twin must not share the kernel's)."""
+    import types
+
+    from numba import njit
+
+    inner = kernel.py_func
+    twin = types.FunctionType(inner.__code__, inner.__globals__, inner.__name__,
+                              inner.__defaults__, inner.__closure__)
+    twin.__qualname__ = f"{inner.__qualname__}_from_python"
+    twin.__doc__ = inner.__doc__
+    options = {k: v for k, v in kernel.targetoptions.items()
+               if k not in INNER_KERNEL and k != "nopython"}  # njit sets nopython itself
+    return njit(cache=True, **options, **OUTER_KERNEL)(twin)

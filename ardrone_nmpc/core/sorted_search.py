@@ -6,10 +6,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import INNER_KERNEL
+
 __all__ = ["count_at_or_below"]
 
 
-@njit(cache=True)
+@njit(cache=True, **INNER_KERNEL)
 def count_at_or_below(a: np.ndarray, n: int, v: float) -> int:
     """How many of the ascending ``a[:n]`` are ≤ ``v``; ``n`` for NaN (numpy sorts it last)."""
     if v != v:

@@ -13,12 +13,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["fold_sample", "lag_exponents"]
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def lag_exponents(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
                   lags_s: np.ndarray, j_out: np.ndarray, arg_out: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
@@ -33,7 +34,7 @@ def lag_exponents(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
             arg_out[k, m] = -d / lags_s[m]
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
                 y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
                 sxy: np.ndarray) -> None:

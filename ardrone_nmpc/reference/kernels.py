@@ -14,13 +14,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
 __all__ = ["waypoint_states"]
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def waypoint_states(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad: np.ndarray,
                     dt_s: np.ndarray, vel_mps: np.ndarray, t_s: np.ndarray,
                     out: np.ndarray) -> None:

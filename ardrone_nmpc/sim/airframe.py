@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import GRAVITY_MPS2
 
 __all__ = ["N_AUX_STATE", "N_STATE", "airframe_rk4", "airframe_rk4_array",
@@ -28,7 +29,7 @@ _NO_WIND = (0.0, 0.0, 0.0)
 N_AUX_STATE = 12  # + η_φ, η_θ of the second-order attitude form
 
 
-@njit(cache=True)
+@njit(cache=True, **INNER_KERNEL)
 def _tilt_rates(x, ref_phi, ref_theta, k, out):
     """φ', θ' (and η' with the second-order form, a state of 12) towards the tilt references.
 
@@ -48,7 +49,7 @@ def _tilt_rates(x, ref_phi, ref_theta, k, out):
         out[7] = (ref_theta - theta) * inv_tau_tilt
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     """The motors-on right-hand side on arrays (the one definition: :func:`airframe_derivative`
     and :func:`airframe_rk4` both call it). ``k`` is ``PlantParams.rhs_coefficients``."""
@@ -72,7 +73,7 @@ def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     out[8], out[9] = r, -yaw * yaw_gain - r * inv_tau_yaw
 
 
-@njit(cache=True)
+@njit(cache=True, **INNER_KERNEL)
 def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
     """One classical RK4 step of :func:`_airframe_rhs` from the array ``x``; a new array."""
     n = x.shape[0]
@@ -99,7 +100,7 @@ def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
     """:func:`rk4_step` of :func:`airframe_derivative`, compiled: the simulator's hot path
     (13 substeps per control tick) for the first-order attitude form. ``k`` is
@@ -111,14 +112,14 @@ def airframe_rk4(state, roll, pitch, gaz, yaw, hold, k, w, h):
     return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9])
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
     """:func:`airframe_rk4` on a state array of 10 or, with the second-order attitude form,
     12 elements; returns a new array."""
     return _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h)
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def airframe_rk4_many(state, commands, k, w, h):
     """One RK4 step per row of ``commands`` (n, 5: roll, pitch, gaz, yaw, hold as 0/1),
     each from the last, on a state array of 10 or 12 elements; stops after a step that ends

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 
@@ -93,7 +94,7 @@ class KitModel:
 KIT = KitModel()
 
 
-@njit(cache=True)
+@njit(cache=True, **INNER_KERNEL)
 def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     """Derivative of the kit state ``x`` (N_KIT); also returns (vx, vy, vz, φ, θ_k, ψ̇_k)."""
     (ra11, ra12, ra21, ra22, rb1, rb2, rc1, rc2, pa11, pa12, pa21, pa22, pb1, pb2, pc1, pc2,
@@ -126,7 +127,7 @@ def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     return out[0], out[1], vz, phi, theta_k, psi_k_rate
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def kit_rk4(x0, roll, pitch, gaz, yaw, hold, k, w, h):
     """One classical RK4 step of the kit over ``h`` (the commands held); returns the new state
     and the outputs (vx, vy, vz, φ, θ_k, ψ̇_k) at its end. ``hold`` zeroes roll and pitch."""

@@ -48,3 +48,22 @@ def test_numba_imported_first_is_pinned_too():
     out = subprocess.run([sys.executable, "-c", probe], env=_env(), capture_output=True,
                          text=True, timeout=120, check=True).stdout.split("\n")
     assert (out[0], out[1]) == (PINNED_CPU_NAME, repr(PINNED_CPU_FEATURES))
+
+
+def test_an_inner_kernel_and_its_python_twin_give_the_same_bits():
+    """Inner kernels compile without numba's Python wrapper (the cold start); Python calls a
+    twin of the same source and options, cached under a name of its own."""
+    from numba import njit
+
+    from ardrone_nmpc.control import kernels
+    from ardrone_nmpc.control.kernels.residual import bound_gradient as inner
+    from ardrone_nmpc.core.numerics import INNER_KERNEL
+
+    assert all(inner.targetoptions[k] == v for k, v in INNER_KERNEL.items())
+    twin = kernels.bound_gradient
+    assert twin is not inner
+    assert twin.py_func.__qualname__ != inner.py_func.__qualname__  # numba's cache key
+    assert not twin.targetoptions.get("no_cpython_wrapper", False)
+    through_a_kernel = njit(lambda s: inner(s))
+    for s in (-2.0, -0.999, -0.4, 0.0, 1e-9, 0.5, 0.99899, 1.5):
+        assert twin(s).hex() == through_a_kernel(s).hex()

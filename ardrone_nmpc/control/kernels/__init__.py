@@ -42,17 +42,28 @@ from pathlib import Path
 
 from numba.core.registry import CPUDispatcher
 
+from ardrone_nmpc.control.kernels import layout, residual as _residual, solve
 from ardrone_nmpc.control.kernels.layout import (FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK,
                                                 NO_ACTIVE, STAGE_ACTIVE, STAGE_CONDENSED,
-                                                STAGE_DUMMY, carve_workspace, memory_size,
-                                                workspace_size)
+                                                STAGE_DUMMY, memory_size, workspace_size)
 from ardrone_nmpc.control.kernels.memory import SolverMemory, SolverStats
-from ardrone_nmpc.control.kernels.residual import (aim_obstacles, bound_barrier, bound_gradient,
-                                                  condensed_cost, penalty, penalty_gradient,
-                                                  residual, rollout_rk4, sincos_small)
-from ardrone_nmpc.control.kernels.solve import fdgmres, newton_solve, prepare_reference
+from ardrone_nmpc.control.kernels.residual import (aim_obstacles, penalty, penalty_gradient,
+                                                  rollout_rk4, sincos_small)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
+from ardrone_nmpc.core.numerics import callable_from_python
+
+# The kernels only other kernels call are compiled without numba's Python wrapper (the cold
+# start, docs/benchmarks.md); tests, benchmarks and the reference solver call these twins (the
+# same source and options, so the same machine code), compiled on their first call.
+bound_barrier = callable_from_python(_residual.bound_barrier)
+bound_gradient = callable_from_python(_residual.bound_gradient)
+condensed_cost = callable_from_python(_residual.condensed_cost)
+residual = callable_from_python(_residual.residual)
+carve_workspace = callable_from_python(layout.carve_workspace)
+fdgmres = callable_from_python(solve.fdgmres)
+newton_solve = callable_from_python(solve.newton_solve)
+prepare_reference = callable_from_python(solve.prepare_reference)
 
 __all__ = [
     "FLAG_BAD_INPUT", "FLAG_NON_FINITE", "FLAG_OK", "NO_ACTIVE", "STAGE_ACTIVE",
@@ -67,7 +78,7 @@ __all__ = [
 # what it calls from other files (the model, the obstacle penalty, gmres, the angle helper,
 # sibling modules here). So: one digest over all of those sources, and every cached kernel is
 # flushed (recompiled on its next call) when the digest changes.
-_KERNEL_MODULES = ("ardrone_nmpc.model", "ardrone_nmpc.core.angles",
+_KERNEL_MODULES = ("ardrone_nmpc.model", "ardrone_nmpc.core.numerics", "ardrone_nmpc.control.kernels", "ardrone_nmpc.core.angles",
                    "ardrone_nmpc.control.obstacles", "ardrone_nmpc.control.gmres",
                    "ardrone_nmpc.control.kernels.layout", "ardrone_nmpc.control.kernels.residual",
                    "ardrone_nmpc.control.kernels.solve", "ardrone_nmpc.control.kernels.steps")

@@ -27,6 +27,7 @@ from numba import njit
 
 from ardrone_nmpc.control.gmres import FAST_MATH
 from ardrone_nmpc.control.obstacles import OBS_COLS
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 
 NX = 7
 NU = 4
@@ -60,7 +61,7 @@ def memory_size(horizon_steps: int, stage_dim: int, kmax: int, n_obstacles: int 
             + workspace_size(horizon_steps, stage_dim, kmax))
 
 
-@njit(cache=True)
+@njit(cache=True, **OUTER_KERNEL)
 def unpack(mem, n_stages, m, n_obs):
     """Views of one solver's packed memory: ``(U, dU, u_out, stats, W, prm, obs, buf)``.
 
@@ -79,7 +80,7 @@ def unpack(mem, n_stages, m, n_obs):
     return U, dU, u_out, stats, W, prm, obs, mem[o:]
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def carve_workspace(buf, n_stages, m, kmax):
     """Carve ``buf`` into (xs, ref0, ref1, trig, V, H, cs, sn, g, F0, F1, rhs, Ut, Ft, w, dU, x1,
     pbase)."""

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels.layout import (
-    P_DTAU, P_DTAU_NEXT, P_H, P_PERIOD, P_RHO, P_RTOL, P_TOL, P_TRIGGER, P_ZETA, carve_workspace,
+    P_DTAU, P_DTAU_NEXT, P_H, P_PERIOD, P_RHO, P_RTOL, P_TOL, P_TRIGGER, P_ZETA,
     memory_size, unpack)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
@@ -149,4 +149,6 @@ class SolverMemory:
 
     def workspace_views(self) -> tuple:
         """The kernels' workspace views (``layout.carve_workspace``) for direct kernel calls."""
-        return carve_workspace(self._buf, self.horizon_steps, self.stage_dim, self._kmax)
+        from ardrone_nmpc.control.kernels import carve_workspace as callable_carve_workspace
+
+        return callable_carve_workspace(self._buf, self.horizon_steps, self.stage_dim, self._kmax)

@@ -15,6 +15,7 @@ from numba import njit
 from ardrone_nmpc.control import obstacles
 from ardrone_nmpc.control.gmres import FAST_MATH
 from ardrone_nmpc.control.kernels.layout import NO_BASE, NU, NX, STAGE_CONDENSED, STAGE_DUMMY
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import GRAVITY_MPS2
 from ardrone_nmpc.model import dynamics as _dynamics
 
@@ -36,7 +37,7 @@ aim_obstacles = njit(cache=True, error_model="numpy", fastmath=FAST_MATH)(
     obstacles.aim_obstacles)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def rollout_rk4(x, inputs, dt, out):
     """``out`` = ``x`` integrated through ``inputs`` (k, 4), each held for ``dt`` (RK4 of
     eq. 3.13) — the delay compensation's prediction of the state a new command will meet."""
@@ -78,7 +79,7 @@ def sincos_small(a):
     return s, c
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def bound_gradient(s):
     """``s/√(1 − s²)`` for |s| < S_MAX, continued along its tangent beyond (condensed bounds)."""
     if abs(s) < S_MAX:
@@ -88,7 +89,7 @@ def bound_gradient(s):
     return s0 / math.sqrt(c) + (s - s0) / (c * math.sqrt(c))
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def bound_barrier(s):
     """Antiderivative of :func:`bound_gradient`: ``−√(1 − s²)``, continued beyond S_MAX by
     the quadratic whose slope is the tangent continuation."""
@@ -100,7 +101,7 @@ def bound_barrier(s):
     return -math.sqrt(c) + ds * s0 / math.sqrt(c) + 0.5 * ds * ds / (c * math.sqrt(c))
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def condensed_cost(U, xs, ref, dtau, W, rho, obs):
     """The cost whose gradient is the condensed residual (``F = ∇_U J / Δτ``, m = 4).
 
@@ -133,7 +134,7 @@ def condensed_cost(U, xs, ref, dtau, W, rho, obs):
     return total
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def keep_inside(U_old, U_new, W):
     """Condensed layout: pull every input of ``U_new`` that left the box back inside.
 
@@ -150,7 +151,7 @@ def keep_inside(U_old, U_new, W):
             U_new[k] = U_old[k] + FRACTION_TO_BOUND * (lo - U_old[k])
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def residual(U, m, x0, ref, dtau, W, rho, eps, active, xs, trig, out, same_inputs=False,
              obs=None, base=NO_BASE, gauss_newton=False):
     """Evaluate ``F(U, x0, t)`` into ``out`` (N·m,); return ``‖F‖₂``.

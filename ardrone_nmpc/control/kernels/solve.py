@@ -14,6 +14,7 @@ from ardrone_nmpc.control.gmres import FAST_MATH, gmres_finish, gmres_iterate, g
 from ardrone_nmpc.control.kernels.layout import NO, NU, NX, STAGE_ACTIVE, STAGE_CONDENSED
 from ardrone_nmpc.control.kernels.residual import condensed_cost, keep_inside, residual
 from ardrone_nmpc.core.angles import unwrap_near_turns
+from ardrone_nmpc.core.numerics import INNER_KERNEL
 
 # ψ of a reference stage moved by whole turns next to the previous one (compiled from the
 # single definition in ardrone_nmpc.core.angles).
@@ -21,7 +22,7 @@ _unwrap_near_turns = njit(cache=True, error_model="numpy", fastmath=FAST_MATH,
                           inline="always")(unwrap_near_turns)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax, rtol,
             views, out, obs=None, gauss_newton=False):
     """Thesis Algorithm 1: solve ``F_U w = rhs`` with ``F_U w ≈ (F(U + h w) − Fbase)/h``.
@@ -77,7 +78,7 @@ def fdgmres(U, m, x0, ref, dtau, W, rho, eps, active, Fbase, rhs, guess, h, kmax
     return k, res
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def prepare_reference(x, ref, out):
     """Copy ``ref`` into ``out`` with ψ unwrapped along the horizon and shifted by 2πk to
     lie near ``x[6]`` (the OCP penalises ψ − ψ_d unwrapped). False if anything is non-finite."""
@@ -95,7 +96,7 @@ def prepare_reference(x, ref, out):
     return True
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def clip_first_input(U, W, u_out):
     """``u_out = clip(U[0:4], u_min, u_max)``; False if any is non-finite."""
     for j in range(NU):
@@ -106,7 +107,7 @@ def clip_first_input(U, W, u_out):
     return True
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax, rtol, views,
                  obs=None, gauss_newton=False):
     """Newton/GMRES on ``F(U, x, t) = 0`` (eq. 3.22–3.24) with a backtracking line search.
@@ -172,7 +173,7 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
 
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def update_active_set(U, active, W, eps, n_stages):
     """Eq. 3.25 bookkeeping after a solve; True if the active set changed.
 
@@ -200,7 +201,7 @@ def update_active_set(U, active, W, eps, n_stages):
     return changed
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
 def activate_blocking_bounds(U, dU, active, W, eps, n_stages):
     """Eq. 3.25 for a stalled solve: move along the last Newton direction ``dU`` to the first
     bound it meets, which joins the active set (its input at ``bound ∓ ε``). True if one did.

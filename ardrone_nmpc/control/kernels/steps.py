@@ -20,6 +20,7 @@ from ardrone_nmpc.control.kernels.residual import aim_obstacles, dynamics, keep_
 from ardrone_nmpc.control.kernels.solve import (activate_blocking_bounds, clip_first_input,
                                                fdgmres, newton_solve, prepare_reference,
                                                update_active_set)
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
 
 ACTIVE_SET_ROUNDS = 32  # eq. 3.25 re-solves per tick at most
 # With obstacles, a Newton re-projection stops at this fraction of the trigger residual and
@@ -128,7 +129,7 @@ def cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs=
 
 # The per-tick entry points from Python, on packed memory: one per scheme and per obstacle
 # table (empty or not), so that a run compiles only the one its solver calls.
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def cgmres_step(mem, x, ref, iprm, initialise):
     """:func:`cgmres_tick` without obstacles (the obstacle-free specialisation: the
     ``obs is not None`` branches are not compiled, see the layout's docstring)."""
@@ -136,21 +137,21 @@ def cgmres_step(mem, x, ref, iprm, initialise):
     return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def cgmres_step_obstacles(mem, x, ref, iprm, initialise):
     """:func:`cgmres_tick` with the obstacle table of the memory."""
     U, dU, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
     return cgmres_tick(U, dU, x, ref, W, prm, iprm, initialise, buf, u_out, stats, obs)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def newton_step(mem, x, ref, iprm, active):
     """:func:`newton_tick` without obstacles."""
     U, _, u_out, stats, W, prm, _, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
     return newton_tick(U, x, ref, W, prm, iprm, active, buf, u_out, stats)
 
 
-@njit(cache=True, error_model="numpy", fastmath=FAST_MATH)
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **OUTER_KERNEL)
 def newton_step_obstacles(mem, x, ref, iprm, active):
     """:func:`newton_tick` with the obstacle table of the memory."""
     U, _, u_out, stats, W, prm, obs, buf = unpack(mem, ref.shape[0] - 1, iprm[0], iprm[4])
