@@ -37,6 +37,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                "links/mocap_factory.py"],
               ["tests/unit/test_mocap_sources.py", "tests/unit/test_mocap_senders.py",
                "tests/unit/test_motioncapture_child_lines.py",
+               "tests/integration/test_mocap_receiver.py",
                "tests/unit/test_follow.py::test_mocap_link_tracks_a_second_object",
                *(f"tests/integration/test_links.py::test_mocap_{name}" for name in (
                    "latest_pose_converted_and_stamped", "age_grows_when_object_disappears",
