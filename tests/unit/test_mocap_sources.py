@@ -407,6 +407,7 @@ def test_from_config_takes_every_field_of_the_config():
     assert src.y_up is True and src.connect_timeout_s == 2.5 and src.repeat_limit == 3
     src.start()
     assert lib.calls == [("optitrack", {"hostname": "10.0.0.5"})]
+    assert src._thread.name == "mocap-rx" and src._thread.daemon   # never holds the exit
     mc.push(Body("drone7", (1.0, 2.0, 3.0), Rotation.identity()))      # Y up
     assert _wait_for(lambda: src.poses == 1)
     pose, rx = src.latest()
@@ -538,3 +539,21 @@ def test_the_longest_gap_and_the_fresh_count_of_the_object():
     src.receive_bodies(body(1.2), 4.5)
     assert src.max_gap_s == 2.5 and src.fresh_count("ardrone") == src.poses == 3
     assert src.fresh_count("car") == 0
+
+
+def test_the_shared_rules_refuse_a_nameless_object_and_a_repeat_limit_below_2():
+    from ardrone_nmpc.links.mocap_source import MocapSource
+
+    base = MocapSource()
+    assert base.object_name == "ardrone" and base.repeat_limit == 3   # docs/mocap-stream.md
+    for name in ("", 5):
+        with pytest.raises(ValueError, match=r"^object_name must be a non-empty string$"):
+            MocapSource(object_name=name)
+    assert MocapSource(repeat_limit=2).repeat_limit == 2
+    with pytest.raises(ValueError, match=r"^repeat_limit must be >= 2 \(or None\), got 1$"):
+        MocapSource(repeat_limit=1)
+
+
+def test_the_connect_timeout_default_is_the_configs():
+    assert MotionCaptureSource("vicon").connect_timeout_s == \
+        load_config(None, []).mocap.connect_timeout_s
