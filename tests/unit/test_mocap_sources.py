@@ -546,6 +546,7 @@ def test_the_shared_rules_refuse_a_nameless_object_and_a_repeat_limit_below_2():
 
     base = MocapSource()
     assert base.object_name == "ardrone" and base.repeat_limit == 3   # docs/mocap-stream.md
+    assert base.last_error is None and base.names_seen == () and base.max_gap_s == 0.0
     for name in ("", 5):
         with pytest.raises(ValueError, match=r"^object_name must be a non-empty string$"):
             MocapSource(object_name=name)
@@ -557,3 +558,15 @@ def test_the_shared_rules_refuse_a_nameless_object_and_a_repeat_limit_below_2():
 def test_the_connect_timeout_default_is_the_configs():
     assert MotionCaptureSource("vicon").connect_timeout_s == \
         load_config(None, []).mocap.connect_timeout_s
+
+
+def test_the_frame_rate_is_measured_over_the_last_second():
+    """100 Hz for 2 s, then 10 Hz: a second later the rate is the stream's 10 Hz (a longer
+    window would still mix in the 100 Hz)."""
+    src = _source(ScriptedMotionCapture(), repeat_limit=None)
+    body = [("ardrone", (1.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))]
+    for k in range(200):
+        src.receive_bodies(body, 0.01 * k)
+    for k in range(1, 11):
+        src.receive_bodies(body, 2.0 + 0.1 * k)
+    assert src.stats.rate_hz == pytest.approx(10.0)
