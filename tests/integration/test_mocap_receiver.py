@@ -17,6 +17,7 @@ from ardrone_nmpc.links import mocap_link
 from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.motioncapture_source import MotionCaptureSource
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.sim.loopback import free_udp_port
 
 from tests.integration.test_links import wait_until
 
@@ -36,15 +37,9 @@ def sender():
     sock.close()
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind((LOOPBACK, 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.timeout(10)
 def test_the_link_listens_on_the_port_asked_and_names_the_sender(sender):
-    port = _free_port()
+    port = free_udp_port()
     now = [41.5]
     link = MocapLink(LOOPBACK, port, object_name="ardrone", clock=lambda: now[0])
     assert link.port == port and link.where == f"udp {LOOPBACK}:{port}"

@@ -26,6 +26,9 @@ from ardrone_nmpc.links.motioncapture_source import (
     rigid_body_pose,
 )
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.sim.loopback import free_udp_port
+
+from tests.integration.test_links import wait_until
 
 
 def _wxyz(rot: Rotation) -> tuple[float, float, float, float]:
@@ -409,7 +412,7 @@ def test_from_config_takes_every_field_of_the_config():
     assert lib.calls == [("optitrack", {"hostname": "10.0.0.5"})]
     assert src._thread.name == "mocap-rx" and src._thread.daemon   # never holds the exit
     mc.push(Body("drone7", (1.0, 2.0, 3.0), Rotation.identity()))      # Y up
-    assert _wait_for(lambda: src.poses == 1)
+    assert wait_until(lambda: src.poses == 1)
     pose, rx = src.latest()
     assert rx == 17.25 and pose.position_m.tolist() == pytest.approx([1.0, -3.0, 2.0])
     finally_closed(src, mc)
@@ -418,17 +421,8 @@ def test_from_config_takes_every_field_of_the_config():
     assert MotionCaptureSource.from_config(cfg_z).y_up is False
 
 
-def _wait_for(predicate, timeout_s: float = 5.0) -> bool:
-    waiter = threading.Event()
-    for _ in range(int(timeout_s / 0.005)):
-        if predicate():
-            return True
-        waiter.wait(0.005)
-    return predicate()
-
-
 def test_the_factory_passes_host_port_name_others_and_clock():
-    port = _free_udp_port()
+    port = free_udp_port()
     cfg = load_config(None, ["mocap.bind_host=127.0.0.1", f"mocap.port={port}",
                              "mocap.object_name=drone7"]).mocap
     link = open_mocap_source(cfg, other_objects=("car",), clock=lambda: 3.5)
@@ -437,7 +431,7 @@ def test_the_factory_passes_host_port_name_others_and_clock():
     with link, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
         tx.sendto(encode_mocap(MocapFrame.of(1, [MocapObjectPose(
             "drone7", (1.0, 2.0, 3.0), (0.0, 0.0, 0.1))])), ("127.0.0.1", port))
-        assert _wait_for(lambda: link.poses == 1)
+        assert wait_until(lambda: link.poses == 1)
         assert link.latest()[1] == 3.5                     # stamped with the clock given
     mc_cfg = load_config(None, ["mocap.kind=motioncapture", "mocap.object_name=drone7"]).mocap
     src = open_mocap_source(mc_cfg, other_objects=("car",), clock=lambda: 4.5)
@@ -453,12 +447,6 @@ def test_the_factory_refuses_an_unknown_kind_naming_the_known_ones():
     with pytest.raises(ValueError) as err:
         open_mocap_source(SimpleNamespace(kind="optical"))
     assert str(err.value) == "unknown mocap.kind 'optical'; choose one of vicon_udp, motioncapture"
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class _FailingOnce(ScriptedMotionCapture):
