@@ -173,8 +173,8 @@ def finally_closed(src: MotionCaptureSource, mc: ScriptedMotionCapture) -> None:
     """Close ``src`` (its thread woken) and check that the thread ended."""
     waker = waking(src, mc)
     src.close()
+    assert not src._thread.is_alive()                      # close returns once it has ended
     waker.join()
-    assert not src._thread.is_alive()
 
 
 def _source(mc, **kw) -> MotionCaptureSource:
@@ -314,8 +314,8 @@ def test_start_runs_the_receiver_thread_until_close():
         assert src.poses == 1 and src.where == "qualisys@h"
         assert lib.calls == [("qualisys", {"hostname": "h"})]
         waker = waking(src, mc)                            # the exit closes: it must be seen
+    assert not src._thread.is_alive()                      # …before the exit returns
     waker.join()
-    assert not src._thread.is_alive()
 
 
 @pytest.mark.timeout(10)
