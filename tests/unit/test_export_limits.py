@@ -1,5 +1,5 @@
 """``export``'s MCAP file against what the ``mcap`` library reads in it: the limits of an MCAP
-log time (nanoseconds since 1970 in an unsigned 64-bit field, docs/export.md) — a row or
+log time (nanoseconds since 1970 in an unsigned 64-bit field, docs/live-view.md) — a row or
 event beyond them refused naming its line, a run starting before 1970 − 584 y refused naming
 the run, the times just inside kept exactly —, where ``/config`` and the whole paths sit in
 the file, the extra named when foxglove-sdk is missing, and ``read_mcap`` on files it did not
