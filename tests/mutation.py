@@ -30,12 +30,21 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                   ["tests/unit/test_plant_profiles.py", "tests/unit/test_kit_closed_loop.py",
                    "tests/unit/test_plant_disturbances.py"]),
     "config_text": (["protocol/config_text.py"], ["tests/unit/test_protocol_config_text.py"]),
+    # the sources' own tests, the UDP link's socket tests (receiver thread, 127.0.0.1) and the
+    # one follow test that reads the link; not the flights that merely use a source (each
+    # mutant would fly for 2–45 s, and a cold first flight compiles for minutes)
     "mocap": (["links/mocap_source.py", "links/mocap_link.py", "links/motioncapture_source.py",
                "links/mocap_factory.py"],
               ["tests/unit/test_mocap_sources.py", "tests/unit/test_mocap_senders.py",
                "tests/unit/test_motioncapture_child_lines.py",
-               "tests/unit/test_follow.py", "tests/unit/test_hostile_input.py",
-               "tests/integration/test_mocap_source_swap.py"]),
+               "tests/integration/test_mocap_receiver.py",
+               "tests/unit/test_follow.py::test_mocap_link_tracks_a_second_object",
+               *(f"tests/integration/test_links.py::test_mocap_{name}" for name in (
+                   "latest_pose_converted_and_stamped", "age_grows_when_object_disappears",
+                   "all_zero_pose_ignored", "repeated_identical_pose_stops_being_fresh",
+                   "frame_gaps_reordering_and_malformed")),
+               "tests/integration/test_hostile_datagrams.py::"
+               "test_mocap_link_counts_garbage_and_keeps_the_latest_good_pose"]),
     "schedule": (["runtime/schedule.py"],
                  ["tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py"]),
     "judges": (["experiments/reproduce/judges.py"],
@@ -50,7 +59,8 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "tune": (["experiments/tune/objective.py", "experiments/tune/space.py"],
              ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py"]),
     "export": (["experiments/export.py"],
-               ["tests/unit/test_export.py", "tests/unit/test_export_edges.py"]),
+               ["tests/unit/test_export.py", "tests/unit/test_export_edges.py",
+                "tests/unit/test_export_limits.py"]),
     # the operator commands run in-process (typer's CliRunner) against the SDK stand-in; the
     # alarms file holds the operator's `emergency` against a running `fly` (issue 21)
     "operator": (["cli/operator.py"],
@@ -80,7 +90,8 @@ _MOCAP = ("tests/unit/test_mocap_sources.py", "tests/unit/test_follow.py",
           "tests/unit/test_mocap_senders.py")
 _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
-_EXPORT = ("tests/unit/test_export.py", "tests/unit/test_export_edges.py")
+_EXPORT = ("tests/unit/test_export.py", "tests/unit/test_export_edges.py",
+           "tests/unit/test_export_limits.py")
 _TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py")
 _CONFIG = ("tests/unit/test_drone_config_verify.py",)
 
@@ -139,8 +150,7 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
                "return _created_ns(run) - round(min(first, 0.0) * 1e9)",
                "return _created_ns(run) + round(min(first, 0.0) * 1e9)", _EXPORT),
     HandMutant("export: an event's time ignored", "experiments/export.py",
-               'float(t) if isinstance(t, (int, float)) else float("nan"))',
-               'float("nan"))', _EXPORT),
+               "float(t) if isinstance(t, (int, float)) else math.nan,", "math.nan,", _EXPORT),
     HandMutant("export: an older run's event t_exp_s ignored", "runs/rundir.py",
                "t_s = float(t_exp) if isinstance(t_exp, (int, float)) else wall - offset",
                "t_s = wall - offset", _EXPORT),

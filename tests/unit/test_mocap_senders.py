@@ -39,6 +39,7 @@ def test_the_first_sender_of_the_object_is_locked_and_others_never_move_the_pose
         ("mocap_foreign_sender", "10.0.0.3:40000"), ("mocap_sender", "10.0.0.2:51000"),
         ("mocap_foreign_sender", "10.0.0.2:51001")]
     assert events[0]["carries_object"] is False and events[0]["locked_sender"] is None
+    assert events[1]["frame"] == 7                         # the frame it was locked on
     assert events[2]["carries_object"] is True and events[2]["locked_sender"] == \
         "10.0.0.2:51000" and events[2]["frame"] == 1
     assert link.take_events() == []
@@ -94,3 +95,25 @@ def test_a_foreign_sender_of_the_object_is_a_contender_and_one_of_other_objects_
     assert link.contenders == []
     link.feed(frame(1, 800.0), 0.02, B)                    # the object again: a contender
     assert link.contenders == ["10.0.0.3:40000"] and x_of(link) == pytest.approx(0.001)
+
+
+def test_the_defaults_are_the_documented_ones():
+    """docs/mocap-stream.md: all interfaces, port 51001, relock after 2 s of silence, a pose
+    frozen from its 3rd bit-identical frame."""
+    link = MocapLink()
+    assert link.where == "udp 0.0.0.0:51001" and link.object_name == "ardrone"
+    link.feed(frame(100, 1.0), 0.0, A)
+    link.feed(frame(1, 2.0), 1.99, B)
+    assert x_of(link) == pytest.approx(0.001)
+    link.feed(frame(2, 3.0), 2.0, B)
+    assert x_of(link) == pytest.approx(0.003) and link.sender == "10.0.0.3:40000"
+    events = link.take_events()
+    assert events[-1] == {"kind": "mocap_sender_changed", "sender": "10.0.0.3:40000",
+                          "frame": 2}
+
+
+def test_repeat_limit_is_the_links_own():
+    link = MocapLink(object_name="ardrone", repeat_limit=5)
+    for k in range(1, 7):
+        link.feed(frame(k, 1.0), 0.01 * k, A)              # bit-identical six frames running
+    assert link.poses == 4 and link.repeats == 2

@@ -6,6 +6,7 @@ waitForNextFrame(), rigidBodies: name → position, rotation.w/x/y/z)."""
 from __future__ import annotations
 
 import math
+import socket
 import sys
 import threading
 
@@ -25,6 +26,9 @@ from ardrone_nmpc.links.motioncapture_source import (
     rigid_body_pose,
 )
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
+from ardrone_nmpc.sim.loopback import free_udp_port
+
+from tests.integration.test_links import wait_until
 
 
 def _wxyz(rot: Rotation) -> tuple[float, float, float, float]:
@@ -146,6 +150,31 @@ class Library:
         if self.error is not None:
             raise self.error
         return self.mc
+
+
+def waking(src: MotionCaptureSource, mc: ScriptedMotionCapture) -> threading.Thread:
+    """A thread that wakes ``src``'s receiver (blocked in ``waitForNextFrame``, as the
+    library's is between frames) with empty frames until it has ended — so a close that comes
+    waits for a state, not for its join timeout."""
+    def wake():
+        idle = threading.Event()
+        for _ in range(1000):
+            if not src._thread.is_alive():
+                return
+            mc.push()
+            idle.wait(0.01)
+
+    waker = threading.Thread(target=wake, daemon=True)
+    waker.start()
+    return waker
+
+
+def finally_closed(src: MotionCaptureSource, mc: ScriptedMotionCapture) -> None:
+    """Close ``src`` (its thread woken) and check that the thread ended."""
+    waker = waking(src, mc)
+    src.close()
+    assert not src._thread.is_alive()                      # close returns once it has ended
+    waker.join()
 
 
 def _source(mc, **kw) -> MotionCaptureSource:
@@ -284,8 +313,9 @@ def test_start_runs_the_receiver_thread_until_close():
             deadline.wait(0.01)
         assert src.poses == 1 and src.where == "qualisys@h"
         assert lib.calls == [("qualisys", {"hostname": "h"})]
-        mc.push()  # wake the thread so it sees the stop
-    assert not src._thread.is_alive()
+        waker = waking(src, mc)                            # the exit closes: it must be seen
+    assert not src._thread.is_alive()                      # …before the exit returns
+    waker.join()
 
 
 @pytest.mark.timeout(10)
@@ -302,6 +332,10 @@ def test_a_connect_that_never_returns_times_out():
     block = threading.Event()
     src = MotionCaptureSource("vicon", {"hostname": "silent"}, connect_timeout_s=0.2,
                               library=Library(ScriptedMotionCapture(), block=block))
+    # the connect returns once the source gives up (as the child process's ends when it is
+    # killed), so the source's close need not wait out its join timeout
+    threading.Thread(target=lambda: block.set() if src._stop.wait(10.0) else None,
+                     daemon=True).start()
     try:
         with pytest.raises(MocapConnectError, match="no connection to vicon@silent within 0.2 s"):
             src.start()
@@ -336,3 +370,191 @@ def test_library_options_must_be_scalars():
         load_config(None, ["mocap.options.port=[1,2]"])
     assert err.value.messages == ["mocap.options: port: expected a string, number or boolean, "
                                   "got list"]
+
+
+# ----------------------------------------------------------------------------- more edges
+
+
+def test_quaternions_of_any_length_give_the_unit_quaternions_angles():
+    """The library's quaternion need not be unit (float32, a hand-made mock body): scaled by 3
+    or by 1/4 it is the same rotation (scipy normalises too)."""
+    for rot in Rotation.random(50, random_state=11):
+        want = rot.as_euler("XYZ")
+        for scale in (3.0, 0.25):
+            got = quaternion_to_xyz_rad(*(scale * q for q in _wxyz(rot)))
+            np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+@pytest.mark.parametrize("pitch_deg", [90.0, -90.0])
+def test_a_pitch_of_exactly_90_degrees_gives_angles_not_an_error(pitch_deg):
+    """At ±90° the sine of the pitch rounds to ±1.0000000000000002 for most roll angles: the
+    angles must still come out, finite, with that pitch (roll and yaw are then ill-defined —
+    gimbal lock — and a drone there has long crashed; the heading is not used)."""
+    for rx in np.linspace(-3.0, 3.0, 61):
+        rot = Rotation.from_euler("XYZ", [rx, math.radians(pitch_deg), 0.3])
+        got = quaternion_to_xyz_rad(*_wxyz(rot))
+        assert all(math.isfinite(a) for a in got)
+        assert got[1] == pytest.approx(math.radians(pitch_deg))
+
+
+def test_from_config_takes_every_field_of_the_config():
+    cfg = load_config(None, ["mocap.kind=motioncapture", "mocap.system=optitrack",
+                             "mocap.hostname=10.0.0.5", "mocap.object_name=drone7",
+                             "mocap.connect_timeout_s=2.5"]).mocap
+    mc = ScriptedMotionCapture()
+    lib = Library(mc)
+    src = MotionCaptureSource.from_config(cfg, other_objects=("car",), clock=lambda: 17.25,
+                                          library=lib)
+    assert (src.system, src.where, src.object_name, src.other_objects) == (
+        "optitrack", "optitrack@10.0.0.5", "drone7", ("car",))
+    assert src.y_up is True and src.connect_timeout_s == 2.5 and src.repeat_limit == 3
+    src.start()
+    assert lib.calls == [("optitrack", {"hostname": "10.0.0.5"})]
+    assert src._thread.name == "mocap-rx" and src._thread.daemon   # never holds the exit
+    mc.push(Body("drone7", (1.0, 2.0, 3.0), Rotation.identity()))      # Y up
+    assert wait_until(lambda: src.poses == 1)
+    pose, rx = src.latest()
+    assert rx == 17.25 and pose.position_m.tolist() == pytest.approx([1.0, -3.0, 2.0])
+    finally_closed(src, mc)
+    cfg_z = load_config(None, ["mocap.kind=motioncapture", "mocap.system=optitrack",
+                               "mocap.up_axis=z"]).mocap
+    assert MotionCaptureSource.from_config(cfg_z).y_up is False
+
+
+def test_the_factory_passes_host_port_name_others_and_clock():
+    port = free_udp_port()
+    cfg = load_config(None, ["mocap.bind_host=127.0.0.1", f"mocap.port={port}",
+                             "mocap.object_name=drone7"]).mocap
+    link = open_mocap_source(cfg, other_objects=("car",), clock=lambda: 3.5)
+    assert (link.bind_host, link.port, link.object_name, link.other_objects) == (
+        "127.0.0.1", port, "drone7", ("car",))
+    with link, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        tx.sendto(encode_mocap(MocapFrame.of(1, [MocapObjectPose(
+            "drone7", (1.0, 2.0, 3.0), (0.0, 0.0, 0.1))])), ("127.0.0.1", port))
+        assert wait_until(lambda: link.poses == 1)
+        assert link.latest()[1] == 3.5                     # stamped with the clock given
+    mc_cfg = load_config(None, ["mocap.kind=motioncapture", "mocap.object_name=drone7"]).mocap
+    src = open_mocap_source(mc_cfg, other_objects=("car",), clock=lambda: 4.5)
+    assert src.object_name == "drone7" and src.other_objects == ("car",)
+    mc = ScriptedMotionCapture()
+    mc.push(Body("drone7", (1.0, 2.0, 3.0), Rotation.identity()))
+    assert next(src.frames_from(mc))[1] == 4.5
+
+
+def test_the_factory_refuses_an_unknown_kind_naming_the_known_ones():
+    from types import SimpleNamespace
+
+    with pytest.raises(ValueError) as err:
+        open_mocap_source(SimpleNamespace(kind="optical"))
+    assert str(err.value) == "unknown mocap.kind 'optical'; choose one of vicon_udp, motioncapture"
+
+
+class _FailingOnce(ScriptedMotionCapture):
+    """A system whose first waitForNextFrame raises (the library's RuntimeError on a lost
+    connection), then delivers."""
+
+    def __init__(self):
+        super().__init__()
+        self.failed = False
+
+    def waitForNextFrame(self):  # noqa: N802 - the library's name
+        if not self.failed:
+            self.failed = True
+            raise RuntimeError("frame lost")
+        super().waitForNextFrame()
+
+
+@pytest.mark.timeout(10)
+def test_a_frame_the_library_fails_to_deliver_is_counted_and_the_next_one_read():
+    mc = _FailingOnce()
+    src = _source(mc)
+    mc.push(Body("ardrone", (1.0, 2.0, 3.0), Rotation.identity()))
+    bodies, t_s = next(src.frames_from(mc))
+    assert [b[0] for b in bodies] == ["ardrone"] and t_s == 1.0
+    assert src.frame_errors == 1 and src.last_error == "mocap: vicon@lab: frame lost"
+
+
+def test_received_bodies_are_turned_y_up_and_malformed_ones_counted():
+    src = MotionCaptureSource("optitrack", {"hostname": "h"}, y_up=True, repeat_limit=None)
+    src.receive_bodies([("ardrone", (1.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0)),
+                        ("car", (1.0, 2.0), (1.0, 0.0, 0.0, 0.0))], 1.0)
+    assert src.latest()[0].position_m.tolist() == pytest.approx([1.0, -3.0, 2.0])
+    assert src.stats.malformed == 1
+    assert src.last_error == ("mocap: body 'car': not enough values to unpack "
+                              "(expected 3, got 2)")
+
+
+@pytest.mark.timeout(10)
+def test_start_is_once_only():
+    mc = ScriptedMotionCapture()
+    src = _source(mc)
+    src.close()                                            # never started: nothing to stop
+    src = _source(mc)
+    src.start()
+    with pytest.raises(RuntimeError,
+                       match=r"^MotionCaptureSource already started \(or closed\)$"):
+        src.start()
+    finally_closed(src, mc)
+    with pytest.raises(RuntimeError,
+                       match=r"^MotionCaptureSource already started \(or closed\)$"):
+        src.start()                                        # nor after close
+
+
+def test_the_missing_library_message_names_the_setting_and_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "motioncapture", None)
+    src = MotionCaptureSource("vicon", {"hostname": "h"})
+    with pytest.raises(MissingExtra) as err:
+        src.start()
+    assert str(err.value) == ("mocap.kind 'motioncapture' needs the 'motioncapture' library: "
+                              "pip install 'ardrone-nmpc[mocap]'")
+
+
+def test_other_objects_are_stamped_with_their_receipt_time():
+    src = _source(ScriptedMotionCapture(), other_objects=("car",))
+    src.receive_bodies([("car", (1.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))], 7.5)
+    car, rx = src.latest_of("car")
+    assert car.t_s == rx == 7.5
+
+
+def test_the_longest_gap_and_the_fresh_count_of_the_object():
+    src = _source(ScriptedMotionCapture(), repeat_limit=None)
+    body = lambda x: [("ardrone", (x, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))]  # noqa: E731
+    src.receive_bodies(body(1.0), 1.0)
+    assert src.max_gap_s == 0.0 and src.fresh_count("ardrone") == 1
+    src.receive_bodies(body(1.1), 2.0)
+    src.receive_bodies([], 3.0)                            # occluded: no fresh pose
+    src.receive_bodies([("ardrone", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))], 4.0)  # zero
+    src.receive_bodies(body(1.2), 4.5)
+    assert src.max_gap_s == 2.5 and src.fresh_count("ardrone") == src.poses == 3
+    assert src.fresh_count("car") == 0
+
+
+def test_the_shared_rules_refuse_a_nameless_object_and_a_repeat_limit_below_2():
+    from ardrone_nmpc.links.mocap_source import MocapSource
+
+    base = MocapSource()
+    assert base.object_name == "ardrone" and base.repeat_limit == 3   # docs/mocap-stream.md
+    assert base.last_error is None and base.names_seen == () and base.max_gap_s == 0.0
+    for name in ("", 5):
+        with pytest.raises(ValueError, match=r"^object_name must be a non-empty string$"):
+            MocapSource(object_name=name)
+    assert MocapSource(repeat_limit=2).repeat_limit == 2
+    with pytest.raises(ValueError, match=r"^repeat_limit must be >= 2 \(or None\), got 1$"):
+        MocapSource(repeat_limit=1)
+
+
+def test_the_connect_timeout_default_is_the_configs():
+    assert MotionCaptureSource("vicon").connect_timeout_s == \
+        load_config(None, []).mocap.connect_timeout_s
+
+
+def test_the_frame_rate_is_measured_over_the_last_second():
+    """100 Hz for 2 s, then 10 Hz: a second later the rate is the stream's 10 Hz (a longer
+    window would still mix in the 100 Hz)."""
+    src = _source(ScriptedMotionCapture(), repeat_limit=None)
+    body = [("ardrone", (1.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))]
+    for k in range(200):
+        src.receive_bodies(body, 0.01 * k)
+    for k in range(1, 11):
+        src.receive_bodies(body, 2.0 + 0.1 * k)
+    assert src.stats.rate_hz == pytest.approx(10.0)
