@@ -72,9 +72,7 @@ Time
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field, replace
-from itertools import islice
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
@@ -82,7 +80,8 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, airframe_rk4_array,
-                                       airframe_rk4_many, freefall_derivative, rk4_step)
+                                       flying_steps, freefall_derivative, rk4_step)
+from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -363,7 +362,7 @@ class AirframePlant:
         self._steps = 0
         self._pending_s = 0.0
         self._current = _HOVER
-        self._fifo: deque = deque([_HOVER] * params.command_delay_steps)
+        self._fifo = CommandFifo([_HOVER] * params.command_delay_steps)
         self._tilt_aux = (0.0, 0.0)  # η_φ, η_θ of the second-order attitude form
         self._vel_bias = tuple(params.navdata_velocity_bias_std_mps * v
                                for v in self._bias_rng.standard_normal(2))
@@ -466,13 +465,7 @@ class AirframePlant:
         if not (math.isfinite(delay_s) and delay_s >= 0.0):
             raise ValueError(f"delay_s must be finite and >= 0, got {delay_s!r}")
         self.params = self.params.replace(command_delay_s=float(delay_s))
-        n = self.params.command_delay_steps
-        fifo = self._fifo
-        oldest = fifo[0] if fifo else self._current
-        while len(fifo) < n:
-            fifo.appendleft(oldest)
-        while len(fifo) > n:
-            fifo.popleft()
+        self._fifo = self._fifo.resized(self.params.command_delay_steps, self._current)
 
     # ------------------------------------------------------------------ time
 
@@ -509,35 +502,27 @@ class AirframePlant:
                                                self._gust_rng.standard_normal(2))
 
     def _flying_substeps(self, n: int, h: float, wind: tuple) -> int:
-        """Up to ``n`` FLYING substeps in one compiled call (:func:`airframe_rk4_many`), the
-        same arithmetic as :meth:`_substep`'s, without its per-step Python overhead — the
-        simulator's largest cost per tick. Stops after a step that touches the ground (its
-        contact applied here, as :meth:`_substep` does) and leaves to :meth:`_substep` the
-        steps that could empty the battery (a mode change). Returns the steps done."""
-        drain = self.params.battery_drain_pct_per_min * h / 60.0
+        """Up to ``n`` FLYING substeps in one compiled call (:func:`flying_steps`), the same
+        arithmetic as :meth:`_substep`'s, without its per-step Python — the simulator's
+        largest cost per tick. Leaves to :meth:`_substep` the steps that would empty the
+        battery (a mode change). Returns the steps done."""
+        p = self.params
         # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path,
         # and so does a sagging vertical gain (its coefficients change with every step's drain)
-        if (n < 2 or type(self)._motors_on_step is not AirframePlant._motors_on_step
-                or self.params.battery_sag_frac != 0.0 or self._battery <= (n + 1) * drain):
+        if (type(self)._motors_on_step is not AirframePlant._motors_on_step
+                or p.battery_sag_frac != 0.0):
             return 0
-        fifo, current = self._fifo, self._current
-        delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
-        delayed += [current] * (n - len(delayed))
-        done, x = airframe_rk4_many(self._state_array(), np.array(delayed, dtype=np.float64),
-                                    self.params.rhs_coefficients, wind, h)
-        state = self._from_state_array(x)
-        for _ in range(done):
-            fifo.append(current)
-            fifo.popleft()
-            self._battery = max(0.0, self._battery - drain)
+        fifo, (roll, pitch, gaz, yaw, hold) = self._fifo, self._current
+        done, fifo.head, self._battery, x = flying_steps(
+            self._state_array(), fifo.rows, fifo.head, roll, pitch, gaz, yaw, hold,
+            p.rhs_coefficients, wind, h, n, self._battery,
+            p.battery_drain_pct_per_min * h / 60.0)
         self._steps += done
-        self._state = state if state[2] > 0.0 else self._ground_contact(state)
+        self._state = self._from_state_array(x)
         return done
 
     def _substep(self, h: float, wind: tuple) -> None:
-        fifo = self._fifo
-        fifo.append(self._current)
-        delayed = fifo.popleft()  # the command of command_delay_steps steps ago
+        delayed = self._fifo.shift(self._current)  # the command of command_delay_steps ago
         self._steps += 1
         mode = self._mode
         if mode is FlightMode.FLYING:
