@@ -1,0 +1,54 @@
+"""A flying plant's whole :meth:`~ardrone_nmpc.sim.plant.AirframePlant.advance` in one
+compiled call: the substeps (:func:`~ardrone_nmpc.sim.airframe.flying_steps`), the heading
+wrapped, and the navdata biases advanced (the yaw offset's drift and walk, the velocity
+biases' Gauss–Markov step) — the plant's Python arithmetic in its order, so the same bits,
+without the interpreter between the steps (the simulator's largest cost per tick)."""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ardrone_nmpc.core.angles import ieee_remainder
+from ardrone_nmpc.sim.airframe import flying_steps
+
+__all__ = ["flying_advance", "wrap_half_turn"]
+
+_remainder = njit(cache=True)(ieee_remainder)
+
+
+@njit(cache=True)
+def wrap_half_turn(a, half_turn):
+    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` (``half_turn`` = π) and
+    :func:`~ardrone_nmpc.core.angles.wrap_angle_deg` (180) compiled: their rule on
+    :func:`~ardrone_nmpc.core.angles.ieee_remainder` (tests hold the three to the same bits)."""
+    if not math.isfinite(a):
+        return math.nan
+    r = _remainder(a, 2.0 * half_turn)
+    return half_turn if r <= -half_turn else r
+
+
+@njit(cache=True)
+def flying_advance(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain,
+                   normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,
+                   vel_bias_std, vel_bias_tau_s):
+    """``n`` steps of :func:`flying_steps` (arguments as there), then — only if all ``n``
+    were flown — the heading wrapped and the biases advanced over ``n·h`` with the standard
+    normals ``normals`` (3): the yaw offset by ``yaw_drift_radps``·dt (signed) and
+    ``yaw_walk``·√dt·normals[0], the velocity biases as
+    :func:`~ardrone_nmpc.sim.plant.gauss_markov_step`. Returns (steps done, head, battery,
+    state, yaw offset °, velocity bias 0, velocity bias 1)."""
+    done, head, battery, x = flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h,
+                                          n, battery, drain)
+    if done < n:  # the battery empties: the plant's step-by-step path goes on
+        return done, head, battery, x, yaw_bias_deg, vel_bias_0, vel_bias_1
+    x[8] = wrap_half_turn(x[8], math.pi)
+    dt = n * h
+    drift = yaw_drift_radps * dt
+    walk = yaw_walk * math.sqrt(dt) * normals[0]
+    yaw_bias_deg = wrap_half_turn(yaw_bias_deg + math.degrees(drift + walk), 180.0)
+    a = math.exp(-dt / vel_bias_tau_s)
+    q = vel_bias_std * math.sqrt(1.0 - a * a)
+    return (done, head, battery, x, yaw_bias_deg, a * vel_bias_0 + q * normals[1],
+            a * vel_bias_1 + q * normals[2])
