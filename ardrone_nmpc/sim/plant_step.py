@@ -10,23 +10,10 @@ import math
 
 from numba import njit
 
-from ardrone_nmpc.core.angles import ieee_remainder
+from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.sim.airframe import flying_steps
 
-__all__ = ["flying_advance", "wrap_half_turn"]
-
-_remainder = njit(cache=True)(ieee_remainder)
-
-
-@njit(cache=True)
-def wrap_half_turn(a, half_turn):
-    """:func:`~ardrone_nmpc.core.angles.wrap_angle_rad` (``half_turn`` = π) and
-    :func:`~ardrone_nmpc.core.angles.wrap_angle_deg` (180) compiled: their rule on
-    :func:`~ardrone_nmpc.core.angles.ieee_remainder` (tests hold the three to the same bits)."""
-    if not math.isfinite(a):
-        return math.nan
-    r = _remainder(a, 2.0 * half_turn)
-    return half_turn if r <= -half_turn else r
+__all__ = ["flying_advance"]
 
 
 @njit(cache=True)

@@ -78,7 +78,7 @@ def test_the_compiled_wrap_is_the_wrap_bit_for_bit():
     import math
 
     from ardrone_nmpc.core.angles import TWO_PI, ieee_remainder, wrap_angle_deg, wrap_angle_rad
-    from ardrone_nmpc.sim.plant_step import wrap_half_turn
+    from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 
     rng = np.random.default_rng(0)
     angles = np.concatenate([rng.normal(0.0, 5.0, 3000), rng.normal(0.0, 1e4, 300),
