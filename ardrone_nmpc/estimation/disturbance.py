@@ -120,6 +120,16 @@ def _integrate(x, ref, frozen, preview, law, carry, psi, latched, learning, shif
 
 
 @njit(cache=True)
+def _shifted(states, shift):
+    """A copy of ``states`` (n, 7) with ``shift`` (4) added to x, y, z, ψ."""
+    out = states.copy()
+    for j in range(out.shape[0]):
+        for k in range(4):
+            out[j, _POS[k]] += shift[k]
+    return out
+
+
+@njit(cache=True)
 def _clip(value, lim):
     """``min(max(value, -lim), lim)`` with Python's ``min`` and ``max``."""
     low = -lim if -lim > value else value
@@ -199,6 +209,9 @@ class ReferenceIntegrator:
 
     def shifted(self, states: np.ndarray) -> np.ndarray:
         """Reference states (n, 7) with the shift added to x, y, z, ψ (a new array)."""
-        out = np.array(states, dtype=float, copy=True)
-        out[..., _POS_LIST] += self.shift
-        return out
+        states = np.asarray(states, dtype=np.float64)
+        if states.ndim != 2:
+            out = np.array(states, copy=True)
+            out[..., _POS_LIST] += self.shift
+            return out
+        return _shifted(states, self.shift)
