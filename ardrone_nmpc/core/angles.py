@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-__all__ = ["TWO_PI", "wrap_angle_rad", "wrap_angle_deg", "unwrap_near", "unwrap_near_turns"]
+__all__ = ["TWO_PI", "ieee_remainder", "wrap_angle_rad", "wrap_angle_deg", "unwrap_near",
+           "unwrap_near_turns"]
 
 TWO_PI = 2.0 * math.pi
 
@@ -27,6 +28,23 @@ def _wrap_scalar(a: float) -> float:
 
 
 _wrap_array = np.vectorize(_wrap_scalar, otypes=[float])
+
+
+def ieee_remainder(x: float, y: float) -> float:
+    """``math.remainder(x, y)`` for finite ``x`` and finite ``y`` ≠ 0, in plain arithmetic so
+    that the kernels compile it (numba has no ``math.remainder``): CPython's own algorithm,
+    bit for bit — ``%`` of non-negative floats is C's ``fmod``, exact."""
+    absx, absy = abs(x), abs(y)
+    m = absx % absy
+    c = absy - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:  # half way: the even multiple
+        r = m - 2.0 * ((0.5 * (absx - m)) % absy)
+    return math.copysign(1.0, x) * r
+
 
 
 def wrap_angle_rad(a):

@@ -14,8 +14,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
+from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
 __all__ = ["AXES", "SATURATION_FRAC", "STEADY_FRACTION", "ReferenceIntegrator", "frozen_axes"]
@@ -24,6 +27,9 @@ AXES = ("x", "y", "z", "psi")
 _POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
 _POS_LIST = list(_POS)
 _VEL = (IX_VX, IX_VY, IX_VZ)
+_NO_PREVIEW = np.zeros((0, 7))
+# the rows of ReferenceIntegrator._carry: what each axis carries from one update to the next
+_LAST, _REST_S, _INTEGRAL, _REST_LO, _REST_HI = range(5)
 _REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
 #: to control_vz_max before the mapping, so the gaz flag alone would never show it).
@@ -56,6 +62,81 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
     return tilt, tilt, sat[2], sat[3]
 
 
+@njit(cache=True, **OUTER_KERNEL)
+def _integrate(x, ref, frozen, preview, law, carry, psi, latched, learning, shift, period):
+    """:meth:`ReferenceIntegrator.update`'s law, compiled: one period of every axis.
+
+    ``law`` (4, 8): error band, speed band, steady band, release speed, hold, ki, kp, max
+    shift per axis; ``carry`` (5, 4) the rows ``_LAST`` … ``_REST_HI``; ``psi`` (1,) the last
+    ψ error (NaN before the first); ``latched``, ``learning``, ``shift`` (4,) in place.
+    Python's ``min``/``max`` are spelled out (the first argument unless the second is
+    strictly beyond it), so a NaN goes where it went in Python.
+    """
+    pos = _POS
+    e = np.empty(4)
+    rate = np.zeros(4)
+    for k in range(4):
+        e[k] = x[pos[k]] - ref[pos[k]]
+    e[3] = wrap_half_turn(e[3], math.pi)
+    for k in range(3):
+        rate[k] = x[_VEL[k]]
+    if math.isfinite(psi[0]):
+        rate[3] = wrap_half_turn(e[3] - psi[0], math.pi) / period
+    psi[0] = e[3]
+    for k in range(4):
+        error_band, speed_band, steady_band, release = law[k, 0], law[k, 1], law[k, 2], law[k, 3]
+        hold, ki, kp, lim = law[k, 4], law[k, 5], law[k, 6], law[k, 7]
+        ek, refk = e[k], ref[pos[k]]
+        still = True
+        for j in range(preview.shape[0]):
+            if not abs(preview[j, pos[k]] - refk) <= _REF_STILL:
+                still = False
+        moved = abs(refk - carry[_LAST, k]) > _REF_STILL or not still  # first update: NaN
+        carry[_LAST, k] = refk
+        inside = math.isfinite(ek) and abs(ek) < error_band
+        at_rest = inside and abs(rate[k]) < speed_band and not moved
+        if at_rest and carry[_REST_S, k] > 0.0:
+            lo = ek if ek < carry[_REST_LO, k] else carry[_REST_LO, k]
+            hi = ek if ek > carry[_REST_HI, k] else carry[_REST_HI, k]
+            spread = STEADY_FRACTION * abs(ek)
+            if hi - lo <= (spread if spread > steady_band else steady_band):
+                carry[_REST_LO, k], carry[_REST_HI, k] = lo, hi
+                carry[_REST_S, k] += period
+            else:  # still converging by itself: the rest starts again from here
+                carry[_REST_LO, k] = carry[_REST_HI, k] = ek
+                carry[_REST_S, k] = period
+        elif at_rest:
+            carry[_REST_LO, k] = carry[_REST_HI, k] = ek
+            carry[_REST_S, k] = period
+        else:
+            carry[_REST_S, k] = 0.0
+        if not inside or moved or abs(rate[k]) > release:
+            latched[k] = False
+        elif carry[_REST_S, k] > hold:
+            latched[k] = True
+        learning[k] = latched[k] and not frozen[k]
+        if learning[k]:
+            carry[_INTEGRAL, k] = _clip(carry[_INTEGRAL, k] - ki * ek * period, lim)
+            shift[k] = _clip(carry[_INTEGRAL, k] - kp * ek, lim)
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def _shifted(states, shift):
+    """A copy of ``states`` (n, 7) with ``shift`` (4) added to x, y, z, ψ."""
+    out = states.copy()
+    for j in range(out.shape[0]):
+        for k in range(4):
+            out[j, _POS[k]] += shift[k]
+    return out
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _clip(value, lim):
+    """``min(max(value, -lim), lim)`` with Python's ``min`` and ``max``."""
+    low = -lim if -lim > value else value
+    return lim if lim < low else low
+
+
 class ReferenceIntegrator:
     """The reference shift ``s`` = [x, y, z, ψ] and its integration law.
 
@@ -83,17 +164,13 @@ class ReferenceIntegrator:
         self.shift = np.zeros(n)
         self.learning = np.zeros(n, dtype=bool)  # which axes integrated on the last update
         self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
-        # the law per axis, and the state carried between updates, as plain floats
-        self._law = list(zip(*(a.tolist() for a in (
+        # the law per axis (rows of _integrate's law) and what it carries between updates
+        self._law = np.ascontiguousarray(np.stack((
             self.error_band, self.speed_band, self.steady_band, self.release_speed,
-            self.hold_s, self.ki_per_s, self.kp, self.max_shift))))
-        self._latched = [False] * n
-        self._rest_s = [0.0] * n  # how long each axis has been at rest inside its band
-        self._last = [math.nan] * n  # the reference components of the last update
-        self._last_error_psi = math.nan
-        self._integral = [0.0] * n  # the integral part of the shift
-        self._rest_lo = [0.0] * n  # the error's range since the axis came to rest
-        self._rest_hi = [0.0] * n
+            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1))
+        self._carry = np.zeros((5, n))
+        self._carry[_LAST] = math.nan  # the reference components of the last update
+        self._last_error_psi = np.array([math.nan])
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
@@ -124,59 +201,18 @@ class ReferenceIntegrator:
         The shift is clipped to ±max_shift. ė is the estimate's velocity, for ψ the
         difference of its error over one period.
         """
-        # plain floats per axis (numpy scalars cost ten times as much; the same IEEE ops)
-        e = self.errors(x, ref).tolist()
-        xs, refs = x.tolist(), ref.tolist()
-        rate = [xs[i] for i in _VEL] + [0.0]
-        if math.isfinite(self._last_error_psi):
-            rate[3] = wrap_angle_rad(e[3] - self._last_error_psi) / self.period_s
-        self._last_error_psi = e[3]
-        still = ((np.abs(preview[:, _POS_LIST] - ref[_POS_LIST]) <= _REF_STILL).all(axis=0).tolist()
-                 if preview is not None else (True,) * len(AXES))
-        law = self._law
-        last, rest_s, rest_lo, rest_hi = self._last, self._rest_s, self._rest_lo, self._rest_hi
-        latched, integ = self._latched, self._integral
-        shift, learning = self.shift.tolist(), [False] * len(AXES)
-        period = self.period_s
-        for k, i in enumerate(_POS):
-            error_band, speed_band, steady_band, release, hold, ki, kp, lim = law[k]
-            ek = e[k]
-            moved = abs(refs[i] - last[k]) > _REF_STILL or not still[k]  # first update: NaN
-            last[k] = refs[i]
-            inside = math.isfinite(ek) and abs(ek) < error_band
-            at_rest = inside and abs(rate[k]) < speed_band and not moved
-            if at_rest and rest_s[k] > 0.0:
-                lo = min(rest_lo[k], ek)
-                hi = max(rest_hi[k], ek)
-                # steady: the range within the band or a fifth of the error — a converging tail
-                # changes by (1 − e^(−hold/τ)) of itself, most of it for hold ≳ τ
-                if hi - lo <= max(steady_band, STEADY_FRACTION * abs(ek)):
-                    rest_lo[k], rest_hi[k] = lo, hi
-                    rest_s[k] += period
-                else:  # still converging by itself: the rest starts again from here
-                    rest_lo[k] = rest_hi[k] = ek
-                    rest_s[k] = period
-            elif at_rest:
-                rest_lo[k] = rest_hi[k] = ek
-                rest_s[k] = period
-            else:
-                rest_s[k] = 0.0
-            if not inside or moved or abs(rate[k]) > release:
-                latched[k] = False
-            elif rest_s[k] > hold:
-                latched[k] = True
-            learning[k] = latched[k] and not frozen[k]
-            if learning[k]:
-                integral = integ[k] - ki * ek * period
-                integ[k] = min(max(integral, -lim), lim)
-                shift[k] = min(max(integ[k] - kp * ek, -lim), lim)
-        self.shift[:] = shift
-        self.learning[:] = learning
-        self.latched[:] = latched
+        preview = _NO_PREVIEW if preview is None else np.asarray(preview, dtype=np.float64)
+        _integrate(np.asarray(x, dtype=np.float64), np.asarray(ref, dtype=np.float64),
+                   tuple(bool(f) for f in frozen), preview, self._law,
+                   self._carry, self._last_error_psi, self.latched, self.learning, self.shift,
+                   self.period_s)
         return self.shift
 
     def shifted(self, states: np.ndarray) -> np.ndarray:
         """Reference states (n, 7) with the shift added to x, y, z, ψ (a new array)."""
-        out = np.array(states, dtype=float, copy=True)
-        out[..., _POS_LIST] += self.shift
-        return out
+        states = np.asarray(states, dtype=np.float64)
+        if states.ndim != 2:
+            out = np.array(states, copy=True)
+            out[..., _POS_LIST] += self.shift
+            return out
+        return _shifted(states, self.shift)

@@ -1,8 +1,9 @@
 """The airframe's compiled right-hand side and RK4 steps: the simulator's hot path.
 
 :mod:`ardrone_nmpc.sim.plant` defines the model (its module docstring) and calls these:
-:func:`airframe_rk4` is one fixed RK4 step of the motors-on plant, :func:`airframe_rk4_many`
-many in one call (a whole control tick's substeps without Python in between);
+:func:`airframe_rk4` is one fixed RK4 step of the motors-on plant, :func:`flying_steps`
+many in one call with the command delay and the battery (a flying plant's substeps without
+Python in between);
 :func:`rk4_step` is the plain-Python RK4 of any right-hand side (the falling drone's, and the
 reference the compiled steps are tested against).
 
@@ -22,7 +23,7 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import GRAVITY_MPS2
 
 __all__ = ["N_AUX_STATE", "N_STATE", "airframe_rk4", "airframe_rk4_array",
-           "airframe_rk4_many", "freefall_derivative", "rk4_step"]
+           "flying_steps", "freefall_derivative", "rk4_step"]
 
 N_STATE = 10      # x, y, z, vx, vy, vz, φ, θ, ψ, r
 _NO_WIND = (0.0, 0.0, 0.0)
@@ -74,14 +75,10 @@ def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
-    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x``; a new array."""
+def _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, a, b, c, d, t, out):
+    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x`` into ``out``
+    (``a`` … ``t``: scratch arrays of x's size; ``out`` may be ``x``)."""
     n = x.shape[0]
-    a = np.empty(n)
-    b = np.empty(n)
-    c = np.empty(n)
-    d = np.empty(n)
-    t = np.empty(n)
     hh = 0.5 * h
     _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, a)
     for i in range(n):
@@ -94,9 +91,17 @@ def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
         t[i] = x[i] + h * c[i]
     _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
     h6 = h / 6.0
-    out = np.empty(n)
     for i in range(n):
         out[i] = x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
+    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x``; a new array."""
+    n = x.shape[0]
+    out = np.empty(n)
+    _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, np.empty(n), np.empty(n), np.empty(n),
+              np.empty(n), np.empty(n), out)
     return out
 
 
@@ -119,18 +124,39 @@ def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
     return _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h)
 
 
-@njit(cache=True, **OUTER_KERNEL)
-def airframe_rk4_many(state, commands, k, w, h):
-    """One RK4 step per row of ``commands`` (n, 5: roll, pitch, gaz, yaw, hold as 0/1),
-    each from the last, on a state array of 10 or 12 elements; stops after a step that ends
-    at z ≤ 0 (ground contact is the caller's). Returns (steps done, state array)."""
-    x = state
-    for i in range(commands.shape[0]):
-        c = commands[i]
-        x = _rk4_array(x, c[0], c[1], c[2], c[3], c[4] != 0.0, k, w, h)
-        if x[2] <= 0.0:
-            return i + 1, x
-    return commands.shape[0], x
+@njit(cache=True, **INNER_KERNEL)
+def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain):
+    """Up to ``n`` steps of a FLYING plant in one call: each queues the current command
+    (``roll`` … ``hold``) in the delay ring ``ring`` (m, 5; oldest at ``head``; shifted in
+    place) and flies the oldest (the current one with no delay), one RK4 step from the state
+    array ``x`` (10 or 12), then the floor (z ≤ 0 stops at 0 with no downward speed) and the
+    battery drain — :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in
+    its order. Stops before a step whose drain would empty the battery (a mode change, the
+    plant's). Returns (steps done, head, battery, state array)."""
+    m = ring.shape[0]
+    size = x.shape[0]
+    x = x.copy()
+    k1, k2, k3, k4, tmp = (np.empty(size), np.empty(size), np.empty(size), np.empty(size),
+                           np.empty(size))
+    for i in range(n):
+        if not battery - drain > 0.0:
+            return i, head, battery, x
+        if m == 0:
+            r, p, g, y, hd = roll, pitch, gaz, yaw, hold
+        else:
+            r, p, g, y, hd = (ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3],
+                              ring[head, 4] != 0.0)
+            ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
+            ring[head, 4] = 1.0 if hold else 0.0
+            head = head + 1 if head + 1 < m else 0
+        _rk4_into(x, r, p, g, y, hd, k, w, h, k1, k2, k3, k4, tmp, x)
+        if not x[2] > 0.0:  # the floor: max(vz, 0.0) as Python's max keeps a NaN
+            x[2] = 0.0
+            if 0.0 > x[5]:
+                x[5] = 0.0
+        left = battery - drain
+        battery = left if left > 0.0 else 0.0
+    return n, head, battery, x
 
 
 def rk4_step(deriv, state: tuple, h: float, command: tuple, params,

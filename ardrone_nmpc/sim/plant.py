@@ -72,9 +72,7 @@ Time
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field, replace
-from itertools import islice
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
@@ -82,8 +80,10 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_deg, wrap_angle_rad
 from ardrone_nmpc.core.types import GRAVITY_MPS2, FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, airframe_rk4_array,
-                                       airframe_rk4_many, freefall_derivative, rk4_step)
+                                       freefall_derivative, rk4_step)
+from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
+from ardrone_nmpc.sim.plant_step import flying_advance
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
     from ardrone_nmpc.config.schema import DroneConfig, NoiseConfig, SimConfig
@@ -363,7 +363,7 @@ class AirframePlant:
         self._steps = 0
         self._pending_s = 0.0
         self._current = _HOVER
-        self._fifo: deque = deque([_HOVER] * params.command_delay_steps)
+        self._fifo = CommandFifo([_HOVER] * params.command_delay_steps)
         self._tilt_aux = (0.0, 0.0)  # η_φ, η_θ of the second-order attitude form
         self._vel_bias = tuple(params.navdata_velocity_bias_std_mps * v
                                for v in self._bias_rng.standard_normal(2))
@@ -466,13 +466,7 @@ class AirframePlant:
         if not (math.isfinite(delay_s) and delay_s >= 0.0):
             raise ValueError(f"delay_s must be finite and >= 0, got {delay_s!r}")
         self.params = self.params.replace(command_delay_s=float(delay_s))
-        n = self.params.command_delay_steps
-        fifo = self._fifo
-        oldest = fifo[0] if fifo else self._current
-        while len(fifo) < n:
-            fifo.appendleft(oldest)
-        while len(fifo) > n:
-            fifo.popleft()
+        self._fifo = self._fifo.resized(self.params.command_delay_steps, self._current)
 
     # ------------------------------------------------------------------ time
 
@@ -493,51 +487,52 @@ class AirframePlant:
         self._pending_s = max(0.0, pending - n * h)
         if n == 0:
             return
-        wind = tuple(map(float, self.wind_mps))
-        if self.params.turbulence_std_mps > 0.0:
-            wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
-        done = self._flying_substeps(n, h, wind) if self._mode is FlightMode.FLYING else 0
-        for _ in range(n - done):
-            self._substep(h, wind)
-        x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
-        self._state = (x, y, z, vx, vy, vz, phi, theta, wrap_angle_rad(psi), r)
-        self._advance_biases(n * h)
         p = self.params
+        wind = tuple(map(float, self.wind_mps))
+        if p.turbulence_std_mps > 0.0:
+            wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
+        normals = self._bias_rng.standard_normal(3)  # the biases' draws (their stream alone)
+        done = (self._flying_advance(n, h, wind, normals) if self._mode is FlightMode.FLYING
+                else 0)
+        if done < n:
+            for _ in range(n - done):
+                self._substep(h, wind)
+            x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
+            self._state = (x, y, z, vx, vy, vz, phi, theta, wrap_angle_rad(psi), r)
+            self._advance_biases(n * h, normals)
         if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
             self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
                                                p.turbulence_tau_s, n * h,
                                                self._gust_rng.standard_normal(2))
 
-    def _flying_substeps(self, n: int, h: float, wind: tuple) -> int:
-        """Up to ``n`` FLYING substeps in one compiled call (:func:`airframe_rk4_many`), the
-        same arithmetic as :meth:`_substep`'s, without its per-step Python overhead — the
-        simulator's largest cost per tick. Stops after a step that touches the ground (its
-        contact applied here, as :meth:`_substep` does) and leaves to :meth:`_substep` the
-        steps that could empty the battery (a mode change). Returns the steps done."""
-        drain = self.params.battery_drain_pct_per_min * h / 60.0
+    def _flying_advance(self, n: int, h: float, wind: tuple, normals: np.ndarray) -> int:
+        """Up to ``n`` FLYING substeps in one compiled call (:func:`flying_advance`), the same
+        arithmetic as :meth:`_substep`'s, without its per-step Python — the simulator's
+        largest cost per tick — and, when all ``n`` were flown, the heading's wrap and
+        :meth:`_advance_biases` too. Leaves to :meth:`_substep` the steps that would empty
+        the battery (a mode change). Returns the steps done."""
+        p = self.params
         # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path,
         # and so does a sagging vertical gain (its coefficients change with every step's drain)
-        if (n < 2 or type(self)._motors_on_step is not AirframePlant._motors_on_step
-                or self.params.battery_sag_frac != 0.0 or self._battery <= (n + 1) * drain):
+        if (type(self)._motors_on_step is not AirframePlant._motors_on_step
+                or p.battery_sag_frac != 0.0):
             return 0
-        fifo, current = self._fifo, self._current
-        delayed = list(islice(fifo, n))  # the commands of command_delay_steps steps ago
-        delayed += [current] * (n - len(delayed))
-        done, x = airframe_rk4_many(self._state_array(), np.array(delayed, dtype=np.float64),
-                                    self.params.rhs_coefficients, wind, h)
-        state = self._from_state_array(x)
-        for _ in range(done):
-            fifo.append(current)
-            fifo.popleft()
-            self._battery = max(0.0, self._battery - drain)
+        fifo, (roll, pitch, gaz, yaw, hold) = self._fifo, self._current
+        done, fifo.head, self._battery, x, yaw_bias, vb0, vb1 = flying_advance(
+            self._state_array(), fifo.rows, fifo.head, roll, pitch, gaz, yaw, hold,
+            p.rhs_coefficients, wind, h, n, self._battery,
+            p.battery_drain_pct_per_min * h / 60.0, normals, self._yaw_bias_deg,
+            *self._vel_bias, self._yaw_drift_sign * p.navdata_yaw_drift_radps,
+            p.navdata_yaw_walk_rad_per_sqrt_s, p.navdata_velocity_bias_std_mps,
+            p.navdata_velocity_bias_tau_s)
         self._steps += done
-        self._state = state if state[2] > 0.0 else self._ground_contact(state)
+        self._state = self._from_state_array(x)
+        if done == n:
+            self._yaw_bias_deg, self._vel_bias = yaw_bias, (vb0, vb1)
         return done
 
     def _substep(self, h: float, wind: tuple) -> None:
-        fifo = self._fifo
-        fifo.append(self._current)
-        delayed = fifo.popleft()  # the command of command_delay_steps steps ago
+        delayed = self._fifo.shift(self._current)  # the command of command_delay_steps ago
         self._steps += 1
         mode = self._mode
         if mode is FlightMode.FLYING:
@@ -626,9 +621,10 @@ class AirframePlant:
         self._yaw_bias_deg = 180.0 * u[2]
         self._yaw_drift_sign = 1.0 if rng.random() < 0.5 else -1.0
 
-    def _advance_biases(self, dt: float) -> None:
+    def _advance_biases(self, dt: float, n: np.ndarray) -> None:
+        """The yaw offset's drift and walk and the velocity biases over ``dt`` (s), with the
+        standard normals ``n`` (3) (:func:`flying_advance` compiles the same arithmetic)."""
         p = self.params
-        n = self._bias_rng.standard_normal(3)
         drift = self._yaw_drift_sign * p.navdata_yaw_drift_radps * dt
         walk = p.navdata_yaw_walk_rad_per_sqrt_s * math.sqrt(dt) * n[0]
         self._yaw_bias_deg = wrap_angle_deg(self._yaw_bias_deg + math.degrees(drift + walk))
