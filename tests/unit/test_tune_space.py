@@ -144,6 +144,10 @@ def test_params_three_levels_deep_land_where_their_path_says(step_z):
     start[2] = 1.5
     assert plant["initial_position_m"] == start
     assert set(plant) == {"tau_vz_s", "initial_position_m"}  # nothing else copied in
+    # a vector the config writes, three levels deep: its other elements are the written ones
+    written = apply_params({"sim": {"plant": {"initial_position_m": [0.5, -0.5, 2.0]}}},
+                           {"sim.plant.initial_position_m[2]": 1.5}, resolved=resolved)
+    assert written["sim"]["plant"] == {"initial_position_m": [0.5, -0.5, 1.5]}
     full = apply_params(resolved, {"sim.plant.tau_vz_s": 0.7})
     assert full["sim"]["plant"] == dict(resolved["sim"]["plant"], tau_vz_s=0.7)
 
