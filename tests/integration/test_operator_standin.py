@@ -362,3 +362,52 @@ def test_an_interrupted_blind_landing_says_it_was_not_confirmed(short_blind_land
         assert result.exit_code == code, result.stderr
         assert result.stderr.strip().splitlines()[-1] == (
             "error: interrupted: landing not confirmed by navdata — check the drone")
+
+
+def test_status_prints_the_snapshot_and_every_held_limit_line_by_line():
+    """What the stand-in sends, as docs/first-flight.md lists it: a drone on the ground
+    (ctrl_state major 2, LANDED), navdata_demo after the handshake (state bit 10), its
+    battery, altitude and attitude, then the ten keys it holds (config_keys.h defaults) —
+    one missing from its store said so, a control port that does not answer one line."""
+    from tests.standins.sdk_drone import DEFAULT_CONFIG
+
+    with SdkDrone(attitude_deg=(0.3, -0.2), battery_pct=80) as drone:
+        del drone.config["control:flying_mode"]
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        at, nav = drone.at_port, drone.navdata_port
+    assert result.exit_code == 0, result.stderr
+    keys = ("control:euler_angle_max", "control:control_vz_max", "control:control_yaw",
+            "control:altitude_max", "control:outdoor", "control:flight_without_shell",
+            "control:flying_mode", "custom:session_id", "custom:profile_id",
+            "custom:application_id")
+    held = dict(DEFAULT_CONFIG, **{"control:flying_mode": "(missing)"})
+    assert result.stdout.splitlines() == [
+        f"drone      127.0.0.1:{at}/{nav}", "mode       landed",
+        "state      0x00000400 NAVDATA_DEMO", "faults     none",
+        "ctrl_state 0x00020000 (major 2 LANDED, minor 0)", "battery    80 %",
+        "altitude   0.000 m", "attitude   roll +0.3° pitch -0.2° yaw +10.0°",
+        *(f"{key:<29}{held[key]}" for key in keys)]
+    with SdkDrone(serve_control_port=False) as drone:
+        result = operator("status", drone, "--control-port", str(dead_port()))
+    assert result.exit_code == 0, result.stderr
+    assert result.stdout.splitlines()[-1].startswith("limits     not read: ")
+
+
+@pytest.mark.parametrize("value", ["d2e081a3,be27e2e4", "d2e081a3,be27e2e4,d87f7e0c,00000000",
+                                   "d2e081a3,be27e2e4,d87f7e0", "d2e081a3,be27e2e4,d87f7e0g"])
+def test_config_ids_are_exactly_three_of_8_hex_digits(value):
+    """docs/first-flight.md: --config-ids SESSION,PROFILE,APPLICATION, 8 hex digits each;
+    anything else is one usage line (exit 2) before a datagram goes out."""
+    result = CliRunner().invoke(app, ["reset", "--drone", "127.0.0.1", "--at-port",
+                                      str(dead_port()), "--config-ids", value])
+    assert result.exit_code == 2
+    assert result.stderr == (f"error: --config-ids: {value!r}: three ids of 8 hex digits, "
+                             "session,profile,application (e.g. d2e081a3,be27e2e4,d87f7e0c)\n")
+
+
+def test_config_ids_may_be_spaced_and_of_either_case():
+    with SdkDrone(held=SESSION) as drone:
+        spaced = " D2E081A3 , be27e2e4,d87f7e0c "
+        result = operator("status", drone, "--control-port", str(drone.control_port),
+                          "--config-ids", spaced)
+        assert result.exit_code == 0, result.stderr
