@@ -411,3 +411,69 @@ def test_config_ids_may_be_spaced_and_of_either_case():
         result = operator("status", drone, "--control-port", str(drone.control_port),
                           "--config-ids", spaced)
         assert result.exit_code == 0, result.stderr
+
+
+def test_status_reads_a_drone_in_the_air():
+    """status works against any drone, flying too (docs/first-flight.md): it must not refuse
+    an airborne one as fly's connect does."""
+    with SdkDrone(airborne_at_start=True) as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        assert drone.phase == "hovering"                # and it did not land it
+    assert result.exit_code == 0, result.stderr
+    state = next(line for line in result.stdout.splitlines() if line.startswith("state"))
+    assert "FLY" in state.split()
+
+
+class StuckCut(SdkDrone):
+    """A drone whose emergency does not clear on the edge (a cut the firmware holds)."""
+
+    def _at_ref(self, args, now):
+        if self.phase != "emergency":
+            super()._at_ref(args, now)
+
+
+def _cut(drone) -> None:
+    with drone.lock:
+        drone._set("emergency", drone.phase_t)
+
+
+def test_reset_in_a_multiconfig_session_takes_the_ids_and_clears_the_cut():
+    with SdkDrone(held=SESSION) as drone:
+        _cut(drone)
+        result = operator("reset", drone, "--config-ids", ",".join(IDS))
+        assert result.exit_code == 0, result.stderr
+        assert result.stdout == "emergency cleared\n" and drone.phase == "landed"
+
+
+def test_a_cut_that_does_not_clear_is_one_error_line():
+    with StuckCut() as drone:
+        _cut(drone)
+        result = operator("reset", drone)
+        assert drone.phase == "emergency"
+    assert result.exit_code == 1
+    assert result.stderr == ("error: emergency not cleared (state bit 31 still set after "
+                             "3.00 s)\n")
+
+
+def test_a_busy_local_at_port_is_a_warning_not_an_error(monkeypatch):
+    """The lab's local AT port 5556 taken by another program: AT commands go out from an
+    ephemeral port, and the command says so on stderr (docs/first-flight.md)."""
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("127.0.0.1", 0))
+    port = busy.getsockname()[1]
+    base = drone_link_module.DroneLink
+
+    def init(self, *args, **kwargs):
+        base.__init__(self, *args, **kwargs)
+        self.at_local_port = port
+    monkeypatch.setattr(drone_link_module, "DroneLink", type("DroneLink", (base,),
+                                                             {"__init__": init}))
+    try:
+        with SdkDrone() as drone:
+            result = operator("status", drone, "--control-port", str(drone.control_port))
+    finally:
+        busy.close()
+    assert result.exit_code == 0, result.stderr
+    assert result.stderr.startswith(f"warning: local UDP port {port} is busy (")
+    assert result.stderr.endswith("; AT commands go out from an ephemeral port\n")
+    assert result.stdout.startswith("drone      127.0.0.1:")
