@@ -477,3 +477,35 @@ def test_a_busy_local_at_port_is_a_warning_not_an_error(monkeypatch):
     assert result.stderr.startswith(f"warning: local UDP port {port} is busy (")
     assert result.stderr.endswith("; AT commands go out from an ephemeral port\n")
     assert result.stdout.startswith("drone      127.0.0.1:")
+
+
+@pytest.mark.parametrize("command", ["status", "reset"])
+def test_an_address_that_is_no_host_is_one_error_line(command):
+    result = CliRunner().invoke(app, [command, "--drone", "127.0.0.1 x", "--at-port",
+                                      str(dead_port())])
+    assert result.exit_code == 1
+    assert result.stderr == ("error: drone address must be an address or host name, got "
+                             "'127.0.0.1 x'\n")
+
+
+class BootstrapOnly(SdkDrone):
+    """A drone that acknowledges navdata_demo but keeps sending bootstrap packets (header
+    and state only: no demo option, so no ctrl_state, battery or attitude)."""
+
+    def _at_config(self, args, now):
+        super()._at_config(args, now)
+        self.bootstrap = True
+
+
+def test_status_of_a_drone_stuck_in_bootstrap_is_one_error_line(monkeypatch):
+    """Without the demo option there is no ctrl_state, battery or attitude to print: the
+    connection fails, in one line (so status never prints a snapshot without a ctrl_state)."""
+    import ardrone_nmpc.cli.operator as operator_module
+
+    monkeypatch.setattr(operator_module, "CONNECT_TIMEOUT_S", 1.0)
+    with BootstrapOnly() as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 1 and result.stdout == ""
+    assert re.fullmatch(r"error: navdata from 127\.0\.0\.1 still in bootstrap mode \(no demo "
+                        r"option\) [0-9.]+ s after connecting, although general:navdata_demo "
+                        r"was acknowledged\n", result.stderr), result.stderr
