@@ -420,8 +420,34 @@ def test_status_reads_a_drone_in_the_air():
         result = operator("status", drone, "--control-port", str(drone.control_port))
         assert drone.phase == "hovering"                # and it did not land it
     assert result.exit_code == 0, result.stderr
-    state = next(line for line in result.stdout.splitlines() if line.startswith("state"))
-    assert "FLY" in state.split()
+    lines = result.stdout.splitlines()
+    assert lines[2] == "state      0x00000401 FLY NAVDATA_DEMO"      # bits 0 and 10
+    assert lines[4] == "ctrl_state 0x00040000 (major 4 HOVERING, minor 0)"
+    assert lines[6] == "altitude   1.000 m"                         # the stand-in's hover
+
+
+class NewMajor(SdkDrone):
+    """A firmware reporting a major ctrl_state control_states.h does not list."""
+
+    def _state_and_ctrl(self, now):
+        state, _ = super()._state_and_ctrl(now)
+        return state, 99 << 16 | 3
+
+
+def test_status_of_a_cut_drone_and_of_an_unknown_ctrl_state():
+    with SdkDrone() as drone:
+        _cut(drone)
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[1:5] == ["mode       emergency",
+                          "state      0x80000400 NAVDATA_DEMO EMERGENCY",     # bits 10, 31
+                          "faults     none",
+                          "ctrl_state 0x00000000 (major 0 DEFAULT, minor 0)"]
+    with NewMajor() as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 0, result.stderr
+    assert result.stdout.splitlines()[4] == "ctrl_state 0x00630003 (major 99 unknown, minor 3)"
 
 
 class StuckCut(SdkDrone):
