@@ -57,7 +57,8 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                       "tests/integration/test_links.py",
                       "tests/integration/test_backend_conformance.py"]),
     "tune": (["experiments/tune/objective.py", "experiments/tune/space.py"],
-             ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py"]),
+             ["tests/unit/test_tune.py", "tests/unit/test_tune_objective.py",
+              "tests/unit/test_tune_space.py"]),
     "export": (["experiments/export.py"],
                ["tests/unit/test_export.py", "tests/unit/test_export_edges.py",
                 "tests/unit/test_export_limits.py"]),
@@ -92,7 +93,8 @@ _LOOP = ("tests/unit/test_schedule.py", "tests/unit/test_realtime_schedule.py")
 _JUDGES = ("tests/unit/test_reproduce.py",)
 _EXPORT = ("tests/unit/test_export.py", "tests/unit/test_export_edges.py",
            "tests/unit/test_export_limits.py")
-_TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py")
+_TUNE = ("tests/unit/test_tune.py", "tests/unit/test_tune_objective.py",
+         "tests/unit/test_tune_space.py")
 _CONFIG = ("tests/unit/test_drone_config_verify.py",)
 
 #: The hand-mutation audit's survivors (issue 25) and their neighbours: each must be killed.

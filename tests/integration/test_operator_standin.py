@@ -362,3 +362,176 @@ def test_an_interrupted_blind_landing_says_it_was_not_confirmed(short_blind_land
         assert result.exit_code == code, result.stderr
         assert result.stderr.strip().splitlines()[-1] == (
             "error: interrupted: landing not confirmed by navdata — check the drone")
+
+
+def test_status_prints_the_snapshot_and_every_held_limit_line_by_line():
+    """What the stand-in sends, as docs/first-flight.md lists it: a drone on the ground
+    (ctrl_state major 2, LANDED), navdata_demo after the handshake (state bit 10), its
+    battery, altitude and attitude, then the ten keys it holds (config_keys.h defaults) —
+    one missing from its store said so, a control port that does not answer one line."""
+    from tests.standins.sdk_drone import DEFAULT_CONFIG
+
+    with SdkDrone(attitude_deg=(0.3, -0.2), battery_pct=80) as drone:
+        del drone.config["control:flying_mode"]
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        at, nav = drone.at_port, drone.navdata_port
+    assert result.exit_code == 0, result.stderr
+    keys = ("control:euler_angle_max", "control:control_vz_max", "control:control_yaw",
+            "control:altitude_max", "control:outdoor", "control:flight_without_shell",
+            "control:flying_mode", "custom:session_id", "custom:profile_id",
+            "custom:application_id")
+    held = dict(DEFAULT_CONFIG, **{"control:flying_mode": "(missing)"})
+    assert result.stdout.splitlines() == [
+        f"drone      127.0.0.1:{at}/{nav}", "mode       landed",
+        "state      0x00000400 NAVDATA_DEMO", "faults     none",
+        "ctrl_state 0x00020000 (major 2 LANDED, minor 0)", "battery    80 %",
+        "altitude   0.000 m", "attitude   roll +0.3° pitch -0.2° yaw +10.0°",
+        *(f"{key:<29}{held[key]}" for key in keys)]
+    with SdkDrone(serve_control_port=False) as drone:
+        result = operator("status", drone, "--control-port", str(dead_port()))
+    assert result.exit_code == 0, result.stderr
+    assert result.stdout.splitlines()[-1].startswith("limits     not read: ")
+
+
+@pytest.mark.parametrize("value", ["d2e081a3,be27e2e4", "d2e081a3,be27e2e4,d87f7e0c,00000000",
+                                   "d2e081a3,be27e2e4,d87f7e0", "d2e081a3,be27e2e4,d87f7e0g"])
+def test_config_ids_are_exactly_three_of_8_hex_digits(value):
+    """docs/first-flight.md: --config-ids SESSION,PROFILE,APPLICATION, 8 hex digits each;
+    anything else is one usage line (exit 2) before a datagram goes out."""
+    result = CliRunner().invoke(app, ["reset", "--drone", "127.0.0.1", "--at-port",
+                                      str(dead_port()), "--config-ids", value])
+    assert result.exit_code == 2
+    assert result.stderr == (f"error: --config-ids: {value!r}: three ids of 8 hex digits, "
+                             "session,profile,application (e.g. d2e081a3,be27e2e4,d87f7e0c)\n")
+
+
+def test_config_ids_may_be_spaced_and_of_either_case():
+    with SdkDrone(held=SESSION) as drone:
+        spaced = " D2E081A3 , be27e2e4,d87f7e0c "
+        result = operator("status", drone, "--control-port", str(drone.control_port),
+                          "--config-ids", spaced)
+        assert result.exit_code == 0, result.stderr
+
+
+def test_status_reads_a_drone_in_the_air():
+    """status works against any drone, flying too (docs/first-flight.md): it must not refuse
+    an airborne one as fly's connect does."""
+    with SdkDrone(airborne_at_start=True) as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+        assert drone.phase == "hovering"                # and it did not land it
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[2] == "state      0x00000401 FLY NAVDATA_DEMO"      # bits 0 and 10
+    assert lines[4] == "ctrl_state 0x00040000 (major 4 HOVERING, minor 0)"
+    assert lines[6] == "altitude   1.000 m"                         # the stand-in's hover
+
+
+class NewMajor(SdkDrone):
+    """A firmware reporting a major ctrl_state control_states.h does not list."""
+
+    def _state_and_ctrl(self, now):
+        state, _ = super()._state_and_ctrl(now)
+        return state, 99 << 16 | 3
+
+
+def test_status_of_a_cut_drone_and_of_an_unknown_ctrl_state():
+    with SdkDrone() as drone:
+        _cut(drone)
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[1:5] == ["mode       emergency",
+                          "state      0x80000400 NAVDATA_DEMO EMERGENCY",     # bits 10, 31
+                          "faults     none",
+                          "ctrl_state 0x00000000 (major 0 DEFAULT, minor 0)"]
+    with NewMajor() as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 0, result.stderr
+    assert result.stdout.splitlines()[4] == "ctrl_state 0x00630003 (major 99 unknown, minor 3)"
+
+
+class StuckCut(SdkDrone):
+    """A drone whose emergency does not clear on the edge (a cut the firmware holds)."""
+
+    def _at_ref(self, args, now):
+        if self.phase != "emergency":
+            super()._at_ref(args, now)
+
+
+def _cut(drone) -> None:
+    with drone.lock:
+        drone._set("emergency", drone.phase_t)
+
+
+def test_reset_in_a_multiconfig_session_takes_the_ids_and_clears_the_cut():
+    with SdkDrone(held=SESSION) as drone:
+        _cut(drone)
+        result = operator("reset", drone, "--config-ids", ",".join(IDS))
+        assert result.exit_code == 0, result.stderr
+        assert result.stdout == "emergency cleared\n" and drone.phase == "landed"
+
+
+def test_a_cut_that_does_not_clear_is_one_error_line():
+    with StuckCut() as drone:
+        _cut(drone)
+        result = operator("reset", drone)
+        assert drone.phase == "emergency"
+    assert result.exit_code == 1
+    assert result.stderr == ("error: emergency not cleared (state bit 31 still set after "
+                             "3.00 s)\n")
+
+
+def test_a_busy_local_at_port_is_a_warning_not_an_error(monkeypatch):
+    """The lab's local AT port 5556 taken by another program: AT commands go out from an
+    ephemeral port, and the command says so on stderr (docs/first-flight.md)."""
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("127.0.0.1", 0))
+    port = busy.getsockname()[1]
+    base = drone_link_module.DroneLink
+
+    def init(self, *args, **kwargs):
+        base.__init__(self, *args, **kwargs)
+        self.at_local_port = port
+    monkeypatch.setattr(drone_link_module, "DroneLink", type("DroneLink", (base,),
+                                                             {"__init__": init}))
+    try:
+        with SdkDrone() as drone:
+            result = operator("status", drone, "--control-port", str(drone.control_port))
+    finally:
+        busy.close()
+    assert result.exit_code == 0, result.stderr
+    assert result.stderr.startswith(f"warning: local UDP port {port} is busy (")
+    assert result.stderr.endswith("; AT commands go out from an ephemeral port\n")
+    assert result.stdout.startswith("drone      127.0.0.1:")
+
+
+@pytest.mark.parametrize("command", ["status", "reset"])
+def test_an_address_that_is_no_host_is_one_error_line(command):
+    result = CliRunner().invoke(app, [command, "--drone", "127.0.0.1 x", "--at-port",
+                                      str(dead_port())])
+    assert result.exit_code == 1
+    assert result.stderr == ("error: drone address must be an address or host name, got "
+                             "'127.0.0.1 x'\n")
+
+
+class BootstrapOnly(SdkDrone):
+    """A drone that acknowledges navdata_demo but keeps sending bootstrap packets (header
+    and state only: no demo option, so no ctrl_state, battery or attitude)."""
+
+    def _at_config(self, args, now):
+        super()._at_config(args, now)
+        self.bootstrap = True
+
+
+def test_status_of_a_drone_stuck_in_bootstrap_is_one_error_line(monkeypatch):
+    """Without the demo option there is no ctrl_state, battery or attitude to print: the
+    connection fails, in one line (so status never prints a snapshot without a ctrl_state)."""
+    import ardrone_nmpc.cli.operator as operator_module
+
+    monkeypatch.setattr(operator_module, "CONNECT_TIMEOUT_S", 1.0)
+    with BootstrapOnly() as drone:
+        result = operator("status", drone, "--control-port", str(drone.control_port))
+    assert result.exit_code == 1 and result.stdout == ""
+    assert re.fullmatch(r"error: navdata from 127\.0\.0\.1 still in bootstrap mode \(no demo "
+                        r"option\) [0-9.]+ s after connecting, although general:navdata_demo "
+                        r"was acknowledged\n", result.stderr), result.stderr

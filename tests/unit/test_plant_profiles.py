@@ -117,6 +117,10 @@ def test_yaw_step_turns_clockwise_as_the_transfer_function_says():
     # rtol: the printed gain 1.265 is the stored 1.265268 rounded
     np.testing.assert_allclose(-psi, delayed_step_response(TF_YAW, 0.2, t), rtol=1e-3, atol=1e-5)
     assert psi[-1] < -0.5                                    # clockwise: ψ decreases
+    # the reported yaw rate is the rate of ψ (central differences, away from the 0.26 s jump)
+    rate = np.array([o.psi_rate_radps for o in out])
+    late = t >= 0.5
+    np.testing.assert_allclose(rate[late][1:-1], np.gradient(psi, t)[late][1:-1], atol=1e-4)
 
 
 def test_gaz_step_climbs_as_the_transfer_function_says():
@@ -287,3 +291,86 @@ def test_the_kit_drifts_with_a_wind_at_any_heading(psi):
     np.testing.assert_allclose(out[:, 0], c * u + s * v, atol=1e-4)
     np.testing.assert_allclose(out[:, 1], s * u - c * v, atol=1e-4)
     assert np.all(x[:, 2] == 1.0) and np.all(out[:, 2] == 0.0)
+
+
+def _noisy_kit_sim(seed: int) -> SimConfig:
+    return SimConfig(plant={"profile": "thesis_kit"}, seed=seed,
+                     noise=NoiseConfig(mocap_position_std_m=0.01, mocap_angle_std_rad=0.0,
+                                       navdata_attitude_std_rad=0.0, navdata_yaw_std_rad=0.0,
+                                       navdata_altitude_std_m=0.0,
+                                       navdata_velocity_std_mps=0.0))
+
+
+def _mocap_positions(plant, n: int = 5) -> list:
+    return [tuple(plant.mocap_pose().position_m) for _ in range(n)]
+
+
+def test_the_kit_from_a_config_is_seeded_by_sim_seed_or_the_seed_given():
+    """As AirframePlant.from_config: ``seed`` (default ``sim.seed``) seeds the noise, so the
+    same seed draws the same mocap noise and another seed other noise."""
+    drone = DroneConfig()
+    by_config = _mocap_positions(KitPlant.from_config(_noisy_kit_sim(3), drone))
+    assert by_config == _mocap_positions(KitPlant.from_config(_noisy_kit_sim(3), drone))
+    assert by_config == _mocap_positions(KitPlant.from_config(_noisy_kit_sim(9), drone, seed=3))
+    assert by_config != _mocap_positions(KitPlant.from_config(_noisy_kit_sim(9), drone))
+    airframe = AirframePlant(PlantParams.from_config(_noisy_kit_sim(3), drone),
+                             _noisy_kit_sim(3).noise, seed=3)
+    assert by_config == _mocap_positions(airframe)  # the same streams: at rest, the same pose
+    params, noise = PlantParams.from_config(_noisy_kit_sim(0), drone), _noisy_kit_sim(0).noise
+    assert _mocap_positions(KitPlant(params, noise)) == _mocap_positions(
+        AirframePlant(params, noise))  # the default seed is the airframe's
+
+
+def test_a_kit_drone_hovers_where_it_starts():
+    """No command, no wind: every kit channel rests, so the drone stays at its initial
+    position and heading (wherever that is, not only at the origin)."""
+    params = PlantParams(initial_position_m=(1.0, -2.0, 1.2), initial_psi_rad=0.7,
+                         navdata_trim_bias_max_rad=0.0, navdata_yaw_drift_radps=0.0,
+                         navdata_yaw_walk_rad_per_sqrt_s=0.0, navdata_velocity_bias_std_mps=0.0)
+    _, truth = fly(KitPlant(params, QUIET, seed=0), (0.0, 0.0, 0.0, 0.0), 1.0)
+    for tr in truth:
+        np.testing.assert_allclose(tr.position_m, (1.0, -2.0, 1.2), atol=1e-12)
+        assert tr.psi_rad == pytest.approx(0.7, abs=1e-12)
+
+
+def test_the_kits_take_off_and_landing_climb_at_their_speeds_with_the_hold_on():
+    """The on-board take-off and landing command the climb rate through Gzc: its step
+    response (0.1526 s + 5.153)/(s + 5.82) reaches takeoff_climb_mps (landing_speed_mps down)
+    within e^(−5.82 t); and they fly with the position hold, so a wind w along x pushes the
+    drone only to u = τ_h·|a_u|·w (du/dt = −u/τ_h + |a_u|·w, τ_h = hover_tau_s), not to w."""
+    params = PlantParams(takeoff_climb_mps=0.6, landing_speed_mps=0.4, hover_tau_s=0.5)
+    plant = KitPlant(params, QUIET, seed=1)
+    plant.wind_mps = np.array([0.4, 0.0, 0.0])
+    assert plant.takeoff()
+    a_u = 0.665041  # ssPitch2U's pole as the kit stores it (docs/plant.md §4)
+    for _ in range(int(round(1.2 / H))):
+        plant.advance(H)
+    assert plant.mode is FlightMode.TAKING_OFF
+    vx, vy, vz = plant.truth.velocity_mps
+    gain, feed = 5.153 / 5.82, 0.1526  # Gzc·s at s = 0 and at s → ∞
+    gaz = 0.6 / gain
+    assert vz == pytest.approx(gaz * (gain + (feed - gain) * math.exp(-5.82 * 1.2)), abs=1e-4)
+    assert vx == pytest.approx(0.5 * a_u * 0.4 * (1 - math.exp(-1.2 / 0.5)), abs=2e-3)
+    while plant.mode is FlightMode.TAKING_OFF:
+        plant.advance(H)
+    plant.wind_mps = np.zeros(3)
+    assert plant.land()
+    for _ in range(int(round(1.5 / H))):
+        plant.advance(H)
+    assert plant.mode is FlightMode.LANDING
+    assert plant.truth.velocity_mps[2] == pytest.approx(-0.4, abs=1e-3)  # e^(−5.82·1.5) left
+
+
+def test_the_kits_take_off_hands_over_where_the_climb_settles_at_the_take_off_altitude():
+    """FLYING once the climb will settle at ``takeoff_altitude_m`` (docs/plant.md): with the
+    commands then at 0, the kit's vertical channel (pole 5.82/s) coasts up to it — within
+    what Gzc's direct feed-through (0.1526·gaz, gone with the gaz) and one 5 ms step leave."""
+    params = PlantParams(takeoff_altitude_m=1.1, takeoff_climb_mps=0.5)
+    plant = KitPlant(params, QUIET, seed=0)
+    assert plant.takeoff()
+    while plant.mode is FlightMode.TAKING_OFF:
+        plant.advance(H)
+    plant.command(0.0, 0.0, 0.0, 0.0)
+    plant.advance(3.0)
+    gaz = 0.5 / (5.153 / 5.82)
+    assert plant.truth.position_m[2] == pytest.approx(1.1, abs=0.1526 * gaz / 5.82 + 0.5 * H)
