@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_exponents
+from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_decays
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
            "CONFIDENT_DELAY_R2", "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2",
@@ -155,7 +155,7 @@ class AttitudeResponseEstimator:
         self._count = 0
         # the compiled steps' buffers
         self._j = np.zeros(len(self.delays_s), dtype=np.int64)
-        self._arg = np.zeros((len(self.delays_s), len(self.lags_s)))
+        self._decay = np.zeros((len(self.delays_s), len(self.lags_s)))
         self._x = np.zeros(shape)
         self._best = None
         self._since_best = 0
@@ -172,7 +172,9 @@ class AttitudeResponseEstimator:
             if t_s <= t0:
                 return
             u0, y0 = self._u[n - 1], self._y[n - 1]
-            y = u0 + (y0 - u0) * np.exp(-(t_s - t0) / self.lags_s)[:, None]
+            # the C library's exp, not numpy's: numpy's depends on the CPU (response_kernels)
+            decay = np.array([math.exp(a) for a in -(t_s - t0) / self.lags_s])
+            y = u0 + (y0 - u0) * decay[:, None]
         else:
             y = np.tile(u, (len(self.lags_s), 1))  # no past: as if held for long
         if n == len(self._t):  # full: keep the newest half (what the longest delay needs)
@@ -198,12 +200,12 @@ class AttitudeResponseEstimator:
         if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
                 or self._t[0] > t_s - self.delays_s[-1]):
             return False
-        lag_exponents(self._t, n, t_s, self.delays_s, self.lags_s, self._j, self._arg)
+        lag_decays(self._t, n, t_s, self.delays_s, self.lags_s, self._j, self._decay)
         forget = (math.exp(-(t_s - self._last_t) / self.window_s)
                   if math.isfinite(self._last_t) else 1.0)
         self._last_t = t_s
         x = self._x
-        fold_sample(self._u, self._y, self._j, np.exp(self._arg), y, forget, x,
+        fold_sample(self._u, self._y, self._j, self._decay, y, forget, x,
                     self._sx, self._sxx, self._sxy)
         self._residual(x, y, forget)  # reads x only: the sums' update may come first
         self._n = self._n * forget + 1.0
@@ -224,7 +226,10 @@ class AttitudeResponseEstimator:
         r = y - (gain * x[k, l] + offset)
         self._res *= forget
         if self._last_r is not None:
-            self._res += (float(r @ r), float(r @ self._last_r), 1.0)
+            # written out: a BLAS dot (``r @ r``) sums in the order of the CPU's kernel
+            r0, r1 = float(r[0]), float(r[1])
+            p0, p1 = float(self._last_r[0]), float(self._last_r[1])
+            self._res += (r0 * r0 + r1 * r1, r0 * p0 + r1 * p1, 1.0)
         self._last_r = r
 
     # ---------------------------------------------------------------------- the fit

@@ -4,11 +4,16 @@ Each navdata sample adds its model value at every grid point (delays × lags × 
 running sums: two dozen numpy operations on arrays of a few hundred elements, the largest
 cost of a tick with something ``auto`` (issue 26). These loops compute the same expressions
 in the same order — sums, products and quotients round alike in numpy and in a compiled loop
-on the pinned target, which fuses nothing — so the fit is the same bits; the exponentials
-stay numpy's (its vectorised ``exp`` and the C library's may differ in the last bit).
+on the pinned target, which fuses nothing — so the fit is the same bits. The exponentials
+are the C library's ``exp`` (``math.exp`` in Python, the same function): numpy's vectorised
+``exp`` is chosen by the CPU at run time and differs in the last bit on AVX-512 machines
+from the one on AVX2 machines (4.6 % of arguments), which made the fit, and the flights it
+steers, depend on the CPU (docs/solver-notes.md §9).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -16,22 +21,22 @@ from numba import njit
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["fold_sample", "lag_exponents"]
+__all__ = ["fold_sample", "lag_decays"]
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def lag_exponents(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
-                  lags_s: np.ndarray, j_out: np.ndarray, arg_out: np.ndarray) -> None:
+def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
+               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
-    (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``arg_out``
-    (K, L) the exponent ``−(t_s − d − times[j]) / τ`` of each lag τ."""
+    (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``decay_out``
+    (K, L) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``)."""
     for k in range(delays_s.size):
         at = t_s - delays_s[k]
         j = count_at_or_below(times, n, at) - 1
         j_out[k] = j
         d = at - times[j]
         for m in range(lags_s.size):
-            arg_out[k, m] = -d / lags_s[m]
+            decay_out[k, m] = math.exp(-d / lags_s[m])
 
 
 @njit(cache=True, **OUTER_KERNEL)

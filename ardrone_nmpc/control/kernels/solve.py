@@ -139,7 +139,11 @@ def newton_solve(U, m, x, ref, dtau, W, rho, eps, active, tol, max_iter, h, kmax
         slope = 0.0
         if obs is not None:
             if by_cost:
-                slope = dtau * np.dot(F0, dU)  # dJ/ds along U + s dU (F = ∇J/Δτ)
+                # dJ/ds along U + s dU (F = ∇J/Δτ); a loop, not np.dot: numba's np.dot calls
+                # BLAS, whose kernel (and order of summation) the CPU chooses
+                for i in range(F0.shape[0]):
+                    slope += F0[i] * dU[i]
+                slope *= dtau
                 if not slope < 0.0:
                     break  # an inexact or indefinite solve gave no descent direction
         step = 1.0

@@ -138,8 +138,12 @@ def _tilt_input(f: Flight) -> tuple[np.ndarray, np.ndarray]:
     sample, the tilt would lag the drone's by half a navdata period (33 ms at 15 Hz), which
     biases the drag pole up by 15 %."""
     t = np.arange(f.t_nav[0], f.t_nav[-1], 0.01)
-    return t, np.column_stack([np.interp(t, f.t_nav, np.tan(-f.nav_tilt_rad[:, 1])),
-                               np.interp(t, f.t_nav, -np.tan(f.nav_tilt_rad[:, 0]))])
+    # the C library's tan, not numpy's: numpy's is chosen by the CPU at run time and differs
+    # in the last bit between AVX-512 and AVX2 machines (docs/solver-notes.md §9)
+    tan_pitch = np.array([math.tan(-a) for a in f.nav_tilt_rad[:, 1]])
+    tan_roll = np.array([math.tan(a) for a in f.nav_tilt_rad[:, 0]])
+    return t, np.column_stack([np.interp(t, f.t_nav, tan_pitch),
+                               np.interp(t, f.t_nav, -tan_roll)])
 
 
 def fit_velocity(flights: Sequence[Flight]) -> FitResult:
