@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 
 # LLVM fast-math without 'nnan'/'ninf': the kernels must still see NaN and inf to report them.
@@ -147,3 +148,6 @@ def gmres_dense(A, b, x0, kmax, rtol):
         k += 1
     gmres_finish(k, V, H, g, x0, x)
     return x, k, residual
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -10,6 +10,7 @@ import math
 from numba import njit
 
 from ardrone_nmpc.core.angles import ieee_remainder
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 
 __all__ = ["wrap_half_turn"]
@@ -25,3 +26,6 @@ def wrap_half_turn(a, half_turn):
         return math.nan
     r = _remainder(a, 2.0 * half_turn)
     return half_turn if r <= -half_turn else r
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL
 
 __all__ = ["count_at_or_below"]
@@ -24,3 +25,6 @@ def count_at_or_below(a: np.ndarray, n: int, v: float) -> int:
         else:
             hi = mid
     return lo
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -18,6 +18,7 @@ from numba import njit
 
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
@@ -216,3 +217,6 @@ class ReferenceIntegrator:
             out[..., _POS_LIST] += self.shift
             return out
         return _shifted(states, self.shift)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
@@ -61,3 +62,6 @@ def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarra
                 sx[k, m, a] += v
                 sxx[k, m, a] += v * v
                 sxy[k, m, a] += v * y[a]
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

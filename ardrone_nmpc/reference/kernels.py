@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
@@ -42,3 +43,6 @@ def waypoint_states(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad: np.nd
             out[j, col] = vel_mps[k, c] if inside else 0.0
         psi_a, psi_b = psi_rad[k], psi_rad[k + 1]
         out[j, IX_PSI] = psi_b if after else psi_a + frac * (psi_b - psi_a)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import GRAVITY_MPS2
 
@@ -200,3 +201,6 @@ def freefall_derivative(state: tuple, command: tuple, params,
     kd = params.drag_per_s
     return (vx, vy, vz, -kd * (vx - wind_mps[0]), -kd * (vy - wind_mps[1]), -GRAVITY_MPS2,
             0.0, 0.0, state[9], 0.0)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
@@ -205,3 +206,6 @@ class KitPlant(AirframePlant):
         """At rest on the ground, the kit's channels rest too (a new flight starts from 0)."""
         self._kit = np.zeros(N_KIT)
         return AirframePlant._at_rest(state)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -11,6 +11,7 @@ import math
 from numba import njit
 
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.sim.airframe import flying_steps
 
@@ -40,3 +41,6 @@ def flying_advance(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, batte
     q = vel_bias_std * math.sqrt(1.0 - a * a)
     return (done, head, battery, x, yaw_bias_deg, a * vel_bias_0 + q * normals[1],
             a * vel_bias_1 + q * normals[2])
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

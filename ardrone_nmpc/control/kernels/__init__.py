@@ -36,12 +36,6 @@ the kernel functions are exported here for tests and benchmarks.
 
 from __future__ import annotations
 
-import hashlib
-import sys
-from pathlib import Path
-
-from numba.core.registry import CPUDispatcher
-
 from ardrone_nmpc.control.kernels import layout, residual as _residual, solve
 from ardrone_nmpc.control.kernels.layout import (FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK,
                                                 NO_ACTIVE, STAGE_ACTIVE, STAGE_CONDENSED,
@@ -51,6 +45,7 @@ from ardrone_nmpc.control.kernels.residual import (aim_obstacles, penalty, penal
                                                   rollout_rk4, sincos_small)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import callable_from_python
 
 # The kernels only other kernels call are compiled without numba's Python wrapper (the cold
@@ -74,36 +69,8 @@ __all__ = [
     "prepare_reference", "residual", "rollout_rk4", "sincos_small", "workspace_size",
 ]
 
-# numba keys a cached kernel on its own file only, but a kernel's machine code includes
-# what it calls from other files (the model, the obstacle penalty, gmres, the angle helper,
-# sibling modules here). So: one digest over all of those sources, and every cached kernel is
-# flushed (recompiled on its next call) when the digest changes.
-_KERNEL_MODULES = ("ardrone_nmpc.model", "ardrone_nmpc.core.numerics", "ardrone_nmpc.control.kernels", "ardrone_nmpc.core.angles",
-                   "ardrone_nmpc.control.obstacles", "ardrone_nmpc.control.gmres",
-                   "ardrone_nmpc.control.kernels.layout", "ardrone_nmpc.control.kernels.residual",
-                   "ardrone_nmpc.control.kernels.solve", "ardrone_nmpc.control.kernels.steps")
-_DIGEST_FILE = "kernel-sources.sha256"
-
-
-def _flush_stale_caches() -> None:
-    modules = [sys.modules[name] for name in _KERNEL_MODULES]
-    digest = hashlib.sha256()
-    for module in modules:
-        digest.update(Path(module.__file__).read_bytes())
-    kernels = [value for module in modules for value in vars(module).values()
-               if isinstance(value, CPUDispatcher) and hasattr(value._cache, "cache_path")]
-    stamp = Path(kernels[0]._cache.cache_path) / _DIGEST_FILE
-    try:
-        if stamp.read_text() == digest.hexdigest():
-            return
-    except OSError:
-        pass
-    for kernel in kernels:
-        kernel._cache.flush()
-    try:
-        stamp.write_text(digest.hexdigest())
-    except OSError:
-        pass  # a read-only tree: numba recompiles every run anyway
-
-
-_flush_stale_caches()
+# numba keys a cached kernel on its own file only: flush the solver's (and the twins' above)
+# when any kernel source changed (core/kernel_cache.py)
+flush_stale_caches(__name__, "ardrone_nmpc.control.kernels.layout",
+                   "ardrone_nmpc.control.kernels.residual", "ardrone_nmpc.control.kernels.solve",
+                   "ardrone_nmpc.control.kernels.steps")
