@@ -535,3 +535,37 @@ def test_status_of_a_drone_stuck_in_bootstrap_is_one_error_line(monkeypatch):
     assert re.fullmatch(r"error: navdata from 127\.0\.0\.1 still in bootstrap mode \(no demo "
                         r"option\) [0-9.]+ s after connecting, although general:navdata_demo "
                         r"was acknowledged\n", result.stderr), result.stderr
+
+
+def test_emergency_after_the_entry_points_edge_sends_no_second_one(monkeypatch):
+    """The installed command's entry point sent the edge (REF land, then emergency) before
+    typer loaded; the command's own link must then hold REF land: a second rising edge of
+    bit 8 would toggle the emergency again (the SDK toggles it on every edge)."""
+    from ardrone_nmpc.cli import first_datagram as launch
+
+    monkeypatch.setattr(launch, "SENT", None)
+    monkeypatch.setattr(launch, "_LOCAL_AT_PORT", dead_port())
+    with SdkDrone(airborne_at_start=True) as drone:
+        launch.send_first(["emergency", "--drone", "127.0.0.1", "--at-port", str(drone.at_port)])
+        assert launch.SENT == ("emergency", "127.0.0.1", drone.at_port)
+        assert wait_until(lambda: drone.phase == "emergency", 5.0)
+        result = operator("emergency", drone)
+        values = [v for _, v in refs(drone)]
+        rising = sum(1 for a, b in zip(values, values[1:]) if a == LAND and b == EMERGENCY)
+        assert rising == 1, values[:8]
+        assert result.exit_code == 0, result.stderr
+        assert drone.phase == "emergency"
+
+
+@pytest.mark.parametrize("command", ["land", "emergency"])
+def test_a_link_that_cannot_be_opened_is_one_error_line_naming_why(monkeypatch, command):
+    from ardrone_nmpc.links.drone_config import LinkError
+
+    def refuse(self, command, *, edge_sent=False):
+        raise LinkError("cannot open a link to 127.0.0.1: [Errno 99] no such address")
+    monkeypatch.setattr(operator_link_module.OperatorLink, "start", refuse)
+    result = CliRunner().invoke(app, [command, "--drone", "127.0.0.1", "--at-port",
+                                      str(dead_port())])
+    assert result.exit_code == 1
+    assert result.stderr == ("error: cannot open a link to 127.0.0.1: [Errno 99] no such "
+                             "address\n")
