@@ -17,6 +17,7 @@ from ardrone_nmpc.control.kernels.layout import (
     memory_size, unpack)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
+from ardrone_nmpc.core.numerics import load_cached_callees
 
 __all__ = ["SolverMemory", "SolverStats"]
 
@@ -85,6 +86,8 @@ class SolverMemory:
         # the entry points of this obstacle table: only the one called is ever compiled
         self._cgmres = cgmres_step_obstacles if n_obs else cgmres_step
         self._newton = newton_step_obstacles if n_obs else newton_step
+        for entry in (self._cgmres, self._newton):  # same bits whether compiled or cached
+            load_cached_callees(entry)
 
     @property
     def kmax(self) -> int:
