@@ -9,6 +9,10 @@ code. Each kernel module calls :func:`flush_stale_caches` once it has defined it
 one digest over every file in :data:`KERNEL_SOURCES` (``tests/unit/test_kernel_cache.py``
 checks the list is whole), and the module's cached kernels are flushed — recompiled on their
 next call — when it differs from the digest they were cached under.
+
+:func:`load_cached_callees` is the other half: a process that loads a kernel from the cache
+runs the machine code a process that compiled it runs (numba's weak callee copies,
+docs/solver-notes.md §9).
 """
 
 from __future__ import annotations
@@ -65,3 +69,45 @@ def flush_stale_caches(*module_names: str) -> int:
     except OSError:
         pass  # a read-only tree: numba cannot cache there either
     return len(kernels)
+
+
+def load_cached_callees(kernel) -> None:
+    """Load from numba's cache every specialisation of every kernel ``kernel`` calls, callees
+    first, before ``kernel`` itself runs — so that a process which loads ``kernel`` from the
+    cache runs the same machine code as one that compiled it.
+
+    numba links a copy of each callee into its caller (a weak symbol, re-optimised with the
+    caller: under fast-math its last bits can differ from the callee's own compilation). A
+    process that compiles the caller has already loaded the callee's own, strong definition,
+    and the caller's calls resolve to it; a process that loads the caller from the cache alone
+    ran the weak copies. Loading the callees first makes both resolve to the callees' own code
+    (docs/solver-notes.md §9). A no-op on an empty cache: compiling loads them anyway."""
+    for callee in _callees_post_order(kernel, set()):
+        if callee.targetoptions.get("inline") != "always":  # an inlined one has no symbol
+            _load_cached(callee)
+
+
+def _callees_post_order(kernel, seen: set):
+    """The numba kernels ``kernel`` names, transitively, each after the ones it names."""
+    from numba.core.dispatcher import Dispatcher
+
+    func = kernel.py_func
+    for name in func.__code__.co_names:
+        callee = func.__globals__.get(name)
+        if isinstance(callee, Dispatcher) and id(callee) not in seen:
+            seen.add(id(callee))
+            yield from _callees_post_order(callee, seen)
+            yield callee
+
+
+def _load_cached(kernel) -> None:
+    """Every specialisation of ``kernel`` in its cache index for this target, loaded."""
+    cache = getattr(kernel, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is None:  # not a cached kernel
+        return
+    magic = kernel.targetctx.codegen().magic_tuple()
+    for key in cache_file._load_index():
+        signature, key_magic = key[0], key[1]
+        if key_magic == magic and signature not in kernel.overloads:
+            kernel.compile(signature)

@@ -17,7 +17,7 @@ from ardrone_nmpc.control.kernels.layout import (
     memory_size, unpack)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
-from ardrone_nmpc.core.numerics import load_cached_callees
+from ardrone_nmpc.core.kernel_cache import load_cached_callees
 
 __all__ = ["SolverMemory", "SolverStats"]
 
