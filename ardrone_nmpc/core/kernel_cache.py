@@ -32,6 +32,7 @@ KERNEL_SOURCES = (
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None
+_preloaded: set[int] = set()  # entry points whose callees this process has loaded
 
 
 def sources_digest() -> str:
@@ -81,7 +82,11 @@ def load_cached_callees(kernel) -> None:
     process that compiles the caller has already loaded the callee's own, strong definition,
     and the caller's calls resolve to it; a process that loads the caller from the cache alone
     ran the weak copies. Loading the callees first makes both resolve to the callees' own code
-    (docs/solver-notes.md §9). A no-op on an empty cache: compiling loads them anyway."""
+    (docs/solver-notes.md §9). A no-op on an empty cache: compiling loads them anyway; and
+    once per process and entry point (each solver built reads no cache index again)."""
+    if id(kernel) in _preloaded:
+        return
+    _preloaded.add(id(kernel))
     for callee in _callees_post_order(kernel, set()):
         if callee.targetoptions.get("inline") != "always":  # an inlined one has no symbol
             _load_cached(callee)
