@@ -83,6 +83,7 @@ from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, air
                                        freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
+from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_step import flying_advance
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -367,6 +368,12 @@ class AirframePlant:
         self._tilt_aux = (0.0, 0.0)  # η_φ, η_θ of the second-order attitude form
         self._vel_bias = tuple(params.navdata_velocity_bias_std_mps * v
                                for v in self._bias_rng.standard_normal(2))
+        # the per-sample and per-advance normals, drawn ahead a block at a time (the same
+        # values in the same order: sim/normal_blocks.py)
+        self._mocap_normals = NormalBlocks(self._mocap_rng)
+        self._nav_normals = NormalBlocks(self._nav_rng)
+        self._bias_normals = NormalBlocks(self._bias_rng)
+        self._gust_normals = NormalBlocks(self._gust_rng)
         self._new_flight_biases()
 
     @classmethod
@@ -491,7 +498,7 @@ class AirframePlant:
         wind = tuple(map(float, self.wind_mps))
         if p.turbulence_std_mps > 0.0:
             wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
-        normals = self._bias_rng.standard_normal(3)  # the biases' draws (their stream alone)
+        normals = self._bias_normals.take(3)  # the biases' draws (their stream alone)
         done = (self._flying_advance(n, h, wind, normals) if self._mode is FlightMode.FLYING
                 else 0)
         if done < n:
@@ -503,7 +510,7 @@ class AirframePlant:
         if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
             self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
                                                p.turbulence_tau_s, n * h,
-                                               self._gust_rng.standard_normal(2))
+                                               self._gust_normals.take(2))
 
     def _flying_advance(self, n: int, h: float, wind: tuple, normals: np.ndarray) -> int:
         """Up to ``n`` FLYING substeps in one compiled call (:func:`flying_advance`), the same
@@ -615,6 +622,7 @@ class AirframePlant:
     def _new_flight_biases(self) -> None:
         """Per-flight navdata trims, yaw offset and yaw drift direction (drawn at take-off)."""
         p, rng = self.params, self._bias_rng
+        self._bias_normals.sync()  # the stream where the normals drawn so far left it
         u = rng.uniform(-1.0, 1.0, 3)
         self._trim_bias_rad = (p.navdata_trim_bias_max_rad * u[0],
                                p.navdata_trim_bias_max_rad * u[1])
@@ -652,7 +660,7 @@ class AirframePlant:
     def mocap_pose(self) -> MocapPose:
         """A mocap pose now: position + N(0, σ_p) per axis, each XYZ angle + N(0, σ_a)."""
         x, y, z, _, _, _, phi, theta, psi, _ = self._state
-        n = self._mocap_rng.standard_normal(6)
+        n = self._mocap_normals.take(6)
         sp, sa = self.noise.mocap_position_std_m, self.noise.mocap_angle_std_rad
         rx, ry, rz = mocap_rotation_xyz_rad(phi, theta, psi)
         rx, ry = wrap_angle_rad(rx + sa * n[3]), ry + sa * n[4]
@@ -667,7 +675,7 @@ class AirframePlant:
         """A navdata demo sample now, in the drone's signs (see NavdataSample)."""
         x, y, z, vx, vy, vz, phi, theta, psi, _ = self._state
         nz = self.noise
-        n = self._nav_rng.standard_normal(7)
+        n = self._nav_normals.take(7)
         roll = math.degrees(phi + self._trim_bias_rad[0] + nz.navdata_attitude_std_rad * n[0])
         pitch = math.degrees(-theta + self._trim_bias_rad[1] + nz.navdata_attitude_std_rad * n[1])
         yaw = wrap_angle_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2])
