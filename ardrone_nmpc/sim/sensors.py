@@ -140,7 +140,8 @@ class LockstepSensors:
                 self.took_pose(t_event, self.plant.mocap_pose())
             else:
                 self.took_navdata(t_event, self.plant.navdata())
-        self._run_to(t_s)
+        if done <= len(events):  # the last leg, unless the compiled run did it
+            self._run_to(t_s)
 
     def _direct_events(self, t_s: float) -> list[tuple[float, int]]:
         """The newest mocap frame and navdata sample due by ``t_s`` not taken yet, in time
