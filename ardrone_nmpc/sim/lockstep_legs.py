@@ -27,7 +27,7 @@ import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.sim import sensor_step as ks
-from ardrone_nmpc.sim.plant import AirframePlant, _readonly
+from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
 
 __all__ = ["CompiledLegs"]
@@ -35,11 +35,12 @@ __all__ = ["CompiledLegs"]
 _FLYING = FlightMode.FLYING
 _MOTORS_ON_STEP = AirframePlant._motors_on_step
 _f64 = np.float64
+_NONE: list = []
 
 
 class CompiledLegs:
     """The compiled tick of one lockstep sensor sampler's plant and firmware (module
-    docstring). :meth:`run` returns ``(events, legs done)`` as ``_advance_direct`` needs."""
+    docstring). :meth:`run` returns what it left to ``_advance_direct``."""
 
     def __init__(self, sensors) -> None:
         self.sensors = sensors
@@ -50,6 +51,8 @@ class CompiledLegs:
         self.p = np.zeros(ks.P_SIZE)
         self.out = np.zeros(ks.OUT_SIZE)
         self._p_key: tuple = ()
+        self.turbulent = False
+        self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
 
     @staticmethod
     def eligible(plant) -> bool:
@@ -102,64 +105,79 @@ class CompiledLegs:
         p[ks.P_TRIM0], p[ks.P_TRIM1] = plant._trim_bias_rad
         p[ks.P_BIAS0], p[ks.P_BIAS1] = pp.navdata_velocity_bias_mps
         p[ks.P_VMAX] = pp.control_vz_max_mps
+        k = pp.rhs_coefficients
+        if len(k) != ks.N_K:
+            raise ValueError(f"{ks.N_K} RHS coefficients expected, got {len(k)}")
+        p[ks.P_K:] = k
         self._p_key = key
+        self.turbulent = pp.turbulence_std_mps > 0.0
         return p
 
-    def run(self, t_s: float) -> tuple[list, int]:
+    def _state_array(self) -> np.ndarray:
+        """The plant's state array: the one the last run left while the plant's state is the
+        one it took from it (the same tuples), else a new one."""
+        plant = self.plant
+        if plant._state is self._x_state and plant._tilt_aux is self._x_aux:
+            return self._x
+        return plant._state_array()
+
+    def run(self, t_s: float) -> tuple[list, bool]:
         """The kernel's run to ``t_s``; the samples of the events it passed are the sensors'.
-        Returns the events (``(t, kind)``, in order) and the legs done."""
+        Returns the events it left to the Python path (``(t, kind)``, in order) and whether
+        the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
         p = self._params()
         iv, sv, out = self.iv, self.sv, self.out
         fifo = plant._fifo
-        turbulent = p[ks.P_TURB_STD] > 0.0
         bias_n, gust_n = plant._bias_normals, plant._gust_normals
         mocap_n, nav_n = plant._mocap_normals, plant._nav_normals
-        bias_n.ensure(9)  # three legs at most
-        mocap_n.ensure(6)
-        nav_n.ensure(7)
-        if turbulent:
-            gust_n.ensure(6)
         iv[:8] = (plant._steps, fifo.head, sensors._next_mocap_k, sensors._next_nav_k,
                   bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
-        gust = plant._gust_mps
-        sv[:] = (t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg,
-                 plant._vel_bias[0], plant._vel_bias[1], gust[0], gust[1])
-        x = plant._state_array()
+        gust, vel_bias, wind = plant._gust_mps, plant._vel_bias, plant.wind_mps
         roll, pitch, gaz, yaw, hold = plant._current
         flags, _, _, fw_gaz, _ = fw.pcmd
-        climbing = bool(flags & _PROGRESSIVE) and fw_gaz > 0.0
-        wind = plant.wind_mps
-        ks.lockstep_run(x, fifo.rows, iv, sv, p, plant.params.rhs_coefficients,
-                        (float(wind[0]), float(wind[1]), float(wind[2])), roll, pitch, gaz,
-                        yaw, hold, climbing, fw._lead_s() if climbing else 0.0,
-                        fw.config.altitude_max_m if climbing else 0.0,
-                        bias_n.values, gust_n.values, mocap_n.values, nav_n.values, out)
+        if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
+            climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
+        else:
+            climbing = lead_s = alt_max_m = 0.0
+        sv[:] = (t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
+                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
+                 climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2])
+        x = self._state_array()
+        ks.lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
+                        nav_n.values, out)
+        if iv[ks.I_DONE] < 0:  # a block ran short: new ones, and again
+            bias_n.ensure(ks.NEED_BIAS)
+            mocap_n.ensure(ks.NEED_MOCAP)
+            nav_n.ensure(ks.NEED_NAV)
+            if self.turbulent:
+                gust_n.ensure(ks.NEED_GUST)
+            return self.run(t_s)
         (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
          n_events, kind0, kind1) = iv.tolist()
-        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = sv.tolist()
+        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = sv[:8].tolist()
         o = out.tolist()
         plant._steps, fifo.head, plant._pending_s, plant._battery = steps, head, pending, battery
         plant._yaw_bias_deg, plant._vel_bias = yaw_bias, (vb0, vb1)
-        if turbulent:
+        if self.turbulent:
             plant._gust_mps = (gust0, gust1)
             gust_n.pos = pos_gust
-        plant._state = plant._from_state_array(x)
+        plant._state = self._x_state = plant._from_state_array(x)
+        self._x, self._x_aux = x, plant._tilt_aux
         bias_n.pos, mocap_n.pos, nav_n.pos = pos_bias, pos_mocap, pos_nav
         sensors._next_mocap_k, sensors._next_nav_k = next_mocap, next_nav
-        if o[ks.O_LAST_NOW] == o[ks.O_LAST_NOW]:  # a firmware advance ran: its watchdogs
-            fw.watchdogs(o[ks.O_LAST_NOW])
-        events = []
-        for i, kind in enumerate((kind0, kind1)[:n_events]):
-            t_event = o[ks.O_EV_T0 + i]
-            events.append((t_event, kind))
-            if i >= done:
-                continue
+        now = o[ks.O_LAST_NOW]
+        # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
+        # (ready) — the bit the Python path's calls would have latched by then
+        if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
+            fw.comwdg_latched = True
+        for i in range(min(done, n_events)):
+            kind, t_event = (kind0, o[ks.O_EV_T0]) if i == 0 else (kind1, o[ks.O_EV_T1])
             if kind == ks.MOCAP:
                 q = ks.O_POSE
-                sensors.took_pose(t_event, MocapPose(o[q], _readonly(o[q + 1], o[q + 2], o[q + 3]),
-                                                     _readonly(o[q + 4], o[q + 5], o[q + 6]),
-                                                     o[q + 7]))
+                pose = out[q + 1:q + 7].copy()  # position and angles, read-only views
+                pose.flags.writeable = False
+                sensors.took_pose(t_event, MocapPose(o[q], pose[:3], pose[3:], o[q + 7]))
             else:
                 q = ks.O_NAV
                 altitude = o[q + 5]
@@ -168,4 +186,7 @@ class CompiledLegs:
                     o[q], _FLYING, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
                     _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
                     _f64(o[q + 8])))
-        return events, done
+        if done > n_events:
+            return _NONE, False
+        events = [(o[ks.O_EV_T0], kind0), (o[ks.O_EV_T1], kind1)][done:n_events]
+        return events, True

@@ -644,11 +644,17 @@ class AirframePlant:
     @property
     def truth(self) -> PlantTruth:
         """The true state now (world/model signs, see module docstring)."""
-        x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
+        state = self._state
+        motion = np.array(state[:6], dtype=float)  # position and velocity, read-only views
+        motion.flags.writeable = False
+        psi = state[8]
+        # ψ is kept wrapped: in (−π, π] the wrap returns it unchanged (math.remainder is
+        # exact), so it is only called outside (the same bits, and a float either way)
+        psi = float(psi) if -math.pi < psi <= math.pi else wrap_angle_rad(psi)
         return PlantTruth(
-            t_s=self.t_s, position_m=_readonly(x, y, z), velocity_mps=_readonly(vx, vy, vz),
-            roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
-            mode=self._mode, battery_pct=self._battery)
+            t_s=self.t_s, position_m=motion[:3],
+            velocity_mps=motion[3:], roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
+            psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
 
     @property
     def altitude_m_and_rate_mps(self) -> tuple[float, float]:

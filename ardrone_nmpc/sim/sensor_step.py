@@ -39,14 +39,20 @@ I_STEPS, I_HEAD, I_NEXT_MOCAP, I_NEXT_NAV = 0, 1, 2, 3
 I_POS_BIAS, I_POS_GUST, I_POS_MOCAP, I_POS_NAV = 4, 5, 6, 7
 I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
 IV_SIZE = 12
-# sv: the plant's float state (in and out) and the tick's time (in)
-S_T, S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1 = range(8)
-SV_SIZE = 8
-# p: a flight's parameters
+# sv: the tick's time, the plant's float state (in and out), the plant's current command
+# (roll, pitch, gaz, yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead,
+# the cap), the wind (in)
+(S_T, S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
+ S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2) = range(19)
+SV_SIZE = 19
+# p: a flight's parameters, then the 13 coefficients of the airframe's RHS
 (P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
  P_MOCAP_PERIOD, P_MOCAP_LATENCY, P_NAV_PERIOD, P_SP, P_SA, P_ATT_STD, P_YAW_STD, P_ALT_STD,
- P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX) = range(22)
-P_SIZE = 22
+ P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_K) = range(23)
+N_K = 13
+P_SIZE = P_K + N_K
+# the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
+NEED_BIAS, NEED_GUST, NEED_MOCAP, NEED_NAV = 9, 6, 6, 7
 # out: the pose (t, position, XYZ angles, ψ), the navdata sample (t, battery, roll, pitch,
 # yaw, altitude, forward, right, down), the event times, the last firmware time
 O_POSE, O_NAV, O_EV_T0, O_EV_T1, O_LAST_NOW = 0, 8, 17, 18, 19
@@ -103,8 +109,7 @@ def _navdata(x, sv, p, n, out):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _leg(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing, lead_s,
-         alt_max_m, bias_n, gust_n, t_event):
+def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
     the Python path must take it (a climb within reach of the cap, a battery that could
     empty on the way)."""
@@ -113,7 +118,7 @@ def _leg(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing, lea
     if not t_event > t_plant:
         return True
     dt = t_event - t_plant
-    if climbing and x[2] + p[P_VMAX] * (dt + lead_s) >= alt_max_m:
+    if sv[S_CLIMBING] != 0.0 and x[2] + p[P_VMAX] * (dt + sv[S_LEAD]) >= sv[S_ALT_MAX]:
         return False  # the firmware checks the cap after every step
     pending = sv[S_PENDING] + dt
     n = int(math.floor((pending + _TIME_TOL_S) / h))
@@ -124,14 +129,15 @@ def _leg(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing, lea
     sv[S_PENDING] = rest if rest > 0.0 else 0.0
     if n == 0:
         return True
-    w0, w1, w2 = wind
+    w0, w1, w2 = sv[S_W0], sv[S_W1], sv[S_W2]
     turbulent = p[P_TURB_STD] > 0.0
     if turbulent:
         w0, w1 = w0 + sv[S_GUST0], w1 + sv[S_GUST1]
     pos = iv[I_POS_BIAS]
     iv[I_POS_BIAS] = pos + 3
     done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
-        x, ring, iv[I_HEAD], roll, pitch, gaz, yaw, hold, k, (w0, w1, w2), h, n,
+        x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
+        k, (w0, w1, w2), h, n,
         sv[S_BATTERY], drain, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
         p[P_YAW_DRIFT], p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
     iv[I_HEAD] = head
@@ -150,14 +156,21 @@ def _leg(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing, lea
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def lockstep_run(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing, lead_s,
-                 alt_max_m, bias_n, gust_n, mocap_n, nav_n, out):
+def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
     """The direct sensor path's advance to ``sv[S_T]`` (module docstring): the due mocap and
     navdata events (at most one of each, in time order, mocap first on a tie) into
     ``iv[I_KIND*]``/``out[O_EV_T*]``, then the legs to each and to the tick's time, each
     event's sample into ``out``. ``iv[I_DONE]``: the legs done (events, then the last); the
-    rest is the Python path's. ``x`` (the state array), ``ring`` and the counters are
-    updated in place."""
+    rest is the Python path's — or −1, nothing done, if a block of normals has fewer left
+    than a run may take (``NEED_*``: draw new blocks and call again). ``x`` (the state
+    array), ``ring`` and the counters are updated in place."""
+    if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
+            > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
+            or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
+        iv[I_DONE] = -1
+        return
+    k = (p[P_K], p[P_K + 1], p[P_K + 2], p[P_K + 3], p[P_K + 4], p[P_K + 5], p[P_K + 6],
+         p[P_K + 7], p[P_K + 8], p[P_K + 9], p[P_K + 10], p[P_K + 11], p[P_K + 12])
     t_s = sv[S_T]
     mocap_period, nav_period = p[P_MOCAP_PERIOD], p[P_NAV_PERIOD]
     k_mocap = math.floor((t_s - p[P_MOCAP_LATENCY]) / mocap_period + 1e-9)
@@ -196,8 +209,7 @@ def lockstep_run(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climb
             kind = -1
             t_event = t_s
         ran = t_event > iv[I_STEPS] * h
-        if not _leg(x, ring, iv, sv, p, k, wind, roll, pitch, gaz, yaw, hold, climbing,
-                    lead_s, alt_max_m, bias_n, gust_n, t_event):
+        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
             return
         if ran:
             out[O_LAST_NOW] = t_event

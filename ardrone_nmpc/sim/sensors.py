@@ -131,16 +131,16 @@ class LockstepSensors:
     def _advance_direct(self, t_s: float) -> None:
         legs = self._legs
         if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
-            events, done = legs.run(t_s)
+            events, last_leg = legs.run(t_s)      # … and what it left, if anything
         else:
-            events, done = self._direct_events(t_s), 0
-        for t_event, kind in events[done:]:  # what the compiled run left, if anything
+            events, last_leg = self._direct_events(t_s), True
+        for t_event, kind in events:
             self._run_to(t_event)
             if kind == _MOCAP:
                 self.took_pose(t_event, self.plant.mocap_pose())
             else:
                 self.took_navdata(t_event, self.plant.navdata())
-        if done <= len(events):  # the last leg, unless the compiled run did it
+        if last_leg:
             self._run_to(t_s)
 
     def _direct_events(self, t_s: float) -> list[tuple[float, int]]:

@@ -53,10 +53,10 @@ def _fly(cfg, legs: bool, ticks: int, command):
         run = compiled.run
 
         def counted(t_s):
-            events, done = run(t_s)
+            events, last_leg = run(t_s)
             used[0] += 1
-            used[1] += done <= len(events)
-            return events, done
+            used[1] += last_leg
+            return events, last_leg
         compiled.run = counted
     period = cfg.loop.period_s
     drone.connect()
