@@ -370,10 +370,9 @@ class AirframePlant:
                                for v in self._bias_rng.standard_normal(2))
         # the per-sample and per-advance normals, drawn ahead a block at a time (the same
         # values in the same order: sim/normal_blocks.py)
-        self._mocap_normals = NormalBlocks(self._mocap_rng)
-        self._nav_normals = NormalBlocks(self._nav_rng)
-        self._bias_normals = NormalBlocks(self._bias_rng)
-        self._gust_normals = NormalBlocks(self._gust_rng)
+        self._mocap_normals, self._nav_normals, self._bias_normals, self._gust_normals = (
+            NormalBlocks(rng) for rng in (self._mocap_rng, self._nav_rng, self._bias_rng,
+                                          self._gust_rng))
         self._new_flight_biases()
 
     @classmethod
@@ -651,10 +650,9 @@ class AirframePlant:
         # ψ is kept wrapped: in (−π, π] the wrap returns it unchanged (math.remainder is
         # exact), so it is only called outside (the same bits, and a float either way)
         psi = float(psi) if -math.pi < psi <= math.pi else wrap_angle_rad(psi)
-        return PlantTruth(
-            t_s=self.t_s, position_m=motion[:3],
-            velocity_mps=motion[3:], roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
-            psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
+        return PlantTruth(t_s=self.t_s, position_m=motion[:3], velocity_mps=motion[3:],
+                          roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
+                          psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
 
     @property
     def altitude_m_and_rate_mps(self) -> tuple[float, float]:
