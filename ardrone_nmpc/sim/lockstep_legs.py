@@ -35,6 +35,7 @@ __all__ = ["CompiledLegs"]
 _FLYING = FlightMode.FLYING
 _MOTORS_ON_STEP = AirframePlant._motors_on_step
 _f64 = np.float64
+_frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: list = []
 
 
@@ -175,8 +176,7 @@ class CompiledLegs:
             kind, t_event = (kind0, o[ks.O_EV_T0]) if i == 0 else (kind1, o[ks.O_EV_T1])
             if kind == ks.MOCAP:
                 q = ks.O_POSE
-                pose = out[q + 1:q + 7].copy()  # position and angles, read-only views
-                pose.flags.writeable = False
+                pose = _frozen(out[q + 1:q + 7].tobytes())  # position, angles: read-only
                 sensors.took_pose(t_event, MocapPose(o[q], pose[:3], pose[3:], o[q + 7]))
             else:
                 q = ks.O_NAV

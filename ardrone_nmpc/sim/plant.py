@@ -72,6 +72,7 @@ Time
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Optional
 
@@ -111,6 +112,7 @@ ATTITUDE_MODELS = ("lag", "second_order")
 _HOVER = (0.0, 0.0, 0.0, 0.0, True)   # what the drone does with the progressive flag at 0
 _NO_WIND = (0.0, 0.0, 0.0)
 _TIME_TOL_S = 1e-9
+_PACK = {n: struct.Struct(f"{n}d").pack for n in (3, 6)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,9 +321,8 @@ def _finite_frac(name: str, value: float) -> float:
 
 
 def _readonly(*values: float) -> np.ndarray:
-    a = np.array(values, dtype=float)
-    a.flags.writeable = False
-    return a
+    """A read-only float64 array: one over immutable bytes (half the cost of a flags call)."""
+    return np.frombuffer(_PACK[len(values)](*values))
 
 
 # ----------------------------------------------------------------------------- the plant
@@ -644,12 +645,9 @@ class AirframePlant:
     def truth(self) -> PlantTruth:
         """The true state now (world/model signs, see module docstring)."""
         state = self._state
-        motion = np.array(state[:6], dtype=float)  # position and velocity, read-only views
-        motion.flags.writeable = False
-        psi = state[8]
-        # ψ is kept wrapped: in (−π, π] the wrap returns it unchanged (math.remainder is
-        # exact), so it is only called outside (the same bits, and a float either way)
-        psi = float(psi) if -math.pi < psi <= math.pi else wrap_angle_rad(psi)
+        motion = _readonly(*state[:6])  # position and velocity, read-only views of one
+        # in (−π, π] the wrap returns ψ unchanged (math.remainder is exact): the same bits
+        psi = float(state[8]) if -math.pi < state[8] <= math.pi else wrap_angle_rad(state[8])
         return PlantTruth(t_s=self.t_s, position_m=motion[:3], velocity_mps=motion[3:],
                           roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
                           psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
