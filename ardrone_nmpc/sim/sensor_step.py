@@ -143,7 +143,8 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     iv[I_HEAD] = head
     iv[I_STEPS] += done
     sv[S_BATTERY] = battery
-    x[:] = xn
+    for i in range(x.shape[0]):  # not x[:] = xn: its shape check compiles an error message
+        x[i] = xn[i]
     sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = yaw_bias, vb0, vb1
     if turbulent:  # plant.gauss_markov_step over the call's n·h
         a = math.exp(-(n * h) / p[P_TURB_TAU])
