@@ -7,7 +7,7 @@ and writes the plant's and the firmware's internals (it is their compiled path, 
 client), and is used only when the Python path's tick would do what the kernel does:
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING on its own dynamics
-  (no other backend's ``_motors_on_step``, no battery sag: what ``_flying_advance`` compiles);
+  (no other backend's ``_motors_on_step``: what ``_flying_advance`` compiles);
 * the navdata's flight mode is the one the link's take-off guard saw last (no guard call);
 * the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
   applied and not capped, and by the tick's time no hover, no link-loss watchdog fires (the
@@ -65,8 +65,6 @@ class CompiledLegs:
         plant, fw = self.plant, self.firmware
         if plant._mode is not _FLYING or self.sensors._nav_mode is not _FLYING:
             return False
-        if plant.params.battery_sag_frac != 0.0:
-            return False
         if fw.pcmd is not fw._applied_pcmd or fw.alt_capped:
             return False
         if fw.last_cmd_t is None:
@@ -106,6 +104,7 @@ class CompiledLegs:
         p[ks.P_TRIM0], p[ks.P_TRIM1] = plant._trim_bias_rad
         p[ks.P_BIAS0], p[ks.P_BIAS1] = pp.navdata_velocity_bias_mps
         p[ks.P_VMAX] = pp.control_vz_max_mps
+        p[ks.P_VZ_GAIN], p[ks.P_SAG] = pp.vz_gain, pp.battery_sag_frac
         k = pp.rhs_coefficients
         if len(k) != ks.N_K:
             raise ValueError(f"{ks.N_K} RHS coefficients expected, got {len(k)}")

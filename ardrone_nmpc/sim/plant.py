@@ -519,16 +519,15 @@ class AirframePlant:
         :meth:`_advance_biases` too. Leaves to :meth:`_substep` the steps that would empty
         the battery (a mode change). Returns the steps done."""
         p = self.params
-        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path,
-        # and so does a sagging vertical gain (its coefficients change with every step's drain)
-        if (type(self)._motors_on_step is not AirframePlant._motors_on_step
-                or p.battery_sag_frac != 0.0):
+        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path
+        if type(self)._motors_on_step is not AirframePlant._motors_on_step:
             return 0
         fifo, (roll, pitch, gaz, yaw, hold) = self._fifo, self._current
         done, fifo.head, self._battery, x, yaw_bias, vb0, vb1 = flying_advance(
             self._state_array(), fifo.rows, fifo.head, roll, pitch, gaz, yaw, hold,
             p.rhs_coefficients, wind, h, n, self._battery,
-            p.battery_drain_pct_per_min * h / 60.0, normals, self._yaw_bias_deg,
+            p.battery_drain_pct_per_min * h / 60.0, p.vz_gain, p.battery_sag_frac, normals,
+            self._yaw_bias_deg,
             *self._vel_bias, self._yaw_drift_sign * p.navdata_yaw_drift_radps,
             p.navdata_yaw_walk_rad_per_sqrt_s, p.navdata_velocity_bias_std_mps,
             p.navdata_velocity_bias_tau_s)

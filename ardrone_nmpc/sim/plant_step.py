@@ -35,14 +35,14 @@ def advance_biases(dt, normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_
 
 @njit(cache=True, **OUTER_KERNEL)
 def flying_advance(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain,
-                   normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,
-                   vel_bias_std, vel_bias_tau_s):
+                   vz_gain, sag, normals, yaw_bias_deg, vel_bias_0, vel_bias_1,
+                   yaw_drift_radps, yaw_walk, vel_bias_std, vel_bias_tau_s):
     """``n`` steps of :func:`flying_steps` (arguments as there), then — only if all ``n``
     were flown — the heading wrapped and the biases advanced over ``n·h`` with the standard
     normals ``normals`` (3) (:func:`advance_biases`). Returns (steps done, head, battery,
     state, yaw offset °, velocity bias 0, velocity bias 1)."""
     done, head, battery, x = flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h,
-                                          n, battery, drain)
+                                          n, battery, drain, vz_gain, sag)
     if done < n:  # the battery empties: the plant's step-by-step path goes on
         return done, head, battery, x, yaw_bias_deg, vel_bias_0, vel_bias_1
     x[8] = wrap_half_turn(x[8], math.pi)

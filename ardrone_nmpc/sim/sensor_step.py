@@ -48,7 +48,7 @@ SV_SIZE = 19
 # p: a flight's parameters, then the 13 coefficients of the airframe's RHS
 (P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
  P_MOCAP_PERIOD, P_MOCAP_LATENCY, P_NAV_PERIOD, P_SP, P_SA, P_ATT_STD, P_YAW_STD, P_ALT_STD,
- P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_K) = range(23)
+ P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_VZ_GAIN, P_SAG, P_K) = range(25)
 N_K = 13
 P_SIZE = P_K + N_K
 # the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
@@ -138,7 +138,7 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
         k, (w0, w1, w2), h, n,
-        sv[S_BATTERY], drain, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
+        sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
         p[P_YAW_DRIFT], p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
     iv[I_HEAD] = head
     iv[I_STEPS] += done

@@ -93,6 +93,7 @@ CASES = {
     "climb_into_cap": (["drone.altitude_max_m=1.3"],
                        lambda k: (0.0, 0.01, 0.6 if (k // 40) % 2 == 0 else -0.2, 0.0), True),
     "turbulence": (["sim.plant.turbulence_std_mps=0.5"], _zigzag, False),
+    "sag": (["sim.battery_sag_frac=0.3", "sim.vz_gain=0.9"], _zigzag, False),
     "second_order": (["sim.plant.attitude_model=second_order"], _zigzag, False),
     "hover_and_silence": ([], lambda k: None if k % 7 == 0 else (0.01, -0.02, 0.0, 0.0), False),
     "watchdogs": ([], lambda k: "silent" if 150 < k < 200 or k % 40 > 35 else _zigzag(k),
