@@ -21,14 +21,12 @@ battery would change; the Python path goes on from there.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.sim import sensor_step as ks
-from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
+from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["CompiledLegs"]
 
