@@ -17,6 +17,10 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   little speed and draws the noise in another order, so clean runs keep the direct path (and
   their golden trace).
 
+On the direct path a tick in which nothing but physics happens (a FLYING airframe, a quiet
+firmware) is one compiled call (:class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`): the
+same legs, samples and bits.
+
 Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
 bits and ctrl_state major the drone reported — which the link's take-off guard watches (on
 the direct path only when the flight mode changes: between changes the guard would see the
