@@ -126,14 +126,17 @@ def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain):
+def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain, vz_gain,
+                 sag):
     """Up to ``n`` steps of a FLYING plant in one call: each queues the current command
     (``roll`` … ``hold``) in the delay ring ``ring`` (m, 5; oldest at ``head``; shifted in
     place) and flies the oldest (the current one with no delay), one RK4 step from the state
     array ``x`` (10 or 12), then the floor (z ≤ 0 stops at 0 with no downward speed) and the
     battery drain — :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in
     its order. Stops before a step whose drain would empty the battery (a mode change, the
-    plant's). Returns (steps done, head, battery, state array)."""
+    plant's). With a battery sag ``sag`` > 0 each step's vertical gain is
+    :meth:`~ardrone_nmpc.sim.plant.PlantParams.coefficients_at`'s at the battery level before
+    it (``vz_gain``: the unsagged one). Returns (steps done, head, battery, state array)."""
     m = ring.shape[0]
     size = x.shape[0]
     x = x.copy()
@@ -150,7 +153,14 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
             ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
             ring[head, 4] = 1.0 if hold else 0.0
             head = head + 1 if head + 1 < m else 0
-        _rk4_into(x, r, p, g, y, hd, k, w, h, k1, k2, k3, k4, tmp, x)
+        kk = k
+        if sag != 0.0:  # PlantParams.vertical_gain, Python's min and max spelled out
+            level = battery if not 0.0 > battery else 0.0
+            level = level if not 100.0 < level else 100.0
+            gain = vz_gain * (1.0 - sag * (1.0 - level / 100.0))
+            kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
+                  k[10], k[11], k[12])
+        _rk4_into(x, r, p, g, y, hd, kk, w, h, k1, k2, k3, k4, tmp, x)
         if not x[2] > 0.0:  # the floor: max(vz, 0.0) as Python's max keeps a NaN
             x[2] = 0.0
             if 0.0 > x[5]:

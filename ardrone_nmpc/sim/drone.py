@@ -133,6 +133,15 @@ class SimulatedDrone:
         self.firmware.execute_datagram(commands, now_s)
         return True
 
+    def execute_pcmd(self, seq: int, pcmd: tuple, now_s: float, fault_t_s: float) -> bool:
+        """:meth:`execute_at` of a datagram of one progressive PCMD (``seq``, ``(flags,
+        roll, pitch, gaz, yaw)``: :meth:`DroneFirmware.execute_pcmd`)."""
+        if self._at_lost(fault_t_s):
+            return False
+        self.counters.at_datagrams_in += 1
+        self.firmware.execute_pcmd(seq, pcmd, now_s)
+        return True
+
     def wakeup_lost(self, now_s: float) -> bool:
         """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""
         return self.faults is not None and self.faults.wakeup_lost(now_s)

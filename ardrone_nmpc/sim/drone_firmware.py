@@ -186,21 +186,37 @@ class DroneFirmware:
                 else None
         self.apply_command()
 
-    def execute(self, cmd: AtCommand, now: float,
-                ids: Optional[tuple[str, str, str]] = None) -> None:
-        """One command under the sequence-number rule (``ids``: the ``AT*CONFIG_IDS`` before
-        it in the datagram, if any)."""
+    def execute_pcmd(self, seq: int, pcmd: tuple, now: float) -> None:
+        """A datagram of one progressive PCMD — ``seq`` and ``(flags, roll, pitch, gaz,
+        yaw)`` — as :meth:`execute_datagram` runs it, without the command objects (the
+        lockstep link sends one every tick)."""
+        self.counters.at_commands_in += 1
+        if self._accept(seq, now):
+            self.pcmd = pcmd
+        self.apply_command()
+
+    def _accept(self, seq: int, now: float) -> bool:
+        """The sequence-number rule; an accepted command is traffic for the watchdogs."""
         c = self.counters
-        if not (cmd.seq == 1 or cmd.seq > self.last_seq):
+        if not (seq == 1 or seq > self.last_seq):
             c.at_commands_stale += 1
-            return
-        self.last_seq = cmd.seq
+            return False
+        self.last_seq = seq
         c.at_commands_applied += 1
         self.last_cmd_t = now
         self.link_lost = False
         self.lost_com_hover = False
         if self.comwdg_clear == "any":
             self.comwdg_latched = False
+        return True
+
+    def execute(self, cmd: AtCommand, now: float,
+                ids: Optional[tuple[str, str, str]] = None) -> None:
+        """One command under the sequence-number rule (``ids``: the ``AT*CONFIG_IDS`` before
+        it in the datagram, if any)."""
+        if not self._accept(cmd.seq, now):
+            return
+        c = self.counters
         body = cmd.body
         mode = self.plant.mode
         if isinstance(body, Ref):

@@ -172,8 +172,14 @@ class LockstepDrone(ConfigHandshake):
         """PCMD — with the REF held until one datagram carrying it arrived: the firmware acts
         on REF's level and edges, which a repeat does not change (the UDP link repeats it
         against loss; here only an injected loss drops a datagram)."""
-        pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
         ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
+        if ref is None and progressive:  # the firmware takes the PCMD's values as they are
+            self._seq = seq + 1
+            self.sim.execute_pcmd(seq + 1, (_PROGRESSIVE, float(roll_frac), float(pitch_frac),
+                                            float(gaz_frac), float(yaw_frac)),
+                                  self.sim.plant.t_s, self.t_exp_s)
+            return
+        pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
         if ref is None:
             commands = (_Numbered(seq + 1, pcmd),)
         else:

@@ -72,6 +72,7 @@ Time
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Optional
 
@@ -83,6 +84,7 @@ from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, air
                                        freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
+from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_step import flying_advance
 
 if TYPE_CHECKING:  # config imports pydantic; the plant only reads attributes
@@ -110,6 +112,7 @@ ATTITUDE_MODELS = ("lag", "second_order")
 _HOVER = (0.0, 0.0, 0.0, 0.0, True)   # what the drone does with the progressive flag at 0
 _NO_WIND = (0.0, 0.0, 0.0)
 _TIME_TOL_S = 1e-9
+_PACK = {n: struct.Struct(f"{n}d").pack for n in (3, 6)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -318,9 +321,8 @@ def _finite_frac(name: str, value: float) -> float:
 
 
 def _readonly(*values: float) -> np.ndarray:
-    a = np.array(values, dtype=float)
-    a.flags.writeable = False
-    return a
+    """A read-only float64 array: one over immutable bytes (half the cost of a flags call)."""
+    return np.frombuffer(_PACK[len(values)](*values))
 
 
 # ----------------------------------------------------------------------------- the plant
@@ -367,6 +369,11 @@ class AirframePlant:
         self._tilt_aux = (0.0, 0.0)  # η_φ, η_θ of the second-order attitude form
         self._vel_bias = tuple(params.navdata_velocity_bias_std_mps * v
                                for v in self._bias_rng.standard_normal(2))
+        # the per-sample and per-advance normals, drawn ahead a block at a time (the same
+        # values in the same order: sim/normal_blocks.py)
+        self._mocap_normals, self._nav_normals, self._bias_normals, self._gust_normals = (
+            NormalBlocks(rng) for rng in (self._mocap_rng, self._nav_rng, self._bias_rng,
+                                          self._gust_rng))
         self._new_flight_biases()
 
     @classmethod
@@ -491,7 +498,7 @@ class AirframePlant:
         wind = tuple(map(float, self.wind_mps))
         if p.turbulence_std_mps > 0.0:
             wind = (wind[0] + self._gust_mps[0], wind[1] + self._gust_mps[1], wind[2])
-        normals = self._bias_rng.standard_normal(3)  # the biases' draws (their stream alone)
+        normals = self._bias_normals.take(3)  # the biases' draws (their stream alone)
         done = (self._flying_advance(n, h, wind, normals) if self._mode is FlightMode.FLYING
                 else 0)
         if done < n:
@@ -503,7 +510,7 @@ class AirframePlant:
         if p.turbulence_std_mps > 0.0:  # docs/plant-profiles.md §3, held within one call
             self._gust_mps = gauss_markov_step(self._gust_mps, p.turbulence_std_mps,
                                                p.turbulence_tau_s, n * h,
-                                               self._gust_rng.standard_normal(2))
+                                               self._gust_normals.take(2))
 
     def _flying_advance(self, n: int, h: float, wind: tuple, normals: np.ndarray) -> int:
         """Up to ``n`` FLYING substeps in one compiled call (:func:`flying_advance`), the same
@@ -512,16 +519,15 @@ class AirframePlant:
         :meth:`_advance_biases` too. Leaves to :meth:`_substep` the steps that would empty
         the battery (a mode change). Returns the steps done."""
         p = self.params
-        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path,
-        # and so does a sagging vertical gain (its coefficients change with every step's drain)
-        if (type(self)._motors_on_step is not AirframePlant._motors_on_step
-                or p.battery_sag_frac != 0.0):
+        # a backend with other dynamics (its own _motors_on_step) keeps the step-by-step path
+        if type(self)._motors_on_step is not AirframePlant._motors_on_step:
             return 0
         fifo, (roll, pitch, gaz, yaw, hold) = self._fifo, self._current
         done, fifo.head, self._battery, x, yaw_bias, vb0, vb1 = flying_advance(
             self._state_array(), fifo.rows, fifo.head, roll, pitch, gaz, yaw, hold,
             p.rhs_coefficients, wind, h, n, self._battery,
-            p.battery_drain_pct_per_min * h / 60.0, normals, self._yaw_bias_deg,
+            p.battery_drain_pct_per_min * h / 60.0, p.vz_gain, p.battery_sag_frac, normals,
+            self._yaw_bias_deg,
             *self._vel_bias, self._yaw_drift_sign * p.navdata_yaw_drift_radps,
             p.navdata_yaw_walk_rad_per_sqrt_s, p.navdata_velocity_bias_std_mps,
             p.navdata_velocity_bias_tau_s)
@@ -615,6 +621,7 @@ class AirframePlant:
     def _new_flight_biases(self) -> None:
         """Per-flight navdata trims, yaw offset and yaw drift direction (drawn at take-off)."""
         p, rng = self.params, self._bias_rng
+        self._bias_normals.sync()  # the stream where the normals drawn so far left it
         u = rng.uniform(-1.0, 1.0, 3)
         self._trim_bias_rad = (p.navdata_trim_bias_max_rad * u[0],
                                p.navdata_trim_bias_max_rad * u[1])
@@ -636,11 +643,13 @@ class AirframePlant:
     @property
     def truth(self) -> PlantTruth:
         """The true state now (world/model signs, see module docstring)."""
-        x, y, z, vx, vy, vz, phi, theta, psi, r = self._state
-        return PlantTruth(
-            t_s=self.t_s, position_m=_readonly(x, y, z), velocity_mps=_readonly(vx, vy, vz),
-            roll_rad=phi, pitch_rad=theta, psi_rad=wrap_angle_rad(psi), psi_rate_radps=r,
-            mode=self._mode, battery_pct=self._battery)
+        state = self._state
+        motion = _readonly(*state[:6])  # position and velocity, read-only views of one
+        # in (−π, π] the wrap returns ψ unchanged (math.remainder is exact): the same bits
+        psi = float(state[8]) if -math.pi < state[8] <= math.pi else wrap_angle_rad(state[8])
+        return PlantTruth(t_s=self.t_s, position_m=motion[:3], velocity_mps=motion[3:],
+                          roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
+                          psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
 
     @property
     def altitude_m_and_rate_mps(self) -> tuple[float, float]:
@@ -652,7 +661,7 @@ class AirframePlant:
     def mocap_pose(self) -> MocapPose:
         """A mocap pose now: position + N(0, σ_p) per axis, each XYZ angle + N(0, σ_a)."""
         x, y, z, _, _, _, phi, theta, psi, _ = self._state
-        n = self._mocap_rng.standard_normal(6)
+        n = self._mocap_normals.take(6)
         sp, sa = self.noise.mocap_position_std_m, self.noise.mocap_angle_std_rad
         rx, ry, rz = mocap_rotation_xyz_rad(phi, theta, psi)
         rx, ry = wrap_angle_rad(rx + sa * n[3]), ry + sa * n[4]
@@ -667,7 +676,7 @@ class AirframePlant:
         """A navdata demo sample now, in the drone's signs (see NavdataSample)."""
         x, y, z, vx, vy, vz, phi, theta, psi, _ = self._state
         nz = self.noise
-        n = self._nav_rng.standard_normal(7)
+        n = self._nav_normals.take(7)
         roll = math.degrees(phi + self._trim_bias_rad[0] + nz.navdata_attitude_std_rad * n[0])
         pitch = math.degrees(-theta + self._trim_bias_rad[1] + nz.navdata_attitude_std_rad * n[1])
         yaw = wrap_angle_deg(math.degrees(-psi + nz.navdata_yaw_std_rad * n[2])

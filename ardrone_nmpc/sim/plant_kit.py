@@ -40,7 +40,9 @@ from numba import njit
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
+from ardrone_nmpc.sim.plant_step import advance_biases
 
 if TYPE_CHECKING:
     from ardrone_nmpc.config.schema import DroneConfig, SimConfig
@@ -159,6 +161,53 @@ def kit_rk4(x0, roll, pitch, gaz, yaw, hold, k, w, h):
     return x, outputs
 
 
+@njit(cache=True, **OUTER_KERNEL)
+def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n,
+                       battery, drain, vz_gain, sag, normals, yaw_bias_deg, vel_bias_0,
+                       vel_bias_1, yaw_drift_radps, yaw_walk, vel_bias_std, vel_bias_tau_s):
+    """Up to ``n`` FLYING steps of :class:`KitPlant` in one call — each
+    :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in its order: the
+    command ``roll`` … ``hold`` queued in the delay ring ``ring`` (oldest at ``head``) and the
+    oldest flown, :meth:`KitPlant._motors_on_step` (the kit's x, y, z, ψ from the plant's
+    ``state`` (10), gaz times the vertical gain at the battery level, :func:`kit_rk4`), the
+    floor, the drain — stopping before a step whose drain would empty the battery (a mode
+    change, the plant's). If all ``n`` were flown, ψ is wrapped and the biases advanced
+    (:func:`~ardrone_nmpc.sim.plant_step.advance_biases`). Returns (steps done, head,
+    battery, state, kit state, yaw offset °, velocity bias 0, velocity bias 1)."""
+    m = ring.shape[0]
+    state = state.copy()
+    for i in range(n):
+        if not battery - drain > 0.0:
+            return i, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
+        if m == 0:
+            r, p, g, y, hd = roll, pitch, gaz, yaw, hold
+        else:
+            r, p, g, y, hd = (ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3],
+                              ring[head, 4] != 0.0)
+            ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
+            ring[head, 4] = 1.0 if hold else 0.0
+            head = head + 1 if head + 1 < m else 0
+        kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
+        level = battery if not 0.0 > battery else 0.0  # PlantParams.vertical_gain: min, max
+        level = level if not 100.0 < level else 100.0   # as Python's
+        kit, out = kit_rk4(kit, r, p, g * (vz_gain * (1.0 - sag * (1.0 - level / 100.0))), y,
+                           hd, k, w, h)
+        vx, vy, vz, phi, theta_k, psi_k_rate = out
+        state[0], state[1], state[2], state[3], state[4] = kit[0], kit[1], kit[2], vx, vy
+        state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, kit[3], -psi_k_rate
+        if not state[2] > 0.0:  # the floor: max(vz, 0.0) as Python's max keeps a NaN
+            state[2] = 0.0
+            if 0.0 > state[5]:
+                state[5] = 0.0
+        left = battery - drain
+        battery = left if left > 0.0 else 0.0
+    state[8] = wrap_half_turn(state[8], math.pi)
+    yaw_bias_deg, vel_bias_0, vel_bias_1 = advance_biases(
+        n * h, normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,
+        vel_bias_std, vel_bias_tau_s)
+    return n, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
+
+
 class KitPlant(AirframePlant):
     """:class:`~ardrone_nmpc.sim.plant.AirframePlant` with the kit's channels in flight.
 
@@ -184,6 +233,26 @@ class KitPlant(AirframePlant):
         ``drag_per_s`` of ``sim.plant`` are not used)."""
         return cls(PlantParams.from_config(sim_cfg, drone_cfg), sim_cfg.noise,
                    seed=sim_cfg.seed if seed is None else seed)
+
+    def _flying_advance(self, n: int, h: float, wind: tuple, normals: np.ndarray) -> int:
+        """Up to ``n`` FLYING steps in one compiled call (:func:`kit_flying_advance`), as
+        the airframe's; returns the steps done (the rest are the step-by-step path's)."""
+        if type(self)._motors_on_step is not KitPlant._motors_on_step:
+            return 0  # a backend with other dynamics still
+        p, fifo, (roll, pitch, gaz, yaw, hold) = self.params, self._fifo, self._current
+        done, fifo.head, self._battery, state, self._kit, yaw_bias, vb0, vb1 = \
+            kit_flying_advance(
+                np.array(self._state, dtype=np.float64), self._kit, fifo.rows, fifo.head, roll,
+                pitch, gaz, yaw, hold, self._coefficients, wind, h, n, self._battery,
+                p.battery_drain_pct_per_min * h / 60.0, p.vz_gain, p.battery_sag_frac, normals,
+                self._yaw_bias_deg, *self._vel_bias, self._yaw_drift_sign
+                * p.navdata_yaw_drift_radps, p.navdata_yaw_walk_rad_per_sqrt_s,
+                p.navdata_velocity_bias_std_mps, p.navdata_velocity_bias_tau_s)
+        self._steps += done
+        self._state = tuple(state.tolist())
+        if done == n:
+            self._yaw_bias_deg, self._vel_bias = yaw_bias, (vb0, vb1)
+        return done
 
     def _motors_on_step(self, command: tuple, h: float, wind: tuple) -> tuple:
         roll, pitch, gaz, yaw, hold = command

@@ -17,6 +17,10 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   little speed and draws the noise in another order, so clean runs keep the direct path (and
   their golden trace).
 
+On the direct path a tick in which nothing but physics happens (a FLYING airframe, a quiet
+firmware) is one compiled call (:class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`): the
+same legs, samples and bits.
+
 Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
 bits and ctrl_state major the drone reported — which the link's take-off guard watches (on
 the direct path only when the flight mode changes: between changes the guard would see the
@@ -95,6 +99,12 @@ class LockstepSensors:
         self.nav_malformed = 0
         self._queue: list = []  # (arrival_s, order, stream, bytes)
         self._order = 0
+        # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
+        self._legs = None
+        if not self.wire:
+            from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+            if CompiledLegs.eligible(self.plant):
+                self._legs = CompiledLegs(self)
 
     # ------------------------------------------------------------------ the clock
     def _run_to(self, t_s: float) -> None:
@@ -123,6 +133,23 @@ class LockstepSensors:
 
     # ------------------------------------------------------------------ direct
     def _advance_direct(self, t_s: float) -> None:
+        legs = self._legs
+        if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
+            events, last_leg = legs.run(t_s)      # … and what it left, if anything
+        else:
+            events, last_leg = self._direct_events(t_s), True
+        for t_event, kind in events:
+            self._run_to(t_event)
+            if kind == _MOCAP:
+                self.took_pose(t_event, self.plant.mocap_pose())
+            else:
+                self.took_navdata(t_event, self.plant.navdata())
+        if last_leg:
+            self._run_to(t_s)
+
+    def _direct_events(self, t_s: float) -> list[tuple[float, int]]:
+        """The newest mocap frame and navdata sample due by ``t_s`` not taken yet, in time
+        order: ``(time, kind)``."""
         k_mocap = math.floor((t_s - self.mocap_latency_s) / self.mocap_period_s + 1e-9)
         k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
         events = []
@@ -132,24 +159,26 @@ class LockstepSensors:
         if k_nav >= self._next_nav_k:
             events.append((k_nav * self.nav_period_s, _NAV))
             self._next_nav_k = k_nav + 1
-        for t_event, kind in sorted(events):
-            self._run_to(t_event)
-            if kind == _MOCAP:
-                self.pose = self.plant.mocap_pose()
-                self.pose_rx_t_s = t_event + self.mocap_latency_s
-                if self.target_cfg is not None:  # the scripted second object, same frame
-                    self.target = target_pose(self.target_cfg, t_event, self._target_rng,
-                                              self._target_std_m)
-                    self.target_rx_t_s = self.pose_rx_t_s
-            else:
-                self.nav = self.plant.navdata()
-                self.nav_rx_t_s = t_event
-                if self.nav.mode is not self._nav_mode:  # what the guard sees changes with it
-                    self._nav_mode = self.nav.mode
-                    status = self.firmware.status(t_event)
-                    self.on_navdata(status.state_bits(),
-                                    status.ctrl_state(self.firmware.ctrl_codes) >> 16)
-        self._run_to(t_s)
+        return sorted(events)
+
+    def took_pose(self, t_event: float, pose) -> None:
+        """The mocap frame of ``t_event`` (its pose drawn): what the link holds."""
+        self.pose = pose
+        self.pose_rx_t_s = t_event + self.mocap_latency_s
+        if self.target_cfg is not None:  # the scripted second object, same frame
+            self.target = target_pose(self.target_cfg, t_event, self._target_rng,
+                                      self._target_std_m)
+            self.target_rx_t_s = self.pose_rx_t_s
+
+    def took_navdata(self, t_event: float, nav) -> None:
+        """The navdata sample of ``t_event``: what the link holds (and the guard sees)."""
+        self.nav = nav
+        self.nav_rx_t_s = t_event
+        if nav.mode is not self._nav_mode:  # what the guard sees changes with it
+            self._nav_mode = nav.mode
+            status = self.firmware.status(t_event)
+            self.on_navdata(status.state_bits(),
+                            status.ctrl_state(self.firmware.ctrl_codes) >> 16)
 
     # ------------------------------------------------------------------ through the wire
     def _advance_through_wire(self, t_s: float) -> None:

@@ -49,7 +49,7 @@ from ardrone_nmpc.sim.plant import PlantParams
 p = PlantParams()
 x = np.zeros(10); x[2] = 1.0
 out = flying_advance(x, np.zeros((0, 5)), 0, 0.2, 0.1, 0.3, 0.0, False,
-                     p.rhs_coefficients, (0.0, 0.0, 1.0), 0.005, 4, 100.0, 0.0,
+                     p.rhs_coefficients, (0.0, 0.0, 1.0), 0.005, 4, 100.0, 0.0, 1.0, 0.0,
                      np.zeros(3), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 print(repr(out[3].tolist()))
 """

@@ -47,6 +47,9 @@ def _fly(cfg, *, batched: bool, monkeypatch, batched_steps: list | None = None) 
     ["sim.plant.attitude_model=second_order"],       # two hidden states
     ["sim.plant.battery_drain_pct_per_min=100",      # empties the battery in flight
      "sim.plant.battery_start_pct=25"],
+    ["sim.battery_sag_frac=0.4",                     # the vertical gain sags with it
+     "sim.plant.battery_drain_pct_per_min=60"],
+    ["sim.battery_sag_frac=0.4", "sim.plant.attitude_model=second_order"],
 ])
 def test_batched_flying_advance_equals_the_step_by_step_path(overrides, monkeypatch):
     cfg = load_config(None, overrides)
@@ -62,11 +65,15 @@ def test_batched_flying_advance_equals_the_step_by_step_path(overrides, monkeypa
 
 
 def test_a_backend_with_its_own_dynamics_keeps_the_step_by_step_path():
-    from ardrone_nmpc.sim.backends import make_plant
+    from ardrone_nmpc.sim.plant_kit import KitPlant
+
+    class OtherDynamics(KitPlant):  # neither the airframe's nor the kit's compiled steps
+        def _motors_on_step(self, command, h, wind):
+            return KitPlant._motors_on_step(self, command, h, wind)
 
     cfg = load_config(None, ["sim.plant.profile=thesis_kit"])
-    plant = make_plant(cfg.sim, cfg.drone, seed=0)
-    assert type(plant)._motors_on_step is not AirframePlant._motors_on_step  # the kit's
+    plant = OtherDynamics.from_config(cfg.sim, cfg.drone, seed=0)
+    assert type(plant)._motors_on_step is not AirframePlant._motors_on_step
     plant.takeoff()
     while plant.mode is not FlightMode.FLYING:
         plant.advance(0.065)

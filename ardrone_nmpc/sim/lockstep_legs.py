@@ -1,0 +1,189 @@
+"""The direct sensor path's tick in one compiled call, when nothing but physics happens in it.
+
+:class:`CompiledLegs` hands :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` the plant's
+state, runs it and takes the state back, for
+:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. It reads
+and writes the plant's and the firmware's internals (it is their compiled path, not a
+client), and is used only when the Python path's tick would do what the kernel does:
+
+* the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING on its own dynamics
+  (no other backend's ``_motors_on_step``: what ``_flying_advance`` compiles);
+* the navdata's flight mode is the one the link's take-off guard saw last (no guard call);
+* the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
+  applied and not capped, and by the tick's time no hover, no link-loss watchdog fires (the
+  silence only grows within a tick, so none fires earlier either; the com-watchdog bit,
+  which nothing reads on the way, is latched after the run, as the Python path's calls
+  would have left it).
+
+The kernel itself stops before a leg that a climb near the altitude cap or an emptying
+battery would change; the Python path goes on from there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.sim import sensor_step as ks
+from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
+from ardrone_nmpc.sim.plant import AirframePlant
+
+__all__ = ["CompiledLegs"]
+
+_FLYING = FlightMode.FLYING
+_MOTORS_ON_STEP = AirframePlant._motors_on_step
+_f64 = np.float64
+_frozen = np.frombuffer  # over immutable bytes: a read-only array
+_NONE: list = []
+
+
+class CompiledLegs:
+    """The compiled tick of one lockstep sensor sampler's plant and firmware (module
+    docstring). :meth:`run` returns what it left to ``_advance_direct``."""
+
+    def __init__(self, sensors) -> None:
+        self.sensors = sensors
+        self.plant = sensors.plant
+        self.firmware = sensors.firmware
+        self.iv = np.zeros(ks.IV_SIZE, dtype=np.int64)
+        self.sv = np.zeros(ks.SV_SIZE)
+        self.p = np.zeros(ks.P_SIZE)
+        self.out = np.zeros(ks.OUT_SIZE)
+        self._p_key: tuple = ()
+        self.turbulent = False
+        self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
+
+    @staticmethod
+    def eligible(plant) -> bool:
+        """A plant this path can fly (the airframe's own dynamics)."""
+        return isinstance(plant, AirframePlant) and type(plant)._motors_on_step is _MOTORS_ON_STEP
+
+    def ready(self, t_s: float) -> bool:
+        """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""
+        plant, fw = self.plant, self.firmware
+        if plant._mode is not _FLYING or self.sensors._nav_mode is not _FLYING:
+            return False
+        if fw.pcmd is not fw._applied_pcmd or fw.alt_capped:
+            return False
+        if fw.last_cmd_t is None:
+            return False
+        silence = t_s - fw.last_cmd_t
+        return ((fw.lost_com_hover or not silence > fw.hover_after_s)
+                and (fw.link_lost or not silence > fw.link_loss_s))
+
+    def _params(self) -> np.ndarray:
+        """The flight's parameters (rebuilt when the plant's params, noise or per-flight
+        biases change)."""
+        plant, sensors = self.plant, self.sensors
+        key = (plant.params, plant.noise, plant._trim_bias_rad, plant._yaw_drift_sign)
+        old = self._p_key
+        if (len(old) == 4 and old[0] is key[0] and old[1] is key[1] and old[2] is key[2]
+                and old[3] == key[3]):
+            return self.p
+        pp, nz, p = plant.params, plant.noise, self.p
+        h = pp.integration_step_s
+        p[ks.P_H] = h
+        p[ks.P_DRAIN] = pp.battery_drain_pct_per_min * h / 60.0
+        p[ks.P_YAW_DRIFT] = plant._yaw_drift_sign * pp.navdata_yaw_drift_radps
+        p[ks.P_YAW_WALK] = pp.navdata_yaw_walk_rad_per_sqrt_s
+        p[ks.P_VB_STD] = pp.navdata_velocity_bias_std_mps
+        p[ks.P_VB_TAU] = pp.navdata_velocity_bias_tau_s
+        p[ks.P_TURB_STD] = pp.turbulence_std_mps
+        p[ks.P_TURB_TAU] = pp.turbulence_tau_s
+        p[ks.P_MOCAP_PERIOD] = sensors.mocap_period_s
+        p[ks.P_MOCAP_LATENCY] = sensors.mocap_latency_s
+        p[ks.P_NAV_PERIOD] = sensors.nav_period_s
+        p[ks.P_SP] = nz.mocap_position_std_m
+        p[ks.P_SA] = nz.mocap_angle_std_rad
+        p[ks.P_ATT_STD] = nz.navdata_attitude_std_rad
+        p[ks.P_YAW_STD] = nz.navdata_yaw_std_rad
+        p[ks.P_ALT_STD] = nz.navdata_altitude_std_m
+        p[ks.P_VEL_STD] = nz.navdata_velocity_std_mps
+        p[ks.P_TRIM0], p[ks.P_TRIM1] = plant._trim_bias_rad
+        p[ks.P_BIAS0], p[ks.P_BIAS1] = pp.navdata_velocity_bias_mps
+        p[ks.P_VMAX] = pp.control_vz_max_mps
+        p[ks.P_VZ_GAIN], p[ks.P_SAG] = pp.vz_gain, pp.battery_sag_frac
+        k = pp.rhs_coefficients
+        if len(k) != ks.N_K:
+            raise ValueError(f"{ks.N_K} RHS coefficients expected, got {len(k)}")
+        p[ks.P_K:] = k
+        self._p_key = key
+        self.turbulent = pp.turbulence_std_mps > 0.0
+        return p
+
+    def _state_array(self) -> np.ndarray:
+        """The plant's state array: the one the last run left while the plant's state is the
+        one it took from it (the same tuples), else a new one."""
+        plant = self.plant
+        if plant._state is self._x_state and plant._tilt_aux is self._x_aux:
+            return self._x
+        return plant._state_array()
+
+    def run(self, t_s: float) -> tuple[list, bool]:
+        """The kernel's run to ``t_s``; the samples of the events it passed are the sensors'.
+        Returns the events it left to the Python path (``(t, kind)``, in order) and whether
+        the last leg (to ``t_s``) is left too."""
+        plant, fw, sensors = self.plant, self.firmware, self.sensors
+        p = self._params()
+        iv, sv, out = self.iv, self.sv, self.out
+        fifo = plant._fifo
+        bias_n, gust_n = plant._bias_normals, plant._gust_normals
+        mocap_n, nav_n = plant._mocap_normals, plant._nav_normals
+        iv[:8] = (plant._steps, fifo.head, sensors._next_mocap_k, sensors._next_nav_k,
+                  bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+        gust, vel_bias, wind = plant._gust_mps, plant._vel_bias, plant.wind_mps
+        roll, pitch, gaz, yaw, hold = plant._current
+        flags, _, _, fw_gaz, _ = fw.pcmd
+        if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
+            climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
+        else:
+            climbing = lead_s = alt_max_m = 0.0
+        sv[:] = (t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
+                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
+                 climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2])
+        x = self._state_array()
+        ks.lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
+                        nav_n.values, out)
+        if iv[ks.I_DONE] < 0:  # a block ran short: new ones, and again
+            bias_n.ensure(ks.NEED_BIAS)
+            mocap_n.ensure(ks.NEED_MOCAP)
+            nav_n.ensure(ks.NEED_NAV)
+            if self.turbulent:
+                gust_n.ensure(ks.NEED_GUST)
+            return self.run(t_s)
+        (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
+         n_events, kind0, kind1) = iv.tolist()
+        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = sv[:8].tolist()
+        o = out.tolist()
+        plant._steps, fifo.head, plant._pending_s, plant._battery = steps, head, pending, battery
+        plant._yaw_bias_deg, plant._vel_bias = yaw_bias, (vb0, vb1)
+        if self.turbulent:
+            plant._gust_mps = (gust0, gust1)
+            gust_n.pos = pos_gust
+        plant._state = self._x_state = plant._from_state_array(x)
+        self._x, self._x_aux = x, plant._tilt_aux
+        bias_n.pos, mocap_n.pos, nav_n.pos = pos_bias, pos_mocap, pos_nav
+        sensors._next_mocap_k, sensors._next_nav_k = next_mocap, next_nav
+        now = o[ks.O_LAST_NOW]
+        # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
+        # (ready) — the bit the Python path's calls would have latched by then
+        if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
+            fw.comwdg_latched = True
+        for i in range(min(done, n_events)):
+            kind, t_event = (kind0, o[ks.O_EV_T0]) if i == 0 else (kind1, o[ks.O_EV_T1])
+            if kind == ks.MOCAP:
+                q = ks.O_POSE
+                pose = _frozen(out[q + 1:q + 7].tobytes())  # position, angles: read-only
+                sensors.took_pose(t_event, MocapPose(o[q], pose[:3], pose[3:], o[q + 7]))
+            else:
+                q = ks.O_NAV
+                altitude = o[q + 5]
+                # the types of AirframePlant.navdata's values (numpy scalars from its draws)
+                sensors.took_navdata(t_event, NavdataSample(
+                    o[q], _FLYING, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
+                    _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
+                    _f64(o[q + 8])))
+        if done > n_events:
+            return _NONE, False
+        events = [(o[ks.O_EV_T0], kind0), (o[ks.O_EV_T1], kind1)][done:n_events]
+        return events, True

@@ -1,0 +1,231 @@
+"""One lockstep tick of the simulated drone in one compiled call: the plant run from sensor
+event to sensor event and the samples drawn on the way.
+
+:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>` runs the
+drone to the newest mocap frame time, draws a pose, to the newest navdata time, draws a
+sample, then to the tick's time — each leg a firmware advance (plant advance, watchdogs, the
+held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
+legs and samples for a FLYING airframe plant while nothing but physics happens between them
+(the caller checks that nothing the firmware does could change on the way; here each leg is
+checked for what only its start shows — a climb within reach of the altitude cap, a battery
+that could empty — and the run stops before such a leg, untouched, for the Python path to
+go on from there). The arithmetic is the Python's, in its order: the event grid of
+``_advance_direct``, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
+(whole steps, the remainder carried; :func:`~ardrone_nmpc.sim.plant_step.flying_advance`, the
+turbulence's Gauss–Markov step), :meth:`~ardrone_nmpc.sim.plant.AirframePlant.mocap_pose`
+and :meth:`~ardrone_nmpc.sim.plant.AirframePlant.navdata`. The normals come from blocks drawn
+ahead (:class:`~ardrone_nmpc.sim.normal_blocks.NormalBlocks`), consumed in the order the
+Python draws them.
+
+The arrays (indices below): ``iv`` int64 counters, ``sv`` the plant's float state beside its
+state vector, ``p`` the parameters of a flight, ``out`` what the run produced.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ardrone_nmpc.core.angle_kernels import wrap_half_turn
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.sim.plant_step import flying_advance
+
+__all__ = ["lockstep_run"]
+
+# iv: int64 counters (in and out)
+I_STEPS, I_HEAD, I_NEXT_MOCAP, I_NEXT_NAV = 0, 1, 2, 3
+I_POS_BIAS, I_POS_GUST, I_POS_MOCAP, I_POS_NAV = 4, 5, 6, 7
+I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
+IV_SIZE = 12
+# sv: the tick's time, the plant's float state (in and out), the plant's current command
+# (roll, pitch, gaz, yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead,
+# the cap), the wind (in)
+(S_T, S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
+ S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2) = range(19)
+SV_SIZE = 19
+# p: a flight's parameters, then the 13 coefficients of the airframe's RHS
+(P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
+ P_MOCAP_PERIOD, P_MOCAP_LATENCY, P_NAV_PERIOD, P_SP, P_SA, P_ATT_STD, P_YAW_STD, P_ALT_STD,
+ P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_VZ_GAIN, P_SAG, P_K) = range(25)
+N_K = 13
+P_SIZE = P_K + N_K
+# the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
+NEED_BIAS, NEED_GUST, NEED_MOCAP, NEED_NAV = 9, 6, 6, 7
+# out: the pose (t, position, XYZ angles, ψ), the navdata sample (t, battery, roll, pitch,
+# yaw, altitude, forward, right, down), the event times, the last firmware time
+O_POSE, O_NAV, O_EV_T0, O_EV_T1, O_LAST_NOW = 0, 8, 17, 18, 19
+OUT_SIZE = 20
+MOCAP, NAV = 0, 1
+_TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _mocap_pose(x, sp, sa, n, out):
+    """:meth:`AirframePlant.mocap_pose`'s arithmetic (with
+    :func:`~ardrone_nmpc.sim.geometry.mocap_rotation_xyz_rad` and
+    :func:`~ardrone_nmpc.protocol.mocap.rotation_heading_rad`) into ``out[1:8]``."""
+    phi, theta, psi = x[6], x[7], x[8]
+    sf, cf = math.sin(phi), math.cos(phi)
+    st, ct = math.sin(theta), math.cos(theta)
+    sps, cps = math.sin(psi), math.cos(psi)
+    r00 = cps * ct
+    r01 = cps * st * sf - sps * cf
+    r02 = cps * st * cf + sps * sf
+    r12 = sps * st * cf - cps * sf
+    r22 = ct * cf
+    c = r02 if r02 < 1.0 else 1.0  # min(1.0, r02) as Python's min: a NaN gives 1.0
+    c = c if c > -1.0 else -1.0
+    ry = math.asin(c)
+    rx, rz = math.atan2(-r12, r22), math.atan2(-r01, r00)
+    rx, ry = wrap_half_turn(rx + sa * n[3], math.pi), ry + sa * n[4]
+    rz = wrap_half_turn(rz + sa * n[5], math.pi)
+    out[1], out[2], out[3] = x[0] + sp * n[0], x[1] + sp * n[1], x[2] + sp * n[2]
+    out[4], out[5], out[6] = rx, ry, rz
+    if not (math.isfinite(rx) and math.isfinite(ry) and math.isfinite(rz)):
+        out[7] = math.nan
+        return
+    r10 = math.cos(rx) * math.sin(rz) + math.sin(rx) * math.sin(ry) * math.cos(rz)
+    r00 = math.cos(ry) * math.cos(rz)
+    heading = math.atan2(r10, r00)
+    out[7] = math.pi if heading <= -math.pi else heading
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _navdata(x, sv, p, n, out):
+    """:meth:`AirframePlant.navdata`'s arithmetic for an airborne plant into ``out[2:9]``."""
+    vx, vy, vz, phi, theta, psi = x[3], x[4], x[5], x[6], x[7], x[8]
+    out[2] = math.degrees(phi + p[P_TRIM0] + p[P_ATT_STD] * n[0])
+    out[3] = math.degrees(-theta + p[P_TRIM1] + p[P_ATT_STD] * n[1])
+    out[4] = wrap_half_turn(math.degrees(-psi + p[P_YAW_STD] * n[2]) + sv[S_YAW_BIAS], 180.0)
+    c, s = math.cos(psi), math.sin(psi)
+    sv_ = p[P_VEL_STD]
+    altitude = x[2] + p[P_ALT_STD] * n[3]
+    out[5] = altitude if altitude > 0.0 else 0.0  # max(0.0, …) as Python's max
+    out[6] = c * vx + s * vy + sv[S_VB0] + p[P_BIAS0] + sv_ * n[4]
+    out[7] = s * vx - c * vy + sv[S_VB1] + p[P_BIAS1] + sv_ * n[5]
+    out[8] = -vz + sv_ * n[6]
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
+    """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
+    the Python path must take it (a climb within reach of the cap, a battery that could
+    empty on the way)."""
+    h = p[P_H]
+    t_plant = iv[I_STEPS] * h
+    if not t_event > t_plant:
+        return True
+    dt = t_event - t_plant
+    if sv[S_CLIMBING] != 0.0 and x[2] + p[P_VMAX] * (dt + sv[S_LEAD]) >= sv[S_ALT_MAX]:
+        return False  # the firmware checks the cap after every step
+    pending = sv[S_PENDING] + dt
+    n = int(math.floor((pending + _TIME_TOL_S) / h))
+    drain = p[P_DRAIN]
+    if n > 0 and not sv[S_BATTERY] - drain * (n + 1) > drain:
+        return False  # it might empty on the way: a mode change, the plant's own path
+    rest = pending - n * h
+    sv[S_PENDING] = rest if rest > 0.0 else 0.0
+    if n == 0:
+        return True
+    w0, w1, w2 = sv[S_W0], sv[S_W1], sv[S_W2]
+    turbulent = p[P_TURB_STD] > 0.0
+    if turbulent:
+        w0, w1 = w0 + sv[S_GUST0], w1 + sv[S_GUST1]
+    pos = iv[I_POS_BIAS]
+    iv[I_POS_BIAS] = pos + 3
+    done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
+        x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
+        k, (w0, w1, w2), h, n,
+        sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
+        p[P_YAW_DRIFT], p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+    iv[I_HEAD] = head
+    iv[I_STEPS] += done
+    sv[S_BATTERY] = battery
+    for i in range(x.shape[0]):  # not x[:] = xn: its shape check compiles an error message
+        x[i] = xn[i]
+    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = yaw_bias, vb0, vb1
+    if turbulent:  # plant.gauss_markov_step over the call's n·h
+        a = math.exp(-(n * h) / p[P_TURB_TAU])
+        q = p[P_TURB_STD] * math.sqrt(1.0 - a * a)
+        g = iv[I_POS_GUST]
+        iv[I_POS_GUST] = g + 2
+        sv[S_GUST0] = a * sv[S_GUST0] + q * gust_n[g]
+        sv[S_GUST1] = a * sv[S_GUST1] + q * gust_n[g + 1]
+    return True
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
+    """The direct sensor path's advance to ``sv[S_T]`` (module docstring): the due mocap and
+    navdata events (at most one of each, in time order, mocap first on a tie) into
+    ``iv[I_KIND*]``/``out[O_EV_T*]``, then the legs to each and to the tick's time, each
+    event's sample into ``out``. ``iv[I_DONE]``: the legs done (events, then the last); the
+    rest is the Python path's — or −1, nothing done, if a block of normals has fewer left
+    than a run may take (``NEED_*``: draw new blocks and call again). ``x`` (the state
+    array), ``ring`` and the counters are updated in place."""
+    if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
+            > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
+            or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
+        iv[I_DONE] = -1
+        return
+    k = (p[P_K], p[P_K + 1], p[P_K + 2], p[P_K + 3], p[P_K + 4], p[P_K + 5], p[P_K + 6],
+         p[P_K + 7], p[P_K + 8], p[P_K + 9], p[P_K + 10], p[P_K + 11], p[P_K + 12])
+    t_s = sv[S_T]
+    mocap_period, nav_period = p[P_MOCAP_PERIOD], p[P_NAV_PERIOD]
+    k_mocap = math.floor((t_s - p[P_MOCAP_LATENCY]) / mocap_period + 1e-9)
+    k_nav = math.floor(t_s / nav_period + 1e-9)
+    n_events = 0
+    t_mocap = t_nav = 0.0
+    has_mocap = k_mocap >= iv[I_NEXT_MOCAP]
+    if has_mocap:
+        t_mocap = k_mocap * mocap_period
+        iv[I_NEXT_MOCAP] = k_mocap + 1
+    has_nav = k_nav >= iv[I_NEXT_NAV]
+    if has_nav:
+        t_nav = k_nav * nav_period
+        iv[I_NEXT_NAV] = k_nav + 1
+    if has_mocap and has_nav:  # sorted((t, kind)): the mocap frame first on a tie
+        if t_nav < t_mocap:
+            iv[I_KIND0], out[O_EV_T0], iv[I_KIND1], out[O_EV_T1] = NAV, t_nav, MOCAP, t_mocap
+        else:
+            iv[I_KIND0], out[O_EV_T0], iv[I_KIND1], out[O_EV_T1] = MOCAP, t_mocap, NAV, t_nav
+        n_events = 2
+    elif has_mocap:
+        iv[I_KIND0], out[O_EV_T0] = MOCAP, t_mocap
+        n_events = 1
+    elif has_nav:
+        iv[I_KIND0], out[O_EV_T0] = NAV, t_nav
+        n_events = 1
+    iv[I_EVENTS] = n_events
+    iv[I_DONE] = 0
+    out[O_LAST_NOW] = math.nan
+    h = p[P_H]
+    for i in range(n_events + 1):
+        if i < n_events:
+            kind = iv[I_KIND0 + i]
+            t_event = out[O_EV_T0 + i]
+        else:
+            kind = -1
+            t_event = t_s
+        ran = t_event > iv[I_STEPS] * h
+        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
+            return
+        if ran:
+            out[O_LAST_NOW] = t_event
+        if kind == MOCAP:
+            pos = iv[I_POS_MOCAP]
+            iv[I_POS_MOCAP] = pos + 6
+            out[O_POSE] = iv[I_STEPS] * h
+            _mocap_pose(x, p[P_SP], p[P_SA], mocap_n[pos:pos + 6], out[O_POSE:O_NAV])
+        elif kind == NAV:
+            pos = iv[I_POS_NAV]
+            iv[I_POS_NAV] = pos + 7
+            out[O_NAV] = iv[I_STEPS] * h
+            out[O_NAV + 1] = sv[S_BATTERY]
+            _navdata(x, sv, p, nav_n[pos:pos + 7], out[O_NAV:O_EV_T0])
+        iv[I_DONE] = i + 1
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

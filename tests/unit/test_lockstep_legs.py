@@ -1,0 +1,130 @@
+"""The direct sensor path's compiled tick (sim/lockstep_legs.py, sim/sensor_step.py) gives the
+Python path's bits: two lockstep drones of one seed, one with the compiled legs and one
+without, flown with the same commands, hold the same samples, truth and plant state on every
+tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
+attitude, the watchdogs of a silent link, a draining battery, a scripted target and a take-off after a self-landing."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+
+
+def _value(v):
+    """A comparable form of a sample's field: its type and bits."""
+    if isinstance(v, np.ndarray):
+        return ("array", v.dtype.str, v.shape, v.tobytes(), v.flags.writeable)
+    if isinstance(v, float):
+        return (type(v).__name__, np.float64(v).tobytes())
+    return (type(v).__name__, v)
+
+
+def _record(obj):
+    if obj is None:
+        return None
+    return tuple((name, _value(getattr(obj, name))) for name in obj.__slots__)
+
+
+def _snapshot(drone, t_s):
+    inputs = drone.inputs(t_s)
+    plant = drone.sim.plant
+    fw = drone.sim.firmware
+    return (inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s, inputs.target_rx_t_s,
+            _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
+            _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
+            plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
+            plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
+            fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing)
+
+
+def _fly(cfg, legs: bool, ticks: int, command):
+    drone = LockstepDrone(cfg)
+    used = [0, 0]  # compiled runs, of them stopped before the last leg
+    compiled = drone.sensors._legs
+    if not legs:
+        drone.sensors._legs = None
+    elif compiled is not None:
+        run = compiled.run
+
+        def counted(t_s):
+            events, last_leg = run(t_s)
+            used[0] += 1
+            used[1] += last_leg
+            return events, last_leg
+        compiled.run = counted
+    period = cfg.loop.period_s
+    drone.connect()
+    drone.takeoff()
+    shots = []
+    while drone.truth.mode is not FlightMode.FLYING:
+        drone.advance_to(drone.truth.t_s + period)
+        shots.append(_snapshot(drone, drone.truth.t_s))
+    t_first = drone.truth.t_s
+    drone.start_experiment(t_first)
+    for k in range(ticks):
+        t = t_first + k * period
+        drone.advance_to(t, k * period)
+        shots.append(_snapshot(drone, t))
+        cmd = command(k)
+        if cmd == "silent":  # no command: the firmware's watchdogs
+            pass
+        elif cmd == "takeoff":
+            drone.takeoff()
+        elif cmd is None:
+            drone.hover()
+        else:
+            drone.set_command(*cmd)
+    return shots, used
+
+
+def _zigzag(k):
+    return (0.05 * ((k // 50) % 3 - 1), 0.02, 0.01 * ((k // 30) % 2), 0.01)
+
+
+# name: (overrides, command of tick k, the compiled run must stop before a leg sometimes)
+CASES = {
+    "square": (["duration_s=60"], _zigzag, False),
+    "climb_into_cap": (["drone.altitude_max_m=1.3"],
+                       lambda k: (0.0, 0.01, 0.6 if (k // 40) % 2 == 0 else -0.2, 0.0), True),
+    "turbulence": (["sim.plant.turbulence_std_mps=0.5"], _zigzag, False),
+    "sag": (["sim.battery_sag_frac=0.3", "sim.vz_gain=0.9"], _zigzag, False),
+    "second_order": (["sim.plant.attitude_model=second_order"], _zigzag, False),
+    "hover_and_silence": ([], lambda k: None if k % 7 == 0 else (0.01, -0.02, 0.0, 0.0), False),
+    "watchdogs": ([], lambda k: "silent" if 150 < k < 200 or k % 40 > 35 else _zigzag(k),
+                  False),
+    "battery_empties": (["sim.plant.battery_start_pct=21",
+                         "sim.plant.battery_drain_pct_per_min=100"],
+                        lambda k: "takeoff" if k % 25 == 0 else _zigzag(k), True),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_compiled_legs_give_the_python_paths_bits(name):
+    overrides, command, stops = CASES[name]
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
+    python, _ = _fly(cfg, False, 400, command)
+    compiled, (used, stopped) = _fly(cfg, True, 400, command)
+    assert used > 100  # the compiled path flew many ticks
+    assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
+    assert len(python) == len(compiled)
+    for i, (a, b) in enumerate(zip(python, compiled)):
+        assert a == b, f"tick {i}"
+
+
+def test_compiled_legs_with_a_scripted_target():
+    cfg = load_config(str(ROOT / "configs" / "follow_car.yaml"), [])
+    python, _ = _fly(cfg, False, 300, _zigzag)
+    compiled, (used, _) = _fly(cfg, True, 300, _zigzag)
+    assert used > 100
+    assert python == compiled
+
+
+def test_other_backends_keep_the_python_path():
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), ["sim.plant.profile=thesis_kit"])
+    assert LockstepDrone(cfg).sensors._legs is None
