@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_decays
+from ardrone_nmpc.estimation import response_kernels as rk
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
            "CONFIDENT_DELAY_R2", "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2",
@@ -140,97 +140,60 @@ class AttitudeResponseEstimator:
         self.window_s = float(window_s)
         self.lags_s = np.asarray(lags_s, dtype=float)
         self.delays_s = np.arange(0.0, max_delay_s + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
-        shape = (len(self.delays_s), len(self.lags_s), 2)
-        self._sx, self._sxx, self._sxy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
-        self._n = 0.0
-        self._sy, self._syy = np.zeros(2), np.zeros(2)
-        self._res = np.zeros(3)           # Σr², Σr·r_prev, and r_prev's weight
-        self._last_r = None
-        self._last_t = math.nan
-        # the commands: send times, values (rad), the lags' outputs at those times (L, 2)
-        capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
-        self._t = np.zeros(capacity)
-        self._u = np.zeros((capacity, 2))
-        self._y = np.zeros((capacity, len(self.lags_s), 2))
-        self._count = 0
-        # the compiled steps' buffers
-        self._j = np.zeros(len(self.delays_s), dtype=np.int64)
-        self._decay = np.zeros((len(self.delays_s), len(self.lags_s)))
-        self._x = np.zeros(shape)
-        self._best = None
-        self._since_best = 0
+        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        # the commands held: send times, values (rad), the lags' outputs at those times
+        self._capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
+        # the whole state in one buffer the compiled step works on (response_kernels);
+        # the names below are views of it
+        st = self._state = np.zeros(rk.state_size(n_k, n_l, self._capacity))
+        st[rk.S_LAST_T] = math.nan
+        shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
+        o = rk.HEAD
+        self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
+                                          for i in range(3))
+        self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
+        self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
+        self._j = np.zeros(n_k, dtype=np.int64)
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
+    @property
+    def _n(self) -> float:
+        """The samples' effective number (with the forgetting)."""
+        return float(self._state[rk.S_N])
+
     # ---------------------------------------------------------------------- feeding
+    def feed(self, sample_t_s: float | None, roll_deg: float, pitch_deg: float,
+             cmd_kind: int, cmd_t_s: float = 0.0, roll_frac: float = 0.0,
+             pitch_frac: float = 0.0) -> bool:
+        """One tick in one compiled call: a navdata sample (None: none), then a command
+        (``cmd_kind`` :data:`~.response_kernels.CMD_SEND`), a :meth:`restart`
+        (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
+        has = sample_t_s is not None
+        code = rk.feed(self._state, self._j, self.delays_s, self.lags_s, self._capacity,
+                       self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES, has,
+                       _microseconds(sample_t_s) if has else 0.0, float(roll_deg),
+                       float(pitch_deg), cmd_kind, _microseconds(cmd_t_s), float(roll_frac),
+                       float(pitch_frac))
+        if code:
+            self._estimate = None
+            if code == 2:  # the residual tracks a recent best model
+                self._estimate = self._fit()
+        return code != 0
+
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
         """A command sent at ``t_s``, held until the next."""
-        t_s = _microseconds(t_s)
-        u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
-        n = self._count
-        if n:
-            t0 = self._t[n - 1]
-            if t_s <= t0:
-                return
-            u0, y0 = self._u[n - 1], self._y[n - 1]
-            # the C library's exp, not numpy's: numpy's depends on the CPU (response_kernels)
-            decay = np.array([math.exp(a) for a in -(t_s - t0) / self.lags_s])
-            y = u0 + (y0 - u0) * decay[:, None]
-        else:
-            y = np.tile(u, (len(self.lags_s), 1))  # no past: as if held for long
-        if n == len(self._t):  # full: keep the newest half (what the longest delay needs)
-            keep = n // 2
-            for a in (self._t, self._u, self._y):
-                a[:keep] = a[n - keep:n]
-            n = keep
-        self._t[n], self._u[n], self._y[n] = t_s, u, y
-        self._count = n + 1
+        self.feed(None, 0.0, 0.0, rk.CMD_SEND, t_s, roll_frac, pitch_frac)
 
     def restart(self) -> None:
         """The drone flew something else than the commands (its own hover): forget the
         commands; what the sums learned stays (and fades)."""
-        self._count = 0
-        self._last_r = None
+        self._state[rk.S_COUNT] = 0.0
+        self._state[rk.S_HAS_R] = 0.0
 
     def navdata(self, t_s: float, roll_deg: float, pitch_deg: float) -> bool:
         """A navdata sample received at ``t_s``; False if it could not be used (a sample seen
         before, not finite, or commands not reaching back the longest delay)."""
-        n = self._count
-        t_s = _microseconds(t_s)
-        y = np.radians([roll_deg, pitch_deg])
-        if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
-                or self._t[0] > t_s - self.delays_s[-1]):
-            return False
-        lag_decays(self._t, n, t_s, self.delays_s, self.lags_s, self._j, self._decay)
-        forget = (math.exp(-(t_s - self._last_t) / self.window_s)
-                  if math.isfinite(self._last_t) else 1.0)
-        self._last_t = t_s
-        x = self._x
-        fold_sample(self._u, self._y, self._j, self._decay, y, forget, x,
-                    self._sx, self._sxx, self._sxy)
-        self._residual(x, y, forget)  # reads x only: the sums' update may come first
-        self._n = self._n * forget + 1.0
-        self._sy = self._sy * forget + y
-        self._syy = self._syy * forget + y * y
-        self._estimate = None
-        self._since_best += 1
-        if self._since_best >= REFRESH_SAMPLES:  # the residual tracks a recent best model
-            self._since_best = 0
-            self._estimate = self._fit()
-        return True
-
-    def _residual(self, x: np.ndarray, y: np.ndarray, forget: float) -> None:
-        """Track the residual of the current best model (its lag-1 correlation)."""
-        if self._best is None:
-            return
-        k, l, gain, offset = self._best
-        r = y - (gain * x[k, l] + offset)
-        self._res *= forget
-        if self._last_r is not None:
-            # written out: a BLAS dot (``r @ r``) sums in the order of the CPU's kernel
-            r0, r1 = float(r[0]), float(r[1])
-            p0, p1 = float(self._last_r[0]), float(self._last_r[1])
-            self._res += (r0 * r0 + r1 * r1, r0 * p0 + r1 * p1, 1.0)
-        self._last_r = r
+        return self.feed(t_s, roll_deg, pitch_deg, rk.CMD_NONE)
 
     # ---------------------------------------------------------------------- the fit
     @property
@@ -256,7 +219,9 @@ class AttitudeResponseEstimator:
         k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
         g = gain[k, l]
         offset = (self._sy - g * self._sx[k, l]) / n
-        self._best = (k, l, g, offset)
+        st = self._state  # the best model, whose residual the compiled step tracks
+        st[rk.S_HAS_BEST], st[rk.S_K], st[rk.S_L] = 1.0, k, l
+        st[rk.S_G:rk.S_G + 2], st[rk.S_B:rk.S_B + 2] = g, offset
         sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
         inflate = self._inflation()
         delay, delay_var = self._refine(rss[:, l], k, sigma2)

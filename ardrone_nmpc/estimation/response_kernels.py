@@ -19,10 +19,42 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["fold_sample", "lag_decays"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
+           "S_HAS_R", "S_K", "S_L", "S_LAST_T", "S_N", "S_R", "S_RES", "S_SINCE_BEST", "S_SY",
+           "S_SYY", "S_Y", "feed", "fold_sample", "lag_decays", "state_size"]
+
+# The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
+# dozen): a head of scalars (these slots), then Σx, Σx², Σx·y, the model values x (each K×L×2),
+# the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2).
+S_N = 0              # the samples' effective number
+S_LAST_T = 1         # the last sample's time (NaN before the first)
+S_COUNT = 2          # commands held
+S_SINCE_BEST = 3     # samples since the best grid point was refreshed
+S_HAS_R = 4          # 1.0: the residual of the last sample is in S_R
+S_R = 5              # (2) that residual
+S_HAS_BEST = 7       # 1.0: a best grid point is tracked
+S_K = 8              # its delay index
+S_L = 9              # its lag index
+S_G = 10             # (2) its gains
+S_B = 12             # (2) its offsets
+S_RES = 14           # (3) Σr², Σr·r_prev, r_prev's weight
+S_SY = 17            # (2) Σy
+S_SYY = 19           # (2) Σy²
+S_Y = 21             # (2) the last sample (rad)
+HEAD = 23
+#: What :func:`feed` does with the command after the sample.
+CMD_NONE = 0
+CMD_RESTART = 1
+CMD_SEND = 2
+_DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
+
+
+def state_size(delays: int, lags: int, capacity: int) -> int:
+    """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
+    return HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -62,6 +94,123 @@ def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarra
                 sx[k, m, a] += v
                 sxx[k, m, a] += v * v
                 sxy[k, m, a] += v * y[a]
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndarray,
+         capacity: int, euler_max_rad: float, window_s: float, refresh_samples: int,
+         has_sample: bool, sample_t_s: float, roll_deg: float, pitch_deg: float,
+         cmd_kind: int, cmd_t_s: float, roll_frac: float, pitch_frac: float) -> int:
+    """One tick of the streaming fit (``AttitudeResponseEstimator``'s ``navdata`` then its
+    ``command`` or ``restart``; the same expressions in the same order). Times are already
+    rounded to the microsecond. Returns 0 if there was no sample or it could not be used, 1 if
+    it was folded in, 2 if, moreover, the best grid point is due for a refresh (the caller
+    fits)."""
+    K, L = delays_s.size, lags_s.size
+    kl2 = K * L * 2
+    o = HEAD
+    sx = state[o:o + kl2].reshape((K, L, 2))
+    sxx = state[o + kl2:o + 2 * kl2].reshape((K, L, 2))
+    sxy = state[o + 2 * kl2:o + 3 * kl2].reshape((K, L, 2))
+    x = state[o + 3 * kl2:o + 4 * kl2].reshape((K, L, 2))
+    o += 4 * kl2
+    decay = state[o:o + K * L].reshape((K, L))
+    o += K * L
+    t = state[o:o + capacity]
+    o += capacity
+    u = state[o:o + 2 * capacity].reshape((capacity, 2))
+    o += 2 * capacity
+    ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
+    code = 0
+    if has_sample:
+        code = _sample(state, j, delays_s, lags_s, window_s, refresh_samples, sx, sxx, sxy,
+                       x, decay, t, u, ylag, sample_t_s, roll_deg, pitch_deg)
+    if cmd_kind == CMD_RESTART:
+        state[S_COUNT] = 0.0
+        state[S_HAS_R] = 0.0
+    elif cmd_kind == CMD_SEND:
+        _command(state, lags_s, capacity, euler_max_rad, t, u, ylag, cmd_t_s, roll_frac,
+                 pitch_frac)
+    return code
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _sample(state, j, delays_s, lags_s, window_s, refresh_samples, sx, sxx, sxy, x, decay, t,
+            u, ylag, t_s, roll_deg, pitch_deg):
+    """A navdata sample (``AttitudeResponseEstimator.navdata`` up to its fit)."""
+    n = int(state[S_COUNT])
+    y0 = roll_deg * _DEG2RAD
+    y1 = pitch_deg * _DEG2RAD
+    last_t = state[S_LAST_T]
+    if (n < 2 or not (math.isfinite(y0) and math.isfinite(y1)) or t_s <= last_t
+            or t[0] > t_s - delays_s[delays_s.size - 1]):
+        return 0
+    lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
+    forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
+    state[S_LAST_T] = t_s
+    y = state[S_Y:S_Y + 2]
+    y[0] = y0
+    y[1] = y1
+    fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
+    if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
+        k, m = int(state[S_K]), int(state[S_L])
+        r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
+        r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
+        for i in range(3):
+            state[S_RES + i] *= forget
+        if state[S_HAS_R] != 0.0:
+            p0, p1 = state[S_R], state[S_R + 1]
+            state[S_RES] += r0 * r0 + r1 * r1
+            state[S_RES + 1] += r0 * p0 + r1 * p1
+            state[S_RES + 2] += 1.0
+        state[S_R] = r0
+        state[S_R + 1] = r1
+        state[S_HAS_R] = 1.0
+    state[S_N] = state[S_N] * forget + 1.0
+    for a in range(2):
+        ya = state[S_Y + a]
+        state[S_SY + a] = state[S_SY + a] * forget + ya
+        state[S_SYY + a] = state[S_SYY + a] * forget + ya * ya
+    state[S_SINCE_BEST] += 1.0
+    if state[S_SINCE_BEST] >= refresh_samples:
+        state[S_SINCE_BEST] = 0.0
+        return 2
+    return 1
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _command(state, lags_s, capacity, euler_max_rad, t, u, ylag, t_s, roll_frac, pitch_frac):
+    """A command sent at ``t_s``, held until the next (``AttitudeResponseEstimator.command``)."""
+    u0 = roll_frac * euler_max_rad
+    u1 = pitch_frac * euler_max_rad
+    n = int(state[S_COUNT])
+    if n:
+        if t_s <= t[n - 1]:
+            return
+        if n == capacity:  # full: keep the newest half (what the longest delay needs)
+            keep = n // 2
+            for i in range(keep):
+                t[i] = t[n - keep + i]
+                for a in range(2):
+                    u[i, a] = u[n - keep + i, a]
+                for m in range(lags_s.size):
+                    for a in range(2):
+                        ylag[i, m, a] = ylag[n - keep + i, m, a]
+            n = keep
+        t0 = t[n - 1]
+        for m in range(lags_s.size):  # the lags' outputs, from the last command's
+            dec = math.exp(-(t_s - t0) / lags_s[m])
+            for a in range(2):
+                ua = u[n - 1, a]
+                ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
+    else:  # no past: as if held for long
+        for m in range(lags_s.size):
+            ylag[n, m, 0] = u0
+            ylag[n, m, 1] = u1
+    t[n] = t_s
+    u[n, 0] = u0
+    u[n, 1] = u1
+    state[S_COUNT] = n + 1.0
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -27,6 +27,7 @@ from ardrone_nmpc.core.types import (
 )
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator
+from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
@@ -342,18 +343,23 @@ class ResponseEstimation:
 
     def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
-        est = self.estimator
         nav = inputs.navdata
+        # the sample, then the command sent (a hover restarts the window): one compiled call
+        if sent.progressive:
+            p = sent.pcmd
+            cmd = (CMD_SEND, inputs.t_s, p.roll_frac, p.pitch_frac)
+        else:
+            cmd = (CMD_RESTART,)
         if nav is not None:
-            est.navdata(inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
+            self.estimator.feed(inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg, *cmd)
+        else:
+            self.estimator.feed(None, 0.0, 0.0, *cmd)
         if not sent.progressive:
-            est.restart()
             return []
-        est.command(inputs.t_s, sent.pcmd.roll_frac, sent.pcmd.pitch_frac)
         if inputs.t_s < self._next_fit_s:
             return []
         self._next_fit_s = inputs.t_s + self.cfg.refit_s
-        e = est.estimate
+        e = self.estimator.estimate
         if not math.isfinite(e.delay_s):
             return []
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
