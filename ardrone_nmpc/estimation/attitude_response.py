@@ -154,6 +154,13 @@ class AttitudeResponseEstimator:
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
         self._j = np.zeros(n_k, dtype=np.int64)
+        # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
+        # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
+        out = self._fit_out = np.zeros(rk.fit_size(n_k, n_l))
+        kl = n_k * n_l
+        self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
+                           out[4 * kl:6 * kl].reshape(shape),
+                           out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
     @property
@@ -206,17 +213,13 @@ class AttitudeResponseEstimator:
         n = self._n
         if n < 20:
             return NO_ESTIMATE
-        sxx = self._sxx - self._sx ** 2 / n                       # centred, (K, L, 2)
-        sxy = self._sxy - self._sx * self._sy / n
-        syy = self._syy - self._sy ** 2 / n                        # (2,)
-        ok = sxx > 1e-12
-        if not ok.any() or syy.sum() <= 0.0:
+        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        best = rk.fit_grid(self._state, n_k, n_l, self._fit_out)  # every grid point's fit
+        if best < 0:
             return NO_ESTIMATE
-        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-        # an axis the commands did not move keeps its whole variance at every grid point
-        rss_axis = np.where(ok, syy - gain * sxy, syy)            # (K, L, 2)
-        rss = rss_axis.sum(axis=2)
-        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
+        sxx, gain, rss_axis, rss, syy = self._fit_views
+        k, l = divmod(best, n_l)
+        ok = sxx[k, l] > 1e-12
         g = gain[k, l]
         offset = (self._sy - g * self._sx[k, l]) / n
         st = self._state  # the best model, whose residual the compiled step tracks
@@ -227,7 +230,7 @@ class AttitudeResponseEstimator:
         delay, delay_var = self._refine(rss[:, l], k, sigma2)
         gains, gain_std = [], []
         for a in range(2):
-            if ok[k, l, a]:
+            if ok[a]:
                 gains.append(float(g[a]))
                 gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
                                                     / max(n - 2.0, 1.0) / float(sxx[k, l, a])))

@@ -24,7 +24,7 @@ from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
            "S_HAS_R", "S_K", "S_L", "S_LAST_T", "S_N", "S_R", "S_RES", "S_SINCE_BEST", "S_SY",
-           "S_SYY", "S_Y", "feed", "fold_sample", "lag_decays", "state_size"]
+           "S_SYY", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen): a head of scalars (these slots), then Σx, Σx², Σx·y, the model values x (each K×L×2),
@@ -55,6 +55,12 @@ _DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 def state_size(delays: int, lags: int, capacity: int) -> int:
     """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
     return HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
+
+
+def fit_size(delays: int, lags: int) -> int:
+    """Length of :func:`fit_grid`'s output buffer: the centred Σx², the gains, the residual
+    per axis (each K×L×2), the residual (K×L) and the centred Σy² (2)."""
+    return 3 * delays * lags * 2 + delays * lags + 2
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -211,6 +217,61 @@ def _command(state, lags_s, capacity, euler_max_rad, t, u, ylag, t_s, roll_frac,
     u[n, 0] = u0
     u[n, 1] = u1
     state[S_COUNT] = n + 1.0
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def fit_grid(state: np.ndarray, delays: int, lags: int, out: np.ndarray) -> int:
+    """Every grid point's least-squares fit from the sums (``AttitudeResponseEstimator._fit``'s
+    numpy, the same expressions in the same order): into ``out`` (:func:`fit_size`) the
+    centred Σx², the gains, the residual per axis and summed over the axes, the centred Σy².
+    Returns the flat index of the least residual (``argmin``: the first, or the first NaN),
+    or −1 when no grid point's commands moved or the attitude did not vary."""
+    K, L = delays, lags
+    kl2 = K * L * 2
+    n = state[S_N]
+    o = HEAD
+    sx = state[o:o + kl2]
+    sxx = state[o + kl2:o + 2 * kl2]
+    sxy = state[o + 2 * kl2:o + 3 * kl2]
+    sxx_c = out[0:kl2]
+    gain = out[kl2:2 * kl2]
+    rss_axis = out[2 * kl2:3 * kl2]
+    rss = out[3 * kl2:3 * kl2 + K * L]
+    syy = out[3 * kl2 + K * L:3 * kl2 + K * L + 2]
+    for a in range(2):
+        sy = state[S_SY + a]
+        syy[a] = state[S_SYY + a] - sy * sy / n
+    any_ok = False
+    for i in range(K * L):
+        for a in range(2):
+            e = 2 * i + a
+            v = sx[e]
+            c = sxx[e] - v * v / n
+            cy = sxy[e] - v * state[S_SY + a] / n
+            sxx_c[e] = c
+            if c > 1e-12:
+                any_ok = True
+                g = cy / c
+                gain[e] = g
+                rss_axis[e] = syy[a] - g * cy
+            else:
+                gain[e] = 0.0
+                rss_axis[e] = syy[a]
+        rss[i] = (0.0 + rss_axis[2 * i]) + rss_axis[2 * i + 1]  # numpy's sum of two
+    if not any_ok or (0.0 + syy[0]) + syy[1] <= 0.0:
+        return -1
+    best = 0
+    low = rss[0]
+    if low != low:
+        return 0
+    for i in range(1, K * L):
+        v = rss[i]
+        if v != v:
+            return i
+        if v < low:
+            low = v
+            best = i
+    return best
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

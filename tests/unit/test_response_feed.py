@@ -1,5 +1,6 @@
 """The attitude-response fit's compiled step (``response_kernels.feed``) against the numpy
-code it replaced, bit for bit: the sums, the tracked residual and every estimate."""
+code it replaced, bit for bit: the sums, the tracked residual and every estimate (the grid's
+fit, ``response_kernels.fit_grid``, too)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 import numpy as np
 
 from ardrone_nmpc.estimation.attitude_response import (
-    AttitudeResponseEstimator, REFRESH_SAMPLES, _microseconds,
+    NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate, AttitudeResponseEstimator, _microseconds,
 )
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 
@@ -16,7 +17,7 @@ E = 0.21
 
 
 class _NumpyFeed(AttitudeResponseEstimator):
-    """The feeding methods as they were before they were compiled (numpy, per call)."""
+    """The feeding methods and the fit as they were before they were compiled (numpy)."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -30,6 +31,43 @@ class _NumpyFeed(AttitudeResponseEstimator):
         self._last_r = None
         self._last_t = math.nan
         self._since_best = 0
+
+    def _fit(self):
+        n = self._n
+        if n < 20:
+            return NO_ESTIMATE
+        sxx = self._sxx - self._sx ** 2 / n
+        sxy = self._sxy - self._sx * self._sy / n
+        syy = self._syy - self._sy ** 2 / n
+        ok = sxx > 1e-12
+        if not ok.any() or syy.sum() <= 0.0:
+            return NO_ESTIMATE
+        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+        rss_axis = np.where(ok, syy - gain * sxy, syy)
+        rss = rss_axis.sum(axis=2)
+        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
+        g = gain[k, l]
+        offset = (self._sy - g * self._sx[k, l]) / n
+        st = self._state
+        st[7], st[8], st[9] = 1.0, k, l
+        st[10:12], st[12:14] = g, offset
+        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        inflate = self._inflation()
+        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        gains, gain_std = [], []
+        for a in range(2):
+            if ok[k, l, a]:
+                gains.append(float(g[a]))
+                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
+                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+            else:
+                gains.append(math.nan)
+                gain_std.append(math.inf)
+        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+                                (gains[0], gains[1]), (gain_std[0], gain_std[1]),
+                                float(self.lags_s[l]),
+                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
+                                self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
 
     def command(self, t_s, roll_frac, pitch_frac):
         t_s = _microseconds(t_s)
@@ -174,3 +212,24 @@ def test_one_call_per_tick_is_the_sample_then_the_command():
         assert r1 == r2
         assert repr(one.estimate) == repr(two.estimate)
     _same(one, two)
+
+
+def test_the_compiled_fit_on_odd_sums():
+    """Axes never moved, NaN and ±0 in the sums: the grid's fit picks what numpy picked."""
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+        st = rng.normal(size=ref._state.size) ** 2
+        st[0] = 30.0 + trial  # the samples' effective number
+        kl2 = ref._sx.size
+        head = 23
+        if trial % 4 == 1:  # an axis no command moved
+            st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
+            st[head + 1:head + kl2:2] = 0.0
+        if trial % 4 == 2:
+            st[head + rng.integers(3 * kl2)] = math.nan
+        if trial % 4 == 3:
+            st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
+        ref._state[:], got._state[:] = st, st
+        assert repr(ref._fit()) == repr(got._fit())
+        assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
