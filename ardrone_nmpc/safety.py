@@ -211,14 +211,16 @@ class Supervisor:
         ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``.
         """
         cfg = self.cfg
-        if not all(math.isfinite(v) for v in x):
+        xs = x.tolist() if hasattr(x, "tolist") else x  # floats: numpy's scalars are slow
+        if not all(map(math.isfinite, xs)):
             return Decision(Action.HOVER, "nonfinite-state")
-        position = (x[0], x[2], x[4])
-        if not all(lo <= p <= hi for p, lo, hi in zip(position, self._fence_lo, self._fence_hi)):
+        lo, hi = self._fence_lo, self._fence_hi
+        if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
             if cfg.geofence_action == "land":
                 return self._latch(Decision(Action.LAND, "geofence"))
             return Decision(Action.HOVER, "geofence")
-        if not math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2) <= cfg.max_speed_mps:
+        # ``** 2`` (the C library's pow, as numpy's scalars do), not v * v: the same bits
+        if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= cfg.max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
             cap_deg = math.degrees(cfg.max_tilt_rad)
@@ -233,7 +235,7 @@ class Supervisor:
         the supervisor never trusts the solver to have done so).
         """
         cfg = self.cfg
-        good = ok and all(math.isfinite(v) for v in u)
+        good = ok and all(map(math.isfinite, u.tolist() if hasattr(u, "tolist") else u))
         if good:
             self._solver_failures = 0
             if not self._solver_fallback:

@@ -11,8 +11,7 @@ last command sent — and nothing else; the log row is built from their results 
 from __future__ import annotations
 
 import math
-from collections import deque
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -77,18 +76,20 @@ class Estimation:
 
         Returns the stage's own (7,) array, overwritten by the next call.
         """
+        pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
+        px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
         if pose.t_s != self._last_pose_t_s:
             if self._last_pose_t_s is None:
-                self.vz_estimator.reset(pose.position_m[2])
+                self.vz_estimator.reset(pz)
                 self.xy_difference.reset()
-                self.xy_difference.update(pose.position_m[:2], 1.0)
+                self.xy_difference.update((px, py), 1.0)
             else:
                 dt = pose.t_s - self._last_pose_t_s
-                self.vz_estimator.update(pose.position_m[2], zacc_mps2, dt)
-                self.xy_difference.update(pose.position_m[:2], dt)
+                self.vz_estimator.update(pz, zacc_mps2, dt)
+                self.xy_difference.update((px, py), dt)
             self._last_pose_t_s = pose.t_s
         x = self._x
-        x[IX_X], x[IX_Y], x[IX_Z] = pose.position_m
+        x[IX_X], x[IX_Y], x[IX_Z] = px, py, pz
         x[IX_PSI] = pose.psi_rad
         x[IX_VZ] = self.vz_estimator.vz_mps
         if self.velocity_from_navdata and navdata is not None:
@@ -114,8 +115,9 @@ class DelayPrediction:
         self.period_s = period_s
         self.delay_ticks = math.ceil(delay_s / period_s - 1e-9)
         capacity = max(self.delay_ticks, math.ceil(max_delay_s / period_s - 1e-9), 1)
-        self._pending: deque = deque(maxlen=capacity)  # newest last
+        # the last ``capacity`` inputs sent, oldest first; zeros (hover) before the first
         self._sent = np.zeros((capacity, INPUT_DIM))
+        self._pushed = False
 
     @property
     def lead_s(self) -> float:
@@ -132,22 +134,19 @@ class DelayPrediction:
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        self._pending.append(u_sent)
+        sent = self._sent
+        sent[:-1] = sent[1:]  # numpy copies an overlapping slice through a buffer
+        sent[-1] = u_sent
+        self._pushed = True
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
         period) — the state the new command will meet; ``x`` itself if nothing is pending."""
         n = self.delay_ticks
-        if n == 0 or not self._pending:
+        if n == 0 or not self._pushed:
             return x
-        sent = self._sent[:n]
-        pending = list(self._pending)[-n:]
-        missing = n - len(pending)  # start-up: hover for those
-        sent[:missing] = 0.0
-        for k, u in enumerate(pending):
-            sent[missing + k] = u
         out = np.empty(STATE_DIM)
-        rollout_rk4(x, sent, self.period_s, out)
+        rollout_rk4(x, self._sent[self._sent.shape[0] - n:], self.period_s, out)
         return out
 
     def warm_up(self, x: np.ndarray) -> None:
@@ -186,9 +185,9 @@ class MovingObstacles:
 
 
 # ----------------------------------------------------------------------------- control
-@dataclass(frozen=True, slots=True, eq=False)
-class Solution:
-    """What the controller computed in one tick (logged whether or not it is flown).
+class Solution(NamedTuple):
+    """What the controller computed in one tick (logged whether or not it is flown); a
+    NamedTuple: built every tick, ~3× cheaper than a frozen dataclass.
 
     ``result`` is None for the P controller, whose command is ``p_command``. ``u_flown`` is
     the NMPC input the supervisor judges, ``ok`` whether the solver may be trusted,
@@ -279,14 +278,15 @@ class Control:
             return None
         if sol.result is None:
             return sol.p_command
-        u = sol.result.u
+        u = sol.result.u.tolist()  # Python floats: float(u[i]) without numpy's scalars
+        zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
         # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
         vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
-        vz_ref = min(max(vz_reference_mps(vz_base, u[IU_ZACC], self.vz_lead_s), -vz_max), vz_max)
-        return AttitudeCommand(vz_ref, float(u[IU_PHI]), float(u[IU_THETA]), float(u[IU_PSIRATE]))
+        vz_ref = min(max(vz_reference_mps(vz_base, zacc, self.vz_lead_s), -vz_max), vz_max)
+        return AttitudeCommand(vz_ref, phi, theta, rate)
 
 
 # ----------------------------------------------------------------------------- offset-free
@@ -389,9 +389,8 @@ class ResponseEstimation:
 
 
 # ----------------------------------------------------------------------------- supervision
-@dataclass(frozen=True, slots=True, eq=False)
-class Sent:
-    """What a tick sends and why.
+class Sent(NamedTuple):
+    """What a tick sends and why (a NamedTuple, as :class:`Solution`).
 
     ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
     from the NMPC; zeros for a hover). ``flown`` is a newly sent command after tilt clipping
@@ -447,19 +446,22 @@ class Supervision:
         if cmd is not None and action in (Action.CONTROL, Action.FALLBACK):
             roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
             pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
-            flown = AttitudeCommand(cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps)
-            if all(map(math.isfinite, (flown.vz_ref_mps, roll, pitch, flown.psirate_radps))):
+            vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
+            if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
+                    and math.isfinite(rate)):
+                flown = AttitudeCommand(vz, roll, pitch, rate)
                 # the NMPC's tilt per its model's gain; P's gains are chosen on the plant
                 asked = self._per_gain(flown) if action is Action.CONTROL else flown
                 pcmd = map_to_pcmd(asked, self.limits)
-                flags = (pcmd.saturated[0] or roll_clipped, pcmd.saturated[1] or pitch_clipped,
-                         *pcmd.saturated[2:])
+                sat = pcmd.saturated
+                flags = (("1" if sat[0] or roll_clipped else "0")
+                         + ("1" if sat[1] or pitch_clipped else "0")
+                         + ("1" if sat[2] else "0") + ("1" if sat[3] else "0"))
                 zacc = zacc_mps2 if action is Action.CONTROL and math.isfinite(zacc_mps2) else 0.0
-                u_sent = np.array([zacc, roll, pitch, flown.psirate_radps])
-                self.vz_ref_mps = flown.vz_ref_mps
+                u_sent = np.array([zacc, roll, pitch, rate])
+                self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
-                return Sent(pcmd, u_sent, True, decision, flown,
-                            "".join("1" if f else "0" for f in flags))
+                return Sent(pcmd, u_sent, True, decision, flown, flags)
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
         elif action is Action.HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
