@@ -134,10 +134,12 @@ DRONE_ALARMS: tuple[DroneAlarm, ...] = (
     DroneAlarm(21, "ULTRASOUND", "ultrasound sensor deaf", None),
 )
 
+_ALARM_BITS = sum(f.mask for f in DRONE_ALARMS)  # every bit above, in one mask
+
 
 def drone_alarms(state_bits: int | None) -> list[DroneAlarm]:
     """The :data:`DRONE_ALARMS` set in ``state_bits`` (none for None), most severe first."""
-    if state_bits is None:
+    if state_bits is None or not state_bits & _ALARM_BITS:  # the usual tick: none set
         return []
     return [f for f in DRONE_ALARMS if state_bits & f.mask]
 

@@ -181,10 +181,8 @@ class AttitudeResponseEstimator:
                        _microseconds(sample_t_s) if has else 0.0, float(roll_deg),
                        float(pitch_deg), cmd_kind, _microseconds(cmd_t_s), float(roll_frac),
                        float(pitch_frac))
-        if code:
+        if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
-            if code == 2:  # the residual tracks a recent best model
-                self._estimate = self._fit()
         return code != 0
 
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:

@@ -110,8 +110,8 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
     """One tick of the streaming fit (``AttitudeResponseEstimator``'s ``navdata`` then its
     ``command`` or ``restart``; the same expressions in the same order). Times are already
     rounded to the microsecond. Returns 0 if there was no sample or it could not be used, 1 if
-    it was folded in, 2 if, moreover, the best grid point is due for a refresh (the caller
-    fits)."""
+    it was folded in, 2 if, moreover, the best grid point was refreshed (every
+    ``refresh_samples``: the fit of the grid, as ``_fit`` makes it)."""
     K, L = delays_s.size, lags_s.size
     kl2 = K * L * 2
     o = HEAD
@@ -178,10 +178,34 @@ def _sample(state, j, delays_s, lags_s, window_s, refresh_samples, sx, sxx, sxy,
         state[S_SY + a] = state[S_SY + a] * forget + ya
         state[S_SYY + a] = state[S_SYY + a] * forget + ya * ya
     state[S_SINCE_BEST] += 1.0
-    if state[S_SINCE_BEST] >= refresh_samples:
+    if state[S_SINCE_BEST] >= refresh_samples:  # the residual tracks a recent best model
         state[S_SINCE_BEST] = 0.0
+        _refresh_best(state, delays_s.size, lags_s.size)
         return 2
     return 1
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _refresh_best(state, delays, lags):
+    """The best grid point and its model (gains, offsets) into the state's head, as
+    ``AttitudeResponseEstimator._fit`` sets them (nothing without an estimate)."""
+    n = state[S_N]
+    if n < 20:
+        return
+    kl2 = delays * lags * 2
+    out = np.empty(3 * kl2 + delays * lags + 2)  # fit_size
+    best = fit_grid(state, delays, lags, out)
+    if best < 0:
+        return
+    k, m = best // lags, best % lags
+    for a in range(2):
+        e = (k * lags + m) * 2 + a
+        g = out[kl2 + e]
+        state[S_G + a] = g
+        state[S_B + a] = (state[S_SY + a] - g * state[HEAD + e]) / n
+    state[S_HAS_BEST] = 1.0
+    state[S_K] = k
+    state[S_L] = m
 
 
 @njit(cache=True, **INNER_KERNEL)

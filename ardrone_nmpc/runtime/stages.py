@@ -232,6 +232,8 @@ class Control:
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
+            self._offsets = np.empty_like(self._stage_index)
+            self._offsets_dtau = math.nan  # the Δτ _offsets were made with
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -254,16 +256,23 @@ class Control:
         dtau = solver.stage_dtau_s(t_exp_s)
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
+        dtau = max(dtau, 1e-9)
+        if dtau != self._offsets_dtau:  # Δτ·i, kept while Δτ holds (no horizon ramp)
+            np.multiply(dtau, self._stage_index, out=self._offsets)
+            self._offsets_dtau = dtau
         times = np.empty(solver.spec.horizon_steps + 2)
         times[0] = t_exp_s
-        times[1:] = t_exp_s + self.delay.lead_s + max(dtau, 1e-9) * self._stage_index
+        np.add(t_exp_s + self.delay.lead_s, self._offsets, out=times[1:])  # (t + lead) + Δτ·i
         states = traj.state_at(times)
-        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
+        ahead = states[1:]
+        horizon = ahead if offset is None else offset.integrator.shifted(ahead)
         result = solver.solve(t_exp_s, x_solve, horizon)
-        ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
-                           and self.accept_max_iterations)
-        return Solution(states[0], x_solve, result, result.u, ok, result.status.value,
-                        ref_horizon=states[1:])
+        status = result.status
+        ok = status is SolverStatus.OK or (status is SolverStatus.MAX_ITERATIONS
+                                           and self.accept_max_iterations)
+        # ``_value_``: the member's value without the enum's descriptor (µs a tick)
+        return Solution(states[0], x_solve, result, result.u, ok, status._value_,
+                        ref_horizon=ahead)
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
