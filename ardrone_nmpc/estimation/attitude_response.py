@@ -37,8 +37,7 @@ from ardrone_nmpc.estimation import response_kernels as rk
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
            "CONFIDENT_DELAY_R2", "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2",
-           "NO_ESTIMATE",
-           "fit_attitude_response"]
+           "NO_ESTIMATE", "fit_attitude_response", "warm_up_kernels"]
 
 DELAY_STEP_S = 0.01
 MAX_DELAY_S = 0.6
@@ -273,6 +272,20 @@ class AttitudeResponseEstimator:
             return 1.0
         rho = min(max(rr1 / rr, 0.0), 0.95)
         return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+_kernels_warm = False
+
+
+def warm_up_kernels() -> None:
+    """Load (or compile) the streaming fit's kernels now — once per process — not on the
+    first tick aloft (a ``fly`` would wait seconds for a compile mid-air)."""
+    global _kernels_warm
+    if not _kernels_warm:
+        est = AttitudeResponseEstimator(1.0)
+        est.feed(None, 0.0, 0.0, rk.CMD_RESTART)
+        rk.fit_grid(est._state, len(est.delays_s), len(est.lags_s), est._fit_out)
+        _kernels_warm = True
 
 
 def fit_attitude_response(t_cmd, cmd_frac, t_meas, meas_rad, *, euler_angle_max_rad: float,

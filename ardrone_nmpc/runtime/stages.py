@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
+from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, pcmd_of, vz_reference_mps
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
@@ -25,7 +25,7 @@ from ardrone_nmpc.core.types import (
     IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
 )
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
-from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator
+from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
@@ -349,6 +349,7 @@ class ResponseEstimation:
         self.estimator = AttitudeResponseEstimator(limits.euler_angle_max_rad,
                                                    window_s=a.window_s)
         self._next_fit_s = -math.inf
+        warm_up_kernels()  # not on the first tick aloft
 
     def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
@@ -458,10 +459,13 @@ class Supervision:
             vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
             if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
                     and math.isfinite(rate)):
-                flown = AttitudeCommand(vz, roll, pitch, rate)
-                # the NMPC's tilt per its model's gain; P's gains are chosen on the plant
-                asked = self._per_gain(flown) if action is Action.CONTROL else flown
-                pcmd = map_to_pcmd(asked, self.limits)
+                # the NMPC's tilt per its model's gain: the tilt to ask for so that the drone
+                # tilts by the command's; P's gains are chosen on the plant
+                k = self.attitude_gain
+                if action is Action.CONTROL and k != 1.0:
+                    pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
+                else:
+                    pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
                 sat = pcmd.saturated
                 flags = (("1" if sat[0] or roll_clipped else "0")
                          + ("1" if sat[1] or pitch_clipped else "0")
@@ -470,7 +474,8 @@ class Supervision:
                 u_sent = np.array([zacc, roll, pitch, rate])
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
-                return Sent(pcmd, u_sent, True, decision, flown, flags)
+                return Sent(pcmd, u_sent, True, decision, AttitudeCommand(vz, roll, pitch, rate),
+                            flags)
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
         elif action is Action.HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
@@ -479,15 +484,6 @@ class Supervision:
         self.vz_ref_mps = 0.0
         self._last = None
         return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
-
-
-    def _per_gain(self, cmd: AttitudeCommand) -> AttitudeCommand:
-        """The tilt to ask for so that the drone tilts by ``cmd``'s (its gain divided out)."""
-        k = self.attitude_gain
-        if k == 1.0:
-            return cmd
-        return AttitudeCommand(cmd.vz_ref_mps, cmd.phi_rad / k, cmd.theta_rad / k,
-                               cmd.psirate_radps)
 
 
 # ----------------------------------------------------------------------------- the row
