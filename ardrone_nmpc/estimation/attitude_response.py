@@ -284,6 +284,7 @@ def warm_up_kernels() -> None:
     if not _kernels_warm:
         est = AttitudeResponseEstimator(1.0)
         est.feed(None, 0.0, 0.0, rk.CMD_RESTART)
+        est._state[rk.S_N] = 1.0  # numba raises on a division by zero, as Python does
         rk.fit_grid(est._state, len(est.delays_s), len(est.lags_s), est._fit_out)
         _kernels_warm = True
 
