@@ -161,6 +161,9 @@ class AttitudeResponseEstimator:
                            out[4 * kl:6 * kl].reshape(shape),
                            out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
+        # what every call of the compiled step passes first (the state and the grid)
+        self._feed_args = (st, self._j, self.delays_s, self.lags_s, self._capacity,
+                           self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES)
 
     @property
     def _n(self) -> float:
@@ -175,11 +178,9 @@ class AttitudeResponseEstimator:
         (``cmd_kind`` :data:`~.response_kernels.CMD_SEND`), a :meth:`restart`
         (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
         has = sample_t_s is not None
-        code = rk.feed(self._state, self._j, self.delays_s, self.lags_s, self._capacity,
-                       self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES, has,
-                       _microseconds(sample_t_s) if has else 0.0, float(roll_deg),
-                       float(pitch_deg), cmd_kind, _microseconds(cmd_t_s), float(roll_frac),
-                       float(pitch_frac))
+        code = rk.feed(*self._feed_args, has, _microseconds(sample_t_s) if has else 0.0,
+                       float(roll_deg), float(pitch_deg), cmd_kind, _microseconds(cmd_t_s),
+                       float(roll_frac), float(pitch_frac))
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
         return code != 0

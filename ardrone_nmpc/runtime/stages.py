@@ -355,17 +355,14 @@ class ResponseEstimation:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
         nav = inputs.navdata
         # the sample, then the command sent (a hover restarts the window): one compiled call
-        if sent.progressive:
-            p = sent.pcmd
-            cmd = (CMD_SEND, inputs.t_s, p.roll_frac, p.pitch_frac)
-        else:
-            cmd = (CMD_RESTART,)
-        if nav is not None:
-            self.estimator.feed(inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg, *cmd)
-        else:
-            self.estimator.feed(None, 0.0, 0.0, *cmd)
+        t_nav, roll_deg, pitch_deg = ((inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
+                                      if nav is not None else (None, 0.0, 0.0))
         if not sent.progressive:
+            self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_RESTART)
             return []
+        p = sent.pcmd
+        self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_SEND, inputs.t_s, p.roll_frac,
+                            p.pitch_frac)
         if inputs.t_s < self._next_fit_s:
             return []
         self._next_fit_s = inputs.t_s + self.cfg.refit_s
