@@ -38,6 +38,11 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
 
+# enum members bound once: ``Action.CONTROL`` is a lookup through the enum's metaclass
+# (~0.1 µs), and the tick makes a dozen
+_CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
+_OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
+
 
 # ----------------------------------------------------------------------------- estimation
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -232,7 +237,7 @@ class Control:
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
-            self._offsets = np.empty_like(self._stage_index)
+            self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
             self._offsets_dtau = math.nan  # the Δτ _offsets were made with
 
     def warm_up(self) -> np.ndarray:
@@ -257,22 +262,20 @@ class Control:
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
         dtau = max(dtau, 1e-9)
-        if dtau != self._offsets_dtau:  # Δτ·i, kept while Δτ holds (no horizon ramp)
-            np.multiply(dtau, self._stage_index, out=self._offsets)
+        if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
+            np.multiply(dtau, self._stage_index, out=self._offsets[1:])
             self._offsets_dtau = dtau
-        times = np.empty(solver.spec.horizon_steps + 2)
+        times = np.add(t_exp_s + self.delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
-        np.add(t_exp_s + self.delay.lead_s, self._offsets, out=times[1:])  # (t + lead) + Δτ·i
         states = traj.state_at(times)
         ahead = states[1:]
         horizon = ahead if offset is None else offset.integrator.shifted(ahead)
         result = solver.solve(t_exp_s, x_solve, horizon)
         status = result.status
-        ok = status is SolverStatus.OK or (status is SolverStatus.MAX_ITERATIONS
+        ok = status is _OK or (status is _MAX_ITERATIONS
                                            and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
-        return Solution(states[0], x_solve, result, result.u, ok, status._value_,
-                        ref_horizon=ahead)
+        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None, ahead)
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -281,9 +284,9 @@ class Control:
         ``vz_ref_last_mps`` is the ż reference last sent: without a ż estimate the NMPC's z̈
         is integrated from it.
         """
-        if action is Action.FALLBACK:
+        if action is _FALLBACK:
             return p_control(x, sol.ref_now, self.p_gains)
-        if action is not Action.CONTROL:
+        if action is not _CONTROL:
             return None
         if sol.result is None:
             return sol.p_command
@@ -316,7 +319,7 @@ class OffsetFree:
             self.integrator.learning[:] = False
             return
         p = sent.pcmd
-        if sent.decision.action is Action.CONTROL:
+        if sent.decision.action is _CONTROL:
             frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
@@ -447,10 +450,10 @@ class Supervision:
 
     def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
         action = decision.action
-        if action is Action.HOLD and self._last is not None:
+        if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
             return Sent(pcmd, u_sent, True, decision)
-        if cmd is not None and action in (Action.CONTROL, Action.FALLBACK):
+        if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
             pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
             vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
@@ -459,7 +462,7 @@ class Supervision:
                 # the NMPC's tilt per its model's gain: the tilt to ask for so that the drone
                 # tilts by the command's; P's gains are chosen on the plant
                 k = self.attitude_gain
-                if action is Action.CONTROL and k != 1.0:
+                if action is _CONTROL and k != 1.0:
                     pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
                 else:
                     pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
@@ -467,14 +470,14 @@ class Supervision:
                 flags = (("1" if sat[0] or roll_clipped else "0")
                          + ("1" if sat[1] or pitch_clipped else "0")
                          + ("1" if sat[2] else "0") + ("1" if sat[3] else "0"))
-                zacc = zacc_mps2 if action is Action.CONTROL and math.isfinite(zacc_mps2) else 0.0
+                zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
                 u_sent = np.array([zacc, roll, pitch, rate])
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
                 return Sent(pcmd, u_sent, True, decision, AttitudeCommand(vz, roll, pitch, rate),
                             flags)
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
-        elif action is Action.HOLD:  # nothing sent yet that could be held
+        elif action is _HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
         # hover, land, stop: the drone's own hover — no acceleration, for the delay predictor
         # and the integrators; the last NMPC input is never flown
