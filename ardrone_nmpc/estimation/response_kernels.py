@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
@@ -107,11 +107,14 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
          capacity: int, euler_max_rad: float, window_s: float, refresh_samples: int,
          has_sample: bool, sample_t_s: float, roll_deg: float, pitch_deg: float,
          cmd_kind: int, cmd_t_s: float, roll_frac: float, pitch_frac: float) -> int:
-    """One tick of the streaming fit (``AttitudeResponseEstimator``'s ``navdata`` then its
-    ``command`` or ``restart``; the same expressions in the same order). Times are already
+    """One tick of the streaming fit: ``AttitudeResponseEstimator``'s ``navdata``, then its
+    ``command`` or ``restart`` — the same expressions in the same order. Times are already
     rounded to the microsecond. Returns 0 if there was no sample or it could not be used, 1 if
     it was folded in, 2 if, moreover, the best grid point was refreshed (every
-    ``refresh_samples``: the fit of the grid, as ``_fit`` makes it)."""
+    ``refresh_samples``: the fit of the grid, as ``_fit`` makes it).
+
+    One function, not one per step: every compiled level below an entry point costs its
+    cold start a copy of the levels beneath (docs/solver-notes.md §5)."""
     K, L = delays_s.size, lags_s.size
     kl2 = K * L * 2
     o = HEAD
@@ -128,119 +131,95 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
     o += 2 * capacity
     ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
     code = 0
-    if has_sample:
-        code = _sample(state, j, delays_s, lags_s, window_s, refresh_samples, sx, sxx, sxy,
-                       x, decay, t, u, ylag, sample_t_s, roll_deg, pitch_deg)
+    n = int(state[S_COUNT])
+    # --- the navdata sample (``navdata``)
+    y0 = roll_deg * _DEG2RAD
+    y1 = pitch_deg * _DEG2RAD
+    last_t = state[S_LAST_T]
+    if has_sample and not (n < 2 or not (math.isfinite(y0) and math.isfinite(y1))
+                           or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
+        t_s = sample_t_s
+        lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
+        forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
+        state[S_LAST_T] = t_s
+        y = state[S_Y:S_Y + 2]
+        y[0] = y0
+        y[1] = y1
+        fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
+        if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
+            k, m = int(state[S_K]), int(state[S_L])
+            r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
+            r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
+            for i in range(3):
+                state[S_RES + i] *= forget
+            if state[S_HAS_R] != 0.0:
+                p0, p1 = state[S_R], state[S_R + 1]
+                state[S_RES] += r0 * r0 + r1 * r1
+                state[S_RES + 1] += r0 * p0 + r1 * p1
+                state[S_RES + 2] += 1.0
+            state[S_R] = r0
+            state[S_R + 1] = r1
+            state[S_HAS_R] = 1.0
+        state[S_N] = state[S_N] * forget + 1.0
+        for a in range(2):
+            ya = state[S_Y + a]
+            state[S_SY + a] = state[S_SY + a] * forget + ya
+            state[S_SYY + a] = state[S_SYY + a] * forget + ya * ya
+        state[S_SINCE_BEST] += 1.0
+        code = 1
+        if state[S_SINCE_BEST] >= refresh_samples:  # the residual tracks a recent best model
+            state[S_SINCE_BEST] = 0.0
+            code = 2
+            ns = state[S_N]
+            if not ns < 20:  # the best grid point and its model, as ``_fit`` sets them
+                out = np.empty(3 * kl2 + K * L + 2)  # fit_size
+                best = fit_grid(state, K, L, out)
+                if best >= 0:
+                    k, m = best // L, best % L
+                    for a in range(2):
+                        e = (k * L + m) * 2 + a
+                        g = out[kl2 + e]
+                        state[S_G + a] = g
+                        state[S_B + a] = (state[S_SY + a] - g * state[HEAD + e]) / ns
+                    state[S_HAS_BEST] = 1.0
+                    state[S_K] = k
+                    state[S_L] = m
+    # --- then the command (``command``, held until the next) or the restart
     if cmd_kind == CMD_RESTART:
         state[S_COUNT] = 0.0
         state[S_HAS_R] = 0.0
     elif cmd_kind == CMD_SEND:
-        _command(state, lags_s, capacity, euler_max_rad, t, u, ylag, cmd_t_s, roll_frac,
-                 pitch_frac)
-    return code
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _sample(state, j, delays_s, lags_s, window_s, refresh_samples, sx, sxx, sxy, x, decay, t,
-            u, ylag, t_s, roll_deg, pitch_deg):
-    """A navdata sample (``AttitudeResponseEstimator.navdata`` up to its fit)."""
-    n = int(state[S_COUNT])
-    y0 = roll_deg * _DEG2RAD
-    y1 = pitch_deg * _DEG2RAD
-    last_t = state[S_LAST_T]
-    if (n < 2 or not (math.isfinite(y0) and math.isfinite(y1)) or t_s <= last_t
-            or t[0] > t_s - delays_s[delays_s.size - 1]):
-        return 0
-    lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
-    forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
-    state[S_LAST_T] = t_s
-    y = state[S_Y:S_Y + 2]
-    y[0] = y0
-    y[1] = y1
-    fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
-    if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
-        k, m = int(state[S_K]), int(state[S_L])
-        r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
-        r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
-        for i in range(3):
-            state[S_RES + i] *= forget
-        if state[S_HAS_R] != 0.0:
-            p0, p1 = state[S_R], state[S_R + 1]
-            state[S_RES] += r0 * r0 + r1 * r1
-            state[S_RES + 1] += r0 * p0 + r1 * p1
-            state[S_RES + 2] += 1.0
-        state[S_R] = r0
-        state[S_R + 1] = r1
-        state[S_HAS_R] = 1.0
-    state[S_N] = state[S_N] * forget + 1.0
-    for a in range(2):
-        ya = state[S_Y + a]
-        state[S_SY + a] = state[S_SY + a] * forget + ya
-        state[S_SYY + a] = state[S_SYY + a] * forget + ya * ya
-    state[S_SINCE_BEST] += 1.0
-    if state[S_SINCE_BEST] >= refresh_samples:  # the residual tracks a recent best model
-        state[S_SINCE_BEST] = 0.0
-        _refresh_best(state, delays_s.size, lags_s.size)
-        return 2
-    return 1
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _refresh_best(state, delays, lags):
-    """The best grid point and its model (gains, offsets) into the state's head, as
-    ``AttitudeResponseEstimator._fit`` sets them (nothing without an estimate)."""
-    n = state[S_N]
-    if n < 20:
-        return
-    kl2 = delays * lags * 2
-    out = np.empty(3 * kl2 + delays * lags + 2)  # fit_size
-    best = fit_grid(state, delays, lags, out)
-    if best < 0:
-        return
-    k, m = best // lags, best % lags
-    for a in range(2):
-        e = (k * lags + m) * 2 + a
-        g = out[kl2 + e]
-        state[S_G + a] = g
-        state[S_B + a] = (state[S_SY + a] - g * state[HEAD + e]) / n
-    state[S_HAS_BEST] = 1.0
-    state[S_K] = k
-    state[S_L] = m
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _command(state, lags_s, capacity, euler_max_rad, t, u, ylag, t_s, roll_frac, pitch_frac):
-    """A command sent at ``t_s``, held until the next (``AttitudeResponseEstimator.command``)."""
-    u0 = roll_frac * euler_max_rad
-    u1 = pitch_frac * euler_max_rad
-    n = int(state[S_COUNT])
-    if n:
-        if t_s <= t[n - 1]:
-            return
-        if n == capacity:  # full: keep the newest half (what the longest delay needs)
-            keep = n // 2
-            for i in range(keep):
-                t[i] = t[n - keep + i]
-                for a in range(2):
-                    u[i, a] = u[n - keep + i, a]
-                for m in range(lags_s.size):
+        t_s = cmd_t_s
+        u0 = roll_frac * euler_max_rad
+        u1 = pitch_frac * euler_max_rad
+        if n and t_s <= t[n - 1]:
+            return code
+        if n:
+            if n == capacity:  # full: keep the newest half (what the longest delay needs)
+                keep = n // 2
+                for i in range(keep):
+                    t[i] = t[n - keep + i]
                     for a in range(2):
-                        ylag[i, m, a] = ylag[n - keep + i, m, a]
-            n = keep
-        t0 = t[n - 1]
-        for m in range(lags_s.size):  # the lags' outputs, from the last command's
-            dec = math.exp(-(t_s - t0) / lags_s[m])
-            for a in range(2):
-                ua = u[n - 1, a]
-                ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
-    else:  # no past: as if held for long
-        for m in range(lags_s.size):
-            ylag[n, m, 0] = u0
-            ylag[n, m, 1] = u1
-    t[n] = t_s
-    u[n, 0] = u0
-    u[n, 1] = u1
-    state[S_COUNT] = n + 1.0
+                        u[i, a] = u[n - keep + i, a]
+                    for m in range(L):
+                        for a in range(2):
+                            ylag[i, m, a] = ylag[n - keep + i, m, a]
+                n = keep
+            t0 = t[n - 1]
+            for m in range(L):  # the lags' outputs, from the last command's
+                dec = math.exp(-(t_s - t0) / lags_s[m])
+                for a in range(2):
+                    ua = u[n - 1, a]
+                    ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
+        else:  # no past: as if held for long
+            for m in range(L):
+                ylag[n, m, 0] = u0
+                ylag[n, m, 1] = u1
+        t[n] = t_s
+        u[n, 0] = u0
+        u[n, 1] = u1
+        state[S_COUNT] = n + 1.0
+    return code
 
 
 @njit(cache=True, **OUTER_KERNEL)
