@@ -132,10 +132,14 @@ def pcmd_of(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_radps: 
             limits: DroneLimits) -> PcmdCommand:
     """:func:`map_to_pcmd` of the four values (no :class:`AttitudeCommand` to build: the tick
     maps one every 65 ms, and each record costs)."""
-    phi = _finite("phi_rad", phi_rad)
-    theta = _finite("theta_rad", theta_rad)
-    vz = _finite("vz_ref_mps", vz_ref_mps)
-    psirate = _finite("psirate_radps", psirate_radps)
+    phi, theta = float(phi_rad), float(theta_rad)
+    vz, psirate = float(vz_ref_mps), float(psirate_radps)
+    if not (math.isfinite(phi) and math.isfinite(theta) and math.isfinite(vz)
+            and math.isfinite(psirate)):  # refused, naming the first in this order
+        _finite("phi_rad", phi)
+        _finite("theta_rad", theta)
+        _finite("vz_ref_mps", vz)
+        _finite("psirate_radps", psirate)
     roll, s_roll = _clip_unit(phi / limits.euler_angle_max_rad)
     pitch, s_pitch = _clip_unit(-theta / limits.euler_angle_max_rad)
     gaz, s_gaz = _clip_unit(vz / limits.control_vz_max_mps)

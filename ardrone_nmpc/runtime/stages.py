@@ -38,6 +38,9 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
 
+# the estimate's slots in index order, written in one assignment (seven cost ~0.5 µs more)
+assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
+
 # enum members bound once: ``Action.CONTROL`` is a lookup through the enum's metaclass
 # (~0.1 µs), and the tick makes a dozen
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
@@ -93,14 +96,12 @@ class Estimation:
                 self.vz_estimator.update(pz, zacc_mps2, dt)
                 self.xy_difference.update((px, py), dt)
             self._last_pose_t_s = pose.t_s
-        x = self._x
-        x[IX_X], x[IX_Y], x[IX_Z] = px, py, pz
-        x[IX_PSI] = pose.psi_rad
-        x[IX_VZ] = self.vz_estimator.vz_mps
         if self.velocity_from_navdata and navdata is not None:
-            x[IX_VX], x[IX_VY] = navdata_velocity_world(navdata, pose.psi_rad)
+            vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
         else:
-            x[IX_VX], x[IX_VY] = self.xy_difference.velocity_mps
+            vx, vy = self.xy_difference.velocity_mps
+        x = self._x
+        x[:] = (px, vx, py, vy, pz, self.vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
         return x
 
 
