@@ -153,6 +153,11 @@ class AttitudeResponseEstimator:
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
         self._j = np.zeros(n_k, dtype=np.int64)
+        # the grids as floats, and per delay the delays a rival must be at (``_contrast``)
+        self._delays, self._lags = self.delays_s.tolist(), self.lags_s.tolist()
+        self._away = [np.abs(self.delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
+                      for d in self.delays_s]
+        self._any_away = [bool(a.any()) for a in self._away]
         # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
         # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
         out = self._fit_out = np.zeros(rk.fit_size(n_k, n_l))
@@ -217,58 +222,60 @@ class AttitudeResponseEstimator:
             return NO_ESTIMATE
         sxx, gain, rss_axis, rss, syy = self._fit_views
         k, l = divmod(best, n_l)
-        ok = sxx[k, l] > 1e-12
-        g = gain[k, l]
-        offset = (self._sy - g * self._sx[k, l]) / n
-        st = self._state  # the best model, whose residual the compiled step tracks
-        st[rk.S_HAS_BEST], st[rk.S_K], st[rk.S_L] = 1.0, k, l
-        st[rk.S_G:rk.S_G + 2], st[rk.S_B:rk.S_B + 2] = g, offset
-        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        # Python floats from here (numpy's scalars cost ~10× each; the same arithmetic)
+        g0, g1 = gain[k, l].tolist()
+        sx0, sx1 = self._sx[k, l].tolist()
+        sy0, sy1 = self._sy.tolist()
+        # the best model, whose residual the compiled step tracks (slots S_HAS_BEST … S_B + 1)
+        self._state[rk.S_HAS_BEST:rk.S_B + 2] = (1.0, k, l, g0, g1, (sy0 - g0 * sx0) / n,
+                                                 (sy1 - g1 * sx1) / n)
+        curve = rss[:, l]
+        values = curve.tolist()
+        sigma2 = values[k] / max(2.0 * n - 5.0, 1.0)
         inflate = self._inflation()
-        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        delay, delay_var = self._refine(values, k, sigma2)
         gains, gain_std = [], []
-        for a in range(2):
-            if ok[a]:
-                gains.append(float(g[a]))
-                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
-                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+        for g, ra, sa in zip((g0, g1), rss_axis[k, l].tolist(), sxx[k, l].tolist()):
+            if sa > 1e-12:
+                gains.append(g)
+                gain_std.append(inflate * math.sqrt(max(ra, 0.0) / max(n - 2.0, 1.0) / sa))
             else:
                 gains.append(math.nan)
                 gain_std.append(math.inf)
-        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+        return AttitudeEstimate(delay, inflate * math.sqrt(delay_var),
                                 (gains[0], gains[1]), (gain_std[0], gain_std[1]),
-                                float(self.lags_s[l]),
-                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
-                                self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
+                                self._lags[l], 1.0 - values[k] / float(syy.sum()), n,
+                                self._contrast(curve, k, sigma2 * inflate ** 2))
 
     def _contrast(self, curve: np.ndarray, k: int, sigma2: float) -> float:
         """(least RSS along ``curve`` — the residual over the delays at the best lag — at
         DELAY_RIVAL_SEPARATION_S or more from grid point ``k``) − its RSS at ``k``, over
         ``sigma2``; ∞ when the grid holds no such delay."""
-        away = np.abs(self.delays_s - self.delays_s[k]) >= DELAY_RIVAL_SEPARATION_S - 1e-9
-        if not away.any() or not sigma2 > 0.0:
+        away = self._away[k]
+        if not self._any_away[k] or not sigma2 > 0.0:
             return math.inf
         return float(curve[away].min() - curve[k]) / sigma2
 
-    def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
-        """The delay from a parabola through the residual at grid point ``k`` and its
-        neighbours (the first or last three on an edge of the grid: the vertex kept inside
-        it), and its variance 2σ²/curvature."""
+    def _refine(self, curve: list, k: int, sigma2: float) -> tuple[float, float]:
+        """The delay from a parabola through the residual ``curve`` (floats) at grid point
+        ``k`` and its neighbours (the first or last three on an edge of the grid: the vertex
+        kept inside it), and its variance 2σ²/curvature."""
+        d = self._delays
         i = min(max(k, 1), len(curve) - 2)
         lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
-        if not np.all(np.isfinite((lo, mid, hi))):
-            return float(self.delays_s[k]), math.inf
+        if not (math.isfinite(lo) and math.isfinite(mid) and math.isfinite(hi)):
+            return d[k], math.inf
         second = lo - 2.0 * mid + hi
         if not second > 0.0:
-            return float(self.delays_s[k]), math.inf
-        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
-        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+            return d[k], math.inf
+        delay = d[i] + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, d[0]), d[-1])
         # the grid resolves no better than its step over √12, whatever the curvature
         return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
 
     def _inflation(self) -> float:
         """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁."""
-        rr, rr1, w = self._res
+        rr, rr1, w = self._res.tolist()
         if w < 10.0 or rr <= 0.0:
             return 1.0
         rho = min(max(rr1 / rr, 0.0), 0.95)

@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from ardrone_nmpc.estimation.attitude_response import (
-    NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate, AttitudeResponseEstimator, _microseconds,
+    DELAY_RIVAL_SEPARATION_S, DELAY_STEP_S, NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate,
+    AttitudeResponseEstimator, _microseconds,
 )
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 
@@ -68,6 +69,31 @@ class _NumpyFeed(AttitudeResponseEstimator):
                                 float(self.lags_s[l]),
                                 1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
                                 self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
+
+    def _contrast(self, curve, k, sigma2):
+        away = np.abs(self.delays_s - self.delays_s[k]) >= DELAY_RIVAL_SEPARATION_S - 1e-9
+        if not away.any() or not sigma2 > 0.0:
+            return math.inf
+        return float(curve[away].min() - curve[k]) / sigma2
+
+    def _refine(self, curve, k, sigma2):
+        i = min(max(k, 1), len(curve) - 2)
+        lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
+        if not np.all(np.isfinite((lo, mid, hi))):
+            return float(self.delays_s[k]), math.inf
+        second = lo - 2.0 * mid + hi
+        if not second > 0.0:
+            return float(self.delays_s[k]), math.inf
+        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+        return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
+
+    def _inflation(self):
+        rr, rr1, w = self._res
+        if w < 10.0 or rr <= 0.0:
+            return 1.0
+        rho = min(max(rr1 / rr, 0.0), 0.95)
+        return math.sqrt((1.0 + rho) / (1.0 - rho))
 
     def command(self, t_s, roll_frac, pitch_frac):
         t_s = _microseconds(t_s)
