@@ -121,8 +121,11 @@ class DelayPrediction:
         self.period_s = period_s
         self.delay_ticks = math.ceil(delay_s / period_s - 1e-9)
         capacity = max(self.delay_ticks, math.ceil(max_delay_s / period_s - 1e-9), 1)
-        # the last ``capacity`` inputs sent, oldest first; zeros (hover) before the first
-        self._sent = np.zeros((capacity, INPUT_DIM))
+        # the inputs sent, a ring written twice (rows i and i + capacity): the last
+        # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
+        self._capacity = capacity
+        self._sent = np.zeros((2 * capacity, INPUT_DIM))
+        self._next = 0  # the row the next input goes to
         self._pushed = False
 
     @property
@@ -133,16 +136,17 @@ class DelayPrediction:
     def set_delay_s(self, delay_s: float) -> bool:
         """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the
         capacity); True if the ticks changed."""
-        ticks = min(max(int(round(delay_s / self.period_s)), 0), self._sent.shape[0])
+        ticks = min(max(int(round(delay_s / self.period_s)), 0), self._capacity)
         changed = ticks != self.delay_ticks
         self.delay_ticks = ticks
         return changed
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        sent = self._sent
-        sent[:-1] = sent[1:]  # numpy copies an overlapping slice through a buffer
-        sent[-1] = u_sent
+        i, cap = self._next, self._capacity
+        self._sent[i] = u_sent
+        self._sent[i + cap] = u_sent
+        self._next = (i + 1) % cap
         self._pushed = True
 
     def predict(self, x: np.ndarray) -> np.ndarray:
@@ -152,7 +156,8 @@ class DelayPrediction:
         if n == 0 or not self._pushed:
             return x
         out = np.empty(STATE_DIM)
-        rollout_rk4(x, self._sent[self._sent.shape[0] - n:], self.period_s, out)
+        end = self._next + self._capacity  # the newest is the row before
+        rollout_rk4(x, self._sent[end - n:end], self.period_s, out)
         return out
 
     def warm_up(self, x: np.ndarray) -> None:
@@ -475,8 +480,10 @@ class Supervision:
                 u_sent = np.array([zacc, roll, pitch, rate])
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
-                return Sent(pcmd, u_sent, True, decision, AttitudeCommand(vz, roll, pitch, rate),
-                            flags)
+                # the command as flown: the controller's own record unless a tilt was clipped
+                flown = (cmd if not (roll_clipped or pitch_clipped)
+                         else AttitudeCommand(vz, roll, pitch, rate))
+                return Sent(pcmd, u_sent, True, decision, flown, flags)
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
         elif action is _HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
