@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
@@ -63,7 +63,7 @@ def fit_size(delays: int, lags: int) -> int:
     return 3 * delays * lags * 2 + delays * lags + 2
 
 
-@njit(cache=True, **OUTER_KERNEL)
+@njit(cache=True, **INNER_KERNEL)
 def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
                lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
@@ -78,7 +78,7 @@ def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
             decay_out[k, m] = math.exp(-d / lags_s[m])
 
 
-@njit(cache=True, **OUTER_KERNEL)
+@njit(cache=True, **INNER_KERNEL)
 def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
                 y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
                 sxy: np.ndarray) -> None:
