@@ -72,6 +72,9 @@ class Action(str, enum.Enum):
     STOP = "stop"          # the drone is in emergency: send nothing, report
 
 
+# bound once: an enum member's lookup goes through the enum's metaclass (~0.1 µs a tick)
+_CONTROL, _EMERGENCY = Action.CONTROL, FlightMode.EMERGENCY
+
 #: Actions after which the run does not go back to flying the experiment.
 LATCHING = frozenset({Action.LAND, Action.STOP})
 
@@ -88,7 +91,7 @@ class Decision:
     reason: str = ""
 
     def mode(self, nominal: str) -> str:
-        if self.action is Action.CONTROL:
+        if self.action is _CONTROL:
             return nominal
         return Mode(self.action.value, self.reason).label
 
@@ -134,10 +137,12 @@ DRONE_ALARMS: tuple[DroneAlarm, ...] = (
     DroneAlarm(21, "ULTRASOUND", "ultrasound sensor deaf", None),
 )
 
+_ALARM_BITS = sum(f.mask for f in DRONE_ALARMS)  # every bit above, in one mask
+
 
 def drone_alarms(state_bits: int | None) -> list[DroneAlarm]:
     """The :data:`DRONE_ALARMS` set in ``state_bits`` (none for None), most severe first."""
-    if state_bits is None:
+    if state_bits is None or not state_bits & _ALARM_BITS:  # the usual tick: none set
         return []
     return [f for f in DRONE_ALARMS if state_bits & f.mask]
 
@@ -184,7 +189,7 @@ class Supervisor:
         if self._latched is not None:
             return self._latched
         cfg = self.cfg
-        if navdata is not None and navdata.mode is FlightMode.EMERGENCY:
+        if navdata is not None and navdata.mode is _EMERGENCY:
             return self._latch(Decision(Action.STOP, "emergency"))
         faults = drone_alarms(navdata.state_bits if navdata is not None else None)
         for fault in faults:
@@ -211,14 +216,16 @@ class Supervisor:
         ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``.
         """
         cfg = self.cfg
-        if not all(math.isfinite(v) for v in x):
+        xs = x.tolist() if hasattr(x, "tolist") else x  # floats: numpy's scalars are slow
+        if not all(map(math.isfinite, xs)):
             return Decision(Action.HOVER, "nonfinite-state")
-        position = (x[0], x[2], x[4])
-        if not all(lo <= p <= hi for p, lo, hi in zip(position, self._fence_lo, self._fence_hi)):
+        lo, hi = self._fence_lo, self._fence_hi
+        if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
             if cfg.geofence_action == "land":
                 return self._latch(Decision(Action.LAND, "geofence"))
             return Decision(Action.HOVER, "geofence")
-        if not math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2) <= cfg.max_speed_mps:
+        # ``** 2`` (the C library's pow, as numpy's scalars do), not v * v: the same bits
+        if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= cfg.max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
             cap_deg = math.degrees(cfg.max_tilt_rad)
@@ -233,7 +240,7 @@ class Supervisor:
         the supervisor never trusts the solver to have done so).
         """
         cfg = self.cfg
-        good = ok and all(math.isfinite(v) for v in u)
+        good = ok and all(map(math.isfinite, u.tolist() if hasattr(u, "tolist") else u))
         if good:
             self._solver_failures = 0
             if not self._solver_fallback:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from ardrone_nmpc.core.types import AttitudeCommand
 
 __all__ = ["DroneLimits", "PcmdCommand", "MappingError", "command_scales", "map_to_pcmd",
-           "vz_reference_mps"]
+           "pcmd_of", "vz_reference_mps"]
 
 
 class MappingError(ValueError):
@@ -73,7 +73,7 @@ def command_scales(drone) -> DroneLimits:
                        drone.control_yaw_radps)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PcmdCommand:
     """One AT*PCMD's four fractions in [−1, 1] and which of them were clipped.
 
@@ -125,10 +125,21 @@ def map_to_pcmd(cmd: AttitudeCommand, limits: DroneLimits = DroneLimits()) -> Pc
     MappingError
         If any field of ``cmd`` is not finite (the message names it).
     """
-    phi = _finite("phi_rad", cmd.phi_rad)
-    theta = _finite("theta_rad", cmd.theta_rad)
-    vz = _finite("vz_ref_mps", cmd.vz_ref_mps)
-    psirate = _finite("psirate_radps", cmd.psirate_radps)
+    return pcmd_of(cmd.vz_ref_mps, cmd.phi_rad, cmd.theta_rad, cmd.psirate_radps, limits)
+
+
+def pcmd_of(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_radps: float,
+            limits: DroneLimits) -> PcmdCommand:
+    """:func:`map_to_pcmd` of the four values (no :class:`AttitudeCommand` to build: the tick
+    maps one every 65 ms, and each record costs)."""
+    phi, theta = float(phi_rad), float(theta_rad)
+    vz, psirate = float(vz_ref_mps), float(psirate_radps)
+    if not (math.isfinite(phi) and math.isfinite(theta) and math.isfinite(vz)
+            and math.isfinite(psirate)):  # refused, naming the first in this order
+        _finite("phi_rad", phi)
+        _finite("theta_rad", theta)
+        _finite("vz_ref_mps", vz)
+        _finite("psirate_radps", psirate)
     roll, s_roll = _clip_unit(phi / limits.euler_angle_max_rad)
     pitch, s_pitch = _clip_unit(-theta / limits.euler_angle_max_rad)
     gaz, s_gaz = _clip_unit(vz / limits.control_vz_max_mps)

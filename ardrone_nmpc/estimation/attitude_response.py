@@ -33,12 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_decays
+from ardrone_nmpc.estimation import response_kernels as rk
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
            "CONFIDENT_DELAY_R2", "CONFIDENT_DELAY_STD_S", "CONFIDENT_GAIN_REL_STD", "CONFIDENT_R2",
-           "NO_ESTIMATE",
-           "fit_attitude_response"]
+           "NO_ESTIMATE", "fit_attitude_response", "warm_up_kernels"]
 
 DELAY_STEP_S = 0.01
 MAX_DELAY_S = 0.6
@@ -140,97 +139,71 @@ class AttitudeResponseEstimator:
         self.window_s = float(window_s)
         self.lags_s = np.asarray(lags_s, dtype=float)
         self.delays_s = np.arange(0.0, max_delay_s + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
-        shape = (len(self.delays_s), len(self.lags_s), 2)
-        self._sx, self._sxx, self._sxy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
-        self._n = 0.0
-        self._sy, self._syy = np.zeros(2), np.zeros(2)
-        self._res = np.zeros(3)           # Σr², Σr·r_prev, and r_prev's weight
-        self._last_r = None
-        self._last_t = math.nan
-        # the commands: send times, values (rad), the lags' outputs at those times (L, 2)
-        capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
-        self._t = np.zeros(capacity)
-        self._u = np.zeros((capacity, 2))
-        self._y = np.zeros((capacity, len(self.lags_s), 2))
-        self._count = 0
-        # the compiled steps' buffers
-        self._j = np.zeros(len(self.delays_s), dtype=np.int64)
-        self._decay = np.zeros((len(self.delays_s), len(self.lags_s)))
-        self._x = np.zeros(shape)
-        self._best = None
-        self._since_best = 0
+        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        # the commands held: send times, values (rad), the lags' outputs at those times
+        self._capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
+        # the whole state in one buffer the compiled step works on (response_kernels);
+        # the names below are views of it
+        st = self._state = np.zeros(rk.state_size(n_k, n_l, self._capacity))
+        st[rk.S_LAST_T] = math.nan
+        shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
+        o = rk.HEAD
+        self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
+                                          for i in range(3))
+        self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
+        self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
+        self._j = np.zeros(n_k, dtype=np.int64)
+        # the grids as floats, and per delay the delays a rival must be at (``_contrast``)
+        self._delays, self._lags = self.delays_s.tolist(), self.lags_s.tolist()
+        self._away = [np.abs(self.delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
+                      for d in self.delays_s]
+        self._any_away = [bool(a.any()) for a in self._away]
+        # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
+        # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
+        out = self._fit_out = np.zeros(rk.fit_size(n_k, n_l))
+        kl = n_k * n_l
+        self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
+                           out[4 * kl:6 * kl].reshape(shape),
+                           out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
+        # what every call of the compiled step passes first (the state and the grid)
+        self._feed_args = (st, self._j, self.delays_s, self.lags_s, self._capacity,
+                           self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES)
+
+    @property
+    def _n(self) -> float:
+        """The samples' effective number (with the forgetting)."""
+        return float(self._state[rk.S_N])
 
     # ---------------------------------------------------------------------- feeding
+    def feed(self, sample_t_s: float | None, roll_deg: float, pitch_deg: float,
+             cmd_kind: int, cmd_t_s: float = 0.0, roll_frac: float = 0.0,
+             pitch_frac: float = 0.0) -> bool:
+        """One tick in one compiled call: a navdata sample (None: none), then a command
+        (``cmd_kind`` :data:`~.response_kernels.CMD_SEND`), a :meth:`restart`
+        (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
+        has = sample_t_s is not None
+        code = rk.feed(*self._feed_args, has, _microseconds(sample_t_s) if has else 0.0,
+                       float(roll_deg), float(pitch_deg), cmd_kind, _microseconds(cmd_t_s),
+                       float(roll_frac), float(pitch_frac))
+        if code:  # a new sample: the estimate is fitted when it is read
+            self._estimate = None
+        return code != 0
+
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
         """A command sent at ``t_s``, held until the next."""
-        t_s = _microseconds(t_s)
-        u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
-        n = self._count
-        if n:
-            t0 = self._t[n - 1]
-            if t_s <= t0:
-                return
-            u0, y0 = self._u[n - 1], self._y[n - 1]
-            # the C library's exp, not numpy's: numpy's depends on the CPU (response_kernels)
-            decay = np.array([math.exp(a) for a in -(t_s - t0) / self.lags_s])
-            y = u0 + (y0 - u0) * decay[:, None]
-        else:
-            y = np.tile(u, (len(self.lags_s), 1))  # no past: as if held for long
-        if n == len(self._t):  # full: keep the newest half (what the longest delay needs)
-            keep = n // 2
-            for a in (self._t, self._u, self._y):
-                a[:keep] = a[n - keep:n]
-            n = keep
-        self._t[n], self._u[n], self._y[n] = t_s, u, y
-        self._count = n + 1
+        self.feed(None, 0.0, 0.0, rk.CMD_SEND, t_s, roll_frac, pitch_frac)
 
     def restart(self) -> None:
         """The drone flew something else than the commands (its own hover): forget the
         commands; what the sums learned stays (and fades)."""
-        self._count = 0
-        self._last_r = None
+        self._state[rk.S_COUNT] = 0.0
+        self._state[rk.S_HAS_R] = 0.0
 
     def navdata(self, t_s: float, roll_deg: float, pitch_deg: float) -> bool:
         """A navdata sample received at ``t_s``; False if it could not be used (a sample seen
         before, not finite, or commands not reaching back the longest delay)."""
-        n = self._count
-        t_s = _microseconds(t_s)
-        y = np.radians([roll_deg, pitch_deg])
-        if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
-                or self._t[0] > t_s - self.delays_s[-1]):
-            return False
-        lag_decays(self._t, n, t_s, self.delays_s, self.lags_s, self._j, self._decay)
-        forget = (math.exp(-(t_s - self._last_t) / self.window_s)
-                  if math.isfinite(self._last_t) else 1.0)
-        self._last_t = t_s
-        x = self._x
-        fold_sample(self._u, self._y, self._j, self._decay, y, forget, x,
-                    self._sx, self._sxx, self._sxy)
-        self._residual(x, y, forget)  # reads x only: the sums' update may come first
-        self._n = self._n * forget + 1.0
-        self._sy = self._sy * forget + y
-        self._syy = self._syy * forget + y * y
-        self._estimate = None
-        self._since_best += 1
-        if self._since_best >= REFRESH_SAMPLES:  # the residual tracks a recent best model
-            self._since_best = 0
-            self._estimate = self._fit()
-        return True
-
-    def _residual(self, x: np.ndarray, y: np.ndarray, forget: float) -> None:
-        """Track the residual of the current best model (its lag-1 correlation)."""
-        if self._best is None:
-            return
-        k, l, gain, offset = self._best
-        r = y - (gain * x[k, l] + offset)
-        self._res *= forget
-        if self._last_r is not None:
-            # written out: a BLAS dot (``r @ r``) sums in the order of the CPU's kernel
-            r0, r1 = float(r[0]), float(r[1])
-            p0, p1 = float(self._last_r[0]), float(self._last_r[1])
-            self._res += (r0 * r0 + r1 * r1, r0 * p0 + r1 * p1, 1.0)
-        self._last_r = r
+        return self.feed(t_s, roll_deg, pitch_deg, rk.CMD_NONE)
 
     # ---------------------------------------------------------------------- the fit
     @property
@@ -243,70 +216,85 @@ class AttitudeResponseEstimator:
         n = self._n
         if n < 20:
             return NO_ESTIMATE
-        sxx = self._sxx - self._sx ** 2 / n                       # centred, (K, L, 2)
-        sxy = self._sxy - self._sx * self._sy / n
-        syy = self._syy - self._sy ** 2 / n                        # (2,)
-        ok = sxx > 1e-12
-        if not ok.any() or syy.sum() <= 0.0:
+        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        best = rk.fit_grid(self._state, n_k, n_l, self._fit_out)  # every grid point's fit
+        if best < 0:
             return NO_ESTIMATE
-        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
-        # an axis the commands did not move keeps its whole variance at every grid point
-        rss_axis = np.where(ok, syy - gain * sxy, syy)            # (K, L, 2)
-        rss = rss_axis.sum(axis=2)
-        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
-        g = gain[k, l]
-        offset = (self._sy - g * self._sx[k, l]) / n
-        self._best = (k, l, g, offset)
-        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        sxx, gain, rss_axis, rss, syy = self._fit_views
+        k, l = divmod(best, n_l)
+        # Python floats from here (numpy's scalars cost ~10× each; the same arithmetic)
+        g0, g1 = gain[k, l].tolist()
+        sx0, sx1 = self._sx[k, l].tolist()
+        sy0, sy1 = self._sy.tolist()
+        # the best model, whose residual the compiled step tracks (slots S_HAS_BEST … S_B + 1)
+        self._state[rk.S_HAS_BEST:rk.S_B + 2] = (1.0, k, l, g0, g1, (sy0 - g0 * sx0) / n,
+                                                 (sy1 - g1 * sx1) / n)
+        curve = rss[:, l]
+        values = curve.tolist()
+        sigma2 = values[k] / max(2.0 * n - 5.0, 1.0)
         inflate = self._inflation()
-        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        delay, delay_var = self._refine(values, k, sigma2)
         gains, gain_std = [], []
-        for a in range(2):
-            if ok[k, l, a]:
-                gains.append(float(g[a]))
-                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
-                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+        for g, ra, sa in zip((g0, g1), rss_axis[k, l].tolist(), sxx[k, l].tolist()):
+            if sa > 1e-12:
+                gains.append(g)
+                gain_std.append(inflate * math.sqrt(max(ra, 0.0) / max(n - 2.0, 1.0) / sa))
             else:
                 gains.append(math.nan)
                 gain_std.append(math.inf)
-        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+        return AttitudeEstimate(delay, inflate * math.sqrt(delay_var),
                                 (gains[0], gains[1]), (gain_std[0], gain_std[1]),
-                                float(self.lags_s[l]),
-                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
-                                self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
+                                self._lags[l], 1.0 - values[k] / float(syy.sum()), n,
+                                self._contrast(curve, k, sigma2 * inflate ** 2))
 
     def _contrast(self, curve: np.ndarray, k: int, sigma2: float) -> float:
         """(least RSS along ``curve`` — the residual over the delays at the best lag — at
         DELAY_RIVAL_SEPARATION_S or more from grid point ``k``) − its RSS at ``k``, over
         ``sigma2``; ∞ when the grid holds no such delay."""
-        away = np.abs(self.delays_s - self.delays_s[k]) >= DELAY_RIVAL_SEPARATION_S - 1e-9
-        if not away.any() or not sigma2 > 0.0:
+        away = self._away[k]
+        if not self._any_away[k] or not sigma2 > 0.0:
             return math.inf
         return float(curve[away].min() - curve[k]) / sigma2
 
-    def _refine(self, curve: np.ndarray, k: int, sigma2: float) -> tuple[float, float]:
-        """The delay from a parabola through the residual at grid point ``k`` and its
-        neighbours (the first or last three on an edge of the grid: the vertex kept inside
-        it), and its variance 2σ²/curvature."""
+    def _refine(self, curve: list, k: int, sigma2: float) -> tuple[float, float]:
+        """The delay from a parabola through the residual ``curve`` (floats) at grid point
+        ``k`` and its neighbours (the first or last three on an edge of the grid: the vertex
+        kept inside it), and its variance 2σ²/curvature."""
+        d = self._delays
         i = min(max(k, 1), len(curve) - 2)
         lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
-        if not np.all(np.isfinite((lo, mid, hi))):
-            return float(self.delays_s[k]), math.inf
+        if not (math.isfinite(lo) and math.isfinite(mid) and math.isfinite(hi)):
+            return d[k], math.inf
         second = lo - 2.0 * mid + hi
         if not second > 0.0:
-            return float(self.delays_s[k]), math.inf
-        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
-        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+            return d[k], math.inf
+        delay = d[i] + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, d[0]), d[-1])
         # the grid resolves no better than its step over √12, whatever the curvature
         return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
 
     def _inflation(self) -> float:
         """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁."""
-        rr, rr1, w = self._res
+        rr, rr1, w = self._res.tolist()
         if w < 10.0 or rr <= 0.0:
             return 1.0
         rho = min(max(rr1 / rr, 0.0), 0.95)
         return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+_kernels_warm = False
+
+
+def warm_up_kernels() -> None:
+    """Load (or compile) the streaming fit's kernels now — once per process — not on the
+    first tick aloft (a ``fly`` would wait seconds for a compile mid-air)."""
+    global _kernels_warm
+    if not _kernels_warm:
+        est = AttitudeResponseEstimator(1.0)
+        est.feed(None, 0.0, 0.0, rk.CMD_RESTART)
+        est._state[rk.S_N] = 1.0  # numba raises on a division by zero, as Python does
+        rk.fit_grid(est._state, len(est.delays_s), len(est.lags_s), est._fit_out)
+        _kernels_warm = True
 
 
 def fit_attitude_response(t_cmd, cmd_frac, t_meas, meas_rad, *, euler_angle_max_rad: float,

@@ -62,9 +62,11 @@ def check_step(z_m: float, zacc_mps2: float, dt_s: float) -> tuple[float, float,
     EstimatorError
         If any input is non-finite or ``dt_s <= 0``.
     """
-    z = check_finite("z_m", z_m)
-    a = check_finite("zacc_mps2", zacc_mps2)
-    dt = check_finite("dt_s", dt_s)
+    z, a, dt = float(z_m), float(zacc_mps2), float(dt_s)
+    if not (math.isfinite(z) and math.isfinite(a) and math.isfinite(dt)):  # name the first
+        check_finite("z_m", z)
+        check_finite("zacc_mps2", a)
+        check_finite("dt_s", dt)
     if dt <= 0.0:
         raise EstimatorError(f"dt_s must be > 0, got {dt!r}")
     return z, a, dt

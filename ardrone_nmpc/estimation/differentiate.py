@@ -117,10 +117,10 @@ class BackwardDifference:
         """
         if len(position_m) != self._n:
             raise EstimatorError(f"position_m must have {self._n} entries, got {len(position_m)}")
-        p = tuple(float(v) for v in position_m)
-        for i, v in enumerate(p):
-            if not math.isfinite(v):
-                raise EstimatorError(f"position_m[{i}] must be finite, got {v!r}")
+        p = tuple(map(float, position_m))
+        if not all(map(math.isfinite, p)):
+            i = next(i for i, v in enumerate(p) if not math.isfinite(v))
+            raise EstimatorError(f"position_m[{i}] must be finite, got {p[i]!r}")
         dt = check_finite("dt_s", dt_s)
         if dt <= 0.0:
             raise EstimatorError(f"dt_s must be > 0, got {dt!r}")

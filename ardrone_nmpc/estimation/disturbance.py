@@ -56,11 +56,14 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
     ("0100"; None for none). Roll and pitch act on x and y together once the drone has turned,
     so either one on its limit freezes both; gaz freezes z, yaw ψ.
     """
-    sat = [abs(f) >= SATURATION_FRAC for f in pcmd_fracs]
+    roll, pitch, gaz, yaw = pcmd_fracs  # spelled out: two list comprehensions cost µs a tick
+    s0, s1 = abs(roll) >= SATURATION_FRAC, abs(pitch) >= SATURATION_FRAC
+    s2, s3 = abs(gaz) >= SATURATION_FRAC, abs(yaw) >= SATURATION_FRAC
     if flags:
-        sat = [s or c == "1" for s, c in zip(sat, flags)]
-    tilt = sat[0] or sat[1]
-    return tilt, tilt, sat[2], sat[3]
+        c0, c1, c2, c3 = flags
+        s0, s1, s2, s3 = (s0 or c0 == "1", s1 or c1 == "1", s2 or c2 == "1", s3 or c3 == "1")
+    tilt = s0 or s1
+    return tilt, tilt, s2, s3
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -203,8 +206,9 @@ class ReferenceIntegrator:
         difference of its error over one period.
         """
         preview = _NO_PREVIEW if preview is None else np.asarray(preview, dtype=np.float64)
+        f0, f1, f2, f3 = frozen
         _integrate(np.asarray(x, dtype=np.float64), np.asarray(ref, dtype=np.float64),
-                   tuple(bool(f) for f in frozen), preview, self._law,
+                   (bool(f0), bool(f1), bool(f2), bool(f3)), preview, self._law,
                    self._carry, self._last_error_psi, self.latched, self.learning, self.shift,
                    self.period_s)
         return self.shift

@@ -19,13 +19,51 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["fold_sample", "lag_decays"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
+           "S_HAS_R", "S_K", "S_L", "S_LAST_T", "S_N", "S_R", "S_RES", "S_SINCE_BEST", "S_SY",
+           "S_SYY", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays", "state_size"]
+
+# The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
+# dozen): a head of scalars (these slots), then Σx, Σx², Σx·y, the model values x (each K×L×2),
+# the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2).
+S_N = 0              # the samples' effective number
+S_LAST_T = 1         # the last sample's time (NaN before the first)
+S_COUNT = 2          # commands held
+S_SINCE_BEST = 3     # samples since the best grid point was refreshed
+S_HAS_R = 4          # 1.0: the residual of the last sample is in S_R
+S_R = 5              # (2) that residual
+S_HAS_BEST = 7       # 1.0: a best grid point is tracked
+S_K = 8              # its delay index
+S_L = 9              # its lag index
+S_G = 10             # (2) its gains
+S_B = 12             # (2) its offsets
+S_RES = 14           # (3) Σr², Σr·r_prev, r_prev's weight
+S_SY = 17            # (2) Σy
+S_SYY = 19           # (2) Σy²
+S_Y = 21             # (2) the last sample (rad)
+HEAD = 23
+#: What :func:`feed` does with the command after the sample.
+CMD_NONE = 0
+CMD_RESTART = 1
+CMD_SEND = 2
+_DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 
 
-@njit(cache=True, **OUTER_KERNEL)
+def state_size(delays: int, lags: int, capacity: int) -> int:
+    """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
+    return HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
+
+
+def fit_size(delays: int, lags: int) -> int:
+    """Length of :func:`fit_grid`'s output buffer: the centred Σx², the gains, the residual
+    per axis (each K×L×2), the residual (K×L) and the centred Σy² (2)."""
+    return 3 * delays * lags * 2 + delays * lags + 2
+
+
+@njit(cache=True, **INNER_KERNEL)
 def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
                lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
@@ -40,7 +78,7 @@ def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
             decay_out[k, m] = math.exp(-d / lags_s[m])
 
 
-@njit(cache=True, **OUTER_KERNEL)
+@njit(cache=True, **INNER_KERNEL)
 def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
                 y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
                 sxy: np.ndarray) -> None:
@@ -62,6 +100,181 @@ def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarra
                 sx[k, m, a] += v
                 sxx[k, m, a] += v * v
                 sxy[k, m, a] += v * y[a]
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndarray,
+         capacity: int, euler_max_rad: float, window_s: float, refresh_samples: int,
+         has_sample: bool, sample_t_s: float, roll_deg: float, pitch_deg: float,
+         cmd_kind: int, cmd_t_s: float, roll_frac: float, pitch_frac: float) -> int:
+    """One tick of the streaming fit: ``AttitudeResponseEstimator``'s ``navdata``, then its
+    ``command`` or ``restart`` — the same expressions in the same order. Times are already
+    rounded to the microsecond. Returns 0 if there was no sample or it could not be used, 1 if
+    it was folded in, 2 if, moreover, the best grid point was refreshed (every
+    ``refresh_samples``: the fit of the grid, as ``_fit`` makes it).
+
+    One function, not one per step: every compiled level below an entry point costs its
+    cold start a copy of the levels beneath (docs/solver-notes.md §5)."""
+    K, L = delays_s.size, lags_s.size
+    kl2 = K * L * 2
+    o = HEAD
+    sx = state[o:o + kl2].reshape((K, L, 2))
+    sxx = state[o + kl2:o + 2 * kl2].reshape((K, L, 2))
+    sxy = state[o + 2 * kl2:o + 3 * kl2].reshape((K, L, 2))
+    x = state[o + 3 * kl2:o + 4 * kl2].reshape((K, L, 2))
+    o += 4 * kl2
+    decay = state[o:o + K * L].reshape((K, L))
+    o += K * L
+    t = state[o:o + capacity]
+    o += capacity
+    u = state[o:o + 2 * capacity].reshape((capacity, 2))
+    o += 2 * capacity
+    ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
+    code = 0
+    n = int(state[S_COUNT])
+    # --- the navdata sample (``navdata``)
+    y0 = roll_deg * _DEG2RAD
+    y1 = pitch_deg * _DEG2RAD
+    last_t = state[S_LAST_T]
+    if has_sample and not (n < 2 or not (math.isfinite(y0) and math.isfinite(y1))
+                           or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
+        t_s = sample_t_s
+        lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
+        forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
+        state[S_LAST_T] = t_s
+        y = state[S_Y:S_Y + 2]
+        y[0] = y0
+        y[1] = y1
+        fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
+        if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
+            k, m = int(state[S_K]), int(state[S_L])
+            r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
+            r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
+            for i in range(3):
+                state[S_RES + i] *= forget
+            if state[S_HAS_R] != 0.0:
+                p0, p1 = state[S_R], state[S_R + 1]
+                state[S_RES] += r0 * r0 + r1 * r1
+                state[S_RES + 1] += r0 * p0 + r1 * p1
+                state[S_RES + 2] += 1.0
+            state[S_R] = r0
+            state[S_R + 1] = r1
+            state[S_HAS_R] = 1.0
+        state[S_N] = state[S_N] * forget + 1.0
+        for a in range(2):
+            ya = state[S_Y + a]
+            state[S_SY + a] = state[S_SY + a] * forget + ya
+            state[S_SYY + a] = state[S_SYY + a] * forget + ya * ya
+        state[S_SINCE_BEST] += 1.0
+        code = 1
+        if state[S_SINCE_BEST] >= refresh_samples:  # the residual tracks a recent best model
+            state[S_SINCE_BEST] = 0.0
+            code = 2
+            ns = state[S_N]
+            if not ns < 20:  # the best grid point and its model, as ``_fit`` sets them
+                out = np.empty(3 * kl2 + K * L + 2)  # fit_size
+                best = fit_grid(state, K, L, out)
+                if best >= 0:
+                    k, m = best // L, best % L
+                    for a in range(2):
+                        e = (k * L + m) * 2 + a
+                        g = out[kl2 + e]
+                        state[S_G + a] = g
+                        state[S_B + a] = (state[S_SY + a] - g * state[HEAD + e]) / ns
+                    state[S_HAS_BEST] = 1.0
+                    state[S_K] = k
+                    state[S_L] = m
+    # --- then the command (``command``, held until the next) or the restart
+    if cmd_kind == CMD_RESTART:
+        state[S_COUNT] = 0.0
+        state[S_HAS_R] = 0.0
+    elif cmd_kind == CMD_SEND:
+        t_s = cmd_t_s
+        u0 = roll_frac * euler_max_rad
+        u1 = pitch_frac * euler_max_rad
+        if n and t_s <= t[n - 1]:
+            return code
+        if n:
+            if n == capacity:  # full: keep the newest half (what the longest delay needs)
+                keep = n // 2
+                for i in range(keep):
+                    t[i] = t[n - keep + i]
+                    for a in range(2):
+                        u[i, a] = u[n - keep + i, a]
+                    for m in range(L):
+                        for a in range(2):
+                            ylag[i, m, a] = ylag[n - keep + i, m, a]
+                n = keep
+            t0 = t[n - 1]
+            for m in range(L):  # the lags' outputs, from the last command's
+                dec = math.exp(-(t_s - t0) / lags_s[m])
+                for a in range(2):
+                    ua = u[n - 1, a]
+                    ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
+        else:  # no past: as if held for long
+            for m in range(L):
+                ylag[n, m, 0] = u0
+                ylag[n, m, 1] = u1
+        t[n] = t_s
+        u[n, 0] = u0
+        u[n, 1] = u1
+        state[S_COUNT] = n + 1.0
+    return code
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def fit_grid(state: np.ndarray, delays: int, lags: int, out: np.ndarray) -> int:
+    """Every grid point's least-squares fit from the sums (``AttitudeResponseEstimator._fit``'s
+    numpy, the same expressions in the same order): into ``out`` (:func:`fit_size`) the
+    centred Σx², the gains, the residual per axis and summed over the axes, the centred Σy².
+    Returns the flat index of the least residual (``argmin``: the first, or the first NaN),
+    or −1 when no grid point's commands moved or the attitude did not vary."""
+    K, L = delays, lags
+    kl2 = K * L * 2
+    n = state[S_N]
+    o = HEAD
+    sx = state[o:o + kl2]
+    sxx = state[o + kl2:o + 2 * kl2]
+    sxy = state[o + 2 * kl2:o + 3 * kl2]
+    sxx_c = out[0:kl2]
+    gain = out[kl2:2 * kl2]
+    rss_axis = out[2 * kl2:3 * kl2]
+    rss = out[3 * kl2:3 * kl2 + K * L]
+    syy = out[3 * kl2 + K * L:3 * kl2 + K * L + 2]
+    for a in range(2):
+        sy = state[S_SY + a]
+        syy[a] = state[S_SYY + a] - sy * sy / n
+    any_ok = False
+    for i in range(K * L):
+        for a in range(2):
+            e = 2 * i + a
+            v = sx[e]
+            c = sxx[e] - v * v / n
+            cy = sxy[e] - v * state[S_SY + a] / n
+            sxx_c[e] = c
+            if c > 1e-12:
+                any_ok = True
+                g = cy / c
+                gain[e] = g
+                rss_axis[e] = syy[a] - g * cy
+            else:
+                gain[e] = 0.0
+                rss_axis[e] = syy[a]
+        rss[i] = (0.0 + rss_axis[2 * i]) + rss_axis[2 * i + 1]  # numpy's sum of two
+    if not any_ok or (0.0 + syy[0]) + syy[1] <= 0.0:
+        return -1
+    best = 0
+    low = rss[0]
+    if low != low:
+        return 0
+    for i in range(1, K * L):
+        v = rss[i]
+        if v != v:
+            return i
+        if v < low:
+            low = v
+            best = i
+    return best
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -11,13 +11,12 @@ last command sent — and nothing else; the log row is built from their results 
 from __future__ import annotations
 
 import math
-from collections import deque
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, map_to_pcmd, vz_reference_mps
+from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, pcmd_of, vz_reference_mps
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
@@ -26,7 +25,8 @@ from ardrone_nmpc.core.types import (
     IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
 )
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
-from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator
+from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
+from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
@@ -37,6 +37,14 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", 
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
+
+# the estimate's slots in index order, written in one assignment (seven cost ~0.5 µs more)
+assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
+
+# enum members bound once: ``Action.CONTROL`` is a lookup through the enum's metaclass
+# (~0.1 µs), and the tick makes a dozen
+_CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
+_OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 
 
 # ----------------------------------------------------------------------------- estimation
@@ -76,24 +84,24 @@ class Estimation:
 
         Returns the stage's own (7,) array, overwritten by the next call.
         """
+        pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
+        px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
         if pose.t_s != self._last_pose_t_s:
             if self._last_pose_t_s is None:
-                self.vz_estimator.reset(pose.position_m[2])
+                self.vz_estimator.reset(pz)
                 self.xy_difference.reset()
-                self.xy_difference.update(pose.position_m[:2], 1.0)
+                self.xy_difference.update((px, py), 1.0)
             else:
                 dt = pose.t_s - self._last_pose_t_s
-                self.vz_estimator.update(pose.position_m[2], zacc_mps2, dt)
-                self.xy_difference.update(pose.position_m[:2], dt)
+                self.vz_estimator.update(pz, zacc_mps2, dt)
+                self.xy_difference.update((px, py), dt)
             self._last_pose_t_s = pose.t_s
-        x = self._x
-        x[IX_X], x[IX_Y], x[IX_Z] = pose.position_m
-        x[IX_PSI] = pose.psi_rad
-        x[IX_VZ] = self.vz_estimator.vz_mps
         if self.velocity_from_navdata and navdata is not None:
-            x[IX_VX], x[IX_VY] = navdata_velocity_world(navdata, pose.psi_rad)
+            vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
         else:
-            x[IX_VX], x[IX_VY] = self.xy_difference.velocity_mps
+            vx, vy = self.xy_difference.velocity_mps
+        x = self._x
+        x[:] = (px, vx, py, vy, pz, self.vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
         return x
 
 
@@ -113,8 +121,12 @@ class DelayPrediction:
         self.period_s = period_s
         self.delay_ticks = math.ceil(delay_s / period_s - 1e-9)
         capacity = max(self.delay_ticks, math.ceil(max_delay_s / period_s - 1e-9), 1)
-        self._pending: deque = deque(maxlen=capacity)  # newest last
-        self._sent = np.zeros((capacity, INPUT_DIM))
+        # the inputs sent, a ring written twice (rows i and i + capacity): the last
+        # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
+        self._capacity = capacity
+        self._sent = np.zeros((2 * capacity, INPUT_DIM))
+        self._next = 0  # the row the next input goes to
+        self._pushed = False
 
     @property
     def lead_s(self) -> float:
@@ -124,29 +136,28 @@ class DelayPrediction:
     def set_delay_s(self, delay_s: float) -> bool:
         """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the
         capacity); True if the ticks changed."""
-        ticks = min(max(int(round(delay_s / self.period_s)), 0), self._sent.shape[0])
+        ticks = min(max(int(round(delay_s / self.period_s)), 0), self._capacity)
         changed = ticks != self.delay_ticks
         self.delay_ticks = ticks
         return changed
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        self._pending.append(u_sent)
+        i, cap = self._next, self._capacity
+        self._sent[i] = u_sent
+        self._sent[i + cap] = u_sent
+        self._next = (i + 1) % cap
+        self._pushed = True
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
         period) — the state the new command will meet; ``x`` itself if nothing is pending."""
         n = self.delay_ticks
-        if n == 0 or not self._pending:
+        if n == 0 or not self._pushed:
             return x
-        sent = self._sent[:n]
-        pending = list(self._pending)[-n:]
-        missing = n - len(pending)  # start-up: hover for those
-        sent[:missing] = 0.0
-        for k, u in enumerate(pending):
-            sent[missing + k] = u
         out = np.empty(STATE_DIM)
-        rollout_rk4(x, sent, self.period_s, out)
+        end = self._next + self._capacity  # the newest is the row before
+        rollout_rk4(x, self._sent[end - n:end], self.period_s, out)
         return out
 
     def warm_up(self, x: np.ndarray) -> None:
@@ -185,9 +196,9 @@ class MovingObstacles:
 
 
 # ----------------------------------------------------------------------------- control
-@dataclass(frozen=True, slots=True, eq=False)
-class Solution:
-    """What the controller computed in one tick (logged whether or not it is flown).
+class Solution(NamedTuple):
+    """What the controller computed in one tick (logged whether or not it is flown); a
+    NamedTuple: built every tick, ~3× cheaper than a frozen dataclass.
 
     ``result`` is None for the P controller, whose command is ``p_command``. ``u_flown`` is
     the NMPC input the supervisor judges, ``ok`` whether the solver may be trusted,
@@ -232,6 +243,8 @@ class Control:
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
+            self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
+            self._offsets_dtau = math.nan  # the Δτ _offsets were made with
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -254,16 +267,21 @@ class Control:
         dtau = solver.stage_dtau_s(t_exp_s)
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
-        times = np.empty(solver.spec.horizon_steps + 2)
+        dtau = max(dtau, 1e-9)
+        if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
+            np.multiply(dtau, self._stage_index, out=self._offsets[1:])
+            self._offsets_dtau = dtau
+        times = np.add(t_exp_s + self.delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
-        times[1:] = t_exp_s + self.delay.lead_s + max(dtau, 1e-9) * self._stage_index
         states = traj.state_at(times)
-        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
+        ahead = states[1:]
+        horizon = ahead if offset is None else offset.integrator.shifted(ahead)
         result = solver.solve(t_exp_s, x_solve, horizon)
-        ok = result.ok or (result.status is SolverStatus.MAX_ITERATIONS
-                           and self.accept_max_iterations)
-        return Solution(states[0], x_solve, result, result.u, ok, result.status.value,
-                        ref_horizon=states[1:])
+        status = result.status
+        ok = status is _OK or (status is _MAX_ITERATIONS
+                                           and self.accept_max_iterations)
+        # ``_value_``: the member's value without the enum's descriptor (µs a tick)
+        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None, ahead)
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -272,20 +290,21 @@ class Control:
         ``vz_ref_last_mps`` is the ż reference last sent: without a ż estimate the NMPC's z̈
         is integrated from it.
         """
-        if action is Action.FALLBACK:
+        if action is _FALLBACK:
             return p_control(x, sol.ref_now, self.p_gains)
-        if action is not Action.CONTROL:
+        if action is not _CONTROL:
             return None
         if sol.result is None:
             return sol.p_command
-        u = sol.result.u
+        u = sol.result.u.tolist()  # Python floats: float(u[i]) without numpy's scalars
+        zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
         # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
         vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
-        vz_ref = min(max(vz_reference_mps(vz_base, u[IU_ZACC], self.vz_lead_s), -vz_max), vz_max)
-        return AttitudeCommand(vz_ref, float(u[IU_PHI]), float(u[IU_THETA]), float(u[IU_PSIRATE]))
+        vz_ref = min(max(vz_reference_mps(vz_base, zacc, self.vz_lead_s), -vz_max), vz_max)
+        return AttitudeCommand(vz_ref, phi, theta, rate)
 
 
 # ----------------------------------------------------------------------------- offset-free
@@ -306,7 +325,7 @@ class OffsetFree:
             self.integrator.learning[:] = False
             return
         p = sent.pcmd
-        if sent.decision.action is Action.CONTROL:
+        if sent.decision.action is _CONTROL:
             frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
@@ -339,21 +358,24 @@ class ResponseEstimation:
         self.estimator = AttitudeResponseEstimator(limits.euler_angle_max_rad,
                                                    window_s=a.window_s)
         self._next_fit_s = -math.inf
+        warm_up_kernels()  # not on the first tick aloft
 
     def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
-        est = self.estimator
         nav = inputs.navdata
-        if nav is not None:
-            est.navdata(inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
+        # the sample, then the command sent (a hover restarts the window): one compiled call
+        t_nav, roll_deg, pitch_deg = ((inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
+                                      if nav is not None else (None, 0.0, 0.0))
         if not sent.progressive:
-            est.restart()
+            self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_RESTART)
             return []
-        est.command(inputs.t_s, sent.pcmd.roll_frac, sent.pcmd.pitch_frac)
+        p = sent.pcmd
+        self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_SEND, inputs.t_s, p.roll_frac,
+                            p.pitch_frac)
         if inputs.t_s < self._next_fit_s:
             return []
         self._next_fit_s = inputs.t_s + self.cfg.refit_s
-        e = est.estimate
+        e = self.estimator.estimate
         if not math.isfinite(e.delay_s):
             return []
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
@@ -383,9 +405,8 @@ class ResponseEstimation:
 
 
 # ----------------------------------------------------------------------------- supervision
-@dataclass(frozen=True, slots=True, eq=False)
-class Sent:
-    """What a tick sends and why.
+class Sent(NamedTuple):
+    """What a tick sends and why (a NamedTuple, as :class:`Solution`).
 
     ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
     from the NMPC; zeros for a hover). ``flown`` is a newly sent command after tilt clipping
@@ -435,42 +456,42 @@ class Supervision:
 
     def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
         action = decision.action
-        if action is Action.HOLD and self._last is not None:
+        if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
             return Sent(pcmd, u_sent, True, decision)
-        if cmd is not None and action in (Action.CONTROL, Action.FALLBACK):
+        if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
             pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
-            flown = AttitudeCommand(cmd.vz_ref_mps, roll, pitch, cmd.psirate_radps)
-            if all(map(math.isfinite, (flown.vz_ref_mps, roll, pitch, flown.psirate_radps))):
-                # the NMPC's tilt per its model's gain; P's gains are chosen on the plant
-                asked = self._per_gain(flown) if action is Action.CONTROL else flown
-                pcmd = map_to_pcmd(asked, self.limits)
-                flags = (pcmd.saturated[0] or roll_clipped, pcmd.saturated[1] or pitch_clipped,
-                         *pcmd.saturated[2:])
-                zacc = zacc_mps2 if action is Action.CONTROL and math.isfinite(zacc_mps2) else 0.0
-                u_sent = np.array([zacc, roll, pitch, flown.psirate_radps])
-                self.vz_ref_mps = flown.vz_ref_mps
+            vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
+            if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
+                    and math.isfinite(rate)):
+                # the NMPC's tilt per its model's gain: the tilt to ask for so that the drone
+                # tilts by the command's; P's gains are chosen on the plant
+                k = self.attitude_gain
+                if action is _CONTROL and k != 1.0:
+                    pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
+                else:
+                    pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
+                sat = pcmd.saturated
+                flags = (("1" if sat[0] or roll_clipped else "0")
+                         + ("1" if sat[1] or pitch_clipped else "0")
+                         + ("1" if sat[2] else "0") + ("1" if sat[3] else "0"))
+                zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
+                u_sent = np.array([zacc, roll, pitch, rate])
+                self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
-                return Sent(pcmd, u_sent, True, decision, flown,
-                            "".join("1" if f else "0" for f in flags))
+                # the command as flown: the controller's own record unless a tilt was clipped
+                flown = (cmd if not (roll_clipped or pitch_clipped)
+                         else AttitudeCommand(vz, roll, pitch, rate))
+                return Sent(pcmd, u_sent, True, decision, flown, flags)
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
-        elif action is Action.HOLD:  # nothing sent yet that could be held
+        elif action is _HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
         # hover, land, stop: the drone's own hover — no acceleration, for the delay predictor
         # and the integrators; the last NMPC input is never flown
         self.vz_ref_mps = 0.0
         self._last = None
         return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
-
-
-    def _per_gain(self, cmd: AttitudeCommand) -> AttitudeCommand:
-        """The tilt to ask for so that the drone tilts by ``cmd``'s (its gain divided out)."""
-        k = self.attitude_gain
-        if k == 1.0:
-            return cmd
-        return AttitudeCommand(cmd.vz_ref_mps, cmd.phi_rad / k, cmd.theta_rad / k,
-                               cmd.psirate_radps)
 
 
 # ----------------------------------------------------------------------------- the row

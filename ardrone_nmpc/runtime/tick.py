@@ -28,6 +28,8 @@ from ardrone_nmpc.safety import Action, Supervisor
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "navdata_velocity_world"]
 
+_CONTROL = Action.CONTROL  # bound once: an enum member's lookup costs ~0.1 µs
+
 
 @dataclass(frozen=True, slots=True)
 class TickOutput:
@@ -140,9 +142,9 @@ class Tick:
         x = solution = cmd = None
         if inputs.pose is not None:  # estimated even when stale (the row logs it)
             x = self.estimation.update(inputs.pose, inputs.navdata, self.supervision.zacc_mps2)
-        if decision.action is Action.CONTROL:
+        if decision.action is _CONTROL:
             decision = sup.check_state(x, inputs.navdata)
-        if decision.action is Action.CONTROL:
+        if decision.action is _CONTROL:
             solution = self.control.solve(t_exp_s, x, traj, self.offset)
             if solution.result is not None:  # the NMPC's answer is judged; P's is not
                 decision = sup.check_solution(solution.ok, solution.u_flown)

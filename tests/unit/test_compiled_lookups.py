@@ -11,9 +11,14 @@ import math
 import numpy as np
 import pytest
 
+from ardrone_nmpc.core.numerics import callable_from_python
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
-from ardrone_nmpc.estimation.response_kernels import fold_sample, lag_decays
+from ardrone_nmpc.estimation import response_kernels
 from ardrone_nmpc.reference.trajectories import Square, Waypoints
+
+# the attitude fit's inner kernels, callable from Python (the same source and options)
+lag_decays = callable_from_python(response_kernels.lag_decays)
+fold_sample = callable_from_python(response_kernels.fold_sample)
 
 
 def _numpy_waypoints(t_knots, p, psi, t):

@@ -1,0 +1,47 @@
+"""DelayPrediction's ring of inputs sent against the deque it replaced: the same inputs, in
+the same order, reach the rollout — the same bits — whatever the delay set since."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.runtime.stages import DelayPrediction
+
+PERIOD_S = 0.065
+
+
+def _reference(pending: deque, n: int, capacity: int, x: np.ndarray) -> np.ndarray:
+    """The deque version: the last ``n`` inputs, zeros (hover) for those not sent yet."""
+    sent = np.zeros((capacity, 4))[:n]
+    last = list(pending)[-n:]
+    missing = n - len(last)
+    sent[:missing] = 0.0
+    for k, u in enumerate(last):
+        sent[missing + k] = u
+    out = np.empty(7)
+    rollout_rk4(x, sent, PERIOD_S, out)
+    return out
+
+
+def test_the_ring_feeds_the_rollout_what_the_deque_did():
+    rng = np.random.default_rng(5)
+    delay = DelayPrediction(0.2, PERIOD_S, max_delay_s=0.5)
+    capacity = 8  # ceil(0.5 / 0.065)
+    pending: deque = deque(maxlen=capacity)
+    x = rng.normal(size=7)
+    assert delay.predict(x) is x  # nothing sent yet
+    for k in range(60):
+        u = rng.normal(size=4) * 0.1
+        delay.push(u)
+        pending.append(u)
+        if k % 7 == 3:
+            delay.set_delay_s(float(rng.uniform(0.0, 0.6)))
+        n = delay.delay_ticks
+        got = delay.predict(x)
+        if n == 0:
+            assert got is x
+        else:
+            assert got.tobytes() == _reference(pending, n, capacity, x).tobytes()

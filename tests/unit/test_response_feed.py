@@ -1,0 +1,261 @@
+"""The attitude-response fit's compiled step (``response_kernels.feed``) against the numpy
+code it replaced, bit for bit: the sums, the tracked residual and every estimate (the grid's
+fit, ``response_kernels.fit_grid``, too)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ardrone_nmpc.estimation.attitude_response import (
+    DELAY_RIVAL_SEPARATION_S, DELAY_STEP_S, NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate,
+    AttitudeResponseEstimator, _microseconds,
+)
+from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
+
+E = 0.21
+
+
+class _NumpyFeed(AttitudeResponseEstimator):
+    """The feeding methods and the fit as they were before they were compiled (numpy)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        cap = self._capacity
+        self._t = np.zeros(cap)
+        self._u = np.zeros((cap, 2))
+        self._y = np.zeros((cap, len(self.lags_s), 2))
+        self._count = 0
+        self._decay = np.zeros((len(self.delays_s), len(self.lags_s)))
+        self._x = np.zeros_like(self._sx)
+        self._last_r = None
+        self._last_t = math.nan
+        self._since_best = 0
+
+    def _fit(self):
+        n = self._n
+        if n < 20:
+            return NO_ESTIMATE
+        sxx = self._sxx - self._sx ** 2 / n
+        sxy = self._sxy - self._sx * self._sy / n
+        syy = self._syy - self._sy ** 2 / n
+        ok = sxx > 1e-12
+        if not ok.any() or syy.sum() <= 0.0:
+            return NO_ESTIMATE
+        gain = np.where(ok, sxy / np.where(ok, sxx, 1.0), 0.0)
+        rss_axis = np.where(ok, syy - gain * sxy, syy)
+        rss = rss_axis.sum(axis=2)
+        k, l = np.unravel_index(int(np.argmin(rss)), rss.shape)
+        g = gain[k, l]
+        offset = (self._sy - g * self._sx[k, l]) / n
+        st = self._state
+        st[7], st[8], st[9] = 1.0, k, l
+        st[10:12], st[12:14] = g, offset
+        sigma2 = float(rss[k, l]) / max(2.0 * n - 5.0, 1.0)
+        inflate = self._inflation()
+        delay, delay_var = self._refine(rss[:, l], k, sigma2)
+        gains, gain_std = [], []
+        for a in range(2):
+            if ok[k, l, a]:
+                gains.append(float(g[a]))
+                gain_std.append(inflate * math.sqrt(max(float(rss_axis[k, l, a]), 0.0)
+                                                    / max(n - 2.0, 1.0) / float(sxx[k, l, a])))
+            else:
+                gains.append(math.nan)
+                gain_std.append(math.inf)
+        return AttitudeEstimate(float(delay), inflate * math.sqrt(delay_var),
+                                (gains[0], gains[1]), (gain_std[0], gain_std[1]),
+                                float(self.lags_s[l]),
+                                1.0 - float(rss[k, l]) / float(syy.sum()), float(n),
+                                self._contrast(rss[:, l], k, sigma2 * inflate ** 2))
+
+    def _contrast(self, curve, k, sigma2):
+        away = np.abs(self.delays_s - self.delays_s[k]) >= DELAY_RIVAL_SEPARATION_S - 1e-9
+        if not away.any() or not sigma2 > 0.0:
+            return math.inf
+        return float(curve[away].min() - curve[k]) / sigma2
+
+    def _refine(self, curve, k, sigma2):
+        i = min(max(k, 1), len(curve) - 2)
+        lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
+        if not np.all(np.isfinite((lo, mid, hi))):
+            return float(self.delays_s[k]), math.inf
+        second = lo - 2.0 * mid + hi
+        if not second > 0.0:
+            return float(self.delays_s[k]), math.inf
+        delay = float(self.delays_s[i]) + 0.5 * DELAY_STEP_S * (lo - hi) / second
+        delay = min(max(delay, float(self.delays_s[0])), float(self.delays_s[-1]))
+        return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
+
+    def _inflation(self):
+        rr, rr1, w = self._res
+        if w < 10.0 or rr <= 0.0:
+            return 1.0
+        rho = min(max(rr1 / rr, 0.0), 0.95)
+        return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+    def command(self, t_s, roll_frac, pitch_frac):
+        t_s = _microseconds(t_s)
+        u = np.array([roll_frac, pitch_frac], dtype=float) * self.euler_angle_max_rad
+        n = self._count
+        if n:
+            t0 = self._t[n - 1]
+            if t_s <= t0:
+                return
+            u0, y0 = self._u[n - 1], self._y[n - 1]
+            decay = np.array([math.exp(a) for a in -(t_s - t0) / self.lags_s])
+            y = u0 + (y0 - u0) * decay[:, None]
+        else:
+            y = np.tile(u, (len(self.lags_s), 1))
+        if n == len(self._t):
+            keep = n // 2
+            for a in (self._t, self._u, self._y):
+                a[:keep] = a[n - keep:n]
+            n = keep
+        self._t[n], self._u[n], self._y[n] = t_s, u, y
+        self._count = n + 1
+
+    def restart(self):
+        self._count = 0
+        self._last_r = None
+
+    def navdata(self, t_s, roll_deg, pitch_deg):
+        n = self._count
+        t_s = _microseconds(t_s)
+        y = np.radians([roll_deg, pitch_deg])
+        if (n < 2 or not np.all(np.isfinite(y)) or t_s <= self._last_t
+                or self._t[0] > t_s - self.delays_s[-1]):
+            return False
+        at = t_s - self.delays_s
+        j = np.searchsorted(self._t[:n], at, side="right") - 1
+        arg = -(at - self._t[j])[:, None] / self.lags_s
+        decay = np.array([[math.exp(a) for a in row] for row in arg])
+        forget = (math.exp(-(t_s - self._last_t) / self.window_s)
+                  if math.isfinite(self._last_t) else 1.0)
+        self._last_t = t_s
+        uj = self._u[j][:, None, :]
+        x = uj + (self._y[j] - uj) * decay[:, :, None]
+        if forget != 1.0:
+            for s in (self._sx, self._sxx, self._sxy):
+                s *= forget
+        self._sx += x
+        self._sxx += x * x
+        self._sxy += x * y
+        st = self._state
+        if st[7] != 0.0:  # a best model (S_HAS_BEST), set by _fit
+            k, l = int(st[8]), int(st[9])
+            r = y - (st[10:12] * x[k, l] + st[12:14])
+            self._res *= forget
+            if self._last_r is not None:
+                r0, r1 = float(r[0]), float(r[1])
+                p0, p1 = float(self._last_r[0]), float(self._last_r[1])
+                self._res += (r0 * r0 + r1 * r1, r0 * p0 + r1 * p1, 1.0)
+            self._last_r = r
+        st[0] = st[0] * forget + 1.0
+        self._sy[:] = self._sy * forget + y
+        self._syy[:] = self._syy * forget + y * y
+        self._estimate = None
+        self._since_best += 1
+        if self._since_best >= REFRESH_SAMPLES:
+            self._since_best = 0
+            self._estimate = self._fit()
+        return True
+
+
+def _stream(seed: int):
+    """Commands every 65 ms (some repeated or late), navdata every ~5 ms with a delayed,
+    lagged, noisy response; hovers (restarts), NaN samples and samples seen twice."""
+    rng = np.random.default_rng(seed)
+    t, cmd, state = 0.0, np.zeros(2), np.zeros(2)
+    events = []
+    for k in range(1500):
+        t += 0.065 + rng.normal(0.0, 0.002)
+        if k % 200 == 150:
+            events.append(("restart", t))
+        elif k % 97 == 5:
+            events.append(("cmd", t - 0.1, 0.1, 0.1))  # before the last: ignored
+        else:
+            cmd = np.clip(cmd + rng.normal(0.0, 0.2, 2), -1, 1)
+            events.append(("cmd", t, *cmd))
+        for m in range(13):
+            tn = t + m * 0.005 + rng.uniform(0, 0.001)
+            state += 0.1 * (cmd * E * 1.3 - state)
+            roll, pitch = np.degrees(state + rng.normal(0, 0.003, 2))
+            if rng.random() < 0.01:
+                roll = math.nan
+            events.append(("nav", tn, roll, pitch))
+            if rng.random() < 0.01:
+                events.append(("nav", tn, roll, pitch))  # seen again
+    return events
+
+
+def _same(a: AttitudeResponseEstimator, b: AttitudeResponseEstimator) -> None:
+    for name in ("_sx", "_sxx", "_sxy", "_sy", "_syy", "_res"):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
+    assert a._n == b._n
+
+
+def test_feed_is_the_numpy_step_bit_for_bit():
+    for seed, window_s in ((0, 30.0), (1, math.inf), (2, 5.0)):
+        ref = _NumpyFeed(E, window_s=window_s)
+        got = AttitudeResponseEstimator(E, window_s=window_s)
+        fits = 0
+        for i, ev in enumerate(_stream(seed)):
+            if ev[0] == "cmd":
+                ref.command(*ev[1:])
+                got.command(*ev[1:])
+            elif ev[0] == "restart":
+                ref.restart()
+                got.restart()
+            else:
+                assert ref.navdata(*ev[1:]) == got.navdata(*ev[1:])
+            if i % 50 == 0:
+                _same(ref, got)
+                assert ref.estimate == got.estimate or (
+                    repr(ref.estimate) == repr(got.estimate))  # NaN fields compare unequal
+                fits += math.isfinite(got.estimate.delay_s)
+        _same(ref, got)
+        assert fits > 10
+
+
+def test_one_call_per_tick_is_the_sample_then_the_command():
+    """``feed`` (what the tick calls) is ``navdata`` then ``command`` or ``restart``."""
+    one, two = AttitudeResponseEstimator(E), AttitudeResponseEstimator(E)
+    events = _stream(4)
+    cmds = [e for e in events if e[0] != "nav"]
+    navs = [e for e in events if e[0] == "nav"]
+    for i, c in enumerate(cmds[:800]):
+        nav = navs[i * 13]
+        if c[0] == "restart":
+            r1 = one.feed(nav[1], nav[2], nav[3], CMD_RESTART)
+            r2 = two.navdata(*nav[1:])
+            two.restart()
+        else:
+            r1 = one.feed(nav[1], nav[2], nav[3], CMD_SEND, *c[1:])
+            r2 = two.navdata(*nav[1:])
+            two.command(*c[1:])
+        assert r1 == r2
+        assert repr(one.estimate) == repr(two.estimate)
+    _same(one, two)
+
+
+def test_the_compiled_fit_on_odd_sums():
+    """Axes never moved, NaN and ±0 in the sums: the grid's fit picks what numpy picked."""
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+        st = rng.normal(size=ref._state.size) ** 2
+        st[0] = 30.0 + trial  # the samples' effective number
+        kl2 = ref._sx.size
+        head = 23
+        if trial % 4 == 1:  # an axis no command moved
+            st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
+            st[head + 1:head + kl2:2] = 0.0
+        if trial % 4 == 2:
+            st[head + rng.integers(3 * kl2)] = math.nan
+        if trial % 4 == 3:
+            st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
+        ref._state[:], got._state[:] = st, st
+        assert repr(ref._fit()) == repr(got._fit())
+        assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
