@@ -168,16 +168,18 @@ def _plain_line(cells: list, quotes: int) -> bytes | None:
     if (b"\\" in text or text.count(b",") != _SEPARATORS
             or text.count(b'"') != quotes):
         return None
-    if b"null" in text:  # NaN, ±inf or None: a lockstep row's nav_state_bits, every tick
-        parts = text.split(b",")
-        i = -1
-        for _ in range(parts.count(b"null")):
-            i = parts.index(b"null", i + 1)
-            c = cells[i]
-            parts[i] = b"nan" if c is None else format_number(c).encode("ascii")
-        text = b",".join(parts)
+    # NaN, ±inf or None (a lockstep row's nav_state_bits, every tick): the cell is the
+    # number of ',' before it (no string holds one)
+    at = text.find(b"null")
+    while at >= 0:
+        c = cells[text.count(b",", 0, at)]
+        if c.__class__ is str:  # a string holding "null": _fast_line's careful path
+            return None
+        cell = b"nan" if c is None else format_number(c).encode("ascii")
+        text = text[:at] + cell + text[at + 4:]
+        at = text.find(b"null", at + len(cell))
     # what _fast_line leaves to the careful path: a string cell holding these
-    if b"null" in text or b"true" in text or b"false" in text or b"[" in text or b"{" in text:
+    if b"true" in text or b"false" in text or b"[" in text or b"{" in text:
         return None
     return text.replace(b'"', b"") + b"\n"
 
