@@ -38,8 +38,10 @@ Speed: a row is formatted by one ``orjson.dumps`` call (its floats are printed b
 shortest round-trip algorithm): ≈ 2 µs per row, where CPython's own float formatting costs
 ≈ 1 µs per number on a 2 GHz machine and a row holds up to 35 numbers, written every tick
 also in 100×-real-time simulation. Its text can differ from ``repr`` (``5.0``, ``1e-7``) but
-reads back to the same double; rows with NaN, ±inf or bools take the pure-Python path
-(:func:`format_number`); numpy scalars are widened to Python floats first.
+reads back to the same double. A row of plain cells (float, np.float64 — printed by orjson
+as the float it is —, int, None, str) takes no Python call per cell; its NaN and ±inf cells
+are printed as :func:`format_number` prints them. Other numpy scalars are widened to Python
+floats first; rows with bools take the pure-Python path (:func:`format_number`).
 """
 
 from __future__ import annotations
