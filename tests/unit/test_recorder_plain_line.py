@@ -1,4 +1,4 @@
-"""The recorder's one-call row printer (``rundir._plain_line``) against the per-cell way it
+"""The recorder's one-call row printer (``row_text._plain_line``) against the per-cell way it
 stands in for (``RunRecorder._line``: the cells into orjson one by one, or the careful path):
 the same bytes for every row it takes, and every row it does not take is left to the other."""
 
