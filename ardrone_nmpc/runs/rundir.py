@@ -497,6 +497,8 @@ def _float_column(path: Path, name: str, cells: list[str]) -> np.ndarray:
         return np.fromiter(map(float, cells), dtype=np.float64, count=n)
     except ValueError:
         pass
+    if cells.count("") == n:  # a column no row filled (tick_late_ms in simulation, target_*)
+        return np.full(n, math.nan)
     out = np.empty(n, dtype=np.float64)
     for i, cell in enumerate(cells):
         if cell == "":
