@@ -133,3 +133,69 @@ def _print_non_finite(cells: list) -> int:
             continue
         added += 2
     return added
+
+
+# ----------------------------------------------------------------------------- kept rows
+_STRING_SLOTS = frozenset(_INDEX[c] for c in STRING_COLUMNS)
+
+
+def _cells_of_line(line: bytes) -> list:
+    """The cells of a written line as read back: numbers as float ("" → NaN), strings as text."""
+    return [t if i in _STRING_SLOTS else (math.nan if t == "" else float(t))
+            for i, t in enumerate(line[:-1].decode("utf-8").split(","))]
+
+
+def _floats(cells: tuple, n: int) -> np.ndarray:
+    """A numeric column of kept cells (float, np.float64, int, None, "" for an empty cell) as
+    read back: float64, every NaN the one ``nan`` reads as."""
+    if cells.count("") == n:  # a column no row filled
+        return np.full(n, math.nan)
+    try:
+        arr = np.array(cells, dtype=np.float64)  # None is NaN; ints exact as their text reads
+    except (TypeError, ValueError):  # empty cells among the numbers
+        arr = np.fromiter((math.nan if c is None or c.__class__ is str else c for c in cells),
+                          dtype=np.float64, count=n)
+    nan = np.isnan(arr)
+    if nan.any():
+        arr[nan] = math.nan  # a NaN's sign and payload are not written
+    return arr
+
+
+class KeptRows:
+    """The cells of the rows a recorder wrote, so that the run's summary needs not parse
+    ``log.csv`` back: :meth:`columns` gives what :func:`~ardrone_nmpc.runs.rundir.read_run`
+    parses from the file, bit for bit (every number's text reads back to the double it was
+    printed from). Only the first ``limit`` rows are kept: a longer run is read back from its
+    file, and its memory stays bounded."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._rows: list[list] | None = []
+
+    def add(self, cells: list | None, line: bytes) -> None:
+        """One written row: the cells :func:`_plain_line` printed as ``line``, or None for a
+        line printed cell by cell (its cells are then read back from the text)."""
+        rows = self._rows
+        if rows is None:
+            return
+        if len(rows) >= self.limit:
+            self._rows = None  # too long to keep: read back from the file
+            return
+        rows.append(cells if cells is not None else _cells_of_line(line))
+
+    def columns(self) -> dict[str, np.ndarray] | None:
+        """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
+        of str for :data:`STRING_COLUMNS`), or None when the rows were not all kept."""
+        rows = self._rows
+        if rows is None:
+            return None
+        n = len(rows)
+        out: dict[str, np.ndarray] = {}
+        for name, cells in zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)):
+            if name in STRING_COLUMNS:
+                arr = np.empty(n, dtype=object)
+                arr[:] = list(cells)
+            else:
+                arr = _floats(cells, n)
+            out[name] = arr
+        return out

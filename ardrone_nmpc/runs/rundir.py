@@ -67,8 +67,8 @@ from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.trajectories import input_files
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
-from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, _fast_line, _plain_line,
-                                        format_number)
+from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, KeptRows, _fast_line,
+                                        _plain_line, format_number)
 
 __all__ = [
     "LogError",
@@ -172,6 +172,11 @@ class RunRecorder:
         #: ``t_s`` of the last row written (NaN before the first).
         self.last_t_s = math.nan
         self._plans: dict[tuple, tuple] = {}
+        self._kept = KeptRows(self.KEEP_ROWS)
+
+    #: How many rows :meth:`kept_columns` keeps (~1.5 kB each: ~20 min at 16 Hz); a longer run
+    #: is summarised from its file.
+    KEEP_ROWS = 20_000
 
     # -- creation ---------------------------------------------------------------------------
     @classmethod
@@ -251,12 +256,19 @@ class RunRecorder:
         plan = self._plans.get(keys)
         if plan is None:
             plan = self._plan(keys)  # validates the keys; raises for an unknown one
-        line = _plain_line(list(map(row.get, LOG_COLUMNS, _EMPTY_CELLS)), plan[4])
+        cells = list(map(row.get, LOG_COLUMNS, _EMPTY_CELLS))
+        line = _plain_line(cells, plan[4])
         if line is None:
-            line = self._line(row, plan)
+            line, cells = self._line(row, plan), None
         _write_all(self._log, line)
         self.rows_written += 1
         self.last_t_s = row.get("t_s", self.last_t_s)
+        self._kept.add(cells, line)
+
+    def kept_columns(self) -> dict[str, np.ndarray] | None:
+        """The columns of the rows written, as :func:`read_run` would parse them from
+        ``log.csv`` (None for a run longer than :attr:`KEEP_ROWS` rows: read it back)."""
+        return self._kept.columns()
 
     def _line(self, row: Mapping[str, Any], plan: tuple) -> bytes:
         """A row :func:`_plain_line` does not take (numpy scalars of other types, bools, a
@@ -600,8 +612,9 @@ def _on_experiment_clock(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def read_run(run_dir: str | Path) -> RunData:
-    """Read a run directory written by :class:`RunRecorder`.
+def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None) -> RunData:
+    """Read a run directory written by :class:`RunRecorder`; ``columns`` (its
+    :meth:`~RunRecorder.kept_columns`) stand for ``log.csv``, which is then not parsed again.
 
     Raises
     ------
@@ -631,7 +644,8 @@ def read_run(run_dir: str | Path) -> RunData:
     if missing is not None and not Path(missing).is_file():  # an older run: no copy
         warnings.append(f"{cfg_path}: reference.path_file {missing} is gone: path metrics "
                         "and the reference path cannot be shown")
-    columns = _read_log(path / LOG_FILE, warnings)
+    if columns is None:
+        columns = _read_log(path / LOG_FILE, warnings)
     events = _read_events(path / EVENTS_FILE, warnings)
     return RunData(path=path, config=config, columns=columns, events=events, seed=seed,
                    version=version, warnings=warnings)
