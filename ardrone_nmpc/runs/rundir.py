@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from ardrone_nmpc import __version__
-from ardrone_nmpc.config.io import dump_config, load_config
+from ardrone_nmpc.config.io import dump_config, load_run_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.errors import UserError
@@ -633,7 +633,7 @@ def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = Non
     cfg_path = path / CONFIG_FILE
     cfg_text = _read_text(cfg_path)
     try:
-        config = load_config(cfg_path, allow_retired=True)
+        config = load_run_config(cfg_path)
     except ConfigError as exc:
         detail = "; ".join(exc.messages)
         prefix = "" if detail.startswith(str(cfg_path)) else f"{cfg_path}: "
