@@ -101,7 +101,7 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
         wall_s = time.perf_counter() - wall0
-    run, rows = write_run_summary(recorder.path)
+    run, rows = write_run_summary(recorder.path, columns=recorder.kept_columns())
     return Recording(recorder.path, result, "", wall_s, run, rows)
 
 

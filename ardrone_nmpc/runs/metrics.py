@@ -132,13 +132,15 @@ def step_metrics(t_s: np.ndarray, y: np.ndarray, *, y0: float, y_final: float, t
 
 
 def path_deviation(positions_m: np.ndarray, polyline_m: np.ndarray,
-                   chunk_elements: int = 1_000_000) -> tuple[float, float]:
+                   chunk_elements: int = 32_768) -> tuple[float, float]:
     """Mean and max distance (m) of positions from a polyline.
 
     Each position's distance is to the nearest point of the nearest *segment* (a point beyond a
     segment's end measures to the end point); a one-point polyline measures to that point.
     Rows with a non-finite coordinate are ignored. Vectorised over points × segments, in chunks
-    of about ``chunk_elements`` pairs to bound memory.
+    of about ``chunk_elements`` pairs: small enough that a chunk's temporaries stay in the
+    CPU cache (~1.8× faster than chunks of 10⁶ pairs on a 60 s square) — every pair's distance
+    is computed alike in any chunk, so the result does not depend on it.
 
     Parameters
     ----------

@@ -38,8 +38,10 @@ Speed: a row is formatted by one ``orjson.dumps`` call (its floats are printed b
 shortest round-trip algorithm): ≈ 2 µs per row, where CPython's own float formatting costs
 ≈ 1 µs per number on a 2 GHz machine and a row holds up to 35 numbers, written every tick
 also in 100×-real-time simulation. Its text can differ from ``repr`` (``5.0``, ``1e-7``) but
-reads back to the same double; rows with NaN, ±inf or bools take the pure-Python path
-(:func:`format_number`); numpy scalars are widened to Python floats first.
+reads back to the same double. A row of plain cells (float, np.float64 — printed by orjson
+as the float it is —, int, None, str) takes no Python call per cell; its NaN and ±inf cells
+are printed as :func:`format_number` prints them. Other numpy scalars are widened to Python
+floats first; rows with bools take the pure-Python path (:func:`format_number`).
 """
 
 from __future__ import annotations
@@ -50,7 +52,6 @@ import json
 import math
 import operator
 import os
-import re
 import shutil
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -58,15 +59,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import orjson
 
 from ardrone_nmpc import __version__
-from ardrone_nmpc.config.io import dump_config, load_config
+from ardrone_nmpc.config.io import dump_config, load_run_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.core.atomic import write_text_atomic
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.trajectories import input_files
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, KeptRows, _fast_line,
+                                        _plain_line, format_number)
 
 __all__ = [
     "LogError",
@@ -88,70 +90,6 @@ INPUTS_DIR = "inputs"
 
 _COLUMN_SET = frozenset(LOG_COLUMNS)
 _INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
-_FORBIDDEN = re.compile(r'[,"\r\n]')
-
-
-def format_number(value: Any) -> str:
-    """The text of a numeric cell: ``repr(float(value))`` without a trailing ``.0``.
-
-    The shortest decimal that reads back (``float()``) to the same double; ints beyond 2**53
-    are rounded to a double first. Raises TypeError for str/bytes (a number is expected).
-    """
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"expected a number, got {type(value).__name__}")
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
-
-
-# ----------------------------------------------------------------------------- fast rows
-def _as_float(value: Any) -> float:
-    """orjson's fallback for numpy scalars: widen exactly to a Python float (a float32 is
-    written as the double it equals, not as its own shortest text)."""
-    if isinstance(value, (np.floating, np.integer)):
-        return float(value)
-    raise TypeError(f"{type(value).__name__} is not a number")
-
-
-def _fast_line(cells: list, quotes: int) -> bytes | None:
-    """The CSV line of ``cells`` (numbers and str, "" for an empty cell) via one orjson call.
-
-    orjson prints floats as the shortest text that reads back to the same double (Ryu), so
-    rows replay bit for bit. ``quotes``: how many ``"`` the string and empty cells account
-    for — any other count means a string sat in a numeric column. NaN, ±inf and None, which
-    orjson writes as ``null``, are printed as text first (:func:`_print_non_finite`). None
-    when a cell needs :meth:`RunRecorder._careful_line` (orjson writes bools as
-    ``true``/``false``; lists and dicts are refused there).
-    """
-    try:
-        text = orjson.dumps(cells, default=_as_float)[1:-1]
-        if b"null" in text:  # NaN, ±inf or None (a lockstep row's nav_state_bits, every tick)
-            quotes += _print_non_finite(cells)
-            text = orjson.dumps(cells, default=_as_float)[1:-1]
-    except TypeError:
-        return None
-    # plain `in` tests: ~5× cheaper than one regex with alternatives on a 600-byte row
-    if (text.count(b'"') != quotes or b"null" in text or b"true" in text or b"false" in text
-            or b"[" in text or b"{" in text):
-        return None
-    return text.replace(b'"', b"") + b"\n"
-
-
-def _print_non_finite(cells: list) -> int:
-    """Replace each NaN, ±inf and None cell of ``cells`` by its text as
-    :meth:`RunRecorder._careful_line` prints it (``nan``, ``inf``, ``-inf``; None is NaN);
-    returns the ``"`` those strings add."""
-    added = 0
-    for i, c in enumerate(cells):
-        if c is None:
-            cells[i] = "nan"
-        elif isinstance(c, (float, np.floating)) and not math.isfinite(c):
-            cells[i] = format_number(c)
-        else:
-            continue
-        added += 2
-    return added
-
-
 class LogError(UserError, ValueError):
     """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line;
     exit code 1)."""
@@ -234,6 +172,11 @@ class RunRecorder:
         #: ``t_s`` of the last row written (NaN before the first).
         self.last_t_s = math.nan
         self._plans: dict[tuple, tuple] = {}
+        self._kept = KeptRows(self.KEEP_ROWS)
+
+    #: How many rows :meth:`kept_columns` keeps (~1.5 kB each: ~20 min at 16 Hz); a longer run
+    #: is summarised from its file.
+    KEEP_ROWS = 20_000
 
     # -- creation ---------------------------------------------------------------------------
     @classmethod
@@ -305,14 +248,31 @@ class RunRecorder:
         an unknown key, a value of the wrong kind, or a string holding ``,``, ``"`` or a line
         break; nothing is written then.
 
-        Cost ≈ 10 µs per row on a 2 GHz VM (≈ 3 µs of it the ``write`` system call): the
-        column layout is cached per key sequence (callers build their rows the same way every
-        tick) and the cells are printed by one orjson call.
+        Cost ≈ 5 µs per row on a 2 GHz VM (≈ 3 µs of it the ``write`` system call): the keys
+        are checked once per key sequence (callers build their rows the same way every
+        tick) and a row of plain cells is printed by one orjson call (:func:`_plain_line`).
         """
         keys = tuple(row)
         plan = self._plans.get(keys)
         if plan is None:
             plan = self._plan(keys)  # validates the keys; raises for an unknown one
+        cells = list(map(row.get, LOG_COLUMNS, _EMPTY_CELLS))
+        line = _plain_line(cells, plan[4])
+        if line is None:
+            line, cells = self._line(row, plan), None
+        _write_all(self._log, line)
+        self.rows_written += 1
+        self.last_t_s = row.get("t_s", self.last_t_s)
+        self._kept.add(cells, line)
+
+    def kept_columns(self) -> dict[str, np.ndarray] | None:
+        """The columns of the rows written, as :func:`read_run` would parse them from
+        ``log.csv`` (None for a run longer than :attr:`KEEP_ROWS` rows: read it back)."""
+        return self._kept.columns()
+
+    def _line(self, row: Mapping[str, Any], plan: tuple) -> bytes:
+        """A row :func:`_plain_line` does not take (numpy scalars of other types, bools, a
+        value to refuse): the cells one by one into orjson, or :meth:`_careful_line`."""
         template, slots, get_values, string_slots, quotes = plan
         cells = template.copy()
         for slot, value in zip(slots, get_values(row)):
@@ -323,9 +283,7 @@ class RunRecorder:
             line = _fast_line(cells, quotes)
         if line is None:
             line = self._careful_line(row)  # NaN/inf/bool cells, or a value to refuse
-        _write_all(self._log, line)
-        self.rows_written += 1
-        self.last_t_s = row.get("t_s", self.last_t_s)
+        return line
 
     def _plan(self, keys: tuple) -> tuple:
         """Cell template, slots and getter for rows with these keys (cached per key order)."""
@@ -551,6 +509,8 @@ def _float_column(path: Path, name: str, cells: list[str]) -> np.ndarray:
         return np.fromiter(map(float, cells), dtype=np.float64, count=n)
     except ValueError:
         pass
+    if cells.count("") == n:  # a column no row filled (tick_late_ms in simulation, target_*)
+        return np.full(n, math.nan)
     out = np.empty(n, dtype=np.float64)
     for i, cell in enumerate(cells):
         if cell == "":
@@ -652,8 +612,9 @@ def _on_experiment_clock(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def read_run(run_dir: str | Path) -> RunData:
-    """Read a run directory written by :class:`RunRecorder`.
+def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None) -> RunData:
+    """Read a run directory written by :class:`RunRecorder`; ``columns`` (its
+    :meth:`~RunRecorder.kept_columns`) stand for ``log.csv``, which is then not parsed again.
 
     Raises
     ------
@@ -672,7 +633,7 @@ def read_run(run_dir: str | Path) -> RunData:
     cfg_path = path / CONFIG_FILE
     cfg_text = _read_text(cfg_path)
     try:
-        config = load_config(cfg_path, allow_retired=True)
+        config = load_run_config(cfg_path)
     except ConfigError as exc:
         detail = "; ".join(exc.messages)
         prefix = "" if detail.startswith(str(cfg_path)) else f"{cfg_path}: "
@@ -683,7 +644,8 @@ def read_run(run_dir: str | Path) -> RunData:
     if missing is not None and not Path(missing).is_file():  # an older run: no copy
         warnings.append(f"{cfg_path}: reference.path_file {missing} is gone: path metrics "
                         "and the reference path cannot be shown")
-    columns = _read_log(path / LOG_FILE, warnings)
+    if columns is None:
+        columns = _read_log(path / LOG_FILE, warnings)
     events = _read_events(path / EVENTS_FILE, warnings)
     return RunData(path=path, config=config, columns=columns, events=events, seed=seed,
                    version=version, warnings=warnings)

@@ -49,6 +49,7 @@ What :func:`summarise` measures, and over which rows
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,6 +119,8 @@ class _Run:
 def _strings(arr: np.ndarray | None, n: int) -> np.ndarray:
     if arr is None:
         return np.full(n, "", dtype=object)
+    if isinstance(arr, np.ndarray) and arr.dtype == object and set(map(type, arr)) <= {str}:
+        return arr.copy()  # the string column of read_run / MemoryRecorder: text already
     return np.array(["" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)
                      for v in arr], dtype=object)
 
@@ -235,9 +238,13 @@ def _input_rows(r: _Run) -> list[SummaryRow]:
         rows += [SummaryRow(name, "peak_abs", float(stats["peak_abs"][i]), unit),
                  SummaryRow(name, "saturated_fraction", float(stats["saturated_fraction"][i]),
                             "fraction")]
-    flags = [s for s in _strings(r.cols.get("cmd_saturated"), r.n)[r.window] if len(s) == 4]
+    # the few distinct flag texts, counted once (not four passes over the ticks)
+    flags = Counter(s for s in _strings(r.cols.get("cmd_saturated"), r.n)[r.window]
+                    if len(s) == 4)
+    n_flags = sum(flags.values())
     for i, name in enumerate(_PCMD):
-        frac = sum(s[i] == "1" for s in flags) / len(flags) if flags else math.nan
+        set_ticks = sum(count for s, count in flags.items() if s[i] == "1")
+        frac = set_ticks / n_flags if n_flags else math.nan
         rows.append(SummaryRow(name, "saturated_fraction", frac, "fraction"))
     return rows
 
@@ -267,12 +274,15 @@ def _solver_rows(r: _Run) -> list[SummaryRow]:
 def _loop_rows(r: _Run) -> list[SummaryRow]:
     """Fallbacks in the window, the supervisor's ticks per action, overruns, lateness and
     compute time."""
-    modes = [Mode.parse(m) for m in r.mode]
-    fallbacks = int(np.sum(r.window & np.array([m.is_fallback for m in modes], dtype=bool)))
+    # each distinct label parsed once, then looked up per tick
+    counts = Counter(r.mode)
+    modes = {label: Mode.parse(label) for label in counts}
+    fallback = {label: mode.is_fallback for label, mode in modes.items()}
+    fallbacks = int(np.sum(r.window & np.array([fallback[m] for m in r.mode], dtype=bool)))
     rows = [SummaryRow("loop", "fallbacks", float(fallbacks), "count")]
     # the supervisor's verdicts (safety.py): ticks per action, over the whole run
     for action in SUPERVISOR_ACTIONS:
-        ticks = sum(1 for m in modes if m.action == action)
+        ticks = sum(count for label, count in counts.items() if modes[label].action == action)
         rows.append(SummaryRow("supervisor", f"{action}_ticks", float(ticks), "count"))
     pct = percentiles(r.column("tick_late_ms"))
     if pct is not None:
@@ -312,10 +322,13 @@ def summarise(run: RunData) -> list[SummaryRow]:
                                 _solver_rows, _loop_rows, _link_rows) for row in section(r)]
 
 
-def write_run_summary(run_dir: str | Path) -> tuple[RunData, list[SummaryRow]]:
+def write_run_summary(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None
+                      ) -> tuple[RunData, list[SummaryRow]]:
     """Read the run at ``run_dir`` back, summarise it and write its ``summary.csv`` (the
-    last file of every run directory); returns the run and its rows."""
-    run = read_run(run_dir)
+    last file of every run directory); returns the run and its rows. ``columns``: the
+    recorder's :meth:`~ardrone_nmpc.runs.rundir.RunRecorder.kept_columns`, read instead of
+    parsing ``log.csv`` again (:func:`~ardrone_nmpc.runs.rundir.read_run`)."""
+    run = read_run(run_dir, columns=columns)
     rows = summarise(run)
     write_summary(run_dir, rows)
     return run, rows

@@ -191,6 +191,8 @@ def test_path_deviation_chunks_agree(rng):
     whole = path_deviation(pts, poly, chunk_elements=10**9)
     chunked = path_deviation(pts, poly, chunk_elements=1000)
     assert chunked == whole
+    assert path_deviation(pts, poly, chunk_elements=1) == whole  # one point a chunk
+    assert path_deviation(pts, poly) == whole  # the default's chunks
     # brute force for a few points
     a, b = poly[:-1], poly[1:]
     for q in pts[:5]:

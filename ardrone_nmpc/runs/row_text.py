@@ -1,0 +1,201 @@
+"""The text of a ``log.csv`` row: the cells of one tick printed as the run directory keeps them
+(:mod:`ardrone_nmpc.runs.rundir`, whose module docstring gives the format and the speed).
+
+Numbers are the shortest decimal that reads back to the same double (Ryu, through orjson),
+NaN and ±inf ``nan``/``inf``/``-inf``, string cells as they are. :func:`_plain_line` prints a
+row of plain cells in one orjson call; :func:`_fast_line` takes the cells one by one into
+orjson (numpy scalars widened by :func:`_as_float`); the recorder's careful path
+(:func:`format_number` per cell) takes the rest and refuses what cannot be written.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+import re
+from typing import Any
+
+import numpy as np
+import orjson
+
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+
+__all__ = ["format_number"]
+
+_INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
+_FORBIDDEN = re.compile(r'[,"\r\n]')
+
+
+def format_number(value: Any) -> str:
+    """The text of a numeric cell: ``repr(float(value))`` without a trailing ``.0``.
+
+    The shortest decimal that reads back (``float()``) to the same double; ints beyond 2**53
+    are rounded to a double first. Raises TypeError for str/bytes (a number is expected).
+    """
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"expected a number, got {type(value).__name__}")
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+# ----------------------------------------------------------------------------- fast rows
+def _as_float(value: Any) -> float:
+    """orjson's fallback for numpy scalars: widen exactly to a Python float (a float32 is
+    written as the double it equals, not as its own shortest text)."""
+    if isinstance(value, (np.floating, np.integer)):
+        return float(value)
+    raise TypeError(f"{type(value).__name__} is not a number")
+
+
+def _fast_line(cells: list, quotes: int) -> bytes | None:
+    """The CSV line of ``cells`` (numbers and str, "" for an empty cell) via one orjson call.
+
+    orjson prints floats as the shortest text that reads back to the same double (Ryu), so
+    rows replay bit for bit. ``quotes``: how many ``"`` the string and empty cells account
+    for — any other count means a string sat in a numeric column. NaN, ±inf and None, which
+    orjson writes as ``null``, are printed as text first (:func:`_print_non_finite`). None
+    when a cell needs :meth:`RunRecorder._careful_line` (orjson writes bools as
+    ``true``/``false``; lists and dicts are refused there).
+    """
+    try:
+        text = orjson.dumps(cells, default=_as_float)[1:-1]
+        if b"null" in text:  # NaN, ±inf or None (a lockstep row's nav_state_bits, every tick)
+            quotes += _print_non_finite(cells)
+            text = orjson.dumps(cells, default=_as_float)[1:-1]
+    except TypeError:
+        return None
+    # plain `in` tests: ~5× cheaper than one regex with alternatives on a 600-byte row
+    if (text.count(b'"') != quotes or b"null" in text or b"true" in text or b"false" in text
+            or b"[" in text or b"{" in text):
+        return None
+    return text.replace(b'"', b"") + b"\n"
+
+
+_EMPTY_CELLS = ("",) * len(LOG_COLUMNS)  # a missing key: an empty cell
+_STRING_CELLS = operator.itemgetter(*(_INDEX[c] for c in LOG_COLUMNS if c in STRING_COLUMNS))
+#: The cell types :func:`_plain_line` prints: orjson writes an np.float64 as the float it is
+#: (the same Ryu text); other numpy scalars are widened first (:func:`_as_float`), bools and
+#: the rest refused — those rows take :func:`_fast_line` or the careful path.
+_PLAIN_TYPES = frozenset({float, int, str, np.float64, type(None)})
+_STR_ONLY = frozenset({str})
+_SEPARATORS = len(LOG_COLUMNS) - 1
+
+
+def _plain_line(cells: list, quotes: int) -> bytes | None:
+    """The line :func:`_fast_line` prints for ``cells`` (one per :data:`LOG_COLUMNS` name,
+    ``""`` for a missing key), in one orjson call without a Python call per cell; None for
+    any row that is not plain (a cell of another type, a string column holding something
+    else, a string orjson would escape or that holds a ``,``, or that :func:`_fast_line`
+    would send to the careful path) — the caller then takes the per-cell way.
+
+    NaN, ±inf and None come out of orjson as ``null`` and are printed in place as
+    :func:`_print_non_finite` prints them (``nan``, ``inf``, ``-inf``).
+    """
+    if not (set(map(type, cells)) <= _PLAIN_TYPES
+            and set(map(type, _STRING_CELLS(cells))) <= _STR_ONLY):
+        return None
+    try:
+        text = orjson.dumps(cells, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
+    except TypeError:  # an int beyond 64 bits
+        return None
+    # no escape (a '"', '\\' or control character in a string), no ',' inside a string, and
+    # strings only where the string and empty cells are
+    if (b"\\" in text or text.count(b",") != _SEPARATORS
+            or text.count(b'"') != quotes):
+        return None
+    # NaN, ±inf or None (a lockstep row's nav_state_bits, every tick): the cell is the
+    # number of ',' before it (no string holds one)
+    at = text.find(b"null")
+    while at >= 0:
+        c = cells[text.count(b",", 0, at)]
+        if c.__class__ is str:  # a string holding "null": _fast_line's careful path
+            return None
+        cell = b"nan" if c is None else format_number(c).encode("ascii")
+        text = text[:at] + cell + text[at + 4:]
+        at = text.find(b"null", at + len(cell))
+    # what _fast_line leaves to the careful path: a string cell holding these
+    if b"true" in text or b"false" in text or b"[" in text or b"{" in text:
+        return None
+    return text.replace(b'"', b"") + b"\n"
+
+
+def _print_non_finite(cells: list) -> int:
+    """Replace each NaN, ±inf and None cell of ``cells`` by its text as
+    :meth:`RunRecorder._careful_line` prints it (``nan``, ``inf``, ``-inf``; None is NaN);
+    returns the ``"`` those strings add."""
+    added = 0
+    for i, c in enumerate(cells):
+        if c is None:
+            cells[i] = "nan"
+        elif isinstance(c, (float, np.floating)) and not math.isfinite(c):
+            cells[i] = format_number(c)
+        else:
+            continue
+        added += 2
+    return added
+
+
+# ----------------------------------------------------------------------------- kept rows
+_STRING_SLOTS = frozenset(_INDEX[c] for c in STRING_COLUMNS)
+
+
+def _cells_of_line(line: bytes) -> list:
+    """The cells of a written line as read back: numbers as float ("" → NaN), strings as text."""
+    return [t if i in _STRING_SLOTS else (math.nan if t == "" else float(t))
+            for i, t in enumerate(line[:-1].decode("utf-8").split(","))]
+
+
+def _floats(cells: tuple, n: int) -> np.ndarray:
+    """A numeric column of kept cells (float, np.float64, int, None, "" for an empty cell) as
+    read back: float64, every NaN the one ``nan`` reads as."""
+    if set(map(type, cells)) <= _STR_ONLY:  # a column no row filled: "" all through (no
+        return np.full(n, math.nan)           # == per cell: numpy's scalar compare is slow)
+    try:
+        arr = np.array(cells, dtype=np.float64)  # None is NaN; ints exact as their text reads
+    except (TypeError, ValueError):  # empty cells among the numbers
+        arr = np.fromiter((math.nan if c is None or c.__class__ is str else c for c in cells),
+                          dtype=np.float64, count=n)
+    nan = np.isnan(arr)
+    if nan.any():
+        arr[nan] = math.nan  # a NaN's sign and payload are not written
+    return arr
+
+
+class KeptRows:
+    """The cells of the rows a recorder wrote, so that the run's summary needs not parse
+    ``log.csv`` back: :meth:`columns` gives what :func:`~ardrone_nmpc.runs.rundir.read_run`
+    parses from the file, bit for bit (every number's text reads back to the double it was
+    printed from). Only the first ``limit`` rows are kept: a longer run is read back from its
+    file, and its memory stays bounded."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._rows: list[list] | None = []
+
+    def add(self, cells: list | None, line: bytes) -> None:
+        """One written row: the cells :func:`_plain_line` printed as ``line``, or None for a
+        line printed cell by cell (its cells are then read back from the text)."""
+        rows = self._rows
+        if rows is None:
+            return
+        if len(rows) >= self.limit:
+            self._rows = None  # too long to keep: read back from the file
+            return
+        rows.append(cells if cells is not None else _cells_of_line(line))
+
+    def columns(self) -> dict[str, np.ndarray] | None:
+        """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
+        of str for :data:`STRING_COLUMNS`), or None when the rows were not all kept."""
+        rows = self._rows
+        if rows is None:
+            return None
+        n = len(rows)
+        out: dict[str, np.ndarray] = {}
+        for name, cells in zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)):
+            if name in STRING_COLUMNS:
+                arr = np.empty(n, dtype=object)
+                arr[:] = list(cells)
+            else:
+                arr = _floats(cells, n)
+            out[name] = arr
+        return out
