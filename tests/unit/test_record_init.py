@@ -35,7 +35,8 @@ CASES = {
 def _twin(cls):
     """``cls`` as ``dataclasses`` alone builds it (its generated ``__init__``)."""
     params = cls.__dataclass_params__
-    specs = [(f.name, f.type, dataclasses.field(default=f.default)) for f in dataclasses.fields(cls)]
+    specs = [(f.name, f.type, dataclasses.field(default=f.default))
+             for f in dataclasses.fields(cls)]
     return dataclasses.make_dataclass(cls.__name__, specs, frozen=True, slots=True,
                                       eq=params.eq)
 
