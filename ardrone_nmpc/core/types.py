@@ -6,7 +6,7 @@ State ``x = [x, ẋ, y, ẏ, z, ż, ψ]`` (m, m/s, m, m/s, m, m/s, rad) and inpu
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
 
 # State indices (thesis x1..x7, zero-based).
 IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI = range(7)
@@ -21,6 +21,34 @@ INPUT_NAMES = ("u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps")
 GRAVITY_MPS2 = 9.81
 
 
+def _slot_init(cls):
+    """``cls`` (a frozen slotted dataclass) with an ``__init__`` that sets each slot through its
+    descriptor: the dataclass's looks up ``object.__setattr__`` per field, 3× the cost, and
+    these records are built several times a lockstep tick (issue 26). The same parameters and
+    defaults; equality, hash, repr, ``dataclasses.replace`` and the frozen ``__setattr__``
+    are the dataclass's."""
+    names, params, ns = [], [], {}
+    for f in fields(cls):
+        if not f.init or f.default_factory is not MISSING or hasattr(cls, "__post_init__"):
+            raise TypeError(f"{cls.__name__}.{f.name}: needs the dataclass's own __init__")
+        names.append(f.name)
+        ns[f"_set_{f.name}"] = cls.__dict__[f.name].__set__  # the slot's member descriptor
+        if f.default is MISSING:
+            params.append(f.name)
+        else:
+            ns[f"_default_{f.name}"] = f.default
+            params.append(f"{f.name}=_default_{f.name}")
+    body = "".join(f"    _set_{n}(self, {n})\n" for n in names)
+    exec(f"def __init__(self, {', '.join(params)}):\n{body}", ns)  # noqa: S102 - our names
+    init = ns["__init__"]
+    init.__qualname__ = f"{cls.__qualname__}.__init__"
+    init.__module__ = cls.__module__
+    init.__annotations__ = {f.name: f.type for f in fields(cls)} | {"return": None}
+    cls.__init__ = init
+    return cls
+
+
+@_slot_init
 @dataclass(frozen=True, slots=True)
 class AttitudeCommand:
     """What a high-level controller asks of the drone's inner loops for one tick.
@@ -65,6 +93,7 @@ class FlightMode(_enum.Enum):
         return self in (FlightMode.TAKING_OFF, FlightMode.FLYING, FlightMode.LANDING)
 
 
+@_slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class PlantTruth:
     """The simulated drone's true state (world frame, docs/design.md §4).
@@ -95,6 +124,7 @@ class PlantTruth:
     battery_pct: float
 
 
+@_slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class MocapPose:
     """One motion-capture pose of the drone (docs/mocap-stream.md), converted to SI.
@@ -114,6 +144,7 @@ class MocapPose:
     psi_rad: float
 
 
+@_slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class NavdataSample:
     """One navdata demo sample (docs/protocol.md §4.4) in the drone's own sign conventions, SI-ish units.
@@ -155,6 +186,7 @@ class NavdataSample:
     state_bits: int | None = None
 
 
+@_slot_init
 @dataclass(frozen=True, slots=True)
 class TickInputs:
     """What the links hold at tick time ``t_s`` (s, the run's clock): the control tick's input.

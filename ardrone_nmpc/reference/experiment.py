@@ -13,7 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
-from ardrone_nmpc.reference.trajectories import ReferenceError, Trajectory, make_trajectory
+from ardrone_nmpc.reference.trajectories import (ReferenceError, Trajectory, is_times,
+                                                  make_trajectory)
+
+#: ``ndarray.min`` of a 1-D array is this reduction (numpy/_core/_methods.py: ``_amin``).
+_min = np.minimum.reduce
 
 #: Sampling step of :func:`check_inside_geofence` (s).
 FENCE_CHECK_STEP_S = 0.01
@@ -30,7 +34,12 @@ class HoldStartThen:
         self.duration_s = trajectory.duration_s
 
     def state_at(self, t_s):
-        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        if is_times(t_s):  # the horizon's times: no conversions; the same reduction as .min()
+            if t_s.size and _min(t_s) > 0.0:
+                return self.inner.state_at(t_s)
+            t = t_s
+        else:
+            t = np.atleast_1d(np.asarray(t_s, dtype=float))
         if t.size and t.min() > 0.0:  # all inside the experiment (NaN is not): nothing held
             return self.inner.state_at(t)
         out = self.inner.state_at(np.maximum(t, 0.0))

@@ -95,8 +95,25 @@ class Trajectory(Protocol):
 # ----------------------------------------------------------------------------- helpers
 
 
+_F64 = np.dtype(np.float64)
+
+
+def is_times(t_s: object) -> bool:
+    """True for what :func:`_times` passes through as it is: a 1-D C-contiguous float64
+    ndarray, the horizon's times every tick (its conversions cost µs a tick, issue 26)."""
+    return (type(t_s) is np.ndarray and t_s.dtype is _F64 and t_s.ndim == 1
+            and t_s.flags.c_contiguous)
+
+
 def _times(t_s: np.ndarray | float | Sequence[float]) -> np.ndarray:
     """Times as a 1-D float array (a scalar becomes one time)."""
+    if is_times(t_s):  # the general path would return a view of the same values
+        return t_s
+    return _times_general(t_s)
+
+
+def _times_general(t_s: np.ndarray | float | Sequence[float]) -> np.ndarray:
+    """:func:`_times` for any input (tests check the fast path against it)."""
     return np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
 
 
@@ -191,7 +208,9 @@ class Hover:
         self._state[IX_PSI] = self.psi_rad
 
     def state_at(self, t_s: np.ndarray) -> np.ndarray:
-        return np.tile(self._state, (_times(t_s).size, 1))
+        out = np.empty((_times(t_s).size, STATE_DIM))  # np.tile's rows, without its µs
+        out[...] = self._state
+        return out
 
     def polyline_m(self) -> np.ndarray:
         """The single hover point, (1, 3)."""
@@ -289,16 +308,28 @@ class Waypoints:
         return float(self.t_s[-1])
 
     def state_at(self, t_s: np.ndarray) -> np.ndarray:
-        from ardrone_nmpc.reference.kernels import waypoint_states  # numba: not at start-up
-
+        kernel = _waypoint_states if _waypoint_states is not None else _waypoint_kernel()
         t = np.ascontiguousarray(_times(t_s))
         out = np.empty((t.size, STATE_DIM))
-        waypoint_states(*self._kernel_args, t, out)
+        kernel(*self._kernel_args, t, out)
         return out
 
     def polyline_m(self) -> np.ndarray:
         """The waypoints, densified to ≤ 2 cm spacing."""
         return _densify(self.positions_m)
+
+
+#: The compiled lookup of :class:`Waypoints`, imported at its first use (numba: not at the
+#: command line's start-up; an import statement per lookup costs ½ µs a tick).
+_waypoint_states = None
+
+
+def _waypoint_kernel():
+    global _waypoint_states
+    from ardrone_nmpc.reference.kernels import waypoint_states
+
+    _waypoint_states = waypoint_states
+    return waypoint_states
 
 
 def _square_corners_xy(start_xy_m: np.ndarray, side_m: float) -> np.ndarray:

@@ -1,0 +1,70 @@
+"""The per-tick records of ``core/types.py`` keep the dataclass's behaviour with their faster
+``__init__`` (issue 26): each is compared with a twin built by ``dataclasses`` itself from the
+same fields — signature, stored values, repr, equality and hash, ``replace``, pickling — and
+stays frozen."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import inspect
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.core.types import (AttitudeCommand, FlightMode, MocapPose, NavdataSample,
+                                     PlantTruth, TickInputs)
+
+POSE = MocapPose(1.0, np.array([0.1, 0.2, 1.0]), np.zeros(3), 0.3)
+NAV = NavdataSample(1.0, FlightMode.FLYING, 55.0, 1.0, -2.0, 30.0, 0.9, 0.1, -0.2, 0.05)
+
+# a record's positional arguments (the optional ones left out) and its optional ones
+CASES = {
+    AttitudeCommand: ((0.1, -0.0, 0.3, math.nan), {}),
+    PlantTruth: ((2.0, np.arange(3.0), np.ones(3), 0.1, -0.2, 0.3, 0.0, FlightMode.FLYING, 80.0),
+                 {}),
+    MocapPose: ((1.0, np.array([0.1, 0.2, 1.0]), np.zeros(3), 0.3), {}),
+    NavdataSample: ((1.0, FlightMode.LANDED, 55.0, 1.0, -2.0, 30.0, 0.0, 0.1, -0.2, 0.05),
+                    {"ctrl_state": 0x20000, "state_bits": 7}),
+    TickInputs: ((3.0, POSE, 2.99, NAV, 2.98), {"target": POSE, "target_rx_t_s": 2.5}),
+}
+
+
+def _twin(cls):
+    """``cls`` as ``dataclasses`` alone builds it (its generated ``__init__``)."""
+    params = cls.__dataclass_params__
+    specs = [(f.name, f.type, dataclasses.field(default=f.default))
+             for f in dataclasses.fields(cls)]
+    return dataclasses.make_dataclass(cls.__name__, specs, frozen=True, slots=True,
+                                      eq=params.eq)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda c: c.__name__)
+def test_records_build_as_their_dataclass_twin(cls):
+    twin = _twin(cls)
+    assert str(inspect.signature(cls)) == str(inspect.signature(twin))
+    args, optional = CASES[cls]
+    names = [f.name for f in dataclasses.fields(cls)]
+    for kwargs in ({}, optional):
+        rec, ref = cls(*args, **kwargs), twin(*args, **kwargs)
+        by_name = cls(**dict(zip(names, args)), **kwargs)
+        for name in names:  # the very objects given (or the same defaults)
+            assert getattr(rec, name) is getattr(ref, name) is getattr(by_name, name)
+        assert repr(rec) == repr(ref)
+        if cls.__dataclass_params__.eq:
+            assert rec == cls(*args, **kwargs) and hash(rec) == hash(cls(*args, **kwargs))
+            assert rec != cls(*args[:-1], -1.0, **kwargs)
+        else:  # vectors inside: compared by identity
+            assert rec != cls(*args, **kwargs) and rec == rec
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(rec, names[0], 5.0)
+        changed = dataclasses.replace(rec, **{names[0]: 5.0})
+        assert type(changed) is cls and getattr(changed, names[0]) == 5.0
+        assert repr(pickle.loads(pickle.dumps(rec))) == repr(rec)
+        assert repr(copy.copy(rec)) == repr(rec)
+    with pytest.raises(TypeError):
+        cls(*args[:-1])
+    with pytest.raises(TypeError):
+        cls(*args, nonsense=1)
