@@ -126,6 +126,22 @@ def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def shift_ring(ring, head, roll, pitch, gaz, yaw, hold):
+    """Queue the command ``roll`` … ``hold`` in the delay ring ``ring`` (m, 5; oldest at
+    ``head``) and return the oldest with the new head — the command itself when the ring is
+    empty (no delay); :meth:`~ardrone_nmpc.sim.command_fifo.CommandFifo.shift` compiled, for
+    both plants' flying steps."""
+    m = ring.shape[0]
+    if m == 0:
+        return roll, pitch, gaz, yaw, hold, head
+    r, p, g, y, hd = (ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3],
+                      ring[head, 4] != 0.0)
+    ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
+    ring[head, 4] = 1.0 if hold else 0.0
+    return r, p, g, y, hd, head + 1 if head + 1 < m else 0
+
+
+@njit(cache=True, **INNER_KERNEL)
 def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain, vz_gain,
                  sag):
     """Up to ``n`` steps of a FLYING plant in one call: each queues the current command
@@ -137,7 +153,6 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
     plant's). With a battery sag ``sag`` > 0 each step's vertical gain is
     :meth:`~ardrone_nmpc.sim.plant.PlantParams.coefficients_at`'s at the battery level before
     it (``vz_gain``: the unsagged one). Returns (steps done, head, battery, state array)."""
-    m = ring.shape[0]
     size = x.shape[0]
     x = x.copy()
     k1, k2, k3, k4, tmp = (np.empty(size), np.empty(size), np.empty(size), np.empty(size),
@@ -145,14 +160,7 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
     for i in range(n):
         if not battery - drain > 0.0:
             return i, head, battery, x
-        if m == 0:
-            r, p, g, y, hd = roll, pitch, gaz, yaw, hold
-        else:
-            r, p, g, y, hd = (ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3],
-                              ring[head, 4] != 0.0)
-            ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
-            ring[head, 4] = 1.0 if hold else 0.0
-            head = head + 1 if head + 1 < m else 0
+        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
         kk = k
         if sag != 0.0:  # PlantParams.vertical_gain, Python's min and max spelled out
             level = battery if not 0.0 > battery else 0.0

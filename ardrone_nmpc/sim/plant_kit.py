@@ -41,6 +41,7 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
+from ardrone_nmpc.sim.airframe import shift_ring
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 from ardrone_nmpc.sim.plant_step import advance_biases
 
@@ -174,19 +175,11 @@ def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w
     change, the plant's). If all ``n`` were flown, ψ is wrapped and the biases advanced
     (:func:`~ardrone_nmpc.sim.plant_step.advance_biases`). Returns (steps done, head,
     battery, state, kit state, yaw offset °, velocity bias 0, velocity bias 1)."""
-    m = ring.shape[0]
     state = state.copy()
     for i in range(n):
         if not battery - drain > 0.0:
             return i, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
-        if m == 0:
-            r, p, g, y, hd = roll, pitch, gaz, yaw, hold
-        else:
-            r, p, g, y, hd = (ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3],
-                              ring[head, 4] != 0.0)
-            ring[head, 0], ring[head, 1], ring[head, 2], ring[head, 3] = roll, pitch, gaz, yaw
-            ring[head, 4] = 1.0 if hold else 0.0
-            head = head + 1 if head + 1 < m else 0
+        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
         kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
         level = battery if not 0.0 > battery else 0.0  # PlantParams.vertical_gain: min, max
         level = level if not 100.0 < level else 100.0   # as Python's
