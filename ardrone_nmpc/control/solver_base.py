@@ -121,7 +121,7 @@ class NmpcSolverBase:
         t0 = time.perf_counter_ns()
         flag = self._tick(x, ref, initialise)
         elapsed_us = (time.perf_counter_ns() - t0) * 1e-3
-        newton_it, gmres_it, newton_norm, norm = self.memory.stats()
+        newton_it, gmres_it, newton_norm, norm = self.memory.stats_values()
         if flag == FLAG_BAD_INPUT:
             # Nothing to solve with: keep the solution, report, hand back the last input.
             return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0, elapsed_us)

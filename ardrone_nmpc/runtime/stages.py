@@ -330,7 +330,9 @@ class OffsetFree:
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
             frozen = (True,) * 4
-        self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
+        # x, ref_now, ref_horizon are float64 arrays: the integrator's own step, without
+        # its conversions (ReferenceIntegrator.update)
+        self.integrator.step(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
 # ----------------------------------------------------------------------------- adaptation
