@@ -64,6 +64,8 @@ class NmpcSolverBase:
         mem.tolerance = tolerance
         mem.dtau_s = mem.dtau_next_s = spec.dtau_s
         self._ramped = spec.horizon_ramp_rate_per_s > 0
+        # Δτ when the spec keeps it fixed (its stage_dtau_s' own test), asked every tick
+        self._fixed_dtau_s = spec.dtau_s if spec.horizon_ramp_rate_per_s <= 0.0 else None
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
 
@@ -86,6 +88,8 @@ class NmpcSolverBase:
 
     def stage_dtau_s(self, t_s: float) -> float:
         """Δτ the solver uses at ``t_s`` (the horizon ramp starts at the first solve)."""
+        if self._fixed_dtau_s is not None:
+            return self._fixed_dtau_s
         elapsed = 0.0 if self._t0_s is None else t_s - self._t0_s
         return self.spec.stage_dtau_s(elapsed)
 
@@ -121,7 +125,7 @@ class NmpcSolverBase:
         t0 = time.perf_counter_ns()
         flag = self._tick(x, ref, initialise)
         elapsed_us = (time.perf_counter_ns() - t0) * 1e-3
-        newton_it, gmres_it, newton_norm, norm = self.memory.stats()
+        newton_it, gmres_it, newton_norm, norm = self.memory.stats_values()
         if flag == FLAG_BAD_INPUT:
             # Nothing to solve with: keep the solution, report, hand back the last input.
             return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0, elapsed_us)

@@ -207,8 +207,14 @@ class ReferenceIntegrator:
         """
         preview = _NO_PREVIEW if preview is None else np.asarray(preview, dtype=np.float64)
         f0, f1, f2, f3 = frozen
-        _integrate(np.asarray(x, dtype=np.float64), np.asarray(ref, dtype=np.float64),
-                   (bool(f0), bool(f1), bool(f2), bool(f3)), preview, self._law,
+        return self.step(np.asarray(x, dtype=np.float64), np.asarray(ref, dtype=np.float64),
+                         (bool(f0), bool(f1), bool(f2), bool(f3)), preview)
+
+    def step(self, x: np.ndarray, ref: np.ndarray, frozen: tuple[bool, bool, bool, bool],
+             preview: np.ndarray | None) -> np.ndarray:
+        """:meth:`update` for the tick: ``x``, ``ref`` (7,) and ``preview`` (n, 7) float64
+        arrays (or None), ``frozen`` four bools — no conversions."""
+        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._law,
                    self._carry, self._last_error_psi, self.latched, self.learning, self.shift,
                    self.period_s)
         return self.shift

@@ -46,6 +46,12 @@ assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM)
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 
+# the ``cmd_saturated`` text of the (roll, pitch, gaz, yaw) flags: one lookup, not four
+# conditionals and three concatenations
+_FLAGS = {(a, b, c, d): "".join("1" if f else "0" for f in (a, b, c, d))
+          for a in (False, True) for b in (False, True) for c in (False, True)
+          for d in (False, True)}
+
 
 # ----------------------------------------------------------------------------- estimation
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -330,7 +336,9 @@ class OffsetFree:
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
             frozen = (True,) * 4
-        self.integrator.update(x, sol.ref_now, frozen, sol.ref_horizon)
+        # x, ref_now, ref_horizon are float64 arrays: the integrator's own step, without
+        # its conversions (ReferenceIntegrator.update)
+        self.integrator.step(x, sol.ref_now, frozen, sol.ref_horizon)
 
 
 # ----------------------------------------------------------------------------- adaptation
@@ -450,14 +458,13 @@ class Supervision:
                 zacc_mps2: float) -> Sent:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
         ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller)."""
-        sent = self._sent(decision, cmd, zacc_mps2)
-        self.zacc_mps2 = float(sent.u[IU_ZACC])
-        return sent
+        return self._sent(decision, cmd, zacc_mps2)  # it notes the z̈ sent (zacc_mps2)
 
     def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
         action = decision.action
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
+            self.zacc_mps2 = float(u_sent[IU_ZACC])
             return Sent(pcmd, u_sent, True, decision)
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
@@ -472,12 +479,11 @@ class Supervision:
                     pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
                 else:
                     pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
-                sat = pcmd.saturated
-                flags = (("1" if sat[0] or roll_clipped else "0")
-                         + ("1" if sat[1] or pitch_clipped else "0")
-                         + ("1" if sat[2] else "0") + ("1" if sat[3] else "0"))
+                s0, s1, s2, s3 = pcmd.saturated
+                flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
                 zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
                 u_sent = np.array([zacc, roll, pitch, rate])
+                self.zacc_mps2 = float(zacc)  # u_sent[IU_ZACC], without numpy's scalar
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
                 # the command as flown: the controller's own record unless a tilt was clipped
@@ -490,6 +496,7 @@ class Supervision:
         # hover, land, stop: the drone's own hover — no acceleration, for the delay predictor
         # and the integrators; the last NMPC input is never flown
         self.vz_ref_mps = 0.0
+        self.zacc_mps2 = 0.0
         self._last = None
         return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
 

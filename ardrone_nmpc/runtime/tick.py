@@ -48,6 +48,23 @@ class TickOutput:
     events: list = field(default_factory=list)
 
 
+def _tick_output_init(self, pcmd: PcmdCommand, progressive: bool, row: dict,
+                      action: Action = Action.CONTROL, events: list | None = None) -> None:
+    # one a tick: each slot set through its descriptor, not object.__setattr__ per field
+    # (core/types._slot_init, which cannot take the default factory of ``events``)
+    _set_pcmd(self, pcmd)
+    _set_progressive(self, progressive)
+    _set_row(self, row)
+    _set_action(self, action)
+    _set_events(self, [] if events is None else events)
+
+
+_set_pcmd, _set_progressive, _set_row, _set_action, _set_events = (
+    TickOutput.__dict__[n].__set__ for n in ("pcmd", "progressive", "row", "action", "events"))
+_tick_output_init.__qualname__ = "TickOutput.__init__"
+TickOutput.__init__ = _tick_output_init
+
+
 def effective_controller(controller, limits: DroneLimits):
     """``controller`` with its input box intersected with what the drone is configured to do.
 

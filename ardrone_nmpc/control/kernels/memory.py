@@ -135,6 +135,10 @@ class SolverMemory:
         """The last tick's :class:`SolverStats`."""
         return SolverStats(*self._stats.tolist())
 
+    def stats_values(self) -> list[float]:
+        """:meth:`stats` as a plain list in its field order (the tick's: no record built)."""
+        return self._stats.tolist()
+
     def cgmres_step(self, x: np.ndarray, ref: np.ndarray, initialise: bool) -> int:
         """One C/GMRES tick (:func:`~ardrone_nmpc.control.kernels.steps.cgmres_step`, or
         ``cgmres_step_obstacles`` with obstacles)."""
