@@ -141,14 +141,16 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         raise
     t_takeoff = drone.truth.t_s
     drone.takeoff()
-    while drone.truth.mode is not FlightMode.FLYING and drone.truth.t_s < TAKEOFF_TIMEOUT_S:
+    truth = drone.truth  # one truth per step of the clock (each read builds one)
+    while truth.mode is not FlightMode.FLYING and truth.t_s < TAKEOFF_TIMEOUT_S:
         check_signals()
-        drone.advance_to(drone.truth.t_s + period)
-    if drone.truth.mode is not FlightMode.FLYING:
+        drone.advance_to(truth.t_s + period)
+        truth = drone.truth
+    if truth.mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "
-                           f"(mode {drone.truth.mode.value})")
+                           f"(mode {truth.mode.value})")
     # The settle phase starts now, on whole ticks: experiment time 0 is n_settle ticks later.
-    t_first = drone.truth.t_s
+    t_first = truth.t_s
     t_start = t_first + schedule.settle_span_s  # experiment time 0 on the plant clock
     announced = drone.start_experiment(t_start)
     for kind, fields in preflight_events:
@@ -239,8 +241,9 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     write_event(t_first + k0 * period - t_start, "land")
     deadline = drone.truth.t_s + LANDING_TIMEOUT_S
     k = k0
-    while drone.truth.mode is not FlightMode.LANDED and drone.truth.t_s < deadline:
-        if drone.truth.mode is FlightMode.EMERGENCY:
+    truth = drone.truth  # one truth per step of the clock (each read builds one)
+    while truth.mode is not FlightMode.LANDED and truth.t_s < deadline:
+        if truth.mode is FlightMode.EMERGENCY:
             break
         t_plant = t_first + k * period
         drone.advance_to(t_plant, t_plant - t_start)
@@ -251,6 +254,8 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
             out.row["mode"] = "landing"
             _record(recorder, out.row, drone)
         k += 1
-    mode = drone.truth.mode
-    write_event(drone.truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
+        truth = drone.truth
+    truth = drone.truth
+    mode = truth.mode
+    write_event(truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
                 drone_mode=mode.value)
