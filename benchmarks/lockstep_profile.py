@@ -9,7 +9,7 @@ stages (monkeypatched here, nothing in the package changes) and prints the cost 
 * solver — ``Control.solve`` (delay prediction, reference lookup, the NMPC);
 * supervisor — the supervisor's checks and verdict bookkeeping, the command mapping
   (``Control.command``, ``Supervision.command``, ``DelayPrediction.push``);
-* logging — building the row (``tick_row``, ``truth_columns``) and the recorder's
+* logging — building the row (``tick_row``, ``put_truth``) and the recorder's
   ``write_row``, for a run directory (``log.csv``) and for an in-memory recorder;
 * rest — the runner's loop and everything not wrapped.
 
@@ -69,7 +69,7 @@ def _instrument(acc: dict) -> None:
     _wrap(stages.Supervision, "command", "supervisor", acc)
     _wrap(stages.DelayPrediction, "push", "supervisor", acc)
     _wrap(tick, "tick_row", "logging", acc)
-    _wrap(lockstep, "truth_columns", "logging", acc)
+    _wrap(lockstep, "put_truth", "logging", acc)
 
 
 def _fly(cfg, kind: str, acc: dict | None) -> tuple[float, int]:

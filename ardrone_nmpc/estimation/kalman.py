@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
 from ardrone_nmpc.estimation.base import EstimatorError, check_finite, check_step
 
@@ -63,6 +62,9 @@ def steady_state_kalman(q: float, r: float) -> tuple[float, float]:
     q, r = _check_variances(q, r)
     if q == 0.0:
         raise EstimatorError("q must be > 0 for a steady state (with q = 0 the gain decays to 0)")
+    # imported here: a flight never calls this, and scipy.linalg costs a worker ~0.1 s to load
+    from scipy.linalg import solve_discrete_are
+
     one = np.ones((1, 1))
     p = float(solve_discrete_are(one.T, one.T, np.array([[q]]), np.array([[r]]))[0, 0])
     return p, p / (p + r)

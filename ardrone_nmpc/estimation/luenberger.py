@@ -29,7 +29,6 @@ from collections import OrderedDict
 from typing import Literal, Sequence
 
 import numpy as np
-from scipy.linalg import expm
 
 from ardrone_nmpc.estimation.base import EstimatorError, check_finite, check_step
 
@@ -130,6 +129,10 @@ class LuenbergerVz:
         m[2, 3] = 1.0  # y' = ẏ
         if self._hold == "model":
             m[3, 4] = 1.0  # ẏ' = u: y bends like the model's z
+        # imported here, once per period (cached): scipy.linalg costs a worker ~0.1 s to load,
+        # and only this estimator needs it
+        from scipy.linalg import expm
+
         return expm(m * dt_s)
 
     def discrete_matrices(

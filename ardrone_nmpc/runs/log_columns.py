@@ -28,7 +28,8 @@ _FALLBACK = Action.FALLBACK  # bound once: an enum member's lookup costs ~0.1 µ
 __all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMNS",
            "ReplayError", "SAME_POSE_TOLERANCE_S", "STRING_COLUMNS", "UNITS", "link_columns",
            "pose_of_row", "unlogged_pose",
-           "measurement_columns", "tick_inputs_of_rows", "tick_row", "truth_columns"]
+           "measurement_columns", "put_truth", "tick_inputs_of_rows", "tick_row",
+           "truth_columns"]
 
 
 class Column(NamedTuple):
@@ -248,6 +249,14 @@ def truth_columns(truth) -> dict:
     return {"x_true_m": truth.position_m[0], "y_true_m": truth.position_m[1],
             "z_true_m": truth.position_m[2], "psi_true_rad": truth.psi_rad,
             "vz_true_mps": truth.velocity_mps[2]}
+
+
+def put_truth(row: dict, cells: tuple) -> None:
+    """:func:`truth_columns` written into ``row`` from ``(x, y, z, ψ, ż)`` (the lockstep
+    runner's every tick: :meth:`~ardrone_nmpc.sim.lockstep_drone.LockstepDrone.truth_cells`,
+    without a PlantTruth)."""
+    row["x_true_m"], row["y_true_m"], row["z_true_m"], row["psi_true_rad"], \
+        row["vz_true_mps"] = cells
 
 
 def link_columns(late_s: float, navdata: NavdataSample | None) -> dict:

@@ -32,7 +32,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import truth_columns
+from ardrone_nmpc.runs.log_columns import put_truth
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
@@ -72,6 +72,7 @@ class TakeoffRefused(UserError, RuntimeError):
 REFUSED_EVENT = "takeoff_refused"
 #: The ending of a run whose drone landed by itself (the supervisor's ``land-<reason>`` form).
 SELF_LANDED = "land-drone-landed-itself"
+_ENDS = (Action.LAND, Action.STOP)  # the verdicts that end the experiment's ticks
 
 
 def _configure(cfg, drone: LockstepDrone, events: list) -> None:
@@ -140,14 +141,16 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         raise
     t_takeoff = drone.truth.t_s
     drone.takeoff()
-    while drone.truth.mode is not FlightMode.FLYING and drone.truth.t_s < TAKEOFF_TIMEOUT_S:
+    truth = drone.truth  # one truth per step of the clock (each read builds one)
+    while truth.mode is not FlightMode.FLYING and truth.t_s < TAKEOFF_TIMEOUT_S:
         check_signals()
-        drone.advance_to(drone.truth.t_s + period)
-    if drone.truth.mode is not FlightMode.FLYING:
+        drone.advance_to(truth.t_s + period)
+        truth = drone.truth
+    if truth.mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "
-                           f"(mode {drone.truth.mode.value})")
+                           f"(mode {truth.mode.value})")
     # The settle phase starts now, on whole ticks: experiment time 0 is n_settle ticks later.
-    t_first = drone.truth.t_s
+    t_first = truth.t_s
     t_start = t_first + schedule.settle_span_s  # experiment time 0 on the plant clock
     announced = drone.start_experiment(t_start)
     for kind, fields in preflight_events:
@@ -157,12 +160,21 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     wall0 = time.perf_counter()
     ending, k, flown = "completed", 0, 0
     tally = VerdictTally(follow=tick.follow is not None)
+    # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
+    # what its name says, in this order, every tick
+    t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
+    sensors, step, set_command = drone.sensors, tick.step, drone.set_command
+    write_row = recorder.write_row if recorder is not None else None
+    truth_cells, tally_add = drone.truth_cells, tally.add
     for k in range(schedule.n_ticks):
         check_signals()
-        t_exp = schedule.t_exp_s(k)
-        drone.advance_to(t_first + k * period, t_exp)
-        _write_drone_events(write_event, drone)
-        nav = drone.navdata
+        t_exp = t_exp_of(k)
+        t_plant = t_first + k * period
+        advance_to(t_plant, t_exp)
+        drone_events = take_events()
+        if drone_events:
+            _write_events_at(write_event, drone_events)
+        nav = sensors.nav  # drone.navdata
         if drone.self_landing and nav.mode is not FlightMode.EMERGENCY:
             # the drone's word: no command, no take-off again (an emergency is the
             # supervisor's to report, as in fly, where the tick sees it first)
@@ -170,17 +182,21 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
             ending = SELF_LANDED
             break
         flown = k + 1
-        out = tick.step(drone.inputs(t_first + k * period), t_exp_s=t_exp, mode=phase(t_exp))
-        write_events(write_event, t_exp, out.events)
+        out = step(sensors.inputs(t_plant), t_exp_s=t_exp, mode=phase(t_exp))
+        if out.events:
+            write_events(write_event, t_exp, out.events)
         pcmd = out.pcmd
-        drone.set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
-                          progressive=out.progressive)
-        _record(recorder, out.row, drone)
-        tally.add(out.row)
+        set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
+                    progressive=out.progressive)
+        row = out.row
+        if write_row is not None:  # _record's
+            put_truth(row, truth_cells())
+            write_row(row)
+        tally_add(row)
         if progress is not None:
             progress(schedule.fraction_done(k))
-        if out.action in (Action.LAND, Action.STOP):
-            ending = out.row["mode"]
+        if out.action in _ENDS:
+            ending = row["mode"]
             break
     ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
@@ -200,13 +216,18 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
 
 def _write_drone_events(write_event, drone: LockstepDrone) -> None:
     """The injected faults that started, at their experiment times."""
-    for t_exp, event in drone.take_events():
+    _write_events_at(write_event, drone.take_events())
+
+
+def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
+    """``(experiment time, event)`` pairs, each at its time."""
+    for t_exp, event in events:
         write_events(write_event, t_exp, [event])
 
 
 def _record(recorder, row: dict, drone: LockstepDrone) -> None:
     if recorder is not None:
-        row.update(truth_columns(drone.truth))
+        put_truth(row, drone.truth_cells())
         recorder.write_row(row)
 
 
@@ -220,8 +241,9 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     write_event(t_first + k0 * period - t_start, "land")
     deadline = drone.truth.t_s + LANDING_TIMEOUT_S
     k = k0
-    while drone.truth.mode is not FlightMode.LANDED and drone.truth.t_s < deadline:
-        if drone.truth.mode is FlightMode.EMERGENCY:
+    truth = drone.truth  # one truth per step of the clock (each read builds one)
+    while truth.mode is not FlightMode.LANDED and truth.t_s < deadline:
+        if truth.mode is FlightMode.EMERGENCY:
             break
         t_plant = t_first + k * period
         drone.advance_to(t_plant, t_plant - t_start)
@@ -232,6 +254,8 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
             out.row["mode"] = "landing"
             _record(recorder, out.row, drone)
         k += 1
-    mode = drone.truth.mode
-    write_event(drone.truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
+        truth = drone.truth
+    truth = drone.truth
+    mode = truth.mode
+    write_event(truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
                 drone_mode=mode.value)

@@ -18,11 +18,13 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import PlantTruth, TickInputs
 from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 __all__ = ["LockstepDrone"]
@@ -81,6 +83,9 @@ class LockstepDrone(ConfigHandshake):
         self._guard = TakeoffGuard()
         self.self_landing: str | None = None
         self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
+        plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
+        self._airframe = (isinstance(plant, AirframePlant)
+                          and type(plant).truth is AirframePlant.truth)
 
     # ------------------------------------------------------------------ the manual clock
     def connect(self) -> None:
@@ -119,6 +124,20 @@ class LockstepDrone(ConfigHandshake):
     def truth(self) -> PlantTruth:
         """The plant's true state (a simulating runner logs it)."""
         return self.sim.plant.truth
+
+    def truth_cells(self) -> tuple:
+        """(x, y, z, ψ, ż) of :attr:`truth` (the logged truth, every tick): an airframe's read
+        from its state, the values :attr:`AirframePlant.truth` would hold, without building
+        it."""
+        plant = self.sim.plant
+        if self._airframe:
+            state = plant._state
+            psi = state[8]  # AirframePlant.truth's wrap: unchanged in (−π, π]
+            psi = float(psi) if -math.pi < psi <= math.pi else wrap_angle_rad(psi)
+            return state[0], state[1], state[2], psi, state[5]
+        truth = plant.truth
+        p, v = truth.position_m, truth.velocity_mps
+        return p[0], p[1], p[2], truth.psi_rad, v[2]
 
     # ------------------------------------------------------------------ navdata receiver
     def inputs(self, t_s: float) -> TickInputs:

@@ -21,6 +21,8 @@ battery would change; the Python path goes on from there.
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
@@ -35,6 +37,11 @@ _MOTORS_ON_STEP = AirframePlant._motors_on_step
 _f64 = np.float64
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: list = []
+# the counters and the float state written straight into iv and sv (native int64 and double:
+# the arrays' own types, the same bits) and read back: no per-element numpy conversion
+_PUT_IV = struct.Struct(f"{8}q").pack_into
+_PUT_SV = struct.Struct(f"{ks.SV_SIZE}d").pack_into
+_GET_SV = struct.Struct(f"{8}d").unpack_from
 
 
 class CompiledLegs:
@@ -129,8 +136,8 @@ class CompiledLegs:
         fifo = plant._fifo
         bias_n, gust_n = plant._bias_normals, plant._gust_normals
         mocap_n, nav_n = plant._mocap_normals, plant._nav_normals
-        iv[:8] = (plant._steps, fifo.head, sensors._next_mocap_k, sensors._next_nav_k,
-                  bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+        _PUT_IV(iv, 0, plant._steps, fifo.head, sensors._next_mocap_k, sensors._next_nav_k,
+                bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
         gust, vel_bias, wind = plant._gust_mps, plant._vel_bias, plant.wind_mps
         roll, pitch, gaz, yaw, hold = plant._current
         flags, _, _, fw_gaz, _ = fw.pcmd
@@ -138,9 +145,9 @@ class CompiledLegs:
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
-        sv[:] = (t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
-                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                 climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2])
+        _PUT_SV(sv, 0, t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
+                vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
+                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2])
         x = self._state_array()
         ks.lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
                         nav_n.values, out)
@@ -153,7 +160,7 @@ class CompiledLegs:
             return self.run(t_s)
         (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
          n_events, kind0, kind1) = iv.tolist()
-        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = sv[:8].tolist()
+        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = _GET_SV(sv)
         o = out.tolist()
         plant._steps, fifo.head, plant._pending_s, plant._battery = steps, head, pending, battery
         plant._yaw_bias_deg, plant._vel_bias = yaw_bias, (vb0, vb1)
