@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 #: The environment switch: ``0`` starts no background compile.
 ENV_SWITCH = "ARDRONE_NMPC_PRECOMPILE"
@@ -51,9 +52,13 @@ def start_if_cold() -> subprocess.Popen | None:
     try:
         if not cache_is_cold():
             return None
+        # this process's package first on the child's path: it compiles these very sources
+        root = str(Path(__file__).resolve().parents[2])
+        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
         return subprocess.Popen([sys.executable, "-m", __name__],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env={**os.environ, ENV_SWITCH: "0"})
+                                stderr=subprocess.DEVNULL,
+                                env={**os.environ, ENV_SWITCH: "0", "PYTHONPATH": path})
     except Exception:  # best-effort: the runner compiles what it needs itself
         return None
 
