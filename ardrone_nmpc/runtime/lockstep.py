@@ -34,6 +34,7 @@ from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import put_truth
 from ardrone_nmpc.runs.verdict import VerdictTally
+from ardrone_nmpc.runtime.precompile import start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
@@ -105,6 +106,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     terminating signal ends it at the next tick (:func:`~ardrone_nmpc.runtime.signals.
     polled_signals`: raised from its handler, it could land inside a compiled call and be lost).
     """
+    start_if_cold()  # the drone's kernels compiled by a child while this compiles the solver
     with polled_signals() as check_signals:
         return _fly(cfg, recorder, seed, progress, plant, check_signals)
 

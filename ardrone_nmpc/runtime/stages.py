@@ -366,7 +366,12 @@ class ResponseEstimation:
         self.estimator = AttitudeResponseEstimator(limits.euler_angle_max_rad,
                                                    window_s=a.window_s)
         self._next_fit_s = -math.inf
-        warm_up_kernels()  # not on the first tick aloft
+
+    def warm_up(self) -> None:
+        """Load (or compile) the streaming fit's kernels now, not on the first tick aloft
+        (:class:`~ardrone_nmpc.runtime.tick.Tick` calls it after the solver's warm-up: a cold
+        start's background compile has them cached by then, ``runtime/precompile.py``)."""
+        warm_up_kernels()
 
     def update(self, inputs: TickInputs, sent: Sent) -> list[dict]:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""

@@ -138,6 +138,8 @@ class Tick:
                           if nmpc is not None and moving else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
+        if self.response is not None:  # after the solver's (runtime/precompile.py)
+            self.response.warm_up()
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None) -> TickOutput:

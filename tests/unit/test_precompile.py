@@ -1,0 +1,57 @@
+"""The cold start's background compile (runtime/precompile.py): the cold-cache test is right
+(an empty ``NUMBA_CACHE_DIR`` is cold, one after a flight is warm), the child fills an empty
+cache with the simulated drone's and the attitude fit's kernels, and no child is started when
+the cache is warm or the switch is off. Each case in its own process (its own cache dir)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+_COLD = "from ardrone_nmpc.runtime.precompile import cache_is_cold; print(cache_is_cold())"
+_START = ("from ardrone_nmpc.runtime.precompile import start_if_cold; "
+          "print(start_if_cold() is not None)")
+#: Kernels the child must leave cached (module.kernel of numba's file names).
+EXPECTED = ("sensor_step.lockstep_run", "plant_step.flying_advance", "airframe.airframe_rk4",
+            "response_kernels.feed", "response_kernels.fit_grid")
+
+
+def _python(code: str, cache: Path, **env) -> str:
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=600, env={**os.environ, "NUMBA_CACHE_DIR": str(cache), **env})
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout.strip().splitlines()[-1]
+
+
+def _cached(cache: Path) -> set[str]:
+    """module.kernel of every compiled kernel's data file in ``cache``."""
+    return {p.name.split("-")[0] for p in cache.rglob("*.nbc")}
+
+
+def test_the_child_fills_an_empty_cache_and_then_it_is_warm(tmp_path):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    assert _python(_COLD, cache) == "True"
+    done = subprocess.run([sys.executable, "-m", "ardrone_nmpc.runtime.precompile"],
+                          env={**os.environ, "NUMBA_CACHE_DIR": str(cache)},
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert set(EXPECTED) <= _cached(cache), sorted(_cached(cache))
+    assert _python(_COLD, cache) == "False"
+    assert _python(_START, cache) == "False"  # warm: no child
+
+
+def test_a_flight_leaves_the_cache_warm_and_the_switch_starts_no_child(tmp_path):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    assert _python(_START, cache, ARDRONE_NMPC_PRECOMPILE="0") == "False"
+    fly = ("from ardrone_nmpc.config.schema import config_from_dict\n"
+           "from ardrone_nmpc.runtime.lockstep import run_lockstep\n"
+           "run_lockstep(config_from_dict({'name': 't', 'duration_s': 0.2}))\n"
+           "print('flown')")
+    # the switch off: the flight compiles every kernel itself, and leaves the cache warm
+    assert _python(fly, cache, ARDRONE_NMPC_PRECOMPILE="0") == "flown"
+    assert set(EXPECTED) <= _cached(cache)
+    assert _python(_COLD, cache) == "False"
