@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import settings
@@ -13,6 +15,11 @@ import ardrone_nmpc.links.drone_link as drone_link_module
 # fails a correct test whenever the machine is loaded (or the first example JIT-compiles).
 settings.register_profile("no-deadline", deadline=None)
 settings.load_profile("no-deadline")
+
+# No background compile (runtime/precompile.py) in the tests' flights and their subprocesses:
+# a child outliving its test would write into a cache directory the test removes. Its own
+# tests (tests/unit/test_precompile.py) turn it on where they mean to.
+os.environ["ARDRONE_NMPC_PRECOMPILE"] = "0"
 
 
 def thesis_cost(x0, ref, u, *, q, r, qf, dtau):
