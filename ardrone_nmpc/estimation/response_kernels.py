@@ -24,7 +24,8 @@ from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
            "S_HAS_R", "S_K", "S_L", "S_LAST_T", "S_N", "S_R", "S_RES", "S_SINCE_BEST", "S_SY",
-           "S_SYY", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays", "state_size"]
+           "S_SYY", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
+           "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen): a head of scalars (these slots), then Σx, Σx², Σx·y, the model values x (each K×L×2),

@@ -34,7 +34,7 @@ from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import put_truth
 from ardrone_nmpc.runs.verdict import VerdictTally
-from ardrone_nmpc.runtime.precompile import start_if_cold
+from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
@@ -118,6 +118,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
     tick = Tick(cfg, experiment_trajectory(cfg),
                 wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
+    join_child()  # the drone's kernels, compiled meanwhile, are cached before it takes off
     period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
 

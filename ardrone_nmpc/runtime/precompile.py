@@ -9,10 +9,12 @@ ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the c
 those kernels (:func:`main`) and the runner finds them cached when it gets there.
 
 Never harmful: the child is best-effort (its output goes nowhere; the runner compiles whatever
-is not cached yet), numba writes each cache file to a temporary name and renames it (two writers
-are safe), and the cached code a process loads is the code it would compile (no fast-math;
-``core/kernel_cache.load_cached_callees``). No child when the cache is warm or when
-``ARDRONE_NMPC_PRECOMPILE=0``.
+is not cached yet), and the cached code a process loads is the code it would compile (no
+fast-math; ``core/kernel_cache.load_cached_callees``). The runner waits for the child
+(:func:`join_child`) before its first call of a kernel the child compiles — the take-off —:
+numba writes each cache file under a temporary name and renames it, but two processes adding
+*different* signatures of one kernel at once could both claim the same data file name.
+No child when the cache is warm or when ``ARDRONE_NMPC_PRECOMPILE=0``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,11 @@ from pathlib import Path
 
 #: The environment switch: ``0`` starts no background compile.
 ENV_SWITCH = "ARDRONE_NMPC_PRECOMPILE"
+#: How long :func:`join_child` waits before it stops a child that hangs (its own compile on a
+#: busy machine takes ~10 s)
+JOIN_TIMEOUT_S = 120.0
 _started = False
+_child: subprocess.Popen | None = None
 
 
 def cache_is_cold() -> bool:
@@ -45,22 +51,39 @@ def cache_is_cold() -> bool:
 def start_if_cold() -> subprocess.Popen | None:
     """Start the background compile (module docstring) when the cache is cold, once per
     process; returns the child (None if none started). Any failure is silent."""
-    global _started
+    global _started, _child
     if _started or os.environ.get(ENV_SWITCH, "1") == "0":
         return None
     _started = True
     try:
         if not cache_is_cold():
             return None
-        # this process's package first on the child's path: it compiles these very sources
+        # this process's package first on the child's path (not the working directory's, as
+        # ``-m`` would put first, nor on PYTHONPATH, ahead of the standard library): it
+        # compiles these very sources
         root = str(Path(__file__).resolve().parents[2])
-        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
-        return subprocess.Popen([sys.executable, "-m", __name__],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL,
-                                env={**os.environ, ENV_SWITCH: "0", "PYTHONPATH": path})
+        code = (f"import sys; sys.path.insert(0, {root!r}); "
+                f"from {__name__} import main; sys.exit(main())")
+        _child = subprocess.Popen([sys.executable, "-c", code],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL, env={**os.environ, ENV_SWITCH: "0"})
+        return _child
     except Exception:  # best-effort: the runner compiles what it needs itself
         return None
+
+
+def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
+    """Wait for the background compile, if one runs (module docstring); a child still running
+    after ``timeout_s`` is stopped — the runner then compiles what is missing itself."""
+    global _child
+    child, _child = _child, None
+    if child is None:
+        return
+    try:
+        child.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.wait()
 
 
 def compile_kernels() -> None:

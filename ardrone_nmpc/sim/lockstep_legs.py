@@ -33,15 +33,18 @@ from ardrone_nmpc.sim.plant import AirframePlant
 __all__ = ["CompiledLegs"]
 
 _FLYING = FlightMode.FLYING
-_MOTORS_ON_STEP = AirframePlant._motors_on_step
+#: What the kernel does in the plant's place: a subclass overriding any of these flies the
+#: Python path (its override would be skipped)
+_REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
+             "_state_array", "_from_state_array", "mocap_pose", "navdata", "truth")
 _f64 = np.float64
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
-_NONE: list = []
+_NONE: tuple = ()
 # the counters and the float state written straight into iv and sv (native int64 and double:
 # the arrays' own types, the same bits) and read back: no per-element numpy conversion
-_PUT_IV = struct.Struct(f"{8}q").pack_into
+_PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
 _PUT_SV = struct.Struct(f"{ks.SV_SIZE}d").pack_into
-_GET_SV = struct.Struct(f"{8}d").unpack_from
+_GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
 
 
 class CompiledLegs:
@@ -62,8 +65,10 @@ class CompiledLegs:
 
     @staticmethod
     def eligible(plant) -> bool:
-        """A plant this path can fly (the airframe's own dynamics)."""
-        return isinstance(plant, AirframePlant) and type(plant)._motors_on_step is _MOTORS_ON_STEP
+        """A plant this path can fly: the airframe's own dynamics, sensors and state."""
+        kind = type(plant)
+        return (isinstance(plant, AirframePlant)
+                and all(getattr(kind, name) is getattr(AirframePlant, name) for name in _REPLACED))
 
     def ready(self, t_s: float) -> bool:
         """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""

@@ -138,7 +138,8 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
         k, (w0, w1, w2), h, n,
-        sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
+        sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], bias_n[pos:pos + 3],
+        sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
         p[P_YAW_DRIFT], p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
     iv[I_HEAD] = head
     iv[I_STEPS] += done

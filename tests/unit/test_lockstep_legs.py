@@ -128,3 +128,21 @@ def test_compiled_legs_with_a_scripted_target():
 def test_other_backends_keep_the_python_path():
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), ["sim.plant.profile=thesis_kit"])
     assert LockstepDrone(cfg).sensors._legs is None
+
+
+@pytest.mark.parametrize("name", ["navdata", "mocap_pose", "advance", "_substep",
+                                  "_advance_biases", "_motors_on_step", "truth"])
+def test_a_plant_that_overrides_what_the_kernel_does_keeps_the_python_path(name):
+    """The compiled tick does the airframe's dynamics, sensors and state in the plant's place:
+    a subclass overriding any of them (a test emulator with a biased navdata, say) would see its
+    override skipped aloft, so it flies the Python path; the airframe itself is eligible."""
+    from ardrone_nmpc.config.sim import NoiseConfig
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+    from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
+
+    base = getattr(AirframePlant, name)
+    override = property(lambda self: base.fget(self)) if isinstance(base, property) else (
+        lambda self, *a, **k: base(self, *a, **k))
+    Overriding = type("Overriding", (AirframePlant,), {name: override})
+    assert CompiledLegs.eligible(AirframePlant(PlantParams(), NoiseConfig(), seed=1))
+    assert not CompiledLegs.eligible(Overriding(PlantParams(), NoiseConfig(), seed=1))

@@ -13,9 +13,15 @@ from pathlib import Path
 _COLD = "from ardrone_nmpc.runtime.precompile import cache_is_cold; print(cache_is_cold())"
 _START = ("from ardrone_nmpc.runtime.precompile import start_if_cold; "
           "print(start_if_cold() is not None)")
-_START_AND_WAIT = ("from ardrone_nmpc.runtime.precompile import start_if_cold\n"
-                   "child = start_if_cold()\n"
-                   "print('none' if child is None else f'started {child.wait(timeout=600)}')")
+_START_AND_JOIN = ("from ardrone_nmpc.runtime import precompile\n"
+                   "child = precompile.start_if_cold()\n"
+                   "precompile.join_child(timeout_s=600.0)\n"
+                   "print('none' if child is None else f'started {child.returncode}')")
+# a child that outlives the wait is stopped (a Python start-up alone outlasts a zero wait)
+_START_AND_STOP = ("from ardrone_nmpc.runtime import precompile\n"
+                   "child = precompile.start_if_cold()\n"
+                   "precompile.join_child(timeout_s=0.0)\n"
+                   "print('none' if child is None else f'stopped {child.returncode}')")
 #: Kernels the child must leave cached (module.kernel of numba's file names).
 EXPECTED = ("sensor_step.lockstep_run", "plant_step.flying_advance", "airframe.airframe_rk4",
             "response_kernels.feed", "response_kernels.fit_grid")
@@ -39,7 +45,7 @@ def test_a_cold_cache_starts_the_child_and_it_fills_the_cache(tmp_path):
     assert _python(_COLD, cache) == "True"
     # the switch on (conftest turns it off for every other test): a child starts, and once it
     # has ended (waited for here) the cache holds the drone's and the attitude fit's kernels
-    assert _python(_START_AND_WAIT, cache, ARDRONE_NMPC_PRECOMPILE="1") == "started 0"
+    assert _python(_START_AND_JOIN, cache, ARDRONE_NMPC_PRECOMPILE="1") == "started 0"
     assert set(EXPECTED) <= _cached(cache), sorted(_cached(cache))
     assert _python(_COLD, cache) == "False"
     assert _python(_START, cache, ARDRONE_NMPC_PRECOMPILE="1") == "False"  # warm: no child
@@ -57,3 +63,9 @@ def test_a_flight_leaves_the_cache_warm_and_the_switch_starts_no_child(tmp_path)
     assert _python(fly, cache, ARDRONE_NMPC_PRECOMPILE="0") == "flown"
     assert set(EXPECTED) <= _cached(cache)
     assert _python(_COLD, cache) == "False"
+
+
+def test_a_child_that_outlives_the_wait_is_stopped(tmp_path):
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    assert _python(_START_AND_STOP, cache, ARDRONE_NMPC_PRECOMPILE="1") == "stopped -9"
