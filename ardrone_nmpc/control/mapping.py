@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ardrone_nmpc.core.types import AttitudeCommand, _slot_init
+from ardrone_nmpc.core.types import AttitudeCommand, slot_init
 
 __all__ = ["DroneLimits", "PcmdCommand", "MappingError", "command_scales", "map_to_pcmd",
            "pcmd_of", "vz_reference_mps"]
@@ -73,7 +73,7 @@ def command_scales(drone) -> DroneLimits:
                        drone.control_yaw_radps)
 
 
-@_slot_init  # built every tick: each slot set through its descriptor (core/types.py)
+@slot_init  # built every tick: each slot set through its descriptor (core/types.py)
 @dataclass(frozen=True, slots=True)
 class PcmdCommand:
     """One AT*PCMD's four fractions in [−1, 1] and which of them were clipped.

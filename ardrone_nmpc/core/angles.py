@@ -21,6 +21,8 @@ TWO_PI = 2.0 * math.pi
 def _wrap_scalar(a: float) -> float:
     # math.remainder is the exact IEEE remainder: for |a| < π it returns a unchanged (so the
     # wrap is idempotent bit for bit) and it lands in [−π, π]; only −π needs moving to π.
+    if -math.pi < a <= math.pi:  # already wrapped (most calls: a heading every tick)
+        return float(a)          # what remainder would return, without computing it
     if not math.isfinite(a):
         return math.nan  # math.remainder(inf, …) raises
     r = math.remainder(a, TWO_PI)

@@ -21,24 +21,39 @@ INPUT_NAMES = ("u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps")
 GRAVITY_MPS2 = 9.81
 
 
-def _slot_init(cls):
+class _Factory:
+    """The default of a field with a ``default_factory`` (shown as the dataclass shows it)."""
+
+    def __repr__(self) -> str:
+        return "<factory>"
+
+
+_FACTORY = _Factory()
+
+
+def slot_init(cls):
     """``cls`` (a frozen slotted dataclass) with an ``__init__`` that sets each slot through its
     descriptor: the dataclass's looks up ``object.__setattr__`` per field, 3× the cost, and
     these records are built several times a lockstep tick (issue 26). The same parameters and
-    defaults; equality, hash, repr, ``dataclasses.replace`` and the frozen ``__setattr__``
-    are the dataclass's."""
-    names, params, ns = [], [], {}
+    defaults (a ``default_factory`` called for each record left without a value); equality,
+    hash, repr, ``dataclasses.replace`` and the frozen ``__setattr__`` are the dataclass's."""
+    params, ns = [], {"_FACTORY": _FACTORY}
+    body = ""
     for f in fields(cls):
-        if not f.init or f.default_factory is not MISSING or hasattr(cls, "__post_init__"):
+        if not f.init or hasattr(cls, "__post_init__"):
             raise TypeError(f"{cls.__name__}.{f.name}: needs the dataclass's own __init__")
-        names.append(f.name)
         ns[f"_set_{f.name}"] = cls.__dict__[f.name].__set__  # the slot's member descriptor
-        if f.default is MISSING:
+        value = f.name
+        if f.default_factory is not MISSING:
+            ns[f"_factory_{f.name}"] = f.default_factory
+            params.append(f"{f.name}=_FACTORY")
+            value = f"_factory_{f.name}() if {f.name} is _FACTORY else {f.name}"
+        elif f.default is MISSING:
             params.append(f.name)
         else:
             ns[f"_default_{f.name}"] = f.default
             params.append(f"{f.name}=_default_{f.name}")
-    body = "".join(f"    _set_{n}(self, {n})\n" for n in names)
+        body += f"    _set_{f.name}(self, {value})\n"
     exec(f"def __init__(self, {', '.join(params)}):\n{body}", ns)  # noqa: S102 - our names
     init = ns["__init__"]
     init.__qualname__ = f"{cls.__qualname__}.__init__"
@@ -48,7 +63,7 @@ def _slot_init(cls):
     return cls
 
 
-@_slot_init
+@slot_init
 @dataclass(frozen=True, slots=True)
 class AttitudeCommand:
     """What a high-level controller asks of the drone's inner loops for one tick.
@@ -93,7 +108,7 @@ class FlightMode(_enum.Enum):
         return self in (FlightMode.TAKING_OFF, FlightMode.FLYING, FlightMode.LANDING)
 
 
-@_slot_init
+@slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class PlantTruth:
     """The simulated drone's true state (world frame, docs/design.md §4).
@@ -124,7 +139,7 @@ class PlantTruth:
     battery_pct: float
 
 
-@_slot_init
+@slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class MocapPose:
     """One motion-capture pose of the drone (docs/mocap-stream.md), converted to SI.
@@ -144,7 +159,7 @@ class MocapPose:
     psi_rad: float
 
 
-@_slot_init
+@slot_init
 @dataclass(frozen=True, slots=True, eq=False)
 class NavdataSample:
     """One navdata demo sample (docs/protocol.md §4.4) in the drone's own sign conventions, SI-ish units.
@@ -186,7 +201,7 @@ class NavdataSample:
     state_bits: int | None = None
 
 
-@_slot_init
+@slot_init
 @dataclass(frozen=True, slots=True)
 class TickInputs:
     """What the links hold at tick time ``t_s`` (s, the run's clock): the control tick's input.

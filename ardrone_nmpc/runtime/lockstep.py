@@ -166,9 +166,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
     t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
-    sensors, step, set_command = drone.sensors, tick.step, drone.set_command
-    write_row = recorder.write_row if recorder is not None else None
-    truth_cells, tally_add = drone.truth_cells, tally.add
+    inputs, step, set_command, tally_add = drone.inputs, tick.step, drone.set_command, tally.add
     for k in range(schedule.n_ticks):
         check_signals()
         t_exp = t_exp_of(k)
@@ -177,7 +175,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         drone_events = take_events()
         if drone_events:
             _write_events_at(write_event, drone_events)
-        nav = sensors.nav  # drone.navdata
+        nav = drone.navdata
         if drone.self_landing and nav.mode is not FlightMode.EMERGENCY:
             # the drone's word: no command, no take-off again (an emergency is the
             # supervisor's to report, as in fly, where the tick sees it first)
@@ -185,16 +183,14 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
             ending = SELF_LANDED
             break
         flown = k + 1
-        out = step(sensors.inputs(t_plant), t_exp_s=t_exp, mode=phase(t_exp))
+        out = step(inputs(t_plant), t_exp_s=t_exp, mode=phase(t_exp))
         if out.events:
             write_events(write_event, t_exp, out.events)
         pcmd = out.pcmd
         set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
                     progressive=out.progressive)
         row = out.row
-        if write_row is not None:  # _record's
-            put_truth(row, truth_cells())
-            write_row(row)
+        _record(recorder, row, drone)
         tally_add(row)
         if progress is not None:
             progress(schedule.fraction_done(k))
@@ -258,7 +254,6 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
             _record(recorder, out.row, drone)
         k += 1
         truth = drone.truth
-    truth = drone.truth
     mode = truth.mode
     write_event(truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
                 drone_mode=mode.value)

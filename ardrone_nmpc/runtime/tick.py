@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
-from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs
+from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, slot_init
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_row
@@ -31,6 +31,7 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
 _CONTROL = Action.CONTROL  # bound once: an enum member's lookup costs ~0.1 µs
 
 
+@slot_init  # one a tick (core/types.py)
 @dataclass(frozen=True, slots=True)
 class TickOutput:
     """The command to send, the log row of the tick and the supervisor's verdict.
@@ -46,23 +47,6 @@ class TickOutput:
     row: dict
     action: Action = Action.CONTROL
     events: list = field(default_factory=list)
-
-
-def _tick_output_init(self, pcmd: PcmdCommand, progressive: bool, row: dict,
-                      action: Action = Action.CONTROL, events: list | None = None) -> None:
-    # one a tick: each slot set through its descriptor, not object.__setattr__ per field
-    # (core/types._slot_init, which cannot take the default factory of ``events``)
-    _set_pcmd(self, pcmd)
-    _set_progressive(self, progressive)
-    _set_row(self, row)
-    _set_action(self, action)
-    _set_events(self, [] if events is None else events)
-
-
-_set_pcmd, _set_progressive, _set_row, _set_action, _set_events = (
-    TickOutput.__dict__[n].__set__ for n in ("pcmd", "progressive", "row", "action", "events"))
-_tick_output_init.__qualname__ = "TickOutput.__init__"
-TickOutput.__init__ = _tick_output_init
 
 
 def effective_controller(controller, limits: DroneLimits):

@@ -142,6 +142,29 @@ def shift_ring(ring, head, roll, pitch, gaz, yaw, hold):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def sagged_vz_gain(vz_gain, sag, battery):
+    """:meth:`~ardrone_nmpc.sim.plant.PlantParams.vertical_gain` at the battery level
+    ``battery`` (%), Python's ``min`` and ``max`` spelled out — for both plants' flying
+    steps."""
+    level = battery if not 0.0 > battery else 0.0
+    level = level if not 100.0 < level else 100.0
+    return vz_gain * (1.0 - sag * (1.0 - level / 100.0))
+
+
+@njit(cache=True, **INNER_KERNEL)
+def floor_and_drain(x, battery, drain):
+    """The end of a flying step, :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s:
+    the floor on the state array ``x`` (z ≤ 0 stops at 0 with no downward speed; a NaN z is
+    kept, as Python's ``max``), then the drain; returns the battery left (≥ 0)."""
+    if not x[2] > 0.0:
+        x[2] = 0.0
+        if 0.0 > x[5]:
+            x[5] = 0.0
+    left = battery - drain
+    return left if left > 0.0 else 0.0
+
+
+@njit(cache=True, **INNER_KERNEL)
 def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain, vz_gain,
                  sag):
     """Up to ``n`` steps of a FLYING plant in one call: each queues the current command
@@ -162,19 +185,12 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
             return i, head, battery, x
         r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
         kk = k
-        if sag != 0.0:  # PlantParams.vertical_gain, Python's min and max spelled out
-            level = battery if not 0.0 > battery else 0.0
-            level = level if not 100.0 < level else 100.0
-            gain = vz_gain * (1.0 - sag * (1.0 - level / 100.0))
+        if sag != 0.0:
+            gain = sagged_vz_gain(vz_gain, sag, battery)
             kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
                   k[10], k[11], k[12])
         _rk4_into(x, r, p, g, y, hd, kk, w, h, k1, k2, k3, k4, tmp, x)
-        if not x[2] > 0.0:  # the floor: max(vz, 0.0) as Python's max keeps a NaN
-            x[2] = 0.0
-            if 0.0 > x[5]:
-                x[5] = 0.0
-        left = battery - drain
-        battery = left if left > 0.0 else 0.0
+        battery = floor_and_drain(x, battery, drain)
     return n, head, battery, x
 
 

@@ -131,10 +131,8 @@ class LockstepDrone(ConfigHandshake):
         it."""
         plant = self.sim.plant
         if self._airframe:
-            state = plant._state
-            psi = state[8]  # AirframePlant.truth's wrap: unchanged in (−π, π]
-            psi = float(psi) if -math.pi < psi <= math.pi else wrap_angle_rad(psi)
-            return state[0], state[1], state[2], psi, state[5]
+            state = plant._state  # ψ wrapped as AirframePlant.truth wraps it
+            return state[0], state[1], state[2], wrap_angle_rad(state[8]), state[5]
         truth = plant.truth
         p, v = truth.position_m, truth.velocity_mps
         return p[0], p[1], p[2], truth.psi_rad, v[2]

@@ -645,10 +645,8 @@ class AirframePlant:
         """The true state now (world/model signs, see module docstring)."""
         state = self._state
         motion = _readonly(*state[:6])  # position and velocity, read-only views of one
-        # in (−π, π] the wrap returns ψ unchanged (math.remainder is exact): the same bits
-        psi = float(state[8]) if -math.pi < state[8] <= math.pi else wrap_angle_rad(state[8])
         return PlantTruth(t_s=self.t_s, position_m=motion[:3], velocity_mps=motion[3:],
-                          roll_rad=state[6], pitch_rad=state[7], psi_rad=psi,
+                          roll_rad=state[6], pitch_rad=state[7], psi_rad=wrap_angle_rad(state[8]),
                           psi_rate_radps=state[9], mode=self._mode, battery_pct=self._battery)
 
     @property

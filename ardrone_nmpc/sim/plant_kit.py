@@ -41,7 +41,7 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
-from ardrone_nmpc.sim.airframe import shift_ring
+from ardrone_nmpc.sim.airframe import floor_and_drain, sagged_vz_gain, shift_ring
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
 from ardrone_nmpc.sim.plant_step import advance_biases
 
@@ -181,19 +181,11 @@ def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w
             return i, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
         r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
         kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
-        level = battery if not 0.0 > battery else 0.0  # PlantParams.vertical_gain: min, max
-        level = level if not 100.0 < level else 100.0   # as Python's
-        kit, out = kit_rk4(kit, r, p, g * (vz_gain * (1.0 - sag * (1.0 - level / 100.0))), y,
-                           hd, k, w, h)
+        kit, out = kit_rk4(kit, r, p, g * sagged_vz_gain(vz_gain, sag, battery), y, hd, k, w, h)
         vx, vy, vz, phi, theta_k, psi_k_rate = out
         state[0], state[1], state[2], state[3], state[4] = kit[0], kit[1], kit[2], vx, vy
         state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, kit[3], -psi_k_rate
-        if not state[2] > 0.0:  # the floor: max(vz, 0.0) as Python's max keeps a NaN
-            state[2] = 0.0
-            if 0.0 > state[5]:
-                state[5] = 0.0
-        left = battery - drain
-        battery = left if left > 0.0 else 0.0
+        battery = floor_and_drain(state, battery, drain)
     state[8] = wrap_half_turn(state[8], math.pi)
     yaw_bias_deg, vel_bias_0, vel_bias_1 = advance_biases(
         n * h, normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,

@@ -68,3 +68,28 @@ def test_records_build_as_their_dataclass_twin(cls):
         cls(*args[:-1])
     with pytest.raises(TypeError):
         cls(*args, nonsense=1)
+
+
+def test_a_default_factory_gives_each_record_its_own_value():
+    """``slot_init`` on a record with a ``default_factory`` (the tick's ``TickOutput`` and its
+    ``events``): the dataclass's signature, a new value for each record left without one,
+    the value given otherwise — as the dataclass's own ``__init__``."""
+    from ardrone_nmpc.control.mapping import PcmdCommand
+    from ardrone_nmpc.runtime.tick import TickOutput
+    from ardrone_nmpc.safety import Action
+
+    specs = [(f.name, f.type,
+              dataclasses.field(default=f.default, default_factory=f.default_factory))
+             for f in dataclasses.fields(TickOutput)]
+    twin = dataclasses.make_dataclass("TickOutput", specs, frozen=True, slots=True)
+    assert str(inspect.signature(TickOutput)) == str(inspect.signature(twin))
+    pcmd = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False,) * 4)
+    a, b = TickOutput(pcmd, True, {}), TickOutput(pcmd, True, {})
+    assert a.events == [] and b.events == [] and a.events is not b.events
+    assert a.action is Action.CONTROL
+    given = [{"kind": "x"}]
+    assert TickOutput(pcmd, False, {}, Action.LAND, given).events is given
+    assert TickOutput(pcmd, False, {}, events=given).events is given
+    assert repr(a) == repr(twin(pcmd, True, {}))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.events = []
