@@ -21,10 +21,10 @@ TWO_PI = 2.0 * math.pi
 def _wrap_scalar(a: float) -> float:
     # math.remainder is the exact IEEE remainder: for |a| < π it returns a unchanged (so the
     # wrap is idempotent bit for bit) and it lands in [−π, π]; only −π needs moving to π.
-    if -math.pi < a <= math.pi:  # already wrapped (most calls: a heading every tick)
-        return float(a)          # what remainder would return, without computing it
-    if not math.isfinite(a):
-        return math.nan  # math.remainder(inf, …) raises
+    if not math.isfinite(a):  # first: an ordered comparison with NaN raises the FPU's
+        return math.nan       # invalid flag (np.vectorize warns); math.remainder(inf, …) raises
+    if -math.pi < a <= math.pi:  # already wrapped (most calls: a heading every tick): what
+        return float(a)          # remainder would return, without computing it
     r = math.remainder(a, TWO_PI)
     return math.pi if r <= -math.pi else r
 
