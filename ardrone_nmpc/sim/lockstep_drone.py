@@ -192,6 +192,11 @@ class LockstepDrone(ConfigHandshake):
         ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
         if ref is None and progressive:  # the firmware takes the PCMD's values as they are
             self._seq = seq + 1
+            legs = self.sensors._legs
+            if legs is not None and legs.takes_commands:  # the chain written out
+                legs.command(seq + 1, float(roll_frac), float(pitch_frac), float(gaz_frac),
+                             float(yaw_frac), self.sim.plant.t_s)
+                return
             self.sim.execute_pcmd(seq + 1, (_PROGRESSIVE, float(roll_frac), float(pitch_frac),
                                             float(gaz_frac), float(yaw_frac)),
                                   self.sim.plant.t_s, self.t_exp_s)

@@ -17,17 +17,26 @@ client), and is used only when the Python path's tick would do what the kernel d
 
 The kernel itself stops before a leg that a climb near the altitude cap or an emptying
 battery would change; the Python path goes on from there.
+
+:meth:`CompiledLegs.command` is the same kind of shortcut for the tick's PCMD: the chain
+:meth:`SimulatedDrone.execute_pcmd <ardrone_nmpc.sim.drone.SimulatedDrone.execute_pcmd>` →
+:meth:`DroneFirmware.execute_pcmd <ardrone_nmpc.sim.drone_firmware.DroneFirmware.execute_pcmd>`
+(the sequence rule) → ``apply_command`` (the altitude cap) →
+:meth:`AirframePlant.command <ardrone_nmpc.sim.plant.AirframePlant.command>` written out in
+one method, for a drone without injected faults whose classes override none of them.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 
 import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.sim import sensor_step as ks
-from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
+from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["CompiledLegs"]
@@ -37,6 +46,11 @@ _FLYING = FlightMode.FLYING
 #: Python path (its override would be skipped)
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
              "_state_array", "_from_state_array", "mocap_pose", "navdata", "truth")
+#: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
+_COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
+                     (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
+                     (AirframePlant, ("command",)))
+_isfinite = math.isfinite
 _f64 = np.float64
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: tuple = ()
@@ -62,6 +76,10 @@ class CompiledLegs:
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
+        drone = sensors.drone
+        #: the tick's PCMD by :meth:`command` (else the drone's own chain)
+        self.takes_commands = drone.faults is None and self.commands_eligible(drone)
+        self.counters = drone.counters
 
     @staticmethod
     def eligible(plant) -> bool:
@@ -69,6 +87,56 @@ class CompiledLegs:
         kind = type(plant)
         return (isinstance(plant, AirframePlant)
                 and all(getattr(kind, name) is getattr(AirframePlant, name) for name in _REPLACED))
+
+    @staticmethod
+    def commands_eligible(drone) -> bool:
+        """A drone whose PCMD chain :meth:`command` may stand in for: none of its drone's,
+        firmware's or plant's classes overrides a method of the chain."""
+        for base, names in _COMMAND_REPLACED:
+            obj = drone if base is SimulatedDrone else (
+                drone.firmware if base is DroneFirmware else drone.plant)
+            kind = type(obj)
+            if not (isinstance(obj, base)
+                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+                return False
+        return True
+
+    def command(self, seq: int, roll: float, pitch: float, gaz: float, yaw: float,
+                now: float) -> None:
+        """:meth:`SimulatedDrone.execute_pcmd` of one progressive PCMD (``seq``, the float
+        fractions) at firmware time ``now`` without injected faults, written out (module
+        docstring): the same counters, firmware state and plant command."""
+        fw, c = self.firmware, self.counters
+        c.at_datagrams_in += 1
+        c.at_commands_in += 1
+        if not (seq == 1 or seq > fw.last_seq):  # the sequence rule refuses it
+            c.at_commands_stale += 1
+            fw.apply_command()
+            return
+        fw.last_seq = seq  # DroneFirmware._accept
+        c.at_commands_applied += 1
+        fw.last_cmd_t = now
+        fw.link_lost = False
+        fw.lost_com_hover = False
+        if fw.comwdg_clear == "any":
+            fw.comwdg_latched = False
+        fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, roll, pitch, gaz, yaw)  # apply_command:
+        plant = self.plant  # a new held command, progressive
+        at_cap = False
+        if gaz > 0.0 and plant.mode.airborne:  # only a climb is capped
+            at_cap = fw._z_stop_m() >= fw.config.altitude_max_m
+        if at_cap:
+            gaz = 0.0
+        fw.alt_capped = at_cap
+        cmd = (roll, pitch, gaz, yaw, True)
+        if cmd != fw.applied:
+            if _isfinite(roll) and _isfinite(pitch) and _isfinite(gaz) and _isfinite(yaw):
+                # AirframePlant.command: each fraction clipped to [−1, 1]
+                plant._current = (min(1.0, max(-1.0, roll)), min(1.0, max(-1.0, pitch)),
+                                  min(1.0, max(-1.0, gaz)), min(1.0, max(-1.0, yaw)), False)
+            else:
+                plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
+            fw.applied = cmd
 
     def ready(self, t_s: float) -> bool:
         """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""

@@ -40,7 +40,10 @@ def _snapshot(drone, t_s):
             _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
             plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
             plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
-            fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing)
+            fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
+            # what the PCMD chain (or CompiledLegs.command in its place) leaves
+            plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
+            fw.link_lost, fw.ref_start, drone.sim.counters)
 
 
 def _fly(cfg, legs: bool, ticks: int, command):
@@ -146,3 +149,55 @@ def test_a_plant_that_overrides_what_the_kernel_does_keeps_the_python_path(name)
     Overriding = type("Overriding", (AirframePlant,), {name: override})
     assert CompiledLegs.eligible(AirframePlant(PlantParams(), NoiseConfig(), seed=1))
     assert not CompiledLegs.eligible(Overriding(PlantParams(), NoiseConfig(), seed=1))
+
+
+@pytest.mark.parametrize("owner,name", [("drone", "execute_pcmd"), ("drone", "_at_lost"),
+                                        ("firmware", "execute_pcmd"), ("firmware", "_accept"),
+                                        ("firmware", "apply_command"), ("plant", "command")])
+def test_a_drone_that_overrides_the_pcmd_chain_keeps_it(owner, name):
+    """CompiledLegs.command writes out the PCMD chain: a subclass overriding a link of it (a
+    firmware with another sequence rule, say) keeps the chain, so its override runs."""
+    from ardrone_nmpc.sim.drone import SimulatedDrone
+    from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+    from ardrone_nmpc.sim.plant import AirframePlant
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    legs = drone.sensors._legs
+    assert legs.takes_commands and CompiledLegs.commands_eligible(drone.sim)
+    obj = {"drone": drone.sim, "firmware": drone.sim.firmware, "plant": drone.sim.plant}[owner]
+    base = {"drone": SimulatedDrone, "firmware": DroneFirmware, "plant": AirframePlant}[owner]
+    method = getattr(base, name)
+    obj.__class__ = type("Overriding", (base,), {name: lambda self, *a, **k: method(self, *a,
+                                                                                     **k)})
+    assert not CompiledLegs.commands_eligible(drone.sim)
+
+
+def test_a_drone_with_injected_faults_keeps_the_pcmd_chain():
+    """An injected AT loss drops datagrams in SimulatedDrone._at_lost: the chain stays."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), ["faults.at_loss.probability=0.3"])
+    drone = LockstepDrone(cfg)
+    assert drone.sim.faults is not None
+    assert drone.sensors._legs is None or not drone.sensors._legs.takes_commands
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_command_is_refused_as_the_chain_refuses_it(bad):
+    """A non-finite fraction: the plant's ValueError either way, and the same state after."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    shots = []
+    for legs in (False, True):
+        drone = LockstepDrone(cfg)
+        if not legs:
+            drone.sensors._legs = None
+        drone.connect()
+        drone.takeoff()
+        while drone.truth.mode is not FlightMode.FLYING:
+            drone.advance_to(drone.truth.t_s + 0.06)
+        drone.set_command(0.1, 0.0, 0.2, 0.0)
+        with pytest.raises(ValueError):
+            drone.set_command(0.1, bad, 0.2, 0.0)
+        drone.advance_to(drone.truth.t_s + 0.06)
+        shots.append(_snapshot(drone, drone.truth.t_s))
+    assert shots[0] == shots[1]
