@@ -6,9 +6,11 @@ state, runs it and takes the state back, for
 and writes the plant's and the firmware's internals (it is their compiled path, not a
 client), and is used only when the Python path's tick would do what the kernel does:
 
-* the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING on its own dynamics
-  (no other backend's ``_motors_on_step``: what ``_flying_advance`` compiles);
-* the navdata's flight mode is the one the link's take-off guard saw last (no guard call);
+* the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
+  LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
+  ``_flying_advance`` and ``_auto_advance`` compile);
+* the navdata's flight mode is the plant's, the one the link's take-off guard saw last (no
+  guard call; the kernel hands back a leg that changes the mode);
 * the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
   applied and not capped, and by the tick's time no hover, no link-loss watchdog fires (the
   silence only grows within a tick, so none fires earlier either; the com-watchdog bit,
@@ -41,11 +43,15 @@ from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["CompiledLegs"]
 
-_FLYING = FlightMode.FLYING
+#: the modes the kernel flies, as it takes them (``sv[S_MODE]``)
+_MODES = {FlightMode.FLYING: ks.MODE_FLYING, FlightMode.TAKING_OFF: ks.MODE_TAKING_OFF,
+          FlightMode.LANDING: ks.MODE_LANDING}
 #: What the kernel does in the plant's place: a subclass overriding any of these flies the
 #: Python path (its override would be skipped)
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
-             "_state_array", "_from_state_array", "mocap_pose", "navdata", "truth")
+             "_state_array", "_from_state_array", "mocap_pose", "navdata", "truth",
+             "_auto_advance", "_auto_command", "_ground_contact", "_check_transitions",
+             "_at_rest")
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
@@ -141,7 +147,8 @@ class CompiledLegs:
     def ready(self, t_s: float) -> bool:
         """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""
         plant, fw = self.plant, self.firmware
-        if plant._mode is not _FLYING or self.sensors._nav_mode is not _FLYING:
+        mode = plant._mode
+        if mode is not self.sensors._nav_mode or mode not in _MODES:
             return False
         if fw.pcmd is not fw._applied_pcmd or fw.alt_capped:
             return False
@@ -183,6 +190,10 @@ class CompiledLegs:
         p[ks.P_BIAS0], p[ks.P_BIAS1] = pp.navdata_velocity_bias_mps
         p[ks.P_VMAX] = pp.control_vz_max_mps
         p[ks.P_VZ_GAIN], p[ks.P_SAG] = pp.vz_gain, pp.battery_sag_frac
+        # AirframePlant._auto_command's gaz
+        p[ks.P_GAZ_UP] = pp.takeoff_climb_mps / pp.control_vz_max_mps
+        p[ks.P_GAZ_DOWN] = -pp.landing_speed_mps / pp.control_vz_max_mps
+        p[ks.P_TAU_VZ], p[ks.P_TAKEOFF_ALT] = pp.tau_vz_s, pp.takeoff_altitude_m
         k = pp.rhs_coefficients
         if len(k) != ks.N_K:
             raise ValueError(f"{ks.N_K} RHS coefficients expected, got {len(k)}")
@@ -220,7 +231,7 @@ class CompiledLegs:
             climbing = lead_s = alt_max_m = 0.0
         _PUT_SV(sv, 0, t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2])
+                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2], _MODES[plant._mode])
         x = self._state_array()
         ks.lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
                         nav_n.values, out)
@@ -260,7 +271,7 @@ class CompiledLegs:
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
                 sensors.took_navdata(t_event, NavdataSample(
-                    o[q], _FLYING, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
+                    o[q], plant._mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
                     _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
                     _f64(o[q + 8])))
         if done > n_events:

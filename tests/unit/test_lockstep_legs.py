@@ -2,7 +2,8 @@
 Python path's bits: two lockstep drones of one seed, one with the compiled legs and one
 without, flown with the same commands, hold the same samples, truth and plant state on every
 tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
-attitude, the watchdogs of a silent link, a draining battery, a scripted target and a take-off after a self-landing."""
+attitude, the watchdogs of a silent link, a draining battery, a scripted target and a take-off after a self-landing — and through the automatic take-off and landing, whose
+last legs (the climb settled, the touch-down) the kernel hands back."""
 
 import math
 
@@ -48,7 +49,8 @@ def _snapshot(drone, t_s):
 
 def _fly(cfg, legs: bool, ticks: int, command):
     drone = LockstepDrone(cfg)
-    used = [0, 0]  # compiled runs, of them stopped before the last leg
+    # compiled runs, of them stopped before the last leg: flying, taking off or landing
+    used = [0, 0, 0, 0]
     compiled = drone.sensors._legs
     if not legs:
         drone.sensors._legs = None
@@ -56,9 +58,10 @@ def _fly(cfg, legs: bool, ticks: int, command):
         run = compiled.run
 
         def counted(t_s):
+            i = 0 if drone.sim.plant.mode is FlightMode.FLYING else 2
             events, last_leg = run(t_s)
-            used[0] += 1
-            used[1] += last_leg
+            used[i] += 1
+            used[i + 1] += last_leg
             return events, last_leg
         compiled.run = counted
     period = cfg.loop.period_s
@@ -83,6 +86,14 @@ def _fly(cfg, legs: bool, ticks: int, command):
             drone.hover()
         else:
             drone.set_command(*cmd)
+    drone.land()
+    for k in range(ticks, ticks + 100):  # as runtime/lockstep._land: REF land held
+        if drone.truth.mode is FlightMode.LANDED:
+            break
+        t = t_first + k * period
+        drone.advance_to(t, k * period)
+        drone.land()
+        shots.append(_snapshot(drone, t))
     return shots, used
 
 
@@ -112,9 +123,10 @@ def test_compiled_legs_give_the_python_paths_bits(name):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped) = _fly(cfg, True, 400, command)
+    compiled, (used, stopped, auto_used, auto_stopped) = _fly(cfg, True, 400, command)
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
+    assert auto_used > 20 and auto_stopped >= 1  # take-off, landing: an end handed back
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"
@@ -123,7 +135,7 @@ def test_compiled_legs_give_the_python_paths_bits(name):
 def test_compiled_legs_with_a_scripted_target():
     cfg = load_config(str(ROOT / "configs" / "follow_car.yaml"), [])
     python, _ = _fly(cfg, False, 300, _zigzag)
-    compiled, (used, _) = _fly(cfg, True, 300, _zigzag)
+    compiled, (used, *_) = _fly(cfg, True, 300, _zigzag)
     assert used > 100
     assert python == compiled
 
