@@ -37,6 +37,7 @@ import numpy as np
 
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
 from ardrone_nmpc.sim import sensor_step as ks
+from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
@@ -58,6 +59,7 @@ _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (AirframePlant, ("command",)))
 _isfinite = math.isfinite
 _f64 = np.float64
+_lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: tuple = ()
 # the counters and the float state written straight into iv and sv (native int64 and double:
@@ -65,6 +67,10 @@ _NONE: tuple = ()
 _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
 _PUT_SV = struct.Struct(f"{ks.SV_SIZE}d").pack_into
 _GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
+# the kernel's layout, bound once (run reads them every tick)
+_O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1,
+                                                    ks.O_LAST_NOW)
+_MOCAP = ks.MOCAP
 
 
 class CompiledLegs:
@@ -162,11 +168,11 @@ class CompiledLegs:
         """The flight's parameters (rebuilt when the plant's params, noise or per-flight
         biases change)."""
         plant, sensors = self.plant, self.sensors
-        key = (plant.params, plant.noise, plant._trim_bias_rad, plant._yaw_drift_sign)
         old = self._p_key
-        if (len(old) == 4 and old[0] is key[0] and old[1] is key[1] and old[2] is key[2]
-                and old[3] == key[3]):
+        if (old and old[0] is plant.params and old[1] is plant.noise
+                and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
             return self.p
+        key = (plant.params, plant.noise, plant._trim_bias_rad, plant._yaw_drift_sign)
         pp, nz, p = plant.params, plant.noise, self.p
         h = pp.integration_step_s
         p[ks.P_H] = h
@@ -233,17 +239,17 @@ class CompiledLegs:
                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
                 climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2], _MODES[plant._mode])
         x = self._state_array()
-        ks.lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
-                        nav_n.values, out)
-        if iv[ks.I_DONE] < 0:  # a block ran short: new ones, and again
+        _lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
+                      nav_n.values, out)
+        (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
+         n_events, kind0, kind1) = iv.tolist()
+        if done < 0:  # a block ran short: new ones, and again
             bias_n.ensure(ks.NEED_BIAS)
             mocap_n.ensure(ks.NEED_MOCAP)
             nav_n.ensure(ks.NEED_NAV)
             if self.turbulent:
                 gust_n.ensure(ks.NEED_GUST)
             return self.run(t_s)
-        (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
-         n_events, kind0, kind1) = iv.tolist()
         (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = _GET_SV(sv)
         o = out.tolist()
         plant._steps, fifo.head, plant._pending_s, plant._battery = steps, head, pending, battery
@@ -251,23 +257,27 @@ class CompiledLegs:
         if self.turbulent:
             plant._gust_mps = (gust0, gust1)
             gust_n.pos = pos_gust
-        plant._state = self._x_state = plant._from_state_array(x)
+        values = x.tolist()  # AirframePlant._from_state_array
+        if len(values) > N_STATE:
+            plant._tilt_aux = (values[N_STATE], values[N_STATE + 1])
+            values = values[:N_STATE]
+        plant._state = self._x_state = tuple(values)
         self._x, self._x_aux = x, plant._tilt_aux
         bias_n.pos, mocap_n.pos, nav_n.pos = pos_bias, pos_mocap, pos_nav
         sensors._next_mocap_k, sensors._next_nav_k = next_mocap, next_nav
-        now = o[ks.O_LAST_NOW]
+        now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
         for i in range(min(done, n_events)):
-            kind, t_event = (kind0, o[ks.O_EV_T0]) if i == 0 else (kind1, o[ks.O_EV_T1])
-            if kind == ks.MOCAP:
-                q = ks.O_POSE
+            kind, t_event = (kind0, o[_O_EV_T0]) if i == 0 else (kind1, o[_O_EV_T1])
+            if kind == _MOCAP:
+                q = _O_POSE
                 pose = _frozen(out[q + 1:q + 7].tobytes())  # position, angles: read-only
                 sensors.took_pose(t_event, MocapPose(o[q], pose[:3], pose[3:], o[q + 7]))
             else:
-                q = ks.O_NAV
+                q = _O_NAV
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
                 sensors.took_navdata(t_event, NavdataSample(
@@ -276,5 +286,5 @@ class CompiledLegs:
                     _f64(o[q + 8])))
         if done > n_events:
             return _NONE, False
-        events = [(o[ks.O_EV_T0], kind0), (o[ks.O_EV_T1], kind1)][done:n_events]
+        events = [(o[_O_EV_T0], kind0), (o[_O_EV_T1], kind1)][done:n_events]
         return events, True
