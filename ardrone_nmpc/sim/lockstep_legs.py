@@ -18,7 +18,8 @@ client), and is used only when the Python path's tick would do what the kernel d
   would have left it).
 
 The kernel itself stops before a leg that a climb near the altitude cap or an emptying
-battery would change; the Python path goes on from there.
+battery would change, or that ends a take-off or landing (flown, found to, and undone); the
+Python path goes on from there.
 
 :meth:`CompiledLegs.command` is the same kind of shortcut for the tick's PCMD: the chain
 :meth:`SimulatedDrone.execute_pcmd <ardrone_nmpc.sim.drone.SimulatedDrone.execute_pcmd>` →
@@ -44,9 +45,8 @@ from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["CompiledLegs"]
 
-#: the modes the kernel flies, as it takes them (``sv[S_MODE]``)
-_MODES = {FlightMode.FLYING: ks.MODE_FLYING, FlightMode.TAKING_OFF: ks.MODE_TAKING_OFF,
-          FlightMode.LANDING: ks.MODE_LANDING}
+# the modes the kernel flies (compared by identity: an Enum hashes in Python)
+_FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
 #: What the kernel does in the plant's place: a subclass overriding any of these flies the
 #: Python path (its override would be skipped)
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
@@ -154,7 +154,8 @@ class CompiledLegs:
         """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""
         plant, fw = self.plant, self.firmware
         mode = plant._mode
-        if mode is not self.sensors._nav_mode or mode not in _MODES:
+        if mode is not self.sensors._nav_mode or not (
+                mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             return False
         if fw.pcmd is not fw._applied_pcmd or fw.alt_capped:
             return False
@@ -235,9 +236,12 @@ class CompiledLegs:
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
+        mode = plant._mode  # as the kernel takes it (sv[S_MODE])
+        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
+                       ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         _PUT_SV(sv, 0, t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
                 vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2], _MODES[plant._mode])
+                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2], kernel_mode)
         x = self._state_array()
         _lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
                       nav_n.values, out)
@@ -281,7 +285,7 @@ class CompiledLegs:
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
                 sensors.took_navdata(t_event, NavdataSample(
-                    o[q], plant._mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
+                    o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
                     _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
                     _f64(o[q + 8])))
         if done > n_events:

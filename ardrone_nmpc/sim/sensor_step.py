@@ -7,12 +7,12 @@ sample, then to the tick's time — each leg a firmware advance (plant advance, 
 held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
 legs and samples for an airborne airframe plant — FLYING, or in its automatic take-off or
 landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`) — while nothing but physics happens
-between them
-(the caller checks that nothing the firmware does could change on the way; here each leg is
-checked for what only its start shows — a climb within reach of the altitude cap, a battery
-that could empty — and the run stops before such a leg, untouched, for the Python path to
-go on from there; a take-off's or landing's leg that ends it — the climb settled, the
-touch-down — is flown, found to change the mode, and undone, for the Python path too). The arithmetic is the Python's, in its order: the event grid of
+between them (the caller checks that nothing the firmware does could change on the way; here
+each leg is checked for what only its start shows — a climb within reach of the altitude
+cap, a battery that could empty — and the run stops before such a leg, untouched, for the
+Python path to go on from there; a take-off's or landing's leg that ends it — the climb
+settled, the touch-down — is flown, found to change the mode, and undone, for the Python
+path too). The arithmetic is the Python's, in its order: the event grid of
 ``_advance_direct``, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
 (whole steps, the remainder carried; :func:`~ardrone_nmpc.sim.plant_step.flying_advance`, the
 turbulence's Gauss–Markov step), :meth:`~ardrone_nmpc.sim.plant.AirframePlant.mocap_pose`
@@ -116,6 +116,18 @@ def _navdata(x, sv, p, n, out):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def _gust_step(iv, sv, p, n, h, gust_n):
+    """The turbulence's step at the end of an advance of ``n`` steps (none without)."""
+    if p[P_TURB_STD] > 0.0:  # plant.gauss_markov_step over the call's n·h
+        a = math.exp(-(n * h) / p[P_TURB_TAU])
+        q = p[P_TURB_STD] * math.sqrt(1.0 - a * a)
+        g = iv[I_POS_GUST]
+        iv[I_POS_GUST] = g + 2
+        sv[S_GUST0] = a * sv[S_GUST0] + q * gust_n[g]
+        sv[S_GUST1] = a * sv[S_GUST1] + q * gust_n[g + 1]
+
+
+@njit(cache=True, **INNER_KERNEL)
 def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
     """The automatic take-off's or landing's ``n`` steps (:meth:`AirframePlant.advance
     <ardrone_nmpc.sim.plant.AirframePlant.advance>`: :func:`auto_steps`, the heading's wrap,
@@ -199,18 +211,6 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = yaw_bias, vb0, vb1
     _gust_step(iv, sv, p, n, h, gust_n)
     return True
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _gust_step(iv, sv, p, n, h, gust_n):
-    """The turbulence's step at the end of an advance of ``n`` steps (none without)."""
-    if p[P_TURB_STD] > 0.0:  # plant.gauss_markov_step over the call's n·h
-        a = math.exp(-(n * h) / p[P_TURB_TAU])
-        q = p[P_TURB_STD] * math.sqrt(1.0 - a * a)
-        g = iv[I_POS_GUST]
-        iv[I_POS_GUST] = g + 2
-        sv[S_GUST0] = a * sv[S_GUST0] + q * gust_n[g]
-        sv[S_GUST1] = a * sv[S_GUST1] + q * gust_n[g + 1]
 
 
 @njit(cache=True, **OUTER_KERNEL)

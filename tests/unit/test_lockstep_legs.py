@@ -2,7 +2,8 @@
 Python path's bits: two lockstep drones of one seed, one with the compiled legs and one
 without, flown with the same commands, hold the same samples, truth and plant state on every
 tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
-attitude, the watchdogs of a silent link, a draining battery, a scripted target and a take-off after a self-landing — and through the automatic take-off and landing, whose
+attitude, the watchdogs of a silent link, a draining battery, a scripted target and a
+take-off after a self-landing — and through the automatic take-off and landing, whose
 last legs (the climb settled, the touch-down) the kernel hands back."""
 
 import math
