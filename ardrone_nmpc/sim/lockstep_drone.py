@@ -107,7 +107,8 @@ class LockstepDrone(ConfigHandshake):
         step of the clock) the plant faults due by then act first."""
         if t_exp_s is not None:
             self.t_exp_s = t_exp_s
-            self.sim.update_faults(t_exp_s)
+            if self.sim.faults is not None:  # (SimulatedDrone.update_faults' own test)
+                self.sim.update_faults(t_exp_s)
         self.sensors.advance_to(t_s)
 
     def take_events(self) -> list[tuple[float, dict]]:

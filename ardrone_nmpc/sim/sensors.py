@@ -137,6 +137,8 @@ class LockstepSensors:
         legs = self._legs
         if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
             events, last_leg = legs.run(t_s)      # … and what it left, if anything
+            if not (events or last_leg):
+                return
         else:
             events, last_leg = self._direct_events(t_s), True
         for t_event, kind in events:
