@@ -16,11 +16,13 @@ configuration read-back works as against the real drone.
 
 from __future__ import annotations
 
+import copy
 import socket
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from typing import Optional
 
+from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.links.backend import OpenedDrone
 
 from ardrone_nmpc.sim.addresses import require_loopback_host
@@ -30,7 +32,9 @@ from ardrone_nmpc.sim.fault_injection import FaultCounters, ServerFaults
 from ardrone_nmpc.sim.mocap_server import MocapServer
 from ardrone_nmpc.sim.plant import AirframePlant
 
-__all__ = ["Loopback", "free_udp_port", "open_loopback_drone", "start_loopback"]
+__all__ = ["Loopback", "free_udp_port", "open_loopback_drone", "start_loopback", "warm_physics"]
+
+_WARM_UP_LIMIT_S = 30.0  # plant seconds a warm-up phase may take (a take-off takes ~2 s)
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -139,6 +143,41 @@ class Loopback:
                 f"mocap→{self.mocap_host}:{self.mocap_port} {self.object_name!r})")
 
 
+def warm_physics(plant, step_s: float) -> tuple:
+    """Load (or, on a cold cache, compile) the kernels the physics and mocap threads call —
+    on a copy of ``plant``, flown through a take-off, a second of flight and a landing in
+    ``step_s`` steps — before the servers start. Compiled in the physics thread instead, the
+    first take-off of a fresh install stalls it for seconds and the client sees the navdata
+    stop (``take-off failed: navdata lost``). ``plant`` itself is left untouched; returns the
+    copy's modes, in the order it went through them (none for a plant that cannot be copied:
+    it is served cold)."""
+    try:
+        twin = copy.deepcopy(plant)
+    except (TypeError, copy.Error):  # a user's backend holding a lock, a socket …
+        return ()
+    modes = [twin.mode]
+
+    def fly_while(mode) -> None:
+        t_end = twin.t_s + _WARM_UP_LIMIT_S
+        while twin.mode is mode and twin.t_s < t_end:
+            twin.advance(step_s)
+        modes.append(twin.mode)
+
+    if twin.takeoff():
+        modes.append(twin.mode)
+        fly_while(FlightMode.TAKING_OFF)
+        twin.command(0.01, -0.01, 0.02, 0.01)
+        for _ in range(max(1, round(1.0 / step_s))):
+            twin.advance(step_s)
+        twin.mocap_pose()
+        twin.navdata()
+        _ = twin.truth  # a property (its angle wrap)
+        if twin.land():
+            modes.append(twin.mode)
+            fly_while(FlightMode.LANDING)
+    return tuple(modes)
+
+
 def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int] = None,
                    mocap_host: str = "127.0.0.1", bind_host: str = "127.0.0.1",
                    at_port: int = 0, navdata_port: int = 0, control_port: Optional[int] = 0,
@@ -171,6 +210,7 @@ def start_loopback(cfg, *, seed: Optional[int] = None, mocap_port: Optional[int]
                    step_s=cfg.sim.plant.integration_step_s,
                    control_port_mode=simulated.control_port_mode)
     options.update(server_options)
+    warm_physics(plant, options["step_s"])  # before its threads start
     drone = DroneServer(plant, bind_host=bind_host, at_port=at_port, navdata_port=navdata_port,
                         control_port=control_port, drone=simulated, **options)
     try:

@@ -1,0 +1,48 @@
+"""The loopback's physics warm-up (sim/loopback.warm_physics): it flies a copy of the plant
+through what the physics thread will run — so a cold numba cache compiles before the servers
+start, not during the first take-off, where the stall once cost ``fly --sim`` its navdata
+("take-off failed: navdata lost" on the first two flights of a fresh install) — and it leaves
+the served plant exactly as it was."""
+
+import pickle
+import threading
+
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.core.types import FlightMode
+from ardrone_nmpc.sim.backends import make_plant
+from ardrone_nmpc.sim.loopback import warm_physics
+from tests.standins.airframe_emulator import AirframeEmulator
+
+_FLIGHT = (FlightMode.LANDED, FlightMode.TAKING_OFF, FlightMode.FLYING, FlightMode.LANDING,
+           FlightMode.LANDED)
+
+
+def _plants():
+    for profile in ("ardrone", "thesis_kit"):
+        cfg = load_config(None, [f"sim.plant.profile={profile}"])
+        yield profile, make_plant(cfg.sim, cfg.drone, seed=11)
+    yield "emulator", AirframeEmulator()
+
+
+@pytest.mark.parametrize("name,plant", list(_plants()), ids=lambda v: v if isinstance(v, str) else "")
+def test_the_warm_up_flies_a_whole_flight_on_a_copy(name, plant):
+    before = pickle.dumps(plant)
+    assert warm_physics(plant, 0.005) == _FLIGHT
+    assert pickle.dumps(plant) == before  # state, clock, command, generator: untouched
+    assert plant.mode is FlightMode.LANDED and plant.t_s == 0.0
+
+
+def test_a_plant_that_refuses_the_take_off_is_only_copied():
+    cfg = load_config(None, ["sim.plant.battery_start_pct=5"])
+    plant = make_plant(cfg.sim, cfg.drone)
+    assert plant.battery_pct < plant.params.takeoff_min_battery_pct  # refused below it
+    assert warm_physics(plant, 0.005) == (FlightMode.LANDED,)
+
+
+def test_a_plant_that_cannot_be_copied_is_served_cold():
+    plant = AirframeEmulator()
+    plant.lock = threading.Lock()  # a user's backend holding a lock: deepcopy refuses
+    assert warm_physics(plant, 0.005) == ()
+    assert plant.mode is FlightMode.LANDED
