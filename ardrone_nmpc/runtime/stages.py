@@ -28,6 +28,8 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
+from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.reference.kernels import held_waypoint_horizon
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
@@ -45,6 +47,7 @@ assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM)
 # (~0.1 µs), and the tick makes a dozen
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
+_NO_SHIFT = np.zeros(0)  # held_waypoint_horizon: no offset-free shift
 
 # the ``cmd_saturated`` text of the (roll, pitch, gaz, yaw) flags: one lookup, not four
 # conditionals and three concatenations
@@ -251,6 +254,12 @@ class Control:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
             self._offsets_dtau = math.nan  # the Δτ _offsets were made with
+            # the one-call lookup's buffers: its times (and their clamp at 0), the shifted
+            # horizon (read by the solver within the tick only)
+            self._times = np.zeros(self._offsets.size)
+            self._clamped = np.zeros(self._offsets.size)
+            self._states_shape = (self._offsets.size, STATE_DIM)
+            self._horizon = np.zeros((nmpc.spec.horizon_steps + 1, STATE_DIM))
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -277,17 +286,32 @@ class Control:
         if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
             np.multiply(dtau, self._stage_index, out=self._offsets[1:])
             self._offsets_dtau = dtau
+        args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
+        if args is not None:  # a waypoint reference (the square): times, lookup, shift at once
+            states = np.empty(self._states_shape)
+            if offset is None:
+                shift, horizon = _NO_SHIFT, states[1:]
+            else:
+                shift, horizon = offset.integrator.shift, self._horizon
+            held_waypoint_horizon(*args, t_exp_s, self.delay.lead_s, self._offsets, shift,
+                                  self._times, self._clamped, states, horizon)
+            return self._solved(t_exp_s, x_solve, states, horizon)
         times = np.add(t_exp_s + self.delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
         states = traj.state_at(times)
-        ahead = states[1:]
-        horizon = ahead if offset is None else offset.integrator.shifted(ahead)
-        result = solver.solve(t_exp_s, x_solve, horizon)
+        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
+        return self._solved(t_exp_s, x_solve, states, horizon)
+
+    def _solved(self, t_exp_s: float, x_solve: np.ndarray, states: np.ndarray,
+                horizon: np.ndarray) -> Solution:
+        """The NMPC's solve against ``horizon`` and its :class:`Solution` (``states``: the
+        reference now, then the unshifted horizon)."""
+        result = self.nmpc.solve(t_exp_s, x_solve, horizon)
         status = result.status
-        ok = status is _OK or (status is _MAX_ITERATIONS
-                                           and self.accept_max_iterations)
+        ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
-        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None, ahead)
+        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None,
+                        states[1:])
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
