@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, pcmd_of, vz_reference_mps
+from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand, pcmd_of,
+                                          vz_reference_mps)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
@@ -226,7 +227,7 @@ class Solution(NamedTuple):
     @property
     def zacc_mps2(self) -> float:
         """The NMPC's z̈ as solved (m/s²); NaN for the P controller."""
-        return math.nan if self.result is None else self.result.u[IU_ZACC]
+        return math.nan if self.result is None else self.result.u.item(IU_ZACC)
 
 
 class Control:
@@ -250,6 +251,7 @@ class Control:
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else cfg.loop.period_s
         self.vz_from_commands = cfg.estimator.kind == "none"
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
+        self._vz_max_mps = limits.control_vz_max_mps
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
@@ -332,8 +334,14 @@ class Control:
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
-        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
-        vz_ref = min(max(vz_reference_mps(vz_base, zacc, self.vz_lead_s), -vz_max), vz_max)
+        vz_max = self._vz_max_mps  # the drone clips beyond: no wind-up past it
+        # min(max(v, −vz_max), vz_max) spelled out: Python's min and max keep their first
+        # argument unless the second is strictly beyond it (a NaN stays)
+        vz_ref = vz_reference_mps(vz_base, zacc, self.vz_lead_s)
+        if -vz_max > vz_ref:
+            vz_ref = -vz_max
+        if vz_max < vz_ref:
+            vz_ref = vz_max
         return AttitudeCommand(vz_ref, phi, theta, rate)
 
 
@@ -496,8 +504,13 @@ class Supervision:
             self.zacc_mps2 = float(u_sent[IU_ZACC])
             return Sent(pcmd, u_sent, True, decision)
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
-            roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
-            pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
+            roll, pitch = cmd.phi_rad, cmd.theta_rad
+            cap = self.supervisor.cfg.max_tilt_rad
+            if -cap <= roll <= cap and -cap <= pitch <= cap:  # what clip_tilt_rad leaves be
+                roll_clipped = pitch_clipped = False
+            else:
+                roll, roll_clipped = self.supervisor.clip_tilt_rad(roll)
+                pitch, pitch_clipped = self.supervisor.clip_tilt_rad(pitch)
             vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
             if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
                     and math.isfinite(rate)):
@@ -508,8 +521,12 @@ class Supervision:
                     pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
                 else:
                     pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
-                s0, s1, s2, s3 = pcmd.saturated
-                flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
+                saturated = pcmd.saturated
+                if saturated is UNSATURATED and not (roll_clipped or pitch_clipped):
+                    flags = "0000"
+                else:
+                    s0, s1, s2, s3 = saturated
+                    flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
                 zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
                 u_sent = np.array([zacc, roll, pitch, rate])
                 self.zacc_mps2 = float(zacc)  # u_sent[IU_ZACC], without numpy's scalar
