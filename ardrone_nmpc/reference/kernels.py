@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
@@ -49,7 +49,7 @@ def waypoint_states(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad: np.nd
         out[j, IX_PSI] = psi_b if after else psi_a + frac * (psi_b - psi_a)
 
 
-@njit(cache=True, **OUTER_KERNEL)
+@njit(cache=True, **INNER_KERNEL)
 def held_waypoint_horizon(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad: np.ndarray,
                           dt_s: np.ndarray, vel_mps: np.ndarray, start: np.ndarray,
                           t_s: float, lead_s: float, offsets: np.ndarray, shift: np.ndarray,
@@ -60,7 +60,8 @@ def held_waypoint_horizon(t_knots: np.ndarray, positions_m: np.ndarray, psi_rad:
     :class:`~ardrone_nmpc.reference.experiment.HoldStartThen` of a waypoint trajectory at
     them (``start`` before t = 0), and — when ``shift`` (4) is not empty — ``horizon`` =
     ``states[1:]`` with the offset-free shift added to x, y, z, ψ (``ReferenceIntegrator.
-    shifted``). ``clamped`` is scratch of ``times``' length."""
+    shifted``). ``clamped`` is scratch of ``times``' length. Only kernels call it
+    (``runtime/tick_kernels.nmpc_inputs``); tests its ``callable_from_python`` twin."""
     base = t_s + lead_s
     n = offsets.size
     for i in range(n):

@@ -94,7 +94,10 @@ def compile_kernels() -> None:
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
     from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
-    warm_up_kernels()  # the runner needs these first: right after the solver's compile
+    from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
+
+    warm_up_tick_kernels()  # the runner needs these first: right after the solver's compile
+    warm_up_kernels()
     cfg = config_from_dict({"name": "precompile", "duration_s": 1.0})
     drone = LockstepDrone(cfg)
     period = cfg.loop.period_s

@@ -30,8 +30,9 @@ from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator,
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
-from ardrone_nmpc.reference.kernels import held_waypoint_horizon
 from ardrone_nmpc.reference.live import TrackedObject
+from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
+from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -48,7 +49,8 @@ assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM)
 # (~0.1 µs), and the tick makes a dozen
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
-_NO_SHIFT = np.zeros(0)  # held_waypoint_horizon: no offset-free shift
+_NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
+_F64 = np.dtype(np.float64)
 
 # the ``cmd_saturated`` text of the (roll, pitch, gaz, yaw) flags: one lookup, not four
 # conditionals and three concatenations
@@ -158,6 +160,14 @@ class DelayPrediction:
         self._sent[i + cap] = u_sent
         self._next = (i + 1) % cap
         self._pushed = True
+
+    def pending(self) -> tuple[np.ndarray, int, int]:
+        """The ring of inputs sent, and the first row and number of those still pending
+        (:meth:`predict`'s rollout; 0 when it returns ``x`` itself), for a compiled caller."""
+        n = self.delay_ticks
+        if n == 0 or not self._pushed:
+            return self._sent, 0, 0
+        return self._sent, self._next + self._capacity - n, n
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
@@ -269,6 +279,7 @@ class Control:
         hover[IX_Z] = 1.0
         self.nmpc.solve(0.0, hover, np.tile(hover, (self.nmpc.spec.horizon_steps + 1, 1)))
         self.nmpc.reset()
+        warm_up_tick_kernels()
         return hover
 
     def solve(self, t_exp_s: float, x: np.ndarray, traj, offset: OffsetFree | None = None
@@ -280,7 +291,7 @@ class Control:
             ref_now = traj.state_at(t_exp_s)[0]
             return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
         solver = self.nmpc
-        x_solve = self.delay.predict(x)
+        delay = self.delay
         dtau = solver.stage_dtau_s(t_exp_s)
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
@@ -289,16 +300,22 @@ class Control:
             np.multiply(dtau, self._stage_index, out=self._offsets[1:])
             self._offsets_dtau = dtau
         args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
-        if args is not None:  # a waypoint reference (the square): times, lookup, shift at once
+        if args is not None and x.__class__ is np.ndarray and x.dtype is _F64:
+            # a waypoint reference (the square): the delay prediction, the horizon's times,
+            # the lookup and the offset-free shift in one call (runtime/tick_kernels.py)
+            sent, first, pending = delay.pending()
+            x_solve = np.empty(STATE_DIM) if pending else x
             states = np.empty(self._states_shape)
             if offset is None:
                 shift, horizon = _NO_SHIFT, states[1:]
             else:
                 shift, horizon = offset.integrator.shift, self._horizon
-            held_waypoint_horizon(*args, t_exp_s, self.delay.lead_s, self._offsets, shift,
-                                  self._times, self._clamped, states, horizon)
+            nmpc_inputs(x, sent, first, pending, delay.period_s, x_solve, *args, t_exp_s,
+                        delay.lead_s, self._offsets, shift, self._times, self._clamped, states,
+                        horizon)
             return self._solved(t_exp_s, x_solve, states, horizon)
-        times = np.add(t_exp_s + self.delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
+        x_solve = delay.predict(x)
+        times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
         states = traj.state_at(times)
         horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
