@@ -175,6 +175,7 @@ class Supervisor:
         self.cfg = safety
         self._fence_lo = tuple(safety.geofence_min_m)
         self._fence_hi = tuple(safety.geofence_max_m)
+        self._tilt_cap_deg = math.degrees(safety.max_tilt_rad)  # check_state's, every tick
         self._latched: Decision | None = None
         self._solver_failures = 0   # consecutive failed solves
         self._solver_good = 0       # consecutive good solves while in a solver fallback
@@ -228,7 +229,7 @@ class Supervisor:
         if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= cfg.max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
-            cap_deg = math.degrees(cfg.max_tilt_rad)
+            cap_deg = self._tilt_cap_deg
             if not (abs(navdata.roll_deg) <= cap_deg and abs(navdata.pitch_deg) <= cap_deg):
                 return Decision(Action.HOVER, "tilt")
         return NOMINAL

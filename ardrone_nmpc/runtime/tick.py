@@ -29,6 +29,7 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "navdata_velocity_world"]
 
 _CONTROL = Action.CONTROL  # bound once: an enum member's lookup costs ~0.1 µs
+_perf_counter_ns = time.perf_counter_ns
 
 
 @slot_init  # one a tick (core/types.py)
@@ -130,7 +131,7 @@ class Tick:
         """One tick at experiment time ``t_exp_s`` against ``trajectory`` (default: the
         experiment's). ``mode`` labels a nominal row ("track", "settle"); the supervisor's
         verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
-        t0 = time.perf_counter_ns()
+        t0 = _perf_counter_ns()
         traj = trajectory or self.trajectory
         ages_ms = feedback_ages_ms(inputs)
         if self.follow is not None:  # reference kind 'follow': the object's newest pose
@@ -159,7 +160,7 @@ class Tick:
         if self.offset is not None:  # integrates after the verdict: frozen unless flown
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
-        compute_us = (time.perf_counter_ns() - t0) * 1e-3
+        compute_us = (_perf_counter_ns() - t0) * 1e-3
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action,
