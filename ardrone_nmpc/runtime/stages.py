@@ -31,7 +31,11 @@ from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
-from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
+from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
+from ardrone_nmpc.runtime.tick_kernels import (
+    E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
+    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate, nmpc_inputs,
+)
 from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
@@ -81,14 +85,64 @@ class Estimation:
     """
 
     def __init__(self, est_cfg) -> None:
-        self.vz_estimator = make_vz_estimator(
+        self._vz_estimator = make_vz_estimator(
             est_cfg.kind, kalman_q=est_cfg.kalman_q, kalman_r=est_cfg.kalman_r,
             kalman_p0=est_cfg.kalman_p0, lambda0_per_s=est_cfg.luenberger_lambda0_per_s,
             gain=est_cfg.luenberger_gain)
-        self.xy_difference = BackwardDifference(size=2)
+        self._xy_difference = BackwardDifference(size=2)
         self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
         self._last_pose_t_s: float | None = None
         self._x = np.zeros(STATE_DIM)
+        # the Kalman filter's and the difference's state in one buffer, updated by one
+        # compiled call (runtime/tick_kernels.kalman_estimate) until someone asks for the
+        # estimator objects themselves: they get it back (_leave_compiled)
+        self._compiled = type(self._vz_estimator) is ScalarKalmanVz
+        if self._compiled:
+            self._state = np.zeros(E_SIZE)
+            self._to_compiled()
+
+    # the estimators as objects: their state, handed back from the compiled step
+    @property
+    def vz_estimator(self):
+        """The ż estimator (:func:`~ardrone_nmpc.estimation.make_vz_estimator`)."""
+        self._leave_compiled()
+        return self._vz_estimator
+
+    @vz_estimator.setter
+    def vz_estimator(self, estimator) -> None:
+        self._leave_compiled()
+        self._vz_estimator = estimator
+
+    @property
+    def xy_difference(self) -> BackwardDifference:
+        """The backward difference of the mocap x, y."""
+        self._leave_compiled()
+        return self._xy_difference
+
+    def _to_compiled(self) -> None:
+        kf, diff, s = self._vz_estimator, self._xy_difference, self._state
+        s[E_HAS_POSE] = self._last_pose_t_s is not None
+        s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
+        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = kf._q, kf._r, kf._p0, kf._midpoint
+        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = (kf._z_m, kf._vz, kf._p, kf._k,
+                                                      kf._initialised)
+        s[E_HAS_PREV] = diff._prev is not None
+        s[E_PREV_X], s[E_PREV_Y] = diff._prev if diff._prev is not None else (0.0, 0.0)
+        s[E_VEL_X], s[E_VEL_Y] = diff._vel
+
+    def _leave_compiled(self) -> None:
+        """The compiled step's state back into the estimator objects, which hold it from now on
+        (the Python path: the same arithmetic)."""
+        if not self._compiled:
+            return
+        self._compiled = False
+        kf, diff = self._vz_estimator, self._xy_difference
+        (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
+         vel_x, vel_y) = self._state.tolist()
+        self._last_pose_t_s = last_t if has_pose else None
+        kf._z_m, kf._vz, kf._p, kf._k, kf._initialised = z, vz, p, k, bool(initialised)
+        diff._prev = (prev_x, prev_y) if has_prev else None
+        diff._vel = (vel_x, vel_y)
 
     def update(self, pose: MocapPose, navdata: NavdataSample | None,
                zacc_mps2: float) -> np.ndarray:
@@ -98,22 +152,32 @@ class Estimation:
         """
         pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
         px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
+        if self._compiled:
+            if self.velocity_from_navdata and navdata is not None:
+                vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
+                if kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
+                                   zacc_mps2, True, vx, vy) == ESTIMATED:
+                    return self._x
+            elif kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
+                                 zacc_mps2, False, 0.0, 0.0) == ESTIMATED:
+                return self._x
+            self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:
             if self._last_pose_t_s is None:
-                self.vz_estimator.reset(pz)
-                self.xy_difference.reset()
-                self.xy_difference.update((px, py), 1.0)
+                self._vz_estimator.reset(pz)
+                self._xy_difference.reset()
+                self._xy_difference.update((px, py), 1.0)
             else:
                 dt = pose.t_s - self._last_pose_t_s
-                self.vz_estimator.update(pz, zacc_mps2, dt)
-                self.xy_difference.update((px, py), dt)
+                self._vz_estimator.update(pz, zacc_mps2, dt)
+                self._xy_difference.update((px, py), dt)
             self._last_pose_t_s = pose.t_s
         if self.velocity_from_navdata and navdata is not None:
             vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
         else:
-            vx, vy = self.xy_difference.velocity_mps
+            vx, vy = self._xy_difference.velocity_mps
         x = self._x
-        x[:] = (px, vx, py, vy, pz, self.vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
+        x[:] = (px, vx, py, vy, pz, self._vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
         return x
 
 

@@ -23,6 +23,7 @@ from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
+from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
 from ardrone_nmpc.safety import Action, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
@@ -122,7 +123,9 @@ class Tick:
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
-            self.delay.warm_up(self.control.warm_up())
+            self.delay.warm_up(self.control.warm_up())  # the solver's, then the stages'
+        else:
+            warm_up_tick_kernels()  # the stages' (the estimate's)
         if self.response is not None:  # after the solver's (runtime/precompile.py)
             self.response.warm_up()
 

@@ -1,5 +1,8 @@
-"""The tick's NMPC inputs in one compiled call (issue 26): the state the new command will meet
-and the reference it is solved against.
+"""The tick stages' compiled steps (issue 26): the estimate, and the NMPC's inputs — the state
+the new command will meet and the reference it is solved against — each in one call.
+
+:func:`kalman_estimate` is the estimation stage's update with its default ż filter (Kalman)
+and the backward difference of x, y: six Python calls and their checks, one compiled one.
 
 ``Control.solve`` made four calls of its own a tick before the solver's — the delay
 prediction's rollout (:meth:`~ardrone_nmpc.runtime.stages.DelayPrediction.predict`), the
@@ -11,6 +14,8 @@ Other reference kinds keep the general path.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -19,7 +24,8 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_calle
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.reference.kernels import held_waypoint_horizon
 
-__all__ = ["nmpc_inputs", "warm_up_kernels"]
+__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
+           "warm_up_kernels"]
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -39,11 +45,84 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, perio
                           offsets, shift, times, clamped, states, horizon)
 
 
+# The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
+# and the backward difference of x, y), one float64 buffer: these slots.
+E_HAS_POSE = 0      # 1.0 once a pose was seen
+E_LAST_T = 1        # that pose's time
+E_Q, E_R, E_P0 = 2, 3, 4          # the filter's constants (ScalarKalmanVz's q, r, p0)
+E_MIDPOINT = 5      # 1.0: the difference models ż at mid-tick (measurement_at_midpoint)
+E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor, ż, P, K, initialised
+E_HAS_PREV = 11     # the difference's previous position is held
+E_PREV_X, E_PREV_Y = 12, 13
+E_VEL_X, E_VEL_Y = 14, 15         # its velocity
+E_SIZE = 16
+#: What :func:`kalman_estimate` returns.
+ESTIMATED, REFUSED = 0, 1
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: float,
+                    psi_rad: float, t_s: float, zacc_mps2: float, navdata: bool,
+                    nav_vx_mps: float, nav_vy_mps: float) -> int:
+    """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
+    (their ``reset``/``update``, the same expressions in the same order) into ``x`` over the
+    state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
+    the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
+    an input the Python estimators refuse (non-finite, a time not after the last): the caller
+    raises their error."""
+    if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
+        if s[E_HAS_POSE] == 0.0:  # reset(z), then the difference's first position (dt = 1)
+            if not (math.isfinite(pz) and math.isfinite(px) and math.isfinite(py)):
+                return REFUSED
+            s[E_Z] = pz
+            s[E_VZ] = 0.0
+            s[E_P] = s[E_P0]
+            s[E_K] = math.nan
+            s[E_INIT] = 0.0
+            s[E_VEL_X] = 0.0
+            s[E_VEL_Y] = 0.0
+        else:
+            dt = t_s - s[E_LAST_T]
+            if not (math.isfinite(pz) and math.isfinite(zacc_mps2) and math.isfinite(dt)
+                    and dt > 0.0 and math.isfinite(px) and math.isfinite(py)):
+                return REFUSED
+            if s[E_INIT] == 0.0:  # the filter's first update only anchors z
+                s[E_Z] = pz
+                s[E_INIT] = 1.0
+            else:
+                u = zacc_mps2
+                y = (pz - s[E_Z]) / dt
+                vz_prior = s[E_VZ] + dt * u
+                p_prior = s[E_P] + s[E_Q]
+                y_pred = vz_prior - 0.5 * dt * u if s[E_MIDPOINT] != 0.0 else vz_prior
+                k = p_prior / (p_prior + s[E_R])
+                s[E_VZ] = vz_prior + k * (y - y_pred)
+                s[E_P] = (1.0 - k) * p_prior
+                s[E_K] = k
+                s[E_Z] = pz
+            if s[E_HAS_PREV] != 0.0:
+                s[E_VEL_X] = (px - s[E_PREV_X]) / dt
+                s[E_VEL_Y] = (py - s[E_PREV_Y]) / dt
+        s[E_HAS_PREV] = 1.0
+        s[E_PREV_X] = px
+        s[E_PREV_Y] = py
+        s[E_HAS_POSE] = 1.0
+        s[E_LAST_T] = t_s
+    x[0] = px
+    x[1] = nav_vx_mps if navdata else s[E_VEL_X]
+    x[2] = py
+    x[3] = nav_vy_mps if navdata else s[E_VEL_Y]
+    x[4] = pz
+    x[5] = s[E_VZ]
+    x[6] = psi_rad
+    return ESTIMATED
+
+
 _kernels_warm = False
 
 
 def warm_up_kernels() -> None:
-    """Load (or compile) :func:`nmpc_inputs` now — once per process — not on the first tick
+    """Load (or compile) :func:`nmpc_inputs` and :func:`kalman_estimate` now — once per process — not on the first tick
     (``Control.warm_up``; a cold start's background compile, ``runtime/precompile.py``).
     Its callees are loaded from the cache first (``core/kernel_cache.load_cached_callees``:
     the rollout's own machine code, cached or compiled alike)."""
@@ -56,6 +135,8 @@ def warm_up_kernels() -> None:
     nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
                 np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
                 np.zeros(4), np.zeros(n), np.zeros(n), states, np.zeros((n - 1, 7)))
+    s = np.zeros(E_SIZE)
+    kalman_estimate(s, x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
     _kernels_warm = True
 
 

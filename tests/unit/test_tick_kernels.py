@@ -112,3 +112,93 @@ def test_control_solves_the_same_through_either_path(shifted):
                         sol.ref_horizon.tobytes(), sol.status, sol.ok))
         solutions.append(run)
     assert solutions[0] == solutions[1]
+
+
+# ----------------------------------------------------------------------------- estimation
+def _poses(seed: int):
+    """A flight's poses: steps of 65 ms with jitter, a pose seen again (stale mocap), a gap."""
+    from ardrone_nmpc.core.types import MocapPose
+
+    rng = np.random.default_rng(seed)
+    t, out = 0.0, []
+    for k in range(60):
+        t += 0.0 if k in (7, 8, 30) else (0.4 if k == 20 else rng.uniform(0.05, 0.08))
+        p = rng.normal([0.0, 0.0, 1.0], 0.3)
+        out.append((MocapPose(t, p, np.zeros(3), float(rng.uniform(-3.0, 3.0))),
+                    float(rng.normal(0.0, 1.0))))
+    return out
+
+
+def _nav(k: int):
+    from ardrone_nmpc.core.types import FlightMode, NavdataSample
+
+    return NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.0, 2.0, 0.0, 1.0, 0.1 * k, -0.05 * k, 0.0)
+
+
+def _estimations(*overrides: str):
+    from ardrone_nmpc.config.io import config_from_dict
+
+    from ardrone_nmpc.runtime.stages import Estimation
+
+    est = {"kind": "kalman"}
+    for o in overrides:
+        key, value = o.split("=")
+        est[key] = value
+    cfg = config_from_dict({"name": "t", "estimator": est}).estimator
+    compiled, python = Estimation(cfg), Estimation(cfg)
+    python._leave_compiled()  # the estimator objects from the start
+    return compiled, python
+
+
+@pytest.mark.parametrize("horizontal", ["difference", "navdata"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
+    compiled, python = _estimations(f"horizontal_velocity={horizontal}")
+    assert compiled._compiled and not python._compiled
+    for k, (p, zacc) in enumerate(_poses(seed)):
+        nav = _nav(k) if k % 3 else None
+        a = compiled.update(p, nav, zacc).copy()
+        b = python.update(p, nav, zacc).copy()
+        assert a.tobytes() == b.tobytes(), k
+    assert compiled._compiled
+    # the objects, asked for, hold the state the compiled step reached: the same from here on
+    kf, kp = compiled.vz_estimator, python.vz_estimator
+    assert not compiled._compiled
+    assert (kf.z_m, kf.vz_mps, kf.covariance, kf.gain) == (kp.z_m, kp.vz_mps, kp.covariance,
+                                                           kp.gain)
+    assert compiled.xy_difference.velocity_mps == python.xy_difference.velocity_mps
+    for p, zacc in _poses(seed + 10):
+        shifted = type(p)(p.t_s + 100.0, p.position_m, p.rotation_xyz_rad, p.psi_rad)
+        assert (compiled.update(shifted, None, zacc).tobytes()
+                == python.update(shifted, None, zacc).tobytes())
+
+
+@pytest.mark.parametrize("bad", ["z", "x", "zacc", "dt", "t_nan"])
+@pytest.mark.parametrize("first", [True, False])
+def test_the_compiled_estimate_refuses_what_the_estimators_refuse(bad, first):
+    from ardrone_nmpc.core.types import MocapPose
+    from ardrone_nmpc.estimation.base import EstimatorError
+
+    if first and bad in ("zacc", "dt"):
+        return  # the first pose only resets: no z̈, no interval
+    compiled, python = _estimations()
+    if not first:
+        for est in (compiled, python):
+            est.update(MocapPose(1.0, np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0), None, 0.0)
+            est.update(MocapPose(1.065, np.array([0.01, 0.0, 1.01]), np.zeros(3), 0.0), None, 0.1)
+    t = {"dt": 1.0 if not first else 2.0, "t_nan": math.nan}.get(bad, 1.2)
+    pos = np.array([math.nan if bad == "x" else 0.02, 0.0, math.inf if bad == "z" else 1.0])
+    zacc = math.nan if bad == "zacc" else 0.0
+    def outcome(est, pose, zacc_mps2):
+        try:
+            return est.update(pose, None, zacc_mps2).tobytes()
+        except EstimatorError as err:
+            return str(err)
+
+    bad_pose = MocapPose(t, pos, np.zeros(3), 0.0)
+    first_outcome = outcome(compiled, bad_pose, zacc)
+    assert first_outcome == outcome(python, bad_pose, zacc)
+    assert not compiled._compiled or isinstance(first_outcome, bytes)
+    # and what each holds afterwards is the same
+    good = MocapPose(5.0, np.array([0.1, 0.1, 1.1]), np.zeros(3), 0.1)
+    assert outcome(compiled, good, 0.2) == outcome(python, good, 0.2)
