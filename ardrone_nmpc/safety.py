@@ -218,7 +218,8 @@ class Supervisor:
         """
         cfg = self.cfg
         xs = x.tolist() if hasattr(x, "tolist") else x  # floats: numpy's scalars are slow
-        if not all(map(math.isfinite, xs)):
+        total = sum(xs)  # finite only if every one is (or, rarely, all are and the sum is not)
+        if not (total - total == 0.0 or all(map(math.isfinite, xs))):
             return Decision(Action.HOVER, "nonfinite-state")
         lo, hi = self._fence_lo, self._fence_hi
         if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
