@@ -33,7 +33,7 @@ class HoldStartThen:
         self._start = start
         self.duration_s = trajectory.duration_s
         # a waypoint trajectory's arrays for the tick's one-call horizon lookup
-        # (reference/kernels.held_waypoint_horizon); None for any other kind
+        # (runtime/tick_kernels.nmpc_inputs); None for any other kind
         self.waypoint_args = (trajectory._kernel_args + (start,)
                               if isinstance(trajectory, Waypoints)
                               and type(trajectory).state_at is Waypoints.state_at else None)

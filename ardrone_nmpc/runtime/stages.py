@@ -36,7 +36,6 @@ from ardrone_nmpc.runtime.tick_kernels import (
     E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
     E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate, nmpc_inputs,
 )
-from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -118,6 +117,11 @@ class Estimation:
         """The backward difference of the mocap x, y."""
         self._leave_compiled()
         return self._xy_difference
+
+    @property
+    def compiled(self) -> bool:
+        """True while the compiled step (``kalman_estimate``) holds the estimators' state."""
+        return self._compiled
 
     def _to_compiled(self) -> None:
         kf, diff, s = self._vz_estimator, self._xy_difference, self._state
@@ -343,7 +347,6 @@ class Control:
         hover[IX_Z] = 1.0
         self.nmpc.solve(0.0, hover, np.tile(hover, (self.nmpc.spec.horizon_steps + 1, 1)))
         self.nmpc.reset()
-        warm_up_tick_kernels()
         return hover
 
     def solve(self, t_exp_s: float, x: np.ndarray, traj, offset: OffsetFree | None = None

@@ -16,6 +16,7 @@ from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, slot_init
+from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_row
@@ -123,9 +124,12 @@ class Tick:
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
-            self.delay.warm_up(self.control.warm_up())  # the solver's, then the stages'
-        else:
-            warm_up_tick_kernels()  # the stages' (the estimate's)
+            self.delay.warm_up(self.control.warm_up())
+        # the stages' own (runtime/tick_kernels): those this flight calls
+        waypoints = (trajectory.__class__ is HoldStartThen
+                     and trajectory.waypoint_args is not None)
+        warm_up_tick_kernels(estimate=self.estimation.compiled,
+                             nmpc=nmpc is not None and waypoints)
         if self.response is not None:  # after the solver's (runtime/precompile.py)
             self.response.warm_up()
 

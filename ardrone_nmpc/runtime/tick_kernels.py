@@ -22,10 +22,16 @@ from numba import njit
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
-from ardrone_nmpc.reference.kernels import held_waypoint_horizon
+from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.reference.kernels import waypoint_states
 
 __all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
            "warm_up_kernels"]
+
+
+#: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
+#: :mod:`ardrone_nmpc.estimation.disturbance`.
+_SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -35,14 +41,46 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, perio
                 t_s: float, lead_s: float, offsets: np.ndarray, shift: np.ndarray,
                 times: np.ndarray, clamped: np.ndarray, states: np.ndarray,
                 horizon: np.ndarray) -> None:
-    """``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
-    pending]`` (``DelayPrediction.predict``; nothing written when none is pending), then
-    :func:`~ardrone_nmpc.reference.kernels.held_waypoint_horizon`'s ``times``, ``states``
-    and shifted ``horizon``."""
+    """``Control.solve``'s inputs of the NMPC, the same bits as its general path:
+
+    * ``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
+      pending]`` (``DelayPrediction.predict``; nothing written when none is pending);
+    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (len, 7) the
+      :class:`~ardrone_nmpc.reference.experiment.HoldStartThen` of a waypoint trajectory
+      (``reference/kernels.waypoint_states``'s arrays) at them, ``start`` before t = 0;
+    * when ``shift`` (4) is not empty, ``horizon`` = ``states[1:]`` with the offset-free shift
+      added to x, y, z, ψ (``ReferenceIntegrator.shifted``).
+
+    ``clamped`` is scratch of ``times``' length. One kernel, its lookup written here rather
+    than in a kernel of its own: every compiled level costs a cold start a compile."""
     if pending:
         rollout_rk4(x, sent[first:first + pending], period_s, x_solve)
-    held_waypoint_horizon(t_knots, positions_m, psi_rad, dt_s, vel_mps, start, t_s, lead_s,
-                          offsets, shift, times, clamped, states, horizon)
+    base = t_s + lead_s
+    n = offsets.size
+    for i in range(n):
+        times[i] = base + offsets[i]
+    times[0] = t_s
+    inside = True  # min(times) > 0 (NaN is not): nothing held
+    for i in range(n):
+        if not times[i] > 0.0:
+            inside = False
+    if inside:
+        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, times, states)
+    else:
+        for i in range(n):  # np.maximum(t, 0.0): t unless t < 0 (NaN stays NaN)
+            t = times[i]
+            clamped[i] = t if (t >= 0.0 or t != t) else 0.0
+        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
+        for i in range(n):
+            if times[i] < 0.0:
+                for c in range(states.shape[1]):
+                    states[i, c] = start[c]
+    if shift.size:
+        for j in range(horizon.shape[0]):
+            for c in range(states.shape[1]):
+                horizon[j, c] = states[j + 1, c]
+            for k in range(4):
+                horizon[j, _SHIFTED[k]] += shift[k]
 
 
 # The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
@@ -118,26 +156,28 @@ def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: floa
     return ESTIMATED
 
 
-_kernels_warm = False
+_warm: set[str] = set()  # the kernels this process has loaded (or compiled)
 
 
-def warm_up_kernels() -> None:
-    """Load (or compile) :func:`nmpc_inputs` and :func:`kalman_estimate` now — once per process — not on the first tick
-    (``Control.warm_up``; a cold start's background compile, ``runtime/precompile.py``).
-    Its callees are loaded from the cache first (``core/kernel_cache.load_cached_callees``:
-    the rollout's own machine code, cached or compiled alike)."""
-    global _kernels_warm
-    if _kernels_warm:
-        return
-    load_cached_callees(nmpc_inputs)
-    knots, n = np.array([0.0, 1.0]), 3  # a two-waypoint trajectory, one stage
-    x, states = np.zeros(7), np.zeros((n, 7))
-    nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
-                np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
-                np.zeros(4), np.zeros(n), np.zeros(n), states, np.zeros((n - 1, 7)))
-    s = np.zeros(E_SIZE)
-    kalman_estimate(s, x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
-    _kernels_warm = True
+def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
+    """Load (or compile) :func:`kalman_estimate` and :func:`nmpc_inputs` now — once per
+    process — not on the first tick aloft (``Tick``: each only if its flight uses it, a
+    compile costs a cold start ~0.2 s and ~1 s of CPU; ``runtime/precompile.py`` compiles the
+    estimate's in the background). :func:`nmpc_inputs`' callees are loaded from the cache
+    first (``core/kernel_cache.load_cached_callees``: the rollout's own machine code, cached
+    or compiled alike)."""
+    x = np.zeros(7)
+    if estimate and "estimate" not in _warm:
+        kalman_estimate(np.zeros(E_SIZE), x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+        _warm.add("estimate")
+    if nmpc and "nmpc" not in _warm:
+        load_cached_callees(nmpc_inputs)
+        knots, n = np.array([0.0, 1.0]), 3  # a two-waypoint trajectory, one stage
+        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
+                    np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
+                    np.zeros(4), np.zeros(n), np.zeros(n), np.zeros((n, 7)),
+                    np.zeros((n - 1, 7)))
+        _warm.add("nmpc")
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py
