@@ -124,15 +124,14 @@ class Estimation:
         return self._compiled
 
     def _to_compiled(self) -> None:
-        kf, diff, s = self._vz_estimator, self._xy_difference, self._state
+        s = self._state
         s[E_HAS_POSE] = self._last_pose_t_s is not None
         s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
-        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = kf._q, kf._r, kf._p0, kf._midpoint
-        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = (kf._z_m, kf._vz, kf._p, kf._k,
-                                                      kf._initialised)
-        s[E_HAS_PREV] = diff._prev is not None
-        s[E_PREV_X], s[E_PREV_Y] = diff._prev if diff._prev is not None else (0.0, 0.0)
-        s[E_VEL_X], s[E_VEL_Y] = diff._vel
+        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = self._vz_estimator.constants
+        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = self._vz_estimator.state()
+        previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
+        s[E_HAS_PREV] = previous is not None
+        s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
 
     def _leave_compiled(self) -> None:
         """The compiled step's state back into the estimator objects, which hold it from now on
@@ -140,13 +139,11 @@ class Estimation:
         if not self._compiled:
             return
         self._compiled = False
-        kf, diff = self._vz_estimator, self._xy_difference
         (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
          vel_x, vel_y) = self._state.tolist()
         self._last_pose_t_s = last_t if has_pose else None
-        kf._z_m, kf._vz, kf._p, kf._k, kf._initialised = z, vz, p, k, bool(initialised)
-        diff._prev = (prev_x, prev_y) if has_prev else None
-        diff._vel = (vel_x, vel_y)
+        self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
+        self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
 
     def update(self, pose: MocapPose, navdata: NavdataSample | None,
                zacc_mps2: float) -> np.ndarray:
