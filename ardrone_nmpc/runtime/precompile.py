@@ -4,9 +4,9 @@ into numba's on-disk cache by a background child while the runner compiles the s
 On an empty cache a flight compiles everything in one process, serially (~13 s on 2 cores):
 the solver first (``Tick``'s warm-up), then the estimation stage's step and the attitude
 estimate's ``feed``, then the simulated drone's kernels (``lockstep_run``, ``flying_advance``,
-``airframe_rk4`` …), which are needed only after the take-off. :func:`start_if_cold` starts ``python -m
-ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child compiles
-those kernels (:func:`main`) and the runner finds them cached when it gets there.
+``airframe_rk4`` …), which are needed only after the take-off. :func:`start_if_cold` starts
+``python -m ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child
+compiles those kernels (:func:`main`) and the runner finds them cached when it gets there.
 
 Never harmful: the child is best-effort (its output goes nowhere; the runner compiles whatever
 is not cached yet), and the cached code a process loads is the code it would compile (no

@@ -29,9 +29,9 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
+from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
-from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
 from ardrone_nmpc.runtime.tick_kernels import (
     E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
     E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate, nmpc_inputs,
@@ -178,7 +178,8 @@ class Estimation:
         else:
             vx, vy = self._xy_difference.velocity_mps
         x = self._x
-        x[:] = (px, vx, py, vy, pz, self._vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
+        # [x, ẋ, y, ẏ, z, ż, ψ]
+        x[:] = (px, vx, py, vy, pz, self._vz_estimator.vz_mps, pose.psi_rad)
         return x
 
 
