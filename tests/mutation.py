@@ -127,7 +127,7 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
                "kd * (vy - w[1])", "kd * (vy + w[1])", _AIR),
     HandMutant("airframe: hold damping on v dropped", "sim/airframe.py",
                "ay -= hold_damping * vy", "pass", _AIR),
-    HandMutant("airframe: battery sag ignored", "sim/plant.py",
+    HandMutant("airframe: battery sag ignored", "sim/plant_params.py",
                "if self.battery_sag_frac == 0.0:\n            return k",
                "if True:\n            return k", _AIR),
     HandMutant("drone_config: held-limit tolerance 10 %", "links/drone_config.py",

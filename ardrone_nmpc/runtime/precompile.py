@@ -111,6 +111,8 @@ def compile_kernels() -> None:
         drone.advance_to(truth.t_s + period)
         truth = drone.truth
     t0 = truth.t_s
+    plant = drone.sim.plant  # its step-by-step path, which a take-off's last leg may take
+    plant._motors_on_step(plant._current, plant.params.integration_step_s, (0.0, 0.0, 0.0))
     drone.start_experiment(t0)
     for k in range(round(1.0 / period)):
         t = t0 + k * period

@@ -107,7 +107,8 @@ class LockstepDrone(ConfigHandshake):
         step of the clock) the plant faults due by then act first."""
         if t_exp_s is not None:
             self.t_exp_s = t_exp_s
-            self.sim.update_faults(t_exp_s)
+            if self.sim.faults is not None:  # (SimulatedDrone.update_faults' own test)
+                self.sim.update_faults(t_exp_s)
         self.sensors.advance_to(t_s)
 
     def take_events(self) -> list[tuple[float, dict]]:
@@ -192,6 +193,11 @@ class LockstepDrone(ConfigHandshake):
         ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
         if ref is None and progressive:  # the firmware takes the PCMD's values as they are
             self._seq = seq + 1
+            legs = self.sensors._legs
+            if legs is not None and legs.takes_commands:  # the chain written out
+                legs.command(seq + 1, float(roll_frac), float(pitch_frac), float(gaz_frac),
+                             float(yaw_frac), self.sim.plant.t_s)
+                return
             self.sim.execute_pcmd(seq + 1, (_PROGRESSIVE, float(roll_frac), float(pitch_frac),
                                             float(gaz_frac), float(yaw_frac)),
                                   self.sim.plant.t_s, self.t_exp_s)

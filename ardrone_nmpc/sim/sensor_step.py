@@ -5,11 +5,14 @@ event to sensor event and the samples drawn on the way.
 drone to the newest mocap frame time, draws a pose, to the newest navdata time, draws a
 sample, then to the tick's time — each leg a firmware advance (plant advance, watchdogs, the
 held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
-legs and samples for a FLYING airframe plant while nothing but physics happens between them
-(the caller checks that nothing the firmware does could change on the way; here each leg is
-checked for what only its start shows — a climb within reach of the altitude cap, a battery
-that could empty — and the run stops before such a leg, untouched, for the Python path to
-go on from there). The arithmetic is the Python's, in its order: the event grid of
+legs and samples for an airborne airframe plant — FLYING, or in its automatic take-off or
+landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`) — while nothing but physics happens
+between them (the caller checks that nothing the firmware does could change on the way; here
+each leg is checked for what only its start shows — a climb within reach of the altitude
+cap, a battery that could empty — and the run stops before such a leg, untouched, for the
+Python path to go on from there; a take-off's or landing's leg that ends it — the climb
+settled, the touch-down — is flown, found to change the mode, and undone, for the Python
+path too). The arithmetic is the Python's, in its order: the event grid of
 ``_advance_direct``, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
 (whole steps, the remainder carried; :func:`~ardrone_nmpc.sim.plant_step.flying_advance`, the
 turbulence's Gauss–Markov step), :meth:`~ardrone_nmpc.sim.plant.AirframePlant.mocap_pose`
@@ -25,12 +28,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.plant_step import flying_advance
+from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps, flying_advance
 
 __all__ = ["lockstep_run"]
 
@@ -41,14 +45,17 @@ I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
 IV_SIZE = 12
 # sv: the tick's time, the plant's float state (in and out), the plant's current command
 # (roll, pitch, gaz, yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead,
-# the cap), the wind (in)
+# the cap), the wind, the plant's mode (MODE_*) (in)
 (S_T, S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
- S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2) = range(19)
-SV_SIZE = 19
-# p: a flight's parameters, then the 13 coefficients of the airframe's RHS
+ S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE) = range(20)
+SV_SIZE = 20
+MODE_FLYING, MODE_TAKING_OFF, MODE_LANDING = 0.0, 1.0, 2.0
+# p: a flight's parameters (the automatic climb's and descent's gaz, τ_z, the take-off
+# height among them), then the 13 coefficients of the airframe's RHS
 (P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
  P_MOCAP_PERIOD, P_MOCAP_LATENCY, P_NAV_PERIOD, P_SP, P_SA, P_ATT_STD, P_YAW_STD, P_ALT_STD,
- P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_VZ_GAIN, P_SAG, P_K) = range(25)
+ P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_VZ_GAIN, P_SAG, P_GAZ_UP, P_GAZ_DOWN,
+ P_TAU_VZ, P_TAKEOFF_ALT, P_K) = range(29)
 N_K = 13
 P_SIZE = P_K + N_K
 # the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
@@ -109,10 +116,57 @@ def _navdata(x, sv, p, n, out):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def _gust_step(iv, sv, p, n, h, gust_n):
+    """The turbulence's step at the end of an advance of ``n`` steps (none without)."""
+    if p[P_TURB_STD] > 0.0:  # plant.gauss_markov_step over the call's n·h
+        a = math.exp(-(n * h) / p[P_TURB_TAU])
+        q = p[P_TURB_STD] * math.sqrt(1.0 - a * a)
+        g = iv[I_POS_GUST]
+        iv[I_POS_GUST] = g + 2
+        sv[S_GUST0] = a * sv[S_GUST0] + q * gust_n[g]
+        sv[S_GUST1] = a * sv[S_GUST1] + q * gust_n[g + 1]
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
+    """The automatic take-off's or landing's ``n`` steps (:meth:`AirframePlant.advance
+    <ardrone_nmpc.sim.plant.AirframePlant.advance>`: :func:`auto_steps`, the heading's wrap,
+    the biases) — False, with the state and the ring as they were, if they change the
+    mode."""
+    m = ring.shape[0]
+    saved = np.empty((m, 5))  # auto_steps shifts the ring in place
+    for i in range(m):
+        for j in range(5):
+            saved[i, j] = ring[i, j]
+    landing = sv[S_MODE] == MODE_LANDING
+    done, head, battery, xn, mode = auto_steps(
+        x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
+        landing, p[P_GAZ_DOWN] if landing else p[P_GAZ_UP], k, w, h, n, sv[S_BATTERY],
+        p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG], p[P_TAU_VZ], p[P_TAKEOFF_ALT])
+    if mode != AUTO_SAME or done < n:  # the mode changes on the way: the Python path's
+        for i in range(m):
+            for j in range(5):
+                ring[i, j] = saved[i, j]
+        return False
+    xn[8] = wrap_half_turn(xn[8], math.pi)
+    pos = iv[I_POS_BIAS]
+    iv[I_POS_BIAS] = pos + 3
+    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
+        n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
+        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+    iv[I_HEAD] = head
+    iv[I_STEPS] += done
+    sv[S_BATTERY] = battery
+    for i in range(x.shape[0]):
+        x[i] = xn[i]
+    return True
+
+
+@njit(cache=True, **INNER_KERNEL)
 def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
     the Python path must take it (a climb within reach of the cap, a battery that could
-    empty on the way)."""
+    empty on the way, a take-off or landing that ends on the way)."""
     h = p[P_H]
     t_plant = iv[I_STEPS] * h
     if not t_event > t_plant:
@@ -126,13 +180,21 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     if n > 0 and not sv[S_BATTERY] - drain * (n + 1) > drain:
         return False  # it might empty on the way: a mode change, the plant's own path
     rest = pending - n * h
-    sv[S_PENDING] = rest if rest > 0.0 else 0.0
+    rest = rest if rest > 0.0 else 0.0
     if n == 0:
+        sv[S_PENDING] = rest
         return True
     w0, w1, w2 = sv[S_W0], sv[S_W1], sv[S_W2]
     turbulent = p[P_TURB_STD] > 0.0
     if turbulent:
         w0, w1 = w0 + sv[S_GUST0], w1 + sv[S_GUST1]
+    if sv[S_MODE] != MODE_FLYING:
+        if not _auto_leg(x, ring, iv, sv, p, k, (w0, w1, w2), h, n, bias_n):
+            return False
+        sv[S_PENDING] = rest
+        _gust_step(iv, sv, p, n, h, gust_n)
+        return True
+    sv[S_PENDING] = rest
     pos = iv[I_POS_BIAS]
     iv[I_POS_BIAS] = pos + 3
     done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
@@ -147,13 +209,7 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     for i in range(x.shape[0]):  # not x[:] = xn: its shape check compiles an error message
         x[i] = xn[i]
     sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = yaw_bias, vb0, vb1
-    if turbulent:  # plant.gauss_markov_step over the call's n·h
-        a = math.exp(-(n * h) / p[P_TURB_TAU])
-        q = p[P_TURB_STD] * math.sqrt(1.0 - a * a)
-        g = iv[I_POS_GUST]
-        iv[I_POS_GUST] = g + 2
-        sv[S_GUST0] = a * sv[S_GUST0] + q * gust_n[g]
-        sv[S_GUST1] = a * sv[S_GUST1] + q * gust_n[g + 1]
+    _gust_step(iv, sv, p, n, h, gust_n)
     return True
 
 

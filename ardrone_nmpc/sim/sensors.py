@@ -17,8 +17,9 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   little speed and draws the noise in another order, so clean runs keep the direct path (and
   their golden trace).
 
-On the direct path a tick in which nothing but physics happens (a FLYING airframe, a quiet
-firmware) is one compiled call (:class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`): the
+On the direct path a tick in which nothing but physics happens (an airframe flying, taking
+off or landing, a quiet firmware) is one compiled call
+(:class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`): the
 same legs, samples and bits.
 
 Each navdata sample received is also shown to ``on_navdata(state, ctrl_major)`` — the state
@@ -136,6 +137,8 @@ class LockstepSensors:
         legs = self._legs
         if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
             events, last_leg = legs.run(t_s)      # … and what it left, if anything
+            if not (events or last_leg):
+                return
         else:
             events, last_leg = self._direct_events(t_s), True
         for t_event, kind in events:

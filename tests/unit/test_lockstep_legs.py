@@ -2,7 +2,9 @@
 Python path's bits: two lockstep drones of one seed, one with the compiled legs and one
 without, flown with the same commands, hold the same samples, truth and plant state on every
 tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
-attitude, the watchdogs of a silent link, a draining battery, a scripted target and a take-off after a self-landing."""
+attitude, the watchdogs of a silent link, a draining battery, a scripted target and a
+take-off after a self-landing — and through the automatic take-off and landing, whose
+last legs (the climb settled, the touch-down) the kernel hands back."""
 
 import math
 
@@ -40,12 +42,16 @@ def _snapshot(drone, t_s):
             _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
             plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
             plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
-            fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing)
+            fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
+            # what the PCMD chain (or CompiledLegs.command in its place) leaves
+            plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
+            fw.link_lost, fw.ref_start, drone.sim.counters)
 
 
 def _fly(cfg, legs: bool, ticks: int, command):
     drone = LockstepDrone(cfg)
-    used = [0, 0]  # compiled runs, of them stopped before the last leg
+    # compiled runs, of them stopped before the last leg: flying, taking off or landing
+    used = [0, 0, 0, 0]
     compiled = drone.sensors._legs
     if not legs:
         drone.sensors._legs = None
@@ -53,9 +59,10 @@ def _fly(cfg, legs: bool, ticks: int, command):
         run = compiled.run
 
         def counted(t_s):
+            i = 0 if drone.sim.plant.mode is FlightMode.FLYING else 2
             events, last_leg = run(t_s)
-            used[0] += 1
-            used[1] += last_leg
+            used[i] += 1
+            used[i + 1] += last_leg
             return events, last_leg
         compiled.run = counted
     period = cfg.loop.period_s
@@ -80,6 +87,14 @@ def _fly(cfg, legs: bool, ticks: int, command):
             drone.hover()
         else:
             drone.set_command(*cmd)
+    drone.land()
+    for k in range(ticks, ticks + 100):  # as runtime/lockstep._land: REF land held
+        if drone.truth.mode is FlightMode.LANDED:
+            break
+        t = t_first + k * period
+        drone.advance_to(t, k * period)
+        drone.land()
+        shots.append(_snapshot(drone, t))
     return shots, used
 
 
@@ -109,9 +124,10 @@ def test_compiled_legs_give_the_python_paths_bits(name):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped) = _fly(cfg, True, 400, command)
+    compiled, (used, stopped, auto_used, auto_stopped) = _fly(cfg, True, 400, command)
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
+    assert auto_used > 20 and auto_stopped >= 1  # take-off, landing: an end handed back
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"
@@ -120,7 +136,7 @@ def test_compiled_legs_give_the_python_paths_bits(name):
 def test_compiled_legs_with_a_scripted_target():
     cfg = load_config(str(ROOT / "configs" / "follow_car.yaml"), [])
     python, _ = _fly(cfg, False, 300, _zigzag)
-    compiled, (used, _) = _fly(cfg, True, 300, _zigzag)
+    compiled, (used, *_) = _fly(cfg, True, 300, _zigzag)
     assert used > 100
     assert python == compiled
 
@@ -146,3 +162,55 @@ def test_a_plant_that_overrides_what_the_kernel_does_keeps_the_python_path(name)
     Overriding = type("Overriding", (AirframePlant,), {name: override})
     assert CompiledLegs.eligible(AirframePlant(PlantParams(), NoiseConfig(), seed=1))
     assert not CompiledLegs.eligible(Overriding(PlantParams(), NoiseConfig(), seed=1))
+
+
+@pytest.mark.parametrize("owner,name", [("drone", "execute_pcmd"), ("drone", "_at_lost"),
+                                        ("firmware", "execute_pcmd"), ("firmware", "_accept"),
+                                        ("firmware", "apply_command"), ("plant", "command")])
+def test_a_drone_that_overrides_the_pcmd_chain_keeps_it(owner, name):
+    """CompiledLegs.command writes out the PCMD chain: a subclass overriding a link of it (a
+    firmware with another sequence rule, say) keeps the chain, so its override runs."""
+    from ardrone_nmpc.sim.drone import SimulatedDrone
+    from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+    from ardrone_nmpc.sim.plant import AirframePlant
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    legs = drone.sensors._legs
+    assert legs.takes_commands and CompiledLegs.commands_eligible(drone.sim)
+    obj = {"drone": drone.sim, "firmware": drone.sim.firmware, "plant": drone.sim.plant}[owner]
+    base = {"drone": SimulatedDrone, "firmware": DroneFirmware, "plant": AirframePlant}[owner]
+    method = getattr(base, name)
+    obj.__class__ = type("Overriding", (base,), {name: lambda self, *a, **k: method(self, *a,
+                                                                                     **k)})
+    assert not CompiledLegs.commands_eligible(drone.sim)
+
+
+def test_a_drone_with_injected_faults_keeps_the_pcmd_chain():
+    """An injected AT loss drops datagrams in SimulatedDrone._at_lost: the chain stays."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), ["faults.at_loss.probability=0.3"])
+    drone = LockstepDrone(cfg)
+    assert drone.sim.faults is not None
+    assert drone.sensors._legs is None or not drone.sensors._legs.takes_commands
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_command_is_refused_as_the_chain_refuses_it(bad):
+    """A non-finite fraction: the plant's ValueError either way, and the same state after."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    shots = []
+    for legs in (False, True):
+        drone = LockstepDrone(cfg)
+        if not legs:
+            drone.sensors._legs = None
+        drone.connect()
+        drone.takeoff()
+        while drone.truth.mode is not FlightMode.FLYING:
+            drone.advance_to(drone.truth.t_s + 0.06)
+        drone.set_command(0.1, 0.0, 0.2, 0.0)
+        with pytest.raises(ValueError):
+            drone.set_command(0.1, bad, 0.2, 0.0)
+        drone.advance_to(drone.truth.t_s + 0.06)
+        shots.append(_snapshot(drone, drone.truth.t_s))
+    assert shots[0] == shots[1]
