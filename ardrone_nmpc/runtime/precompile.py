@@ -88,14 +88,13 @@ def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
 
 def compile_kernels() -> None:
     """Compile (or load) the estimation stage's and the attitude estimate's kernels, then the
-    simulated drone's: connect,
-    take off, fly a second holding a small command — the calls a lockstep flight makes."""
+    simulated drone's: connect, take off, fly a second holding a small command — the calls a
+    lockstep flight makes."""
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
-    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
-
     from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
     # the runner needs these first: right after the solver's compile (the estimate's: every
     # flight with the default ż filter; nmpc_inputs only a waypoint reference's, left to it)
