@@ -175,6 +175,7 @@ class Supervisor:
         self.cfg = safety
         self._fence_lo = tuple(safety.geofence_min_m)
         self._fence_hi = tuple(safety.geofence_max_m)
+        self._tilt_cap_deg = math.degrees(safety.max_tilt_rad)  # check_state's, every tick
         self._latched: Decision | None = None
         self._solver_failures = 0   # consecutive failed solves
         self._solver_good = 0       # consecutive good solves while in a solver fallback
@@ -217,7 +218,8 @@ class Supervisor:
         """
         cfg = self.cfg
         xs = x.tolist() if hasattr(x, "tolist") else x  # floats: numpy's scalars are slow
-        if not all(map(math.isfinite, xs)):
+        total = sum(xs)  # finite only if every one is (or, rarely, all are and the sum is not)
+        if not (total - total == 0.0 or all(map(math.isfinite, xs))):
             return Decision(Action.HOVER, "nonfinite-state")
         lo, hi = self._fence_lo, self._fence_hi
         if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
@@ -228,7 +230,7 @@ class Supervisor:
         if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= cfg.max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
-            cap_deg = math.degrees(cfg.max_tilt_rad)
+            cap_deg = self._tilt_cap_deg
             if not (abs(navdata.roll_deg) <= cap_deg and abs(navdata.pitch_deg) <= cap_deg):
                 return Decision(Action.HOVER, "tilt")
         return NOMINAL

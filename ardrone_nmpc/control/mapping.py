@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 from ardrone_nmpc.core.types import AttitudeCommand, slot_init
 
-__all__ = ["DroneLimits", "PcmdCommand", "MappingError", "command_scales", "map_to_pcmd",
-           "pcmd_of", "vz_reference_mps"]
+__all__ = ["DroneLimits", "PcmdCommand", "MappingError", "UNSATURATED", "command_scales",
+           "map_to_pcmd", "pcmd_of", "vz_reference_mps"]
 
 
 class MappingError(ValueError):
@@ -73,6 +73,10 @@ def command_scales(drone) -> DroneLimits:
                        drone.control_yaw_radps)
 
 
+#: ``PcmdCommand.saturated`` of a command inside [−1, 1] (one tuple: an identity test)
+UNSATURATED = (False, False, False, False)
+
+
 @slot_init  # built every tick: each slot set through its descriptor (core/types.py)
 @dataclass(frozen=True, slots=True)
 class PcmdCommand:
@@ -90,7 +94,7 @@ class PcmdCommand:
     pitch_frac: float
     gaz_frac: float
     yaw_frac: float
-    saturated: tuple[bool, bool, bool, bool] = (False, False, False, False)
+    saturated: tuple[bool, bool, bool, bool] = UNSATURATED
 
     @property
     def any_saturated(self) -> bool:
@@ -141,10 +145,16 @@ def pcmd_of(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_radps: 
         _finite("theta_rad", theta)
         _finite("vz_ref_mps", vz)
         _finite("psirate_radps", psirate)
-    roll, s_roll = _clip_unit(phi / limits.euler_angle_max_rad)
-    pitch, s_pitch = _clip_unit(-theta / limits.euler_angle_max_rad)
-    gaz, s_gaz = _clip_unit(vz / limits.control_vz_max_mps)
-    yaw, s_yaw = _clip_unit(-psirate / limits.control_yaw_radps)
+    # _clip_unit of each, spelled out (four calls and tuples cost ~0.4 µs a tick)
+    e = limits.euler_angle_max_rad
+    roll, pitch = phi / e, -theta / e
+    gaz, yaw = vz / limits.control_vz_max_mps, -psirate / limits.control_yaw_radps
+    if -1.0 <= roll <= 1.0 and -1.0 <= pitch <= 1.0 and -1.0 <= gaz <= 1.0 and -1.0 <= yaw <= 1.0:
+        return PcmdCommand(roll + 0.0, pitch + 0.0, gaz + 0.0, yaw + 0.0, UNSATURATED)
+    roll, s_roll = _clip_unit(roll)
+    pitch, s_pitch = _clip_unit(pitch)
+    gaz, s_gaz = _clip_unit(gaz)
+    yaw, s_yaw = _clip_unit(yaw)
     return PcmdCommand(roll, pitch, gaz, yaw, (s_roll, s_pitch, s_gaz, s_yaw))
 
 

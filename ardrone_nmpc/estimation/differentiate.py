@@ -139,5 +139,16 @@ class BackwardDifference:
         """Last velocity estimate, m/s."""
         return self._vel
 
+    def state(self) -> tuple[tuple[float, ...] | None, tuple[float, ...]]:
+        """(previous position or None, velocity): what a compiled step carries on from
+        (``runtime/tick_kernels.kalman_estimate``, the same arithmetic)."""
+        return self._prev, self._vel
+
+    def set_state(self, previous_m: tuple[float, ...] | None,
+                  velocity_mps: tuple[float, ...]) -> None:
+        """Put back a :meth:`state` (after a compiled step carried it on)."""
+        self._prev = None if previous_m is None else tuple(previous_m)
+        self._vel = tuple(velocity_mps)
+
     def __repr__(self) -> str:
         return f"BackwardDifference(size={self._n})"

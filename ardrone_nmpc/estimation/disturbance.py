@@ -59,7 +59,7 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
     roll, pitch, gaz, yaw = pcmd_fracs  # spelled out: two list comprehensions cost µs a tick
     s0, s1 = abs(roll) >= SATURATION_FRAC, abs(pitch) >= SATURATION_FRAC
     s2, s3 = abs(gaz) >= SATURATION_FRAC, abs(yaw) >= SATURATION_FRAC
-    if flags:
+    if flags and flags != "0000":  # the usual tick: nothing flagged
         c0, c1, c2, c3 = flags
         s0, s1, s2, s3 = (s0 or c0 == "1", s1 or c1 == "1", s2 or c2 == "1", s3 or c3 == "1")
     tilt = s0 or s1

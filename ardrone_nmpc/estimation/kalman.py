@@ -147,6 +147,22 @@ class ScalarKalmanVz:
         return self._vz
 
     @property
+    def constants(self) -> tuple[float, float, float, bool]:
+        """(q, r, p0, measurement_at_midpoint)."""
+        return self._q, self._r, self._p0, self._midpoint
+
+    def state(self) -> tuple[float, float, float, float, bool]:
+        """(z anchor, ż, P, K, initialised): what a compiled step carries on from
+        (``runtime/tick_kernels.kalman_estimate``, the same arithmetic)."""
+        return self._z_m, self._vz, self._p, self._k, self._initialised
+
+    def set_state(self, z_m: float, vz_mps: float, p: float, k: float,
+                  initialised: bool) -> None:
+        """Put back a :meth:`state` (after a compiled step carried it on)."""
+        self._z_m, self._vz, self._p, self._k = z_m, vz_mps, p, k
+        self._initialised = bool(initialised)
+
+    @property
     def z_m(self) -> float:
         """Altitude of the last update (the finite-difference anchor), m."""
         return self._z_m

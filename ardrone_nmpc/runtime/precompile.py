@@ -2,11 +2,11 @@
 into numba's on-disk cache by a background child while the runner compiles the solver.
 
 On an empty cache a flight compiles everything in one process, serially (~13 s on 2 cores):
-the solver first (``Tick``'s warm-up), then the attitude estimate's ``feed``, then the simulated
-drone's kernels (``lockstep_run``, ``flying_advance``, ``airframe_rk4`` …), which are needed
-only after the take-off. :func:`start_if_cold` starts ``python -m
-ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child compiles
-those kernels (:func:`main`) and the runner finds them cached when it gets there.
+the solver first (``Tick``'s warm-up), then the estimation stage's step and the attitude
+estimate's ``feed``, then the simulated drone's kernels (``lockstep_run``, ``flying_advance``,
+``airframe_rk4`` …), which are needed only after the take-off. :func:`start_if_cold` starts
+``python -m ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child
+compiles those kernels (:func:`main`) and the runner finds them cached when it gets there.
 
 Never harmful: the child is best-effort (its output goes nowhere; the runner compiles whatever
 is not cached yet), and the cached code a process loads is the code it would compile (no
@@ -87,14 +87,19 @@ def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
 
 
 def compile_kernels() -> None:
-    """Compile (or load) the attitude estimate's kernels, then the simulated drone's: connect,
-    take off, fly a second holding a small command — the calls a lockstep flight makes."""
+    """Compile (or load) the estimation stage's and the attitude estimate's kernels, then the
+    simulated drone's: connect, take off, fly a second holding a small command — the calls a
+    lockstep flight makes."""
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
+    from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
     from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
-    warm_up_kernels()  # the runner needs these first: right after the solver's compile
+    # the runner needs these first: right after the solver's compile (the estimate's: every
+    # flight with the default ż filter; nmpc_inputs only a waypoint reference's, left to it)
+    warm_up_tick_kernels(estimate=True, nmpc=False)
+    warm_up_kernels()
     cfg = config_from_dict({"name": "precompile", "duration_s": 1.0})
     drone = LockstepDrone(cfg)
     period = cfg.loop.period_s

@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, pcmd_of, vz_reference_mps
+from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand, pcmd_of,
+                                          vz_reference_mps)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
@@ -28,7 +29,13 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
+from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
+from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
+from ardrone_nmpc.runtime.tick_kernels import (
+    E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
+    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate, nmpc_inputs,
+)
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -45,6 +52,8 @@ assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM)
 # (~0.1 µs), and the tick makes a dozen
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
+_NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
+_F64 = np.dtype(np.float64)
 
 # the ``cmd_saturated`` text of the (roll, pitch, gaz, yaw) flags: one lookup, not four
 # conditionals and three concatenations
@@ -75,14 +84,66 @@ class Estimation:
     """
 
     def __init__(self, est_cfg) -> None:
-        self.vz_estimator = make_vz_estimator(
+        self._vz_estimator = make_vz_estimator(
             est_cfg.kind, kalman_q=est_cfg.kalman_q, kalman_r=est_cfg.kalman_r,
             kalman_p0=est_cfg.kalman_p0, lambda0_per_s=est_cfg.luenberger_lambda0_per_s,
             gain=est_cfg.luenberger_gain)
-        self.xy_difference = BackwardDifference(size=2)
+        self._xy_difference = BackwardDifference(size=2)
         self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
         self._last_pose_t_s: float | None = None
         self._x = np.zeros(STATE_DIM)
+        # the Kalman filter's and the difference's state in one buffer, updated by one
+        # compiled call (runtime/tick_kernels.kalman_estimate) until someone asks for the
+        # estimator objects themselves: they get it back (_leave_compiled)
+        self._compiled = type(self._vz_estimator) is ScalarKalmanVz
+        if self._compiled:
+            self._state = np.zeros(E_SIZE)
+            self._to_compiled()
+
+    # the estimators as objects: their state, handed back from the compiled step
+    @property
+    def vz_estimator(self):
+        """The ż estimator (:func:`~ardrone_nmpc.estimation.make_vz_estimator`)."""
+        self._leave_compiled()
+        return self._vz_estimator
+
+    @vz_estimator.setter
+    def vz_estimator(self, estimator) -> None:
+        self._leave_compiled()
+        self._vz_estimator = estimator
+
+    @property
+    def xy_difference(self) -> BackwardDifference:
+        """The backward difference of the mocap x, y."""
+        self._leave_compiled()
+        return self._xy_difference
+
+    @property
+    def compiled(self) -> bool:
+        """True while the compiled step (``kalman_estimate``) holds the estimators' state."""
+        return self._compiled
+
+    def _to_compiled(self) -> None:
+        s = self._state
+        s[E_HAS_POSE] = self._last_pose_t_s is not None
+        s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
+        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = self._vz_estimator.constants
+        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = self._vz_estimator.state()
+        previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
+        s[E_HAS_PREV] = previous is not None
+        s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
+
+    def _leave_compiled(self) -> None:
+        """The compiled step's state back into the estimator objects, which hold it from now on
+        (the Python path: the same arithmetic)."""
+        if not self._compiled:
+            return
+        self._compiled = False
+        (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
+         vel_x, vel_y) = self._state.tolist()
+        self._last_pose_t_s = last_t if has_pose else None
+        self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
+        self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
 
     def update(self, pose: MocapPose, navdata: NavdataSample | None,
                zacc_mps2: float) -> np.ndarray:
@@ -92,22 +153,33 @@ class Estimation:
         """
         pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
         px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
+        if self._compiled:
+            if self.velocity_from_navdata and navdata is not None:
+                vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
+                if kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
+                                   zacc_mps2, True, vx, vy) == ESTIMATED:
+                    return self._x
+            elif kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
+                                 zacc_mps2, False, 0.0, 0.0) == ESTIMATED:
+                return self._x
+            self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:
             if self._last_pose_t_s is None:
-                self.vz_estimator.reset(pz)
-                self.xy_difference.reset()
-                self.xy_difference.update((px, py), 1.0)
+                self._vz_estimator.reset(pz)
+                self._xy_difference.reset()
+                self._xy_difference.update((px, py), 1.0)
             else:
                 dt = pose.t_s - self._last_pose_t_s
-                self.vz_estimator.update(pz, zacc_mps2, dt)
-                self.xy_difference.update((px, py), dt)
+                self._vz_estimator.update(pz, zacc_mps2, dt)
+                self._xy_difference.update((px, py), dt)
             self._last_pose_t_s = pose.t_s
         if self.velocity_from_navdata and navdata is not None:
             vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
         else:
-            vx, vy = self.xy_difference.velocity_mps
+            vx, vy = self._xy_difference.velocity_mps
         x = self._x
-        x[:] = (px, vx, py, vy, pz, self.vz_estimator.vz_mps, pose.psi_rad)  # [x, ẋ, y, ẏ, z, ż, ψ]
+        # [x, ẋ, y, ẏ, z, ż, ψ]
+        x[:] = (px, vx, py, vy, pz, self._vz_estimator.vz_mps, pose.psi_rad)
         return x
 
 
@@ -154,6 +226,14 @@ class DelayPrediction:
         self._sent[i + cap] = u_sent
         self._next = (i + 1) % cap
         self._pushed = True
+
+    def pending(self) -> tuple[np.ndarray, int, int]:
+        """The ring of inputs sent, and the first row and number of those still pending
+        (:meth:`predict`'s rollout; 0 when it returns ``x`` itself), for a compiled caller."""
+        n = self.delay_ticks
+        if n == 0 or not self._pushed:
+            return self._sent, 0, 0
+        return self._sent, self._next + self._capacity - n, n
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
@@ -223,7 +303,7 @@ class Solution(NamedTuple):
     @property
     def zacc_mps2(self) -> float:
         """The NMPC's z̈ as solved (m/s²); NaN for the P controller."""
-        return math.nan if self.result is None else self.result.u[IU_ZACC]
+        return math.nan if self.result is None else self.result.u.item(IU_ZACC)
 
 
 class Control:
@@ -247,10 +327,17 @@ class Control:
         self.vz_lead_s = ctl.vz_lead_s if ctl.vz_lead_s is not None else cfg.loop.period_s
         self.vz_from_commands = cfg.estimator.kind == "none"
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
+        self._vz_max_mps = limits.control_vz_max_mps
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
             self._offsets_dtau = math.nan  # the Δτ _offsets were made with
+            # the one-call lookup's buffers: its times (and their clamp at 0), the shifted
+            # horizon (read by the solver within the tick only)
+            self._times = np.zeros(self._offsets.size)
+            self._clamped = np.zeros(self._offsets.size)
+            self._states_shape = (self._offsets.size, STATE_DIM)
+            self._horizon = np.zeros((nmpc.spec.horizon_steps + 1, STATE_DIM))
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -269,7 +356,7 @@ class Control:
             ref_now = traj.state_at(t_exp_s)[0]
             return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
         solver = self.nmpc
-        x_solve = self.delay.predict(x)
+        delay = self.delay
         dtau = solver.stage_dtau_s(t_exp_s)
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
@@ -277,17 +364,38 @@ class Control:
         if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
             np.multiply(dtau, self._stage_index, out=self._offsets[1:])
             self._offsets_dtau = dtau
-        times = np.add(t_exp_s + self.delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
+        args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
+        if args is not None and x.__class__ is np.ndarray and x.dtype is _F64:
+            # a waypoint reference (the square): the delay prediction, the horizon's times,
+            # the lookup and the offset-free shift in one call (runtime/tick_kernels.py)
+            sent, first, pending = delay.pending()
+            x_solve = np.empty(STATE_DIM) if pending else x
+            states = np.empty(self._states_shape)
+            if offset is None:
+                shift, horizon = _NO_SHIFT, states[1:]
+            else:
+                shift, horizon = offset.integrator.shift, self._horizon
+            nmpc_inputs(x, sent, first, pending, delay.period_s, x_solve, *args, t_exp_s,
+                        delay.lead_s, self._offsets, shift, self._times, self._clamped, states,
+                        horizon)
+            return self._solved(t_exp_s, x_solve, states, horizon)
+        x_solve = delay.predict(x)
+        times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
         states = traj.state_at(times)
-        ahead = states[1:]
-        horizon = ahead if offset is None else offset.integrator.shifted(ahead)
-        result = solver.solve(t_exp_s, x_solve, horizon)
+        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
+        return self._solved(t_exp_s, x_solve, states, horizon)
+
+    def _solved(self, t_exp_s: float, x_solve: np.ndarray, states: np.ndarray,
+                horizon: np.ndarray) -> Solution:
+        """The NMPC's solve against ``horizon`` and its :class:`Solution` (``states``: the
+        reference now, then the unshifted horizon)."""
+        result = self.nmpc.solve(t_exp_s, x_solve, horizon)
         status = result.status
-        ok = status is _OK or (status is _MAX_ITERATIONS
-                                           and self.accept_max_iterations)
+        ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
-        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None, ahead)
+        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None,
+                        states[1:])
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -308,8 +416,14 @@ class Control:
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
-        vz_max = self.limits.control_vz_max_mps  # the drone clips beyond: no wind-up past it
-        vz_ref = min(max(vz_reference_mps(vz_base, zacc, self.vz_lead_s), -vz_max), vz_max)
+        vz_max = self._vz_max_mps  # the drone clips beyond: no wind-up past it
+        # min(max(v, −vz_max), vz_max) spelled out: Python's min and max keep their first
+        # argument unless the second is strictly beyond it (a NaN stays)
+        vz_ref = vz_reference_mps(vz_base, zacc, self.vz_lead_s)
+        if -vz_max > vz_ref:
+            vz_ref = -vz_max
+        if vz_max < vz_ref:
+            vz_ref = vz_max
         return AttitudeCommand(vz_ref, phi, theta, rate)
 
 
@@ -472,8 +586,13 @@ class Supervision:
             self.zacc_mps2 = float(u_sent[IU_ZACC])
             return Sent(pcmd, u_sent, True, decision)
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
-            roll, roll_clipped = self.supervisor.clip_tilt_rad(cmd.phi_rad)
-            pitch, pitch_clipped = self.supervisor.clip_tilt_rad(cmd.theta_rad)
+            roll, pitch = cmd.phi_rad, cmd.theta_rad
+            cap = self.supervisor.cfg.max_tilt_rad
+            if -cap <= roll <= cap and -cap <= pitch <= cap:  # what clip_tilt_rad leaves be
+                roll_clipped = pitch_clipped = False
+            else:
+                roll, roll_clipped = self.supervisor.clip_tilt_rad(roll)
+                pitch, pitch_clipped = self.supervisor.clip_tilt_rad(pitch)
             vz, rate = cmd.vz_ref_mps, cmd.psirate_radps
             if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
                     and math.isfinite(rate)):
@@ -484,8 +603,12 @@ class Supervision:
                     pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
                 else:
                     pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
-                s0, s1, s2, s3 = pcmd.saturated
-                flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
+                saturated = pcmd.saturated
+                if saturated is UNSATURATED and not (roll_clipped or pitch_clipped):
+                    flags = "0000"
+                else:
+                    s0, s1, s2, s3 = saturated
+                    flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
                 zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
                 u_sent = np.array([zacc, roll, pitch, rate])
                 self.zacc_mps2 = float(zacc)  # u_sent[IU_ZACC], without numpy's scalar

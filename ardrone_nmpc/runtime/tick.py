@@ -16,6 +16,7 @@ from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, slot_init
+from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_row
@@ -23,12 +24,14 @@ from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
+from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
 from ardrone_nmpc.safety import Action, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "navdata_velocity_world"]
 
 _CONTROL = Action.CONTROL  # bound once: an enum member's lookup costs ~0.1 µs
+_perf_counter_ns = time.perf_counter_ns
 
 
 @slot_init  # one a tick (core/types.py)
@@ -122,6 +125,11 @@ class Tick:
                           if nmpc is not None and moving else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
+        # the stages' own (runtime/tick_kernels): those this flight calls
+        waypoints = (trajectory.__class__ is HoldStartThen
+                     and trajectory.waypoint_args is not None)
+        warm_up_tick_kernels(estimate=self.estimation.compiled,
+                             nmpc=nmpc is not None and waypoints)
         if self.response is not None:  # after the solver's (runtime/precompile.py)
             self.response.warm_up()
 
@@ -130,7 +138,7 @@ class Tick:
         """One tick at experiment time ``t_exp_s`` against ``trajectory`` (default: the
         experiment's). ``mode`` labels a nominal row ("track", "settle"); the supervisor's
         verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
-        t0 = time.perf_counter_ns()
+        t0 = _perf_counter_ns()
         traj = trajectory or self.trajectory
         ages_ms = feedback_ages_ms(inputs)
         if self.follow is not None:  # reference kind 'follow': the object's newest pose
@@ -159,7 +167,7 @@ class Tick:
         if self.offset is not None:  # integrates after the verdict: frozen unless flown
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
-        compute_us = (time.perf_counter_ns() - t0) * 1e-3
+        compute_us = (_perf_counter_ns() - t0) * 1e-3
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action,

@@ -1,0 +1,183 @@
+"""The tick stages' compiled steps (issue 26): the estimate, and the NMPC's inputs — the state
+the new command will meet and the reference it is solved against — each in one call.
+
+:func:`kalman_estimate` is the estimation stage's update with its default ż filter (Kalman)
+and the backward difference of x, y: six Python calls and their checks, one compiled one.
+
+``Control.solve`` made four calls of its own a tick before the solver's — the delay
+prediction's rollout (:meth:`~ardrone_nmpc.runtime.stages.DelayPrediction.predict`), the
+horizon's times, the reference lookup (``HoldStartThen.state_at`` of a waypoint trajectory)
+and the offset-free shift — each with its arrays to allocate and its numba call to dispatch.
+:func:`nmpc_inputs` runs the same kernels, on the same arrays, in one call: the same bits.
+Other reference kinds keep the general path.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.reference.kernels import waypoint_states
+
+__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
+           "warm_up_kernels"]
+
+
+#: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
+#: :mod:`ardrone_nmpc.estimation.disturbance`.
+_SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, period_s: float,
+                x_solve: np.ndarray, t_knots: np.ndarray, positions_m: np.ndarray,
+                psi_rad: np.ndarray, dt_s: np.ndarray, vel_mps: np.ndarray, start: np.ndarray,
+                t_s: float, lead_s: float, offsets: np.ndarray, shift: np.ndarray,
+                times: np.ndarray, clamped: np.ndarray, states: np.ndarray,
+                horizon: np.ndarray) -> None:
+    """``Control.solve``'s inputs of the NMPC, the same bits as its general path:
+
+    * ``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
+      pending]`` (``DelayPrediction.predict``; nothing written when none is pending);
+    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (len, 7) the
+      :class:`~ardrone_nmpc.reference.experiment.HoldStartThen` of a waypoint trajectory
+      (``reference/kernels.waypoint_states``'s arrays) at them, ``start`` before t = 0;
+    * when ``shift`` (4) is not empty, ``horizon`` = ``states[1:]`` with the offset-free shift
+      added to x, y, z, ψ (``ReferenceIntegrator.shifted``).
+
+    ``clamped`` is scratch of ``times``' length. One kernel, its lookup written here rather
+    than in a kernel of its own: every compiled level costs a cold start a compile."""
+    if pending:
+        rollout_rk4(x, sent[first:first + pending], period_s, x_solve)
+    base = t_s + lead_s
+    n = offsets.size
+    for i in range(n):
+        times[i] = base + offsets[i]
+    times[0] = t_s
+    inside = True  # min(times) > 0 (NaN is not): nothing held
+    for i in range(n):
+        if not times[i] > 0.0:
+            inside = False
+    if inside:
+        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, times, states)
+    else:
+        for i in range(n):  # np.maximum(t, 0.0): t unless t < 0 (NaN stays NaN)
+            t = times[i]
+            clamped[i] = t if (t >= 0.0 or t != t) else 0.0
+        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
+        for i in range(n):
+            if times[i] < 0.0:
+                for c in range(states.shape[1]):
+                    states[i, c] = start[c]
+    if shift.size:
+        for j in range(horizon.shape[0]):
+            for c in range(states.shape[1]):
+                horizon[j, c] = states[j + 1, c]
+            for k in range(4):
+                horizon[j, _SHIFTED[k]] += shift[k]
+
+
+# The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
+# and the backward difference of x, y), one float64 buffer: these slots.
+E_HAS_POSE = 0      # 1.0 once a pose was seen
+E_LAST_T = 1        # that pose's time
+E_Q, E_R, E_P0 = 2, 3, 4          # the filter's constants (ScalarKalmanVz's q, r, p0)
+E_MIDPOINT = 5      # 1.0: the difference models ż at mid-tick (measurement_at_midpoint)
+E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor, ż, P, K, initialised
+E_HAS_PREV = 11     # the difference's previous position is held
+E_PREV_X, E_PREV_Y = 12, 13
+E_VEL_X, E_VEL_Y = 14, 15         # its velocity
+E_SIZE = 16
+#: What :func:`kalman_estimate` returns.
+ESTIMATED, REFUSED = 0, 1
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: float,
+                    psi_rad: float, t_s: float, zacc_mps2: float, navdata: bool,
+                    nav_vx_mps: float, nav_vy_mps: float) -> int:
+    """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
+    (their ``reset``/``update``, the same expressions in the same order) into ``x`` over the
+    state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
+    the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
+    an input the Python estimators refuse (non-finite, a time not after the last): the caller
+    raises their error."""
+    if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
+        if s[E_HAS_POSE] == 0.0:  # reset(z), then the difference's first position (dt = 1)
+            if not (math.isfinite(pz) and math.isfinite(px) and math.isfinite(py)):
+                return REFUSED
+            s[E_Z] = pz
+            s[E_VZ] = 0.0
+            s[E_P] = s[E_P0]
+            s[E_K] = math.nan
+            s[E_INIT] = 0.0
+            s[E_VEL_X] = 0.0
+            s[E_VEL_Y] = 0.0
+        else:
+            dt = t_s - s[E_LAST_T]
+            if not (math.isfinite(pz) and math.isfinite(zacc_mps2) and math.isfinite(dt)
+                    and dt > 0.0 and math.isfinite(px) and math.isfinite(py)):
+                return REFUSED
+            if s[E_INIT] == 0.0:  # the filter's first update only anchors z
+                s[E_Z] = pz
+                s[E_INIT] = 1.0
+            else:
+                u = zacc_mps2
+                y = (pz - s[E_Z]) / dt
+                vz_prior = s[E_VZ] + dt * u
+                p_prior = s[E_P] + s[E_Q]
+                y_pred = vz_prior - 0.5 * dt * u if s[E_MIDPOINT] != 0.0 else vz_prior
+                k = p_prior / (p_prior + s[E_R])
+                s[E_VZ] = vz_prior + k * (y - y_pred)
+                s[E_P] = (1.0 - k) * p_prior
+                s[E_K] = k
+                s[E_Z] = pz
+            if s[E_HAS_PREV] != 0.0:
+                s[E_VEL_X] = (px - s[E_PREV_X]) / dt
+                s[E_VEL_Y] = (py - s[E_PREV_Y]) / dt
+        s[E_HAS_PREV] = 1.0
+        s[E_PREV_X] = px
+        s[E_PREV_Y] = py
+        s[E_HAS_POSE] = 1.0
+        s[E_LAST_T] = t_s
+    x[0] = px
+    x[1] = nav_vx_mps if navdata else s[E_VEL_X]
+    x[2] = py
+    x[3] = nav_vy_mps if navdata else s[E_VEL_Y]
+    x[4] = pz
+    x[5] = s[E_VZ]
+    x[6] = psi_rad
+    return ESTIMATED
+
+
+_warm: set[str] = set()  # the kernels this process has loaded (or compiled)
+
+
+def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
+    """Load (or compile) :func:`kalman_estimate` and :func:`nmpc_inputs` now — once per
+    process — not on the first tick aloft (``Tick``: each only if its flight uses it, a
+    compile costs a cold start ~0.2 s and ~1 s of CPU; ``runtime/precompile.py`` compiles the
+    estimate's in the background). :func:`nmpc_inputs`' callees are loaded from the cache
+    first (``core/kernel_cache.load_cached_callees``: the rollout's own machine code, cached
+    or compiled alike)."""
+    x = np.zeros(7)
+    if estimate and "estimate" not in _warm:
+        kalman_estimate(np.zeros(E_SIZE), x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+        _warm.add("estimate")
+    if nmpc and "nmpc" not in _warm:
+        load_cached_callees(nmpc_inputs)
+        knots, n = np.array([0.0, 1.0]), 3  # a two-waypoint trajectory, one stage
+        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
+                    np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
+                    np.zeros(4), np.zeros(n), np.zeros(n), np.zeros((n, 7)),
+                    np.zeros((n - 1, 7)))
+        _warm.add("nmpc")
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

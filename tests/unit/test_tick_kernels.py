@@ -1,0 +1,204 @@
+"""The tick's one-call NMPC inputs (``runtime/tick_kernels.nmpc_inputs``, issue 26) give the bits
+of the Python they replace: ``DelayPrediction.predict``, the horizon's times,
+``HoldStartThen.state_at`` of a waypoint trajectory and ``ReferenceIntegrator.shifted`` — and
+``Control.solve`` answers the same through either path."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.config.schema import ReferenceConfig
+from ardrone_nmpc.control.mapping import command_scales
+from ardrone_nmpc.control.solver import make_nmpc
+from ardrone_nmpc.core.types import STATE_DIM
+from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator
+from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.reference.trajectories import Waypoints, make_trajectory
+from ardrone_nmpc.runtime.stages import Control, DelayPrediction, OffsetFree
+from ardrone_nmpc.runtime.tick import effective_controller
+from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
+
+PERIOD_S = 0.065
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+
+
+def _waypoint_references():
+    square = make_trajectory(ReferenceConfig(kind="square"), duration_s=25.0)
+    altitudes = make_trajectory(ReferenceConfig(kind="square_altitudes"), duration_s=25.0)
+    path = Waypoints([0.0, 2.0, 3.5, 4.0], [[0, 0, 1], [1, 0, 1], [1, -1, 1.2], [0.5, -1, 1.2]],
+                     [0.0, 0.5, 3.0, -3.0])
+    return [HoldStartThen(t) for t in (square, altitudes, path)]
+
+
+def _delay(pending: int) -> DelayPrediction:
+    delay = DelayPrediction(0.3, PERIOD_S, max_delay_s=0.6)
+    rng = np.random.default_rng(pending)
+    for _ in range(pending):
+        delay.push(rng.uniform(-0.3, 0.3, 4))
+    return delay
+
+
+@pytest.mark.parametrize("pending", [0, 1, 7, 12])
+@pytest.mark.parametrize("shift", [None, np.array([0.02, -0.01, 0.005, 0.03])])
+def test_nmpc_inputs_is_the_python_it_replaces_bit_for_bit(pending, shift):
+    x = np.array([0.1, 0.3, -0.2, 0.1, 1.05, -0.02, 0.2])
+    n = 16
+    for traj in _waypoint_references():
+        assert traj.waypoint_args is not None
+        delay = _delay(pending)
+        for t_s in (-2.0, -0.3, -0.07, 0.0, 1e-9, 2.5, 4.99, 12.3, 30.0, math.nan):
+            for dtau in (0.08, 0.1):
+                offsets = np.zeros(n + 2)
+                np.multiply(dtau, np.arange(n + 1, dtype=np.float64), out=offsets[1:])
+                # the Python path (runtime/stages.py before issue 26's fusion)
+                x_py = delay.predict(x)
+                times = np.add(t_s + delay.lead_s, offsets)
+                times[0] = t_s
+                states_py = traj.state_at(times)
+                horizon_py = (states_py[1:] if shift is None
+                              else _integrator(shift).shifted(states_py[1:]))
+                # the one call
+                sent, first, count = delay.pending()
+                x_k = np.full(STATE_DIM, np.nan) if count else x
+                states = np.full((n + 2, STATE_DIM), np.nan)
+                horizon = np.full((n + 1, STATE_DIM), np.nan)
+                nmpc_inputs(x, sent, first, count, delay.period_s, x_k, *traj.waypoint_args,
+                            t_s, delay.lead_s, offsets, np.zeros(0) if shift is None else shift,
+                            np.zeros(n + 2), np.zeros(n + 2), states, horizon)
+                assert (count > 0) == (x_py is not x)
+                assert x_k.tobytes() == x_py.tobytes()
+                assert states.tobytes() == states_py.tobytes(), (t_s, dtau)
+                if shift is not None:
+                    assert horizon.tobytes() == horizon_py.tobytes()
+
+
+def _integrator(shift: np.ndarray) -> ReferenceIntegrator:
+    ones = (1.0,) * 4
+    integrator = ReferenceIntegrator(ones, ones, ones, ones, ones, PERIOD_S)
+    integrator.shift[:] = shift
+    return integrator
+
+
+class _NotHeld(HoldStartThen):
+    """The same reference through the general path (only HoldStartThen itself takes the
+    one-call path)."""
+
+
+@pytest.mark.parametrize("shifted", [False, True])
+def test_control_solves_the_same_through_either_path(shifted):
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"))
+    limits = command_scales(cfg.drone)
+    solutions = []
+    for wrap in (HoldStartThen, _NotHeld):
+        traj = wrap(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+        delay = DelayPrediction(0.26, PERIOD_S)
+        nmpc = make_nmpc(effective_controller(cfg.controller, limits), period_s=PERIOD_S)
+        control = Control(cfg, limits, nmpc, delay)
+        offset = OffsetFree(cfg.controller.offset_free, PERIOD_S) if shifted else None
+        x = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+        run = []
+        for k in range(40):
+            t = -1.0 + k * PERIOD_S
+            if offset is not None:  # an offset-free shift that changes every tick
+                offset.integrator.shift[:] = 0.01 * np.cos(np.arange(4) + k)
+            sol = control.solve(t, x, traj, offset)
+            delay.push(sol.result.u)
+            x = x + 0.01 * np.sin(np.arange(STATE_DIM) + k)
+            run.append((sol.ref_now.tobytes(), sol.x_solve.tobytes(), sol.result.u.tobytes(),
+                        sol.ref_horizon.tobytes(), sol.status, sol.ok))
+        solutions.append(run)
+    assert solutions[0] == solutions[1]
+
+
+# ----------------------------------------------------------------------------- estimation
+def _poses(seed: int):
+    """A flight's poses: steps of 65 ms with jitter, a pose seen again (stale mocap), a gap."""
+    from ardrone_nmpc.core.types import MocapPose
+
+    rng = np.random.default_rng(seed)
+    t, out = 0.0, []
+    for k in range(60):
+        t += 0.0 if k in (7, 8, 30) else (0.4 if k == 20 else rng.uniform(0.05, 0.08))
+        p = rng.normal([0.0, 0.0, 1.0], 0.3)
+        out.append((MocapPose(t, p, np.zeros(3), float(rng.uniform(-3.0, 3.0))),
+                    float(rng.normal(0.0, 1.0))))
+    return out
+
+
+def _nav(k: int):
+    from ardrone_nmpc.core.types import FlightMode, NavdataSample
+
+    return NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.0, 2.0, 0.0, 1.0, 0.1 * k, -0.05 * k, 0.0)
+
+
+def _estimations(*overrides: str):
+    from ardrone_nmpc.config.io import config_from_dict
+
+    from ardrone_nmpc.runtime.stages import Estimation
+
+    est = {"kind": "kalman"}
+    for o in overrides:
+        key, value = o.split("=")
+        est[key] = value
+    cfg = config_from_dict({"name": "t", "estimator": est}).estimator
+    compiled, python = Estimation(cfg), Estimation(cfg)
+    python._leave_compiled()  # the estimator objects from the start
+    return compiled, python
+
+
+@pytest.mark.parametrize("horizontal", ["difference", "navdata"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
+    compiled, python = _estimations(f"horizontal_velocity={horizontal}")
+    assert compiled._compiled and not python._compiled
+    for k, (p, zacc) in enumerate(_poses(seed)):
+        nav = _nav(k) if k % 3 else None
+        a = compiled.update(p, nav, zacc).copy()
+        b = python.update(p, nav, zacc).copy()
+        assert a.tobytes() == b.tobytes(), k
+    assert compiled._compiled
+    # the objects, asked for, hold the state the compiled step reached: the same from here on
+    kf, kp = compiled.vz_estimator, python.vz_estimator
+    assert not compiled._compiled
+    assert (kf.z_m, kf.vz_mps, kf.covariance, kf.gain) == (kp.z_m, kp.vz_mps, kp.covariance,
+                                                           kp.gain)
+    assert compiled.xy_difference.velocity_mps == python.xy_difference.velocity_mps
+    for p, zacc in _poses(seed + 10):
+        shifted = type(p)(p.t_s + 100.0, p.position_m, p.rotation_xyz_rad, p.psi_rad)
+        assert (compiled.update(shifted, None, zacc).tobytes()
+                == python.update(shifted, None, zacc).tobytes())
+
+
+@pytest.mark.parametrize("bad", ["z", "x", "zacc", "dt", "t_nan"])
+@pytest.mark.parametrize("first", [True, False])
+def test_the_compiled_estimate_refuses_what_the_estimators_refuse(bad, first):
+    from ardrone_nmpc.core.types import MocapPose
+    from ardrone_nmpc.estimation.base import EstimatorError
+
+    if first and bad in ("zacc", "dt"):
+        return  # the first pose only resets: no z̈, no interval
+    compiled, python = _estimations()
+    if not first:
+        for est in (compiled, python):
+            est.update(MocapPose(1.0, np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0), None, 0.0)
+            est.update(MocapPose(1.065, np.array([0.01, 0.0, 1.01]), np.zeros(3), 0.0), None, 0.1)
+    t = {"dt": 1.0 if not first else 2.0, "t_nan": math.nan}.get(bad, 1.2)
+    pos = np.array([math.nan if bad == "x" else 0.02, 0.0, math.inf if bad == "z" else 1.0])
+    zacc = math.nan if bad == "zacc" else 0.0
+    def outcome(est, pose, zacc_mps2):
+        try:
+            return est.update(pose, None, zacc_mps2).tobytes()
+        except EstimatorError as err:
+            return str(err)
+
+    bad_pose = MocapPose(t, pos, np.zeros(3), 0.0)
+    first_outcome = outcome(compiled, bad_pose, zacc)
+    assert first_outcome == outcome(python, bad_pose, zacc)
+    assert not compiled._compiled or isinstance(first_outcome, bytes)
+    # and what each holds afterwards is the same
+    good = MocapPose(5.0, np.array([0.1, 0.1, 1.1]), np.zeros(3), 0.1)
+    assert outcome(compiled, good, 0.2) == outcome(python, good, 0.2)
