@@ -180,7 +180,7 @@ def test_the_compiled_estimate_refuses_what_the_estimators_refuse(bad, first):
     from ardrone_nmpc.estimation.base import EstimatorError
 
     if first and bad in ("zacc", "dt"):
-        return  # the first pose only resets: no z̈, no interval
+        pytest.skip("the first pose only resets: no z̈, no interval")
     compiled, python = _estimations()
     if not first:
         for est in (compiled, python):
