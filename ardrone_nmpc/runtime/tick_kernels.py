@@ -67,9 +67,9 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, perio
     if inside:
         waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, times, states)
     else:
-        for i in range(n):  # np.maximum(t, 0.0): t unless t < 0 (NaN stays NaN)
+        for i in range(n):  # np.maximum(t, 0.0): t if t > 0 or NaN, else +0.0 (−0.0 too)
             t = times[i]
-            clamped[i] = t if (t >= 0.0 or t != t) else 0.0
+            clamped[i] = t if (t > 0.0 or t != t) else 0.0
         waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
         for i in range(n):
             if times[i] < 0.0:
