@@ -167,6 +167,7 @@ def warm_physics(plant, step_s: float) -> tuple:
     if twin.takeoff():
         modes.append(twin.mode)
         fly_while(FlightMode.TAKING_OFF)
+    if twin.mode is FlightMode.FLYING:  # (or a plant that starts aloft: z₀ > 0)
         twin.command(0.01, -0.01, 0.02, 0.01)
         for _ in range(max(1, round(1.0 / step_s))):
             twin.advance(step_s)

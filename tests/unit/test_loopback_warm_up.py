@@ -68,3 +68,20 @@ def test_the_warm_up_reaches_the_plants_step_by_step_step(model, monkeypatch):
     assert warm_physics(plant, 0.005) == _FLIGHT
     assert set(calls) == {"airframe_rk4_array" if model == "second_order" else "airframe_rk4"}
     assert pickle.dumps(plant) == before
+
+
+def test_a_plant_that_starts_aloft_is_warmed_too(monkeypatch):
+    """An initial altitude above 0 starts the plant FLYING: no take-off to fly, but the flight
+    and the landing still are (the physics thread flies them from its first step)."""
+    from ardrone_nmpc.sim import plant as plant_module
+
+    calls = []
+    kernel = plant_module.flying_advance
+    monkeypatch.setattr(plant_module, "flying_advance",
+                        lambda *a: calls.append(1) or kernel(*a))
+    cfg = load_config(None, ["sim.plant.initial_position_m=[0, 0, 1.0]"])
+    plant = make_plant(cfg.sim, cfg.drone, seed=11)
+    before = pickle.dumps(plant)
+    assert warm_physics(plant, 0.005) == _FLIGHT[2:]
+    assert len(calls) > 100
+    assert pickle.dumps(plant) == before
