@@ -8,7 +8,8 @@ client), and is used only when the Python path's tick would do what the kernel d
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
   LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
-  ``_flying_advance`` and ``_auto_advance`` compile);
+  ``_flying_advance`` and ``_auto_advance`` compile), under a firmware and a sampler whose
+  classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
 * the navdata's flight mode is the plant's, the one the link's take-off guard saw last (no
   guard call; the kernel hands back a leg that changes the mode);
 * the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
@@ -43,7 +44,7 @@ from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
 
-__all__ = ["CompiledLegs"]
+__all__ = ["SAMPLER_REPLACED", "CompiledLegs"]
 
 # the modes the kernel flies (compared by identity: an Enum hashes in Python)
 _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
@@ -52,7 +53,12 @@ _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, Fligh
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
              "_state_array", "_from_state_array", "mocap_pose", "navdata", "truth",
              "_auto_advance", "_auto_command", "_ground_contact", "_check_transitions",
-             "_at_rest")
+             "_at_rest", "altitude_m_and_rate_mps", "t_s")
+#: … in the firmware's (its advance: watchdogs, the cap's checks) and in the sampler's (its
+#: legs; LockstepSensors checks its own class, it imports this module)
+_FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
+                      "_climb_may_reach_cap")
+SAMPLER_REPLACED = ("_run_to", "_direct_events")
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
@@ -94,11 +100,19 @@ class CompiledLegs:
         self.counters = drone.counters
 
     @staticmethod
-    def eligible(plant) -> bool:
-        """A plant this path can fly: the airframe's own dynamics, sensors and state."""
-        kind = type(plant)
-        return (isinstance(plant, AirframePlant)
-                and all(getattr(kind, name) is getattr(AirframePlant, name) for name in _REPLACED))
+    def eligible(plant, firmware=None) -> bool:
+        """A plant this path can fly: the airframe's own dynamics, sensors and state — and,
+        when given, a firmware whose class overrides none of what the kernel does in its
+        place."""
+        for obj, base, names in ((plant, AirframePlant, _REPLACED),
+                                 (firmware, DroneFirmware, _FIRMWARE_REPLACED)):
+            if obj is None and base is DroneFirmware:
+                continue
+            kind = type(obj)
+            if not (isinstance(obj, base)
+                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+                return False
+        return True
 
     @staticmethod
     def commands_eligible(drone) -> bool:

@@ -146,11 +146,12 @@ class Loopback:
 def warm_physics(plant, step_s: float) -> tuple:
     """Load (or, on a cold cache, compile) the kernels the physics and mocap threads call —
     on a copy of ``plant``, flown through a take-off, a second of flight and a landing in
-    ``step_s`` steps — before the servers start. Compiled in the physics thread instead, the
-    first take-off of a fresh install stalls it for seconds and the client sees the navdata
-    stop (``take-off failed: navdata lost``). ``plant`` itself is left untouched; returns the
-    copy's modes, in the order it went through them (none for a plant that cannot be copied:
-    it is served cold)."""
+    ``step_s`` steps (the landing started by an empty battery inside a two-step advance,
+    which the plant flies step by step, where it can be told its level) — before the servers
+    start. Compiled in the physics thread instead, the first take-off of a fresh install
+    stalls it for seconds and the client sees the navdata stop (``take-off failed: navdata
+    lost``). ``plant`` itself is left untouched; returns the copy's modes, in the order it
+    went through them (none for a plant that cannot be copied: it is served cold)."""
     try:
         twin = copy.deepcopy(plant)
     except (TypeError, copy.Error):  # a user's backend holding a lock, a socket …
@@ -166,13 +167,24 @@ def warm_physics(plant, step_s: float) -> tuple:
     if twin.takeoff():
         modes.append(twin.mode)
         fly_while(FlightMode.TAKING_OFF)
+    if twin.mode is FlightMode.FLYING:  # (or a plant that starts aloft: z₀ > 0)
         twin.command(0.01, -0.01, 0.02, 0.01)
         for _ in range(max(1, round(1.0 / step_s))):
             twin.advance(step_s)
         twin.mocap_pose()
         twin.navdata()
         _ = twin.truth  # a property (its angle wrap)
-        if twin.land():
+        # a late physics wake-up advances several steps at once; when the climb settles or
+        # the battery empties inside one, the plant flies the rest step by step (another
+        # kernel): an empty battery makes it land so, where a plant can be told its level
+        set_battery_pct = getattr(twin, "set_battery_pct", None)
+        if set_battery_pct is not None:
+            set_battery_pct(0.0)
+            twin.advance(2 * step_s)
+            if twin.mode is FlightMode.LANDING:
+                modes.append(twin.mode)
+                fly_while(FlightMode.LANDING)
+        elif twin.land():
             modes.append(twin.mode)
             fly_while(FlightMode.LANDING)
     return tuple(modes)

@@ -103,8 +103,11 @@ class LockstepSensors:
         # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
         self._legs = None
         if not self.wire:
-            from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
-            if CompiledLegs.eligible(self.plant):
+            from ardrone_nmpc.sim.lockstep_legs import SAMPLER_REPLACED, CompiledLegs
+            kind = type(self)  # (a sampler overriding its legs keeps them)
+            if CompiledLegs.eligible(self.plant, self.firmware) and all(
+                    getattr(kind, name) is getattr(LockstepSensors, name)
+                    for name in SAMPLER_REPLACED):
                 self._legs = CompiledLegs(self)
 
     # ------------------------------------------------------------------ the clock

@@ -214,3 +214,40 @@ def test_a_non_finite_command_is_refused_as_the_chain_refuses_it(bad):
         drone.advance_to(drone.truth.t_s + 0.06)
         shots.append(_snapshot(drone, drone.truth.t_s))
     assert shots[0] == shots[1]
+
+
+@pytest.mark.parametrize("owner,name", [
+    ("firmware", "advance"), ("firmware", "watchdogs"), ("firmware", "silence"),
+    ("firmware", "apply_command"), ("firmware", "_climb_may_reach_cap"),
+    ("sensors", "_run_to"), ("sensors", "_direct_events"),
+    ("plant", "altitude_m_and_rate_mps"), ("plant", "t_s")])
+def test_a_firmware_or_sampler_that_overrides_what_the_kernel_does_keeps_the_python_path(
+        owner, name, monkeypatch):
+    """The compiled tick stands in for the firmware's advance (its watchdogs, its altitude
+    cap's checks) and the sampler's legs too, reading the plant's height and clock from its
+    state: a firmware, sampler or plant class overriding one of those flies the Python path,
+    so its override runs."""
+    from ardrone_nmpc.sim import drone as drone_module
+    from ardrone_nmpc.sim import lockstep_drone as lockstep_module
+    from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+    from ardrone_nmpc.sim.plant import AirframePlant
+    from ardrone_nmpc.sim.sensors import LockstepSensors
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    assert LockstepDrone(cfg).sensors._legs is not None
+    base = {"firmware": DroneFirmware, "sensors": LockstepSensors, "plant": AirframePlant}[owner]
+    member = base.__dict__[name]
+    override = (property(member.fget) if isinstance(member, property)
+                else lambda self, *a, _m=member, **k: _m(self, *a, **k))
+    kind = type("Overriding", (base,), {name: override})
+    if owner == "firmware":
+        monkeypatch.setattr(drone_module, "DroneFirmware", kind)
+        drone = LockstepDrone(cfg)
+    elif owner == "sensors":
+        monkeypatch.setattr(lockstep_module, "LockstepSensors", kind)
+        drone = LockstepDrone(cfg)
+    else:
+        drone = LockstepDrone(cfg, plant=kind.from_config(cfg.sim, cfg.drone))
+    assert isinstance({"firmware": drone.sim.firmware, "sensors": drone.sensors,
+                       "plant": drone.sim.plant}[owner], kind)
+    assert drone.sensors._legs is None

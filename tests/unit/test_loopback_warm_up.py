@@ -46,3 +46,42 @@ def test_a_plant_that_cannot_be_copied_is_served_cold():
     plant.lock = threading.Lock()  # a user's backend holding a lock: deepcopy refuses
     assert warm_physics(plant, 0.005) == ()
     assert plant.mode is FlightMode.LANDED
+
+
+@pytest.mark.parametrize("model", ["lag", "second_order"])
+def test_the_warm_up_reaches_the_plants_step_by_step_step(model, monkeypatch):
+    """A late physics wake-up advances several steps at once: when the climb settles, or the
+    battery empties, inside one, the plant flies the rest step by step (``_motors_on_step``:
+    ``airframe_rk4``, or ``airframe_rk4_array`` for the second-order attitude) — a kernel the
+    compiled take-off, flight and landing never call, so the warm-up must reach it too (else
+    a cold cache compiles it in the physics thread at the end of the first take-off)."""
+    from ardrone_nmpc.sim import plant as plant_module
+
+    calls = []
+    for name in ("airframe_rk4", "airframe_rk4_array"):
+        kernel = getattr(plant_module, name)
+        monkeypatch.setattr(plant_module, name,
+                            lambda *a, _k=kernel, _n=name: calls.append(_n) or _k(*a))
+    cfg = load_config(None, [f"sim.plant.attitude_model={model}"])
+    plant = make_plant(cfg.sim, cfg.drone, seed=11)
+    before = pickle.dumps(plant)
+    assert warm_physics(plant, 0.005) == _FLIGHT
+    assert set(calls) == {"airframe_rk4_array" if model == "second_order" else "airframe_rk4"}
+    assert pickle.dumps(plant) == before
+
+
+def test_a_plant_that_starts_aloft_is_warmed_too(monkeypatch):
+    """An initial altitude above 0 starts the plant FLYING: no take-off to fly, but the flight
+    and the landing still are (the physics thread flies them from its first step)."""
+    from ardrone_nmpc.sim import plant as plant_module
+
+    calls = []
+    kernel = plant_module.flying_advance
+    monkeypatch.setattr(plant_module, "flying_advance",
+                        lambda *a: calls.append(1) or kernel(*a))
+    cfg = load_config(None, ["sim.plant.initial_position_m=[0, 0, 1.0]"])
+    plant = make_plant(cfg.sim, cfg.drone, seed=11)
+    before = pickle.dumps(plant)
+    assert warm_physics(plant, 0.005) == _FLIGHT[2:]
+    assert len(calls) > 100
+    assert pickle.dumps(plant) == before
