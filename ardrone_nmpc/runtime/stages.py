@@ -17,8 +17,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand, pcmd_of,
-                                          vz_reference_mps)
+from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand,
+                                          pcmd_of_floats, vz_reference_mps)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
@@ -76,6 +76,8 @@ class DelayPrediction:
         # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
         self._capacity = capacity
         self._sent = np.zeros((2 * capacity, INPUT_DIM))
+        # rows i and i + capacity as one (2, 4) view each: a push is one assignment, not two
+        self._pairs = [self._sent[i::capacity] for i in range(capacity)]
         self._next = 0  # the row the next input goes to
         self._pushed = False
 
@@ -94,10 +96,9 @@ class DelayPrediction:
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        i, cap = self._next, self._capacity
-        self._sent[i] = u_sent
-        self._sent[i + cap] = u_sent
-        self._next = (i + 1) % cap
+        i = self._next
+        self._pairs[i][...] = u_sent  # rows i and i + capacity
+        self._next = (i + 1) % self._capacity
         self._pushed = True
 
     def pending(self) -> tuple[np.ndarray, int, int]:
@@ -446,13 +447,23 @@ class Supervision:
         self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
         self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
 
+    @property
+    def limits(self) -> DroneLimits:
+        """The command at PCMD ±1 (:func:`~ardrone_nmpc.control.mapping.command_scales`)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, limits: DroneLimits) -> None:
+        self._limits = limits
+        # unpacked once: the mapping's three attribute lookups a tick (pcmd_of_floats)
+        self._scales = (limits.euler_angle_max_rad, limits.control_vz_max_mps,
+                        limits.control_yaw_radps)
+
     def command(self, decision: Decision, cmd: AttitudeCommand | None,
                 zacc_mps2: float) -> Sent:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
-        ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller)."""
-        return self._sent(decision, cmd, zacc_mps2)  # it notes the z̈ sent (zacc_mps2)
-
-    def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
+        ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller). It notes the ż
+        reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`)."""
         action = decision.action
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
@@ -470,12 +481,17 @@ class Supervision:
             if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
                     and math.isfinite(rate)):
                 # the NMPC's tilt per its model's gain: the tilt to ask for so that the drone
-                # tilts by the command's; P's gains are chosen on the plant
+                # tilts by the command's; P's gains are chosen on the plant. Finite, checked
+                # above: pcmd_of's arithmetic without its checks (float(): a numpy scalar's
+                # fraction would log as one)
                 k = self.attitude_gain
+                e, vz_max, yaw_max = self._scales
                 if action is _CONTROL and k != 1.0:
-                    pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
+                    pcmd = pcmd_of_floats(float(vz), float(roll / k), float(pitch / k),
+                                          float(rate), e, vz_max, yaw_max)
                 else:
-                    pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
+                    pcmd = pcmd_of_floats(float(vz), float(roll), float(pitch), float(rate),
+                                          e, vz_max, yaw_max)
                 saturated = pcmd.saturated
                 if saturated is UNSATURATED and not (roll_clipped or pitch_clipped):
                     flags = "0000"
