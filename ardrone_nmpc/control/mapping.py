@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from ardrone_nmpc.core.types import AttitudeCommand, slot_init
 
 __all__ = ["DroneLimits", "PcmdCommand", "MappingError", "UNSATURATED", "command_scales",
-           "map_to_pcmd", "pcmd_of", "vz_reference_mps"]
+           "map_to_pcmd", "pcmd_of", "pcmd_of_floats", "vz_reference_mps"]
 
 
 class MappingError(ValueError):
@@ -145,10 +145,19 @@ def pcmd_of(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_radps: 
         _finite("theta_rad", theta)
         _finite("vz_ref_mps", vz)
         _finite("psirate_radps", psirate)
+    return pcmd_of_floats(vz, phi, theta, psirate, limits.euler_angle_max_rad,
+                          limits.control_vz_max_mps, limits.control_yaw_radps)
+
+
+def pcmd_of_floats(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_radps: float,
+                   euler_angle_max_rad: float, control_vz_max_mps: float,
+                   control_yaw_radps: float) -> PcmdCommand:
+    """:func:`pcmd_of`'s arithmetic, for a caller that has the four values as finite Python
+    floats already and the limits unpacked (the tick's supervision: no checks, no
+    conversions, no attribute lookups). A NaN or a numpy scalar here is the caller's bug."""
     # _clip_unit of each, spelled out (four calls and tuples cost ~0.4 µs a tick)
-    e = limits.euler_angle_max_rad
-    roll, pitch = phi / e, -theta / e
-    gaz, yaw = vz / limits.control_vz_max_mps, -psirate / limits.control_yaw_radps
+    roll, pitch = phi_rad / euler_angle_max_rad, -theta_rad / euler_angle_max_rad
+    gaz, yaw = vz_ref_mps / control_vz_max_mps, -psirate_radps / control_yaw_radps
     if -1.0 <= roll <= 1.0 and -1.0 <= pitch <= 1.0 and -1.0 <= gaz <= 1.0 and -1.0 <= yaw <= 1.0:
         return PcmdCommand(roll + 0.0, pitch + 0.0, gaz + 0.0, yaw + 0.0, UNSATURATED)
     roll, s_roll = _clip_unit(roll)

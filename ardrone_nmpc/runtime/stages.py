@@ -5,7 +5,8 @@ estimation → delay prediction → control → supervision → row, with the mo
 from the second tracked object first. Each stage owns the state that carries over from one tick
 to the next — the estimators, the inputs sent but not yet acting, the NMPC warm start, the
 last command sent — and nothing else; the log row is built from their results by
-:func:`~ardrone_nmpc.runs.log_columns.tick_row`.
+:func:`~ardrone_nmpc.runs.log_columns.tick_row`. The estimation stage lives in
+:mod:`ardrone_nmpc.runtime.estimate` and is re-exported here.
 """
 
 from __future__ import annotations
@@ -16,26 +17,22 @@ from typing import NamedTuple
 import numpy as np
 
 from ardrone_nmpc.control.kernels import rollout_rk4
-from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand, pcmd_of,
-                                          vz_reference_mps)
+from ardrone_nmpc.control.mapping import (UNSATURATED, DroneLimits, PcmdCommand,
+                                          pcmd_of_floats, vz_reference_mps)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.core.types import (
-    INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y,
-    IX_Z, STATE_DIM, AttitudeCommand, MocapPose, NavdataSample, TickInputs,
+    INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, IX_Z, STATE_DIM, AttitudeCommand,
+    MocapPose, TickInputs,
 )
-from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
-from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
-from ardrone_nmpc.runtime.tick_kernels import (
-    E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
-    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate, nmpc_inputs,
-)
+from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
+from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -44,9 +41,6 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", 
 
 OBSTACLE_VELOCITY_FILTER_S = 0.2  # first-order filter of a moving obstacle's velocity (s)
 HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
-
-# the estimate's slots in index order, written in one assignment (seven cost ~0.5 µs more)
-assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
 
 # enum members bound once: ``Action.CONTROL`` is a lookup through the enum's metaclass
 # (~0.1 µs), and the tick makes a dozen
@@ -60,127 +54,6 @@ _F64 = np.dtype(np.float64)
 _FLAGS = {(a, b, c, d): "".join("1" if f else "0" for f in (a, b, c, d))
           for a in (False, True) for b in (False, True) for c in (False, True)
           for d in (False, True)}
-
-
-# ----------------------------------------------------------------------------- estimation
-def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
-    """Navdata body velocities (forward, right-positive) → world (ẋ, ẏ) at heading ψ (CCW)."""
-    c, s = math.cos(psi_rad), math.sin(psi_rad)
-    fwd, right = nav.vx_body_mps, nav.vy_body_mps
-    return fwd * c + right * s, fwd * s - right * c
-
-
-class Estimation:
-    """The state ``[x, ẋ, y, ẏ, z, ż, ψ]`` from the newest mocap pose and navdata.
-
-    Position and ψ from mocap; ż from the vertical-speed estimator (fed the z̈ applied over
-    the last interval); ẋ/ẏ from navdata (``estimator.horizontal_velocity: navdata``, when
-    there is any) or else backward differences of the mocap positions. A pose seen again (the
-    same stamp) updates no estimator.
-
-    Parameters
-    ----------
-    est_cfg : :class:`~ardrone_nmpc.config.schema.EstimatorConfig`.
-    """
-
-    def __init__(self, est_cfg) -> None:
-        self._vz_estimator = make_vz_estimator(
-            est_cfg.kind, kalman_q=est_cfg.kalman_q, kalman_r=est_cfg.kalman_r,
-            kalman_p0=est_cfg.kalman_p0, lambda0_per_s=est_cfg.luenberger_lambda0_per_s,
-            gain=est_cfg.luenberger_gain)
-        self._xy_difference = BackwardDifference(size=2)
-        self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
-        self._last_pose_t_s: float | None = None
-        self._x = np.zeros(STATE_DIM)
-        # the Kalman filter's and the difference's state in one buffer, updated by one
-        # compiled call (runtime/tick_kernels.kalman_estimate) until someone asks for the
-        # estimator objects themselves: they get it back (_leave_compiled)
-        self._compiled = type(self._vz_estimator) is ScalarKalmanVz
-        if self._compiled:
-            self._state = np.zeros(E_SIZE)
-            self._to_compiled()
-
-    # the estimators as objects: their state, handed back from the compiled step
-    @property
-    def vz_estimator(self):
-        """The ż estimator (:func:`~ardrone_nmpc.estimation.make_vz_estimator`)."""
-        self._leave_compiled()
-        return self._vz_estimator
-
-    @vz_estimator.setter
-    def vz_estimator(self, estimator) -> None:
-        self._leave_compiled()
-        self._vz_estimator = estimator
-
-    @property
-    def xy_difference(self) -> BackwardDifference:
-        """The backward difference of the mocap x, y."""
-        self._leave_compiled()
-        return self._xy_difference
-
-    @property
-    def compiled(self) -> bool:
-        """True while the compiled step (``kalman_estimate``) holds the estimators' state."""
-        return self._compiled
-
-    def _to_compiled(self) -> None:
-        s = self._state
-        s[E_HAS_POSE] = self._last_pose_t_s is not None
-        s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
-        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = self._vz_estimator.constants
-        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = self._vz_estimator.state()
-        previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
-        s[E_HAS_PREV] = previous is not None
-        s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
-
-    def _leave_compiled(self) -> None:
-        """The compiled step's state back into the estimator objects, which hold it from now on
-        (the Python path: the same arithmetic)."""
-        if not self._compiled:
-            return
-        self._compiled = False
-        (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
-         vel_x, vel_y) = self._state.tolist()
-        self._last_pose_t_s = last_t if has_pose else None
-        self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
-        self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
-
-    def update(self, pose: MocapPose, navdata: NavdataSample | None,
-               zacc_mps2: float) -> np.ndarray:
-        """The estimate after ``pose``; ``zacc_mps2`` is the z̈ applied since the last pose.
-
-        Returns the stage's own (7,) array, overwritten by the next call.
-        """
-        pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
-        px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
-        if self._compiled:
-            if self.velocity_from_navdata and navdata is not None:
-                vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-                if kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
-                                   zacc_mps2, True, vx, vy) == ESTIMATED:
-                    return self._x
-            elif kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
-                                 zacc_mps2, False, 0.0, 0.0) == ESTIMATED:
-                return self._x
-            self._leave_compiled()  # refused: the estimators raise their own error below
-        if pose.t_s != self._last_pose_t_s:
-            if self._last_pose_t_s is None:
-                self._vz_estimator.reset(pz)
-                self._xy_difference.reset()
-                self._xy_difference.update((px, py), 1.0)
-            else:
-                dt = pose.t_s - self._last_pose_t_s
-                self._vz_estimator.update(pz, zacc_mps2, dt)
-                self._xy_difference.update((px, py), dt)
-            self._last_pose_t_s = pose.t_s
-        if self.velocity_from_navdata and navdata is not None:
-            vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-        else:
-            vx, vy = self._xy_difference.velocity_mps
-        x = self._x
-        # [x, ẋ, y, ẏ, z, ż, ψ]
-        x[:] = (px, vx, py, vy, pz, self._vz_estimator.vz_mps, pose.psi_rad)
-        return x
 
 
 # ----------------------------------------------------------------------------- delay
@@ -203,6 +76,8 @@ class DelayPrediction:
         # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
         self._capacity = capacity
         self._sent = np.zeros((2 * capacity, INPUT_DIM))
+        # rows i and i + capacity as one (2, 4) view each: a push is one assignment, not two
+        self._pairs = [self._sent[i::capacity] for i in range(capacity)]
         self._next = 0  # the row the next input goes to
         self._pushed = False
 
@@ -221,10 +96,9 @@ class DelayPrediction:
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        i, cap = self._next, self._capacity
-        self._sent[i] = u_sent
-        self._sent[i + cap] = u_sent
-        self._next = (i + 1) % cap
+        i = self._next
+        self._pairs[i][...] = u_sent  # rows i and i + capacity
+        self._next = (i + 1) % self._capacity
         self._pushed = True
 
     def pending(self) -> tuple[np.ndarray, int, int]:
@@ -573,13 +447,23 @@ class Supervision:
         self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
         self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
 
+    @property
+    def limits(self) -> DroneLimits:
+        """The command at PCMD ±1 (:func:`~ardrone_nmpc.control.mapping.command_scales`)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, limits: DroneLimits) -> None:
+        self._limits = limits
+        # unpacked once: the mapping's three attribute lookups a tick (pcmd_of_floats)
+        self._scales = (limits.euler_angle_max_rad, limits.control_vz_max_mps,
+                        limits.control_yaw_radps)
+
     def command(self, decision: Decision, cmd: AttitudeCommand | None,
                 zacc_mps2: float) -> Sent:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
-        ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller)."""
-        return self._sent(decision, cmd, zacc_mps2)  # it notes the z̈ sent (zacc_mps2)
-
-    def _sent(self, decision: Decision, cmd: AttitudeCommand | None, zacc_mps2: float) -> Sent:
+        ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller). It notes the ż
+        reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`)."""
         action = decision.action
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
@@ -597,12 +481,17 @@ class Supervision:
             if (math.isfinite(vz) and math.isfinite(roll) and math.isfinite(pitch)
                     and math.isfinite(rate)):
                 # the NMPC's tilt per its model's gain: the tilt to ask for so that the drone
-                # tilts by the command's; P's gains are chosen on the plant
+                # tilts by the command's; P's gains are chosen on the plant. Finite, checked
+                # above: pcmd_of's arithmetic without its checks (float(): a numpy scalar's
+                # fraction would log as one)
                 k = self.attitude_gain
+                e, vz_max, yaw_max = self._scales
                 if action is _CONTROL and k != 1.0:
-                    pcmd = pcmd_of(vz, roll / k, pitch / k, rate, self.limits)
+                    pcmd = pcmd_of_floats(float(vz), float(roll / k), float(pitch / k),
+                                          float(rate), e, vz_max, yaw_max)
                 else:
-                    pcmd = pcmd_of(vz, roll, pitch, rate, self.limits)
+                    pcmd = pcmd_of_floats(float(vz), float(roll), float(pitch), float(rate),
+                                          e, vz_max, yaw_max)
                 saturated = pcmd.saturated
                 if saturated is UNSATURATED and not (roll_clipped or pitch_clipped):
                     flags = "0000"
@@ -610,7 +499,7 @@ class Supervision:
                     s0, s1, s2, s3 = saturated
                     flags = _FLAGS[(s0 or roll_clipped, s1 or pitch_clipped, s2, s3)]
                 zacc = zacc_mps2 if action is _CONTROL and math.isfinite(zacc_mps2) else 0.0
-                u_sent = np.array([zacc, roll, pitch, rate])
+                u_sent = np.array((zacc, roll, pitch, rate))  # a tuple: ~10% under a list
                 self.zacc_mps2 = float(zacc)  # u_sent[IU_ZACC], without numpy's scalar
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
