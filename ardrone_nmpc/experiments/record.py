@@ -106,7 +106,8 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
         wall_s = time.perf_counter() - wall0
-    run, rows = write_run_summary(recorder.path, columns=recorder.kept_columns())
+    run, rows = write_run_summary(recorder.path, columns=recorder.kept_columns(),
+                                  config=recorder.config)
     return Recording(recorder.path, result, "", wall_s, run, rows)
 
 

@@ -679,9 +679,13 @@ def _on_experiment_clock(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None) -> RunData:
+def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None,
+             config: ExperimentConfig | None = None) -> RunData:
     """Read a run directory written by :class:`RunRecorder`; ``columns`` (its
-    :meth:`~RunRecorder.kept_columns`) stand for ``log.csv``, which is then not parsed again.
+    :meth:`~RunRecorder.kept_columns`) stand for ``log.csv``, which is then not parsed again,
+    and ``config`` (its :attr:`~RunRecorder.config`: what ``config.yaml`` loads back as —
+    ``tests/unit/test_read_run_config.py``) for ``config.yaml``'s settings, which are then
+    not parsed and validated again (its header comments still are).
 
     Raises
     ------
@@ -700,7 +704,8 @@ def read_run(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = Non
     cfg_path = path / CONFIG_FILE
     cfg_text = _read_text(cfg_path)
     try:
-        config = load_run_config(cfg_path)
+        if config is None:
+            config = load_run_config(cfg_path)
     except ConfigError as exc:
         detail = "; ".join(exc.messages)
         prefix = "" if detail.startswith(str(cfg_path)) else f"{cfg_path}: "
