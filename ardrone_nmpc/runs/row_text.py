@@ -229,8 +229,9 @@ def _cells_of_line(line: bytes) -> list:
 def _floats(cells: tuple, n: int) -> np.ndarray:
     """A numeric column of kept cells (float, np.float64, int, None, "" for an empty cell) as
     read back: float64, every NaN the one ``nan`` reads as."""
-    if set(map(type, cells)) <= _STR_ONLY:  # a column no row filled: "" all through (no
-        return np.full(n, math.nan)           # == per cell: numpy's scalar compare is slow)
+    # a column no row filled: "" all through (no == per cell: numpy's scalar compare is slow)
+    if not cells or (cells[0].__class__ is str and set(map(type, cells)) <= _STR_ONLY):
+        return np.full(n, math.nan)
     try:
         arr = np.array(cells, dtype=np.float64)  # None is NaN; ints exact as their text reads
     except (TypeError, ValueError):  # empty cells among the numbers
