@@ -129,3 +129,26 @@ def test_blocks_of_rows_without_infinities_take_the_block_path(tmp_path, monkeyp
     assert block[0] == one[0] and block[2] == one[2]
     assert _same_columns(block[1], one[1])
     assert sum(printed) >= len(printed) // 2 > 5
+
+
+def test_a_simulations_run_directory_is_not_fsynced_and_the_same(tmp_path, monkeypatch):
+    """durable=False (record_lockstep): no fsync, the same config.yaml and summary.csv."""
+    import datetime as dt
+    import os
+
+    from ardrone_nmpc.runs.rundir import CONFIG_FILE, SUMMARY_FILE, SummaryRow
+
+    now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
+    rows = [SummaryRow("x", "rmse", 0.1, "m"), SummaryRow("run", "ticks", 5.0, "count")]
+    texts = {}
+    for durable in (True, False):
+        synced = []
+        real = os.fsync
+        monkeypatch.setattr(os, "fsync", lambda fd: synced.append(fd) or real(fd))
+        with RunRecorder.create(tmp_path / str(durable), CFG, seed=1, now=now,
+                                durable=durable) as rec:
+            rec.write_summary(rows)
+        monkeypatch.undo()
+        assert bool(synced) is durable
+        texts[durable] = [(rec.path / name).read_bytes() for name in (CONFIG_FILE, SUMMARY_FILE)]
+    assert texts[True] == texts[False]
