@@ -14,6 +14,7 @@ import itertools
 import math
 import operator
 import re
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
 __all__ = ["format_number"]
 
 _INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
+_COLUMN_SET = frozenset(LOG_COLUMNS)
 _FORBIDDEN = re.compile(r'[,"\r\n]')
 
 
@@ -214,6 +216,67 @@ def _print_non_finite(cells: list) -> int:
             continue
         added += 2
     return added
+
+
+# ----------------------------------------------------------------------------- row plans
+def _getter(names: list[str]) -> Callable[[Mapping[str, Any]], tuple]:
+    """``row -> tuple(row[n] for n in names)`` at C speed."""
+    if len(names) > 1:
+        return operator.itemgetter(*names)
+    if names:
+        name = names[0]
+        return lambda row: (row[name],)
+    return lambda row: ()
+
+
+def row_plan(keys: tuple) -> tuple:
+    """How rows with these keys (in this order) are printed: ``(template, slots, getter,
+    string_slots, quotes, n_str)`` — the empty cells, the slot of each present column, a
+    getter of their values, the string columns' slots, the ``"`` of the empty and string
+    cells, the str cells of a plain row. Raises ValueError for an unknown key."""
+    unknown = [k for k in keys if k not in _COLUMN_SET]
+    if unknown:
+        raise ValueError(f"unknown log column(s) {', '.join(map(repr, unknown))}; "
+                         f"expected names from LOG_COLUMNS")
+    present = [c for c in LOG_COLUMNS if c in set(keys)]
+    template = ["" for _ in LOG_COLUMNS]  # "" = an empty cell
+    slots = [_INDEX[c] for c in present]
+    string_slots = [_INDEX[c] for c in present if c in STRING_COLUMNS]
+    # each empty cell and each string cell prints as "…": two quotes apiece
+    quotes = 2 * (len(LOG_COLUMNS) - len(present) + len(string_slots))
+    # the str cells of a plain row: one per string column, one per missing numeric key
+    n_str = _N_STRING_COLUMNS + sum(1 for c in LOG_COLUMNS
+                                    if c not in set(keys) and c not in STRING_COLUMNS)
+    return (template, slots, _getter(present), string_slots, quotes, n_str)
+
+
+def careful_line(row: Mapping[str, Any]) -> bytes:
+    """The row line cell by cell (the recorder's careful path): "" is an empty cell, a bad
+    value a precise ValueError."""
+    cells = []
+    for name in LOG_COLUMNS:
+        if name not in row:
+            cells.append("")
+            continue
+        v = row[name]
+        if name in STRING_COLUMNS:
+            if v is None or (isinstance(v, float) and math.isnan(v)):
+                cells.append("")
+                continue
+            if not isinstance(v, str):
+                raise ValueError(f"log column {name}: {v!r} is not a string")
+            if _FORBIDDEN.search(v):
+                raise ValueError(f"log column {name}: {v!r} contains ',', '\"' or a "
+                                 f"line break")
+            cells.append(str.__str__(v))
+        elif isinstance(v, str) and v == "":
+            cells.append("")
+        else:
+            try:
+                cells.append(format_number(math.nan if v is None else v))
+            except (TypeError, ValueError):
+                raise ValueError(f"log column {name}: {v!r} is not a number") from None
+    return (",".join(cells) + "\n").encode("utf-8")
 
 
 # ----------------------------------------------------------------------------- kept rows

@@ -53,11 +53,10 @@ import datetime as _dt
 import enum
 import json
 import math
-import operator
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,9 +70,9 @@ from ardrone_nmpc.core.atomic import atomic_path, write_text_atomic
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.trajectories import input_files
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
-from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, _N_STRING_COLUMNS, KeptRows,
-                                        BlockCheck, _fast_line, _plain_line, block_text,
-                                        format_number)
+from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, KeptRows,
+                                        _fast_line, _plain_line, block_text, careful_line,
+                                        format_number, row_plan)
 
 __all__ = [
     "LogError",
@@ -94,7 +93,6 @@ SUMMARY_FILE = "summary.csv"
 INPUTS_DIR = "inputs"
 
 _COLUMN_SET = frozenset(LOG_COLUMNS)
-_INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
 class LogError(UserError, ValueError):
     """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line;
     exit code 1)."""
@@ -121,16 +119,6 @@ def _write_all(raw: Any, data: bytes) -> None:
     while n is not None and n < len(data):  # pragma: no cover - regular files take it all
         data = data[n:]
         n = raw.write(data)
-
-
-def _getter(names: list[str]) -> Callable[[Mapping[str, Any]], tuple]:
-    """``row -> tuple(row[n] for n in names)`` at C speed."""
-    if len(names) > 1:
-        return operator.itemgetter(*names)
-    if names:
-        name = names[0]
-        return lambda row: (row[name],)
-    return lambda row: ()
 
 
 def _read_inputs(cfg: ExperimentConfig) -> dict:
@@ -354,52 +342,13 @@ class RunRecorder:
 
     def _plan(self, keys: tuple) -> tuple:
         """Cell template, slots and getter for rows with these keys (cached per key order)."""
-        unknown = [k for k in keys if k not in _COLUMN_SET]
-        if unknown:
-            raise ValueError(f"unknown log column(s) {', '.join(map(repr, unknown))}; "
-                             f"expected names from LOG_COLUMNS")
-        present = [c for c in LOG_COLUMNS if c in set(keys)]
-        template = ["" for _ in LOG_COLUMNS]  # "" = an empty cell
-        slots = [_INDEX[c] for c in present]
-        string_slots = [_INDEX[c] for c in present if c in STRING_COLUMNS]
-        # each empty cell and each string cell prints as "…": two quotes apiece
-        quotes = 2 * (len(LOG_COLUMNS) - len(present) + len(string_slots))
-        # the str cells of a plain row: one per string column, one per missing numeric key
-        n_str = _N_STRING_COLUMNS + sum(1 for c in LOG_COLUMNS
-                                        if c not in set(keys) and c not in STRING_COLUMNS)
-        plan = (template, slots, _getter(present), string_slots, quotes, n_str)
+        plan = row_plan(keys)  # raises for an unknown key
         if len(self._plans) >= 64:  # rows of ever-changing shapes: keep the cache small
             self._plans.clear()
         self._plans[keys] = plan
         return plan
 
-    @staticmethod
-    def _careful_line(row: Mapping[str, Any]) -> bytes:
-        """The row line cell by cell: "" is an empty cell, a bad value a precise ValueError."""
-        cells = []
-        for name in LOG_COLUMNS:
-            if name not in row:
-                cells.append("")
-                continue
-            v = row[name]
-            if name in STRING_COLUMNS:
-                if v is None or (isinstance(v, float) and math.isnan(v)):
-                    cells.append("")
-                    continue
-                if not isinstance(v, str):
-                    raise ValueError(f"log column {name}: {v!r} is not a string")
-                if _FORBIDDEN.search(v):
-                    raise ValueError(f"log column {name}: {v!r} contains ',', '\"' or a "
-                                     f"line break")
-                cells.append(str.__str__(v))
-            elif isinstance(v, str) and v == "":
-                cells.append("")
-            else:
-                try:
-                    cells.append(format_number(math.nan if v is None else v))
-                except (TypeError, ValueError):
-                    raise ValueError(f"log column {name}: {v!r} is not a number") from None
-        return (",".join(cells) + "\n").encode("utf-8")
+    _careful_line = staticmethod(careful_line)
 
     def event(self, t_s: float, kind: str, **fields: Any) -> None:
         """Append ``{"t_s": t_s, "kind": kind, **fields}`` as one line of ``events.jsonl``.
