@@ -5,7 +5,9 @@ Numbers are the shortest decimal that reads back to the same double (Ryu, throug
 NaN and ±inf ``nan``/``inf``/``-inf``, string cells as they are. :func:`_plain_line` prints a
 row of plain cells in one orjson call; :func:`_fast_line` takes the cells one by one into
 orjson (numpy scalars widened by :func:`_as_float`); the recorder's careful path
-(:func:`format_number` per cell) takes the rest and refuses what cannot be written.
+(:func:`careful_line`, :func:`format_number` per cell) takes the rest and refuses what cannot
+be written. :func:`block_text` prints a block of rows :class:`BlockCheck` admits in one orjson
+call (a lockstep recording's; the same text as :func:`_plain_line` row by row).
 """
 
 from __future__ import annotations
