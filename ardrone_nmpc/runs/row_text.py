@@ -330,17 +330,6 @@ class KeptRows:
             return
         rows.append(cells if cells is not None else _cells_of_line(line))
 
-    def add_rows(self, rows: list[list]) -> None:
-        """Rows written as one block, each the cells :func:`_plain_line` printed (as
-        :meth:`add` one by one)."""
-        kept = self._rows
-        if kept is None:
-            return
-        if len(kept) + len(rows) > self.limit:
-            self._rows = None  # too long to keep: read back from the file
-            return
-        kept.extend(rows)
-
     def columns(self) -> dict[str, np.ndarray] | None:
         """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
         of str for :data:`STRING_COLUMNS`), or None when the rows were not all kept."""

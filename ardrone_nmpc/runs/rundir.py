@@ -301,22 +301,37 @@ class RunRecorder:
         self._kept.add(cells, line)
 
     def _write_held(self) -> None:
-        """Print the held rows as one block and hand it to the OS by one ``write``."""
-        held, self._held = self._held, []
+        """Print the held rows as one block and hand it to the OS by one ``write``. An
+        exception or interrupt before the block reached the file leaves the rows held (the
+        recorder's close writes them); after, they count as written."""
+        held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
-        if text is not None:
+        kept = [(cells, b"") for cells in rows]
+        if text is None:  # a ±inf among them: row by row, as write_row prints them
+            kept = []
+            for cells, plan in held:
+                line = _plain_line(cells, plan[4])
+                if line is None:  # pragma: no cover - BlockCheck's rows print plain
+                    line = self._line({LOG_COLUMNS[i]: cells[i] for i in plan[1]}, plan)
+                    cells = None
+                kept.append((cells, line))
+            text = b"".join(line for _, line in kept)
+        at = self._log.tell()
+        try:
             _write_all(self._log, text)
-            self._kept.add_rows(rows)
-            return
-        lines = []  # a ±inf among them: row by row, as write_row prints them
-        for cells, plan in held:
-            line = _plain_line(cells, plan[4])
-            if line is None:  # pragma: no cover - BlockCheck's rows print plain
-                line, cells = self._line({LOG_COLUMNS[i]: cells[i] for i in plan[1]}, plan), None
-            lines.append(line)
-            self._kept.add(cells, line)
-        _write_all(self._log, b"".join(lines))
+        except BaseException:
+            if self._log.tell() != at:  # written: a signal's KeyboardInterrupt after it
+                self._held = []
+                self._keep(kept)
+            raise
+        self._held = []
+        self._keep(kept)
+
+    def _keep(self, kept: list[tuple[list | None, bytes]]) -> None:
+        add = self._kept.add
+        for cells, line in kept:
+            add(cells, line)
 
     def kept_columns(self) -> dict[str, np.ndarray] | None:
         """The columns of the rows written, as :func:`read_run` would parse them from

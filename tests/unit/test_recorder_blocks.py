@@ -152,3 +152,31 @@ def test_a_simulations_run_directory_is_not_fsynced_and_the_same(tmp_path, monke
         assert bool(synced) is durable
         texts[durable] = [(rec.path / name).read_bytes() for name in (CONFIG_FILE, SUMMARY_FILE)]
     assert texts[True] == texts[False]
+
+
+@pytest.mark.parametrize("written", [False, True])
+def test_an_interrupt_at_the_blocks_write_neither_loses_nor_repeats_rows(tmp_path, monkeypatch,
+                                                                         written):
+    """A KeyboardInterrupt (a signal) raised in the block's write: before the bytes reached
+    the file the rows stay held and close writes them; after, they are not written again."""
+    from ardrone_nmpc.runs import rundir
+
+    rng = random.Random(6)
+    rows = [_tick_like(rng, k) for k in range(70)]
+    expected = _write(tmp_path, rows, 1, "one")[0]
+    rec = RunRecorder.create(tmp_path / "block", CFG, seed=0, rows_per_write=64)
+    real = rundir._write_all
+
+    def interrupted(raw, data):
+        if written:
+            real(raw, data)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(rundir, "_write_all", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        for row in rows:
+            rec.write_row(row)
+    monkeypatch.undo()
+    rec.close()
+    text = (rec.path / LOG_FILE).read_bytes()
+    assert text == expected[:len(text)] and text.count(b"\n") == 65  # header + 64 rows
