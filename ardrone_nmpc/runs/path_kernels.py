@@ -3,8 +3,9 @@
 positions against a ~200-vertex polyline: 7 ms in numpy's chunked broadcasting, ~0.5 ms here).
 
 The same arithmetic as the numpy form it replaced, operation by operation: ``ap = q − a``,
-``u = clip((ap·ab)·inv, 0, 1)``, ``diff = ap − u·ab``, ``d² = diff·diff``, ``inv = 1/(ab·ab)``
-(0 for a zero-length segment), the minimum over the segments, then its square root. The
+``u = clip((ap·ab)·inv, 0, 1)``, ``diff = ap − u·ab``, ``d² = diff·diff``,
+``inv = 1/(ab·ab)`` (0 for a zero-length segment), the minimum over the segments, then its
+square root. The
 three-term dot products are summed ``(x₀ + x₂) + x₁``: the order numpy's ``einsum`` takes on
 AVX2 and AVX-512 machines (its 4- and 8-lane sums add lane 2 to lane 0 first), so the
 distances are the bits the numpy form gave there — and, compiled for the pinned target

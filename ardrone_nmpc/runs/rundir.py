@@ -301,9 +301,8 @@ class RunRecorder:
         self._kept.add(cells, line)
 
     def _write_held(self) -> None:
-        """Print the held rows as one block and hand it to the OS by one ``write``. An
-        exception or interrupt before the block reached the file leaves the rows held (the
-        recorder's close writes them); after, they count as written."""
+        """Print the held rows as one block, hand it to the OS by one ``write``. Interrupted
+        before the block reached the file, the rows stay held (:meth:`close` writes them)."""
         held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
@@ -313,25 +312,18 @@ class RunRecorder:
             for cells, plan in held:
                 line = _plain_line(cells, plan[4])
                 if line is None:  # pragma: no cover - BlockCheck's rows print plain
-                    line = self._line({LOG_COLUMNS[i]: cells[i] for i in plan[1]}, plan)
-                    cells = None
+                    present = {LOG_COLUMNS[i]: cells[i] for i in plan[1]}
+                    line, cells = self._line(present, plan), None
                 kept.append((cells, line))
             text = b"".join(line for _, line in kept)
         at = self._log.tell()
         try:
             _write_all(self._log, text)
-        except BaseException:
-            if self._log.tell() != at:  # written: a signal's KeyboardInterrupt after it
+        finally:  # the file grew: written, even if a signal's KeyboardInterrupt followed
+            if self._log.tell() != at:
                 self._held = []
-                self._keep(kept)
-            raise
-        self._held = []
-        self._keep(kept)
-
-    def _keep(self, kept: list[tuple[list | None, bytes]]) -> None:
-        add = self._kept.add
-        for cells, line in kept:
-            add(cells, line)
+                for cells, line in kept:
+                    self._kept.add(cells, line)
 
     def kept_columns(self) -> dict[str, np.ndarray] | None:
         """The columns of the rows written, as :func:`read_run` would parse them from
