@@ -113,6 +113,10 @@ def _json_default(obj: Any) -> Any:
     return repr(obj)
 
 
+#: The events' encoder, made once (json.dumps given arguments makes one per call: ~5 µs).
+_EVENT_JSON = json.JSONEncoder(default=_json_default, separators=(",", ":"))
+
+
 def _write_all(raw: Any, data: bytes) -> None:
     """Write ``data`` to an unbuffered file: one ``write`` call unless the OS takes less."""
     n = raw.write(data)
@@ -201,10 +205,9 @@ class RunRecorder:
         now : the creation time for the name and header (default: the local time now).
         rows_per_write : hand the rows to the OS in blocks of up to this many (1: each row
             at once; see :meth:`write_row`).
-        durable : ``fsync`` ``config.yaml`` before the first row (and ``summary.csv`` before
-            it replaces an earlier one, :attr:`durable`). False for a simulation, which its
-            config flies again bit for bit: each ``fsync`` after a flight's ~0.7 MB log costs
-            ~2.5 ms of wall time (the journal writes the log out first).
+        durable : ``fsync`` ``config.yaml`` (and ``summary.csv``, :attr:`durable`). False for
+            a simulation, which its config flies again bit for bit: an ``fsync`` after a
+            flight's ~0.7 MB log costs ~2.5 ms of wall time (the journal writes the log first).
         """
         inputs = _read_inputs(cfg)  # checked before anything is created
         now = now if now is not None else _dt.datetime.now().astimezone()
@@ -265,13 +268,11 @@ class RunRecorder:
         keys are checked once per key sequence (callers build their rows the same way every
         tick) and a row of plain cells is printed by one orjson call (:func:`_plain_line`).
 
-        With ``rows_per_write`` > 1 (the lockstep simulation's recordings, ~1000 rows a
-        second) a row of plain cells whose writing cannot fail (:class:`BlockCheck`) is held
-        and printed with the rows after it by one orjson call, the block handed to the OS by
-        one ``write`` (:func:`block_text`: the same text; ≈ 7 µs a row in all): when
-        ``rows_per_write`` rows are held, when a row was held :attr:`HOLD_S`, before a row
-        that is not held, and on :meth:`flush`, :meth:`kept_columns` and :meth:`close` (an
-        exception or Ctrl-C closes the recorder: only a killed process loses the rows held).
+        With ``rows_per_write`` > 1 (lockstep recordings) a row whose writing cannot fail
+        (:class:`BlockCheck`) is held, and the block printed by one orjson call and one
+        ``write`` (:func:`block_text`, the same text; ≈ 7 µs a row in all) when full, when a
+        row was held :attr:`HOLD_S`, before a row not held, and on :meth:`flush`,
+        :meth:`kept_columns` and :meth:`close` (errors and Ctrl-C close the recorder).
         """
         keys = tuple(row)
         plan = self._plans.get(keys)
@@ -364,7 +365,7 @@ class RunRecorder:
         written as its ``repr``. Floats keep full precision (NaN/inf as ``NaN``/``Infinity``).
         """
         record = {"t_s": float(t_s), "kind": str(kind), **fields}
-        line = json.dumps(record, default=_json_default, separators=(",", ":"))
+        line = _EVENT_JSON.encode(record)
         _write_all(self._events, (line + "\n").encode("utf-8"))
 
     def flush(self) -> None:

@@ -180,3 +180,24 @@ def test_an_interrupt_at_the_blocks_write_neither_loses_nor_repeats_rows(tmp_pat
     rec.close()
     text = (rec.path / LOG_FILE).read_bytes()
     assert text == expected[:len(text)] and text.count(b"\n") == 65  # header + 64 rows
+
+
+def test_the_events_encoder_writes_what_json_dumps_wrote():
+    """RunRecorder.event's encoder, made once, against json.dumps with its arguments."""
+    import enum
+    import json
+    from pathlib import Path
+
+    from ardrone_nmpc.runs import rundir
+
+    class Kind(enum.Enum):
+        A = "a"
+
+    rng = random.Random(8)
+    values = [1.5, math.nan, math.inf, -0.0, 1e-7, "é", 'q"', np.float64(2.5), np.int64(3),
+              np.arange(3), Kind.A, {2, 1}, Path("/x"), None, True, [1, {"a": 2.5}]]
+    for _ in range(500):
+        record = {"t_s": rng.random(), "kind": "k",
+                  **{f"f{i}": rng.choice(values) for i in range(rng.randint(0, 5))}}
+        assert rundir._EVENT_JSON.encode(record) == json.dumps(
+            record, default=rundir._json_default, separators=(",", ":"))
