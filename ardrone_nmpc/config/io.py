@@ -316,15 +316,57 @@ def config_to_dict(cfg: ExperimentConfig) -> dict[str, Any]:
     return cfg.model_dump(mode="json")
 
 
+def _dump(data: Any, dumper: type) -> str:
+    return yaml.dump(data, Dumper=dumper, sort_keys=False, default_flow_style=False,
+                     allow_unicode=True, width=100)
+
+
+def _unshared(data: Any, seen: set[int]) -> bool:
+    """Whether no dict or list of ``data`` appears twice (the emitter would write an anchor
+    and an alias for it: text that spans sections)."""
+    if isinstance(data, (dict, list)):
+        if id(data) in seen:
+            return False
+        seen.add(id(data))
+        values = data.values() if isinstance(data, dict) else data
+        return all(_unshared(v, seen) for v in values)
+    return True
+
+
+#: The text of a top-level section, by ``(key, repr(value))``: a sweep's configs differ in a
+#: section or two (the seed, a gain), and each run directory writes its config.yaml.
+_SECTION_TEXT: dict[tuple[str, str], str] = {}
+_SECTIONS_KEPT = 512
+
+
+def _body(data: dict[str, Any]) -> str:
+    """``data`` as YAML. Plain text (:func:`_plain_strings`) on libyaml, a section at a time
+    from :data:`_SECTION_TEXT`: a block mapping's sections are written one after the other,
+    each the text it has alone, when no object is shared (no anchor). The rest on
+    :class:`_Dumper`, whole."""
+    if _CDumper is None or not _plain_strings(data):
+        return _dump(data, _Dumper)
+    if not _unshared(data, set()):
+        return _dump(data, _CDumper)
+    parts = []
+    for key, value in data.items():
+        at = (key, repr(value))  # repr tells 1 from 1.0 and True, nan from inf, -0.0 from 0.0
+        text = _SECTION_TEXT.get(at)
+        if text is None:
+            text = _dump({key: value}, _CDumper)
+            if len(_SECTION_TEXT) >= _SECTIONS_KEPT:
+                _SECTION_TEXT.clear()
+            _SECTION_TEXT[at] = text
+        parts.append(text)
+    return "".join(parts)
+
+
 def dump_config(cfg: ExperimentConfig, header: str | None = None) -> str:
     """The configuration as YAML, keys in declared order, loadable by :func:`load_config`.
 
     ``header`` (e.g. the tool version) is written as leading ``#`` comment lines.
     """
-    data = config_to_dict(cfg)
-    dumper = _CDumper if _CDumper is not None and _plain_strings(data) else _Dumper
-    body = yaml.dump(data, Dumper=dumper, sort_keys=False, default_flow_style=False,
-                     allow_unicode=True, width=100)
+    body = _body(config_to_dict(cfg))
     if not header:
         return body
     comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())

@@ -28,7 +28,7 @@ KERNEL_SOURCES = (
     "core/sorted_search.py", "control/gmres.py", "control/obstacles.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
-    "sim/sensor_step.py",
+    "sim/sensor_step.py", "runs/path_kernels.py",
     "reference/kernels.py", "estimation/response_kernels.py", "estimation/disturbance.py",
     "runtime/tick_kernels.py",
 )

@@ -37,6 +37,9 @@ T = TypeVar("T")
 
 #: The event that ends a lockstep recording (wall time, ticks, how it ended).
 SIMULATED_EVENT = "simulated"
+#: A lockstep recording hands its rows to the OS in blocks of up to this many (~1000 rows a
+#: second of wall time: the block's text is printed by one call; ``RunRecorder.write_row``).
+LOCKSTEP_ROWS_PER_WRITE = 64
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,8 @@ def one_line(err: BaseException) -> str:
 
 def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
            fly: Callable[[RunRecorder], T], catch: bool = False,
-           summarise_failed: Callable[[Path], None] | None = None) -> Recording[T]:
+           summarise_failed: Callable[[Path], None] | None = None,
+           rows_per_write: int = 1, durable: bool = True) -> Recording[T]:
     """Create a run directory for ``cfg`` under ``log_dir``, run ``fly(recorder)`` into it,
     then write its ``summary.csv``.
 
@@ -80,12 +84,14 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     real flight's run directory is complete however it ended — and the exception propagates
     — or, with ``catch``, comes back as :attr:`Recording.error`. A Ctrl-C or terminating
     signal ends it with the ``interrupted`` event and propagates (never caught), carrying
-    the run directory as ``run_dir``.
+    the run directory as ``run_dir``. ``rows_per_write`` and ``durable``: see
+    :meth:`~ardrone_nmpc.runs.rundir.RunRecorder.create`.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
     wall0 = time.perf_counter()
-    with RunRecorder.create(log_dir, cfg, seed=seed) as recorder:
+    with RunRecorder.create(log_dir, cfg, seed=seed, rows_per_write=rows_per_write,
+                            durable=durable) as recorder:
         try:
             result = fly(recorder)
         except BaseException as err:
@@ -101,7 +107,8 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
                 raise
             return Recording(recorder.path, None, one_line(err), time.perf_counter() - wall0)
         wall_s = time.perf_counter() - wall0
-    run, rows = write_run_summary(recorder.path, columns=recorder.kept_columns())
+    run, rows = write_run_summary(recorder.path, columns=recorder.kept_columns(),
+                                  config=recorder.config, durable=durable)
     return Recording(recorder.path, result, "", wall_s, run, rows)
 
 
@@ -144,4 +151,6 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
                        final_mode=result.final_mode.value)
         return result
 
-    return record(cfg, log_dir, seed=seed, fly=fly, catch=catch)
+    # a simulation flies again bit for bit from its config.yaml: no fsync (RunRecorder.create)
+    return record(cfg, log_dir, seed=seed, fly=fly, catch=catch,
+                  rows_per_write=LOCKSTEP_ROWS_PER_WRITE, durable=False)

@@ -13,7 +13,9 @@ since ``log.csv`` round-trips every double.
 
 from __future__ import annotations
 
+import itertools
 import math
+import operator
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -56,6 +58,28 @@ def _numbers(cells: list, n: int) -> np.ndarray:
         return arr
 
 
+def _transposed(rows: list[dict]) -> dict[str, tuple | list]:
+    """Each key any row has → its cells over the rows (None where a row lacks it): the rows
+    of one key sequence (a runner builds its rows alike tick after tick) transposed at C
+    speed, ~10× faster than a ``row.get`` per row and key."""
+    runs = [(keys, [row for _, row in run])
+            for keys, run in itertools.groupby(zip(map(tuple, rows), rows),
+                                               key=operator.itemgetter(0))]
+    if len(runs) == 1:
+        keys, run = runs[0]
+        return dict(zip(keys, zip(*map(dict.values, run))))
+    out: dict[str, list] = {}
+    done = 0
+    for keys, run in runs:
+        for key, cells in zip(keys, zip(*map(dict.values, run))):
+            column = out.get(key)
+            if column is None:
+                column = out[key] = [None] * len(rows)
+            column[done:done + len(run)] = cells
+        done += len(run)
+    return out
+
+
 class MemoryRecorder:
     """Collects rows and events in memory; :meth:`run_data` turns them into a RunData.
 
@@ -89,12 +113,24 @@ class MemoryRecorder:
     def columns(self) -> dict[str, np.ndarray]:
         """Every :data:`LOG_COLUMNS` name (and any extra key a row had) → array over the
         rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
-        extra = set().union(*self.rows) - set(LOG_COLUMNS) if self.rows else set()
+        rows = self.rows
+        n = len(rows)
+        cells_of = _transposed(rows) if n and all(r.__class__ is dict for r in rows) else None
+        if cells_of is None:
+            extra = set().union(*rows) - set(LOG_COLUMNS) if rows else set()
+        else:
+            extra = set(cells_of) - set(LOG_COLUMNS)
         names = [*LOG_COLUMNS, *sorted(extra)]
-        n = len(self.rows)
         out: dict[str, np.ndarray] = {}
         for name in names:
-            cells = [row.get(name) for row in self.rows]
+            if cells_of is None:
+                cells = [row.get(name) for row in rows]
+            else:
+                cells = cells_of.get(name)
+                if cells is None:  # no row has it
+                    out[name] = (np.full(n, "", dtype=object) if name in STRING_COLUMNS
+                                 else np.full(n, math.nan))  # numpy's NaN for None, alike
+                    continue
             if name in STRING_COLUMNS:
                 arr = np.empty(n, dtype=object)
                 arr[:] = [c if c.__class__ is str else _text(c) for c in cells]

@@ -1,4 +1,4 @@
-"""Run metrics as pure numpy functions of plain arrays: step response, path deviation, input
+"""Run metrics as pure functions of plain arrays: step response, path deviation, input
 peaks and saturation, obstacle clearance, solver statistics, skipped deadlines.
 
 :mod:`ardrone_nmpc.runs.summary` applies them to a run (which rows, which columns:
@@ -131,16 +131,14 @@ def step_metrics(t_s: np.ndarray, y: np.ndarray, *, y0: float, y_final: float, t
             "steady_state_error": sse, "rmse": rmse}
 
 
-def path_deviation(positions_m: np.ndarray, polyline_m: np.ndarray,
-                   chunk_elements: int = 32_768) -> tuple[float, float]:
+def path_deviation(positions_m: np.ndarray, polyline_m: np.ndarray) -> tuple[float, float]:
     """Mean and max distance (m) of positions from a polyline.
 
     Each position's distance is to the nearest point of the nearest *segment* (a point beyond a
     segment's end measures to the end point); a one-point polyline measures to that point.
-    Rows with a non-finite coordinate are ignored. Vectorised over points × segments, in chunks
-    of about ``chunk_elements`` pairs: small enough that a chunk's temporaries stay in the
-    CPU cache (~1.8× faster than chunks of 10⁶ pairs on a 60 s square) — every pair's distance
-    is computed alike in any chunk, so the result does not depend on it.
+    Rows with a non-finite coordinate are ignored. The distances are computed by a compiled
+    loop over points × segments (:mod:`ardrone_nmpc.runs.path_kernels`, the bits of the
+    numpy broadcasting it replaced); their mean is numpy's.
 
     Parameters
     ----------
@@ -163,20 +161,9 @@ def path_deviation(positions_m: np.ndarray, polyline_m: np.ndarray,
     if poly.shape[0] == 1:
         d = np.linalg.norm(p - poly[0], axis=1)
         return float(d.mean()), float(d.max())
-    a = poly[:-1]                      # (S, 3) segment starts
-    ab = poly[1:] - a                  # (S, 3) segment vectors
-    ab2 = np.einsum("ij,ij->i", ab, ab)
-    inv = np.divide(1.0, ab2, out=np.zeros_like(ab2), where=ab2 > 0.0)  # zero-length → t = 0
-    n_seg = a.shape[0]
-    step = max(1, chunk_elements // n_seg)
-    dist = np.empty(p.shape[0])
-    for i in range(0, p.shape[0], step):
-        q = p[i:i + step]
-        ap = q[:, None, :] - a[None, :, :]                      # (c, S, 3)
-        u = np.clip(np.einsum("csk,sk->cs", ap, ab) * inv, 0.0, 1.0)
-        diff = ap - u[:, :, None] * ab[None, :, :]
-        d2 = np.einsum("csk,csk->cs", diff, diff)
-        dist[i:i + step] = np.sqrt(d2.min(axis=1))
+    from ardrone_nmpc.runs.path_kernels import polyline_distances_m  # numba: when used
+
+    dist = polyline_distances_m(np.ascontiguousarray(p), np.ascontiguousarray(poly))
     return float(dist.mean()), float(dist.max())
 
 

@@ -322,13 +322,15 @@ def summarise(run: RunData) -> list[SummaryRow]:
                                 _solver_rows, _loop_rows, _link_rows) for row in section(r)]
 
 
-def write_run_summary(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None
-                      ) -> tuple[RunData, list[SummaryRow]]:
+def write_run_summary(run_dir: str | Path, *, columns: dict[str, np.ndarray] | None = None,
+                      config=None, durable: bool = True) -> tuple[RunData, list[SummaryRow]]:
     """Read the run at ``run_dir`` back, summarise it and write its ``summary.csv`` (the
-    last file of every run directory); returns the run and its rows. ``columns``: the
-    recorder's :meth:`~ardrone_nmpc.runs.rundir.RunRecorder.kept_columns`, read instead of
-    parsing ``log.csv`` again (:func:`~ardrone_nmpc.runs.rundir.read_run`)."""
-    run = read_run(run_dir, columns=columns)
+    last file of every run directory); returns the run and its rows. ``columns`` and
+    ``config``: the recorder's :meth:`~ardrone_nmpc.runs.rundir.RunRecorder.kept_columns`
+    and :attr:`~ardrone_nmpc.runs.rundir.RunRecorder.config`, taken instead of parsing
+    ``log.csv`` and ``config.yaml`` again (:func:`~ardrone_nmpc.runs.rundir.read_run`);
+    ``durable``: see :func:`~ardrone_nmpc.runs.rundir.write_summary`."""
+    run = read_run(run_dir, columns=columns, config=config)
     rows = summarise(run)
-    write_summary(run_dir, rows)
+    write_summary(run_dir, rows, durable=durable)
     return run, rows

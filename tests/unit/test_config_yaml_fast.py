@@ -98,3 +98,36 @@ def test_a_users_config_is_read_by_the_pure_loader(tmp_path, monkeypatch):
     assert load_config(path).name == "x"  # never on libyaml's scanner
     with pytest.raises(Used):
         io.load_run_config(path)  # a run's config.yaml is
+
+
+def _whole(data) -> str:
+    """The document in one emitter call (config.yaml before the section cache)."""
+    dumper = io._CDumper if io._plain_strings(data) else io._Dumper
+    return yaml.dump(data, Dumper=dumper, sort_keys=False, default_flow_style=False,
+                     allow_unicode=True, width=100)
+
+
+def test_sections_from_the_cache_make_the_whole_documents_text():
+    rng = random.Random(9)
+    io._SECTION_TEXT.clear()
+    for _ in range(3):  # the second and third rounds come from the cache
+        for path in CONFIGS:
+            sets = [f"sim.seed={rng.randint(0, 5)}", f"duration_s={rng.choice([1, 2.5, 60])}",
+                    f"controller.dtau_s={rng.choice([0.05, 0.1])}"]
+            cfg = load_config(path, sets)
+            assert dump_config(cfg) == _whole(config_to_dict(cfg))
+
+
+@pytest.mark.parametrize("a, b", [(1, 1.0), (1.0, True), (float("nan"), float("inf")),
+                                  (0.0, -0.0), ("1", 1), (None, "null"), ([1, 2], (1, 2))])
+def test_a_section_cached_for_one_value_is_not_taken_for_another_like_it(a, b):
+    io._SECTION_TEXT.clear()
+    for value in (a, b, a):
+        data = {"name": "x", "section": {"k": value, "v": [value, 2.5]}}
+        assert io._body(data) == _whole(data)
+
+
+def test_shared_objects_are_written_whole():
+    shared = [1.5, 2.5]
+    data = {"a": {"v": shared}, "b": {"w": shared}}
+    assert io._body(data) == _whole(data) and "&id" in _whole(data)

@@ -128,7 +128,8 @@ def judge_columns(cols, *, geofence_min_m, geofence_max_m, ending: str = "comple
                              reason)
 
     lo, hi = np.asarray(geofence_min_m), np.asarray(geofence_max_m)
-    aborted = next((m for m in mode if Mode.parse(m).is_abort), None)
+    aborts = {m: Mode.parse(m).is_abort for m in set(mode)}  # each distinct label once
+    aborted = next((m for m in mode if aborts[m]), None)
     if not t.size or not np.all(np.isfinite(pos)):
         return verdict("diverged", "non-finite position")
     if np.any((pos < lo) | (pos > hi)):

@@ -103,7 +103,10 @@ def case_metrics(*, run: RunData, rows: Sequence[SummaryRow]) -> dict[str, float
 
 
 def _aborted(mode: np.ndarray) -> str | None:
-    return next((m for m in mode if Mode.parse(m).is_abort), None)
+    """The first mode label that aborts the flight, if any (each distinct label parsed once:
+    a flight logs a handful of labels over ~1000 ticks)."""
+    aborts = {label: Mode.parse(label).is_abort for label in set(mode)}
+    return next((m for m in mode if aborts[m]), None)
 
 
 def classify(*, run: RunData, diverge_m: float = DIVERGE_M) -> tuple[str, str]:

@@ -180,7 +180,9 @@ def scenario_metrics(run, rows, *, ending: str = "completed") -> dict[str, float
     ref = run.config.reference
     after = (float(t[window][-1]) - ref.step_time_s
              if ref.kind == "step" and window.any() else math.nan)
-    aborted = ending != "completed" or any(Mode.parse(m).is_abort for m in cols["mode"][window])
+    # each distinct label once: a flight logs a handful of labels over ~1000 ticks
+    aborted = ending != "completed" or any(Mode.parse(m).is_abort
+                                           for m in set(cols["mode"][window]))
     safety = run.config.safety
     verdict = judge_columns(cols, geofence_min_m=safety.geofence_min_m,
                             geofence_max_m=safety.geofence_max_m, ending=ending)

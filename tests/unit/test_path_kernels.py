@@ -1,0 +1,104 @@
+"""The compiled polyline distances (runs/path_kernels.py) against the numpy broadcasting they
+replaced in ``runs.metrics.path_deviation``: bit for bit, over many random paths and the
+flown square's positions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.runs.metrics import path_deviation
+from ardrone_nmpc.runs.path_kernels import polyline_distances_m
+
+
+def _numpy_distances(p: np.ndarray, poly: np.ndarray, chunk_elements: int = 32_768
+                     ) -> np.ndarray:
+    """The numpy form path_deviation had before the kernel (commit fb5eae3), verbatim."""
+    a = poly[:-1]
+    ab = poly[1:] - a
+    ab2 = np.einsum("ij,ij->i", ab, ab)
+    inv = np.divide(1.0, ab2, out=np.zeros_like(ab2), where=ab2 > 0.0)
+    n_seg = a.shape[0]
+    step = max(1, chunk_elements // n_seg)
+    dist = np.empty(p.shape[0])
+    for i in range(0, p.shape[0], step):
+        q = p[i:i + step]
+        ap = q[:, None, :] - a[None, :, :]
+        u = np.clip(np.einsum("csk,sk->cs", ap, ab) * inv, 0.0, 1.0)
+        diff = ap - u[:, :, None] * ab[None, :, :]
+        d2 = np.einsum("csk,csk->cs", diff, diff)
+        dist[i:i + step] = np.sqrt(d2.min(axis=1))
+    return dist
+
+
+def _python_distances(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """The kernel's order written out in Python floats (the CPU-independent statement)."""
+    out = []
+    for q in p.tolist():
+        best = math.inf
+        for a, b in zip(poly[:-1].tolist(), poly[1:].tolist()):
+            ab = [b[k] - a[k] for k in range(3)]
+            ab2 = (ab[0] * ab[0] + ab[2] * ab[2]) + ab[1] * ab[1]
+            inv = 1.0 / ab2 if ab2 > 0.0 else 0.0
+            ap = [q[k] - a[k] for k in range(3)]
+            u = min(max(((ap[0] * ab[0] + ap[2] * ab[2]) + ap[1] * ab[1]) * inv, 0.0), 1.0)
+            d = [ap[k] - u * ab[k] for k in range(3)]
+            best = min(best, (d[0] * d[0] + d[2] * d[2]) + d[1] * d[1])
+        out.append(math.sqrt(best))
+    return np.array(out)
+
+
+def _einsum_sums_lane_two_first() -> bool:
+    """Whether this CPU's numpy sums a 3-term einsum as (x0 + x2) + x1 (AVX2, AVX-512)."""
+    rng = np.random.default_rng(7)
+    a, b = rng.normal(size=(4096, 3)), rng.normal(size=(4096, 3))
+    x = a * b
+    return bool(np.array_equal(np.einsum("ij,ij->i", a, b), (x[:, 0] + x[:, 2]) + x[:, 1]))
+
+
+def _random_path(rng, n_vertices: int, scale: float) -> np.ndarray:
+    poly = np.cumsum(rng.normal(size=(n_vertices, 3)) * scale, axis=0)
+    if n_vertices > 3:  # repeated vertices: zero-length segments
+        poly[n_vertices // 2] = poly[n_vertices // 2 - 1]
+    return poly
+
+
+def test_the_kernel_is_the_python_order_bit_for_bit():
+    rng = np.random.default_rng(1)
+    for trial in range(40):
+        poly = _random_path(rng, int(rng.integers(2, 30)), 10.0 ** rng.uniform(-3, 2))
+        p = rng.normal(size=(int(rng.integers(1, 40)), 3)) * 10.0 ** rng.uniform(-2, 2)
+        assert np.array_equal(polyline_distances_m(p, poly), _python_distances(p, poly)), trial
+
+
+@pytest.mark.skipif(not _einsum_sums_lane_two_first(),
+                    reason="numpy's einsum sums in another order on this CPU (no AVX2)")
+def test_the_kernel_gives_the_numpy_forms_bits():
+    rng = np.random.default_rng(2)
+    for trial in range(300):
+        poly = _random_path(rng, int(rng.integers(2, 250)), 10.0 ** rng.uniform(-3, 2))
+        p = poly[rng.integers(0, poly.shape[0], 200)] + rng.normal(size=(200, 3)) * 10.0 ** (
+            rng.uniform(-4, 1))
+        assert np.array_equal(polyline_distances_m(p, poly), _numpy_distances(p, poly)), trial
+
+
+@pytest.mark.skipif(not _einsum_sums_lane_two_first(),
+                    reason="numpy's einsum sums in another order on this CPU (no AVX2)")
+def test_path_deviation_of_a_flown_square_is_the_numpy_forms():
+    """A 60 s square, as the summary measures it: mean and max the old bits."""
+    from ardrone_nmpc.config.io import load_config
+    from ardrone_nmpc.reference.trajectories import make_trajectory
+    from ardrone_nmpc.runs.memory import MemoryRecorder
+    from ardrone_nmpc.runtime.lockstep import run_lockstep
+
+    cfg = load_config("configs/square.yaml", ["duration_s=20"])
+    rec = MemoryRecorder()
+    run_lockstep(cfg, recorder=rec)
+    cols = rec.columns()
+    xyz = np.column_stack([cols["x_true_m"], cols["y_true_m"], cols["z_true_m"]])
+    xyz = xyz[np.all(np.isfinite(xyz), axis=1)]
+    poly = make_trajectory(cfg.reference, duration_s=cfg.duration_s).polyline_m()
+    d = _numpy_distances(xyz, poly)
+    assert path_deviation(xyz, poly) == (float(d.mean()), float(d.max()))
