@@ -292,7 +292,8 @@ class Control:
         # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
-        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
+        # ``item``: a Python float (numpy's scalar costs ~3× per operation; the same double)
+        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve.item(IX_VZ)
         vz_max = self._vz_max_mps  # the drone clips beyond: no wind-up past it
         # min(max(v, −vz_max), vz_max) spelled out: Python's min and max keep their first
         # argument unless the second is strictly beyond it (a NaN stays)
