@@ -71,6 +71,9 @@ class CGMRESController(NmpcSolverBase):
                              f"got {newton_trigger_residual}")
         self.memory.zeta_per_s = zeta_per_s
         self.memory.newton_trigger_residual = newton_trigger_residual
+        # the tick's kernel and its fixed arguments bound once (SolverMemory.cgmres_step's
+        # call without its frame and three attribute reads, every tick)
+        self._step = self.memory.cgmres_call()
 
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "CGMRESController":
@@ -92,4 +95,5 @@ class CGMRESController(NmpcSolverBase):
         self.dU[:] = 0.0
 
     def _tick(self, x, ref, initialise: bool) -> int:
-        return self.memory.cgmres_step(x, ref, initialise)
+        step, mem, iprm = self._step
+        return step(mem, x, ref, iprm, initialise)

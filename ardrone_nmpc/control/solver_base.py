@@ -27,6 +27,10 @@ from ardrone_nmpc.core.types import INPUT_DIM, STATE_DIM
 _F64 = np.dtype(np.float64)
 _OK = SolverStatus.OK  # bound once: an enum member's lookup costs ~0.1 µs
 _perf_counter_ns = time.perf_counter_ns  # the tick times every solve
+# a SolveResult from its seven fields without the NamedTuple's Python ``__new__`` (a frame
+# and a default-argument fill a tick): the same tuple
+_new_tuple = tuple.__new__
+_X_SHAPE = (STATE_DIM,)
 
 
 class NmpcSolverBase:
@@ -69,6 +73,7 @@ class NmpcSolverBase:
         self._fixed_dtau_s = spec.dtau_s if spec.horizon_ramp_rate_per_s <= 0.0 else None
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
+        self._stats_values = mem.stats_values  # bound once: read every tick
 
     @property
     def dummy_weight(self) -> float:
@@ -113,7 +118,7 @@ class NmpcSolverBase:
             x = np.asarray(x, dtype=np.float64)
         if ref.__class__ is not np.ndarray or (ref.dtype is not _F64 and ref.dtype != _F64):
             ref = np.asarray(ref, dtype=np.float64)
-        if x.shape != (STATE_DIM,) or ref.shape != self._ref_shape:
+        if x.shape != _X_SHAPE or ref.shape != self._ref_shape:
             raise ValueError(f"solve: x must be (7,), ref ({self.spec.horizon_steps + 1}, 7); "
                              f"got {x.shape} and {ref.shape}")
         initialise = self._t0_s is None
@@ -126,7 +131,7 @@ class NmpcSolverBase:
         t0 = _perf_counter_ns()
         flag = self._tick(x, ref, initialise)
         elapsed_us = (_perf_counter_ns() - t0) * 1e-3
-        newton_it, gmres_it, newton_norm, norm = self.memory.stats_values()
+        newton_it, gmres_it, newton_norm, norm = self._stats_values()
         if flag == FLAG_BAD_INPUT:
             # Nothing to solve with: keep the solution, report, hand back the last input.
             return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0, elapsed_us)
@@ -137,8 +142,8 @@ class NmpcSolverBase:
         status = _OK
         if newton_norm > self.tolerance and (initialise or self._newton_every_tick):
             status = SolverStatus.MAX_ITERATIONS
-        return SolveResult(self._u.copy(), status, norm, int(gmres_it), elapsed_us,
-                           int(newton_it))
+        return _new_tuple(SolveResult, (self._u.copy(), status, norm, int(gmres_it), elapsed_us,
+                                        int(newton_it), False))
 
     def _recover(self, t_s, x, ref, status, elapsed_us) -> SolveResult:
         """Re-initialise and solve afresh from the box centre; report ``status``."""

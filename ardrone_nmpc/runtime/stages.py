@@ -48,6 +48,8 @@ _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
 _F64 = np.dtype(np.float64)
+# a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
+_new_tuple = tuple.__new__
 
 # the ``cmd_saturated`` text of the (roll, pitch, gaz, yaw) flags: one lookup, not four
 # conditionals and three concatenations
@@ -234,7 +236,8 @@ class Control:
         dtau = solver.stage_dtau_s(t_exp_s)
         # one lookup for the reference at t (logged against x(t)) and over the horizon that
         # starts when this command takes effect, t + lead
-        dtau = max(dtau, 1e-9)
+        if 1e-9 > dtau:  # max(dtau, 1e-9) without the builtin's call (a NaN stays)
+            dtau = 1e-9
         if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
             np.multiply(dtau, self._stage_index, out=self._offsets[1:])
             self._offsets_dtau = dtau
@@ -268,8 +271,8 @@ class Control:
         status = result.status
         ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
-        return Solution(states[0], x_solve, result, result.u, ok, status._value_, None,
-                        states[1:])
+        return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok, status._value_,
+                                     None, states[1:]))
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
@@ -289,7 +292,8 @@ class Control:
         # ż reference: the estimator's (predicted) ż plus this tick's z̈ (thesis end of §4.4).
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
-        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve[IX_VZ]
+        # ``item``: a Python float (numpy's scalar costs ~3× per operation; the same double)
+        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve.item(IX_VZ)
         vz_max = self._vz_max_mps  # the drone clips beyond: no wind-up past it
         # min(max(v, −vz_max), vz_max) spelled out: Python's min and max keep their first
         # argument unless the second is strictly beyond it (a NaN stays)

@@ -139,7 +139,7 @@ class Tick:
         experiment's). ``mode`` labels a nominal row ("track", "settle"); the supervisor's
         verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
         t0 = _perf_counter_ns()
-        traj = trajectory or self.trajectory
+        traj = self.trajectory if trajectory is None else trajectory
         ages_ms = feedback_ages_ms(inputs)
         if self.follow is not None:  # reference kind 'follow': the object's newest pose
             target_age_s = inputs.t_s - inputs.target_rx_t_s
@@ -170,5 +170,7 @@ class Tick:
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
-        return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action,
-                          sup.take_events() + adapted)
+        events = sup.take_events()  # a list of its own: extended, not copied
+        if adapted:
+            events += adapted
+        return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action, events)

@@ -248,3 +248,23 @@ def test_solvers_build_from_the_config():
 def test_ocp_spec_rejects_bad_values(kwargs, match):
     with pytest.raises(ValueError, match=match):
         OcpSpec(**kwargs)
+
+
+def test_cgmres_call_is_the_memory_step():
+    """``SolverMemory.cgmres_call`` (what the solver binds once) is ``cgmres_step``'s call:
+    the same tick from the same warm start gives the same bits, and a solve's SolveResult
+    (built as its tuple) has the NamedTuple's fields."""
+    solver = CGMRESController(SPEC)
+    x, ref = np.asarray(HOVER_STATE, float), _ref(SMALL_TARGET)
+    result = solver.solve(0.0, x, ref)
+    assert result._fields == ("u", "status", "residual_norm", "gmres_iterations",
+                              "solve_time_us", "newton_iterations", "reinitialised")
+    assert result.reinitialised is False and isinstance(result.status, SolverStatus)
+    mem = solver.memory
+    warm = mem.snapshot()
+    flag = mem.cgmres_step(x, ref, False)
+    U, u = mem.U.copy(), mem.u.copy()
+    mem.restore(warm)
+    kernel, memory, settings = mem.cgmres_call()
+    assert kernel(memory, x, ref, settings, False) == flag
+    assert np.array_equal(mem.U, U) and np.array_equal(mem.u, u)

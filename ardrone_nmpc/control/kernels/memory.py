@@ -144,6 +144,11 @@ class SolverMemory:
         ``cgmres_step_obstacles`` with obstacles)."""
         return self._cgmres(self._mem, x, ref, self._iprm, initialise)
 
+    def cgmres_call(self) -> tuple:
+        """``(kernel, memory, settings)``: :meth:`cgmres_step` is
+        ``kernel(memory, x, ref, settings, initialise)`` (for a caller that binds them once)."""
+        return self._cgmres, self._mem, self._iprm
+
     def newton_step(self, x: np.ndarray, ref: np.ndarray, active: np.ndarray) -> int:
         """One Newton tick with the eq. 3.25 active set ``active`` (N, 4) int8."""
         return self._newton(self._mem, x, ref, self._iprm, active)
