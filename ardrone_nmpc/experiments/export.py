@@ -38,6 +38,7 @@ from ardrone_nmpc.runs import channels as ch
 from ardrone_nmpc.runs import foxglove_channels as fox
 from ardrone_nmpc.runs.rundir import CONFIG_FILE, EVENTS_FILE, LOG_FILE, RunData, read_run
 from ardrone_nmpc.runs.table_schema import log_table
+from ardrone_nmpc.runtime.signals import polled_signals
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "default_output", "export_run", "require_format",
            "write_mcap", "write_parquet", "read_mcap", "McapContents", "run_rows"]
@@ -117,8 +118,19 @@ def write_mcap(run: RunData, out: Path) -> int:
     for topic, poses in paths.messages():   # whole paths, shown from the start
         messages.append((t0_ns, -1, topic, poses))
     messages.sort(key=lambda m: m[:2])
-    with atomic_path(out) as tmp, open(tmp, "wb") as stream:
-        return fox.write_mcap_messages(stream, ((t, topic, data) for t, _, topic, data in messages))
+    # a Ctrl-C is held while foxglove-sdk's writer runs (landing inside its call back into
+    # Python it came out as the writer's I/O error, or as a SystemError) and raised between
+    # messages — before atomic_path's end, which then keeps the earlier file
+    with atomic_path(out) as tmp, polled_signals() as check, open(tmp, "wb") as stream:
+        return fox.write_mcap_messages(stream, _checked(messages, check))
+
+
+def _checked(messages: list, check, every: int = 256):
+    """The ``(log ns, topic, payload)`` of ``messages``, ``check()`` called every ``every``."""
+    for i, (t, _, topic, data) in enumerate(messages):
+        if i % every == 0:
+            check()
+        yield t, topic, data
 
 
 @dataclass

@@ -168,19 +168,60 @@ class FoxgloveChannels:
             channel.close()
 
 
+class _WatchedStream:
+    """A binary stream that remembers the first error its ``write`` raised: foxglove-sdk's
+    writer turns an error inside its call back into Python (a Ctrl-C landing there) into an
+    I/O error of its own, raised later — the interrupt itself would be lost."""
+
+    def __init__(self, raw) -> None:
+        self.raw = raw
+        self.error: BaseException | None = None
+
+    def write(self, data) -> int:
+        try:
+            return self.raw.write(data)
+        except BaseException as err:
+            self.error = self.error or err
+            raise
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self.raw.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self.raw.tell()
+
+    def flush(self) -> None:
+        self.raw.flush()
+
+
 def write_mcap_messages(stream, messages: Iterable[tuple[int, str, Any]]) -> int:
     """Write ``(log ns, topic, payload)`` messages, in their order, as MCAP to the binary
-    ``stream`` (seekable) with foxglove-sdk's writer; return how many."""
+    ``stream`` (seekable) with foxglove-sdk's writer; return how many. An error the stream
+    raised (a Ctrl-C while writing) is raised as itself, not as the writer's I/O error."""
     fg = sdk("export --format mcap", extra="mcap")
     context = fg.Context()
-    writer = fg.open_mcap(stream, context=context)
+    watched = _WatchedStream(stream)
+    writer = fg.open_mcap(watched, context=context)
     channels = FoxgloveChannels(fg, context)
     n = 0
     try:
         for log_ns, topic, payload in messages:
             channels.log(topic, payload, log_ns)
             n += 1
-    finally:
+    except BaseException as err:
+        try:  # the writer may be failed by now: its own error must not replace this one
+            writer.close()
+            channels.close()
+        except Exception:  # noqa: S110 - abandoned: the caller removes the partial file
+            pass
+        if watched.error is not None and watched.error is not err:
+            raise watched.error from None
+        raise
+    try:
         writer.close()
         channels.close()
+    except BaseException:
+        if watched.error is not None:
+            raise watched.error from None
+        raise
     return n

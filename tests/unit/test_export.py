@@ -384,3 +384,43 @@ def test_an_older_runs_events_go_to_their_experiment_time(tmp_path):
     origin = back.row_log_times_ns[0] + round(0.13 * 1e9)
     assert back.event_log_times_ns == [origin + round(t * 1e9) for t in
                                        (-10.0, -9.0, 0.0, 0.1, 0.3)]
+
+
+class _InterruptedStream:
+    """A file whose ``write`` is interrupted by Ctrl-C after ``after`` writes (the signal lands
+    while foxglove-sdk's writer is writing)."""
+
+    def __init__(self, after: int) -> None:
+        self.after = after
+        self.position = 0
+
+    def write(self, data) -> int:
+        if self.after == 0:
+            raise KeyboardInterrupt
+        self.after -= 1
+        self.position += len(data)
+        return len(data)
+
+    def seek(self, offset, whence=0) -> int:
+        self.position = offset if whence == 0 else self.position + offset
+        return self.position
+
+    def tell(self) -> int:
+        return self.position
+
+    def flush(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("after", [0, 1, 3])
+def test_a_ctrl_c_inside_the_writers_write_is_reported_as_the_interrupt(after):
+    """The writer left failed by the interrupt raises an I/O error of its own when closed; that
+    error once replaced the Ctrl-C (export exited 1 with a traceback instead of 130)."""
+    from ardrone_nmpc.runs.foxglove_channels import write_mcap_messages
+
+    pytest.importorskip("foxglove")
+    row = {"t_s": 0.0, "x_m": 1.0, "y_m": 0.0, "z_m": 1.0, "psi_rad": 0.0}
+    messages = [(k * 65_000_000, topic, data) for k in range(2000)
+                for topic, data in ch.row_messages(dict(row, t_s=0.065 * k), ch.PathBuilder())]
+    with pytest.raises(KeyboardInterrupt):
+        write_mcap_messages(_InterruptedStream(after), iter(messages))
