@@ -22,11 +22,11 @@ from numba import njit
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
-from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
-__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
-           "warm_up_kernels"]
+__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
+           "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views", "warm_up_kernels"]
 
 
 #: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
@@ -34,29 +34,77 @@ __all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
 _SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
 
 
+# :func:`nmpc_inputs`' fixed buffers and parameters, one float64 vector built once per flight
+# (:func:`nmpc_work`; numba's dispatch costs ~50–100 ns an argument, issue 26): these slots,
+# then the horizon's offsets, times and their clamp at 0 (N each), the shifted horizon
+# (N − 1, 7), and the waypoint trajectory's arrays (``HoldStartThen.waypoint_args``): the knots
+# (K), positions (K, 3), ψ (K), Δt (K − 1), velocities (K − 1, 3) and the start (7).
+W_PERIOD = 0    # the control period (s): the delay prediction's RK4 step
+W_TIMES = 1     # N, the horizon's times (its stages + 1, and the reference now)
+W_KNOTS = 2     # K, the waypoints
+W_HEAD = 3
+
+
+def nmpc_work(period_s: float, n_times: int, waypoint_args: tuple) -> np.ndarray:
+    """:func:`nmpc_inputs`' work vector (the ``W_*`` slots) for ``n_times`` horizon times and a
+    waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
+    t_knots, positions_m, psi_rad, dt_s, vel_mps, start = waypoint_args
+    k = t_knots.size
+    head = np.array([period_s, n_times, k], dtype=np.float64)
+    buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM)
+    return np.concatenate((head, buffers, t_knots, positions_m.ravel(), psi_rad, dt_s,
+                           vel_mps.ravel(), start)).astype(np.float64, copy=False)
+
+
+def nmpc_work_views(work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The offsets, times, clamp (N each) and the shifted horizon (N − 1, 7) in ``work``
+    (views: the caller writes the offsets, the solver reads the horizon)."""
+    n = int(work[W_TIMES])
+    o = W_HEAD
+    return (work[o:o + n], work[o + n:o + 2 * n], work[o + 2 * n:o + 3 * n],
+            work[o + 3 * n:o + 3 * n + (n - 1) * STATE_DIM].reshape((n - 1, STATE_DIM)))
+
+
 @njit(cache=True, **OUTER_KERNEL)
-def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, period_s: float,
-                x_solve: np.ndarray, t_knots: np.ndarray, positions_m: np.ndarray,
-                psi_rad: np.ndarray, dt_s: np.ndarray, vel_mps: np.ndarray, start: np.ndarray,
-                t_s: float, lead_s: float, offsets: np.ndarray, shift: np.ndarray,
-                times: np.ndarray, clamped: np.ndarray, states: np.ndarray,
-                horizon: np.ndarray) -> None:
-    """``Control.solve``'s inputs of the NMPC, the same bits as its general path:
+def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_solve: np.ndarray,
+                t_s: float, lead_s: float, shift: np.ndarray, states: np.ndarray,
+                work: np.ndarray) -> None:
+    """``Control.solve``'s inputs of the NMPC, the same bits as its general path (the offsets,
+    times, clamp, horizon, trajectory and period in ``work``, :func:`nmpc_work`):
 
     * ``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
       pending]`` (``DelayPrediction.predict``; nothing written when none is pending);
-    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (len, 7) the
+    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (N, 7) the
       :class:`~ardrone_nmpc.reference.experiment.HoldStartThen` of a waypoint trajectory
       (``reference/kernels.waypoint_states``'s arrays) at them, ``start`` before t = 0;
     * when ``shift`` (4) is not empty, ``horizon`` = ``states[1:]`` with the offset-free shift
       added to x, y, z, ψ (``ReferenceIntegrator.shifted``).
 
-    ``clamped`` is scratch of ``times``' length. One kernel, its lookup written here rather
+    The clamp is scratch of the times' length. One kernel, its lookup written here rather
     than in a kernel of its own: every compiled level costs a cold start a compile."""
+    n = int(work[W_TIMES])
+    nk = int(work[W_KNOTS])
+    o = W_HEAD
+    offsets = work[o:o + n]
+    times = work[o + n:o + 2 * n]
+    clamped = work[o + 2 * n:o + 3 * n]
+    o += 3 * n
+    horizon = work[o:o + (n - 1) * STATE_DIM].reshape((n - 1, STATE_DIM))
+    o += (n - 1) * STATE_DIM
+    t_knots = work[o:o + nk]
+    o += nk
+    positions_m = work[o:o + 3 * nk].reshape((nk, 3))
+    o += 3 * nk
+    psi_rad = work[o:o + nk]
+    o += nk
+    dt_s = work[o:o + nk - 1]
+    o += nk - 1
+    vel_mps = work[o:o + 3 * (nk - 1)].reshape((nk - 1, 3))
+    o += 3 * (nk - 1)
+    start = work[o:o + STATE_DIM]
     if pending:
-        rollout_rk4(x, sent[first:first + pending], period_s, x_solve)
+        rollout_rk4(x, sent[first:first + pending], work[W_PERIOD], x_solve)
     base = t_s + lead_s
-    n = offsets.size
     for i in range(n):
         times[i] = base + offsets[i]
     times[0] = t_s
@@ -172,11 +220,11 @@ def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
         _warm.add("estimate")
     if nmpc and "nmpc" not in _warm:
         load_cached_callees(nmpc_inputs)
-        knots, n = np.array([0.0, 1.0]), 3  # a two-waypoint trajectory, one stage
-        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
-                    np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
-                    np.zeros(4), np.zeros(n), np.zeros(n), np.zeros((n, 7)),
-                    np.zeros((n - 1, 7)))
+        n = 3  # a two-waypoint trajectory, one stage
+        work = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)), np.zeros(2),
+                                    np.ones(1), np.zeros((1, 3)), x))
+        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, np.zeros(7), 0.0, 0.0, np.zeros(4),
+                    np.zeros((n, 7)), work)
         _warm.add("nmpc")
 
 
