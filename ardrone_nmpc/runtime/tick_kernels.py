@@ -25,7 +25,7 @@ from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
-__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
+__all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
            "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views", "warm_up_kernels"]
 
 
@@ -141,18 +141,19 @@ E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor, ż, P, K, initiali
 E_HAS_PREV = 11     # the difference's previous position is held
 E_PREV_X, E_PREV_Y = 12, 13
 E_VEL_X, E_VEL_Y = 14, 15         # its velocity
-E_SIZE = 16
+E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's view: one argument less)
+E_SIZE = 23
 #: What :func:`kalman_estimate` returns.
 ESTIMATED, REFUSED = 0, 1
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: float,
-                    psi_rad: float, t_s: float, zacc_mps2: float, navdata: bool,
-                    nav_vx_mps: float, nav_vy_mps: float) -> int:
+def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
+                    zacc_mps2: float, navdata: bool, nav_vx_mps: float,
+                    nav_vy_mps: float) -> int:
     """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
-    (their ``reset``/``update``, the same expressions in the same order) into ``x`` over the
-    state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
+    (their ``reset``/``update``, the same expressions in the same order) into the estimate
+    ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
     the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
     an input the Python estimators refuse (non-finite, a time not after the last): the caller
     raises their error."""
@@ -194,13 +195,13 @@ def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: floa
         s[E_PREV_Y] = py
         s[E_HAS_POSE] = 1.0
         s[E_LAST_T] = t_s
-    x[0] = px
-    x[1] = nav_vx_mps if navdata else s[E_VEL_X]
-    x[2] = py
-    x[3] = nav_vy_mps if navdata else s[E_VEL_Y]
-    x[4] = pz
-    x[5] = s[E_VZ]
-    x[6] = psi_rad
+    s[E_X] = px
+    s[E_X + 1] = nav_vx_mps if navdata else s[E_VEL_X]
+    s[E_X + 2] = py
+    s[E_X + 3] = nav_vy_mps if navdata else s[E_VEL_Y]
+    s[E_X + 4] = pz
+    s[E_X + 5] = s[E_VZ]
+    s[E_X + 6] = psi_rad
     return ESTIMATED
 
 
@@ -216,7 +217,7 @@ def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
     or compiled alike)."""
     x = np.zeros(7)
     if estimate and "estimate" not in _warm:
-        kalman_estimate(np.zeros(E_SIZE), x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+        kalman_estimate(np.zeros(E_SIZE), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
         _warm.add("estimate")
     if nmpc and "nmpc" not in _warm:
         load_cached_callees(nmpc_inputs)
