@@ -241,7 +241,7 @@ class AttitudeResponseEstimator:
         n = self._n
         if n < 20:
             return NO_ESTIMATE
-        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        n_l = len(self.lags_s)
         best = rk.fit_grid(self._state, self._fit_out)  # every grid point's fit
         if best < 0:
             return NO_ESTIMATE
