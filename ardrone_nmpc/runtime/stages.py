@@ -211,9 +211,10 @@ class Control:
             self._states_shape = (self._offsets.size, STATE_DIM)
             # the one-call lookup's buffers and parameters (the offsets, its times and their
             # clamp at 0, the shifted horizon — read by the solver within the tick only —, the
-            # period, the trajectory's arrays): one vector, made at the first solve against
+            # period, the trajectory's arrays): two arrays, made at the first solve against
             # a waypoint trajectory (_pack)
             self._work: np.ndarray | None = None
+            self._rows: np.ndarray | None = None
             self._work_args: tuple | None = None  # the waypoint_args it holds
             self._horizon: np.ndarray | None = None
 
@@ -257,7 +258,7 @@ class Control:
             else:
                 shift, horizon = offset.integrator.shift, self._horizon
             nmpc_inputs(x, sent, first, pending, x_solve, t_exp_s, delay.lead_s, shift, states,
-                        self._work)
+                        self._work, self._rows)
             return self._solved(t_exp_s, x_solve, states, horizon)
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
@@ -269,7 +270,7 @@ class Control:
     def _pack(self, args: tuple) -> None:
         """:func:`~ardrone_nmpc.runtime.tick_kernels.nmpc_work` of the waypoint trajectory's
         ``args``; the offsets as they are, from now on a view of it (the general path too)."""
-        work = nmpc_work(self.delay.period_s, self._offsets.size, args)
+        work, self._rows = nmpc_work(self.delay.period_s, self._offsets.size, args)
         offsets, _, _, self._horizon = nmpc_work_views(work)
         offsets[:] = self._offsets
         self._offsets = offsets

@@ -34,26 +34,29 @@ __all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERI
 _SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
 
 
-# :func:`nmpc_inputs`' fixed buffers and parameters, one float64 vector built once per flight
-# (:func:`nmpc_work`; numba's dispatch costs ~50–100 ns an argument, issue 26): these slots,
-# then the horizon's offsets, times and their clamp at 0 (N each), the shifted horizon
-# (N − 1, 7), and the waypoint trajectory's arrays (``HoldStartThen.waypoint_args``): the knots
-# (K), positions (K, 3), ψ (K), Δt (K − 1), velocities (K − 1, 3) and the start (7).
+# :func:`nmpc_inputs`' fixed buffers and parameters, built once per flight (:func:`nmpc_work`;
+# numba's dispatch costs ~50–100 ns an argument, issue 26) in two arrays. ``work``, float64:
+# these slots, then the horizon's offsets, times and their clamp at 0 (N each), the shifted
+# horizon (N − 1, 7, row-major), and the waypoint trajectory's (``HoldStartThen.waypoint_args``)
+# knots (K), ψ (K), Δt (K − 1) and start (7). ``rows`` (2K − 1, 3): its positions (K) then its
+# segment velocities (K − 1) — 2-D slices of it, not reshapes of ``work``: a reshape costs the
+# cold start ~0.1 s of compile each.
 W_PERIOD = 0    # the control period (s): the delay prediction's RK4 step
 W_TIMES = 1     # N, the horizon's times (its stages + 1, and the reference now)
 W_KNOTS = 2     # K, the waypoints
 W_HEAD = 3
 
 
-def nmpc_work(period_s: float, n_times: int, waypoint_args: tuple) -> np.ndarray:
-    """:func:`nmpc_inputs`' work vector (the ``W_*`` slots) for ``n_times`` horizon times and a
-    waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
+def nmpc_work(period_s: float, n_times: int,
+              waypoint_args: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nmpc_inputs`' ``work`` (the ``W_*`` slots) and ``rows`` for ``n_times`` horizon
+    times and a waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
     t_knots, positions_m, psi_rad, dt_s, vel_mps, start = waypoint_args
-    k = t_knots.size
-    head = np.array([period_s, n_times, k], dtype=np.float64)
+    head = np.array([period_s, n_times, t_knots.size], dtype=np.float64)
     buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM)
-    return np.concatenate((head, buffers, t_knots, positions_m.ravel(), psi_rad, dt_s,
-                           vel_mps.ravel(), start)).astype(np.float64, copy=False)
+    work = np.concatenate((head, buffers, t_knots, psi_rad, dt_s, start)).astype(np.float64)
+    rows = np.ascontiguousarray(np.concatenate((positions_m, vel_mps)), dtype=np.float64)
+    return work, rows
 
 
 def nmpc_work_views(work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -68,9 +71,9 @@ def nmpc_work_views(work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
 @njit(cache=True, **OUTER_KERNEL)
 def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_solve: np.ndarray,
                 t_s: float, lead_s: float, shift: np.ndarray, states: np.ndarray,
-                work: np.ndarray) -> None:
+                work: np.ndarray, rows: np.ndarray) -> None:
     """``Control.solve``'s inputs of the NMPC, the same bits as its general path (the offsets,
-    times, clamp, horizon, trajectory and period in ``work``, :func:`nmpc_work`):
+    times, clamp, horizon, trajectory and period in ``work`` and ``rows``, :func:`nmpc_work`):
 
     * ``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
       pending]`` (``DelayPrediction.predict``; nothing written when none is pending);
@@ -84,29 +87,23 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
     than in a kernel of its own: every compiled level costs a cold start a compile."""
     n = int(work[W_TIMES])
     nk = int(work[W_KNOTS])
-    o = W_HEAD
-    offsets = work[o:o + n]
+    o = W_HEAD  # the offsets from here (read by index: a slice is compiled code too)
     times = work[o + n:o + 2 * n]
     clamped = work[o + 2 * n:o + 3 * n]
     o += 3 * n
-    horizon = work[o:o + (n - 1) * STATE_DIM].reshape((n - 1, STATE_DIM))
+    h0 = o  # the shifted horizon, row-major (no reshape: a smaller compile)
     o += (n - 1) * STATE_DIM
     t_knots = work[o:o + nk]
-    o += nk
-    positions_m = work[o:o + 3 * nk].reshape((nk, 3))
-    o += 3 * nk
-    psi_rad = work[o:o + nk]
-    o += nk
-    dt_s = work[o:o + nk - 1]
-    o += nk - 1
-    vel_mps = work[o:o + 3 * (nk - 1)].reshape((nk - 1, 3))
-    o += 3 * (nk - 1)
-    start = work[o:o + STATE_DIM]
+    psi_rad = work[o + nk:o + 2 * nk]
+    dt_s = work[o + 2 * nk:o + 3 * nk - 1]
+    s0 = o + 3 * nk - 1  # the start
+    positions_m = rows[:nk]
+    vel_mps = rows[nk:]
     if pending:
         rollout_rk4(x, sent[first:first + pending], work[W_PERIOD], x_solve)
     base = t_s + lead_s
     for i in range(n):
-        times[i] = base + offsets[i]
+        times[i] = base + work[W_HEAD + i]
     times[0] = t_s
     inside = True  # min(times) > 0 (NaN is not): nothing held
     for i in range(n):
@@ -121,14 +118,15 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
         waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
         for i in range(n):
             if times[i] < 0.0:
-                for c in range(states.shape[1]):
-                    states[i, c] = start[c]
+                for c in range(STATE_DIM):
+                    states[i, c] = work[s0 + c]
     if shift.size:
-        for j in range(horizon.shape[0]):
-            for c in range(states.shape[1]):
-                horizon[j, c] = states[j + 1, c]
+        for j in range(n - 1):
+            row = h0 + j * STATE_DIM
+            for c in range(STATE_DIM):
+                work[row + c] = states[j + 1, c]
             for k in range(4):
-                horizon[j, _SHIFTED[k]] += shift[k]
+                work[row + _SHIFTED[k]] += shift[k]
 
 
 # The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
@@ -222,10 +220,10 @@ def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
     if nmpc and "nmpc" not in _warm:
         load_cached_callees(nmpc_inputs)
         n = 3  # a two-waypoint trajectory, one stage
-        work = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)), np.zeros(2),
-                                    np.ones(1), np.zeros((1, 3)), x))
+        work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)),
+                                          np.zeros(2), np.ones(1), np.zeros((1, 3)), x))
         nmpc_inputs(x, np.zeros((2, 4)), 0, 1, np.zeros(7), 0.0, 0.0, np.zeros(4),
-                    np.zeros((n, 7)), work)
+                    np.zeros((n, 7)), work, rows)
         _warm.add("nmpc")
 
 

@@ -65,12 +65,12 @@ def test_nmpc_inputs_is_the_python_it_replaces_bit_for_bit(pending, shift):
                 sent, first, count = delay.pending()
                 x_k = np.full(STATE_DIM, np.nan) if count else x
                 states = np.full((n + 2, STATE_DIM), np.nan)
-                work = nmpc_work(delay.period_s, n + 2, traj.waypoint_args)
+                work, rows = nmpc_work(delay.period_s, n + 2, traj.waypoint_args)
                 work_offsets, _, _, horizon = nmpc_work_views(work)
                 work_offsets[:] = offsets
                 horizon[:] = np.nan
                 nmpc_inputs(x, sent, first, count, x_k, t_s, delay.lead_s,
-                            np.zeros(0) if shift is None else shift, states, work)
+                            np.zeros(0) if shift is None else shift, states, work, rows)
                 assert (count > 0) == (x_py is not x)
                 assert x_k.tobytes() == x_py.tobytes()
                 assert states.tobytes() == states_py.tobytes(), (t_s, dtau)
@@ -220,7 +220,7 @@ def test_nmpc_inputs_clamps_a_negative_zero_time_as_numpy_does(coordinate):
     want = traj.state_at(times)  # the Python path: HoldStartThen.state_at
     x = np.zeros(STATE_DIM)
     states = np.full((n + 2, STATE_DIM), np.nan)
-    work = nmpc_work(PERIOD_S, n + 2, traj.waypoint_args)
+    work, rows = nmpc_work(PERIOD_S, n + 2, traj.waypoint_args)
     nmpc_work_views(work)[0][:] = offsets
-    nmpc_inputs(x, np.zeros((2, 4)), 0, 0, x, t_s, 0.0, np.zeros(0), states, work)
+    nmpc_inputs(x, np.zeros((2, 4)), 0, 0, x, t_s, 0.0, np.zeros(0), states, work, rows)
     assert states.tobytes() == want.tobytes()
