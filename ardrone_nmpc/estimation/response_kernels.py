@@ -24,8 +24,8 @@ from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_CAPACITY", "S_COUNT",
            "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS",
-           "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY", "S_WINDOW",
-           "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "grid_views", "lag_decays",
+           "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY",
+           "S_WINDOW", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
            "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
@@ -80,12 +80,6 @@ def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max
     state[state.size - K - L:state.size - L] = delays_s
     state[state.size - L:] = lags_s
     return state
-
-
-def grid_views(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The delays (K) and the lags (L) the state holds (views)."""
-    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
-    return state[state.size - K - L:state.size - L], state[state.size - L:]
 
 
 def fit_size(delays: int, lags: int) -> int:

@@ -151,8 +151,8 @@ def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: flo
                     nav_vy_mps: float) -> int:
     """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
     (their ``reset``/``update``, the same expressions in the same order) into the estimate
-    ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
-    the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
+    ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are
+    ``nav_v*_mps`` (navdata, rotated by the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
     an input the Python estimators refuse (non-finite, a time not after the last): the caller
     raises their error."""
     if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
