@@ -167,15 +167,16 @@ class AttitudeResponseEstimator:
         self._capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
         # the whole state in one buffer the compiled step works on (response_kernels);
         # the names below are views of it
-        st = self._state = np.zeros(rk.state_size(n_k, n_l, self._capacity))
-        st[rk.S_LAST_T] = math.nan
+        # with the fit's parameters and grid (what each call would otherwise pass)
+        st = self._state = rk.new_state(self.delays_s, self.lags_s, self._capacity,
+                                        self.euler_angle_max_rad, self.window_s,
+                                        REFRESH_SAMPLES)
         shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
         o = rk.HEAD
         self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
                                           for i in range(3))
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
-        self._j = np.zeros(n_k, dtype=np.int64)
         # the grids as floats, and per delay the delays a rival must be at (``_contrast``)
         self._delays, self._lags = self.delays_s.tolist(), self.lags_s.tolist()
         self._away = [np.abs(self.delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
@@ -189,9 +190,6 @@ class AttitudeResponseEstimator:
                            out[4 * kl:6 * kl].reshape(shape),
                            out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
-        # what every call of the compiled step passes first (the state and the grid)
-        self._feed_args = (st, self._j, self.delays_s, self.lags_s, self._capacity,
-                           self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES)
 
     @property
     def _n(self) -> float:
@@ -210,7 +208,7 @@ class AttitudeResponseEstimator:
             has, sample_us = False, 0.0
         else:
             has, sample_us = True, _microseconds(sample_t_s)
-        code = _feed(*self._feed_args, has, sample_us, float(roll_deg), float(pitch_deg),
+        code = _feed(self._state, has, sample_us, float(roll_deg), float(pitch_deg),
                      cmd_kind, _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0,
                      float(roll_frac), float(pitch_frac))
         if code:  # a new sample: the estimate is fitted when it is read
@@ -243,8 +241,8 @@ class AttitudeResponseEstimator:
         n = self._n
         if n < 20:
             return NO_ESTIMATE
-        n_k, n_l = len(self.delays_s), len(self.lags_s)
-        best = rk.fit_grid(self._state, n_k, n_l, self._fit_out)  # every grid point's fit
+        n_l = len(self.lags_s)
+        best = rk.fit_grid(self._state, self._fit_out)  # every grid point's fit
         if best < 0:
             return NO_ESTIMATE
         sxx, gain, rss_axis, rss, syy = self._fit_views
@@ -320,7 +318,7 @@ def warm_up_kernels() -> None:
         est = AttitudeResponseEstimator(1.0)
         est.feed(None, 0.0, 0.0, rk.CMD_RESTART)
         est._state[rk.S_N] = 1.0  # numba raises on a division by zero, as Python does
-        rk.fit_grid(est._state, len(est.delays_s), len(est.lags_s), est._fit_out)
+        rk.fit_grid(est._state, est._fit_out)
         _kernels_warm = True
 
 

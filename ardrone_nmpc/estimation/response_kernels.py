@@ -22,14 +22,17 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_COUNT", "S_G", "S_HAS_BEST",
-           "S_HAS_R", "S_K", "S_L", "S_LAST_T", "S_N", "S_R", "S_RES", "S_SINCE_BEST", "S_SY",
-           "S_SYY", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
-           "state_size"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_CAPACITY", "S_COUNT",
+           "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS",
+           "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY",
+           "S_WINDOW", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
+           "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
-# dozen): a head of scalars (these slots), then Σx, Σx², Σx·y, the model values x (each K×L×2),
-# the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2).
+# dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
+# slots, the fit's fixed parameters among them), then Σx, Σx², Σx·y, the model values x (each
+# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), and
+# last the grid: the delays (K) and the lags (L). Built once by :func:`new_state`.
 S_N = 0              # the samples' effective number
 S_LAST_T = 1         # the last sample's time (NaN before the first)
 S_COUNT = 2          # commands held
@@ -45,7 +48,13 @@ S_RES = 14           # (3) Σr², Σr·r_prev, r_prev's weight
 S_SY = 17            # (2) Σy
 S_SYY = 19           # (2) Σy²
 S_Y = 21             # (2) the last sample (rad)
-HEAD = 23
+S_CAPACITY = 23      # the parameters, fixed: commands held at most (C)
+S_EULER_MAX = 24     # the drone's tilt at a command of 1 (rad)
+S_WINDOW = 25        # the forgetting's time constant (s; inf: none)
+S_REFRESH = 26       # samples between refreshes of the best grid point
+S_DELAYS = 27        # the delays' number (K)
+S_LAGS = 28          # the lags' number (L)
+HEAD = 29
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
@@ -55,7 +64,22 @@ _DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 
 def state_size(delays: int, lags: int, capacity: int) -> int:
     """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
-    return HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
+    return (HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
+            + delays + lags)
+
+
+def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max_rad: float,
+              window_s: float, refresh_samples: int) -> np.ndarray:
+    """The state buffer of a new fit (no sample, no command) with its parameters and grid."""
+    K, L = delays_s.size, lags_s.size
+    state = np.zeros(state_size(K, L, capacity))
+    state[S_LAST_T] = math.nan
+    state[S_CAPACITY], state[S_EULER_MAX] = capacity, euler_max_rad
+    state[S_WINDOW], state[S_REFRESH] = window_s, refresh_samples
+    state[S_DELAYS], state[S_LAGS] = K, L
+    state[state.size - K - L:state.size - L] = delays_s
+    state[state.size - L:] = lags_s
+    return state
 
 
 def fit_size(delays: int, lags: int) -> int:
@@ -104,19 +128,26 @@ def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarra
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndarray,
-         capacity: int, euler_max_rad: float, window_s: float, refresh_samples: int,
-         has_sample: bool, sample_t_s: float, roll_deg: float, pitch_deg: float,
-         cmd_kind: int, cmd_t_s: float, roll_frac: float, pitch_frac: float) -> int:
-    """One tick of the streaming fit: ``AttitudeResponseEstimator``'s ``navdata``, then its
-    ``command`` or ``restart`` — the same expressions in the same order. Times are already
-    rounded to the microsecond. Returns 0 if there was no sample or it could not be used, 1 if
-    it was folded in, 2 if, moreover, the best grid point was refreshed (every
-    ``refresh_samples``: the fit of the grid, as ``_fit`` makes it).
+def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float,
+         pitch_deg: float, cmd_kind: int, cmd_t_s: float, roll_frac: float,
+         pitch_frac: float) -> int:
+    """One tick of the streaming fit (its state and parameters ``state``, :func:`new_state`):
+    ``AttitudeResponseEstimator``'s ``navdata``, then its ``command`` or ``restart`` — the same
+    expressions in the same order. Times are already rounded to the microsecond. Returns 0 if
+    there was no sample or it could not be used, 1 if it was folded in, 2 if, moreover, the
+    best grid point was refreshed (every ``S_REFRESH`` samples: the fit of the grid, as
+    ``_fit`` makes it).
 
     One function, not one per step: every compiled level below an entry point costs its
     cold start a copy of the levels beneath (docs/solver-notes.md §5)."""
-    K, L = delays_s.size, lags_s.size
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
+    capacity = int(state[S_CAPACITY])
+    euler_max_rad = state[S_EULER_MAX]
+    window_s = state[S_WINDOW]
+    refresh_samples = state[S_REFRESH]
+    end = state.size
+    delays_s = state[end - K - L:end - L]
+    lags_s = state[end - L:end]
     kl2 = K * L * 2
     o = HEAD
     sx = state[o:o + kl2].reshape((K, L, 2))
@@ -140,6 +171,7 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
     if has_sample and not (n < 2 or not (math.isfinite(y0) and math.isfinite(y1))
                            or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
         t_s = sample_t_s
+        j = np.empty(K, dtype=np.int64)  # each delay's command
         lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
         forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
         state[S_LAST_T] = t_s
@@ -174,7 +206,7 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
             ns = state[S_N]
             if not ns < 20:  # the best grid point and its model, as ``_fit`` sets them
                 out = np.empty(3 * kl2 + K * L + 2)  # fit_size
-                best = fit_grid(state, K, L, out)
+                best = fit_grid(state, out)
                 if best >= 0:
                     k, m = best // L, best % L
                     for a in range(2):
@@ -224,13 +256,13 @@ def feed(state: np.ndarray, j: np.ndarray, delays_s: np.ndarray, lags_s: np.ndar
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def fit_grid(state: np.ndarray, delays: int, lags: int, out: np.ndarray) -> int:
+def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     """Every grid point's least-squares fit from the sums (``AttitudeResponseEstimator._fit``'s
     numpy, the same expressions in the same order): into ``out`` (:func:`fit_size`) the
     centred Σx², the gains, the residual per axis and summed over the axes, the centred Σy².
     Returns the flat index of the least residual (``argmin``: the first, or the first NaN),
     or −1 when no grid point's commands moved or the attitude did not vary."""
-    K, L = delays, lags
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
     kl2 = K * L * 2
     n = state[S_N]
     o = HEAD

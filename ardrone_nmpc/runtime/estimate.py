@@ -18,7 +18,7 @@ from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
 from ardrone_nmpc.runtime.tick_kernels import (
     E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
-    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_Z, ESTIMATED, kalman_estimate,
+    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_X, E_Z, ESTIMATED, kalman_estimate,
 )
 
 __all__ = ["Estimation", "navdata_velocity_world"]
@@ -62,6 +62,7 @@ class Estimation:
         self._compiled = type(self._vz_estimator) is ScalarKalmanVz
         if self._compiled:
             self._state = np.zeros(E_SIZE)
+            self._x = self._state[E_X:E_X + STATE_DIM]  # the compiled step writes it there
             self._to_compiled()
 
     # the estimators as objects: their state, handed back from the compiled step
@@ -104,7 +105,7 @@ class Estimation:
             return
         self._compiled = False
         (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
-         vel_x, vel_y) = self._state.tolist()
+         vel_x, vel_y) = self._state[:E_X].tolist()
         self._last_pose_t_s = last_t if has_pose else None
         self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
         self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
@@ -120,11 +121,11 @@ class Estimation:
         if self._compiled:
             if self.velocity_from_navdata and navdata is not None:
                 vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-                if kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
-                                   zacc_mps2, True, vx, vy) == ESTIMATED:
+                if kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+                                   True, vx, vy) == ESTIMATED:
                     return self._x
-            elif kalman_estimate(self._state, self._x, px, py, pz, pose.psi_rad, pose.t_s,
-                                 zacc_mps2, False, 0.0, 0.0) == ESTIMATED:
+            elif kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+                                 False, 0.0, 0.0) == ESTIMATED:
                 return self._x
             self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:

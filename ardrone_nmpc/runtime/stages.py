@@ -32,7 +32,7 @@ from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
-from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
+from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work, nmpc_work_views
 from ardrone_nmpc.safety import Action, Decision, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -208,12 +208,15 @@ class Control:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
             self._offsets_dtau = math.nan  # the Δτ _offsets were made with
-            # the one-call lookup's buffers: its times (and their clamp at 0), the shifted
-            # horizon (read by the solver within the tick only)
-            self._times = np.zeros(self._offsets.size)
-            self._clamped = np.zeros(self._offsets.size)
             self._states_shape = (self._offsets.size, STATE_DIM)
-            self._horizon = np.zeros((nmpc.spec.horizon_steps + 1, STATE_DIM))
+            # the one-call lookup's buffers and parameters (the offsets, its times and their
+            # clamp at 0, the shifted horizon — read by the solver within the tick only —, the
+            # period, the trajectory's arrays): two arrays, made at the first solve against
+            # a waypoint trajectory (_pack)
+            self._work: np.ndarray | None = None
+            self._rows: np.ndarray | None = None
+            self._work_args: tuple | None = None  # the waypoint_args it holds
+            self._horizon: np.ndarray | None = None
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -245,6 +248,8 @@ class Control:
         if args is not None and x.__class__ is np.ndarray and x.dtype is _F64:
             # a waypoint reference (the square): the delay prediction, the horizon's times,
             # the lookup and the offset-free shift in one call (runtime/tick_kernels.py)
+            if args is not self._work_args:  # once a flight: its arrays into the work vector
+                self._pack(args)
             sent, first, pending = delay.pending()
             x_solve = np.empty(STATE_DIM) if pending else x
             states = np.empty(self._states_shape)
@@ -252,9 +257,8 @@ class Control:
                 shift, horizon = _NO_SHIFT, states[1:]
             else:
                 shift, horizon = offset.integrator.shift, self._horizon
-            nmpc_inputs(x, sent, first, pending, delay.period_s, x_solve, *args, t_exp_s,
-                        delay.lead_s, self._offsets, shift, self._times, self._clamped, states,
-                        horizon)
+            nmpc_inputs(x, sent, first, pending, x_solve, t_exp_s, delay.lead_s, shift, states,
+                        self._work, self._rows)
             return self._solved(t_exp_s, x_solve, states, horizon)
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
@@ -262,6 +266,15 @@ class Control:
         states = traj.state_at(times)
         horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
         return self._solved(t_exp_s, x_solve, states, horizon)
+
+    def _pack(self, args: tuple) -> None:
+        """:func:`~ardrone_nmpc.runtime.tick_kernels.nmpc_work` of the waypoint trajectory's
+        ``args``; the offsets as they are, from now on a view of it (the general path too)."""
+        work, self._rows = nmpc_work(self.delay.period_s, self._offsets.size, args)
+        offsets, _, _, self._horizon = nmpc_work_views(work)
+        offsets[:] = self._offsets
+        self._offsets = offsets
+        self._work, self._work_args = work, args
 
     def _solved(self, t_exp_s: float, x_solve: np.ndarray, states: np.ndarray,
                 horizon: np.ndarray) -> Solution:

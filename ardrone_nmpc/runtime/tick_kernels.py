@@ -22,11 +22,11 @@ from numba import njit
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
-from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z
+from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
-__all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
-           "warm_up_kernels"]
+__all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
+           "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views", "warm_up_kernels"]
 
 
 #: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
@@ -34,31 +34,76 @@ __all__ = ["E_SIZE", "ESTIMATED", "REFUSED", "kalman_estimate", "nmpc_inputs",
 _SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
 
 
+# :func:`nmpc_inputs`' fixed buffers and parameters, built once per flight (:func:`nmpc_work`;
+# numba's dispatch costs ~50–100 ns an argument, issue 26) in two arrays. ``work``, float64:
+# these slots, then the horizon's offsets, times and their clamp at 0 (N each), the shifted
+# horizon (N − 1, 7, row-major), and the waypoint trajectory's (``HoldStartThen.waypoint_args``)
+# knots (K), ψ (K), Δt (K − 1) and start (7). ``rows`` (2K − 1, 3): its positions (K) then its
+# segment velocities (K − 1) — 2-D slices of it, not reshapes of ``work``: a reshape costs the
+# cold start ~0.1 s of compile each.
+W_PERIOD = 0    # the control period (s): the delay prediction's RK4 step
+W_TIMES = 1     # N, the horizon's times (its stages + 1, and the reference now)
+W_KNOTS = 2     # K, the waypoints
+W_HEAD = 3
+
+
+def nmpc_work(period_s: float, n_times: int,
+              waypoint_args: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nmpc_inputs`' ``work`` (the ``W_*`` slots) and ``rows`` for ``n_times`` horizon
+    times and a waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
+    t_knots, positions_m, psi_rad, dt_s, vel_mps, start = waypoint_args
+    head = np.array([period_s, n_times, t_knots.size], dtype=np.float64)
+    buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM)
+    work = np.concatenate((head, buffers, t_knots, psi_rad, dt_s, start)).astype(np.float64)
+    rows = np.ascontiguousarray(np.concatenate((positions_m, vel_mps)), dtype=np.float64)
+    return work, rows
+
+
+def nmpc_work_views(work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The offsets, times, clamp (N each) and the shifted horizon (N − 1, 7) in ``work``
+    (views: the caller writes the offsets, the solver reads the horizon)."""
+    n = int(work[W_TIMES])
+    o = W_HEAD
+    return (work[o:o + n], work[o + n:o + 2 * n], work[o + 2 * n:o + 3 * n],
+            work[o + 3 * n:o + 3 * n + (n - 1) * STATE_DIM].reshape((n - 1, STATE_DIM)))
+
+
 @njit(cache=True, **OUTER_KERNEL)
-def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, period_s: float,
-                x_solve: np.ndarray, t_knots: np.ndarray, positions_m: np.ndarray,
-                psi_rad: np.ndarray, dt_s: np.ndarray, vel_mps: np.ndarray, start: np.ndarray,
-                t_s: float, lead_s: float, offsets: np.ndarray, shift: np.ndarray,
-                times: np.ndarray, clamped: np.ndarray, states: np.ndarray,
-                horizon: np.ndarray) -> None:
-    """``Control.solve``'s inputs of the NMPC, the same bits as its general path:
+def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_solve: np.ndarray,
+                t_s: float, lead_s: float, shift: np.ndarray, states: np.ndarray,
+                work: np.ndarray, rows: np.ndarray) -> None:
+    """``Control.solve``'s inputs of the NMPC, the same bits as its general path (the offsets,
+    times, clamp, horizon, trajectory and period in ``work`` and ``rows``, :func:`nmpc_work`):
 
     * ``x_solve`` = ``x`` rolled through the ``pending`` inputs ``sent[first:first +
       pending]`` (``DelayPrediction.predict``; nothing written when none is pending);
-    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (len, 7) the
+    * ``times`` = [t, (t + lead) + offsets[1:]] and ``states`` (N, 7) the
       :class:`~ardrone_nmpc.reference.experiment.HoldStartThen` of a waypoint trajectory
       (``reference/kernels.waypoint_states``'s arrays) at them, ``start`` before t = 0;
     * when ``shift`` (4) is not empty, ``horizon`` = ``states[1:]`` with the offset-free shift
       added to x, y, z, ψ (``ReferenceIntegrator.shifted``).
 
-    ``clamped`` is scratch of ``times``' length. One kernel, its lookup written here rather
+    The clamp is scratch of the times' length. One kernel, its lookup written here rather
     than in a kernel of its own: every compiled level costs a cold start a compile."""
+    n = int(work[W_TIMES])
+    nk = int(work[W_KNOTS])
+    o = W_HEAD  # the offsets from here (read by index: a slice is compiled code too)
+    times = work[o + n:o + 2 * n]
+    clamped = work[o + 2 * n:o + 3 * n]
+    o += 3 * n
+    h0 = o  # the shifted horizon, row-major (no reshape: a smaller compile)
+    o += (n - 1) * STATE_DIM
+    t_knots = work[o:o + nk]
+    psi_rad = work[o + nk:o + 2 * nk]
+    dt_s = work[o + 2 * nk:o + 3 * nk - 1]
+    s0 = o + 3 * nk - 1  # the start
+    positions_m = rows[:nk]
+    vel_mps = rows[nk:]
     if pending:
-        rollout_rk4(x, sent[first:first + pending], period_s, x_solve)
+        rollout_rk4(x, sent[first:first + pending], work[W_PERIOD], x_solve)
     base = t_s + lead_s
-    n = offsets.size
     for i in range(n):
-        times[i] = base + offsets[i]
+        times[i] = base + work[W_HEAD + i]
     times[0] = t_s
     inside = True  # min(times) > 0 (NaN is not): nothing held
     for i in range(n):
@@ -73,14 +118,15 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, perio
         waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
         for i in range(n):
             if times[i] < 0.0:
-                for c in range(states.shape[1]):
-                    states[i, c] = start[c]
+                for c in range(STATE_DIM):
+                    states[i, c] = work[s0 + c]
     if shift.size:
-        for j in range(horizon.shape[0]):
-            for c in range(states.shape[1]):
-                horizon[j, c] = states[j + 1, c]
+        for j in range(n - 1):
+            row = h0 + j * STATE_DIM
+            for c in range(STATE_DIM):
+                work[row + c] = states[j + 1, c]
             for k in range(4):
-                horizon[j, _SHIFTED[k]] += shift[k]
+                work[row + _SHIFTED[k]] += shift[k]
 
 
 # The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
@@ -93,19 +139,20 @@ E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor, ż, P, K, initiali
 E_HAS_PREV = 11     # the difference's previous position is held
 E_PREV_X, E_PREV_Y = 12, 13
 E_VEL_X, E_VEL_Y = 14, 15         # its velocity
-E_SIZE = 16
+E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's view: one argument less)
+E_SIZE = 23
 #: What :func:`kalman_estimate` returns.
 ESTIMATED, REFUSED = 0, 1
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: float,
-                    psi_rad: float, t_s: float, zacc_mps2: float, navdata: bool,
-                    nav_vx_mps: float, nav_vy_mps: float) -> int:
+def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
+                    zacc_mps2: float, navdata: bool, nav_vx_mps: float,
+                    nav_vy_mps: float) -> int:
     """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
-    (their ``reset``/``update``, the same expressions in the same order) into ``x`` over the
-    state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by
-    the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
+    (their ``reset``/``update``, the same expressions in the same order) into the estimate
+    ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are
+    ``nav_v*_mps`` (navdata, rotated by the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
     an input the Python estimators refuse (non-finite, a time not after the last): the caller
     raises their error."""
     if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
@@ -146,13 +193,13 @@ def kalman_estimate(s: np.ndarray, x: np.ndarray, px: float, py: float, pz: floa
         s[E_PREV_Y] = py
         s[E_HAS_POSE] = 1.0
         s[E_LAST_T] = t_s
-    x[0] = px
-    x[1] = nav_vx_mps if navdata else s[E_VEL_X]
-    x[2] = py
-    x[3] = nav_vy_mps if navdata else s[E_VEL_Y]
-    x[4] = pz
-    x[5] = s[E_VZ]
-    x[6] = psi_rad
+    s[E_X] = px
+    s[E_X + 1] = nav_vx_mps if navdata else s[E_VEL_X]
+    s[E_X + 2] = py
+    s[E_X + 3] = nav_vy_mps if navdata else s[E_VEL_Y]
+    s[E_X + 4] = pz
+    s[E_X + 5] = s[E_VZ]
+    s[E_X + 6] = psi_rad
     return ESTIMATED
 
 
@@ -168,15 +215,15 @@ def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
     or compiled alike)."""
     x = np.zeros(7)
     if estimate and "estimate" not in _warm:
-        kalman_estimate(np.zeros(E_SIZE), x, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+        kalman_estimate(np.zeros(E_SIZE), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
         _warm.add("estimate")
     if nmpc and "nmpc" not in _warm:
         load_cached_callees(nmpc_inputs)
-        knots, n = np.array([0.0, 1.0]), 3  # a two-waypoint trajectory, one stage
-        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, 0.065, np.zeros(7), knots, np.zeros((2, 3)),
-                    np.zeros(2), np.ones(1), np.zeros((1, 3)), x, 0.0, 0.0, np.zeros(n),
-                    np.zeros(4), np.zeros(n), np.zeros(n), np.zeros((n, 7)),
-                    np.zeros((n - 1, 7)))
+        n = 3  # a two-waypoint trajectory, one stage
+        work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)),
+                                          np.zeros(2), np.ones(1), np.zeros((1, 3)), x))
+        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, np.zeros(7), 0.0, 0.0, np.zeros(4),
+                    np.zeros((n, 7)), work, rows)
         _warm.add("nmpc")
 
 

@@ -12,6 +12,7 @@ from ardrone_nmpc.estimation.attitude_response import (
     DELAY_RIVAL_SEPARATION_S, DELAY_STEP_S, NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate,
     AttitudeResponseEstimator, _microseconds,
 )
+from ardrone_nmpc.estimation import response_kernels as rk
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 
 E = 0.21
@@ -247,8 +248,12 @@ def test_the_compiled_fit_on_odd_sums():
         ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
         st = rng.normal(size=ref._state.size) ** 2
         st[0] = 30.0 + trial  # the samples' effective number
+        # the fit's parameters and grid as built (response_kernels.new_state)
+        grid = len(ref.delays_s) + len(ref.lags_s)
+        st[rk.S_CAPACITY:rk.HEAD] = ref._state[rk.S_CAPACITY:rk.HEAD]
+        st[-grid:] = ref._state[-grid:]
         kl2 = ref._sx.size
-        head = 23
+        head = rk.HEAD
         if trial % 4 == 1:  # an axis no command moved
             st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
             st[head + 1:head + kl2:2] = 0.0

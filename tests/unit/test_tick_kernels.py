@@ -20,7 +20,7 @@ from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.trajectories import Waypoints, make_trajectory
 from ardrone_nmpc.runtime.stages import Control, DelayPrediction, OffsetFree
 from ardrone_nmpc.runtime.tick import effective_controller
-from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs
+from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work, nmpc_work_views
 
 PERIOD_S = 0.065
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
@@ -65,10 +65,12 @@ def test_nmpc_inputs_is_the_python_it_replaces_bit_for_bit(pending, shift):
                 sent, first, count = delay.pending()
                 x_k = np.full(STATE_DIM, np.nan) if count else x
                 states = np.full((n + 2, STATE_DIM), np.nan)
-                horizon = np.full((n + 1, STATE_DIM), np.nan)
-                nmpc_inputs(x, sent, first, count, delay.period_s, x_k, *traj.waypoint_args,
-                            t_s, delay.lead_s, offsets, np.zeros(0) if shift is None else shift,
-                            np.zeros(n + 2), np.zeros(n + 2), states, horizon)
+                work, rows = nmpc_work(delay.period_s, n + 2, traj.waypoint_args)
+                work_offsets, _, _, horizon = nmpc_work_views(work)
+                work_offsets[:] = offsets
+                horizon[:] = np.nan
+                nmpc_inputs(x, sent, first, count, x_k, t_s, delay.lead_s,
+                            np.zeros(0) if shift is None else shift, states, work, rows)
                 assert (count > 0) == (x_py is not x)
                 assert x_k.tobytes() == x_py.tobytes()
                 assert states.tobytes() == states_py.tobytes(), (t_s, dtau)
@@ -218,6 +220,7 @@ def test_nmpc_inputs_clamps_a_negative_zero_time_as_numpy_does(coordinate):
     want = traj.state_at(times)  # the Python path: HoldStartThen.state_at
     x = np.zeros(STATE_DIM)
     states = np.full((n + 2, STATE_DIM), np.nan)
-    nmpc_inputs(x, np.zeros((2, 4)), 0, 0, PERIOD_S, x, *traj.waypoint_args, t_s, 0.0, offsets,
-                np.zeros(0), np.zeros(n + 2), np.zeros(n + 2), states, states[1:])
+    work, rows = nmpc_work(PERIOD_S, n + 2, traj.waypoint_args)
+    nmpc_work_views(work)[0][:] = offsets
+    nmpc_inputs(x, np.zeros((2, 4)), 0, 0, x, t_s, 0.0, np.zeros(0), states, work, rows)
     assert states.tobytes() == want.tobytes()
