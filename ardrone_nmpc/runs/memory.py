@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS,
+                                          cells_row, tick_cell_values)
 from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = ["MEMORY_PATH", "MemoryRecorder"]
@@ -58,20 +59,34 @@ def _numbers(cells: list, n: int) -> np.ndarray:
         return arr
 
 
-def _transposed(rows: list[dict]) -> dict[str, tuple | list]:
+_CELLS = object()  # the group of write_cells' rows (no key tuple equals it)
+
+
+def _row_keys(row) -> Any:
+    return _CELLS if row.__class__ is list else tuple(row)
+
+
+def _transposed(rows: list) -> dict[str, tuple | list]:
     """Each key any row has → its cells over the rows (None where a row lacks it): the rows
     of one key sequence (a runner builds its rows alike tick after tick) transposed at C
-    speed, ~10× faster than a ``row.get`` per row and key."""
-    runs = [(keys, [row for _, row in run])
-            for keys, run in itertools.groupby(zip(map(tuple, rows), rows),
-                                               key=operator.itemgetter(0))]
+    speed, ~10× faster than a ``row.get`` per row and key. A row of cells
+    (:meth:`MemoryRecorder.write_cells`) has the keys and values of its dict
+    (:func:`~ardrone_nmpc.runs.log_columns.cells_row`)."""
+    runs = []
+    for keys, run in itertools.groupby(zip(map(_row_keys, rows), rows),
+                                       key=operator.itemgetter(0)):
+        run = [row for _, row in run]
+        if keys is _CELLS:
+            runs.append((TICK_CELL_KEYS, list(map(tick_cell_values, run))))
+        else:
+            runs.append((keys, list(map(dict.values, run))))
     if len(runs) == 1:
         keys, run = runs[0]
-        return dict(zip(keys, zip(*map(dict.values, run))))
+        return dict(zip(keys, zip(*run)))
     out: dict[str, list] = {}
     done = 0
     for keys, run in runs:
-        for key, cells in zip(keys, zip(*map(dict.values, run))):
+        for key, cells in zip(keys, zip(*run)):
             column = out.get(key)
             if column is None:
                 column = out[key] = [None] * len(rows)
@@ -90,7 +105,7 @@ class MemoryRecorder:
     path = None
 
     def __init__(self) -> None:
-        self.rows: list[Mapping[str, Any]] = []
+        self.rows: list[Mapping[str, Any] | list] = []  # dicts, or cells (write_cells)
         self.events: list[dict[str, Any]] = []
 
     @property
@@ -100,6 +115,12 @@ class MemoryRecorder:
     def write_row(self, row: Mapping[str, Any]) -> None:
         """Keep ``row`` (not copied: the caller must not change it afterwards)."""
         self.rows.append(row)
+
+    def write_cells(self, cells: list) -> None:
+        """Keep a lockstep tick's row given as its cells in :data:`LOG_COLUMNS` order
+        (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth put; not copied): the row
+        :func:`~ardrone_nmpc.runs.log_columns.cells_row` gives, without building it."""
+        self.rows.append(cells)
 
     def event(self, t_s: float, kind: str, **fields: Any) -> None:
         self.events.append({"t_s": float(t_s), "kind": str(kind), **fields})
@@ -115,8 +136,10 @@ class MemoryRecorder:
         rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
         rows = self.rows
         n = len(rows)
-        cells_of = _transposed(rows) if n and all(r.__class__ is dict for r in rows) else None
+        plain = all(r.__class__ is dict or r.__class__ is list for r in rows)
+        cells_of = _transposed(rows) if n and plain else None
         if cells_of is None:
+            rows = [cells_row(r) if r.__class__ is list else r for r in rows]
             extra = set().union(*rows) - set(LOG_COLUMNS) if rows else set()
         else:
             extra = set(cells_of) - set(LOG_COLUMNS)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import orjson
 
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS
 
 __all__ = ["format_number"]
 
@@ -179,6 +179,32 @@ class BlockCheck:
                 self._strings.clear()
             self._strings.add(strings)
         return True
+
+
+    def tick_cells(self, cells: list) -> bool:
+        """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
+        truth put), whose plan is known: its numeric cells plain numbers, its string cells
+        str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
+        only for rows :meth:`__call__` passes (it may refuse more: those take
+        ``write_row``)."""
+        if not set(map(type, _TICK_NUMBERS(cells))) <= _NUMBER_TYPES:
+            return False
+        strings = _STRING_CELLS(cells)
+        if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
+            return False
+        if strings not in self._strings:
+            if _SUSPECT.search("".join(strings)) is not None:
+                return False
+            if len(self._strings) >= self._LIMIT:
+                self._strings.clear()
+            self._strings.add(strings)
+        return True
+
+
+#: The numeric cells of a tick_cells row (its absent columns hold tick_cells' own "").
+_TICK_NUMBERS = operator.itemgetter(*sorted(_INDEX[k] for k in TICK_CELL_KEYS
+                                            if k not in STRING_COLUMNS))
+_NUMBER_TYPES = _PLAIN_TYPES - {str}
 
 
 def block_text(rows: list[list]) -> bytes | None:

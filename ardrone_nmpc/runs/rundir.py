@@ -69,7 +69,8 @@ from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.core.atomic import atomic_path, write_text_atomic
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.reference.trajectories import input_files
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS,
+                                          TICK_CELL_KEYS, cells_row)
 from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, KeptRows,
                                         _fast_line, _plain_line, block_text, careful_line,
                                         format_number, row_plan)
@@ -174,6 +175,7 @@ class RunRecorder:
         self._held: list[tuple[list, tuple]] = []  # (cells, plan) of rows not yet written
         self._held_since = 0.0
         self._blockable = BlockCheck()
+        self._tick_plan: tuple | None = None  # the plan of write_cells' rows, made once
         #: Whether ``config.yaml`` and ``summary.csv`` are ``fsync``-ed (:meth:`create`).
         self.durable = True
 
@@ -300,6 +302,27 @@ class RunRecorder:
         self.rows_written += 1
         self.last_t_s = row.get("t_s", self.last_t_s)
         self._kept.add(cells, line)
+
+    def write_cells(self, cells: list) -> None:
+        """:meth:`write_row` of a lockstep tick's row given as its cells in
+        :data:`LOG_COLUMNS` order (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth
+        put): the same line, the same errors, without a dict to map back to column order.
+        The list is kept (held, :meth:`kept_columns`): the caller must not change it."""
+        if self._rows_per_write > 1 and self._blockable.tick_cells(cells):
+            plan = self._tick_plan
+            if plan is None:
+                plan = self._tick_plan = row_plan(TICK_CELL_KEYS)
+            held = self._held
+            if not held:
+                self._held_since = time.monotonic()
+            held.append((cells, plan))
+            self.rows_written += 1
+            self.last_t_s = cells[0]
+            if (len(held) >= self._rows_per_write
+                    or time.monotonic() - self._held_since > self.HOLD_S):
+                self._write_held()
+            return
+        self.write_row(cells_row(cells))  # one at a time, or a cell to look at closely
 
     def _write_held(self) -> None:
         """Print the held rows as one block, hand it to the OS by one ``write``. Interrupted
