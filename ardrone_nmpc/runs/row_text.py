@@ -142,6 +142,7 @@ _SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f]|null|true|false')
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
+_STATE_BITS = _INDEX["nav_state_bits"]
 
 
 class BlockCheck:
@@ -220,7 +221,10 @@ def block_text(rows: list[list]) -> bytes | None:
         return None
     parts = text.split(b"null")  # no string holds one (BlockCheck)
     if len(parts) > 1:
-        if not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows)):
+        # each null is a NaN, None or ±inf cell: when the NaN and None of nav_state_bits (NaN
+        # on every lockstep tick) account for them all, no cell is ±inf — else look at all
+        if (len(parts) - 1 != sum(1 for r in rows if (c := r[_STATE_BITS]) is None or c != c)
+                and not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows))):
             return None
         text = b"nan".join(parts)
     lines = text[2:-2].split(b"],[")  # no string holds a ',', '[', ']' or '"' (BlockCheck)

@@ -171,3 +171,26 @@ def test_the_cells_check_passes_only_what_block_check_passes():
     for v in variants:
         if check.tick_cells(v):
             assert check(v, n_str)
+
+
+@pytest.mark.parametrize("state_bits", [math.nan, None, np.float64(math.nan), 5, ""])
+def test_block_text_counts_nav_state_bits_nulls_and_still_refuses_infinities(state_bits):
+    """block_text's shortcut (the nulls are nav_state_bits' NaN) never hides a ±inf or
+    another NaN cell: the text is _plain_line's, row for row, or None for a ±inf."""
+    from ardrone_nmpc.runs.row_text import _plain_line, block_text
+
+    cells = list(_a_cells_row())
+    cells[LOG_COLUMNS.index("nav_state_bits")] = state_bits
+    quotes = row_plan(TICK_CELL_KEYS)[4] + 2 * (state_bits == "")  # an empty cell: ""
+    slots = [LOG_COLUMNS.index(c) for c in ("x_m", "battery_pct", "vz_true_mps")]
+    for slot in slots:
+        for value in (math.inf, -math.inf, np.float64(math.inf), math.nan, None):
+            rows = [list(cells) for _ in range(5)]
+            rows[3][slot] = value
+            text = block_text(rows)
+            if isinstance(value, float) and math.isinf(value):
+                assert text is None
+            else:
+                assert text == b"".join(_plain_line(list(r), quotes) for r in rows)
+    rows = [list(cells) for _ in range(4)]
+    assert block_text(rows) == b"".join(_plain_line(list(r), quotes) for r in rows)
