@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS,
-                                          cells_row, tick_cell_values)
+                                          cells_row)
 from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = ["MEMORY_PATH", "MemoryRecorder"]
@@ -60,6 +60,7 @@ def _numbers(cells: list, n: int) -> np.ndarray:
 
 
 _CELLS = object()  # the group of write_cells' rows (no key tuple equals it)
+_TICK_CELL_SLOTS = [LOG_COLUMNS.index(k) for k in TICK_CELL_KEYS]  # their cells' columns
 
 
 def _row_keys(row) -> Any:
@@ -72,26 +73,27 @@ def _transposed(rows: list) -> dict[str, tuple | list]:
     speed, ~10× faster than a ``row.get`` per row and key. A row of cells
     (:meth:`MemoryRecorder.write_cells`) has the keys and values of its dict
     (:func:`~ardrone_nmpc.runs.log_columns.cells_row`)."""
-    runs = []
+    runs = []  # (keys, rows, columns) of each run of rows alike
     for keys, run in itertools.groupby(zip(map(_row_keys, rows), rows),
                                        key=operator.itemgetter(0)):
         run = [row for _, row in run]
-        if keys is _CELLS:
-            runs.append((TICK_CELL_KEYS, list(map(tick_cell_values, run))))
+        if keys is _CELLS:  # every column transposed, then those the cells hold
+            columns = list(zip(*run))
+            runs.append((TICK_CELL_KEYS, len(run), [columns[i] for i in _TICK_CELL_SLOTS]))
         else:
-            runs.append((keys, list(map(dict.values, run))))
+            runs.append((keys, len(run), list(zip(*map(dict.values, run)))))
     if len(runs) == 1:
-        keys, run = runs[0]
-        return dict(zip(keys, zip(*run)))
+        keys, _, columns = runs[0]
+        return dict(zip(keys, columns))
     out: dict[str, list] = {}
     done = 0
-    for keys, run in runs:
-        for key, cells in zip(keys, zip(*run)):
+    for keys, n, columns in runs:
+        for key, cells in zip(keys, columns):
             column = out.get(key)
             if column is None:
                 column = out[key] = [None] * len(rows)
-            column[done:done + len(run)] = cells
-        done += len(run)
+            column[done:done + n] = cells
+        done += n
     return out
 
 
