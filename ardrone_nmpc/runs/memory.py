@@ -107,22 +107,28 @@ class MemoryRecorder:
     path = None
 
     def __init__(self) -> None:
-        self.rows: list[Mapping[str, Any] | list] = []  # dicts, or cells (write_cells)
+        self._rows: list[Mapping[str, Any] | list] = []  # dicts, or cells (write_cells)
         self.events: list[dict[str, Any]] = []
 
     @property
     def rows_written(self) -> int:
-        return len(self.rows)
+        return len(self._rows)
+
+    @property
+    def rows(self) -> list[Mapping[str, Any]]:
+        """The rows kept, as dicts (a row given as cells: its
+        :func:`~ardrone_nmpc.runs.log_columns.cells_row`, built now)."""
+        return [cells_row(r) if r.__class__ is list else r for r in self._rows]
 
     def write_row(self, row: Mapping[str, Any]) -> None:
         """Keep ``row`` (not copied: the caller must not change it afterwards)."""
-        self.rows.append(row)
+        self._rows.append(row)
 
     def write_cells(self, cells: list) -> None:
         """Keep a lockstep tick's row given as its cells in :data:`LOG_COLUMNS` order
         (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth put; not copied): the row
         :func:`~ardrone_nmpc.runs.log_columns.cells_row` gives, without building it."""
-        self.rows.append(cells)
+        self._rows.append(cells)
 
     def event(self, t_s: float, kind: str, **fields: Any) -> None:
         self.events.append({"t_s": float(t_s), "kind": str(kind), **fields})
@@ -136,7 +142,7 @@ class MemoryRecorder:
     def columns(self) -> dict[str, np.ndarray]:
         """Every :data:`LOG_COLUMNS` name (and any extra key a row had) → array over the
         rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
-        rows = self.rows
+        rows = self._rows
         n = len(rows)
         plain = all(r.__class__ is dict or r.__class__ is list for r in rows)
         cells_of = _transposed(rows) if n and plain else None

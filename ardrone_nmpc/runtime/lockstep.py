@@ -237,8 +237,12 @@ def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
 
 def _cell_sink(recorder):
     """The recorder's ``write_cells`` (rows as cells in ``LOG_COLUMNS`` order, no dict:
-    RunRecorder, MemoryRecorder), or None: a recorder that takes dicts only."""
-    return getattr(recorder, "write_cells", None) if recorder is not None else None
+    RunRecorder, MemoryRecorder), or None: a recorder that takes dicts only. Looked up on
+    its class: a wrapper that forwards other attributes (the live view's tee) must see
+    every row through its own ``write_row``."""
+    if recorder is None or getattr(type(recorder), "write_cells", None) is None:
+        return None
+    return recorder.write_cells
 
 
 def _record(recorder, row: dict, drone: LockstepDrone) -> None:

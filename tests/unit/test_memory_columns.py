@@ -79,11 +79,11 @@ def test_a_flown_square():
     rec = MemoryRecorder()
     run_lockstep(load_config("configs/square.yaml", ["duration_s=5"]), recorder=rec)
     # the runner's usual rows come as cells (write_cells; a clean square: all of them)
-    kinds = {r.__class__ for r in rec.rows}
+    kinds = {r.__class__ for r in rec._rows}
     assert list in kinds
     _assert_same(rec.columns(), _columns_by_name([cells_row(r) if r.__class__ is list else r
-                                                  for r in rec.rows]))
-    cells = [r for r in rec.rows if r.__class__ is list]  # a run of cells alone, and mixed
+                                                  for r in rec._rows]))
+    cells = [r for r in rec._rows if r.__class__ is list]  # a run of cells alone, and mixed
     _assert_same(_recorder_cells(cells).columns(), _columns_by_name(list(map(cells_row, cells))))
     mixed = [{"t_s": -1.0, "mode": "settle", "odd": 2.0}, *cells[:50], {"x_m": 3.0},
              *cells[50:]]

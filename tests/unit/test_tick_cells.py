@@ -89,9 +89,13 @@ def test_memory_columns_from_cells_are_those_of_dicts(config, overrides):
     cells, dicts = MemoryRecorder(), _DictRows()
     lockstep.run_lockstep(cfg, recorder=cells)
     lockstep.run_lockstep(cfg, recorder=dicts)
-    assert any(r.__class__ is list for r in cells.rows) or cfg.controller.kind == "p"
+    assert any(r.__class__ is list for r in cells._rows) or cfg.controller.kind == "p"
     assert all(r.__class__ is dict for r in dicts.rows)
     assert _masked(cells.columns()) == _masked(dicts.columns())
+    # .rows gives dicts, as before: those of tick_row + put_truth
+    assert [list(r) for r in cells.rows] == [list(r) for r in dicts.rows]
+    assert ([[_bits(v) for k, v in r.items() if k not in CLOCKS] for r in cells.rows]
+            == [[_bits(v) for k, v in r.items() if k not in CLOCKS] for r in dicts.rows])
     assert cells.events == dicts.events
 
 
@@ -131,7 +135,7 @@ def _a_cells_row():
     cfg = _cfg(*FLIGHTS[0])
     rec = MemoryRecorder()
     lockstep.run_lockstep(cfg, recorder=rec)
-    return next(r for r in rec.rows if r.__class__ is list)
+    return next(r for r in rec._rows if r.__class__ is list)
 
 
 @pytest.mark.parametrize("slot, value", [
@@ -194,3 +198,26 @@ def test_block_text_counts_nav_state_bits_nulls_and_still_refuses_infinities(sta
                 assert text == b"".join(_plain_line(list(r), quotes) for r in rows)
     rows = [list(cells) for _ in range(4)]
     assert block_text(rows) == b"".join(_plain_line(list(r), quotes) for r in rows)
+
+
+def test_a_wrapper_forwarding_attributes_gets_dict_rows():
+    """A recorder wrapper whose __getattr__ forwards to a RunRecorder-like one (the live
+    view's tee) sees every row through its own write_row, as dicts."""
+
+    class _Forwarding:
+        def __init__(self, inner):
+            self._inner = inner
+            self.seen = []
+
+        def write_row(self, row):
+            self.seen.append(row)
+            self._inner.write_row(row)
+
+        def __getattr__(self, name):
+            return getattr(self._inner, name)
+
+    inner = MemoryRecorder()
+    tee = _Forwarding(inner)
+    lockstep.run_lockstep(_cfg(*FLIGHTS[0]), recorder=tee)
+    assert tee.seen and len(tee.seen) == len(inner.rows)
+    assert all(r.__class__ is dict for r in inner._rows)
