@@ -44,7 +44,9 @@ also in 100×-real-time simulation. Its text can differ from ``repr`` (``5.0``, 
 reads back to the same double. A row of plain cells (float, np.float64 — printed by orjson
 as the float it is —, int, None, str) takes no Python call per cell; its NaN and ±inf cells
 are printed as :func:`format_number` prints them. Other numpy scalars are widened to Python
-floats first; rows with bools take the pure-Python path (:func:`format_number`).
+floats first; rows with bools take the pure-Python path (:func:`format_number`). The lockstep
+runner hands its usual NMPC rows as their cells in column order (:meth:`RunRecorder.write_cells`,
+:func:`~ardrone_nmpc.runs.log_columns.tick_cells`): no dict to build and map back.
 """
 
 from __future__ import annotations
