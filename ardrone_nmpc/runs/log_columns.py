@@ -12,6 +12,7 @@ builders read the tick's stage results by attribute (they live in the runtime, a
 from __future__ import annotations
 
 import math
+import operator
 from typing import NamedTuple
 
 import numpy as np
@@ -29,7 +30,8 @@ __all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMN
            "ReplayError", "SAME_POSE_TOLERANCE_S", "STRING_COLUMNS", "UNITS", "link_columns",
            "pose_of_row", "unlogged_pose",
            "measurement_columns", "put_truth", "tick_inputs_of_rows", "tick_row",
-           "truth_columns"]
+           "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "cells_row", "put_truth_cells",
+           "tick_cell_values", "tick_cells"]
 
 
 class Column(NamedTuple):
@@ -217,6 +219,67 @@ def tick_row(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float]
             "mode": mode, "compute_us": compute_us}
     return _general_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x,
                         solution=solution, sent=sent, mode=mode, compute_us=compute_us)
+
+
+def tick_cells(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
+               x: np.ndarray | None, solution, sent, mode: str, compute_us: float
+               ) -> list | None:
+    """:func:`tick_row`'s usual NMPC row as its cells in :data:`LOG_COLUMNS` order (``""`` for
+    a column it lacks; the truth's cells ``""`` until :func:`put_truth_cells`), or None for
+    any other tick (take :func:`tick_row`). The lockstep runner's row: the recorder takes
+    the cells as they are, without a dict to map back to column order. The same values as
+    :func:`tick_row`'s fast path, the same conditions (tests/unit/test_tick_cells.py)."""
+    nav, result = inputs.navdata, solution.result if solution is not None else None
+    flown = sent.flown
+    if not (result is not None and x is not None and nav is not None
+            and inputs.pose is not None and inputs.target is None and flown is not None
+            and sent.decision.action is not _FALLBACK):
+        return None
+    xs, ref, u, pcmd = x.tolist(), solution.ref_now.tolist(), result.u.tolist(), sent.pcmd
+    state_bits = nav.state_bits
+    return [
+        t_exp_s, xs[IX_X], xs[IX_Y], xs[IX_Z], xs[IX_PSI], xs[IX_VX], xs[IX_VY], xs[IX_VZ],
+        ref[IX_X], ref[IX_Y], ref[IX_Z], ref[IX_PSI],
+        u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE], flown.vz_ref_mps,
+        pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
+        sent.saturated if sent.saturated is not None else "0000",
+        result.solve_time_us, solution.status, result.residual_norm,
+        result.gmres_iterations, result.newton_iterations, mode, ages_ms[0], ages_ms[1],
+        nav.battery_pct, "", compute_us, inputs.pose.t_s, nav.vx_body_mps, nav.vy_body_mps,
+        nav.mode.value, nav.roll_deg, nav.pitch_deg,
+        state_bits if state_bits is not None else math.nan,
+        "", "", "", "", "", "", "", "", "", "", "", ""]
+
+
+#: The keys of a :func:`tick_cells` row with its truth put: :func:`tick_row`'s fast path's,
+#: in its order, then :func:`put_truth`'s (the dict :func:`cells_row` gives back).
+TICK_CELL_KEYS: tuple[str, ...] = (
+    "t_s", "mocap_age_ms", "navdata_age_ms", "solver_status", "cmd_saturated", "mocap_t_s",
+    "battery_pct", "nav_vx_body_mps", "nav_vy_body_mps", "nav_mode", "nav_roll_deg",
+    "nav_pitch_deg", "nav_state_bits", "x_m", "y_m", "z_m", "psi_rad", "vx_mps", "vy_mps",
+    "vz_mps", "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad", "u_zacc_mps2", "u_phi_rad",
+    "u_theta_rad", "u_psirate_radps", "solve_us", "residual_norm", "gmres_iterations",
+    "newton_iterations", "vz_ref_mps", "cmd_roll_frac", "cmd_pitch_frac", "cmd_gaz_frac",
+    "cmd_yaw_frac", "mode", "compute_us",
+    "x_true_m", "y_true_m", "z_true_m", "psi_true_rad", "vz_true_mps")
+_COLUMN_INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
+#: ``cells -> the values of its TICK_CELL_KEYS`` (a tuple, at C speed)
+tick_cell_values = operator.itemgetter(*(_COLUMN_INDEX[k] for k in TICK_CELL_KEYS))
+#: The cells :func:`put_truth_cells` fills (x, y, z, ψ, ż of the truth, adjacent columns).
+_TRUTH_CELLS = slice(_COLUMN_INDEX["x_true_m"], _COLUMN_INDEX["vz_true_mps"] + 1)
+#: The cell of ``mode`` (the lockstep runner relabels its landing rows).
+MODE_CELL = _COLUMN_INDEX["mode"]
+
+
+def put_truth_cells(cells: list, truth: tuple) -> None:
+    """:func:`put_truth` for a :func:`tick_cells` row: ``(x, y, z, ψ, ż)`` into its slots."""
+    cells[_TRUTH_CELLS] = truth
+
+
+def cells_row(cells: list) -> dict:
+    """The dict row of a :func:`tick_cells` row with its truth put: the very dict
+    :func:`tick_row` and :func:`put_truth` build (same keys, same order, same values)."""
+    return dict(zip(TICK_CELL_KEYS, tick_cell_values(cells)))
 
 
 def _general_row(*, t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],

@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS,
+                                          cells_row)
 from ardrone_nmpc.runs.rundir import RunData
 
 __all__ = ["MEMORY_PATH", "MemoryRecorder"]
@@ -58,25 +59,41 @@ def _numbers(cells: list, n: int) -> np.ndarray:
         return arr
 
 
-def _transposed(rows: list[dict]) -> dict[str, tuple | list]:
+_CELLS = object()  # the group of write_cells' rows (no key tuple equals it)
+_TICK_CELL_SLOTS = [LOG_COLUMNS.index(k) for k in TICK_CELL_KEYS]  # their cells' columns
+
+
+def _row_keys(row) -> Any:
+    return _CELLS if row.__class__ is list else tuple(row)
+
+
+def _transposed(rows: list) -> dict[str, tuple | list]:
     """Each key any row has → its cells over the rows (None where a row lacks it): the rows
     of one key sequence (a runner builds its rows alike tick after tick) transposed at C
-    speed, ~10× faster than a ``row.get`` per row and key."""
-    runs = [(keys, [row for _, row in run])
-            for keys, run in itertools.groupby(zip(map(tuple, rows), rows),
-                                               key=operator.itemgetter(0))]
+    speed, ~10× faster than a ``row.get`` per row and key. A row of cells
+    (:meth:`MemoryRecorder.write_cells`) has the keys and values of its dict
+    (:func:`~ardrone_nmpc.runs.log_columns.cells_row`)."""
+    runs = []  # (keys, rows, columns) of each run of rows alike
+    for keys, run in itertools.groupby(zip(map(_row_keys, rows), rows),
+                                       key=operator.itemgetter(0)):
+        run = [row for _, row in run]
+        if keys is _CELLS:  # every column transposed, then those the cells hold
+            columns = list(zip(*run))
+            runs.append((TICK_CELL_KEYS, len(run), [columns[i] for i in _TICK_CELL_SLOTS]))
+        else:
+            runs.append((keys, len(run), list(zip(*map(dict.values, run)))))
     if len(runs) == 1:
-        keys, run = runs[0]
-        return dict(zip(keys, zip(*map(dict.values, run))))
+        keys, _, columns = runs[0]
+        return dict(zip(keys, columns))
     out: dict[str, list] = {}
     done = 0
-    for keys, run in runs:
-        for key, cells in zip(keys, zip(*map(dict.values, run))):
+    for keys, n, columns in runs:
+        for key, cells in zip(keys, columns):
             column = out.get(key)
             if column is None:
                 column = out[key] = [None] * len(rows)
-            column[done:done + len(run)] = cells
-        done += len(run)
+            column[done:done + n] = cells
+        done += n
     return out
 
 
@@ -90,16 +107,28 @@ class MemoryRecorder:
     path = None
 
     def __init__(self) -> None:
-        self.rows: list[Mapping[str, Any]] = []
+        self._rows: list[Mapping[str, Any] | list] = []  # dicts, or cells (write_cells)
         self.events: list[dict[str, Any]] = []
 
     @property
     def rows_written(self) -> int:
-        return len(self.rows)
+        return len(self._rows)
+
+    @property
+    def rows(self) -> list[Mapping[str, Any]]:
+        """The rows kept, as dicts (a row given as cells: its
+        :func:`~ardrone_nmpc.runs.log_columns.cells_row`, built now)."""
+        return [cells_row(r) if r.__class__ is list else r for r in self._rows]
 
     def write_row(self, row: Mapping[str, Any]) -> None:
         """Keep ``row`` (not copied: the caller must not change it afterwards)."""
-        self.rows.append(row)
+        self._rows.append(row)
+
+    def write_cells(self, cells: list) -> None:
+        """Keep a lockstep tick's row given as its cells in :data:`LOG_COLUMNS` order
+        (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth put; not copied): the row
+        :func:`~ardrone_nmpc.runs.log_columns.cells_row` gives, without building it."""
+        self._rows.append(cells)
 
     def event(self, t_s: float, kind: str, **fields: Any) -> None:
         self.events.append({"t_s": float(t_s), "kind": str(kind), **fields})
@@ -113,10 +142,12 @@ class MemoryRecorder:
     def columns(self) -> dict[str, np.ndarray]:
         """Every :data:`LOG_COLUMNS` name (and any extra key a row had) → array over the
         rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
-        rows = self.rows
+        rows = self._rows
         n = len(rows)
-        cells_of = _transposed(rows) if n and all(r.__class__ is dict for r in rows) else None
+        plain = all(r.__class__ is dict or r.__class__ is list for r in rows)
+        cells_of = _transposed(rows) if n and plain else None
         if cells_of is None:
+            rows = [cells_row(r) if r.__class__ is list else r for r in rows]
             extra = set().union(*rows) - set(LOG_COLUMNS) if rows else set()
         else:
             extra = set(cells_of) - set(LOG_COLUMNS)

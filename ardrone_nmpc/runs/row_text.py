@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import orjson
 
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS
 
 __all__ = ["format_number"]
 
@@ -142,6 +142,7 @@ _SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f]|null|true|false')
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
+_STATE_BITS = _INDEX["nav_state_bits"]
 
 
 class BlockCheck:
@@ -181,6 +182,32 @@ class BlockCheck:
         return True
 
 
+    def tick_cells(self, cells: list) -> bool:
+        """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
+        truth put), whose plan is known: its numeric cells plain numbers, its string cells
+        str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
+        only for rows :meth:`__call__` passes (it may refuse more: those take
+        ``write_row``)."""
+        if not set(map(type, _TICK_NUMBERS(cells))) <= _NUMBER_TYPES:
+            return False
+        strings = _STRING_CELLS(cells)
+        if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
+            return False
+        if strings not in self._strings:
+            if _SUSPECT.search("".join(strings)) is not None:
+                return False
+            if len(self._strings) >= self._LIMIT:
+                self._strings.clear()
+            self._strings.add(strings)
+        return True
+
+
+#: The numeric cells of a tick_cells row (its absent columns hold tick_cells' own "").
+_TICK_NUMBERS = operator.itemgetter(*sorted(_INDEX[k] for k in TICK_CELL_KEYS
+                                            if k not in STRING_COLUMNS))
+_NUMBER_TYPES = _PLAIN_TYPES - {str}
+
+
 def block_text(rows: list[list]) -> bytes | None:
     """The lines :func:`_plain_line` prints for each of ``rows`` (cells :class:`BlockCheck`
     passed), joined, from one orjson call for them all (~0.7 µs a row where a call per row
@@ -194,7 +221,10 @@ def block_text(rows: list[list]) -> bytes | None:
         return None
     parts = text.split(b"null")  # no string holds one (BlockCheck)
     if len(parts) > 1:
-        if not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows)):
+        # each null is a NaN, None or ±inf cell: when the NaN and None of nav_state_bits (NaN
+        # on every lockstep tick) account for them all, no cell is ±inf — else look at all
+        if (len(parts) - 1 != sum(1 for r in rows if (c := r[_STATE_BITS]) is None or c != c)
+                and not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows))):
             return None
         text = b"nan".join(parts)
     lines = text[2:-2].split(b"],[")  # no string holds a ',', '[', ']' or '"' (BlockCheck)

@@ -44,7 +44,9 @@ also in 100×-real-time simulation. Its text can differ from ``repr`` (``5.0``, 
 reads back to the same double. A row of plain cells (float, np.float64 — printed by orjson
 as the float it is —, int, None, str) takes no Python call per cell; its NaN and ±inf cells
 are printed as :func:`format_number` prints them. Other numpy scalars are widened to Python
-floats first; rows with bools take the pure-Python path (:func:`format_number`).
+floats first; rows with bools take the pure-Python path (:func:`format_number`). The lockstep
+runner hands its usual NMPC rows as their cells in column order (:meth:`RunRecorder.write_cells`,
+:func:`~ardrone_nmpc.runs.log_columns.tick_cells`): no dict to build and map back.
 """
 
 from __future__ import annotations
@@ -68,8 +70,11 @@ from ardrone_nmpc.config.io import dump_config, load_run_config
 from ardrone_nmpc.config.schema import ConfigError, ExperimentConfig
 from ardrone_nmpc.core.atomic import atomic_path, write_text_atomic
 from ardrone_nmpc.errors import UserError
-from ardrone_nmpc.reference.trajectories import input_files
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, REQUIRED_COLUMNS, STRING_COLUMNS,
+                                          TICK_CELL_KEYS, cells_row)
+from ardrone_nmpc.runs.run_inputs import INPUTS_DIR  # noqa: F401 - its home's name
+from ardrone_nmpc.runs.run_inputs import copy_inputs as _copy_inputs
+from ardrone_nmpc.runs.run_inputs import read_inputs as _read_inputs
 from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, KeptRows,
                                         _fast_line, _plain_line, block_text, careful_line,
                                         format_number, row_plan)
@@ -89,10 +94,9 @@ CONFIG_FILE = "config.yaml"
 LOG_FILE = "log.csv"
 EVENTS_FILE = "events.jsonl"
 SUMMARY_FILE = "summary.csv"
-#: Folder of the copied input files, inside the run directory.
-INPUTS_DIR = "inputs"
 
 _COLUMN_SET = frozenset(LOG_COLUMNS)
+_TICK_PLAN = row_plan(TICK_CELL_KEYS)
 class LogError(UserError, ValueError):
     """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line;
     exit code 1)."""
@@ -125,32 +129,6 @@ def _write_all(raw: Any, data: bytes) -> None:
         n = raw.write(data)
 
 
-def _read_inputs(cfg: ExperimentConfig) -> dict:
-    """The input files ``cfg`` names, read and checked: ``{field: WaypointFile}``."""
-    return input_files(cfg.reference)
-
-
-def _copy_inputs(path: Path, cfg: ExperimentConfig, inputs: dict
-                 ) -> tuple[ExperimentConfig, ExperimentConfig, str]:
-    """Write each input into ``path/inputs/``. Returns the config to record (inputs named
-    relative to the run directory), the config to fly (the copies' absolute paths) and the
-    header lines saying where each copy came from."""
-    if not inputs:
-        return cfg, cfg, ""
-    (path / INPUTS_DIR).mkdir()
-    relative, absolute, origins = {}, {}, ""
-    for name, source in inputs.items():
-        target = path / INPUTS_DIR / source.path.name
-        target.write_bytes(source.raw)
-        relative[name] = f"{INPUTS_DIR}/{source.path.name}"
-        absolute[name] = str(target.resolve())
-        origins += f"\nreference.{name}: copied from {source.path}"
-    ref = cfg.reference
-    recorded = cfg.model_copy(update={"reference": ref.model_copy(update=relative)})
-    flown = cfg.model_copy(update={"reference": ref.model_copy(update=absolute)})
-    return recorded, flown, origins
-
-
 class RunRecorder:
     """Writes one run directory; a context manager (leaving it closes the files).
 
@@ -174,6 +152,7 @@ class RunRecorder:
         self._held: list[tuple[list, tuple]] = []  # (cells, plan) of rows not yet written
         self._held_since = 0.0
         self._blockable = BlockCheck()
+        self._tick_plan = _TICK_PLAN  # the plan of write_cells' rows
         #: Whether ``config.yaml`` and ``summary.csv`` are ``fsync``-ed (:meth:`create`).
         self.durable = True
 
@@ -281,15 +260,7 @@ class RunRecorder:
         cells = list(map(row.get, LOG_COLUMNS, _EMPTY_CELLS))
         if self._rows_per_write > 1:
             if self._blockable(cells, plan[5]):
-                held = self._held
-                if not held:
-                    self._held_since = time.monotonic()
-                held.append((cells, plan))
-                self.rows_written += 1
-                self.last_t_s = row.get("t_s", self.last_t_s)
-                if (len(held) >= self._rows_per_write
-                        or time.monotonic() - self._held_since > self.HOLD_S):
-                    self._write_held()
+                self._hold(cells, plan, row.get("t_s", self.last_t_s))
                 return
             if self._held:
                 self._write_held()  # in order: the rows held before this one
@@ -300,6 +271,28 @@ class RunRecorder:
         self.rows_written += 1
         self.last_t_s = row.get("t_s", self.last_t_s)
         self._kept.add(cells, line)
+
+    def write_cells(self, cells: list) -> None:
+        """:meth:`write_row` of a lockstep tick's row given as its cells in
+        :data:`LOG_COLUMNS` order (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth
+        put): the same line, the same errors, without a dict to map back to column order.
+        The list is kept (held, :meth:`kept_columns`): the caller must not change it."""
+        if self._rows_per_write > 1 and self._blockable.tick_cells(cells):
+            self._hold(cells, self._tick_plan, cells[0])
+        else:  # one at a time, or a cell to look at closely
+            self.write_row(cells_row(cells))
+
+    def _hold(self, cells: list, plan: tuple, t_s: float) -> None:
+        """Hold a row for its block; write the block when full or held :attr:`HOLD_S`."""
+        held = self._held
+        if not held:
+            self._held_since = time.monotonic()
+        held.append((cells, plan))
+        self.rows_written += 1
+        self.last_t_s = t_s
+        if (len(held) >= self._rows_per_write
+                or time.monotonic() - self._held_since > self.HOLD_S):
+            self._write_held()
 
     def _write_held(self) -> None:
         """Print the held rows as one block, hand it to the OS by one ``write``. Interrupted

@@ -32,7 +32,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import put_truth
+from ardrone_nmpc.runs.log_columns import MODE_CELL, cells_row, put_truth, put_truth_cells
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
@@ -167,6 +167,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     # what its name says, in this order, every tick
     t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
     inputs, step, set_command, tally_add = drone.inputs, tick.step, drone.set_command, tally.add
+    write_cells = _cell_sink(recorder)
+    tick.cell_rows = recorder is None or write_cells is not None
     for k in range(schedule.n_ticks):
         check_signals()
         t_exp = t_exp_of(k)
@@ -189,13 +191,22 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         pcmd = out.pcmd
         set_command(pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
                     progressive=out.progressive)
-        row = out.row
-        _record(recorder, row, drone)
-        tally_add(row)
+        cells = out.cells
+        if cells is not None:  # the usual NMPC tick: its cells in column order, no dict
+            if write_cells is not None:
+                put_truth_cells(cells, drone.truth_cells())
+                write_cells(cells)
+            label = cells[MODE_CELL]
+            tally_add({"t_s": cells[0], "mode": label})  # no target: no target_age_ms
+        else:
+            row = out.row
+            _record(recorder, row, drone)
+            tally_add(row)
+            label = row["mode"]
         if progress is not None:
             progress(schedule.fraction_done(k))
         if out.action in _ENDS:
-            ending = row["mode"]
+            ending = label
             break
     ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
@@ -224,10 +235,36 @@ def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
         write_events(write_event, t_exp, [event])
 
 
+def _cell_sink(recorder):
+    """The recorder's ``write_cells`` (rows as cells in ``LOG_COLUMNS`` order, no dict:
+    RunRecorder, MemoryRecorder), or None: a recorder that takes dicts only. Looked up on
+    its class: a wrapper that forwards other attributes (the live view's tee) must see
+    every row through its own ``write_row``."""
+    if recorder is None or getattr(type(recorder), "write_cells", None) is None:
+        return None
+    return recorder.write_cells
+
+
 def _record(recorder, row: dict, drone: LockstepDrone) -> None:
     if recorder is not None:
         put_truth(row, drone.truth_cells())
         recorder.write_row(row)
+
+
+def _record_out(recorder, out, drone: LockstepDrone, mode: str) -> None:
+    """Record a tick's output (its cells or its dict row) labelled ``mode``."""
+    cells = out.cells
+    if cells is None:
+        out.row["mode"] = mode
+        _record(recorder, out.row, drone)
+    elif recorder is not None:
+        cells[MODE_CELL] = mode
+        put_truth_cells(cells, drone.truth_cells())
+        write_cells = _cell_sink(recorder)
+        if write_cells is not None:
+            write_cells(cells)
+        else:  # pragma: no cover - cell rows are only asked of such recorders
+            recorder.write_row(cells_row(cells))
 
 
 def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_start,
@@ -250,8 +287,7 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
         drone.land()  # REF land, held as the link's keepalive holds it
         if logged:
             out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
-            out.row["mode"] = "landing"
-            _record(recorder, out.row, drone)
+            _record_out(recorder, out, drone, "landing")
         k += 1
         truth = drone.truth
     mode = truth.mode

@@ -19,7 +19,7 @@ from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, sl
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
-from ardrone_nmpc.runs.log_columns import tick_row
+from ardrone_nmpc.runs.log_columns import tick_cells, tick_row
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
@@ -42,14 +42,17 @@ class TickOutput:
     ``progressive`` False means "hover" (AT*PCMD flag 0: the drone holds position itself).
     ``action`` tells the runner what else to do: :attr:`Action.LAND` — land now;
     :attr:`Action.STOP` — the drone is in emergency: stop the loop and report. ``events`` are
-    the supervisor's mode changes of this tick, for ``events.jsonl``.
+    the supervisor's mode changes of this tick, for ``events.jsonl``. ``cells``: the row as
+    its cells in ``LOG_COLUMNS`` order (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`),
+    only from a tick whose :attr:`Tick.cell_rows` is set, and then ``row`` is None.
     """
 
     pcmd: PcmdCommand
     progressive: bool
-    row: dict
+    row: dict | None
     action: Action = Action.CONTROL
     events: list = field(default_factory=list)
+    cells: list | None = None
 
 
 def effective_controller(controller, limits: DroneLimits):
@@ -88,6 +91,9 @@ class Tick:
                  wrap_solver: Callable | None = None):
         self.cfg = cfg
         self.trajectory = trajectory
+        #: Hand the usual NMPC tick's row as cells in column order (``TickOutput.cells``, no
+        #: dict): the lockstep runner's recorder takes them as they are.
+        self.cell_rows = False
         self.period_s = cfg.loop.period_s
         self.limits = command_scales(cfg.drone)  # the command at PCMD ±1
         ctl = cfg.controller
@@ -168,6 +174,15 @@ class Tick:
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
+        if self.cell_rows:
+            cells = tick_cells(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x,
+                               solution=solution, sent=sent, mode=label, compute_us=compute_us)
+            if cells is not None:
+                events = sup.take_events()
+                if adapted:
+                    events += adapted
+                return TickOutput(sent.pcmd, sent.progressive, None, sent.decision.action,
+                                  events, cells)
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         events = sup.take_events()  # a list of its own: extended, not copied

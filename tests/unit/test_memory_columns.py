@@ -9,7 +9,7 @@ import random
 import numpy as np
 import pytest
 
-from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS, cells_row
 from ardrone_nmpc.runs.memory import MemoryRecorder, _numbers, _text
 
 from tests.unit.test_recorder_plain_line import _row
@@ -78,4 +78,24 @@ def test_a_flown_square():
 
     rec = MemoryRecorder()
     run_lockstep(load_config("configs/square.yaml", ["duration_s=5"]), recorder=rec)
-    _assert_same(rec.columns(), _columns_by_name(rec.rows))
+    # the runner's usual rows come as cells (write_cells; a clean square: all of them)
+    kinds = {r.__class__ for r in rec._rows}
+    assert list in kinds
+    _assert_same(rec.columns(), _columns_by_name([cells_row(r) if r.__class__ is list else r
+                                                  for r in rec._rows]))
+    cells = [r for r in rec._rows if r.__class__ is list]  # a run of cells alone, and mixed
+    _assert_same(_recorder_cells(cells).columns(), _columns_by_name(list(map(cells_row, cells))))
+    mixed = [{"t_s": -1.0, "mode": "settle", "odd": 2.0}, *cells[:50], {"x_m": 3.0},
+             *cells[50:]]
+    rec = MemoryRecorder()
+    for r in mixed:
+        (rec.write_cells if r.__class__ is list else rec.write_row)(r)
+    _assert_same(rec.columns(), _columns_by_name([cells_row(r) if r.__class__ is list else r
+                                                  for r in mixed]))
+
+
+def _recorder_cells(rows) -> MemoryRecorder:
+    rec = MemoryRecorder()
+    for cells in rows:
+        rec.write_cells(cells)
+    return rec
