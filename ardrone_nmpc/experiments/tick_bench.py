@@ -16,7 +16,11 @@ import math
 import time
 from dataclasses import asdict, dataclass
 
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS
+
 __all__ = ["TickSplit", "bench_tick"]
+
+_SOLVE_US, _COMPUTE_US = LOG_COLUMNS.index("solve_us"), LOG_COLUMNS.index("compute_us")
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,12 @@ class _Clocks:
     def write_row(self, row: dict) -> None:
         self.solve_us.append(_number(row.get("solve_us")))
         self.compute_us.append(_number(row.get("compute_us")))
+
+    def write_cells(self, cells: list) -> None:
+        """A row as the lockstep runner hands it to the recorders that take cells (the run
+        directory's and tuning's: ``runs/log_columns.tick_cells``)."""
+        self.solve_us.append(_number(cells[_SOLVE_US]))
+        self.compute_us.append(_number(cells[_COMPUTE_US]))
 
     def event(self, *args, **kwargs) -> None:
         pass
