@@ -138,7 +138,12 @@ def _print_nulls(text: bytes, cells: list) -> bytes | None:
 #: that makes :func:`_plain_line` or :func:`_fast_line` look twice (``,``, ``"``, ``\``,
 #: control characters, brackets and braces, ``null``/``true``/``false``). A false alarm
 #: (``"nu" + "ll"`` across two cells) only sends the row the one-by-one way.
-_SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f]|null|true|false')
+#: A lone surrogate (``\udcff``, a path decoded with ``surrogateescape``) cannot be encoded:
+#: :func:`careful_line` refuses it (UnicodeEncodeError), so the row must not be held.
+_SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f\ud800-\udfff]|null|true|false')
+#: The ints a held row may hold: those orjson prints (an int beyond, printed cell by cell
+#: through ``float()``, may overflow it — OverflowError — and is refused at write_row).
+_INT_LIMIT = 2 ** 63
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
@@ -148,7 +153,8 @@ _STATE_BITS = _INDEX["nav_state_bits"]
 class BlockCheck:
     """Whether a row may be printed in a block (:func:`block_text`): plain cells
     (:data:`_PLAIN_TYPES`), str in every string column and in no numeric column that the
-    row's key set has, no string cell holding :data:`_SUSPECT` text. Such a row's line is
+    row's key set has, no string cell holding :data:`_SUSPECT` text, ints within 64 bits
+    (:data:`_INT_LIMIT`). Such a row's line is
     :func:`_plain_line`'s, and writing it cannot fail. The cell types and the string cells
     repeat from tick to tick: each distinct pattern is judged once (a few hundred kept)."""
 
@@ -162,16 +168,21 @@ class BlockCheck:
         """Whether the row may be printed in a block. ``n_str``: the str cells a plain row
         of its key set holds (one per string column, one per missing numeric key)."""
         key = (tuple(map(type, cells)), n_str)
-        ok = self._types.get(key)
-        if ok is None:
+        int_slots = self._types.get(key)  # False: not plain; else the int cells' slots
+        if int_slots is None:
             types = key[0]
             ok = (set(types) <= _PLAIN_TYPES and types.count(str) == n_str
                   and set(map(type, _STRING_CELLS(cells))) <= _STR_ONLY)
+            int_slots = (tuple(i for i, t in enumerate(types) if t is int) if ok
+                         else False)
             if len(self._types) >= self._LIMIT:
                 self._types.clear()
-            self._types[key] = ok
-        if not ok:
+            self._types[key] = int_slots
+        if int_slots is False:
             return False
+        for i in int_slots:  # a lockstep row's two iteration counts
+            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+                return False
         strings = _STRING_CELLS(cells)
         if strings not in self._strings:
             if _SUSPECT.search("".join(strings)) is not None:

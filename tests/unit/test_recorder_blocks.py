@@ -201,3 +201,27 @@ def test_the_events_encoder_writes_what_json_dumps_wrote():
                   **{f"f{i}": rng.choice(values) for i in range(rng.randint(0, 5))}}
         assert rundir._EVENT_JSON.encode(record) == json.dumps(
             record, default=rundir._json_default, separators=(",", ":"))
+
+
+@pytest.mark.parametrize("bad", [{"mode": "tr\udcffack"},  # a lone surrogate: not UTF-8
+                                 {"gmres_iterations": 10 ** 400}])  # float() overflows
+def test_a_row_that_cannot_be_written_is_refused_at_once_not_held(tmp_path, bad):
+    """Held, such a row failed the whole block at its write (the error at a later row or at
+    close, every row of the block lost): it is refused at write_row, as one row a write."""
+    rows = [{"t_s": k * 0.0625, "mode": "track", "gmres_iterations": 3} for k in range(10)]
+    rows[5] = {**rows[5], **bad}
+    outcome = []
+    for rows_per_write in (1, 64):
+        rec = RunRecorder.create(tmp_path / str(rows_per_write), CFG, seed=0,
+                                 rows_per_write=rows_per_write)
+        refused = []
+        with rec:
+            for i, row in enumerate(rows):
+                try:
+                    rec.write_row(row)
+                except (ValueError, OverflowError) as err:
+                    refused.append((i, type(err).__name__, str(err)))
+        outcome.append(((rec.path / LOG_FILE).read_bytes(), refused))
+    assert outcome[1] == outcome[0]
+    assert [i for i, *_ in outcome[0][1]] == [5]
+    assert outcome[0][0].count(b"\n") == 1 + 9  # the header and the nine good rows
