@@ -154,14 +154,15 @@ class BlockCheck:
     """Whether a row may be printed in a block (:func:`block_text`): plain cells
     (:data:`_PLAIN_TYPES`), str in every string column and in no numeric column that the
     row's key set has, no string cell holding :data:`_SUSPECT` text, ints within 64 bits
-    (:data:`_INT_LIMIT`). Such a row's line is
-    :func:`_plain_line`'s, and writing it cannot fail. The cell types and the string cells
-    repeat from tick to tick: each distinct pattern is judged once (a few hundred kept)."""
+    (:data:`_INT_LIMIT`). Such a row's line is :func:`_plain_line`'s, and writing it cannot
+    fail. The cell types and the string cells repeat from tick to tick: each distinct pattern
+    is judged once (a few hundred kept)."""
 
     _LIMIT = 256
 
     def __init__(self) -> None:
-        self._types: dict[tuple, bool] = {}  # (cell types, n_str) → plain
+        self._types: dict[tuple, tuple | bool] = {}  # (cell types, n_str) → int slots
+        self._tick_types: dict[tuple, tuple | bool] = {}  # tick_cells' numbers' types → …
         self._strings: set[tuple] = set()
 
     def __call__(self, cells: list, n_str: int) -> bool:
@@ -192,15 +193,26 @@ class BlockCheck:
             self._strings.add(strings)
         return True
 
-
     def tick_cells(self, cells: list) -> bool:
         """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
         truth put), whose plan is known: its numeric cells plain numbers, its string cells
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        if not set(map(type, _TICK_NUMBERS(cells))) <= _NUMBER_TYPES:
+        numbers = _TICK_NUMBERS(cells)
+        types = tuple(map(type, numbers))
+        int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
+        if int_slots is None:
+            int_slots = (tuple(i for i, t in enumerate(types) if t is int)
+                         if set(types) <= _NUMBER_TYPES else False)
+            if len(self._tick_types) >= self._LIMIT:
+                self._tick_types.clear()
+            self._tick_types[types] = int_slots
+        if int_slots is False:
             return False
+        for i in int_slots:  # the iteration counts
+            if not -_INT_LIMIT <= numbers[i] < _INT_LIMIT:
+                return False
         strings = _STRING_CELLS(cells)
         if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
             return False
