@@ -16,7 +16,7 @@ import itertools
 import math
 import operator
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -382,6 +382,11 @@ class KeptRows:
             self._rows = None  # too long to keep: read back from the file
             return
         rows.append(cells if cells is not None else _cells_of_line(line))
+
+    def extend(self, rows: Iterable[list]) -> None:
+        """:meth:`add` of each of ``rows``' cells (plain rows, written)."""
+        for cells in rows:
+            self.add(cells, b"")
 
     def columns(self) -> dict[str, np.ndarray] | None:
         """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
