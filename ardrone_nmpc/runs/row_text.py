@@ -16,7 +16,7 @@ import itertools
 import math
 import operator
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -138,7 +138,12 @@ def _print_nulls(text: bytes, cells: list) -> bytes | None:
 #: that makes :func:`_plain_line` or :func:`_fast_line` look twice (``,``, ``"``, ``\``,
 #: control characters, brackets and braces, ``null``/``true``/``false``). A false alarm
 #: (``"nu" + "ll"`` across two cells) only sends the row the one-by-one way.
-_SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f]|null|true|false')
+#: A lone surrogate (``\udcff``, a path decoded with ``surrogateescape``) cannot be encoded:
+#: :func:`careful_line` refuses it (UnicodeEncodeError), so the row must not be held.
+_SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f\ud800-\udfff]|null|true|false')
+#: The ints a held row may hold: those orjson prints (an int beyond, printed cell by cell
+#: through ``float()``, may overflow it — OverflowError — and is refused at write_row).
+_INT_LIMIT = 2 ** 63
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
@@ -148,30 +153,37 @@ _STATE_BITS = _INDEX["nav_state_bits"]
 class BlockCheck:
     """Whether a row may be printed in a block (:func:`block_text`): plain cells
     (:data:`_PLAIN_TYPES`), str in every string column and in no numeric column that the
-    row's key set has, no string cell holding :data:`_SUSPECT` text. Such a row's line is
-    :func:`_plain_line`'s, and writing it cannot fail. The cell types and the string cells
-    repeat from tick to tick: each distinct pattern is judged once (a few hundred kept)."""
+    row's key set has, no string cell holding :data:`_SUSPECT` text, ints within 64 bits
+    (:data:`_INT_LIMIT`). Such a row's line is :func:`_plain_line`'s, and writing it cannot
+    fail. The cell types and the string cells repeat from tick to tick: each distinct pattern
+    is judged once (a few hundred kept)."""
 
     _LIMIT = 256
 
     def __init__(self) -> None:
-        self._types: dict[tuple, bool] = {}  # (cell types, n_str) → plain
+        self._types: dict[tuple, tuple | bool] = {}  # (cell types, n_str) → int slots
+        self._tick_types: dict[tuple, tuple | bool] = {}  # tick_cells' numbers' types → …
         self._strings: set[tuple] = set()
 
     def __call__(self, cells: list, n_str: int) -> bool:
         """Whether the row may be printed in a block. ``n_str``: the str cells a plain row
         of its key set holds (one per string column, one per missing numeric key)."""
         key = (tuple(map(type, cells)), n_str)
-        ok = self._types.get(key)
-        if ok is None:
+        int_slots = self._types.get(key)  # False: not plain; else the int cells' slots
+        if int_slots is None:
             types = key[0]
             ok = (set(types) <= _PLAIN_TYPES and types.count(str) == n_str
                   and set(map(type, _STRING_CELLS(cells))) <= _STR_ONLY)
+            int_slots = (tuple(i for i, t in enumerate(types) if t is int) if ok
+                         else False)
             if len(self._types) >= self._LIMIT:
                 self._types.clear()
-            self._types[key] = ok
-        if not ok:
+            self._types[key] = int_slots
+        if int_slots is False:
             return False
+        for i in int_slots:  # a lockstep row's two iteration counts
+            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+                return False
         strings = _STRING_CELLS(cells)
         if strings not in self._strings:
             if _SUSPECT.search("".join(strings)) is not None:
@@ -181,15 +193,26 @@ class BlockCheck:
             self._strings.add(strings)
         return True
 
-
     def tick_cells(self, cells: list) -> bool:
         """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
         truth put), whose plan is known: its numeric cells plain numbers, its string cells
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        if not set(map(type, _TICK_NUMBERS(cells))) <= _NUMBER_TYPES:
+        numbers = _TICK_NUMBERS(cells)
+        types = tuple(map(type, numbers))
+        int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
+        if int_slots is None:
+            int_slots = (tuple(i for i, t in enumerate(types) if t is int)
+                         if set(types) <= _NUMBER_TYPES else False)
+            if len(self._tick_types) >= self._LIMIT:
+                self._tick_types.clear()
+            self._tick_types[types] = int_slots
+        if int_slots is False:
             return False
+        for i in int_slots:  # the iteration counts
+            if not -_INT_LIMIT <= numbers[i] < _INT_LIMIT:
+                return False
         strings = _STRING_CELLS(cells)
         if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
             return False
@@ -359,6 +382,11 @@ class KeptRows:
             self._rows = None  # too long to keep: read back from the file
             return
         rows.append(cells if cells is not None else _cells_of_line(line))
+
+    def extend(self, rows: Iterable[list]) -> None:
+        """:meth:`add` of each of ``rows``' cells (plain rows, written)."""
+        for cells in rows:
+            self.add(cells, b"")
 
     def columns(self) -> dict[str, np.ndarray] | None:
         """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays

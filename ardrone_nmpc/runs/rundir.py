@@ -151,6 +151,7 @@ class RunRecorder:
         self._rows_per_write = max(1, int(rows_per_write))
         self._held: list[tuple[list, tuple]] = []  # (cells, plan) of rows not yet written
         self._held_since = 0.0
+        self._writing: tuple | None = None  # (held, file position, rows): _write_held's
         self._blockable = BlockCheck()
         self._tick_plan = _TICK_PLAN  # the plan of write_cells' rows
         #: Whether ``config.yaml`` and ``summary.csv`` are ``fsync``-ed (:meth:`create`).
@@ -295,8 +296,12 @@ class RunRecorder:
             self._write_held()
 
     def _write_held(self) -> None:
-        """Print the held rows as one block, hand it to the OS by one ``write``. Interrupted
-        before the block reached the file, the rows stay held (:meth:`close` writes them)."""
+        """Print the held rows as one block, hand it to the OS by one ``write``; interrupted,
+        they stay held (:meth:`close` writes them) unless they reached the file (``_writing``)."""
+        writing, self._writing = self._writing, None
+        if writing and writing[0] is self._held and self._log.tell() != writing[1]:
+            self._held = writing[0][writing[2]:]  # written, its bookkeeping cut: not again
+            self._kept.extend(cells for cells, _ in writing[0][:writing[2]])
         held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
@@ -311,6 +316,7 @@ class RunRecorder:
                 kept.append((cells, line))
             text = b"".join(line for _, line in kept)
         at = self._log.tell()
+        self._writing = (held, at, len(held))  # one store: an interrupt's trace (above)
         try:
             _write_all(self._log, text)
         finally:  # the file grew: written, even if a signal's KeyboardInterrupt followed
@@ -318,6 +324,7 @@ class RunRecorder:
                 self._held = []
                 for cells, line in kept:
                     self._kept.add(cells, line)
+            self._writing = None
 
     def kept_columns(self) -> dict[str, np.ndarray] | None:
         """The columns of the rows written, as :func:`read_run` would parse them from

@@ -201,3 +201,73 @@ def test_the_events_encoder_writes_what_json_dumps_wrote():
                   **{f"f{i}": rng.choice(values) for i in range(rng.randint(0, 5))}}
         assert rundir._EVENT_JSON.encode(record) == json.dumps(
             record, default=rundir._json_default, separators=(",", ":"))
+
+
+@pytest.mark.parametrize("bad", [{"mode": "tr\udcffack"},  # a lone surrogate: not UTF-8
+                                 {"gmres_iterations": 10 ** 400}])  # float() overflows
+def test_a_row_that_cannot_be_written_is_refused_at_once_not_held(tmp_path, bad):
+    """Held, such a row failed the whole block at its write (the error at a later row or at
+    close, every row of the block lost): it is refused at write_row, as one row a write."""
+    rows = [{"t_s": k * 0.0625, "mode": "track", "gmres_iterations": 3} for k in range(10)]
+    rows[5] = {**rows[5], **bad}
+    outcome = []
+    for rows_per_write in (1, 64):
+        rec = RunRecorder.create(tmp_path / str(rows_per_write), CFG, seed=0,
+                                 rows_per_write=rows_per_write)
+        refused = []
+        with rec:
+            for i, row in enumerate(rows):
+                try:
+                    rec.write_row(row)
+                except (ValueError, OverflowError) as err:
+                    refused.append((i, type(err).__name__, str(err)))
+        outcome.append(((rec.path / LOG_FILE).read_bytes(), refused))
+    assert outcome[1] == outcome[0]
+    assert [i for i, *_ in outcome[0][1]] == [5]
+    assert outcome[0][0].count(b"\n") == 1 + 9  # the header and the nine good rows
+
+
+@pytest.mark.parametrize("go_on", [False, True])
+def test_an_interrupt_in_the_bookkeeping_after_the_blocks_write_repeats_no_row(tmp_path,
+                                                                               go_on):
+    """A KeyboardInterrupt landing after the block reached the file but before the recorder
+    noted it (here: as the write's ``finally`` asks the file's position) — close, or the
+    next block, must not write those rows again; rows held since are still written."""
+    rng = random.Random(8)
+    rows = [_tick_like(rng, k) for k in range(150)]
+    expected = _write(tmp_path, rows, 1, "one")[0]
+    rec = RunRecorder.create(tmp_path / "block", CFG, seed=0, rows_per_write=64)
+    log = rec._log
+    interrupt = {"armed": False, "blocks": 0}
+
+    class Log:  # the real file, its tell() interrupted once after the first block's write
+        closed = property(lambda self: log.closed)
+
+        def write(self, data):
+            n = log.write(data)
+            interrupt["blocks"] += 1
+            interrupt["armed"] = interrupt["blocks"] == 1
+            return n
+
+        def tell(self):
+            if interrupt["armed"]:
+                interrupt["armed"] = False
+                raise KeyboardInterrupt
+            return log.tell()
+
+        def close(self):
+            log.close()
+
+    rec._log = Log()
+    n = 0
+    with pytest.raises(KeyboardInterrupt):
+        for n, row in enumerate(rows, 1):
+            rec.write_row(row)
+    assert n == 64
+    if go_on:  # a caller that goes on writing (the next block settles the interrupted one)
+        for row in rows[n:]:
+            rec.write_row(row)
+    rec.close()
+    text = (rec.path / LOG_FILE).read_bytes()
+    assert text == (expected if go_on else expected[:len(text)])
+    assert text.count(b"\n") == 1 + (len(rows) if go_on else 64)

@@ -221,3 +221,24 @@ def test_a_wrapper_forwarding_attributes_gets_dict_rows():
     lockstep.run_lockstep(_cfg(*FLIGHTS[0]), recorder=tee)
     assert tee.seen and len(tee.seen) == len(inner.rows)
     assert all(r.__class__ is dict for r in inner._rows)
+
+
+@pytest.mark.parametrize("slot, value", [
+    (LOG_COLUMNS.index("gmres_iterations"), 10 ** 400),  # float() overflows: OverflowError
+    (MODE_CELL, "tr\udcffack"),  # a lone surrogate: not UTF-8 (UnicodeEncodeError)
+])
+def test_a_cell_that_cannot_be_printed_is_refused_at_once_not_held(tmp_path, slot, value):
+    """Held, such a row failed its whole block at the block's write (the error at a later
+    row or at close): write_cells refuses it at once, as write_row one row a write does."""
+    cfg = _cfg(*FLIGHTS[0])
+    cells = list(_a_cells_row())
+    cells[slot] = value
+    errors = []
+    for name, write, rows_per_write in (("cells", "write_cells", 64), ("dict", "write_row", 1)):
+        rec = RunRecorder.create(tmp_path / name, cfg, seed=0, rows_per_write=rows_per_write,
+                                 durable=False)
+        with rec, pytest.raises((ValueError, OverflowError)) as err:
+            getattr(rec, write)(list(cells) if write == "write_cells" else cells_row(cells))
+        errors.append((type(err.value), str(err.value)))
+        assert rec.rows_written == 0
+    assert errors[0] == errors[1]
