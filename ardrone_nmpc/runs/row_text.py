@@ -184,14 +184,7 @@ class BlockCheck:
         for i in int_slots:  # a lockstep row's two iteration counts
             if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
                 return False
-        strings = _STRING_CELLS(cells)
-        if strings not in self._strings:
-            if _SUSPECT.search("".join(strings)) is not None:
-                return False
-            if len(self._strings) >= self._LIMIT:
-                self._strings.clear()
-            self._strings.add(strings)
-        return True
+        return self._plain_strings(_STRING_CELLS(cells))
 
     def tick_cells(self, cells: list) -> bool:
         """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
@@ -216,6 +209,10 @@ class BlockCheck:
         strings = _STRING_CELLS(cells)
         if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
             return False
+        return self._plain_strings(strings)
+
+    def _plain_strings(self, strings: tuple) -> bool:
+        """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
         if strings not in self._strings:
             if _SUSPECT.search("".join(strings)) is not None:
                 return False
