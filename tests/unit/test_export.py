@@ -418,7 +418,6 @@ def test_a_ctrl_c_inside_the_writers_write_is_reported_as_the_interrupt(after):
     error once replaced the Ctrl-C (export exited 1 with a traceback instead of 130)."""
     from ardrone_nmpc.runs.foxglove_channels import write_mcap_messages
 
-    pytest.importorskip("foxglove")
     row = {"t_s": 0.0, "x_m": 1.0, "y_m": 0.0, "z_m": 1.0, "psi_rad": 0.0}
     messages = [(k * 65_000_000, topic, data) for k in range(2000)
                 for topic, data in ch.row_messages(dict(row, t_s=0.065 * k), ch.PathBuilder())]
