@@ -32,7 +32,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import MODE_CELL, cells_row, put_truth, put_truth_cells
+from ardrone_nmpc.runs.log_columns import MODE_CELL, put_truth, put_truth_cells
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
@@ -252,7 +252,8 @@ def _record(recorder, row: dict, drone: LockstepDrone) -> None:
 
 
 def _record_out(recorder, out, drone: LockstepDrone, mode: str) -> None:
-    """Record a tick's output (its cells or its dict row) labelled ``mode``."""
+    """Record a tick's output (its cells or its dict row) labelled ``mode``; a tick hands
+    cells only when the recorder takes them, or there is none (``_fly``)."""
     cells = out.cells
     if cells is None:
         out.row["mode"] = mode
@@ -260,11 +261,7 @@ def _record_out(recorder, out, drone: LockstepDrone, mode: str) -> None:
     elif recorder is not None:
         cells[MODE_CELL] = mode
         put_truth_cells(cells, drone.truth_cells())
-        write_cells = _cell_sink(recorder)
-        if write_cells is not None:
-            write_cells(cells)
-        else:  # pragma: no cover - cell rows are only asked of such recorders
-            recorder.write_row(cells_row(cells))
+        recorder.write_cells(cells)
 
 
 def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_start,

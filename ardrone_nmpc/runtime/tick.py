@@ -174,18 +174,15 @@ class Tick:
             self.offset.update(x, solution, sent)
         label = sup.record(sent.decision, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
+        events = sup.take_events()  # a list of its own: extended, not copied
+        if adapted:
+            events += adapted
         if self.cell_rows:
             cells = tick_cells(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x,
                                solution=solution, sent=sent, mode=label, compute_us=compute_us)
             if cells is not None:
-                events = sup.take_events()
-                if adapted:
-                    events += adapted
                 return TickOutput(sent.pcmd, sent.progressive, None, sent.decision.action,
                                   events, cells)
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
-        events = sup.take_events()  # a list of its own: extended, not copied
-        if adapted:
-            events += adapted
         return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action, events)
