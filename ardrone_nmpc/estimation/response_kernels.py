@@ -9,6 +9,14 @@ are the C library's ``exp`` (``math.exp`` in Python, the same function): numpy's
 ``exp`` is chosen by the CPU at run time and differs in the last bit on AVX-512 machines
 from the one on AVX2 machines (4.6 % of arguments), which made the fit, and the flights it
 steers, depend on the CPU (docs/solver-notes.md §9).
+
+Those exponentials, 372 a sample, were most of the step's cost. Their arguments repeat: a
+decay's is ``−d/τ`` with d a sample's time, less a delay, less a command's time — times
+rounded to the microsecond, commands and samples on fixed periods — and a 60 s square sees
+some 400 distinct values of d (exact doubles) among 59 000. :func:`lag_decays` keeps the
+decays of the recent ones in a small cache in the state (:func:`memo_decays`): a value found
+there was made by the same ``math.exp`` of the same argument, so it is the same bits; one not
+found is computed and stored. The cache only saves time; what it holds never changes a bit.
 """
 
 from __future__ import annotations
@@ -22,17 +30,18 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_CAPACITY", "S_COUNT",
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT",
            "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS",
            "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY",
-           "S_WINDOW", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
-           "new_state", "state_size"]
+           "S_WINDOW", "S_Y", "TIMES_ROUNDED", "feed", "fit_grid", "fit_size", "fold_sample",
+           "lag_decays", "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
 # slots, the fit's fixed parameters among them), then Σx, Σx², Σx·y, the model values x (each
-# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), and
-# last the grid: the delays (K) and the lags (L). Built once by :func:`new_state`.
+# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), the
+# decays' cache (MEMO_SETS × 2 slots of a d and its L decays) and last the grid: the delays (K)
+# and the lags (L). Built once by :func:`new_state`.
 S_N = 0              # the samples' effective number
 S_LAST_T = 1         # the last sample's time (NaN before the first)
 S_COUNT = 2          # commands held
@@ -54,18 +63,25 @@ S_WINDOW = 25        # the forgetting's time constant (s; inf: none)
 S_REFRESH = 26       # samples between refreshes of the best grid point
 S_DELAYS = 27        # the delays' number (K)
 S_LAGS = 28          # the lags' number (L)
-HEAD = 29
+S_BITS = 29          # scratch: a double whose bits the cache hashes (memo_decays)
+HEAD = 30
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
 CMD_SEND = 2
+#: Added to ``cmd_kind``: the times passed are rounded to the microsecond already (:func:`feed`).
+TIMES_ROUNDED = 4
+#: The decays' cache: sets of two slots, a slot's set picked by a hash of d's bits. A 60 s
+#: square's ~400 values of d miss it ~440 times (each miss 6 exponentials) of 59 000.
+MEMO_SETS = 512
+_HASH = np.int64(-7046029254386353131)  # 0x9E3779B97F4A7C15 (Fibonacci hashing), as int64
 _DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 
 
 def state_size(delays: int, lags: int, capacity: int) -> int:
     """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
     return (HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
-            + delays + lags)
+            + 2 * MEMO_SETS * (1 + lags) + delays + lags)
 
 
 def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max_rad: float,
@@ -79,7 +95,15 @@ def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max
     state[S_DELAYS], state[S_LAGS] = K, L
     state[state.size - K - L:state.size - L] = delays_s
     state[state.size - L:] = lags_s
+    memo_view(state)[:, 0] = math.nan  # no key: NaN equals nothing
     return state
+
+
+def memo_view(state: np.ndarray) -> np.ndarray:
+    """The decays' cache of a state buffer: (2 · MEMO_SETS, 1 + L) rows of a d and its decays."""
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
+    end = state.size - K - L
+    return state[end - 2 * MEMO_SETS * (1 + L):end].reshape((2 * MEMO_SETS, 1 + L))
 
 
 def fit_size(delays: int, lags: int) -> int:
@@ -89,18 +113,60 @@ def fit_size(delays: int, lags: int) -> int:
 
 
 @njit(cache=True, **INNER_KERNEL)
+def memo_decays(d: float, lags_s: np.ndarray, memo: np.ndarray, bits: np.ndarray,
+                ints: np.ndarray) -> int:
+    """The row of the cache ``memo`` (:func:`memo_view`) whose columns 1 … L hold
+    ``exp(−d / lags_s[m])`` for every lag (the C library's ``exp``): found there when it holds
+    ``d``, otherwise computed and stored in the first slot of d's set (its former occupant
+    moved to the second, which is dropped).
+
+    A slot matches when its key equals d: the same double (or ±0, whose decays are all 1), so
+    the decays it holds are this d's, to the bit. NaN matches nothing. ``bits`` is a (1,)
+    float64 scratch (``S_BITS``) and ``ints`` its int64 view (made once by the caller: a
+    view costs an allocation): d's bits, hashed to the set."""
+    bits[0] = d
+    i = 2 * (((ints[0] * _HASH) >> 55) & (MEMO_SETS - 1))  # the top 9 bits of the product
+    if memo[i, 0] == d:
+        return i
+    if memo[i + 1, 0] == d:
+        return i + 1
+    memo[i + 1, 0] = memo[i, 0]
+    memo[i, 0] = d
+    for m in range(lags_s.size):
+        memo[i + 1, 1 + m] = memo[i, 1 + m]
+        memo[i, 1 + m] = math.exp(-d / lags_s[m])
+    return i
+
+
+@njit(cache=True, **INNER_KERNEL)
 def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
-               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray) -> None:
+               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray, memo: np.ndarray,
+               bits: np.ndarray, ints: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
     (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``decay_out``
-    (K, L) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``)."""
+    (K, L) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``,
+    through the cache ``memo``: :func:`memo_decays`)."""
     for k in range(delays_s.size):
         at = t_s - delays_s[k]
         j = count_at_or_below(times, n, at) - 1
         j_out[k] = j
-        d = at - times[j]
+        row = memo_decays(at - times[j], lags_s, memo, bits, ints)
         for m in range(lags_s.size):
-            decay_out[k, m] = math.exp(-d / lags_s[m])
+            decay_out[k, m] = memo[row, 1 + m]
+
+
+@njit(cache=True, **INNER_KERNEL)
+def microseconds(t_s: float) -> float:
+    """``round(t_s, 6)`` by ``attitude_response._microseconds``' shortcut (its docstring
+    argues it); −1 where the shortcut does not apply and Python's ``round`` must do it. The
+    nearest integer as ``floor(y + 0.5)``: it can differ from ``round(y)`` only near a half,
+    where |y − n| > ¼ refuses the shortcut either way."""
+    y = t_s * 1e6
+    if 1.0 <= y < 1099511627776.0:  # 2⁴⁰
+        n = float(math.floor(y + 0.5))
+        if abs(y - n) <= 0.25:
+            return n / 1e6
+    return -1.0
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -133,13 +199,27 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
          pitch_frac: float) -> int:
     """One tick of the streaming fit (its state and parameters ``state``, :func:`new_state`):
     ``AttitudeResponseEstimator``'s ``navdata``, then its ``command`` or ``restart`` — the same
-    expressions in the same order. Times are already rounded to the microsecond. Returns 0 if
+    expressions in the same order. The times are rounded to the microsecond here
+    (:func:`microseconds`) unless ``cmd_kind`` has :data:`TIMES_ROUNDED` added; where that
+    cannot round one it returns −1 at once, nothing changed, and the caller rounds them in
+    Python (``attitude_response._microseconds``) and calls again. Otherwise returns 0 if
     there was no sample or it could not be used, 1 if it was folded in, 2 if, moreover, the
     best grid point was refreshed (every ``S_REFRESH`` samples: the fit of the grid, as
     ``_fit`` makes it).
 
     One function, not one per step: every compiled level below an entry point costs its
     cold start a copy of the levels beneath (docs/solver-notes.md §5)."""
+    if cmd_kind >= TIMES_ROUNDED:
+        cmd_kind -= TIMES_ROUNDED
+    else:  # each time to the microsecond only where it is read
+        if has_sample:
+            sample_t_s = microseconds(sample_t_s)
+            if sample_t_s < 0.0:
+                return -1
+        if cmd_kind == CMD_SEND:
+            cmd_t_s = microseconds(cmd_t_s)
+            if cmd_t_s < 0.0:
+                return -1
     K, L = int(state[S_DELAYS]), int(state[S_LAGS])
     capacity = int(state[S_CAPACITY])
     euler_max_rad = state[S_EULER_MAX]
@@ -162,6 +242,10 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     u = state[o:o + 2 * capacity].reshape((capacity, 2))
     o += 2 * capacity
     ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
+    o += capacity * L * 2
+    memo = state[o:o + 2 * MEMO_SETS * (1 + L)].reshape((2 * MEMO_SETS, 1 + L))
+    bits = state[S_BITS:S_BITS + 1]
+    ints = bits.view(np.int64)
     code = 0
     n = int(state[S_COUNT])
     # --- the navdata sample (``navdata``)
@@ -172,7 +256,7 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
                            or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
         t_s = sample_t_s
         j = np.empty(K, dtype=np.int64)  # each delay's command
-        lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
+        lag_decays(t, n, t_s, delays_s, lags_s, j, decay, memo, bits, ints)
         forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
         state[S_LAST_T] = t_s
         y = state[S_Y:S_Y + 2]
@@ -239,8 +323,9 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
                             ylag[i, m, a] = ylag[n - keep + i, m, a]
                 n = keep
             t0 = t[n - 1]
+            row = memo_decays(t_s - t0, lags_s, memo, bits, ints)  # exp(−(t_s − t0) / τ)
             for m in range(L):  # the lags' outputs, from the last command's
-                dec = math.exp(-(t_s - t0) / lags_s[m])
+                dec = memo[row, 1 + m]
                 for a in range(2):
                     ua = u[n - 1, a]
                     ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
