@@ -133,8 +133,8 @@ _SHORTCUT_MAX_US = 2.0 ** 40
 def _microseconds(t_s: float) -> float:
     """A time to the microsecond: the same sample, its time gone through a log's ms ages and
     back (``replay --rerun``), is the same time, and the fit the same bits. (The compiled
-    step rounds by the same shortcut, ``response_kernels.microseconds``, and leaves the times
-    it does not apply to here.)
+    step rounds the tick's times itself, ``response_kernels.microseconds``, the same bits,
+    and leaves those below 1 µs or beyond 2⁴⁰ µs to this.)
 
     ``round(t, 6)``'s value, at half its cost (the tick rounds two times): ``round`` rounds
     the exact t·10⁶ to an integer n (ties to even) and returns the double nearest n·10⁻⁶. When
@@ -207,7 +207,7 @@ class AttitudeResponseEstimator:
         (``cmd_kind`` :data:`~.response_kernels.CMD_SEND`), a :meth:`restart`
         (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
         # the kernel rounds each time to the microsecond where it reads it, or answers −1
-        # (nothing done) for Python's round to do it (a time near a half µs, below 1 µs, …)
+        # (nothing done) for Python's round to do it (a time below 1 µs: a flight's start)
         if sample_t_s is None:
             has, sample_t_s = False, 0.0
         else:

@@ -31,6 +31,12 @@ _VEL = (IX_VX, IX_VY, IX_VZ)
 _NO_PREVIEW = np.zeros((0, 7))
 # the rows of ReferenceIntegrator._carry: what each axis carries from one update to the next
 _LAST, _REST_S, _INTEGRAL, _REST_LO, _REST_HI = range(5)
+# ReferenceIntegrator._work, one float64 buffer (one argument of _integrate, not six: numba's
+# dispatch costs ~50–100 ns an argument, issue 26): the law (4 axes × 8), the carry (5 × 4),
+# the shift (4), the last ψ error (1) and the period (1)
+_W_LAW, _W_CARRY, _W_SHIFT, _W_PSI, _W_PERIOD = 0, 32, 52, 56, 57
+_W_SIZE = 58
+_NONE_FROZEN = (False, False, False, False)
 _REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
 #: to control_vz_max before the mapping, so the gaz flag alone would never show it).
@@ -57,9 +63,13 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
     so either one on its limit freezes both; gaz freezes z, yaw ψ.
     """
     roll, pitch, gaz, yaw = pcmd_fracs  # spelled out: two list comprehensions cost µs a tick
+    if (-SATURATION_FRAC < roll < SATURATION_FRAC and -SATURATION_FRAC < pitch < SATURATION_FRAC
+            and -SATURATION_FRAC < gaz < SATURATION_FRAC
+            and -SATURATION_FRAC < yaw < SATURATION_FRAC and (not flags or flags == "0000")):
+        return _NONE_FROZEN  # the usual tick: all inside, nothing flagged (a NaN goes below)
     s0, s1 = abs(roll) >= SATURATION_FRAC, abs(pitch) >= SATURATION_FRAC
     s2, s3 = abs(gaz) >= SATURATION_FRAC, abs(yaw) >= SATURATION_FRAC
-    if flags and flags != "0000":  # the usual tick: nothing flagged
+    if flags and flags != "0000":
         c0, c1, c2, c3 = flags
         s0, s1, s2, s3 = (s0 or c0 == "1", s1 or c1 == "1", s2 or c2 == "1", s3 or c3 == "1")
     tilt = s0 or s1
@@ -67,15 +77,23 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def _integrate(x, ref, frozen, preview, law, carry, psi, latched, learning, shift, period):
+def _integrate(x, ref, frozen, preview, work, flags):
     """:meth:`ReferenceIntegrator.update`'s law, compiled: one period of every axis.
 
-    ``law`` (4, 8): error band, speed band, steady band, release speed, hold, ki, kp, max
-    shift per axis; ``carry`` (5, 4) the rows ``_LAST`` … ``_REST_HI``; ``psi`` (1,) the last
-    ψ error (NaN before the first); ``latched``, ``learning``, ``shift`` (4,) in place.
+    ``work`` (:data:`_W_SIZE`) holds the law (4, 8): error band, speed band, steady band,
+    release speed, hold, ki, kp, max shift per axis; the carry (5, 4), the rows ``_LAST`` …
+    ``_REST_HI``; the shift (4); the last ψ error (NaN before the first); the period.
+    ``flags`` (2, 4) are the axes latched and learning. All in place.
     Python's ``min``/``max`` are spelled out (the first argument unless the second is
     strictly beyond it), so a NaN goes where it went in Python.
     """
+    law = work[_W_LAW:_W_CARRY].reshape((4, 8))
+    carry = work[_W_CARRY:_W_SHIFT].reshape((5, 4))
+    shift = work[_W_SHIFT:_W_PSI]
+    psi = work[_W_PSI:_W_PERIOD]
+    period = work[_W_PERIOD]
+    latched = flags[0]
+    learning = flags[1]
     pos = _POS
     e = np.empty(4)
     rate = np.zeros(4)
@@ -164,17 +182,31 @@ class ReferenceIntegrator:
         self.error_band = _per_axis(error_band)
         self.speed_band = _per_axis(speed_band)
         self.max_shift = _per_axis(max_shift)
-        self.period_s = float(period_s)
-        self.shift = np.zeros(n)
-        self.learning = np.zeros(n, dtype=bool)  # which axes integrated on the last update
-        self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
+        # what _integrate reads and writes, in two buffers (_W_*); the names are views
+        work = self._work = np.zeros(_W_SIZE)
+        flags = self._flags = np.zeros((2, n), dtype=bool)
+        self.shift = work[_W_SHIFT:_W_PSI]
+        self.latched = flags[0]  # learning until the error or reference moves
+        self.learning = flags[1]  # which axes integrated on the last update
         # the law per axis (rows of _integrate's law) and what it carries between updates
-        self._law = np.ascontiguousarray(np.stack((
+        self._law = work[_W_LAW:_W_CARRY].reshape(n, 8)
+        self._law[:] = np.stack((
             self.error_band, self.speed_band, self.steady_band, self.release_speed,
-            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1))
-        self._carry = np.zeros((5, n))
+            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1)
+        self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, n)
         self._carry[_LAST] = math.nan  # the reference components of the last update
-        self._last_error_psi = np.array([math.nan])
+        self._last_error_psi = work[_W_PSI:_W_PERIOD]
+        self._last_error_psi[0] = math.nan
+        self.period_s = period_s
+
+    @property
+    def period_s(self) -> float:
+        """The integration step (s), held in the kernel's buffer."""
+        return float(self._work[_W_PERIOD])
+
+    @period_s.setter
+    def period_s(self, period_s: float) -> None:
+        self._work[_W_PERIOD] = float(period_s)
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
@@ -214,9 +246,8 @@ class ReferenceIntegrator:
              preview: np.ndarray | None) -> np.ndarray:
         """:meth:`update` for the tick: ``x``, ``ref`` (7,) and ``preview`` (n, 7) float64
         arrays (or None), ``frozen`` four bools — no conversions."""
-        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._law,
-                   self._carry, self._last_error_psi, self.latched, self.learning, self.shift,
-                   self.period_s)
+        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._work,
+                   self._flags)
         return self.shift
 
     def shifted(self, states: np.ndarray) -> np.ndarray:

@@ -157,16 +157,29 @@ def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
 
 @njit(cache=True, **INNER_KERNEL)
 def microseconds(t_s: float) -> float:
-    """``round(t_s, 6)`` by ``attitude_response._microseconds``' shortcut (its docstring
-    argues it); −1 where the shortcut does not apply and Python's ``round`` must do it. The
-    nearest integer as ``floor(y + 0.5)``: it can differ from ``round(y)`` only near a half,
-    where |y − n| > ¼ refuses the shortcut either way."""
+    """``round(t_s, 6)``, to the bit, for 1 µs ≤ t_s < 2⁴⁰ µs; −1 elsewhere (NaN included),
+    where Python's ``round`` must do it (``attitude_response._microseconds``).
+
+    ``round`` rounds the exact t·10⁶ to an integer n, ties to even, and returns the double
+    nearest n·10⁻⁶. Here: y = t·10⁶ rounded and its error e (exact: Dekker's product, 10⁶
+    splitting into itself), so t·10⁶ = y + e exactly; with n₀ = ⌊y⌋, f = y − n₀ ∈ [0, 1)
+    and f − ½ are exact (multiples of y's ulp ≤ 2⁻¹²), and the sign of (f − ½) + e is that of
+    the exact sum (a rounded sum is 0 only when the exact one is): above ½ n₀ + 1, below n₀,
+    at ½ the even one. n < 2⁵³ and 10⁶ are exact doubles, so n / 10⁶ (correctly rounded) is
+    the double nearest n·10⁻⁶. The tick's times are rarely within ¼ µs of a whole one (a
+    navdata period of ⅓ ms is not), so ``_microseconds``' shortcut alone would not do."""
     y = t_s * 1e6
-    if 1.0 <= y < 1099511627776.0:  # 2⁴⁰
-        n = float(math.floor(y + 0.5))
-        if abs(y - n) <= 0.25:
-            return n / 1e6
-    return -1.0
+    if not 1.0 <= y < 1099511627776.0:  # 2⁴⁰
+        return -1.0
+    c = 134217729.0 * t_s  # Veltkamp's split of t into 26 + 27 bits (2²⁷ + 1)
+    hi = c - (c - t_s)
+    lo = t_s - hi
+    e = (hi * 1e6 - y) + lo * 1e6  # each product exact: 10⁶ has 20 bits
+    n = math.floor(y)
+    s = ((y - n) - 0.5) + e
+    if s > 0.0 or (s == 0.0 and n % 2 == 1):
+        n += 1
+    return n / 1e6
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -200,9 +213,9 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     """One tick of the streaming fit (its state and parameters ``state``, :func:`new_state`):
     ``AttitudeResponseEstimator``'s ``navdata``, then its ``command`` or ``restart`` — the same
     expressions in the same order. The times are rounded to the microsecond here
-    (:func:`microseconds`) unless ``cmd_kind`` has :data:`TIMES_ROUNDED` added; where that
-    cannot round one it returns −1 at once, nothing changed, and the caller rounds them in
-    Python (``attitude_response._microseconds``) and calls again. Otherwise returns 0 if
+    (:func:`microseconds`, ``round(t, 6)``) unless ``cmd_kind`` has :data:`TIMES_ROUNDED`
+    added; where that does not answer (a time below 1 µs) it returns −1 at once, nothing
+    changed, and the caller rounds them in Python and calls again. Otherwise returns 0 if
     there was no sample or it could not be used, 1 if it was folded in, 2 if, moreover, the
     best grid point was refreshed (every ``S_REFRESH`` samples: the fit of the grid, as
     ``_fit`` makes it).

@@ -125,26 +125,28 @@ def test_the_decays_cache_holds_the_exponentials_of_its_keys_bit_for_bit():
     assert np.isnan(memo[memo_decays(math.nan, lags, memo, bits, ints), 1:]).all()
 
 
-def test_the_kernels_microseconds_is_the_pythons_where_it_answers():
-    """``response_kernels.microseconds`` is ``_microseconds`` (so ``round(t, 6)``) wherever
-    it does not refuse (−1), and refuses exactly where ``_microseconds``' shortcut does."""
+def test_the_kernels_microseconds_is_round_to_six_decimals_bit_for_bit():
+    """``response_kernels.microseconds`` is ``round(t, 6)`` wherever it answers — random
+    times, a navdata period's thirds of a ms, exact ties (q/128: t·10⁶ ends in ·5), the halves
+    of a microsecond and their neighbours — and refuses (−1) exactly outside 1 µs … 2⁴⁰ µs."""
     import random
-
-    from ardrone_nmpc.estimation.attitude_response import _microseconds
 
     rng = random.Random(5)
     times = [rng.uniform(0.0, 1e4) for _ in range(50_000)]
     times += [0.065 * rng.randrange(10**6) for _ in range(10_000)]
+    times += [rng.randrange(1, 10**10) / 3e6 for _ in range(10_000)]
+    times += [q / 128 for q in range(1, 40_000, 2)]
     for _ in range(10_000):
         k = rng.randrange(10**10)
         for t in ((k + 0.5) / 1e6, (k + 0.25) / 1e6, k / 1e6):
             times += [t, math.nextafter(t, -math.inf), math.nextafter(t, math.inf)]
     times += [rng.uniform(-10.0, 10.0) for _ in range(5_000)]
-    times += [0.0, -0.0, 1e-7, 5e-7, 1e-6, 1.5e-6, 2.0 ** 40 / 1e6, 1e12, math.inf, math.nan]
+    times += [0.0, -0.0, 1e-7, 5e-7, 1e-6, 1.5e-6, 2.0 ** 40 / 1e6,
+              math.nextafter(2.0 ** 40 / 1e6, 0.0), 1e12, math.inf, -math.inf, math.nan]
     for t in times:
         got = microseconds(t)
-        y = t * 1e6
-        shortcut = 1.0 <= y < 2.0 ** 40 and abs(y - round(y)) <= 0.25
-        assert (got != -1.0) == shortcut, t  # refused exactly where Python rounds itself
-        if shortcut:
-            assert got == _microseconds(t) and math.copysign(1.0, got) == 1.0, t
+        answers = 1.0 <= t * 1e6 < 2.0 ** 40
+        assert (got != -1.0) == answers, t
+        if answers:
+            want = round(t, 6)
+            assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want), t
