@@ -188,22 +188,36 @@ def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarra
                 sxy: np.ndarray) -> None:
     """The model value ``x`` (K, L, 2) of a sample at every grid point — the lag's output
     ``u + (y_lag − u)·decay`` from the command ``j[k]`` — and its sums, first faded by
-    ``forget`` (unless it is 1): Σx, Σx², Σx·y."""
+    ``forget`` (unless it is 1): Σx, Σx², Σx·y.
+
+    Each element's expressions as numpy's broadcast wrote them; what is read more than once
+    (the command, the decay, y) is read once into a local — the same doubles — and the
+    fading's test is made once, not per element."""
+    y0, y1 = y[0], y[1]
     scale = forget != 1.0
     for k in range(decay.shape[0]):
         jk = j[k]
+        u0, u1 = u[jk, 0], u[jk, 1]
         for m in range(decay.shape[1]):
-            for a in range(2):
-                uu = u[jk, a]
-                v = uu + (ylag[jk, m, a] - uu) * decay[k, m]
-                x[k, m, a] = v
-                if scale:
-                    sx[k, m, a] *= forget
-                    sxx[k, m, a] *= forget
-                    sxy[k, m, a] *= forget
-                sx[k, m, a] += v
-                sxx[k, m, a] += v * v
-                sxy[k, m, a] += v * y[a]
+            dk = decay[k, m]
+            v0 = u0 + (ylag[jk, m, 0] - u0) * dk
+            v1 = u1 + (ylag[jk, m, 1] - u1) * dk
+            x[k, m, 0] = v0
+            x[k, m, 1] = v1
+            if scale:
+                sx[k, m, 0] = sx[k, m, 0] * forget + v0
+                sx[k, m, 1] = sx[k, m, 1] * forget + v1
+                sxx[k, m, 0] = sxx[k, m, 0] * forget + v0 * v0
+                sxx[k, m, 1] = sxx[k, m, 1] * forget + v1 * v1
+                sxy[k, m, 0] = sxy[k, m, 0] * forget + v0 * y0
+                sxy[k, m, 1] = sxy[k, m, 1] * forget + v1 * y1
+            else:
+                sx[k, m, 0] += v0
+                sx[k, m, 1] += v1
+                sxx[k, m, 0] += v0 * v0
+                sxx[k, m, 1] += v1 * v1
+                sxy[k, m, 0] += v0 * y0
+                sxy[k, m, 1] += v1 * y1
 
 
 @njit(cache=True, **OUTER_KERNEL)
