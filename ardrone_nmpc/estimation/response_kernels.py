@@ -115,27 +115,28 @@ def fit_size(delays: int, lags: int) -> int:
 @njit(cache=True, **INNER_KERNEL)
 def memo_decays(d: float, lags_s: np.ndarray, memo: np.ndarray, bits: np.ndarray,
                 ints: np.ndarray) -> int:
-    """The row of the cache ``memo`` (:func:`memo_view`) whose columns 1 … L hold
-    ``exp(−d / lags_s[m])`` for every lag (the C library's ``exp``): found there when it holds
-    ``d``, otherwise computed and stored in the first slot of d's set (its former occupant
-    moved to the second, which is dropped).
+    """Where in the cache ``memo`` (:func:`memo_view`, flat: rows of 1 + L) ``exp(−d / τ)``
+    of every lag τ starts (the C library's ``exp``; lag m at the answer + m): found there
+    when it holds ``d``, otherwise computed and stored in the first slot of d's set (its
+    former occupant moved to the second, which is dropped).
 
     A slot matches when its key equals d: the same double (or ±0, whose decays are all 1), so
     the decays it holds are this d's, to the bit. NaN matches nothing. ``bits`` is a (1,)
     float64 scratch (``S_BITS``) and ``ints`` its int64 view (made once by the caller: a
     view costs an allocation): d's bits, hashed to the set."""
+    w = lags_s.size + 1
     bits[0] = d
-    i = 2 * (((ints[0] * _HASH) >> 55) & (MEMO_SETS - 1))  # the top 9 bits of the product
-    if memo[i, 0] == d:
-        return i
-    if memo[i + 1, 0] == d:
+    i = 2 * w * (((ints[0] * _HASH) >> 55) & (MEMO_SETS - 1))  # the top 9 bits of the product
+    if memo[i] == d:
         return i + 1
-    memo[i + 1, 0] = memo[i, 0]
-    memo[i, 0] = d
+    if memo[i + w] == d:
+        return i + w + 1
+    for c in range(w):  # the first slot to the second
+        memo[i + w + c] = memo[i + c]
+    memo[i] = d
     for m in range(lags_s.size):
-        memo[i + 1, 1 + m] = memo[i, 1 + m]
-        memo[i, 1 + m] = math.exp(-d / lags_s[m])
-    return i
+        memo[i + 1 + m] = math.exp(-d / lags_s[m])
+    return i + 1
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -144,15 +145,16 @@ def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
                bits: np.ndarray, ints: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
     (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``decay_out``
-    (K, L) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``,
-    through the cache ``memo``: :func:`memo_decays`)."""
+    (K × L, flat) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's
+    ``exp``, through the cache ``memo``: :func:`memo_decays`)."""
+    L = lags_s.size
     for k in range(delays_s.size):
         at = t_s - delays_s[k]
         j = count_at_or_below(times, n, at) - 1
         j_out[k] = j
-        row = memo_decays(at - times[j], lags_s, memo, bits, ints)
-        for m in range(lags_s.size):
-            decay_out[k, m] = memo[row, 1 + m]
+        r = memo_decays(at - times[j], lags_s, memo, bits, ints)
+        for m in range(L):
+            decay_out[k * L + m] = memo[r + m]
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -186,38 +188,44 @@ def microseconds(t_s: float) -> float:
 def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
                 y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
                 sxy: np.ndarray) -> None:
-    """The model value ``x`` (K, L, 2) of a sample at every grid point — the lag's output
+    """The model value ``x`` (K × L × 2) of a sample at every grid point — the lag's output
     ``u + (y_lag − u)·decay`` from the command ``j[k]`` — and its sums, first faded by
-    ``forget`` (unless it is 1): Σx, Σx², Σx·y.
+    ``forget`` (unless it is 1): Σx, Σx², Σx·y. Every array flat, in C order: ``u`` (C × 2),
+    ``ylag`` (C × L × 2), ``decay`` (K × L), ``x`` and the sums (K × L × 2); K = ``j.size``.
+    (Flat: a compiled reshape costs a call of numba's C helper, ~50 ns each, a dozen a tick.)
 
     Each element's expressions as numpy's broadcast wrote them; what is read more than once
     (the command, the decay, y) is read once into a local — the same doubles — and the
     fading's test is made once, not per element."""
     y0, y1 = y[0], y[1]
+    K = j.size
+    L = decay.size // K
     scale = forget != 1.0
-    for k in range(decay.shape[0]):
+    for k in range(K):
         jk = j[k]
-        u0, u1 = u[jk, 0], u[jk, 1]
-        for m in range(decay.shape[1]):
-            dk = decay[k, m]
-            v0 = u0 + (ylag[jk, m, 0] - u0) * dk
-            v1 = u1 + (ylag[jk, m, 1] - u1) * dk
-            x[k, m, 0] = v0
-            x[k, m, 1] = v1
+        u0, u1 = u[2 * jk], u[2 * jk + 1]
+        for m in range(L):
+            dk = decay[k * L + m]
+            g = 2 * (jk * L + m)  # (jk, m, 0) in ylag
+            e = 2 * (k * L + m)   # (k, m, 0) in x and the sums
+            v0 = u0 + (ylag[g] - u0) * dk
+            v1 = u1 + (ylag[g + 1] - u1) * dk
+            x[e] = v0
+            x[e + 1] = v1
             if scale:
-                sx[k, m, 0] = sx[k, m, 0] * forget + v0
-                sx[k, m, 1] = sx[k, m, 1] * forget + v1
-                sxx[k, m, 0] = sxx[k, m, 0] * forget + v0 * v0
-                sxx[k, m, 1] = sxx[k, m, 1] * forget + v1 * v1
-                sxy[k, m, 0] = sxy[k, m, 0] * forget + v0 * y0
-                sxy[k, m, 1] = sxy[k, m, 1] * forget + v1 * y1
+                sx[e] = sx[e] * forget + v0
+                sx[e + 1] = sx[e + 1] * forget + v1
+                sxx[e] = sxx[e] * forget + v0 * v0
+                sxx[e + 1] = sxx[e + 1] * forget + v1 * v1
+                sxy[e] = sxy[e] * forget + v0 * y0
+                sxy[e + 1] = sxy[e + 1] * forget + v1 * y1
             else:
-                sx[k, m, 0] += v0
-                sx[k, m, 1] += v1
-                sxx[k, m, 0] += v0 * v0
-                sxx[k, m, 1] += v1 * v1
-                sxy[k, m, 0] += v0 * y0
-                sxy[k, m, 1] += v1 * y1
+                sx[e] += v0
+                sx[e + 1] += v1
+                sxx[e] += v0 * v0
+                sxx[e + 1] += v1 * v1
+                sxy[e] += v0 * y0
+                sxy[e + 1] += v1 * y1
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -257,20 +265,21 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     lags_s = state[end - L:end]
     kl2 = K * L * 2
     o = HEAD
-    sx = state[o:o + kl2].reshape((K, L, 2))
-    sxx = state[o + kl2:o + 2 * kl2].reshape((K, L, 2))
-    sxy = state[o + 2 * kl2:o + 3 * kl2].reshape((K, L, 2))
-    x = state[o + 3 * kl2:o + 4 * kl2].reshape((K, L, 2))
+    # flat views, C order (no reshape: each costs a C call); the shapes in the comments
+    sx = state[o:o + kl2]  # (K, L, 2)
+    sxx = state[o + kl2:o + 2 * kl2]
+    sxy = state[o + 2 * kl2:o + 3 * kl2]
+    x = state[o + 3 * kl2:o + 4 * kl2]
     o += 4 * kl2
-    decay = state[o:o + K * L].reshape((K, L))
+    decay = state[o:o + K * L]  # (K, L)
     o += K * L
     t = state[o:o + capacity]
     o += capacity
-    u = state[o:o + 2 * capacity].reshape((capacity, 2))
+    u = state[o:o + 2 * capacity]  # (C, 2)
     o += 2 * capacity
-    ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
+    ylag = state[o:o + capacity * L * 2]  # (C, L, 2)
     o += capacity * L * 2
-    memo = state[o:o + 2 * MEMO_SETS * (1 + L)].reshape((2 * MEMO_SETS, 1 + L))
+    memo = state[o:o + 2 * MEMO_SETS * (1 + L)]  # (2 · MEMO_SETS, 1 + L)
     bits = state[S_BITS:S_BITS + 1]
     ints = bits.view(np.int64)
     code = 0
@@ -292,8 +301,9 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
         fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
         if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
             k, m = int(state[S_K]), int(state[S_L])
-            r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
-            r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
+            e = 2 * (k * L + m)
+            r0 = y0 - (state[S_G] * x[e] + state[S_B])
+            r1 = y1 - (state[S_G + 1] * x[e + 1] + state[S_B + 1])
             for i in range(3):
                 state[S_RES + i] *= forget
             if state[S_HAS_R] != 0.0:
@@ -344,25 +354,24 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
                 for i in range(keep):
                     t[i] = t[n - keep + i]
                     for a in range(2):
-                        u[i, a] = u[n - keep + i, a]
-                    for m in range(L):
-                        for a in range(2):
-                            ylag[i, m, a] = ylag[n - keep + i, m, a]
+                        u[2 * i + a] = u[2 * (n - keep + i) + a]
+                    for c in range(2 * L):
+                        ylag[2 * L * i + c] = ylag[2 * L * (n - keep + i) + c]
                 n = keep
             t0 = t[n - 1]
-            row = memo_decays(t_s - t0, lags_s, memo, bits, ints)  # exp(−(t_s − t0) / τ)
+            r = memo_decays(t_s - t0, lags_s, memo, bits, ints)  # exp(−(t_s − t0) / τ)
             for m in range(L):  # the lags' outputs, from the last command's
-                dec = memo[row, 1 + m]
+                dec = memo[r + m]
                 for a in range(2):
-                    ua = u[n - 1, a]
-                    ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
+                    ua = u[2 * (n - 1) + a]
+                    ylag[2 * (n * L + m) + a] = ua + (ylag[2 * ((n - 1) * L + m) + a] - ua) * dec
         else:  # no past: as if held for long
             for m in range(L):
-                ylag[n, m, 0] = u0
-                ylag[n, m, 1] = u1
+                ylag[2 * (n * L + m)] = u0
+                ylag[2 * (n * L + m) + 1] = u1
         t[n] = t_s
-        u[n, 0] = u0
-        u[n, 1] = u1
+        u[2 * n] = u0
+        u[2 * n + 1] = u1
         state[S_COUNT] = n + 1.0
     return code
 

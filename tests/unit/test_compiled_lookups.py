@@ -73,13 +73,15 @@ def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
     delays, lags = np.arange(0.0, 0.605, 0.01), np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
     sums = [rng.normal(size=(delays.size, lags.size, 2)) for _ in range(3)]
     # the decays' cache, cold for the first time and warm (every d seen) for its repeat
-    memo = np.full((2 * response_kernels.MEMO_SETS, 1 + lags.size), math.nan)
+    memo = np.full(2 * response_kernels.MEMO_SETS * (1 + lags.size), math.nan)
     bits = np.zeros(1)
     for t_s, forget in ((float(times[n - 1]) + 0.013, 0.97), (float(times[n - 1]), 1.0),
                         (float(times[n - 1]) + 0.013, 0.97)):
         j = np.zeros(delays.size, dtype=np.int64)
         decay = np.zeros((delays.size, lags.size))
-        lag_decays(times, n, t_s, delays, lags, j, decay, memo, bits, bits.view(np.int64))
+        # the kernels take flat arrays (views of these)
+        lag_decays(times, n, t_s, delays, lags, j, decay.reshape(-1), memo, bits,
+                   bits.view(np.int64))
         at = t_s - delays
         j_np = np.searchsorted(times[:n], at, side="right") - 1
         assert np.array_equal(j, j_np)
@@ -89,7 +91,8 @@ def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
         y = rng.normal(size=2)
         x = np.zeros_like(sums[0])
         expected = [s.copy() for s in sums]
-        fold_sample(u, ylag, j, decay, y, forget, x, *sums)
+        fold_sample(u.reshape(-1), ylag.reshape(-1), j, decay.reshape(-1), y, forget,
+                    x.reshape(-1), *(s.reshape(-1) for s in sums))
         uj = u[j_np][:, None, :]
         x_np = uj + (ylag[j_np] - uj) * decay[:, :, None]
         if forget != 1.0:
@@ -110,6 +113,7 @@ def test_the_decays_cache_holds_the_exponentials_of_its_keys_bit_for_bit():
     rng = np.random.default_rng(11)
     lags = np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
     memo = np.full((2 * response_kernels.MEMO_SETS, 1 + lags.size), math.nan)
+    flat = memo.reshape(-1)
     bits = np.zeros(1)
     ints = bits.view(np.int64)
     # µs-rounded differences and their last-bit neighbours (the flight's keys), repeated, in
@@ -117,12 +121,15 @@ def test_the_decays_cache_holds_the_exponentials_of_its_keys_bit_for_bit():
     base = np.round(rng.uniform(0.0, 0.07, 300), 6)
     keys = np.concatenate([base, np.nextafter(base, 1.0), np.nextafter(base, -1.0)])
     keys = np.concatenate([keys, [0.0, -0.0, math.nan, math.inf, -1.5, 1e300]])
+    width = 1 + lags.size
     for d in rng.choice(keys, 20_000):
-        row = memo_decays(d, lags, memo, bits, ints)
+        at = memo_decays(d, lags, flat, bits, ints)
+        row = at // width
+        assert at % width == 1
         want = np.array([math.exp(-d / tau) for tau in lags])
         assert memo[row, 1:].tobytes() == want.tobytes(), d
         assert row % 2 == 0 or memo[row, 0] == d
-    assert np.isnan(memo[memo_decays(math.nan, lags, memo, bits, ints), 1:]).all()
+    assert np.isnan(memo[memo_decays(math.nan, lags, flat, bits, ints) // width, 1:]).all()
 
 
 def test_the_kernels_microseconds_is_round_to_six_decimals_bit_for_bit():
