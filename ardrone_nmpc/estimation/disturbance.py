@@ -33,9 +33,10 @@ _NO_PREVIEW = np.zeros((0, 7))
 _LAST, _REST_S, _INTEGRAL, _REST_LO, _REST_HI = range(5)
 # ReferenceIntegrator._work, one float64 buffer (one argument of _integrate, not six: numba's
 # dispatch costs ~50–100 ns an argument, issue 26): the law (4 axes × 8), the carry (5 × 4),
-# the shift (4), the last ψ error (1) and the period (1)
-_W_LAW, _W_CARRY, _W_SHIFT, _W_PSI, _W_PERIOD = 0, 32, 52, 56, 57
-_W_SIZE = 58
+# the shift (4), the last ψ error (1), the period (1), and scratch for the errors and their
+# rates (4 each): read flat, no reshape or allocation in the kernel (each costs ~50 ns)
+_W_LAW, _W_CARRY, _W_SHIFT, _W_PSI, _W_PERIOD, _W_E, _W_RATE = 0, 32, 52, 56, 57, 58, 62
+_W_SIZE = 66
 _NONE_FROZEN = (False, False, False, False)
 _REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
@@ -82,64 +83,65 @@ def _integrate(x, ref, frozen, preview, work, flags):
 
     ``work`` (:data:`_W_SIZE`) holds the law (4, 8): error band, speed band, steady band,
     release speed, hold, ki, kp, max shift per axis; the carry (5, 4), the rows ``_LAST`` …
-    ``_REST_HI``; the shift (4); the last ψ error (NaN before the first); the period.
+    ``_REST_HI``; the shift (4); the last ψ error (NaN before the first); the period; scratch.
     ``flags`` (2, 4) are the axes latched and learning. All in place.
     Python's ``min``/``max`` are spelled out (the first argument unless the second is
     strictly beyond it), so a NaN goes where it went in Python.
     """
-    law = work[_W_LAW:_W_CARRY].reshape((4, 8))
-    carry = work[_W_CARRY:_W_SHIFT].reshape((5, 4))
-    shift = work[_W_SHIFT:_W_PSI]
-    psi = work[_W_PSI:_W_PERIOD]
+    c = _W_CARRY  # the carry's row r, axis k at c + 4·r + k
     period = work[_W_PERIOD]
     latched = flags[0]
     learning = flags[1]
     pos = _POS
-    e = np.empty(4)
-    rate = np.zeros(4)
+    e = work[_W_E:_W_E + 4]
+    rate = work[_W_RATE:_W_RATE + 4]
     for k in range(4):
         e[k] = x[pos[k]] - ref[pos[k]]
+        rate[k] = 0.0
     e[3] = wrap_half_turn(e[3], math.pi)
     for k in range(3):
         rate[k] = x[_VEL[k]]
-    if math.isfinite(psi[0]):
-        rate[3] = wrap_half_turn(e[3] - psi[0], math.pi) / period
-    psi[0] = e[3]
+    if math.isfinite(work[_W_PSI]):
+        rate[3] = wrap_half_turn(e[3] - work[_W_PSI], math.pi) / period
+    work[_W_PSI] = e[3]
     for k in range(4):
-        error_band, speed_band, steady_band, release = law[k, 0], law[k, 1], law[k, 2], law[k, 3]
-        hold, ki, kp, lim = law[k, 4], law[k, 5], law[k, 6], law[k, 7]
+        w = _W_LAW + 8 * k
+        error_band, speed_band, steady_band, release = work[w], work[w + 1], work[w + 2], work[w + 3]
+        hold, ki, kp, lim = work[w + 4], work[w + 5], work[w + 6], work[w + 7]
+        last, rest_s, integral = c + 4 * _LAST + k, c + 4 * _REST_S + k, c + 4 * _INTEGRAL + k
+        rest_lo, rest_hi = c + 4 * _REST_LO + k, c + 4 * _REST_HI + k
         ek, refk = e[k], ref[pos[k]]
         still = True
         for j in range(preview.shape[0]):
             if not abs(preview[j, pos[k]] - refk) <= _REF_STILL:
                 still = False
-        moved = abs(refk - carry[_LAST, k]) > _REF_STILL or not still  # first update: NaN
-        carry[_LAST, k] = refk
+        moved = abs(refk - work[last]) > _REF_STILL or not still  # first update: NaN
+        work[last] = refk
         inside = math.isfinite(ek) and abs(ek) < error_band
         at_rest = inside and abs(rate[k]) < speed_band and not moved
-        if at_rest and carry[_REST_S, k] > 0.0:
-            lo = ek if ek < carry[_REST_LO, k] else carry[_REST_LO, k]
-            hi = ek if ek > carry[_REST_HI, k] else carry[_REST_HI, k]
+        if at_rest and work[rest_s] > 0.0:
+            lo = ek if ek < work[rest_lo] else work[rest_lo]
+            hi = ek if ek > work[rest_hi] else work[rest_hi]
             spread = STEADY_FRACTION * abs(ek)
             if hi - lo <= (spread if spread > steady_band else steady_band):
-                carry[_REST_LO, k], carry[_REST_HI, k] = lo, hi
-                carry[_REST_S, k] += period
+                work[rest_lo], work[rest_hi] = lo, hi
+                work[rest_s] += period
             else:  # still converging by itself: the rest starts again from here
-                carry[_REST_LO, k] = carry[_REST_HI, k] = ek
-                carry[_REST_S, k] = period
+                work[rest_lo] = work[rest_hi] = ek
+                work[rest_s] = period
         elif at_rest:
-            carry[_REST_LO, k] = carry[_REST_HI, k] = ek
-            carry[_REST_S, k] = period
+            work[rest_lo] = work[rest_hi] = ek
+            work[rest_s] = period
         else:
-            carry[_REST_S, k] = 0.0
+            work[rest_s] = 0.0
         if not inside or moved or abs(rate[k]) > release:
             latched[k] = False
-        elif carry[_REST_S, k] > hold:
+        elif work[rest_s] > hold:
             latched[k] = True
         learning[k] = latched[k] and not frozen[k]
         if learning[k]:
-            carry[_INTEGRAL, k] = _clip(carry[_INTEGRAL, k] - ki * ek * period, lim)
-            shift[k] = _clip(carry[_INTEGRAL, k] - kp * ek, lim)
+            work[integral] = _clip(work[integral] - ki * ek * period, lim)
+            work[_W_SHIFT + k] = _clip(work[integral] - kp * ek, lim)
 
 
 @njit(cache=True, **OUTER_KERNEL)
