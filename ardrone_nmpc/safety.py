@@ -288,7 +288,8 @@ class Supervisor:
     # ------------------------------------------------------------------ mode bookkeeping
     def record(self, decision: Decision, nominal: str) -> str:
         """Note the tick's final decision; return its mode label (an event if it changed)."""
-        mode = decision.mode(nominal)
+        # Decision.mode's nominal case without its call (the usual tick)
+        mode = nominal if decision.action is _CONTROL else decision.mode(nominal)
         if mode != self._mode:
             # the settle → track switch is the runner's schedule, not a supervisor event
             if not (decision.action is Action.CONTROL and self._mode in ("", "settle", "track")):

@@ -208,22 +208,19 @@ class AttitudeResponseEstimator:
         (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
         # the kernel rounds each time to the microsecond where it reads it, or answers −1
         # (nothing done) for Python's round to do it (a time below 1 µs: a flight's start)
-        if sample_t_s is None:
-            has, sample_t_s = False, 0.0
-        else:
-            has, sample_t_s = True, float(sample_t_s)
-        roll_deg, pitch_deg = float(roll_deg), float(pitch_deg)
-        cmd_t_s, roll_frac, pitch_frac = float(cmd_t_s), float(roll_frac), float(pitch_frac)
-        code = _feed(self._state, has, sample_t_s, roll_deg, pitch_deg, cmd_kind, cmd_t_s,
-                     roll_frac, pitch_frac)
+        has = sample_t_s is not None
+        code = _feed(self._state, has, float(sample_t_s) if has else 0.0, float(roll_deg),
+                     float(pitch_deg), cmd_kind, float(cmd_t_s), float(roll_frac),
+                     float(pitch_frac))
         if code < 0:
-            code = _feed(self._state, has, _microseconds(sample_t_s) if has else 0.0, roll_deg,
-                         pitch_deg, cmd_kind + _TIMES_ROUNDED,
+            code = _feed(self._state, has, _microseconds(sample_t_s) if has else 0.0,
+                         float(roll_deg), float(pitch_deg), cmd_kind + _TIMES_ROUNDED,
                          _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0,
-                         roll_frac, pitch_frac)
+                         float(roll_frac), float(pitch_frac))
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
-        return code != 0
+            return True
+        return False
 
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
         """A command sent at ``t_s``, held until the next."""
