@@ -106,7 +106,8 @@ def _integrate(x, ref, frozen, preview, work, flags):
     work[_W_PSI] = e[3]
     for k in range(4):
         w = _W_LAW + 8 * k
-        error_band, speed_band, steady_band, release = work[w], work[w + 1], work[w + 2], work[w + 3]
+        error_band, speed_band = work[w], work[w + 1]
+        steady_band, release = work[w + 2], work[w + 3]
         hold, ki, kp, lim = work[w + 4], work[w + 5], work[w + 6], work[w + 7]
         last, rest_s, integral = c + 4 * _LAST + k, c + 4 * _REST_S + k, c + 4 * _INTEGRAL + k
         rest_lo, rest_hi = c + 4 * _REST_LO + k, c + 4 * _REST_HI + k

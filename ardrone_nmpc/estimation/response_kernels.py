@@ -30,11 +30,12 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT",
-           "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS",
-           "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY",
-           "S_WINDOW", "S_Y", "TIMES_ROUNDED", "feed", "fit_grid", "fit_size", "fold_sample",
-           "lag_decays", "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS",
+           "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
+           "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
+           "S_SINCE_BEST", "S_SY", "S_SYY", "S_WINDOW", "S_Y", "TIMES_ROUNDED", "feed",
+           "fit_grid", "fit_size", "fold_sample", "lag_decays", "memo_decays", "memo_view",
+           "microseconds", "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
