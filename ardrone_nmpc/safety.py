@@ -54,6 +54,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from numpy import ndarray as _NDARRAY
+
 from ardrone_nmpc.core.modes import Mode
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
@@ -190,17 +192,20 @@ class Supervisor:
         if self._latched is not None:
             return self._latched
         cfg = self.cfg
-        if navdata is not None and navdata.mode is _EMERGENCY:
-            return self._latch(Decision(Action.STOP, "emergency"))
-        faults = drone_alarms(navdata.state_bits if navdata is not None else None)
-        for fault in faults:
-            if fault.in_flight is Action.STOP:
-                return self._latch(Decision(Action.STOP, fault.reason))
-        if navdata is not None and not navdata.battery_pct > cfg.battery_floor_pct:
-            return self._latch(Decision(Action.LAND, "battery"))
-        for fault in faults:
-            if fault.in_flight is Action.LAND:
-                return self._latch(Decision(Action.LAND, fault.reason))
+        if navdata is not None:
+            if navdata.mode is _EMERGENCY:
+                return self._latch(Decision(Action.STOP, "emergency"))
+            bits = navdata.state_bits
+            # drone_alarms' own test first: the usual tick has no fault bit, and no call
+            faults = drone_alarms(bits) if bits is not None and bits & _ALARM_BITS else ()
+            for fault in faults:
+                if fault.in_flight is Action.STOP:
+                    return self._latch(Decision(Action.STOP, fault.reason))
+            if not navdata.battery_pct > cfg.battery_floor_pct:
+                return self._latch(Decision(Action.LAND, "battery"))
+            for fault in faults:
+                if fault.in_flight is Action.LAND:
+                    return self._latch(Decision(Action.LAND, fault.reason))
         if not navdata_age_ms <= cfg.navdata_land_ms:  # NaN/inf (never received) included
             return self._latch(Decision(Action.LAND, "navdata-lost"))
         if not mocap_age_ms <= cfg.mocap_land_ms:
@@ -216,12 +221,13 @@ class Supervisor:
 
         ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``.
         """
-        cfg = self.cfg
-        xs = x.tolist() if hasattr(x, "tolist") else x  # floats: numpy's scalars are slow
+        # floats: numpy's scalars are slow (the class test first: hasattr costs more)
+        xs = x.tolist() if x.__class__ is _NDARRAY or hasattr(x, "tolist") else x
         total = sum(xs)  # finite only if every one is (or, rarely, all are and the sum is not)
         if not (total - total == 0.0 or all(map(math.isfinite, xs))):
             return Decision(Action.HOVER, "nonfinite-state")
         lo, hi = self._fence_lo, self._fence_hi
+        cfg = self.cfg
         if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
             if cfg.geofence_action == "land":
                 return self._latch(Decision(Action.LAND, "geofence"))
@@ -242,7 +248,12 @@ class Supervisor:
         the supervisor never trusts the solver to have done so).
         """
         cfg = self.cfg
-        good = ok and all(map(math.isfinite, u.tolist() if hasattr(u, "tolist") else u))
+        if ok:
+            us = u.tolist() if u.__class__ is _NDARRAY or hasattr(u, "tolist") else u
+            total = sum(us)  # finite only if every one is (check_state's test)
+            good = total - total == 0.0 or all(map(math.isfinite, us))
+        else:
+            good = False
         if good:
             self._solver_failures = 0
             if not self._solver_fallback:
@@ -277,7 +288,8 @@ class Supervisor:
     # ------------------------------------------------------------------ mode bookkeeping
     def record(self, decision: Decision, nominal: str) -> str:
         """Note the tick's final decision; return its mode label (an event if it changed)."""
-        mode = decision.mode(nominal)
+        # Decision.mode's nominal case without its call (the usual tick)
+        mode = nominal if decision.action is _CONTROL else decision.mode(nominal)
         if mode != self._mode:
             # the settle → track switch is the runner's schedule, not a supervisor event
             if not (decision.action is Action.CONTROL and self._mode in ("", "settle", "track")):

@@ -118,7 +118,8 @@ class AttitudeEstimate:
         return self.delay_confident and self.gain_confident
 
 
-_feed, _CMD_SEND = rk.feed, rk.CMD_SEND  # bound once: the tick feeds one a period
+# bound once: the tick feeds one a period
+_feed, _CMD_SEND, _TIMES_ROUNDED = rk.feed, rk.CMD_SEND, rk.TIMES_ROUNDED
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
                                math.nan, math.nan, 0.0, 0.0)
@@ -131,7 +132,9 @@ _SHORTCUT_MAX_US = 2.0 ** 40
 
 def _microseconds(t_s: float) -> float:
     """A time to the microsecond: the same sample, its time gone through a log's ms ages and
-    back (``replay --rerun``), is the same time, and the fit the same bits.
+    back (``replay --rerun``), is the same time, and the fit the same bits. (The compiled
+    step rounds the tick's times itself, ``response_kernels.microseconds``, the same bits,
+    and leaves those below 1 µs or beyond 2⁴⁰ µs to this.)
 
     ``round(t, 6)``'s value, at half its cost (the tick rounds two times): ``round`` rounds
     the exact t·10⁶ to an integer n (ties to even) and returns the double nearest n·10⁻⁶. When
@@ -203,17 +206,21 @@ class AttitudeResponseEstimator:
         """One tick in one compiled call: a navdata sample (None: none), then a command
         (``cmd_kind`` :data:`~.response_kernels.CMD_SEND`), a :meth:`restart`
         (``CMD_RESTART``) or nothing (``CMD_NONE``). Returns :meth:`navdata`'s answer."""
-        # each time to the microsecond only where the kernel reads it
-        if sample_t_s is None:
-            has, sample_us = False, 0.0
-        else:
-            has, sample_us = True, _microseconds(sample_t_s)
-        code = _feed(self._state, has, sample_us, float(roll_deg), float(pitch_deg),
-                     cmd_kind, _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0,
-                     float(roll_frac), float(pitch_frac))
+        # the kernel rounds each time to the microsecond where it reads it, or answers −1
+        # (nothing done) for Python's round to do it (a time below 1 µs: a flight's start)
+        has = sample_t_s is not None
+        code = _feed(self._state, has, float(sample_t_s) if has else 0.0, float(roll_deg),
+                     float(pitch_deg), cmd_kind, float(cmd_t_s), float(roll_frac),
+                     float(pitch_frac))
+        if code < 0:
+            code = _feed(self._state, has, _microseconds(sample_t_s) if has else 0.0,
+                         float(roll_deg), float(pitch_deg), cmd_kind + _TIMES_ROUNDED,
+                         _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0,
+                         float(roll_frac), float(pitch_frac))
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
-        return code != 0
+            return True
+        return False
 
     def command(self, t_s: float, roll_frac: float, pitch_frac: float) -> None:
         """A command sent at ``t_s``, held until the next."""

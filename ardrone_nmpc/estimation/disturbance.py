@@ -31,6 +31,13 @@ _VEL = (IX_VX, IX_VY, IX_VZ)
 _NO_PREVIEW = np.zeros((0, 7))
 # the rows of ReferenceIntegrator._carry: what each axis carries from one update to the next
 _LAST, _REST_S, _INTEGRAL, _REST_LO, _REST_HI = range(5)
+# ReferenceIntegrator._work, one float64 buffer (one argument of _integrate, not six: numba's
+# dispatch costs ~50–100 ns an argument, issue 26): the law (4 axes × 8), the carry (5 × 4),
+# the shift (4), the last ψ error (1), the period (1), and scratch for the errors and their
+# rates (4 each): read flat, no reshape or allocation in the kernel (each costs ~50 ns)
+_W_LAW, _W_CARRY, _W_SHIFT, _W_PSI, _W_PERIOD, _W_E, _W_RATE = 0, 32, 52, 56, 57, 58, 62
+_W_SIZE = 66
+_NONE_FROZEN = (False, False, False, False)
 _REF_STILL = 1e-9  # a reference component that changes by more than this has moved
 #: A PCMD fraction this close to ±1 counts as on the drone's limit (the ż reference is clipped
 #: to control_vz_max before the mapping, so the gaz flag alone would never show it).
@@ -57,9 +64,13 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
     so either one on its limit freezes both; gaz freezes z, yaw ψ.
     """
     roll, pitch, gaz, yaw = pcmd_fracs  # spelled out: two list comprehensions cost µs a tick
+    if (-SATURATION_FRAC < roll < SATURATION_FRAC and -SATURATION_FRAC < pitch < SATURATION_FRAC
+            and -SATURATION_FRAC < gaz < SATURATION_FRAC
+            and -SATURATION_FRAC < yaw < SATURATION_FRAC and (not flags or flags == "0000")):
+        return _NONE_FROZEN  # the usual tick: all inside, nothing flagged (a NaN goes below)
     s0, s1 = abs(roll) >= SATURATION_FRAC, abs(pitch) >= SATURATION_FRAC
     s2, s3 = abs(gaz) >= SATURATION_FRAC, abs(yaw) >= SATURATION_FRAC
-    if flags and flags != "0000":  # the usual tick: nothing flagged
+    if flags and flags != "0000":
         c0, c1, c2, c3 = flags
         s0, s1, s2, s3 = (s0 or c0 == "1", s1 or c1 == "1", s2 or c2 == "1", s3 or c3 == "1")
     tilt = s0 or s1
@@ -67,61 +78,71 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def _integrate(x, ref, frozen, preview, law, carry, psi, latched, learning, shift, period):
+def _integrate(x, ref, frozen, preview, work, flags):
     """:meth:`ReferenceIntegrator.update`'s law, compiled: one period of every axis.
 
-    ``law`` (4, 8): error band, speed band, steady band, release speed, hold, ki, kp, max
-    shift per axis; ``carry`` (5, 4) the rows ``_LAST`` … ``_REST_HI``; ``psi`` (1,) the last
-    ψ error (NaN before the first); ``latched``, ``learning``, ``shift`` (4,) in place.
+    ``work`` (:data:`_W_SIZE`) holds the law (4, 8): error band, speed band, steady band,
+    release speed, hold, ki, kp, max shift per axis; the carry (5, 4), the rows ``_LAST`` …
+    ``_REST_HI``; the shift (4); the last ψ error (NaN before the first); the period; scratch.
+    ``flags`` (2, 4) are the axes latched and learning. All in place.
     Python's ``min``/``max`` are spelled out (the first argument unless the second is
     strictly beyond it), so a NaN goes where it went in Python.
     """
+    c = _W_CARRY  # the carry's row r, axis k at c + 4·r + k
+    period = work[_W_PERIOD]
+    latched = flags[0]
+    learning = flags[1]
     pos = _POS
-    e = np.empty(4)
-    rate = np.zeros(4)
+    e = work[_W_E:_W_E + 4]
+    rate = work[_W_RATE:_W_RATE + 4]
     for k in range(4):
         e[k] = x[pos[k]] - ref[pos[k]]
+        rate[k] = 0.0
     e[3] = wrap_half_turn(e[3], math.pi)
     for k in range(3):
         rate[k] = x[_VEL[k]]
-    if math.isfinite(psi[0]):
-        rate[3] = wrap_half_turn(e[3] - psi[0], math.pi) / period
-    psi[0] = e[3]
+    if math.isfinite(work[_W_PSI]):
+        rate[3] = wrap_half_turn(e[3] - work[_W_PSI], math.pi) / period
+    work[_W_PSI] = e[3]
     for k in range(4):
-        error_band, speed_band, steady_band, release = law[k, 0], law[k, 1], law[k, 2], law[k, 3]
-        hold, ki, kp, lim = law[k, 4], law[k, 5], law[k, 6], law[k, 7]
+        w = _W_LAW + 8 * k
+        error_band, speed_band = work[w], work[w + 1]
+        steady_band, release = work[w + 2], work[w + 3]
+        hold, ki, kp, lim = work[w + 4], work[w + 5], work[w + 6], work[w + 7]
+        last, rest_s, integral = c + 4 * _LAST + k, c + 4 * _REST_S + k, c + 4 * _INTEGRAL + k
+        rest_lo, rest_hi = c + 4 * _REST_LO + k, c + 4 * _REST_HI + k
         ek, refk = e[k], ref[pos[k]]
         still = True
         for j in range(preview.shape[0]):
             if not abs(preview[j, pos[k]] - refk) <= _REF_STILL:
                 still = False
-        moved = abs(refk - carry[_LAST, k]) > _REF_STILL or not still  # first update: NaN
-        carry[_LAST, k] = refk
+        moved = abs(refk - work[last]) > _REF_STILL or not still  # first update: NaN
+        work[last] = refk
         inside = math.isfinite(ek) and abs(ek) < error_band
         at_rest = inside and abs(rate[k]) < speed_band and not moved
-        if at_rest and carry[_REST_S, k] > 0.0:
-            lo = ek if ek < carry[_REST_LO, k] else carry[_REST_LO, k]
-            hi = ek if ek > carry[_REST_HI, k] else carry[_REST_HI, k]
+        if at_rest and work[rest_s] > 0.0:
+            lo = ek if ek < work[rest_lo] else work[rest_lo]
+            hi = ek if ek > work[rest_hi] else work[rest_hi]
             spread = STEADY_FRACTION * abs(ek)
             if hi - lo <= (spread if spread > steady_band else steady_band):
-                carry[_REST_LO, k], carry[_REST_HI, k] = lo, hi
-                carry[_REST_S, k] += period
+                work[rest_lo], work[rest_hi] = lo, hi
+                work[rest_s] += period
             else:  # still converging by itself: the rest starts again from here
-                carry[_REST_LO, k] = carry[_REST_HI, k] = ek
-                carry[_REST_S, k] = period
+                work[rest_lo] = work[rest_hi] = ek
+                work[rest_s] = period
         elif at_rest:
-            carry[_REST_LO, k] = carry[_REST_HI, k] = ek
-            carry[_REST_S, k] = period
+            work[rest_lo] = work[rest_hi] = ek
+            work[rest_s] = period
         else:
-            carry[_REST_S, k] = 0.0
+            work[rest_s] = 0.0
         if not inside or moved or abs(rate[k]) > release:
             latched[k] = False
-        elif carry[_REST_S, k] > hold:
+        elif work[rest_s] > hold:
             latched[k] = True
         learning[k] = latched[k] and not frozen[k]
         if learning[k]:
-            carry[_INTEGRAL, k] = _clip(carry[_INTEGRAL, k] - ki * ek * period, lim)
-            shift[k] = _clip(carry[_INTEGRAL, k] - kp * ek, lim)
+            work[integral] = _clip(work[integral] - ki * ek * period, lim)
+            work[_W_SHIFT + k] = _clip(work[integral] - kp * ek, lim)
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -164,17 +185,31 @@ class ReferenceIntegrator:
         self.error_band = _per_axis(error_band)
         self.speed_band = _per_axis(speed_band)
         self.max_shift = _per_axis(max_shift)
-        self.period_s = float(period_s)
-        self.shift = np.zeros(n)
-        self.learning = np.zeros(n, dtype=bool)  # which axes integrated on the last update
-        self.latched = np.zeros(n, dtype=bool)  # learning until the error or reference moves
+        # what _integrate reads and writes, in two buffers (_W_*); the names are views
+        work = self._work = np.zeros(_W_SIZE)
+        flags = self._flags = np.zeros((2, n), dtype=bool)
+        self.shift = work[_W_SHIFT:_W_PSI]
+        self.latched = flags[0]  # learning until the error or reference moves
+        self.learning = flags[1]  # which axes integrated on the last update
         # the law per axis (rows of _integrate's law) and what it carries between updates
-        self._law = np.ascontiguousarray(np.stack((
+        self._law = work[_W_LAW:_W_CARRY].reshape(n, 8)
+        self._law[:] = np.stack((
             self.error_band, self.speed_band, self.steady_band, self.release_speed,
-            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1))
-        self._carry = np.zeros((5, n))
+            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1)
+        self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, n)
         self._carry[_LAST] = math.nan  # the reference components of the last update
-        self._last_error_psi = np.array([math.nan])
+        self._last_error_psi = work[_W_PSI:_W_PERIOD]
+        self._last_error_psi[0] = math.nan
+        self.period_s = period_s
+
+    @property
+    def period_s(self) -> float:
+        """The integration step (s), held in the kernel's buffer."""
+        return float(self._work[_W_PERIOD])
+
+    @period_s.setter
+    def period_s(self, period_s: float) -> None:
+        self._work[_W_PERIOD] = float(period_s)
 
     @classmethod
     def from_config(cls, cfg, period_s: float) -> ReferenceIntegrator:
@@ -214,9 +249,8 @@ class ReferenceIntegrator:
              preview: np.ndarray | None) -> np.ndarray:
         """:meth:`update` for the tick: ``x``, ``ref`` (7,) and ``preview`` (n, 7) float64
         arrays (or None), ``frozen`` four bools — no conversions."""
-        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._law,
-                   self._carry, self._last_error_psi, self.latched, self.learning, self.shift,
-                   self.period_s)
+        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._work,
+                   self._flags)
         return self.shift
 
     def shifted(self, states: np.ndarray) -> np.ndarray:

@@ -9,6 +9,14 @@ are the C library's ``exp`` (``math.exp`` in Python, the same function): numpy's
 ``exp`` is chosen by the CPU at run time and differs in the last bit on AVX-512 machines
 from the one on AVX2 machines (4.6 % of arguments), which made the fit, and the flights it
 steers, depend on the CPU (docs/solver-notes.md §9).
+
+Those exponentials, 372 a sample, were most of the step's cost. Their arguments repeat: a
+decay's is ``−d/τ`` with d a sample's time, less a delay, less a command's time — times
+rounded to the microsecond, commands and samples on fixed periods — and a 60 s square sees
+some 400 distinct values of d (exact doubles) among 59 000. :func:`lag_decays` keeps the
+decays of the recent ones in a small cache in the state (:func:`memo_decays`): a value found
+there was made by the same ``math.exp`` of the same argument, so it is the same bits; one not
+found is computed and stored. The cache only saves time; what it holds never changes a bit.
 """
 
 from __future__ import annotations
@@ -22,17 +30,19 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "S_B", "S_CAPACITY", "S_COUNT",
-           "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS",
-           "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY",
-           "S_WINDOW", "S_Y", "feed", "fit_grid", "fit_size", "fold_sample", "lag_decays",
-           "new_state", "state_size"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS",
+           "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
+           "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
+           "S_SINCE_BEST", "S_SY", "S_SYY", "S_WINDOW", "S_Y", "TIMES_ROUNDED", "feed",
+           "fit_grid", "fit_size", "fold_sample", "lag_decays", "memo_decays", "memo_view",
+           "microseconds", "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
 # slots, the fit's fixed parameters among them), then Σx, Σx², Σx·y, the model values x (each
-# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), and
-# last the grid: the delays (K) and the lags (L). Built once by :func:`new_state`.
+# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), the
+# decays' cache (MEMO_SETS × 2 slots of a d and its L decays) and last the grid: the delays (K)
+# and the lags (L). Built once by :func:`new_state`.
 S_N = 0              # the samples' effective number
 S_LAST_T = 1         # the last sample's time (NaN before the first)
 S_COUNT = 2          # commands held
@@ -54,18 +64,25 @@ S_WINDOW = 25        # the forgetting's time constant (s; inf: none)
 S_REFRESH = 26       # samples between refreshes of the best grid point
 S_DELAYS = 27        # the delays' number (K)
 S_LAGS = 28          # the lags' number (L)
-HEAD = 29
+S_BITS = 29          # scratch: a double whose bits the cache hashes (memo_decays)
+HEAD = 30
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
 CMD_SEND = 2
+#: Added to ``cmd_kind``: the times passed are rounded to the microsecond already (:func:`feed`).
+TIMES_ROUNDED = 4
+#: The decays' cache: sets of two slots, a slot's set picked by a hash of d's bits. A 60 s
+#: square's ~400 values of d miss it ~440 times (each miss 6 exponentials) of 59 000.
+MEMO_SETS = 512
+_HASH = np.int64(-7046029254386353131)  # 0x9E3779B97F4A7C15 (Fibonacci hashing), as int64
 _DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 
 
 def state_size(delays: int, lags: int, capacity: int) -> int:
     """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
     return (HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
-            + delays + lags)
+            + 2 * MEMO_SETS * (1 + lags) + delays + lags)
 
 
 def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max_rad: float,
@@ -79,7 +96,15 @@ def new_state(delays_s: np.ndarray, lags_s: np.ndarray, capacity: int, euler_max
     state[S_DELAYS], state[S_LAGS] = K, L
     state[state.size - K - L:state.size - L] = delays_s
     state[state.size - L:] = lags_s
+    memo_view(state)[:, 0] = math.nan  # no key: NaN equals nothing
     return state
+
+
+def memo_view(state: np.ndarray) -> np.ndarray:
+    """The decays' cache of a state buffer: (2 · MEMO_SETS, 1 + L) rows of a d and its decays."""
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
+    end = state.size - K - L
+    return state[end - 2 * MEMO_SETS * (1 + L):end].reshape((2 * MEMO_SETS, 1 + L))
 
 
 def fit_size(delays: int, lags: int) -> int:
@@ -89,42 +114,119 @@ def fit_size(delays: int, lags: int) -> int:
 
 
 @njit(cache=True, **INNER_KERNEL)
+def memo_decays(d: float, lags_s: np.ndarray, memo: np.ndarray, bits: np.ndarray,
+                ints: np.ndarray) -> int:
+    """Where in the cache ``memo`` (:func:`memo_view`, flat: rows of 1 + L) ``exp(−d / τ)``
+    of every lag τ starts (the C library's ``exp``; lag m at the answer + m): found there
+    when it holds ``d``, otherwise computed and stored in the first slot of d's set (its
+    former occupant moved to the second, which is dropped).
+
+    A slot matches when its key equals d: the same double (or ±0, whose decays are all 1), so
+    the decays it holds are this d's, to the bit. NaN matches nothing. ``bits`` is a (1,)
+    float64 scratch (``S_BITS``) and ``ints`` its int64 view (made once by the caller: a
+    view costs an allocation): d's bits, hashed to the set."""
+    w = lags_s.size + 1
+    bits[0] = d
+    i = 2 * w * (((ints[0] * _HASH) >> 55) & (MEMO_SETS - 1))  # the top 9 bits of the product
+    if memo[i] == d:
+        return i + 1
+    if memo[i + w] == d:
+        return i + w + 1
+    for c in range(w):  # the first slot to the second
+        memo[i + w + c] = memo[i + c]
+    memo[i] = d
+    for m in range(lags_s.size):
+        memo[i + 1 + m] = math.exp(-d / lags_s[m])
+    return i + 1
+
+
+@njit(cache=True, **INNER_KERNEL)
 def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
-               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray) -> None:
+               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray, memo: np.ndarray,
+               bits: np.ndarray, ints: np.ndarray) -> None:
     """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
     (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``decay_out``
-    (K, L) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``)."""
+    (K × L, flat) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's
+    ``exp``, through the cache ``memo``: :func:`memo_decays`)."""
+    L = lags_s.size
     for k in range(delays_s.size):
         at = t_s - delays_s[k]
         j = count_at_or_below(times, n, at) - 1
         j_out[k] = j
-        d = at - times[j]
-        for m in range(lags_s.size):
-            decay_out[k, m] = math.exp(-d / lags_s[m])
+        r = memo_decays(at - times[j], lags_s, memo, bits, ints)
+        for m in range(L):
+            decay_out[k * L + m] = memo[r + m]
+
+
+@njit(cache=True, **INNER_KERNEL)
+def microseconds(t_s: float) -> float:
+    """``round(t_s, 6)``, to the bit, for 1 µs ≤ t_s < 2⁴⁰ µs; −1 elsewhere (NaN included),
+    where Python's ``round`` must do it (``attitude_response._microseconds``).
+
+    ``round`` rounds the exact t·10⁶ to an integer n, ties to even, and returns the double
+    nearest n·10⁻⁶. Here: y = t·10⁶ rounded and its error e (exact: Dekker's product, 10⁶
+    splitting into itself), so t·10⁶ = y + e exactly; with n₀ = ⌊y⌋, f = y − n₀ ∈ [0, 1)
+    and f − ½ are exact (multiples of y's ulp ≤ 2⁻¹²), and the sign of (f − ½) + e is that of
+    the exact sum (a rounded sum is 0 only when the exact one is): above ½ n₀ + 1, below n₀,
+    at ½ the even one. n < 2⁵³ and 10⁶ are exact doubles, so n / 10⁶ (correctly rounded) is
+    the double nearest n·10⁻⁶. The tick's times are rarely within ¼ µs of a whole one (a
+    navdata period of ⅓ ms is not), so ``_microseconds``' shortcut alone would not do."""
+    y = t_s * 1e6
+    if not 1.0 <= y < 1099511627776.0:  # 2⁴⁰
+        return -1.0
+    c = 134217729.0 * t_s  # Veltkamp's split of t into 26 + 27 bits (2²⁷ + 1)
+    hi = c - (c - t_s)
+    lo = t_s - hi
+    e = (hi * 1e6 - y) + lo * 1e6  # each product exact: 10⁶ has 20 bits
+    n = math.floor(y)
+    s = ((y - n) - 0.5) + e
+    if s > 0.0 or (s == 0.0 and n % 2 == 1):
+        n += 1
+    return n / 1e6
 
 
 @njit(cache=True, **INNER_KERNEL)
 def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
                 y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
                 sxy: np.ndarray) -> None:
-    """The model value ``x`` (K, L, 2) of a sample at every grid point — the lag's output
+    """The model value ``x`` (K × L × 2) of a sample at every grid point — the lag's output
     ``u + (y_lag − u)·decay`` from the command ``j[k]`` — and its sums, first faded by
-    ``forget`` (unless it is 1): Σx, Σx², Σx·y."""
+    ``forget`` (unless it is 1): Σx, Σx², Σx·y. Every array flat, in C order: ``u`` (C × 2),
+    ``ylag`` (C × L × 2), ``decay`` (K × L), ``x`` and the sums (K × L × 2); K = ``j.size``.
+    (Flat: a compiled reshape costs a call of numba's C helper, ~50 ns each, a dozen a tick.)
+
+    Each element's expressions as numpy's broadcast wrote them; what is read more than once
+    (the command, the decay, y) is read once into a local — the same doubles — and the
+    fading's test is made once, not per element."""
+    y0, y1 = y[0], y[1]
+    K = j.size
+    L = decay.size // K
     scale = forget != 1.0
-    for k in range(decay.shape[0]):
+    for k in range(K):
         jk = j[k]
-        for m in range(decay.shape[1]):
-            for a in range(2):
-                uu = u[jk, a]
-                v = uu + (ylag[jk, m, a] - uu) * decay[k, m]
-                x[k, m, a] = v
-                if scale:
-                    sx[k, m, a] *= forget
-                    sxx[k, m, a] *= forget
-                    sxy[k, m, a] *= forget
-                sx[k, m, a] += v
-                sxx[k, m, a] += v * v
-                sxy[k, m, a] += v * y[a]
+        u0, u1 = u[2 * jk], u[2 * jk + 1]
+        for m in range(L):
+            dk = decay[k * L + m]
+            g = 2 * (jk * L + m)  # (jk, m, 0) in ylag
+            e = 2 * (k * L + m)   # (k, m, 0) in x and the sums
+            v0 = u0 + (ylag[g] - u0) * dk
+            v1 = u1 + (ylag[g + 1] - u1) * dk
+            x[e] = v0
+            x[e + 1] = v1
+            if scale:
+                sx[e] = sx[e] * forget + v0
+                sx[e + 1] = sx[e + 1] * forget + v1
+                sxx[e] = sxx[e] * forget + v0 * v0
+                sxx[e + 1] = sxx[e + 1] * forget + v1 * v1
+                sxy[e] = sxy[e] * forget + v0 * y0
+                sxy[e + 1] = sxy[e + 1] * forget + v1 * y1
+            else:
+                sx[e] += v0
+                sx[e + 1] += v1
+                sxx[e] += v0 * v0
+                sxx[e + 1] += v1 * v1
+                sxy[e] += v0 * y0
+                sxy[e + 1] += v1 * y1
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -133,13 +235,27 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
          pitch_frac: float) -> int:
     """One tick of the streaming fit (its state and parameters ``state``, :func:`new_state`):
     ``AttitudeResponseEstimator``'s ``navdata``, then its ``command`` or ``restart`` — the same
-    expressions in the same order. Times are already rounded to the microsecond. Returns 0 if
+    expressions in the same order. The times are rounded to the microsecond here
+    (:func:`microseconds`, ``round(t, 6)``) unless ``cmd_kind`` has :data:`TIMES_ROUNDED`
+    added; where that does not answer (a time below 1 µs) it returns −1 at once, nothing
+    changed, and the caller rounds them in Python and calls again. Otherwise returns 0 if
     there was no sample or it could not be used, 1 if it was folded in, 2 if, moreover, the
     best grid point was refreshed (every ``S_REFRESH`` samples: the fit of the grid, as
     ``_fit`` makes it).
 
     One function, not one per step: every compiled level below an entry point costs its
     cold start a copy of the levels beneath (docs/solver-notes.md §5)."""
+    if cmd_kind >= TIMES_ROUNDED:
+        cmd_kind -= TIMES_ROUNDED
+    else:  # each time to the microsecond only where it is read
+        if has_sample:
+            sample_t_s = microseconds(sample_t_s)
+            if sample_t_s < 0.0:
+                return -1
+        if cmd_kind == CMD_SEND:
+            cmd_t_s = microseconds(cmd_t_s)
+            if cmd_t_s < 0.0:
+                return -1
     K, L = int(state[S_DELAYS]), int(state[S_LAGS])
     capacity = int(state[S_CAPACITY])
     euler_max_rad = state[S_EULER_MAX]
@@ -150,18 +266,23 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     lags_s = state[end - L:end]
     kl2 = K * L * 2
     o = HEAD
-    sx = state[o:o + kl2].reshape((K, L, 2))
-    sxx = state[o + kl2:o + 2 * kl2].reshape((K, L, 2))
-    sxy = state[o + 2 * kl2:o + 3 * kl2].reshape((K, L, 2))
-    x = state[o + 3 * kl2:o + 4 * kl2].reshape((K, L, 2))
+    # flat views, C order (no reshape: each costs a C call); the shapes in the comments
+    sx = state[o:o + kl2]  # (K, L, 2)
+    sxx = state[o + kl2:o + 2 * kl2]
+    sxy = state[o + 2 * kl2:o + 3 * kl2]
+    x = state[o + 3 * kl2:o + 4 * kl2]
     o += 4 * kl2
-    decay = state[o:o + K * L].reshape((K, L))
+    decay = state[o:o + K * L]  # (K, L)
     o += K * L
     t = state[o:o + capacity]
     o += capacity
-    u = state[o:o + 2 * capacity].reshape((capacity, 2))
+    u = state[o:o + 2 * capacity]  # (C, 2)
     o += 2 * capacity
-    ylag = state[o:o + capacity * L * 2].reshape((capacity, L, 2))
+    ylag = state[o:o + capacity * L * 2]  # (C, L, 2)
+    o += capacity * L * 2
+    memo = state[o:o + 2 * MEMO_SETS * (1 + L)]  # (2 · MEMO_SETS, 1 + L)
+    bits = state[S_BITS:S_BITS + 1]
+    ints = bits.view(np.int64)
     code = 0
     n = int(state[S_COUNT])
     # --- the navdata sample (``navdata``)
@@ -172,7 +293,7 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
                            or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
         t_s = sample_t_s
         j = np.empty(K, dtype=np.int64)  # each delay's command
-        lag_decays(t, n, t_s, delays_s, lags_s, j, decay)
+        lag_decays(t, n, t_s, delays_s, lags_s, j, decay, memo, bits, ints)
         forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
         state[S_LAST_T] = t_s
         y = state[S_Y:S_Y + 2]
@@ -181,8 +302,9 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
         fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
         if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
             k, m = int(state[S_K]), int(state[S_L])
-            r0 = y0 - (state[S_G] * x[k, m, 0] + state[S_B])
-            r1 = y1 - (state[S_G + 1] * x[k, m, 1] + state[S_B + 1])
+            e = 2 * (k * L + m)
+            r0 = y0 - (state[S_G] * x[e] + state[S_B])
+            r1 = y1 - (state[S_G + 1] * x[e + 1] + state[S_B + 1])
             for i in range(3):
                 state[S_RES + i] *= forget
             if state[S_HAS_R] != 0.0:
@@ -233,24 +355,24 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
                 for i in range(keep):
                     t[i] = t[n - keep + i]
                     for a in range(2):
-                        u[i, a] = u[n - keep + i, a]
-                    for m in range(L):
-                        for a in range(2):
-                            ylag[i, m, a] = ylag[n - keep + i, m, a]
+                        u[2 * i + a] = u[2 * (n - keep + i) + a]
+                    for c in range(2 * L):
+                        ylag[2 * L * i + c] = ylag[2 * L * (n - keep + i) + c]
                 n = keep
             t0 = t[n - 1]
+            r = memo_decays(t_s - t0, lags_s, memo, bits, ints)  # exp(−(t_s − t0) / τ)
             for m in range(L):  # the lags' outputs, from the last command's
-                dec = math.exp(-(t_s - t0) / lags_s[m])
+                dec = memo[r + m]
                 for a in range(2):
-                    ua = u[n - 1, a]
-                    ylag[n, m, a] = ua + (ylag[n - 1, m, a] - ua) * dec
+                    ua = u[2 * (n - 1) + a]
+                    ylag[2 * (n * L + m) + a] = ua + (ylag[2 * ((n - 1) * L + m) + a] - ua) * dec
         else:  # no past: as if held for long
             for m in range(L):
-                ylag[n, m, 0] = u0
-                ylag[n, m, 1] = u1
+                ylag[2 * (n * L + m)] = u0
+                ylag[2 * (n * L + m) + 1] = u1
         t[n] = t_s
-        u[n, 0] = u0
-        u[n, 1] = u1
+        u[2 * n] = u0
+        u[2 * n + 1] = u1
         state[S_COUNT] = n + 1.0
     return code
 

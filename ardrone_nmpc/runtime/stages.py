@@ -306,11 +306,19 @@ class Control:
         # Without an estimate the thesis could only integrate its own z̈ commands — the
         # integrator that winds up into fig. 3.2's overshoot.
         # ``item``: a Python float (numpy's scalar costs ~3× per operation; the same double)
-        vz_base = vz_ref_last_mps if self.vz_from_commands else sol.x_solve.item(IX_VZ)
+        vz_base = (float(vz_ref_last_mps) if self.vz_from_commands
+                   else sol.x_solve.item(IX_VZ))
         vz_max = self._vz_max_mps  # the drone clips beyond: no wind-up past it
+        # vz_reference_mps' arithmetic without its checks: a finite result from a lead ≥ 0
+        # means every input was finite (a non-finite ż or z̈ makes it NaN or ±inf, and so
+        # does an infinite lead), which is all its checks ask; otherwise it is called, to
+        # answer or raise as it does
+        dt = self.vz_lead_s
+        vz_ref = vz_base + zacc * dt
+        if not (vz_ref - vz_ref == 0.0 and dt >= 0.0):
+            vz_ref = vz_reference_mps(vz_base, zacc, dt)
         # min(max(v, −vz_max), vz_max) spelled out: Python's min and max keep their first
         # argument unless the second is strictly beyond it (a NaN stays)
-        vz_ref = vz_reference_mps(vz_base, zacc, self.vz_lead_s)
         if -vz_max > vz_ref:
             vz_ref = -vz_max
         if vz_max < vz_ref:
@@ -485,7 +493,7 @@ class Supervision:
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
             self.zacc_mps2 = float(u_sent[IU_ZACC])
-            return Sent(pcmd, u_sent, True, decision)
+            return _new_tuple(Sent, (pcmd, u_sent, True, decision, None, None))
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, pitch = cmd.phi_rad, cmd.theta_rad
             cap = self.supervisor.cfg.max_tilt_rad
@@ -523,7 +531,8 @@ class Supervision:
                 # the command as flown: the controller's own record unless a tilt was clipped
                 flown = (cmd if not (roll_clipped or pitch_clipped)
                          else AttitudeCommand(vz, roll, pitch, rate))
-                return Sent(pcmd, u_sent, True, decision, flown, flags)
+                # every field given: the tuple without the NamedTuple's Python ``__new__``
+                return _new_tuple(Sent, (pcmd, u_sent, True, decision, flown, flags))
             decision = Decision(Action.HOVER, "nonfinite-command")  # never sent
         elif action is _HOLD:  # nothing sent yet that could be held
             decision = Decision(Action.HOVER, decision.reason)
@@ -532,7 +541,7 @@ class Supervision:
         self.vz_ref_mps = 0.0
         self.zacc_mps2 = 0.0
         self._last = None
-        return Sent(HOVER, np.zeros(INPUT_DIM), False, decision)
+        return _new_tuple(Sent, (HOVER, np.zeros(INPUT_DIM), False, decision, None, None))
 
 
 # ----------------------------------------------------------------------------- the row

@@ -18,6 +18,8 @@ from ardrone_nmpc.reference.trajectories import Square, Waypoints
 
 # the attitude fit's inner kernels, callable from Python (the same source and options)
 lag_decays = callable_from_python(response_kernels.lag_decays)
+memo_decays = callable_from_python(response_kernels.memo_decays)
+microseconds = callable_from_python(response_kernels.microseconds)
 fold_sample = callable_from_python(response_kernels.fold_sample)
 
 
@@ -70,10 +72,16 @@ def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
     u, ylag = rng.normal(size=(cap, 2)), rng.normal(size=(cap, 6, 2))
     delays, lags = np.arange(0.0, 0.605, 0.01), np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
     sums = [rng.normal(size=(delays.size, lags.size, 2)) for _ in range(3)]
-    for t_s, forget in ((float(times[n - 1]) + 0.013, 0.97), (float(times[n - 1]), 1.0)):
+    # the decays' cache, cold for the first time and warm (every d seen) for its repeat
+    memo = np.full(2 * response_kernels.MEMO_SETS * (1 + lags.size), math.nan)
+    bits = np.zeros(1)
+    for t_s, forget in ((float(times[n - 1]) + 0.013, 0.97), (float(times[n - 1]), 1.0),
+                        (float(times[n - 1]) + 0.013, 0.97)):
         j = np.zeros(delays.size, dtype=np.int64)
         decay = np.zeros((delays.size, lags.size))
-        lag_decays(times, n, t_s, delays, lags, j, decay)
+        # the kernels take flat arrays (views of these)
+        lag_decays(times, n, t_s, delays, lags, j, decay.reshape(-1), memo, bits,
+                   bits.view(np.int64))
         at = t_s - delays
         j_np = np.searchsorted(times[:n], at, side="right") - 1
         assert np.array_equal(j, j_np)
@@ -83,7 +91,8 @@ def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
         y = rng.normal(size=2)
         x = np.zeros_like(sums[0])
         expected = [s.copy() for s in sums]
-        fold_sample(u, ylag, j, decay, y, forget, x, *sums)
+        fold_sample(u.reshape(-1), ylag.reshape(-1), j, decay.reshape(-1), y, forget,
+                    x.reshape(-1), *(s.reshape(-1) for s in sums))
         uj = u[j_np][:, None, :]
         x_np = uj + (ylag[j_np] - uj) * decay[:, :, None]
         if forget != 1.0:
@@ -95,3 +104,56 @@ def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
         assert x.tobytes() == x_np.tobytes()
         for got, want in zip(sums, expected):
             assert got.tobytes() == want.tobytes()
+
+
+def test_the_decays_cache_holds_the_exponentials_of_its_keys_bit_for_bit():
+    """``memo_decays``: whatever it finds or evicts, the row it answers holds ``exp(−d/τ)``
+    of exactly the d asked (the C library's, as ``math.exp``); a set's two slots, the newest
+    first; NaN matches nothing, ±0 both give 1."""
+    rng = np.random.default_rng(11)
+    lags = np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
+    memo = np.full((2 * response_kernels.MEMO_SETS, 1 + lags.size), math.nan)
+    flat = memo.reshape(-1)
+    bits = np.zeros(1)
+    ints = bits.view(np.int64)
+    # µs-rounded differences and their last-bit neighbours (the flight's keys), repeated, in
+    # a table far too small for them all: hits, misses and evictions
+    base = np.round(rng.uniform(0.0, 0.07, 300), 6)
+    keys = np.concatenate([base, np.nextafter(base, 1.0), np.nextafter(base, -1.0)])
+    keys = np.concatenate([keys, [0.0, -0.0, math.nan, math.inf, -1.5, 1e300]])
+    width = 1 + lags.size
+    for d in rng.choice(keys, 20_000):
+        at = memo_decays(d, lags, flat, bits, ints)
+        row = at // width
+        assert at % width == 1
+        want = np.array([math.exp(-d / tau) for tau in lags])
+        assert memo[row, 1:].tobytes() == want.tobytes(), d
+        assert row % 2 == 0 or memo[row, 0] == d
+    assert np.isnan(memo[memo_decays(math.nan, lags, flat, bits, ints) // width, 1:]).all()
+
+
+def test_the_kernels_microseconds_is_round_to_six_decimals_bit_for_bit():
+    """``response_kernels.microseconds`` is ``round(t, 6)`` wherever it answers — random
+    times, a navdata period's thirds of a ms, exact ties (q/128: t·10⁶ ends in ·5), the halves
+    of a microsecond and their neighbours — and refuses (−1) exactly outside 1 µs … 2⁴⁰ µs."""
+    import random
+
+    rng = random.Random(5)
+    times = [rng.uniform(0.0, 1e4) for _ in range(50_000)]
+    times += [0.065 * rng.randrange(10**6) for _ in range(10_000)]
+    times += [rng.randrange(1, 10**10) / 3e6 for _ in range(10_000)]
+    times += [q / 128 for q in range(1, 40_000, 2)]
+    for _ in range(10_000):
+        k = rng.randrange(10**10)
+        for t in ((k + 0.5) / 1e6, (k + 0.25) / 1e6, k / 1e6):
+            times += [t, math.nextafter(t, -math.inf), math.nextafter(t, math.inf)]
+    times += [rng.uniform(-10.0, 10.0) for _ in range(5_000)]
+    times += [0.0, -0.0, 1e-7, 5e-7, 1e-6, 1.5e-6, 2.0 ** 40 / 1e6,
+              math.nextafter(2.0 ** 40 / 1e6, 0.0), 1e12, math.inf, -math.inf, math.nan]
+    for t in times:
+        got = microseconds(t)
+        answers = 1.0 <= t * 1e6 < 2.0 ** 40
+        assert (got != -1.0) == answers, t
+        if answers:
+            want = round(t, 6)
+            assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want), t

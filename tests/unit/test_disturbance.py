@@ -429,3 +429,24 @@ def test_per_axis_vectors_are_four_floats():
         integrator(ki=(0.5, 0.5, 0.4))
     with pytest.raises(ValueError, match="one value per axis"):
         integrator(max_shift=(0.5,) * 5)
+
+
+def test_frozen_axes_is_its_rule_everywhere():
+    """The shortcut for the usual tick (all inside, nothing flagged) against the rule written
+    out: every combination of values at, inside and beyond the limit, NaN, and flags."""
+    import itertools
+
+    from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC
+
+    def rule(fracs, flags):
+        s = [abs(v) >= SATURATION_FRAC for v in fracs]
+        if flags and flags != "0000":
+            s = [a or c == "1" for a, c in zip(s, flags)]
+        return (s[0] or s[1], s[0] or s[1], s[2], s[3])
+
+    values = (0.0, -0.0, 0.5, -0.5, SATURATION_FRAC, -SATURATION_FRAC,
+              math.nextafter(SATURATION_FRAC, 0.0), -math.nextafter(SATURATION_FRAC, 0.0),
+              1.0, -1.0, math.nan, math.inf)
+    for flags in (None, "", "0000", "1000", "0100", "0010", "0001", "1111"):
+        for fracs in itertools.product(values, repeat=4):
+            assert frozen_axes(fracs, flags) == rule(fracs, flags), (fracs, flags)

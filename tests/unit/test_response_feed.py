@@ -287,3 +287,26 @@ def test_microseconds_is_round_to_six_decimals_bit_for_bit():
         got, want = _microseconds(t), round(t, 6)
         assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want), t
     assert math.isnan(_microseconds(math.nan))
+
+
+def test_times_the_kernel_leaves_to_pythons_round():
+    """Times below 1 µs (a flight's first command at 0) or beyond 2⁴⁰ µs, NaN: the compiled
+    step answers −1 and the times are rounded by ``round`` and fed again — the numpy step's
+    bits, whichever of the two rounded them."""
+    early = [("cmd", 0.0, 0.1, 0.2), ("nav", 2e-7, 1.0, 1.0), ("cmd", 6e-7, -0.1, 0.3),
+             ("nav", 8e-7, 0.5, 0.2), ("cmd", 1.4e-6, 0.2, 0.2), ("nav", 1.6e-6, 0.4, 0.1),
+             ("cmd", math.nan, 0.1, 0.1), ("nav", math.nan, 0.3, 0.3)]
+    late = [(kind, t + 2.0 ** 41 / 1e6, *rest) for kind, t, *rest in _stream(6)[:400]]
+    for events in (early + _stream(5), late):
+        ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+        for ev in events:
+            if ev[0] == "cmd":
+                ref.command(*ev[1:])
+                got.command(*ev[1:])
+            elif ev[0] == "restart":
+                ref.restart()
+                got.restart()
+            else:
+                assert ref.navdata(*ev[1:]) == got.navdata(*ev[1:])
+        _same(ref, got)
+        assert repr(ref.estimate) == repr(got.estimate)
