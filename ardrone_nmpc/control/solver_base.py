@@ -74,6 +74,9 @@ class NmpcSolverBase:
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
         self._stats_values = mem.stats_values  # bound once: read every tick
+        # ``(kernel, memory, settings)`` of a subclass whose tick is
+        # ``kernel(memory, x, ref, settings, initialise)`` (C/GMRES); None: :meth:`_tick`
+        self._kernel: tuple | None = None
 
     @property
     def dummy_weight(self) -> float:
@@ -91,6 +94,11 @@ class NmpcSolverBase:
     def inputs_horizon(self) -> np.ndarray:
         """(N, 4) predicted inputs of the current solution."""
         return self.U.reshape(self.spec.horizon_steps, self.stage_dim)[:, :INPUT_DIM]
+
+    @property
+    def fixed_dtau_s(self) -> float | None:
+        """Δτ (s) when it never changes (no horizon ramp), else None."""
+        return self._fixed_dtau_s
 
     def stage_dtau_s(self, t_s: float) -> float:
         """Δτ the solver uses at ``t_s`` (the horizon ramp starts at the first solve)."""
@@ -121,6 +129,12 @@ class NmpcSolverBase:
         if x.shape != _X_SHAPE or ref.shape != self._ref_shape:
             raise ValueError(f"solve: x must be (7,), ref ({self.spec.horizon_steps + 1}, 7); "
                              f"got {x.shape} and {ref.shape}")
+        return self.solve_prepared(t_s, x, ref)
+
+    def solve_prepared(self, t_s: float, x: np.ndarray, ref: np.ndarray) -> SolveResult:
+        """:meth:`solve` for a caller that vouches for its arrays — ``x`` a (7,) and ``ref`` a
+        (N+1, 7) float64 ndarray (the control stage's fast path builds them) —: the same
+        solve without the checks and conversions (µs a tick)."""
         initialise = self._t0_s is None
         if initialise:
             self._t0_s = t_s
@@ -128,8 +142,12 @@ class NmpcSolverBase:
         if self._ramped:
             self.memory.dtau_s = self.stage_dtau_s(t_s)
             self.memory.dtau_next_s = self.stage_dtau_s(t_s + self.memory.fd_step)
+        kernel = self._kernel
         t0 = _perf_counter_ns()
-        flag = self._tick(x, ref, initialise)
+        if kernel is not None:  # the subclass' bound kernel call, without its _tick frame
+            flag = kernel[0](kernel[1], x, ref, kernel[2], initialise)
+        else:
+            flag = self._tick(x, ref, initialise)
         elapsed_us = (_perf_counter_ns() - t0) * 1e-3
         newton_it, gmres_it, newton_norm, norm = self._stats_values()
         if flag == FLAG_BAD_INPUT:
