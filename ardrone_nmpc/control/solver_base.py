@@ -31,6 +31,7 @@ _perf_counter_ns = time.perf_counter_ns  # the tick times every solve
 # and a default-argument fill a tick): the same tuple
 _new_tuple = tuple.__new__
 _X_SHAPE = (STATE_DIM,)
+assert FLAG_OK == 0  # solve_prepared tests a tick's flag for truth
 
 
 class NmpcSolverBase:
@@ -73,7 +74,9 @@ class NmpcSolverBase:
         self._fixed_dtau_s = spec.dtau_s if spec.horizon_ramp_rate_per_s <= 0.0 else None
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
-        self._stats_values = mem.stats_values  # bound once: read every tick
+        # the kernels' stats as a list: the array's own tolist bound once (read every tick;
+        # SolverMemory.stats_values without its frame)
+        self._stats_values = mem.stats_array.tolist
         # ``(kernel, memory, settings)`` of a subclass whose tick is
         # ``kernel(memory, x, ref, settings, initialise)`` (C/GMRES); None: :meth:`_tick`
         self._kernel: tuple | None = None
@@ -150,11 +153,13 @@ class NmpcSolverBase:
             flag = self._tick(x, ref, initialise)
         elapsed_us = (_perf_counter_ns() - t0) * 1e-3
         newton_it, gmres_it, newton_norm, norm = self._stats_values()
-        if flag == FLAG_BAD_INPUT:
-            # Nothing to solve with: keep the solution, report, hand back the last input.
-            return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0, elapsed_us)
-        if flag == FLAG_NON_FINITE:
-            return self._recover(t_s, x, ref, SolverStatus.NON_FINITE, elapsed_us)
+        if flag:  # not FLAG_OK (one test a tick, not two)
+            if flag == FLAG_BAD_INPUT:
+                # Nothing to solve with: keep the solution, report, hand back the last input.
+                return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0,
+                                   elapsed_us)
+            if flag == FLAG_NON_FINITE:
+                return self._recover(t_s, x, ref, SolverStatus.NON_FINITE, elapsed_us)
         if norm > self.divergence_residual:
             return self._recover(t_s, x, ref, SolverStatus.DIVERGED, elapsed_us)
         status = _OK
