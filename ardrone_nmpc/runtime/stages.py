@@ -69,6 +69,10 @@ class DelayPrediction:
     period_s : control period (s).
     max_delay_s : the largest delay :meth:`set_delay_s` may set later (s): the inputs sent
         over that span are kept.
+
+    Attributes read every tick (kept by :meth:`push` and :meth:`set_delay_s`, no call):
+    ``lead_s``, how far ahead of the measurement the next command takes effect (s);
+    ``ring``, ``first``, ``count``: :meth:`pending`'s answer.
     """
 
     def __init__(self, delay_s: float, period_s: float, *, max_delay_s: float = 0.0) -> None:
@@ -87,9 +91,6 @@ class DelayPrediction:
         # them every tick without a call (µs a tick)
         self.lead_s = self.delay_ticks * period_s
         self.first = self.count = 0
-
-    # lead_s: how far ahead of the measurement the next command takes effect (s), an
-    # attribute kept with delay_ticks (set_delay_s)
 
     def set_delay_s(self, delay_s: float) -> bool:
         """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the
