@@ -279,9 +279,10 @@ class Control:
             pending = delay.count
             x_solve = np.empty(STATE_DIM) if pending else x
             states = np.empty(self._states_shape)
+            ref_horizon = states[1:]  # the logged horizon, unshifted (one view, not two)
             if offset is None:
                 shift = _NO_SHIFT
-                horizon = states[1:]
+                horizon = ref_horizon
             else:
                 shift = offset.integrator.shift
                 horizon = self._horizon
@@ -292,7 +293,7 @@ class Control:
             ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
             # _solved's Solution (its frame saved: µs a tick)
             return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok,
-                                         status._value_, None, states[1:]))
+                                         status._value_, None, ref_horizon))
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
