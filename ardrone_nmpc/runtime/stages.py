@@ -109,10 +109,12 @@ class DelayPrediction:
         i += 1
         capacity = self._capacity
         self._next = i = 0 if i == capacity else i  # (i + 1) % capacity
-        self._pushed = True
-        n = self.delay_ticks  # _note_pending, without its frame
-        if n:
-            self.first, self.count = i + capacity - n, n
+        n = self.count
+        if n:  # the pending window moves one row: _note_pending's, without its frame
+            self.first = i + capacity - n
+        elif not self._pushed:  # the first input sent: something is pending from now on
+            self._pushed = True
+            self._note_pending()
 
     def _note_pending(self) -> None:
         n = self.delay_ticks
