@@ -72,8 +72,9 @@ class CGMRESController(NmpcSolverBase):
         self.memory.zeta_per_s = zeta_per_s
         self.memory.newton_trigger_residual = newton_trigger_residual
         # the tick's kernel and its fixed arguments bound once (SolverMemory.cgmres_step's
-        # call without its frame and three attribute reads, every tick)
-        self._step = self.memory.cgmres_call()
+        # call without its frame and three attribute reads, every tick); the base's solve
+        # calls it without :meth:`_tick`'s frame
+        self._step = self._kernel = self.memory.cgmres_call()
 
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "CGMRESController":

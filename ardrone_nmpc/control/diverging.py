@@ -32,6 +32,14 @@ class DivergingSolver:
             return result._replace(status=SolverStatus.DIVERGED)
         return result
 
+    def solve_prepared(self, t_s: float, x, ref) -> SolveResult:
+        """The inner solver's ``solve_prepared`` (the control stage's fast path), marked as
+        :meth:`solve` marks it: defined here, not forwarded, which would skip the mark."""
+        result = self._inner.solve_prepared(t_s, x, ref)
+        if self._diverges(t_s):
+            return result._replace(status=SolverStatus.DIVERGED)
+        return result
+
     def __getattr__(self, name: str):
         return getattr(self._inner, name)
 

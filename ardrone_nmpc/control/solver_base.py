@@ -31,6 +31,7 @@ _perf_counter_ns = time.perf_counter_ns  # the tick times every solve
 # and a default-argument fill a tick): the same tuple
 _new_tuple = tuple.__new__
 _X_SHAPE = (STATE_DIM,)
+assert FLAG_OK == 0  # solve_prepared tests a tick's flag for truth
 
 
 class NmpcSolverBase:
@@ -73,7 +74,12 @@ class NmpcSolverBase:
         self._fixed_dtau_s = spec.dtau_s if spec.horizon_ramp_rate_per_s <= 0.0 else None
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
-        self._stats_values = mem.stats_values  # bound once: read every tick
+        # the kernels' stats as a list: the array's own tolist bound once (read every tick;
+        # SolverMemory.stats_values without its frame)
+        self._stats_values = mem.stats_array.tolist
+        # ``(kernel, memory, settings)`` of a subclass whose tick is
+        # ``kernel(memory, x, ref, settings, initialise)`` (C/GMRES); None: :meth:`_tick`
+        self._kernel: tuple | None = None
 
     @property
     def dummy_weight(self) -> float:
@@ -91,6 +97,11 @@ class NmpcSolverBase:
     def inputs_horizon(self) -> np.ndarray:
         """(N, 4) predicted inputs of the current solution."""
         return self.U.reshape(self.spec.horizon_steps, self.stage_dim)[:, :INPUT_DIM]
+
+    @property
+    def fixed_dtau_s(self) -> float | None:
+        """Δτ (s) when it never changes (no horizon ramp), else None."""
+        return self._fixed_dtau_s
 
     def stage_dtau_s(self, t_s: float) -> float:
         """Δτ the solver uses at ``t_s`` (the horizon ramp starts at the first solve)."""
@@ -121,6 +132,12 @@ class NmpcSolverBase:
         if x.shape != _X_SHAPE or ref.shape != self._ref_shape:
             raise ValueError(f"solve: x must be (7,), ref ({self.spec.horizon_steps + 1}, 7); "
                              f"got {x.shape} and {ref.shape}")
+        return self.solve_prepared(t_s, x, ref)
+
+    def solve_prepared(self, t_s: float, x: np.ndarray, ref: np.ndarray) -> SolveResult:
+        """:meth:`solve` for a caller that vouches for its arrays — ``x`` a (7,) and ``ref`` a
+        (N+1, 7) float64 ndarray (the control stage's fast path builds them) —: the same
+        solve without the checks and conversions (µs a tick)."""
         initialise = self._t0_s is None
         if initialise:
             self._t0_s = t_s
@@ -128,15 +145,21 @@ class NmpcSolverBase:
         if self._ramped:
             self.memory.dtau_s = self.stage_dtau_s(t_s)
             self.memory.dtau_next_s = self.stage_dtau_s(t_s + self.memory.fd_step)
+        kernel = self._kernel
         t0 = _perf_counter_ns()
-        flag = self._tick(x, ref, initialise)
+        if kernel is not None:  # the subclass' bound kernel call, without its _tick frame
+            flag = kernel[0](kernel[1], x, ref, kernel[2], initialise)
+        else:
+            flag = self._tick(x, ref, initialise)
         elapsed_us = (_perf_counter_ns() - t0) * 1e-3
         newton_it, gmres_it, newton_norm, norm = self._stats_values()
-        if flag == FLAG_BAD_INPUT:
-            # Nothing to solve with: keep the solution, report, hand back the last input.
-            return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0, elapsed_us)
-        if flag == FLAG_NON_FINITE:
-            return self._recover(t_s, x, ref, SolverStatus.NON_FINITE, elapsed_us)
+        if flag:  # not FLAG_OK (one test a tick, not two)
+            if flag == FLAG_BAD_INPUT:
+                # Nothing to solve with: keep the solution, report, hand back the last input.
+                return SolveResult(self._u.copy(), SolverStatus.NON_FINITE, math.inf, 0,
+                                   elapsed_us)
+            if flag == FLAG_NON_FINITE:
+                return self._recover(t_s, x, ref, SolverStatus.NON_FINITE, elapsed_us)
         if norm > self.divergence_residual:
             return self._recover(t_s, x, ref, SolverStatus.DIVERGED, elapsed_us)
         status = _OK

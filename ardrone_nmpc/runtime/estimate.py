@@ -25,6 +25,8 @@ __all__ = ["Estimation", "navdata_velocity_world"]
 
 # the estimate's slots in index order, written in one assignment (seven cost ~0.5 µs more)
 assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
+assert ESTIMATED == 0  # Estimation.update tests kalman_estimate's answer for truth
+_NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the general spelling)
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -117,16 +119,18 @@ class Estimation:
         Returns the stage's own (7,) array, overwritten by the next call.
         """
         pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
-        px, py, pz = pos.tolist() if isinstance(pos, np.ndarray) else map(float, pos)
+        px, py, pz = pos.tolist() if pos.__class__ is _NDARRAY else map(float, pos)
         if self._compiled:
-            if self.velocity_from_navdata and navdata is not None:
-                vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-                if kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
-                                   True, vx, vy) == ESTIMATED:
+            # ``not``: ESTIMATED is 0 (one comparison a tick less)
+            if navdata is None or not self.velocity_from_navdata:
+                if not kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s,
+                                       zacc_mps2, False, 0.0, 0.0):
                     return self._x
-            elif kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
-                                 False, 0.0, 0.0) == ESTIMATED:
-                return self._x
+            else:
+                vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
+                if not kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s,
+                                       zacc_mps2, True, vx, vy):
+                    return self._x
             self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:
             if self._last_pose_t_s is None:

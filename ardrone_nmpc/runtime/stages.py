@@ -48,6 +48,7 @@ _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
 _F64 = np.dtype(np.float64)
+_X_SHAPE = (STATE_DIM,)
 # a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
 _new_tuple = tuple.__new__
 
@@ -68,6 +69,10 @@ class DelayPrediction:
     period_s : control period (s).
     max_delay_s : the largest delay :meth:`set_delay_s` may set later (s): the inputs sent
         over that span are kept.
+
+    Attributes read every tick (kept by :meth:`push` and :meth:`set_delay_s`, no call):
+    ``lead_s``, how far ahead of the measurement the next command takes effect (s);
+    ``ring``, ``first``, ``count``: :meth:`pending`'s answer.
     """
 
     def __init__(self, delay_s: float, period_s: float, *, max_delay_s: float = 0.0) -> None:
@@ -77,16 +82,15 @@ class DelayPrediction:
         # the inputs sent, a ring written twice (rows i and i + capacity): the last
         # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
         self._capacity = capacity
-        self._sent = np.zeros((2 * capacity, INPUT_DIM))
+        self._sent = self.ring = np.zeros((2 * capacity, INPUT_DIM))
         # rows i and i + capacity as one (2, 4) view each: a push is one assignment, not two
         self._pairs = [self._sent[i::capacity] for i in range(capacity)]
         self._next = 0  # the row the next input goes to
         self._pushed = False
-
-    @property
-    def lead_s(self) -> float:
-        """How far ahead of the measurement the next command takes effect (s)."""
-        return self.delay_ticks * self.period_s
+        # what pending() answers, kept by push and set_delay_s: the control stage reads
+        # them every tick without a call (µs a tick)
+        self.lead_s = self.delay_ticks * period_s
+        self.first = self.count = 0
 
     def set_delay_s(self, delay_s: float) -> bool:
         """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the
@@ -94,22 +98,36 @@ class DelayPrediction:
         ticks = min(max(int(round(delay_s / self.period_s)), 0), self._capacity)
         changed = ticks != self.delay_ticks
         self.delay_ticks = ticks
+        self.lead_s = ticks * self.period_s
+        self._note_pending()
         return changed
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
         i = self._next
         self._pairs[i][...] = u_sent  # rows i and i + capacity
-        self._next = (i + 1) % self._capacity
-        self._pushed = True
+        i += 1
+        capacity = self._capacity
+        self._next = i = 0 if i == capacity else i  # (i + 1) % capacity
+        n = self.count
+        if n:  # the pending window moves one row: _note_pending's, without its frame
+            self.first = i + capacity - n
+        elif not self._pushed:  # the first input sent: something is pending from now on
+            self._pushed = True
+            self._note_pending()
+
+    def _note_pending(self) -> None:
+        n = self.delay_ticks
+        if n == 0 or not self._pushed:
+            self.first = self.count = 0
+        else:
+            self.first, self.count = self._next + self._capacity - n, n
 
     def pending(self) -> tuple[np.ndarray, int, int]:
         """The ring of inputs sent, and the first row and number of those still pending
-        (:meth:`predict`'s rollout; 0 when it returns ``x`` itself), for a compiled caller."""
-        n = self.delay_ticks
-        if n == 0 or not self._pushed:
-            return self._sent, 0, 0
-        return self._sent, self._next + self._capacity - n, n
+        (:meth:`predict`'s rollout; 0 when it returns ``x`` itself), for a compiled caller
+        (also :attr:`first` and :attr:`count`)."""
+        return self._sent, self.first, self.count
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """``x`` rolled forward through the pending inputs (model eq. 3.13, RK4 per control
@@ -217,6 +235,11 @@ class Control:
             self._rows: np.ndarray | None = None
             self._work_args: tuple | None = None  # the waypoint_args it holds
             self._horizon: np.ndarray | None = None
+            self._dtau_varies = True  # until the first solve asks the solver
+            # the fast path's solve: without the checks its arrays pass by construction (a
+            # solver without it solves with them)
+            self._solve_prepared = getattr(nmpc, "solve_prepared", None) or getattr(
+                nmpc, "solve", None)
 
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
@@ -236,30 +259,43 @@ class Control:
             return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
         solver = self.nmpc
         delay = self.delay
-        dtau = solver.stage_dtau_s(t_exp_s)
-        # one lookup for the reference at t (logged against x(t)) and over the horizon that
-        # starts when this command takes effect, t + lead
-        if 1e-9 > dtau:  # max(dtau, 1e-9) without the builtin's call (a NaN stays)
-            dtau = 1e-9
-        if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds (no horizon ramp)
-            np.multiply(dtau, self._stage_index, out=self._offsets[1:])
-            self._offsets_dtau = dtau
+        if self._dtau_varies:
+            dtau = solver.stage_dtau_s(t_exp_s)
+            # one lookup for the reference at t (logged against x(t)) and over the horizon
+            # that starts when this command takes effect, t + lead
+            if 1e-9 > dtau:  # max(dtau, 1e-9) without the builtin's call (a NaN stays)
+                dtau = 1e-9
+            if dtau != self._offsets_dtau:  # [0, Δτ·i …], kept while Δτ holds
+                np.multiply(dtau, self._stage_index, out=self._offsets[1:])
+                self._offsets_dtau = dtau
+            # a Δτ fixed for good (no horizon ramp): the offsets are made, never asked again
+            self._dtau_varies = solver.fixed_dtau_s is None
         args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
-        if args is not None and x.__class__ is np.ndarray and x.dtype is _F64:
+        if (args is not None and x.__class__ is np.ndarray and x.dtype is _F64
+                and x.shape == _X_SHAPE):
             # a waypoint reference (the square): the delay prediction, the horizon's times,
-            # the lookup and the offset-free shift in one call (runtime/tick_kernels.py)
+            # the lookup and the offset-free shift in one call (runtime/tick_kernels.py),
+            # then the solve without the checks its arrays pass by construction
             if args is not self._work_args:  # once a flight: its arrays into the work vector
                 self._pack(args)
-            sent, first, pending = delay.pending()
+            pending = delay.count
             x_solve = np.empty(STATE_DIM) if pending else x
             states = np.empty(self._states_shape)
+            ref_horizon = states[1:]  # the logged horizon, unshifted (one view, not two)
             if offset is None:
-                shift, horizon = _NO_SHIFT, states[1:]
+                shift = _NO_SHIFT
+                horizon = ref_horizon
             else:
-                shift, horizon = offset.integrator.shift, self._horizon
-            nmpc_inputs(x, sent, first, pending, x_solve, t_exp_s, delay.lead_s, shift, states,
-                        self._work, self._rows)
-            return self._solved(t_exp_s, x_solve, states, horizon)
+                shift = offset.integrator.shift
+                horizon = self._horizon
+            nmpc_inputs(x, delay.ring, delay.first, pending, x_solve, t_exp_s, delay.lead_s,
+                        shift, states, self._work, self._rows)
+            result = self._solve_prepared(t_exp_s, x_solve, horizon)
+            status = result.status
+            ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
+            # _solved's Solution (its frame saved: µs a tick)
+            return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok,
+                                         status._value_, None, ref_horizon))
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s

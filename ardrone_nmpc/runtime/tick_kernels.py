@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.control.kernels import rollout_rk4
+from ardrone_nmpc.control.kernels import rollout_rk4_into
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
@@ -37,14 +37,16 @@ _SHIFTED = (IX_X, IX_Y, IX_Z, IX_PSI)
 # :func:`nmpc_inputs`' fixed buffers and parameters, built once per flight (:func:`nmpc_work`;
 # numba's dispatch costs ~50–100 ns an argument, issue 26) in two arrays. ``work``, float64:
 # these slots, then the horizon's offsets, times and their clamp at 0 (N each), the shifted
-# horizon (N − 1, 7, row-major), and the waypoint trajectory's (``HoldStartThen.waypoint_args``)
-# knots (K), ψ (K), Δt (K − 1) and start (7). ``rows`` (2K − 1, 3): its positions (K) then its
+# horizon (N − 1, 7, row-major), the rollout's scratch (5 × 7: its slopes, not allocated every
+# tick) and the waypoint trajectory's (``HoldStartThen.waypoint_args``) knots (K), ψ (K),
+# Δt (K − 1) and start (7). ``rows`` (2K − 1, 3): its positions (K) then its
 # segment velocities (K − 1) — 2-D slices of it, not reshapes of ``work``: a reshape costs the
 # cold start ~0.1 s of compile each.
 W_PERIOD = 0    # the control period (s): the delay prediction's RK4 step
 W_TIMES = 1     # N, the horizon's times (its stages + 1, and the reference now)
 W_KNOTS = 2     # K, the waypoints
 W_HEAD = 3
+_ROLLOUT_SCRATCH = 5 * STATE_DIM  # rollout_rk4_into's
 
 
 def nmpc_work(period_s: float, n_times: int,
@@ -53,7 +55,7 @@ def nmpc_work(period_s: float, n_times: int,
     times and a waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
     t_knots, positions_m, psi_rad, dt_s, vel_mps, start = waypoint_args
     head = np.array([period_s, n_times, t_knots.size], dtype=np.float64)
-    buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM)
+    buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM + _ROLLOUT_SCRATCH)
     work = np.concatenate((head, buffers, t_knots, psi_rad, dt_s, start)).astype(np.float64)
     rows = np.ascontiguousarray(np.concatenate((positions_m, vel_mps)), dtype=np.float64)
     return work, rows
@@ -93,6 +95,8 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
     o += 3 * n
     h0 = o  # the shifted horizon, row-major (no reshape: a smaller compile)
     o += (n - 1) * STATE_DIM
+    scratch = work[o:o + _ROLLOUT_SCRATCH]
+    o += _ROLLOUT_SCRATCH
     t_knots = work[o:o + nk]
     psi_rad = work[o + nk:o + 2 * nk]
     dt_s = work[o + 2 * nk:o + 3 * nk - 1]
@@ -100,7 +104,7 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
     positions_m = rows[:nk]
     vel_mps = rows[nk:]
     if pending:
-        rollout_rk4(x, sent[first:first + pending], work[W_PERIOD], x_solve)
+        rollout_rk4_into(x, sent[first:first + pending], work[W_PERIOD], x_solve, scratch)
     base = t_s + lead_s
     for i in range(n):
         times[i] = base + work[W_HEAD + i]

@@ -13,6 +13,14 @@ from ardrone_nmpc.runtime.stages import DelayPrediction
 PERIOD_S = 0.065
 
 
+def _sent(pending: deque, n: int) -> np.ndarray:
+    """The last ``n`` inputs of the deque, oldest first, zeros for those not sent yet."""
+    sent = np.zeros((n, 4))
+    last = list(pending)[-n:]
+    sent[n - len(last):] = last
+    return sent
+
+
 def _reference(pending: deque, n: int, capacity: int, x: np.ndarray) -> np.ndarray:
     """The deque version: the last ``n`` inputs, zeros (hover) for those not sent yet."""
     sent = np.zeros((capacity, 4))[:n]
@@ -32,7 +40,7 @@ def test_the_ring_feeds_the_rollout_what_the_deque_did():
     capacity = 8  # ceil(0.5 / 0.065)
     pending: deque = deque(maxlen=capacity)
     x = rng.normal(size=7)
-    assert delay.predict(x) is x  # nothing sent yet
+    assert delay.predict(x) is x and delay.count == 0  # nothing sent yet
     for k in range(60):
         u = rng.normal(size=4) * 0.1
         delay.push(u)
@@ -40,6 +48,12 @@ def test_the_ring_feeds_the_rollout_what_the_deque_did():
         if k % 7 == 3:
             delay.set_delay_s(float(rng.uniform(0.0, 0.6)))
         n = delay.delay_ticks
+        # the attributes the control stage reads every tick: pending() and the lead
+        ring, first, count = delay.pending()
+        assert ring is delay.ring and (first, count) == (delay.first, delay.count)
+        assert count == n and delay.lead_s == n * PERIOD_S
+        if n:
+            assert np.array_equal(ring[first:first + n], _sent(pending, n))
         got = delay.predict(x)
         if n == 0:
             assert got is x

@@ -268,3 +268,32 @@ def test_cgmres_call_is_the_memory_step():
     kernel, memory, settings = mem.cgmres_call()
     assert kernel(memory, x, ref, settings, False) == flag
     assert np.array_equal(mem.U, U) and np.array_equal(mem.u, u)
+
+
+@pytest.mark.parametrize("cls", [CGMRESController, NewtonGMRESController])
+def test_solve_prepared_is_solve_without_its_checks(cls):
+    """The control stage's ``solve_prepared`` (no input checks; C/GMRES' kernel called
+    without the ``_tick`` frame) answers as ``solve`` does, bit for bit, along a run with a
+    reference step, a non-finite state (flagged, the last input) and a forced divergence
+    (the recovery)."""
+    runs = []
+    for prepared in (False, True):
+        solver = cls(SPEC)
+        solve = solver.solve_prepared if prepared else solver.solve
+        x = np.asarray(HOVER_STATE, float).copy()
+        run = []
+        for k in range(12):
+            target = SMALL_TARGET if k < 6 else BIG_TARGET
+            xk = x.copy()
+            if k == 8:
+                xk[2] = np.nan
+            if k == 10:
+                solver.divergence_residual = 1e-12
+            r = solve(0.065 * k, xk, _ref(target))
+            run.append((r.u.tobytes(), r.status, r.residual_norm, r.gmres_iterations,
+                        r.newton_iterations, r.reinitialised))
+            x = plant_step(x, r.u, 0.065)
+        runs.append(run)
+    assert runs[0] == runs[1]
+    statuses = {status for _, status, *_ in runs[0]}
+    assert SolverStatus.NON_FINITE in statuses and SolverStatus.DIVERGED in statuses

@@ -260,6 +260,25 @@ def test_injected_divergence_acts_in_its_window_only_and_the_solver_still_runs()
     assert tick.supervisor.check_solution(inside.ok, inside.u_flown).action is Action.HOLD
 
 
+def test_the_wrapper_marks_the_control_stages_prepared_solve_too():
+    """The fast path's ``solve_prepared`` is the wrapper's own, not forwarded past its mark;
+    what it solves is the inner solver's, bit for bit."""
+    cfg = config()
+    plain = Tick(cfg, experiment_trajectory(cfg))
+    wrapped = Tick(cfg, experiment_trajectory(cfg),
+                   wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: t_s >= 1.0))
+    for t in (0.5, 0.565, 1.0, 1.065):
+        a = plain.control.solve(t, state(), plain.trajectory)
+        b = wrapped.control.solve(t, state(), wrapped.trajectory)
+        assert a.result.u.tobytes() == b.result.u.tobytes()
+        assert a.result.residual_norm == b.result.residual_norm
+        assert b.status == (SolverStatus.DIVERGED.value if t >= 1.0 else a.status)
+        assert b.ok == (a.ok and t < 1.0)
+    x = np.array(state())
+    ref = np.tile(x, (plain.control.nmpc.spec.horizon_steps + 1, 1))
+    assert wrapped.control.nmpc.solve_prepared(2.0, x, ref).status is SolverStatus.DIVERGED
+
+
 def test_only_a_wrapper_the_runner_builds_makes_the_solver_diverge():
     cfg = config("faults.solver_diverge.start_s=-100", "faults.solver_diverge.duration_s=1e3")
     plain = Tick(cfg, experiment_trajectory(cfg))  # a faults section alone injects nothing

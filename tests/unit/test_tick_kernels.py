@@ -20,7 +20,7 @@ from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.trajectories import Waypoints, make_trajectory
 from ardrone_nmpc.runtime.stages import Control, DelayPrediction, OffsetFree
 from ardrone_nmpc.runtime.tick import effective_controller
-from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work, nmpc_work_views
+from ardrone_nmpc.runtime.tick_kernels import W_HEAD, nmpc_inputs, nmpc_work, nmpc_work_views
 
 PERIOD_S = 0.065
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
@@ -69,6 +69,9 @@ def test_nmpc_inputs_is_the_python_it_replaces_bit_for_bit(pending, shift):
                 work_offsets, _, _, horizon = nmpc_work_views(work)
                 work_offsets[:] = offsets
                 horizon[:] = np.nan
+                # the rollout's scratch after the horizon, any contents: the same bits
+                scratch = work[W_HEAD + 3 * (n + 2) + (n + 1) * STATE_DIM:]
+                scratch[:5 * STATE_DIM] = np.nan
                 nmpc_inputs(x, sent, first, count, x_k, t_s, delay.lead_s,
                             np.zeros(0) if shift is None else shift, states, work, rows)
                 assert (count > 0) == (x_py is not x)

@@ -42,7 +42,7 @@ from ardrone_nmpc.control.kernels.layout import (FLAG_BAD_INPUT, FLAG_NON_FINITE
                                                 STAGE_DUMMY, memory_size, workspace_size)
 from ardrone_nmpc.control.kernels.memory import SolverMemory, SolverStats
 from ardrone_nmpc.control.kernels.residual import (aim_obstacles, penalty, penalty_gradient,
-                                                  rollout_rk4, sincos_small)
+                                                  rollout_rk4, rollout_rk4_into, sincos_small)
 from ardrone_nmpc.control.kernels.steps import (cgmres_step, cgmres_step_obstacles, newton_step,
                                                 newton_step_obstacles)
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
@@ -66,7 +66,8 @@ __all__ = [
     "bound_barrier", "bound_gradient", "carve_workspace", "cgmres_step", "cgmres_step_obstacles",
     "condensed_cost", "fdgmres", "memory_size", "newton_solve", "newton_step",
     "newton_step_obstacles", "penalty", "penalty_gradient",
-    "prepare_reference", "residual", "rollout_rk4", "sincos_small", "workspace_size",
+    "prepare_reference", "residual", "rollout_rk4", "rollout_rk4_into", "sincos_small",
+    "workspace_size",
 ]
 
 # numba keys a cached kernel on its own file only: flush the solver's (and the twins' above)

@@ -135,6 +135,11 @@ class SolverMemory:
         """The last tick's :class:`SolverStats`."""
         return SolverStats(*self._stats.tolist())
 
+    @property
+    def stats_array(self) -> np.ndarray:
+        """The kernels' stats slots (a view, :class:`SolverStats`' field order)."""
+        return self._stats
+
     def stats_values(self) -> list[float]:
         """:meth:`stats` as a plain list in its field order (the tick's: no record built)."""
         return self._stats.tolist()

@@ -41,13 +41,21 @@ aim_obstacles = njit(cache=True, error_model="numpy", fastmath=FAST_MATH)(
 def rollout_rk4(x, inputs, dt, out):
     """``out`` = ``x`` integrated through ``inputs`` (k, 4), each held for ``dt`` (RK4 of
     eq. 3.13) — the delay compensation's prediction of the state a new command will meet."""
+    rollout_rk4_into(x, inputs, dt, out, np.empty(5 * NX))
+
+
+@njit(cache=True, error_model="numpy", fastmath=FAST_MATH, **INNER_KERNEL)
+def rollout_rk4_into(x, inputs, dt, out, scratch):
+    """:func:`rollout_rk4` with its four slopes and trial state in ``scratch`` (5·NX, any
+    contents): a compiled caller with a buffer of its own (the tick's ``nmpc_inputs``)
+    allocates nothing, five allocations a tick."""
     for i in range(NX):
         out[i] = x[i]
-    k1 = np.empty(NX)
-    k2 = np.empty(NX)
-    k3 = np.empty(NX)
-    k4 = np.empty(NX)
-    tmp = np.empty(NX)
+    k1 = scratch[0:NX]
+    k2 = scratch[NX:2 * NX]
+    k3 = scratch[2 * NX:3 * NX]
+    k4 = scratch[3 * NX:4 * NX]
+    tmp = scratch[4 * NX:5 * NX]
     for r in range(inputs.shape[0]):
         u = inputs[r]
         dynamics(out, u, k1)
@@ -62,7 +70,6 @@ def rollout_rk4(x, inputs, dt, out):
         dynamics(tmp, u, k4)
         for i in range(NX):
             out[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-
 
 
 @njit(cache=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
