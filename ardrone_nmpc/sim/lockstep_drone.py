@@ -85,6 +85,9 @@ class LockstepDrone(ConfigHandshake):
         self._guard = TakeoffGuard()
         self.self_landing: str | None = None
         self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
+        # the sampler's compiled legs (None without): the truth of their last run while they
+        # hold the state (a legs object no longer used never runs: its live_out stays None)
+        self._legs = self.sensors._legs
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
                           and type(plant).truth is AirframePlant.truth)
@@ -126,7 +129,7 @@ class LockstepDrone(ConfigHandshake):
     @property
     def truth(self) -> PlantTruth:
         """The plant's true state (a simulating runner logs it)."""
-        legs = self.sensors._legs
+        legs = self._legs
         if legs is not None:  # (from the compiled legs' arrays while they hold the state)
             return legs.truth()
         return self.sim.plant.truth
@@ -137,7 +140,7 @@ class LockstepDrone(ConfigHandshake):
         it."""
         plant = self.sim.plant
         if self._airframe:
-            legs = self.sensors._legs  # (the last run's truth, while it holds the state)
+            legs = self._legs  # (the last run's truth, while it holds the state)
             o = legs.live_out if legs is not None else None
             if o is not None:
                 return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]

@@ -59,13 +59,12 @@ _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_adva
 #: legs; LockstepSensors checks its own class, it imports this module)
 _FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
                       "_climb_may_reach_cap")
-SAMPLER_REPLACED = ("_run_to", "_direct_events")
+SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
                      (AirframePlant, ("command",)))
 _isfinite = math.isfinite
-_f64 = np.float64
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: tuple = ()
@@ -400,11 +399,10 @@ class CompiledLegs:
         mode = plant._mode  # as the kernel takes it (sv[S_MODE])
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
-        wind = plant.wind_mps
-        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2],
-                    kernel_mode)
+        w0, w1, w2 = plant.wind_mps.tolist()
+        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode)
         sv[0] = t_s
-        x, fifo, rows = self._held[:3]
+        x, _, rows = self._held[:3]
         bias_v, gust_v, mocap_v, nav_v = self._blocks
         self._kernel(x, rows, iv, sv, p, bias_v, gust_v, mocap_v, nav_v, out)
         done, n_events, kind0, kind1 = _GET_DONE(iv, _AT_DONE)
@@ -429,17 +427,23 @@ class CompiledLegs:
             if kind == _MOCAP:
                 q = _O_POSE
                 # position, angles: read-only arrays, as AirframePlant.mocap_pose's
-                sensors.took_pose(t_event, MocapPose(
-                    o[q], _frozen(_PACK3(o[q + 1], o[q + 2], o[q + 3])),
-                    _frozen(_PACK3(o[q + 4], o[q + 5], o[q + 6])), o[q + 7]))
+                pose = MocapPose(o[q], _frozen(_PACK3(o[q + 1], o[q + 2], o[q + 3])),
+                                 _frozen(_PACK3(o[q + 4], o[q + 5], o[q + 6])), o[q + 7])
+                if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
+                    sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
+                else:
+                    sensors.took_pose(t_event, pose)
             else:
                 q = _O_NAV
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
-                sensors.took_navdata(t_event, NavdataSample(
+                nav = NavdataSample(
                     o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
-                    _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
-                    _f64(o[q + 8])))
+                    out[q + 5] if altitude > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
+                if mode is sensors._nav_mode:  # LockstepSensors.took_navdata, spelled out
+                    sensors.nav, sensors.nav_rx_t_s = nav, t_event
+                else:
+                    sensors.took_navdata(t_event, nav)
         if done > n_events:
             self.live_out = o
             return _NONE, False
