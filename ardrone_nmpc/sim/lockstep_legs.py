@@ -1,9 +1,18 @@
 """The direct sensor path's tick in one compiled call, when nothing but physics happens in it.
 
-:class:`CompiledLegs` hands :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` the plant's
-state, runs it and takes the state back, for
-:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. It reads
-and writes the plant's and the firmware's internals (it is their compiled path, not a
+:class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
+plant's state for
+:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. Between
+its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
+command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
+packing it from the attributes and writing it back every tick cost as much as the
+physics. The attributes leave the instances' ``__dict__`` meanwhile, and any read of one —
+the plant's Python path, the firmware, a fault, a test — writes them all back first
+(:mod:`~ardrone_nmpc.sim.held_state`); a write meanwhile is newer than the arrays and is
+kept, and the next run takes the state again. What a tick reads between runs comes from
+the arrays: the samples, and the truth of the last run (:meth:`CompiledLegs.truth`,
+:attr:`CompiledLegs.live_out` for ``LockstepDrone.truth_cells`` and the PCMD chain). It
+reads and writes the plant's and the firmware's internals (it is their compiled path, not a
 client), and is used only when the Python path's tick would do what the kernel does:
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or

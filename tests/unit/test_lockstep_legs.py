@@ -37,8 +37,8 @@ def _snapshot(drone, t_s):
     inputs = drone.inputs(t_s)
     plant = drone.sim.plant
     fw = drone.sim.firmware
-    return (drone.truth_cells(), inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s, inputs.target_rx_t_s,
-            _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
+    return (drone.truth_cells(), inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s,
+            inputs.target_rx_t_s, _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
             _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
             plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
             plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
