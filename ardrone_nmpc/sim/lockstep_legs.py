@@ -82,6 +82,8 @@ _NONE: tuple = ()
 _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
 _GET_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").unpack_from
 _GET_DONE = struct.Struct("4q").unpack_from  # iv[I_DONE … I_KIND1]
+_GET_POS, _PUT_POS = struct.Struct("4q").unpack_from, struct.Struct("4q").pack_into
+_AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
 _AT_DONE = 8 * ks.I_DONE
 # sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
 _PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
@@ -151,12 +153,13 @@ class CompiledLegs:
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
         # while held (_take … release): (x, fifo, ring, the normal blocks), the blocks'
-        # arrays, the attributes taken out, whether a run changed them, the dicts' sizes
+        # arrays, the kernel's arrays, the attributes taken out, whether a run changed them
         self._held: tuple = ()
         self._blocks: tuple = ()
         self._saved = self._sensors_saved = None
+        self._args: tuple = ()
         self._ran = False
-        self._lens = (0, 0)
+        self._plant_len = self._sensors_len = 0  # the dicts' sizes while held
         self._kernel = _lockstep_run
         #: ``out.tolist()`` of the last run while the arrays hold the state it left (its
         #: truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
@@ -327,6 +330,7 @@ class CompiledLegs:
             x = self._x = plant._state_array()
         self._held = (x, fifo, fifo.rows, bias_n, gust_n, mocap_n, nav_n)
         self._blocks = (bias_n.values, gust_n.values, mocap_n.values, nav_n.values)
+        self._args = (x, fifo.rows, *self._blocks)  # the kernel's arrays, in its order
         self._kernel = _kernel_for(x, fifo.rows, self._blocks)
         self._saved = {name: d.pop(name) for name in _PLANT_HELD}
         sd = sensors.__dict__
@@ -334,7 +338,7 @@ class CompiledLegs:
         plant._held_by = sensors._held_by = self
         self._ran = False
         self.live_out = None
-        self._lens = (len(d), len(sd))
+        self._plant_len, self._sensors_len = len(d), len(sd)
 
     def release(self) -> None:
         """The held attributes back into the plant's and the sensors' ``__dict__`` — as the
@@ -395,10 +399,15 @@ class CompiledLegs:
         d = plant.__dict__
         if d.get("_held_by") is not self:
             self._take()
-        elif self._lens != (len(d), len(sensors.__dict__)):
+        elif len(d) != self._plant_len or len(sensors.__dict__) != self._sensors_len:
             self.release()  # a held attribute was written meanwhile: it is the newer
             self._take()
-        p = self._params()
+        old = self._p_key  # the flight's parameters (_params), unchanged as a rule
+        if (old and old[0] is plant.params and old[1] is plant.noise
+                and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
+            p = self.p
+        else:
+            p = self._params()
         iv, sv, out = self.iv, self.sv, self.out
         flags, _, _, fw_gaz, _ = fw.pcmd
         if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
@@ -411,18 +420,21 @@ class CompiledLegs:
         w0, w1, w2 = plant.wind_mps.tolist()
         _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode)
         sv[0] = t_s
-        x, _, rows = self._held[:3]
-        bias_v, gust_v, mocap_v, nav_v = self._blocks
+        x, rows, bias_v, gust_v, mocap_v, nav_v = self._args
         self._kernel(x, rows, iv, sv, p, bias_v, gust_v, mocap_v, nav_v, out)
         done, n_events, kind0, kind1 = _GET_DONE(iv, _AT_DONE)
-        if done < 0:  # a block ran short: new ones, and again
-            self.release()
-            bias_n, gust_n, mocap_n, nav_n = self._held[3:]
+        if done < 0:  # a block ran short: new ones (held: the positions in iv), and again
+            bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
+            bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
             bias_n.ensure(ks.NEED_BIAS)
             mocap_n.ensure(ks.NEED_MOCAP)
             nav_n.ensure(ks.NEED_NAV)
             if self.turbulent:
                 gust_n.ensure(ks.NEED_GUST)
+            _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+            self._blocks = tuple(b.values for b in blocks)
+            self._args = (x, rows, *self._blocks)
+            self._kernel = _kernel_for(x, rows, self._blocks)
             return self.run(t_s)
         self._ran = True
         o = out.tolist()
@@ -431,7 +443,7 @@ class CompiledLegs:
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        for i in range(min(done, n_events)):
+        for i in range(done if done < n_events else n_events):
             kind, t_event = (kind0, o[_O_EV_T0]) if i == 0 else (kind1, o[_O_EV_T1])
             if kind == _MOCAP:
                 q = _O_POSE
