@@ -138,12 +138,12 @@ class LockstepDrone(ConfigHandshake):
         """(x, y, z, ψ, ż) of :attr:`truth` (the logged truth, every tick): an airframe's read
         from its state, the values :attr:`AirframePlant.truth` would hold, without building
         it."""
+        legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
+        o = legs.live_out if legs is not None else None
+        if o is not None:
+            return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]
         plant = self.sim.plant
         if self._airframe:
-            legs = self._legs  # (the last run's truth, while it holds the state)
-            o = legs.live_out if legs is not None else None
-            if o is not None:
-                return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]
             state = plant._state  # ψ wrapped as AirframePlant.truth wraps it
             return state[0], state[1], state[2], wrap_angle_rad(state[8]), state[5]
         truth = plant.truth
