@@ -233,9 +233,16 @@ class CompiledLegs:
         cmd = (roll, pitch, gaz, yaw, True)
         if cmd != fw.applied:
             if _isfinite(roll) and _isfinite(pitch) and _isfinite(gaz) and _isfinite(yaw):
-                # AirframePlant.command: each fraction clipped to [−1, 1]
-                roll, pitch = min(1.0, max(-1.0, roll)), min(1.0, max(-1.0, pitch))
-                gaz, yaw = min(1.0, max(-1.0, gaz)), min(1.0, max(-1.0, yaw))
+                # AirframePlant.command: each fraction clipped to [−1, 1], min(1.0, max(−1.0,
+                # v)) spelled out (a finite v: the same float)
+                roll = roll if roll > -1.0 else -1.0
+                roll = roll if roll < 1.0 else 1.0
+                pitch = pitch if pitch > -1.0 else -1.0
+                pitch = pitch if pitch < 1.0 else 1.0
+                gaz = gaz if gaz > -1.0 else -1.0
+                gaz = gaz if gaz < 1.0 else 1.0
+                yaw = yaw if yaw > -1.0 else -1.0
+                yaw = yaw if yaw < 1.0 else 1.0
                 if plant.__dict__.get("_held_by") is self:  # the arrays hold the command
                     self._saved["_current"] = (roll, pitch, gaz, yaw, False)
                     _PUT_COMMAND(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 0.0)

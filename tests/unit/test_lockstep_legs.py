@@ -126,6 +126,9 @@ CASES = {
     "hover_and_silence": ([], lambda k: None if k % 7 == 0 else (0.01, -0.02, 0.0, 0.0), False),
     "watchdogs": ([], lambda k: "silent" if 150 < k < 200 or k % 40 > 35 else _zigzag(k),
                   False),
+    # fractions beyond ±1 (the plant clips them), a −0.0
+    "saturated": ([], lambda k: (1.7 if (k // 20) % 2 else -1.3, -1.0000000000000002, 0.0,
+                                 2.5 if k % 3 else -0.0), False),
     "battery_empties": (["sim.plant.battery_start_pct=21",
                          "sim.plant.battery_drain_pct_per_min=100"],
                         lambda k: "takeoff" if k % 25 == 0 else _zigzag(k), True),
