@@ -178,11 +178,22 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
     it (``vz_gain``: the unsagged one). Returns (steps done, head, battery, state array)."""
     size = x.shape[0]
     x = x.copy()
-    k1, k2, k3, k4, tmp = (np.empty(size), np.empty(size), np.empty(size), np.empty(size),
-                           np.empty(size))
+    scratch = np.empty((5, size))
+    done, head, battery = flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w,
+                                            h, n, battery, drain, vz_gain, sag, scratch)
+    return done, head, battery, x
+
+
+@njit(cache=True, **INNER_KERNEL)
+def flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain,
+                      vz_gain, sag, scratch):
+    """:func:`flying_steps` on ``x`` in place, with the RK4's scratch rows ``scratch`` (5,
+    x's size) given: the lockstep tick flies three legs a tick and allocates them once.
+    Returns (steps done, head, battery)."""
+    k1, k2, k3, k4, tmp = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     for i in range(n):
         if not battery - drain > 0.0:
-            return i, head, battery, x
+            return i, head, battery
         r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
         kk = k
         if sag != 0.0:
@@ -191,7 +202,7 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
                   k[10], k[11], k[12])
         _rk4_into(x, r, p, g, y, hd, kk, w, h, k1, k2, k3, k4, tmp, x)
         battery = floor_and_drain(x, battery, drain)
-    return n, head, battery, x
+    return n, head, battery
 
 
 def rk4_step(deriv, state: tuple, h: float, command: tuple, params,

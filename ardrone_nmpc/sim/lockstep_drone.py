@@ -25,6 +25,7 @@ from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_co
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.sensor_step import O_STATE
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 __all__ = ["LockstepDrone"]
@@ -34,6 +35,7 @@ _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
+_X = O_STATE  # the state's place in the compiled legs' last run
 _set = object.__setattr__
 
 
@@ -83,6 +85,9 @@ class LockstepDrone(ConfigHandshake):
         self._guard = TakeoffGuard()
         self.self_landing: str | None = None
         self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
+        # the sampler's compiled legs (None without): the truth of their last run while they
+        # hold the state (a legs object no longer used never runs: its live_out stays None)
+        self._legs = self.sensors._legs
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
                           and type(plant).truth is AirframePlant.truth)
@@ -124,12 +129,19 @@ class LockstepDrone(ConfigHandshake):
     @property
     def truth(self) -> PlantTruth:
         """The plant's true state (a simulating runner logs it)."""
+        legs = self._legs
+        if legs is not None:  # (from the compiled legs' arrays while they hold the state)
+            return legs.truth()
         return self.sim.plant.truth
 
     def truth_cells(self) -> tuple:
         """(x, y, z, ψ, ż) of :attr:`truth` (the logged truth, every tick): an airframe's read
         from its state, the values :attr:`AirframePlant.truth` would hold, without building
         it."""
+        legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
+        o = legs.live_out if legs is not None else None
+        if o is not None:
+            return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]
         plant = self.sim.plant
         if self._airframe:
             state = plant._state  # ψ wrapped as AirframePlant.truth wraps it
@@ -196,7 +208,7 @@ class LockstepDrone(ConfigHandshake):
             legs = self.sensors._legs
             if legs is not None and legs.takes_commands:  # the chain written out
                 legs.command(seq + 1, float(roll_frac), float(pitch_frac), float(gaz_frac),
-                             float(yaw_frac), self.sim.plant.t_s)
+                             float(yaw_frac))  # at the plant's time
                 return
             self.sim.execute_pcmd(seq + 1, (_PROGRESSIVE, float(roll_frac), float(pitch_frac),
                                             float(gaz_frac), float(yaw_frac)),

@@ -1,9 +1,18 @@
 """The direct sensor path's tick in one compiled call, when nothing but physics happens in it.
 
-:class:`CompiledLegs` hands :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` the plant's
-state, runs it and takes the state back, for
-:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. It reads
-and writes the plant's and the firmware's internals (it is their compiled path, not a
+:class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
+plant's state for
+:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. Between
+its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
+command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
+packing it from the attributes and writing it back every tick cost as much as the
+physics. The attributes leave the instances' ``__dict__`` meanwhile, and any read of one —
+the plant's Python path, the firmware, a fault, a test — writes them all back first
+(:mod:`~ardrone_nmpc.sim.held_state`); a write meanwhile is newer than the arrays and is
+kept, and the next run takes the state again. What a tick reads between runs comes from
+the arrays: the samples, and the truth of the last run (:meth:`CompiledLegs.truth`,
+:attr:`CompiledLegs.live_out` for ``LockstepDrone.truth_cells`` and the PCMD chain). It
+reads and writes the plant's and the firmware's internals (it is their compiled path, not a
 client), and is used only when the Python path's tick would do what the kernel does:
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
@@ -37,7 +46,8 @@ import struct
 
 import numpy as np
 
-from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
@@ -58,25 +68,73 @@ _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_adva
 #: legs; LockstepSensors checks its own class, it imports this module)
 _FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
                       "_climb_may_reach_cap")
-SAMPLER_REPLACED = ("_run_to", "_direct_events")
+SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
                      (AirframePlant, ("command",)))
 _isfinite = math.isfinite
-_f64 = np.float64
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 _NONE: tuple = ()
 # the counters and the float state written straight into iv and sv (native int64 and double:
 # the arrays' own types, the same bits) and read back: no per-element numpy conversion
 _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
-_PUT_SV = struct.Struct(f"{ks.SV_SIZE}d").pack_into
+_GET_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").unpack_from
+_GET_DONE = struct.Struct("4q").unpack_from  # iv[I_DONE … I_KIND1]
+_GET_POS, _PUT_POS = struct.Struct("4q").unpack_from, struct.Struct("4q").pack_into
+_AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
+_AT_DONE = 8 * ks.I_DONE
+# sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
+_PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
+_AT_PENDING = 8 * ks.S_PENDING
+# sv[S_CLIMBING … S_MODE]: what the firmware, the faults and the modes may change any time
+_PUT_INPUTS = struct.Struct(f"{ks.S_MODE - ks.S_CLIMBING + 1}d").pack_into
+_AT_CLIMBING = 8 * ks.S_CLIMBING
+_PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
+_AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
+_PACK6 = struct.Struct("6d").pack
+_PACK3 = struct.Struct("3d").pack
+#: the plant's and the sensors' attributes the arrays hold between runs (sim/held_state.py)
+_PLANT_HELD = ("_state", "_tilt_aux", "_steps", "_pending_s", "_battery", "_yaw_bias_deg",
+               "_vel_bias", "_gust_mps", "_current", "_fifo", "_bias_normals",
+               "_gust_normals", "_mocap_normals", "_nav_normals")
+_SENSORS_HELD = ("_next_mocap_k", "_next_nav_k")
 # the kernel's layout, bound once (run reads them every tick)
 _O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1,
                                                     ks.O_LAST_NOW)
 _MOCAP = ks.MOCAP
+_O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
+
+
+_F64 = np.dtype(np.float64)
+_ENTRY: list = []  # lockstep_run's compiled entry point for the arrays CompiledLegs builds
+
+
+def _kernel_for(x, rows, blocks):
+    """:func:`~ardrone_nmpc.sim.sensor_step.lockstep_run`'s compiled entry point — the
+    dispatcher's own choice for these arrays, without its per-call look-up of ten
+    arguments' types — when the plant's arrays are of the one kind CompiledLegs builds its
+    own of (float64, C-contiguous, aligned, writeable; the state and the blocks 1-D, the
+    ring 2-D: their types until the next :meth:`_take <CompiledLegs._take>` asks again);
+    else, or before the kernel is compiled (or without the JIT), the dispatcher."""
+    if not (x.ndim == 1 and rows.ndim == 2
+            and all(a.dtype == _F64 and a.flags.carray for a in (x, rows, *blocks))
+            and all(a.ndim == 1 for a in blocks)):
+        return _lockstep_run
+    if not _ENTRY:
+        overloads = getattr(_lockstep_run, "overloads", None)
+        if not overloads:
+            return _lockstep_run
+        from numba import typeof
+        iv, sv = np.zeros(ks.IV_SIZE, dtype=np.int64), np.zeros(ks.SV_SIZE)
+        compiled = overloads.get(tuple(typeof(a) for a in (x, rows, iv, sv, sv, *blocks,
+                                                            sv)))
+        if compiled is None:
+            return _lockstep_run
+        _ENTRY.append(compiled.entry_point)
+    return _ENTRY[0]
 
 
 class CompiledLegs:
@@ -94,6 +152,18 @@ class CompiledLegs:
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
+        # while held (_take … release): (x, fifo, ring, the normal blocks), the blocks'
+        # arrays, the kernel's arrays, the attributes taken out, whether a run changed them
+        self._held: tuple = ()
+        self._blocks: tuple = ()
+        self._saved = self._sensors_saved = None
+        self._args: tuple = ()
+        self._ran = False
+        self._plant_len = self._sensors_len = 0  # the dicts' sizes while held
+        self._kernel = _lockstep_run
+        #: ``out.tolist()`` of the last run while the arrays hold the state it left (its
+        #: truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
+        self.live_out = None
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
@@ -128,7 +198,7 @@ class CompiledLegs:
         return True
 
     def command(self, seq: int, roll: float, pitch: float, gaz: float, yaw: float,
-                now: float) -> None:
+                now: float | None = None) -> None:
         """:meth:`SimulatedDrone.execute_pcmd` of one progressive PCMD (``seq``, the float
         fractions) at firmware time ``now`` without injected faults, written out (module
         docstring): the same counters, firmware state and plant command."""
@@ -141,25 +211,43 @@ class CompiledLegs:
             return
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
+        plant, o = self.plant, self.live_out  # (the last run's truth while held)
+        if now is None:  # the plant's time
+            now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
         fw.link_lost = False
         fw.lost_com_hover = False
         if fw.comwdg_clear == "any":
             fw.comwdg_latched = False
         fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, roll, pitch, gaz, yaw)  # apply_command:
-        plant = self.plant  # a new held command, progressive
         at_cap = False
-        if gaz > 0.0 and plant.mode.airborne:  # only a climb is capped
-            at_cap = fw._z_stop_m() >= fw.config.altitude_max_m
+        if gaz > 0.0 and plant._mode.airborne:  # only a climb is capped
+            if o is not None:  # DroneFirmware._z_stop_m of the held state
+                z, vz = o[_O_STATE + 2], o[_O_STATE + 5]
+                at_cap = z + max(0.0, vz) * fw._lead_s() >= fw.config.altitude_max_m
+            else:
+                at_cap = fw._z_stop_m() >= fw.config.altitude_max_m
         if at_cap:
             gaz = 0.0
         fw.alt_capped = at_cap
         cmd = (roll, pitch, gaz, yaw, True)
         if cmd != fw.applied:
             if _isfinite(roll) and _isfinite(pitch) and _isfinite(gaz) and _isfinite(yaw):
-                # AirframePlant.command: each fraction clipped to [−1, 1]
-                plant._current = (min(1.0, max(-1.0, roll)), min(1.0, max(-1.0, pitch)),
-                                  min(1.0, max(-1.0, gaz)), min(1.0, max(-1.0, yaw)), False)
+                # AirframePlant.command: each fraction clipped to [−1, 1], min(1.0, max(−1.0,
+                # v)) spelled out (a finite v: the same float)
+                roll = roll if roll > -1.0 else -1.0
+                roll = roll if roll < 1.0 else 1.0
+                pitch = pitch if pitch > -1.0 else -1.0
+                pitch = pitch if pitch < 1.0 else 1.0
+                gaz = gaz if gaz > -1.0 else -1.0
+                gaz = gaz if gaz < 1.0 else 1.0
+                yaw = yaw if yaw > -1.0 else -1.0
+                yaw = yaw if yaw < 1.0 else 1.0
+                if plant.__dict__.get("_held_by") is self:  # the arrays hold the command
+                    self._saved["_current"] = (roll, pitch, gaz, yaw, False)
+                    _PUT_COMMAND(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 0.0)
+                else:
+                    plant._current = (roll, pitch, gaz, yaw, False)
             else:
                 plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
@@ -223,28 +311,111 @@ class CompiledLegs:
         self.turbulent = pp.turbulence_std_mps > 0.0
         return p
 
-    def _state_array(self) -> np.ndarray:
-        """The plant's state array: the one the last run left while the plant's state is the
-        one it took from it (the same tuples), else a new one."""
-        plant = self.plant
-        if plant._state is self._x_state and plant._tilt_aux is self._x_aux:
-            return self._x
-        return plant._state_array()
+    # ------------------------------------------------------------------ the arrays hold it
+    def _take(self) -> None:
+        """The plant's and the sensors' state into the arrays, its attributes out of their
+        ``__dict__``: the arrays hold them until :meth:`release` (sim/held_state.py)."""
+        plant, fw, sensors = self.plant, self.firmware, self.sensors
+        d = plant.__dict__
+        for name in _PLANT_HELD:  # (a subclass's __init__ may leave one to the class)
+            if name not in d:
+                d[name] = getattr(plant, name)
+        fifo, bias_n, gust_n = d["_fifo"], d["_bias_normals"], d["_gust_normals"]
+        mocap_n, nav_n = d["_mocap_normals"], d["_nav_normals"]
+        _PUT_IV(self.iv, 0, d["_steps"], fifo.head, sensors._next_mocap_k,
+                sensors._next_nav_k, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+        gust, vel_bias = d["_gust_mps"], d["_vel_bias"]
+        roll, pitch, gaz, yaw, hold = d["_current"]
+        _PUT_STATE(self.sv, _AT_PENDING, d["_pending_s"], d["_battery"], d["_yaw_bias_deg"],
+                   vel_bias[0], vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw,
+                   1.0 if hold else 0.0)
+        # the plant's state array: the one the last run left while the plant's state is the
+        # one released from it (the same tuples), else a new one
+        if d["_state"] is self._x_state and d["_tilt_aux"] is self._x_aux:
+            x = self._x
+        else:
+            x = self._x = plant._state_array()
+        self._held = (x, fifo, fifo.rows, bias_n, gust_n, mocap_n, nav_n)
+        self._blocks = (bias_n.values, gust_n.values, mocap_n.values, nav_n.values)
+        self._args = (x, fifo.rows, *self._blocks)  # the kernel's arrays, in its order
+        self._kernel = _kernel_for(x, fifo.rows, self._blocks)
+        self._saved = {name: d.pop(name) for name in _PLANT_HELD}
+        sd = sensors.__dict__
+        self._sensors_saved = {name: sd.pop(name) for name in _SENSORS_HELD}
+        plant._held_by = sensors._held_by = self
+        self._ran = False
+        self.live_out = None
+        self._plant_len, self._sensors_len = len(d), len(sd)
 
+    def release(self) -> None:
+        """The held attributes back into the plant's and the sensors' ``__dict__`` — as the
+        runs since :meth:`_take` left them, but for any written meanwhile (those are newer)."""
+        plant, sensors = self.plant, self.sensors
+        if plant.__dict__.get("_held_by") is not self:
+            return
+        saved, sensors_saved = self._saved, self._sensors_saved
+        if self._ran:  # what the Python path's calls would have left
+            x, fifo, _, bias_n, gust_n, mocap_n, nav_n = self._held
+            (steps, fifo.head, next_mocap, next_nav, bias_n.pos, pos_gust, mocap_n.pos,
+             nav_n.pos) = _GET_IV(self.iv)
+            (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = _GET_SV(self.sv)
+            values = x.tolist()  # AirframePlant._from_state_array
+            if len(values) > N_STATE:
+                saved["_tilt_aux"] = (values[N_STATE], values[N_STATE + 1])
+                values = values[:N_STATE]
+            saved["_state"] = self._x_state = tuple(values)
+            self._x_aux = saved["_tilt_aux"]
+            saved["_steps"], saved["_pending_s"], saved["_battery"] = steps, pending, battery
+            saved["_yaw_bias_deg"], saved["_vel_bias"] = yaw_bias, (vb0, vb1)
+            if self.turbulent:
+                saved["_gust_mps"] = (gust0, gust1)
+                gust_n.pos = pos_gust
+            sensors_saved["_next_mocap_k"], sensors_saved["_next_nav_k"] = next_mocap, next_nav
+        else:
+            self._x_state, self._x_aux = saved["_state"], saved["_tilt_aux"]
+        for obj, values in ((plant, saved), (sensors, sensors_saved)):
+            d = obj.__dict__
+            for name, value in values.items():
+                d.setdefault(name, value)
+            d["_held_by"] = None
+        self._saved = self._sensors_saved = None
+        self.live_out = None
+
+    def held(self) -> bool:
+        """The arrays hold the plant's state now (its readers release it, or read
+        :attr:`live_out`)."""
+        return self.plant.__dict__.get("_held_by") is self
+
+    def truth(self):
+        """:attr:`AirframePlant.truth`, from the last run's while the arrays hold its state."""
+        o = self.live_out
+        if o is None:
+            return self.plant.truth
+        q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's
+        return PlantTruth(o[_O_T], _frozen(_PACK3(o[q], o[q + 1], o[q + 2])),
+                          _frozen(_PACK3(o[q + 3], o[q + 4], o[q + 5])), o[q + 6], o[q + 7],
+                          wrap_angle_rad(o[q + 8]), o[q + 9], self.plant._mode,
+                          o[_O_BATTERY])
+
+    # ------------------------------------------------------------------ one tick
     def run(self, t_s: float) -> tuple[list, bool]:
         """The kernel's run to ``t_s``; the samples of the events it passed are the sensors'.
         Returns the events it left to the Python path (``(t, kind)``, in order) and whether
         the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
-        p = self._params()
+        d = plant.__dict__
+        if d.get("_held_by") is not self:
+            self._take()
+        elif len(d) != self._plant_len or len(sensors.__dict__) != self._sensors_len:
+            self.release()  # a held attribute was written meanwhile: it is the newer
+            self._take()
+        old = self._p_key  # the flight's parameters (_params), unchanged as a rule
+        if (old and old[0] is plant.params and old[1] is plant.noise
+                and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
+            p = self.p
+        else:
+            p = self._params()
         iv, sv, out = self.iv, self.sv, self.out
-        fifo = plant._fifo
-        bias_n, gust_n = plant._bias_normals, plant._gust_normals
-        mocap_n, nav_n = plant._mocap_normals, plant._nav_normals
-        _PUT_IV(iv, 0, plant._steps, fifo.head, sensors._next_mocap_k, sensors._next_nav_k,
-                bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
-        gust, vel_bias, wind = plant._gust_mps, plant._vel_bias, plant.wind_mps
-        roll, pitch, gaz, yaw, hold = plant._current
         flags, _, _, fw_gaz, _ = fw.pcmd
         if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
@@ -253,56 +424,57 @@ class CompiledLegs:
         mode = plant._mode  # as the kernel takes it (sv[S_MODE])
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
-        _PUT_SV(sv, 0, t_s, plant._pending_s, plant._battery, plant._yaw_bias_deg, vel_bias[0],
-                vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                climbing, lead_s, alt_max_m, wind[0], wind[1], wind[2], kernel_mode)
-        x = self._state_array()
-        _lockstep_run(x, fifo.rows, iv, sv, p, bias_n.values, gust_n.values, mocap_n.values,
-                      nav_n.values, out)
-        (steps, head, next_mocap, next_nav, pos_bias, pos_gust, pos_mocap, pos_nav, done,
-         n_events, kind0, kind1) = iv.tolist()
-        if done < 0:  # a block ran short: new ones, and again
+        w0, w1, w2 = plant.wind_mps.tolist()
+        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode)
+        sv[0] = t_s
+        x, rows, bias_v, gust_v, mocap_v, nav_v = self._args
+        self._kernel(x, rows, iv, sv, p, bias_v, gust_v, mocap_v, nav_v, out)
+        done, n_events, kind0, kind1 = _GET_DONE(iv, _AT_DONE)
+        if done < 0:  # a block ran short: new ones (held: the positions in iv), and again
+            bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
+            bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
             bias_n.ensure(ks.NEED_BIAS)
             mocap_n.ensure(ks.NEED_MOCAP)
             nav_n.ensure(ks.NEED_NAV)
             if self.turbulent:
                 gust_n.ensure(ks.NEED_GUST)
+            _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+            self._blocks = tuple(b.values for b in blocks)
+            self._args = (x, rows, *self._blocks)
+            self._kernel = _kernel_for(x, rows, self._blocks)
             return self.run(t_s)
-        (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = _GET_SV(sv)
+        self._ran = True
         o = out.tolist()
-        plant._steps, fifo.head, plant._pending_s, plant._battery = steps, head, pending, battery
-        plant._yaw_bias_deg, plant._vel_bias = yaw_bias, (vb0, vb1)
-        if self.turbulent:
-            plant._gust_mps = (gust0, gust1)
-            gust_n.pos = pos_gust
-        values = x.tolist()  # AirframePlant._from_state_array
-        if len(values) > N_STATE:
-            plant._tilt_aux = (values[N_STATE], values[N_STATE + 1])
-            values = values[:N_STATE]
-        plant._state = self._x_state = tuple(values)
-        self._x, self._x_aux = x, plant._tilt_aux
-        bias_n.pos, mocap_n.pos, nav_n.pos = pos_bias, pos_mocap, pos_nav
-        sensors._next_mocap_k, sensors._next_nav_k = next_mocap, next_nav
         now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        for i in range(min(done, n_events)):
+        for i in range(done if done < n_events else n_events):
             kind, t_event = (kind0, o[_O_EV_T0]) if i == 0 else (kind1, o[_O_EV_T1])
             if kind == _MOCAP:
                 q = _O_POSE
-                pose = _frozen(out[q + 1:q + 7].tobytes())  # position, angles: read-only
-                sensors.took_pose(t_event, MocapPose(o[q], pose[:3], pose[3:], o[q + 7]))
+                # position, angles: read-only arrays, as AirframePlant.mocap_pose's
+                pose = MocapPose(o[q], _frozen(_PACK3(o[q + 1], o[q + 2], o[q + 3])),
+                                 _frozen(_PACK3(o[q + 4], o[q + 5], o[q + 6])), o[q + 7])
+                if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
+                    sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
+                else:
+                    sensors.took_pose(t_event, pose)
             else:
                 q = _O_NAV
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
-                sensors.took_navdata(t_event, NavdataSample(
+                nav = NavdataSample(
                     o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
-                    _f64(altitude) if altitude > 0.0 else 0.0, _f64(o[q + 6]), _f64(o[q + 7]),
-                    _f64(o[q + 8])))
+                    out[q + 5] if altitude > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
+                if mode is sensors._nav_mode:  # LockstepSensors.took_navdata, spelled out
+                    sensors.nav, sensors.nav_rx_t_s = nav, t_event
+                else:
+                    sensors.took_navdata(t_event, nav)
         if done > n_events:
+            self.live_out = o
             return _NONE, False
+        self.release()  # the Python path goes on from here
         events = [(o[_O_EV_T0], kind0), (o[_O_EV_T1], kind1)][done:n_events]
         return events, True

@@ -9,10 +9,13 @@ its output one ``random_standard_normal`` at a time from the bit generator, so a
 ``N`` values is the concatenation of any sequence of calls drawing ``N`` in all — the same
 values in the same order (tests/unit/test_normal_blocks.py holds it to that).
 
+A new block carries the values of the last one not consumed yet and draws on from where
+the generator stands (after the last block): the same sequence, each value drawn once.
+
 The generator may have other users (the plant's per-flight biases draw uniforms from the
 stream of its bias normals): :meth:`NormalBlocks.sync` first puts it where drawing only the
-values consumed so far would have left it (its state before the block, then those values
-drawn again), so every draw after is the one it was.
+values consumed so far would have left it (its state before the first block since the last
+sync, then the values consumed since drawn again), so every draw after is the one it was.
 """
 
 from __future__ import annotations
@@ -32,14 +35,15 @@ class NormalBlocks:
     ``values[pos:]`` and hands back the new ``pos``.
     """
 
-    __slots__ = ("rng", "block", "values", "pos", "_state")
+    __slots__ = ("rng", "block", "values", "pos", "_state", "_skip")
 
     def __init__(self, rng: np.random.Generator, block: int = BLOCK_SIZE) -> None:
         self.rng = rng
         self.block = int(block)
         self.values = np.empty(0)
         self.pos = 0
-        self._state = None  # the generator's state before ``values`` were drawn
+        self._state = None  # the generator's state before the blocks since the last sync …
+        self._skip = 0      # … and the values drawn from it before ``values[0]``
 
     def take(self, n: int) -> np.ndarray:
         """The next ``n`` normals (a view: read it before the next call)."""
@@ -56,10 +60,17 @@ class NormalBlocks:
             self.refill(n)
 
     def refill(self, n: int = 0) -> None:
-        """A new block (of at least ``n``) starting at the first value not consumed."""
-        self.sync()
-        self._state = self.rng.bit_generator.state
-        self.values = self.rng.standard_normal(max(self.block, n))
+        """A new block (of at least ``n``) starting at the first value not consumed: those
+        left carried, then ``max(block, n)`` drawn on (module docstring)."""
+        fresh = max(self.block, n)
+        if self._state is None:  # the generator stands where the consumed values left it
+            self._state = self.rng.bit_generator.state
+            self._skip = 0
+            self.values = self.rng.standard_normal(fresh)
+        else:  # … after the last block: its values left come first
+            self._skip += self.pos
+            self.values = np.concatenate((self.values[self.pos:],
+                                          self.rng.standard_normal(fresh)))
         self.pos = 0
 
     def sync(self) -> None:
@@ -68,8 +79,10 @@ class NormalBlocks:
         if self._state is None:
             return
         self.rng.bit_generator.state = self._state
-        if self.pos:
-            self.rng.standard_normal(self.pos)
+        consumed = self._skip + self.pos
+        if consumed:
+            self.rng.standard_normal(consumed)
         self._state = None
+        self._skip = 0
         self.values = np.empty(0)
         self.pos = 0

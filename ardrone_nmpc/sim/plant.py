@@ -83,6 +83,7 @@ from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, air
                                        freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
+from ardrone_nmpc.sim.held_state import HeldInArrays
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_params import ATTITUDE_MODELS, PlantParams
 from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_LANDING, AUTO_SAME,
@@ -194,6 +195,12 @@ class AirframePlant:
         injection, read at the start of each :meth:`advance`.
     """
 
+    # what the lockstep's compiled legs may hold in their arrays between their runs (a read
+    # while they do writes them back first: sim/held_state.py)
+    (_state, _tilt_aux, _steps, _pending_s, _battery, _yaw_bias_deg, _vel_bias, _gust_mps,
+     _current, _fifo, _bias_normals, _gust_normals, _mocap_normals, _nav_normals) = (
+        HeldInArrays() for _ in range(14))
+
     def __init__(self, params: PlantParams, noise: Optional[NoiseConfig] = None, *,
                  seed: int = 0) -> None:
         if noise is None:
@@ -202,6 +209,7 @@ class AirframePlant:
         self.params = params
         self.noise = noise
         self.wind_mps = np.zeros(3)
+        self._held_by = None  # the compiled legs holding some attributes (sim/held_state.py)
         root = np.random.default_rng(seed)
         # a fourth stream for the turbulence: spawn(4)'s first three equal spawn(3)'s, so the
         # sensor noise of a seed does not depend on the turbulence setting

@@ -34,7 +34,8 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps, flying_advance
+from ardrone_nmpc.sim.airframe import flying_steps_into
+from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps
 
 __all__ = ["lockstep_run"]
 
@@ -61,9 +62,11 @@ P_SIZE = P_K + N_K
 # the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
 NEED_BIAS, NEED_GUST, NEED_MOCAP, NEED_NAV = 9, 6, 6, 7
 # out: the pose (t, position, XYZ angles, ψ), the navdata sample (t, battery, roll, pitch,
-# yaw, altitude, forward, right, down), the event times, the last firmware time
+# yaw, altitude, forward, right, down), the event times, the last firmware time — and, after
+# a run that did all its legs, the plant's time, battery and 10-state then (its truth)
 O_POSE, O_NAV, O_EV_T0, O_EV_T1, O_LAST_NOW = 0, 8, 17, 18, 19
-OUT_SIZE = 20
+O_T, O_BATTERY, O_STATE = 20, 21, 22
+OUT_SIZE = O_STATE + 10
 MOCAP, NAV = 0, 1
 _TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
 
@@ -163,7 +166,7 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
+def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
     """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
     the Python path must take it (a climb within reach of the cap, a battery that could
     empty on the way, a take-off or landing that ends on the way)."""
@@ -197,18 +200,17 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     sv[S_PENDING] = rest
     pos = iv[I_POS_BIAS]
     iv[I_POS_BIAS] = pos + 3
-    done, head, battery, xn, yaw_bias, vb0, vb1 = flying_advance(
+    # flying_advance in place (all n steps fly: the battery was checked above)
+    done, head, battery = flying_steps_into(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
-        k, (w0, w1, w2), h, n,
-        sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], bias_n[pos:pos + 3],
-        sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1],
-        p[P_YAW_DRIFT], p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+        k, (w0, w1, w2), h, n, sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], scratch)
+    x[8] = wrap_half_turn(x[8], math.pi)
+    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
+        n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
+        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
     iv[I_HEAD] = head
     iv[I_STEPS] += done
     sv[S_BATTERY] = battery
-    for i in range(x.shape[0]):  # not x[:] = xn: its shape check compiles an error message
-        x[i] = xn[i]
-    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = yaw_bias, vb0, vb1
     _gust_step(iv, sv, p, n, h, gust_n)
     return True
 
@@ -221,7 +223,8 @@ def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
     event's sample into ``out``. ``iv[I_DONE]``: the legs done (events, then the last); the
     rest is the Python path's — or −1, nothing done, if a block of normals has fewer left
     than a run may take (``NEED_*``: draw new blocks and call again). ``x`` (the state
-    array), ``ring`` and the counters are updated in place."""
+    array), ``ring`` and the counters are updated in place; after all the legs, the truth
+    then into ``out[O_T:]`` (one list for the caller's truth reads)."""
     if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
             > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
@@ -259,6 +262,7 @@ def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
     iv[I_DONE] = 0
     out[O_LAST_NOW] = math.nan
     h = p[P_H]
+    scratch = np.empty((5, x.shape[0]))  # the RK4's, for every leg
     for i in range(n_events + 1):
         if i < n_events:
             kind = iv[I_KIND0 + i]
@@ -267,7 +271,7 @@ def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
             kind = -1
             t_event = t_s
         ran = t_event > iv[I_STEPS] * h
-        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
+        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
             return
         if ran:
             out[O_LAST_NOW] = t_event
@@ -283,6 +287,10 @@ def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
             out[O_NAV + 1] = sv[S_BATTERY]
             _navdata(x, sv, p, nav_n[pos:pos + 7], out[O_NAV:O_EV_T0])
         iv[I_DONE] = i + 1
+    out[O_T] = iv[I_STEPS] * h  # all legs done: the plant's truth now (AirframePlant.t_s)
+    out[O_BATTERY] = sv[S_BATTERY]
+    for i in range(10):
+        out[O_STATE + i] = x[i]
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -45,6 +45,7 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
+from ardrone_nmpc.sim.held_state import HeldInArrays
 from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.sim.target import target_pose
 
@@ -65,8 +66,12 @@ class LockstepSensors:
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 
+    # the sensor grids' next indices: held by the compiled legs between their runs
+    _next_mocap_k, _next_nav_k = HeldInArrays(), HeldInArrays()
+
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None):
+        self._held_by = None  # the compiled legs holding the grids' indices
         self.drone = drone
         self.plant = drone.plant
         self.firmware = drone.firmware

@@ -37,8 +37,8 @@ def _snapshot(drone, t_s):
     inputs = drone.inputs(t_s)
     plant = drone.sim.plant
     fw = drone.sim.firmware
-    return (inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s, inputs.target_rx_t_s,
-            _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
+    return (drone.truth_cells(), inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s,
+            inputs.target_rx_t_s, _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
             _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
             plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
             plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
@@ -48,10 +48,18 @@ def _snapshot(drone, t_s):
             fw.link_lost, fw.ref_start, drone.sim.counters)
 
 
-def _fly(cfg, legs: bool, ticks: int, command):
+def _light(drone, t_s):
+    """What a tick reads of the drone (no plant attribute: the compiled legs keep holding
+    its state, sim/held_state.py)."""
+    inputs = drone.inputs(t_s)
+    return (drone.truth_cells(), _record(drone.truth), _record(inputs.pose),
+            _record(inputs.navdata), drone.sim.firmware.comwdg_latched)
+
+
+def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     drone = LockstepDrone(cfg)
     # compiled runs, of them stopped before the last leg: flying, taking off or landing
-    used = [0, 0, 0, 0]
+    used = [0, 0, 0, 0, 0]  # … and (the last) ticks on which the arrays held the state
     compiled = drone.sensors._legs
     if not legs:
         drone.sensors._legs = None
@@ -77,7 +85,12 @@ def _fly(cfg, legs: bool, ticks: int, command):
     for k in range(ticks):
         t = t_first + k * period
         drone.advance_to(t, k * period)
-        shots.append(_snapshot(drone, t))
+        if k % every == 0:  # every attribute (the arrays give them back)
+            shots.append(_snapshot(drone, t))
+        else:
+            if legs and compiled is not None and compiled.held():
+                used[4] += 1
+            shots.append(_light(drone, t))
         cmd = command(k)
         if cmd == "silent":  # no command: the firmware's watchdogs
             pass
@@ -113,6 +126,9 @@ CASES = {
     "hover_and_silence": ([], lambda k: None if k % 7 == 0 else (0.01, -0.02, 0.0, 0.0), False),
     "watchdogs": ([], lambda k: "silent" if 150 < k < 200 or k % 40 > 35 else _zigzag(k),
                   False),
+    # fractions beyond ±1 (the plant clips them), a −0.0
+    "saturated": ([], lambda k: (1.7 if (k // 20) % 2 else -1.3, -1.0000000000000002, 0.0,
+                                 2.5 if k % 3 else -0.0), False),
     "battery_empties": (["sim.plant.battery_start_pct=21",
                          "sim.plant.battery_drain_pct_per_min=100"],
                         lambda k: "takeoff" if k % 25 == 0 else _zigzag(k), True),
@@ -124,13 +140,95 @@ def test_compiled_legs_give_the_python_paths_bits(name):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped, auto_used, auto_stopped) = _fly(cfg, True, 400, command)
+    compiled, (used, stopped, auto_used, auto_stopped, _) = _fly(cfg, True, 400, command)
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
     assert auto_used > 20 and auto_stopped >= 1  # take-off, landing: an end handed back
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"
+
+
+@pytest.mark.parametrize("name", ["square", "climb_into_cap", "turbulence", "second_order",
+                                  "watchdogs", "sag"])
+def test_the_state_held_in_the_arrays_gives_the_python_paths_bits(name):
+    """Every attribute read only every 23rd tick: between those the compiled legs hold the
+    plant's state in their arrays run after run — the PCMD chain, the truth and the samples
+    read from them — and what the plant's attributes then give back is the Python path's."""
+    overrides, command, _ = CASES[name]
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
+    python, _ = _fly(cfg, False, 400, command, every=23)
+    compiled, used = _fly(cfg, True, 400, command, every=23)
+    assert used[4] > 150  # ticks flown with the state held
+    assert len(python) == len(compiled)
+    for i, (a, b) in enumerate(zip(python, compiled)):
+        assert a == b, f"tick {i}"
+
+
+def test_a_held_attribute_read_or_written_between_runs():
+    """While the arrays hold the plant's state its attributes are out of the instance's
+    dict; a read gives them all back (the value the Python path would hold), a write —
+    a battery fault, say — is kept over the arrays' older value and taken up by the next
+    run: the same flight as the Python path's."""
+    from ardrone_nmpc.sim.plant import AirframePlant
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    period = cfg.loop.period_s
+    shots = []
+    for legs in (False, True):
+        drone = LockstepDrone(cfg)
+        if not legs:
+            drone.sensors._legs = None
+        plant, compiled = drone.sim.plant, drone.sensors._legs
+        drone.connect()
+        drone.takeoff()
+        while drone.truth.mode is not FlightMode.FLYING:
+            drone.advance_to(drone.truth.t_s + period)
+        t0 = drone.truth.t_s
+        for k in range(1, 4):
+            drone.advance_to(t0 + k * period)
+            drone.set_command(0.1, -0.05, 0.1, 0.02)
+        if legs:
+            assert compiled.held() and "_state" not in vars(plant)
+            assert "_next_nav_k" not in vars(drone.sensors)
+        state = plant._state  # a read: everything back
+        if legs:
+            assert not compiled.held() and {"_battery", "_fifo", "_current"} <= set(vars(plant))
+            assert "_next_nav_k" in vars(drone.sensors)
+        for k in range(4, 8):
+            drone.advance_to(t0 + k * period)
+            drone.set_command(0.1, -0.05, 0.1, 0.02)
+        if legs:
+            assert compiled.held()
+        plant.set_battery_pct(50.0)  # a write while held (no read first)
+        for k in range(8, 12):
+            drone.advance_to(t0 + k * period)
+            drone.set_command(-0.1, 0.05, 0.0, 0.0)
+        shots.append((state, _snapshot(drone, drone.truth.t_s)))
+    assert shots[0] == shots[1]
+    with pytest.raises(AttributeError):  # not set, not held: an attribute error as ever
+        AirframePlant.__new__(AirframePlant)._state
+
+
+def test_the_kernels_entry_point_for_the_legs_own_arrays_only():
+    """The legs call the kernel's compiled entry point for the array kinds they build (the
+    dispatcher's choice for them); any other kind goes through the dispatcher."""
+    from ardrone_nmpc.sim import lockstep_legs, sensor_step
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.connect()
+    drone.takeoff()
+    for k in range(1, 80):
+        drone.advance_to(k * cfg.loop.period_s)
+    legs = drone.sensors._legs
+    x, rows, blocks = legs._held[0], legs._held[2], legs._blocks
+    assert legs.held() and legs._kernel is not sensor_step.lockstep_run
+    assert lockstep_legs._kernel_for(x, rows, blocks) is legs._kernel
+    run = sensor_step.lockstep_run
+    assert lockstep_legs._kernel_for(np.zeros(20)[::2], rows, blocks) is run
+    assert lockstep_legs._kernel_for(x, np.asfortranarray(np.zeros((3, 5))), blocks) is run
+    assert lockstep_legs._kernel_for(x, rows, (*blocks[:3], blocks[3].astype(np.float32))) is run
 
 
 def test_compiled_legs_with_a_scripted_target():
@@ -219,7 +317,8 @@ def test_a_non_finite_command_is_refused_as_the_chain_refuses_it(bad):
 @pytest.mark.parametrize("owner,name", [
     ("firmware", "advance"), ("firmware", "watchdogs"), ("firmware", "silence"),
     ("firmware", "apply_command"), ("firmware", "_climb_may_reach_cap"),
-    ("sensors", "_run_to"), ("sensors", "_direct_events"),
+    ("sensors", "_run_to"), ("sensors", "_direct_events"), ("sensors", "took_pose"),
+    ("sensors", "took_navdata"),
     ("plant", "altitude_m_and_rate_mps"), ("plant", "t_s")])
 def test_a_firmware_or_sampler_that_overrides_what_the_kernel_does_keeps_the_python_path(
         owner, name, monkeypatch):

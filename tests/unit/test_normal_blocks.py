@@ -51,3 +51,28 @@ def test_sync_before_any_draw_is_a_no_op():
     rng = np.random.default_rng(5)
     NormalBlocks(rng).sync()
     assert rng.standard_normal() == np.random.default_rng(5).standard_normal()
+
+
+def test_sync_after_many_carried_blocks_and_a_refill_after_a_sync():
+    """Blocks carried over many refills (each value drawn once), a sync in the middle of a
+    block, then blocks again: the per-call values, and the generator where the calls left
+    it."""
+    sizes = [6, 7, 9, 3] * 50
+    rng_calls = np.random.default_rng(21)
+    expected = [rng_calls.standard_normal(k) for k in sizes[:100]]
+    between = rng_calls.random()
+    expected += [rng_calls.standard_normal(k) for k in sizes[100:]]
+    after = rng_calls.random()
+    rng = np.random.default_rng(21)
+    blocks = NormalBlocks(rng, block=32)
+    got = []
+    for i, k in enumerate(sizes):
+        if i == 100:
+            blocks.sync()
+            assert rng.random() == between
+        blocks.ensure(9)
+        got.append(blocks.values[blocks.pos:blocks.pos + k].copy())
+        blocks.pos += k
+    blocks.sync()
+    assert rng.random() == after
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, expected))

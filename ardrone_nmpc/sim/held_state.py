@@ -1,0 +1,39 @@
+"""Attributes that a compiled path holds in its arrays between its runs.
+
+While :class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs` flies a plant tick after tick,
+the plant's state lives in the kernel's arrays: writing it back to the plant's attributes
+and packing it again every tick cost more than the physics. So the legs take the attributes
+out of the instance's ``__dict__`` and set its ``_held_by`` to themselves; a
+:class:`HeldInArrays` of the same name on the class — a non-data descriptor, so an
+attribute in the instance's ``__dict__`` always wins and costs nothing extra — answers a
+read of one that is missing by calling the holder's ``release()``, which writes them all
+back (keeping any written meanwhile), and returns the value. Any reader — the plant's own
+Python path, the firmware, a fault, a test — sees what the attribute would have held.
+"""
+
+from __future__ import annotations
+
+__all__ = ["HeldInArrays"]
+
+
+class HeldInArrays:
+    """A class-level stand-in for an instance attribute while a holder keeps it in arrays
+    (module docstring)."""
+
+    __slots__ = ("name",)
+
+    def __init__(self) -> None:
+        self.name = ""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        holder = obj.__dict__.get("_held_by")
+        if holder is None:
+            raise AttributeError(f"{type(obj).__name__!r} object has no attribute "
+                                 f"{self.name!r}")
+        holder.release()
+        return obj.__dict__[self.name]
