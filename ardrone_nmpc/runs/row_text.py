@@ -192,24 +192,21 @@ class BlockCheck:
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        numbers = _TICK_NUMBERS(cells)
-        types = tuple(map(type, numbers))
+        types = tuple(map(type, cells))  # one pass: the key holds the string cells' types
         int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
         if int_slots is None:
-            int_slots = (tuple(i for i, t in enumerate(types) if t is int)
-                         if set(types) <= _NUMBER_TYPES else False)
+            int_slots = (tuple(i for i in _TICK_NUMBER_SLOTS if types[i] is int)
+                         if (set(_TICK_NUMBERS(types)) <= _NUMBER_TYPES
+                             and set(_STRING_CELLS(types)) <= _STR_ONLY) else False)
             if len(self._tick_types) >= self._LIMIT:
                 self._tick_types.clear()
             self._tick_types[types] = int_slots
         if int_slots is False:
             return False
         for i in int_slots:  # the iteration counts
-            if not -_INT_LIMIT <= numbers[i] < _INT_LIMIT:
+            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
                 return False
-        strings = _STRING_CELLS(cells)
-        if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
-            return False
-        return self._plain_strings(strings)
+        return self._plain_strings(_STRING_CELLS(cells))
 
     def _plain_strings(self, strings: tuple) -> bool:
         """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
@@ -223,8 +220,8 @@ class BlockCheck:
 
 
 #: The numeric cells of a tick_cells row (its absent columns hold tick_cells' own "").
-_TICK_NUMBERS = operator.itemgetter(*sorted(_INDEX[k] for k in TICK_CELL_KEYS
-                                            if k not in STRING_COLUMNS))
+_TICK_NUMBER_SLOTS = tuple(sorted(_INDEX[k] for k in TICK_CELL_KEYS if k not in STRING_COLUMNS))
+_TICK_NUMBERS = operator.itemgetter(*_TICK_NUMBER_SLOTS)
 _NUMBER_TYPES = _PLAIN_TYPES - {str}
 
 
@@ -381,7 +378,12 @@ class KeptRows:
         rows.append(cells if cells is not None else _cells_of_line(line))
 
     def extend(self, rows: Iterable[list]) -> None:
-        """:meth:`add` of each of ``rows``' cells (plain rows, written)."""
+        """:meth:`add` of each of ``rows``' cells (plain rows, written); a list that fits
+        under the limit in one ``list.extend`` (a block of rows: no call per row)."""
+        kept = self._rows
+        if kept is not None and rows.__class__ is list and len(kept) + len(rows) <= self.limit:
+            kept.extend(rows)
+            return
         for cells in rows:
             self.add(cells, b"")
 

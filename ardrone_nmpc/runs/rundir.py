@@ -305,7 +305,7 @@ class RunRecorder:
         held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
-        kept = [(cells, b"") for cells in rows]
+        kept = None  # the block's rows kept as they are; else (cells, line) of each
         if text is None:  # a ±inf among them: row by row, as write_row prints them
             kept = []
             for cells, plan in held:
@@ -322,8 +322,11 @@ class RunRecorder:
         finally:  # the file grew: written, even if a signal's KeyboardInterrupt followed
             if self._log.tell() != at:
                 self._held = []
-                for cells, line in kept:
-                    self._kept.add(cells, line)
+                if kept is None:
+                    self._kept.extend(rows)
+                else:
+                    for cells, line in kept:
+                        self._kept.add(cells, line)
             self._writing = None
 
     def kept_columns(self) -> dict[str, np.ndarray] | None:
