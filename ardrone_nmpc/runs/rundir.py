@@ -80,8 +80,7 @@ from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, Ke
                                         format_number, row_plan)
 
 __all__ = [
-    "LogError",
-    "RunData",
+    "LogError", "RunData",
     "RunRecorder",
     "SummaryRow",
     "format_number",
@@ -305,9 +304,8 @@ class RunRecorder:
         held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
-        kept = None  # the block's rows kept as they are; else (cells, line) of each
+        kept = [] if text is None else None  # (cells, line) of rows printed one by one
         if text is None:  # a ±inf among them: row by row, as write_row prints them
-            kept = []
             for cells, plan in held:
                 line = _plain_line(cells, plan[4])
                 if line is None:  # pragma: no cover - BlockCheck's rows print plain
@@ -322,11 +320,10 @@ class RunRecorder:
         finally:  # the file grew: written, even if a signal's KeyboardInterrupt followed
             if self._log.tell() != at:
                 self._held = []
-                if kept is None:
+                if kept is None:  # the block's rows as they are: one list.extend
                     self._kept.extend(rows)
-                else:
-                    for cells, line in kept:
-                        self._kept.add(cells, line)
+                for cells, line in kept or ():
+                    self._kept.add(cells, line)
             self._writing = None
 
     def kept_columns(self) -> dict[str, np.ndarray] | None:
