@@ -12,6 +12,7 @@ call (a lockstep recording's; the same text as :func:`_plain_line` row by row).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import operator
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 import orjson
 
+from ardrone_nmpc.runs.lazy_columns import LazyColumns
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS
 
 __all__ = ["format_number"]
@@ -387,19 +389,22 @@ class KeptRows:
         for cells in rows:
             self.add(cells, b"")
 
-    def columns(self) -> dict[str, np.ndarray] | None:
+    def columns(self) -> Mapping[str, np.ndarray] | None:
         """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
-        of str for :data:`STRING_COLUMNS`), or None when the rows were not all kept."""
+        of str for :data:`STRING_COLUMNS`; each made when first read: :class:`LazyColumns`),
+        or None when the rows were not all kept."""
         rows = self._rows
         if rows is None:
             return None
         n = len(rows)
-        out: dict[str, np.ndarray] = {}
-        for name, cells in zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)):
-            if name in STRING_COLUMNS:
-                arr = np.empty(n, dtype=object)
-                arr[:] = list(cells)
-            else:
-                arr = _floats(cells, n)
-            out[name] = arr
-        return out
+        cells = dict(zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)))
+        return LazyColumns(cells, functools.partial(_kept_column, n=n))
+
+
+def _kept_column(name: str, cells: tuple, n: int) -> np.ndarray:
+    """A column of kept cells as :func:`~ardrone_nmpc.runs.rundir.read_run` parses it."""
+    if name in STRING_COLUMNS:
+        arr = np.empty(n, dtype=object)
+        arr[:] = list(cells)
+        return arr
+    return _floats(cells, n)

@@ -326,7 +326,7 @@ class RunRecorder:
                     self._kept.add(cells, line)
             self._writing = None
 
-    def kept_columns(self) -> dict[str, np.ndarray] | None:
+    def kept_columns(self) -> Mapping[str, np.ndarray] | None:
         """The columns of the rows written, as :func:`read_run` would parse them from
         ``log.csv`` (None for a run longer than :attr:`KEEP_ROWS` rows: read it back)."""
         if self._held:
