@@ -83,7 +83,10 @@ def _move_into_place(staging: Path, final: Path, *, finished: bool) -> None:
             (made[0] / SUMMARY_FILE).unlink(missing_ok=True)
         shutil.rmtree(final, ignore_errors=True)
         os.replace(made[0], final)
-    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        staging.rmdir()  # emptied by the move: one system call (rmtree walks it first)
+    except OSError:  # absent, or something else left in it
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def run_case(case: Case, *, out_dir: str | Path, diverge_m: float = DIVERGE_M) -> CaseResult:
