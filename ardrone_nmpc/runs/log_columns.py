@@ -227,9 +227,9 @@ def tick_cells(t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
     """:func:`tick_row`'s usual NMPC row as its cells in :data:`LOG_COLUMNS` order (``""`` for
     a column it lacks; the truth's cells ``""`` until :func:`put_truth_cells`), or None for
     any other tick (take :func:`tick_row`). The lockstep runner's row: the recorder takes
-    the cells as they are, without a dict to map back to column order. (Its arguments also
-    positional: :meth:`~ardrone_nmpc.runtime.tick.Tick.step` passes them so, every tick.) The same values as
-    :func:`tick_row`'s fast path, the same conditions (tests/unit/test_tick_cells.py)."""
+    the cells as they are, without a dict to map back to column order. The same values as
+    :func:`tick_row`'s fast path, the same conditions (tests/unit/test_tick_cells.py); its
+    arguments also positional (:meth:`~ardrone_nmpc.runtime.tick.Tick.step`'s call)."""
     nav, result = inputs.navdata, solution.result if solution is not None else None
     flown = sent.flown
     if not (result is not None and x is not None and nav is not None
