@@ -221,13 +221,19 @@ def throughput(jobs: int, rounds: int, flights: str = "step_x") -> None:
 
 def cpu(way: str, rounds: int, flights: str = "step_x") -> None:
     """CPU seconds (``time.process_time``: little affected by other load, unlike wall time)
-    and wall seconds of the 24 flights in this process, the sweep's way or tune's."""
+    and wall seconds of the 24 flights in this process, the sweep's way or tune's, this
+    process made ready as a pool worker is (``warm_worker``: kernels loaded, the garbage
+    collector set)."""
     from ardrone_nmpc.config.io import config_to_dict
-    from ardrone_nmpc.experiments.sweep import Case, case_id, run_case, warm_up
+    from ardrone_nmpc.experiments.sweep import Case, case_id, run_case
 
+    try:
+        from ardrone_nmpc.experiments.sweep import warm_worker
+    except ImportError:  # a tree from before it: no collector settings
+        from ardrone_nmpc.experiments.sweep import warm_up as warm_worker
     cfgs = _configs(flights)
     sim_s = sum(c.duration_s + c.sim.settle_s for c in cfgs)
-    warm_up()
+    warm_worker()
     if way == "tune":
         from ardrone_nmpc.experiments.tune.engine import Scenario, TrialSpec, run_trial
         from ardrone_nmpc.experiments.tune.objective import parse_objective

@@ -29,7 +29,19 @@ def _wrap_scalar(a: float) -> float:
     return math.pi if r <= -math.pi else r
 
 
-_wrap_array = np.vectorize(_wrap_scalar, otypes=[float])
+_wrap_each = np.vectorize(_wrap_scalar, otypes=[float])
+
+
+def _wrap_array(a: np.ndarray) -> np.ndarray:
+    """:func:`_wrap_scalar` of each element, bit for bit: those already in (−π, π] — nearly
+    all of a logged heading's or heading error's — copied as they are (what it returns for
+    them), only the others wrapped one by one (a summary's ψ column: ~0.3 ms → ~10 µs)."""
+    out = np.array(a, dtype=float)
+    with np.errstate(invalid="ignore"):  # a NaN is not inside: wrapped one by one (NaN)
+        outside = ~((-math.pi < out) & (out <= math.pi))
+    if outside.any():
+        out[outside] = _wrap_each(out[outside])
+    return out
 
 
 def ieee_remainder(x: float, y: float) -> float:

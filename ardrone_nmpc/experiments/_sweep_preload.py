@@ -2,8 +2,9 @@
 tune, faults): loads every numba kernel a case uses, once, so the workers forked from it start
 warm.
 
-Importing this module runs a 0.2 s lockstep simulation into a temporary directory (~2 s);
-nothing else imports it.
+Importing this module runs a 0.2 s lockstep simulation into a temporary directory (~2 s) and
+sets the garbage collector for processes that fly one flight after another
+(:func:`~ardrone_nmpc.experiments.sweep.cases.warm_worker`); nothing else imports it.
 """
 
 import signal
@@ -12,6 +13,6 @@ import signal
 # but only once its preload is done: without this a Ctrl-C now prints its traceback).
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-from ardrone_nmpc.experiments.sweep import warm_up  # noqa: E402 - after the signal disposition
+from ardrone_nmpc.experiments.sweep import warm_worker  # noqa: E402 - after the signal disposition
 
-warm_up()
+warm_worker()

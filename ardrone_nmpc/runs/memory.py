@@ -13,15 +13,17 @@ since ``log.csv`` round-trips every double.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import operator
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ardrone_nmpc.runs.lazy_columns import LazyColumns
 from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS,
                                           cells_row)
 from ardrone_nmpc.runs.rundir import RunData
@@ -57,6 +59,18 @@ def _numbers(cells: list, n: int) -> np.ndarray:
         arr = np.empty(n, dtype=object)
         arr[:] = [_text(c) for c in cells]
         return arr
+
+
+def _column(name: str, cells: Sequence | None, n: int) -> np.ndarray:
+    """The array of a column's cells (None: no row has it)."""
+    if cells is None:
+        return (np.full(n, "", dtype=object) if name in STRING_COLUMNS
+                else np.full(n, math.nan))  # numpy's NaN for None, alike
+    if name in STRING_COLUMNS:
+        arr = np.empty(n, dtype=object)
+        arr[:] = [c if c.__class__ is str else _text(c) for c in cells]
+        return arr
+    return _numbers(cells, n)
 
 
 _CELLS = object()  # the group of write_cells' rows (no key tuple equals it)
@@ -139,9 +153,10 @@ class MemoryRecorder:
     def close(self) -> None:
         """Nothing to close (RunRecorder's interface)."""
 
-    def columns(self) -> dict[str, np.ndarray]:
+    def columns(self) -> Mapping[str, np.ndarray]:
         """Every :data:`LOG_COLUMNS` name (and any extra key a row had) → array over the
-        rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "")."""
+        rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "");
+        each made when first read (:class:`~ardrone_nmpc.runs.lazy_columns.LazyColumns`)."""
         rows = self._rows
         n = len(rows)
         plain = all(r.__class__ is dict or r.__class__ is list for r in rows)
@@ -152,23 +167,10 @@ class MemoryRecorder:
         else:
             extra = set(cells_of) - set(LOG_COLUMNS)
         names = [*LOG_COLUMNS, *sorted(extra)]
-        out: dict[str, np.ndarray] = {}
-        for name in names:
-            if cells_of is None:
-                cells = [row.get(name) for row in rows]
-            else:
-                cells = cells_of.get(name)
-                if cells is None:  # no row has it
-                    out[name] = (np.full(n, "", dtype=object) if name in STRING_COLUMNS
-                                 else np.full(n, math.nan))  # numpy's NaN for None, alike
-                    continue
-            if name in STRING_COLUMNS:
-                arr = np.empty(n, dtype=object)
-                arr[:] = [c if c.__class__ is str else _text(c) for c in cells]
-            else:
-                arr = _numbers(cells, n)
-            out[name] = arr
-        return out
+        if cells_of is None:
+            cells_of = {name: [row.get(name) for row in rows] for name in names}
+        return LazyColumns({name: cells_of.get(name) for name in names},
+                           functools.partial(_column, n=n))
 
     def run_data(self, cfg, *, seed: int | None = None) -> RunData:
         """The run as :func:`~ardrone_nmpc.runs.rundir.read_run` would give it back."""

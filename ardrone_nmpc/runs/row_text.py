@@ -12,6 +12,7 @@ call (a lockstep recording's; the same text as :func:`_plain_line` row by row).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import operator
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 import orjson
 
+from ardrone_nmpc.runs.lazy_columns import LazyColumns
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS
 
 __all__ = ["format_number"]
@@ -192,24 +194,21 @@ class BlockCheck:
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        numbers = _TICK_NUMBERS(cells)
-        types = tuple(map(type, numbers))
+        types = tuple(map(type, cells))  # one pass: the key holds the string cells' types
         int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
         if int_slots is None:
-            int_slots = (tuple(i for i, t in enumerate(types) if t is int)
-                         if set(types) <= _NUMBER_TYPES else False)
+            int_slots = (tuple(i for i in _TICK_NUMBER_SLOTS if types[i] is int)
+                         if (set(_TICK_NUMBERS(types)) <= _NUMBER_TYPES
+                             and set(_STRING_CELLS(types)) <= _STR_ONLY) else False)
             if len(self._tick_types) >= self._LIMIT:
                 self._tick_types.clear()
             self._tick_types[types] = int_slots
         if int_slots is False:
             return False
         for i in int_slots:  # the iteration counts
-            if not -_INT_LIMIT <= numbers[i] < _INT_LIMIT:
+            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
                 return False
-        strings = _STRING_CELLS(cells)
-        if not set(map(type, strings)) <= _STR_ONLY:  # before ==: a str enum equals its text
-            return False
-        return self._plain_strings(strings)
+        return self._plain_strings(_STRING_CELLS(cells))
 
     def _plain_strings(self, strings: tuple) -> bool:
         """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
@@ -223,8 +222,8 @@ class BlockCheck:
 
 
 #: The numeric cells of a tick_cells row (its absent columns hold tick_cells' own "").
-_TICK_NUMBERS = operator.itemgetter(*sorted(_INDEX[k] for k in TICK_CELL_KEYS
-                                            if k not in STRING_COLUMNS))
+_TICK_NUMBER_SLOTS = tuple(sorted(_INDEX[k] for k in TICK_CELL_KEYS if k not in STRING_COLUMNS))
+_TICK_NUMBERS = operator.itemgetter(*_TICK_NUMBER_SLOTS)
 _NUMBER_TYPES = _PLAIN_TYPES - {str}
 
 
@@ -381,23 +380,31 @@ class KeptRows:
         rows.append(cells if cells is not None else _cells_of_line(line))
 
     def extend(self, rows: Iterable[list]) -> None:
-        """:meth:`add` of each of ``rows``' cells (plain rows, written)."""
+        """:meth:`add` of each of ``rows``' cells (plain rows, written); a list that fits
+        under the limit in one ``list.extend`` (a block of rows: no call per row)."""
+        kept = self._rows
+        if kept is not None and rows.__class__ is list and len(kept) + len(rows) <= self.limit:
+            kept.extend(rows)
+            return
         for cells in rows:
             self.add(cells, b"")
 
-    def columns(self) -> dict[str, np.ndarray] | None:
+    def columns(self) -> Mapping[str, np.ndarray] | None:
         """Every :data:`LOG_COLUMNS` name → its values over the rows (float64; object arrays
-        of str for :data:`STRING_COLUMNS`), or None when the rows were not all kept."""
+        of str for :data:`STRING_COLUMNS`; each made when first read: :class:`LazyColumns`),
+        or None when the rows were not all kept."""
         rows = self._rows
         if rows is None:
             return None
         n = len(rows)
-        out: dict[str, np.ndarray] = {}
-        for name, cells in zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)):
-            if name in STRING_COLUMNS:
-                arr = np.empty(n, dtype=object)
-                arr[:] = list(cells)
-            else:
-                arr = _floats(cells, n)
-            out[name] = arr
-        return out
+        cells = dict(zip(LOG_COLUMNS, zip(*rows) if n else [()] * len(LOG_COLUMNS)))
+        return LazyColumns(cells, functools.partial(_kept_column, n=n))
+
+
+def _kept_column(name: str, cells: tuple, n: int) -> np.ndarray:
+    """A column of kept cells as :func:`~ardrone_nmpc.runs.rundir.read_run` parses it."""
+    if name in STRING_COLUMNS:
+        arr = np.empty(n, dtype=object)
+        arr[:] = list(cells)
+        return arr
+    return _floats(cells, n)

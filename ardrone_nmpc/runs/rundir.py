@@ -80,8 +80,7 @@ from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, Ke
                                         format_number, row_plan)
 
 __all__ = [
-    "LogError",
-    "RunData",
+    "LogError", "RunData",
     "RunRecorder",
     "SummaryRow",
     "format_number",
@@ -305,9 +304,8 @@ class RunRecorder:
         held = self._held
         rows = [cells for cells, _ in held]
         text = block_text(rows)
-        kept = [(cells, b"") for cells in rows]
+        kept = [] if text is None else None  # (cells, line) of rows printed one by one
         if text is None:  # a ±inf among them: row by row, as write_row prints them
-            kept = []
             for cells, plan in held:
                 line = _plain_line(cells, plan[4])
                 if line is None:  # pragma: no cover - BlockCheck's rows print plain
@@ -322,11 +320,13 @@ class RunRecorder:
         finally:  # the file grew: written, even if a signal's KeyboardInterrupt followed
             if self._log.tell() != at:
                 self._held = []
-                for cells, line in kept:
+                if kept is None:  # the block's rows as they are: one list.extend
+                    self._kept.extend(rows)
+                for cells, line in kept or ():
                     self._kept.add(cells, line)
             self._writing = None
 
-    def kept_columns(self) -> dict[str, np.ndarray] | None:
+    def kept_columns(self) -> Mapping[str, np.ndarray] | None:
         """The columns of the rows written, as :func:`read_run` would parse them from
         ``log.csv`` (None for a run longer than :attr:`KEEP_ROWS` rows: read it back)."""
         if self._held:

@@ -239,8 +239,8 @@ def _input_rows(r: _Run) -> list[SummaryRow]:
                  SummaryRow(name, "saturated_fraction", float(stats["saturated_fraction"][i]),
                             "fraction")]
     # the few distinct flag texts, counted once (not four passes over the ticks)
-    flags = Counter(s for s in _strings(r.cols.get("cmd_saturated"), r.n)[r.window]
-                    if len(s) == 4)
+    flags = Counter(_strings(r.cols.get("cmd_saturated"), r.n)[r.window].tolist())
+    flags = {s: count for s, count in flags.items() if len(s) == 4}
     n_flags = sum(flags.values())
     for i, name in enumerate(_PCMD):
         set_ticks = sum(count for s, count in flags.items() if s[i] == "1")

@@ -64,6 +64,12 @@ class VerdictTally:
         if math.isfinite(age):
             self.target_seen = True
 
+    def add_tick(self, t_s: float, mode: str) -> None:
+        """:meth:`add` of a row without ``target_age_ms`` given as its ``t_s`` and ``mode``
+        (the lockstep runner's usual NMPC tick: no dict built for it)."""
+        if t_s >= 0 and is_tracking(mode):
+            self.tracking_ticks += 1
+
     def verdict(self, ending: str) -> str:
         """``ending`` unless it is :data:`COMPLETED` and the run did not do its job."""
         if ending != COMPLETED:

@@ -165,23 +165,23 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     tally = VerdictTally(follow=tick.follow is not None)
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
-    t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
-    inputs, step, set_command, tally_add = drone.inputs, tick.step, drone.set_command, tally.add
+    n_settle, advance_to, take_events = schedule.n_settle, drone.advance_to, drone.take_events
+    inputs, step, set_command = drone.inputs, tick.step, drone.set_command
+    truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
     for k in range(schedule.n_ticks):
         check_signals()
-        t_exp = t_exp_of(k)
+        t_exp = (k - n_settle) * period  # schedule.t_exp_s(k), spelled out
         t_plant = t_first + k * period
         advance_to(t_plant, t_exp)
         drone_events = take_events()
         if drone_events:
             _write_events_at(write_event, drone_events)
-        nav = drone.navdata
-        if drone.self_landing and nav.mode is not FlightMode.EMERGENCY:
+        if drone.self_landing and drone.navdata.mode is not FlightMode.EMERGENCY:
             # the drone's word: no command, no take-off again (an emergency is the
             # supervisor's to report, as in fly, where the tick sees it first)
-            write_event(t_exp, "drone_landed_itself", drone_mode=nav.mode.value)
+            write_event(t_exp, "drone_landed_itself", drone_mode=drone.navdata.mode.value)
             ending = SELF_LANDED
             break
         flown = k + 1
@@ -194,10 +194,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         cells = out.cells
         if cells is not None:  # the usual NMPC tick: its cells in column order, no dict
             if write_cells is not None:
-                put_truth_cells(cells, drone.truth_cells())
+                put_truth_cells(cells, truth_cells())
                 write_cells(cells)
             label = cells[MODE_CELL]
-            tally_add({"t_s": cells[0], "mode": label})  # no target: no target_age_ms
+            tally_tick(cells[0], label)  # no target: no target_age_ms
         else:
             row = out.row
             _record(recorder, row, drone)

@@ -102,3 +102,29 @@ def test_path_deviation_of_a_flown_square_is_the_numpy_forms():
     poly = make_trajectory(cfg.reference, duration_s=cfg.duration_s).polyline_m()
     d = _numpy_distances(xyz, poly)
     assert path_deviation(xyz, poly) == (float(d.mean()), float(d.max()))
+
+
+def test_the_pruning_skips_no_segment_that_could_be_the_nearest():
+    """Long paths (many chunks of CHUNK_SEGMENTS), positions on, near and far from them, at
+    every scale: the bits of every segment measured (the Python order)."""
+    from ardrone_nmpc.runs.path_kernels import CHUNK_SEGMENTS
+
+    rng = np.random.default_rng(3)
+    for trial in range(12):
+        n = int(rng.integers(CHUNK_SEGMENTS - 1, 8 * CHUNK_SEGMENTS + 3))
+        poly = _random_path(rng, n, 10.0 ** rng.uniform(-3, 2))
+        p = poly[rng.integers(0, n, 60)] + rng.normal(size=(60, 3)) * 10.0 ** rng.uniform(-9, 1)
+        assert np.array_equal(polyline_distances_m(p, poly), _python_distances(p, poly)), trial
+
+
+def test_a_position_or_vertex_not_finite_gives_nan_as_unpruned():
+    rng = np.random.default_rng(4)
+    poly = _random_path(rng, 100, 1.0)
+    p = poly[rng.integers(0, 100, 30)] + rng.normal(size=(30, 3)) * 0.01
+    p[7] = [math.nan, 0.0, 0.0]
+    d = polyline_distances_m(p, poly)
+    assert np.isnan(d[7]) and np.isfinite(np.delete(d, 7)).all()
+    for bad in (math.nan, math.inf, -math.inf):
+        broken = poly.copy()
+        broken[int(rng.integers(0, 100)), int(rng.integers(0, 3))] = bad
+        assert np.isnan(polyline_distances_m(p, broken)).all(), bad  # every position's

@@ -229,6 +229,31 @@ def test_solver_stats():
     assert math.isnan(none["mean_us"]) and none["non_ok"] == 0
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_the_percentiles_and_statuses_are_each_computed_as_alone(seed):
+    """p50 and p99 from one np.percentile call are the bits of one call each; statuses
+    counted once per distinct value are counted as one by one."""
+    from ardrone_nmpc.runs.metrics import percentiles
+
+    rng = np.random.default_rng(seed)
+    x = rng.normal(0.0, 10.0, int(rng.integers(1, 2000)))
+    x[rng.integers(0, x.size, 2)] = np.nan
+    finite = x[np.isfinite(x)]
+    want = (float(np.percentile(finite, 50)), float(np.percentile(finite, 99)),
+            float(finite.max()))
+    assert np.array(percentiles(x)).tobytes() == np.array(want).tobytes()
+    status = rng.choice(np.array(["ok", "", "diverged", None, math.nan, "nan-input"],
+                                 dtype=object), x.size)
+    by_status: dict = {}
+    for v in status:
+        v = "" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)
+        if v and v != "ok":
+            by_status[v] = by_status.get(v, 0) + 1
+    st = solver_stats(x, status)
+    assert st["by_status"] == dict(sorted(by_status.items()))
+    assert st["non_ok"] == sum(by_status.values())
+
+
 # ----------------------------------------------------------------------------- summarise
 
 

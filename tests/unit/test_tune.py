@@ -412,3 +412,29 @@ def test_a_study_file_of_an_earlier_version_is_read_whatever_its_name(tmp_path):
     record = load_record(tmp_path)
     assert record.study_name == "tune" and record.best_value == 3.0
     assert stored_trials(tmp_path) == 1
+
+
+@pytest.mark.parametrize("data", [
+    {"name": "a", "sim": {"seed": 7, "settle_s": 1.0}, "duration_s": 5},
+    {"name": "a"},  # no sim: made
+    {"sim": {"plant": {"profile": "x"}}, "name": "b"},
+    {"sim": None},  # not a mapping: the override's own error
+    {"sim": 3},
+])
+@pytest.mark.parametrize("sc", [Scenario("s0", 0), Scenario("s3", 3, ("duration_s=2",)),
+                                Scenario("s5", 5, ("sim.settle_s=0.5", "name=q"))])
+def test_a_scenario_s_data_is_its_overrides_and_seed_applied(data, sc):
+    from ardrone_nmpc.config.io import apply_overrides
+    from ardrone_nmpc.experiments.tune.engine import _scenario_data
+
+    def outcome(make):
+        try:
+            got = make()
+        except ConfigError as err:
+            return ("error", err.messages)
+        return ("data", got, [list(got)] + [list(v) for v in got.values() if isinstance(v, dict)])
+
+    before = repr(data)
+    want = outcome(lambda: apply_overrides(data, [*sc.overrides, f"sim.seed={sc.seed}"]))
+    assert outcome(lambda: _scenario_data(data, sc)) == want  # key order too
+    assert repr(data) == before  # left alone

@@ -7,7 +7,8 @@ run directory and finds the ones an earlier run finished, :mod:`.status` judges 
 """
 
 from ardrone_nmpc.experiments.sweep.cases import (PARTIAL_DIR, CaseResult, finished_result,
-                                                  resume_results, run_case, sweep_row, warm_up)
+                                                  resume_results, run_case, sweep_row, warm_up,
+                                                  warm_worker)
 from ardrone_nmpc.experiments.sweep.engines import iter_dask, iter_local, run_cases
 from ardrone_nmpc.experiments.sweep.grid import (Case, GridParam, build_cases, case_id,
                                                  parse_grid, split_values, value_text)
@@ -50,5 +51,6 @@ __all__ = [
     "sweep_row",
     "value_text",
     "warm_up",
+    "warm_worker",
     "write_sweep_csv",
 ]

@@ -112,11 +112,24 @@ def _fly(cfg, keep_dir: str | None, number: int):
             result.ending)
 
 
+def _scenario_data(data: Mapping[str, Any], sc: Scenario) -> Mapping[str, Any]:
+    """``data`` with the scenario's overrides and its seed: what ``apply_overrides(data,
+    [*sc.overrides, f"sim.seed={sc.seed}"])`` gives, for :func:`resolve_data` (which copies
+    it before anything changes it). A scenario of a seed alone (an int: its text read back as
+    YAML is that int) is set as it is, without a deep copy of ``data`` and a YAML parse."""
+    from ardrone_nmpc.config.io import apply_overrides
+
+    sim = data.get("sim", {})
+    if sc.overrides or sc.seed.__class__ is not int or sim.__class__ is not dict:
+        return apply_overrides(data, [*sc.overrides, f"sim.seed={sc.seed}"])
+    return {**data, "sim": {**sim, "seed": sc.seed}}
+
+
 def run_trial(spec: TrialSpec) -> TrialResult:
     """Fly ``spec`` on each of its scenarios and score it. Never raises: a flight that
     cannot run (an invalid config, an exception) makes the trial ``failed`` with the
     objective's penalty."""
-    from ardrone_nmpc.config.io import apply_overrides, resolve_data
+    from ardrone_nmpc.config.io import resolve_data
     from ardrone_nmpc.config.schema import ConfigError
 
     wall0 = time.perf_counter()
@@ -127,7 +140,7 @@ def run_trial(spec: TrialSpec) -> TrialResult:
     status = "ok"
     for sc in spec.scenarios:
         try:
-            cfg = resolve_data(apply_overrides(data, [*sc.overrides, f"sim.seed={sc.seed}"]))
+            cfg = resolve_data(_scenario_data(data, sc))
             m, flown_s, ending = _fly(cfg, spec.keep_dir, spec.number)
             sim_s += flown_s
             if ending in FAILED_VERDICTS:  # flown to its end without doing its job
