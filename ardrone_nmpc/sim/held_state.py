@@ -47,14 +47,12 @@ class HeldInArrays:
                                  f"{self.name!r}") from None
 
 
-def released_state(obj) -> dict:
-    """``obj``'s ``__getstate__`` (copy, deepcopy, pickle): its ``__dict__`` with the held
-    attributes written back (module docstring)."""
+def released_state(obj):
+    """``obj``'s ``__getstate__`` (copy, deepcopy, pickle): object's own, with the held
+    attributes written back first (module docstring)."""
     holder = obj.__dict__.get("_held_by")
-    if holder is None:
-        return obj.__dict__
-    holder.release()
-    state = obj.__dict__
-    if state.get("_held_by") is not None:  # a holder not holding obj: not the copy's
-        state = {**state, "_held_by": None}
-    return state
+    if holder is not None:
+        holder.release()
+        if obj.__dict__.get("_held_by") is not None:  # a holder not holding obj (a clone
+            obj.__dict__["_held_by"] = None           # of vars(obj) while held): nobody's
+    return object.__getstate__(obj)

@@ -69,7 +69,8 @@ _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_adva
 #: legs; LockstepSensors checks its own class, it imports this module)
 _FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
                       "_climb_may_reach_cap")
-SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
+SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata",
+                    "_next_mocap_k", "_next_nav_k")  # (the last two: _SENSORS_HELD)
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
@@ -175,7 +176,8 @@ class CompiledLegs:
         """A plant this path can fly: the airframe's own dynamics, sensors and state — and,
         when given, a firmware whose class overrides none of what the kernel does in its
         place."""
-        for obj, base, names in ((plant, AirframePlant, _REPLACED),
+        # (a class default of a held attribute would shadow its HeldInArrays: _PLANT_HELD)
+        for obj, base, names in ((plant, AirframePlant, _REPLACED + _PLANT_HELD),
                                  (firmware, DroneFirmware, _FIRMWARE_REPLACED)):
             if obj is None and base is DroneFirmware:
                 continue

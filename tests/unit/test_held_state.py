@@ -21,9 +21,10 @@ PLANT_HELD = ("_state", "_tilt_aux", "_steps", "_pending_s", "_battery", "_yaw_b
 SENSORS_HELD = ("_next_mocap_k", "_next_nav_k")
 
 
-def _flying(legs: bool) -> LockstepDrone:
-    """A drone a few ticks into its flight: with ``legs``, the arrays hold its state."""
-    drone = LockstepDrone(CFG)
+def _flying(legs: bool, plant=None) -> LockstepDrone:
+    """A drone a few ticks into its flight: with ``legs`` (and legs), the arrays hold its
+    state."""
+    drone = LockstepDrone(CFG, plant=plant)
     if not legs:
         drone.sensors._legs = drone._legs = None
     period = CFG.loop.period_s
@@ -35,7 +36,7 @@ def _flying(legs: bool) -> LockstepDrone:
     for k in range(1, 4):
         drone.advance_to(t0 + k * period)
         drone.set_command(0.1, -0.05, 0.1, 0.02)
-    if legs:
+    if legs and drone.sensors._legs is not None:
         assert drone.sensors._legs.held() and "_state" not in vars(drone.sim.plant)
     return drone
 
@@ -76,6 +77,8 @@ def test_a_held_attribute_of_an_object_its_holder_does_not_hold_is_an_attribute_
     assert not hasattr(clone, "_state")
     with pytest.raises(AttributeError, match="_state"):
         clone._state
+    assert copy.copy(clone)._held_by is None  # not the holder's to hold
+    assert "_state" in vars(plant)  # (the original: released, its own state)
 
 
 def test_a_write_while_held_is_what_the_truth_reads():
@@ -107,3 +110,30 @@ def test_a_plant_command_while_held_then_a_pcmd():
         drone.advance_to(drone.truth.t_s + CFG.loop.period_s)
         shots.append((current, drone.truth_cells(), drone.sim.plant._state))
     assert shots[0] == shots[1]
+
+
+
+@pytest.mark.parametrize("owner,name", [("plant", "_battery"), ("plant", "_tilt_aux"),
+                                        ("plant", "_state"), ("sensors", "_next_nav_k")])
+def test_a_class_default_of_a_held_attribute_keeps_the_python_path(owner, name, monkeypatch):
+    """A subclass (a test's emulator) giving a held attribute a class-level default shadows
+    the base's HeldInArrays: while held, a read would give that default, not the flight's
+    value, and release nothing. Such a plant or sampler flies the Python path: its reads are
+    the plain Python path's."""
+    from ardrone_nmpc.sim import lockstep_drone as lockstep_module
+    from ardrone_nmpc.sim.plant import AirframePlant
+    from ardrone_nmpc.sim.sensors import LockstepSensors
+
+    base = {"plant": AirframePlant, "sensors": LockstepSensors}[owner]
+    kind = type("Shadowing", (base,), {name: None})
+    if owner == "sensors":
+        monkeypatch.setattr(lockstep_module, "LockstepSensors", kind)
+    plant = kind.from_config(CFG.sim, CFG.drone) if owner == "plant" else None
+    drone = _flying(True, plant=plant)
+    obj = {"plant": drone.sim.plant, "sensors": drone.sensors}[owner]
+    assert type(obj) is kind
+    python = _flying(False)
+    names = PLANT_HELD if owner == "plant" else SENSORS_HELD
+    assert _values(obj, names) == _values(
+        {"plant": python.sim.plant, "sensors": python.sensors}[owner], names)
+    assert drone.sensors._legs is None
