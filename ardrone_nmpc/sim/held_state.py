@@ -9,11 +9,15 @@ attribute in the instance's ``__dict__`` always wins and costs nothing extra —
 read of one that is missing by calling the holder's ``release()``, which writes them all
 back (keeping any written meanwhile), and returns the value. Any reader — the plant's own
 Python path, the firmware, a fault, a test — sees what the attribute would have held.
+
+A copy, a deep copy or a pickle reads the instance's ``__dict__`` without the descriptors: an
+owner class's ``__getstate__ = released_state`` writes the held attributes back first, so the
+copy has them (and no holder: it is nobody's).
 """
 
 from __future__ import annotations
 
-__all__ = ["HeldInArrays"]
+__all__ = ["HeldInArrays", "released_state"]
 
 
 class HeldInArrays:
@@ -36,4 +40,19 @@ class HeldInArrays:
             raise AttributeError(f"{type(obj).__name__!r} object has no attribute "
                                  f"{self.name!r}")
         holder.release()
-        return obj.__dict__[self.name]
+        try:
+            return obj.__dict__[self.name]
+        except KeyError:  # a holder not holding obj (a clone of vars(obj) while held)
+            raise AttributeError(f"{type(obj).__name__!r} object has no attribute "
+                                 f"{self.name!r}") from None
+
+
+def released_state(obj):
+    """``obj``'s ``__getstate__`` (copy, deepcopy, pickle): object's own, with the held
+    attributes written back first (module docstring)."""
+    holder = obj.__dict__.get("_held_by")
+    if holder is not None:
+        holder.release()
+        if obj.__dict__.get("_held_by") is not None:  # a holder not holding obj (a clone
+            obj.__dict__["_held_by"] = None           # of vars(obj) while held): nobody's
+    return object.__getstate__(obj)

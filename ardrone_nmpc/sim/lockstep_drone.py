@@ -139,7 +139,7 @@ class LockstepDrone(ConfigHandshake):
         from its state, the values :attr:`AirframePlant.truth` would hold, without building
         it."""
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
-        o = legs.live_out if legs is not None else None
+        o = legs.live() if legs is not None else None
         if o is not None:
             return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]
         plant = self.sim.plant

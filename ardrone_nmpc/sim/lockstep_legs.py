@@ -11,7 +11,8 @@ the plant's Python path, the firmware, a fault, a test — writes them all back 
 (:mod:`~ardrone_nmpc.sim.held_state`); a write meanwhile is newer than the arrays and is
 kept, and the next run takes the state again. What a tick reads between runs comes from
 the arrays: the samples, and the truth of the last run (:meth:`CompiledLegs.truth`,
-:attr:`CompiledLegs.live_out` for ``LockstepDrone.truth_cells`` and the PCMD chain). It
+:meth:`CompiledLegs.live` for ``LockstepDrone.truth_cells`` and the PCMD chain) — unless a
+held attribute was written since (then the attributes, released, are read). It
 reads and writes the plant's and the firmware's internals (it is their compiled path, not a
 client), and is used only when the Python path's tick would do what the kernel does:
 
@@ -68,7 +69,8 @@ _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_adva
 #: legs; LockstepSensors checks its own class, it imports this module)
 _FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
                       "_climb_may_reach_cap")
-SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
+SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata",
+                    "_next_mocap_k", "_next_nav_k")  # (the last two: _SENSORS_HELD)
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
@@ -174,7 +176,8 @@ class CompiledLegs:
         """A plant this path can fly: the airframe's own dynamics, sensors and state — and,
         when given, a firmware whose class overrides none of what the kernel does in its
         place."""
-        for obj, base, names in ((plant, AirframePlant, _REPLACED),
+        # (a class default of a held attribute would shadow its HeldInArrays: _PLANT_HELD)
+        for obj, base, names in ((plant, AirframePlant, _REPLACED + _PLANT_HELD),
                                  (firmware, DroneFirmware, _FIRMWARE_REPLACED)):
             if obj is None and base is DroneFirmware:
                 continue
@@ -212,6 +215,8 @@ class CompiledLegs:
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
         plant, o = self.plant, self.live_out  # (the last run's truth while held)
+        if o is not None and len(plant.__dict__) != self._plant_len:
+            o = self.live()  # a held attribute written since the run: released, None
         if now is None:  # the plant's time
             now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
@@ -386,9 +391,19 @@ class CompiledLegs:
         :attr:`live_out`)."""
         return self.plant.__dict__.get("_held_by") is self
 
+    def live(self):
+        """:attr:`live_out` — unless a held attribute of the plant was written since the run
+        (a fault's battery, a command: the written value is the newer): then the attributes
+        are released and None (read the plant)."""
+        o = self.live_out
+        if o is not None and len(self.plant.__dict__) != self._plant_len:
+            self.release()
+            return None
+        return o
+
     def truth(self):
         """:attr:`AirframePlant.truth`, from the last run's while the arrays hold its state."""
-        o = self.live_out
+        o = self.live()
         if o is None:
             return self.plant.truth
         q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's

@@ -83,7 +83,7 @@ from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, air
                                        freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
-from ardrone_nmpc.sim.held_state import HeldInArrays
+from ardrone_nmpc.sim.held_state import HeldInArrays, released_state
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_params import ATTITUDE_MODELS, PlantParams
 from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_LANDING, AUTO_SAME,
@@ -200,6 +200,7 @@ class AirframePlant:
     (_state, _tilt_aux, _steps, _pending_s, _battery, _yaw_bias_deg, _vel_bias, _gust_mps,
      _current, _fifo, _bias_normals, _gust_normals, _mocap_normals, _nav_normals) = (
         HeldInArrays() for _ in range(14))
+    __getstate__ = released_state  # a copy or pickle while held: the attributes, no holder
 
     def __init__(self, params: PlantParams, noise: Optional[NoiseConfig] = None, *,
                  seed: int = 0) -> None:

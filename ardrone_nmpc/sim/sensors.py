@@ -45,7 +45,7 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
-from ardrone_nmpc.sim.held_state import HeldInArrays
+from ardrone_nmpc.sim.held_state import HeldInArrays, released_state
 from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.sim.target import target_pose
 
@@ -68,6 +68,7 @@ class LockstepSensors:
 
     # the sensor grids' next indices: held by the compiled legs between their runs
     _next_mocap_k, _next_nav_k = HeldInArrays(), HeldInArrays()
+    __getstate__ = released_state  # a copy or pickle while held: the indices, no holder
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None):
