@@ -168,31 +168,42 @@ class AttitudeResponseEstimator:
         n_k, n_l = len(self.delays_s), len(self.lags_s)
         # the commands held: send times, values (rad), the lags' outputs at those times
         self._capacity = 2 * int(math.ceil(max_delay_s / 0.02)) + 8
-        # the whole state in one buffer the compiled step works on (response_kernels);
-        # the names below are views of it
-        # with the fit's parameters and grid (what each call would otherwise pass)
-        st = self._state = rk.new_state(self.delays_s, self.lags_s, self._capacity,
-                                        self.euler_angle_max_rad, self.window_s,
-                                        REFRESH_SAMPLES)
-        shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
-        o = rk.HEAD
-        self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
-                                          for i in range(3))
-        self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
-        self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
+        # the whole state in one buffer the compiled step works on (response_kernels), with
+        # the fit's parameters and grid (what each call would otherwise pass); the sums' names
+        # are views of it (_bind_views)
+        self._state = rk.new_state(self.delays_s, self.lags_s, self._capacity,
+                                   self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES)
         # the grids as floats, and per delay the delays a rival must be at (``_contrast``)
         self._delays, self._lags = self.delays_s.tolist(), self.lags_s.tolist()
         self._away = [np.abs(self.delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
                       for d in self.delays_s]
         self._any_away = [bool(a.any()) for a in self._away]
+        self._fit_out = np.zeros(rk.fit_size(n_k, n_l))  # fit_grid's output (_bind_views)
+        self._bind_views()
+        self._estimate: AttitudeEstimate | None = NO_ESTIMATE
+
+    def _bind_views(self) -> None:
+        """The sums and the fit's outputs as views of the state and fit buffers."""
+        st, out = self._state, self._fit_out
+        n_k, n_l = len(self.delays_s), len(self.lags_s)
+        shape, kl2, kl = (n_k, n_l, 2), n_k * n_l * 2, n_k * n_l
+        o = rk.HEAD
+        self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
+                                          for i in range(3))
+        self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
+        self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
         # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
         # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
-        out = self._fit_out = np.zeros(rk.fit_size(n_k, n_l))
-        kl = n_k * n_l
         self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
                            out[4 * kl:6 * kl].reshape(shape),
                            out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
-        self._estimate: AttitudeEstimate | None = NO_ESTIMATE
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: each view was copied apart from its buffer (numpy
+        copies a view's data alone); made views of the copied buffers again, so what the
+        kernels write is what the fit reads."""
+        self.__dict__.update(state)
+        self._bind_views()
 
     @property
     def _n(self) -> float:

@@ -186,21 +186,33 @@ class ReferenceIntegrator:
         self.speed_band = _per_axis(speed_band)
         self.max_shift = _per_axis(max_shift)
         # what _integrate reads and writes, in two buffers (_W_*); the names are views
-        work = self._work = np.zeros(_W_SIZE)
-        flags = self._flags = np.zeros((2, n), dtype=bool)
+        self._work = np.zeros(_W_SIZE)
+        self._flags = np.zeros((2, n), dtype=bool)
+        self._bind_views()
+        self._law[:] = np.stack((
+            self.error_band, self.speed_band, self.steady_band, self.release_speed,
+            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1)
+        self._carry[_LAST] = math.nan  # the reference components of the last update
+        self._last_error_psi[0] = math.nan
+        self.period_s = period_s
+
+    def _bind_views(self) -> None:
+        """The public arrays and the law, carry and last ψ error as views of the buffers."""
+        work, flags = self._work, self._flags
         self.shift = work[_W_SHIFT:_W_PSI]
         self.latched = flags[0]  # learning until the error or reference moves
         self.learning = flags[1]  # which axes integrated on the last update
         # the law per axis (rows of _integrate's law) and what it carries between updates
-        self._law = work[_W_LAW:_W_CARRY].reshape(n, 8)
-        self._law[:] = np.stack((
-            self.error_band, self.speed_band, self.steady_band, self.release_speed,
-            self.hold_s, self.ki_per_s, self.kp, self.max_shift), axis=1)
-        self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, n)
-        self._carry[_LAST] = math.nan  # the reference components of the last update
+        self._law = work[_W_LAW:_W_CARRY].reshape(len(AXES), 8)
+        self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, len(AXES))
         self._last_error_psi = work[_W_PSI:_W_PERIOD]
-        self._last_error_psi[0] = math.nan
-        self.period_s = period_s
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: each view was copied apart from its buffer (numpy
+        copies a view's data alone); made views of the copied buffers again, so the kernel's
+        writes reach ``shift``, ``latched`` and ``learning``."""
+        self.__dict__.update(state)
+        self._bind_views()
 
     @property
     def period_s(self) -> float:

@@ -34,7 +34,13 @@ def percentiles(x: np.ndarray) -> tuple[float, float, float] | None:
     x = x[np.isfinite(x)]
     if x.size == 0:
         return None
-    p50, p99 = np.percentile(x, (50, 99))  # one partition for both: each as if alone
+    p50, p99 = np.percentile(x, (50, 99))  # one partition for both: each as if alone,
+    # but for a zero: +0 and −0 compare equal, so which one lands at the index depends on the
+    # partition (any other value is the same order statistic, the same bits)
+    if p50 == 0.0:
+        p50 = np.percentile(x, 50)
+    if p99 == 0.0:
+        p99 = np.percentile(x, 99)
     return float(p50), float(p99), float(x.max())
 
 

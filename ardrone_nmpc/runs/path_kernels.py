@@ -39,6 +39,11 @@ CHUNK_SEGMENTS = 16
 #: computed distance could never have been the minimum.
 _REL_MARGIN = 1e-6
 _ABS_MARGIN_M2 = 1e-9
+#: Coordinates (m) up to this keep every product of a distance finite: a box with a vertex
+#: beyond it, or a segment whose 1/(ab·ab) overflows (shorter than ~1e-154 m), is never
+#: skipped, nor any box for a position beyond it — there a segment's squared distance can be
+#: NaN (inf·0, inf − inf, 0·inf) however far its box is, and unpruned the NaN is the answer.
+_SAFE_M = 1e150
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -64,13 +69,16 @@ def polyline_distances_m(p, poly):
             lo[c, k], hi[c, k] = math.inf, -math.inf
             for v in range(c * CHUNK_SEGMENTS, min((c + 1) * CHUNK_SEGMENTS, n_seg) + 1):
                 x = poly[v, k]
-                if not math.isfinite(x):
+                if not abs(x) <= _SAFE_M:  # NaN and ±inf included
                     finite = False
                 if x < lo[c, k]:
                     lo[c, k] = x
                 if x > hi[c, k]:
                     hi[c, k] = x
-        if not finite:  # a vertex not finite: the box bounds everything, never skipped
+        for s in range(c * CHUNK_SEGMENTS, min((c + 1) * CHUNK_SEGMENTS, n_seg)):
+            if not math.isfinite(inv[s]):
+                finite = False
+        if not finite:  # a vertex not finite (or huge), a tiny segment: never skipped
             for k in range(3):
                 lo[c, k], hi[c, k] = -math.inf, math.inf
     out = np.empty(p.shape[0])
@@ -79,6 +87,8 @@ def polyline_distances_m(p, poly):
         q0, q1, q2 = p[i, 0], p[i, 1], p[i, 2]
         best = math.inf
         best_box = start
+        # a position beyond _SAFE_M (or NaN): every box measured (never skipped)
+        prune = abs(q0) <= _SAFE_M and abs(q1) <= _SAFE_M and abs(q2) <= _SAFE_M
         for j in range(n_box):
             c = start + j
             if c >= n_box:
@@ -86,7 +96,8 @@ def polyline_distances_m(p, poly):
             g0 = max(lo[c, 0] - q0, 0.0, q0 - hi[c, 0])
             g1 = max(lo[c, 1] - q1, 0.0, q1 - hi[c, 1])
             g2 = max(lo[c, 2] - q2, 0.0, q2 - hi[c, 2])
-            if (g0 * g0 + g2 * g2) + g1 * g1 > best * (1.0 + _REL_MARGIN) + _ABS_MARGIN_M2:
+            if prune and ((g0 * g0 + g2 * g2) + g1 * g1
+                          > best * (1.0 + _REL_MARGIN) + _ABS_MARGIN_M2):
                 continue  # every segment of the box is farther than the nearest one yet
             for s in range(c * CHUNK_SEGMENTS, min((c + 1) * CHUNK_SEGMENTS, n_seg)):
                 ap0 = q0 - poly[s, 0]

@@ -134,3 +134,28 @@ def test_a_take_off_s_few_weak_samples_never_lock_a_delay_a_tick_or_more_wrong()
             if est.delay_confident and abs(est.delay_s - 0.26) > PERIOD_S:
                 wrong.append((seed, seconds, est.delay_s, est.delay_contrast))
     assert len(wrong) <= 1, wrong
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copy_of_the_estimator_fits_what_it_was_fed(how):
+    """The sums, the residual and the fit's outputs are read through views of the state and
+    fit buffers: a copy's must be views of the copy's buffers (numpy copies a view apart
+    from its base), else its estimate reads zeros or the original's old sums."""
+    import copy
+    import pickle
+
+    def feed(est, t0):
+        for i in range(300):
+            t = t0 + i * 0.065
+            est.command(t, 0.3 * math.sin(3 * t), 0.2 * math.cos(2 * t))
+            est.navdata(t + 0.03, 10 * math.sin(3 * t - 0.3), 8 * math.cos(2 * t - 0.2))
+
+    est, twin = (AttitudeResponseEstimator(math.radians(12)) for _ in range(2))
+    feed(est, 0.0)
+    feed(twin, 0.0)
+    other = copy.deepcopy(est) if how == "deepcopy" else pickle.loads(pickle.dumps(est))
+    feed(other, 20.0)
+    feed(twin, 20.0)
+    assert other.estimate == twin.estimate
+    assert np.shares_memory(other._sx, other._state)
+    assert np.shares_memory(other._fit_views[0], other._fit_out)

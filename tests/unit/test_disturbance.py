@@ -450,3 +450,38 @@ def test_frozen_axes_is_its_rule_everywhere():
     for flags in (None, "", "0000", "1000", "0100", "0010", "0001", "1111"):
         for fracs in itertools.product(values, repeat=4):
             assert frozen_axes(fracs, flags) == rule(fracs, flags), (fracs, flags)
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle", "copy"])
+def test_a_copy_of_the_integrator_integrates_into_its_own_public_arrays(how):
+    """shift, latched, learning (and the carry, the law, the period) are views of the kernel's
+    buffers: a copy's must be views of the copy's buffers, else the copy's kernel writes
+    where its ``shift`` (what ``update`` returns, what ``shifted`` adds) never sees it."""
+    import copy
+    import pickle
+
+    integ = ReferenceIntegrator((0.5,) * 4, (1.0,) * 4, (1.0,) * 4, (1.0,) * 4, (0.0,) * 4,
+                                0.1)
+    twin = ReferenceIntegrator((0.5,) * 4, (1.0,) * 4, (1.0,) * 4, (1.0,) * 4, (0.0,) * 4,
+                               0.1)
+    x, ref = np.zeros(7), np.zeros(7)
+    x[IX_X] = 0.2
+    for _ in range(3):
+        integ.update(x, ref)
+        twin.update(x, ref)
+    other = {"deepcopy": copy.deepcopy, "pickle": lambda o: pickle.loads(pickle.dumps(o)),
+             "copy": copy.copy}[how](integ)
+    if how == "copy":  # a shallow copy shares the buffers (as it shared the arrays before)
+        assert other._work is integ._work
+        return
+    other.period_s = 0.1
+    for _ in range(3):
+        shift = other.update(x, ref)
+        twin.update(x, ref)
+    assert shift is other.shift and other.shift.tolist() == twin.shift.tolist()
+    assert other.latched.tolist() == twin.latched.tolist()
+    assert other.learning.tolist() == twin.learning.tolist()
+    assert np.shares_memory(other.shift, other._work)
+    assert np.shares_memory(other._carry, other._work)
+    assert np.shares_memory(other.latched, other._flags)
+    assert integ.shift.tolist() != other.shift.tolist()  # the original untouched by the copy

@@ -417,3 +417,21 @@ def test_an_oscillation_ending_in_the_band_has_not_settled():
     assert m_ok["settling_time_s"] == pytest.approx(-math.log(0.02), abs=0.07)
     assert step_metrics(t, y, y0=0.0, y_final=1.0, t_step_s=0.0, min_dwell_s=0.0)[
         "settling_time_s"] > 29.0
+
+
+def test_the_percentiles_of_signed_zeros_are_each_computed_as_alone():
+    """+0 and −0 compare equal, so which one a partition leaves at a percentile's index
+    depends on the partition: one call for p50 and p99 could answer the other zero than
+    each call alone ("-0" for "0" in summary.csv)."""
+    from ardrone_nmpc.runs.metrics import percentiles
+
+    rng = np.random.default_rng(9)
+    cases = [np.array([0.0, -0.0, 0.0, 0.0, 0.0, -0.0, -0.0]),
+             np.array([-0.0, -0.0, -0.0, -0.0, 0.0, 0.0, 0.0, -0.0])]
+    cases += [np.where(rng.random(int(rng.integers(1, 300))) < 0.5, 0.0, -0.0)
+              for _ in range(300)]
+    cases += [rng.choice([0.0, -0.0, 1.0, -1.0, 2.0], int(rng.integers(1, 300)))
+              for _ in range(300)]
+    for x in cases:
+        want = (float(np.percentile(x, 50)), float(np.percentile(x, 99)), float(x.max()))
+        assert np.array(percentiles(x)).tobytes() == np.array(want).tobytes(), x.tolist()
