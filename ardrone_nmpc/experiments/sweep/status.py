@@ -61,8 +61,9 @@ def case_window(run: RunData) -> _Window:
     cols = run.columns
     t = np.asarray(cols["t_s"], dtype=np.float64)
     window = experiment_rows(t)
-    mode = np.array(["" if not isinstance(m, str) else m for m in cols["mode"]],
-                    dtype=object)[window]
+    labels = cols["mode"]
+    labels = labels.tolist() if isinstance(labels, np.ndarray) else labels  # (faster to walk)
+    mode = np.array(["" if not isinstance(m, str) else m for m in labels], dtype=object)[window]
     flying = flying_rows(mode)
     truth = all(np.isfinite(cols[c]).any() for c in ("x_true_m", "y_true_m", "z_true_m",
                                                       "psi_true_rad"))
