@@ -76,6 +76,10 @@ def auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
     x = x.copy()
     k1, k2, k3, k4, tmp = (np.empty(size), np.empty(size), np.empty(size), np.empty(size),
                            np.empty(size))
+    # position hold: True, typed ``bool`` — a literal ``True`` is typed ``Literal[bool](True)``
+    # and would compile _rk4_into and _airframe_rhs a second time (flying_steps passes a
+    # ``bool``): ~0.5 s of a cold start. The same arithmetic either way.
+    auto_hold = landing or not landing
     for i in range(n):
         head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)[5]
         kk = k
@@ -83,7 +87,7 @@ def auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
             gain = sagged_vz_gain(vz_gain, sag, battery)
             kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
                   k[10], k[11], k[12])
-        _rk4_into(x, 0.0, 0.0, gaz_auto, 0.0, True, kk, w, h, k1, k2, k3, k4, tmp, x)
+        _rk4_into(x, 0.0, 0.0, gaz_auto, 0.0, auto_hold, kk, w, h, k1, k2, k3, k4, tmp, x)
         mode = AUTO_SAME
         if not x[2] > 0.0:  # _ground_contact
             if landing:  # touch-down: at rest (_at_rest keeps x, y, ψ)

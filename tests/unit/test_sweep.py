@@ -374,3 +374,16 @@ def test_a_case_failing_after_its_summary_is_not_taken_as_finished(tmp_path, mon
     assert (result.status, result.message) == ("failed", "ValueError: metrics bug")
     assert (tmp_path / case.case_id / "log.csv").is_file()
     assert not (tmp_path / case.case_id / "summary.csv").exists()
+
+
+def test_a_window_made_once_gives_the_same_metrics_and_status(tmp_path):
+    from ardrone_nmpc.experiments.sweep.status import case_window
+
+    run, rows = _synthetic_run(tmp_path, offset=lambda t: np.column_stack(
+        [np.where(t > 3.5, 0.8, 0.0), np.zeros_like(t), np.zeros_like(t)]))
+    window = case_window(run)
+    assert classify(run=run, window=window) == classify(run=run)
+    shared, alone = case_metrics(run=run, rows=rows, window=window), case_metrics(run=run,
+                                                                                   rows=rows)
+    assert shared.keys() == alone.keys()
+    np.testing.assert_array_equal(list(shared.values()), list(alone.values()))

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from ardrone_nmpc.experiments import record
 from ardrone_nmpc.experiments.record import one_line
-from ardrone_nmpc.experiments.sweep.status import DIVERGE_M, case_metrics, classify
+from ardrone_nmpc.experiments.sweep.status import DIVERGE_M, case_metrics, case_window, classify
 from ardrone_nmpc.runs.sweep_table import (METRIC_COLUMNS, SWEEP_FILE, SweepTableError,
                                                   as_float, read_sweep)
 from ardrone_nmpc.runs.rundir import SUMMARY_FILE
@@ -109,8 +109,9 @@ def run_case(case: Case, *, out_dir: str | Path, diverge_m: float = DIVERGE_M) -
     wall0 = time.perf_counter()
     try:
         run, rows = _fly(case.config, staging)
-        metrics = case_metrics(run=run, rows=rows)
-        status, message = classify(run=run, diverge_m=diverge_m)
+        window = case_window(run)
+        metrics = case_metrics(run=run, rows=rows, window=window)
+        status, message = classify(run=run, diverge_m=diverge_m, window=window)
     except VerdictFailed as err:  # flown, but it did not do its job
         status, message, metrics = "failed", str(err), nan_metrics()
     except Exception as err:  # noqa: BLE001 - a failed case is a row of the table

@@ -55,12 +55,15 @@ class _Window:
     flying: np.ndarray
 
 
-def _window(run: RunData) -> _Window:
+def case_window(run: RunData) -> _Window:
+    """The experiment window :func:`case_metrics` and :func:`classify` judge (made once for
+    both by a sweep case: ~0.1 ms a flight)."""
     cols = run.columns
     t = np.asarray(cols["t_s"], dtype=np.float64)
     window = experiment_rows(t)
-    mode = np.array(["" if not isinstance(m, str) else m for m in cols["mode"]],
-                    dtype=object)[window]
+    labels = cols["mode"]
+    labels = labels.tolist() if isinstance(labels, np.ndarray) else labels  # (faster to walk)
+    mode = np.array(["" if not isinstance(m, str) else m for m in labels], dtype=object)[window]
     flying = flying_rows(mode)
     truth = all(np.isfinite(cols[c]).any() for c in ("x_true_m", "y_true_m", "z_true_m",
                                                       "psi_true_rad"))
@@ -85,9 +88,11 @@ def _worst(rows: Sequence[SummaryRow], metric: str) -> float:
     return max(values) if values and not any(math.isnan(v) for v in values) else math.nan
 
 
-def case_metrics(*, run: RunData, rows: Sequence[SummaryRow]) -> dict[str, float]:
-    """The ``sweep.csv`` metrics of a run (see the module docstring)."""
-    w = _window(run)
+def case_metrics(*, run: RunData, rows: Sequence[SummaryRow],
+                 window: _Window | None = None) -> dict[str, float]:
+    """The ``sweep.csv`` metrics of a run (see the module docstring); ``window``: the run's
+    :func:`case_window`, if made already."""
+    w = case_window(run) if window is None else window
     dist = np.linalg.norm(w.pos_m[w.flying] - w.ref_m[w.flying], axis=1)
     dist = dist[np.isfinite(dist)]
     fallbacks = _row_value(rows, "loop", "fallbacks")
@@ -109,7 +114,8 @@ def _aborted(mode: np.ndarray) -> str | None:
     return next((m for m in mode if aborts[m]), None)
 
 
-def classify(*, run: RunData, diverge_m: float = DIVERGE_M) -> tuple[str, str]:
+def classify(*, run: RunData, diverge_m: float = DIVERGE_M,
+             window: _Window | None = None) -> tuple[str, str]:
     """``("ok", "")`` or ``("unstable", reasons)`` for a completed run.
 
     Parameters
@@ -117,10 +123,11 @@ def classify(*, run: RunData, diverge_m: float = DIVERGE_M) -> tuple[str, str]:
     run : the run read back (:func:`~ardrone_nmpc.runs.rundir.read_run`).
     diverge_m : largest 3-D distance from the reference (m) allowed in the last quarter of
         the experiment window.
+    window : the run's :func:`case_window`, if made already.
 
     The rule is the module docstring's; ``reasons`` joins every one that holds.
     """
-    w = _window(run)
+    w = case_window(run) if window is None else window
     t, pos, ref = w.t_s[w.flying], w.pos_m[w.flying], w.ref_m[w.flying]
     reasons = []
     if not np.all(np.isfinite(pos)):
