@@ -135,11 +135,10 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     from ardrone_nmpc.runtime import lockstep  # when used (module docstring)
 
     Schedule.from_config(cfg)  # refused before a run directory exists
+    experiment_trajectory(cfg)  # so is a reference outside the geofence
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
-    # so is a reference outside the geofence; the flight takes this one (the same config)
-    experiment_trajectory(cfg, hand_over=True)
     wall0 = time.perf_counter()
 
     def fly(recorder: RunRecorder) -> SimResult:

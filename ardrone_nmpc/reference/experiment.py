@@ -74,33 +74,13 @@ def check_inside_geofence(cfg, trajectory: Trajectory) -> None:
             "(safety.geofence_min_m / geofence_max_m) — bring the reference inside the fence")
 
 
-#: (config, trajectory) built by ``experiment_trajectory(cfg, hand_over=True)`` and not yet
-#: taken: the next call with that very config object takes it instead of building it again.
-_handed_over: tuple | None = None
-
-
-def experiment_trajectory(cfg, *, hand_over: bool = False):
+def experiment_trajectory(cfg):
     """The reference a runner hands the tick: the configured trajectory held at its start
     through the settle phase, or — kind ``follow`` — the live object (it follows from the
     first tick; it cannot be checked against the geofence before it flies). Raises
-    :class:`ReferenceError` for a reference that leaves the geofence.
-
-    ``hand_over``: keep the result for the next call with the same ``cfg`` object, which
-    takes it (once) instead of building and checking it again — ``record_lockstep`` checks
-    the reference before the run directory exists, then the flight builds it (~0.1–0.2 ms a
-    flight). A config is frozen, so the same object means the same reference; one naming an
-    input file flies a copy naming the run directory's copy (another object: built anew).
-    """
-    global _handed_over
-    kept, _handed_over = _handed_over, None
-    if kept is not None and kept[0] is cfg:
-        return kept[1]
+    :class:`ReferenceError` for a reference that leaves the geofence."""
     if cfg.reference.kind == "follow":
-        trajectory = make_trajectory(cfg.reference)
-    else:
-        inner = make_trajectory(cfg.reference, duration_s=cfg.duration_s)
-        check_inside_geofence(cfg, inner)
-        trajectory = HoldStartThen(inner)
-    if hand_over and cfg.reference.kind != "follow":  # a live object is not shared
-        _handed_over = (cfg, trajectory)
-    return trajectory
+        return make_trajectory(cfg.reference)
+    trajectory = make_trajectory(cfg.reference, duration_s=cfg.duration_s)
+    check_inside_geofence(cfg, trajectory)
+    return HoldStartThen(trajectory)

@@ -121,31 +121,3 @@ def test_record_runs_any_flight_into_the_directory_then_summarises(tmp_path):
 def test_one_line_collapses_whitespace_and_names_the_type():
     assert one_line(ValueError("a\n  b\tc ")) == "ValueError: a b c"
     assert one_line(KeyError()) == "KeyError"
-
-
-def test_the_reference_checked_before_the_run_directory_is_the_one_flown(tmp_path,
-                                                                           monkeypatch):
-    """record_lockstep builds (and checks) the trajectory once: the flight takes it."""
-    from ardrone_nmpc.reference import experiment
-
-    built = []
-    make = experiment.make_trajectory
-    monkeypatch.setattr(experiment, "make_trajectory",
-                        lambda *a, **k: built.append(1) or make(*a, **k))
-    recording = record_lockstep(_cfg(), tmp_path)
-    assert recording.error == "" and len(built) == 1
-    assert experiment._handed_over is None  # taken
-
-
-def test_a_trajectory_handed_over_goes_to_that_config_only_and_once():
-    from ardrone_nmpc.reference.experiment import experiment_trajectory
-
-    cfg, other = _cfg(), _cfg()
-    handed = experiment_trajectory(cfg, hand_over=True)
-    assert experiment_trajectory(other) is not handed  # another object: built anew (and the
-    assert experiment_trajectory(cfg) is not handed  # hand-over dropped)
-    handed = experiment_trajectory(cfg, hand_over=True)
-    assert experiment_trajectory(cfg) is handed
-    assert experiment_trajectory(cfg) is not handed  # once
-    np.testing.assert_array_equal(experiment_trajectory(cfg).state_at(np.linspace(-1, 2, 31)),
-                                  handed.state_at(np.linspace(-1, 2, 31)))
