@@ -165,6 +165,8 @@ class BlockCheck:
     def __init__(self) -> None:
         self._types: dict[tuple, tuple | bool] = {}  # (cell types, n_str) → int slots
         self._tick_types: dict[tuple, tuple | bool] = {}  # tick_cells' numbers' types → …
+        self._tick_last: list = []  # the types of tick_cells' last row, and its judgement
+        self._tick_last_slots: tuple | bool = False
         self._strings: set[tuple] = set()
 
     def __call__(self, cells: list, n_str: int) -> bool:
@@ -194,8 +196,23 @@ class BlockCheck:
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        types = tuple(map(type, cells))  # one pass: the key holds the string cells' types
-        int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
+        types = list(map(type, cells))  # one pass: the key holds the string cells' types
+        if types == self._tick_last:  # as a rule the last row's (compared without a hash)
+            int_slots = self._tick_last_slots
+        else:
+            int_slots = self._tick_slots(tuple(types))
+            self._tick_last, self._tick_last_slots = types, int_slots
+        if int_slots is False:
+            return False
+        for i in int_slots:  # the iteration counts
+            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+                return False
+        return self._plain_strings(_STRING_CELLS(cells))
+
+    def _tick_slots(self, types: tuple) -> tuple | bool:
+        """:meth:`tick_cells`' judgement of a row whose cells have ``types``: False (not
+        plain) or the slots of its int cells."""
+        int_slots = self._tick_types.get(types)
         if int_slots is None:
             int_slots = (tuple(i for i in _TICK_NUMBER_SLOTS if types[i] is int)
                          if (set(_TICK_NUMBERS(types)) <= _NUMBER_TYPES
@@ -203,12 +220,7 @@ class BlockCheck:
             if len(self._tick_types) >= self._LIMIT:
                 self._tick_types.clear()
             self._tick_types[types] = int_slots
-        if int_slots is False:
-            return False
-        for i in int_slots:  # the iteration counts
-            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
-                return False
-        return self._plain_strings(_STRING_CELLS(cells))
+        return int_slots
 
     def _plain_strings(self, strings: tuple) -> bool:
         """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
