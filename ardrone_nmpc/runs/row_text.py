@@ -146,6 +146,7 @@ _SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f\ud800-\udfff]|null|true|false')
 #: The ints a held row may hold: those orjson prints (an int beyond, printed cell by cell
 #: through ``float()``, may overflow it — OverflowError — and is refused at write_row).
 _INT_LIMIT = 2 ** 63
+_INT_MIN = -_INT_LIMIT  # (negated once: a big int's negation is a new object)
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
@@ -186,7 +187,7 @@ class BlockCheck:
         if int_slots is False:
             return False
         for i in int_slots:  # a lockstep row's two iteration counts
-            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+            if not _INT_MIN <= cells[i] < _INT_LIMIT:
                 return False
         return self._plain_strings(_STRING_CELLS(cells))
 
@@ -205,7 +206,7 @@ class BlockCheck:
         if int_slots is False:
             return False
         for i in int_slots:  # the iteration counts
-            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+            if not _INT_MIN <= cells[i] < _INT_LIMIT:
                 return False
         return self._plain_strings(_STRING_CELLS(cells))
 
