@@ -236,26 +236,20 @@ def tick_cells(t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
             and inputs.pose is not None and inputs.target is None and flown is not None
             and sent.decision.action is not _FALLBACK):
         return None
-    pcmd, state_bits = sent.pcmd, nav.state_bits
-    # x, ref and u in column order by one C call each (x, y, z, ψ, then the speeds)
+    xs, ref, u, pcmd = x.tolist(), solution.ref_now.tolist(), result.u.tolist(), sent.pcmd
+    state_bits = nav.state_bits
     return [
-        t_exp_s, *_X_CELLS(x.tolist()), *_REF_CELLS(solution.ref_now.tolist()),
-        *_U_CELLS(result.u.tolist()), flown.vz_ref_mps,
+        t_exp_s, xs[IX_X], xs[IX_Y], xs[IX_Z], xs[IX_PSI], xs[IX_VX], xs[IX_VY], xs[IX_VZ],
+        ref[IX_X], ref[IX_Y], ref[IX_Z], ref[IX_PSI],
+        u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE], flown.vz_ref_mps,
         pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
         sent.saturated if sent.saturated is not None else "0000",
         result.solve_time_us, solution.status, result.residual_norm,
         result.gmres_iterations, result.newton_iterations, mode, ages_ms[0], ages_ms[1],
         nav.battery_pct, "", compute_us, inputs.pose.t_s, nav.vx_body_mps, nav.vy_body_mps,
         nav.mode._value_, nav.roll_deg, nav.pitch_deg,  # (.value: an enum property, 0.3 µs)
-        state_bits if state_bits is not None else math.nan, *_ABSENT_TAIL]
-
-
-#: tick_cells' x (x, y, z, ψ, ẋ, ẏ, ż of the state), ref (x, y, z, ψ) and u cells.
-_X_CELLS = operator.itemgetter(IX_X, IX_Y, IX_Z, IX_PSI, IX_VX, IX_VY, IX_VZ)
-_REF_CELLS = operator.itemgetter(IX_X, IX_Y, IX_Z, IX_PSI)
-_U_CELLS = operator.itemgetter(IU_ZACC, IU_PHI, IU_THETA, IU_PSIRATE)
-#: tick_cells' last 12 cells: nav_ctrl_state, the target's, the truth's (put later).
-_ABSENT_TAIL = ("",) * 12
+        state_bits if state_bits is not None else math.nan,
+        "", "", "", "", "", "", "", "", "", "", "", ""]
 
 
 #: The keys of a :func:`tick_cells` row with its truth put: :func:`tick_row`'s fast path's,

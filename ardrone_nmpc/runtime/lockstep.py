@@ -166,11 +166,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
     tally = VerdictTally(follow=tick.follow is not None)
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
-    n_settle, advance_to = schedule.n_settle, drone.advance_to
-    # (drone.take_events and drone.inputs are its simulated drone's and its sensors': bound
-    # without the frame between)
-    take_events, inputs = drone.sim.take_events, drone.sensors.inputs
-    step, set_command = tick.step, drone.set_command
+    n_settle, advance_to, take_events = schedule.n_settle, drone.advance_to, drone.take_events
+    inputs, step, set_command = drone.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
