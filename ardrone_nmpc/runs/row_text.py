@@ -146,6 +146,7 @@ _SUSPECT = re.compile(r'[,"\\\[\]{}\x00-\x1f\x7f\ud800-\udfff]|null|true|false')
 #: The ints a held row may hold: those orjson prints (an int beyond, printed cell by cell
 #: through ``float()``, may overflow it — OverflowError — and is refused at write_row).
 _INT_LIMIT = 2 ** 63
+_INT_MIN = -_INT_LIMIT  # (negated once: a big int's negation is a new object)
 #: The string cells of a row (one per string column; ``""`` for a missing key).
 _N_STRING_COLUMNS = sum(1 for c in LOG_COLUMNS if c in STRING_COLUMNS)
 _INFINITIES = frozenset({math.inf, -math.inf})  # an np.float64 ±inf hashes and equals alike
@@ -165,6 +166,8 @@ class BlockCheck:
     def __init__(self) -> None:
         self._types: dict[tuple, tuple | bool] = {}  # (cell types, n_str) → int slots
         self._tick_types: dict[tuple, tuple | bool] = {}  # tick_cells' numbers' types → …
+        self._tick_last: list = []  # the types of tick_cells' last row, and its judgement
+        self._tick_last_slots: tuple | bool = False
         self._strings: set[tuple] = set()
 
     def __call__(self, cells: list, n_str: int) -> bool:
@@ -184,7 +187,7 @@ class BlockCheck:
         if int_slots is False:
             return False
         for i in int_slots:  # a lockstep row's two iteration counts
-            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
+            if not _INT_MIN <= cells[i] < _INT_LIMIT:
                 return False
         return self._plain_strings(_STRING_CELLS(cells))
 
@@ -194,8 +197,23 @@ class BlockCheck:
         str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
         only for rows :meth:`__call__` passes (it may refuse more: those take
         ``write_row``)."""
-        types = tuple(map(type, cells))  # one pass: the key holds the string cells' types
-        int_slots = self._tick_types.get(types)  # False: not plain; else the ints' slots
+        types = list(map(type, cells))  # one pass: the key holds the string cells' types
+        if types == self._tick_last:  # as a rule the last row's (compared without a hash)
+            int_slots = self._tick_last_slots
+        else:
+            int_slots = self._tick_slots(tuple(types))
+            self._tick_last, self._tick_last_slots = types, int_slots
+        if int_slots is False:
+            return False
+        for i in int_slots:  # the iteration counts
+            if not _INT_MIN <= cells[i] < _INT_LIMIT:
+                return False
+        return self._plain_strings(_STRING_CELLS(cells))
+
+    def _tick_slots(self, types: tuple) -> tuple | bool:
+        """:meth:`tick_cells`' judgement of a row whose cells have ``types``: False (not
+        plain) or the slots of its int cells."""
+        int_slots = self._tick_types.get(types)
         if int_slots is None:
             int_slots = (tuple(i for i in _TICK_NUMBER_SLOTS if types[i] is int)
                          if (set(_TICK_NUMBERS(types)) <= _NUMBER_TYPES
@@ -203,12 +221,7 @@ class BlockCheck:
             if len(self._tick_types) >= self._LIMIT:
                 self._tick_types.clear()
             self._tick_types[types] = int_slots
-        if int_slots is False:
-            return False
-        for i in int_slots:  # the iteration counts
-            if not -_INT_LIMIT <= cells[i] < _INT_LIMIT:
-                return False
-        return self._plain_strings(_STRING_CELLS(cells))
+        return int_slots
 
     def _plain_strings(self, strings: tuple) -> bool:
         """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
@@ -232,25 +245,51 @@ def block_text(rows: list[list]) -> bytes | None:
     passed), joined, from one orjson call for them all (~0.7 µs a row where a call per row
     costs ~5 µs). None when a cell is ±inf (orjson prints it ``null``, as NaN and None,
     which print ``nan``: the caller then prints the rows one by one) or the text is not
-    that of such rows."""
-    n = len(rows)
+    that of such rows.
+
+    A NaN or None ``nav_state_bits`` (every lockstep tick) goes to orjson as the string
+    ``"nan"`` — its text once the quotes are dropped — and back into its row after: a
+    ``null`` left is another cell's NaN, None or ±inf (:func:`_block_nulls`)."""
+    swapped = []
     try:
+        for r in rows:
+            c = r[_STATE_BITS]
+            if c is None or c != c:
+                swapped.append((r, c))
+                r[_STATE_BITS] = "nan"
         text = orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY)
     except TypeError:  # an int beyond 64 bits
         return None
-    parts = text.split(b"null")  # no string holds one (BlockCheck)
-    if len(parts) > 1:
-        # each null is a NaN, None or ±inf cell: when the NaN and None of nav_state_bits (NaN
-        # on every lockstep tick) account for them all, no cell is ±inf — else look at all
-        if (len(parts) - 1 != sum(1 for r in rows if (c := r[_STATE_BITS]) is None or c != c)
-                and not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows))):
+    finally:  # the rows as they were (they are kept)
+        for r, c in swapped:
+            r[_STATE_BITS] = c
+    # (a 'u' first: one byte is found at memchr's speed, and no number's text holds one)
+    if b"u" in text and b"null" in text:  # no string holds one (BlockCheck)
+        text = _block_nulls(rows)
+        if text is None:
             return None
-        text = b"nan".join(parts)
-    lines = text[2:-2].split(b"],[")  # no string holds a ',', '[', ']' or '"' (BlockCheck)
-    if len(lines) != n:
+    # each row but the first starts after a '[' (no string holds one, BlockCheck), each but
+    # the last ends with '],' — one byte splits faster than the three of '],['
+    lines = text[2:-2].split(b"[")
+    if len(lines) != len(rows):
         return None
-    lines.append(b"")
+    last = lines.pop()
+    lines = [line[:-2] for line in lines]
+    lines += (last, b"")
     return b"\n".join(lines).translate(None, b'"')  # an empty or string cell: no quotes
+
+
+def _block_nulls(rows: list[list]) -> bytes | None:
+    """:func:`block_text`'s orjson text of ``rows`` with its NaN and None cells printed
+    ``nan``; None if a cell is ±inf."""
+    text = orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY)
+    parts = text.split(b"null")
+    # each null is a NaN, None or ±inf cell: when the NaN and None of nav_state_bits account
+    # for them all, no cell is ±inf — else look at all
+    if (len(parts) - 1 != sum(1 for r in rows if (c := r[_STATE_BITS]) is None or c != c)
+            and not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows))):
+        return None
+    return b"nan".join(parts)
 
 
 def _print_non_finite(cells: list) -> int:

@@ -32,7 +32,8 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import MODE_CELL, put_truth, put_truth_cells
+from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, put_truth,
+                                          put_truth_cells)
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
@@ -194,7 +195,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
         cells = out.cells
         if cells is not None:  # the usual NMPC tick: its cells in column order, no dict
             if write_cells is not None:
-                put_truth_cells(cells, truth_cells())
+                cells[TRUTH_CELLS] = truth_cells()  # put_truth_cells, spelled out
                 write_cells(cells)
             label = cells[MODE_CELL]
             tally_tick(cells[0], label)  # no target: no target_age_ms

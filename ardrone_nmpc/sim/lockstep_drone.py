@@ -16,6 +16,7 @@ float32s); what the firmware does with them is the same.
 from __future__ import annotations
 
 import math
+import operator
 from typing import NamedTuple
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
@@ -36,6 +37,9 @@ _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
 _X = O_STATE  # the state's place in the compiled legs' last run
+#: x, y, z, ψ, ż of the compiled legs' last run (truth_cells)
+_TRUTH_OF = operator.itemgetter(_X, _X + 1, _X + 2, _X + 8, _X + 5)
+_PI = math.pi
 _set = object.__setattr__
 
 
@@ -140,8 +144,9 @@ class LockstepDrone(ConfigHandshake):
         it."""
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
         o = legs.live() if legs is not None else None
-        if o is not None:
-            return o[_X], o[_X + 1], o[_X + 2], wrap_angle_rad(o[_X + 8]), o[_X + 5]
+        if o is not None:  # (a list of floats: ψ most often in (−π, π], where the wrap
+            x, y, z, psi, vz = _TRUTH_OF(o)  # returns it as it is, without its two calls)
+            return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz
         plant = self.sim.plant
         if self._airframe:
             state = plant._state  # ψ wrapped as AirframePlant.truth wraps it

@@ -175,6 +175,10 @@ def test_the_cells_check_passes_only_what_block_check_passes():
     for v in variants:
         if check.tick_cells(v):
             assert check(v, n_str)
+    # the last row's types are remembered: each row judged alike after any other
+    judged = [check.tick_cells(v) for v in variants]
+    assert judged == [check.tick_cells(v) for v in reversed(variants)][::-1]
+    assert judged == [BlockCheck().tick_cells(v) for v in variants]
 
 
 @pytest.mark.parametrize("state_bits", [math.nan, None, np.float64(math.nan), 5, ""])
@@ -242,3 +246,31 @@ def test_a_cell_that_cannot_be_printed_is_refused_at_once_not_held(tmp_path, slo
         errors.append((type(err.value), str(err.value)))
         assert rec.rows_written == 0
     assert errors[0] == errors[1]
+
+
+@pytest.mark.parametrize("n_rows", [1, 2, 64])
+def test_block_text_leaves_its_rows_as_they_were(n_rows):
+    """block_text hands nav_state_bits' NaN/None to orjson as "nan" and puts the very objects
+    back (the recorder keeps the rows); the text is _plain_line's row for row, also with a
+    'u' in a string cell (a null then looked for), another NaN cell (the nulls' path) and
+    ±inf (None)."""
+    from ardrone_nmpc.runs.row_text import _plain_line, block_text
+
+    cells = list(_a_cells_row())
+    quotes = row_plan(TICK_CELL_KEYS)[4]
+    bits = LOG_COLUMNS.index("nav_state_bits")
+    for mode, other in (("track", None), ("fallback-unsure", None), ("track", math.nan),
+                        ("track", np.float64(math.nan)), ("track", -math.inf)):
+        rows = [list(cells) for _ in range(n_rows)]
+        for i, r in enumerate(rows):
+            r[MODE_CELL] = mode
+            r[bits] = (math.nan, None, np.float64(math.nan), 5)[i % 4]
+        if other is not None:
+            rows[-1][LOG_COLUMNS.index("y_ref_m")] = other
+        before = [list(r) for r in rows]
+        text = block_text(rows)
+        assert all(a is b for r, s in zip(rows, before) for a, b in zip(r, s))
+        if isinstance(other, float) and math.isinf(other):
+            assert text is None
+        else:
+            assert text == b"".join(_plain_line(list(r), quotes) for r in rows)
