@@ -112,6 +112,7 @@ _AT_STATE, _AT_VELOCITY = 8 * ks.O_STATE, 8 * (ks.O_STATE + 3)
 
 
 _F64 = np.dtype(np.float64)
+_PI = math.pi
 _ENTRY: list = []  # lockstep_run's compiled entry point for the arrays CompiledLegs builds
 
 
@@ -411,10 +412,11 @@ class CompiledLegs:
             return self.plant.truth
         q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's
         raw = self.live_raw  # (float64 views of the run's out bytes: o's floats, bit for bit)
+        psi = o[q + 8]  # a float in (−π, π] is its own wrap: wrap_angle_rad's own fast path
         return PlantTruth(o[_O_T], _frozen(raw, _F64, 3, _AT_STATE),
                           _frozen(raw, _F64, 3, _AT_VELOCITY), o[q + 6], o[q + 7],
-                          wrap_angle_rad(o[q + 8]), o[q + 9], self.plant._mode,
-                          o[_O_BATTERY])
+                          psi if -_PI < psi <= _PI else wrap_angle_rad(psi), o[q + 9],
+                          self.plant._mode, o[_O_BATTERY])
 
     # ------------------------------------------------------------------ one tick
     def run(self, t_s: float) -> tuple[list, bool]:
