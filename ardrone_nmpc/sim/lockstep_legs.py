@@ -96,8 +96,6 @@ _AT_CLIMBING = 8 * ks.S_CLIMBING
 _PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
-_PACK6 = struct.Struct("6d").pack
-_PACK3 = struct.Struct("3d").pack
 #: the plant's and the sensors' attributes the arrays hold between runs (sim/held_state.py)
 _PLANT_HELD = ("_state", "_tilt_aux", "_steps", "_pending_s", "_battery", "_yaw_bias_deg",
                "_vel_bias", "_gust_mps", "_current", "_fifo", "_bias_normals",
@@ -108,9 +106,13 @@ _O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV
                                                     ks.O_LAST_NOW)
 _MOCAP = ks.MOCAP
 _O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
+# byte offsets in out of the pose's position and XYZ angles, the truth's position and velocity
+_AT_POSITION, _AT_ANGLES = 8 * (ks.O_POSE + 1), 8 * (ks.O_POSE + 4)
+_AT_STATE, _AT_VELOCITY = 8 * ks.O_STATE, 8 * (ks.O_STATE + 3)
 
 
 _F64 = np.dtype(np.float64)
+_PI = math.pi
 _ENTRY: list = []  # lockstep_run's compiled entry point for the arrays CompiledLegs builds
 
 
@@ -166,6 +168,8 @@ class CompiledLegs:
         #: ``out.tolist()`` of the last run while the arrays hold the state it left (its
         #: truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
         self.live_out = None
+        #: ``out.tobytes()`` of the last run (the truth's arrays are views of it)
+        self.live_raw = b""
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
@@ -407,10 +411,12 @@ class CompiledLegs:
         if o is None:
             return self.plant.truth
         q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's
-        return PlantTruth(o[_O_T], _frozen(_PACK3(o[q], o[q + 1], o[q + 2])),
-                          _frozen(_PACK3(o[q + 3], o[q + 4], o[q + 5])), o[q + 6], o[q + 7],
-                          wrap_angle_rad(o[q + 8]), o[q + 9], self.plant._mode,
-                          o[_O_BATTERY])
+        raw = self.live_raw  # (float64 views of the run's out bytes: o's floats, bit for bit)
+        psi = o[q + 8]  # a float in (−π, π] is its own wrap: wrap_angle_rad's own fast path
+        return PlantTruth(o[_O_T], _frozen(raw, _F64, 3, _AT_STATE),
+                          _frozen(raw, _F64, 3, _AT_VELOCITY), o[q + 6], o[q + 7],
+                          psi if -_PI < psi <= _PI else wrap_angle_rad(psi), o[q + 9],
+                          self.plant._mode, o[_O_BATTERY])
 
     # ------------------------------------------------------------------ one tick
     def run(self, t_s: float) -> tuple[list, bool]:
@@ -465,13 +471,16 @@ class CompiledLegs:
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        for i in range(done if done < n_events else n_events):
-            kind, t_event = (kind0, o[_O_EV_T0]) if i == 0 else (kind1, o[_O_EV_T1])
+        # out's bytes: the read-only arrays of the pose (and of the truth) read from them
+        raw = self.live_raw = out.tobytes()
+        for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[
+                :done if done < n_events else n_events]:
             if kind == _MOCAP:
                 q = _O_POSE
-                # position, angles: read-only arrays, as AirframePlant.mocap_pose's
-                pose = MocapPose(o[q], _frozen(_PACK3(o[q + 1], o[q + 2], o[q + 3])),
-                                 _frozen(_PACK3(o[q + 4], o[q + 5], o[q + 6])), o[q + 7])
+                # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64
+                # views of out's bytes: the values of o's floats, bit for bit)
+                pose = MocapPose(o[q], _frozen(raw, _F64, 3, _AT_POSITION),
+                                 _frozen(raw, _F64, 3, _AT_ANGLES), o[q + 7])
                 if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
                     sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
                 else:
