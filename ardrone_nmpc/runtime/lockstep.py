@@ -225,11 +225,6 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
                      loop_wall_s, ending, drone.truth.t_s - t_start)
 
 
-def _write_drone_events(write_event, drone: LockstepDrone) -> None:
-    """The injected faults that started, at their experiment times."""
-    _write_events_at(write_event, drone.take_events())
-
-
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
     """``(experiment time, event)`` pairs, each at its time."""
     for t_exp, event in events:
@@ -275,14 +270,19 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     write_event(t_first + k0 * period - t_start, "land")
     deadline = drone.truth.t_s + LANDING_TIMEOUT_S
     k = k0
+    # the loop's calls bound once (~40 ticks of descent a flight), as in _fly's loop
+    advance_to, take_events, land = drone.advance_to, drone.take_events, drone.land
+    landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
     truth = drone.truth  # one truth per step of the clock (each read builds one)
-    while truth.mode is not FlightMode.LANDED and truth.t_s < deadline:
-        if truth.mode is FlightMode.EMERGENCY:
+    while truth.mode is not landed and truth.t_s < deadline:
+        if truth.mode is emergency:
             break
         t_plant = t_first + k * period
-        drone.advance_to(t_plant, t_plant - t_start)
-        _write_drone_events(write_event, drone)
-        drone.land()  # REF land, held as the link's keepalive holds it
+        advance_to(t_plant, t_plant - t_start)
+        drone_events = take_events()  # the faults that started: mostly none
+        if drone_events:
+            _write_events_at(write_event, drone_events)
+        land()  # REF land, held as the link's keepalive holds it
         if logged:
             out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
             _record_out(recorder, out, drone, "landing")
