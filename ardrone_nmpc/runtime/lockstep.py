@@ -88,8 +88,12 @@ def _configure(cfg, drone: LockstepDrone, events: list) -> None:
 
 
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
-                 progress: Callable[[float], None] | None = None, plant=None) -> SimResult:
+                 progress: Callable[[float], None] | None = None, plant=None,
+                 trajectory=None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
+
+    ``trajectory``: ``experiment_trajectory(cfg)`` made already (a caller that checked the
+    reference against the geofence: one made per flight, not two), default made here.
 
     ``plant`` flies another airframe than the one ``sim.plant`` configures (an object with
     :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface, landed at time 0: the tests'
@@ -109,15 +113,16 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     """
     start_if_cold()  # the drone's kernels compiled by a child while this compiles the solver
     with polled_signals() as check_signals:
-        return _fly(cfg, recorder, seed, progress, plant, check_signals)
+        return _fly(cfg, recorder, seed, progress, plant, check_signals, trajectory)
 
 
-def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> SimResult:
+def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
+         trajectory=None) -> SimResult:
     """:func:`run_lockstep`'s flight; ``check_signals()`` raises a signal that arrived."""
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
-    tick = Tick(cfg, experiment_trajectory(cfg),
+    tick = Tick(cfg, trajectory if trajectory is not None else experiment_trajectory(cfg),
                 wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
     join_child()  # the drone's kernels, compiled meanwhile, are cached before it takes off
     period = schedule.period_s
