@@ -329,7 +329,8 @@ def _unshared(data: Any, seen: set[int]) -> bool:
             return False
         seen.add(id(data))
         values = data.values() if isinstance(data, dict) else data
-        return all(_unshared(v, seen) for v in values)
+        # scalars (most values) need no call: only a container can be shared
+        return all(_unshared(v, seen) for v in values if isinstance(v, (dict, list)))
     return True
 
 
@@ -344,20 +345,28 @@ def _body(data: dict[str, Any]) -> str:
     from :data:`_SECTION_TEXT`: a block mapping's sections are written one after the other,
     each the text it has alone, when no object is shared (no anchor). The rest on
     :class:`_Dumper`, whole."""
-    if _CDumper is None or not _plain_strings(data):
+    if _CDumper is None:
         return _dump(data, _Dumper)
-    if not _unshared(data, set()):
-        return _dump(data, _CDumper)
-    parts = []
+    # A section found in the cache is plain text: its key is its repr, which spells out every
+    # string of it, and only plain sections are cached; the others are walked (a sweep's
+    # configs differ in a section or two: the walk over the rest was ~0.1 ms a run).
+    parts: list = []
     for key, value in data.items():
         at = (key, repr(value))  # repr tells 1 from 1.0 and True, nan from inf, -0.0 from 0.0
         text = _SECTION_TEXT.get(at)
         if text is None:
-            text = _dump({key: value}, _CDumper)
+            if not (_plain_strings(key) and _plain_strings(value)):
+                return _dump(data, _Dumper)
+            text = at  # dumped below, once the whole is known to share nothing
+        parts.append(text)
+    if not _unshared(data, set()):
+        return _dump(data, _CDumper)
+    for i, at in enumerate(parts):
+        if at.__class__ is tuple:  # a section not in the cache: (key, repr)
+            text = parts[i] = _dump({at[0]: data[at[0]]}, _CDumper)
             if len(_SECTION_TEXT) >= _SECTIONS_KEPT:
                 _SECTION_TEXT.clear()
             _SECTION_TEXT[at] = text
-        parts.append(text)
     return "".join(parts)
 
 

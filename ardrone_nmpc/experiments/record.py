@@ -135,7 +135,9 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     from ardrone_nmpc.runtime import lockstep  # when used (module docstring)
 
     Schedule.from_config(cfg)  # refused before a run directory exists
-    experiment_trajectory(cfg)  # so is a reference outside the geofence
+    trajectory = experiment_trajectory(cfg)  # so is a reference outside the geofence
+    if cfg.reference.kind == "follow":
+        trajectory = None  # a live object, with its state: the flight makes its own
     seed = cfg.sim.seed if seed is None else seed
     if seed != cfg.sim.seed:
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": seed})})
@@ -143,9 +145,12 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
 
     def fly(recorder: RunRecorder) -> SimResult:
         sink = live.tee(recorder) if live is not None else recorder
-        # the run flies its own copy of its input files (the path CSV in the run directory)
+        # the run flies its own copy of its input files (the path CSV in the run directory);
+        # without any, the config itself, whose reference was made above
+        same = recorder.config is cfg
         result = lockstep.run_lockstep(recorder.config, recorder=sink, seed=seed,
-                                       progress=progress, plant=plant)
+                                       progress=progress, plant=plant,
+                                       trajectory=trajectory if same else None)
         recorder.event(result.end_t_s, SIMULATED_EVENT, wall_s=time.perf_counter() - wall0,
                        ticks=result.ticks, ending=result.ending,
                        final_mode=result.final_mode.value)

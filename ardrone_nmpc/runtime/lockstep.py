@@ -88,8 +88,12 @@ def _configure(cfg, drone: LockstepDrone, events: list) -> None:
 
 
 def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
-                 progress: Callable[[float], None] | None = None, plant=None) -> SimResult:
+                 progress: Callable[[float], None] | None = None, plant=None,
+                 trajectory=None) -> SimResult:
     """Fly ``cfg`` against the simulated drone; rows go to ``recorder.write_row``.
+
+    ``trajectory``: ``experiment_trajectory(cfg)`` made already (a caller that checked the
+    reference against the geofence: one made per flight, not two), default made here.
 
     ``plant`` flies another airframe than the one ``sim.plant`` configures (an object with
     :class:`~ardrone_nmpc.sim.plant.AirframePlant`'s interface, landed at time 0: the tests'
@@ -109,15 +113,16 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     """
     start_if_cold()  # the drone's kernels compiled by a child while this compiles the solver
     with polled_signals() as check_signals:
-        return _fly(cfg, recorder, seed, progress, plant, check_signals)
+        return _fly(cfg, recorder, seed, progress, plant, check_signals, trajectory)
 
 
-def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> SimResult:
+def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
+         trajectory=None) -> SimResult:
     """:func:`run_lockstep`'s flight; ``check_signals()`` raises a signal that arrived."""
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
-    tick = Tick(cfg, experiment_trajectory(cfg),
+    tick = Tick(cfg, trajectory if trajectory is not None else experiment_trajectory(cfg),
                 wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
     join_child()  # the drone's kernels, compiled meanwhile, are cached before it takes off
     period = schedule.period_s
@@ -225,11 +230,6 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals) -> Sim
                      loop_wall_s, ending, drone.truth.t_s - t_start)
 
 
-def _write_drone_events(write_event, drone: LockstepDrone) -> None:
-    """The injected faults that started, at their experiment times."""
-    _write_events_at(write_event, drone.take_events())
-
-
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
     """``(experiment time, event)`` pairs, each at its time."""
     for t_exp, event in events:
@@ -275,14 +275,19 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     write_event(t_first + k0 * period - t_start, "land")
     deadline = drone.truth.t_s + LANDING_TIMEOUT_S
     k = k0
+    # the loop's calls bound once (~40 ticks of descent a flight), as in _fly's loop
+    advance_to, take_events, land = drone.advance_to, drone.take_events, drone.land
+    landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
     truth = drone.truth  # one truth per step of the clock (each read builds one)
-    while truth.mode is not FlightMode.LANDED and truth.t_s < deadline:
-        if truth.mode is FlightMode.EMERGENCY:
+    while truth.mode is not landed and truth.t_s < deadline:
+        if truth.mode is emergency:
             break
         t_plant = t_first + k * period
-        drone.advance_to(t_plant, t_plant - t_start)
-        _write_drone_events(write_event, drone)
-        drone.land()  # REF land, held as the link's keepalive holds it
+        advance_to(t_plant, t_plant - t_start)
+        drone_events = take_events()  # the faults that started: mostly none
+        if drone_events:
+            _write_events_at(write_event, drone_events)
+        land()  # REF land, held as the link's keepalive holds it
         if logged:
             out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
             _record_out(recorder, out, drone, "landing")

@@ -131,3 +131,17 @@ def test_shared_objects_are_written_whole():
     shared = [1.5, 2.5]
     data = {"a": {"v": shared}, "b": {"w": shared}}
     assert io._body(data) == _whole(data) and "&id" in _whole(data)
+
+
+def test_cached_sections_beside_a_quoted_string_or_a_shared_object_are_written_whole():
+    # a section from the cache skips the plain-strings walk: the others still decide
+    io._SECTION_TEXT.clear()
+    plain = {"name": "x", "sim": {"seed": 1, "rates": [1.5, 2.5]}}
+    assert io._body(plain) == _whole(plain)  # both sections cached now
+    quoted = {**plain, "note": "a: colon, 'quote' and ünïcode"}
+    assert not io._plain_strings(quoted)
+    assert io._body(quoted) == _whole(quoted)
+    shared = [3.5]
+    twice = {**plain, "a": {"v": shared}, "b": {"w": shared}}
+    assert io._body(twice) == _whole(twice) and "&id" in io._body(twice)
+    assert io._body(plain) == _whole(plain)

@@ -121,3 +121,28 @@ def test_record_runs_any_flight_into_the_directory_then_summarises(tmp_path):
 def test_one_line_collapses_whitespace_and_names_the_type():
     assert one_line(ValueError("a\n  b\tc ")) == "ValueError: a b c"
     assert one_line(KeyError()) == "KeyError"
+
+
+def test_record_lockstep_hands_the_flight_the_reference_it_checked(tmp_path, monkeypatch):
+    """One experiment_trajectory a flight: made for the geofence check, flown by
+    run_lockstep — but never a follow's live object (the flight makes its own)."""
+    from pathlib import Path
+
+    from ardrone_nmpc.config.io import load_config
+    from ardrone_nmpc.experiments.record import record_lockstep
+    from ardrone_nmpc.reference.experiment import HoldStartThen
+    from ardrone_nmpc.runtime import lockstep
+
+    handed = []
+    fly = lockstep.run_lockstep
+
+    def spy(cfg, **kwargs):
+        handed.append(kwargs.get("trajectory"))
+        return fly(cfg, **kwargs)
+
+    monkeypatch.setattr(lockstep, "run_lockstep", spy)
+    root = Path(__file__).resolve().parents[2] / "configs"
+    for name in ("hover", "follow_car"):
+        record_lockstep(load_config(root / f"{name}.yaml", ["duration_s=1", "sim.settle_s=0.5"]),
+                        tmp_path / name, seed=3)
+    assert isinstance(handed[0], HoldStartThen) and handed[1] is None
