@@ -172,24 +172,15 @@ def test_a_held_attribute_read_or_written_between_runs():
     run: the same flight as the Python path's."""
     from ardrone_nmpc.sim.plant import AirframePlant
 
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
-    period = cfg.loop.period_s
+    from tests.unit.test_held_state import CFG, _flying
+
+    period = CFG.loop.period_s
     shots = []
     for legs in (False, True):
-        drone = LockstepDrone(cfg)
-        if not legs:
-            drone.sensors._legs = None
+        drone = _flying(legs)  # three ticks aloft (held, with the legs)
         plant, compiled = drone.sim.plant, drone.sensors._legs
-        drone.connect()
-        drone.takeoff()
-        while drone.truth.mode is not FlightMode.FLYING:
-            drone.advance_to(drone.truth.t_s + period)
-        t0 = drone.truth.t_s
-        for k in range(1, 4):
-            drone.advance_to(t0 + k * period)
-            drone.set_command(0.1, -0.05, 0.1, 0.02)
+        t0 = drone.truth.t_s - 3 * period
         if legs:
-            assert compiled.held() and "_state" not in vars(plant)
             assert "_next_nav_k" not in vars(drone.sensors)
         state = plant._state  # a read: everything back
         if legs:

@@ -34,7 +34,8 @@ def _numpy_distances(p: np.ndarray, poly: np.ndarray, chunk_elements: int = 32_7
 
 
 def _python_distances(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """The kernel's order written out in Python floats (the CPU-independent statement)."""
+    """The kernel's order written out in Python floats (the CPU-independent statement), a
+    NaN squared distance propagated as the unpruned kernel propagates it (numpy's min)."""
     out = []
     for q in p.tolist():
         best = math.inf
@@ -43,9 +44,14 @@ def _python_distances(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
             ab2 = (ab[0] * ab[0] + ab[2] * ab[2]) + ab[1] * ab[1]
             inv = 1.0 / ab2 if ab2 > 0.0 else 0.0
             ap = [q[k] - a[k] for k in range(3)]
-            u = min(max(((ap[0] * ab[0] + ap[2] * ab[2]) + ap[1] * ab[1]) * inv, 0.0), 1.0)
+            u = ((ap[0] * ab[0] + ap[2] * ab[2]) + ap[1] * ab[1]) * inv
+            u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
             d = [ap[k] - u * ab[k] for k in range(3)]
-            best = min(best, (d[0] * d[0] + d[2] * d[2]) + d[1] * d[1])
+            dd = (d[0] * d[0] + d[2] * d[2]) + d[1] * d[1]
+            if math.isnan(dd):
+                best = math.nan
+                break
+            best = min(best, dd)
         out.append(math.sqrt(best))
     return np.array(out)
 
@@ -130,29 +136,6 @@ def test_a_position_or_vertex_not_finite_gives_nan_as_unpruned():
         assert np.isnan(polyline_distances_m(p, broken)).all(), bad  # every position's
 
 
-def _python_distances_nan(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """The unpruned kernel's order in Python floats, a NaN squared distance propagated
-    (the kernel's ``numpy's min propagates a NaN``; ``_python_distances``' min drops it)."""
-    out = []
-    for q in p.tolist():
-        best = math.inf
-        for a, b in zip(poly[:-1].tolist(), poly[1:].tolist()):
-            ab = [b[k] - a[k] for k in range(3)]
-            ab2 = (ab[0] * ab[0] + ab[2] * ab[2]) + ab[1] * ab[1]
-            inv = 1.0 / ab2 if ab2 > 0.0 else 0.0
-            ap = [q[k] - a[k] for k in range(3)]
-            u = ((ap[0] * ab[0] + ap[2] * ab[2]) + ap[1] * ab[1]) * inv
-            u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
-            d = [ap[k] - u * ab[k] for k in range(3)]
-            dd = (d[0] * d[0] + d[2] * d[2]) + d[1] * d[1]
-            if math.isnan(dd):
-                best = math.nan
-                break
-            best = min(best, dd)
-        out.append(math.sqrt(best))
-    return np.array(out)
-
-
 def test_a_finite_path_whose_far_segment_measures_nan_gives_nan_as_unpruned():
     """Finite vertices and positions can still make a segment's squared distance NaN: a
     segment so short its 1/(ab·ab) overflows (u = 0·inf), or coordinates so large ab·ab or
@@ -165,7 +148,7 @@ def test_a_finite_path_whose_far_segment_measures_nan_gives_nan_as_unpruned():
     tiny = np.array(near + [[0.0, 101.0, 0.0], [1e-155, 101.0, 0.0], [0.0, 103.0, 0.0]])
     huge = np.array(near + [[1e200 * (1 + i), 1e200, 0.0] for i in range(4)])
     for poly in (tiny, huge):
-        want = _python_distances_nan(p, poly)
+        want = _python_distances(p, poly)
         assert np.isnan(want).all()
         assert np.array_equal(polyline_distances_m(p, poly), want, equal_nan=True)
     # a position far out (finite), near the path's first, huge vertices (distance 0) and far
@@ -173,7 +156,7 @@ def test_a_finite_path_whose_far_segment_measures_nan_gives_nan_as_unpruned():
     q = [1.7e308, 0.0, -1.7e308]
     mixed = np.array([q] * (CHUNK_SEGMENTS + 1) + [[float(i), 0.0, 0.0] for i in range(
         CHUNK_SEGMENTS)] + [[CHUNK_SEGMENTS + 2.0 * i, 0.0, 2.0 * i] for i in range(1, 8)])
-    want = _python_distances_nan(np.array([q]), mixed)
+    want = _python_distances(np.array([q]), mixed)
     assert np.isnan(want).all()
     assert np.array_equal(polyline_distances_m(np.array([q]), mixed), want, equal_nan=True)
 
@@ -189,5 +172,5 @@ def test_the_pruning_at_large_scales_and_thin_long_segments():
         poly = _random_path(rng, n, scale) * np.array([1.0, 10.0 ** rng.uniform(-9, 0), 1.0])
         p = poly[rng.integers(0, n, 40)] + rng.normal(size=(40, 3)) * scale * 10.0 ** (
             rng.uniform(-12, 0))
-        assert np.array_equal(polyline_distances_m(p, poly), _python_distances_nan(p, poly),
+        assert np.array_equal(polyline_distances_m(p, poly), _python_distances(p, poly),
                               equal_nan=True), trial
