@@ -197,20 +197,25 @@ def _same(a: AttitudeResponseEstimator, b: AttitudeResponseEstimator) -> None:
     assert a._n == b._n
 
 
+def _feed_both(ref, got, ev) -> None:
+    """One event of a stream to both estimators; their navdata answers agree."""
+    if ev[0] == "cmd":
+        ref.command(*ev[1:])
+        got.command(*ev[1:])
+    elif ev[0] == "restart":
+        ref.restart()
+        got.restart()
+    else:
+        assert ref.navdata(*ev[1:]) == got.navdata(*ev[1:])
+
+
 def test_feed_is_the_numpy_step_bit_for_bit():
     for seed, window_s in ((0, 30.0), (1, math.inf), (2, 5.0)):
         ref = _NumpyFeed(E, window_s=window_s)
         got = AttitudeResponseEstimator(E, window_s=window_s)
         fits = 0
         for i, ev in enumerate(_stream(seed)):
-            if ev[0] == "cmd":
-                ref.command(*ev[1:])
-                got.command(*ev[1:])
-            elif ev[0] == "restart":
-                ref.restart()
-                got.restart()
-            else:
-                assert ref.navdata(*ev[1:]) == got.navdata(*ev[1:])
+            _feed_both(ref, got, ev)
             if i % 50 == 0:
                 _same(ref, got)
                 assert ref.estimate == got.estimate or (
@@ -300,13 +305,6 @@ def test_times_the_kernel_leaves_to_pythons_round():
     for events in (early + _stream(5), late):
         ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
         for ev in events:
-            if ev[0] == "cmd":
-                ref.command(*ev[1:])
-                got.command(*ev[1:])
-            elif ev[0] == "restart":
-                ref.restart()
-                got.restart()
-            else:
-                assert ref.navdata(*ev[1:]) == got.navdata(*ev[1:])
+            _feed_both(ref, got, ev)
         _same(ref, got)
         assert repr(ref.estimate) == repr(got.estimate)
