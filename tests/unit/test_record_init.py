@@ -93,3 +93,30 @@ def test_a_default_factory_gives_each_record_its_own_value():
     assert repr(a) == repr(twin(pcmd, True, {}))
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.events = []
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda c: c.__name__)
+def test_a_record_is_its_class_and_a_subclass_record_stays_the_subclass(cls):
+    """The fast ``__init__`` lends the record a twin class while it fills the slots: the
+    record comes out as ``cls``, without a ``__dict__``; a subclass's record (slots of its
+    own or none, ``__init__`` inherited or called through ``super()``) keeps its class."""
+    args, _ = CASES[cls]
+    rec = cls(*args)
+    assert type(rec) is cls and not hasattr(rec, "__dict__")
+
+    class NoSlots(cls):
+        pass
+
+    class SameSlots(cls):
+        __slots__ = ()
+
+        def __init__(self, *a):
+            super().__init__(*a)
+
+    for sub in (NoSlots, SameSlots):
+        rec = sub(*args)
+        assert type(rec) is sub
+        for f, arg in zip(dataclasses.fields(cls), args):
+            assert getattr(rec, f.name) is arg
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(rec, dataclasses.fields(cls)[0].name, 5.0)
