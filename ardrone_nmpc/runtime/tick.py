@@ -180,8 +180,8 @@ class Tick:
         if self.cell_rows:  # (positional: the same arguments as tick_row's, in its order)
             cells = tick_cells(t_exp_s, inputs, ages_ms, x, solution, sent, label, compute_us)
             if cells is not None:
-                return TickOutput(sent.pcmd, sent.progressive, None, sent.decision.action,
-                                  events, cells)
+                return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
+                                       events, cells)
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
-        return TickOutput(sent.pcmd, sent.progressive, row, sent.decision.action, events)
+        return TickOutput.make(sent.pcmd, sent.progressive, row, sent.decision.action, events)

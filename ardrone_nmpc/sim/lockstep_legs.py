@@ -413,10 +413,10 @@ class CompiledLegs:
         q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's
         raw = self.live_raw  # (float64 views of the run's out bytes: o's floats, bit for bit)
         psi = o[q + 8]  # a float in (−π, π] is its own wrap: wrap_angle_rad's own fast path
-        return PlantTruth(o[_O_T], _frozen(raw, _F64, 3, _AT_STATE),
-                          _frozen(raw, _F64, 3, _AT_VELOCITY), o[q + 6], o[q + 7],
-                          psi if -_PI < psi <= _PI else wrap_angle_rad(psi), o[q + 9],
-                          self.plant._mode, o[_O_BATTERY])
+        return PlantTruth.make(o[_O_T], _frozen(raw, _F64, 3, _AT_STATE),
+                               _frozen(raw, _F64, 3, _AT_VELOCITY), o[q + 6], o[q + 7],
+                               psi if -_PI < psi <= _PI else wrap_angle_rad(psi), o[q + 9],
+                               self.plant._mode, o[_O_BATTERY])
 
     # ------------------------------------------------------------------ one tick
     def run(self, t_s: float) -> tuple[list, bool]:
@@ -479,8 +479,8 @@ class CompiledLegs:
                 q = _O_POSE
                 # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64
                 # views of out's bytes: the values of o's floats, bit for bit)
-                pose = MocapPose(o[q], _frozen(raw, _F64, 3, _AT_POSITION),
-                                 _frozen(raw, _F64, 3, _AT_ANGLES), o[q + 7])
+                pose = MocapPose.make(o[q], _frozen(raw, _F64, 3, _AT_POSITION),
+                                      _frozen(raw, _F64, 3, _AT_ANGLES), o[q + 7])
                 if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
                     sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
                 else:
@@ -489,7 +489,7 @@ class CompiledLegs:
                 q = _O_NAV
                 altitude = o[q + 5]
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
-                nav = NavdataSample(
+                nav = NavdataSample.make(
                     o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
                     out[q + 5] if altitude > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
                 if mode is sensors._nav_mode:  # LockstepSensors.took_navdata, spelled out

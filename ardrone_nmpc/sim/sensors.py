@@ -134,12 +134,12 @@ class LockstepSensors:
     def inputs(self, t_s: float) -> TickInputs:
         """What the links hold at ``t_s``: the tick's input."""
         if not self.wire:
-            return TickInputs(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
-                              self.target, self.target_rx_t_s)
+            return TickInputs.make(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
+                                   self.target, self.target_rx_t_s)
         pose, pose_rx = self.mocap.latest()
         target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
                              if self.target_cfg is not None else (None, -math.inf))
-        return TickInputs(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
+        return TickInputs.make(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
 
     # ------------------------------------------------------------------ direct
     def _advance_direct(self, t_s: float) -> None:

@@ -45,14 +45,18 @@ def _twin(cls):
 def test_records_build_as_their_dataclass_twin(cls):
     twin = _twin(cls)
     assert str(inspect.signature(cls)) == str(inspect.signature(twin))
+    assert str(inspect.signature(cls.make)) == str(inspect.signature(twin))
     args, optional = CASES[cls]
     names = [f.name for f in dataclasses.fields(cls)]
     for kwargs in ({}, optional):
         rec, ref = cls(*args, **kwargs), twin(*args, **kwargs)
         by_name = cls(**dict(zip(names, args)), **kwargs)
+        made = cls.make(*args, **kwargs)  # the hot callers' constructor: the same record
+        assert type(made) is cls and not hasattr(made, "__dict__")
         for name in names:  # the very objects given (or the same defaults)
-            assert getattr(rec, name) is getattr(ref, name) is getattr(by_name, name)
-        assert repr(rec) == repr(ref)
+            assert (getattr(rec, name) is getattr(ref, name) is getattr(by_name, name)
+                    is getattr(made, name))
+        assert repr(rec) == repr(ref) == repr(made)
         if cls.__dataclass_params__.eq:
             assert rec == cls(*args, **kwargs) and hash(rec) == hash(cls(*args, **kwargs))
             assert rec != cls(*args[:-1], -1.0, **kwargs)
@@ -64,10 +68,11 @@ def test_records_build_as_their_dataclass_twin(cls):
         assert type(changed) is cls and getattr(changed, names[0]) == 5.0
         assert repr(pickle.loads(pickle.dumps(rec))) == repr(rec)
         assert repr(copy.copy(rec)) == repr(rec)
-    with pytest.raises(TypeError):
-        cls(*args[:-1])
-    with pytest.raises(TypeError):
-        cls(*args, nonsense=1)
+    for build in (cls, cls.make):
+        with pytest.raises(TypeError):
+            build(*args[:-1])
+        with pytest.raises(TypeError):
+            build(*args, nonsense=1)
 
 
 def test_a_default_factory_gives_each_record_its_own_value():
@@ -86,6 +91,9 @@ def test_a_default_factory_gives_each_record_its_own_value():
     pcmd = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False,) * 4)
     a, b = TickOutput(pcmd, True, {}), TickOutput(pcmd, True, {})
     assert a.events == [] and b.events == [] and a.events is not b.events
+    c, d = TickOutput.make(pcmd, True, {}), TickOutput.make(pcmd, True, {})
+    assert c.events == [] and d.events == [] and c.events is not d.events
+    assert TickOutput.make(pcmd, False, {}, events=[{"kind": "x"}]).events == [{"kind": "x"}]
     assert a.action is Action.CONTROL
     given = [{"kind": "x"}]
     assert TickOutput(pcmd, False, {}, Action.LAND, given).events is given
@@ -93,3 +101,30 @@ def test_a_default_factory_gives_each_record_its_own_value():
     assert repr(a) == repr(twin(pcmd, True, {}))
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.events = []
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda c: c.__name__)
+def test_a_record_is_its_class_and_a_subclass_record_stays_the_subclass(cls):
+    """The fast ``__init__`` lends the record a twin class while it fills the slots: the
+    record comes out as ``cls``, without a ``__dict__``; a subclass's record (slots of its
+    own or none, ``__init__`` inherited or called through ``super()``) keeps its class."""
+    args, _ = CASES[cls]
+    rec = cls(*args)
+    assert type(rec) is cls and not hasattr(rec, "__dict__")
+
+    class NoSlots(cls):
+        pass
+
+    class SameSlots(cls):
+        __slots__ = ()
+
+        def __init__(self, *a):
+            super().__init__(*a)
+
+    for sub in (NoSlots, SameSlots):
+        rec = sub(*args)
+        assert type(rec) is sub
+        for f, arg in zip(dataclasses.fields(cls), args):
+            assert getattr(rec, f.name) is arg
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(rec, dataclasses.fields(cls)[0].name, 5.0)
