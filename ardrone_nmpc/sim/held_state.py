@@ -10,14 +10,31 @@ read of one that is missing by calling the holder's ``release()``, which writes 
 back (keeping any written meanwhile), and returns the value. Any reader — the plant's own
 Python path, the firmware, a fault, a test — sees what the attribute would have held.
 
-A copy, a deep copy or a pickle reads the instance's ``__dict__`` without the descriptors: an
+A copy, a deep copy or a pickle reads the instance's ``__dict__`` without the descriptors: the
 owner class's ``__getstate__ = released_state`` writes the held attributes back first, so the
-copy has them (and no holder: it is nobody's).
+copy has them (and no holder: it is nobody's). :func:`holds_in_arrays` declares a class's held
+attributes: the stand-ins, their names (what a holder takes) and that ``__getstate__``.
 """
 
 from __future__ import annotations
 
-__all__ = ["HeldInArrays", "released_state"]
+__all__ = ["HeldInArrays", "holds_in_arrays", "released_state"]
+
+
+def holds_in_arrays(*names: str):
+    """Class decorator: ``names`` may be held in a holder's arrays — each a
+    :class:`HeldInArrays` on the class, the tuple as ``cls.HELD_IN_ARRAYS`` (what the holder
+    takes), and ``__getstate__ = released_state`` (a copy or pickle while held: the
+    attributes, no holder)."""
+    def decorate(cls):
+        for name in names:
+            stand_in = HeldInArrays()
+            stand_in.__set_name__(cls, name)
+            setattr(cls, name, stand_in)
+        cls.HELD_IN_ARRAYS = names
+        cls.__getstate__ = released_state
+        return cls
+    return decorate
 
 
 class HeldInArrays:

@@ -69,8 +69,7 @@ _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_adva
 #: legs; LockstepSensors checks its own class, it imports this module)
 _FIRMWARE_REPLACED = ("advance", "watchdogs", "silence", "apply_command",
                       "_climb_may_reach_cap")
-SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata",
-                    "_next_mocap_k", "_next_nav_k")  # (the last two: _SENSORS_HELD)
+SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
 #: What :meth:`CompiledLegs.command` does in the drone's, firmware's and plant's place
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
@@ -96,11 +95,9 @@ _AT_CLIMBING = 8 * ks.S_CLIMBING
 _PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
-#: the plant's and the sensors' attributes the arrays hold between runs (sim/held_state.py)
-_PLANT_HELD = ("_state", "_tilt_aux", "_steps", "_pending_s", "_battery", "_yaw_bias_deg",
-               "_vel_bias", "_gust_mps", "_current", "_fifo", "_bias_normals",
-               "_gust_normals", "_mocap_normals", "_nav_normals")
-_SENSORS_HELD = ("_next_mocap_k", "_next_nav_k")
+#: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
+#: its class's HELD_IN_ARRAYS)
+_PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
 _O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1,
                                                     ks.O_LAST_NOW)
@@ -218,9 +215,7 @@ class CompiledLegs:
             return
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
-        plant, o = self.plant, self.live_out  # (the last run's truth while held)
-        if o is not None and len(plant.__dict__) != self._plant_len:
-            o = self.live()  # a held attribute written since the run: released, None
+        plant, o = self.plant, self.live()  # (the last run's truth while held)
         if now is None:  # the plant's time
             now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
@@ -277,13 +272,9 @@ class CompiledLegs:
                 and (fw.link_lost or not silence > fw.link_loss_s))
 
     def _params(self) -> np.ndarray:
-        """The flight's parameters (rebuilt when the plant's params, noise or per-flight
-        biases change)."""
+        """The flight's parameters, built anew (:meth:`run` keeps them while the plant's
+        params, noise and per-flight biases are the ones they were built from)."""
         plant, sensors = self.plant, self.sensors
-        old = self._p_key
-        if (old and old[0] is plant.params and old[1] is plant.noise
-                and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
-            return self.p
         key = (plant.params, plant.noise, plant._trim_bias_rad, plant._yaw_drift_sign)
         pp, nz, p = plant.params, plant.noise, self.p
         h = pp.integration_step_s
@@ -350,7 +341,7 @@ class CompiledLegs:
         self._kernel = _kernel_for(x, fifo.rows, self._blocks)
         self._saved = {name: d.pop(name) for name in _PLANT_HELD}
         sd = sensors.__dict__
-        self._sensors_saved = {name: sd.pop(name) for name in _SENSORS_HELD}
+        self._sensors_saved = {name: sd.pop(name) for name in type(sensors).HELD_IN_ARRAYS}
         plant._held_by = sensors._held_by = self
         self._ran = False
         self.live_out = None
@@ -430,7 +421,7 @@ class CompiledLegs:
         elif len(d) != self._plant_len or len(sensors.__dict__) != self._sensors_len:
             self.release()  # a held attribute was written meanwhile: it is the newer
             self._take()
-        old = self._p_key  # the flight's parameters (_params), unchanged as a rule
+        old = self._p_key  # the flight's parameters, unchanged as a rule
         if (old and old[0] is plant.params and old[1] is plant.noise
                 and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
             p = self.p

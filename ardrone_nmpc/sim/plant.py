@@ -83,7 +83,7 @@ from ardrone_nmpc.sim.airframe import (N_STATE, _airframe_rhs, airframe_rk4, air
                                        freefall_derivative, rk4_step)
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.geometry import mocap_rotation_xyz_rad, rotation_heading_rad
-from ardrone_nmpc.sim.held_state import HeldInArrays, released_state
+from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_params import ATTITUDE_MODELS, PlantParams
 from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_LANDING, AUTO_SAME,
@@ -180,6 +180,11 @@ def _readonly(*values: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- the plant
 
 
+# what the lockstep's compiled legs may hold in their arrays between their runs (a read while
+# they do writes them back first: sim/held_state.py)
+@holds_in_arrays("_state", "_tilt_aux", "_steps", "_pending_s", "_battery", "_yaw_bias_deg",
+                 "_vel_bias", "_gust_mps", "_current", "_fifo", "_bias_normals",
+                 "_gust_normals", "_mocap_normals", "_nav_normals")
 class AirframePlant:
     """The AR.Drone 2.0 with its on-board controller, as the ground station sees it.
 
@@ -194,13 +199,6 @@ class AirframePlant:
     wind_mps : (3,) ndarray, air velocity in the world frame (m/s), default zeros; for fault
         injection, read at the start of each :meth:`advance`.
     """
-
-    # what the lockstep's compiled legs may hold in their arrays between their runs (a read
-    # while they do writes them back first: sim/held_state.py)
-    (_state, _tilt_aux, _steps, _pending_s, _battery, _yaw_bias_deg, _vel_bias, _gust_mps,
-     _current, _fifo, _bias_normals, _gust_normals, _mocap_normals, _nav_normals) = (
-        HeldInArrays() for _ in range(14))
-    __getstate__ = released_state  # a copy or pickle while held: the attributes, no holder
 
     def __init__(self, params: PlantParams, noise: Optional[NoiseConfig] = None, *,
                  seed: int = 0) -> None:

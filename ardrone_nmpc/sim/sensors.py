@@ -45,7 +45,7 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
-from ardrone_nmpc.sim.held_state import HeldInArrays, released_state
+from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.sim.target import target_pose
 
@@ -54,6 +54,8 @@ __all__ = ["LockstepSensors"]
 _MOCAP, _NAV = 0, 1
 
 
+# the sensor grids' next indices: held by the compiled legs between their runs
+@holds_in_arrays("_next_mocap_k", "_next_nav_k")
 class LockstepSensors:
     """The sensor side of a lockstep run (module docstring).
 
@@ -65,10 +67,6 @@ class LockstepSensors:
     on_bootstrap : called for each bootstrap packet received (through the wire).
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
-
-    # the sensor grids' next indices: held by the compiled legs between their runs
-    _next_mocap_k, _next_nav_k = HeldInArrays(), HeldInArrays()
-    __getstate__ = released_state  # a copy or pickle while held: the indices, no holder
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None):
@@ -113,7 +111,7 @@ class LockstepSensors:
             kind = type(self)  # (a sampler overriding its legs keeps them)
             if CompiledLegs.eligible(self.plant, self.firmware) and all(
                     getattr(kind, name) is getattr(LockstepSensors, name)
-                    for name in SAMPLER_REPLACED):
+                    for name in SAMPLER_REPLACED + LockstepSensors.HELD_IN_ARRAYS):
                 self._legs = CompiledLegs(self)
 
     # ------------------------------------------------------------------ the clock
