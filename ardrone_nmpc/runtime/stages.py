@@ -290,18 +290,15 @@ class Control:
                 horizon = self._horizon
             nmpc_inputs(x, delay.ring, delay.first, pending, x_solve, t_exp_s, delay.lead_s,
                         shift, states, self._work, self._rows)
-            result = self._solve_prepared(t_exp_s, x_solve, horizon)
-            status = result.status
-            ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
-            # _solved's Solution (its frame saved: µs a tick)
-            return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok,
-                                         status._value_, None, ref_horizon))
+            return self._solved(t_exp_s, x_solve, states, horizon, ref_horizon,
+                                self._solve_prepared)
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
         times[0] = t_exp_s
         states = traj.state_at(times)
-        horizon = states[1:] if offset is None else offset.integrator.shifted(states[1:])
-        return self._solved(t_exp_s, x_solve, states, horizon)
+        ref_horizon = states[1:]
+        horizon = ref_horizon if offset is None else offset.integrator.shifted(ref_horizon)
+        return self._solved(t_exp_s, x_solve, states, horizon, ref_horizon, solver.solve)
 
     def _pack(self, args: tuple) -> None:
         """:func:`~ardrone_nmpc.runtime.tick_kernels.nmpc_work` of the waypoint trajectory's
@@ -313,15 +310,15 @@ class Control:
         self._work, self._work_args = work, args
 
     def _solved(self, t_exp_s: float, x_solve: np.ndarray, states: np.ndarray,
-                horizon: np.ndarray) -> Solution:
-        """The NMPC's solve against ``horizon`` and its :class:`Solution` (``states``: the
-        reference now, then the unshifted horizon)."""
-        result = self.nmpc.solve(t_exp_s, x_solve, horizon)
+                horizon: np.ndarray, ref_horizon: np.ndarray, solve) -> Solution:
+        """``solve``'s answer against ``horizon`` and its :class:`Solution` (``states``: the
+        reference now, then the unshifted horizon ``ref_horizon``, ``states[1:]``)."""
+        result = solve(t_exp_s, x_solve, horizon)
         status = result.status
         ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
         return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok, status._value_,
-                                     None, states[1:]))
+                                     None, ref_horizon))
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
                 vz_ref_last_mps: float) -> AttitudeCommand | None:
