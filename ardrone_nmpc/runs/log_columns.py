@@ -267,14 +267,14 @@ _COLUMN_INDEX = {name: i for i, name in enumerate(LOG_COLUMNS)}
 #: ``cells -> the values of its TICK_CELL_KEYS`` (a tuple, at C speed)
 tick_cell_values = operator.itemgetter(*(_COLUMN_INDEX[k] for k in TICK_CELL_KEYS))
 #: The cells :func:`put_truth_cells` fills (x, y, z, ψ, ż of the truth, adjacent columns).
-TRUTH_CELLS = slice(_COLUMN_INDEX["x_true_m"], _COLUMN_INDEX["vz_true_mps"] + 1)
+_TRUTH_CELLS = slice(_COLUMN_INDEX["x_true_m"], _COLUMN_INDEX["vz_true_mps"] + 1)
 #: The cell of ``mode`` (the lockstep runner relabels its landing rows).
 MODE_CELL = _COLUMN_INDEX["mode"]
 
 
 def put_truth_cells(cells: list, truth: tuple) -> None:
     """:func:`put_truth` for a :func:`tick_cells` row: ``(x, y, z, ψ, ż)`` into its slots."""
-    cells[TRUTH_CELLS] = truth
+    cells[_TRUTH_CELLS] = truth
 
 
 def cells_row(cells: list) -> dict:

@@ -58,8 +58,7 @@ class VerdictTally:
 
     def add(self, row: Mapping[str, Any]) -> None:
         """One logged tick (``t_s``, ``mode``, and ``target_age_ms`` when it saw the target)."""
-        if row["t_s"] >= 0 and is_tracking(str(row["mode"])):
-            self.tracking_ticks += 1
+        self.add_tick(row["t_s"], str(row["mode"]))
         age = row.get("target_age_ms", math.nan)
         if math.isfinite(age):
             self.target_seen = True

@@ -32,8 +32,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, put_truth,
-                                          put_truth_cells)
+from ardrone_nmpc.runs.log_columns import MODE_CELL, put_truth, put_truth_cells
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
@@ -171,14 +170,14 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     tally = VerdictTally(follow=tick.follow is not None)
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
-    n_settle, advance_to, take_events = schedule.n_settle, drone.advance_to, drone.take_events
+    t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
     inputs, step, set_command = drone.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
     for k in range(schedule.n_ticks):
         check_signals()
-        t_exp = (k - n_settle) * period  # schedule.t_exp_s(k), spelled out
+        t_exp = t_exp_of(k)
         t_plant = t_first + k * period
         advance_to(t_plant, t_exp)
         drone_events = take_events()
@@ -200,7 +199,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         cells = out.cells
         if cells is not None:  # the usual NMPC tick: its cells in column order, no dict
             if write_cells is not None:
-                cells[TRUTH_CELLS] = truth_cells()  # put_truth_cells, spelled out
+                put_truth_cells(cells, truth_cells())
                 write_cells(cells)
             label = cells[MODE_CELL]
             tally_tick(cells[0], label)  # no target: no target_age_ms
