@@ -125,30 +125,12 @@ NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.i
                                math.nan, math.nan, 0.0, 0.0)
 
 
-#: Below this many µs a time's product with 10⁶ is within 2⁻¹³ of the exact one
-#: (:func:`_microseconds`' shortcut).
-_SHORTCUT_MAX_US = 2.0 ** 40
-
-
 def _microseconds(t_s: float) -> float:
     """A time to the microsecond: the same sample, its time gone through a log's ms ages and
-    back (``replay --rerun``), is the same time, and the fit the same bits. (The compiled
-    step rounds the tick's times itself, ``response_kernels.microseconds``, the same bits,
-    and leaves those below 1 µs or beyond 2⁴⁰ µs to this.)
-
-    ``round(t, 6)``'s value, at half its cost (the tick rounds two times): ``round`` rounds
-    the exact t·10⁶ to an integer n (ties to even) and returns the double nearest n·10⁻⁶. When
-    the rounded product y = t·10⁶ (within 2⁻¹³ of the exact one below 2⁴⁰) lies within ¼ of
-    its nearest integer n, the exact product is nearer n than any other integer, and n / 10⁶
-    (both exact doubles, the quotient correctly rounded) is that double; otherwise — a product
-    near a half, a negative or huge time, NaN — ``round`` itself."""
-    t = float(t_s)
-    y = t * 1e6
-    if 1.0 <= y < _SHORTCUT_MAX_US:
-        n = round(y)
-        if abs(y - n) <= 0.25:
-            return n / 1e6
-    return round(t, 6)
+    back (``replay --rerun``), is the same time, and the fit the same bits. The compiled step
+    rounds the tick's times itself (``response_kernels.microseconds``, ``round(t, 6)`` to the
+    bit) and leaves to this only those it refuses — below 1 µs, beyond 2⁴⁰ µs, NaN."""
+    return round(float(t_s), 6)
 
 
 class AttitudeResponseEstimator:

@@ -169,8 +169,8 @@ def microseconds(t_s: float) -> float:
     and f − ½ are exact (multiples of y's ulp ≤ 2⁻¹²), and the sign of (f − ½) + e is that of
     the exact sum (a rounded sum is 0 only when the exact one is): above ½ n₀ + 1, below n₀,
     at ½ the even one. n < 2⁵³ and 10⁶ are exact doubles, so n / 10⁶ (correctly rounded) is
-    the double nearest n·10⁻⁶. The tick's times are rarely within ¼ µs of a whole one (a
-    navdata period of ⅓ ms is not), so ``_microseconds``' shortcut alone would not do."""
+    the double nearest n·10⁻⁶. (The tick's times are rarely within ¼ µs of a whole one — a
+    navdata period of ⅓ ms is not —, so a shortcut for those alone would not do.)"""
     y = t_s * 1e6
     if not 1.0 <= y < 1099511627776.0:  # 2⁴⁰
         return -1.0
