@@ -144,7 +144,7 @@ class LockstepDrone(ConfigHandshake):
         it."""
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
         o = legs.live() if legs is not None else None
-        if o is not None:  # (a list of floats: ψ most often in (−π, π], where the wrap
+        if o is not None:  # (the run's floats: ψ most often in (−π, π], where the wrap
             x, y, z, psi, vz = _TRUTH_OF(o)  # returns it as it is, without its two calls)
             return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz
         plant = self.sim.plant

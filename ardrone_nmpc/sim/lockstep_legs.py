@@ -89,12 +89,13 @@ _AT_DONE = 8 * ks.I_DONE
 # sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
 _PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
-# sv[S_CLIMBING … S_MODE]: what the firmware, the faults and the modes may change any time
-_PUT_INPUTS = struct.Struct(f"{ks.S_MODE - ks.S_CLIMBING + 1}d").pack_into
+# sv[S_CLIMBING … S_T]: what the firmware, the faults and the modes may change any time, and
+# the tick's time
+_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_CLIMBING + 1}d").pack_into
 _AT_CLIMBING = 8 * ks.S_CLIMBING
 _PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
 _AT_ROLL = 8 * ks.S_ROLL
-_GET_SV = struct.Struct(f"{ks.S_GUST1 + 1}d").unpack_from  # sv[S_T … S_GUST1]
+_GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
 #: its class's HELD_IN_ARRAYS)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
@@ -106,6 +107,7 @@ _O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
 # byte offsets in out of the pose's position and XYZ angles, the truth's position and velocity
 _AT_POSITION, _AT_ANGLES = 8 * (ks.O_POSE + 1), 8 * (ks.O_POSE + 4)
 _AT_STATE, _AT_VELOCITY = 8 * ks.O_STATE, 8 * (ks.O_STATE + 3)
+_GET_OUT = struct.Struct(f"{ks.OUT_SIZE}d").unpack_from  # out's floats from its bytes
 
 
 _F64 = np.dtype(np.float64)
@@ -129,9 +131,8 @@ def _kernel_for(x, rows, blocks):
         if not overloads:
             return _lockstep_run
         from numba import typeof
-        iv, sv = np.zeros(ks.IV_SIZE, dtype=np.int64), np.zeros(ks.SV_SIZE)
-        compiled = overloads.get(tuple(typeof(a) for a in (x, rows, iv, sv, sv, *blocks,
-                                                            sv)))
+        buf = np.zeros(ks.BUF_SIZE)
+        compiled = overloads.get(tuple(typeof(a) for a in (x, rows, buf, *blocks)))
         if compiled is None:
             return _lockstep_run
         _ENTRY.append(compiled.entry_point)
@@ -146,10 +147,9 @@ class CompiledLegs:
         self.sensors = sensors
         self.plant = sensors.plant
         self.firmware = sensors.firmware
-        self.iv = np.zeros(ks.IV_SIZE, dtype=np.int64)
-        self.sv = np.zeros(ks.SV_SIZE)
-        self.p = np.zeros(ks.P_SIZE)
-        self.out = np.zeros(ks.OUT_SIZE)
+        self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's iv, sv, p and out (views)
+        self.iv = buf[ks.B_IV:ks.B_SV].view(np.int64)
+        self.sv, self.p, self.out = buf[ks.B_SV:ks.B_P], buf[ks.B_P:ks.B_OUT], buf[ks.B_OUT:]
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
@@ -162,8 +162,8 @@ class CompiledLegs:
         self._ran = False
         self._plant_len = self._sensors_len = 0  # the dicts' sizes while held
         self._kernel = _lockstep_run
-        #: ``out.tolist()`` of the last run while the arrays hold the state it left (its
-        #: truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
+        #: the floats of ``out`` (a tuple) of the last run while the arrays hold the state
+        #: it left (its truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
         self.live_out = None
         #: ``out.tobytes()`` of the last run (the truth's arrays are views of it)
         self.live_raw = b""
@@ -225,7 +225,9 @@ class CompiledLegs:
             fw.comwdg_latched = False
         fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, roll, pitch, gaz, yaw)  # apply_command:
         at_cap = False
-        if gaz > 0.0 and plant._mode.airborne:  # only a climb is capped
+        # only an airborne climb is capped (FlightMode.airborne by identity: ~0.2 µs less)
+        mode = plant._mode
+        if gaz > 0.0 and (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             if o is not None:  # DroneFirmware._z_stop_m of the held state
                 z, vz = o[_O_STATE + 2], o[_O_STATE + 5]
                 at_cap = z + max(0.0, vz) * fw._lead_s() >= fw.config.altitude_max_m
@@ -337,7 +339,7 @@ class CompiledLegs:
             x = self._x = plant._state_array()
         self._held = (x, fifo, fifo.rows, bias_n, gust_n, mocap_n, nav_n)
         self._blocks = (bias_n.values, gust_n.values, mocap_n.values, nav_n.values)
-        self._args = (x, fifo.rows, *self._blocks)  # the kernel's arrays, in its order
+        self._args = (x, fifo.rows, self.buf, *self._blocks)  # the kernel's, in its order
         self._kernel = _kernel_for(x, fifo.rows, self._blocks)
         self._saved = {name: d.pop(name) for name in _PLANT_HELD}
         sd = sensors.__dict__
@@ -358,7 +360,7 @@ class CompiledLegs:
             x, fifo, _, bias_n, gust_n, mocap_n, nav_n = self._held
             (steps, fifo.head, next_mocap, next_nav, bias_n.pos, pos_gust, mocap_n.pos,
              nav_n.pos) = _GET_IV(self.iv)
-            (_, pending, battery, yaw_bias, vb0, vb1, gust0, gust1) = _GET_SV(self.sv)
+            pending, battery, yaw_bias, vb0, vb1, gust0, gust1 = _GET_SV(self.sv, _AT_PENDING)
             values = x.tolist()  # AirframePlant._from_state_array
             if len(values) > N_STATE:
                 saved["_tilt_aux"] = (values[N_STATE], values[N_STATE + 1])
@@ -422,11 +424,9 @@ class CompiledLegs:
             self.release()  # a held attribute was written meanwhile: it is the newer
             self._take()
         old = self._p_key  # the flight's parameters, unchanged as a rule
-        if (old and old[0] is plant.params and old[1] is plant.noise
+        if not (old and old[0] is plant.params and old[1] is plant.noise
                 and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
-            p = self.p
-        else:
-            p = self._params()
+            self._params()
         iv, sv, out = self.iv, self.sv, self.out
         flags, _, _, fw_gaz, _ = fw.pcmd
         if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
@@ -437,10 +437,8 @@ class CompiledLegs:
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode)
-        sv[0] = t_s
-        x, rows, bias_v, gust_v, mocap_v, nav_v = self._args
-        self._kernel(x, rows, iv, sv, p, bias_v, gust_v, mocap_v, nav_v, out)
+        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+        self._kernel(*self._args)
         done, n_events, kind0, kind1 = _GET_DONE(iv, _AT_DONE)
         if done < 0:  # a block ran short: new ones (held: the positions in iv), and again
             bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
@@ -452,18 +450,20 @@ class CompiledLegs:
                 gust_n.ensure(ks.NEED_GUST)
             _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
             self._blocks = tuple(b.values for b in blocks)
-            self._args = (x, rows, *self._blocks)
+            x, rows, buf = self._args[:3]
+            self._args = (x, rows, buf, *self._blocks)
             self._kernel = _kernel_for(x, rows, self._blocks)
             return self.run(t_s)
         self._ran = True
-        o = out.tolist()
+        # out's bytes: its floats (unpacked: half of tolist's cost) and the read-only arrays
+        # of the pose (and of the truth) read from them
+        raw = self.live_raw = out.tobytes()
+        o = _GET_OUT(raw)
         now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        # out's bytes: the read-only arrays of the pose (and of the truth) read from them
-        raw = self.live_raw = out.tobytes()
         for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[
                 :done if done < n_events else n_events]:
             if kind == _MOCAP:

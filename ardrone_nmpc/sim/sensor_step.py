@@ -21,7 +21,8 @@ ahead (:class:`~ardrone_nmpc.sim.normal_blocks.NormalBlocks`), consumed in the o
 Python draws them.
 
 The arrays (indices below): ``iv`` int64 counters, ``sv`` the plant's float state beside its
-state vector, ``p`` the parameters of a flight, ``out`` what the run produced.
+state vector, ``p`` the parameters of a flight, ``out`` what the run produced — the four
+side by side in one array ``buf`` (``B_*``), one argument of the call.
 """
 
 from __future__ import annotations
@@ -44,11 +45,12 @@ I_STEPS, I_HEAD, I_NEXT_MOCAP, I_NEXT_NAV = 0, 1, 2, 3
 I_POS_BIAS, I_POS_GUST, I_POS_MOCAP, I_POS_NAV = 4, 5, 6, 7
 I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
 IV_SIZE = 12
-# sv: the tick's time, the plant's float state (in and out), the plant's current command
-# (roll, pitch, gaz, yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead,
-# the cap), the wind, the plant's mode (MODE_*) (in)
-(S_T, S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
- S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE) = range(20)
+# sv: the plant's float state (in and out), the plant's current command (roll, pitch, gaz,
+# yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead, the cap), the wind,
+# the plant's mode (MODE_*), the tick's time (in: the last eight side by side, which the caller
+# writes in one pack every run)
+(S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
+ S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE, S_T) = range(20)
 SV_SIZE = 20
 MODE_FLYING, MODE_TAKING_OFF, MODE_LANDING = 0.0, 1.0, 2.0
 # p: a flight's parameters (the automatic climb's and descent's gaz, τ_z, the take-off
@@ -67,6 +69,10 @@ NEED_BIAS, NEED_GUST, NEED_MOCAP, NEED_NAV = 9, 6, 6, 7
 O_POSE, O_NAV, O_EV_T0, O_EV_T1, O_LAST_NOW = 0, 8, 17, 18, 19
 O_T, O_BATTERY, O_STATE = 20, 21, 22
 OUT_SIZE = O_STATE + 10
+#: buf: the four side by side in one float64 array (iv's int64 viewed in place) — the kernel's
+#: one argument for them (every array argument costs the call ~30 ns to unbox)
+B_IV, B_SV, B_P, B_OUT = 0, IV_SIZE, IV_SIZE + SV_SIZE, IV_SIZE + SV_SIZE + P_SIZE
+BUF_SIZE = B_OUT + OUT_SIZE
 MOCAP, NAV = 0, 1
 _TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
 
@@ -216,7 +222,7 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
+def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     """The direct sensor path's advance to ``sv[S_T]`` (module docstring): the due mocap and
     navdata events (at most one of each, in time order, mocap first on a tie) into
     ``iv[I_KIND*]``/``out[O_EV_T*]``, then the legs to each and to the tick's time, each
@@ -224,7 +230,10 @@ def lockstep_run(x, ring, iv, sv, p, bias_n, gust_n, mocap_n, nav_n, out):
     rest is the Python path's — or −1, nothing done, if a block of normals has fewer left
     than a run may take (``NEED_*``: draw new blocks and call again). ``x`` (the state
     array), ``ring`` and the counters are updated in place; after all the legs, the truth
-    then into ``out[O_T:]`` (one list for the caller's truth reads)."""
+    then into ``out[O_T:]`` (the caller's truth reads). ``iv``, ``sv``, ``p``, ``out``: the
+    parts of ``buf``."""
+    iv, sv = buf[B_IV:B_SV].view(np.int64), buf[B_SV:B_P]
+    p, out = buf[B_P:B_OUT], buf[B_OUT:BUF_SIZE]
     if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
             > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
