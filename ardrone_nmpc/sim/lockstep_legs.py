@@ -2,7 +2,7 @@
 
 :class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
 plant's state for
-:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>`. Between
+:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>`. Between
 its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
 command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
 packing it from the attributes and writing it back every tick cost as much as the
@@ -82,10 +82,8 @@ _NONE: tuple = ()
 # the arrays' own types, the same bits) and read back: no per-element numpy conversion
 _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
 _GET_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").unpack_from
-_GET_DONE = struct.Struct("4q").unpack_from  # iv[I_DONE … I_KIND1]
 _GET_POS, _PUT_POS = struct.Struct("4q").unpack_from, struct.Struct("4q").pack_into
 _AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
-_AT_DONE = 8 * ks.I_DONE
 # sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
 _PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
@@ -107,7 +105,10 @@ _O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
 # byte offsets in out of the pose's position and XYZ angles, the truth's position and velocity
 _AT_POSITION, _AT_ANGLES = 8 * (ks.O_POSE + 1), 8 * (ks.O_POSE + 4)
 _AT_STATE, _AT_VELOCITY = 8 * ks.O_STATE, 8 * (ks.O_STATE + 3)
-_GET_OUT = struct.Struct(f"{ks.OUT_SIZE}d").unpack_from  # out's floats from its bytes
+# what a run left, from buf's bytes (out first: the same indices): out's floats, then
+# iv[I_DONE … I_KIND1] — one unpack (struct's: half of tolist's cost)
+_GET_RUN = struct.Struct(f"={ks.OUT_SIZE}d{8 * (ks.B_IV + ks.I_DONE - ks.OUT_SIZE)}x4q").unpack_from
+_R_DONE = ks.OUT_SIZE
 
 
 _F64 = np.dtype(np.float64)
@@ -141,15 +142,15 @@ def _kernel_for(x, rows, blocks):
 
 class CompiledLegs:
     """The compiled tick of one lockstep sensor sampler's plant and firmware (module
-    docstring). :meth:`run` returns what it left to ``_advance_direct``."""
+    docstring). :meth:`run` returns what it left to ``advance_to``'s direct path."""
 
     def __init__(self, sensors) -> None:
         self.sensors = sensors
         self.plant = sensors.plant
         self.firmware = sensors.firmware
         self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's iv, sv, p and out (views)
-        self.iv = buf[ks.B_IV:ks.B_SV].view(np.int64)
-        self.sv, self.p, self.out = buf[ks.B_SV:ks.B_P], buf[ks.B_P:ks.B_OUT], buf[ks.B_OUT:]
+        self.out, self.iv = buf[ks.B_OUT:ks.B_IV], buf[ks.B_IV:ks.B_SV].view(np.int64)
+        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:]
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
@@ -162,10 +163,11 @@ class CompiledLegs:
         self._ran = False
         self._plant_len = self._sensors_len = 0  # the dicts' sizes while held
         self._kernel = _lockstep_run
-        #: the floats of ``out`` (a tuple) of the last run while the arrays hold the state
-        #: it left (its truth at ``O_T``, ``O_BATTERY``, ``O_STATE``), else None
+        #: the floats of ``out`` (a tuple, at out's indices) of the last run while the
+        #: arrays hold the state it left (its truth at ``O_T``, ``O_BATTERY``, ``O_STATE``),
+        #: else None
         self.live_out = None
-        #: ``out.tobytes()`` of the last run (the truth's arrays are views of it)
+        #: ``buf.tobytes()`` of the last run (out's first: the truth's arrays are views of it)
         self.live_raw = b""
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
@@ -427,7 +429,6 @@ class CompiledLegs:
         if not (old and old[0] is plant.params and old[1] is plant.noise
                 and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
             self._params()
-        iv, sv, out = self.iv, self.sv, self.out
         flags, _, _, fw_gaz, _ = fw.pcmd
         if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
@@ -437,11 +438,16 @@ class CompiledLegs:
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_INPUTS(sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+        _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
         self._kernel(*self._args)
-        done, n_events, kind0, kind1 = _GET_DONE(iv, _AT_DONE)
+        # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
+        # arrays read from them
+        raw = self.buf.tobytes()
+        o = _GET_RUN(raw)
+        done, n_events, kind0, kind1 = o[_R_DONE:]
         if done < 0:  # a block ran short: new ones (held: the positions in iv), and again
             bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
+            iv = self.iv
             bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
             bias_n.ensure(ks.NEED_BIAS)
             mocap_n.ensure(ks.NEED_MOCAP)
@@ -455,15 +461,13 @@ class CompiledLegs:
             self._kernel = _kernel_for(x, rows, self._blocks)
             return self.run(t_s)
         self._ran = True
-        # out's bytes: its floats (unpacked: half of tolist's cost) and the read-only arrays
-        # of the pose (and of the truth) read from them
-        raw = self.live_raw = out.tobytes()
-        o = _GET_OUT(raw)
+        self.live_raw = raw
         now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (ready) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
+        out = self.out
         for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[
                 :done if done < n_events else n_events]:
             if kind == _MOCAP:

@@ -1,7 +1,7 @@
 """One lockstep tick of the simulated drone in one compiled call: the plant run from sensor
 event to sensor event and the samples drawn on the way.
 
-:meth:`LockstepSensors._advance_direct <ardrone_nmpc.sim.sensors.LockstepSensors>` runs the
+:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>` runs the
 drone to the newest mocap frame time, draws a pose, to the newest navdata time, draws a
 sample, then to the tick's time — each leg a firmware advance (plant advance, watchdogs, the
 held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
@@ -12,8 +12,8 @@ each leg is checked for what only its start shows — a climb within reach of th
 cap, a battery that could empty — and the run stops before such a leg, untouched, for the
 Python path to go on from there; a take-off's or landing's leg that ends it — the climb
 settled, the touch-down — is flown, found to change the mode, and undone, for the Python
-path too). The arithmetic is the Python's, in its order: the event grid of
-``_advance_direct``, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
+path too). The arithmetic is the Python's, in its order: the event grid of ``advance_to``'s
+direct path, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
 (whole steps, the remainder carried; :func:`~ardrone_nmpc.sim.plant_step.flying_advance`, the
 turbulence's Gauss–Markov step), :meth:`~ardrone_nmpc.sim.plant.AirframePlant.mocap_pose`
 and :meth:`~ardrone_nmpc.sim.plant.AirframePlant.navdata`. The normals come from blocks drawn
@@ -70,9 +70,10 @@ O_POSE, O_NAV, O_EV_T0, O_EV_T1, O_LAST_NOW = 0, 8, 17, 18, 19
 O_T, O_BATTERY, O_STATE = 20, 21, 22
 OUT_SIZE = O_STATE + 10
 #: buf: the four side by side in one float64 array (iv's int64 viewed in place) — the kernel's
-#: one argument for them (every array argument costs the call ~30 ns to unbox)
-B_IV, B_SV, B_P, B_OUT = 0, IV_SIZE, IV_SIZE + SV_SIZE, IV_SIZE + SV_SIZE + P_SIZE
-BUF_SIZE = B_OUT + OUT_SIZE
+#: one argument for them (every array argument costs the call ~30 ns to unbox); out first,
+#: then iv: the caller reads what a run left (out, iv[I_DONE …]) in one unpack of buf's bytes
+B_OUT, B_IV, B_SV, B_P = 0, OUT_SIZE, OUT_SIZE + IV_SIZE, OUT_SIZE + IV_SIZE + SV_SIZE
+BUF_SIZE = B_P + P_SIZE
 MOCAP, NAV = 0, 1
 _TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
 
@@ -232,8 +233,8 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     array), ``ring`` and the counters are updated in place; after all the legs, the truth
     then into ``out[O_T:]`` (the caller's truth reads). ``iv``, ``sv``, ``p``, ``out``: the
     parts of ``buf``."""
-    iv, sv = buf[B_IV:B_SV].view(np.int64), buf[B_SV:B_P]
-    p, out = buf[B_P:B_OUT], buf[B_OUT:BUF_SIZE]
+    out, iv = buf[B_OUT:B_IV], buf[B_IV:B_SV].view(np.int64)
+    sv, p = buf[B_SV:B_P], buf[B_P:BUF_SIZE]
     if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
             > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):

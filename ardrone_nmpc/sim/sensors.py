@@ -126,21 +126,8 @@ class LockstepSensors:
         way (module docstring: only the newest, or every one through the wire)."""
         if self.wire:
             self._advance_through_wire(t_s)
-        else:
-            self._advance_direct(t_s)
-
-    def inputs(self, t_s: float) -> TickInputs:
-        """What the links hold at ``t_s``: the tick's input."""
-        if not self.wire:
-            return TickInputs.make(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
-                                   self.target, self.target_rx_t_s)
-        pose, pose_rx = self.mocap.latest()
-        target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
-                             if self.target_cfg is not None else (None, -math.inf))
-        return TickInputs.make(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
-
-    # ------------------------------------------------------------------ direct
-    def _advance_direct(self, t_s: float) -> None:
+            return
+        # direct (one call frame less than its own method: every tick)
         legs = self._legs
         if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
             events, last_leg = legs.run(t_s)      # … and what it left, if anything
@@ -157,6 +144,17 @@ class LockstepSensors:
         if last_leg:
             self._run_to(t_s)
 
+    def inputs(self, t_s: float) -> TickInputs:
+        """What the links hold at ``t_s``: the tick's input."""
+        if not self.wire:
+            return TickInputs.make(t_s, self.pose, self.pose_rx_t_s, self.nav, self.nav_rx_t_s,
+                                   self.target, self.target_rx_t_s)
+        pose, pose_rx = self.mocap.latest()
+        target, target_rx = (self.mocap.latest_of(self.target_cfg.object_name)
+                             if self.target_cfg is not None else (None, -math.inf))
+        return TickInputs.make(t_s, pose, pose_rx, self.nav, self.nav_rx_t_s, target, target_rx)
+
+    # ------------------------------------------------------------------ direct
     def _direct_events(self, t_s: float) -> list[tuple[float, int]]:
         """The newest mocap frame and navdata sample due by ``t_s`` not taken yet, in time
         order: ``(time, kind)``."""
