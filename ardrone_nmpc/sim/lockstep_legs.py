@@ -231,8 +231,9 @@ class CompiledLegs:
         mode = plant._mode
         if gaz > 0.0 and (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             if o is not None:  # DroneFirmware._z_stop_m of the held state
-                z, vz = o[_O_STATE + 2], o[_O_STATE + 5]
-                at_cap = z + max(0.0, vz) * fw._lead_s() >= fw.config.altitude_max_m
+                z, vz = o[_O_STATE + 2], o[_O_STATE + 5]  # (max(0.0, vz) spelled out)
+                at_cap = (z + (vz if vz > 0.0 else 0.0) * fw._lead_s()
+                          >= fw.config.altitude_max_m)
             else:
                 at_cap = fw._z_stop_m() >= fw.config.altitude_max_m
         if at_cap:
@@ -259,21 +260,6 @@ class CompiledLegs:
             else:
                 plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
-
-    def ready(self, t_s: float) -> bool:
-        """The Python path's tick to ``t_s`` is what the kernel does (module docstring)."""
-        plant, fw = self.plant, self.firmware
-        mode = plant._mode
-        if mode is not self.sensors._nav_mode or not (
-                mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
-            return False
-        if fw.pcmd is not fw._applied_pcmd or fw.alt_capped:
-            return False
-        if fw.last_cmd_t is None:
-            return False
-        silence = t_s - fw.last_cmd_t
-        return ((fw.lost_com_hover or not silence > fw.hover_after_s)
-                and (fw.link_lost or not silence > fw.link_loss_s))
 
     def _params(self) -> np.ndarray:
         """The flight's parameters, built anew (:meth:`run` keeps them while the plant's
@@ -414,11 +400,40 @@ class CompiledLegs:
                                self.plant._mode, o[_O_BATTERY])
 
     # ------------------------------------------------------------------ one tick
-    def run(self, t_s: float) -> tuple[list, bool]:
-        """The kernel's run to ``t_s``; the samples of the events it passed are the sensors'.
-        Returns the events it left to the Python path (``(t, kind)``, in order) and whether
-        the last leg (to ``t_s``) is left too."""
+    def _refill(self) -> None:
+        """New blocks of normals for those that ran short (held: the positions in iv)."""
+        bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
+        iv = self.iv
+        bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
+        bias_n.ensure(ks.NEED_BIAS)
+        mocap_n.ensure(ks.NEED_MOCAP)
+        nav_n.ensure(ks.NEED_NAV)
+        if self.turbulent:
+            gust_n.ensure(ks.NEED_GUST)
+        _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
+        self._blocks = tuple(b.values for b in blocks)
+        x, rows, buf = self._args[:3]
+        self._args = (x, rows, buf, *self._blocks)
+        self._kernel = _kernel_for(x, rows, self._blocks)
+
+    def run(self, t_s: float) -> tuple[list, bool] | None:
+        """The kernel's run to ``t_s`` — None, nothing done, unless the Python path's tick to
+        ``t_s`` is what the kernel does (module docstring); the samples of the events it
+        passed are the sensors'. Returns the events it left to the Python path (``(t,
+        kind)``, in order) and whether the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
+        mode = plant._mode  # a mode the kernel flies, the one the navdata shows
+        if mode is not sensors._nav_mode or not (
+                mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
+            return None
+        # a quiet firmware: its PCMD applied, not capped, and no watchdog fires by t_s
+        pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
+        if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
+            return None
+        silence = t_s - last_cmd_t
+        if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
+                and (fw.link_lost or not silence > fw.link_loss_s)):
+            return None
         d = plant.__dict__
         if d.get("_held_by") is not self:
             self._take()
@@ -429,13 +444,12 @@ class CompiledLegs:
         if not (old and old[0] is plant.params and old[1] is plant.noise
                 and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
             self._params()
-        flags, _, _, fw_gaz, _ = fw.pcmd
+        flags, _, _, fw_gaz, _ = pcmd
         if flags & _PROGRESSIVE and fw_gaz > 0.0:  # the firmware watches the cap
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
-        mode = plant._mode  # as the kernel takes it (sv[S_MODE])
-        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else
+        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
         _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
@@ -445,26 +459,14 @@ class CompiledLegs:
         raw = self.buf.tobytes()
         o = _GET_RUN(raw)
         done, n_events, kind0, kind1 = o[_R_DONE:]
-        if done < 0:  # a block ran short: new ones (held: the positions in iv), and again
-            bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
-            iv = self.iv
-            bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
-            bias_n.ensure(ks.NEED_BIAS)
-            mocap_n.ensure(ks.NEED_MOCAP)
-            nav_n.ensure(ks.NEED_NAV)
-            if self.turbulent:
-                gust_n.ensure(ks.NEED_GUST)
-            _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
-            self._blocks = tuple(b.values for b in blocks)
-            x, rows, buf = self._args[:3]
-            self._args = (x, rows, buf, *self._blocks)
-            self._kernel = _kernel_for(x, rows, self._blocks)
+        if done < 0:  # a block ran short: new ones, and again
+            self._refill()
             return self.run(t_s)
         self._ran = True
         self.live_raw = raw
         now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
-        # (ready) — the bit the Python path's calls would have latched by then
+        # (checked above) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
         out = self.out

@@ -128,13 +128,14 @@ class LockstepSensors:
             self._advance_through_wire(t_s)
             return
         # direct (one call frame less than its own method: every tick)
-        legs = self._legs
-        if legs is not None and legs.ready(t_s):  # one compiled call (sim/lockstep_legs.py)
-            events, last_leg = legs.run(t_s)      # … and what it left, if anything
+        legs = self._legs  # one compiled call (sim/lockstep_legs.py), if it can fly the tick
+        left = legs.run(t_s) if legs is not None else None
+        if left is None:
+            events, last_leg = self._direct_events(t_s), True
+        else:  # what the compiled call left, if anything
+            events, last_leg = left
             if not (events or last_leg):
                 return
-        else:
-            events, last_leg = self._direct_events(t_s), True
         for t_event, kind in events:
             self._run_to(t_event)
             if kind == _MOCAP:

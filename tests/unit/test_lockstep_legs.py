@@ -68,10 +68,11 @@ def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
 
         def counted(t_s):
             i = 0 if drone.sim.plant.mode is FlightMode.FLYING else 2
-            events, last_leg = run(t_s)
-            used[i] += 1
-            used[i + 1] += last_leg
-            return events, last_leg
+            left = run(t_s)
+            if left is not None:  # (None: not the kernel's tick, nothing done)
+                used[i] += 1
+                used[i + 1] += left[1]
+            return left
         compiled.run = counted
     period = cfg.loop.period_s
     drone.connect()
