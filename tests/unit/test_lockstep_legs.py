@@ -223,6 +223,46 @@ def test_the_kernels_entry_point_for_the_legs_own_arrays_only():
     assert lockstep_legs._kernel_for(x, rows, (*blocks[:3], blocks[3].astype(np.float32))) is run
 
 
+def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
+    """The kernel's counters, state, parameters and output are views of one array (its one
+    argument for them, none spilling into another); what the legs read of a run — out's
+    floats, then iv's done, events and kinds — are those arrays' values, bit for bit."""
+    from ardrone_nmpc.sim import sensor_step as ks
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.connect()
+    drone.takeoff()
+    for k in range(1, 80):
+        drone.advance_to(k * cfg.loop.period_s)
+    legs = drone.sensors._legs
+    assert legs.held() and legs.live_out is not None
+    views = {"out": (legs.out, ks.OUT_SIZE), "iv": (legs.iv, ks.IV_SIZE),
+             "sv": (legs.sv, ks.SV_SIZE), "p": (legs.p, ks.P_SIZE)}
+    for name, (view, size) in views.items():
+        assert view.size == size and np.shares_memory(view, legs.buf), name
+        assert not any(np.shares_memory(view, other) for other, _ in views.values()
+                       if other is not view), name
+    assert legs.iv.dtype == np.int64 and legs.out.dtype == legs.p.dtype == np.float64
+    assert legs.p[ks.P_K:].tolist() == list(drone.sim.plant.params.rhs_coefficients)
+    o = legs.live_out
+    assert np.array(o[:ks.OUT_SIZE]).tobytes() == legs.out.tobytes()
+    assert o[ks.OUT_SIZE:] == tuple(legs.iv[ks.I_DONE:ks.I_KIND1 + 1].tolist())
+    assert o[ks.OUT_SIZE] > o[ks.OUT_SIZE + 1]  # all legs done: more than the events
+
+
+def test_the_legs_leave_a_tick_they_cannot_fly_untouched():
+    """On the ground (and before any PCMD) the kernel's preconditions fail: run does nothing,
+    holds nothing, and the Python path flies the tick."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    legs = drone.sensors._legs
+    assert drone.truth.mode is FlightMode.LANDED
+    assert legs.run(0.1) is None and not legs.held()
+    drone.advance_to(0.1)
+    assert not legs.held() and drone.sensors.nav is not None
+
+
 def test_compiled_legs_with_a_scripted_target():
     cfg = load_config(str(ROOT / "configs" / "follow_car.yaml"), [])
     python, _ = _fly(cfg, False, 300, _zigzag)
