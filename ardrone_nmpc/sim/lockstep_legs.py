@@ -102,12 +102,13 @@ _O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV
                                                     ks.O_LAST_NOW)
 _MOCAP = ks.MOCAP
 _O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
-# byte offsets in out of the pose's position and XYZ angles, the truth's position and velocity
-_AT_POSITION, _AT_ANGLES = 8 * (ks.O_POSE + 1), 8 * (ks.O_POSE + 4)
-_AT_STATE, _AT_VELOCITY = 8 * ks.O_STATE, 8 * (ks.O_STATE + 3)
-# what a run left, from buf's bytes (out first: the same indices): out's floats, then
-# iv[I_DONE … I_KIND1] — one unpack (struct's: half of tolist's cost)
-_GET_RUN = struct.Struct(f"={ks.OUT_SIZE}d{8 * (ks.B_IV + ks.I_DONE - ks.OUT_SIZE)}x4q").unpack_from
+# byte offsets in buf of the pose's position and XYZ angles, the truth's position and velocity
+_AT_POSITION, _AT_ANGLES = 8 * (ks.B_OUT + ks.O_POSE + 1), 8 * (ks.B_OUT + ks.O_POSE + 4)
+_AT_STATE, _AT_VELOCITY = 8 * (ks.B_OUT + ks.O_STATE), 8 * (ks.B_OUT + ks.O_STATE + 3)
+# what a run left, from buf's bytes: out's floats (at out's indices), then iv[I_DONE …
+# I_KIND1] (iv follows out) — one unpack (struct's: half of tolist's cost)
+_GET_RUN = struct.Struct(f"={8 * ks.B_OUT}x{ks.OUT_SIZE}d"
+                         f"{8 * (ks.B_IV + ks.I_DONE - ks.B_OUT - ks.OUT_SIZE)}x4q").unpack_from
 _R_DONE = ks.OUT_SIZE
 
 
@@ -118,7 +119,7 @@ _ENTRY: list = []  # lockstep_run's compiled entry point for the arrays Compiled
 
 def _kernel_for(x, rows, blocks):
     """:func:`~ardrone_nmpc.sim.sensor_step.lockstep_run`'s compiled entry point — the
-    dispatcher's own choice for these arrays, without its per-call look-up of ten
+    dispatcher's own choice for these arrays, without its per-call look-up of seven
     arguments' types — when the plant's arrays are of the one kind CompiledLegs builds its
     own of (float64, C-contiguous, aligned, writeable; the state and the blocks 1-D, the
     ring 2-D: their types until the next :meth:`_take <CompiledLegs._take>` asks again);
