@@ -217,7 +217,7 @@ class LockstepDrone(ConfigHandshake):
                 return
             self.sim.execute_pcmd(seq + 1, (_PROGRESSIVE, float(roll_frac), float(pitch_frac),
                                             float(gaz_frac), float(yaw_frac)),
-                                  self.sim.plant.t_s, self.t_exp_s)
+                                  self._plant_t_s(), self.t_exp_s)
             return
         pcmd = _exact_pcmd(roll_frac, pitch_frac, gaz_frac, yaw_frac) if progressive else _HOVER
         if ref is None:
@@ -225,7 +225,7 @@ class LockstepDrone(ConfigHandshake):
         else:
             commands = (_Numbered(seq + 1, ref), _Numbered(seq + 2, pcmd))
         self._seq = seq + len(commands)
-        if self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s):
+        if self.sim.execute_at(commands, self._plant_t_s(), self.t_exp_s):
             self._ref_unsent = None
 
     def hover(self) -> None:
@@ -242,7 +242,13 @@ class LockstepDrone(ConfigHandshake):
         seq = self._seq
         commands = [_Numbered(seq + i, body) for i, body in enumerate(bodies, start=1)]
         self._seq = seq + len(bodies)
-        return self.sim.execute_at(commands, self.sim.plant.t_s, self.t_exp_s)
+        return self.sim.execute_at(commands, self._plant_t_s(), self.t_exp_s)
+
+    def _plant_t_s(self) -> float:
+        """The plant's time: the compiled legs' (without releasing the state they hold —
+        a landing's REF, held every tick, would release it every tick)."""
+        legs = self._legs
+        return legs.t_s() if legs is not None else self.sim.plant.t_s
 
     # ------------------------------------------------------------------ configuration port
     def write_config(self, key, value, timeout_s: float = 1.0) -> str:

@@ -219,7 +219,7 @@ class CompiledLegs:
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
         plant, o = self.plant, self.live()  # (the last run's truth while held)
-        if now is None:  # the plant's time
+        if now is None:  # the plant's time (t_s() of the o read above)
             now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
         fw.link_lost = False
@@ -386,6 +386,12 @@ class CompiledLegs:
             self.release()
             return None
         return o
+
+    def t_s(self) -> float:
+        """:attr:`AirframePlant.t_s`, the last run's while the arrays hold its state (the
+        time of a REF or a config write: read without releasing them)."""
+        o = self.live()
+        return self.plant.t_s if o is None else o[_O_T]
 
     def truth(self):
         """:attr:`AirframePlant.truth`, from the last run's while the arrays hold its state."""

@@ -263,6 +263,28 @@ def test_the_legs_leave_a_tick_they_cannot_fly_untouched():
     assert not legs.held() and drone.sensors.nav is not None
 
 
+def test_a_ref_held_every_tick_leaves_the_legs_holding_the_state():
+    """A landing holds REF land every tick: its time is the legs' last run's (the plant's
+    own), read without releasing the state they hold — which the Python path would write
+    back and the next run take again."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.connect()
+    drone.takeoff()
+    for k in range(1, 80):
+        drone.advance_to(k * cfg.loop.period_s)
+    legs = drone.sensors._legs
+    for k in range(80, 84):
+        drone.land()
+        drone.advance_to(k * cfg.loop.period_s)
+    assert legs.held() and drone.sim.plant.mode is FlightMode.LANDING
+    t_s = legs.t_s()
+    drone.land()  # as runtime/lockstep._land, every tick
+    assert legs.held() and legs.t_s() == t_s
+    legs.release()
+    assert drone.sim.plant.t_s == t_s
+
+
 def test_compiled_legs_with_a_scripted_target():
     cfg = load_config(str(ROOT / "configs" / "follow_car.yaml"), [])
     python, _ = _fly(cfg, False, 300, _zigzag)
