@@ -149,7 +149,7 @@ class CompiledLegs:
         self.sensors = sensors
         self.plant = sensors.plant
         self.firmware = sensors.firmware
-        self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's iv, sv, p and out (views)
+        self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's out, iv, sv and p (views)
         self.out, self.iv = buf[ks.B_OUT:ks.B_IV], buf[ks.B_IV:ks.B_SV].view(np.int64)
         self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:]
         self._p_key: tuple = ()
@@ -459,7 +459,8 @@ class CompiledLegs:
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+        _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode,
+                    t_s)
         self._kernel(*self._args)
         # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
         # arrays read from them
