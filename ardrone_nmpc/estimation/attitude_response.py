@@ -164,10 +164,11 @@ def _feed_dispatched(state: np.ndarray, has: bool, sample_t_s, roll_deg, pitch_d
 
 
 def _plain(state: np.ndarray) -> bool:
-    """A state of the one kind the entry point takes (new_state's): float64, 1-D,
-    C-contiguous, aligned, writeable — the entry point unboxes without checking."""
-    return (state.dtype == _F64 and state.ndim == 1 and state.flags.carray
-            and state.flags.writeable)
+    """A state of the one kind the entry point was compiled for (new_state's): float64, 1-D,
+    C-contiguous, aligned, writeable. (The dispatcher looks at the types; the entry point
+    does not.)"""
+    return state.dtype == _F64 and state.ndim == 1 and state.flags.carray
+
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
                                math.nan, math.nan, 0.0, 0.0)
