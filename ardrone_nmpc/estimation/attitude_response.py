@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -63,6 +62,20 @@ CONFIDENT_GAIN_REL_STD = 0.1
 CONFIDENT_R2 = 0.3
 
 
+class _kept:
+    """``functools.cached_property`` without Python 3.11's lock (~0.4 µs a first read): the
+    value stored in the instance's ``__dict__``, which a non-data descriptor yields to."""
+
+    def __init__(self, func) -> None:
+        self.func, self.name, self.__doc__ = func, func.__name__, func.__doc__
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = self.func(obj)
+        return value
+
+
 @dataclass(frozen=True)
 class AttitudeEstimate:
     """One fit: the delay (s) and its σ, the gain per axis [roll, pitch] relative to E and
@@ -81,22 +94,29 @@ class AttitudeEstimate:
     #: freedom).
     delay_contrast: float = math.inf
 
-    # cached (the instance's __dict__, beside the frozen fields): the tick's event and its
-    # adaptation read each up to four times a fit
-    @cached_property
+    # made when first read, then kept (the instance's __dict__, beside the frozen fields):
+    # the tick's event and its adaptation read each up to four times a fit
+    @_kept
     def gain_mean(self) -> float:
         """The two axes' gains, weighted by their precision (an axis never moved weighs
         nothing); NaN without either."""
-        pairs = [(g, 1.0 / max(s, 1e-9) ** 2) for g, s in zip(self.gain, self.gain_std)
-                 if math.isfinite(g) and math.isfinite(s)]
-        if not pairs:
-            return math.nan
-        return float(sum(g * w for g, w in pairs) / sum(w for _, w in pairs))
+        num = den = 0.0  # as ``sum`` adds: from 0, the axes in order
+        seen = False
+        for g, s in zip(self.gain, self.gain_std):
+            if math.isfinite(g) and math.isfinite(s):
+                w = 1.0 / max(s, 1e-9) ** 2
+                num += g * w
+                den += w
+                seen = True
+        return num / den if seen else math.nan
 
-    @cached_property
+    @_kept
     def gain_mean_std(self) -> float:
-        w = sum(1.0 / max(s, 1e-9) ** 2 for s in self.gain_std if math.isfinite(s))
-        return float(1.0 / math.sqrt(w)) if w > 0 else math.inf
+        w = 0.0
+        for s in self.gain_std:
+            if math.isfinite(s):
+                w += 1.0 / max(s, 1e-9) ** 2
+        return 1.0 / math.sqrt(w) if w > 0 else math.inf
 
     @property
     def delay_confident(self) -> bool:
@@ -120,6 +140,35 @@ class AttitudeEstimate:
 
 # bound once: the tick feeds one a period
 _feed, _CMD_SEND, _TIMES_ROUNDED = rk.feed, rk.CMD_SEND, rk.TIMES_ROUNDED
+_F64 = np.dtype(np.float64)
+#: ``response_kernels.feed``'s compiled entry point for a state :func:`~.response_kernels.
+#: new_state` built, once the dispatcher has it (``_feed_dispatched``)
+_FEED_ENTRY: list = []
+
+
+def _feed_dispatched(state: np.ndarray, has: bool, sample_t_s, roll_deg, pitch_deg,
+                     cmd_kind: int, cmd_t_s, roll_frac, pitch_frac) -> int:
+    """``response_kernels.feed`` through numba's dispatcher, every number made a float first
+    (its one compiled signature); then notes the signature's compiled entry point, which
+    skips the dispatcher's look-up of nine arguments' types (~0.1 µs) and makes each number
+    a float itself (numba unboxes a float64 by ``PyNumber_Float``, what ``float`` does)."""
+    code = _feed(state, has, float(sample_t_s), float(roll_deg), float(pitch_deg), cmd_kind,
+                 float(cmd_t_s), float(roll_frac), float(pitch_frac))
+    if not _FEED_ENTRY and _plain(state):
+        from numba import typeof
+        compiled = getattr(_feed, "overloads", {}).get(
+            tuple(typeof(a) for a in (state, True, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)))
+        if compiled is not None:  # (None without the JIT)
+            _FEED_ENTRY.append(compiled.entry_point)
+    return code
+
+
+def _plain(state: np.ndarray) -> bool:
+    """A state of the one kind the entry point was compiled for (new_state's): float64, 1-D,
+    C-contiguous, aligned, writeable. (The dispatcher looks at the types; the entry point
+    does not.)"""
+    return state.dtype == _F64 and state.ndim == 1 and state.flags.carray
+
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
                                math.nan, math.nan, 0.0, 0.0)
@@ -161,7 +210,7 @@ class AttitudeResponseEstimator:
                       for d in self.delays_s]
         self._any_away = [bool(a.any()) for a in self._away]
         self._fit_out = np.zeros(rk.fit_size(n_k, n_l))  # fit_grid's output (_bind_views)
-        self._bind_views()
+        self._bind_views()  # (and the compiled step: _step)
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
     def _bind_views(self) -> None:
@@ -179,6 +228,15 @@ class AttitudeResponseEstimator:
         self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
                            out[4 * kl:6 * kl].reshape(shape),
                            out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
+        # the compiled step: its entry point once known for this kind of state, else the
+        # dispatcher (feed binds the entry point after its first call)
+        self._step = _FEED_ENTRY[0] if _FEED_ENTRY and _plain(st) else _feed_dispatched
+
+    def __getstate__(self) -> dict:
+        """Without the compiled step (an entry point does not pickle): bound again."""
+        state = self.__dict__.copy()
+        del state["_step"]
+        return state
 
     def __setstate__(self, state: dict) -> None:
         """A deep copy or unpickling: each view was copied apart from its buffer (numpy
@@ -202,14 +260,16 @@ class AttitudeResponseEstimator:
         # the kernel rounds each time to the microsecond where it reads it, or answers −1
         # (nothing done) for Python's round to do it (a time below 1 µs: a flight's start)
         has = sample_t_s is not None
-        code = _feed(self._state, has, float(sample_t_s) if has else 0.0, float(roll_deg),
-                     float(pitch_deg), cmd_kind, float(cmd_t_s), float(roll_frac),
-                     float(pitch_frac))
+        step = self._step
+        code = step(self._state, has, sample_t_s if has else 0.0, roll_deg, pitch_deg,
+                    cmd_kind, cmd_t_s, roll_frac, pitch_frac)
         if code < 0:
-            code = _feed(self._state, has, _microseconds(sample_t_s) if has else 0.0,
-                         float(roll_deg), float(pitch_deg), cmd_kind + _TIMES_ROUNDED,
-                         _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0,
-                         float(roll_frac), float(pitch_frac))
+            code = step(self._state, has, _microseconds(sample_t_s) if has else 0.0, roll_deg,
+                        pitch_deg, cmd_kind + _TIMES_ROUNDED,
+                        _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0, roll_frac,
+                        pitch_frac)
+        elif step is _feed_dispatched and _FEED_ENTRY and _plain(self._state):
+            self._step = _FEED_ENTRY[0]  # known now
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
             return True
@@ -242,18 +302,18 @@ class AttitudeResponseEstimator:
         if n < 20:
             return NO_ESTIMATE
         n_l = len(self.lags_s)
-        best = rk.fit_grid(self._state, self._fit_out)  # every grid point's fit
+        # every grid point's fit; the best's model is the one whose residual the compiled
+        # step tracks from now on (fit_grid sets it)
+        best = rk.fit_grid(self._state, self._fit_out)
         if best < 0:
             return NO_ESTIMATE
         sxx, gain, rss_axis, rss, syy = self._fit_views
         k, l = divmod(best, n_l)
         # Python floats from here (numpy's scalars cost ~10× each; the same arithmetic)
         g0, g1 = gain[k, l].tolist()
-        sx0, sx1 = self._sx[k, l].tolist()
-        sy0, sy1 = self._sy.tolist()
-        # the best model, whose residual the compiled step tracks (slots S_HAS_BEST … S_B + 1)
-        self._state[rk.S_HAS_BEST:rk.S_B + 2] = (1.0, k, l, g0, g1, (sy0 - g0 * sx0) / n,
-                                                 (sy1 - g1 * sx1) / n)
+        # the centred Σy² of both axes: their sum is numpy's (one rounded addition; fit_grid
+        # found it > 0, so no zero's sign is in question)
+        syy0, syy1 = syy.tolist()
         curve = rss[:, l]
         values = curve.tolist()
         sigma2 = values[k] / max(2.0 * n - 5.0, 1.0)
@@ -269,7 +329,7 @@ class AttitudeResponseEstimator:
                 gain_std.append(math.inf)
         return AttitudeEstimate(delay, inflate * math.sqrt(delay_var),
                                 (gains[0], gains[1]), (gain_std[0], gain_std[1]),
-                                self._lags[l], 1.0 - values[k] / float(syy.sum()), n,
+                                self._lags[l], 1.0 - values[k] / (syy0 + syy1), n,
                                 self._contrast(curve, k, sigma2 * inflate ** 2))
 
     def _contrast(self, curve: np.ndarray, k: int, sigma2: float) -> float:

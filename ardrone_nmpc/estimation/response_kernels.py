@@ -13,7 +13,7 @@ steers, depend on the CPU (docs/solver-notes.md §9).
 Those exponentials, 372 a sample, were most of the step's cost. Their arguments repeat: a
 decay's is ``−d/τ`` with d a sample's time, less a delay, less a command's time — times
 rounded to the microsecond, commands and samples on fixed periods — and a 60 s square sees
-some 400 distinct values of d (exact doubles) among 59 000. :func:`lag_decays` keeps the
+some 400 distinct values of d (exact doubles) among 59 000. :func:`fold_sample` keeps the
 decays of the recent ones in a small cache in the state (:func:`memo_decays`): a value found
 there was made by the same ``math.exp`` of the same argument, so it is the same bits; one not
 found is computed and stored. The cache only saves time; what it holds never changes a bit.
@@ -33,16 +33,16 @@ from ardrone_nmpc.core.sorted_search import count_at_or_below
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS",
            "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
            "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
-           "S_SINCE_BEST", "S_SY", "S_SYY", "S_WINDOW", "S_Y", "TIMES_ROUNDED", "feed",
-           "fit_grid", "fit_size", "fold_sample", "lag_decays", "memo_decays", "memo_view",
-           "microseconds", "new_state", "state_size"]
+           "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
+           "TIMES_ROUNDED", "feed", "fit_grid", "fit_size", "fold_sample", "held_count",
+           "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
-# slots, the fit's fixed parameters among them), then Σx, Σx², Σx·y, the model values x (each
-# K×L×2), the decays (K×L), the commands' times (C), values (C×2) and lag outputs (C×L×2), the
-# decays' cache (MEMO_SETS × 2 slots of a d and its L decays) and last the grid: the delays (K)
-# and the lags (L). Built once by :func:`new_state`.
+# slots, the fit's fixed parameters among them), then Σx, Σx², Σx·y (each K×L×2), the
+# commands' times (C), values (C×2) and lag outputs (C×L×2), the decays' cache (MEMO_SETS × 2
+# slots of a d and its L decays) and last the grid: the delays (K) and the lags (L). Built once
+# by :func:`new_state`.
 S_N = 0              # the samples' effective number
 S_LAST_T = 1         # the last sample's time (NaN before the first)
 S_COUNT = 2          # commands held
@@ -65,7 +65,9 @@ S_REFRESH = 26       # samples between refreshes of the best grid point
 S_DELAYS = 27        # the delays' number (K)
 S_LAGS = 28          # the lags' number (L)
 S_BITS = 29          # scratch: a double whose bits the cache hashes (memo_decays)
-HEAD = 30
+S_X = 30             # (2) scratch: the tracked best model's value of the sample (fold_sample)
+S_UNORDERED = 31     # 1.0 once a NaN command time was held: the times may be out of order
+HEAD = 32
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
@@ -81,7 +83,7 @@ _DEG2RAD = math.pi / 180.0  # numpy's radians (and math.radians): x · (π/180)
 
 def state_size(delays: int, lags: int, capacity: int) -> int:
     """Length of the state buffer of a grid of ``delays`` × ``lags`` and ``capacity`` commands."""
-    return (HEAD + 4 * delays * lags * 2 + delays * lags + capacity * (1 + 2 + lags * 2)
+    return (HEAD + 3 * delays * lags * 2 + capacity * (1 + 2 + lags * 2)
             + 2 * MEMO_SETS * (1 + lags) + delays + lags)
 
 
@@ -141,21 +143,21 @@ def memo_decays(d: float, lags_s: np.ndarray, memo: np.ndarray, bits: np.ndarray
 
 
 @njit(cache=True, **INNER_KERNEL)
-def lag_decays(times: np.ndarray, n: int, t_s: float, delays_s: np.ndarray,
-               lags_s: np.ndarray, j_out: np.ndarray, decay_out: np.ndarray, memo: np.ndarray,
-               bits: np.ndarray, ints: np.ndarray) -> None:
-    """Per delay d: ``j_out`` the last of the ``n`` command times at or before ``t_s − d``
-    (``searchsorted(times[:n], t_s − d, side="right") − 1``; NaN sorts last) and ``decay_out``
-    (K × L, flat) each lag τ's decay ``exp(−(t_s − d − times[j]) / τ)`` (the C library's
-    ``exp``, through the cache ``memo``: :func:`memo_decays`)."""
-    L = lags_s.size
-    for k in range(delays_s.size):
-        at = t_s - delays_s[k]
-        j = count_at_or_below(times, n, at) - 1
-        j_out[k] = j
-        r = memo_decays(at - times[j], lags_s, memo, bits, ints)
-        for m in range(L):
-            decay_out[k * L + m] = memo[r + m]
+def held_count(times: np.ndarray, n: int, c: int, at: float, ordered: bool) -> int:
+    """How many of the ``n`` command times are at or before ``at``: ``count_at_or_below``,
+    for an ``at`` no later than the one whose count ``c`` is (or any, with c = n).
+
+    The delays ascend, so a sample's ``at`` descend and each count is the last one, or a
+    step below it (commands 65 ms apart, delays 10 ms): a walk down from ``c`` — a
+    comparison or two, not a binary search's six unpredictable branches. The same count
+    whenever the times ascend (NaN, which sorts last there, counted as after ``at``); a
+    NaN command time (``ordered`` false: later ones follow it unsorted) or a NaN ``at``
+    take the binary search, whose answer on such an array is its own."""
+    if not ordered or at != at:
+        return count_at_or_below(times, n, at)
+    while c > 0 and not times[c - 1] <= at:
+        c -= 1
+    return c
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -186,47 +188,59 @@ def microseconds(t_s: float) -> float:
 
 
 @njit(cache=True, **INNER_KERNEL)
-def fold_sample(u: np.ndarray, ylag: np.ndarray, j: np.ndarray, decay: np.ndarray,
-                y: np.ndarray, forget: float, x: np.ndarray, sx: np.ndarray, sxx: np.ndarray,
-                sxy: np.ndarray) -> None:
-    """The model value ``x`` (K × L × 2) of a sample at every grid point — the lag's output
-    ``u + (y_lag − u)·decay`` from the command ``j[k]`` — and its sums, first faded by
-    ``forget`` (unless it is 1): Σx, Σx², Σx·y. Every array flat, in C order: ``u`` (C × 2),
-    ``ylag`` (C × L × 2), ``decay`` (K × L), ``x`` and the sums (K × L × 2); K = ``j.size``.
-    (Flat: a compiled reshape costs a call of numba's C helper, ~50 ns each, a dozen a tick.)
+def fold_sample(times: np.ndarray, n: int, ordered: bool, t_s: float, delays_s: np.ndarray,
+                lags_s: np.ndarray, memo: np.ndarray, bits: np.ndarray, ints: np.ndarray,
+                u: np.ndarray, ylag: np.ndarray, y: np.ndarray, forget: float,
+                sums: np.ndarray, best: int, x_best: np.ndarray) -> None:
+    """The model value x (K × L × 2) of a sample at ``t_s`` at every grid point — per delay
+    d the last of the ``n`` commands at or before ``t_s − d`` (j, :func:`held_count`) and
+    the lag's output ``u + (y_lag − u)·decay`` from it, each lag τ's decay
+    ``exp(−(t_s − d − times[j]) / τ)`` (the C library's ``exp``, through the cache ``memo``:
+    :func:`memo_decays`) — folded into the sums, first faded by ``forget`` (unless it is 1):
+    Σx, Σx², Σx·y, one after the other in ``sums`` (each K × L × 2). x itself is kept only
+    at the flat index ``best`` (the tracked model's, of (k, l, 0); −1: none), in ``x_best``.
+    Every array flat, in C order: ``u`` (C × 2), ``ylag`` (C × L × 2). (Flat: a compiled
+    reshape costs a call of numba's C helper, ~50 ns each, a dozen a tick.)
 
     Each element's expressions as numpy's broadcast wrote them; what is read more than once
     (the command, the decay, y) is read once into a local — the same doubles — and the
-    fading's test is made once, not per element."""
+    fading's test is made once, not per element. Per delay, not a pass for the decays and
+    another for the sums: the decays are read where the cache holds them."""
     y0, y1 = y[0], y[1]
-    K = j.size
-    L = decay.size // K
+    K, L = delays_s.size, lags_s.size
+    kl2 = K * L * 2
     scale = forget != 1.0
+    c = n
     for k in range(K):
-        jk = j[k]
+        at = t_s - delays_s[k]
+        c = held_count(times, n, c, at, ordered)
+        jk = c - 1
+        r = memo_decays(at - times[jk], lags_s, memo, bits, ints)
         u0, u1 = u[2 * jk], u[2 * jk + 1]
         for m in range(L):
-            dk = decay[k * L + m]
+            dk = memo[r + m]
             g = 2 * (jk * L + m)  # (jk, m, 0) in ylag
-            e = 2 * (k * L + m)   # (k, m, 0) in x and the sums
+            e = 2 * (k * L + m)   # (k, m, 0) in each sum
             v0 = u0 + (ylag[g] - u0) * dk
             v1 = u1 + (ylag[g + 1] - u1) * dk
-            x[e] = v0
-            x[e + 1] = v1
+            if e == best:
+                x_best[0] = v0
+                x_best[1] = v1
+            q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
             if scale:
-                sx[e] = sx[e] * forget + v0
-                sx[e + 1] = sx[e + 1] * forget + v1
-                sxx[e] = sxx[e] * forget + v0 * v0
-                sxx[e + 1] = sxx[e + 1] * forget + v1 * v1
-                sxy[e] = sxy[e] * forget + v0 * y0
-                sxy[e + 1] = sxy[e + 1] * forget + v1 * y1
+                sums[e] = sums[e] * forget + v0
+                sums[e + 1] = sums[e + 1] * forget + v1
+                sums[q] = sums[q] * forget + v0 * v0
+                sums[q + 1] = sums[q + 1] * forget + v1 * v1
+                sums[w] = sums[w] * forget + v0 * y0
+                sums[w + 1] = sums[w + 1] * forget + v1 * y1
             else:
-                sx[e] += v0
-                sx[e + 1] += v1
-                sxx[e] += v0 * v0
-                sxx[e + 1] += v1 * v1
-                sxy[e] += v0 * y0
-                sxy[e + 1] += v1 * y1
+                sums[e] += v0
+                sums[e + 1] += v1
+                sums[q] += v0 * v0
+                sums[q + 1] += v1 * v1
+                sums[w] += v0 * y0
+                sums[w + 1] += v1 * y1
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -267,13 +281,8 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     kl2 = K * L * 2
     o = HEAD
     # flat views, C order (no reshape: each costs a C call); the shapes in the comments
-    sx = state[o:o + kl2]  # (K, L, 2)
-    sxx = state[o + kl2:o + 2 * kl2]
-    sxy = state[o + 2 * kl2:o + 3 * kl2]
-    x = state[o + 3 * kl2:o + 4 * kl2]
-    o += 4 * kl2
-    decay = state[o:o + K * L]  # (K, L)
-    o += K * L
+    sums = state[o:o + 3 * kl2]  # Σx, Σx², Σx·y: (3, K, L, 2)
+    o += 3 * kl2
     t = state[o:o + capacity]
     o += capacity
     u = state[o:o + 2 * capacity]  # (C, 2)
@@ -292,19 +301,19 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
     if has_sample and not (n < 2 or not (math.isfinite(y0) and math.isfinite(y1))
                            or sample_t_s <= last_t or t[0] > sample_t_s - delays_s[K - 1]):
         t_s = sample_t_s
-        j = np.empty(K, dtype=np.int64)  # each delay's command
-        lag_decays(t, n, t_s, delays_s, lags_s, j, decay, memo, bits, ints)
         forget = math.exp(-(t_s - last_t) / window_s) if math.isfinite(last_t) else 1.0
         state[S_LAST_T] = t_s
         y = state[S_Y:S_Y + 2]
         y[0] = y0
         y[1] = y1
-        fold_sample(u, ylag, j, decay, y, forget, x, sx, sxx, sxy)
-        if state[S_HAS_BEST] != 0.0:  # the residual of the tracked best model (its lag-1 ρ)
-            k, m = int(state[S_K]), int(state[S_L])
-            e = 2 * (k * L + m)
-            r0 = y0 - (state[S_G] * x[e] + state[S_B])
-            r1 = y1 - (state[S_G + 1] * x[e + 1] + state[S_B + 1])
+        has_best = state[S_HAS_BEST] != 0.0
+        best = 2 * (int(state[S_K]) * L + int(state[S_L])) if has_best else -1
+        x = state[S_X:S_X + 2]
+        fold_sample(t, n, state[S_UNORDERED] == 0.0, t_s, delays_s, lags_s, memo, bits, ints,
+                    u, ylag, y, forget, sums, best, x)
+        if has_best:  # the residual of the tracked best model (its lag-1 ρ)
+            r0 = y0 - (state[S_G] * x[0] + state[S_B])
+            r1 = y1 - (state[S_G + 1] * x[1] + state[S_B + 1])
             for i in range(3):
                 state[S_RES + i] *= forget
             if state[S_HAS_R] != 0.0:
@@ -325,20 +334,8 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
         if state[S_SINCE_BEST] >= refresh_samples:  # the residual tracks a recent best model
             state[S_SINCE_BEST] = 0.0
             code = 2
-            ns = state[S_N]
-            if not ns < 20:  # the best grid point and its model, as ``_fit`` sets them
-                out = np.empty(3 * kl2 + K * L + 2)  # fit_size
-                best = fit_grid(state, out)
-                if best >= 0:
-                    k, m = best // L, best % L
-                    for a in range(2):
-                        e = (k * L + m) * 2 + a
-                        g = out[kl2 + e]
-                        state[S_G + a] = g
-                        state[S_B + a] = (state[S_SY + a] - g * state[HEAD + e]) / ns
-                    state[S_HAS_BEST] = 1.0
-                    state[S_K] = k
-                    state[S_L] = m
+            if not state[S_N] < 20:  # the best grid point and its model, as ``_fit``'s
+                fit_grid(state, np.empty(3 * kl2 + K * L + 2))  # fit_size
     # --- then the command (``command``, held until the next) or the restart
     if cmd_kind == CMD_RESTART:
         state[S_COUNT] = 0.0
@@ -370,6 +367,8 @@ def feed(state: np.ndarray, has_sample: bool, sample_t_s: float, roll_deg: float
             for m in range(L):
                 ylag[2 * (n * L + m)] = u0
                 ylag[2 * (n * L + m) + 1] = u1
+        if t_s != t_s:  # later times follow it unsorted (held_count)
+            state[S_UNORDERED] = 1.0
         t[n] = t_s
         u[2 * n] = u0
         u[2 * n + 1] = u1
@@ -383,7 +382,9 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     numpy, the same expressions in the same order): into ``out`` (:func:`fit_size`) the
     centred Σx², the gains, the residual per axis and summed over the axes, the centred Σy².
     Returns the flat index of the least residual (``argmin``: the first, or the first NaN),
-    or −1 when no grid point's commands moved or the attitude did not vary."""
+    or −1 when no grid point's commands moved or the attitude did not vary; otherwise that
+    grid point's model (its gains and offsets) is the one whose residual :func:`feed` tracks
+    from now on (slots ``S_HAS_BEST`` … ``S_B + 1``)."""
     K, L = int(state[S_DELAYS]), int(state[S_LAGS])
     kl2 = K * L * 2
     n = state[S_N]
@@ -420,15 +421,24 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
         return -1
     best = 0
     low = rss[0]
-    if low != low:
-        return 0
-    for i in range(1, K * L):
-        v = rss[i]
-        if v != v:
-            return i
-        if v < low:
-            low = v
-            best = i
+    if low == low:
+        for i in range(1, K * L):
+            v = rss[i]
+            if v != v:
+                best = i
+                break
+            if v < low:
+                low = v
+                best = i
+    k, m = best // L, best % L
+    for a in range(2):
+        e = 2 * best + a
+        g = gain[e]
+        state[S_G + a] = g
+        state[S_B + a] = (state[S_SY + a] - g * sx[e]) / n
+    state[S_HAS_BEST] = 1.0
+    state[S_K] = k
+    state[S_L] = m
     return best
 
 

@@ -423,8 +423,10 @@ class ResponseEstimation:
         """Feed this tick; returns its events (a new fit, a change of what auto uses)."""
         nav = inputs.navdata
         # the sample, then the command sent (a hover restarts the window): one compiled call
-        t_nav, roll_deg, pitch_deg = ((inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg)
-                                      if nav is not None else (None, 0.0, 0.0))
+        if nav is not None:  # (each a name, no tuple built and unpacked)
+            t_nav, roll_deg, pitch_deg = inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
+        else:
+            t_nav, roll_deg, pitch_deg = None, 0.0, 0.0
         if not sent.progressive:
             self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_RESTART)
             return []
@@ -437,30 +439,34 @@ class ResponseEstimation:
         e = self.estimator.estimate
         if not math.isfinite(e.delay_s):
             return []
+        delay_confident, gain_confident = e.delay_confident, e.gain_confident  # (once)
         events = [{"kind": "attitude_estimate", "delay_s": e.delay_s,
                    "delay_std_s": e.delay_std_s, "delay_contrast": e.delay_contrast,
                    "gain": e.gain_mean,
                    "gain_std": e.gain_mean_std, "lag_s": e.lag_s, "r2": e.r2,
-                   "delay_confident": e.delay_confident,
-                   "gain_confident": e.gain_confident}]
-        return events + self._apply(e)
+                   "delay_confident": delay_confident,
+                   "gain_confident": gain_confident}]
+        self._apply(e, delay_confident, gain_confident, events)
+        return events
 
-    def _apply(self, e) -> list[dict]:
-        a, events = self.cfg, []
-        if self.auto_delay and e.delay_confident:
+    def _apply(self, e, delay_confident: bool, gain_confident: bool,
+               events: list[dict]) -> None:
+        """What auto makes of the estimate ``e`` (and its confidences): a new delay, a new
+        gain, each with its event appended to ``events``."""
+        a = self.cfg
+        if self.auto_delay and delay_confident:
             before = self.delay.lead_s
             if self.delay.set_delay_s(min(max(e.delay_s, a.delay_min_s), a.delay_max_s)):
                 events.append({"kind": "delay_compensation", "delay_s": self.delay.lead_s,
                                "previous_s": before, "estimate_s": e.delay_s,
                                "estimate_std_s": e.delay_std_s})
-        if self.auto_gain and e.gain_confident:
+        if self.auto_gain and gain_confident:
             gain = min(max(e.gain_mean, a.gain_min), a.gain_max)
             before = self.supervision.attitude_gain
             if abs(gain - before) > max(2.0 * e.gain_mean_std, 0.05 * before):
                 self.supervision.attitude_gain = gain
                 events.append({"kind": "attitude_gain", "gain": gain, "previous": before,
                                "estimate": e.gain_mean, "estimate_std": e.gain_mean_std})
-        return events
 
 
 # ----------------------------------------------------------------------------- supervision

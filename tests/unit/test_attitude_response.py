@@ -159,3 +159,35 @@ def test_a_copy_of_the_estimator_fits_what_it_was_fed(how):
     assert other.estimate == twin.estimate
     assert np.shares_memory(other._sx, other._state)
     assert np.shares_memory(other._fit_views[0], other._fit_out)
+
+
+def test_the_mean_gain_is_the_precision_weighted_sum_made_once():
+    """``gain_mean`` and ``gain_mean_std``: Python's ``sum`` of the precision-weighted gains
+    and of the weights, to the bit (NaN, ±inf, ±0 and the 1e-9 floor among them), made when
+    first read and kept; an estimate whose weights overflow is still built."""
+    import random
+
+    from ardrone_nmpc.estimation.attitude_response import AttitudeEstimate
+
+    def mean(gain, std):
+        pairs = [(g, 1.0 / max(s, 1e-9) ** 2) for g, s in zip(gain, std)
+                 if math.isfinite(g) and math.isfinite(s)]
+        return sum(g * w for g, w in pairs) / sum(w for _, w in pairs) if pairs else math.nan
+
+    def mean_std(std):
+        w = sum(1.0 / max(s, 1e-9) ** 2 for s in std if math.isfinite(s))
+        return 1.0 / math.sqrt(w) if w > 0 else math.inf
+
+    rng = random.Random(4)
+    odd = [0.0, -0.0, math.nan, math.inf, -math.inf, 1e-12, -1e-12, 1e-9, 5e-10, 1e-300]
+    for _ in range(20_000):
+        gain, std = ([rng.choice(odd) if rng.random() < 0.3
+                      else rng.uniform(-2.0, 2.0) * 10.0 ** rng.randint(-12, 3)
+                      for _ in range(2)] for _ in range(2))
+        est = AttitudeEstimate(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5, 50.0)
+        assert repr(est.gain_mean) == repr(mean(gain, std))
+        assert repr(est.gain_mean_std) == repr(mean_std(std))
+        assert est.__dict__["gain_mean"] is est.gain_mean  # kept
+    huge = AttitudeEstimate(0.1, 0.01, (1.0, 1.0), (1e300, 0.1), 0.1, 0.5, 50.0)
+    with pytest.raises(OverflowError):  # as sum's did, when read
+        _ = huge.gain_mean

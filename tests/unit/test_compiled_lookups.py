@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc.core.numerics import callable_from_python
+from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 from ardrone_nmpc.estimation import response_kernels
 from ardrone_nmpc.reference.trajectories import Square, Waypoints
 
 # the attitude fit's inner kernels, callable from Python (the same source and options)
-lag_decays = callable_from_python(response_kernels.lag_decays)
+held_count = callable_from_python(response_kernels.held_count)
+searched = callable_from_python(count_at_or_below)
 memo_decays = callable_from_python(response_kernels.memo_decays)
 microseconds = callable_from_python(response_kernels.microseconds)
 fold_sample = callable_from_python(response_kernels.fold_sample)
@@ -64,46 +66,77 @@ def test_waypoint_lookup_takes_a_scalar_and_any_layout():
     np.testing.assert_array_equal(traj.state_at(7.5)[0, [IX_X, IX_Y]], [1.0, 0.5])
 
 
-def test_lag_decays_and_fold_are_the_numpy_broadcast_bit_for_bit():
+def test_the_fold_is_the_numpy_broadcast_bit_for_bit():
+    """``fold_sample``: each delay's command (``searchsorted``), its decays (``math.exp``) and
+    the sums they make, as numpy's broadcast makes them — walking down the times or, for
+    times out of order, searching them; the tracked model's value alone kept."""
     rng = np.random.default_rng(3)
     n, cap = 40, 64
     times = np.zeros(cap)
     times[:n] = np.cumsum(rng.uniform(0.02, 0.1, n))
     u, ylag = rng.normal(size=(cap, 2)), rng.normal(size=(cap, 6, 2))
     delays, lags = np.arange(0.0, 0.605, 0.01), np.array([0.03, 0.06, 0.1, 0.15, 0.2, 0.3])
-    sums = [rng.normal(size=(delays.size, lags.size, 2)) for _ in range(3)]
+    sums = rng.normal(size=(3, delays.size, lags.size, 2))
     # the decays' cache, cold for the first time and warm (every d seen) for its repeat
     memo = np.full(2 * response_kernels.MEMO_SETS * (1 + lags.size), math.nan)
     bits = np.zeros(1)
-    for t_s, forget in ((float(times[n - 1]) + 0.013, 0.97), (float(times[n - 1]), 1.0),
-                        (float(times[n - 1]) + 0.013, 0.97)):
-        j = np.zeros(delays.size, dtype=np.int64)
-        decay = np.zeros((delays.size, lags.size))
-        # the kernels take flat arrays (views of these)
-        lag_decays(times, n, t_s, delays, lags, j, decay.reshape(-1), memo, bits,
-                   bits.view(np.int64))
-        at = t_s - delays
-        j_np = np.searchsorted(times[:n], at, side="right") - 1
-        assert np.array_equal(j, j_np)
-        arg = -(at - times[j_np])[:, None] / lags
-        assert decay.tobytes() == np.array([[math.exp(a) for a in row] for row in arg]).tobytes()
-
+    for t_s, forget, ordered, best in ((float(times[n - 1]) + 0.013, 0.97, True, (5, 2)),
+                                       (float(times[n - 1]), 1.0, False, None),
+                                       (float(times[n - 1]) + 0.013, 0.97, True, (60, 5)),
+                                       (float(times[n - 1]) + 0.2, 0.9, False, (0, 0))):
         y = rng.normal(size=2)
-        x = np.zeros_like(sums[0])
-        expected = [s.copy() for s in sums]
-        fold_sample(u.reshape(-1), ylag.reshape(-1), j, decay.reshape(-1), y, forget,
-                    x.reshape(-1), *(s.reshape(-1) for s in sums))
-        uj = u[j_np][:, None, :]
-        x_np = uj + (ylag[j_np] - uj) * decay[:, :, None]
+        x_best = np.full(2, 7.0)
+        expected = sums.copy()
+        flat = -1 if best is None else 2 * (best[0] * lags.size + best[1])
+        fold_sample(times, n, ordered, t_s, delays, lags, memo, bits, bits.view(np.int64),
+                    u.reshape(-1), ylag.reshape(-1), y, forget, sums.reshape(-1), flat, x_best)
+        at = t_s - delays
+        j = np.searchsorted(times[:n], at, side="right") - 1
+        arg = -(at - times[j])[:, None] / lags
+        decay = np.array([[math.exp(a) for a in row] for row in arg])
+        uj = u[j][:, None, :]
+        x_np = uj + (ylag[j] - uj) * decay[:, :, None]
         if forget != 1.0:
-            for s in expected:
-                s *= forget
+            expected *= forget
         expected[0] += x_np
         expected[1] += x_np * x_np
         expected[2] += x_np * y
-        assert x.tobytes() == x_np.tobytes()
-        for got, want in zip(sums, expected):
-            assert got.tobytes() == want.tobytes()
+        assert sums.tobytes() == expected.tobytes()
+        want = np.full(2, 7.0) if best is None else x_np[best]
+        assert x_best.tobytes() == want.tobytes()
+
+
+def test_the_walk_down_the_times_is_the_binary_search():
+    """``held_count`` from the last count, for ``at`` descending (a sample's delays), is
+    ``count_at_or_below`` on ascending times (±inf, a NaN last, a NaN ``at`` included); out
+    of order (a NaN held among them) it is the binary search itself."""
+    rng = np.random.default_rng(9)
+    for trial in range(300):
+        n = int(rng.integers(1, 30))
+        times = np.cumsum(rng.uniform(0.0, 0.1, n)).round(2)  # ties with the ``at`` too
+        times = np.unique(times)
+        n = times.size
+        if trial % 5 == 1:
+            times[-1] = math.inf
+        if trial % 5 == 2:
+            times[0] = -math.inf
+        if trial % 5 == 3:
+            times[-1] = math.nan
+        t_s = float(rng.uniform(-0.1, times[np.isfinite(times)].max(initial=0.0) + 0.3))
+        ats = t_s - np.arange(0.0, 0.605, 0.01)
+        if trial % 7 == 0:
+            ats[:] = math.nan
+        c = n
+        for at in ats:
+            c = held_count(times, n, c, at, True)
+            assert c == np.searchsorted(times[:n], at, side="right"), (times, at)
+        if n > 2:  # a NaN held in the middle: the times after it are unsorted
+            times[n // 2] = math.nan
+            times[n // 2 + 1:] = rng.permutation(times[n // 2 + 1:])
+            c = n
+            for at in ats:
+                c = held_count(times, n, c, at, False)
+                assert c == searched(times, n, at)
 
 
 def test_the_decays_cache_holds_the_exponentials_of_its_keys_bit_for_bit():

@@ -285,3 +285,27 @@ def test_times_the_kernel_leaves_to_pythons_round():
             _feed_both(ref, got, ev)
         _same(ref, got)
         assert repr(ref.estimate) == repr(got.estimate)
+
+
+def test_the_compiled_entry_point_takes_numbers_as_float_makes_them():
+    """Once compiled, the step is called through its entry point (no look-up of the
+    arguments' types): it makes ints, numpy scalars and bools floats as ``float`` does (what
+    the dispatcher's one signature is called with) — the same bits."""
+    from ardrone_nmpc.estimation import attitude_response as ar
+
+    ref, got = AttitudeResponseEstimator(E), AttitudeResponseEstimator(E)
+    kinds = (int, np.float32, np.float64, np.int64, lambda v: bool(v > 0.0), float)
+    for i, ev in enumerate(_stream(8)[:4000]):
+        kind = kinds[i % len(kinds)]
+        values = [kind(v) if math.isfinite(v) else v for v in ev[2:]]  # (no NaN int)
+        if ev[0] == "cmd":
+            ref.command(np.float64(ev[1]), *(float(v) for v in values))
+            got.command(np.float64(ev[1]), *values)
+        elif ev[0] == "restart":
+            ref.restart()
+            got.restart()
+        else:
+            assert ref.navdata(ev[1], *(float(v) for v in values)) == got.navdata(ev[1],
+                                                                                  *values)
+        assert ref._state.tobytes() == got._state.tobytes()
+    assert ar._FEED_ENTRY and got._step is ar._FEED_ENTRY[0]
