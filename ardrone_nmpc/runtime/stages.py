@@ -235,6 +235,13 @@ class Control:
             self._rows: np.ndarray | None = None
             self._work_args: tuple | None = None  # the waypoint_args it holds
             self._horizon: np.ndarray | None = None
+            # the fast path's answer — the predicted state, and the reference now and over
+            # the horizon (one array, its two views) —: the stage's own, overwritten by the
+            # next solve like the estimate it solves from (the tick reads its Solution within
+            # the tick, the log takes values): two allocations and two views less a tick
+            self._x_solve = np.empty(STATE_DIM)
+            self._states = np.empty(self._states_shape)
+            self._ref_now, self._ref_horizon = self._states[0], self._states[1:]
             self._dtau_varies = True  # until the first solve asks the solver
             # the fast path's solve: without the checks its arrays pass by construction (a
             # solver without it solves with them)
@@ -253,7 +260,11 @@ class Control:
               ) -> Solution:
         """The controller's answer at experiment time ``t_exp_s`` for the estimate ``x``;
         ``offset`` shifts the NMPC's horizon reference (offset-free tracking; ``ref_now``,
-        the logged reference, stays the experiment's)."""
+        the logged reference, stays the experiment's).
+
+        Against a waypoint reference the answer's ``ref_now``, ``x_solve`` and
+        ``ref_horizon`` are the stage's own arrays, overwritten by the next call (as the
+        estimate ``x`` is): copy them to keep them; ``result`` is the answer's own."""
         if self.nmpc is None:
             ref_now = traj.state_at(t_exp_s)[0]
             return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
@@ -279,9 +290,8 @@ class Control:
             if args is not self._work_args:  # once a flight: its arrays into the work vector
                 self._pack(args)
             pending = delay.count
-            x_solve = np.empty(STATE_DIM) if pending else x
-            states = np.empty(self._states_shape)
-            ref_horizon = states[1:]  # the logged horizon, unshifted (one view, not two)
+            x_solve = self._x_solve if pending else x
+            ref_horizon = self._ref_horizon  # the logged horizon, unshifted
             if offset is None:
                 shift = _NO_SHIFT
                 horizon = ref_horizon
@@ -289,8 +299,8 @@ class Control:
                 shift = offset.integrator.shift
                 horizon = self._horizon
             nmpc_inputs(x, delay.ring, delay.first, pending, x_solve, t_exp_s, delay.lead_s,
-                        shift, states, self._work, self._rows)
-            return self._solved(t_exp_s, x_solve, states, horizon, ref_horizon,
+                        shift, self._states, self._work, self._rows)
+            return self._solved(t_exp_s, x_solve, self._ref_now, horizon, ref_horizon,
                                 self._solve_prepared)
         x_solve = delay.predict(x)
         times = np.add(t_exp_s + delay.lead_s, self._offsets)  # (t + lead) + Δτ·i
@@ -298,7 +308,7 @@ class Control:
         states = traj.state_at(times)
         ref_horizon = states[1:]
         horizon = ref_horizon if offset is None else offset.integrator.shifted(ref_horizon)
-        return self._solved(t_exp_s, x_solve, states, horizon, ref_horizon, solver.solve)
+        return self._solved(t_exp_s, x_solve, states[0], horizon, ref_horizon, solver.solve)
 
     def _pack(self, args: tuple) -> None:
         """:func:`~ardrone_nmpc.runtime.tick_kernels.nmpc_work` of the waypoint trajectory's
@@ -309,15 +319,15 @@ class Control:
         self._offsets = offsets
         self._work, self._work_args = work, args
 
-    def _solved(self, t_exp_s: float, x_solve: np.ndarray, states: np.ndarray,
+    def _solved(self, t_exp_s: float, x_solve: np.ndarray, ref_now: np.ndarray,
                 horizon: np.ndarray, ref_horizon: np.ndarray, solve) -> Solution:
-        """``solve``'s answer against ``horizon`` and its :class:`Solution` (``states``: the
-        reference now, then the unshifted horizon ``ref_horizon``, ``states[1:]``)."""
+        """``solve``'s answer against ``horizon`` and its :class:`Solution` (``ref_now``: the
+        reference now, ``ref_horizon`` the unshifted horizon)."""
         result = solve(t_exp_s, x_solve, horizon)
         status = result.status
         ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)
-        return _new_tuple(Solution, (states[0], x_solve, result, result.u, ok, status._value_,
+        return _new_tuple(Solution, (ref_now, x_solve, result, result.u, ok, status._value_,
                                      None, ref_horizon))
 
     def command(self, action: Action, sol: Solution, x: np.ndarray,
@@ -356,7 +366,7 @@ class Control:
             vz_ref = -vz_max
         if vz_max < vz_ref:
             vz_ref = vz_max
-        return AttitudeCommand(vz_ref, phi, theta, rate)
+        return AttitudeCommand.make(vz_ref, phi, theta, rate)  # the record, ~50 ns cheaper
 
 
 # ----------------------------------------------------------------------------- offset-free

@@ -119,6 +119,33 @@ def test_control_solves_the_same_through_either_path(shifted):
     assert solutions[0] == solutions[1]
 
 
+
+def test_the_fast_paths_answer_is_the_stages_own_and_its_result_the_answers_own():
+    """Against a waypoint reference ``Control.solve`` writes its answer's ``ref_now``,
+    ``x_solve`` and ``ref_horizon`` into the stage's own arrays (the next solve overwrites
+    them, as the estimate's): what the tick reads within the tick is this solve's; the
+    solver's ``result`` (its ``u``) stays each answer's own."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"))
+    limits = command_scales(cfg.drone)
+    traj = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    delay = DelayPrediction(0.26, PERIOD_S)
+    nmpc = make_nmpc(effective_controller(cfg.controller, limits), period_s=PERIOD_S)
+    control = Control(cfg, limits, nmpc, delay)
+    x = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    delay.push(np.array([0.1, 0.0, 0.0, 0.0]))  # a pending input: x_solve is not x
+    first = control.solve(2.0, x, traj)
+    kept = (first.ref_now.copy(), first.x_solve.copy(), first.ref_horizon.copy(),
+            first.result.u.copy())
+    np.testing.assert_array_equal(kept[0], traj.state_at(2.0)[0])
+    delay.push(first.result.u)
+    second = control.solve(2.0 + PERIOD_S, x, traj)
+    assert second.ref_now is first.ref_now and second.x_solve is first.x_solve
+    assert second.ref_horizon is first.ref_horizon
+    np.testing.assert_array_equal(second.ref_now, traj.state_at(2.0 + PERIOD_S)[0])
+    assert first.ref_now.tobytes() != kept[0].tobytes()  # overwritten, as documented
+    assert second.result.u is not first.result.u
+    assert first.result.u.tobytes() == kept[3].tobytes()
+
 # ----------------------------------------------------------------------------- estimation
 def _poses(seed: int):
     """A flight's poses: steps of 65 ms with jitter, a pose seen again (stale mocap), a gap."""
