@@ -75,7 +75,8 @@ def one_line(err: BaseException) -> str:
 def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
            fly: Callable[[RunRecorder], T], catch: bool = False,
            summarise_failed: Callable[[Path], None] | None = None,
-           rows_per_write: int = 1, durable: bool = True) -> Recording[T]:
+           rows_per_write: int = 1, durable: bool = True,
+           name: str | None = None) -> Recording[T]:
     """Create a run directory for ``cfg`` under ``log_dir``, run ``fly(recorder)`` into it,
     then write its ``summary.csv``.
 
@@ -84,14 +85,14 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
     real flight's run directory is complete however it ended — and the exception propagates
     — or, with ``catch``, comes back as :attr:`Recording.error`. A Ctrl-C or terminating
     signal ends it with the ``interrupted`` event and propagates (never caught), carrying
-    the run directory as ``run_dir``. ``rows_per_write`` and ``durable``: see
+    the run directory as ``run_dir``. ``rows_per_write``, ``durable`` and ``name``: see
     :meth:`~ardrone_nmpc.runs.rundir.RunRecorder.create`.
     """
     from ardrone_nmpc.runs.summary import write_run_summary  # when used (module docstring)
 
     wall0 = time.perf_counter()
     with RunRecorder.create(log_dir, cfg, seed=seed, rows_per_write=rows_per_write,
-                            durable=durable) as recorder:
+                            durable=durable, name=name) as recorder:
         try:
             result = fly(recorder)
         except BaseException as err:
@@ -114,7 +115,8 @@ def record(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None,
 
 def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | None = None,
                     progress: Callable[[float], None] | None = None,
-                    catch: bool = False, live=None, plant=None) -> Recording[SimResult]:
+                    catch: bool = False, live=None, plant=None,
+                    name: str | None = None) -> Recording[SimResult]:
     """Fly ``cfg`` in the lockstep simulation into a new run directory under ``log_dir`` and
     summarise it (see :func:`record`).
 
@@ -124,7 +126,8 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
     after an emergency stop): ``wall_s``, ``ticks``, ``ending``, ``final_mode``.
     ``progress(fraction)`` is called every tick. ``live`` (a
     :class:`~ardrone_nmpc.viz.live.LiveView`) sees every row and event too. ``plant`` flies
-    another airframe (see :func:`~ardrone_nmpc.runtime.lockstep.run_lockstep`).
+    another airframe (see :func:`~ardrone_nmpc.runtime.lockstep.run_lockstep`). ``name``:
+    the run directory's own name (:meth:`~ardrone_nmpc.runs.rundir.RunRecorder.create`).
 
     Raises :class:`~ardrone_nmpc.runtime.schedule.ScheduleError` before any directory is
     created for times that give no tick count, and
@@ -158,4 +161,4 @@ def record_lockstep(cfg: ExperimentConfig, log_dir: str | Path, *, seed: int | N
 
     # a simulation flies again bit for bit from its config.yaml: no fsync (RunRecorder.create)
     return record(cfg, log_dir, seed=seed, fly=fly, catch=catch,
-                  rows_per_write=LOCKSTEP_ROWS_PER_WRITE, durable=False)
+                  rows_per_write=LOCKSTEP_ROWS_PER_WRITE, durable=False, name=name)

@@ -79,15 +79,8 @@ from ardrone_nmpc.runs.row_text import (_EMPTY_CELLS, _FORBIDDEN, BlockCheck, Ke
                                         _fast_line, _plain_line, block_text, careful_line,
                                         format_number, row_plan)
 
-__all__ = [
-    "LogError", "RunData",
-    "RunRecorder",
-    "SummaryRow",
-    "format_number",
-    "read_run",
-    "read_summary",
-    "write_summary",
-]
+__all__ = ["LogError", "RunData", "RunRecorder", "SummaryRow", "format_number", "read_run",
+           "read_summary", "write_summary"]
 
 CONFIG_FILE = "config.yaml"
 LOG_FILE = "log.csv"
@@ -96,6 +89,8 @@ SUMMARY_FILE = "summary.csv"
 
 _COLUMN_SET = frozenset(LOG_COLUMNS)
 _TICK_PLAN = row_plan(TICK_CELL_KEYS)
+
+
 class LogError(UserError, ValueError):
     """A run directory that cannot be read: ``<file>:<line>: <message>`` (1-based line;
     exit code 1)."""
@@ -166,9 +161,10 @@ class RunRecorder:
     @classmethod
     def create(cls, log_dir: str | Path, cfg: ExperimentConfig, *, seed: int | None,
                now: _dt.datetime | None = None, rows_per_write: int = 1,
-               durable: bool = True) -> RunRecorder:
+               durable: bool = True, name: str | None = None) -> RunRecorder:
         """Create ``log_dir/<YYYYmmdd-HHMMSS>-<cfg.name>/`` (``-2``, ``-3``, … appended if it
-        exists; parents created), copy the input files into ``inputs/``, write
+        exists; parents created) — or ``log_dir/<name>/`` as named (FileExistsError if it
+        exists: a sweep's staging directory) —, copy the input files into ``inputs/``, write
         ``config.yaml``, open ``log.csv`` (header row written) and ``events.jsonl``. Fly
         :attr:`config` (it reads the copies).
 
@@ -192,7 +188,7 @@ class RunRecorder:
         now = now if now is not None else _dt.datetime.now().astimezone()
         log_dir = Path(log_dir)
         log_dir.mkdir(parents=True, exist_ok=True)
-        base = f"{now.strftime('%Y%m%d-%H%M%S')}-{cfg.name}"
+        base = f"{now.strftime('%Y%m%d-%H%M%S')}-{cfg.name}" if name is None else name
         suffix = 1
         while True:
             path = log_dir / (base if suffix == 1 else f"{base}-{suffix}")
@@ -200,6 +196,8 @@ class RunRecorder:
                 path.mkdir()  # atomic: two recorders never share a directory
                 break
             except FileExistsError:
+                if name is not None:
+                    raise
                 suffix += 1
         try:
             return cls._fill(path, cfg, inputs, seed=seed, now=now,

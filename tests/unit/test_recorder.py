@@ -110,6 +110,17 @@ def test_default_time_is_now(tmp_path, cfg):
     assert stamp <= dt.datetime.now()
 
 
+def test_a_named_run_directory_is_made_as_named_or_refused(tmp_path, cfg):
+    # a sweep's staging directory: made under the parents, never suffixed
+    with RunRecorder.create(tmp_path / "stage", cfg, seed=5, now=NOW, name="case-1") as rec:
+        rec.write_row(full_row(0))
+    assert rec.path == tmp_path / "stage" / "case-1"
+    assert read_run(rec.path).seed == 5 and read_run(rec.path).n_rows == 1
+    with pytest.raises(FileExistsError):
+        RunRecorder.create(tmp_path / "stage", cfg, seed=5, now=NOW, name="case-1")
+    assert [p.name for p in (tmp_path / "stage").iterdir()] == ["case-1"]
+
+
 def test_context_manager_closes_the_files(tmp_path, cfg):
     with RunRecorder.create(tmp_path, cfg, seed=0, now=NOW) as rec:
         rec.write_row(full_row(0))
