@@ -502,6 +502,8 @@ class Supervision:
         self.limits = limits
         self.attitude_gain = attitude_gain  # the drone's tilt per unit command, over E
         self._last: tuple[PcmdCommand, np.ndarray] | None = None  # for a hold
+        # the tilt cap, read every tick (the safety config is frozen: no change behind it)
+        self._max_tilt_rad = supervisor.cfg.max_tilt_rad
         self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
         self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
 
@@ -522,6 +524,36 @@ class Supervision:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
         ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller). It notes the ż
         reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`)."""
+        if decision.action is _CONTROL and cmd is not None:
+            # the usual tick: the controller's command as Python floats, its tilt inside the
+            # cap (which a NaN fails) — :meth:`_command`'s control case with nothing to
+            # clip, convert or refuse; anything else goes there
+            vz, roll, pitch, rate = cmd.vz_ref_mps, cmd.phi_rad, cmd.theta_rad, cmd.psirate_radps
+            cap = self._max_tilt_rad
+            if (vz.__class__ is float and roll.__class__ is float
+                    and pitch.__class__ is float and rate.__class__ is float
+                    and zacc_mps2.__class__ is float and -cap <= roll <= cap
+                    and -cap <= pitch <= cap and vz - vz == 0.0 and rate - rate == 0.0):
+                k = self.attitude_gain
+                e, vz_max, yaw_max = self._scales
+                if k != 1.0:  # (float(): a gain may be a numpy scalar)
+                    pcmd = pcmd_of_floats(vz, float(roll / k), float(pitch / k), rate, e,
+                                          vz_max, yaw_max)
+                else:
+                    pcmd = pcmd_of_floats(vz, roll, pitch, rate, e, vz_max, yaw_max)
+                saturated = pcmd.saturated
+                flags = "0000" if saturated is UNSATURATED else _FLAGS[saturated]
+                zacc = zacc_mps2 if zacc_mps2 - zacc_mps2 == 0.0 else 0.0
+                u_sent = np.array((zacc, roll, pitch, rate))
+                self.zacc_mps2 = zacc
+                self.vz_ref_mps = vz
+                self._last = (pcmd, u_sent)
+                return _new_tuple(Sent, (pcmd, u_sent, True, decision, cmd, flags))
+        return self._command(decision, cmd, zacc_mps2)
+
+    def _command(self, decision: Decision, cmd: AttitudeCommand | None,
+                 zacc_mps2: float) -> Sent:
+        """:meth:`command`, every case."""
         action = decision.action
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
@@ -529,7 +561,7 @@ class Supervision:
             return _new_tuple(Sent, (pcmd, u_sent, True, decision, None, None))
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, pitch = cmd.phi_rad, cmd.theta_rad
-            cap = self.supervisor.cfg.max_tilt_rad
+            cap = self._max_tilt_rad
             if -cap <= roll <= cap and -cap <= pitch <= cap:  # what clip_tilt_rad leaves be
                 roll_clipped = pitch_clipped = False
             else:
