@@ -267,8 +267,9 @@ class Supervisor:
         if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= self._max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
-            cap_deg = self._tilt_cap_deg
-            if not (abs(navdata.roll_deg) <= cap_deg and abs(navdata.pitch_deg) <= cap_deg):
+            cap_deg = self._tilt_cap_deg  # |v| <= cap as -cap <= v <= cap: no abs() calls
+            if not (-cap_deg <= navdata.roll_deg <= cap_deg
+                    and -cap_deg <= navdata.pitch_deg <= cap_deg):
                 return Decision(Action.HOVER, "tilt")
         return NOMINAL
 
