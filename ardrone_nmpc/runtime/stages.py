@@ -12,6 +12,7 @@ last command sent — and nothing else; the log row is built from their results 
 from __future__ import annotations
 
 import math
+import struct
 from typing import NamedTuple
 
 import numpy as np
@@ -47,6 +48,10 @@ HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
+_ALL_FROZEN = (True, True, True, True)  # OffsetFree: no axis integrates
+# Supervision: the (4,) input sent, from four Python floats (native doubles, the same bits)
+_pack_input = struct.Struct(f"{INPUT_DIM}d").pack
+_frombuffer = np.frombuffer
 _F64 = np.dtype(np.float64)
 _X_SHAPE = (STATE_DIM,)
 # a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
@@ -381,7 +386,7 @@ class OffsetFree:
             frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
-            frozen = (True,) * 4
+            frozen = _ALL_FROZEN
         # x, ref_now, ref_horizon are float64 arrays: the integrator's own step, without
         # its conversions (ReferenceIntegrator.update)
         self.integrator.step(x, sol.ref_now, frozen, sol.ref_horizon)
@@ -468,7 +473,7 @@ class Sent(NamedTuple):
     """What a tick sends and why (a NamedTuple, as :class:`Solution`).
 
     ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
-    from the NMPC; zeros for a hover). ``flown`` is a newly sent command after tilt clipping
+    from the NMPC; zeros for a hover); read it, never write it (the usual tick's is read-only). ``flown`` is a newly sent command after tilt clipping
     and ``saturated`` its ``cmd_saturated`` flags (None for a hold or a hover).
     """
 
@@ -544,7 +549,9 @@ class Supervision:
                 saturated = pcmd.saturated
                 flags = "0000" if saturated is UNSATURATED else _FLAGS[saturated]
                 zacc = zacc_mps2 if zacc_mps2 - zacc_mps2 == 0.0 else 0.0
-                u_sent = np.array((zacc, roll, pitch, rate))
+                # np.array((zacc, roll, pitch, rate))'s values, read-only (the delay ring
+                # copies it, nothing writes it): ~100 ns under numpy's look at the tuple
+                u_sent = _frombuffer(_pack_input(zacc, roll, pitch, rate))
                 self.zacc_mps2 = zacc
                 self.vz_ref_mps = vz
                 self._last = (pcmd, u_sent)
