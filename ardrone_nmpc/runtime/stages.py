@@ -473,8 +473,9 @@ class Sent(NamedTuple):
     """What a tick sends and why (a NamedTuple, as :class:`Solution`).
 
     ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
-    from the NMPC; zeros for a hover); read it, never write it (the usual tick's is read-only). ``flown`` is a newly sent command after tilt clipping
-    and ``saturated`` its ``cmd_saturated`` flags (None for a hold or a hover).
+    from the NMPC; zeros for a hover): read, never written (the usual tick's is read-only).
+    ``flown`` is a newly sent command after tilt clipping and ``saturated`` its
+    ``cmd_saturated`` flags (None for a hold or a hover).
     """
 
     pcmd: PcmdCommand
