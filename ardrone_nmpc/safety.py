@@ -193,6 +193,9 @@ class Supervisor:
         # the limits every tick's checks read, unpacked once (attribute lookups cost µs a tick)
         self._fence_lo = tuple(safety.geofence_min_m)
         self._fence_hi = tuple(safety.geofence_max_m)
+        #: The commanded roll/pitch cap (rad, ``max_tilt_rad``): :meth:`clip_tilt_rad`'s, and
+        #: what the supervision clips to every tick.
+        self.max_tilt_rad = safety.max_tilt_rad
         self._tilt_cap_deg = math.degrees(safety.max_tilt_rad)
         self._max_speed_mps = safety.max_speed_mps
         self._battery_floor_pct = safety.battery_floor_pct
@@ -310,7 +313,7 @@ class Supervisor:
 
     def clip_tilt_rad(self, angle_rad: float) -> tuple[float, bool]:
         """A commanded roll/pitch clipped to ``±max_tilt_rad``, and whether it was."""
-        cap = self.cfg.max_tilt_rad
+        cap = self.max_tilt_rad
         if angle_rad > cap:
             return cap, True
         if angle_rad < -cap:

@@ -508,8 +508,6 @@ class Supervision:
         self.limits = limits
         self.attitude_gain = attitude_gain  # the drone's tilt per unit command, over E
         self._last: tuple[PcmdCommand, np.ndarray] | None = None  # for a hold
-        # the tilt cap, read every tick (the safety config is frozen: no change behind it)
-        self._max_tilt_rad = supervisor.cfg.max_tilt_rad
         self.vz_ref_mps = 0.0  # ż reference of the command last sent (0 after a hover)
         self.zacc_mps2 = 0.0   # z̈ of the input last sent (the ż estimator's input)
 
@@ -535,7 +533,7 @@ class Supervision:
             # cap (which a NaN fails) — :meth:`_command`'s control case with nothing to
             # clip, convert or refuse; anything else goes there
             vz, roll, pitch, rate = cmd.vz_ref_mps, cmd.phi_rad, cmd.theta_rad, cmd.psirate_radps
-            cap = self._max_tilt_rad
+            cap = self.supervisor.max_tilt_rad
             if (vz.__class__ is float and roll.__class__ is float
                     and pitch.__class__ is float and rate.__class__ is float
                     and zacc_mps2.__class__ is float and -cap <= roll <= cap
@@ -569,7 +567,7 @@ class Supervision:
             return _new_tuple(Sent, (pcmd, u_sent, True, decision, None, None))
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, pitch = cmd.phi_rad, cmd.theta_rad
-            cap = self._max_tilt_rad
+            cap = self.supervisor.max_tilt_rad
             if -cap <= roll <= cap and -cap <= pitch <= cap:  # what clip_tilt_rad leaves be
                 roll_clipped = pitch_clipped = False
             else:

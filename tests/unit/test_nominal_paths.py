@@ -112,3 +112,8 @@ def test_a_new_config_moves_the_cached_limits():
     assert sup.check_feedback(**ok) == Decision(Action.HOLD, "stale-mocap")
     x = np.array([0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0])
     assert sup.check_state(x, None) == Decision(Action.HOVER, "speed")
+    supervision = Supervision(sup, DroneLimits())
+    sup.cfg = CFG.model_copy(update={"max_tilt_rad": 0.1})
+    sent = supervision.command(Decision(Action.CONTROL), AttitudeCommand(0.0, 0.15, 0.0, 0.0),
+                               0.0)
+    assert sent.flown.phi_rad == 0.1 and sent.saturated == "1000"
