@@ -175,9 +175,6 @@ class Supervisor:
 
     def __init__(self, safety) -> None:
         self.cfg = safety
-        self._fence_lo = tuple(safety.geofence_min_m)
-        self._fence_hi = tuple(safety.geofence_max_m)
-        self._tilt_cap_deg = math.degrees(safety.max_tilt_rad)  # check_state's, every tick
         self._latched: Decision | None = None
         self._solver_failures = 0   # consecutive failed solves
         self._solver_good = 0       # consecutive good solves while in a solver fallback
@@ -185,10 +182,48 @@ class Supervisor:
         self._mode = ""
         self.events: list[dict] = []
 
+    @property
+    def cfg(self):
+        """The :class:`~ardrone_nmpc.config.schema.SafetyConfig` it enforces."""
+        return self._cfg
+
+    @cfg.setter
+    def cfg(self, safety) -> None:
+        self._cfg = safety
+        # the limits every tick's checks read, unpacked once (attribute lookups cost µs a tick)
+        self._fence_lo = tuple(safety.geofence_min_m)
+        self._fence_hi = tuple(safety.geofence_max_m)
+        #: The commanded roll/pitch cap (rad, ``max_tilt_rad``): :meth:`clip_tilt_rad`'s, and
+        #: what the supervision clips to every tick.
+        self.max_tilt_rad = safety.max_tilt_rad
+        self._tilt_cap_deg = math.degrees(safety.max_tilt_rad)
+        self._max_speed_mps = safety.max_speed_mps
+        self._battery_floor_pct = safety.battery_floor_pct
+        self._navdata_land_ms = safety.navdata_land_ms
+        # an age within the smallest mocap limit passes all three; a NaN limit (no validated
+        # config has one) fails every age, so then none passes without the chain
+        mocap_ms = (safety.mocap_hold_ms, safety.mocap_hover_ms, safety.mocap_land_ms)
+        self._mocap_nominal_ms = (-math.inf if any(v != v for v in mocap_ms)
+                                  else min(mocap_ms))
+
     # ------------------------------------------------------------------ the three checks
     def check_feedback(self, *, mocap_age_ms: float, navdata_age_ms: float,
                        navdata: NavdataSample | None) -> Decision:
         """Before estimation: may the tick use the measurements at all?"""
+        if self._latched is None and navdata is not None:
+            # the usual tick: no emergency, no fault bit, battery above the floor, both ages
+            # within their limits — what the chain below answers NOMINAL to, in one test
+            bits = navdata.state_bits
+            if (navdata.mode is not _EMERGENCY and (bits is None or not bits & _ALARM_BITS)
+                    and navdata.battery_pct > self._battery_floor_pct
+                    and navdata_age_ms <= self._navdata_land_ms
+                    and mocap_age_ms <= self._mocap_nominal_ms):
+                return NOMINAL
+        return self._feedback_chain(mocap_age_ms, navdata_age_ms, navdata)
+
+    def _feedback_chain(self, mocap_age_ms: float, navdata_age_ms: float,
+                        navdata: NavdataSample | None) -> Decision:
+        """:meth:`check_feedback`, every condition in the table's order."""
         if self._latched is not None:
             return self._latched
         cfg = self.cfg
@@ -227,17 +262,17 @@ class Supervisor:
         if not (total - total == 0.0 or all(map(math.isfinite, xs))):
             return Decision(Action.HOVER, "nonfinite-state")
         lo, hi = self._fence_lo, self._fence_hi
-        cfg = self.cfg
         if not (lo[0] <= xs[0] <= hi[0] and lo[1] <= xs[2] <= hi[1] and lo[2] <= xs[4] <= hi[2]):
-            if cfg.geofence_action == "land":
+            if self.cfg.geofence_action == "land":
                 return self._latch(Decision(Action.LAND, "geofence"))
             return Decision(Action.HOVER, "geofence")
         # ``** 2`` (the C library's pow, as numpy's scalars do), not v * v: the same bits
-        if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= cfg.max_speed_mps:
+        if not math.sqrt(xs[1] ** 2 + xs[3] ** 2 + xs[5] ** 2) <= self._max_speed_mps:
             return Decision(Action.HOVER, "speed")
         if navdata is not None:
-            cap_deg = self._tilt_cap_deg
-            if not (abs(navdata.roll_deg) <= cap_deg and abs(navdata.pitch_deg) <= cap_deg):
+            cap_deg = self._tilt_cap_deg  # |v| <= cap as -cap <= v <= cap: no abs() calls
+            if not (-cap_deg <= navdata.roll_deg <= cap_deg
+                    and -cap_deg <= navdata.pitch_deg <= cap_deg):
                 return Decision(Action.HOVER, "tilt")
         return NOMINAL
 
@@ -247,7 +282,6 @@ class Supervisor:
         ``ok`` is the solver's status; ``u`` its (4,) input (checked for finiteness here too:
         the supervisor never trusts the solver to have done so).
         """
-        cfg = self.cfg
         if ok:
             us = u.tolist() if u.__class__ is _NDARRAY or hasattr(u, "tolist") else u
             total = sum(us)  # finite only if every one is (check_state's test)
@@ -259,16 +293,17 @@ class Supervisor:
             if not self._solver_fallback:
                 return NOMINAL
             self._solver_good += 1
-            if self._solver_good >= cfg.solver_recover_ticks:
+            if self._solver_good >= self.cfg.solver_recover_ticks:
                 self._solver_fallback = False
                 return NOMINAL
         else:
             self._solver_failures += 1
             self._solver_good = 0
-            if self._solver_failures <= cfg.solver_hold_ticks and not self._solver_fallback:
+            if self._solver_failures <= self.cfg.solver_hold_ticks and not self._solver_fallback:
                 return Decision(Action.HOLD, "solver")
             self._solver_fallback = True
         # in the fallback: until the NMPC has been good long enough
+        cfg = self.cfg
         policy = cfg.solver_fallback
         if policy == "p":
             return Decision(Action.FALLBACK, "solver")
@@ -278,7 +313,7 @@ class Supervisor:
 
     def clip_tilt_rad(self, angle_rad: float) -> tuple[float, bool]:
         """A commanded roll/pitch clipped to ``±max_tilt_rad``, and whether it was."""
-        cap = self.cfg.max_tilt_rad
+        cap = self.max_tilt_rad
         if angle_rad > cap:
             return cap, True
         if angle_rad < -cap:

@@ -78,13 +78,14 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def _integrate(x, ref, frozen, preview, work, flags):
+def _integrate(x, ref, preview, work, flags):
     """:meth:`ReferenceIntegrator.update`'s law, compiled: one period of every axis.
 
     ``work`` (:data:`_W_SIZE`) holds the law (4, 8): error band, speed band, steady band,
     release speed, hold, ki, kp, max shift per axis; the carry (5, 4), the rows ``_LAST`` …
     ``_REST_HI``; the shift (4); the last ψ error (NaN before the first); the period; scratch.
-    ``flags`` (2, 4) are the axes latched and learning. All in place.
+    ``flags`` (3, 4) are the axes latched, learning and frozen this period (the last row
+    cleared on the way out: the caller sets it only when an axis is frozen). All in place.
     Python's ``min``/``max`` are spelled out (the first argument unless the second is
     strictly beyond it), so a NaN goes where it went in Python.
     """
@@ -92,6 +93,7 @@ def _integrate(x, ref, frozen, preview, work, flags):
     period = work[_W_PERIOD]
     latched = flags[0]
     learning = flags[1]
+    frozen = flags[2]
     pos = _POS
     e = work[_W_E:_W_E + 4]
     rate = work[_W_RATE:_W_RATE + 4]
@@ -140,6 +142,7 @@ def _integrate(x, ref, frozen, preview, work, flags):
         elif work[rest_s] > hold:
             latched[k] = True
         learning[k] = latched[k] and not frozen[k]
+        frozen[k] = False
         if learning[k]:
             work[integral] = _clip(work[integral] - ki * ek * period, lim)
             work[_W_SHIFT + k] = _clip(work[integral] - kp * ek, lim)
@@ -187,7 +190,9 @@ class ReferenceIntegrator:
         self.max_shift = _per_axis(max_shift)
         # what _integrate reads and writes, in two buffers (_W_*); the names are views
         self._work = np.zeros(_W_SIZE)
-        self._flags = np.zeros((2, n), dtype=bool)
+        # latched, learning, and the axes frozen for the next period: a row the kernel reads
+        # and clears, set only when one is (a tuple argument costs ~60 ns a call, issue 26)
+        self._flags = np.zeros((3, n), dtype=bool)
         self._bind_views()
         self._law[:] = np.stack((
             self.error_band, self.speed_band, self.steady_band, self.release_speed,
@@ -202,6 +207,7 @@ class ReferenceIntegrator:
         self.shift = work[_W_SHIFT:_W_PSI]
         self.latched = flags[0]  # learning until the error or reference moves
         self.learning = flags[1]  # which axes integrated on the last update
+        self._frozen = flags[2]
         # the law per axis (rows of _integrate's law) and what it carries between updates
         self._law = work[_W_LAW:_W_CARRY].reshape(len(AXES), 8)
         self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, len(AXES))
@@ -261,7 +267,9 @@ class ReferenceIntegrator:
              preview: np.ndarray | None) -> np.ndarray:
         """:meth:`update` for the tick: ``x``, ``ref`` (7,) and ``preview`` (n, 7) float64
         arrays (or None), ``frozen`` four bools — no conversions."""
-        _integrate(x, ref, frozen, _NO_PREVIEW if preview is None else preview, self._work,
+        if frozen is not _NONE_FROZEN:  # (the usual tick's: the row is clear already)
+            self._frozen[:] = frozen
+        _integrate(x, ref, _NO_PREVIEW if preview is None else preview, self._work,
                    self._flags)
         return self.shift
 

@@ -12,6 +12,7 @@ last command sent — and nothing else; the log row is built from their results 
 from __future__ import annotations
 
 import math
+import struct
 from typing import NamedTuple
 
 import numpy as np
@@ -47,6 +48,10 @@ HOVER = PcmdCommand(0.0, 0.0, 0.0, 0.0, (False, False, False, False))
 _CONTROL, _FALLBACK, _HOLD = Action.CONTROL, Action.FALLBACK, Action.HOLD
 _OK, _MAX_ITERATIONS = SolverStatus.OK, SolverStatus.MAX_ITERATIONS
 _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
+_ALL_FROZEN = (True, True, True, True)  # OffsetFree: no axis integrates
+# Supervision: the (4,) input sent, from four Python floats (native doubles, the same bits)
+_pack_input = struct.Struct(f"{INPUT_DIM}d").pack
+_frombuffer = np.frombuffer
 _F64 = np.dtype(np.float64)
 _X_SHAPE = (STATE_DIM,)
 # a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
@@ -391,7 +396,7 @@ class OffsetFree:
             frozen = frozen_axes((p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac),
                                  sent.saturated)
         else:  # frozen, but it still sees the reference move and the drone come to rest
-            frozen = (True,) * 4
+            frozen = _ALL_FROZEN
         # x, ref_now, ref_horizon are float64 arrays: the integrator's own step, without
         # its conversions (ReferenceIntegrator.update)
         self.integrator.step(x, sol.ref_now, frozen, sol.ref_horizon)
@@ -484,8 +489,9 @@ class Sent(NamedTuple):
     """What a tick sends and why (a NamedTuple, as :class:`Solution`).
 
     ``u`` is the (4,) input as flown, for the delay predictor and the ż estimator (z̈ only
-    from the NMPC; zeros for a hover). ``flown`` is a newly sent command after tilt clipping
-    and ``saturated`` its ``cmd_saturated`` flags (None for a hold or a hover).
+    from the NMPC; zeros for a hover): read, never written (the usual tick's is read-only).
+    ``flown`` is a newly sent command after tilt clipping and ``saturated`` its
+    ``cmd_saturated`` flags (None for a hold or a hover).
     """
 
     pcmd: PcmdCommand
@@ -538,6 +544,38 @@ class Supervision:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
         ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller). It notes the ż
         reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`)."""
+        if decision.action is _CONTROL and cmd is not None:
+            # the usual tick: the controller's command as Python floats, its tilt inside the
+            # cap (which a NaN fails) — :meth:`_command`'s control case with nothing to
+            # clip, convert or refuse; anything else goes there
+            vz, roll, pitch, rate = cmd.vz_ref_mps, cmd.phi_rad, cmd.theta_rad, cmd.psirate_radps
+            cap = self.supervisor.max_tilt_rad
+            if (vz.__class__ is float and roll.__class__ is float
+                    and pitch.__class__ is float and rate.__class__ is float
+                    and zacc_mps2.__class__ is float and -cap <= roll <= cap
+                    and -cap <= pitch <= cap and vz - vz == 0.0 and rate - rate == 0.0):
+                k = self.attitude_gain
+                e, vz_max, yaw_max = self._scales
+                if k != 1.0:  # (float(): a gain may be a numpy scalar)
+                    pcmd = pcmd_of_floats(vz, float(roll / k), float(pitch / k), rate, e,
+                                          vz_max, yaw_max)
+                else:
+                    pcmd = pcmd_of_floats(vz, roll, pitch, rate, e, vz_max, yaw_max)
+                saturated = pcmd.saturated
+                flags = "0000" if saturated is UNSATURATED else _FLAGS[saturated]
+                zacc = zacc_mps2 if zacc_mps2 - zacc_mps2 == 0.0 else 0.0
+                # np.array((zacc, roll, pitch, rate))'s values, read-only (the delay ring
+                # copies it, nothing writes it): ~100 ns under numpy's look at the tuple
+                u_sent = _frombuffer(_pack_input(zacc, roll, pitch, rate))
+                self.zacc_mps2 = zacc
+                self.vz_ref_mps = vz
+                self._last = (pcmd, u_sent)
+                return _new_tuple(Sent, (pcmd, u_sent, True, decision, cmd, flags))
+        return self._command(decision, cmd, zacc_mps2)
+
+    def _command(self, decision: Decision, cmd: AttitudeCommand | None,
+                 zacc_mps2: float) -> Sent:
+        """:meth:`command`, every case."""
         action = decision.action
         if action is _HOLD and self._last is not None:
             pcmd, u_sent = self._last
@@ -545,7 +583,7 @@ class Supervision:
             return _new_tuple(Sent, (pcmd, u_sent, True, decision, None, None))
         if cmd is not None and (action is _CONTROL or action is _FALLBACK):
             roll, pitch = cmd.phi_rad, cmd.theta_rad
-            cap = self.supervisor.cfg.max_tilt_rad
+            cap = self.supervisor.max_tilt_rad
             if -cap <= roll <= cap and -cap <= pitch <= cap:  # what clip_tilt_rad leaves be
                 roll_clipped = pitch_clipped = False
             else:

@@ -144,6 +144,22 @@ def test_frozen_axes_keep_their_shift_and_resume_where_they_were():
     assert integ.shift[0] == pytest.approx(before[0] - 0.5 * 0.1 * T)
 
 
+def test_the_tick_step_freezes_one_period_only():
+    """``step`` hands a frozen axis to the kernel in a row the kernel clears, and the usual
+    tick's nothing-frozen tuple is not written: after a frozen period the next unfrozen one
+    integrates again, as ``update`` (every flag passed) does."""
+    tick, twin = integrator(), integrator()
+    free = frozen_axes((0.0, 0.0, 0.0, 0.0), "0000")  # the usual tick's
+    x = state(x=0.1, z=1.1)
+    for frozen in [free] * 5 + [(True, True, False, False)] * 3 + [free] * 2 + [
+            (False, False, True, True), free, (True,) * 4, free, free]:
+        tick.step(x, REF, frozen, None)
+        twin.update(x, REF, frozen=tuple(bool(f) for f in frozen))
+        assert tick.shift.tobytes() == twin.shift.tobytes()
+        assert list(tick.learning) == [not f for f in frozen]
+        assert not tick._flags[2].any()  # cleared for the next period
+
+
 def test_a_moving_reference_or_preview_stops_learning_and_needs_a_new_hold():
     integ = integrator(hold_s=(0.5,) * 4)
     for _ in range(20):
