@@ -18,7 +18,8 @@ everything on Dask; :meth:`Executor.cancel` does the first part on demand.
 * ``local``, ``jobs == 1``: one case after another in this process.
 * ``local``, ``jobs > 1``: long-lived worker processes forked from a forkserver that loaded the
   numba kernels once (warmed in the background from :func:`open_executor` on, so the caller can
-  prepare meanwhile); they end with this process, even a SIGKILLed one.
+  prepare meanwhile — or from :func:`start_forkserver` on, earlier still); they end with this
+  process, even a SIGKILLed one.
 * ``dask``: a Dask cluster (``scheduler``'s address, or a local cluster of ``jobs`` workers on
   127.0.0.1). Connecting gives up after :data:`CONNECT_TIMEOUT_S` — also on a port that accepts
   and never answers — with a :class:`ExecutorError`. The workers need this package, and any
@@ -31,7 +32,6 @@ import os
 import queue
 import signal
 import threading
-import uuid
 from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from contextlib import contextmanager
@@ -41,7 +41,7 @@ from typing import Any
 from ardrone_nmpc.errors import UserError
 
 __all__ = ["CONNECT_TIMEOUT_S", "ENGINES", "Done", "Executor", "ExecutorError", "ORPHAN_EXIT",
-           "engine_errors", "open_executor"]
+           "engine_errors", "open_executor", "start_forkserver"]
 
 ENGINES = ("local", "dask")
 #: How long a Dask scheduler has to answer (s).
@@ -228,6 +228,20 @@ def _pool_context():
     return ctx
 
 
+def start_forkserver() -> None:
+    """Start the warm forkserver now: its preload (~0.7 s on cached kernels, most of it
+    imports and numba's own set-up) runs on another core while this process goes on, and a
+    pool opened later forks its workers from it. For a command that will open a local pool,
+    as early as it knows so (``cli/launch.py``); harmless when none is opened after all: the
+    forkserver ends with this process (once its preload is done). Nothing to start where
+    workers spawn (no forkserver)."""
+    ctx = _pool_context()
+    if ctx.get_start_method() == "forkserver":
+        from multiprocessing import forkserver
+
+        forkserver.ensure_running()
+
+
 def _noop() -> None:
     """A process that does nothing (see :meth:`_Pool._start`)."""
 
@@ -344,6 +358,8 @@ class _Dask(Executor):
     """Cases on a Dask cluster; its slots are the cluster's worker threads."""
 
     def __init__(self, jobs: int, scheduler: str | None) -> None:
+        import uuid  # here: the entry point imports this module first (cli/launch.py)
+
         from dask.distributed import as_completed
 
         self._client, self._cluster = _dask_client(scheduler=scheduler, jobs=jobs)

@@ -252,10 +252,11 @@ def _wait_until(done, timeout_s: float, what: str) -> None:
 
 def test_the_processes_of_a_killed_sweep_end_with_it(tmp_path):
     """SIGKILL of the sweep's process (nothing of it runs any more): its pool workers, the
-    forkserver and the resource tracker must end too, not fly their cases on for minutes."""
+    forkserver (started early by the entry point, cli/launch.py) and the resource tracker
+    must end too, not fly their cases on for minutes."""
     out = tmp_path / "killed"
     sweep = subprocess.Popen(
-        [sys.executable, "-m", "ardrone_nmpc.cli.app", "sweep", CONFIG, "--grid",
+        [sys.executable, "-m", "ardrone_nmpc.cli.launch", "sweep", CONFIG, "--grid",
          "controller.horizon_steps=8,9,10", "--set", "duration_s=3000", "--jobs", "2",
          "-o", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     family: list[tuple[int, str]] = []

@@ -82,6 +82,24 @@ def test_cancel_drops_the_cases_not_started_and_the_running_one_finishes(tmp_pat
     assert ran == {f"ran{k[4:]}" for k in (d.key for d in finished)}  # cancelled: never ran
 
 
+def _parent_pid(_item) -> int:
+    return os.getppid()
+
+
+@pytest.mark.timeout(120)
+def test_a_pool_forks_its_workers_from_the_forkserver_started_early():
+    """start_forkserver (the entry point's early start) and a pool opened later: one
+    forkserver, the workers' parent."""
+    from multiprocessing import forkserver
+
+    parallel.start_forkserver()
+    server = forkserver._forkserver._forkserver_pid
+    assert server is not None
+    with open_executor("local", jobs=2) as pool:
+        parents = {d.value for d in pool.map(_parent_pid, range(4))}
+    assert parents == {server} and forkserver._forkserver._forkserver_pid == server
+
+
 def _workers_busy(pool) -> bool:
     return sum(f.running() for f in pool._futures) >= 2
 
