@@ -14,8 +14,8 @@ fresh sweep of a couple of seconds, half its wall time, in one process after the
 (:func:`~ardrone_nmpc.experiments.parallel.start_forkserver`), so its preload runs on another
 core while this process loads the command line, the config and the cases. A guess from the
 raw arguments, made before they are parsed: a wrong "yes" (a command that then stops on an
-error, or has nothing left to fly) costs a background process that ends by itself, a wrong
-"no" only the time saved.
+error, or has nothing left to fly) costs a background process that this one ends as it
+exits, a wrong "no" only the time saved.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def pool_wanted(args: Sequence[str]) -> bool:
                 return False
         if name == "--engine":
             engine = value
-        elif value.isdigit():
+        elif value.isdecimal():  # what int() reads (isdigit() passes "²", which it refuses)
             jobs = int(value)
         else:
             return False

@@ -17,6 +17,17 @@ import signal
 # but only once its preload is done: without this a Ctrl-C now prints its traceback).
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-from ardrone_nmpc.experiments.sweep import warm_worker  # noqa: E402 - after the signal disposition
 
-warm_worker()
+def _stop(signum, frame):
+    """SIGTERM during the preload (a forkserver no pool used, parallel.py): end, cleaning up
+    the warm-up flight's temporary directory."""
+    raise SystemExit(128 + signum)
+
+
+signal.signal(signal.SIGTERM, _stop)
+try:
+    from ardrone_nmpc.experiments.sweep import warm_worker
+
+    warm_worker()
+finally:  # the forkserver and the workers it forks: SIGTERM's default again
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -233,13 +233,36 @@ def start_forkserver() -> None:
     imports and numba's own set-up) runs on another core while this process goes on, and a
     pool opened later forks its workers from it. For a command that will open a local pool,
     as early as it knows so (``cli/launch.py``); harmless when none is opened after all: the
-    forkserver ends with this process (once its preload is done). Nothing to start where
-    workers spawn (no forkserver)."""
+    forkserver ends when this process exits (:func:`_end_unused_forkserver`). Nothing to
+    start where workers spawn (no forkserver)."""
     ctx = _pool_context()
     if ctx.get_start_method() == "forkserver":
+        import atexit
         from multiprocessing import forkserver
 
         forkserver.ensure_running()
+        atexit.register(_end_unused_forkserver)
+
+
+#: Whether this process opened a local pool (:class:`_Pool`): its forkserver is in use.
+_pool_opened = False
+
+
+def _end_unused_forkserver() -> None:
+    """At exit, end the forkserver :func:`start_forkserver` started if no pool used it: it
+    holds this process's stdout and stderr, so a caller reading them through a pipe would
+    otherwise wait out its preload (seconds on a cold numba cache) after a command that
+    stopped at once. SIGTERM: the preload (_sweep_preload) ends on it, cleaning up."""
+    from multiprocessing import forkserver
+
+    pid = forkserver._forkserver._forkserver_pid
+    if _pool_opened or pid is None:
+        return
+    try:
+        if os.waitpid(pid, os.WNOHANG)[0] == 0:  # our child, running (so not a reused pid)
+            os.kill(pid, signal.SIGTERM)
+    except OSError:  # not our child (any more)
+        pass
 
 
 def _noop() -> None:
@@ -250,6 +273,8 @@ class _Pool(Executor):
     """``slots`` worker processes forked from a warm forkserver."""
 
     def __init__(self, jobs: int) -> None:
+        global _pool_opened
+        _pool_opened = True  # its forkserver stays (_end_unused_forkserver)
         self.slots = jobs
         self._ctx = _pool_context()
         self._alive_r, self._alive_w = self._ctx.Pipe(duplex=False)  # only we hold _w

@@ -28,6 +28,7 @@ CPUS = os.cpu_count() or 1
     (["sweep", "c.yaml", "--jobs", "2", "--help"], False),
     (["sweep", "c.yaml", "--jobs"], False),               # a value missing
     (["sweep", "c.yaml", "--jobs", "two"], False),        # malformed
+    (["sweep", "c.yaml", "--jobs", "\u00b2"], False),     # a digit int() refuses: typer's error
     (["sweep", "c.yaml", "--jobs", "2", "--", "--jobs", "1"], True),  # after --: arguments
     (["simulate", "c.yaml", "--jobs", "2"], False),       # not a pool command
     (["sweep", "c.yaml"], CPUS > 1),                      # the default: the CPU count
@@ -76,3 +77,36 @@ def _running(pid: int) -> bool:
     except OSError:
         return False
     return text[text.rindex(")") + 2] != "Z"
+
+
+_AT_EXIT = """
+import atexit, os, sys
+from multiprocessing import forkserver
+from ardrone_nmpc.experiments.parallel import open_executor, start_forkserver
+start_forkserver()
+pid = forkserver._forkserver._forkserver_pid
+if sys.argv[1] == "pool":
+    with open_executor("local", jobs=2) as pool:
+        assert [d.value for d in pool.map(abs, [-1])] == [1]
+atexit._run_exitfuncs()  # what this process's exit runs, with the process still here
+if sys.argv[1] == "pool":
+    print("running" if os.waitpid(pid, os.WNOHANG)[0] == 0 else "ended")
+else:  # (without the hook this waits forever: the forkserver waits for this process to end)
+    print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))
+"""
+
+
+@pytest.mark.timeout(180)
+def test_a_forkserver_no_pool_used_is_ended_as_its_process_exits(tmp_path):
+    """It holds the process's stdout and stderr: left to finish its preload, a caller reading
+    them through a pipe would wait it out after a command that stopped at once. Ended by a
+    SIGTERM at exit (its preload's warm-up flight cleaning up its temporary directory); a
+    forkserver a pool used is left to end with the process, as before."""
+    env = dict(os.environ, TMPDIR=str(tmp_path))
+    ended = subprocess.run([sys.executable, "-c", _AT_EXIT, "none"], capture_output=True,
+                           text=True, timeout=60, check=True, env=env)
+    assert int(ended.stdout) in (-15, 128 + 15)  # SIGTERM: by default, or the preload's exit
+    assert not list(tmp_path.glob("ardrone-nmpc-warm-*"))
+    used = subprocess.run([sys.executable, "-c", _AT_EXIT, "pool"], capture_output=True,
+                          text=True, timeout=120, check=True, env=env)
+    assert used.stdout.strip() == "running"
