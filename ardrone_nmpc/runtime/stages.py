@@ -253,6 +253,18 @@ class Control:
             self._solve_prepared = getattr(nmpc, "solve_prepared", None) or getattr(
                 nmpc, "solve", None)
 
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: numpy copies each view apart from its array, so the
+        views the fast path reads or writes — the reference now and over the horizon of
+        ``_states``, the offsets and shifted horizon of ``_work`` — are made views of the
+        copied arrays again (else the copy would log and solve against stale arrays)."""
+        self.__dict__.update(state)
+        if self.nmpc is None:
+            return
+        self._ref_now, self._ref_horizon = self._states[0], self._states[1:]
+        if self._work is not None:
+            self._offsets, _, _, self._horizon = nmpc_work_views(self._work)
+
     def warm_up(self) -> np.ndarray:
         """Load (or compile) the solver kernels now; returns the hover state it solved at."""
         hover = np.zeros(STATE_DIM)

@@ -146,6 +146,52 @@ def test_the_fast_paths_answer_is_the_stages_own_and_its_result_the_answers_own(
     assert second.result.u is not first.result.u
     assert first.result.u.tobytes() == kept[3].tobytes()
 
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+@pytest.mark.parametrize("shifted", [False, True])
+def test_a_copied_control_stage_solves_from_its_own_arrays(how, shifted):
+    """A deep copy or a pickle of the control stage after its first fast-path solve: its
+    views (the reference now and over the horizon, the shifted horizon, the offsets) are
+    views of its own copied arrays again — the reference it logs and the horizon it hands
+    the solver are this tick's, as the original's, not a stale copy made at the copy. (The
+    copied solver's answer and delay pushes are not: theirs are their classes' matter.)"""
+    import copy
+    import pickle
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"))
+    limits = command_scales(cfg.drone)
+    traj = HoldStartThen(make_trajectory(cfg.reference, duration_s=cfg.duration_s))
+    nmpc = make_nmpc(effective_controller(cfg.controller, limits), period_s=PERIOD_S)
+    control = Control(cfg, limits, nmpc, DelayPrediction(0.26, PERIOD_S))
+    offset = OffsetFree(cfg.controller.offset_free, PERIOD_S) if shifted else None
+    x = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    control.solve(1.0, x, traj, offset)
+    control.delay.push(np.array([0.1, 0.02, -0.01, 0.0]))  # pending: x_solve is not x
+    clone = (copy.deepcopy(control) if how == "deepcopy"
+             else pickle.loads(pickle.dumps(control)))
+    runs = []
+    for stage in (control, clone):
+        horizons = []
+        solve = stage._solve_prepared  # the horizon each solve gets, recorded
+
+        def recorded(t_s, x_solve, horizon, solve=solve, horizons=horizons):
+            horizons.append(horizon.tobytes())
+            return solve(t_s, x_solve, horizon)
+
+        stage._solve_prepared = recorded
+        run = []
+        for k in range(1, 4):
+            if offset is not None:  # a shift that changes every tick
+                offset.integrator.shift[:] = 0.01 * np.cos(np.arange(4) + k)
+            sol = stage.solve(1.0 + k * PERIOD_S, x, traj, offset)
+            run.append((sol.ref_now.tobytes(), sol.ref_horizon.tobytes(),
+                        sol.x_solve.tobytes(), horizons[-1]))
+        runs.append(run)
+    assert runs[0] == runs[1]
+    np.testing.assert_array_equal(np.frombuffer(runs[1][-1][0]),
+                                  traj.state_at(1.0 + 3 * PERIOD_S)[0])
+
+
 # ----------------------------------------------------------------------------- estimation
 def _poses(seed: int):
     """A flight's poses: steps of 65 ms with jitter, a pose seen again (stale mocap), a gap."""
