@@ -207,12 +207,7 @@ def test_the_kernels_entry_point_for_the_legs_own_arrays_only():
     dispatcher's choice for them); any other kind goes through the dispatcher."""
     from ardrone_nmpc.sim import lockstep_legs, sensor_step
 
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
-    drone = LockstepDrone(cfg)
-    drone.connect()
-    drone.takeoff()
-    for k in range(1, 80):
-        drone.advance_to(k * cfg.loop.period_s)
+    cfg, drone = _square_drone_aloft()
     legs = drone.sensors._legs
     x, rows, blocks = legs._held[0], legs._held[2], legs._blocks
     assert legs.held() and legs._kernel is not sensor_step.lockstep_run
@@ -229,12 +224,7 @@ def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
     floats, then iv's done, events and kinds — are those arrays' values, bit for bit."""
     from ardrone_nmpc.sim import sensor_step as ks
 
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
-    drone = LockstepDrone(cfg)
-    drone.connect()
-    drone.takeoff()
-    for k in range(1, 80):
-        drone.advance_to(k * cfg.loop.period_s)
+    cfg, drone = _square_drone_aloft()
     legs = drone.sensors._legs
     assert legs.held() and legs.live_out is not None
     views = {"out": (legs.out, ks.OUT_SIZE), "iv": (legs.iv, ks.IV_SIZE),
@@ -267,12 +257,7 @@ def test_a_ref_held_every_tick_leaves_the_legs_holding_the_state():
     """A landing holds REF land every tick: its time is the legs' last run's (the plant's
     own), read without releasing the state they hold — which the Python path would write
     back and the next run take again."""
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
-    drone = LockstepDrone(cfg)
-    drone.connect()
-    drone.takeoff()
-    for k in range(1, 80):
-        drone.advance_to(k * cfg.loop.period_s)
+    cfg, drone = _square_drone_aloft()
     legs = drone.sensors._legs
     for k in range(80, 84):
         drone.land()
@@ -404,3 +389,14 @@ def test_a_firmware_or_sampler_that_overrides_what_the_kernel_does_keeps_the_pyt
     assert isinstance({"firmware": drone.sim.firmware, "sensors": drone.sensors,
                        "plant": drone.sim.plant}[owner], kind)
     assert drone.sensors._legs is None
+
+
+def _square_drone_aloft():
+    """The square's config and its lockstep drone, taken off and run 79 ticks (held)."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.connect()
+    drone.takeoff()
+    for k in range(1, 80):
+        drone.advance_to(k * cfg.loop.period_s)
+    return cfg, drone
