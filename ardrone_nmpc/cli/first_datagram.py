@@ -44,7 +44,7 @@ def target(args: Sequence[str]) -> tuple[str, int] | None:
                 return None
         if name == "--drone":
             host = value
-        elif value.isdigit() and 1 <= int(value) <= 65535:
+        elif value.isdecimal() and 1 <= int(value) <= 65535:  # isdigit() passes "²"
             port = int(value)
         else:
             return None

@@ -167,7 +167,8 @@ def test_arguments_are_checked_before_anything_is_sent(drone):
     (["--help"], None), (["-h"], None), (["--drone"], None), (["--drone", " "], None),
     (["--at-port", "1"], ("192.168.1.1", 1)), (["--at-port", "65535"], ("192.168.1.1", 65535)),
     (["--at-port", "0"], None), (["--at-port", "65536"], None), (["--at-port", "-1"], None),
-    (["--at-port", "x"], None), (["--at-port"], None), (["--at-port=2", "-x"], ("192.168.1.1", 2)),
+    (["--at-port", "x"], None), (["--at-port", "²"], None), (["--at-port"], None),
+    (["--at-port=2", "-x"], ("192.168.1.1", 2)),
 ])
 def test_the_entry_point_reads_only_what_it_is_sure_of(args, where):
     from ardrone_nmpc.cli.first_datagram import target
