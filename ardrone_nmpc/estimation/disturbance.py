@@ -22,7 +22,8 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 
-__all__ = ["AXES", "SATURATION_FRAC", "STEADY_FRACTION", "ReferenceIntegrator", "frozen_axes"]
+__all__ = ["AXES", "SATURATION_FRAC", "STEADY_FRACTION", "ReferenceIntegrator", "frozen_axes",
+           "integrate_period"]
 
 AXES = ("x", "y", "z", "psi")
 _POS = (IX_X, IX_Y, IX_Z, IX_PSI)   # state indices of the shifted reference components
@@ -31,8 +32,8 @@ _VEL = (IX_VX, IX_VY, IX_VZ)
 _NO_PREVIEW = np.zeros((0, 7))
 # the rows of ReferenceIntegrator._carry: what each axis carries from one update to the next
 _LAST, _REST_S, _INTEGRAL, _REST_LO, _REST_HI = range(5)
-# ReferenceIntegrator._work, one float64 buffer (one argument of _integrate, not six: numba's
-# dispatch costs ~50–100 ns an argument, issue 26): the law (4 axes × 8), the carry (5 × 4),
+# ReferenceIntegrator._work, one float64 buffer (one argument of integrate_period, not six:
+# numba's dispatch costs ~50–100 ns an argument, issue 26): the law (4 axes × 8), the carry (5 × 4),
 # the shift (4), the last ψ error (1), the period (1), and scratch for the errors and their
 # rates (4 each): read flat, no reshape or allocation in the kernel (each costs ~50 ns)
 _W_LAW, _W_CARRY, _W_SHIFT, _W_PSI, _W_PERIOD, _W_E, _W_RATE = 0, 32, 52, 56, 57, 58, 62
@@ -78,7 +79,7 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def _integrate(x, ref, preview, work, flags):
+def integrate_period(x, ref, preview, work, flags):
     """:meth:`ReferenceIntegrator.update`'s law, compiled: one period of every axis.
 
     ``work`` (:data:`_W_SIZE`) holds the law (4, 8): error band, speed band, steady band,
@@ -188,7 +189,7 @@ class ReferenceIntegrator:
         self.error_band = _per_axis(error_band)
         self.speed_band = _per_axis(speed_band)
         self.max_shift = _per_axis(max_shift)
-        # what _integrate reads and writes, in two buffers (_W_*); the names are views
+        # what integrate_period reads and writes, in two buffers (_W_*); the names are views
         self._work = np.zeros(_W_SIZE)
         # latched, learning, and the axes frozen for the next period: a row the kernel reads
         # and clears, set only when one is (a tuple argument costs ~60 ns a call, issue 26)
@@ -208,7 +209,7 @@ class ReferenceIntegrator:
         self.latched = flags[0]  # learning until the error or reference moves
         self.learning = flags[1]  # which axes integrated on the last update
         self._frozen = flags[2]
-        # the law per axis (rows of _integrate's law) and what it carries between updates
+        # the law per axis (rows of integrate_period's law) and what it carries between updates
         self._law = work[_W_LAW:_W_CARRY].reshape(len(AXES), 8)
         self._carry = work[_W_CARRY:_W_SHIFT].reshape(5, len(AXES))
         self._last_error_psi = work[_W_PSI:_W_PERIOD]
@@ -269,7 +270,7 @@ class ReferenceIntegrator:
         arrays (or None), ``frozen`` four bools — no conversions."""
         if frozen is not _NONE_FROZEN:  # (the usual tick's: the row is clear already)
             self._frozen[:] = frozen
-        _integrate(x, ref, _NO_PREVIEW if preview is None else preview, self._work,
+        integrate_period(x, ref, _NO_PREVIEW if preview is None else preview, self._work,
                    self._flags)
         return self.shift
 

@@ -109,9 +109,13 @@ class DelayPrediction:
 
     def push(self, u_sent: np.ndarray) -> None:
         """Note the (4,) input just sent (zeros for a hover)."""
-        i = self._next
-        self._pairs[i][...] = u_sent  # rows i and i + capacity
-        i += 1
+        self._pairs[self._next][...] = u_sent  # rows i and i + capacity
+        self._advance()
+
+    def _advance(self) -> None:
+        """The ring's next row, and the pending window, after a row was written (by
+        :meth:`push`, or by the nominal tick's compiled call, ``runtime/after_solve``)."""
+        i = self._next + 1
         capacity = self._capacity
         self._next = i = 0 if i == capacity else i  # (i + 1) % capacity
         n = self.count
@@ -460,9 +464,14 @@ class ResponseEstimation:
         p = sent.pcmd
         self.estimator.feed(t_nav, roll_deg, pitch_deg, CMD_SEND, inputs.t_s, p.roll_frac,
                             p.pitch_frac)
-        if inputs.t_s < self._next_fit_s:
+        return self.refit(inputs.t_s)
+
+    def refit(self, t_s: float) -> list[dict]:
+        """After the feed of the tick at ``t_s``: the fit, once every ``refit_s``, and what
+        auto makes of it; returns its events."""
+        if t_s < self._next_fit_s:
             return []
-        self._next_fit_s = inputs.t_s + self.cfg.refit_s
+        self._next_fit_s = t_s + self.cfg.refit_s
         e = self.estimator.estimate
         if not math.isfinite(e.delay_s):
             return []
@@ -550,6 +559,7 @@ class Supervision:
         # unpacked once: the mapping's three attribute lookups a tick (pcmd_of_floats)
         self._scales = (limits.euler_angle_max_rad, limits.control_vz_max_mps,
                         limits.control_yaw_radps)
+        self._scale_array = np.array(self._scales)  # the same, for the compiled tick
 
     def command(self, decision: Decision, cmd: AttitudeCommand | None,
                 zacc_mps2: float) -> Sent:

@@ -20,6 +20,8 @@ from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_cells, tick_row
+from ardrone_nmpc.runtime.after_solve import AfterSolve
+from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
@@ -129,8 +131,12 @@ class Tick:
         ahead_s = self.delay.lead_s + ctl.obstacle_lookahead_s
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
+        #: The stages after the solve in one compiled call on the nominal tick (None: the
+        #: P controller, whose ticks the Python stages take)
+        self.after_solve = AfterSolve(self) if nmpc is not None else None
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
+            warm_up_after_solve()
         # the stages' own (runtime/tick_kernels): those this flight calls
         waypoints = (trajectory.__class__ is HoldStartThen
                      and trajectory.waypoint_args is not None)
@@ -156,7 +162,7 @@ class Tick:
         sup = self.supervisor
         decision = sup.check_feedback(mocap_age_ms=ages_ms[0], navdata_age_ms=ages_ms[1],
                                       navdata=inputs.navdata)
-        x = solution = cmd = None
+        x = solution = cmd = done = None
         if inputs.pose is not None:  # estimated even when stale (the row logs it)
             x = self.estimation.update(inputs.pose, inputs.navdata, self.supervision.zacc_mps2)
         if decision.action is _CONTROL:
@@ -164,14 +170,17 @@ class Tick:
         if decision.action is _CONTROL:
             solution = self.control.solve(t_exp_s, x, traj, self.offset)
             if solution.result is not None:  # the NMPC's answer is judged; P's is not
-                decision = sup.check_solution(solution.ok, solution.u_flown)
-            cmd = self.control.command(decision.action, solution, x, self.supervision.vz_ref_mps)
-        sent = self.supervision.command(
-            decision, cmd, solution.zacc_mps2 if solution is not None else math.nan)
-        self.delay.push(sent.u)
-        adapted = self.response.update(inputs, sent) if self.response is not None else []
-        if self.offset is not None:  # integrates after the verdict: frozen unless flown
-            self.offset.update(x, solution, sent)
+                if self.after_solve is not None:  # the nominal tick: every stage below at once
+                    done = self.after_solve.nominal(inputs, x, solution)
+                if done is None:
+                    decision = sup.check_solution(solution.ok, solution.u_flown)
+            if done is None:
+                cmd = self.control.command(decision.action, solution, x,
+                                           self.supervision.vz_ref_mps)
+        if done is None:
+            sent, adapted = self._after(inputs, decision, x, solution, cmd)
+        else:
+            sent, adapted = done
         label = sup.record(sent.decision, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         events = sup.take_events()  # a list of its own: extended, not copied
@@ -185,3 +194,14 @@ class Tick:
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput.make(sent.pcmd, sent.progressive, row, sent.decision.action, events)
+
+    def _after(self, inputs: TickInputs, decision, x, solution, cmd) -> tuple:
+        """The stages after the verdict, one by one (every tick the compiled call did not
+        take, ``runtime/after_solve``): the command sent, and the response fit's events."""
+        sent = self.supervision.command(
+            decision, cmd, solution.zacc_mps2 if solution is not None else math.nan)
+        self.delay.push(sent.u)
+        adapted = self.response.update(inputs, sent) if self.response is not None else []
+        if self.offset is not None:  # integrates after the verdict: frozen unless flown
+            self.offset.update(x, solution, sent)
+        return sent, adapted

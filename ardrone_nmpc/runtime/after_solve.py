@@ -1,0 +1,240 @@
+"""The controller's stages after the NMPC's solve, on the nominal tick, in one compiled call.
+
+After ``Control.solve`` the usual tick made six Python calls and four numba dispatches —
+the supervisor's verdict on the solution (``Supervisor.check_solution``), the attitude
+command (``Control.command``), its mapping to PCMD (``Supervision.command``), the delay
+ring's write (``DelayPrediction.push``), the response estimator's feed
+(``ResponseEstimation.update``) and the integrator's step (``OffsetFree.update``): ~10 µs,
+mostly glue (issue 26). :func:`after_solve` does their arithmetic — the same expressions in
+the same order, Python's ``min``/``max`` and NaN tests spelled out — over the same arrays
+the Python stages use (the delay ring, the estimator's state, the integrator's buffers), so
+either path can take any tick. It first tests everything that makes the tick nominal and
+answers :data:`NOT_NOMINAL`, with nothing written, when one fails: the caller then runs the
+Python stages, which decide as they always did.
+
+:class:`AfterSolve` is the Python side: its preconditions (the solver trusted, no solver
+fallback under way), the call, and the records the tick's row and the drone's command need.
+The fit every ``refit_s`` and the events stay in Python (``ResponseEstimation.refit``).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.control.mapping import UNSATURATED, PcmdCommand
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.core.types import (INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ,
+                                     AttitudeCommand)
+from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC, integrate_period
+from ardrone_nmpc.estimation.response_kernels import (CMD_SEND, TIMES_ROUNDED, feed,
+                                                      microseconds)
+from ardrone_nmpc.runtime.stages import Sent
+from ardrone_nmpc.safety import NOMINAL
+
+__all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
+
+#: :func:`after_solve`'s first answer when the tick is not nominal (nothing written).
+NOT_NOMINAL = -1
+_NOTHING = np.zeros(0)  # the estimator's state or the integrator's buffers of a flight without
+_NO_FLAGS = np.zeros((3, 0), dtype=np.bool_)
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def after_solve(u, x, x_solve, ref_now, ref_horizon, ring, row, vz_from_commands, vz_ref_last_mps,
+                vz_lead_s, vz_max_mps, tilt_cap_rad, gain, scales, response, has_nav, t_nav_s,
+                roll_deg, pitch_deg, t_s, offset, offset_flags):
+    """The nominal tick's stages after the solve, over their state (module docstring).
+
+    ``u`` the NMPC's input, ``x`` the estimate, ``x_solve`` the state solved from,
+    ``ref_now`` and ``ref_horizon`` the reference now and over the horizon (unshifted, as
+    logged: what the integrator sees); ``ring`` the delay's inputs
+    sent and ``row`` the next row; ``scales`` the mapping's (E, V, Y); ``response`` the
+    estimator's state (empty: none), fed the navdata sample (``has_nav``) and the command
+    sent at ``t_s``; ``offset``, ``offset_flags`` the integrator's buffers (empty: none).
+
+    Returns (code, ż ref, the four PCMD fractions, their saturation bits — roll 1, pitch 2,
+    gaz 4, yaw 8 —, the feed's answer); code :data:`NOT_NOMINAL` when the tick is not nominal,
+    and then nothing was written."""
+    zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
+    nothing = (NOT_NOMINAL, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+    # check_solution's verdict on a trusted solve: its input finite
+    if not (math.isfinite(zacc) and math.isfinite(phi) and math.isfinite(theta)
+            and math.isfinite(rate)):
+        return nothing
+    # Control.command: the ż reference, clipped (Python's min/max: a NaN stays)
+    vz_base = vz_ref_last_mps if vz_from_commands else x_solve[IX_VZ]
+    vz = vz_base + zacc * vz_lead_s
+    if not (vz - vz == 0.0 and vz_lead_s >= 0.0):  # vz_reference_mps answers or raises
+        return nothing
+    if -vz_max_mps > vz:
+        vz = -vz_max_mps
+    if vz_max_mps < vz:
+        vz = vz_max_mps
+    # Supervision.command's usual case: the tilt inside the cap (else it clips and flags)
+    if not (-tilt_cap_rad <= phi <= tilt_cap_rad and -tilt_cap_rad <= theta <= tilt_cap_rad):
+        return nothing
+    # the estimator's times to the microsecond; one its kernel refuses is Python's to round
+    fed = response.size != 0
+    if fed:
+        if has_nav:
+            t_nav_s = microseconds(t_nav_s)
+            if t_nav_s < 0.0:
+                return nothing
+        t_s = microseconds(t_s)
+        if t_s < 0.0:
+            return nothing
+    # --- nominal: from here on the stages' state is written
+    roll, pitch = phi, theta
+    if gain != 1.0:
+        roll, pitch = phi / gain, theta / gain
+    roll, pitch, gaz, yaw, bits = _fractions(vz, roll, pitch, rate, scales)
+    # DelayPrediction.push: rows i and i + capacity
+    capacity = ring.shape[0] // 2
+    for r in (row, row + capacity):
+        ring[r, IU_ZACC] = zacc
+        ring[r, IU_PHI] = phi
+        ring[r, IU_THETA] = theta
+        ring[r, IU_PSIRATE] = rate
+    code = 0
+    if fed:  # ResponseEstimation.update's feed: the sample, then the command sent
+        code = feed(response, has_nav, t_nav_s, roll_deg, pitch_deg, CMD_SEND + TIMES_ROUNDED,
+                    t_s, roll, pitch)
+    if offset.size != 0:  # OffsetFree.update: frozen_axes of the command, then the step
+        _freeze(roll, pitch, gaz, yaw, bits, offset_flags[2])
+        integrate_period(x, ref_now, ref_horizon, offset, offset_flags)
+    return (0, vz, roll, pitch, gaz, yaw, bits, code)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _fractions(vz, roll, pitch, rate, scales):
+    """``pcmd_of_floats``' arithmetic: the four fractions, and their clip flags as bits."""
+    fr = roll / scales[0]
+    fp = -pitch / scales[0]
+    fg = vz / scales[1]
+    fy = -rate / scales[2]
+    if -1.0 <= fr <= 1.0 and -1.0 <= fp <= 1.0 and -1.0 <= fg <= 1.0 and -1.0 <= fy <= 1.0:
+        return fr + 0.0, fp + 0.0, fg + 0.0, fy + 0.0, 0
+    bits = 0
+    out = np.empty(4)
+    for k, v in enumerate((fr, fp, fg, fy)):  # _clip_unit
+        if v > 1.0:
+            out[k] = 1.0
+            bits |= 1 << k
+        elif v < -1.0:
+            out[k] = -1.0
+            bits |= 1 << k
+        else:
+            out[k] = v + 0.0
+    return out[0], out[1], out[2], out[3], bits
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _freeze(roll, pitch, gaz, yaw, bits, frozen):
+    """``frozen_axes`` of the fractions and flags, into the integrator's ``frozen`` row
+    (left clear, as ``ReferenceIntegrator.step`` leaves it, when nothing is frozen)."""
+    lim = SATURATION_FRAC
+    if (-lim < roll < lim and -lim < pitch < lim and -lim < gaz < lim and -lim < yaw < lim
+            and bits == 0):
+        return
+    tilt = (abs(roll) >= lim or bits & 1 != 0) or (abs(pitch) >= lim or bits & 2 != 0)
+    frozen[0] = tilt
+    frozen[1] = tilt
+    frozen[2] = abs(gaz) >= lim or bits & 4 != 0
+    frozen[3] = abs(yaw) >= lim or bits & 8 != 0
+
+
+# the PcmdCommand flags and the ``cmd_saturated`` text of each set of bits
+_SATURATED = [UNSATURATED] + [tuple(bool(b >> k & 1) for k in range(4)) for b in range(1, 16)]
+_TEXT = ["".join("1" if f else "0" for f in s) for s in _SATURATED]
+_pack_input = struct.Struct(f"{INPUT_DIM}d").pack
+_frombuffer = np.frombuffer
+_make_pcmd = PcmdCommand.make
+_make_cmd = AttitudeCommand.make
+
+
+class AfterSolve:
+    """The Python side of :func:`after_solve` for one tick's stages (``Tick``'s)."""
+
+    def __init__(self, tick) -> None:
+        self.supervisor = tick.supervisor
+        self.control = tick.control
+        self.supervision = tick.supervision
+        self.delay = tick.delay
+        self.response = tick.response
+        self.offset = tick.offset
+        self._response_state = (_NOTHING if self.response is None
+                                else self.response.estimator._state)
+        integrator = self.offset.integrator if self.offset is not None else None
+        self._offset = (_NOTHING, _NO_FLAGS) if integrator is None else (integrator._work,
+                                                                         integrator._flags)
+
+    def nominal(self, inputs, x, sol):
+        """The nominal tick's :class:`~ardrone_nmpc.runtime.stages.Sent` and the response
+        fit's events, all stages after the solve done; None (nothing done) when the tick is
+        not nominal."""
+        if not sol.ok or self.supervisor._solver_fallback:  # check_solution's other verdicts
+            return None
+        control = self.control
+        supervision, delay = self.supervision, self.delay
+        nav = inputs.navdata
+        if nav is not None:
+            t_nav, roll_deg, pitch_deg = inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
+        else:
+            t_nav, roll_deg, pitch_deg = 0.0, 0.0, 0.0
+        u = sol.u_flown
+        offset, flags = self._offset
+        code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
+            u, x, sol.x_solve, sol.ref_now, sol.ref_horizon, delay._sent, delay._next,
+            control.vz_from_commands, supervision.vz_ref_mps, control.vz_lead_s,
+            control._vz_max_mps, self.supervisor.max_tilt_rad, supervision.attitude_gain,
+            supervision._scale_array, self._response_state, nav is not None, t_nav, roll_deg,
+            pitch_deg, inputs.t_s, offset, flags)
+        if code:
+            return None
+        return self._records(inputs, u, vz, roll, pitch, gaz, yaw, bits, fed)
+
+    def _records(self, inputs, u, vz, roll, pitch, gaz, yaw, bits, fed):
+        """What the Python stages keep and the tick hands on, from the kernel's answer."""
+        zacc, phi, theta, rate = u.tolist()
+        self.supervisor._solver_failures = 0
+        pcmd = _make_pcmd(roll, pitch, gaz, yaw, _SATURATED[bits])
+        u_sent = _frombuffer(_pack_input(zacc, phi, theta, rate))
+        supervision = self.supervision
+        supervision.zacc_mps2 = zacc
+        supervision.vz_ref_mps = vz
+        supervision._last = (pcmd, u_sent)
+        self.delay._advance()
+        sent = tuple.__new__(Sent, (pcmd, u_sent, True, NOMINAL,
+                                    _make_cmd(vz, phi, theta, rate), _TEXT[bits]))
+        response = self.response
+        if response is None:
+            return sent, []
+        if fed:  # a new sample: the estimate is fitted when it is read
+            response.estimator._estimate = None
+        return sent, response.refit(inputs.t_s)
+
+
+_warm: list[bool] = []  # loaded (or compiled) in this process
+
+
+def warm_up_kernels() -> None:
+    """Load (or compile) :func:`after_solve` now — once per process —, its callees from the
+    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft."""
+    if _warm:
+        return
+    _warm.append(True)
+    load_cached_callees(after_solve)
+    from ardrone_nmpc.estimation.response_kernels import new_state
+    x = np.zeros(7)
+    ring = np.zeros((2, INPUT_DIM))
+    state = new_state(np.zeros(2), np.ones(1), 4, 0.2, 30.0, 15)
+    after_solve(np.zeros(INPUT_DIM), x, x, x, np.zeros((2, 7)), ring, 0, False, 0.0, 0.065, 0.7,
+                0.3, 1.0, np.ones(3), state, True, 1.0, 0.0, 0.0, 1.0, _NOTHING, _NO_FLAGS)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -1,0 +1,171 @@
+"""The nominal tick's stages after the solve in one compiled call (runtime/after_solve.py):
+the same command, records and stage state as the Python stages, and nothing written when
+the tick is not nominal."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.control.mapping import UNSATURATED
+from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
+from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime import after_solve as after_solve_module
+from ardrone_nmpc.runtime.after_solve import NOT_NOMINAL, AfterSolve, after_solve
+from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
+from ardrone_nmpc.runtime.stages import Solution
+from ardrone_nmpc.runtime.tick import Tick
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def config(name: str, *overrides: str):
+    return load_config(CONFIGS / name, list(overrides))
+
+
+def _same(a, b) -> bool:
+    """Equal, NaN equal to NaN (a row's cells, a record's fields)."""
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (a != a and b != b)
+    return a == b
+
+
+def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, int]:
+    """The rows of a lockstep flight, and how many ticks the compiled call took."""
+    taken = [0]
+    original_init, original_nominal = Tick.__init__, AfterSolve.nominal
+
+    def init(self, *args, **kwargs):
+        original_init(self, *args, **kwargs)
+        if not compiled:
+            self.after_solve = None
+
+    def nominal(self, *args):
+        done = original_nominal(self, *args)
+        taken[0] += done is not None
+        return done
+
+    with monkeypatch.context() as m:
+        m.setattr(Tick, "__init__", init)
+        m.setattr(AfterSolve, "nominal", nominal)
+        recorder = MemoryRecorder()
+        run_lockstep(cfg, recorder=recorder)
+    return recorder.rows, taken[0]
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("square.yaml", ["duration_s=8"]),  # auto delay and gain, offset-free: every stage
+    ("step_x.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"]),  # holds, fallback
+    ("hover.yaml", ["duration_s=6", "faults.mocap_dropout.start_s=3",
+                    "faults.mocap_dropout.duration_s=0.2"]),
+])
+def test_a_flight_gives_the_rows_of_the_python_stages(name, overrides, monkeypatch):
+    cfg = config(name, *overrides)
+    python_rows, none = _fly(cfg, compiled=False, monkeypatch=monkeypatch)
+    compiled_rows, taken = _fly(cfg, compiled=True, monkeypatch=monkeypatch)
+    assert none == 0 and taken > len(python_rows) // 2  # most ticks took the compiled call
+    assert len(compiled_rows) == len(python_rows)
+    for i, (a, b) in enumerate(zip(python_rows, compiled_rows)):
+        bad = [k for k in a if k not in ("solve_us", "compute_us", "tick_late_ms")
+               and not _same(a[k], b[k])]
+        assert not bad, f"row {i}: {bad}"
+
+
+# ----------------------------------------------------------------------------- one tick
+def _tick() -> Tick:
+    cfg = config("square.yaml")
+    tick = Tick(cfg, experiment_trajectory(cfg))
+    tick.control._states[:] = np.array([0.1, 0.0, -0.2, 0.0, 1.0, 0.0, 0.05])
+    return tick
+
+
+def _inputs(t_s: float) -> TickInputs:
+    nav = NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.5, -2.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    return TickInputs(t_s, MocapPose(t_s, np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0),
+                      t_s - 0.01, nav, t_s - 0.02, None, -math.inf)
+
+
+def _solution(tick: Tick, x: np.ndarray, u) -> Solution:
+    u = np.array(u, dtype=float)
+    c = tick.control
+    return Solution(c._ref_now, x, SimpleNamespace(u=u), u, True, "ok", None, c._ref_horizon)
+
+
+def _python_stages(tick: Tick, inputs: TickInputs, x, sol):
+    """What Tick.step does after the solve without the compiled call."""
+    decision = tick.supervisor.check_solution(sol.ok, sol.u_flown)
+    cmd = tick.control.command(decision.action, sol, x, tick.supervision.vz_ref_mps)
+    return tick._after(inputs, decision, x, sol, cmd)
+
+
+def _values(a: np.ndarray) -> list:
+    """An array's values, NaN made comparable."""
+    return np.where(np.isnan(a), -1e300, a).tolist()
+
+
+def _state(tick: Tick) -> list:
+    """What the stages after the solve carry to the next tick."""
+    s, d, integrator = tick.supervision, tick.delay, tick.offset.integrator
+    return [d.ring.tolist(), d._next, d.first, d.count, s.zacc_mps2, s.vz_ref_mps,
+            (s._last[0], s._last[1].tolist()) if s._last else None,
+            tick.supervisor._solver_failures, _values(tick.response.estimator._state),
+            _values(integrator._work), integrator._flags.tolist()]
+
+
+@pytest.mark.parametrize("u, gain", [
+    ((0.3, 0.05, -0.08, 0.2), 1.0),     # nothing saturated
+    ((0.3, 0.05, -0.08, 0.2), 0.9),     # the gain divides roll and pitch
+    ((0.3, 0.15, -0.08, 0.2), 0.6),     # roll beyond E once divided: flagged, x, y frozen
+    ((0.3, 0.05, -0.08, 3.0), 1.0),     # the yaw rate beyond control_yaw
+    ((40.0, 0.05, -0.08, 0.2), 1.0),    # ż clipped to control_vz_max: z frozen, not flagged
+    ((-0.0, 0.0, -0.0, 0.0), 1.0),      # −0.0 sent as 0.0
+])
+def test_the_compiled_tick_is_the_python_stages(u, gain):
+    fast, slow = _tick(), _tick()
+    for k in range(4):  # a few ticks: the delay ring, the feed and the integrator move
+        t_s = 2.0 + 0.065 * k
+        x = np.array([0.05, 0.01, -0.1, 0.0, 1.0, 0.02, 0.04])
+        for tick in (fast, slow):
+            tick.supervision.attitude_gain = gain
+        sent_f, events_f = fast.after_solve.nominal(_inputs(t_s), x, _solution(fast, x, u))
+        sent_s, events_s = _python_stages(slow, _inputs(t_s), x, _solution(slow, x, u))
+        assert events_f == events_s
+        for a, b in zip(sent_f, sent_s):
+            assert (a.tolist() == b.tolist() if isinstance(a, np.ndarray) else a == b)
+        # (Supervision.command tells an unsaturated command by identity)
+        assert (sent_f.pcmd.saturated is UNSATURATED) == (sent_s.pcmd.saturated is UNSATURATED)
+        assert _state(fast) == _state(slow)
+
+
+@pytest.mark.parametrize("u, tick_s, lead_s", [
+    ((math.nan, 0.05, -0.08, 0.2), 2.0, None),  # the solver's input not finite: judged
+    ((0.3, 0.5, -0.08, 0.2), 2.0, None),        # a tilt beyond the cap: clipped in Python
+    ((0.3, 0.05, -0.08, 0.2), 2.0, -0.1),       # a negative ż lead: vz_reference_mps's
+    ((0.3, 0.05, -0.08, 0.2), 2e-7, None),      # a time below 1 µs: Python's round
+])
+def test_a_tick_not_nominal_writes_nothing(u, tick_s, lead_s):
+    tick = _tick()
+    if lead_s is not None:
+        tick.control.vz_lead_s = lead_s
+    x = np.array([0.05, 0.01, -0.1, 0.0, 1.0, 0.02, 0.04])
+    before = _state(tick)
+    assert tick.after_solve.nominal(_inputs(tick_s), x, _solution(tick, x, u)) is None
+    assert _state(tick) == before
+
+
+def test_the_kernel_answers_not_nominal_before_any_write():
+    tick = _tick()
+    ring = tick.delay.ring
+    ring[:] = 7.0
+    u = np.array([0.3, math.inf, 0.0, 0.0])
+    x = np.zeros(7)
+    code = after_solve(u, x, x, x, tick.control._states[1:], ring, 0, False, 0.0, 0.065, 0.7, 0.35,
+                       1.0, np.ones(3), after_solve_module._NOTHING, False, 0.0, 0.0, 0.0, 1.0,
+                       after_solve_module._NOTHING, after_solve_module._NO_FLAGS)[0]
+    assert code == NOT_NOMINAL
+    assert (ring == 7.0).all()
