@@ -42,33 +42,34 @@ __all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
 NOT_NOMINAL = -1
 _NOTHING = np.zeros(0)  # the estimator's state or the integrator's buffers of a flight without
 _NO_FLAGS = np.zeros((3, 0), dtype=np.bool_)
+_NDARRAY = np.ndarray
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def after_solve(u, x, x_solve, ref_now, ref_horizon, ring, row, vz_from_commands, vz_ref_last_mps,
-                vz_lead_s, vz_max_mps, tilt_cap_rad, gain, scales, response, has_nav, t_nav_s,
-                roll_deg, pitch_deg, t_s, offset, offset_flags):
+def after_solve(zacc, phi, theta, rate, vz_base_mps, vz_lead_s, vz_max_mps, tilt_cap_rad, gain,
+                e, v, y, ring, row, response, has_nav, t_nav_s, roll_deg, pitch_deg, t_s, x,
+                ref_now, ref_horizon, offset, offset_flags):
     """The nominal tick's stages after the solve, over their state (module docstring).
 
-    ``u`` the NMPC's input, ``x`` the estimate, ``x_solve`` the state solved from,
-    ``ref_now`` and ``ref_horizon`` the reference now and over the horizon (unshifted, as
-    logged: what the integrator sees); ``ring`` the delay's inputs
-    sent and ``row`` the next row; ``scales`` the mapping's (E, V, Y); ``response`` the
-    estimator's state (empty: none), fed the navdata sample (``has_nav``) and the command
-    sent at ``t_s``; ``offset``, ``offset_flags`` the integrator's buffers (empty: none).
+    The NMPC's input (``zacc`` … ``rate``), the ż it is added to (``vz_base_mps``,
+    ``Control.command``'s), the supervisor's tilt cap, the attitude gain and the mapping's
+    scales (``e``, ``v``, ``y``: E, V, Y) as numbers (a float costs numba's dispatch ~2 ns,
+    an array ~65); ``ring`` the delay's inputs sent and ``row`` the next row; ``response``
+    the estimator's state (empty: none), fed the navdata sample (``has_nav`` 1) and the
+    command sent at ``t_s``; ``offset``, ``offset_flags`` the integrator's buffers (empty:
+    none), stepped on the estimate ``x`` and the reference now and over the horizon
+    (``ref_now``, ``ref_horizon``: unshifted, as logged).
 
     Returns (code, ż ref, the four PCMD fractions, their saturation bits — roll 1, pitch 2,
     gaz 4, yaw 8 —, the feed's answer); code :data:`NOT_NOMINAL` when the tick is not nominal,
     and then nothing was written."""
-    zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
     nothing = (NOT_NOMINAL, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
     # check_solution's verdict on a trusted solve: its input finite
     if not (math.isfinite(zacc) and math.isfinite(phi) and math.isfinite(theta)
             and math.isfinite(rate)):
         return nothing
     # Control.command: the ż reference, clipped (Python's min/max: a NaN stays)
-    vz_base = vz_ref_last_mps if vz_from_commands else x_solve[IX_VZ]
-    vz = vz_base + zacc * vz_lead_s
+    vz = vz_base_mps + zacc * vz_lead_s
     if not (vz - vz == 0.0 and vz_lead_s >= 0.0):  # vz_reference_mps answers or raises
         return nothing
     if -vz_max_mps > vz:
@@ -92,7 +93,7 @@ def after_solve(u, x, x_solve, ref_now, ref_horizon, ring, row, vz_from_commands
     roll, pitch = phi, theta
     if gain != 1.0:
         roll, pitch = phi / gain, theta / gain
-    roll, pitch, gaz, yaw, bits = _fractions(vz, roll, pitch, rate, scales)
+    roll, pitch, gaz, yaw, bits = _fractions(vz, roll, pitch, rate, e, v, y)
     # DelayPrediction.push: rows i and i + capacity
     capacity = ring.shape[0] // 2
     for r in (row, row + capacity):
@@ -111,12 +112,12 @@ def after_solve(u, x, x_solve, ref_now, ref_horizon, ring, row, vz_from_commands
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _fractions(vz, roll, pitch, rate, scales):
+def _fractions(vz, roll, pitch, rate, e, v, y):
     """``pcmd_of_floats``' arithmetic: the four fractions, and their clip flags as bits."""
-    fr = roll / scales[0]
-    fp = -pitch / scales[0]
-    fg = vz / scales[1]
-    fy = -rate / scales[2]
+    fr = roll / e
+    fp = -pitch / e
+    fg = vz / v
+    fy = -rate / y
     if -1.0 <= fr <= 1.0 and -1.0 <= fp <= 1.0 and -1.0 <= fg <= 1.0 and -1.0 <= fy <= 1.0:
         return fr + 0.0, fp + 0.0, fg + 0.0, fy + 0.0, 0
     bits = 0
@@ -179,28 +180,33 @@ class AfterSolve:
         not nominal."""
         if not sol.ok or self.supervisor._solver_fallback:  # check_solution's other verdicts
             return None
-        control = self.control
-        supervision, delay = self.supervision, self.delay
+        u = sol.u_flown
+        if u.__class__ is not _NDARRAY:
+            return None
+        zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
+        control, supervision, delay = self.control, self.supervision, self.delay
+        # Control.command's
+        vz_base = (float(supervision.vz_ref_mps) if control.vz_from_commands
+                   else sol.x_solve.item(IX_VZ))
+        e, v, y = supervision._scales
         nav = inputs.navdata
         if nav is not None:
-            t_nav, roll_deg, pitch_deg = inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
+            has, t_nav, roll_deg, pitch_deg = 1, inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
         else:
-            t_nav, roll_deg, pitch_deg = 0.0, 0.0, 0.0
-        u = sol.u_flown
+            has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
         offset, flags = self._offset
         code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
-            u, x, sol.x_solve, sol.ref_now, sol.ref_horizon, delay._sent, delay._next,
-            control.vz_from_commands, supervision.vz_ref_mps, control.vz_lead_s,
-            control._vz_max_mps, self.supervisor.max_tilt_rad, supervision.attitude_gain,
-            supervision._scale_array, self._response_state, nav is not None, t_nav, roll_deg,
-            pitch_deg, inputs.t_s, offset, flags)
+            zacc, phi, theta, rate, vz_base, control.vz_lead_s, control._vz_max_mps,
+            self.supervisor.max_tilt_rad, supervision.attitude_gain, e, v, y, delay._sent,
+            delay._next, self._response_state, has, t_nav, roll_deg, pitch_deg, inputs.t_s, x,
+            sol.ref_now, sol.ref_horizon, offset, flags)
         if code:
             return None
-        return self._records(inputs, u, vz, roll, pitch, gaz, yaw, bits, fed)
+        return self._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,
+                             bits, fed)
 
-    def _records(self, inputs, u, vz, roll, pitch, gaz, yaw, bits, fed):
+    def _records(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
         """What the Python stages keep and the tick hands on, from the kernel's answer."""
-        zacc, phi, theta, rate = u.tolist()
         self.supervisor._solver_failures = 0
         pcmd = _make_pcmd(roll, pitch, gaz, yaw, _SATURATED[bits])
         u_sent = _frombuffer(_pack_input(zacc, phi, theta, rate))
@@ -216,7 +222,7 @@ class AfterSolve:
             return sent, []
         if fed:  # a new sample: the estimate is fitted when it is read
             response.estimator._estimate = None
-        return sent, response.refit(inputs.t_s)
+        return sent, response.refit(t_s)
 
 
 _warm: list[bool] = []  # loaded (or compiled) in this process
@@ -233,8 +239,8 @@ def warm_up_kernels() -> None:
     x = np.zeros(7)
     ring = np.zeros((2, INPUT_DIM))
     state = new_state(np.zeros(2), np.ones(1), 4, 0.2, 30.0, 15)
-    after_solve(np.zeros(INPUT_DIM), x, x, x, np.zeros((2, 7)), ring, 0, False, 0.0, 0.065, 0.7,
-                0.3, 1.0, np.ones(3), state, True, 1.0, 0.0, 0.0, 1.0, _NOTHING, _NO_FLAGS)
+    after_solve(0.0, 0.0, 0.0, 0.0, 0.0, 0.065, 0.7, 0.3, 1.0, 1.0, 1.0, 1.0, ring, 0, state, 1,
+                1.0, 0.0, 0.0, 1.0, x, x, np.zeros((2, 7)), _NOTHING, _NO_FLAGS)
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

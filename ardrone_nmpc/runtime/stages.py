@@ -559,7 +559,6 @@ class Supervision:
         # unpacked once: the mapping's three attribute lookups a tick (pcmd_of_floats)
         self._scales = (limits.euler_angle_max_rad, limits.control_vz_max_mps,
                         limits.control_yaw_radps)
-        self._scale_array = np.array(self._scales)  # the same, for the compiled tick
 
     def command(self, decision: Decision, cmd: AttitudeCommand | None,
                 zacc_mps2: float) -> Sent:

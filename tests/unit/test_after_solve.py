@@ -162,10 +162,10 @@ def test_the_kernel_answers_not_nominal_before_any_write():
     tick = _tick()
     ring = tick.delay.ring
     ring[:] = 7.0
-    u = np.array([0.3, math.inf, 0.0, 0.0])
     x = np.zeros(7)
-    code = after_solve(u, x, x, x, tick.control._states[1:], ring, 0, False, 0.0, 0.065, 0.7, 0.35,
-                       1.0, np.ones(3), after_solve_module._NOTHING, False, 0.0, 0.0, 0.0, 1.0,
-                       after_solve_module._NOTHING, after_solve_module._NO_FLAGS)[0]
+    nothing = after_solve_module._NOTHING
+    code = after_solve(0.3, math.inf, 0.0, 0.0, 0.0, 0.065, 0.7, 0.35, 1.0, 0.2, 0.7, 1.7, ring,
+                       0, nothing, 0, 0.0, 0.0, 0.0, 1.0, x, x, tick.control._states[1:],
+                       nothing, after_solve_module._NO_FLAGS)[0]
     assert code == NOT_NOMINAL
     assert (ring == 7.0).all()
