@@ -88,14 +88,25 @@ class DelayPrediction:
         # ``capacity`` are always one slice, oldest first; zeros (hover) before the first
         self._capacity = capacity
         self._sent = self.ring = np.zeros((2 * capacity, INPUT_DIM))
-        # rows i and i + capacity as one (2, 4) view each: a push is one assignment, not two
-        self._pairs = [self._sent[i::capacity] for i in range(capacity)]
+        self._bind_pairs()
         self._next = 0  # the row the next input goes to
         self._pushed = False
         # what pending() answers, kept by push and set_delay_s: the control stage reads
         # them every tick without a call (µs a tick)
         self.lead_s = self.delay_ticks * period_s
         self.first = self.count = 0
+
+    def _bind_pairs(self) -> None:
+        # rows i and i + capacity as one (2, 4) view each: a push is one assignment, not two
+        capacity = self._capacity
+        self._pairs = [self._sent[i::capacity] for i in range(capacity)]
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: numpy copies each view apart from its array, so the
+        pairs a push writes are made views of the copied ring again (else the copy's pushes
+        would never reach the inputs it predicts from)."""
+        self.__dict__.update(state)
+        self._bind_pairs()
 
     def set_delay_s(self, delay_s: float) -> bool:
         """Compensate ``delay_s`` from now on, to the nearest whole tick (at most the

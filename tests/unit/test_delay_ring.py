@@ -3,9 +3,12 @@ the same order, reach the rollout — the same bits — whatever the delay set s
 
 from __future__ import annotations
 
+import copy
+import pickle
 from collections import deque
 
 import numpy as np
+import pytest
 
 from ardrone_nmpc.control.kernels import rollout_rk4
 from ardrone_nmpc.runtime.stages import DelayPrediction
@@ -59,3 +62,18 @@ def test_the_ring_feeds_the_rollout_what_the_deque_did():
             assert got is x
         else:
             assert got.tobytes() == _reference(pending, n, capacity, x).tobytes()
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda d: pickle.loads(pickle.dumps(d))])
+def test_a_copied_delay_pushes_into_the_ring_it_predicts_from(copier):
+    original = DelayPrediction(0.2, 0.065, max_delay_s=0.3)
+    original.push(np.array([0.1, 0.02, -0.01, 0.3]))
+    twin = copier(original)
+    x = np.array([0.0, 0.1, 0.0, -0.1, 1.0, 0.0, 0.2])
+    for k in range(6):  # past the capacity: every pair written
+        u = np.array([0.2 * k, 0.01 * k, -0.02, 0.1])
+        original.push(u)
+        twin.push(u)
+        assert twin.ring is twin._sent
+        assert twin.ring.tolist() == original.ring.tolist()
+        assert twin.predict(x).tolist() == original.predict(x).tolist()
