@@ -56,7 +56,7 @@ def _wrap(owner, name: str, bucket: str, acc: dict) -> None:
 
 def _instrument(acc: dict) -> None:
     from ardrone_nmpc import safety
-    from ardrone_nmpc.runtime import lockstep, stages, tick
+    from ardrone_nmpc.runtime import after_solve, lockstep, stages, tick
     from ardrone_nmpc.sim.plant import AirframePlant
 
     for name in ("advance", "mocap_pose", "navdata"):
@@ -68,6 +68,9 @@ def _instrument(acc: dict) -> None:
     _wrap(stages.Control, "command", "supervisor", acc)
     _wrap(stages.Supervision, "command", "supervisor", acc)
     _wrap(stages.DelayPrediction, "push", "supervisor", acc)
+    # the nominal tick's stages after the solve in one call: the four above, with the response
+    # feed and the integrator's step (unwrapped, in "rest", on the other ticks)
+    _wrap(after_solve.AfterSolve, "nominal", "supervisor", acc)
     _wrap(tick, "tick_row", "logging", acc)
     _wrap(lockstep, "put_truth", "logging", acc)
 

@@ -103,7 +103,7 @@ def after_solve(zacc, phi, theta, rate, vz_base_mps, vz_lead_s, vz_max_mps, tilt
         ring[r, IU_PSIRATE] = rate
     code = 0
     if fed:  # ResponseEstimation.update's feed: the sample, then the command sent
-        code = feed(response, has_nav, t_nav_s, roll_deg, pitch_deg, CMD_SEND + TIMES_ROUNDED,
+        code = feed(response, has_nav != 0, t_nav_s, roll_deg, pitch_deg, CMD_SEND + TIMES_ROUNDED,
                     t_s, roll, pitch)
     if offset.size != 0:  # OffsetFree.update: frozen_axes of the command, then the step
         _freeze(roll, pitch, gaz, yaw, bits, offset_flags[2])
@@ -120,18 +120,21 @@ def _fractions(vz, roll, pitch, rate, e, v, y):
     fy = -rate / y
     if -1.0 <= fr <= 1.0 and -1.0 <= fp <= 1.0 and -1.0 <= fg <= 1.0 and -1.0 <= fy <= 1.0:
         return fr + 0.0, fp + 0.0, fg + 0.0, fy + 0.0, 0
-    bits = 0
-    out = np.empty(4)
-    for k, v in enumerate((fr, fp, fg, fy)):  # _clip_unit
-        if v > 1.0:
-            out[k] = 1.0
-            bits |= 1 << k
-        elif v < -1.0:
-            out[k] = -1.0
-            bits |= 1 << k
-        else:
-            out[k] = v + 0.0
-    return out[0], out[1], out[2], out[3], bits
+    fr, b0 = _clip_unit(fr)
+    fp, b1 = _clip_unit(fp)
+    fg, b2 = _clip_unit(fg)
+    fy, b3 = _clip_unit(fy)
+    return fr, fp, fg, fy, b0 | b1 << 1 | b2 << 2 | b3 << 3
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _clip_unit(f):
+    """``mapping._clip_unit``: ``f`` clipped to [−1, 1] (−0.0 made 0.0), and 1 if it was."""
+    if f > 1.0:
+        return 1.0, 1
+    if f < -1.0:
+        return -1.0, 1
+    return f + 0.0, 0
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -159,7 +162,8 @@ _make_cmd = AttitudeCommand.make
 
 
 class AfterSolve:
-    """The Python side of :func:`after_solve` for one tick's stages (``Tick``'s)."""
+    """The Python side of :func:`after_solve` for one tick's stages (``Tick``'s): bound to
+    them, and to the estimator's and the integrator's buffers, when it is made."""
 
     def __init__(self, tick) -> None:
         self.supervisor = tick.supervisor
