@@ -2,11 +2,12 @@
 into numba's on-disk cache by a background child while the runner compiles the solver.
 
 On an empty cache a flight compiles everything in one process, serially (~13 s on 2 cores):
-the solver first (``Tick``'s warm-up), then the estimation stage's step and the attitude
-estimate's ``feed``, then the simulated drone's kernels (``lockstep_run``, ``flying_advance``,
-``airframe_rk4`` …), which are needed only after the take-off. :func:`start_if_cold` starts
-``python -m ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child
-compiles those kernels (:func:`main`) and the runner finds them cached when it gets there.
+the solver first (``Tick``'s warm-up), then the estimation stage's step, the attitude
+estimate's ``feed`` and the NMPC's nominal tick after the solve (``after_solve``), then the
+simulated drone's kernels (``lockstep_run``, ``flying_advance``, ``airframe_rk4`` …), which
+are needed only after the take-off. :func:`start_if_cold` starts ``python -m
+ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child compiles
+those kernels (:func:`main`) and the runner finds them cached when it gets there.
 
 Never harmful: the child is best-effort (its output goes nowhere; the runner compiles whatever
 is not cached yet), and the cached code a process loads is the code it would compile (no
@@ -93,6 +94,7 @@ def compile_kernels() -> None:
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
+    from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
     from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
     from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
@@ -100,6 +102,7 @@ def compile_kernels() -> None:
     # flight with the default ż filter; nmpc_inputs only a waypoint reference's, left to it)
     warm_up_tick_kernels(estimate=True, nmpc=False)
     warm_up_kernels()
+    warm_up_after_solve()  # the NMPC's nominal tick (runtime/after_solve): feed is cached now
     cfg = config_from_dict({"name": "precompile", "duration_s": 1.0})
     drone = LockstepDrone(cfg)
     period = cfg.loop.period_s

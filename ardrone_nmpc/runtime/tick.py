@@ -136,7 +136,6 @@ class Tick:
         self.after_solve = AfterSolve(self) if nmpc is not None else None
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
-            warm_up_after_solve()
         # the stages' own (runtime/tick_kernels): those this flight calls
         waypoints = (trajectory.__class__ is HoldStartThen
                      and trajectory.waypoint_args is not None)
@@ -144,6 +143,8 @@ class Tick:
                              nmpc=nmpc is not None and waypoints)
         if self.response is not None:  # after the solver's (runtime/precompile.py)
             self.response.warm_up()
+        if nmpc is not None:  # last: its callees (the feed's) are loaded or compiled by now
+            warm_up_after_solve()
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None) -> TickOutput:
