@@ -170,18 +170,15 @@ class Tick:
             decision = sup.check_state(x, inputs.navdata)
         if decision.action is _CONTROL:
             solution = self.control.solve(t_exp_s, x, traj, self.offset)
-            if solution.result is not None:  # the NMPC's answer is judged; P's is not
-                if self.after_solve is not None:  # the nominal tick: every stage below at once
-                    done = self.after_solve.nominal(inputs, x, solution)
-                if done is None:
-                    decision = sup.check_solution(solution.ok, solution.u_flown)
+            if solution.result is not None and self.after_solve is not None:
+                # the nominal tick: the stages below in one compiled call (None: not nominal)
+                done = self.after_solve.nominal(inputs, x, solution)
             if done is None:
+                if solution.result is not None:  # the NMPC's answer is judged; P's is not
+                    decision = sup.check_solution(solution.ok, solution.u_flown)
                 cmd = self.control.command(decision.action, solution, x,
                                            self.supervision.vz_ref_mps)
-        if done is None:
-            sent, adapted = self._after(inputs, decision, x, solution, cmd)
-        else:
-            sent, adapted = done
+        sent, adapted = self._after(inputs, decision, x, solution, cmd) if done is None else done
         label = sup.record(sent.decision, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         events = sup.take_events()  # a list of its own: extended, not copied
