@@ -4,7 +4,9 @@ the tick is not nominal."""
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -169,3 +171,14 @@ def test_the_kernel_answers_not_nominal_before_any_write():
                        nothing, after_solve_module._NO_FLAGS)[0]
     assert code == NOT_NOMINAL
     assert (ring == 7.0).all()
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
+def test_a_copied_tick_calls_the_kernel_on_its_own_stages(copier):
+    clone = copier(_tick())
+    after = clone.after_solve
+    assert after._response_state is clone.response.estimator._state
+    assert after._offset[0] is clone.offset.integrator._work
+    assert after._offset[1] is clone.offset.integrator._flags
+    for name in ("supervisor", "control", "supervision", "delay", "response", "offset"):
+        assert getattr(after, name) is getattr(clone, name)
