@@ -32,7 +32,7 @@ from ardrone_nmpc.core.types import (INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU
                                      AttitudeCommand)
 from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC, integrate_period
 from ardrone_nmpc.estimation.response_kernels import (CMD_SEND, TIMES_ROUNDED, feed,
-                                                      microseconds)
+                                                      microseconds, new_state)
 from ardrone_nmpc.runtime.stages import Sent
 from ardrone_nmpc.safety import NOMINAL
 
@@ -40,7 +40,7 @@ __all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
 
 #: :func:`after_solve`'s first answer when the tick is not nominal (nothing written).
 NOT_NOMINAL = -1
-_NOTHING = np.zeros(0)  # the estimator's state or the integrator's buffers of a flight without
+_NOTHING = np.zeros(0)  # the estimator's state, the integrator's buffers: of a flight without
 _NO_FLAGS = np.zeros((3, 0), dtype=np.bool_)
 _NDARRAY = np.ndarray
 
@@ -185,7 +185,7 @@ class AfterSolve:
         if not sol.ok or self.supervisor._solver_fallback:  # check_solution's other verdicts
             return None
         u = sol.u_flown
-        if u.__class__ is not _NDARRAY:
+        if u.__class__ is not _NDARRAY:  # (check_solution takes any sequence: its path)
             return None
         zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
         control, supervision, delay = self.control, self.supervision, self.delay
@@ -239,7 +239,6 @@ def warm_up_kernels() -> None:
         return
     _warm.append(True)
     load_cached_callees(after_solve)
-    from ardrone_nmpc.estimation.response_kernels import new_state
     x = np.zeros(7)
     ring = np.zeros((2, INPUT_DIM))
     state = new_state(np.zeros(2), np.ones(1), 4, 0.2, 30.0, 15)
