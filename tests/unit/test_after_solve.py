@@ -37,8 +37,9 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, int]:
-    """The rows of a lockstep flight, and how many ticks the compiled call took."""
+def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
+    """The rows and events of a lockstep flight, and how many ticks the compiled call
+    took."""
     taken = [0]
     original_init, original_nominal = Tick.__init__, AfterSolve.nominal
 
@@ -57,7 +58,7 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, int]:
         m.setattr(AfterSolve, "nominal", nominal)
         recorder = MemoryRecorder()
         run_lockstep(cfg, recorder=recorder)
-    return recorder.rows, taken[0]
+    return recorder.rows, recorder.events, taken[0]
 
 
 @pytest.mark.parametrize("name, overrides", [
@@ -68,9 +69,10 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, int]:
 ])
 def test_a_flight_gives_the_rows_of_the_python_stages(name, overrides, monkeypatch):
     cfg = config(name, *overrides)
-    python_rows, none = _fly(cfg, compiled=False, monkeypatch=monkeypatch)
-    compiled_rows, taken = _fly(cfg, compiled=True, monkeypatch=monkeypatch)
+    python_rows, python_events, none = _fly(cfg, compiled=False, monkeypatch=monkeypatch)
+    compiled_rows, compiled_events, taken = _fly(cfg, compiled=True, monkeypatch=monkeypatch)
     assert none == 0 and taken > len(python_rows) // 2  # most ticks took the compiled call
+    assert compiled_events == python_events  # the fit's and the supervisor's, in order
     assert len(compiled_rows) == len(python_rows)
     for i, (a, b) in enumerate(zip(python_rows, compiled_rows)):
         bad = [k for k in a if k not in ("solve_us", "compute_us", "tick_late_ms")
