@@ -251,6 +251,34 @@ def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
                 == python.update(shifted, None, zacc).tobytes())
 
 
+@pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_copied_estimation_estimates_as_the_original(copier, compiled):
+    """A deep or pickled copy of the estimation stage mid-flight answers as the original, bit
+    for bit, in its own array (a view of its own state while the compiled step holds it),
+    and its updates leave the original's state alone."""
+    import copy
+    import pickle
+
+    est, _ = _estimations()
+    if not compiled:
+        est._leave_compiled()
+    poses = _poses(3)
+    for p, zacc in poses[:20]:
+        est.update(p, None, zacc)
+    twin = copy.deepcopy(est) if copier == "deepcopy" else pickle.loads(pickle.dumps(est))
+    assert twin.compiled == compiled
+    before = est._state.tobytes()
+    answers = []
+    for who in (twin, est):
+        answers.append([who.update(p, _nav(k) if k % 2 else None, zacc).tobytes()
+                        for k, (p, zacc) in enumerate(poses[20:])])
+        if who is twin:
+            assert est._state.tobytes() == before
+            assert np.shares_memory(twin._x, twin._state)
+    assert answers[0] == answers[1]
+
+
 # the first pose only resets the estimators: a bad z̈ or interval needs a pose before it
 @pytest.mark.parametrize("first,bad", [(True, "z"), (True, "x"), (True, "t_nan")]
                          + [(False, b) for b in ("z", "x", "zacc", "dt", "t_nan")])
