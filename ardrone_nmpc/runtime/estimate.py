@@ -85,10 +85,13 @@ class Estimation:
         self._kalman = _kalman_entry(self._state) or self._kalman_first
 
     def _kalman_first(self, *args) -> int:
-        """``kalman_estimate`` through the dispatcher (which compiles or loads it), then its
-        entry point bound for the next calls (else the dispatcher)."""
+        """``kalman_estimate`` through the dispatcher (which compiles or loads it for these
+        arguments), then its entry point for floats bound for the next calls once known (the
+        numbers may have been of another type: asked again next call)."""
         answer = kalman_estimate(*args)
-        self._kalman = _kalman_entry(self._state) or kalman_estimate
+        entry = _kalman_entry(self._state)
+        if entry is not None:
+            self._kalman = entry
         return answer
 
     def __getstate__(self) -> dict:
