@@ -73,9 +73,10 @@ def entry_point(kernel, *args):
 def _look_up(overloads, args):
     """The entry point of the specialisation compiled for ``args``' numba types, or None."""
     from numba import typeof
+    from numba.core.errors import NumbaError
 
     try:
         compiled = overloads.get(tuple(typeof(a) for a in args))
-    except (ValueError, TypeError, NotImplementedError):  # a dtype numba does not take
+    except (NumbaError, ValueError, TypeError):  # a dtype numba does not take ('>f8' …)
         return None
     return None if compiled is None else compiled.entry_point

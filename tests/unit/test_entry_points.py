@@ -46,6 +46,7 @@ def test_the_entry_point_is_the_dispatchers_specialisation_for_those_kinds_only(
     assert entry_point(weigh, a.astype(np.float32), b, 0.5, True, 3) is None
     assert entry_point(weigh, a, b, np.float64(0.5), True, 3) is None
     assert entry_point(weigh, a, b, 0.5, True, 1 << 63) is None
+    assert entry_point(weigh, a.astype(">f8"), b, 0.5, True, 3) is None  # numba refuses it
     # a kind compiled later is found then (the miss before is not kept once it compiled)
     weigh(a.astype(np.float32), b, 0.5, True, 3)
     other = entry_point(weigh, a.astype(np.float32), b, 0.5, True, 3)
