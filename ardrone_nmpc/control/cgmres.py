@@ -71,10 +71,6 @@ class CGMRESController(NmpcSolverBase):
                              f"got {newton_trigger_residual}")
         self.memory.zeta_per_s = zeta_per_s
         self.memory.newton_trigger_residual = newton_trigger_residual
-        # the tick's kernel and its fixed arguments bound once (SolverMemory.cgmres_step's
-        # call without its frame and three attribute reads, every tick); the base's solve
-        # calls it without :meth:`_tick`'s frame
-        self._step = self._kernel = self.memory.cgmres_call()
 
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "CGMRESController":
@@ -84,6 +80,12 @@ class CGMRESController(NmpcSolverBase):
                    tolerance=s.tolerance, max_newton_iterations=s.max_newton_iterations,
                    dummy_weight=s.dummy_weight, divergence_residual=s.divergence_residual,
                    newton_trigger_residual=s.newton_trigger_residual, condensed=s.condensed)
+
+    def _kernel_call(self) -> tuple:
+        """The tick's kernel and its fixed arguments bound once (SolverMemory.cgmres_step's
+        call without its frame and three attribute reads, every tick); the base's solve
+        calls it without :meth:`_tick`'s frame."""
+        return self.memory.cgmres_call()
 
     def _initial_guess(self) -> None:
         spec = self.spec

@@ -22,6 +22,7 @@ from ardrone_nmpc.control.kernels import (FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_
                                           STAGE_CONDENSED, SolverMemory)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus, SolveResult
+from ardrone_nmpc.core.entry_points import entry_point, plain
 from ardrone_nmpc.core.types import INPUT_DIM, STATE_DIM
 
 _F64 = np.dtype(np.float64)
@@ -60,7 +61,6 @@ class NmpcSolverBase:
             newton_kmax=min(int(newton_kmax), spec.horizon_steps * self.stage_dim),
             max_newton_iterations=max_newton_iterations, obstacles=spec.obstacles,
             gauss_newton=spec.obstacle_gauss_newton)
-        self.U, self.dU, self._u, self.obstacles = mem.U, mem.dU, mem.u, mem.obstacles
         mem.set_weights(q=spec.q, q_terminal=spec.q_terminal, r=spec.r, u_min=spec.u_min,
                         u_max=spec.u_max)
         mem.dummy_weight = dummy_weight
@@ -74,12 +74,45 @@ class NmpcSolverBase:
         self._fixed_dtau_s = spec.dtau_s if spec.horizon_ramp_rate_per_s <= 0.0 else None
         self._ref_shape = (spec.horizon_steps + 1, STATE_DIM)
         self._t0_s: float | None = None
+        self._bind_memory()
+
+    #: what :meth:`_bind_memory` makes of the memory (not copied, not pickled)
+    _BOUND = ("U", "dU", "_u", "obstacles", "_stats_values", "_u_copy", "_step", "_kernel",
+              "_entry", "_seen")
+
+    def _bind_memory(self) -> None:
+        """The memory's views under the solver's names and its tick's calls bound once (made
+        again for a copy: :meth:`__setstate__`)."""
+        mem = self.memory
+        self.U, self.dU, self._u, self.obstacles = mem.U, mem.dU, mem.u, mem.obstacles
         # the kernels' stats as a list: the array's own tolist bound once (read every tick;
         # SolverMemory.stats_values without its frame)
         self._stats_values = mem.stats_array.tolist
+        self._u_copy = mem.u.copy  # the result's own input, a tick (the method bound once)
         # ``(kernel, memory, settings)`` of a subclass whose tick is
         # ``kernel(memory, x, ref, settings, initialise)`` (C/GMRES); None: :meth:`_tick`
-        self._kernel: tuple | None = None
+        self._step: tuple | None = self._kernel_call()
+        # what solve_prepared calls that kernel by: ``(call, memory, settings, x, ref)`` —
+        # its compiled entry point while ``x`` and ``ref`` are the arrays it vetted
+        # (:meth:`_call_unvetted`), never None's (no array is None)
+        self._kernel: tuple | None = None if self._step is None else (*self._step, None, None)
+        self._entry = None  # the kernel's entry point for plain arrays, once compiled
+        self._seen = (None, None)  # the arrays of the last call not vetted
+
+    def __getstate__(self) -> dict:
+        """Without the views and calls :meth:`_bind_memory` makes (an entry point does not
+        pickle; the vetted arrays are the caller's)."""
+        state = self.__dict__.copy()
+        for name in self._BOUND:
+            del state[name]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: numpy copies each view apart from its array, so the
+        views and calls are made of the copied memory again — the copy solves on its own
+        memory as the original does on its, and writes nothing of the original's."""
+        self.__dict__.update(state)
+        self._bind_memory()
 
     @property
     def dummy_weight(self) -> float:
@@ -137,7 +170,10 @@ class NmpcSolverBase:
     def solve_prepared(self, t_s: float, x: np.ndarray, ref: np.ndarray) -> SolveResult:
         """:meth:`solve` for a caller that vouches for its arrays — ``x`` a (7,) and ``ref`` a
         (N+1, 7) float64 ndarray (the control stage's fast path builds them) —: the same
-        solve without the checks and conversions (µs a tick)."""
+        solve without the checks and conversions (µs a tick). C/GMRES' kernel is called by
+        its compiled entry point with the arrays it vetted (:meth:`_call_unvetted`): their
+        kinds are checked once per array object, which must not be reshaped or retyped in
+        place (``a.shape = …``, ``a.dtype = …``) while the solver is fed it."""
         initialise = self._t0_s is None
         if initialise:
             self._t0_s = t_s
@@ -148,7 +184,11 @@ class NmpcSolverBase:
         kernel = self._kernel
         t0 = _perf_counter_ns()
         if kernel is not None:  # the subclass' bound kernel call, without its _tick frame
-            flag = kernel[0](kernel[1], x, ref, kernel[2], initialise)
+            call, mem, iprm, vetted_x, vetted_ref = kernel
+            if x is vetted_x and ref is vetted_ref:  # its entry point (_call_unvetted)
+                flag = call(mem, x, ref, iprm, initialise)
+            else:
+                flag = self._call_unvetted(x, ref, initialise)
         else:
             flag = self._tick(x, ref, initialise)
         elapsed_us = (_perf_counter_ns() - t0) * 1e-3
@@ -165,8 +205,27 @@ class NmpcSolverBase:
         status = _OK
         if newton_norm > self.tolerance and (initialise or self._newton_every_tick):
             status = SolverStatus.MAX_ITERATIONS
-        return _new_tuple(SolveResult, (self._u.copy(), status, norm, int(gmres_it), elapsed_us,
+        return _new_tuple(SolveResult, (self._u_copy(), status, norm, int(gmres_it), elapsed_us,
                                         int(newton_it), False))
+
+    def _call_unvetted(self, x: np.ndarray, ref: np.ndarray, initialise: bool) -> int:
+        """The bound kernel's call with arrays other than the ones vetted: the dispatcher,
+        which looks at their types. The same two arrays a second time in a row are vetted —
+        plain (core/entry_points), the kinds the memory's call is compiled for — and kept
+        with its entry point, so that the next calls with them take it at once: the control
+        stage's fast path passes its own arrays every tick, and a caller with new arrays
+        every call pays no check."""
+        kernel, mem, iprm = self._step
+        seen = self._seen
+        if x is seen[0] and ref is seen[1] and plain(x) and plain(ref, 2):
+            entry = self._entry
+            if entry is None:  # the dispatcher has compiled (or loaded) their kinds by now
+                entry = self._entry = entry_point(kernel, mem, x, ref, iprm, initialise)
+            if entry is not None:  # (None without the JIT)
+                self._kernel = (entry, mem, iprm, x, ref)
+                return entry(mem, x, ref, iprm, initialise)
+        self._seen = (x, ref)
+        return kernel(mem, x, ref, iprm, initialise)
 
     def _recover(self, t_s, x, ref, status, elapsed_us) -> SolveResult:
         """Re-initialise and solve afresh from the box centre; report ``status``."""
@@ -184,6 +243,11 @@ class NmpcSolverBase:
                            elapsed_us, int(stats.newton_iterations), True)
 
     # subclass hooks
+    def _kernel_call(self) -> tuple | None:
+        """``(kernel, memory, settings)`` when a tick is ``kernel(memory, x, ref, settings,
+        initialise)`` (bound once: :meth:`solve_prepared` calls it without :meth:`_tick`)."""
+        return None
+
     def _initial_guess(self) -> None:
         raise NotImplementedError
 

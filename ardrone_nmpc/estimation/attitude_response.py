@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.estimation import response_kernels as rk
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
@@ -140,34 +141,24 @@ class AttitudeEstimate:
 
 # bound once: the tick feeds one a period
 _feed, _CMD_SEND, _TIMES_ROUNDED = rk.feed, rk.CMD_SEND, rk.TIMES_ROUNDED
-_F64 = np.dtype(np.float64)
-#: ``response_kernels.feed``'s compiled entry point for a state :func:`~.response_kernels.
-#: new_state` built, once the dispatcher has it (``_feed_dispatched``)
-_FEED_ENTRY: list = []
 
 
 def _feed_dispatched(state: np.ndarray, has: bool, sample_t_s, roll_deg, pitch_deg,
                      cmd_kind: int, cmd_t_s, roll_frac, pitch_frac) -> int:
     """``response_kernels.feed`` through numba's dispatcher, every number made a float first
-    (its one compiled signature); then notes the signature's compiled entry point, which
+    (its one compiled signature) — until the estimator binds the signature's compiled entry
+    point (:func:`_feed_entry`)."""
+    return _feed(state, has, float(sample_t_s), float(roll_deg), float(pitch_deg), cmd_kind,
+                 float(cmd_t_s), float(roll_frac), float(pitch_frac))
+
+
+def _feed_entry(state: np.ndarray):
+    """``response_kernels.feed``'s compiled entry point for ``state`` (one :func:`~.
+    response_kernels.new_state` built: float64, 1-D, C-contiguous, aligned, writeable) and the
+    numbers :func:`_feed_dispatched` makes floats, once the dispatcher has it (else None): it
     skips the dispatcher's look-up of nine arguments' types (~0.1 µs) and makes each number
     a float itself (numba unboxes a float64 by ``PyNumber_Float``, what ``float`` does)."""
-    code = _feed(state, has, float(sample_t_s), float(roll_deg), float(pitch_deg), cmd_kind,
-                 float(cmd_t_s), float(roll_frac), float(pitch_frac))
-    if not _FEED_ENTRY and _plain(state):
-        from numba import typeof
-        compiled = getattr(_feed, "overloads", {}).get(
-            tuple(typeof(a) for a in (state, True, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)))
-        if compiled is not None:  # (None without the JIT)
-            _FEED_ENTRY.append(compiled.entry_point)
-    return code
-
-
-def _plain(state: np.ndarray) -> bool:
-    """A state of the one kind the entry point was compiled for (new_state's): float64, 1-D,
-    C-contiguous, aligned, writeable. (The dispatcher looks at the types; the entry point
-    does not.)"""
-    return state.dtype == _F64 and state.ndim == 1 and state.flags.carray
+    return entry_point(_feed, state, True, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)
 
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
@@ -230,7 +221,7 @@ class AttitudeResponseEstimator:
                            out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
         # the compiled step: its entry point once known for this kind of state, else the
         # dispatcher (feed binds the entry point after its first call)
-        self._step = _FEED_ENTRY[0] if _FEED_ENTRY and _plain(st) else _feed_dispatched
+        self._step = _feed_entry(st) or _feed_dispatched
 
     def __getstate__(self) -> dict:
         """Without the compiled step (an entry point does not pickle): bound again."""
@@ -268,8 +259,8 @@ class AttitudeResponseEstimator:
                         pitch_deg, cmd_kind + _TIMES_ROUNDED,
                         _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0, roll_frac,
                         pitch_frac)
-        elif step is _feed_dispatched and _FEED_ENTRY and _plain(self._state):
-            self._step = _FEED_ENTRY[0]  # known now
+        elif step is _feed_dispatched:
+            self._step = _feed_entry(self._state) or step  # known now
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
             return True

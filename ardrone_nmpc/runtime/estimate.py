@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.core.types import MocapPose, NavdataSample
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
@@ -27,6 +28,11 @@ __all__ = ["Estimation", "navdata_velocity_world"]
 assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
 assert ESTIMATED == 0  # Estimation.update tests kalman_estimate's answer for truth
 _NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the general spelling)
+
+
+def _kalman_entry(state: np.ndarray):
+    """``kalman_estimate``'s compiled entry point for ``state`` and float numbers, or None."""
+    return entry_point(kalman_estimate, state, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -64,8 +70,44 @@ class Estimation:
         self._compiled = type(self._vz_estimator) is ScalarKalmanVz
         if self._compiled:
             self._state = np.zeros(E_SIZE)
-            self._x = self._state[E_X:E_X + STATE_DIM]  # the compiled step writes it there
+            self._bind_state()
             self._to_compiled()
+
+    def _bind_state(self) -> None:
+        """The estimate as a view of the compiled step's state (it writes it there), and the
+        step's call: ``kalman_estimate``'s compiled entry point for this state once known
+        (:meth:`_kalman_first`), which skips the dispatcher's look-up of ten arguments' types.
+        The state is a plain float64 vector (core/entry_points checks it); of the numbers,
+        the flags are literals and each float parameter is only made a float64 — by
+        ``float()`` in the entry point's unboxing, by the dispatcher's specialisation for
+        another number's type in the kernel, the same value either way."""
+        self._x = self._state[E_X:E_X + STATE_DIM]
+        self._kalman = _kalman_entry(self._state) or self._kalman_first
+
+    def _kalman_first(self, *args) -> int:
+        """``kalman_estimate`` through the dispatcher (which compiles or loads it for these
+        arguments), then its entry point for floats bound for the next calls once known (the
+        numbers may have been of another type: asked again next call)."""
+        answer = kalman_estimate(*args)
+        entry = _kalman_entry(self._state)
+        if entry is not None:
+            self._kalman = entry
+        return answer
+
+    def __getstate__(self) -> dict:
+        """Without what :meth:`_bind_state` makes (an entry point does not pickle)."""
+        state = self.__dict__.copy()
+        if "_state" in state:
+            del state["_x"], state["_kalman"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: numpy copies a view apart from its array, so the
+        estimate is made a view of the copied state again (else the copy's updates would
+        write one array and answer another)."""
+        self.__dict__.update(state)
+        if "_state" in state:
+            self._bind_state()
 
     # the estimators as objects: their state, handed back from the compiled step
     @property
@@ -123,13 +165,13 @@ class Estimation:
         if self._compiled:
             # ``not``: ESTIMATED is 0 (one comparison a tick less)
             if navdata is None or not self.velocity_from_navdata:
-                if not kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s,
-                                       zacc_mps2, False, 0.0, 0.0):
+                if not self._kalman(self._state, px, py, pz, pose.psi_rad, pose.t_s,
+                                    zacc_mps2, False, 0.0, 0.0):
                     return self._x
             else:
                 vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-                if not kalman_estimate(self._state, px, py, pz, pose.psi_rad, pose.t_s,
-                                       zacc_mps2, True, vx, vy):
+                if not self._kalman(self._state, px, py, pz, pose.psi_rad, pose.t_s,
+                                    zacc_mps2, True, vx, vy):
                     return self._x
             self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:

@@ -48,6 +48,7 @@ import struct
 import numpy as np
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
@@ -114,31 +115,17 @@ _R_DONE = ks.OUT_SIZE
 
 _F64 = np.dtype(np.float64)
 _PI = math.pi
-_ENTRY: list = []  # lockstep_run's compiled entry point for the arrays CompiledLegs builds
+_BUF_KIND = np.empty(0)  # a stand-in of CompiledLegs' buf (a plain 1-D float64) for its kind
 
 
 def _kernel_for(x, rows, blocks):
     """:func:`~ardrone_nmpc.sim.sensor_step.lockstep_run`'s compiled entry point — the
     dispatcher's own choice for these arrays, without its per-call look-up of seven
-    arguments' types — when the plant's arrays are of the one kind CompiledLegs builds its
-    own of (float64, C-contiguous, aligned, writeable; the state and the blocks 1-D, the
-    ring 2-D: their types until the next :meth:`_take <CompiledLegs._take>` asks again);
-    else, or before the kernel is compiled (or without the JIT), the dispatcher."""
-    if not (x.ndim == 1 and rows.ndim == 2
-            and all(a.dtype == _F64 and a.flags.carray for a in (x, rows, *blocks))
-            and all(a.ndim == 1 for a in blocks)):
-        return _lockstep_run
-    if not _ENTRY:
-        overloads = getattr(_lockstep_run, "overloads", None)
-        if not overloads:
-            return _lockstep_run
-        from numba import typeof
-        buf = np.zeros(ks.BUF_SIZE)
-        compiled = overloads.get(tuple(typeof(a) for a in (x, rows, buf, *blocks)))
-        if compiled is None:
-            return _lockstep_run
-        _ENTRY.append(compiled.entry_point)
-    return _ENTRY[0]
+    arguments' types (core/entry_points) — when the plant's arrays are of a kind it compiled
+    (CompiledLegs builds its own float64, C-contiguous, aligned, writeable: their types until
+    the next :meth:`_take <CompiledLegs._take>` asks again); else, or before the kernel is
+    compiled (or without the JIT), the dispatcher."""
+    return entry_point(_lockstep_run, x, rows, _BUF_KIND, *blocks) or _lockstep_run
 
 
 class CompiledLegs:

@@ -297,3 +297,91 @@ def test_solve_prepared_is_solve_without_its_checks(cls):
     assert runs[0] == runs[1]
     statuses = {status for _, status, *_ in runs[0]}
     assert SolverStatus.NON_FINITE in statuses and SolverStatus.DIVERGED in statuses
+
+
+def _result_bits(r):
+    return (r.u.tobytes(), r.status, r.residual_norm, r.gmres_iterations, r.newton_iterations,
+            r.reinitialised)
+
+
+@pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
+@pytest.mark.parametrize("cls", [CGMRESController, NewtonGMRESController])
+def test_a_copied_solver_solves_as_the_original(cls, copier):
+    """A deep copy or unpickled copy of a solver mid-run is faithful: from the same state it
+    answers as the original, bit for bit, on its own memory — its views (the horizon, the
+    input, the stats the result reads) are views of its memory, and its solves write nothing
+    of the original's."""
+    import copy
+    import pickle
+
+    solver = cls(SPEC)
+    x = np.asarray(HOVER_STATE, float).copy()
+    for k in range(4):
+        x = plant_step(x, solver.solve(0.065 * k, x, _ref(SMALL_TARGET)).u, 0.065)
+    twin = copy.deepcopy(solver) if copier == "deepcopy" else pickle.loads(pickle.dumps(solver))
+    views = (twin.U, twin.dU, twin._u, twin.memory.u, twin.memory.stats_array,
+             twin._stats_values.__self__)
+    for view in views:
+        assert np.shares_memory(view, twin.memory._mem)
+        assert not np.shares_memory(view, solver.memory._mem)
+    original = solver.memory.snapshot()
+    ref, answers = _ref(BIG_TARGET), []
+    for who in (twin, solver):
+        xk, run = x.copy(), []
+        for k in range(4, 9):  # a reference step (a Newton re-projection), then continuation
+            r = who.solve_prepared(0.065 * k, xk, ref)  # the same arrays: the entry point
+            run.append(_result_bits(r))
+            xk = plant_step(xk, r.u, 0.065)
+        answers.append(run)
+        if who is twin:
+            assert np.array_equal(solver.memory.snapshot(), original)  # untouched by the copy
+    assert answers[0] == answers[1]
+
+
+def _stub_step(mem, x, ref, iprm, initialise):
+    """A kernel of the C/GMRES tick's signature that reads its arrays by their strides."""
+    s = 0.0
+    for i in range(x.shape[0]):
+        s += x[i] * (i + 1)
+    for i in range(ref.shape[0]):
+        for j in range(ref.shape[1]):
+            s += ref[i, j] * (i + 2 * j)
+    mem[0] = s
+    return 0
+
+
+def test_solve_prepared_vets_the_arrays_it_sees_again_for_the_entry_point():
+    """The bound kernel's compiled entry point (no type look-up, no type check) is taken for
+    the same two arrays seen again, and only if they are plain float64 C arrays; arrays of
+    another layout stay with the dispatcher, which reads them by their strides."""
+    numba = pytest.importorskip("numba")
+    from ardrone_nmpc.core.entry_points import entry_point
+
+    stub = numba.njit(_stub_step)
+
+    class Stubbed(CGMRESController):
+        def _kernel_call(self):
+            _, mem, iprm = super()._kernel_call()
+            return stub, mem, iprm
+
+    solver = Stubbed(SPEC)
+    solver._t0_s = 0.0  # no initial guess (the stub solves nothing)
+    x, ref = np.arange(7.0), np.arange(16 * 7.0).reshape(16, 7)
+    out = np.zeros(1)
+    _stub_step(out, x, ref, None, False)
+    expected = out[0]
+    for k in range(3):
+        solver.solve_prepared(0.065, x, ref)
+        assert solver.U[0] == expected
+        assert (solver._kernel[0] is stub) == (k == 0)  # vetted at the second call
+    assert solver._kernel[0] is entry_point(stub, solver.memory._mem, x, ref,
+                                            solver.memory._iprm, False)
+    wide = np.zeros((7, 2))
+    wide[:, 0] = x
+    strided, fortran = wide[:, 0], np.asfortranarray(ref)
+    for xs, refs in [(strided, ref), (x, fortran), (strided, fortran)]:
+        for _ in range(3):
+            solver.U[0] = 0.0
+            solver.solve_prepared(0.065, xs, refs)
+            assert solver.U[0] == expected
+            assert solver._kernel[0] is not stub and solver._kernel[3] is x  # not vetted

@@ -251,6 +251,56 @@ def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
                 == python.update(shifted, None, zacc).tobytes())
 
 
+def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does():
+    """The compiled step is called by its entry point once known (no look-up of the
+    arguments' types): numbers of other types than float — ints, numpy scalars — give the
+    bits the dispatcher's own specialisation for them gives."""
+    from ardrone_nmpc.core.types import MocapPose
+    from ardrone_nmpc.runtime.tick_kernels import E_X, kalman_estimate
+
+    est, _ = _estimations()
+    kinds = (np.float32, int, np.float64, np.int64, float)
+    for k, (p, zacc) in enumerate(_poses(4)):
+        kind = kinds[k % len(kinds)]  # (the times' int parts do not decrease)
+        odd = MocapPose(kind(0.5 * k), p.position_m.astype(np.float32), p.rotation_xyz_rad,
+                        kind(p.psi_rad))
+        state = est._state.copy()
+        estimate = est.update(odd, None, kind(zacc)).copy()
+        assert kalman_estimate(state, *odd.position_m.tolist(), odd.psi_rad, odd.t_s,
+                               kind(zacc), False, 0.0, 0.0) == 0
+        assert estimate.tobytes() == state[E_X:].tobytes() and est._state.tobytes() == (
+            state.tobytes()), k
+    assert est._kalman is not kalman_estimate  # the entry point
+
+
+@pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_copied_estimation_estimates_as_the_original(copier, compiled):
+    """A deep or pickled copy of the estimation stage mid-flight answers as the original, bit
+    for bit, in its own array (a view of its own state while the compiled step holds it),
+    and its updates leave the original's state alone."""
+    import copy
+    import pickle
+
+    est, _ = _estimations()
+    if not compiled:
+        est._leave_compiled()
+    poses = _poses(3)
+    for p, zacc in poses[:20]:
+        est.update(p, None, zacc)
+    twin = copy.deepcopy(est) if copier == "deepcopy" else pickle.loads(pickle.dumps(est))
+    assert twin.compiled == compiled
+    before = est._state.tobytes()
+    answers = []
+    for who in (twin, est):
+        answers.append([who.update(p, _nav(k) if k % 2 else None, zacc).tobytes()
+                        for k, (p, zacc) in enumerate(poses[20:])])
+        if who is twin:
+            assert est._state.tobytes() == before
+            assert np.shares_memory(twin._x, twin._state)
+    assert answers[0] == answers[1]
+
+
 # the first pose only resets the estimators: a bad z̈ or interval needs a pose before it
 @pytest.mark.parametrize("first,bad", [(True, "z"), (True, "x"), (True, "t_nan")]
                          + [(False, b) for b in ("z", "x", "zacc", "dt", "t_nan")])

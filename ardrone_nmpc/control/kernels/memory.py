@@ -78,16 +78,38 @@ class SolverMemory:
         self.stage_dim = stage_dim
         self._kmax = max(kmax, newton_kmax)
         self._mem = np.zeros(memory_size(horizon_steps, stage_dim, self._kmax, n_obs))
-        (self.U, self.dU, self.u, self._stats, self._W, self._prm, self.obstacles,
-         self._buf) = unpack(self._mem, horizon_steps, stage_dim, n_obs)
-        self.obstacles[:] = obstacles
         self._iprm = np.array([stage_dim, kmax, max_newton_iterations, newton_kmax, n_obs,
                                gauss_newton], dtype=np.int64)
-        # the entry points of this obstacle table: only the one called is ever compiled
-        self._cgmres = cgmres_step_obstacles if n_obs else cgmres_step
-        self._newton = newton_step_obstacles if n_obs else newton_step
+        self._bind()
+        self.obstacles[:] = obstacles
         for entry in (self._cgmres, self._newton):  # same bits whether compiled or cached
             load_cached_callees(entry)
+
+    #: what :meth:`_bind` makes of the memory and settings (not copied, not pickled)
+    _BOUND = ("U", "dU", "u", "_stats", "_W", "_prm", "obstacles", "_buf", "_cgmres",
+              "_newton")
+
+    def _bind(self) -> None:
+        """The views of the packed memory under their names, and the entry points of its
+        obstacle table (only the one called is ever compiled)."""
+        n_obs = int(self._iprm[4])
+        (self.U, self.dU, self.u, self._stats, self._W, self._prm, self.obstacles,
+         self._buf) = unpack(self._mem, self.horizon_steps, self.stage_dim, n_obs)
+        self._cgmres = cgmres_step_obstacles if n_obs else cgmres_step
+        self._newton = newton_step_obstacles if n_obs else newton_step
+
+    def __getstate__(self) -> dict:
+        """The memory and settings only: what :meth:`_bind` makes of them is made again."""
+        state = self.__dict__.copy()
+        for name in self._BOUND:
+            del state[name]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        """A deep copy or unpickling: numpy copies a view apart from its array, so the views
+        are made of the copied memory again — what the kernels write is what they show."""
+        self.__dict__.update(state)
+        self._bind()
 
     @property
     def kmax(self) -> int:
