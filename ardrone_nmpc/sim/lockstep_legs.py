@@ -218,7 +218,10 @@ class CompiledLegs:
             return
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
-        plant, o = self.plant, self.live()  # (the last run's truth while held)
+        plant, o = self.plant, self.live_out  # the last run's truth while held (live(),
+        if o is not None and len(plant.__dict__) != self._plant_len:  # without its frame)
+            self.release()
+            o = None
         if now is None:  # the plant's time (t_s() of the o read above)
             now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
