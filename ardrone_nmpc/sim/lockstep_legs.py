@@ -2,7 +2,9 @@
 
 :class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
 plant's state for
-:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>`. Between
+:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>` (and
+for ``LockstepDrone.advance_to``, which calls :meth:`CompiledLegs.run` without the sampler's
+frame, then hands what it left to the sampler's ``go_on``). Between
 its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
 command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
 packing it from the attributes and writing it back every tick cost as much as the
@@ -383,7 +385,8 @@ class CompiledLegs:
     def live(self):
         """:attr:`live_out` — unless a held attribute of the plant was written since the run
         (a fault's battery, a command: the written value is the newer): then the attributes
-        are released and None (read the plant)."""
+        are released and None (read the plant). (:meth:`command` and
+        ``LockstepDrone.truth_cells``, every tick, test the same without this call.)"""
         o = self.live_out
         if o is not None and len(self.plant.__dict__) != self._plant_len:
             self.release()
