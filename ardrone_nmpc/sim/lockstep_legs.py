@@ -86,14 +86,13 @@ _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_PO
 _GET_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").unpack_from
 _GET_POS, _PUT_POS = struct.Struct("4q").unpack_from, struct.Struct("4q").pack_into
 _AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
-# sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
-_PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
+# sv[S_PENDING … S_GUST1]: the plant's state the arrays hold between runs
+_PUT_STATE = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
-# sv[S_CLIMBING … S_T]: what the firmware, the faults and the modes may change any time, and
-# the tick's time
-_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_CLIMBING + 1}d").pack_into
-_AT_CLIMBING = 8 * ks.S_CLIMBING
-_PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
+# sv[S_ROLL … S_T]: the plant's command (held as its _current: the tick's PCMD carried into
+# the run's one pack, not packed by CompiledLegs.command), what the firmware, the faults and
+# the modes may change any time, and the tick's time
+_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_ROLL + 1}d").pack_into
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
@@ -258,9 +257,8 @@ class CompiledLegs:
                 gaz = gaz if gaz < 1.0 else 1.0
                 yaw = yaw if yaw > -1.0 else -1.0
                 yaw = yaw if yaw < 1.0 else 1.0
-                if plant.__dict__.get("_held_by") is self:  # the arrays hold the command
+                if o is not None:  # held: the next run packs it (a write while held, else)
                     self._saved["_current"] = (roll, pitch, gaz, yaw, False)
-                    _PUT_COMMAND(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 0.0)
                 else:
                     plant._current = (roll, pitch, gaz, yaw, False)
             else:
@@ -321,10 +319,8 @@ class CompiledLegs:
         _PUT_IV(self.iv, 0, d["_steps"], fifo.head, sensors._next_mocap_k,
                 sensors._next_nav_k, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
         gust, vel_bias = d["_gust_mps"], d["_vel_bias"]
-        roll, pitch, gaz, yaw, hold = d["_current"]
         _PUT_STATE(self.sv, _AT_PENDING, d["_pending_s"], d["_battery"], d["_yaw_bias_deg"],
-                   vel_bias[0], vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw,
-                   1.0 if hold else 0.0)
+                   vel_bias[0], vel_bias[1], gust[0], gust[1])
         # the plant's state array: the one the last run left while the plant's state is the
         # one released from it (the same tuples), else a new one
         if d["_state"] is self._x_state and d["_tilt_aux"] is self._x_aux:
@@ -465,8 +461,9 @@ class CompiledLegs:
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode,
-                    t_s)
+        roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
+        _PUT_INPUTS(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0, climbing,
+                    lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
         self._kernel(*self._args)
         # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
         # arrays read from them
