@@ -118,7 +118,14 @@ class LockstepDrone(ConfigHandshake):
             self.t_exp_s = t_exp_s
             if self.sim.faults is not None:  # (SimulatedDrone.update_faults' own test)
                 self.sim.update_faults(t_exp_s)
-        self.sensors.advance_to(t_s)
+        sensors = self.sensors
+        legs = sensors._legs  # (LockstepSensors.advance_to without its frame: every tick)
+        if legs is None:
+            sensors.advance_to(t_s)
+            return
+        left = legs.run(t_s)
+        if left is None or left[0] or left[1]:  # the Python legs, or what the run left
+            sensors.go_on(t_s, left)
 
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
@@ -143,10 +150,12 @@ class LockstepDrone(ConfigHandshake):
         from its state, the values :attr:`AirframePlant.truth` would hold, without building
         it."""
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
-        o = legs.live() if legs is not None else None
-        if o is not None:  # (the run's floats: ψ most often in (−π, π], where the wrap
-            x, y, z, psi, vz = _TRUTH_OF(o)  # returns it as it is, without its two calls)
-            return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz
+        o = legs.live_out if legs is not None else None
+        if o is not None:  # (CompiledLegs.live without its frame: every tick)
+            if len(legs.plant.__dict__) == legs._plant_len:  # (the run's floats: ψ most
+                x, y, z, psi, vz = _TRUTH_OF(o)  # often in (−π, π], where the wrap returns
+                return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz  # it)
+            legs.release()  # a held attribute was written since: the plant's
         plant = self.sim.plant
         if self._airframe:
             state = plant._state  # ψ wrapped as AirframePlant.truth wraps it

@@ -2,7 +2,9 @@
 
 :class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
 plant's state for
-:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>`. Between
+:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>` (and
+for ``LockstepDrone.advance_to``, which calls :meth:`CompiledLegs.run` without the sampler's
+frame, then hands what it left to the sampler's ``go_on``). Between
 its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
 command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
 packing it from the attributes and writing it back every tick cost as much as the
@@ -85,14 +87,13 @@ _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_PO
 _GET_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").unpack_from
 _GET_POS, _PUT_POS = struct.Struct("4q").unpack_from, struct.Struct("4q").pack_into
 _AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
-# sv[S_PENDING … S_HOLD]: the plant's state and command the arrays hold between runs
-_PUT_STATE = struct.Struct(f"{ks.S_HOLD - ks.S_PENDING + 1}d").pack_into
+# sv[S_PENDING … S_GUST1]: the plant's state the arrays hold between runs
+_PUT_STATE = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
-# sv[S_CLIMBING … S_T]: what the firmware, the faults and the modes may change any time, and
-# the tick's time
-_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_CLIMBING + 1}d").pack_into
-_AT_CLIMBING = 8 * ks.S_CLIMBING
-_PUT_COMMAND = struct.Struct("5d").pack_into  # sv[S_ROLL … S_HOLD]
+# sv[S_ROLL … S_T]: the plant's command (held as its _current: the tick's PCMD carried into
+# the run's one pack, not packed by CompiledLegs.command), what the firmware, the faults and
+# the modes may change any time, and the tick's time
+_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_ROLL + 1}d").pack_into
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
@@ -205,7 +206,10 @@ class CompiledLegs:
             return
         fw.last_seq = seq  # DroneFirmware._accept
         c.at_commands_applied += 1
-        plant, o = self.plant, self.live()  # (the last run's truth while held)
+        plant, o = self.plant, self.live_out  # the last run's truth while held (live(),
+        if o is not None and len(plant.__dict__) != self._plant_len:  # without its frame)
+            self.release()
+            o = None
         if now is None:  # the plant's time (t_s() of the o read above)
             now = plant.t_s if o is None else o[_O_T]
         fw.last_cmd_t = now
@@ -240,9 +244,8 @@ class CompiledLegs:
                 gaz = gaz if gaz < 1.0 else 1.0
                 yaw = yaw if yaw > -1.0 else -1.0
                 yaw = yaw if yaw < 1.0 else 1.0
-                if plant.__dict__.get("_held_by") is self:  # the arrays hold the command
+                if o is not None:  # held: the next run packs it (a write while held, else)
                     self._saved["_current"] = (roll, pitch, gaz, yaw, False)
-                    _PUT_COMMAND(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 0.0)
                 else:
                     plant._current = (roll, pitch, gaz, yaw, False)
             else:
@@ -303,10 +306,8 @@ class CompiledLegs:
         _PUT_IV(self.iv, 0, d["_steps"], fifo.head, sensors._next_mocap_k,
                 sensors._next_nav_k, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
         gust, vel_bias = d["_gust_mps"], d["_vel_bias"]
-        roll, pitch, gaz, yaw, hold = d["_current"]
         _PUT_STATE(self.sv, _AT_PENDING, d["_pending_s"], d["_battery"], d["_yaw_bias_deg"],
-                   vel_bias[0], vel_bias[1], gust[0], gust[1], roll, pitch, gaz, yaw,
-                   1.0 if hold else 0.0)
+                   vel_bias[0], vel_bias[1], gust[0], gust[1])
         # the plant's state array: the one the last run left while the plant's state is the
         # one released from it (the same tuples), else a new one
         if d["_state"] is self._x_state and d["_tilt_aux"] is self._x_aux:
@@ -367,7 +368,8 @@ class CompiledLegs:
     def live(self):
         """:attr:`live_out` — unless a held attribute of the plant was written since the run
         (a fault's battery, a command: the written value is the newer): then the attributes
-        are released and None (read the plant)."""
+        are released and None (read the plant). (:meth:`command` and
+        ``LockstepDrone.truth_cells``, every tick, test the same without this call.)"""
         o = self.live_out
         if o is not None and len(self.plant.__dict__) != self._plant_len:
             self.release()
@@ -446,8 +448,9 @@ class CompiledLegs:
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_INPUTS(self.sv, _AT_CLIMBING, climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode,
-                    t_s)
+        roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
+        _PUT_INPUTS(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0, climbing,
+                    lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
         self._kernel(*self._args)
         # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
         # arrays read from them

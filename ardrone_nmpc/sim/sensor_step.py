@@ -47,8 +47,8 @@ I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
 IV_SIZE = 12
 # sv: the plant's float state (in and out), the plant's current command (roll, pitch, gaz,
 # yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead, the cap), the wind,
-# the plant's mode (MODE_*), the tick's time (in: the last eight side by side, which the caller
-# writes in one pack every run)
+# the plant's mode (MODE_*), the tick's time (in: the last thirteen side by side, from the
+# command on, which the caller writes in one pack every run)
 (S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
  S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE, S_T) = range(20)
 SV_SIZE = 20

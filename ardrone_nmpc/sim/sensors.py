@@ -127,15 +127,17 @@ class LockstepSensors:
         if self.wire:
             self._advance_through_wire(t_s)
             return
-        # direct (one call frame less than its own method: every tick)
         legs = self._legs  # one compiled call (sim/lockstep_legs.py), if it can fly the tick
         left = legs.run(t_s) if legs is not None else None
-        if left is None:
-            events, last_leg = self._direct_events(t_s), True
-        else:  # what the compiled call left, if anything
-            events, last_leg = left
-            if not (events or last_leg):
-                return
+        if left is None or left[0] or left[1]:
+            self.go_on(t_s, left)
+
+    def go_on(self, t_s: float, left: tuple | None) -> None:
+        """The direct path's Python legs to ``t_s``: all of the tick's (``left`` None), or
+        what :meth:`CompiledLegs.run <ardrone_nmpc.sim.lockstep_legs.CompiledLegs.run>` left
+        (``(events, last_leg)``: the ``(time, kind)`` events in order, each sample drawn at
+        its time, then, if ``last_leg``, the leg to ``t_s``)."""
+        events, last_leg = (self._direct_events(t_s), True) if left is None else left
         for t_event, kind in events:
             self._run_to(t_event)
             if kind == _MOCAP:

@@ -98,6 +98,26 @@ def test_a_write_while_held_is_what_the_truth_reads():
     assert shots[1][0] == 50.0
 
 
+def test_a_write_while_held_is_what_the_logged_cells_and_the_cap_read_first():
+    """A moved plant written while the arrays hold the state, read first by the logged
+    truth cells (LockstepDrone.truth_cells reads the run's floats itself) — or first by a
+    climbing PCMD's altitude-cap check (CompiledLegs.command, the same): the written state,
+    as on the Python path."""
+    moved = (1.0, 2.0, 2.95, 0.1, 0.2, 0.3, 0.0, 0.0, 0.5, 0.0)  # just under the 3 m cap
+    for first in ("cells", "pcmd"):
+        shots = []
+        for legs in (False, True):
+            drone = _flying(legs)
+            fw, plant = drone.sim.firmware, drone.sim.plant
+            plant._state = moved  # (a test's teleport: no read first)
+            if first == "cells":
+                shots.append(drone.truth_cells())
+            drone.set_command(0.0, 0.0, 0.5, 0.0)
+            shots.append((fw.alt_capped, fw.applied, plant._current, drone.truth_cells()))
+        assert shots[: len(shots) // 2] == shots[len(shots) // 2:], first
+        assert shots[-1][-1][:3] == moved[:3] and shots[-1][0], first  # capped: z + lead·ż
+
+
 def test_a_plant_command_while_held_then_a_pcmd():
     """The plant commanded directly while held (a write of its command), then the tick's
     PCMD through the drone: the PCMD is the plant's command, as on the Python path."""
