@@ -183,6 +183,7 @@ def _microseconds(t_s: float) -> float:
 
 
 _RIVALS: dict[tuple, tuple[tuple, tuple]] = {}  # _rivals' answers, by grid
+_RIVALS_KEPT = 64  # grids (a tune may try many delay_max_s: the memory stays bounded)
 
 
 def _rivals(delays_s: np.ndarray) -> tuple[tuple, tuple]:
@@ -198,6 +199,8 @@ def _rivals(delays_s: np.ndarray) -> tuple[tuple, tuple]:
             mask = np.abs(delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
             mask.setflags(write=False)
             away.append(mask)
+        if len(_RIVALS) >= _RIVALS_KEPT:
+            _RIVALS.clear()
         rivals = _RIVALS[key] = (tuple(away), tuple(bool(a.any()) for a in away))
     return rivals
 

@@ -213,3 +213,8 @@ def test_the_rival_masks_are_the_grid_s_own_made_once_and_read_only():
     assert AttitudeResponseEstimator(E)._away is first._away  # made once per grid
     twin = copy.deepcopy(first)
     assert all(np.array_equal(a, b) for a, b in zip(twin._away, first._away))
+    from ardrone_nmpc.estimation import attitude_response as ar
+
+    for k in range(ar._RIVALS_KEPT + 3):  # a tune's many delay_max_s: bounded
+        AttitudeResponseEstimator(E, max_delay_s=0.1 + 0.01 * k)
+        assert len(ar._RIVALS) <= ar._RIVALS_KEPT
