@@ -32,6 +32,7 @@ _LOCAL_AT_PORT = 5556              # the guide's source port; any other works (a
 def target(args: Sequence[str]) -> tuple[str, int] | None:
     """The ``(host, AT port)`` an operator command line names, or None when it cannot be read
     with certainty (help asked, a value missing or malformed)."""
+    # (land and emergency take no arguments: read to the end, "--" and all)
     options = raw_options(args, ("--drone", "--at-port"), stop_at_separator=False)
     if options is None:
         return None

@@ -39,6 +39,7 @@ def pool_wanted(args: Sequence[str]) -> bool:
     be read with certainty (help asked, a value missing or malformed)."""
     if not args or args[0] not in POOL_COMMANDS:
         return False
+    # (after "--" the command's arguments: a config file named --jobs, say)
     options = raw_options(args[1:], ("--jobs", "--engine"), stop_at_separator=True)
     if options is None:
         return False
