@@ -94,8 +94,8 @@ class LockstepSensors:
         self._target_rng = np.random.default_rng([cfg.sim.seed, 0x7A26])
         self._target_std_m = cfg.sim.noise.mocap_position_std_m
         # through the wire: the receiving links and the datagrams on their way (the UDP
-        # link's module imported for it alone: a direct run's process, a sweep's worker,
-        # does without its ~5 ms import, nor the streamer's in _mocap_frame)
+        # links' and servers' modules imported for it alone, here, in _mocap_frame and in
+        # _receive: a direct run's process, a sweep's worker, does without ~9 ms of imports)
         self.mocap = None
         if self.wire:
             from ardrone_nmpc.links.mocap_link import MocapLink

@@ -185,7 +185,7 @@ def warm_up() -> None:
     into a temporary directory; once per process. ~2 s, then each case runs at full speed.
     A square: a waypoint reference's kernels (``nmpc_inputs``) and its summary's path
     deviation load too, which a step's flight does not — else each worker loaded them on its
-    first such case (~17 ms, measured), after the forkserver's preload."""
+    first such case (~25 ms of CPU, measured), after the forkserver's preload."""
     global _WARM
     if _WARM:
         return
