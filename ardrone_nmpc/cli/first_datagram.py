@@ -17,6 +17,8 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 
+from ardrone_nmpc.cli.raw_options import raw_options
+
 __all__ = ["SENT", "send_first", "target"]
 
 #: ``(command, drone host, AT port)`` of the first datagram sent here, or None.
@@ -30,18 +32,12 @@ _LOCAL_AT_PORT = 5556              # the guide's source port; any other works (a
 def target(args: Sequence[str]) -> tuple[str, int] | None:
     """The ``(host, AT port)`` an operator command line names, or None when it cannot be read
     with certainty (help asked, a value missing or malformed)."""
+    # (land and emergency take no arguments: read to the end, "--" and all)
+    options = raw_options(args, ("--drone", "--at-port"), stop_at_separator=False)
+    if options is None:
+        return None
     host, port = _DEFAULTS
-    values = iter(args)
-    for arg in values:
-        name, eq, value = arg.partition("=")
-        if name in ("--help", "-h"):
-            return None
-        if name not in ("--drone", "--at-port"):
-            continue
-        if not eq:
-            value = next(values, None)
-            if value is None:
-                return None
+    for name, value in options:
         if name == "--drone":
             host = value
         elif value.isdecimal() and 1 <= int(value) <= 65535:  # isdigit() passes "²"

@@ -24,6 +24,8 @@ import os
 import sys
 from collections.abc import Sequence
 
+from ardrone_nmpc.cli.raw_options import raw_options
+
 __all__ = ["main", "pool_wanted"]
 
 #: The commands that fly their cases on a local pool of ``--jobs`` workers, and the number of
@@ -37,20 +39,12 @@ def pool_wanted(args: Sequence[str]) -> bool:
     be read with certainty (help asked, a value missing or malformed)."""
     if not args or args[0] not in POOL_COMMANDS:
         return False
+    # (after "--" the command's arguments: a config file named --jobs, say)
+    options = raw_options(args[1:], ("--jobs", "--engine"), stop_at_separator=True)
+    if options is None:
+        return False
     jobs, engine = POOL_COMMANDS[args[0]], "local"
-    values = iter(args[1:])
-    for arg in values:
-        if arg == "--":  # the rest are arguments, not options
-            break
-        name, eq, value = arg.partition("=")
-        if name in ("--help", "-h"):
-            return False
-        if name not in ("--jobs", "--engine"):
-            continue
-        if not eq:
-            value = next(values, None)
-            if value is None:
-                return False
+    for name, value in options:
         if name == "--engine":
             engine = value
         elif value.isdecimal():  # what int() reads (isdigit() passes "²", which it refuses)

@@ -39,14 +39,11 @@ from typing import Callable
 import numpy as np
 
 from ardrone_nmpc.core.types import TickInputs
-from ardrone_nmpc.links.drone_link import navdata_sample_of
-from ardrone_nmpc.links.mocap_link import MocapLink
 from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.held_state import holds_in_arrays
-from ardrone_nmpc.sim.mocap_server import frame_items
 from ardrone_nmpc.sim.target import target_pose
 
 __all__ = ["LockstepSensors"]
@@ -96,10 +93,16 @@ class LockstepSensors:
         self.target_rx_t_s = -math.inf
         self._target_rng = np.random.default_rng([cfg.sim.seed, 0x7A26])
         self._target_std_m = cfg.sim.noise.mocap_position_std_m
-        # through the wire: the receiving links and the datagrams on their way
-        others = (self.target_cfg.object_name,) if self.target_cfg is not None else ()
-        self.mocap = MocapLink("127.0.0.1", 0, object_name=self.object_name,  # never opened
-                               other_objects=others)
+        # through the wire: the receiving links and the datagrams on their way (the UDP
+        # links' and servers' modules imported for it alone, here, in _mocap_frame and in
+        # _receive: a direct run's process, a sweep's worker, does without ~9 ms of imports)
+        self.mocap = None
+        if self.wire:
+            from ardrone_nmpc.links.mocap_link import MocapLink
+
+            others = (self.target_cfg.object_name,) if self.target_cfg is not None else ()
+            self.mocap = MocapLink("127.0.0.1", 0, object_name=self.object_name,  # never
+                                   other_objects=others)                          # opened
         self.nav_stats = LinkStats(window_s=1.0)
         self.nav_malformed = 0
         self._queue: list = []  # (arrival_s, order, stream, bytes)
@@ -228,6 +231,8 @@ class LockstepSensors:
         fault = faults.mocap_frame(t_exp)
         if fault.dropped:
             return
+        from ardrone_nmpc.sim.mocap_server import frame_items  # (the wire's only: __init__)
+
         items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
                             self.target_cfg, t_s)
         data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
@@ -251,6 +256,8 @@ class LockstepSensors:
             return
         if DroneState.NAVDATA_BOOTSTRAP in packet.state:
             self.on_bootstrap()
+        from ardrone_nmpc.links.drone_link import navdata_sample_of  # (the wire's only)
+
         sample = navdata_sample_of(packet, arrival_s)
         if sample is not None:
             stats.record_packet(arrival_s)

@@ -340,3 +340,33 @@ def test_lockstep_stops_when_the_drone_lands_by_itself(tmp_path):
     t, mode = run.columns["t_s"], run.columns["mode"]
     assert set(mode[t >= landed_itself["t_s"]]) == {"landing"}   # no tick flown after it
     assert result.final_mode is FlightMode.LANDED and run.columns["z_true_m"][-1] < 0.02
+
+
+_DIRECT_IMPORTS = """
+import sys
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+run_lockstep(load_config(None, ["duration_s=0.5", "sim.settle_s=0"]))
+udp = ("ardrone_nmpc.links.drone_link", "ardrone_nmpc.links.mocap_link",
+       "ardrone_nmpc.sim.mocap_server", "ardrone_nmpc.sim.drone_server")
+print(sorted(m for m in udp if m in sys.modules))
+wired = LockstepDrone(load_config(None, ["faults.disorder.start_s=0",
+                                         "faults.disorder.duration_s=1"]))
+print(type(wired.sensors.mocap).__name__, sorted(m for m in udp if m in sys.modules))
+"""
+
+
+@pytest.mark.timeout(300)
+def test_a_direct_run_imports_no_udp_link_and_a_wired_one_its_receiver():
+    """The UDP links' and servers' modules are the wire sensors' only: a lockstep flight
+    without sensor faults (a sweep's worker) does without their import; a wired drone has
+    its mocap receiver."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _DIRECT_IMPORTS], capture_output=True,
+                          text=True, timeout=240, check=True)
+    direct, wired = done.stdout.splitlines()[-2:]
+    assert direct == "[]"
+    assert wired == "MocapLink ['ardrone_nmpc.links.mocap_link']"

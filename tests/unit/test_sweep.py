@@ -409,3 +409,24 @@ def test_a_window_made_once_gives_the_same_metrics_and_status(tmp_path):
                                                                                    rows=rows)
     assert shared.keys() == alone.keys()
     np.testing.assert_array_equal(list(shared.values()), list(alone.values()))
+
+
+_WARM_CHECK = """
+from ardrone_nmpc.experiments.sweep.cases import warm_up
+from ardrone_nmpc.runs.path_kernels import polyline_distances_m
+from ardrone_nmpc.runtime import tick_kernels
+warm_up()
+print(sorted(tick_kernels._warm), len(polyline_distances_m.overloads))
+"""
+
+
+@pytest.mark.timeout(300)
+def test_the_warm_up_loads_a_waypoint_flight_s_kernels_and_the_path_deviation_s():
+    """The pool's preload (sweep warm_up): a square's kernels too — nmpc_inputs and the
+    summary's path deviation — else every worker loaded them on its first such case."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True,
+                          text=True, timeout=240, check=True)
+    assert done.stdout.split("\n")[-2] == "['estimate', 'nmpc'] 1"

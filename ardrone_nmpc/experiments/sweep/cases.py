@@ -182,14 +182,17 @@ _WARM = False
 
 def warm_up() -> None:
     """Load every numba kernel a case uses (from the on-disk cache) by flying a 0.2 s case
-    into a temporary directory; once per process. ~2 s, then each case runs at full speed."""
+    into a temporary directory; once per process. ~2 s, then each case runs at full speed.
+    A square: a waypoint reference's kernels (``nmpc_inputs``) and its summary's path
+    deviation load too, which a step's flight does not — else each worker loaded them on its
+    first such case (~25 ms of CPU, measured), after the forkserver's preload."""
     global _WARM
     if _WARM:
         return
     from ardrone_nmpc.config.schema import config_from_dict
 
     cfg = config_from_dict({"name": "warm-up", "duration_s": 0.2, "sim": {"settle_s": 0.0},
-                            "reference": {"kind": "step", "target_m": [-0.5, 0.0, 1.0]}})
+                            "reference": {"kind": "square"}})
     with tempfile.TemporaryDirectory(prefix="ardrone-nmpc-warm-") as tmp:
         run, rows = _fly(cfg, Path(tmp) / "run")
         case_metrics(run=run, rows=rows)
