@@ -37,11 +37,23 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
-    """The rows and events of a lockstep flight, and how many ticks the compiled call
-    took."""
-    taken = [0]
-    original_init, original_nominal = Tick.__init__, AfterSolve.nominal
+def _carried(tick: Tick) -> list:
+    """Everything the stages after the solve carry to the next tick, as bits and types."""
+    s, d, sup, r, o = tick.supervision, tick.delay, tick.supervisor, tick.response, tick.offset
+    last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
+    return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
+            repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
+            sup._solver_good, sup._solver_fallback,
+            None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
+                                    r._next_fit_s),
+            None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
+
+
+def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, list, int]:
+    """The rows and events of a lockstep flight, the stages' state after each tick, and how
+    many ticks the compiled call took."""
+    taken, carried = [0], []
+    original_init, original_nominal, original_step = Tick.__init__, AfterSolve.nominal, Tick.step
 
     def init(self, *args, **kwargs):
         original_init(self, *args, **kwargs)
@@ -53,12 +65,18 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
         taken[0] += done is not None
         return done
 
+    def step(self, *args, **kwargs):
+        out = original_step(self, *args, **kwargs)
+        carried.append(_carried(self))
+        return out
+
     with monkeypatch.context() as m:
         m.setattr(Tick, "__init__", init)
         m.setattr(AfterSolve, "nominal", nominal)
+        m.setattr(Tick, "step", step)
         recorder = MemoryRecorder()
         run_lockstep(cfg, recorder=recorder)
-    return recorder.rows, recorder.events, taken[0]
+    return recorder.rows, recorder.events, carried, taken[0]
 
 
 @pytest.mark.parametrize("name, overrides", [
@@ -67,12 +85,17 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
     ("hover.yaml", ["duration_s=6", "faults.mocap_dropout.start_s=3",
                     "faults.mocap_dropout.duration_s=0.2"]),
 ])
-def test_a_flight_gives_the_rows_of_the_python_stages(name, overrides, monkeypatch):
+def test_a_flight_gives_the_rows_and_state_of_the_python_stages(name, overrides, monkeypatch):
     cfg = config(name, *overrides)
-    python_rows, python_events, none = _fly(cfg, compiled=False, monkeypatch=monkeypatch)
-    compiled_rows, compiled_events, taken = _fly(cfg, compiled=True, monkeypatch=monkeypatch)
+    python_rows, python_events, python_carried, none = _fly(cfg, compiled=False,
+                                                            monkeypatch=monkeypatch)
+    compiled_rows, compiled_events, compiled_carried, taken = _fly(cfg, compiled=True,
+                                                                   monkeypatch=monkeypatch)
     assert none == 0 and taken > len(python_rows) // 2  # most ticks took the compiled call
     assert compiled_events == python_events  # the fit's and the supervisor's, in order
+    assert len(compiled_carried) == len(python_carried)
+    for i, (a, b) in enumerate(zip(python_carried, compiled_carried)):  # the stages' state
+        assert a == b, f"after tick {i}: {[k for k in range(len(a)) if a[k] != b[k]]}"
     assert len(compiled_rows) == len(python_rows)
     for i, (a, b) in enumerate(zip(python_rows, compiled_rows)):
         bad = [k for k in a if k not in ("solve_us", "compute_us", "tick_late_ms")
