@@ -280,7 +280,8 @@ class Supervisor:
         """After the NMPC: fly it, hold, fall back or hover (the solver-failure chain).
 
         ``ok`` is the solver's status; ``u`` its (4,) input (checked for finiteness here too:
-        the supervisor never trusts the solver to have done so).
+        the supervisor never trusts the solver to have done so). The nominal verdict has a
+        compiled twin, ``runtime/after_solve.py`` (kept equal: ``tests/unit/test_after_solve.py``).
         """
         if ok:
             us = u.tolist() if u.__class__ is _NDARRAY or hasattr(u, "tolist") else u

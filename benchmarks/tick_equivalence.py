@@ -149,8 +149,9 @@ def compare(path_a: str, path_b: str) -> int:
     print(f"A: {a['tree']}\nB: {b['tree']}")
     bad = 0
     for name in a["cases"]:
-        if name not in b["cases"]:
+        if name not in b["cases"]:  # not flown is not the same bits (a gate must not pass)
             print(f"{name:<20} missing in B")
+            bad += 1
             continue
         ca, cb = a["cases"][name], b["cases"][name]
         problems = []

@@ -157,7 +157,9 @@ def pcmd_of_floats(vz_ref_mps: float, phi_rad: float, theta_rad: float, psirate_
                    control_yaw_radps: float) -> PcmdCommand:
     """:func:`pcmd_of`'s arithmetic, for a caller that has the four values as finite Python
     floats already and the limits unpacked (the tick's supervision: no checks, no
-    conversions, no attribute lookups). A NaN or a numpy scalar here is the caller's bug."""
+    conversions, no attribute lookups). A NaN or a numpy scalar here is the caller's bug.
+    Its compiled twin (the nominal tick's): ``runtime/after_solve._fractions``, kept equal by
+    ``tests/unit/test_after_solve.py``."""
     # _clip_unit of each, spelled out (four calls and tuples cost ~0.4 µs a tick);
     # ``make``: the same record without the subclass test (core/types.slot_init, ~70 ns)
     roll, pitch = phi_rad / euler_angle_max_rad, -theta_rad / euler_angle_max_rad

@@ -62,7 +62,8 @@ def frozen_axes(pcmd_fracs: tuple[float, float, float, float],
 
     ``pcmd_fracs`` = (roll, pitch, gaz, yaw) fractions, ``flags`` the ``cmd_saturated`` string
     ("0100"; None for none). Roll and pitch act on x and y together once the drone has turned,
-    so either one on its limit freezes both; gaz freezes z, yaw ψ.
+    so either one on its limit freezes both; gaz freezes z, yaw ψ. Its compiled twin (the
+    nominal tick's): ``runtime/after_solve._freeze``, kept equal by its tests.
     """
     roll, pitch, gaz, yaw = pcmd_fracs  # spelled out: two list comprehensions cost µs a tick
     if (-SATURATION_FRAC < roll < SATURATION_FRAC and -SATURATION_FRAC < pitch < SATURATION_FRAC

@@ -33,7 +33,7 @@ from ardrone_nmpc.core.types import (INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU
 from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC, integrate_period
 from ardrone_nmpc.estimation.response_kernels import (CMD_SEND, TIMES_ROUNDED, feed,
                                                       microseconds, new_state)
-from ardrone_nmpc.runtime.stages import Sent
+from ardrone_nmpc.runtime.stages import _FLAGS, Sent
 from ardrone_nmpc.safety import NOMINAL
 
 __all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
@@ -43,6 +43,7 @@ NOT_NOMINAL = -1
 _NOTHING = np.zeros(0)  # the estimator's state, the integrator's buffers: of a flight without
 _NO_FLAGS = np.zeros((3, 0), dtype=np.bool_)
 _NDARRAY = np.ndarray
+_FLOAT = float
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -154,7 +155,7 @@ def _freeze(roll, pitch, gaz, yaw, bits, frozen):
 
 # the PcmdCommand flags and the ``cmd_saturated`` text of each set of bits
 _SATURATED = [UNSATURATED] + [tuple(bool(b >> k & 1) for k in range(4)) for b in range(1, 16)]
-_TEXT = ["".join("1" if f else "0" for f in s) for s in _SATURATED]
+_TEXT = [_FLAGS[s] for s in _SATURATED]
 _pack_input = struct.Struct(f"{INPUT_DIM}d").pack
 _frombuffer = np.frombuffer
 _make_pcmd = PcmdCommand.make
@@ -187,12 +188,21 @@ class AfterSolve:
         u = sol.u_flown
         if u.__class__ is not _NDARRAY:  # (check_solution takes any sequence: its path)
             return None
-        zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
         control, supervision, delay = self.control, self.supervision, self.delay
+        gain, lead, vz_max = supervision.attitude_gain, control.vz_lead_s, control._vz_max_mps
+        e, v, y = supervision._scales
+        # the numbers the stages compute with as Python floats, as a config gives them: with
+        # numpy scalars the Python stages answer numpy scalars (float32 ones: float32
+        # arithmetic, NEP 50) and Supervision takes its general path — their ticks, not the
+        # kernel's (an int would also cost the kernel a compile aloft)
+        if not (gain.__class__ is _FLOAT and lead.__class__ is _FLOAT
+                and vz_max.__class__ is _FLOAT and e.__class__ is _FLOAT
+                and v.__class__ is _FLOAT and y.__class__ is _FLOAT):
+            return None
+        zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
         # Control.command's
         vz_base = (float(supervision.vz_ref_mps) if control.vz_from_commands
                    else sol.x_solve.item(IX_VZ))
-        e, v, y = supervision._scales
         nav = inputs.navdata
         if nav is not None:
             has, t_nav, roll_deg, pitch_deg = 1, inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
@@ -200,10 +210,9 @@ class AfterSolve:
             has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
         offset, flags = self._offset
         code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
-            zacc, phi, theta, rate, vz_base, control.vz_lead_s, control._vz_max_mps,
-            self.supervisor.max_tilt_rad, supervision.attitude_gain, e, v, y, delay._sent,
-            delay._next, self._response_state, has, t_nav, roll_deg, pitch_deg, inputs.t_s, x,
-            sol.ref_now, sol.ref_horizon, offset, flags)
+            zacc, phi, theta, rate, vz_base, lead, vz_max, self.supervisor.max_tilt_rad, gain,
+            e, v, y, delay._sent, delay._next, self._response_state, has, t_nav, roll_deg,
+            pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
         if code:
             return None
         return self._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,

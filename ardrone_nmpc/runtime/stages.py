@@ -367,7 +367,7 @@ class Control:
         """The attitude command ``action`` flies (None for hold, hover, land, stop).
 
         ``vz_ref_last_mps`` is the ż reference last sent: without a ż estimate the NMPC's z̈
-        is integrated from it.
+        is integrated from it. (The nominal tick's compiled twin: ``runtime/after_solve.py``.)
         """
         if action is _FALLBACK:
             return p_control(x, sol.ref_now, self.p_gains)
@@ -575,7 +575,8 @@ class Supervision:
                 zacc_mps2: float) -> Sent:
         """What ``decision`` sends; ``cmd`` is the controller's command for control/fallback,
         ``zacc_mps2`` the NMPC's z̈ behind it (NaN for the P controller). It notes the ż
-        reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`)."""
+        reference and the z̈ sent (:attr:`vz_ref_mps`, :attr:`zacc_mps2`). The control case's
+        compiled twin, the nominal tick's: ``runtime/after_solve.py``."""
         if decision.action is _CONTROL and cmd is not None:
             # the usual tick: the controller's command as Python floats, its tilt inside the
             # cap (which a NaN fails) — :meth:`_command`'s control case with nothing to

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ardrone_nmpc.config.io import load_config
-from ardrone_nmpc.control.mapping import UNSATURATED
+from ardrone_nmpc.control.mapping import UNSATURATED, DroneLimits
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import after_solve as after_solve_module
@@ -37,11 +37,23 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
-    """The rows and events of a lockstep flight, and how many ticks the compiled call
-    took."""
-    taken = [0]
-    original_init, original_nominal = Tick.__init__, AfterSolve.nominal
+def _carried(tick: Tick) -> list:
+    """Everything the stages after the solve carry to the next tick, as bits and types."""
+    s, d, sup, r, o = tick.supervision, tick.delay, tick.supervisor, tick.response, tick.offset
+    last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
+    return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
+            repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
+            sup._solver_good, sup._solver_fallback,
+            None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
+                                    r._next_fit_s),
+            None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
+
+
+def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, list, int]:
+    """The rows and events of a lockstep flight, the stages' state after each tick, and how
+    many ticks the compiled call took."""
+    taken, carried = [0], []
+    original_init, original_nominal, original_step = Tick.__init__, AfterSolve.nominal, Tick.step
 
     def init(self, *args, **kwargs):
         original_init(self, *args, **kwargs)
@@ -53,12 +65,18 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
         taken[0] += done is not None
         return done
 
+    def step(self, *args, **kwargs):
+        out = original_step(self, *args, **kwargs)
+        carried.append(_carried(self))
+        return out
+
     with monkeypatch.context() as m:
         m.setattr(Tick, "__init__", init)
         m.setattr(AfterSolve, "nominal", nominal)
+        m.setattr(Tick, "step", step)
         recorder = MemoryRecorder()
         run_lockstep(cfg, recorder=recorder)
-    return recorder.rows, recorder.events, taken[0]
+    return recorder.rows, recorder.events, carried, taken[0]
 
 
 @pytest.mark.parametrize("name, overrides", [
@@ -67,12 +85,17 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int]:
     ("hover.yaml", ["duration_s=6", "faults.mocap_dropout.start_s=3",
                     "faults.mocap_dropout.duration_s=0.2"]),
 ])
-def test_a_flight_gives_the_rows_of_the_python_stages(name, overrides, monkeypatch):
+def test_a_flight_gives_the_rows_and_state_of_the_python_stages(name, overrides, monkeypatch):
     cfg = config(name, *overrides)
-    python_rows, python_events, none = _fly(cfg, compiled=False, monkeypatch=monkeypatch)
-    compiled_rows, compiled_events, taken = _fly(cfg, compiled=True, monkeypatch=monkeypatch)
+    python_rows, python_events, python_carried, none = _fly(cfg, compiled=False,
+                                                            monkeypatch=monkeypatch)
+    compiled_rows, compiled_events, compiled_carried, taken = _fly(cfg, compiled=True,
+                                                                   monkeypatch=monkeypatch)
     assert none == 0 and taken > len(python_rows) // 2  # most ticks took the compiled call
     assert compiled_events == python_events  # the fit's and the supervisor's, in order
+    assert len(compiled_carried) == len(python_carried)
+    for i, (a, b) in enumerate(zip(python_carried, compiled_carried)):  # the stages' state
+        assert a == b, f"after tick {i}: {[k for k in range(len(a)) if a[k] != b[k]]}"
     assert len(compiled_rows) == len(python_rows)
     for i, (a, b) in enumerate(zip(python_rows, compiled_rows)):
         bad = [k for k in a if k not in ("solve_us", "compute_us", "tick_late_ms")
@@ -88,8 +111,9 @@ def _tick() -> Tick:
     return tick
 
 
-def _inputs(t_s: float) -> TickInputs:
-    nav = NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.5, -2.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+def _inputs(t_s: float, with_navdata: bool = True) -> TickInputs:
+    nav = (NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.5, -2.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+           if with_navdata else None)
     return TickInputs(t_s, MocapPose(t_s, np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0),
                       t_s - 0.01, nav, t_s - 0.02, None, -math.inf)
 
@@ -184,3 +208,101 @@ def test_a_copied_tick_calls_the_kernel_on_its_own_stages(copier):
     assert after._offset[1] is clone.offset.integrator._flags
     for name in ("supervisor", "control", "supervision", "delay", "response", "offset"):
         assert getattr(after, name) is getattr(clone, name)
+
+
+# ------------------------------------------------------------------------- the twin, bit for bit
+def _typed(v) -> tuple:
+    """A number's type and bits (a numpy scalar is not the float it equals)."""
+    if isinstance(v, (float, np.floating)):
+        return type(v), np.float64(v).tobytes()
+    return type(v), v
+
+
+def _sent_typed(sent) -> tuple:
+    p, f = sent.pcmd, sent.flown
+    return (tuple(_typed(a) for a in (p.roll_frac, p.pitch_frac, p.gaz_frac, p.yaw_frac)),
+            p.saturated, sent.u.dtype, sent.u.tobytes(), sent.u.flags.writeable,
+            sent.progressive, sent.decision,
+            None if f is None else tuple(_typed(a) for a in (f.vz_ref_mps, f.phi_rad,
+                                                               f.theta_rad, f.psirate_radps)),
+            sent.saturated)
+
+
+def _state_typed(tick: Tick) -> list:
+    """:func:`_state` with the types of the supervision's numbers, the response's
+    Python-side state and the supervisor's whole solver chain."""
+    s, r, sup = tick.supervision, tick.response, tick.supervisor
+    return _state(tick) + [_typed(s.zacc_mps2), _typed(s.vz_ref_mps), tick.delay._pushed,
+                           r.estimator._estimate is None, r._next_fit_s,
+                           (sup._solver_failures, sup._solver_good, sup._solver_fallback)]
+
+
+def _both_paths(fast: Tick, slow: Tick, u, t_s: float, nav: bool = True):
+    """One tick after the solve on ``fast`` (the compiled call, or the Python stages where it
+    declines, as Tick.step) and on ``slow`` (the Python stages): the same, to the type."""
+    x = np.array([0.05, 0.01, -0.1, 0.0, 1.0, 0.02, 0.04])
+    inputs = _inputs(t_s, nav)
+    done = fast.after_solve.nominal(inputs, x, _solution(fast, x, u))
+    compiled = done is not None
+    if not compiled:
+        done = _python_stages(fast, inputs, x, _solution(fast, x, u))
+    want = _python_stages(slow, inputs, x, _solution(slow, x, u))
+    assert _sent_typed(done[0]) == _sent_typed(want[0])
+    assert done[1] == want[1]
+    assert _state_typed(fast) == _state_typed(slow)
+    return compiled
+
+
+@pytest.mark.parametrize("setting", [
+    ("gain", np.float32(0.9)),      # Python divides in float32 (NEP 50): other bits
+    ("gain", np.float64(0.8)),
+    ("gain", 2),                    # an int: the same quotient
+    ("lead", np.float64(0.05)),     # a numpy ż: Supervision's general path (a writeable u)
+    ("vz_max", np.float64(0.3)),    # the clip makes ż a numpy scalar
+    ("limits", (np.float64(0.2094), 0.7, 1.745)),  # numpy fractions
+])
+def test_numbers_that_are_not_python_floats_give_what_the_python_stages_give(setting):
+    fast, slow = _tick(), _tick()
+    name, value = setting
+    for tick in (fast, slow):
+        if name == "gain":
+            tick.supervision.attitude_gain = value
+        elif name == "lead":
+            tick.control.vz_lead_s = value
+        elif name == "vz_max":
+            tick.control._vz_max_mps = value
+        else:
+            tick.supervision.limits = DroneLimits(*value)
+    for k in range(3):
+        _both_paths(fast, slow, (2.5, 0.05, -0.08, 0.2), 2.0 + 0.065 * k)
+
+
+def test_random_ticks_give_what_the_python_stages_give():
+    """The kernel's twins of the Python stages (check_solution's test, Control.command's ż,
+    the tilt cap, pcmd_of_floats, frozen_axes, the flags) against them over random
+    commands with NaN, ±inf, ±0.0 and values beyond every limit, gains, tilt caps, both ż
+    sources, with and without navdata, times the kernel rounds and times it leaves to
+    Python."""
+    rng = np.random.default_rng(26)
+    specials = [math.nan, math.inf, -math.inf, 0.0, -0.0, 0.35, -0.35, 1e308, 5e-324]
+
+    def pick(values):
+        return values[int(rng.integers(len(values)))]
+
+    taken = []
+    for _ in range(40):
+        fast, slow = _tick(), _tick()
+        gain, cap, lead = pick([1.0, 0.9, 1.3]), pick([0.05, 0.35, 0.6]), pick([0.0, 0.065, 0.5])
+        from_commands = bool(rng.random() < 0.3)
+        for tick in (fast, slow):
+            tick.supervision.attitude_gain = gain
+            tick.supervisor.max_tilt_rad = cap
+            tick.control.vz_lead_s = lead
+            tick.control.vz_from_commands = from_commands
+        for k in range(5):
+            u = [float(v) for v in rng.normal(size=4) * pick([0.05, 0.3, 2.0])]
+            if rng.random() < 0.3:
+                u[int(rng.integers(4))] = pick(specials)
+            t_s = pick([2.0 + 0.065 * k, 3.0000005 + 0.065 * k, 2e-7])
+            taken.append(_both_paths(fast, slow, u, t_s, nav=bool(rng.random() < 0.8)))
+    assert 30 < sum(taken) < len(taken) - 30  # both paths, each many times
