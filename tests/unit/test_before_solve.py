@@ -74,6 +74,11 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int, list]:
 @pytest.mark.parametrize("name, overrides", [
     ("square.yaml", ["duration_s=8"]),  # auto delay and gain, offset-free: every stage
     ("square.yaml", ["duration_s=5", "estimator.horizontal_velocity=navdata"]),
+    ("square.yaml", ["duration_s=5", "controller.solver.method=newton"]),
+    ("square.yaml", ["duration_s=5", "controller.offset_free.enabled=false"]),  # no shift
+    ("square.yaml", ["duration_s=5", "controller.delay_compensation_s=0"]),  # nothing pending
+    ("square.yaml", ["duration_s=5", "faults.at_loss.start_s=2",
+                     "faults.at_loss.probability=0.7"]),
     ("square.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"]),  # holds, fallback
     ("square.yaml", ["duration_s=6", "faults.mocap_dropout.start_s=3",
                      "faults.mocap_dropout.duration_s=0.2"]),  # stale mocap: hold, hover
