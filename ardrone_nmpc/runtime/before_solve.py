@@ -49,7 +49,8 @@ L_FENCE_LO = 3          # (3) x, y, z
 L_FENCE_HI = 6          # (3)
 L_MAX_SPEED_MPS = 9
 L_TILT_CAP_DEG = 10
-L_SCRATCH = 11          # (E_SIZE) the estimator's state, stepped here before it is kept
+L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
+L_SCRATCH = 12          # (E_SIZE) the estimator's state, stepped here before it is kept
 L_SIZE = L_SCRATCH + E_SIZE
 
 _EMERGENCY = FlightMode.EMERGENCY
@@ -76,8 +77,8 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     nav_ms = (t_s - navdata_rx_t_s) * 1e3
     nothing = (NOT_NOMINAL, mocap_ms, nav_ms)
     # check_feedback's usual tick (the emergency mode and the latch are the caller's tests)
-    if not (state_bits & _ALARM_BITS == 0 and battery_pct > limits[L_BATTERY_FLOOR_PCT]
-            and nav_ms <= limits[L_NAVDATA_LAND_MS]
+    if not (state_bits & int(limits[L_ALARM_BITS]) == 0
+            and battery_pct > limits[L_BATTERY_FLOOR_PCT] and nav_ms <= limits[L_NAVDATA_LAND_MS]
             and mocap_ms <= limits[L_MOCAP_NOMINAL_MS]):
         return nothing
     # Estimation.update, on a copy of its state: kept only if the tick is nominal
@@ -156,6 +157,7 @@ class BeforeSolve:
         lim[L_FENCE_HI:L_FENCE_HI + 3] = sup._fence_hi
         lim[L_MAX_SPEED_MPS] = sup._max_speed_mps
         lim[L_TILT_CAP_DEG] = sup._tilt_cap_deg
+        lim[L_ALARM_BITS] = _ALARM_BITS  # (< 2**53: exact in a float64)
         self._cfg = sup._cfg
 
     def nominal(self, inputs, t_exp_s: float, traj):

@@ -163,6 +163,7 @@ def test_the_compiled_ticks_are_the_python_stages():
     _inputs(2.3, mocap_age_s=0.5),                        # stale mocap: hold, hover, land
     _inputs(2.3, nav=_nav(battery_pct=5.0)),               # the battery floor: land
     _inputs(2.3, nav=_nav(state_bits=1 << 22)),            # a fault bit (CUTOUT): stop
+    _inputs(2.3, nav=_nav(state_bits=1 << 15 | 1 << 13)),  # VBAT_LOW (and COM_LOST): land
     _inputs(2.3, nav=_nav(mode=FlightMode.EMERGENCY)),     # emergency: stop
     _inputs(2.3, nav=_nav(roll_deg=60.0)),                 # tilted beyond the cap: hover
     _inputs(2.3, position=(100.0, 0.0, 1.0)),              # outside the geofence
