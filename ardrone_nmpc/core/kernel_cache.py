@@ -30,7 +30,7 @@ KERNEL_SOURCES = (
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "runs/path_kernels.py",
     "reference/kernels.py", "estimation/response_kernels.py", "estimation/disturbance.py",
-    "runtime/tick_kernels.py", "runtime/after_solve.py",
+    "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None

@@ -22,12 +22,14 @@ from ardrone_nmpc.reference.trajectories import Trajectory
 from ardrone_nmpc.runs.log_columns import tick_cells, tick_row
 from ardrone_nmpc.runtime.after_solve import AfterSolve
 from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
+from ardrone_nmpc.runtime.before_solve import BeforeSolve
+from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
 )
 from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
-from ardrone_nmpc.safety import Action, Supervisor
+from ardrone_nmpc.safety import NOMINAL, Action, Supervisor
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "navdata_velocity_world"]
@@ -134,6 +136,9 @@ class Tick:
         #: The stages after the solve in one compiled call on the nominal tick (None: the
         #: P controller, whose ticks the Python stages take)
         self.after_solve = AfterSolve(self) if nmpc is not None else None
+        #: The stages before the solve, likewise (None: the P controller's, or a flight whose
+        #: estimator, reference or stages the compiled call does not take)
+        self.before_solve = BeforeSolve(self) if BeforeSolve.takes(self) else None
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
         # the stages' own (runtime/tick_kernels): those this flight calls
@@ -145,6 +150,8 @@ class Tick:
             self.response.warm_up()
         if nmpc is not None:  # last: its callees (the feed's) are loaded or compiled by now
             warm_up_after_solve()
+        if self.before_solve is not None:  # after its callees' (tick_kernels')
+            warm_up_before_solve()
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None) -> TickOutput:
@@ -153,7 +160,6 @@ class Tick:
         verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
         t0 = _perf_counter_ns()
         traj = self.trajectory if trajectory is None else trajectory
-        ages_ms = feedback_ages_ms(inputs)
         if self.follow is not None:  # reference kind 'follow': the object's newest pose
             target_age_s = inputs.t_s - inputs.target_rx_t_s
             self.follow.observe(inputs.target, t_pose_s=t_exp_s - target_age_s,
@@ -161,15 +167,16 @@ class Tick:
         if self.obstacles is not None and inputs.target is not None:
             self.obstacles.update(inputs.target)
         sup = self.supervisor
-        decision = sup.check_feedback(mocap_age_ms=ages_ms[0], navdata_age_ms=ages_ms[1],
-                                      navdata=inputs.navdata)
-        x = solution = cmd = done = None
-        if inputs.pose is not None:  # estimated even when stale (the row logs it)
-            x = self.estimation.update(inputs.pose, inputs.navdata, self.supervision.zacc_mps2)
-        if decision.action is _CONTROL:
-            decision = sup.check_state(x, inputs.navdata)
-        if decision.action is _CONTROL:
-            solution = self.control.solve(t_exp_s, x, traj, self.offset)
+        before = self.before_solve
+        # the nominal tick: the stages up to the solve in one compiled call (None: not nominal)
+        done = before.nominal(inputs, t_exp_s, traj) if before is not None else None
+        if done is not None:
+            ages_ms, x, solution = done
+            decision = NOMINAL
+        else:
+            ages_ms, decision, x, solution = self._before(inputs, t_exp_s, traj)
+        cmd = done = None
+        if solution is not None:  # the verdict was CONTROL: the controller solved
             if solution.result is not None and self.after_solve is not None:
                 # the nominal tick: the stages below in one compiled call (None: not nominal)
                 done = self.after_solve.nominal(inputs, x, solution)
@@ -192,6 +199,23 @@ class Tick:
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput.make(sent.pcmd, sent.progressive, row, sent.decision.action, events)
+
+    def _before(self, inputs: TickInputs, t_exp_s: float, traj: Trajectory) -> tuple:
+        """The stages up to the solve, one by one (every tick the compiled call did not take,
+        ``runtime/before_solve``): the feedback's ages, the verdict, the estimate and the
+        controller's solution (None unless the verdict is to control)."""
+        sup = self.supervisor
+        ages_ms = feedback_ages_ms(inputs)
+        decision = sup.check_feedback(mocap_age_ms=ages_ms[0], navdata_age_ms=ages_ms[1],
+                                      navdata=inputs.navdata)
+        x = solution = None
+        if inputs.pose is not None:  # estimated even when stale (the row logs it)
+            x = self.estimation.update(inputs.pose, inputs.navdata, self.supervision.zacc_mps2)
+        if decision.action is _CONTROL:
+            decision = sup.check_state(x, inputs.navdata)
+        if decision.action is _CONTROL:
+            solution = self.control.solve(t_exp_s, x, traj, self.offset)
+        return ages_ms, decision, x, solution
 
     def _after(self, inputs: TickInputs, decision, x, solution, cmd) -> tuple:
         """The stages after the verdict, one by one (every tick the compiled call did not

@@ -1,0 +1,262 @@
+"""The controller's stages before the NMPC's solve, on the nominal tick, in one compiled call.
+
+Before the solve the usual tick made five Python calls and two numba dispatches — the
+feedback's ages (``feedback_ages_ms``), the supervisor's look at them
+(``Supervisor.check_feedback``), the estimate (``Estimation.update``: the Kalman step), the
+supervisor's look at it (``Supervisor.check_state``) and the NMPC's inputs (``Control.solve``'s
+waypoint path: ``nmpc_inputs``) —: ~2.9 µs a tick besides the solve, ~2.2 in one call
+(issue 26; the call's 28 arguments cost most of what is left). :func:`before_solve` does their
+arithmetic — the same expressions in the same order (the Kalman step and the NMPC's inputs are
+the very kernels the stages call) — over the same arrays the Python stages use (the
+estimator's state, the delay ring, the control stage's buffers), so either path can take any
+tick. It steps the estimate on a copy, tests everything that makes the tick nominal and
+answers :data:`NOT_NOMINAL`, with nothing written, when one fails: the caller then runs the
+Python stages, which decide as they always did.
+
+:class:`BeforeSolve` is the Python side: the preconditions (fresh pose and navdata, nothing
+latched, the compiled estimator, a waypoint reference the control stage has packed), the
+call, and the solve itself (``Control._solved``: the solver and the tick's ``Solution``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.core.entry_points import entry_point, plain
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.types import STATE_DIM, FlightMode
+from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
+from ardrone_nmpc.runtime.stages import Control
+from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, kalman_estimate,
+                                               nmpc_inputs, nmpc_work)
+from ardrone_nmpc.safety import _ALARM_BITS, Supervisor
+
+__all__ = ["BeforeSolve", "NOT_NOMINAL", "before_solve", "warm_up_kernels"]
+
+#: :func:`before_solve`'s code when the tick is not nominal (nothing written).
+NOT_NOMINAL = -1
+
+# the supervisor's limits the nominal tick is held to (Supervisor.cfg's, unpacked), then the
+# estimator's scratch: one float64 array (:meth:`BeforeSolve._load_limits`)
+L_BATTERY_FLOOR_PCT = 0
+L_NAVDATA_LAND_MS = 1
+L_MOCAP_NOMINAL_MS = 2  # the smallest mocap limit (-inf: none passes without the chain)
+L_FENCE_LO = 3          # (3) x, y, z
+L_FENCE_HI = 6          # (3)
+L_MAX_SPEED_MPS = 9
+L_TILT_CAP_DEG = 10
+L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
+L_SCRATCH = 12          # (E_SIZE) the estimator's state, stepped here before it is kept
+L_SIZE = L_SCRATCH + E_SIZE
+
+_EMERGENCY = FlightMode.EMERGENCY
+_NDARRAY = np.ndarray
+_NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll_deg,
+                 pitch_deg, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
+                 nav_vx_mps, nav_vy_mps, est, limits, t_exp_s, sent, first, pending, lead_s,
+                 x_solve, shift, states, work, rows):
+    """The nominal tick's stages before the solve, over their state (module docstring).
+
+    The tick's time and the feedback's receipt times (``t_s``, ``*_rx_t_s``); the navdata's
+    fault bits (0: none reported), battery and tilt; the pose (``px`` … ``pose_t_s``), the z̈
+    applied since the last (``zacc_mps2``) and, ``navdata_velocity`` set, ẋ, ẏ from navdata
+    (rotated by the caller) for the estimator's state ``est`` (``kalman_estimate``'s);
+    ``limits`` the supervisor's (``L_*``); then ``nmpc_inputs``' arguments.
+
+    Returns (code, mocap age, navdata age) in ms; code :data:`NOT_NOMINAL` when the tick is
+    not nominal, and then nothing was written."""
+    mocap_ms = (t_s - pose_rx_t_s) * 1e3
+    nav_ms = (t_s - navdata_rx_t_s) * 1e3
+    nothing = (NOT_NOMINAL, mocap_ms, nav_ms)
+    # check_feedback's usual tick (the emergency mode and the latch are the caller's tests)
+    if not (state_bits & int(limits[L_ALARM_BITS]) == 0
+            and battery_pct > limits[L_BATTERY_FLOOR_PCT] and nav_ms <= limits[L_NAVDATA_LAND_MS]
+            and mocap_ms <= limits[L_MOCAP_NOMINAL_MS]):
+        return nothing
+    # Estimation.update, on a copy of its state: kept only if the tick is nominal
+    scratch = limits[L_SCRATCH:L_SCRATCH + E_SIZE]
+    for i in range(E_SIZE):
+        scratch[i] = est[i]
+    if kalman_estimate(scratch, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
+                       nav_vx_mps, nav_vy_mps) != ESTIMATED:
+        return nothing
+    # check_state: finite, inside the geofence, not too fast (``** 2``: its spelling), not
+    # too tilted
+    for i in range(STATE_DIM):
+        if not math.isfinite(scratch[E_X + i]):
+            return nothing
+    for k in range(3):  # x, y, z: slots 0, 2, 4
+        v = scratch[E_X + 2 * k]
+        if not (limits[L_FENCE_LO + k] <= v <= limits[L_FENCE_HI + k]):
+            return nothing
+    speed = math.sqrt(scratch[E_X + 1] ** 2 + scratch[E_X + 3] ** 2 + scratch[E_X + 5] ** 2)
+    if not speed <= limits[L_MAX_SPEED_MPS]:
+        return nothing
+    cap_deg = limits[L_TILT_CAP_DEG]
+    if not (-cap_deg <= roll_deg <= cap_deg and -cap_deg <= pitch_deg <= cap_deg):
+        return nothing
+    # --- nominal: from here on the stages' state is written
+    for i in range(E_SIZE):
+        est[i] = scratch[i]
+    nmpc_inputs(est[E_X:E_X + STATE_DIM], sent, first, pending, x_solve, t_exp_s, lead_s, shift,
+                states, work, rows)
+    return (0, mocap_ms, nav_ms)
+
+
+class BeforeSolve:
+    """The Python side of :func:`before_solve` for one tick's stages (``Tick``'s, an NMPC's)."""
+
+    @staticmethod
+    def takes(tick) -> bool:
+        """Whether the compiled call can take ``tick``'s nominal ticks: an NMPC against a
+        waypoint reference, the compiled estimator, and the stages' own classes (a subclass'
+        overrides are called: the Python stages take its ticks)."""
+        traj = tick.trajectory
+        return (tick.control.nmpc is not None and traj.__class__ is HoldStartThen
+                and traj.waypoint_args is not None and tick.estimation.compiled
+                and type(tick.supervisor) is Supervisor and type(tick.estimation) is Estimation
+                and type(tick.control) is Control)
+
+    def __init__(self, tick) -> None:
+        self.supervisor = tick.supervisor
+        self.estimation = tick.estimation
+        self.supervision = tick.supervision
+        self.control = tick.control
+        self.delay = tick.control.delay
+        self.offset = tick.offset
+        self._limits = np.zeros(L_SIZE)
+        self._cfg = None  # the safety config the limits are of
+        # the kernel's call: its compiled entry point (core/entry_points) while the stages'
+        # arrays are the ones vetted for it, else the dispatcher (:meth:`_vet`)
+        self._entry = None
+        self._vetted: tuple = ()
+
+    def __getstate__(self) -> dict:
+        """Without what :meth:`_vet` makes (an entry point does not pickle; the arrays it
+        vetted are the stages', copied apart)."""
+        state = self.__dict__.copy()
+        state["_entry"], state["_vetted"] = None, ()
+        return state
+
+    def _load_limits(self) -> None:
+        """The supervisor's limits (its own unpacked copies) into the kernel's array."""
+        sup = self.supervisor
+        lim = self._limits
+        lim[L_BATTERY_FLOOR_PCT] = sup._battery_floor_pct
+        lim[L_NAVDATA_LAND_MS] = sup._navdata_land_ms
+        lim[L_MOCAP_NOMINAL_MS] = sup._mocap_nominal_ms
+        lim[L_FENCE_LO:L_FENCE_LO + 3] = sup._fence_lo
+        lim[L_FENCE_HI:L_FENCE_HI + 3] = sup._fence_hi
+        lim[L_MAX_SPEED_MPS] = sup._max_speed_mps
+        lim[L_TILT_CAP_DEG] = sup._tilt_cap_deg
+        lim[L_ALARM_BITS] = _ALARM_BITS  # (< 2**53: exact in a float64)
+        self._cfg = sup._cfg
+
+    def nominal(self, inputs, t_exp_s: float, traj):
+        """The nominal tick's feedback ages, estimate and :class:`Solution`, every stage up
+        to and including the solve done; None (nothing done) when the tick is not nominal."""
+        pose, nav = inputs.pose, inputs.navdata
+        sup = self.supervisor
+        if pose is None or nav is None or sup._latched is not None or nav.mode is _EMERGENCY:
+            return None
+        est, control = self.estimation, self.control
+        args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
+        if (args is None or args is not control._work_args or control._dtau_varies
+                or not est._compiled):
+            return None  # (the first solve asks Δτ and packs the trajectory: Control.solve)
+        pos = pose.position_m
+        if pos.__class__ is not _NDARRAY:
+            return None
+        px, py, pz = pos.tolist()
+        if sup._cfg is not self._cfg:
+            self._load_limits()
+        bits = nav.state_bits
+        by_nav = est.velocity_from_navdata
+        if by_nav:
+            vx, vy = navdata_velocity_world(nav, pose.psi_rad)
+        else:
+            vx = vy = 0.0
+        delay, offset = self.delay, self.offset
+        pending = delay.count
+        state, ring, x_solve, states, work, rows = (est._state, delay.ring, control._x_solve,
+                                                    control._states, control._work, control._rows)
+        shift = _NO_SHIFT if offset is None else offset.integrator.shift
+        call, v = self._entry, self._vetted
+        if not (call is not None and state is v[0] and ring is v[1] and x_solve is v[2]
+                and shift is v[3] and states is v[4] and work is v[5] and rows is v[6]):
+            call = before_solve  # the dispatcher: it looks at every argument's type
+            self._entry = None
+        args = (inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s,
+                0 if bits is None else bits, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
+                px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav, vx, vy,
+                state, self._limits, t_exp_s, ring, delay.first, pending, delay.lead_s,
+                x_solve, shift, states, work, rows)
+        code, mocap_ms, nav_ms = call(*args)
+        if call is before_solve:
+            self._vet(args)
+        if code:
+            return None
+        x = est._x
+        ref_horizon = control._ref_horizon  # the logged horizon, unshifted
+        sol = control._solved(t_exp_s, control._x_solve if pending else x, control._ref_now,
+                              ref_horizon if offset is None else control._horizon, ref_horizon,
+                              control._solve_prepared)
+        return (mocap_ms, nav_ms), x, sol
+
+    def _vet(self, args: tuple) -> None:
+        """After a call through the dispatcher: the kernel's entry point for float numbers
+        (each number is made a float64, an int64 or a truth by its unboxing, as a Python
+        caller's numbers are by the dispatcher's specialisation for them: the same value),
+        kept with the stages' arrays of the call if each is of the one kind it is compiled
+        for (``plain``), so that the next calls with them skip the dispatcher's look at 28
+        arguments (~0.4 µs); else the dispatcher stays (asked again next call)."""
+        kinds = list(_NUMBERS)
+        for i, ndim in _ARRAYS:
+            if not plain(args[i], ndim):
+                return
+            kinds[i] = args[i]
+        entry = entry_point(before_solve, *kinds)
+        if entry is not None:
+            self._entry = entry
+            self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
+
+
+# :func:`before_solve`'s array arguments (position, dimensions): the estimator's state, the
+# limits, the ring, x_solve, the shift, the reference states, work, rows; its numbers' kinds
+# (the state bits, the pending window: int64; ẋ, ẏ from navdata: a truth; floats else)
+_ARRAYS = ((16, 1), (17, 1), (19, 2), (23, 1), (24, 1), (25, 2), (26, 1), (27, 2))
+_NUMBERS = tuple(0 if i in (3, 20, 21) else False if i == 13 else 0.0 for i in range(28))
+
+_warm: list[bool] = []  # loaded (or compiled) in this process
+
+
+def warm_up_kernels() -> None:
+    """Load (or compile) :func:`before_solve` now — once per process —, its callees from the
+    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft."""
+    if _warm:
+        return
+    _warm.append(True)
+    load_cached_callees(before_solve)
+    x = np.zeros(STATE_DIM)
+    n = 3  # a two-waypoint trajectory, one stage
+    work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)), np.zeros(2),
+                                      np.ones(1), np.zeros((1, 3)), x))
+    limits = np.zeros(L_SIZE)
+    limits[L_NAVDATA_LAND_MS] = limits[L_MOCAP_NOMINAL_MS] = 1.0
+    limits[L_FENCE_LO:L_FENCE_LO + 3] = -1.0
+    limits[L_FENCE_HI:L_FENCE_HI + 3] = limits[L_MAX_SPEED_MPS] = limits[L_TILT_CAP_DEG] = 1.0
+    before_solve(1.0, 1.0, 1.0, 0, 50.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False, 0.0,
+                 0.0, np.zeros(E_SIZE), limits, 0.0, np.zeros((2, 4)), 0, 1, 0.0, np.zeros(7),
+                 np.zeros(4), np.zeros((n, 7)), work, rows)
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py
