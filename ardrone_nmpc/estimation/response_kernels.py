@@ -34,7 +34,7 @@ __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S
            "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
            "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
            "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
-           "TIMES_ROUNDED", "feed", "fit_grid", "fit_size", "fold_sample", "held_count",
+           "TIMES_ROUNDED", "estimate_size", "feed", "fit_estimate", "fit_grid", "fit_size", "fold_sample", "held_count",
            "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
@@ -66,8 +66,8 @@ S_DELAYS = 27        # the delays' number (K)
 S_LAGS = 28          # the lags' number (L)
 S_BITS = 29          # scratch: a double whose bits the cache hashes (memo_decays)
 S_X = 30             # (2) scratch: the tracked best model's value of the sample (fold_sample)
-S_UNORDERED = 31     # 1.0 once a NaN command time was held: the times may be out of order
-HEAD = 32
+S_UNORDERED = 32     # 1.0 once a NaN command time was held: the times may be out of order
+HEAD = 33
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
@@ -113,6 +113,22 @@ def fit_size(delays: int, lags: int) -> int:
     """Length of :func:`fit_grid`'s output buffer: the centred Σx², the gains, the residual
     per axis (each K×L×2), the residual (K×L) and the centred Σy² (2)."""
     return 3 * delays * lags * 2 + delays * lags + 2
+
+
+#: :func:`fit_estimate`'s parameters (four floats after :func:`fit_grid`'s output, set once by
+#: its caller: ``attitude_response``'s grid step and rival separation, each expression made in
+#: Python) and its answer (thirteen floats after them, in this order): the delay and its σ, the
+#: gains and their σ (2 each), the lag, R², the samples; then, for the contrast, the rise of the
+#: least rival residual over the best's, σ², the inflation and 1.0 when the grid holds a rival.
+#: (The contrast's σ² · inflation ** 2 stays in Python: ``x ** 2`` is the C library's ``pow``,
+#: which differs from x · x in the last bit for ~0.1 % of x.)
+ESTIMATE_PARAMS = 4
+ESTIMATE_ANSWER = 13
+
+
+def estimate_size(delays: int, lags: int) -> int:
+    """Length of :func:`fit_estimate`'s buffer: :func:`fit_size`'s, its parameters, its answer."""
+    return fit_size(delays, lags) + ESTIMATE_PARAMS + ESTIMATE_ANSWER
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -439,6 +455,112 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     state[S_HAS_BEST] = 1.0
     state[S_K] = k
     state[S_L] = m
+    return best
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _py_max(a: float, b: float) -> float:
+    """Python's ``max(a, b)``: ``b`` only if it is greater (a NaN first stays; a NaN second
+    does not)."""
+    return b if b > a else a
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _py_min(a: float, b: float) -> float:
+    """Python's ``min(a, b)``: ``b`` only if it is less."""
+    return b if b < a else a
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _inflation(state: np.ndarray) -> float:
+    """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁ (1 with fewer than
+    ten pairs or no residual)."""
+    rr, rr1, w = state[S_RES], state[S_RES + 1], state[S_RES + 2]
+    if w < 10.0 or rr <= 0.0:
+        return 1.0
+    rho = _py_min(_py_max(rr1 / rr, 0.0), 0.95)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _refine(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma2: float,
+            params: np.ndarray) -> tuple:
+    """The delay from a parabola through the residual at lag ``m`` (``rss`` flat, K × L) at
+    delay ``k`` and its neighbours (the first or last three on an edge of the grid: the vertex
+    kept inside it), and its variance 2σ²/curvature, no less than the grid's step² / 12. A
+    neighbour before the first is the last (Python's list index −1, on a grid of two)."""
+    K = delays_s.size
+    if K < 2:
+        raise IndexError("list index out of range")  # (a grid of one has no neighbours)
+    i = min(max(k, 1), K - 2)
+    lo = rss[((i - 1) % K) * L + m]
+    mid, hi = rss[i * L + m], rss[(i + 1) * L + m]
+    if not (math.isfinite(lo) and math.isfinite(mid) and math.isfinite(hi)):
+        return delays_s[k], math.inf
+    second = lo - 2.0 * mid + hi
+    if not second > 0.0:
+        return delays_s[k], math.inf
+    delay = delays_s[i] + params[0] * (lo - hi) / second  # ½ step
+    delay = _py_min(_py_max(delay, delays_s[0]), delays_s[K - 1])
+    return delay, _py_max(2.0 * sigma2 * params[1] / second, params[2])  # step², step² / 12
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
+    """``AttitudeResponseEstimator._fit`` in one call: :func:`fit_grid` into ``out``, then the
+    best grid point's estimate into ``out``'s answer (:data:`ESTIMATE_ANSWER`, after its
+    :data:`ESTIMATE_PARAMS`) — the same expressions in the same order, Python's ``max`` and
+    ``min`` (:func:`_py_max`), numpy's ``min`` of the rivals (NaN if any is). Returns
+    :func:`fit_grid`'s best flat index, or −1: no estimate (fewer than 20 samples, nothing
+    moved; the state untouched with fewer than 20)."""
+    n = state[S_N]
+    if n < 20:
+        return -1
+    best = fit_grid(state, out)
+    if best < 0:
+        return -1
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
+    kl, kl2 = K * L, K * L * 2
+    end = state.size
+    delays_s = state[end - K - L:end - L]
+    k, m = best // L, best % L
+    sxx, gain, rss_axis = out[0:kl2], out[kl2:2 * kl2], out[2 * kl2:3 * kl2]
+    rss = out[3 * kl2:3 * kl2 + kl]
+    f = 3 * kl2 + kl + 2  # fit_size
+    params = out[f:f + ESTIMATE_PARAMS]
+    answer = out[f + ESTIMATE_PARAMS:f + ESTIMATE_PARAMS + ESTIMATE_ANSWER]
+    low = rss[best]
+    sigma2 = low / _py_max(2.0 * n - 5.0, 1.0)
+    inflate = _inflation(state)
+    delay, delay_var = _refine(rss, L, m, k, delays_s, sigma2, params)
+    answer[0] = delay
+    answer[1] = inflate * math.sqrt(delay_var)
+    for a in range(2):
+        e = 2 * best + a
+        sa = sxx[e]
+        if sa > 1e-12:
+            answer[2 + a] = gain[e]
+            answer[4 + a] = inflate * math.sqrt(_py_max(rss_axis[e], 0.0)
+                                                / _py_max(n - 2.0, 1.0) / sa)
+        else:
+            answer[2 + a] = math.nan
+            answer[4 + a] = math.inf
+    answer[6] = state[end - L + m]
+    answer[7] = 1.0 - low / (out[3 * kl2 + kl] + out[3 * kl2 + kl + 1])  # Σy² of both axes
+    answer[8] = n
+    # the least residual at the best lag DELAY_RIVAL_SEPARATION_S or more from the best delay
+    rival, least, at = False, 0.0, delays_s[k]
+    for j in range(K):
+        if abs(delays_s[j] - at) >= params[3]:
+            v = rss[j * L + m]
+            if not rival:
+                least, rival = v, True
+            elif least == least and not v >= least:  # less, or NaN (which numpy's min keeps)
+                least = v
+    answer[9] = least - low if rival else 0.0
+    answer[10] = sigma2
+    answer[11] = inflate
+    answer[12] = 1.0 if rival else 0.0
     return best
 
 

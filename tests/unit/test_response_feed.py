@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from ardrone_nmpc.estimation.attitude_response import (
     DELAY_RIVAL_SEPARATION_S, DELAY_STEP_S, NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate,
@@ -246,29 +247,127 @@ def test_one_call_per_tick_is_the_sample_then_the_command():
     _same(one, two)
 
 
+def _odd_sums(rng, ref, trial: int) -> np.ndarray:
+    """A state of random sums for ``ref``'s grid (its parameters and grid kept): every fourth
+    with an axis no command moved, NaN in a sum, or only 0, −0 and 1; the tracked residual's
+    sums (the inflation) random too, with at least ten pairs every other trial."""
+    st = rng.normal(size=ref._state.size) ** 2
+    st[0] = 30.0 + trial  # the samples' effective number
+    # the fit's parameters and grid as built (response_kernels.new_state)
+    grid = len(ref.delays_s) + len(ref.lags_s)
+    st[rk.S_CAPACITY:rk.HEAD] = ref._state[rk.S_CAPACITY:rk.HEAD]
+    st[-grid:] = ref._state[-grid:]
+    kl2 = ref._sx.size
+    head = rk.HEAD
+    if trial % 4 == 1:  # an axis no command moved
+        st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
+        st[head + 1:head + kl2:2] = 0.0
+    if trial % 4 == 2:
+        st[head + rng.integers(3 * kl2)] = math.nan
+    if trial % 4 == 3:
+        st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
+    st[rk.S_RES:rk.S_RES + 2] = rng.choice([rng.normal(), 0.0, -1.0, math.nan], size=2)
+    st[rk.S_RES + 2] = 10.0 + trial if trial % 2 else 9.0
+    return st
+
+
+def _both_fit(ref, got, st) -> AttitudeEstimate:
+    """The numpy fit and the compiled one of the state ``st``: the same estimate (every field,
+    its mean gain too) and the same best model tracked."""
+    ref._state[:], got._state[:] = st, st
+    want, have = ref._fit(), got._fit()
+    assert repr(want) == repr(have)
+    assert repr((want.gain_mean, want.gain_mean_std)) == repr((have.gain_mean,
+                                                               have.gain_mean_std))
+    assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
+    return have
+
+
 def test_the_compiled_fit_on_odd_sums():
-    """Axes never moved, NaN and ±0 in the sums: the grid's fit picks what numpy picked."""
+    """Axes never moved, NaN and ±0 in the sums, an odd residual: the grid's fit and the
+    estimate (``response_kernels.fit_estimate``) are what numpy made, on the full grid and on
+    short ones — no delay far enough for a rival (0–0.05 s), a few (0–0.07 s), two delays (a
+    neighbour at Python's index −1)."""
     rng = np.random.default_rng(7)
-    for trial in range(40):
-        ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
-        st = rng.normal(size=ref._state.size) ** 2
-        st[0] = 30.0 + trial  # the samples' effective number
-        # the fit's parameters and grid as built (response_kernels.new_state)
-        grid = len(ref.delays_s) + len(ref.lags_s)
-        st[rk.S_CAPACITY:rk.HEAD] = ref._state[rk.S_CAPACITY:rk.HEAD]
-        st[-grid:] = ref._state[-grid:]
-        kl2 = ref._sx.size
-        head = rk.HEAD
-        if trial % 4 == 1:  # an axis no command moved
-            st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
-            st[head + 1:head + kl2:2] = 0.0
-        if trial % 4 == 2:
-            st[head + rng.integers(3 * kl2)] = math.nan
-        if trial % 4 == 3:
-            st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
-        ref._state[:], got._state[:] = st, st
-        assert repr(ref._fit()) == repr(got._fit())
-        assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
+    for max_delay_s in (0.6, 0.05, 0.07, 0.01):
+        fits = 0
+        for trial in range(40):
+            ref = _NumpyFeed(E, max_delay_s=max_delay_s)
+            got = AttitudeResponseEstimator(E, max_delay_s=max_delay_s)
+            fits += math.isfinite(_both_fit(ref, got, _odd_sums(rng, ref, trial)).delay_s)
+        assert fits > 20
+
+
+def test_the_compiled_estimate_of_a_stream_on_short_grids():
+    """A stream's estimates on grids with no rival delay (0–0.05 s), some (0–0.07 s) and two
+    delays: numpy's, every field; a contrast only where a rival exists."""
+    for max_delay_s, rivals in ((0.05, False), (0.07, True), (0.01, False)):
+        ref = _NumpyFeed(E, max_delay_s=max_delay_s)
+        got = AttitudeResponseEstimator(E, max_delay_s=max_delay_s)
+        contrasts = []
+        for i, ev in enumerate(_stream(9)[:6000]):
+            _feed_both(ref, got, ev)
+            if i % 50 == 0:
+                assert repr(ref.estimate) == repr(got.estimate)
+                if math.isfinite(got.estimate.delay_s):
+                    contrasts.append(got.estimate.delay_contrast)
+        assert len(contrasts) > 50
+        assert any(map(math.isfinite, contrasts)) == rivals
+
+
+def test_the_compiled_estimate_without_one_and_on_ties():
+    """Fewer than 20 samples (or no sample), nothing moved: no estimate, the state untouched
+    with too few; sums alike at every grid point (a tie: the first) or at every rival; a
+    grid of one delay fails as Python's neighbour did."""
+    rng = np.random.default_rng(3)
+    ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+    st = _odd_sums(rng, ref, 0)
+    for n in (0.0, 19.999):
+        st[rk.S_N] = n
+        got._state[:] = st
+        assert got._fit() is NO_ESTIMATE and ref._fit() is NO_ESTIMATE
+        assert got._state.tobytes() == st.tobytes()
+    st[rk.S_N] = math.nan  # not fewer than 20: fitted, NaN everywhere, as numpy did
+    _both_fit(ref, got, st)
+    kl2 = ref._sx.size
+    flat = st.copy()
+    flat[rk.S_N] = 40.0
+    sx = flat[rk.HEAD:rk.HEAD + kl2]
+    flat[rk.HEAD + kl2:rk.HEAD + 2 * kl2] = sx * sx / 40.0  # Σx² = (Σx)²/n: nothing moved
+    _both_fit(ref, got, flat)
+    assert got._fit() is NO_ESTIMATE
+    L = len(ref.lags_s)
+    for trial in range(20):
+        tie = _odd_sums(rng, ref, trial)
+        sums = tie[rk.HEAD:rk.HEAD + 3 * kl2].reshape(3, -1, L, 2)
+        if trial % 2:
+            sums[:] = sums[:, :1]  # every delay alike: a tie along the whole curve
+        else:
+            sums[:, 20:] = sums[:, 20:21]  # the rivals of the best alike
+        _both_fit(ref, got, tie)
+    one_ref = _NumpyFeed(E, max_delay_s=0.0)
+    one_got = AttitudeResponseEstimator(E, max_delay_s=0.0)
+    st = _odd_sums(rng, one_ref, 0)
+    for est in (one_ref, one_got):
+        est._state[:] = st
+        with pytest.raises(IndexError):
+            est._fit()
+
+
+def test_the_compiled_estimate_through_its_entry_point_and_a_copy():
+    """The estimate's first call goes through numba's dispatcher, the next through the
+    compiled entry point; a copy (no entry point pickled) binds it again: the same fits."""
+    import copy
+
+    from ardrone_nmpc.estimation import response_kernels
+
+    rng = np.random.default_rng(11)
+    ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+    got._fit_step = response_kernels.fit_estimate  # as before its first call
+    for trial in range(6):
+        _both_fit(ref, got, _odd_sums(rng, ref, trial))
+        assert got._fit_step is not response_kernels.fit_estimate
+        got = copy.deepcopy(got)
 
 
 def test_times_the_kernel_leaves_to_pythons_round():
