@@ -63,6 +63,9 @@ CONFIDENT_GAIN_REL_STD = 0.1
 CONFIDENT_R2 = 0.3
 
 
+_new_object = object.__new__
+
+
 class _kept:
     """``functools.cached_property`` without Python 3.11's lock (~0.4 µs a first read): the
     value stored in the instance's ``__dict__``, which a non-data descriptor yields to."""
@@ -119,6 +122,25 @@ class AttitudeEstimate:
                 w += 1.0 / max(s, 1e-9) ** 2
         return 1.0 / math.sqrt(w) if w > 0 else math.inf
 
+    @classmethod
+    def _fitted(cls, delay_s, delay_std_s, gain, gain_std, lag_s, r2, samples, delay_contrast,
+                gain_mean, gain_mean_std, means_made) -> AttitudeEstimate:
+        """The estimate ``response_kernels.fit_estimate`` made, with its mean gain and σ when
+        it made them (``means_made``), as the first reads would keep them. Its fields set as
+        the frozen ``__init__`` sets them (``object.__setattr__`` each: ~0.1 µs apiece), in
+        one update of the instance's dict."""
+        est = _new_object(cls)
+        if means_made:
+            est.__dict__.update(delay_s=delay_s, delay_std_s=delay_std_s, gain=gain,
+                                gain_std=gain_std, lag_s=lag_s, r2=r2, samples=samples,
+                                delay_contrast=delay_contrast, gain_mean=gain_mean,
+                                gain_mean_std=gain_mean_std)
+        else:  # read, they raise as they did (a weight's square overflows)
+            est.__dict__.update(delay_s=delay_s, delay_std_s=delay_std_s, gain=gain,
+                                gain_std=gain_std, lag_s=lag_s, r2=r2, samples=samples,
+                                delay_contrast=delay_contrast)
+        return est
+
     @property
     def delay_confident(self) -> bool:
         """Delay σ ≤ 20 ms, R² ≥ 0.2, and no rival delay a tick (65 ms) or more away within
@@ -174,10 +196,11 @@ def _microseconds(t_s: float) -> float:
     return round(float(t_s), 6)
 
 
-#: fit_estimate's parameters (response_kernels.ESTIMATE_PARAMS), each made here as ``_refine``
-#: and ``_contrast`` made them: ½ step, step², step² / 12, the least separation of a rival
+#: fit_estimate's parameters (response_kernels.ESTIMATE_PARAMS), each made here in Python: ½
+#: the delays' step, step², step² / 12, the least separation of a rival, and the exponent of
+#: the squares ``**`` makes (read at run time: the C library's ``pow``, not x · x)
 _ESTIMATE_PARAMS = (0.5 * DELAY_STEP_S, DELAY_STEP_S ** 2, DELAY_STEP_S ** 2 / 12.0,
-                    DELAY_RIVAL_SEPARATION_S - 1e-9)
+                    DELAY_RIVAL_SEPARATION_S - 1e-9, 2.0)
 
 
 class AttitudeResponseEstimator:
@@ -210,21 +233,16 @@ class AttitudeResponseEstimator:
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
     def _bind_views(self) -> None:
-        """The sums and the fit's outputs as views of the state and fit buffers."""
+        """The sums and the fit's answer as views of the state and fit buffers."""
         st, out = self._state, self._fit_out
         n_k, n_l = len(self.delays_s), len(self.lags_s)
-        shape, kl2, kl = (n_k, n_l, 2), n_k * n_l * 2, n_k * n_l
+        shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
         o = rk.HEAD
         self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
                                           for i in range(3))
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
-        # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
-        # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
-        self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
-                           out[4 * kl:6 * kl].reshape(shape),
-                           out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:7 * kl + 2])
-        self._answer = out[out.size - rk.ESTIMATE_ANSWER:]  # fit_estimate's
+        self._answer = out[out.size - rk.ESTIMATE_ANSWER:]  # fit_estimate's (its estimate)
         # the compiled steps: their entry points once known for this kind of state, else the
         # dispatchers (feed and _fit bind the entry points after their first calls)
         self._step = _feed_entry(st) or _feed_dispatched
@@ -305,12 +323,10 @@ class AttitudeResponseEstimator:
             return NO_ESTIMATE
         if step is _fit_estimate:  # the dispatcher: its entry point, now compiled
             self._fit_step = entry_point(step, state, out) or step
-        (delay, delay_std, g0, g1, s0, s1, lag, r2, n, rise, sigma2, inflate,
-         rival) = self._answer.tolist()
-        # the contrast over σ² inflated like every σ (here: ``** 2`` is the C library's pow)
-        sigma2 = sigma2 * inflate ** 2
-        return AttitudeEstimate(delay, delay_std, (g0, g1), (s0, s1), lag, r2, n,
-                                rise / sigma2 if rival and sigma2 > 0.0 else math.inf)
+        (delay, delay_std, g0, g1, s0, s1, lag, r2, n, contrast, gain_mean, gain_mean_std,
+         made) = self._answer.tolist()
+        return AttitudeEstimate._fitted(delay, delay_std, (g0, g1), (s0, s1), lag, r2, n,
+                                        contrast, gain_mean, gain_mean_std, made)
 
 
 _kernels_warm = False

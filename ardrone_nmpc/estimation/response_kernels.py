@@ -30,12 +30,13 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS",
-           "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
-           "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
-           "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
-           "TIMES_ROUNDED", "estimate_size", "feed", "fit_estimate", "fit_grid", "fit_size", "fold_sample", "held_count",
-           "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "ESTIMATE_ANSWER", "ESTIMATE_PARAMS", "HEAD",
+           "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G",
+           "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH",
+           "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
+           "TIMES_ROUNDED", "estimate_size", "feed", "fit_estimate", "fit_grid", "fit_size",
+           "fold_sample", "held_count", "memo_decays", "memo_view", "microseconds", "new_state",
+           "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
@@ -115,14 +116,13 @@ def fit_size(delays: int, lags: int) -> int:
     return 3 * delays * lags * 2 + delays * lags + 2
 
 
-#: :func:`fit_estimate`'s parameters (four floats after :func:`fit_grid`'s output, set once by
+#: :func:`fit_estimate`'s parameters (five floats after :func:`fit_grid`'s output, set once by
 #: its caller: ``attitude_response``'s grid step and rival separation, each expression made in
-#: Python) and its answer (thirteen floats after them, in this order): the delay and its σ, the
-#: gains and their σ (2 each), the lag, R², the samples; then, for the contrast, the rise of the
-#: least rival residual over the best's, σ², the inflation and 1.0 when the grid holds a rival.
-#: (The contrast's σ² · inflation ** 2 stays in Python: ``x ** 2`` is the C library's ``pow``,
-#: which differs from x · x in the last bit for ~0.1 % of x.)
-ESTIMATE_PARAMS = 4
+#: Python, and the exponent 2.0) and its answer (thirteen floats after them, in this order):
+#: the delay and its σ, the gains and their σ (2 each), the lag, R², the samples, the delay's
+#: contrast, the mean gain and its σ, and 1.0 if those two were made (0.0: a weight overflowed,
+#: where Python's ``**`` raises: left to Python).
+ESTIMATE_PARAMS = 5
 ESTIMATE_ANSWER = 13
 
 
@@ -505,14 +505,53 @@ def _refine(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma
     return delay, _py_max(2.0 * sigma2 * params[1] / second, params[2])  # step², step² / 12
 
 
+@njit(cache=True, **INNER_KERNEL)
+def _py_square(x: float, two: float) -> float:
+    """Python's ``x ** 2`` of a finite or NaN ``x``: the C library's ``pow(x, 2.0)`` — not x · x,
+    from which it differs in the last bit for ~0.1 % of x — with ``two`` read at run time (a
+    constant 2 would let the compiler make it x · x); NaN itself. An infinite answer is where
+    Python raises OverflowError: the caller checks."""
+    if x != x:
+        return x
+    return math.pow(x, two)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _gain_means(answer: np.ndarray, two: float) -> bool:
+    """``AttitudeEstimate.gain_mean`` and ``gain_mean_std`` of the gains and σ in ``answer``
+    (slots 2–5) into its slots 10 and 11, the same expressions in the same order; False
+    (nothing written) when a weight's square overflows, where Python raises."""
+    p0 = _py_square(_py_max(answer[4], 1e-9), two) if math.isfinite(answer[4]) else -1.0
+    p1 = _py_square(_py_max(answer[5], 1e-9), two) if math.isfinite(answer[5]) else -1.0
+    if math.isinf(p0) or math.isinf(p1):
+        return False
+    num = den = 0.0  # as gain_mean adds: from 0, the axes in order
+    w_all = 0.0      # gain_mean_std's: every finite σ
+    seen = False
+    for a in range(2):
+        p = p0 if a == 0 else p1
+        if p < 0.0:  # σ not finite
+            continue
+        w = 1.0 / p
+        w_all += w
+        g = answer[2 + a]
+        if math.isfinite(g):
+            num += g * w
+            den += w
+            seen = True
+    answer[10] = num / den if seen else math.nan
+    answer[11] = 1.0 / math.sqrt(w_all) if w_all > 0 else math.inf
+    return True
+
+
 @njit(cache=True, **OUTER_KERNEL)
 def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
     """``AttitudeResponseEstimator._fit`` in one call: :func:`fit_grid` into ``out``, then the
     best grid point's estimate into ``out``'s answer (:data:`ESTIMATE_ANSWER`, after its
-    :data:`ESTIMATE_PARAMS`) — the same expressions in the same order, Python's ``max`` and
-    ``min`` (:func:`_py_max`), numpy's ``min`` of the rivals (NaN if any is). Returns
-    :func:`fit_grid`'s best flat index, or −1: no estimate (fewer than 20 samples, nothing
-    moved; the state untouched with fewer than 20)."""
+    :data:`ESTIMATE_PARAMS`) — the same expressions in the same order, Python's ``max``,
+    ``min`` and ``**`` (:func:`_py_max`, :func:`_py_square`), numpy's ``min`` of the rivals
+    (NaN if any is). Returns :func:`fit_grid`'s best flat index, or −1: no estimate (fewer
+    than 20 samples, nothing moved; the state untouched with fewer than 20)."""
     n = state[S_N]
     if n < 20:
         return -1
@@ -548,20 +587,29 @@ def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
     answer[6] = state[end - L + m]
     answer[7] = 1.0 - low / (out[3 * kl2 + kl] + out[3 * kl2 + kl + 1])  # Σy² of both axes
     answer[8] = n
-    # the least residual at the best lag DELAY_RIVAL_SEPARATION_S or more from the best delay
+    answer[9] = _contrast(rss, L, m, k, delays_s, sigma2 * _py_square(inflate, params[4]),
+                          params[3])
+    answer[12] = 1.0 if _gain_means(answer, params[4]) else 0.0
+    return best
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _contrast(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma2: float,
+              rival_s: float) -> float:
+    """(least residual at lag ``m`` — ``rss`` flat, K × L — at ``rival_s`` or more from delay
+    ``k``: numpy's ``min``, NaN if any is) − the residual at ``k``, over ``sigma2``; ∞ when the
+    grid holds no such delay or ``sigma2`` is not > 0."""
     rival, least, at = False, 0.0, delays_s[k]
-    for j in range(K):
-        if abs(delays_s[j] - at) >= params[3]:
+    for j in range(delays_s.size):
+        if abs(delays_s[j] - at) >= rival_s:
             v = rss[j * L + m]
             if not rival:
                 least, rival = v, True
             elif least == least and not v >= least:  # less, or NaN (which numpy's min keeps)
                 least = v
-    answer[9] = least - low if rival else 0.0
-    answer[10] = sigma2
-    answer[11] = inflate
-    answer[12] = 1.0 if rival else 0.0
-    return best
+    if not rival or not sigma2 > 0.0:
+        return math.inf
+    return (least - rss[k * L + m]) / sigma2
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

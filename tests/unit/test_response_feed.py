@@ -409,3 +409,82 @@ def test_the_compiled_entry_point_takes_numbers_as_float_makes_them():
         assert ref._state.tobytes() == got._state.tobytes()
     entry = ar._feed_entry(got._state)
     assert entry is not None and got._step is entry and ref._step is entry
+
+
+def test_the_compiled_mean_gain_is_pythons_to_the_bit():
+    """``fit_estimate``'s mean gain and its σ (``response_kernels._gain_means``) against
+    ``AttitudeEstimate.gain_mean`` and ``gain_mean_std`` on odd gains and σ (NaN, ±inf, ±0,
+    the 1e-9 floor, squares ``pow`` rounds unlike x · x): the same bits; where a weight's
+    square overflows it makes none, and the estimate raises when read, as Python's ``**``."""
+    import random
+
+    from ardrone_nmpc.core.numerics import callable_from_python
+
+    means = callable_from_python(rk._gain_means)
+    rng = random.Random(5)
+    odd = [0.0, -0.0, math.nan, math.inf, -math.inf, 1e-12, 1e-9, 5e-10, 1e-300, 1e155]
+    answer = np.zeros(rk.ESTIMATE_ANSWER)
+    made = 0
+    for _ in range(20_000):
+        gain, std = ([rng.choice(odd) if rng.random() < 0.3
+                      else rng.uniform(-2.0, 2.0) * 10.0 ** rng.randint(-12, 3)
+                      for _ in range(2)] for _ in range(2))
+        answer[2:6] = gain + std
+        answer[10:12] = -7.0
+        ours = AttitudeEstimate(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5, 50.0)
+        if means(answer, 2.0):
+            made += 1
+            assert repr(answer[10:12].tolist()) == repr([ours.gain_mean, ours.gain_mean_std])
+            fitted = AttitudeEstimate._fitted(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5,
+                                              50.0, math.inf, *answer[10:12].tolist(), 1.0)
+            assert fitted.__dict__ == {**ours.__dict__, "delay_contrast": math.inf} or (
+                repr(fitted) == repr(AttitudeEstimate(0.1, 0.01, tuple(gain), tuple(std), 0.1,
+                                                      0.5, 50.0, math.inf)))
+        else:  # left to the properties: each raises where Python's did (σ's at least)
+            assert answer[10:12].tolist() == [-7.0, -7.0]  # nothing written
+            fitted = AttitudeEstimate._fitted(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5,
+                                              50.0, 0.0, 0.0, 0.0, 0.0)
+            assert "gain_mean" not in fitted.__dict__
+            assert _read(fitted, "gain_mean") == _read(ours, "gain_mean")
+            assert _read(fitted, "gain_mean_std") == _read(ours, "gain_mean_std") == "raised"
+    assert 15_000 < made < 20_000
+
+
+def _read(est: AttitudeEstimate, name: str) -> str:
+    """An estimate's property, its repr or "raised" (an OverflowError)."""
+    try:
+        return repr(getattr(est, name))
+    except OverflowError:
+        return "raised"
+
+
+def test_an_estimate_the_kernel_made_is_one_init_makes():
+    """``AttitudeEstimate._fitted`` (the kernel's answer, without the frozen ``__init__``):
+    equal, the same repr and hash, frozen, its mean gain kept as the first read keeps it."""
+    import dataclasses
+
+    fields = (0.2, 0.01, (0.9, 1.1), (0.02, math.inf), 0.06, 0.7, 300.0, 12.0)
+    made = AttitudeEstimate(*fields)
+    fitted = AttitudeEstimate._fitted(*fields, made.gain_mean, made.gain_mean_std, 1.0)
+    assert fitted == made and repr(fitted) == repr(made) and hash(fitted) == hash(made)
+    assert fitted.__dict__ == made.__dict__
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fitted.delay_s = 0.3
+
+
+def test_the_state_heads_slots_are_apart():
+    """Every slot of the state's head its own (a two-wide scratch once covered the flag of an
+    unordered command time: every fold set it, and each sample took the binary search), and a
+    stream's folds leave the flag down while its times ascend."""
+    wide = {rk.S_R: 2, rk.S_G: 2, rk.S_B: 2, rk.S_RES: 3, rk.S_SY: 2, rk.S_SYY: 2, rk.S_Y: 2,
+            rk.S_X: 2}
+    starts = [getattr(rk, name) for name in rk.__all__ if name.startswith("S_")]
+    cells = [s + i for s in starts for i in range(wide.get(s, 1))]
+    assert len(cells) == len(set(cells)) and max(cells) < rk.HEAD
+    est = AttitudeResponseEstimator(E)
+    for ev in _stream(2)[:3000]:
+        if ev[0] == "cmd":
+            est.command(*ev[1:])
+        elif ev[0] == "nav":
+            est.navdata(*ev[1:])
+    assert est._state[rk.S_HAS_BEST] == 1.0 and est._state[rk.S_UNORDERED] == 0.0
