@@ -233,30 +233,41 @@ def fold_sample(times: np.ndarray, n: int, ordered: bool, t_s: float, delays_s: 
         jk = c - 1
         r = memo_decays(at - times[jk], lags_s, memo, bits, ints)
         u0, u1 = u[2 * jk], u[2 * jk + 1]
-        for m in range(L):
-            dk = memo[r + m]
-            g = 2 * (jk * L + m)  # (jk, m, 0) in ylag
-            e = 2 * (k * L + m)   # (k, m, 0) in each sum
-            v0 = u0 + (ylag[g] - u0) * dk
-            v1 = u1 + (ylag[g + 1] - u1) * dk
-            if e == best:
-                x_best[0] = v0
-                x_best[1] = v1
-            q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
-            if scale:
+        gk, ek = 2 * jk * L, 2 * k * L  # (jk, 0, 0) in ylag, (k, 0, 0) in each sum
+        # the lags without a test per lag (the tracked model's value made after them, the
+        # same expression): ~4 % of the fold
+        if scale:
+            for m in range(L):
+                dk = memo[r + m]
+                g, e = gk + 2 * m, ek + 2 * m
+                q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
+                v0 = u0 + (ylag[g] - u0) * dk
+                v1 = u1 + (ylag[g + 1] - u1) * dk
                 sums[e] = sums[e] * forget + v0
                 sums[e + 1] = sums[e + 1] * forget + v1
                 sums[q] = sums[q] * forget + v0 * v0
                 sums[q + 1] = sums[q + 1] * forget + v1 * v1
                 sums[w] = sums[w] * forget + v0 * y0
                 sums[w + 1] = sums[w + 1] * forget + v1 * y1
-            else:
+        else:
+            for m in range(L):
+                dk = memo[r + m]
+                g, e = gk + 2 * m, ek + 2 * m
+                q, w = e + kl2, e + 2 * kl2
+                v0 = u0 + (ylag[g] - u0) * dk
+                v1 = u1 + (ylag[g + 1] - u1) * dk
                 sums[e] += v0
                 sums[e + 1] += v1
                 sums[q] += v0 * v0
                 sums[q + 1] += v1 * v1
                 sums[w] += v0 * y0
                 sums[w + 1] += v1 * y1
+        if ek <= best < ek + 2 * L:  # the tracked model is at this delay
+            m = (best - ek) // 2
+            dk = memo[r + m]
+            g = gk + 2 * m
+            x_best[0] = u0 + (ylag[g] - u0) * dk
+            x_best[1] = u1 + (ylag[g + 1] - u1) * dk
 
 
 @njit(cache=True, **OUTER_KERNEL)
