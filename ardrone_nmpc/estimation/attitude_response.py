@@ -63,6 +63,9 @@ CONFIDENT_GAIN_REL_STD = 0.1
 CONFIDENT_R2 = 0.3
 
 
+_new_object = object.__new__
+
+
 class _kept:
     """``functools.cached_property`` without Python 3.11's lock (~0.4 µs a first read): the
     value stored in the instance's ``__dict__``, which a non-data descriptor yields to."""
@@ -119,6 +122,25 @@ class AttitudeEstimate:
                 w += 1.0 / max(s, 1e-9) ** 2
         return 1.0 / math.sqrt(w) if w > 0 else math.inf
 
+    @classmethod
+    def _fitted(cls, delay_s, delay_std_s, gain, gain_std, lag_s, r2, samples, delay_contrast,
+                gain_mean, gain_mean_std, means_made) -> AttitudeEstimate:
+        """The estimate ``response_kernels.fit_estimate`` made, with its mean gain and σ when
+        it made them (``means_made``), as the first reads would keep them. Its fields set as
+        the frozen ``__init__`` sets them (``object.__setattr__`` each: ~0.1 µs apiece), in
+        one update of the instance's dict."""
+        est = _new_object(cls)
+        if means_made:
+            est.__dict__.update(delay_s=delay_s, delay_std_s=delay_std_s, gain=gain,
+                                gain_std=gain_std, lag_s=lag_s, r2=r2, samples=samples,
+                                delay_contrast=delay_contrast, gain_mean=gain_mean,
+                                gain_mean_std=gain_mean_std)
+        else:  # read, they raise as they did (a weight's square overflows)
+            est.__dict__.update(delay_s=delay_s, delay_std_s=delay_std_s, gain=gain,
+                                gain_std=gain_std, lag_s=lag_s, r2=r2, samples=samples,
+                                delay_contrast=delay_contrast)
+        return est
+
     @property
     def delay_confident(self) -> bool:
         """Delay σ ≤ 20 ms, R² ≥ 0.2, and no rival delay a tick (65 ms) or more away within
@@ -141,6 +163,7 @@ class AttitudeEstimate:
 
 # bound once: the tick feeds one a period
 _feed, _CMD_SEND, _TIMES_ROUNDED = rk.feed, rk.CMD_SEND, rk.TIMES_ROUNDED
+_fit_estimate = rk.fit_estimate
 
 
 def _feed_dispatched(state: np.ndarray, has: bool, sample_t_s, roll_deg, pitch_deg,
@@ -173,27 +196,11 @@ def _microseconds(t_s: float) -> float:
     return round(float(t_s), 6)
 
 
-_RIVALS: dict[tuple, tuple[tuple, tuple]] = {}  # _rivals' answers, by grid
-_RIVALS_KEPT = 64  # grids (a tune may try many delay_max_s: the memory stays bounded)
-
-
-def _rivals(delays_s: np.ndarray) -> tuple[tuple, tuple]:
-    """Per delay of the grid, the mask of the delays a rival must be at (``_contrast``:
-    DELAY_RIVAL_SEPARATION_S or more away) and whether it holds any. Made once per grid and
-    shared, read-only: every flight's estimator has the same grid, and making them cost
-    ~0.3 ms a flight (~60 array operations)."""
-    key = tuple(delays_s.tolist())
-    rivals = _RIVALS.get(key)
-    if rivals is None:
-        away = []
-        for d in delays_s:
-            mask = np.abs(delays_s - d) >= DELAY_RIVAL_SEPARATION_S - 1e-9
-            mask.setflags(write=False)
-            away.append(mask)
-        if len(_RIVALS) >= _RIVALS_KEPT:
-            _RIVALS.clear()
-        rivals = _RIVALS[key] = (tuple(away), tuple(bool(a.any()) for a in away))
-    return rivals
+#: fit_estimate's parameters (response_kernels.ESTIMATE_PARAMS), each made here in Python: ½
+#: the delays' step, step², step² / 12, the least separation of a rival, and the exponent of
+#: the squares ``**`` makes (read at run time: the C library's ``pow``, not x · x)
+_ESTIMATE_PARAMS = (0.5 * DELAY_STEP_S, DELAY_STEP_S ** 2, DELAY_STEP_S ** 2 / 12.0,
+                    DELAY_RIVAL_SEPARATION_S - 1e-9, 2.0)
 
 
 class AttitudeResponseEstimator:
@@ -218,36 +225,33 @@ class AttitudeResponseEstimator:
         # are views of it (_bind_views)
         self._state = rk.new_state(self.delays_s, self.lags_s, self._capacity,
                                    self.euler_angle_max_rad, self.window_s, REFRESH_SAMPLES)
-        # the grids as floats, and per delay the delays a rival must be at (``_contrast``)
-        self._delays, self._lags = self.delays_s.tolist(), self.lags_s.tolist()
-        self._away, self._any_away = _rivals(self.delays_s)
-        self._fit_out = np.zeros(rk.fit_size(n_k, n_l))  # fit_grid's output (_bind_views)
+        # fit_estimate's buffer: fit_grid's output, the parameters, the answer (_bind_views)
+        self._fit_out = np.zeros(rk.estimate_size(n_k, n_l))
+        f = rk.fit_size(n_k, n_l)
+        self._fit_out[f:f + rk.ESTIMATE_PARAMS] = _ESTIMATE_PARAMS
         self._bind_views()  # (and the compiled step: _step)
         self._estimate: AttitudeEstimate | None = NO_ESTIMATE
 
     def _bind_views(self) -> None:
-        """The sums and the fit's outputs as views of the state and fit buffers."""
+        """The sums and the fit's answer as views of the state and fit buffers."""
         st, out = self._state, self._fit_out
         n_k, n_l = len(self.delays_s), len(self.lags_s)
-        shape, kl2, kl = (n_k, n_l, 2), n_k * n_l * 2, n_k * n_l
+        shape, kl2 = (n_k, n_l, 2), n_k * n_l * 2
         o = rk.HEAD
         self._sx, self._sxx, self._sxy = (st[o + i * kl2:o + (i + 1) * kl2].reshape(shape)
                                           for i in range(3))
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
-        # the fit's output (response_kernels.fit_grid): centred Σx², gains, residuals per
-        # axis (K, L, 2), the residual (K, L), the centred Σy² (2)
-        self._fit_views = (out[:2 * kl].reshape(shape), out[2 * kl:4 * kl].reshape(shape),
-                           out[4 * kl:6 * kl].reshape(shape),
-                           out[6 * kl:7 * kl].reshape(n_k, n_l), out[7 * kl:])
-        # the compiled step: its entry point once known for this kind of state, else the
-        # dispatcher (feed binds the entry point after its first call)
+        self._answer = out[out.size - rk.ESTIMATE_ANSWER:]  # fit_estimate's (its estimate)
+        # the compiled steps: their entry points once known for this kind of state, else the
+        # dispatchers (feed and _fit bind the entry points after their first calls)
         self._step = _feed_entry(st) or _feed_dispatched
+        self._fit_step = entry_point(_fit_estimate, st, out) or _fit_estimate
 
     def __getstate__(self) -> dict:
-        """Without the compiled step (an entry point does not pickle): bound again."""
+        """Without the compiled steps (an entry point does not pickle): bound again."""
         state = self.__dict__.copy()
-        del state["_step"]
+        del state["_step"], state["_fit_step"]
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -310,73 +314,19 @@ class AttitudeResponseEstimator:
         return self._estimate
 
     def _fit(self) -> AttitudeEstimate:
-        n = self._n
-        if n < 20:
+        """The fit of the grid and the best grid point's estimate in one compiled call
+        (``response_kernels.fit_estimate``; the module docstring's fit); the best's model is
+        the one whose residual the compiled step tracks from now on."""
+        state, out = self._state, self._fit_out
+        step = self._fit_step
+        if step(state, out) < 0:
             return NO_ESTIMATE
-        n_l = len(self.lags_s)
-        # every grid point's fit; the best's model is the one whose residual the compiled
-        # step tracks from now on (fit_grid sets it)
-        best = rk.fit_grid(self._state, self._fit_out)
-        if best < 0:
-            return NO_ESTIMATE
-        sxx, gain, rss_axis, rss, syy = self._fit_views
-        k, l = divmod(best, n_l)
-        # Python floats from here (numpy's scalars cost ~10× each; the same arithmetic)
-        g0, g1 = gain[k, l].tolist()
-        # the centred Σy² of both axes: their sum is numpy's (one rounded addition; fit_grid
-        # found it > 0, so no zero's sign is in question)
-        syy0, syy1 = syy.tolist()
-        curve = rss[:, l]
-        values = curve.tolist()
-        sigma2 = values[k] / max(2.0 * n - 5.0, 1.0)
-        inflate = self._inflation()
-        delay, delay_var = self._refine(values, k, sigma2)
-        gains, gain_std = [], []
-        for g, ra, sa in zip((g0, g1), rss_axis[k, l].tolist(), sxx[k, l].tolist()):
-            if sa > 1e-12:
-                gains.append(g)
-                gain_std.append(inflate * math.sqrt(max(ra, 0.0) / max(n - 2.0, 1.0) / sa))
-            else:
-                gains.append(math.nan)
-                gain_std.append(math.inf)
-        return AttitudeEstimate(delay, inflate * math.sqrt(delay_var),
-                                (gains[0], gains[1]), (gain_std[0], gain_std[1]),
-                                self._lags[l], 1.0 - values[k] / (syy0 + syy1), n,
-                                self._contrast(curve, k, sigma2 * inflate ** 2))
-
-    def _contrast(self, curve: np.ndarray, k: int, sigma2: float) -> float:
-        """(least RSS along ``curve`` — the residual over the delays at the best lag — at
-        DELAY_RIVAL_SEPARATION_S or more from grid point ``k``) − its RSS at ``k``, over
-        ``sigma2``; ∞ when the grid holds no such delay."""
-        away = self._away[k]
-        if not self._any_away[k] or not sigma2 > 0.0:
-            return math.inf
-        return float(curve[away].min() - curve[k]) / sigma2
-
-    def _refine(self, curve: list, k: int, sigma2: float) -> tuple[float, float]:
-        """The delay from a parabola through the residual ``curve`` (floats) at grid point
-        ``k`` and its neighbours (the first or last three on an edge of the grid: the vertex
-        kept inside it), and its variance 2σ²/curvature."""
-        d = self._delays
-        i = min(max(k, 1), len(curve) - 2)
-        lo, mid, hi = curve[i - 1], curve[i], curve[i + 1]
-        if not (math.isfinite(lo) and math.isfinite(mid) and math.isfinite(hi)):
-            return d[k], math.inf
-        second = lo - 2.0 * mid + hi
-        if not second > 0.0:
-            return d[k], math.inf
-        delay = d[i] + 0.5 * DELAY_STEP_S * (lo - hi) / second
-        delay = min(max(delay, d[0]), d[-1])
-        # the grid resolves no better than its step over √12, whatever the curvature
-        return delay, max(2.0 * sigma2 * DELAY_STEP_S ** 2 / second, DELAY_STEP_S ** 2 / 12.0)
-
-    def _inflation(self) -> float:
-        """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁."""
-        rr, rr1, w = self._res.tolist()
-        if w < 10.0 or rr <= 0.0:
-            return 1.0
-        rho = min(max(rr1 / rr, 0.0), 0.95)
-        return math.sqrt((1.0 + rho) / (1.0 - rho))
+        if step is _fit_estimate:  # the dispatcher: its entry point, now compiled
+            self._fit_step = entry_point(step, state, out) or step
+        (delay, delay_std, g0, g1, s0, s1, lag, r2, n, contrast, gain_mean, gain_mean_std,
+         made) = self._answer.tolist()
+        return AttitudeEstimate._fitted(delay, delay_std, (g0, g1), (s0, s1), lag, r2, n,
+                                        contrast, gain_mean, gain_mean_std, made)
 
 
 _kernels_warm = False
@@ -391,6 +341,8 @@ def warm_up_kernels() -> None:
         est.feed(None, 0.0, 0.0, rk.CMD_RESTART)
         est._state[rk.S_N] = 1.0  # numba raises on a division by zero, as Python does
         rk.fit_grid(est._state, est._fit_out)
+        est._state[rk.S_N] = 20.0
+        est._fit()  # fit_estimate (its answer: none, nothing moved)
         _kernels_warm = True
 
 

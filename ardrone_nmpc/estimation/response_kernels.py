@@ -30,12 +30,13 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
-__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "HEAD", "MEMO_SETS", "S_B", "S_BITS",
-           "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G", "S_HAS_BEST", "S_HAS_R",
-           "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH", "S_RES",
-           "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
-           "TIMES_ROUNDED", "feed", "fit_grid", "fit_size", "fold_sample", "held_count",
-           "memo_decays", "memo_view", "microseconds", "new_state", "state_size"]
+__all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "ESTIMATE_ANSWER", "ESTIMATE_PARAMS", "HEAD",
+           "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G",
+           "S_HAS_BEST", "S_HAS_R", "S_K", "S_L", "S_LAGS", "S_LAST_T", "S_N", "S_R", "S_REFRESH",
+           "S_RES", "S_SINCE_BEST", "S_SY", "S_SYY", "S_UNORDERED", "S_WINDOW", "S_X", "S_Y",
+           "TIMES_ROUNDED", "estimate_size", "feed", "fit_estimate", "fit_grid", "fit_size",
+           "fold_sample", "held_count", "memo_decays", "memo_view", "microseconds", "new_state",
+           "state_size"]
 
 # The streaming fit's whole state is one float64 buffer (one argument to unbox per call, not a
 # dozen: numba's dispatch costs ~50–100 ns an argument, issue 26): a head of scalars (these
@@ -66,8 +67,8 @@ S_DELAYS = 27        # the delays' number (K)
 S_LAGS = 28          # the lags' number (L)
 S_BITS = 29          # scratch: a double whose bits the cache hashes (memo_decays)
 S_X = 30             # (2) scratch: the tracked best model's value of the sample (fold_sample)
-S_UNORDERED = 31     # 1.0 once a NaN command time was held: the times may be out of order
-HEAD = 32
+S_UNORDERED = 32     # 1.0 once a NaN command time was held: the times may be out of order
+HEAD = 33
 #: What :func:`feed` does with the command after the sample.
 CMD_NONE = 0
 CMD_RESTART = 1
@@ -113,6 +114,21 @@ def fit_size(delays: int, lags: int) -> int:
     """Length of :func:`fit_grid`'s output buffer: the centred Σx², the gains, the residual
     per axis (each K×L×2), the residual (K×L) and the centred Σy² (2)."""
     return 3 * delays * lags * 2 + delays * lags + 2
+
+
+#: :func:`fit_estimate`'s parameters (five floats after :func:`fit_grid`'s output, set once by
+#: its caller: ``attitude_response``'s grid step and rival separation, each expression made in
+#: Python, and the exponent 2.0) and its answer (thirteen floats after them, in this order):
+#: the delay and its σ, the gains and their σ (2 each), the lag, R², the samples, the delay's
+#: contrast, the mean gain and its σ, and 1.0 if those two were made (0.0: a weight overflowed,
+#: where Python's ``**`` raises: left to Python).
+ESTIMATE_PARAMS = 5
+ESTIMATE_ANSWER = 13
+
+
+def estimate_size(delays: int, lags: int) -> int:
+    """Length of :func:`fit_estimate`'s buffer: :func:`fit_size`'s, its parameters, its answer."""
+    return fit_size(delays, lags) + ESTIMATE_PARAMS + ESTIMATE_ANSWER
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -217,30 +233,41 @@ def fold_sample(times: np.ndarray, n: int, ordered: bool, t_s: float, delays_s: 
         jk = c - 1
         r = memo_decays(at - times[jk], lags_s, memo, bits, ints)
         u0, u1 = u[2 * jk], u[2 * jk + 1]
-        for m in range(L):
-            dk = memo[r + m]
-            g = 2 * (jk * L + m)  # (jk, m, 0) in ylag
-            e = 2 * (k * L + m)   # (k, m, 0) in each sum
-            v0 = u0 + (ylag[g] - u0) * dk
-            v1 = u1 + (ylag[g + 1] - u1) * dk
-            if e == best:
-                x_best[0] = v0
-                x_best[1] = v1
-            q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
-            if scale:
+        gk, ek = 2 * jk * L, 2 * k * L  # (jk, 0, 0) in ylag, (k, 0, 0) in each sum
+        # the lags without a test per lag (the tracked model's value made after them, the
+        # same expression): ~4 % of the fold
+        if scale:
+            for m in range(L):
+                dk = memo[r + m]
+                g, e = gk + 2 * m, ek + 2 * m
+                q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
+                v0 = u0 + (ylag[g] - u0) * dk
+                v1 = u1 + (ylag[g + 1] - u1) * dk
                 sums[e] = sums[e] * forget + v0
                 sums[e + 1] = sums[e + 1] * forget + v1
                 sums[q] = sums[q] * forget + v0 * v0
                 sums[q + 1] = sums[q + 1] * forget + v1 * v1
                 sums[w] = sums[w] * forget + v0 * y0
                 sums[w + 1] = sums[w + 1] * forget + v1 * y1
-            else:
+        else:
+            for m in range(L):
+                dk = memo[r + m]
+                g, e = gk + 2 * m, ek + 2 * m
+                q, w = e + kl2, e + 2 * kl2
+                v0 = u0 + (ylag[g] - u0) * dk
+                v1 = u1 + (ylag[g + 1] - u1) * dk
                 sums[e] += v0
                 sums[e + 1] += v1
                 sums[q] += v0 * v0
                 sums[q + 1] += v1 * v1
                 sums[w] += v0 * y0
                 sums[w + 1] += v1 * y1
+        if ek <= best < ek + 2 * L:  # the tracked model is at this delay
+            m = (best - ek) // 2
+            dk = memo[r + m]
+            g = gk + 2 * m
+            x_best[0] = u0 + (ylag[g] - u0) * dk
+            x_best[1] = u1 + (ylag[g + 1] - u1) * dk
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -440,6 +467,160 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     state[S_K] = k
     state[S_L] = m
     return best
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _py_max(a: float, b: float) -> float:
+    """Python's ``max(a, b)``: ``b`` only if it is greater (a NaN first stays; a NaN second
+    does not)."""
+    return b if b > a else a
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _py_min(a: float, b: float) -> float:
+    """Python's ``min(a, b)``: ``b`` only if it is less."""
+    return b if b < a else a
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _inflation(state: np.ndarray) -> float:
+    """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁ (1 with fewer than
+    ten pairs or no residual)."""
+    rr, rr1, w = state[S_RES], state[S_RES + 1], state[S_RES + 2]
+    if w < 10.0 or rr <= 0.0:
+        return 1.0
+    rho = _py_min(_py_max(rr1 / rr, 0.0), 0.95)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _refine(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma2: float,
+            params: np.ndarray) -> tuple:
+    """The delay from a parabola through the residual at lag ``m`` (``rss`` flat, K × L) at
+    delay ``k`` and its neighbours (the first or last three on an edge of the grid: the vertex
+    kept inside it), and its variance 2σ²/curvature, no less than the grid's step² / 12. A
+    neighbour before the first is the last (Python's list index −1, on a grid of two)."""
+    K = delays_s.size
+    if K < 2:
+        raise IndexError("list index out of range")  # (a grid of one has no neighbours)
+    i = min(max(k, 1), K - 2)
+    lo = rss[((i - 1) % K) * L + m]
+    mid, hi = rss[i * L + m], rss[(i + 1) * L + m]
+    if not (math.isfinite(lo) and math.isfinite(mid) and math.isfinite(hi)):
+        return delays_s[k], math.inf
+    second = lo - 2.0 * mid + hi
+    if not second > 0.0:
+        return delays_s[k], math.inf
+    delay = delays_s[i] + params[0] * (lo - hi) / second  # ½ step
+    delay = _py_min(_py_max(delay, delays_s[0]), delays_s[K - 1])
+    return delay, _py_max(2.0 * sigma2 * params[1] / second, params[2])  # step², step² / 12
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _py_square(x: float, two: float) -> float:
+    """Python's ``x ** 2`` of a finite or NaN ``x``: the C library's ``pow(x, 2.0)`` — not x · x,
+    from which it differs in the last bit for ~0.1 % of x — with ``two`` read at run time (a
+    constant 2 would let the compiler make it x · x); NaN itself. An infinite answer is where
+    Python raises OverflowError: the caller checks."""
+    if x != x:
+        return x
+    return math.pow(x, two)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _gain_means(answer: np.ndarray, two: float) -> bool:
+    """``AttitudeEstimate.gain_mean`` and ``gain_mean_std`` of the gains and σ in ``answer``
+    (slots 2–5) into its slots 10 and 11, the same expressions in the same order; False
+    (nothing written) when a weight's square overflows, where Python raises."""
+    p0 = _py_square(_py_max(answer[4], 1e-9), two) if math.isfinite(answer[4]) else -1.0
+    p1 = _py_square(_py_max(answer[5], 1e-9), two) if math.isfinite(answer[5]) else -1.0
+    if math.isinf(p0) or math.isinf(p1):
+        return False
+    num = den = 0.0  # as gain_mean adds: from 0, the axes in order
+    w_all = 0.0      # gain_mean_std's: every finite σ
+    seen = False
+    for a in range(2):
+        p = p0 if a == 0 else p1
+        if p < 0.0:  # σ not finite
+            continue
+        w = 1.0 / p
+        w_all += w
+        g = answer[2 + a]
+        if math.isfinite(g):
+            num += g * w
+            den += w
+            seen = True
+    answer[10] = num / den if seen else math.nan
+    answer[11] = 1.0 / math.sqrt(w_all) if w_all > 0 else math.inf
+    return True
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
+    """``AttitudeResponseEstimator._fit`` in one call: :func:`fit_grid` into ``out``, then the
+    best grid point's estimate into ``out``'s answer (:data:`ESTIMATE_ANSWER`, after its
+    :data:`ESTIMATE_PARAMS`) — the same expressions in the same order, Python's ``max``,
+    ``min`` and ``**`` (:func:`_py_max`, :func:`_py_square`), numpy's ``min`` of the rivals
+    (NaN if any is). Returns :func:`fit_grid`'s best flat index, or −1: no estimate (fewer
+    than 20 samples, nothing moved; the state untouched with fewer than 20)."""
+    n = state[S_N]
+    if n < 20:
+        return -1
+    best = fit_grid(state, out)
+    if best < 0:
+        return -1
+    K, L = int(state[S_DELAYS]), int(state[S_LAGS])
+    kl, kl2 = K * L, K * L * 2
+    end = state.size
+    delays_s = state[end - K - L:end - L]
+    k, m = best // L, best % L
+    sxx, gain, rss_axis = out[0:kl2], out[kl2:2 * kl2], out[2 * kl2:3 * kl2]
+    rss = out[3 * kl2:3 * kl2 + kl]
+    f = 3 * kl2 + kl + 2  # fit_size
+    params = out[f:f + ESTIMATE_PARAMS]
+    answer = out[f + ESTIMATE_PARAMS:f + ESTIMATE_PARAMS + ESTIMATE_ANSWER]
+    low = rss[best]
+    sigma2 = low / _py_max(2.0 * n - 5.0, 1.0)
+    inflate = _inflation(state)
+    delay, delay_var = _refine(rss, L, m, k, delays_s, sigma2, params)
+    answer[0] = delay
+    answer[1] = inflate * math.sqrt(delay_var)
+    for a in range(2):
+        e = 2 * best + a
+        sa = sxx[e]
+        if sa > 1e-12:
+            answer[2 + a] = gain[e]
+            answer[4 + a] = inflate * math.sqrt(_py_max(rss_axis[e], 0.0)
+                                                / _py_max(n - 2.0, 1.0) / sa)
+        else:
+            answer[2 + a] = math.nan
+            answer[4 + a] = math.inf
+    answer[6] = state[end - L + m]
+    answer[7] = 1.0 - low / (out[3 * kl2 + kl] + out[3 * kl2 + kl + 1])  # Σy² of both axes
+    answer[8] = n
+    answer[9] = _contrast(rss, L, m, k, delays_s, sigma2 * _py_square(inflate, params[4]),
+                          params[3])
+    answer[12] = 1.0 if _gain_means(answer, params[4]) else 0.0
+    return best
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _contrast(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma2: float,
+              rival_s: float) -> float:
+    """(least residual at lag ``m`` — ``rss`` flat, K × L — at ``rival_s`` or more from delay
+    ``k``: numpy's ``min``, NaN if any is) − the residual at ``k``, over ``sigma2``; ∞ when the
+    grid holds no such delay or ``sigma2`` is not > 0."""
+    rival, least, at = False, 0.0, delays_s[k]
+    for j in range(delays_s.size):
+        if abs(delays_s[j] - at) >= rival_s:
+            v = rss[j * L + m]
+            if not rival:
+                least, rival = v, True
+            elif least == least and not v >= least:  # less, or NaN (which numpy's min keeps)
+                least = v
+    if not rival or not sigma2 > 0.0:
+        return math.inf
+    return (least - rss[k * L + m]) / sigma2
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -25,7 +25,8 @@ _START_AND_STOP = ("from ardrone_nmpc.runtime import precompile\n"
 #: Kernels the child must leave cached (module.kernel of numba's file names).
 EXPECTED = ("sensor_step.lockstep_run", "plant_step.flying_advance", "plant_step.auto_steps",
             "airframe.airframe_rk4",
-            "response_kernels.feed", "response_kernels.fit_grid")
+            "response_kernels.feed", "response_kernels.fit_grid",
+            "response_kernels.fit_estimate")
 
 
 def _python(code: str, cache: Path, **env) -> str:

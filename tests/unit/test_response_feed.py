@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from ardrone_nmpc.estimation.attitude_response import (
     DELAY_RIVAL_SEPARATION_S, DELAY_STEP_S, NO_ESTIMATE, REFRESH_SAMPLES, AttitudeEstimate,
@@ -246,29 +247,127 @@ def test_one_call_per_tick_is_the_sample_then_the_command():
     _same(one, two)
 
 
+def _odd_sums(rng, ref, trial: int) -> np.ndarray:
+    """A state of random sums for ``ref``'s grid (its parameters and grid kept): every fourth
+    with an axis no command moved, NaN in a sum, or only 0, −0 and 1; the tracked residual's
+    sums (the inflation) random too, with at least ten pairs every other trial."""
+    st = rng.normal(size=ref._state.size) ** 2
+    st[0] = 30.0 + trial  # the samples' effective number
+    # the fit's parameters and grid as built (response_kernels.new_state)
+    grid = len(ref.delays_s) + len(ref.lags_s)
+    st[rk.S_CAPACITY:rk.HEAD] = ref._state[rk.S_CAPACITY:rk.HEAD]
+    st[-grid:] = ref._state[-grid:]
+    kl2 = ref._sx.size
+    head = rk.HEAD
+    if trial % 4 == 1:  # an axis no command moved
+        st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
+        st[head + 1:head + kl2:2] = 0.0
+    if trial % 4 == 2:
+        st[head + rng.integers(3 * kl2)] = math.nan
+    if trial % 4 == 3:
+        st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
+    st[rk.S_RES:rk.S_RES + 2] = rng.choice([rng.normal(), 0.0, -1.0, math.nan], size=2)
+    st[rk.S_RES + 2] = 10.0 + trial if trial % 2 else 9.0
+    return st
+
+
+def _both_fit(ref, got, st) -> AttitudeEstimate:
+    """The numpy fit and the compiled one of the state ``st``: the same estimate (every field,
+    its mean gain too) and the same best model tracked."""
+    ref._state[:], got._state[:] = st, st
+    want, have = ref._fit(), got._fit()
+    assert repr(want) == repr(have)
+    assert repr((want.gain_mean, want.gain_mean_std)) == repr((have.gain_mean,
+                                                               have.gain_mean_std))
+    assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
+    return have
+
+
 def test_the_compiled_fit_on_odd_sums():
-    """Axes never moved, NaN and ±0 in the sums: the grid's fit picks what numpy picked."""
+    """Axes never moved, NaN and ±0 in the sums, an odd residual: the grid's fit and the
+    estimate (``response_kernels.fit_estimate``) are what numpy made, on the full grid and on
+    short ones — no delay far enough for a rival (0–0.05 s), a few (0–0.07 s), two delays (a
+    neighbour at Python's index −1)."""
     rng = np.random.default_rng(7)
-    for trial in range(40):
-        ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
-        st = rng.normal(size=ref._state.size) ** 2
-        st[0] = 30.0 + trial  # the samples' effective number
-        # the fit's parameters and grid as built (response_kernels.new_state)
-        grid = len(ref.delays_s) + len(ref.lags_s)
-        st[rk.S_CAPACITY:rk.HEAD] = ref._state[rk.S_CAPACITY:rk.HEAD]
-        st[-grid:] = ref._state[-grid:]
-        kl2 = ref._sx.size
-        head = rk.HEAD
-        if trial % 4 == 1:  # an axis no command moved
-            st[head + kl2 + 1:head + 2 * kl2:2] = 0.0
-            st[head + 1:head + kl2:2] = 0.0
-        if trial % 4 == 2:
-            st[head + rng.integers(3 * kl2)] = math.nan
-        if trial % 4 == 3:
-            st[head:head + 3 * kl2] = rng.choice([0.0, -0.0, 1.0], size=3 * kl2)
-        ref._state[:], got._state[:] = st, st
-        assert repr(ref._fit()) == repr(got._fit())
-        assert ref._state.tobytes() == got._state.tobytes()  # the best model tracked
+    for max_delay_s in (0.6, 0.05, 0.07, 0.01):
+        fits = 0
+        for trial in range(40):
+            ref = _NumpyFeed(E, max_delay_s=max_delay_s)
+            got = AttitudeResponseEstimator(E, max_delay_s=max_delay_s)
+            fits += math.isfinite(_both_fit(ref, got, _odd_sums(rng, ref, trial)).delay_s)
+        assert fits > 20
+
+
+def test_the_compiled_estimate_of_a_stream_on_short_grids():
+    """A stream's estimates on grids with no rival delay (0–0.05 s), some (0–0.07 s) and two
+    delays: numpy's, every field; a contrast only where a rival exists."""
+    for max_delay_s, rivals in ((0.05, False), (0.07, True), (0.01, False)):
+        ref = _NumpyFeed(E, max_delay_s=max_delay_s)
+        got = AttitudeResponseEstimator(E, max_delay_s=max_delay_s)
+        contrasts = []
+        for i, ev in enumerate(_stream(9)[:6000]):
+            _feed_both(ref, got, ev)
+            if i % 50 == 0:
+                assert repr(ref.estimate) == repr(got.estimate)
+                if math.isfinite(got.estimate.delay_s):
+                    contrasts.append(got.estimate.delay_contrast)
+        assert len(contrasts) > 50
+        assert any(map(math.isfinite, contrasts)) == rivals
+
+
+def test_the_compiled_estimate_without_one_and_on_ties():
+    """Fewer than 20 samples (or no sample), nothing moved: no estimate, the state untouched
+    with too few; sums alike at every grid point (a tie: the first) or at every rival; a
+    grid of one delay fails as Python's neighbour did."""
+    rng = np.random.default_rng(3)
+    ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+    st = _odd_sums(rng, ref, 0)
+    for n in (0.0, 19.999):
+        st[rk.S_N] = n
+        got._state[:] = st
+        assert got._fit() is NO_ESTIMATE and ref._fit() is NO_ESTIMATE
+        assert got._state.tobytes() == st.tobytes()
+    st[rk.S_N] = math.nan  # not fewer than 20: fitted, NaN everywhere, as numpy did
+    _both_fit(ref, got, st)
+    kl2 = ref._sx.size
+    flat = st.copy()
+    flat[rk.S_N] = 40.0
+    sx = flat[rk.HEAD:rk.HEAD + kl2]
+    flat[rk.HEAD + kl2:rk.HEAD + 2 * kl2] = sx * sx / 40.0  # Σx² = (Σx)²/n: nothing moved
+    _both_fit(ref, got, flat)
+    assert got._fit() is NO_ESTIMATE
+    L = len(ref.lags_s)
+    for trial in range(20):
+        tie = _odd_sums(rng, ref, trial)
+        sums = tie[rk.HEAD:rk.HEAD + 3 * kl2].reshape(3, -1, L, 2)
+        if trial % 2:
+            sums[:] = sums[:, :1]  # every delay alike: a tie along the whole curve
+        else:
+            sums[:, 20:] = sums[:, 20:21]  # the rivals of the best alike
+        _both_fit(ref, got, tie)
+    one_ref = _NumpyFeed(E, max_delay_s=0.0)
+    one_got = AttitudeResponseEstimator(E, max_delay_s=0.0)
+    st = _odd_sums(rng, one_ref, 0)
+    for est in (one_ref, one_got):
+        est._state[:] = st
+        with pytest.raises(IndexError):
+            est._fit()
+
+
+def test_the_compiled_estimate_through_its_entry_point_and_a_copy():
+    """The estimate's first call goes through numba's dispatcher, the next through the
+    compiled entry point; a copy (no entry point pickled) binds it again: the same fits."""
+    import copy
+
+    from ardrone_nmpc.estimation import response_kernels
+
+    rng = np.random.default_rng(11)
+    ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
+    got._fit_step = response_kernels.fit_estimate  # as before its first call
+    for trial in range(6):
+        _both_fit(ref, got, _odd_sums(rng, ref, trial))
+        assert got._fit_step is not response_kernels.fit_estimate
+        got = copy.deepcopy(got)
 
 
 def test_times_the_kernel_leaves_to_pythons_round():
@@ -310,3 +409,82 @@ def test_the_compiled_entry_point_takes_numbers_as_float_makes_them():
         assert ref._state.tobytes() == got._state.tobytes()
     entry = ar._feed_entry(got._state)
     assert entry is not None and got._step is entry and ref._step is entry
+
+
+def test_the_compiled_mean_gain_is_pythons_to_the_bit():
+    """``fit_estimate``'s mean gain and its σ (``response_kernels._gain_means``) against
+    ``AttitudeEstimate.gain_mean`` and ``gain_mean_std`` on odd gains and σ (NaN, ±inf, ±0,
+    the 1e-9 floor, squares ``pow`` rounds unlike x · x): the same bits; where a weight's
+    square overflows it makes none, and the estimate raises when read, as Python's ``**``."""
+    import random
+
+    from ardrone_nmpc.core.numerics import callable_from_python
+
+    means = callable_from_python(rk._gain_means)
+    rng = random.Random(5)
+    odd = [0.0, -0.0, math.nan, math.inf, -math.inf, 1e-12, 1e-9, 5e-10, 1e-300, 1e155]
+    answer = np.zeros(rk.ESTIMATE_ANSWER)
+    made = 0
+    for _ in range(20_000):
+        gain, std = ([rng.choice(odd) if rng.random() < 0.3
+                      else rng.uniform(-2.0, 2.0) * 10.0 ** rng.randint(-12, 3)
+                      for _ in range(2)] for _ in range(2))
+        answer[2:6] = gain + std
+        answer[10:12] = -7.0
+        ours = AttitudeEstimate(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5, 50.0)
+        if means(answer, 2.0):
+            made += 1
+            assert repr(answer[10:12].tolist()) == repr([ours.gain_mean, ours.gain_mean_std])
+            fitted = AttitudeEstimate._fitted(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5,
+                                              50.0, math.inf, *answer[10:12].tolist(), 1.0)
+            assert fitted.__dict__ == {**ours.__dict__, "delay_contrast": math.inf} or (
+                repr(fitted) == repr(AttitudeEstimate(0.1, 0.01, tuple(gain), tuple(std), 0.1,
+                                                      0.5, 50.0, math.inf)))
+        else:  # left to the properties: each raises where Python's did (σ's at least)
+            assert answer[10:12].tolist() == [-7.0, -7.0]  # nothing written
+            fitted = AttitudeEstimate._fitted(0.1, 0.01, tuple(gain), tuple(std), 0.1, 0.5,
+                                              50.0, 0.0, 0.0, 0.0, 0.0)
+            assert "gain_mean" not in fitted.__dict__
+            assert _read(fitted, "gain_mean") == _read(ours, "gain_mean")
+            assert _read(fitted, "gain_mean_std") == _read(ours, "gain_mean_std") == "raised"
+    assert 15_000 < made < 20_000
+
+
+def _read(est: AttitudeEstimate, name: str) -> str:
+    """An estimate's property, its repr or "raised" (an OverflowError)."""
+    try:
+        return repr(getattr(est, name))
+    except OverflowError:
+        return "raised"
+
+
+def test_an_estimate_the_kernel_made_is_one_init_makes():
+    """``AttitudeEstimate._fitted`` (the kernel's answer, without the frozen ``__init__``):
+    equal, the same repr and hash, frozen, its mean gain kept as the first read keeps it."""
+    import dataclasses
+
+    fields = (0.2, 0.01, (0.9, 1.1), (0.02, math.inf), 0.06, 0.7, 300.0, 12.0)
+    made = AttitudeEstimate(*fields)
+    fitted = AttitudeEstimate._fitted(*fields, made.gain_mean, made.gain_mean_std, 1.0)
+    assert fitted == made and repr(fitted) == repr(made) and hash(fitted) == hash(made)
+    assert fitted.__dict__ == made.__dict__
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fitted.delay_s = 0.3
+
+
+def test_the_state_heads_slots_are_apart():
+    """Every slot of the state's head its own (a two-wide scratch once covered the flag of an
+    unordered command time: every fold set it, and each sample took the binary search), and a
+    stream's folds leave the flag down while its times ascend."""
+    wide = {rk.S_R: 2, rk.S_G: 2, rk.S_B: 2, rk.S_RES: 3, rk.S_SY: 2, rk.S_SYY: 2, rk.S_Y: 2,
+            rk.S_X: 2}
+    starts = [getattr(rk, name) for name in rk.__all__ if name.startswith("S_")]
+    cells = [s + i for s in starts for i in range(wide.get(s, 1))]
+    assert len(cells) == len(set(cells)) and max(cells) < rk.HEAD
+    est = AttitudeResponseEstimator(E)
+    for ev in _stream(2)[:3000]:
+        if ev[0] == "cmd":
+            est.command(*ev[1:])
+        elif ev[0] == "nav":
+            est.navdata(*ev[1:])
+    assert est._state[rk.S_HAS_BEST] == 1.0 and est._state[rk.S_UNORDERED] == 0.0
