@@ -64,7 +64,6 @@ from ardrone_nmpc.protocol.at import (
 )
 from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState, DroneStatus, encode_drone_navdata
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession, OutdoorProfiles
-from ardrone_nmpc.sim.held_state import holds_in_arrays
 
 __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
 
@@ -108,10 +107,6 @@ class DroneServerCounters:
     at_datagrams_lost: int = 0        # discarded on arrival by an injected AT-loss fault
 
 
-# the command state the lockstep's compiled legs may hold between their runs while the drone
-# flies on the tick's PCMD (a read while they do writes it back first: sim/held_state.py)
-@holds_in_arrays("pcmd", "_applied_pcmd", "applied", "alt_capped", "last_cmd_t", "last_seq",
-                 "link_lost", "lost_com_hover", "comwdg_latched")
 class DroneFirmware:
     """The drone's protocol state and behaviour (module docstring); call under the lock.
 
@@ -140,7 +135,6 @@ class DroneFirmware:
                  fault_bits: int = 0, session: Optional[HeldSession] = None,
                  outdoor: Optional[OutdoorProfiles] = None) -> None:
         self.plant = plant
-        self._held_by = None  # the compiled legs holding the command state (held_state.py)
         self.counters = counters
         self.dump_config = dump_config
         self.comwdg_s = comwdg_s

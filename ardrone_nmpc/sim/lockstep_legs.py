@@ -39,14 +39,7 @@ Python path goes on from there.
 :meth:`DroneFirmware.execute_pcmd <ardrone_nmpc.sim.drone_firmware.DroneFirmware.execute_pcmd>`
 (the sequence rule) → ``apply_command`` (the altitude cap) →
 :meth:`AirframePlant.command <ardrone_nmpc.sim.plant.AirframePlant.command>` written out in
-one method, for a drone without injected faults whose classes override none of them. While
-the arrays hold the plant's state and the firmware's command state is the one such a PCMD
-leaves (applied, not capped, no watchdog acted), the legs hold that too (last_seq,
-last_cmd_t, pcmd, alt_capped, applied, the com-watchdog bit: :attr:`CompiledLegs.fw_held`),
-out of the firmware's ``__dict__`` as the plant's are: the next PCMD writes it in one store
-and :meth:`CompiledLegs.run` checks it in one read. A read of any of it (a REF's sequence
-rule, a watchdog, a test) writes it back alone — the plant's stays in the arrays — and a
-write meanwhile is the newer.
+one method, for a drone without injected faults whose classes override none of them.
 """
 
 from __future__ import annotations
@@ -106,11 +99,6 @@ _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
 #: its class's HELD_IN_ARRAYS)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
-#: the firmware's command state the legs hold with the plant's while it is the one a nominal
-#: PCMD leaves (CompiledLegs._take_fw): held as one tuple (:attr:`CompiledLegs.fw_held`), so
-#: :meth:`CompiledLegs.command` writes it in one store and :meth:`CompiledLegs.run` checks it
-#: in one read
-_FW_HELD = DroneFirmware.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
 _O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1,
                                                     ks.O_LAST_NOW)
@@ -139,15 +127,6 @@ def _kernel_for(x, rows, blocks):
     the next :meth:`_take <CompiledLegs._take>` asks again); else, or before the kernel is
     compiled (or without the JIT), the dispatcher."""
     return entry_point(_lockstep_run, x, rows, _BUF_KIND, *blocks) or _lockstep_run
-
-
-class _FirmwareHold:
-    """The holder (sim/held_state.py) of a firmware's command state: its ``release``."""
-
-    __slots__ = ("release",)
-
-    def __init__(self, release) -> None:
-        self.release = release
 
 
 class CompiledLegs:
@@ -179,15 +158,6 @@ class CompiledLegs:
         self.live_out = None
         #: ``buf.tobytes()`` of the last run (out's first: the truth's arrays are views of it)
         self.live_raw = b""
-        #: while the firmware's command state is held (_take_fw … release): (last_seq,
-        #: last_cmd_t, pcmd — also _applied_pcmd —, alt_capped, applied); link_lost and
-        #: lost_com_hover are False, comwdg_latched is :attr:`_fw_wdg`. Else None
-        self.fw_held = None
-        self._fw_wdg = False
-        self._fw_len = 0  # the firmware's __dict__ size while held
-        # the firmware's holder: a read of its command state (a REF's sequence rule, every
-        # tick of a landing) writes back that alone, the plant's stays in the arrays
-        self._fw_holder = _FirmwareHold(self._release_fw)
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
@@ -216,8 +186,6 @@ class CompiledLegs:
         for base, names in _COMMAND_REPLACED:
             obj = drone if base is SimulatedDrone else (
                 drone.firmware if base is DroneFirmware else drone.plant)
-            if base is DroneFirmware:  # (a class default would shadow a held attribute)
-                names = names + _FW_HELD
             kind = type(obj)
             if not (isinstance(obj, base)
                     and all(getattr(kind, name) is getattr(base, name) for name in names)):
@@ -229,56 +197,9 @@ class CompiledLegs:
         """:meth:`SimulatedDrone.execute_pcmd` of one progressive PCMD (``seq``, the float
         fractions) at firmware time ``now`` without injected faults, written out (module
         docstring): the same counters, firmware state and plant command."""
-        c = self.counters
+        fw, c = self.firmware, self.counters
         c.at_datagrams_in += 1
         c.at_commands_in += 1
-        q, o = self.fw_held, self.live_out
-        if q is None or o is None:
-            self._command_attrs(seq, roll, pitch, gaz, yaw, now)
-            return
-        fw, plant = self.firmware, self.plant
-        # the held command state, unless written since (then the attributes, released; the
-        # plant's checked there)
-        if not (len(fw.__dict__) == self._fw_len and len(plant.__dict__) == self._plant_len
-                and (seq == 1 or seq > q[0])):  # (a refused one: apply_command's cap check)
-            self._release_fw()
-            self._command_attrs(seq, roll, pitch, gaz, yaw, now)
-            return
-        t_s = o[_O_T] if now is None else now
-        at_cap = False  # _command_attrs' cap, clipping and plant command (see there)
-        mode = plant._mode
-        if gaz > 0.0 and (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
-            z, vz = o[_O_STATE + 2], o[_O_STATE + 5]
-            at_cap = z + (vz if vz > 0.0 else 0.0) * fw._lead_s() >= fw.config.altitude_max_m
-        pcmd = (_PROGRESSIVE, roll, pitch, gaz, yaw)  # (the fractions as sent, unclipped)
-        capped = 0.0 if at_cap else gaz
-        cmd = (roll, pitch, capped, yaw, True)
-        applied = q[4]
-        if cmd != applied:
-            if not (_isfinite(roll) and _isfinite(pitch) and _isfinite(capped)
-                    and _isfinite(yaw)):  # the plant's ValueError, after the firmware's writes
-                self._release_fw()
-                self._command_attrs(seq, roll, pitch, gaz, yaw, now)
-                return
-            applied = cmd  # AirframePlant.command's clipping, as _command_attrs spells it
-            roll = roll if roll > -1.0 else -1.0
-            roll = roll if roll < 1.0 else 1.0
-            pitch = pitch if pitch > -1.0 else -1.0
-            pitch = pitch if pitch < 1.0 else 1.0
-            capped = capped if capped > -1.0 else -1.0
-            capped = capped if capped < 1.0 else 1.0
-            yaw = yaw if yaw > -1.0 else -1.0
-            yaw = yaw if yaw < 1.0 else 1.0
-            self._saved["_current"] = (roll, pitch, capped, yaw, False)
-        c.at_commands_applied += 1  # DroneFirmware._accept's
-        if fw.comwdg_clear == "any":
-            self._fw_wdg = False
-        self.fw_held = (seq, t_s, pcmd, at_cap, applied)
-
-    def _command_attrs(self, seq: int, roll: float, pitch: float, gaz: float, yaw: float,
-                       now: float | None) -> None:
-        """:meth:`command` on the firmware's attributes (not held), after its counts."""
-        fw, c = self.firmware, self.counters
         if not (seq == 1 or seq > fw.last_seq):  # the sequence rule refuses it
             c.at_commands_stale += 1
             fw.apply_command()
@@ -330,8 +251,6 @@ class CompiledLegs:
             else:
                 plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
-        if o is not None:  # the arrays hold the plant's state: the firmware's with it
-            self._take_fw()
 
     def _params(self) -> np.ndarray:
         """The flight's parameters, built anew (:meth:`run` keeps them while the plant's
@@ -407,42 +326,9 @@ class CompiledLegs:
         self.live_out = None
         self._plant_len, self._sensors_len = len(d), len(sd)
 
-    def _take_fw(self) -> None:
-        """The firmware's command state into :attr:`fw_held`, its attributes out of its
-        ``__dict__`` — when it is the state a nominal PCMD leaves (its command applied, not
-        capped, no watchdog acted); else the attributes stay (the legs read them). Taken
-        after :meth:`command` on the attributes, while the arrays hold the plant's state."""
-        d = self.firmware.__dict__
-        if not (all(name in d for name in _FW_HELD) and d["pcmd"] is d["_applied_pcmd"]
-                and not d["alt_capped"] and d["last_cmd_t"] is not None
-                and not d["link_lost"] and not d["lost_com_hover"]):
-            return
-        self.fw_held = (d["last_seq"], d["last_cmd_t"], d["pcmd"], False, d["applied"])
-        self._fw_wdg = d["comwdg_latched"]
-        for name in _FW_HELD:
-            del d[name]
-        d["_held_by"] = self._fw_holder
-        self._fw_len = len(d)
-
-    def _release_fw(self) -> None:
-        """The firmware's command state back into its attributes — but for any written
-        meanwhile (those are newer)."""
-        seq, last_cmd_t, pcmd, alt_capped, applied = self.fw_held
-        self.fw_held = None
-        d = self.firmware.__dict__
-        for name, value in (("pcmd", pcmd), ("_applied_pcmd", pcmd), ("applied", applied),
-                            ("alt_capped", alt_capped), ("last_cmd_t", last_cmd_t),
-                            ("last_seq", seq), ("link_lost", False),
-                            ("lost_com_hover", False), ("comwdg_latched", self._fw_wdg)):
-            d.setdefault(name, value)
-        d["_held_by"] = None
-
     def release(self) -> None:
-        """The held attributes back into the plant's, the sensors' and the firmware's
-        ``__dict__`` — as the runs and commands since :meth:`_take` left them, but for any
-        written meanwhile (those are newer)."""
-        if self.fw_held is not None:
-            self._release_fw()
+        """The held attributes back into the plant's and the sensors' ``__dict__`` — as the
+        runs since :meth:`_take` left them, but for any written meanwhile (those are newer)."""
         plant, sensors = self.plant, self.sensors
         if plant.__dict__.get("_held_by") is not self:
             return
@@ -537,24 +423,13 @@ class CompiledLegs:
                 mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             return None
         # a quiet firmware: its PCMD applied, not capped, and no watchdog fires by t_s
-        q = self.fw_held
-        if q is not None and len(fw.__dict__) == self._fw_len:  # held: what a PCMD left
-            _, last_cmd_t, pcmd, at_cap, _ = q  # (not lost_com_hover, not link_lost)
-            if at_cap:
-                return None
-            silence = t_s - last_cmd_t
-            if silence > fw.hover_after_s or silence > fw.link_loss_s:
-                return None
-        else:
-            if q is not None:  # a held attribute was written meanwhile: it is the newer
-                self._release_fw()
-            pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
-            if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
-                return None
-            silence = t_s - last_cmd_t
-            if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
-                    and (fw.link_lost or not silence > fw.link_loss_s)):
-                return None
+        pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
+        if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
+            return None
+        silence = t_s - last_cmd_t
+        if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
+                and (fw.link_lost or not silence > fw.link_loss_s)):
+            return None
         d = plant.__dict__
         if d.get("_held_by") is not self:
             self._take()
@@ -590,13 +465,8 @@ class CompiledLegs:
         now = o[_O_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (checked above) — the bit the Python path's calls would have latched by then
-        if now == now:
-            q = self.fw_held
-            if q is not None:
-                if not self._fw_wdg and now - q[1] > fw.comwdg_s:
-                    self._fw_wdg = True
-            elif not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
-                fw.comwdg_latched = True
+        if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
+            fw.comwdg_latched = True
         out = self.out
         for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[
                 :done if done < n_events else n_events]:
