@@ -209,7 +209,9 @@ class Supervisor:
     # ------------------------------------------------------------------ the three checks
     def check_feedback(self, *, mocap_age_ms: float, navdata_age_ms: float,
                        navdata: NavdataSample | None) -> Decision:
-        """Before estimation: may the tick use the measurements at all?"""
+        """Before estimation: may the tick use the measurements at all? (Its usual tick's
+        compiled twin, the nominal tick's: ``runtime/before_solve.py``, kept equal by
+        ``tests/unit/test_before_solve.py``.)"""
         if self._latched is None and navdata is not None:
             # the usual tick: no emergency, no fault bit, battery above the floor, both ages
             # within their limits — what the chain below answers NOMINAL to, in one test
@@ -254,7 +256,8 @@ class Supervisor:
     def check_state(self, x, navdata: NavdataSample | None) -> Decision:
         """After estimation: is the state estimate usable, and is the drone where it may be?
 
-        ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``.
+        ``x`` is the (7,) estimate ``[x, ẋ, y, ẏ, z, ż, ψ]``. Its compiled twin, the nominal
+        tick's: ``runtime/before_solve.py`` (kept equal: ``tests/unit/test_before_solve.py``).
         """
         # floats: numpy's scalars are slow (the class test first: hasattr costs more)
         xs = x.tolist() if x.__class__ is _NDARRAY or hasattr(x, "tolist") else x

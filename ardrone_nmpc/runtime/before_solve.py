@@ -29,6 +29,7 @@ from ardrone_nmpc.core.entry_points import entry_point, plain
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import STATE_DIM, FlightMode
+from ardrone_nmpc.estimation.response_kernels import _py_square
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
@@ -51,11 +52,13 @@ L_FENCE_HI = 6          # (3)
 L_MAX_SPEED_MPS = 9
 L_TILT_CAP_DEG = 10
 L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
-L_SCRATCH = 12          # (E_SIZE) the estimator's state, stepped here before it is kept
+L_TWO = 12              # 2.0, read at run time: the speed's squares are pow's (_py_square)
+L_SCRATCH = 13          # (E_SIZE) the estimator's state, stepped here before it is kept
 L_SIZE = L_SCRATCH + E_SIZE
 
 _EMERGENCY = FlightMode.EMERGENCY
 _NDARRAY = np.ndarray
+_FLOAT = float
 _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
 
 
@@ -89,8 +92,8 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     if kalman_estimate(scratch, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
                        nav_vx_mps, nav_vy_mps) != ESTIMATED:
         return nothing
-    # check_state: finite, inside the geofence, not too fast (``** 2``: its spelling), not
-    # too tilted
+    # check_state: finite, inside the geofence, not too fast (Python's ``** 2``: the C
+    # library's pow, not x · x, which differs in the last bit for ~0.1 % of x), not too tilted
     for i in range(STATE_DIM):
         if not math.isfinite(scratch[E_X + i]):
             return nothing
@@ -98,7 +101,9 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
         v = scratch[E_X + 2 * k]
         if not (limits[L_FENCE_LO + k] <= v <= limits[L_FENCE_HI + k]):
             return nothing
-    speed = math.sqrt(scratch[E_X + 1] ** 2 + scratch[E_X + 3] ** 2 + scratch[E_X + 5] ** 2)
+    two = limits[L_TWO]
+    speed = math.sqrt(_py_square(scratch[E_X + 1], two) + _py_square(scratch[E_X + 3], two)
+                      + _py_square(scratch[E_X + 5], two))
     if not speed <= limits[L_MAX_SPEED_MPS]:
         return nothing
     cap_deg = limits[L_TILT_CAP_DEG]
@@ -148,17 +153,21 @@ class BeforeSolve:
         return state
 
     def _load_limits(self) -> None:
-        """The supervisor's limits (its own unpacked copies) into the kernel's array."""
+        """The supervisor's limits (its own unpacked copies) into the kernel's array. A limit
+        that is not a Python float or an int exact in a float64 (a numpy float32 among a
+        copied config's, say) is compared in its own precision by the Python checks (NEP 50):
+        then no tick passes the kernel (the mocap limit −inf) and the Python stages take them."""
         sup = self.supervisor
         lim = self._limits
-        lim[L_BATTERY_FLOOR_PCT] = sup._battery_floor_pct
-        lim[L_NAVDATA_LAND_MS] = sup._navdata_land_ms
-        lim[L_MOCAP_NOMINAL_MS] = sup._mocap_nominal_ms
-        lim[L_FENCE_LO:L_FENCE_LO + 3] = sup._fence_lo
-        lim[L_FENCE_HI:L_FENCE_HI + 3] = sup._fence_hi
-        lim[L_MAX_SPEED_MPS] = sup._max_speed_mps
-        lim[L_TILT_CAP_DEG] = sup._tilt_cap_deg
+        values = (sup._battery_floor_pct, sup._navdata_land_ms, sup._mocap_nominal_ms,
+                  *sup._fence_lo, *sup._fence_hi, sup._max_speed_mps, sup._tilt_cap_deg)
+        if all(v.__class__ is _FLOAT or (v.__class__ is int and abs(v) <= 2 ** 53)
+               for v in values):
+            lim[L_BATTERY_FLOOR_PCT:L_ALARM_BITS] = values
+        else:
+            lim[L_MOCAP_NOMINAL_MS] = -math.inf
         lim[L_ALARM_BITS] = _ALARM_BITS  # (< 2**53: exact in a float64)
+        lim[L_TWO] = 2.0
         self._cfg = sup._cfg
 
     def nominal(self, inputs, t_exp_s: float, traj):
@@ -174,7 +183,15 @@ class BeforeSolve:
                 or not est._compiled):
             return None  # (the first solve asks Δτ and packs the trajectory: Control.solve)
         pos = pose.position_m
-        if pos.__class__ is not _NDARRAY:
+        t_s, pose_rx, nav_rx = inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s
+        battery, roll, pitch = nav.battery_pct, nav.roll_deg, nav.pitch_deg
+        # the numbers check_feedback and check_state compute and compare with in Python as
+        # Python floats (as the links give them): numpy's scalars answer numpy ages, float32
+        # ones compare in float32 (NEP 50) — the Python stages' ticks, not the kernel's
+        if not (pos.__class__ is _NDARRAY and t_s.__class__ is _FLOAT
+                and pose_rx.__class__ is _FLOAT and nav_rx.__class__ is _FLOAT
+                and battery.__class__ is _FLOAT and roll.__class__ is _FLOAT
+                and pitch.__class__ is _FLOAT):
             return None
         px, py, pz = pos.tolist()
         if sup._cfg is not self._cfg:
@@ -195,8 +212,10 @@ class BeforeSolve:
                 and shift is v[3] and states is v[4] and work is v[5] and rows is v[6]):
             call = before_solve  # the dispatcher: it looks at every argument's type
             self._entry = None
-        args = (inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s,
-                0 if bits is None else bits, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
+        # the bits masked in Python (check_feedback's own ``bits & _ALARM_BITS``): a word
+        # beyond int64 would not unbox
+        args = (t_s, pose_rx, nav_rx, 0 if bits is None else bits & _ALARM_BITS, battery, roll,
+                pitch,
                 px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav, vx, vy,
                 state, self._limits, t_exp_s, ring, delay.first, pending, delay.lead_s,
                 x_solve, shift, states, work, rows)
@@ -254,6 +273,7 @@ def warm_up_kernels() -> None:
     limits[L_NAVDATA_LAND_MS] = limits[L_MOCAP_NOMINAL_MS] = 1.0
     limits[L_FENCE_LO:L_FENCE_LO + 3] = -1.0
     limits[L_FENCE_HI:L_FENCE_HI + 3] = limits[L_MAX_SPEED_MPS] = limits[L_TILT_CAP_DEG] = 1.0
+    limits[L_TWO] = 2.0
     before_solve(1.0, 1.0, 1.0, 0, 50.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False, 0.0,
                  0.0, np.zeros(E_SIZE), limits, 0.0, np.zeros((2, 4)), 0, 1, 0.0, np.zeros(7),
                  np.zeros(4), np.zeros((n, 7)), work, rows)

@@ -666,7 +666,8 @@ class Supervision:
 
 # ----------------------------------------------------------------------------- the row
 def feedback_ages_ms(inputs: TickInputs) -> tuple[float, float]:
-    """Ages of the newest mocap pose and navdata at tick time (ms; inf before the first)."""
+    """Ages of the newest mocap pose and navdata at tick time (ms; inf before the first).
+    (The nominal tick's compiled twin: ``runtime/before_solve.py``.)"""
     mocap = (inputs.t_s - inputs.pose_rx_t_s) * 1e3 if inputs.pose is not None else math.inf
     nav = (inputs.t_s - inputs.navdata_rx_t_s) * 1e3 if inputs.navdata is not None else math.inf
     return mocap, nav

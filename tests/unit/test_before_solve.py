@@ -19,6 +19,7 @@ from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
 from ardrone_nmpc.runtime.tick import Tick
+from ardrone_nmpc.runtime.tick_kernels import E_X, kalman_estimate
 from ardrone_nmpc.safety import NOMINAL, Action, Decision
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -214,3 +215,88 @@ def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
     tick.control._x_solve = strided
     assert before.nominal(_inputs(2.365), 1.365, tick.trajectory) is not None
     assert before._entry is None
+
+
+# ----------------------------------------------------------------------------- twins' edges
+def _step_both(inputs: TickInputs, t_exp_s: float, *, setup=None) -> tuple:
+    """The same tick after the same flown ticks, compiled call on and off: their rows
+    (repr: value and type) and stage state."""
+    out = []
+    for compiled in (True, False):
+        tick, _ = _flown_tick(True)
+        if not compiled:
+            tick.before_solve = None
+        if setup is not None:
+            setup(tick)
+        row = tick.step(inputs, t_exp_s=t_exp_s).row
+        out.append(([(k, repr(v)) for k, v in row.items() if k not in _TIMES], _state(tick)))
+    return out
+
+
+def test_the_speed_is_squared_as_python_squares():
+    """check_state's ``v ** 2`` is the C library's pow, which differs from v · v in the last
+    bit for ~0.1 % of v: a speed at its limit must get Python's verdict."""
+    tick, _ = _flown_tick(True)
+    rng = np.random.default_rng(7)
+    for _ in range(200000):  # an estimate whose speeds by pow and by v · v straddle
+        position = (0.04 + rng.uniform(-0.05, 0.05), -0.08 + rng.uniform(-0.05, 0.05),
+                    1.02 + rng.uniform(-0.01, 0.01))
+        inputs = _inputs(2.26, position=position)
+        s = tick.estimation._state.copy()  # Estimation.update's step, on a copy
+        assert kalman_estimate(s, *position, 0.02, 2.26, 0.0, False, 0.0, 0.0) == 0
+        x = s[E_X:E_X + 7].tolist()
+        by_pow = math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2)
+        by_mul = math.sqrt(x[1] * x[1] + x[3] * x[3] + x[5] * x[5])
+        if by_pow > by_mul:
+            break
+    else:
+        pytest.fail("no such estimate found")
+
+    def limit(t: Tick) -> None:
+        t.supervision.zacc_mps2 = 0.0
+        t.supervisor.cfg = t.supervisor.cfg.model_copy(update={"max_speed_mps": by_mul})
+
+    fast, slow = _step_both(inputs, 1.26, setup=limit)
+    assert dict(slow[0])["mode"] == repr("hover-speed")
+    assert fast == slow
+
+
+@pytest.mark.parametrize("name, change", [
+    # numpy ages: the row's cells numpy scalars in Python
+    ("t_s np.float64", lambda i: dataclasses.replace(i, t_s=np.float64(i.t_s))),
+    ("pose_rx float32", lambda i: dataclasses.replace(i, pose_rx_t_s=np.float32(i.pose_rx_t_s))),
+    # a float32 battery at a floor float32 rounds to: Python compares in float32 (NEP 50)
+    ("battery float32", lambda i: dataclasses.replace(i, navdata=dataclasses.replace(
+        i.navdata, battery_pct=np.float32(20.1)))),
+])
+def test_numbers_not_python_floats_are_the_python_stages(name, change):
+    inputs = change(_inputs(2.26, position=(0.04, -0.08, 1.02)))
+
+    def floor(t: Tick) -> None:
+        t.supervisor.cfg = t.supervisor.cfg.model_copy(update={"battery_floor_pct": 20.1})
+
+    fast, slow = _step_both(inputs, 1.26, setup=floor)
+    assert fast == slow
+
+
+@pytest.mark.parametrize("update", [
+    {"battery_floor_pct": np.float32(20.1)},   # battery 20.1 > float32(20.1) in float32: no
+    {"max_speed_mps": np.float32(0.1)},
+])
+def test_limits_not_python_floats_are_the_python_stages(update):
+    inputs = _inputs(2.26, position=(0.04, -0.08, 1.02))
+    inputs = dataclasses.replace(inputs, navdata=dataclasses.replace(inputs.navdata, battery_pct=20.1000004))
+
+    def limit(t: Tick) -> None:
+        t.supervisor.cfg = t.supervisor.cfg.model_copy(update=update)
+
+    fast, slow = _step_both(inputs, 1.26, setup=limit)
+    assert fast == slow
+
+
+@pytest.mark.parametrize("bits", [1 << 63, 1 << 64, 1 << 64 | 1 << 22])
+def test_a_state_word_beyond_int64_is_the_python_stages(bits):
+    """(The compiled call raised OverflowError where check_feedback masks the word.)"""
+    inputs = _inputs(2.26, position=(0.04, -0.08, 1.02), nav=_nav(state_bits=bits))
+    fast, slow = _step_both(inputs, 1.26)
+    assert fast == slow
