@@ -37,6 +37,14 @@ def thesis_cost(x0, ref, u, *, q, r, qf, dtau):
     return cost + 0.5 * e @ (qf * e)
 
 
+def nan_equal(a, b) -> bool:
+    """Equal, a float NaN equal to a float NaN (a row's cells, a record's fields: the compiled
+    and the Python path of a stage compared)."""
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (a != a and b != b)
+    return a == b
+
+
 class ManualClock:
     """A clock the test advances: ``clock()`` reads it, ``clock.sleep(dt)`` moves it on."""
 

@@ -22,19 +22,13 @@ from ardrone_nmpc.runtime.after_solve import NOT_NOMINAL, AfterSolve, after_solv
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
 from ardrone_nmpc.runtime.stages import Solution
 from ardrone_nmpc.runtime.tick import Tick
+from tests.conftest import nan_equal
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
 def config(name: str, *overrides: str):
     return load_config(CONFIGS / name, list(overrides))
-
-
-def _same(a, b) -> bool:
-    """Equal, NaN equal to NaN (a row's cells, a record's fields)."""
-    if isinstance(a, float) and isinstance(b, float):
-        return a == b or (a != a and b != b)
-    return a == b
 
 
 def _carried(tick: Tick) -> list:
@@ -99,7 +93,7 @@ def test_a_flight_gives_the_rows_and_state_of_the_python_stages(name, overrides,
     assert len(compiled_rows) == len(python_rows)
     for i, (a, b) in enumerate(zip(python_rows, compiled_rows)):
         bad = [k for k in a if k not in ("solve_us", "compute_us", "tick_late_ms")
-               and not _same(a[k], b[k])]
+               and not nan_equal(a[k], b[k])]
         assert not bad, f"row {i}: {bad}"
 
 

@@ -21,6 +21,7 @@ from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
 from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.runtime.tick_kernels import E_X, kalman_estimate
 from ardrone_nmpc.safety import NOMINAL, Action, Decision
+from tests.conftest import nan_equal
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 _TIMES = ("solve_us", "compute_us", "tick_late_ms")  # the clock's, not the flight's
@@ -28,13 +29,6 @@ _TIMES = ("solve_us", "compute_us", "tick_late_ms")  # the clock's, not the flig
 
 def config(name: str, *overrides: str):
     return load_config(CONFIGS / name, list(overrides))
-
-
-def _same(a, b) -> bool:
-    """Equal, NaN equal to NaN (a row's cells)."""
-    if isinstance(a, float) and isinstance(b, float):
-        return a == b or (a != a and b != b)
-    return a == b
 
 
 def _supervisor(tick: Tick) -> list:
@@ -98,7 +92,7 @@ def test_a_flight_gives_the_rows_of_the_python_stages(name, overrides, monkeypat
     assert repr(state) == repr(python_state)
     assert len(rows) == len(python_rows)
     for i, (a, b) in enumerate(zip(python_rows, rows)):
-        bad = [k for k in a if k not in _TIMES and not _same(a[k], b[k])]
+        bad = [k for k in a if k not in _TIMES and not nan_equal(a[k], b[k])]
         assert not bad, f"row {i}: {bad}"
 
 
@@ -144,7 +138,7 @@ def test_the_compiled_ticks_are_the_python_stages():
     fast, fast_rows = _flown_tick(True)
     slow, slow_rows = _flown_tick(False)
     for a, b in zip(fast_rows, slow_rows):
-        assert not [k for k in a if k not in _TIMES and not _same(a[k], b[k])]
+        assert not [k for k in a if k not in _TIMES and not nan_equal(a[k], b[k])]
     assert _state(fast) == _state(slow)
     inputs = _inputs(2.3, position=(0.05, -0.1, 1.02))
     ages, x, sol = fast.before_solve.nominal(inputs, 1.3, fast.trajectory)
