@@ -59,8 +59,8 @@ from numpy import ndarray as _NDARRAY
 from ardrone_nmpc.core.modes import Mode
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 
-__all__ = ["Action", "DRONE_ALARMS", "Decision", "DroneAlarm", "Supervisor", "drone_alarms",
-           "takeoff_refusal"]
+__all__ = ["ALARM_BITS", "Action", "DRONE_ALARMS", "Decision", "DroneAlarm", "Supervisor",
+           "drone_alarms", "takeoff_refusal"]
 
 
 class Action(str, enum.Enum):
@@ -139,12 +139,13 @@ DRONE_ALARMS: tuple[DroneAlarm, ...] = (
     DroneAlarm(21, "ULTRASOUND", "ultrasound sensor deaf", None),
 )
 
-_ALARM_BITS = sum(f.mask for f in DRONE_ALARMS)  # every bit above, in one mask
+#: Every bit of :data:`DRONE_ALARMS` in one mask (the supervisor's and ``runtime/before_solve``'s).
+ALARM_BITS = sum(f.mask for f in DRONE_ALARMS)
 
 
 def drone_alarms(state_bits: int | None) -> list[DroneAlarm]:
     """The :data:`DRONE_ALARMS` set in ``state_bits`` (none for None), most severe first."""
-    if state_bits is None or not state_bits & _ALARM_BITS:  # the usual tick: none set
+    if state_bits is None or not state_bits & ALARM_BITS:  # the usual tick: none set
         return []
     return [f for f in DRONE_ALARMS if state_bits & f.mask]
 
@@ -216,7 +217,7 @@ class Supervisor:
             # the usual tick: no emergency, no fault bit, battery above the floor, both ages
             # within their limits — what the chain below answers NOMINAL to, in one test
             bits = navdata.state_bits
-            if (navdata.mode is not _EMERGENCY and (bits is None or not bits & _ALARM_BITS)
+            if (navdata.mode is not _EMERGENCY and (bits is None or not bits & ALARM_BITS)
                     and navdata.battery_pct > self._battery_floor_pct
                     and navdata_age_ms <= self._navdata_land_ms
                     and mocap_age_ms <= self._mocap_nominal_ms):
@@ -234,7 +235,7 @@ class Supervisor:
                 return self._latch(Decision(Action.STOP, "emergency"))
             bits = navdata.state_bits
             # drone_alarms' own test first: the usual tick has no fault bit, and no call
-            faults = drone_alarms(bits) if bits is not None and bits & _ALARM_BITS else ()
+            faults = drone_alarms(bits) if bits is not None and bits & ALARM_BITS else ()
             for fault in faults:
                 if fault.in_flight is Action.STOP:
                     return self._latch(Decision(Action.STOP, fault.reason))

@@ -25,7 +25,7 @@ from pathlib import Path
 #: whose functions or constants kernels use (paths relative to the package).
 KERNEL_SOURCES = (
     "model.py", "core/numerics.py", "core/types.py", "core/angles.py", "core/angle_kernels.py",
-    "core/sorted_search.py", "control/gmres.py", "control/obstacles.py",
+    "core/sorted_search.py", "core/python_floats.py", "control/gmres.py", "control/obstacles.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "runs/path_kernels.py",

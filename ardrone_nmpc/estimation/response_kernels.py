@@ -28,6 +28,7 @@ from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.core.python_floats import py_max, py_min, py_square
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "ESTIMATE_ANSWER", "ESTIMATE_PARAMS", "HEAD",
@@ -470,26 +471,13 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _py_max(a: float, b: float) -> float:
-    """Python's ``max(a, b)``: ``b`` only if it is greater (a NaN first stays; a NaN second
-    does not)."""
-    return b if b > a else a
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _py_min(a: float, b: float) -> float:
-    """Python's ``min(a, b)``: ``b`` only if it is less."""
-    return b if b < a else a
-
-
-@njit(cache=True, **INNER_KERNEL)
 def _inflation(state: np.ndarray) -> float:
     """√((1 + ρ₁)/(1 − ρ₁)) of the tracked residual's lag-1 correlation ρ₁ (1 with fewer than
     ten pairs or no residual)."""
     rr, rr1, w = state[S_RES], state[S_RES + 1], state[S_RES + 2]
     if w < 10.0 or rr <= 0.0:
         return 1.0
-    rho = _py_min(_py_max(rr1 / rr, 0.0), 0.95)
+    rho = py_min(py_max(rr1 / rr, 0.0), 0.95)
     return math.sqrt((1.0 + rho) / (1.0 - rho))
 
 
@@ -512,19 +500,8 @@ def _refine(rss: np.ndarray, L: int, m: int, k: int, delays_s: np.ndarray, sigma
     if not second > 0.0:
         return delays_s[k], math.inf
     delay = delays_s[i] + params[0] * (lo - hi) / second  # ½ step
-    delay = _py_min(_py_max(delay, delays_s[0]), delays_s[K - 1])
-    return delay, _py_max(2.0 * sigma2 * params[1] / second, params[2])  # step², step² / 12
-
-
-@njit(cache=True, **INNER_KERNEL)
-def _py_square(x: float, two: float) -> float:
-    """Python's ``x ** 2`` of a finite or NaN ``x``: the C library's ``pow(x, 2.0)`` — not x · x,
-    from which it differs in the last bit for ~0.1 % of x — with ``two`` read at run time (a
-    constant 2 would let the compiler make it x · x); NaN itself. An infinite answer is where
-    Python raises OverflowError: the caller checks."""
-    if x != x:
-        return x
-    return math.pow(x, two)
+    delay = py_min(py_max(delay, delays_s[0]), delays_s[K - 1])
+    return delay, py_max(2.0 * sigma2 * params[1] / second, params[2])  # step², step² / 12
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -532,8 +509,8 @@ def _gain_means(answer: np.ndarray, two: float) -> bool:
     """``AttitudeEstimate.gain_mean`` and ``gain_mean_std`` of the gains and σ in ``answer``
     (slots 2–5) into its slots 10 and 11, the same expressions in the same order; False
     (nothing written) when a weight's square overflows, where Python raises."""
-    p0 = _py_square(_py_max(answer[4], 1e-9), two) if math.isfinite(answer[4]) else -1.0
-    p1 = _py_square(_py_max(answer[5], 1e-9), two) if math.isfinite(answer[5]) else -1.0
+    p0 = py_square(py_max(answer[4], 1e-9), two) if math.isfinite(answer[4]) else -1.0
+    p1 = py_square(py_max(answer[5], 1e-9), two) if math.isfinite(answer[5]) else -1.0
     if math.isinf(p0) or math.isinf(p1):
         return False
     num = den = 0.0  # as gain_mean adds: from 0, the axes in order
@@ -560,7 +537,7 @@ def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
     """``AttitudeResponseEstimator._fit`` in one call: :func:`fit_grid` into ``out``, then the
     best grid point's estimate into ``out``'s answer (:data:`ESTIMATE_ANSWER`, after its
     :data:`ESTIMATE_PARAMS`) — the same expressions in the same order, Python's ``max``,
-    ``min`` and ``**`` (:func:`_py_max`, :func:`_py_square`), numpy's ``min`` of the rivals
+    ``min`` and ``**`` (:func:`py_max`, :func:`py_square`), numpy's ``min`` of the rivals
     (NaN if any is). Returns :func:`fit_grid`'s best flat index, or −1: no estimate (fewer
     than 20 samples, nothing moved; the state untouched with fewer than 20)."""
     n = state[S_N]
@@ -580,7 +557,7 @@ def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
     params = out[f:f + ESTIMATE_PARAMS]
     answer = out[f + ESTIMATE_PARAMS:f + ESTIMATE_PARAMS + ESTIMATE_ANSWER]
     low = rss[best]
-    sigma2 = low / _py_max(2.0 * n - 5.0, 1.0)
+    sigma2 = low / py_max(2.0 * n - 5.0, 1.0)
     inflate = _inflation(state)
     delay, delay_var = _refine(rss, L, m, k, delays_s, sigma2, params)
     answer[0] = delay
@@ -590,15 +567,15 @@ def fit_estimate(state: np.ndarray, out: np.ndarray) -> int:
         sa = sxx[e]
         if sa > 1e-12:
             answer[2 + a] = gain[e]
-            answer[4 + a] = inflate * math.sqrt(_py_max(rss_axis[e], 0.0)
-                                                / _py_max(n - 2.0, 1.0) / sa)
+            answer[4 + a] = inflate * math.sqrt(py_max(rss_axis[e], 0.0)
+                                                / py_max(n - 2.0, 1.0) / sa)
         else:
             answer[2 + a] = math.nan
             answer[4 + a] = math.inf
     answer[6] = state[end - L + m]
     answer[7] = 1.0 - low / (out[3 * kl2 + kl] + out[3 * kl2 + kl + 1])  # Σy² of both axes
     answer[8] = n
-    answer[9] = _contrast(rss, L, m, k, delays_s, sigma2 * _py_square(inflate, params[4]),
+    answer[9] = _contrast(rss, L, m, k, delays_s, sigma2 * py_square(inflate, params[4]),
                           params[3])
     answer[12] = 1.0 if _gain_means(answer, params[4]) else 0.0
     return best

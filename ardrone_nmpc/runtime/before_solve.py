@@ -28,14 +28,14 @@ from numba import njit
 from ardrone_nmpc.core.entry_points import entry_point, plain
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.python_floats import py_square
 from ardrone_nmpc.core.types import STATE_DIM, FlightMode
-from ardrone_nmpc.estimation.response_kernels import _py_square
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
 from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, kalman_estimate,
                                                nmpc_inputs, nmpc_work)
-from ardrone_nmpc.safety import _ALARM_BITS, Supervisor
+from ardrone_nmpc.safety import ALARM_BITS, Supervisor
 
 __all__ = ["BeforeSolve", "NOT_NOMINAL", "before_solve", "warm_up_kernels"]
 
@@ -51,8 +51,8 @@ L_FENCE_LO = 3          # (3) x, y, z
 L_FENCE_HI = 6          # (3)
 L_MAX_SPEED_MPS = 9
 L_TILT_CAP_DEG = 10
-L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
-L_TWO = 12              # 2.0, read at run time: the speed's squares are pow's (_py_square)
+LALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
+L_TWO = 12              # 2.0, read at run time: the speed's squares are pow's (py_square)
 L_SCRATCH = 13          # (E_SIZE) the estimator's state, stepped here before it is kept
 L_SIZE = L_SCRATCH + E_SIZE
 
@@ -81,7 +81,7 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     nav_ms = (t_s - navdata_rx_t_s) * 1e3
     nothing = (NOT_NOMINAL, mocap_ms, nav_ms)
     # check_feedback's usual tick (the emergency mode and the latch are the caller's tests)
-    if not (state_bits & int(limits[L_ALARM_BITS]) == 0
+    if not (state_bits & int(limits[LALARM_BITS]) == 0
             and battery_pct > limits[L_BATTERY_FLOOR_PCT] and nav_ms <= limits[L_NAVDATA_LAND_MS]
             and mocap_ms <= limits[L_MOCAP_NOMINAL_MS]):
         return nothing
@@ -102,8 +102,8 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
         if not (limits[L_FENCE_LO + k] <= v <= limits[L_FENCE_HI + k]):
             return nothing
     two = limits[L_TWO]
-    speed = math.sqrt(_py_square(scratch[E_X + 1], two) + _py_square(scratch[E_X + 3], two)
-                      + _py_square(scratch[E_X + 5], two))
+    speed = math.sqrt(py_square(scratch[E_X + 1], two) + py_square(scratch[E_X + 3], two)
+                      + py_square(scratch[E_X + 5], two))
     if not speed <= limits[L_MAX_SPEED_MPS]:
         return nothing
     cap_deg = limits[L_TILT_CAP_DEG]
@@ -163,10 +163,10 @@ class BeforeSolve:
                   *sup._fence_lo, *sup._fence_hi, sup._max_speed_mps, sup._tilt_cap_deg)
         if all(v.__class__ is _FLOAT or (v.__class__ is int and abs(v) <= 2 ** 53)
                for v in values):
-            lim[L_BATTERY_FLOOR_PCT:L_ALARM_BITS] = values
+            lim[L_BATTERY_FLOOR_PCT:LALARM_BITS] = values
         else:
             lim[L_MOCAP_NOMINAL_MS] = -math.inf
-        lim[L_ALARM_BITS] = _ALARM_BITS  # (< 2**53: exact in a float64)
+        lim[LALARM_BITS] = ALARM_BITS  # (< 2**53: exact in a float64)
         lim[L_TWO] = 2.0
         self._cfg = sup._cfg
 
@@ -212,9 +212,9 @@ class BeforeSolve:
                 and shift is v[3] and states is v[4] and work is v[5] and rows is v[6]):
             call = before_solve  # the dispatcher: it looks at every argument's type
             self._entry = None
-        # the bits masked in Python (check_feedback's own ``bits & _ALARM_BITS``): a word
+        # the bits masked in Python (check_feedback's own ``bits & ALARM_BITS``): a word
         # beyond int64 would not unbox
-        args = (t_s, pose_rx, nav_rx, 0 if bits is None else bits & _ALARM_BITS, battery, roll,
+        args = (t_s, pose_rx, nav_rx, 0 if bits is None else bits & ALARM_BITS, battery, roll,
                 pitch,
                 px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav, vx, vy,
                 state, self._limits, t_exp_s, ring, delay.first, pending, delay.lead_s,
