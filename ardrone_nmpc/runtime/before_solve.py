@@ -51,7 +51,7 @@ L_FENCE_LO = 3          # (3) x, y, z
 L_FENCE_HI = 6          # (3)
 L_MAX_SPEED_MPS = 9
 L_TILT_CAP_DEG = 10
-LALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
+L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
 L_TWO = 12              # 2.0, read at run time: the speed's squares are pow's (py_square)
 L_SCRATCH = 13          # (E_SIZE) the estimator's state, stepped here before it is kept
 L_SIZE = L_SCRATCH + E_SIZE
@@ -81,7 +81,7 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     nav_ms = (t_s - navdata_rx_t_s) * 1e3
     nothing = (NOT_NOMINAL, mocap_ms, nav_ms)
     # check_feedback's usual tick (the emergency mode and the latch are the caller's tests)
-    if not (state_bits & int(limits[LALARM_BITS]) == 0
+    if not (state_bits & int(limits[L_ALARM_BITS]) == 0
             and battery_pct > limits[L_BATTERY_FLOOR_PCT] and nav_ms <= limits[L_NAVDATA_LAND_MS]
             and mocap_ms <= limits[L_MOCAP_NOMINAL_MS]):
         return nothing
@@ -163,10 +163,10 @@ class BeforeSolve:
                   *sup._fence_lo, *sup._fence_hi, sup._max_speed_mps, sup._tilt_cap_deg)
         if all(v.__class__ is _FLOAT or (v.__class__ is int and abs(v) <= 2 ** 53)
                for v in values):
-            lim[L_BATTERY_FLOOR_PCT:LALARM_BITS] = values
+            lim[L_BATTERY_FLOOR_PCT:L_ALARM_BITS] = values
         else:
             lim[L_MOCAP_NOMINAL_MS] = -math.inf
-        lim[LALARM_BITS] = ALARM_BITS  # (< 2**53: exact in a float64)
+        lim[L_ALARM_BITS] = ALARM_BITS  # (< 2**53: exact in a float64)
         lim[L_TWO] = 2.0
         self._cfg = sup._cfg
 
