@@ -1,12 +1,10 @@
 """core/entry_points: a kernel's compiled entry point only for argument kinds it was compiled
 for — the dispatcher's own specialisation — and None for anything it does not vouch for."""
 
+import numba
 import numpy as np
-import pytest
 
 from ardrone_nmpc.core.entry_points import entry_point, plain
-
-numba = pytest.importorskip("numba")
 
 
 def _kernel():

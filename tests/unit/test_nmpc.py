@@ -354,7 +354,7 @@ def test_solve_prepared_vets_the_arrays_it_sees_again_for_the_entry_point():
     """The bound kernel's compiled entry point (no type look-up, no type check) is taken for
     the same two arrays seen again, and only if they are plain float64 C arrays; arrays of
     another layout stay with the dispatcher, which reads them by their strides."""
-    numba = pytest.importorskip("numba")
+    import numba  # a dependency of the package, not an extra: never skipped
     from ardrone_nmpc.core.entry_points import entry_point
 
     stub = numba.njit(_stub_step)
