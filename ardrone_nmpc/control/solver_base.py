@@ -191,7 +191,14 @@ class NmpcSolverBase:
                 flag = self._call_unvetted(x, ref, initialise)
         else:
             flag = self._tick(x, ref, initialise)
-        elapsed_us = (_perf_counter_ns() - t0) * 1e-3
+        return self.judged(t_s, x, ref, flag, (_perf_counter_ns() - t0) * 1e-3, initialise)
+
+    def judged(self, t_s: float, x: np.ndarray, ref: np.ndarray, flag: int, elapsed_us: float,
+               initialise: bool) -> SolveResult:
+        """The :class:`SolveResult` of a tick whose kernel answered ``flag`` after
+        ``elapsed_us`` (:meth:`solve_prepared`'s, or the controller's one compiled call's,
+        ``runtime/control_tick.py``, which decides its usual tick itself): the status from
+        the flag, the residual and the tolerance; a failed tick recovered (:meth:`_recover`)."""
         newton_it, gmres_it, newton_norm, norm = self._stats_values()
         if flag:  # not FLAG_OK (one test a tick, not two)
             if flag == FLAG_BAD_INPUT:

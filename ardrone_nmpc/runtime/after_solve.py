@@ -183,12 +183,41 @@ class AfterSolve:
         """The nominal tick's :class:`~ardrone_nmpc.runtime.stages.Sent` and the response
         fit's events, all stages after the solve done; None (nothing done) when the tick is
         not nominal."""
-        if not sol.ok or self.supervisor._solver_fallback:  # check_solution's other verdicts
+        if not sol.ok:  # check_solution's other verdicts
             return None
         u = sol.u_flown
         if u.__class__ is not _NDARRAY:  # (check_solution takes any sequence: its path)
             return None
-        control, supervision, delay = self.control, self.supervision, self.delay
+        settings = self.settings()
+        if settings is None:
+            return None
+        gain, lead, vz_max, e, v, y = settings
+        zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
+        # Control.command's
+        vz_base = (float(self.supervision.vz_ref_mps) if self.control.vz_from_commands
+                   else sol.x_solve.item(IX_VZ))
+        nav = inputs.navdata
+        if nav is not None:
+            has, t_nav, roll_deg, pitch_deg = 1, inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
+        else:
+            has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
+        offset, flags = self._offset
+        code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
+            zacc, phi, theta, rate, vz_base, lead, vz_max, self.supervisor.max_tilt_rad, gain,
+            e, v, y, self.delay._sent, self.delay._next, self._response_state, has, t_nav,
+            roll_deg, pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
+        if code:
+            return None
+        return self._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,
+                             bits, fed)
+
+    def settings(self) -> tuple | None:
+        """The numbers :func:`after_solve` computes with — the attitude gain, the ż lead and
+        limit, the mapping's scales — or None when a precondition of the compiled call does
+        not hold (the solver distrusted, or a number not a Python float)."""
+        if self.supervisor._solver_fallback:  # check_solution's other verdicts
+            return None
+        control, supervision = self.control, self.supervision
         gain, lead, vz_max = supervision.attitude_gain, control.vz_lead_s, control._vz_max_mps
         e, v, y = supervision._scales
         # the numbers the stages compute with as Python floats, as a config gives them: with
@@ -199,24 +228,7 @@ class AfterSolve:
                 and vz_max.__class__ is _FLOAT and e.__class__ is _FLOAT
                 and v.__class__ is _FLOAT and y.__class__ is _FLOAT):
             return None
-        zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
-        # Control.command's
-        vz_base = (float(supervision.vz_ref_mps) if control.vz_from_commands
-                   else sol.x_solve.item(IX_VZ))
-        nav = inputs.navdata
-        if nav is not None:
-            has, t_nav, roll_deg, pitch_deg = 1, inputs.navdata_rx_t_s, nav.roll_deg, nav.pitch_deg
-        else:
-            has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
-        offset, flags = self._offset
-        code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
-            zacc, phi, theta, rate, vz_base, lead, vz_max, self.supervisor.max_tilt_rad, gain,
-            e, v, y, delay._sent, delay._next, self._response_state, has, t_nav, roll_deg,
-            pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
-        if code:
-            return None
-        return self._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,
-                             bits, fed)
+        return gain, lead, vz_max, e, v, y
 
     def _records(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
         """What the Python stages keep and the tick hands on, from the kernel's answer."""

@@ -173,6 +173,31 @@ class BeforeSolve:
     def nominal(self, inputs, t_exp_s: float, traj):
         """The nominal tick's feedback ages, estimate and :class:`Solution`, every stage up
         to and including the solve done; None (nothing done) when the tick is not nominal."""
+        args = self.arguments(inputs, t_exp_s, traj)
+        if args is None:
+            return None
+        call, v = self._entry, self._vetted
+        if not (call is not None and args[16] is v[0] and args[19] is v[1] and args[23] is v[2]
+                and args[24] is v[3] and args[25] is v[4] and args[26] is v[5]
+                and args[27] is v[6]):
+            call = before_solve  # the dispatcher: it looks at every argument's type
+            self._entry = None
+        code, mocap_ms, nav_ms = call(*args)
+        if call is before_solve:
+            self._vet(args)
+        if code:
+            return None
+        control = self.control
+        x = self.estimation._x
+        ref_horizon = control._ref_horizon  # the logged horizon, unshifted
+        sol = control._solved(t_exp_s, control._x_solve if args[21] else x, control._ref_now,
+                              ref_horizon if self.offset is None else control._horizon,
+                              ref_horizon, control._solve_prepared)
+        return (mocap_ms, nav_ms), x, sol
+
+    def arguments(self, inputs, t_exp_s: float, traj) -> tuple | None:
+        """:func:`before_solve`'s arguments for this tick, or None when a precondition of the
+        compiled call does not hold (the tick is the Python stages')."""
         pose, nav = inputs.pose, inputs.navdata
         sup = self.supervisor
         if pose is None or nav is None or sup._latched is not None or nav.mode is _EMERGENCY:
@@ -203,33 +228,14 @@ class BeforeSolve:
         else:
             vx = vy = 0.0
         delay, offset = self.delay, self.offset
-        pending = delay.count
-        state, ring, x_solve, states, work, rows = (est._state, delay.ring, control._x_solve,
-                                                    control._states, control._work, control._rows)
         shift = _NO_SHIFT if offset is None else offset.integrator.shift
-        call, v = self._entry, self._vetted
-        if not (call is not None and state is v[0] and ring is v[1] and x_solve is v[2]
-                and shift is v[3] and states is v[4] and work is v[5] and rows is v[6]):
-            call = before_solve  # the dispatcher: it looks at every argument's type
-            self._entry = None
         # the bits masked in Python (check_feedback's own ``bits & ALARM_BITS``): a word
         # beyond int64 would not unbox
-        args = (t_s, pose_rx, nav_rx, 0 if bits is None else bits & ALARM_BITS, battery, roll,
-                pitch,
-                px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav, vx, vy,
-                state, self._limits, t_exp_s, ring, delay.first, pending, delay.lead_s,
-                x_solve, shift, states, work, rows)
-        code, mocap_ms, nav_ms = call(*args)
-        if call is before_solve:
-            self._vet(args)
-        if code:
-            return None
-        x = est._x
-        ref_horizon = control._ref_horizon  # the logged horizon, unshifted
-        sol = control._solved(t_exp_s, control._x_solve if pending else x, control._ref_now,
-                              ref_horizon if offset is None else control._horizon, ref_horizon,
-                              control._solve_prepared)
-        return (mocap_ms, nav_ms), x, sol
+        return (t_s, pose_rx, nav_rx, 0 if bits is None else bits & ALARM_BITS, battery, roll,
+                pitch, px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav,
+                vx, vy, est._state, self._limits, t_exp_s, delay.ring, delay.first, delay.count,
+                delay.lead_s, control._x_solve, shift, control._states, control._work,
+                control._rows)
 
     def _vet(self, args: tuple) -> None:
         """After a call through the dispatcher: the kernel's entry point for float numbers

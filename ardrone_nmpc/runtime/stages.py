@@ -355,7 +355,12 @@ class Control:
                 horizon: np.ndarray, ref_horizon: np.ndarray, solve) -> Solution:
         """``solve``'s answer against ``horizon`` and its :class:`Solution` (``ref_now``: the
         reference now, ``ref_horizon`` the unshifted horizon)."""
-        result = solve(t_exp_s, x_solve, horizon)
+        return self.solution(ref_now, x_solve, solve(t_exp_s, x_solve, horizon), ref_horizon)
+
+    def solution(self, ref_now: np.ndarray, x_solve: np.ndarray, result: SolveResult,
+                 ref_horizon: np.ndarray) -> Solution:
+        """The tick's :class:`Solution` of the solver's ``result``: trusted (``ok``) when it
+        solved, or stopped at its iterations and the safety config accepts that."""
         status = result.status
         ok = status is _OK or (status is _MAX_ITERATIONS and self.accept_max_iterations)
         # ``_value_``: the member's value without the enum's descriptor (µs a tick)

@@ -24,6 +24,8 @@ from ardrone_nmpc.runtime.after_solve import AfterSolve
 from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
 from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
+from ardrone_nmpc.runtime.control_tick import ControlTick
+from ardrone_nmpc.runtime.control_tick import warm_up_kernels as warm_up_control_tick
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
@@ -139,6 +141,9 @@ class Tick:
         #: The stages before the solve, likewise (None: the P controller's, or a flight whose
         #: estimator, reference or stages the compiled call does not take)
         self.before_solve = BeforeSolve(self) if BeforeSolve.takes(self) else None
+        #: The controller's whole nominal tick — both, and the solve between — in one
+        #: compiled call (None: a flight or solver it does not take)
+        self.control_tick = ControlTick(self) if ControlTick.takes(self) else None
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
         # the stages' own (runtime/tick_kernels): those this flight calls
@@ -152,6 +157,8 @@ class Tick:
             warm_up_after_solve()
         if self.before_solve is not None:  # after its callees' (tick_kernels')
             warm_up_before_solve()
+        if self.control_tick is not None:  # after its callees' (the solver's, both halves)
+            warm_up_control_tick()
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None) -> TickOutput:
@@ -167,16 +174,24 @@ class Tick:
         if self.obstacles is not None and inputs.target is not None:
             self.obstacles.update(inputs.target)
         sup = self.supervisor
-        before = self.before_solve
-        # the nominal tick: the stages up to the solve in one compiled call (None: not nominal)
-        done = before.nominal(inputs, t_exp_s, traj) if before is not None else None
-        if done is not None:
-            ages_ms, x, solution = done
+        # the nominal tick: the controller in one compiled call (None: not nominal)
+        whole = (self.control_tick.nominal(inputs, t_exp_s, traj)
+                 if self.control_tick is not None else None)
+        if whole is not None:
+            ages_ms, x, solution, done = whole
             decision = NOMINAL
         else:
-            ages_ms, decision, x, solution = self._before(inputs, t_exp_s, traj)
-        cmd = done = None
-        if solution is not None:  # the verdict was CONTROL: the controller solved
+            before = self.before_solve
+            # the stages up to the solve in one compiled call (None: not nominal)
+            done = before.nominal(inputs, t_exp_s, traj) if before is not None else None
+            if done is not None:
+                ages_ms, x, solution = done
+                decision = NOMINAL
+            else:
+                ages_ms, decision, x, solution = self._before(inputs, t_exp_s, traj)
+            done = None
+        cmd = None
+        if done is None and solution is not None:  # the verdict was CONTROL: it solved
             if solution.result is not None and self.after_solve is not None:
                 # the nominal tick: the stages below in one compiled call (None: not nominal)
                 done = self.after_solve.nominal(inputs, x, solution)

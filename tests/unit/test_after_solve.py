@@ -51,6 +51,7 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, list, int]:
 
     def init(self, *args, **kwargs):
         original_init(self, *args, **kwargs)
+        self.control_tick = None  # this half on its own (test_control_tick: the whole)
         if not compiled:
             self.after_solve = None
 

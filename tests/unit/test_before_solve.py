@@ -47,6 +47,7 @@ def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, int, list]:
     def init(self, *args, **kwargs):
         original_init(self, *args, **kwargs)
         ticks.append(self)
+        self.control_tick = None  # this half on its own (test_control_tick: the whole)
         if not compiled:
             self.before_solve = None
 
@@ -115,6 +116,7 @@ def _flown_tick(compiled: bool, ticks: int = 4) -> tuple[Tick, list]:
     Python), and their rows."""
     cfg = config("square.yaml")
     tick = Tick(cfg, experiment_trajectory(cfg))
+    tick.control_tick = None  # this half on its own (test_control_tick: the whole)
     if not compiled:
         tick.before_solve = None
     rows = []

@@ -1,0 +1,240 @@
+"""The controller's nominal tick in one compiled call: the stages before the solve, the
+C/GMRES update, the solver's verdict on it and the stages after it.
+
+The usual NMPC tick made three compiled calls — :func:`~.before_solve.before_solve`, the
+solver's kernel (``cgmres_step``), :func:`~.after_solve.after_solve` — with Python between
+them: ``NmpcSolverBase.solve_prepared``'s status logic, the ``SolveResult`` and the
+``Solution``, and the after-stages' preconditions (issue 26). :func:`control_tick` makes the
+three calls from compiled code, over the same arrays (the stages' buffers, the solver's own
+memory), and decides what ``solve_prepared`` decides on its usual tick: a solver that
+answered ``FLAG_OK`` with ‖F‖ within ``divergence_residual`` is trusted — on a tick that is
+not the first and without a horizon ramp its status is ``OK`` whatever the tolerance says.
+It times the solver's kernel alone with the clock ``time.perf_counter_ns`` reads
+(``core/monotonic``): the row's ``solve_us`` is what it was, the solve and nothing else.
+
+It answers one of three codes, each leaving the stages' state as the Python path would:
+
+* :data:`NOT_NOMINAL` — the stages before the solve found the tick not nominal: nothing was
+  written, the tick is the Python stages' (or the two-call path's) from the start;
+* :data:`SOLVED` — the stages before the solve and the solver's kernel ran, and then the
+  solver's answer needs Python's judgement (a flag, a divergence: ``judged`` recovers) or
+  the stages after it found the tick not nominal (nothing of theirs written): the tick
+  continues in Python from the kernel's answer;
+* 0 — the whole controller's tick done: the records are built from the answer.
+
+:class:`ControlTick` is the Python side: the preconditions of the three calls (those of
+:class:`~.before_solve.BeforeSolve` and :class:`~.after_solve.AfterSolve`, and a plain
+:class:`~ardrone_nmpc.control.cgmres.CGMRESController` without obstacles, past its first solve,
+unwrapped), the call, and the records the tick's row and the Python state need.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.control.cgmres import CGMRESController
+from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
+from ardrone_nmpc.control.kernels.layout import unpack
+from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
+from ardrone_nmpc.core.entry_points import entry_point, plain
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.monotonic import monotonic_ns
+from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, STATE_DIM
+from ardrone_nmpc.runtime.after_solve import after_solve
+from ardrone_nmpc.runtime.before_solve import L_SIZE, before_solve
+from ardrone_nmpc.runtime.stages import Solution
+from ardrone_nmpc.runtime.tick_kernels import E_X
+
+__all__ = ["NOT_NOMINAL", "SOLVED", "ControlTick", "control_tick", "warm_up_kernels"]
+
+#: :func:`control_tick`'s code when the tick is not nominal before the solve (nothing written)
+NOT_NOMINAL = -1
+#: … when the solver ran and the rest of the tick is Python's (module docstring)
+SOLVED = 1
+_N_BEFORE = 28  # before_solve's arguments, control_tick's first
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def control_tick(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll_deg,
+                 pitch_deg, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
+                 nav_vx_mps, nav_vy_mps, est, limits, t_exp_s, ring, first, pending, lead_s,
+                 x_solve, shift, states, work, rows, mem, iprm, horizon, initialise,
+                 divergence_residual, vz_from_commands, vz_ref_last_mps, vz_lead_s, vz_max_mps,
+                 tilt_cap_rad, gain, e, v, y, ring_row, response, has_nav, offset,
+                 offset_flags):
+    """The nominal tick's controller, over its state (module docstring).
+
+    ``before_solve``'s 28 arguments; the solver's memory, settings, horizon (the reference it
+    solves against: shifted by the offset-free stage, if any), ``initialise`` (False: its
+    usual tick) and ``divergence_residual``; then ``after_solve``'s numbers (the ż base is
+    the last ż reference with ``vz_from_commands``, else the predicted state's ż) and its
+    buffers (``ring_row`` the delay ring's next row, ``has_nav`` 1).
+
+    Returns (code, mocap age ms, navdata age ms, the kernel's flag, solve µs, ‖F‖, GMRES and
+    Newton iterations, the input z̈, φ, θ, ψ̇, then ``after_solve``'s ż ref, four PCMD
+    fractions, saturation bits and feed answer)."""
+    code, mocap_ms, nav_ms = before_solve(
+        t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll_deg, pitch_deg, px, py,
+        pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity, nav_vx_mps, nav_vy_mps, est, limits,
+        t_exp_s, ring, first, pending, lead_s, x_solve, shift, states, work, rows)
+    if code != 0:
+        return (NOT_NOMINAL, mocap_ms, nav_ms, 0, 0.0, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                0.0, 0.0, 0.0, 0.0, 0, 0)
+    x = est[E_X:E_X + STATE_DIM]
+    xs = x_solve if pending else x
+    t0_ns = monotonic_ns()
+    flag = cgmres_step(mem, xs, horizon, iprm, initialise)
+    solve_us = (monotonic_ns() - t0_ns) * 1e-3
+    _, _, u, stats, _, _, _, _ = unpack(mem, horizon.shape[0] - 1, iprm[0], iprm[4])
+    norm = stats[3]
+    gmres_it, newton_it = int(stats[1]), int(stats[0])
+    zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
+    # solve_prepared's verdict (``judged``): on a flag or a divergence it recovers, in Python
+    if flag != FLAG_OK or norm > divergence_residual:
+        return (SOLVED, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi,
+                theta, rate, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+    vz_base = vz_ref_last_mps if vz_from_commands else xs[IX_VZ]
+    code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
+        zacc, phi, theta, rate, vz_base, vz_lead_s, vz_max_mps, tilt_cap_rad, gain, e, v, y,
+        ring, ring_row, response, has_nav, navdata_rx_t_s, roll_deg, pitch_deg, t_s, x,
+        states[0], states[1:], offset, offset_flags)
+    return (SOLVED if code != 0 else 0, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it,
+            newton_it, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed)
+
+
+_OK = SolverStatus.OK
+_OK_TEXT = _OK._value_
+_new_tuple = tuple.__new__
+
+
+class ControlTick:
+    """The Python side of :func:`control_tick` for one tick's stages (``Tick``'s), built on
+    their :class:`~.before_solve.BeforeSolve` and :class:`~.after_solve.AfterSolve`."""
+
+    @staticmethod
+    def takes(tick) -> bool:
+        """Whether the compiled call can take ``tick``'s nominal ticks: both halves can, and
+        the solver is a plain C/GMRES one (not wrapped, not a subclass: their overrides are
+        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``."""
+        nmpc = tick.control.nmpc
+        return (tick.before_solve is not None and tick.after_solve is not None
+                and type(nmpc) is CGMRESController and nmpc._step is not None
+                and nmpc._step[0] is cgmres_step
+                and tick.control._solve_prepared == nmpc.solve_prepared)
+
+    def __init__(self, tick) -> None:
+        self.before = tick.before_solve
+        self.after = tick.after_solve
+        self.control = tick.control
+        self.nmpc = tick.control.nmpc
+        self.supervision = tick.supervision
+        self.delay = tick.delay
+        self.offset = tick.offset
+        # the kernel's call: its compiled entry point while the arrays are the ones vetted
+        # for it, else the dispatcher (:meth:`_vet`)
+        self._entry = None
+        self._vetted: tuple = ()
+
+    def __getstate__(self) -> dict:
+        """Without what :meth:`_vet` makes (an entry point does not pickle)."""
+        state = self.__dict__.copy()
+        state["_entry"], state["_vetted"] = None, ()
+        return state
+
+    def nominal(self, inputs, t_exp_s: float, traj):
+        """The nominal tick's feedback ages, estimate, :class:`Solution` and what the stages
+        after the solve hand on (``(sent, events)``; None: those are Python's to take, from
+        the solution on); None — nothing done — when the tick is not nominal before the
+        solve, or a precondition of the call does not hold."""
+        nmpc = self.nmpc
+        if nmpc._t0_s is None or nmpc._ramped:  # (the first solve initialises: Python's)
+            return None
+        settings = self.after.settings()
+        if settings is None:
+            return None
+        before = self.before.arguments(inputs, t_exp_s, traj)
+        if before is None:
+            return None
+        _, mem, iprm = nmpc._step
+        control, supervision, after = self.control, self.supervision, self.after
+        horizon = control._ref_horizon if self.offset is None else control._horizon
+        from_commands = control.vz_from_commands
+        gain, lead, vz_max, e, v, y = settings
+        offset, flags = after._offset
+        args = (*before, mem, iprm, horizon, False, nmpc.divergence_residual, from_commands,
+                float(supervision.vz_ref_mps) if from_commands else 0.0, lead, vz_max,
+                after.supervisor.max_tilt_rad, gain, e, v, y, self.delay._next,
+                after._response_state, 1, offset, flags)
+        call, vet = self._entry, self._vetted
+        if not (call is not None and before[16] is vet[0] and before[19] is vet[1]
+                and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
+                and before[26] is vet[5] and before[27] is vet[6] and mem is vet[7]
+                and iprm is vet[8] and horizon is vet[9]):
+            call = control_tick  # the dispatcher: it looks at every argument's type
+            self._entry = None
+        (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
+         rate, vz, roll, pitch, gaz, yaw, bits, fed) = call(*args)
+        if call is control_tick:
+            self._vet(args)
+        if code == NOT_NOMINAL:
+            return None
+        x = self.before.estimation._x
+        x_solve = control._x_solve if before[21] else x
+        if code:  # SOLVED: the solver's answer judged as solve_prepared judges it
+            result = nmpc.judged(t_exp_s, x_solve, horizon, flag, solve_us, False)
+            return ((mocap_ms, nav_ms), x,
+                    control.solution(control._ref_now, x_solve, result, control._ref_horizon),
+                    None)
+        sent, events = after._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz,
+                                      yaw, bits, fed)
+        u = sent.u  # the input solved and sent (read-only): the result's own
+        result = _new_tuple(SolveResult, (u, _OK, norm, gmres_it, solve_us, newton_it, False))
+        sol = _new_tuple(Solution, (control._ref_now, x_solve, result, u, True, _OK_TEXT, None,
+                                    control._ref_horizon))
+        return (mocap_ms, nav_ms), x, sol, (sent, events)
+
+    def _vet(self, args: tuple) -> None:
+        """After a call through the dispatcher: the kernel's entry point for these kinds of
+        argument, kept with the arrays of the call if each is of the one kind it is compiled
+        for (``core/entry_points.plain``); else the dispatcher stays (asked again next call).
+        The after-stages' buffers are bound once (``AfterSolve``): not checked per call."""
+        for i, (ndim, dtype) in _ARRAYS.items():
+            if not plain(args[i], ndim, dtype):
+                return
+        entry = entry_point(control_tick, *args)  # (None: a number of another kind)
+        if entry is not None:
+            self._entry = entry
+            self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27, 28, 29, 30))
+
+
+# :func:`control_tick`'s array arguments (position: dimensions, dtype)
+_F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
+_ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
+           25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 28: (1, _F8), 29: (1, _I8), 30: (2, _F8),
+           43: (1, _F8), 45: (1, _F8), 46: (2, _B1)}
+
+_warm: list[bool] = []  # loaded (or compiled) in this process
+
+
+def warm_up_kernels() -> None:
+    """Load (or compile) :func:`control_tick` now — once per process —, its callees from the
+    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft: a
+    call of the kinds a tick's is, on a battery below any floor (not nominal at its first
+    test: nothing runs, nothing is written)."""
+    if _warm:
+        return
+    _warm.append(True)
+    load_cached_callees(control_tick)
+    f8 = np.zeros(1)
+    control_tick(1.0, 1.0, 1.0, 0, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False,
+                 0.0, 0.0, f8, np.zeros(L_SIZE), 0.0, np.zeros((2, 4)), 0, 0, 0.0, f8, f8,
+                 np.zeros((1, STATE_DIM)), f8, np.zeros((1, 1)), f8, np.zeros(6, np.int64),
+                 np.zeros((1, STATE_DIM)), False, 1.0, False, 0.0, 0.065, 0.7, 0.3, 1.0, 1.0,
+                 1.0, 1.0, 0, f8, 1, f8, np.zeros((3, 0), np.bool_))
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -1,0 +1,280 @@
+"""The controller's nominal tick in one compiled call (runtime/control_tick.py): the same rows,
+events and stage state as the two-call path and as the Python stages, the solver's verdicts
+it leaves to Python, and every precondition that leaves the tick to them with nothing
+written."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.control.diverging import DivergingSolver
+from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
+from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime import control_tick as control_tick_module
+from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
+from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
+from ardrone_nmpc.runtime.tick import Tick
+from tests.conftest import nan_equal
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+_TIMES = ("solve_us", "compute_us", "tick_late_ms")  # the clock's, not the flight's
+_PATHS = ("whole", "halves", "python")
+
+
+def config(name: str, *overrides: str):
+    return load_config(CONFIGS / name, list(overrides))
+
+
+def _use(tick: Tick, path: str) -> None:
+    """``tick`` on one path: the whole call (as built), the two calls around the solve, or
+    the Python stages alone."""
+    if path != "whole":
+        tick.control_tick = None
+    if path == "python":
+        tick.before_solve = tick.after_solve = None
+
+
+def _carried(tick: Tick) -> list:
+    """Everything the stages carry to the next tick, as bits (and the types of numbers)."""
+    s, d, sup, r, o = tick.supervision, tick.delay, tick.supervisor, tick.response, tick.offset
+    c, nmpc = tick.control, tick.control.nmpc
+    last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
+    return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
+            repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
+            sup._solver_good, sup._solver_fallback, sup._latched, sup._mode,
+            tick.estimation._state.tobytes(), c._x_solve.tobytes(), c._states.tobytes(),
+            None if nmpc is None else (nmpc.memory.snapshot().tobytes(), nmpc._t0_s),
+            None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
+                                    r._next_fit_s),
+            None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
+
+
+def _fly(cfg, path: str, monkeypatch) -> tuple:
+    """A lockstep flight on ``path``: its rows, events, the stages' state after each tick,
+    and the compiled call's answers (all done, solved and left to Python, declined)."""
+    answers, carried = {"done": 0, "solved": 0, "none": 0}, []
+    init, nominal, step = Tick.__init__, ControlTick.nominal, Tick.step
+
+    def new_init(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        _use(self, path)
+
+    def new_nominal(self, *args):
+        whole = nominal(self, *args)
+        answers["none" if whole is None else "solved" if whole[3] is None else "done"] += 1
+        return whole
+
+    def new_step(self, *args, **kwargs):
+        out = step(self, *args, **kwargs)
+        carried.append(_carried(self))
+        return out
+
+    with monkeypatch.context() as m:
+        m.setattr(Tick, "__init__", new_init)
+        m.setattr(ControlTick, "nominal", new_nominal)
+        m.setattr(Tick, "step", new_step)
+        recorder = MemoryRecorder()
+        run_lockstep(cfg, recorder=recorder)
+    return recorder.rows, recorder.events, carried, answers
+
+
+def _same_flights(a: tuple, b: tuple) -> None:
+    rows_a, events_a, carried_a, _ = a
+    rows_b, events_b, carried_b, _ = b
+    assert repr(events_a) == repr(events_b)  # (repr: a NaN equal to a NaN)
+    assert len(carried_a) == len(carried_b) and len(rows_a) == len(rows_b)
+    for i, (p, q) in enumerate(zip(carried_a, carried_b)):
+        assert p == q, f"after tick {i}: {[k for k in range(len(p)) if p[k] != q[k]]}"
+    for i, (p, q) in enumerate(zip(rows_a, rows_b)):
+        bad = [k for k in p if k not in _TIMES and not nan_equal(p[k], q[k])]
+        assert not bad, f"row {i}: {bad}"
+
+
+@pytest.mark.parametrize("name, overrides, whole", [
+    ("square.yaml", ["duration_s=8"], True),  # auto delay and gain, offset-free: every stage
+    ("square.yaml", ["duration_s=5", "estimator.horizontal_velocity=navdata"], True),
+    ("square.yaml", ["duration_s=5", "controller.offset_free.enabled=false"], True),
+    ("square.yaml", ["duration_s=5", "controller.delay_compensation_s=0"], True),
+    ("square.yaml", ["duration_s=5", "faults.at_loss.start_s=2",
+                     "faults.at_loss.probability=0.7"], True),
+    ("square.yaml", ["duration_s=6", "faults.mocap_dropout.start_s=3",
+                     "faults.mocap_dropout.duration_s=0.2"], True),  # stale: hold, hover
+    ("square.yaml", ["duration_s=6", "faults.battery_floor.start_s=3"], True),  # latched
+    ("square.yaml", ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"], True),  # fence
+    ("step_x.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"], False),  # wrapped
+    ("square.yaml", ["duration_s=4", "controller.solver.method=newton"], False),
+])
+def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, whole,
+                                                              monkeypatch):
+    cfg = config(name, *overrides)
+    flights = {path: _fly(cfg, path, monkeypatch) for path in _PATHS}
+    answers = flights["whole"][3]
+    if whole:  # the compiled call took the nominal ticks
+        assert answers["done"] > 20
+    else:  # a wrapped or another solver: the call is not built
+        assert answers == {"done": 0, "solved": 0, "none": 0}
+    _same_flights(flights["whole"], flights["halves"])
+    _same_flights(flights["whole"], flights["python"])
+
+
+# ----------------------------------------------------------------------------- one tick
+def _nav(**changes) -> NavdataSample:
+    nav = NavdataSample(0.0, FlightMode.FLYING, 80.0, 1.5, -2.0, 0.0, 1.0, 0.1, -0.05, 0.0)
+    return dataclasses.replace(nav, **changes)
+
+
+def _inputs(t_s: float, position=(0.0, 0.0, 1.0), nav=None, mocap_age_s=0.01) -> TickInputs:
+    pose = MocapPose(t_s, np.array(position, dtype=float), np.zeros(3), 0.02)
+    return TickInputs(t_s, pose, t_s - mocap_age_s, _nav() if nav is None else nav, t_s - 0.02,
+                      None, -math.inf)
+
+
+def _flown(path: str, ticks: int = 4, name: str = "square.yaml") -> tuple[Tick, list]:
+    """A flight's tick after ``ticks`` ticks of its start (the first solves in Python), on
+    ``path``, and their rows."""
+    cfg = config(name)
+    tick = Tick(cfg, experiment_trajectory(cfg))
+    _use(tick, path)
+    rows = [_step(tick, k) for k in range(ticks)]
+    return tick, rows
+
+
+def _step(tick: Tick, k: int, **changes) -> dict:
+    t_s = 2.0 + 0.065 * k
+    position = (0.01 * k, -0.02 * k, 1.0 + 0.005 * k)
+    return tick.step(_inputs(t_s, position=position, **changes), t_exp_s=t_s - 1.0).row
+
+
+def _same_ticks(rows_a: list, rows_b: list) -> None:
+    assert len(rows_a) == len(rows_b)
+    for a, b in zip(rows_a, rows_b):
+        assert [k for k in a if k not in _TIMES and not nan_equal(a[k], b[k])] == []
+        assert list(a) == list(b)
+
+
+def test_the_compiled_ticks_are_the_python_stages():
+    (whole, rows), (python, python_rows) = _flown("whole", 8), _flown("python", 8)
+    _same_ticks(rows, python_rows)
+    assert _carried(whole) == _carried(python)
+    assert rows[-1]["solver_status"] == "ok"
+    assert 0.0 < rows[-1]["solve_us"] < rows[-1]["compute_us"]  # the solve alone
+
+
+@pytest.mark.parametrize("setup", [
+    # the solver's answer above divergence_residual: solve_prepared's recovery, in Python
+    lambda tick: setattr(tick.control.nmpc, "divergence_residual", 1e-12),
+    # a tilt beyond the cap: the after-stages decline, Python clips and flags
+    lambda tick: setattr(tick.supervisor, "max_tilt_rad", 1e-4),
+])
+def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
+    codes = []
+    kernel = control_tick_module.control_tick
+
+    def spy(*args):
+        answer = kernel(*args)
+        codes.append(answer[0])
+        return answer
+
+    (whole, _), (python, _) = _flown("whole"), _flown("python")
+    monkeypatch.setattr(control_tick_module, "control_tick", spy)
+    whole.control_tick._entry = None  # through the module's kernel: the spy
+    rows, python_rows = [], []
+    for tick, out in ((whole, rows), (python, python_rows)):
+        setup(tick)
+        out += [_step(tick, k) for k in range(4, 8)]
+    assert codes and set(codes) == {SOLVED}
+    _same_ticks(rows, python_rows)
+    assert _carried(whole) == _carried(python)
+
+
+@pytest.mark.parametrize("setup", [
+    lambda tick: setattr(tick.control.nmpc, "_t0_s", None),  # the first solve: initialises
+    lambda tick: setattr(tick.control.nmpc, "_ramped", True),  # a horizon ramp: Δτ asked
+    lambda tick: setattr(tick.supervisor, "_solver_fallback", True),  # distrusted solver
+    lambda tick: setattr(tick.supervision, "attitude_gain", np.float32(0.9)),
+    lambda tick: setattr(tick.control, "vz_lead_s", np.float64(0.065)),
+    lambda tick: setattr(tick.supervisor, "_latched", "land"),
+])
+def test_a_precondition_not_held_leaves_the_tick_with_nothing_written(setup):
+    tick, _ = _flown("whole")
+    setup(tick)
+    before = _carried(tick)
+    assert tick.control_tick.nominal(_inputs(2.3), 1.3, tick.trajectory) is None
+    assert _carried(tick) == before
+
+
+@pytest.mark.parametrize("inputs", [
+    _inputs(2.3, mocap_age_s=0.5),                  # stale mocap
+    _inputs(2.3, nav=_nav(battery_pct=5.0)),         # the battery floor
+    _inputs(2.3, nav=_nav(state_bits=1 << 22)),      # a fault bit
+    _inputs(2.3, nav=_nav(roll_deg=60.0)),           # tilted beyond the cap
+    _inputs(2.3, position=(100.0, 0.0, 1.0)),        # outside the geofence
+    _inputs(2.3, position=(math.nan, 0.0, 1.0)),     # not finite
+    _inputs(np.float64(2.3)),                        # a numpy time: Python's ages
+])
+def test_a_tick_not_nominal_before_the_solve_writes_nothing(inputs):
+    tick, _ = _flown("whole")
+    before = _carried(tick)
+    assert tick.control_tick.nominal(inputs, 1.3, tick.trajectory) is None
+    assert _carried(tick) == before
+
+
+def test_the_kernel_answers_not_nominal_before_any_write():
+    tick, _ = _flown("whole")
+    ct = tick.control_tick
+    args = list(ct.before.arguments(_inputs(2.3), 1.3, tick.trajectory))
+    args[4] = -math.inf  # the battery: below any floor
+    before = _carried(tick)
+    nmpc, control, after = tick.control.nmpc, tick.control, ct.after
+    _, mem, iprm = nmpc._step
+    offset, flags = after._offset
+    answer = control_tick_module.control_tick(
+        *args, mem, iprm, control._horizon, False, nmpc.divergence_residual, False, 0.0,
+        control.vz_lead_s, control._vz_max_mps, tick.supervisor.max_tilt_rad, 1.0,
+        *tick.supervision._scales, tick.delay._next, after._response_state, 1, offset, flags)
+    assert answer[0] == NOT_NOMINAL
+    assert _carried(tick) == before
+
+
+@pytest.mark.parametrize("build", [
+    lambda cfg: Tick(cfg, experiment_trajectory(cfg),
+                     wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
+    lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
+                     experiment_trajectory(cfg)),
+    lambda cfg: Tick(config("obstacle.yaml"), experiment_trajectory(config("obstacle.yaml"))),
+    lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
+])
+def test_a_solver_the_kernel_is_not_is_not_taken(build):
+    assert build(config("square.yaml")).control_tick is None
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
+def test_a_copied_tick_calls_the_kernel_on_its_own_stages(copier):
+    original, _ = _flown("whole")
+    clone = copier(original)
+    ct = clone.control_tick
+    assert ct.before is clone.before_solve and ct.after is clone.after_solve
+    assert ct.control is clone.control and ct.nmpc is clone.control.nmpc
+    assert ct.delay is clone.delay and ct._entry is None
+    state = _carried(original)
+    python, _ = _flown("python")
+    _same_ticks([_step(clone, k) for k in range(4, 6)], [_step(python, k) for k in range(4, 6)])
+    assert _carried(original) == state  # the original's stages untouched
+
+
+def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
+    tick, _ = _flown("whole")
+    ct = tick.control_tick
+    assert ct._entry is not None and ct._vetted[0] is tick.estimation._state
+    fresh = tick.control._x_solve.copy()  # a new array of the same kind
+    tick.control._x_solve = fresh
+    _step(tick, 4)
+    assert ct._entry is not None and ct._vetted[2] is fresh
