@@ -191,7 +191,7 @@ class AfterSolve:
         settings = self.settings()
         if settings is None:
             return None
-        gain, lead, vz_max, e, v, y = settings
+        gain, lead, vz_max, tilt_cap, e, v, y = settings
         zacc, phi, theta, rate = u.tolist()  # Python floats: ~2 ns each to numba, an array ~65
         # Control.command's
         vz_base = (float(self.supervision.vz_ref_mps) if self.control.vz_from_commands
@@ -203,8 +203,7 @@ class AfterSolve:
             has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
         offset, flags = self._offset
         code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
-            zacc, phi, theta, rate, vz_base, lead, vz_max, self.supervisor.max_tilt_rad, gain,
-            e, v, y, self.delay._sent, self.delay._next, self._response_state, has, t_nav,
+            zacc, phi, theta, rate, vz_base, lead, vz_max, tilt_cap, gain, e, v, y, self.delay._sent, self.delay._next, self._response_state, has, t_nav,
             roll_deg, pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
         if code:
             return None
@@ -213,22 +212,25 @@ class AfterSolve:
 
     def settings(self) -> tuple | None:
         """The numbers :func:`after_solve` computes with — the attitude gain, the ż lead and
-        limit, the mapping's scales — or None when a precondition of the compiled call does
-        not hold (the solver distrusted, or a number not a Python float)."""
+        limit, the supervisor's tilt cap, the mapping's scales — or None when a precondition
+        of the compiled call does not hold (the solver distrusted, or a number not a Python
+        float)."""
         if self.supervisor._solver_fallback:  # check_solution's other verdicts
             return None
         control, supervision = self.control, self.supervision
         gain, lead, vz_max = supervision.attitude_gain, control.vz_lead_s, control._vz_max_mps
+        tilt_cap = self.supervisor.max_tilt_rad
         e, v, y = supervision._scales
         # the numbers the stages compute with as Python floats, as a config gives them: with
         # numpy scalars the Python stages answer numpy scalars (float32 ones: float32
         # arithmetic, NEP 50) and Supervision takes its general path — their ticks, not the
-        # kernel's (an int would also cost the kernel a compile aloft)
+        # kernel's (an int would also cost the kernel a compile aloft); a float32 tilt cap
+        # would be compared in float32 by Python's clip
         if not (gain.__class__ is _FLOAT and lead.__class__ is _FLOAT
-                and vz_max.__class__ is _FLOAT and e.__class__ is _FLOAT
-                and v.__class__ is _FLOAT and y.__class__ is _FLOAT):
+                and vz_max.__class__ is _FLOAT and tilt_cap.__class__ is _FLOAT
+                and e.__class__ is _FLOAT and v.__class__ is _FLOAT and y.__class__ is _FLOAT):
             return None
-        return gain, lead, vz_max, e, v, y
+        return gain, lead, vz_max, tilt_cap, e, v, y
 
     def _records(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
         """What the Python stages keep and the tick hands on, from the kernel's answer."""

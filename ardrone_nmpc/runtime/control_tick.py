@@ -163,23 +163,27 @@ class ControlTick:
         control, supervision, after = self.control, self.supervision, self.after
         horizon = control._ref_horizon if self.offset is None else control._horizon
         from_commands = control.vz_from_commands
-        gain, lead, vz_max, e, v, y = settings
+        gain, lead, vz_max, tilt_cap, e, v, y = settings
         offset, flags = after._offset
-        args = (*before, mem, iprm, horizon, False, nmpc.divergence_residual, from_commands,
-                float(supervision.vz_ref_mps) if from_commands else 0.0, lead, vz_max,
-                after.supervisor.max_tilt_rad, gain, e, v, y, self.delay._next,
-                after._response_state, 1, offset, flags)
+        vz_last = float(supervision.vz_ref_mps) if from_commands else 0.0
+        ring_row, response = self.delay._next, after._response_state
         call, vet = self._entry, self._vetted
-        if not (call is not None and before[16] is vet[0] and before[19] is vet[1]
+        if (call is not None and before[16] is vet[0] and before[19] is vet[1]
                 and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
                 and before[26] is vet[5] and before[27] is vet[6] and mem is vet[7]
                 and iprm is vet[8] and horizon is vet[9]):
-            call = control_tick  # the dispatcher: it looks at every argument's type
+            answer = call(*before, mem, iprm, horizon, False, nmpc.divergence_residual,
+                          from_commands, vz_last, lead, vz_max, tilt_cap, gain, e, v, y,
+                          ring_row, response, 1, offset, flags)
+        else:  # the dispatcher (it looks at every argument's type), then the vetting
             self._entry = None
-        (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
-         rate, vz, roll, pitch, gaz, yaw, bits, fed) = call(*args)
-        if call is control_tick:
+            args = (*before, mem, iprm, horizon, False, nmpc.divergence_residual,
+                    from_commands, vz_last, lead, vz_max, tilt_cap, gain, e, v, y, ring_row,
+                    response, 1, offset, flags)
+            answer = control_tick(*args)
             self._vet(args)
+        (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
+         rate, vz, roll, pitch, gaz, yaw, bits, fed) = answer
         if code == NOT_NOMINAL:
             return None
         x = self.before.estimation._x

@@ -201,6 +201,7 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
     lambda tick: setattr(tick.supervisor, "_solver_fallback", True),  # distrusted solver
     lambda tick: setattr(tick.supervision, "attitude_gain", np.float32(0.9)),
     lambda tick: setattr(tick.control, "vz_lead_s", np.float64(0.065)),
+    lambda tick: setattr(tick.supervisor, "max_tilt_rad", np.float32(0.35)),  # float32 clip
     lambda tick: setattr(tick.supervisor, "_latched", "land"),
 ])
 def test_a_precondition_not_held_leaves_the_tick_with_nothing_written(setup):
