@@ -25,12 +25,14 @@ from pathlib import Path
 #: whose functions or constants kernels use (paths relative to the package).
 KERNEL_SOURCES = (
     "model.py", "core/numerics.py", "core/types.py", "core/angles.py", "core/angle_kernels.py",
-    "core/sorted_search.py", "core/python_floats.py", "control/gmres.py", "control/obstacles.py",
+    "core/sorted_search.py", "core/python_floats.py", "core/monotonic.py", "control/gmres.py",
+    "control/obstacles.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "runs/path_kernels.py",
     "reference/kernels.py", "estimation/response_kernels.py", "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
+    "runtime/control_tick.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None
