@@ -147,9 +147,10 @@ class ControlTick:
 
     def nominal(self, inputs, t_exp_s: float, traj):
         """The nominal tick's feedback ages, estimate, :class:`Solution` and what the stages
-        after the solve hand on (``(sent, events)``; None: those are Python's to take, from
-        the solution on); None — nothing done — when the tick is not nominal before the
-        solve, or a precondition of the call does not hold."""
+        after the solve hand on: ``(sent, events)``, or False when those are Python's to take
+        from the solution on (their compiled call would decline it too). Nothing done: None
+        when a precondition of the call does not hold, False when the stages before the
+        solve found the tick not nominal (their compiled call would decline it too)."""
         nmpc = self.nmpc
         if nmpc._t0_s is None or nmpc._ramped:  # (the first solve initialises: Python's)
             return None
@@ -185,14 +186,14 @@ class ControlTick:
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, bits, fed) = answer
         if code == NOT_NOMINAL:
-            return None
+            return False
         x = self.before.estimation._x
         x_solve = control._x_solve if before[21] else x
         if code:  # SOLVED: the solver's answer judged as solve_prepared judges it
             result = nmpc.judged(t_exp_s, x_solve, horizon, flag, solve_us, False)
             return ((mocap_ms, nav_ms), x,
                     control.solution(control._ref_now, x_solve, result, control._ref_horizon),
-                    None)
+                    False)
         sent, events = after._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz,
                                       yaw, bits, fed)
         u = sent.u  # the input solved and sent (read-only): the result's own

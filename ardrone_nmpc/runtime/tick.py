@@ -174,14 +174,15 @@ class Tick:
         if self.obstacles is not None and inputs.target is not None:
             self.obstacles.update(inputs.target)
         sup = self.supervisor
-        # the nominal tick: the controller in one compiled call (None: not nominal)
+        # the nominal tick: the controller in one compiled call (None, False: not nominal;
+        # False: the two calls around the solve would not take it either)
         whole = (self.control_tick.nominal(inputs, t_exp_s, traj)
                  if self.control_tick is not None else None)
-        if whole is not None:
-            ages_ms, x, solution, done = whole
+        if whole:
+            ages_ms, x, solution, done = whole  # (done False: the stages after, in Python)
             decision = NOMINAL
         else:
-            before = self.before_solve
+            before = self.before_solve if whole is None else None
             # the stages up to the solve in one compiled call (None: not nominal)
             done = before.nominal(inputs, t_exp_s, traj) if before is not None else None
             if done is not None:
@@ -191,16 +192,16 @@ class Tick:
                 ages_ms, decision, x, solution = self._before(inputs, t_exp_s, traj)
             done = None
         cmd = None
-        if done is None and solution is not None:  # the verdict was CONTROL: it solved
-            if solution.result is not None and self.after_solve is not None:
+        if not done and solution is not None:  # the verdict was CONTROL: it solved
+            if done is None and solution.result is not None and self.after_solve is not None:
                 # the nominal tick: the stages below in one compiled call (None: not nominal)
                 done = self.after_solve.nominal(inputs, x, solution)
-            if done is None:
+            if not done:
                 if solution.result is not None:  # the NMPC's answer is judged; P's is not
                     decision = sup.check_solution(solution.ok, solution.u_flown)
                 cmd = self.control.command(decision.action, solution, x,
                                            self.supervision.vz_ref_mps)
-        sent, adapted = self._after(inputs, decision, x, solution, cmd) if done is None else done
+        sent, adapted = done if done else self._after(inputs, decision, x, solution, cmd)
         label = sup.record(sent.decision, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         events = sup.take_events()  # a list of its own: extended, not copied

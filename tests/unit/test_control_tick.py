@@ -69,7 +69,7 @@ def _fly(cfg, path: str, monkeypatch) -> tuple:
 
     def new_nominal(self, *args):
         whole = nominal(self, *args)
-        answers["none" if whole is None else "solved" if whole[3] is None else "done"] += 1
+        answers["none" if not whole else "solved" if not whole[3] else "done"] += 1
         return whole
 
     def new_step(self, *args, **kwargs):
@@ -186,11 +186,14 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
     (whole, _), (python, _) = _flown("whole"), _flown("python")
     monkeypatch.setattr(control_tick_module, "control_tick", spy)
     whole.control_tick._entry = None  # through the module's kernel: the spy
+    asked = []  # the after-stages' own compiled call: not asked after a SOLVED (it would
+    # decline), asked on the ticks the whole call does not take (a solver recovered afresh)
+    whole.after_solve.nominal = lambda *args: asked.append(args)
     rows, python_rows = [], []
     for tick, out in ((whole, rows), (python, python_rows)):
         setup(tick)
         out += [_step(tick, k) for k in range(4, 8)]
-    assert codes and set(codes) == {SOLVED}
+    assert codes and set(codes) == {SOLVED} and len(codes) + len(asked) == 4
     _same_ticks(rows, python_rows)
     assert _carried(whole) == _carried(python)
 
@@ -212,20 +215,24 @@ def test_a_precondition_not_held_leaves_the_tick_with_nothing_written(setup):
     assert _carried(tick) == before
 
 
-@pytest.mark.parametrize("inputs", [
-    _inputs(2.3, mocap_age_s=0.5),                  # stale mocap
-    _inputs(2.3, nav=_nav(battery_pct=5.0)),         # the battery floor
-    _inputs(2.3, nav=_nav(state_bits=1 << 22)),      # a fault bit
-    _inputs(2.3, nav=_nav(roll_deg=60.0)),           # tilted beyond the cap
-    _inputs(2.3, position=(100.0, 0.0, 1.0)),        # outside the geofence
-    _inputs(2.3, position=(math.nan, 0.0, 1.0)),     # not finite
-    _inputs(np.float64(2.3)),                        # a numpy time: Python's ages
+@pytest.mark.parametrize("inputs, answer", [
+    (_inputs(2.3, mocap_age_s=0.5), False),                  # stale mocap
+    (_inputs(2.3, nav=_nav(battery_pct=5.0)), False),         # the battery floor
+    (_inputs(2.3, nav=_nav(state_bits=1 << 22)), False),      # a fault bit
+    (_inputs(2.3, nav=_nav(roll_deg=60.0)), False),           # tilted beyond the cap
+    (_inputs(2.3, position=(100.0, 0.0, 1.0)), False),        # outside the geofence
+    (_inputs(2.3, position=(math.nan, 0.0, 1.0)), False),     # not finite
+    (_inputs(np.float64(2.3)), None),                  # a numpy time: Python's ages (no call)
 ])
-def test_a_tick_not_nominal_before_the_solve_writes_nothing(inputs):
+def test_a_tick_not_nominal_before_the_solve_writes_nothing(inputs, answer):
+    """False: the kernel declined (and before_solve's call would: the tick skips it); None:
+    the Python side did, before any call."""
     tick, _ = _flown("whole")
     before = _carried(tick)
-    assert tick.control_tick.nominal(inputs, 1.3, tick.trajectory) is None
+    assert tick.control_tick.nominal(inputs, 1.3, tick.trajectory) is answer
     assert _carried(tick) == before
+    if answer is False:
+        assert tick.before_solve.nominal(inputs, 1.3, tick.trajectory) is None
 
 
 def test_the_kernel_answers_not_nominal_before_any_write():
