@@ -110,7 +110,7 @@ def run_lockstep(cfg, *, recorder=None, seed: int | None = None,
     terminating signal ends it at the next tick (:func:`~ardrone_nmpc.runtime.signals.
     polled_signals`: raised from its handler, it could land inside a compiled call and be lost).
     """
-    start_if_cold(cfg)  # the drone's kernels compiled by a child while this compiles the solver
+    start_if_cold()  # the drone's kernels compiled by a child while this compiles the solver
     with polled_signals() as check_signals:
         return _fly(cfg, recorder, seed, progress, plant, check_signals, trajectory)
 

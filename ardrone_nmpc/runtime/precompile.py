@@ -3,8 +3,7 @@ into numba's on-disk cache by a background child while the runner compiles the s
 
 On an empty cache a flight compiles everything in one process, serially (~13 s on 2 cores):
 the solver first (``Tick``'s warm-up), then the estimation stage's step, the attitude
-estimate's ``feed`` and the NMPC's nominal tick after the solve (``after_solve``) — against a
-waypoint reference also before it (``nmpc_inputs``, ``before_solve``) —, then the
+estimate's ``feed`` and the NMPC's nominal tick after the solve (``after_solve``), then the
 simulated drone's kernels (``lockstep_run``, ``flying_advance``, ``airframe_rk4`` …), which
 are needed only after the take-off. :func:`start_if_cold` starts ``python -m
 ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child compiles
@@ -31,8 +30,6 @@ ENV_SWITCH = "ARDRONE_NMPC_PRECOMPILE"
 #: How long :func:`join_child` waits before it stops a child that hangs (its own compile on a
 #: busy machine takes ~10 s)
 JOIN_TIMEOUT_S = 120.0
-#: The child's argument: compile the waypoint tick's kernels before the solve too
-BEFORE_SOLVE_ARG = "before_solve"
 _started = False
 _child: subprocess.Popen | None = None
 
@@ -52,11 +49,9 @@ def cache_is_cold() -> bool:
         return True
 
 
-def start_if_cold(cfg=None) -> subprocess.Popen | None:
+def start_if_cold() -> subprocess.Popen | None:
     """Start the background compile (module docstring) when the cache is cold, once per
-    process; returns the child (None if none started). ``cfg``: the flight's configuration,
-    for the child to compile its waypoint tick's kernels too (:func:`takes_before_solve`).
-    Any failure is silent."""
+    process; returns the child (None if none started). Any failure is silent."""
     global _started, _child
     if _started or os.environ.get(ENV_SWITCH, "1") == "0":
         return None
@@ -69,33 +64,13 @@ def start_if_cold(cfg=None) -> subprocess.Popen | None:
         # compiles these very sources
         root = str(Path(__file__).resolve().parents[2])
         code = (f"import sys; sys.path.insert(0, {root!r}); "
-                f"from {__name__} import main; sys.exit(main(sys.argv[1:]))")
-        args = [BEFORE_SOLVE_ARG] if takes_before_solve(cfg) else []
-        _child = subprocess.Popen([sys.executable, "-c", code, *args],
+                f"from {__name__} import main; sys.exit(main())")
+        _child = subprocess.Popen([sys.executable, "-c", code],
                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                   stderr=subprocess.DEVNULL, env={**os.environ, ENV_SWITCH: "0"})
         return _child
     except Exception:  # best-effort: the runner compiles what it needs itself
         return None
-
-
-def takes_before_solve(cfg) -> bool:
-    """Whether a flight of ``cfg`` likely takes the nominal tick's compiled call before the
-    solve (``runtime/before_solve.BeforeSolve.takes``: an NMPC, the Kalman ż filter, a
-    waypoint reference) — read from the configuration before the tick exists. A wrong guess
-    costs time only: a kernel compiled that the flight never calls, or compiled by the runner
-    itself."""
-    if cfg is None:
-        return False
-    try:
-        from ardrone_nmpc.reference.trajectories import Waypoints, make_trajectory
-
-        return (cfg.controller.kind == "nmpc" and cfg.estimator.kind == "kalman"
-                and cfg.reference.kind != "follow"
-                and isinstance(make_trajectory(cfg.reference, duration_s=cfg.duration_s),
-                               Waypoints))
-    except Exception:  # (a bad reference: the runner says so itself)
-        return False
 
 
 def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
@@ -112,29 +87,22 @@ def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
         child.wait()
 
 
-def compile_kernels(*, before_solve: bool = False) -> None:
-    """Compile (or load) the estimation stage's and the attitude estimate's kernels, the NMPC's
-    nominal tick after the solve and — ``before_solve`` — before it against a waypoint
-    reference, then the simulated drone's: connect, take off, fly a second holding a small
-    command — the calls a lockstep flight makes."""
+def compile_kernels() -> None:
+    """Compile (or load) the estimation stage's and the attitude estimate's kernels, then the
+    simulated drone's: connect, take off, fly a second holding a small command — the calls a
+    lockstep flight makes."""
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
     from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
-    from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
     from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
     from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
-    # the runner needs these first, in its order: right after the solver's compile (the
-    # estimate's: every flight with the default ż filter)
+    # the runner needs these first: right after the solver's compile (the estimate's: every
+    # flight with the default ż filter; nmpc_inputs only a waypoint reference's, left to it)
     warm_up_tick_kernels(estimate=True, nmpc=False)
     warm_up_kernels()
     warm_up_after_solve()  # the NMPC's nominal tick (runtime/after_solve): feed is cached now
-    if before_solve:  # a waypoint reference's nominal tick before the solve, its callee
-        # nmpc_inputs first: each kernel with the one signature the runner gives it (no two
-        # writers add different signatures of one kernel)
-        warm_up_tick_kernels(estimate=False, nmpc=True)
-        warm_up_before_solve()
     cfg = config_from_dict({"name": "precompile", "duration_s": 1.0})
     drone = LockstepDrone(cfg)
     period = cfg.loop.period_s
@@ -157,11 +125,11 @@ def compile_kernels(*, before_solve: bool = False) -> None:
         drone.truth_cells()
 
 
-def main(argv: list[str] | None = None) -> int:
-    """The child's entry point (``python -m ardrone_nmpc.runtime.precompile [before_solve]``)."""
-    compile_kernels(before_solve=BEFORE_SOLVE_ARG in (argv or ()))
+def main() -> int:
+    """The child's entry point (``python -m ardrone_nmpc.runtime.precompile``)."""
+    compile_kernels()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

@@ -13,11 +13,8 @@ from pathlib import Path
 _COLD = "from ardrone_nmpc.runtime.precompile import cache_is_cold; print(cache_is_cold())"
 _START = ("from ardrone_nmpc.runtime.precompile import start_if_cold; "
           "print(start_if_cold() is not None)")
-# a square's flight: the child compiles its tick before the solve too
-_START_AND_JOIN = ("from ardrone_nmpc.config.schema import config_from_dict\n"
-                   "from ardrone_nmpc.runtime import precompile\n"
-                   "cfg = config_from_dict({'name': 's', 'reference': {'kind': 'square'}})\n"
-                   "child = precompile.start_if_cold(cfg)\n"
+_START_AND_JOIN = ("from ardrone_nmpc.runtime import precompile\n"
+                   "child = precompile.start_if_cold()\n"
                    "precompile.join_child(timeout_s=600.0)\n"
                    "print('none' if child is None else f'started {child.returncode}')")
 # a child that outlives the wait is stopped (a Python start-up alone outlasts a zero wait)
@@ -30,8 +27,6 @@ EXPECTED = ("sensor_step.lockstep_run", "plant_step.flying_advance", "plant_step
             "airframe.airframe_rk4",
             "response_kernels.feed", "response_kernels.fit_grid",
             "response_kernels.fit_estimate")
-#: and those of a waypoint flight's tick before the solve
-WAYPOINT_EXPECTED = ("tick_kernels.nmpc_inputs", "before_solve.before_solve")
 
 
 def _python(code: str, cache: Path, **env) -> str:
@@ -53,7 +48,7 @@ def test_a_cold_cache_starts_the_child_and_it_fills_the_cache(tmp_path):
     # the switch on (conftest turns it off for every other test): a child starts, and once it
     # has ended (waited for here) the cache holds the drone's and the attitude fit's kernels
     assert _python(_START_AND_JOIN, cache, ARDRONE_NMPC_PRECOMPILE="1") == "started 0"
-    assert set(EXPECTED + WAYPOINT_EXPECTED) <= _cached(cache), sorted(_cached(cache))
+    assert set(EXPECTED) <= _cached(cache), sorted(_cached(cache))
     assert _python(_COLD, cache) == "False"
     assert _python(_START, cache, ARDRONE_NMPC_PRECOMPILE="1") == "False"  # warm: no child
 
@@ -77,60 +72,3 @@ def test_a_child_that_outlives_the_wait_is_stopped(tmp_path):
     cache = tmp_path / "cache"
     cache.mkdir()
     assert _python(_START_AND_STOP, cache, ARDRONE_NMPC_PRECOMPILE="1") == "stopped -9"
-
-
-def test_the_child_compiles_the_waypoint_tick_before_the_solve_for_a_flight_that_takes_it(
-        monkeypatch):
-    """A flight whose nominal tick before the solve is compiled (an NMPC, the Kalman filter,
-    a waypoint reference) has the child compile it, its callee nmpc_inputs first; any other
-    flight's child leaves both to the runner (they would only lengthen its wait)."""
-    from ardrone_nmpc.config.io import load_config
-    from ardrone_nmpc.runtime import before_solve, precompile, tick_kernels
-
-    root = Path(__file__).resolve().parents[2] / "configs"
-    square, hover = load_config(root / "square.yaml"), load_config(root / "hover.yaml")
-    p_square = load_config(root / "square.yaml", ["controller.kind=p"])
-    luenberger = load_config(root / "square.yaml", ["estimator.kind=luenberger"])
-    assert precompile.takes_before_solve(square)
-    for cfg in (hover, p_square, luenberger, None):
-        assert not precompile.takes_before_solve(cfg)
-    # the child's argument
-    started = []
-    monkeypatch.setenv(precompile.ENV_SWITCH, "1")
-    monkeypatch.setattr(precompile, "cache_is_cold", lambda: True)
-    monkeypatch.setattr(precompile.subprocess, "Popen", lambda argv, **kw: started.append(argv))
-    for cfg in (square, hover):
-        monkeypatch.setattr(precompile, "_started", False)
-        precompile.start_if_cold(cfg)
-    assert started[0][-1] == precompile.BEFORE_SOLVE_ARG
-    assert precompile.BEFORE_SOLVE_ARG not in started[1]
-    # what the child compiles for it, in the runner's order, before the drone's kernels
-    calls = []
-
-    class Stop(Exception):
-        pass
-
-    def drone(cfg):
-        calls.append("drone")
-        raise Stop
-
-    monkeypatch.setattr(tick_kernels, "warm_up_kernels",
-                        lambda **which: calls.append(("tick", which)))
-    monkeypatch.setattr(before_solve, "warm_up_kernels", lambda: calls.append("before_solve"))
-    monkeypatch.setattr("ardrone_nmpc.runtime.after_solve.warm_up_kernels",
-                        lambda: calls.append("after_solve"))
-    monkeypatch.setattr("ardrone_nmpc.estimation.attitude_response.warm_up_kernels",
-                        lambda: calls.append("response"))
-    monkeypatch.setattr("ardrone_nmpc.sim.lockstep_drone.LockstepDrone", drone)
-    for argv, expected in (([precompile.BEFORE_SOLVE_ARG],
-                            [("tick", {"estimate": True, "nmpc": False}), "response",
-                             "after_solve", ("tick", {"estimate": False, "nmpc": True}),
-                             "before_solve", "drone"]),
-                           ([], [("tick", {"estimate": True, "nmpc": False}), "response",
-                                 "after_solve", "drone"])):
-        calls.clear()
-        try:
-            precompile.main(argv)
-        except Stop:
-            pass
-        assert calls == expected, argv
