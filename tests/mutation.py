@@ -153,7 +153,7 @@ HAND_MUTANTS: tuple[HandMutant, ...] = (
                "return _created_ns(run) + round(min(first, 0.0) * 1e9)", _EXPORT),
     HandMutant("export: an event's time ignored", "experiments/export.py",
                "float(t) if isinstance(t, (int, float)) else math.nan,", "math.nan,", _EXPORT),
-    HandMutant("export: an older run's event t_exp_s ignored", "runs/rundir.py",
+    HandMutant("export: an older run's event t_exp_s ignored", "runs/run_reading.py",
                "t_s = float(t_exp) if isinstance(t_exp, (int, float)) else wall - offset",
                "t_s = wall - offset", _EXPORT),
     HandMutant("export: the yaw quaternion's sign", "runs/channels.py",

@@ -37,6 +37,7 @@ KERNEL_SOURCES = (
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None
 _preloaded: set[int] = set()  # entry points whose callees this process has loaded
+_warmed: set[int] = set()  # the kernels a warm-up has run in this process (first_warm_up)
 
 
 def sources_digest() -> str:
@@ -94,6 +95,23 @@ def load_cached_callees(kernel) -> None:
     for callee in _callees_post_order(kernel, set()):
         if callee.targetoptions.get("inline") != "always":  # an inlined one has no symbol
             _load_cached(callee)
+
+
+def first_warm_up(kernel) -> bool:
+    """A module's ``warm_up_kernels`` preamble: True the first time in this process a warm-up
+    asks for ``kernel`` — its callees then loaded from the cache (:func:`load_cached_callees`)
+    for the warm-up to call it once, loading (or compiling) it before the first tick aloft —,
+    False after (warmed already)."""
+    if id(kernel) in _warmed:
+        return False
+    _warmed.add(id(kernel))
+    load_cached_callees(kernel)
+    return True
+
+
+def warmed(kernel) -> bool:
+    """A warm-up has run ``kernel`` in this process (:func:`first_warm_up`)."""
+    return id(kernel) in _warmed
 
 
 def _callees_post_order(kernel, seen: set):

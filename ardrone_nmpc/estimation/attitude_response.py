@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ardrone_nmpc.core.entry_points import entry_point
+from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.estimation import response_kernels as rk
 
 __all__ = ["AttitudeEstimate", "AttitudeResponseEstimator", "CONFIDENT_DELAY_CONTRAST",
@@ -163,25 +163,27 @@ class AttitudeEstimate:
 
 # bound once: the tick feeds one a period
 _feed, _CMD_SEND, _TIMES_ROUNDED = rk.feed, rk.CMD_SEND, rk.TIMES_ROUNDED
-_fit_estimate = rk.fit_estimate
 
 
 def _feed_dispatched(state: np.ndarray, has: bool, sample_t_s, roll_deg, pitch_deg,
                      cmd_kind: int, cmd_t_s, roll_frac, pitch_frac) -> int:
     """``response_kernels.feed`` through numba's dispatcher, every number made a float first
     (its one compiled signature) — until the estimator binds the signature's compiled entry
-    point (:func:`_feed_entry`)."""
+    point (:data:`_FEED`)."""
     return _feed(state, has, float(sample_t_s), float(roll_deg), float(pitch_deg), cmd_kind,
                  float(cmd_t_s), float(roll_frac), float(pitch_frac))
 
 
-def _feed_entry(state: np.ndarray):
-    """``response_kernels.feed``'s compiled entry point for ``state`` (one :func:`~.
-    response_kernels.new_state` built: float64, 1-D, C-contiguous, aligned, writeable) and the
-    numbers :func:`_feed_dispatched` makes floats, once the dispatcher has it (else None): it
-    skips the dispatcher's look-up of nine arguments' types (~0.1 µs) and makes each number
-    a float itself (numba unboxes a float64 by ``PyNumber_Float``, what ``float`` does)."""
-    return entry_point(_feed, state, True, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)
+#: ``response_kernels.feed``'s call on an estimator's own state (one :func:`~.response_kernels.
+#: new_state` built: float64, 1-D, C-contiguous, aligned, writeable) and the numbers
+#: :func:`_feed_dispatched` makes floats: its compiled entry point once the dispatcher has it
+#: (core/entry_points.VettedCall.bind), which skips the dispatcher's look-up of nine
+#: arguments' types (~0.1 µs) and makes each number a float itself (numba unboxes a float64
+#: by ``PyNumber_Float``, what ``float`` does)
+_FEED = VettedCall(_feed, ArrayKind(1), True, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0,
+                   dispatch=_feed_dispatched)
+#: ``response_kernels.fit_estimate``'s call on an estimator's state and fit buffer
+_FIT = VettedCall(rk.fit_estimate, ArrayKind(1), ArrayKind(1))
 
 
 NO_ESTIMATE = AttitudeEstimate(math.nan, math.inf, (math.nan, math.nan), (math.inf, math.inf),
@@ -243,10 +245,10 @@ class AttitudeResponseEstimator:
         self._sy, self._syy = st[rk.S_SY:rk.S_SY + 2], st[rk.S_SYY:rk.S_SYY + 2]
         self._res = st[rk.S_RES:rk.S_RES + 3]  # Σr², Σr·r_prev, and r_prev's weight
         self._answer = out[out.size - rk.ESTIMATE_ANSWER:]  # fit_estimate's (its estimate)
-        # the compiled steps: their entry points once known for this kind of state, else the
-        # dispatchers (feed and _fit bind the entry points after their first calls)
-        self._step = _feed_entry(st) or _feed_dispatched
-        self._fit_step = entry_point(_fit_estimate, st, out) or _fit_estimate
+        # the compiled steps: their entry points once known for these buffers, else the
+        # dispatchers until their first calls (core/entry_points.VettedCall.bind)
+        _FEED.bind(self, "_step", st)
+        _FIT.bind(self, "_fit_step", st, out)
 
     def __getstate__(self) -> dict:
         """Without the compiled steps (an entry point does not pickle): bound again."""
@@ -276,7 +278,7 @@ class AttitudeResponseEstimator:
         # the kernel rounds each time to the microsecond where it reads it, or answers −1
         # (nothing done) for Python's round to do it (a time below 1 µs: a flight's start)
         has = sample_t_s is not None
-        step = self._step
+        step = self._step  # (the same call for both: a first call rebinds _step)
         code = step(self._state, has, sample_t_s if has else 0.0, roll_deg, pitch_deg,
                     cmd_kind, cmd_t_s, roll_frac, pitch_frac)
         if code < 0:
@@ -284,8 +286,6 @@ class AttitudeResponseEstimator:
                         pitch_deg, cmd_kind + _TIMES_ROUNDED,
                         _microseconds(cmd_t_s) if cmd_kind == _CMD_SEND else 0.0, roll_frac,
                         pitch_frac)
-        elif step is _feed_dispatched:
-            self._step = _feed_entry(self._state) or step  # known now
         if code:  # a new sample: the estimate is fitted when it is read
             self._estimate = None
             return True
@@ -318,11 +318,8 @@ class AttitudeResponseEstimator:
         (``response_kernels.fit_estimate``; the module docstring's fit); the best's model is
         the one whose residual the compiled step tracks from now on."""
         state, out = self._state, self._fit_out
-        step = self._fit_step
-        if step(state, out) < 0:
+        if self._fit_step(state, out) < 0:
             return NO_ESTIMATE
-        if step is _fit_estimate:  # the dispatcher: its entry point, now compiled
-            self._fit_step = entry_point(step, state, out) or step
         (delay, delay_std, g0, g1, s0, s1, lag, r2, n, contrast, gain_mean, gain_mean_std,
          made) = self._answer.tolist()
         return AttitudeEstimate._fitted(delay, delay_std, (g0, g1), (s0, s1), lag, r2, n,

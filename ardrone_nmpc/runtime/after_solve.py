@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.mapping import UNSATURATED, PcmdCommand
-from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import (INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ,
                                      AttitudeCommand)
@@ -252,16 +252,11 @@ class AfterSolve:
         return sent, response.refit(t_s)
 
 
-_warm: list[bool] = []  # loaded (or compiled) in this process
-
-
 def warm_up_kernels() -> None:
     """Load (or compile) :func:`after_solve` now — once per process —, its callees from the
-    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft."""
-    if _warm:
+    cache first (``core/kernel_cache.first_warm_up``), not on the first tick aloft."""
+    if not first_warm_up(after_solve):
         return
-    _warm.append(True)
-    load_cached_callees(after_solve)
     x = np.zeros(7)
     ring = np.zeros((2, INPUT_DIM))
     state = new_state(np.zeros(2), np.ones(1), 4, 0.2, 30.0, 15)

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.entry_points import entry_point, plain
-from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_square
 from ardrone_nmpc.core.types import STATE_DIM, FlightMode
@@ -34,7 +34,7 @@ from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
 from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, kalman_estimate,
-                                               nmpc_inputs, nmpc_work)
+                                               nmpc_inputs, sample_waypoint_work)
 from ardrone_nmpc.safety import ALARM_BITS, Supervisor
 
 __all__ = ["BeforeSolve", "NOT_NOMINAL", "before_solve", "warm_up_kernels"]
@@ -261,20 +261,13 @@ class BeforeSolve:
 _ARRAYS = ((16, 1), (17, 1), (19, 2), (23, 1), (24, 1), (25, 2), (26, 1), (27, 2))
 _NUMBERS = tuple(0 if i in (3, 20, 21) else False if i == 13 else 0.0 for i in range(28))
 
-_warm: list[bool] = []  # loaded (or compiled) in this process
-
 
 def warm_up_kernels() -> None:
     """Load (or compile) :func:`before_solve` now — once per process —, its callees from the
-    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft."""
-    if _warm:
+    cache first (``core/kernel_cache.first_warm_up``), not on the first tick aloft."""
+    if not first_warm_up(before_solve):
         return
-    _warm.append(True)
-    load_cached_callees(before_solve)
-    x = np.zeros(STATE_DIM)
-    n = 3  # a two-waypoint trajectory, one stage
-    work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)), np.zeros(2),
-                                      np.ones(1), np.zeros((1, 3)), x))
+    n, work, rows = sample_waypoint_work()
     limits = np.zeros(L_SIZE)
     limits[L_NAVDATA_LAND_MS] = limits[L_MOCAP_NOMINAL_MS] = 1.0
     limits[L_FENCE_LO:L_FENCE_LO + 3] = -1.0

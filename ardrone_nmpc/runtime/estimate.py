@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ardrone_nmpc.core.entry_points import entry_point
+from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.core.types import MocapPose, NavdataSample
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
@@ -30,9 +30,9 @@ assert ESTIMATED == 0  # Estimation.update tests kalman_estimate's answer for tr
 _NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the general spelling)
 
 
-def _kalman_entry(state: np.ndarray):
-    """``kalman_estimate``'s compiled entry point for ``state`` and float numbers, or None."""
-    return entry_point(kalman_estimate, state, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+#: ``kalman_estimate``'s call on an estimation's own state and float numbers (the flags: bools)
+_KALMAN = VettedCall(kalman_estimate, ArrayKind(1), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0,
+                     0.0)
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -76,23 +76,14 @@ class Estimation:
     def _bind_state(self) -> None:
         """The estimate as a view of the compiled step's state (it writes it there), and the
         step's call: ``kalman_estimate``'s compiled entry point for this state once known
-        (:meth:`_kalman_first`), which skips the dispatcher's look-up of ten arguments' types.
-        The state is a plain float64 vector (core/entry_points checks it); of the numbers,
+        (core/entry_points.VettedCall.bind: the dispatcher on the first call if not yet), which
+        skips the dispatcher's look-up of ten arguments' types. The state is a plain float64
+        vector (VettedCall checks it); of the numbers,
         the flags are literals and each float parameter is only made a float64 — by
         ``float()`` in the entry point's unboxing, by the dispatcher's specialisation for
         another number's type in the kernel, the same value either way."""
         self._x = self._state[E_X:E_X + STATE_DIM]
-        self._kalman = _kalman_entry(self._state) or self._kalman_first
-
-    def _kalman_first(self, *args) -> int:
-        """``kalman_estimate`` through the dispatcher (which compiles or loads it for these
-        arguments), then its entry point for floats bound for the next calls once known (the
-        numbers may have been of another type: asked again next call)."""
-        answer = kalman_estimate(*args)
-        entry = _kalman_entry(self._state)
-        if entry is not None:
-            self._kalman = entry
-        return answer
+        _KALMAN.bind(self, "_kalman", self._state)
 
     def __getstate__(self) -> dict:
         """Without what :meth:`_bind_state` makes (an entry point does not pickle)."""

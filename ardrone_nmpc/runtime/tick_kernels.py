@@ -20,13 +20,14 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.kernels import rollout_rk4_into
-from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
 __all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
-           "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views", "warm_up_kernels"]
+           "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views",
+           "sample_waypoint_work", "warm_up_kernels"]
 
 
 #: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
@@ -207,28 +208,30 @@ def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: flo
     return ESTIMATED
 
 
-_warm: set[str] = set()  # the kernels this process has loaded (or compiled)
+def sample_waypoint_work() -> tuple[int, np.ndarray, np.ndarray]:
+    """A sample waypoint flight's :func:`nmpc_work`: ``(n, work, rows)`` for a two-waypoint
+    trajectory and one stage (``n`` = 3 times) — what a warm-up calls the kernels taking
+    ``work`` and ``rows`` with, once, to load (or compile) them."""
+    n = 3
+    work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)), np.zeros(2),
+                                      np.ones(1), np.zeros((1, 3)), np.zeros(STATE_DIM)))
+    return n, work, rows
 
 
 def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
     """Load (or compile) :func:`kalman_estimate` and :func:`nmpc_inputs` now — once per
     process — not on the first tick aloft (``Tick``: each only if its flight uses it, a
     compile costs a cold start ~0.2 s and ~1 s of CPU; ``runtime/precompile.py`` compiles the
-    estimate's in the background). :func:`nmpc_inputs`' callees are loaded from the cache
-    first (``core/kernel_cache.load_cached_callees``: the rollout's own machine code, cached
-    or compiled alike)."""
-    x = np.zeros(7)
-    if estimate and "estimate" not in _warm:
+    estimate's in the background). Their callees are loaded from the cache first
+    (``core/kernel_cache.first_warm_up``: the rollout's own machine code, cached or compiled
+    alike)."""
+    if estimate and first_warm_up(kalman_estimate):
         kalman_estimate(np.zeros(E_SIZE), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
-        _warm.add("estimate")
-    if nmpc and "nmpc" not in _warm:
-        load_cached_callees(nmpc_inputs)
-        n = 3  # a two-waypoint trajectory, one stage
-        work, rows = nmpc_work(0.065, n, (np.array([0.0, 1.0]), np.zeros((2, 3)),
-                                          np.zeros(2), np.ones(1), np.zeros((1, 3)), x))
-        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, np.zeros(7), 0.0, 0.0, np.zeros(4),
-                    np.zeros((n, 7)), work, rows)
-        _warm.add("nmpc")
+    if nmpc and first_warm_up(nmpc_inputs):
+        n, work, rows = sample_waypoint_work()
+        x = np.zeros(STATE_DIM)
+        nmpc_inputs(x, np.zeros((2, 4)), 0, 1, np.zeros(STATE_DIM), 0.0, 0.0, np.zeros(4),
+                    np.zeros((n, STATE_DIM)), work, rows)
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

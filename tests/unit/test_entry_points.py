@@ -53,3 +53,123 @@ def test_the_entry_point_is_the_dispatchers_specialisation_for_those_kinds_only(
 
 def test_no_entry_point_without_a_dispatcher():
     assert entry_point(lambda a: a, np.zeros(2)) is None
+
+
+# ----------------------------------------------------------------------------- VettedCall
+def _counted(kernel):
+    """The dispatcher's calls counted (the entry point's are not)."""
+    calls = []
+
+    def dispatch(*args):
+        calls.append(args)
+        return kernel(*args)
+    return dispatch, calls
+
+
+def _weigh_call(weigh):
+    from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
+
+    dispatch, calls = _counted(weigh)
+    return VettedCall(weigh, ArrayKind(1), ArrayKind(2), 0.0, False, 0, dispatch=dispatch), calls
+
+
+def _vetted(n: int):
+    """A call of a new kernel vetted for two arrays of ``n`` rows (seen twice)."""
+    weigh = _kernel()
+    call, calls = _weigh_call(weigh)
+    a, b = np.arange(float(n)), np.ones((n, 2))
+    for _ in range(2):
+        call(a, b, 0.5, True, 3)
+    assert call.entry is not None and len(calls) == 1
+    return weigh, call, calls, a, b
+
+
+def test_a_vetted_call_takes_the_entry_point_while_the_same_plain_arrays_come():
+    weigh = _kernel()
+    call, calls = _weigh_call(weigh)
+    a, b = np.arange(4.0), np.ones((4, 2))
+    assert call(a, b, 0.5, True, 3) == weigh.py_func(a, b, 0.5, True, 3)
+    assert len(calls) == 1 and call.entry is None  # new arrays: the dispatcher, not vetted
+    assert call(a, b, 2.0, False, 1) == weigh.py_func(a, b, 2.0, False, 1)
+    assert len(calls) == 1 and call.entry is entry_point(weigh, a, b, 0.5, True, 3)
+    assert call.vetted[0] is a and call.vetted[1] is b
+    for k in range(3):  # the same arrays: the entry point, with any numbers
+        assert call(a, b, 0.25 * k, k % 2 == 0, k) == weigh.py_func(a, b, 0.25 * k, k % 2 == 0, k)
+    assert len(calls) == 1
+    # an equal copy is not the vetted array: the dispatcher (and vetted in its turn)
+    c = a.copy()
+    call(c, b, 0.5, True, 3)
+    assert len(calls) == 2 and call.vetted[0] is a
+    call(c, b, 0.5, True, 3)
+    assert len(calls) == 2 and call.vetted[0] is c
+    call(a, b, 0.5, True, 3)  # the first arrays are no longer the vetted ones
+    assert len(calls) == 3
+
+
+def test_a_vetted_call_leaves_arrays_of_other_kinds_to_the_dispatcher():
+    _, call, calls, a, b = _vetted(8)
+    vetted = call.entry
+    others = [(a.astype(np.float32), b), (a.reshape(2, 4), b), (a[::2], b),
+              (a, np.asfortranarray(b)), (a, b.reshape(16))]
+    for x, y in others:
+        n = len(calls)
+        for _ in range(3):  # seen again and again: never vetted, the dispatcher each call
+            try:
+                call(x, y, 0.5, True, 3)
+            except Exception:  # (numba's own refusal of a kind it cannot type: still its call)
+                pass
+        assert len(calls) == n + 3, (x.shape, x.dtype, y.shape)
+        assert call.entry is vetted and call.vetted[0] is a
+
+
+def test_a_vetted_call_copied_or_pickled_starts_afresh_with_the_same_kernel():
+    import copy
+    import pickle
+
+    weigh, call, calls, a, b = _vetted(4)
+    for twin in (copy.copy(call), copy.deepcopy(call)):
+        assert twin.entry is None and twin.vetted == () and twin.kernel is weigh
+        assert twin.dispatch is call.dispatch and twin.kinds == call.kinds
+        twin(a, b, 0.5, True, 3)
+        assert len(calls) == 2 and twin.entry is None  # a first sight: the dispatcher
+        del calls[1:]
+    from ardrone_nmpc.runtime.estimate import _KALMAN  # a module-level kernel pickles
+    twin = pickle.loads(pickle.dumps(_KALMAN))
+    assert twin.kernel is _KALMAN.kernel and twin.kinds == _KALMAN.kinds and twin.entry is None
+
+
+class _Owner:
+    pass
+
+
+def test_bind_sets_the_entry_point_or_a_first_call_that_binds_it(monkeypatch):
+    from ardrone_nmpc.core import entry_points
+
+    weigh = _kernel()
+    call, calls = _weigh_call(weigh)
+    a, b = np.arange(4.0), np.ones((4, 2))
+    owner = _Owner()
+    call.bind(owner, "step", a, b)  # nothing compiled: the first call
+    first = owner.step
+    assert first(a, b, 0.5, True, 3) == weigh.py_func(a, b, 0.5, True, 3) and len(calls) == 1
+    entry = entry_point(weigh, a, b, 0.5, True, 3)
+    assert entry is not None and owner.step is entry
+    # compiled already: the entry point at once
+    other = _Owner()
+    call.bind(other, "step", a, b)
+    assert other.step is entry
+    # a first call with other arrays than the owner's binds nothing
+    monkeypatch.setattr(entry_points, "entry_point", lambda *args: None)
+    call.bind(other, "step", a, b)
+    monkeypatch.undo()
+    first = other.step
+    first(a.copy(), b, 0.5, True, 3)
+    assert other.step is first and len(calls) == 2
+    # arrays not plain are never bound
+    strided = a[::2]
+    call.bind(other, "step", strided, b)
+    first = other.step
+    assert first is not entry
+    for _ in range(2):
+        assert first(strided, b, 0.5, True, 3) == weigh.py_func(strided, b, 0.5, True, 3)
+    assert other.step is first and len(calls) == 4

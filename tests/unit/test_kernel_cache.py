@@ -79,3 +79,21 @@ def test_an_edit_of_the_airframe_reaches_the_flying_plants_cached_advance(tmp_pa
     airframe.write_text(text.replace(wind_term, "out[5] = gaz * vz_gain - vz * inv_tau_vz"),
                         encoding="utf-8")
     assert _advance(root, cache) != before
+
+
+def test_first_warm_up_answers_once_per_kernel_after_loading_its_callees(monkeypatch):
+    """A warm-up's preamble: True the first time a kernel is asked for (its callees loaded
+    from the cache then), False after; each kernel on its own."""
+    import numba
+
+    from ardrone_nmpc.core import kernel_cache
+
+    loaded = []
+    monkeypatch.setattr(kernel_cache, "load_cached_callees", loaded.append)
+    one, other = numba.njit(lambda a: a), numba.njit(lambda a: a + 1)
+    assert not kernel_cache.warmed(one)
+    assert kernel_cache.first_warm_up(one) and loaded == [one] and kernel_cache.warmed(one)
+    assert not kernel_cache.first_warm_up(one) and loaded == [one]
+    assert not kernel_cache.warmed(other)
+    assert kernel_cache.first_warm_up(other) and loaded == [one, other]
+    assert not kernel_cache.first_warm_up(other) and kernel_cache.warmed(other)

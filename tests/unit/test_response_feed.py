@@ -354,19 +354,24 @@ def test_the_compiled_estimate_without_one_and_on_ties():
             est._fit()
 
 
-def test_the_compiled_estimate_through_its_entry_point_and_a_copy():
+def test_the_compiled_estimate_through_its_entry_point_and_a_copy(monkeypatch):
     """The estimate's first call goes through numba's dispatcher, the next through the
     compiled entry point; a copy (no entry point pickled) binds it again: the same fits."""
     import copy
 
-    from ardrone_nmpc.estimation import response_kernels
+    from ardrone_nmpc.core import entry_points
+    from ardrone_nmpc.estimation import attitude_response as ar
 
     rng = np.random.default_rng(11)
-    ref, got = _NumpyFeed(E), AttitudeResponseEstimator(E)
-    got._fit_step = response_kernels.fit_estimate  # as before its first call
+    ref = _NumpyFeed(E)
+    monkeypatch.setattr(entry_points, "entry_point", lambda *args: None)  # as if not compiled
+    got = AttitudeResponseEstimator(E)
+    monkeypatch.undo()
+    first = got._fit_step  # the dispatcher's first call
     for trial in range(6):
         _both_fit(ref, got, _odd_sums(rng, ref, trial))
-        assert got._fit_step is not response_kernels.fit_estimate
+        entry = ar._FIT.entry_for(got._state, got._fit_out)
+        assert entry is not None and got._fit_step is entry and entry is not first
         got = copy.deepcopy(got)
 
 
@@ -407,7 +412,7 @@ def test_the_compiled_entry_point_takes_numbers_as_float_makes_them():
             assert ref.navdata(ev[1], *(float(v) for v in values)) == got.navdata(ev[1],
                                                                                   *values)
         assert ref._state.tobytes() == got._state.tobytes()
-    entry = ar._feed_entry(got._state)
+    entry = ar._FEED.entry_for(got._state)
     assert entry is not None and got._step is entry and ref._step is entry
 
 

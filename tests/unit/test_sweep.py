@@ -414,9 +414,11 @@ def test_a_window_made_once_gives_the_same_metrics_and_status(tmp_path):
 _WARM_CHECK = """
 from ardrone_nmpc.experiments.sweep.cases import warm_up
 from ardrone_nmpc.runs.path_kernels import polyline_distances_m
+from ardrone_nmpc.core.kernel_cache import warmed
 from ardrone_nmpc.runtime import tick_kernels
 warm_up()
-print(sorted(tick_kernels._warm), len(polyline_distances_m.overloads))
+print(warmed(tick_kernels.kalman_estimate), warmed(tick_kernels.nmpc_inputs),
+      len(polyline_distances_m.overloads))
 """
 
 
@@ -429,4 +431,4 @@ def test_the_warm_up_loads_a_waypoint_flight_s_kernels_and_the_path_deviation_s(
 
     done = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True,
                           text=True, timeout=240, check=True)
-    assert done.stdout.split("\n")[-2] == "['estimate', 'nmpc'] 1"
+    assert done.stdout.split("\n")[-2] == "True True 1"

@@ -270,7 +270,9 @@ def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does
                                kind(zacc), False, 0.0, 0.0) == 0
         assert estimate.tobytes() == state[E_X:].tobytes() and est._state.tobytes() == (
             state.tobytes()), k
-    assert est._kalman is not kalman_estimate  # the entry point
+    from ardrone_nmpc.runtime.estimate import _KALMAN
+    entry = _KALMAN.entry_for(est._state)
+    assert entry is not None and est._kalman is entry  # the entry point
 
 
 @pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
