@@ -33,7 +33,7 @@ from ardrone_nmpc.core.types import (INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU
 from ardrone_nmpc.estimation.disturbance import SATURATION_FRAC, integrate_period
 from ardrone_nmpc.estimation.response_kernels import (CMD_SEND, TIMES_ROUNDED, feed,
                                                       microseconds, new_state)
-from ardrone_nmpc.runtime.stages import _FLAGS, Sent
+from ardrone_nmpc.runtime.supervision import CMD_SATURATED_TEXT, Sent
 from ardrone_nmpc.safety import NOMINAL
 
 __all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
@@ -155,7 +155,7 @@ def _freeze(roll, pitch, gaz, yaw, bits, frozen):
 
 # the PcmdCommand flags and the ``cmd_saturated`` text of each set of bits
 _SATURATED = [UNSATURATED] + [tuple(bool(b >> k & 1) for k in range(4)) for b in range(1, 16)]
-_TEXT = [_FLAGS[s] for s in _SATURATED]
+_TEXT = [CMD_SATURATED_TEXT[s] for s in _SATURATED]
 _pack_input = struct.Struct(f"{INPUT_DIM}d").pack
 _frombuffer = np.frombuffer
 _make_pcmd = PcmdCommand.make

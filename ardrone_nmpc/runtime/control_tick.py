@@ -40,7 +40,7 @@ from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.layout import unpack
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
 from ardrone_nmpc.core.entry_points import entry_point, plain
-from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
+from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, STATE_DIM
@@ -222,18 +222,14 @@ _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
            25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 28: (1, _F8), 29: (1, _I8), 30: (2, _F8),
            43: (1, _F8), 45: (1, _F8), 46: (2, _B1)}
 
-_warm: list[bool] = []  # loaded (or compiled) in this process
-
 
 def warm_up_kernels() -> None:
     """Load (or compile) :func:`control_tick` now — once per process —, its callees from the
-    cache first (``core/kernel_cache.load_cached_callees``), not on the first tick aloft: a
+    cache first (``core/kernel_cache.first_warm_up``), not on the first tick aloft: a
     call of the kinds a tick's is, on a battery below any floor (not nominal at its first
     test: nothing runs, nothing is written)."""
-    if _warm:
+    if not first_warm_up(control_tick):
         return
-    _warm.append(True)
-    load_cached_callees(control_tick)
     f8 = np.zeros(1)
     control_tick(1.0, 1.0, 1.0, 0, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False,
                  0.0, 0.0, f8, np.zeros(L_SIZE), 0.0, np.zeros((2, 4)), 0, 0, 0.0, f8, f8,

@@ -32,7 +32,7 @@ from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
-from ardrone_nmpc.runtime.supervision import CMD_SATURATED_TEXT, HOVER, Sent, Supervision
+from ardrone_nmpc.runtime.supervision import HOVER, Sent, Supervision
 from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work, nmpc_work_views
 from ardrone_nmpc.safety import Action
 
@@ -52,7 +52,6 @@ _F64 = np.dtype(np.float64)
 _X_SHAPE = (STATE_DIM,)
 # a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
 _new_tuple = tuple.__new__
-_FLAGS = CMD_SATURATED_TEXT  # (runtime/after_solve's import of it)
 
 
 # ----------------------------------------------------------------------------- delay
