@@ -25,6 +25,7 @@ from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.lockstep_legs import ALL_DONE
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensor_step import O_STATE
 from ardrone_nmpc.sim.sensors import LockstepSensors
@@ -127,7 +128,7 @@ class LockstepDrone(ConfigHandshake):
             sensors.advance_to(t_s)
             return
         left = legs.run(t_s)
-        if left is None or left[0] or left[1]:  # the Python legs, or what the run left
+        if left is not ALL_DONE:  # the Python legs, or what the run left
             sensors.go_on(t_s, left)
 
     def take_events(self) -> list[tuple[float, dict]]:
