@@ -478,53 +478,30 @@ class CompiledLegs:
         # (checked above) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        if done <= n_events:  # the run stopped before a leg: the samples of those done
-            return self._left(o, raw, mode, done, n_events, kind0, kind1)
-        self.live_out = o  # all the legs (the usual tick): at most one sample of each
-        if n_events:  # kind, in either order (what each sample writes, the other reads not)
-            if n_events == 2:
-                t_pose, t_nav = ((o[_O_EV_T0], o[_O_EV_T1]) if kind0 == _MOCAP
-                                 else (o[_O_EV_T1], o[_O_EV_T0]))
-            elif kind0 == _MOCAP:
-                t_pose, t_nav = o[_O_EV_T0], None
-            else:
-                t_pose, t_nav = None, o[_O_EV_T0]
+        taken = n_events if done > n_events else done  # the events whose legs it ran
+        if taken:  # at most one of each kind (mocap first on a tie), each sample written as
+            if kind0 == _MOCAP:  # the sampler's took_* would (what one writes the other
+                t_pose, t_nav = o[_O_EV_T0], o[_O_EV_T1] if taken == 2 else None  # reads
+            else:                                                                 # not)
+                t_pose, t_nav = o[_O_EV_T1] if taken == 2 else None, o[_O_EV_T0]
             if t_pose is not None:
-                self._took_pose(o, raw, t_pose)
-            if t_nav is not None:  # (the navdata's mode is the plant's: checked above)
-                sensors.nav, sensors.nav_rx_t_s = self._navdata(o, mode), t_nav
-        return ALL_DONE
-
-    def _took_pose(self, o: tuple, raw: bytes, t_event: float) -> None:
-        """The pose the run drew at ``t_event``: what the sampler holds
-        (:meth:`LockstepSensors.took_pose`, spelled out without a target)."""
-        # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64 views of
-        # out's bytes: the values of o's floats, bit for bit)
-        pose = MocapPose.make(o[_O_POSE], _frozen(raw, _F64, 3, _AT_POSITION),
-                              _frozen(raw, _F64, 3, _AT_ANGLES), o[_O_POSE + 7])
-        sensors = self.sensors
-        if sensors.target_cfg is None:
-            sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
-        else:
-            sensors.took_pose(t_event, pose)
-
-    def _navdata(self, o: tuple, mode) -> NavdataSample:
-        """The navdata sample the run drew, with the types of AirframePlant.navdata's values
-        (numpy scalars from its draws)."""
-        q, out = _O_NAV, self.out
-        return NavdataSample.make(o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
-                                  out[q + 5] if o[q + 5] > 0.0 else 0.0, out[q + 6],
-                                  out[q + 7], out[q + 8])
-
-    def _left(self, o: tuple, raw: bytes, mode, done: int, n_events: int, kind0: int,
-              kind1: int) -> tuple[list, bool]:
-        """What a run that stopped before a leg left to the Python path (:meth:`run`), after
-        the samples of the events it passed, in time order."""
-        sensors = self.sensors
-        for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[:done]:
-            if kind == _MOCAP:
-                self._took_pose(o, raw, t_event)
-            else:
-                sensors.took_navdata(t_event, self._navdata(o, mode))
+                # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64
+                # views of out's bytes: the values of o's floats, bit for bit)
+                pose = MocapPose.make(o[_O_POSE], _frozen(raw, _F64, 3, _AT_POSITION),
+                                      _frozen(raw, _F64, 3, _AT_ANGLES), o[_O_POSE + 7])
+                if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
+                    sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
+                else:
+                    sensors.took_pose(t_pose, pose)
+            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode is
+                q, out = _O_NAV, self.out  # the plant's: checked above)
+                # the types of AirframePlant.navdata's values (numpy scalars from its draws)
+                sensors.nav = NavdataSample.make(
+                    o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
+                    out[q + 5] if o[q + 5] > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
+                sensors.nav_rx_t_s = t_nav
+        if done > n_events:  # all the legs (the usual tick)
+            self.live_out = o
+            return ALL_DONE
         self.release()  # the Python path goes on from here
         return [(o[_O_EV_T0], kind0), (o[_O_EV_T1], kind1)][done:n_events], True
