@@ -16,7 +16,6 @@ float32s); what the firmware does with them is the same.
 from __future__ import annotations
 
 import math
-import operator
 from typing import NamedTuple
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
@@ -25,9 +24,8 @@ from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
-from ardrone_nmpc.sim.lockstep_legs import ALL_DONE
+from ardrone_nmpc.sim.lockstep_legs import ALL_DONE, TRUTH_CELLS_OF
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.sensor_step import O_STATE
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 __all__ = ["LockstepDrone"]
@@ -40,9 +38,6 @@ _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
-_X = O_STATE  # the state's place in the compiled legs' last run
-#: x, y, z, ψ, ż of the compiled legs' last run (truth_cells)
-_TRUTH_OF = operator.itemgetter(_X, _X + 1, _X + 2, _X + 8, _X + 5)
 _PI = math.pi
 _set = object.__setattr__
 
@@ -171,7 +166,7 @@ class LockstepDrone(ConfigHandshake):
         o = legs.live_out if legs is not None else None
         if o is not None:  # (CompiledLegs.live without its frame: every tick)
             if len(legs.plant.__dict__) == legs._plant_len:  # (the run's floats: ψ most
-                x, y, z, psi, vz = _TRUTH_OF(o)  # often in (−π, π], where the wrap returns
+                x, y, z, psi, vz = TRUTH_CELLS_OF(o)  # often in (−π, π], where the wrap returns
                 return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz  # it)
             legs.release()  # a held attribute was written since: the plant's
         plant = self.sim.plant
