@@ -174,7 +174,7 @@ class CompiledLegs:
         self.firmware = sensors.firmware
         self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's out, iv, sv and p (views)
         self.out, self.iv = buf[ks.B_OUT:ks.B_IV], buf[ks.B_IV:ks.B_SV].view(np.int64)
-        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:]
+        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:ks.B_SCRATCH]
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
@@ -191,8 +191,10 @@ class CompiledLegs:
         #: ``_RUN_READ``'s indices, then iv's done, events and kinds) while the arrays hold
         #: the state it left (its truth's time, x, y, z, ż, ψ: ``TRUTH_CELLS_OF``), else None
         self.live_out = None
-        #: ``buf.tobytes()`` of the last run (out's first: the truth's arrays are views of it)
+        #: the bytes of buf's out and iv after the last run (out's first, at buf's offsets: the
+        #: truth's arrays are views of them)
         self.live_raw = b""
+        self._run_bytes = buf[:ks.B_SV].tobytes  # (what a run left: out, iv; a bound method)
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
@@ -492,9 +494,9 @@ class CompiledLegs:
         _PUT_INPUTS(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0, climbing,
                     lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
         self._kernel(*self._args)
-        # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
-        # arrays read from them
-        raw = self.buf.tobytes()
+        # the bytes of out and iv: the run's floats and counts, the pose's (and the truth's)
+        # read-only arrays read from them
+        raw = self._run_bytes()
         o = _GET_RUN(raw)
         done, n_events, kind0, kind1 = o[_R_DONE:]
         if done < 0:  # a block ran short: new ones, and again
