@@ -165,9 +165,9 @@ class LockstepDrone(ConfigHandshake):
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
         o = legs.live_out if legs is not None else None
         if o is not None:  # (CompiledLegs.live without its frame: every tick)
-            if len(legs.plant.__dict__) == legs._plant_len:  # (the run's floats: ψ most
-                x, y, z, psi, vz = TRUTH_CELLS_OF(o)  # often in (−π, π], where the wrap returns
-                return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz  # it)
+            if len(legs.plant.__dict__) == legs._plant_len:  # the run's floats (ψ most often
+                x, y, z, psi, vz = TRUTH_CELLS_OF(o)  # in (−π, π], where the wrap returns it)
+                return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz
             legs.release()  # a held attribute was written since: the plant's
         plant = self.sim.plant
         if self._airframe:
