@@ -144,7 +144,8 @@ _GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
  _R_PSI) = (_RUN_READ.index(i) for i in (
     ks.O_POSE, ks.O_POSE + 7, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1, ks.O_LAST_NOW, ks.O_T,
     ks.O_STATE, ks.O_STATE + 5, ks.O_STATE + 8))
-_R_DONE = len(_RUN_READ)
+_R_DONE = len(_RUN_READ)  # … then the events', and their kinds
+_R_EVENTS, _R_KIND0, _R_KIND1 = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3
 #: x, y, z, ψ, ż of :attr:`CompiledLegs.live_out` (``LockstepDrone.truth_cells``)
 TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
@@ -501,7 +502,7 @@ class CompiledLegs:
         # read-only arrays read from them
         raw = self._run_bytes()
         o = _GET_RUN(raw)
-        done, n_events, kind0, kind1 = o[_R_DONE:]
+        done, n_events = o[_R_DONE], o[_R_EVENTS]
         if done < 0:  # a block ran short: new ones, and again
             self._refill()
             return self.run(t_s)
@@ -514,9 +515,9 @@ class CompiledLegs:
             fw.comwdg_latched = True
         taken = n_events if done > n_events else done  # the events whose legs it ran
         if taken:  # at most one of each kind (mocap first on a tie), each sample written as
-            if kind0 == _MOCAP:  # the sampler's took_* would (what one writes the other
-                t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None  # reads
-            else:                                                                 # not)
+            if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
+                t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None  # other
+            else:                                                                 # reads not)
                 t_pose, t_nav = o[_R_EV_T1] if taken == 2 else None, o[_R_EV_T0]
             if t_pose is not None:
                 # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64
@@ -538,4 +539,4 @@ class CompiledLegs:
             self.live_out = o
             return ALL_DONE
         self.release()  # the Python path goes on from here
-        return [(o[_R_EV_T0], kind0), (o[_R_EV_T1], kind1)][done:n_events], True
+        return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True
