@@ -274,25 +274,27 @@ class CompiledLegs:
         fw.alt_capped = at_cap
         cmd = (roll, pitch, gaz, yaw, True)
         if cmd != fw.applied:
-            if not (-1.0 <= roll <= 1.0 and -1.0 <= pitch <= 1.0 and -1.0 <= gaz <= 1.0
-                    and -1.0 <= yaw <= 1.0):  # (within: AirframePlant.command's clip keeps
-                if not (_isfinite(roll) and _isfinite(pitch) and _isfinite(gaz)  # them)
-                        and _isfinite(yaw)):
-                    plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
-                # AirframePlant.command: each fraction clipped to [−1, 1], min(1.0,
-                # max(−1.0, v)) spelled out (a finite v: the same float)
-                roll = roll if roll > -1.0 else -1.0
-                roll = roll if roll < 1.0 else 1.0
-                pitch = pitch if pitch > -1.0 else -1.0
-                pitch = pitch if pitch < 1.0 else 1.0
-                gaz = gaz if gaz > -1.0 else -1.0
-                gaz = gaz if gaz < 1.0 else 1.0
-                yaw = yaw if yaw > -1.0 else -1.0
-                yaw = yaw if yaw < 1.0 else 1.0
-            if o is not None:  # held: the next run packs it (a write while held, else)
-                self._saved["_current"] = (roll, pitch, gaz, yaw, False)
+            # (fractions within [−1, 1], as a rule: AirframePlant.command's clip keeps them)
+            within = (-1.0 <= roll <= 1.0 and -1.0 <= pitch <= 1.0 and -1.0 <= gaz <= 1.0
+                      and -1.0 <= yaw <= 1.0)
+            if within or (_isfinite(roll) and _isfinite(pitch) and _isfinite(gaz)
+                          and _isfinite(yaw)):
+                if not within:  # AirframePlant.command: each fraction clipped to [−1, 1],
+                    # min(1.0, max(−1.0, v)) spelled out (a finite v: the same float)
+                    roll = roll if roll > -1.0 else -1.0
+                    roll = roll if roll < 1.0 else 1.0
+                    pitch = pitch if pitch > -1.0 else -1.0
+                    pitch = pitch if pitch < 1.0 else 1.0
+                    gaz = gaz if gaz > -1.0 else -1.0
+                    gaz = gaz if gaz < 1.0 else 1.0
+                    yaw = yaw if yaw > -1.0 else -1.0
+                    yaw = yaw if yaw < 1.0 else 1.0
+                if o is not None:  # held: the next run packs it (a write while held, else)
+                    self._saved["_current"] = (roll, pitch, gaz, yaw, False)
+                else:
+                    plant._current = (roll, pitch, gaz, yaw, False)
             else:
-                plant._current = (roll, pitch, gaz, yaw, False)
+                plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
 
     def _params(self) -> np.ndarray:
