@@ -16,7 +16,6 @@ float32s); what the firmware does with them is the same.
 from __future__ import annotations
 
 import math
-import operator
 from typing import NamedTuple
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
@@ -25,8 +24,8 @@ from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.lockstep_legs import ALL_DONE, TRUTH_CELLS_OF
 from ardrone_nmpc.sim.plant import AirframePlant
-from ardrone_nmpc.sim.sensor_step import O_STATE
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 __all__ = ["LockstepDrone"]
@@ -39,9 +38,6 @@ _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)
-_X = O_STATE  # the state's place in the compiled legs' last run
-#: x, y, z, ψ, ż of the compiled legs' last run (truth_cells)
-_TRUTH_OF = operator.itemgetter(_X, _X + 1, _X + 2, _X + 8, _X + 5)
 _PI = math.pi
 _set = object.__setattr__
 
@@ -127,8 +123,22 @@ class LockstepDrone(ConfigHandshake):
             sensors.advance_to(t_s)
             return
         left = legs.run(t_s)
-        if left is None or left[0] or left[1]:  # the Python legs, or what the run left
+        if left is not ALL_DONE:  # the Python legs, or what the run left
             sensors.go_on(t_s, left)
+
+    def advance_inputs(self, t_s: float, t_exp_s: float) -> tuple[list, TickInputs]:
+        """The lockstep loop's drone calls before a tick in one: :meth:`advance_to` (``t_s``,
+        ``t_exp_s``), then :meth:`take_events` and :meth:`inputs` (``t_s``) — their answers,
+        ``(events, inputs)``, and the same state."""
+        self.advance_to(t_s, t_exp_s)
+        return self.sim.take_events(), self.sensors.inputs(t_s)
+
+    def command_truth(self, roll_frac: float, pitch_frac: float, gaz_frac: float,
+                      yaw_frac: float, *, progressive: bool = True) -> tuple:
+        """The lockstep loop's drone calls after a tick in one: :meth:`set_command`, then
+        :meth:`truth_cells` (its answer, the truth the tick's row logs)."""
+        self.set_command(roll_frac, pitch_frac, gaz_frac, yaw_frac, progressive=progressive)
+        return self.truth_cells()
 
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
@@ -155,9 +165,9 @@ class LockstepDrone(ConfigHandshake):
         legs = self._legs  # the last run's truth while the legs hold the (airframe's) state
         o = legs.live_out if legs is not None else None
         if o is not None:  # (CompiledLegs.live without its frame: every tick)
-            if len(legs.plant.__dict__) == legs._plant_len:  # (the run's floats: ψ most
-                x, y, z, psi, vz = _TRUTH_OF(o)  # often in (−π, π], where the wrap returns
-                return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz  # it)
+            if len(legs.plant.__dict__) == legs._plant_len:  # the run's floats (ψ most often
+                x, y, z, psi, vz = TRUTH_CELLS_OF(o)  # in (−π, π], where the wrap returns it)
+                return x, y, z, psi if -_PI < psi <= _PI else wrap_angle_rad(psi), vz
             legs.release()  # a held attribute was written since: the plant's
         plant = self.sim.plant
         if self._airframe:

@@ -45,6 +45,7 @@ one method, for a drone without injected faults whose classes override none of t
 from __future__ import annotations
 
 import math
+import operator
 import struct
 
 import numpy as np
@@ -58,7 +59,7 @@ from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
 
-__all__ = ["SAMPLER_REPLACED", "CompiledLegs"]
+__all__ = ["ALL_DONE", "SAMPLER_REPLACED", "TRUTH_CELLS_OF", "CompiledLegs"]
 
 # the modes the kernel flies (compared by identity: an Enum hashes in Python)
 _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
@@ -80,7 +81,8 @@ _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
 _isfinite = math.isfinite
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
-_NONE: tuple = ()
+#: what :meth:`CompiledLegs.run` returns when it ran all the tick's legs (nothing left)
+ALL_DONE: tuple = ((), False)
 # the counters and the float state written straight into iv and sv (native int64 and double:
 # the arrays' own types, the same bits) and read back: no per-element numpy conversion
 _PUT_IV = struct.Struct(f"{ks.I_POS_NAV + 1}q").pack_into  # iv[I_STEPS … I_POS_NAV]
@@ -100,18 +102,52 @@ _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S
 #: its class's HELD_IN_ARRAYS)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
-_O_POSE, _O_NAV, _O_EV_T0, _O_EV_T1, _O_LAST_NOW = (ks.O_POSE, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1,
-                                                    ks.O_LAST_NOW)
-_MOCAP = ks.MOCAP
-_O_T, _O_BATTERY, _O_STATE = ks.O_T, ks.O_BATTERY, ks.O_STATE
+_O_NAV, _MOCAP = ks.O_NAV, ks.MOCAP
 # byte offsets in buf of the pose's position and XYZ angles, the truth's position and velocity
 _AT_POSITION, _AT_ANGLES = 8 * (ks.B_OUT + ks.O_POSE + 1), 8 * (ks.B_OUT + ks.O_POSE + 4)
 _AT_STATE, _AT_VELOCITY = 8 * (ks.B_OUT + ks.O_STATE), 8 * (ks.B_OUT + ks.O_STATE + 3)
-# what a run left, from buf's bytes: out's floats (at out's indices), then iv[I_DONE …
-# I_KIND1] (iv follows out) — one unpack (struct's: half of tolist's cost)
-_GET_RUN = struct.Struct(f"={8 * ks.B_OUT}x{ks.OUT_SIZE}d"
-                         f"{8 * (ks.B_IV + ks.I_DONE - ks.B_OUT - ks.OUT_SIZE)}x4q").unpack_from
-_R_DONE = ks.OUT_SIZE
+# the truth's time, battery and 10-state, side by side in out (truth()), from buf's bytes
+if not ks.O_T + 1 == ks.O_BATTERY == ks.O_STATE - 1:
+    raise ImportError("lockstep_legs: the truth's floats are not side by side in out")
+_AT_TRUTH = 8 * (ks.B_OUT + ks.O_T)
+_GET_TRUTH = struct.Struct(f"{ks.O_STATE + 10 - ks.O_T}d").unpack_from
+#: the floats of out a tick reads (at these out indices, in order): the pose's time and ψ, the
+#: navdata sample's time, battery, angles and altitude (its speeds: numpy scalars, from out),
+#: the event times, the last firmware time, the truth's time, x, y, z, ż and ψ
+_RUN_READ = (ks.O_POSE, ks.O_POSE + 7, *range(ks.O_NAV, ks.O_NAV + 6), ks.O_EV_T0, ks.O_EV_T1,
+             ks.O_LAST_NOW, ks.O_T, ks.O_STATE, ks.O_STATE + 1, ks.O_STATE + 2,
+             ks.O_STATE + 5, ks.O_STATE + 8)
+
+
+def _run_layout(floats: tuple, at_ints: int, n_ints: int) -> str:
+    """The struct format reading out's ``floats`` (ascending indices), then ``n_ints`` int64
+    from float64 index ``at_ints`` of buf: what lies between, pad bytes (no object made)."""
+    fmt, at = "", ks.B_OUT
+    for i in (*(ks.B_OUT + i for i in floats), at_ints):
+        fmt += f"{8 * (i - at)}x" if i > at else ""
+        fmt += "d" if i < at_ints else f"{n_ints}q"
+        at = i + 1
+    return fmt
+
+
+# what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_KIND1] (iv
+# follows out) — one unpack (struct's: half of tolist's cost; 21 objects, not all 36), in
+# native mode (the arrays' own types, bit for bit: ~20 % faster than "=", whose standard
+# sizes unpack each double by PyFloat_Unpack8); every field falls on a multiple of 8 bytes,
+# so native alignment adds no padding (checked below)
+_RUN_LAYOUT = _run_layout(_RUN_READ, ks.B_IV + ks.I_DONE, 4)
+if struct.calcsize(_RUN_LAYOUT) != struct.calcsize("=" + _RUN_LAYOUT):
+    raise ImportError("lockstep_legs: the run's layout is padded in native mode")
+_GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
+# where the run's floats are in what _GET_RUN gives (CompiledLegs.live_out)
+(_R_POSE_T, _R_POSE_PSI, _R_NAV, _R_EV_T0, _R_EV_T1, _R_LAST_NOW, _R_T, _R_X, _R_VZ,
+ _R_PSI) = (_RUN_READ.index(i) for i in (
+    ks.O_POSE, ks.O_POSE + 7, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1, ks.O_LAST_NOW, ks.O_T,
+    ks.O_STATE, ks.O_STATE + 5, ks.O_STATE + 8))
+_R_DONE = len(_RUN_READ)  # … then the events', and their kinds
+_R_EVENTS, _R_KIND0, _R_KIND1 = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3
+#: x, y, z, ψ, ż of :attr:`CompiledLegs.live_out` (``LockstepDrone.truth_cells``)
+TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
 
 _F64 = np.dtype(np.float64)
@@ -139,7 +175,10 @@ class CompiledLegs:
         self.firmware = sensors.firmware
         self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's out, iv, sv and p (views)
         self.out, self.iv = buf[ks.B_OUT:ks.B_IV], buf[ks.B_IV:ks.B_SV].view(np.int64)
-        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:]
+        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:ks.B_SCRATCH]
+        # sv's memory as a memoryview: a pack into it skips numpy's buffer export (~70 ns
+        # of every run's one pack)
+        self._sv_memory = memoryview(self.sv)
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
@@ -152,12 +191,14 @@ class CompiledLegs:
         self._ran = False
         self._plant_len = self._sensors_len = 0  # the dicts' sizes while held
         self._kernel = _lockstep_run
-        #: the floats of ``out`` (a tuple, at out's indices) of the last run while the
-        #: arrays hold the state it left (its truth at ``O_T``, ``O_BATTERY``, ``O_STATE``),
-        #: else None
+        #: what a tick reads of the last run (a tuple: the floats of ``out`` at
+        #: ``_RUN_READ``'s indices, then iv's done, events and kinds) while the arrays hold
+        #: the state it left (its truth's time, x, y, z, ż, ψ: ``TRUTH_CELLS_OF``), else None
         self.live_out = None
-        #: ``buf.tobytes()`` of the last run (out's first: the truth's arrays are views of it)
+        #: the bytes of buf's out and iv after the last run (out's first, at buf's offsets: the
+        #: truth's arrays are views of them)
         self.live_raw = b""
+        self._run_bytes = buf[:ks.B_SV].tobytes  # (what a run left: out, iv; a bound method)
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
@@ -211,7 +252,7 @@ class CompiledLegs:
             self.release()
             o = None
         if now is None:  # the plant's time (t_s() of the o read above)
-            now = plant.t_s if o is None else o[_O_T]
+            now = plant.t_s if o is None else o[_R_T]
         fw.last_cmd_t = now
         fw.link_lost = False
         fw.lost_com_hover = False
@@ -223,7 +264,7 @@ class CompiledLegs:
         mode = plant._mode
         if gaz > 0.0 and (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             if o is not None:  # DroneFirmware._z_stop_m of the held state
-                z, vz = o[_O_STATE + 2], o[_O_STATE + 5]  # (max(0.0, vz) spelled out)
+                z, vz = o[_R_X + 2], o[_R_VZ]  # (max(0.0, vz) spelled out)
                 at_cap = (z + (vz if vz > 0.0 else 0.0) * fw._lead_s()
                           >= fw.config.altitude_max_m)
             else:
@@ -233,17 +274,21 @@ class CompiledLegs:
         fw.alt_capped = at_cap
         cmd = (roll, pitch, gaz, yaw, True)
         if cmd != fw.applied:
-            if _isfinite(roll) and _isfinite(pitch) and _isfinite(gaz) and _isfinite(yaw):
-                # AirframePlant.command: each fraction clipped to [−1, 1], min(1.0, max(−1.0,
-                # v)) spelled out (a finite v: the same float)
-                roll = roll if roll > -1.0 else -1.0
-                roll = roll if roll < 1.0 else 1.0
-                pitch = pitch if pitch > -1.0 else -1.0
-                pitch = pitch if pitch < 1.0 else 1.0
-                gaz = gaz if gaz > -1.0 else -1.0
-                gaz = gaz if gaz < 1.0 else 1.0
-                yaw = yaw if yaw > -1.0 else -1.0
-                yaw = yaw if yaw < 1.0 else 1.0
+            # (fractions within [−1, 1], as a rule: AirframePlant.command's clip keeps them)
+            within = (-1.0 <= roll <= 1.0 and -1.0 <= pitch <= 1.0 and -1.0 <= gaz <= 1.0
+                      and -1.0 <= yaw <= 1.0)
+            if within or (_isfinite(roll) and _isfinite(pitch) and _isfinite(gaz)
+                          and _isfinite(yaw)):
+                if not within:  # AirframePlant.command: each fraction clipped to [−1, 1],
+                    # min(1.0, max(−1.0, v)) spelled out (a finite v: the same float)
+                    roll = roll if roll > -1.0 else -1.0
+                    roll = roll if roll < 1.0 else 1.0
+                    pitch = pitch if pitch > -1.0 else -1.0
+                    pitch = pitch if pitch < 1.0 else 1.0
+                    gaz = gaz if gaz > -1.0 else -1.0
+                    gaz = gaz if gaz < 1.0 else 1.0
+                    yaw = yaw if yaw > -1.0 else -1.0
+                    yaw = yaw if yaw < 1.0 else 1.0
                 if o is not None:  # held: the next run packs it (a write while held, else)
                     self._saved["_current"] = (roll, pitch, gaz, yaw, False)
                 else:
@@ -380,20 +425,21 @@ class CompiledLegs:
         """:attr:`AirframePlant.t_s`, the last run's while the arrays hold its state (the
         time of a REF or a config write: read without releasing them)."""
         o = self.live()
-        return self.plant.t_s if o is None else o[_O_T]
+        return self.plant.t_s if o is None else o[_R_T]
 
     def truth(self):
         """:attr:`AirframePlant.truth`, from the last run's while the arrays hold its state."""
         o = self.live()
         if o is None:
             return self.plant.truth
-        q = _O_STATE  # position, velocity: read-only arrays, as AirframePlant.truth's
-        raw = self.live_raw  # (float64 views of the run's out bytes: o's floats, bit for bit)
-        psi = o[q + 8]  # a float in (−π, π] is its own wrap: wrap_angle_rad's own fast path
-        return PlantTruth.make(o[_O_T], _frozen(raw, _F64, 3, _AT_STATE),
-                               _frozen(raw, _F64, 3, _AT_VELOCITY), o[q + 6], o[q + 7],
-                               psi if -_PI < psi <= _PI else wrap_angle_rad(psi), o[q + 9],
-                               self.plant._mode, o[_O_BATTERY])
+        raw = self.live_raw  # the run's out bytes: the truth's floats (its position and
+        t, battery, *_, phi, theta, psi, r = _GET_TRUTH(raw, _AT_TRUTH)  # velocity: read-only
+        # arrays, as AirframePlant.truth's, float64 views of them, bit for bit); a float in
+        # (−π, π] is its own wrap: wrap_angle_rad's own fast path
+        return PlantTruth.make(t, _frozen(raw, _F64, 3, _AT_STATE),
+                               _frozen(raw, _F64, 3, _AT_VELOCITY), phi, theta,
+                               psi if -_PI < psi <= _PI else wrap_angle_rad(psi), r,
+                               self.plant._mode, battery)
 
     # ------------------------------------------------------------------ one tick
     def _refill(self) -> None:
@@ -430,12 +476,14 @@ class CompiledLegs:
         if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
                 and (fw.link_lost or not silence > fw.link_loss_s)):
             return None
-        d = plant.__dict__
-        if d.get("_held_by") is not self:
-            self._take()
-        elif len(d) != self._plant_len or len(sensors.__dict__) != self._sensors_len:
-            self.release()  # a held attribute was written meanwhile: it is the newer
-            self._take()
+        d = plant.__dict__  # (a last run's truth: the arrays hold the state since)
+        if (self.live_out is None or len(d) != self._plant_len
+                or len(sensors.__dict__) != self._sensors_len):
+            if d.get("_held_by") is not self:
+                self._take()
+            elif len(d) != self._plant_len or len(sensors.__dict__) != self._sensors_len:
+                self.release()  # a held attribute was written meanwhile: it is the newer
+                self._take()
         old = self._p_key  # the flight's parameters, unchanged as a rule
         if not (old and old[0] is plant.params and old[1] is plant.noise
                 and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
@@ -449,51 +497,48 @@ class CompiledLegs:
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
         roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
-        _PUT_INPUTS(self.sv, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0, climbing,
-                    lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+        _PUT_INPUTS(self._sv_memory, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
+                    climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
         self._kernel(*self._args)
-        # buf's bytes: the run's floats and counts, the pose's (and the truth's) read-only
-        # arrays read from them
-        raw = self.buf.tobytes()
+        # the bytes of out and iv: the run's floats and counts, the pose's (and the truth's)
+        # read-only arrays read from them
+        raw = self._run_bytes()
         o = _GET_RUN(raw)
-        done, n_events, kind0, kind1 = o[_R_DONE:]
+        done, n_events = o[_R_DONE], o[_R_EVENTS]
         if done < 0:  # a block ran short: new ones, and again
             self._refill()
             return self.run(t_s)
         self._ran = True
         self.live_raw = raw
-        now = o[_O_LAST_NOW]
+        now = o[_R_LAST_NOW]
         # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
         # (checked above) — the bit the Python path's calls would have latched by then
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
-        out = self.out
-        for kind, t_event in ((kind0, o[_O_EV_T0]), (kind1, o[_O_EV_T1]))[
-                :done if done < n_events else n_events]:
-            if kind == _MOCAP:
-                q = _O_POSE
+        taken = n_events if done > n_events else done  # the events whose legs it ran
+        if taken:  # at most one of each kind (mocap first on a tie), each sample written as
+            if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
+                t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None  # other
+            else:                                                                 # reads not)
+                t_pose, t_nav = o[_R_EV_T1] if taken == 2 else None, o[_R_EV_T0]
+            if t_pose is not None:
                 # position, angles: read-only arrays, as AirframePlant.mocap_pose's (float64
                 # views of out's bytes: the values of o's floats, bit for bit)
-                pose = MocapPose.make(o[q], _frozen(raw, _F64, 3, _AT_POSITION),
-                                      _frozen(raw, _F64, 3, _AT_ANGLES), o[q + 7])
+                pose = MocapPose.make(o[_R_POSE_T], _frozen(raw, _F64, 3, _AT_POSITION),
+                                      _frozen(raw, _F64, 3, _AT_ANGLES), o[_R_POSE_PSI])
                 if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
-                    sensors.pose, sensors.pose_rx_t_s = pose, t_event + sensors.mocap_latency_s
+                    sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
                 else:
-                    sensors.took_pose(t_event, pose)
-            else:
-                q = _O_NAV
-                altitude = o[q + 5]
+                    sensors.took_pose(t_pose, pose)
+            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode is
+                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's: checked above)
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
-                nav = NavdataSample.make(
-                    o[q], mode, o[q + 1], o[q + 2], o[q + 3], o[q + 4],
-                    out[q + 5] if altitude > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
-                if mode is sensors._nav_mode:  # LockstepSensors.took_navdata, spelled out
-                    sensors.nav, sensors.nav_rx_t_s = nav, t_event
-                else:
-                    sensors.took_navdata(t_event, nav)
-        if done > n_events:
+                sensors.nav = NavdataSample.make(
+                    o[r], mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
+                    out[q + 5] if o[r + 5] > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
+                sensors.nav_rx_t_s = t_nav
+        if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
-            return _NONE, False
+            return ALL_DONE
         self.release()  # the Python path goes on from here
-        events = [(o[_O_EV_T0], kind0), (o[_O_EV_T1], kind1)][done:n_events]
-        return events, True
+        return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True

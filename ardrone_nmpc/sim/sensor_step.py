@@ -35,7 +35,7 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.airframe import flying_steps_into
+from ardrone_nmpc.sim.airframe import N_AUX_STATE, flying_steps_into
 from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps
 
 __all__ = ["lockstep_run"]
@@ -71,9 +71,13 @@ O_T, O_BATTERY, O_STATE = 20, 21, 22
 OUT_SIZE = O_STATE + 10
 #: buf: the four side by side in one float64 array (iv's int64 viewed in place) — the kernel's
 #: one argument for them (every array argument costs the call ~30 ns to unbox); out first,
-#: then iv: the caller reads what a run left (out, iv[I_DONE …]) in one unpack of buf's bytes
+#: then iv: the caller reads what a run left (out, iv[I_DONE …]) in one unpack of buf's bytes;
+#: last the RK4's scratch rows (5 of a state's size, at most N_AUX_STATE: written before any
+#: read, every step — here rather than allocated by every run)
 B_OUT, B_IV, B_SV, B_P = 0, OUT_SIZE, OUT_SIZE + IV_SIZE, OUT_SIZE + IV_SIZE + SV_SIZE
-BUF_SIZE = B_P + P_SIZE
+B_SCRATCH = B_P + P_SIZE
+SCRATCH_SIZE = 5 * N_AUX_STATE
+BUF_SIZE = B_SCRATCH + SCRATCH_SIZE
 MOCAP, NAV = 0, 1
 _TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
 
@@ -234,7 +238,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     then into ``out[O_T:]`` (the caller's truth reads). ``iv``, ``sv``, ``p``, ``out``: the
     parts of ``buf``."""
     out, iv = buf[B_OUT:B_IV], buf[B_IV:B_SV].view(np.int64)
-    sv, p = buf[B_SV:B_P], buf[B_P:BUF_SIZE]
+    sv, p = buf[B_SV:B_P], buf[B_P:B_SCRATCH]
     if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
             > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
@@ -272,7 +276,9 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     iv[I_DONE] = 0
     out[O_LAST_NOW] = math.nan
     h = p[P_H]
-    scratch = np.empty((5, x.shape[0]))  # the RK4's, for every leg
+    n_x = x.shape[0]  # the RK4's scratch rows, for every leg
+    scratch = (buf[B_SCRATCH:B_SCRATCH + 5 * n_x].reshape((5, n_x)) if 5 * n_x <= SCRATCH_SIZE
+               else np.empty((5, n_x)))
     for i in range(n_events + 1):
         if i < n_events:
             kind = iv[I_KIND0 + i]

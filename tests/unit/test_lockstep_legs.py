@@ -220,9 +220,10 @@ def test_the_kernels_entry_point_for_the_legs_own_arrays_only():
 
 def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
     """The kernel's counters, state, parameters and output are views of one array (its one
-    argument for them, none spilling into another); what the legs read of a run — out's
-    floats, then iv's done, events and kinds — are those arrays' values, bit for bit."""
-    from ardrone_nmpc.sim import sensor_step as ks
+    argument for them, none spilling into another); what the legs read of a run — the
+    floats of out a tick reads, then iv's done, events and kinds — are those arrays' values,
+    bit for bit."""
+    from ardrone_nmpc.sim import lockstep_legs, sensor_step as ks
 
     cfg, drone = _square_drone_aloft()
     legs = drone.sensors._legs
@@ -235,10 +236,15 @@ def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
                        if other is not view), name
     assert legs.iv.dtype == np.int64 and legs.out.dtype == legs.p.dtype == np.float64
     assert legs.p[ks.P_K:].tolist() == list(drone.sim.plant.params.rhs_coefficients)
-    o = legs.live_out
-    assert np.array(o[:ks.OUT_SIZE]).tobytes() == legs.out.tobytes()
-    assert o[ks.OUT_SIZE:] == tuple(legs.iv[ks.I_DONE:ks.I_KIND1 + 1].tolist())
-    assert o[ks.OUT_SIZE] > o[ks.OUT_SIZE + 1]  # all legs done: more than the events
+    o, read = legs.live_out, lockstep_legs._RUN_READ
+    assert len(set(read)) == len(read) == len(o) - 4 and max(read) < ks.OUT_SIZE
+    assert np.array(o[:len(read)]).tobytes() == legs.out[list(read)].tobytes()
+    assert o[len(read):] == tuple(legs.iv[ks.I_DONE:ks.I_KIND1 + 1].tolist())
+    assert o[len(read)] > o[len(read) + 1]  # all legs done: more than the events
+    # the truth's cells, and the times the PCMD chain and a REF read, are among them
+    assert lockstep_legs.TRUTH_CELLS_OF(o) == tuple(legs.out[[ks.O_STATE + i for i in
+                                                               (0, 1, 2, 8, 5)]].tolist())
+    assert legs.t_s() == legs.out[ks.O_T] and legs.truth().t_s == legs.out[ks.O_T]
 
 
 def test_the_legs_leave_a_tick_they_cannot_fly_untouched():
