@@ -126,20 +126,6 @@ class LockstepDrone(ConfigHandshake):
         if left is not ALL_DONE:  # the Python legs, or what the run left
             sensors.go_on(t_s, left)
 
-    def advance_inputs(self, t_s: float, t_exp_s: float) -> tuple[list, TickInputs]:
-        """The lockstep loop's drone calls before a tick in one: :meth:`advance_to` (``t_s``,
-        ``t_exp_s``), then :meth:`take_events` and :meth:`inputs` (``t_s``) — their answers,
-        ``(events, inputs)``, and the same state."""
-        self.advance_to(t_s, t_exp_s)
-        return self.sim.take_events(), self.sensors.inputs(t_s)
-
-    def command_truth(self, roll_frac: float, pitch_frac: float, gaz_frac: float,
-                      yaw_frac: float, *, progressive: bool = True) -> tuple:
-        """The lockstep loop's drone calls after a tick in one: :meth:`set_command`, then
-        :meth:`truth_cells` (its answer, the truth the tick's row logs)."""
-        self.set_command(roll_frac, pitch_frac, gaz_frac, yaw_frac, progressive=progressive)
-        return self.truth_cells()
-
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
         call."""
