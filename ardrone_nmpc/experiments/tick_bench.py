@@ -55,26 +55,36 @@ class TickSplit:
 
 
 class _Clocks:
-    """A recorder that keeps the two clock cells of each row."""
+    """A recorder that keeps each row as it comes — a list append, as tune's in-memory
+    recorder does (``runs/memory``) — and reads its two clock cells after the flight."""
 
     path = None  # no run directory
 
     def __init__(self) -> None:
-        self.solve_us: list[float] = []
-        self.compute_us: list[float] = []
+        self._rows: list = []  # dict rows, or rows as cells (write_cells)
 
     def write_row(self, row: dict) -> None:
-        self.solve_us.append(_number(row.get("solve_us")))
-        self.compute_us.append(_number(row.get("compute_us")))
+        self._rows.append(row)
 
     def write_cells(self, cells: list) -> None:
         """A row as the lockstep runner hands it to the recorders that take cells (the run
-        directory's and tuning's: ``runs/log_columns.tick_cells``)."""
-        self.solve_us.append(_number(cells[_SOLVE_US]))
-        self.compute_us.append(_number(cells[_COMPUTE_US]))
+        directory's and tuning's: ``runs/log_columns.tick_cells``); kept, not copied."""
+        self._rows.append(cells)
 
     def event(self, *args, **kwargs) -> None:
         pass
+
+    def clocks(self) -> tuple[list[float], list[float]]:
+        """``solve_us`` and ``compute_us`` of every row, NaN where a row has none."""
+        solve_us, compute_us = [], []
+        for row in self._rows:
+            if row.__class__ is list:
+                solve, compute = row[_SOLVE_US], row[_COMPUTE_US]
+            else:
+                solve, compute = row.get("solve_us"), row.get("compute_us")
+            solve_us.append(_number(solve))
+            compute_us.append(_number(compute))
+        return solve_us, compute_us
 
 
 def _number(value) -> float:
@@ -88,10 +98,11 @@ def _fly(cfg, seed: int | None) -> TickSplit:
     t0 = time.perf_counter()
     result = run_lockstep(cfg, recorder=clocks, seed=seed)
     wall_s = time.perf_counter() - t0
-    ticks = len(clocks.compute_us)
-    solved = [s for s in clocks.solve_us if math.isfinite(s)]
+    solve_us, compute_us = clocks.clocks()
+    ticks = len(compute_us)
+    solved = [s for s in solve_us if math.isfinite(s)]
     solve_total = sum(solved)
-    compute_total = sum(c for c in clocks.compute_us if math.isfinite(c))
+    compute_total = sum(c for c in compute_us if math.isfinite(c))
     return TickSplit(
         ticks=ticks, solved_ticks=len(solved), simulated_s=result.end_t_s, wall_s=wall_s,
         update_us=solve_total / len(solved) if solved else math.nan,
