@@ -55,36 +55,32 @@ class TickSplit:
 
 
 class _Clocks:
-    """A recorder that keeps each row as it comes — a list append, as tune's in-memory
-    recorder does (``runs/memory``) — and reads its two clock cells after the flight."""
+    """A recorder that keeps the two clock cells of each row as they are (a float, or what
+    marks none), read as numbers after the flight: no conversion a tick, and no row kept
+    (kept rows are containers the garbage collector walks, ~1 ms a flight)."""
 
     path = None  # no run directory
 
     def __init__(self) -> None:
-        self._rows: list = []  # dict rows, or rows as cells (write_cells)
+        self._solve: list = []
+        self._compute: list = []
 
     def write_row(self, row: dict) -> None:
-        self._rows.append(row)
+        self._solve.append(row.get("solve_us"))
+        self._compute.append(row.get("compute_us"))
 
     def write_cells(self, cells: list) -> None:
         """A row as the lockstep runner hands it to the recorders that take cells (the run
-        directory's and tuning's: ``runs/log_columns.tick_cells``); kept, not copied."""
-        self._rows.append(cells)
+        directory's and tuning's: ``runs/log_columns.tick_cells``)."""
+        self._solve.append(cells[_SOLVE_US])
+        self._compute.append(cells[_COMPUTE_US])
 
     def event(self, *args, **kwargs) -> None:
         pass
 
     def clocks(self) -> tuple[list[float], list[float]]:
         """``solve_us`` and ``compute_us`` of every row, NaN where a row has none."""
-        solve_us, compute_us = [], []
-        for row in self._rows:
-            if row.__class__ is list:
-                solve, compute = row[_SOLVE_US], row[_COMPUTE_US]
-            else:
-                solve, compute = row.get("solve_us"), row.get("compute_us")
-            solve_us.append(_number(solve))
-            compute_us.append(_number(compute))
-        return solve_us, compute_us
+        return list(map(_number, self._solve)), list(map(_number, self._compute))
 
 
 def _number(value) -> float:
