@@ -30,8 +30,8 @@ __all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMN
            "ReplayError", "SAME_POSE_TOLERANCE_S", "STRING_COLUMNS", "UNITS", "link_columns",
            "pose_of_row", "unlogged_pose",
            "measurement_columns", "put_truth", "tick_inputs_of_rows", "tick_row",
-           "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "TRUTH_CELLS", "cells_row", "put_truth_cells",
-           "tick_cell_values", "tick_cells"]
+           "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "TRUTH_CELLS", "cells_row",
+           "put_truth_cells", "tick_cell_values", "tick_cells"]
 
 
 class Column(NamedTuple):
