@@ -180,7 +180,9 @@ class Supervisor:
         self._solver_failures = 0   # consecutive failed solves
         self._solver_good = 0       # consecutive good solves while in a solver fallback
         self._solver_fallback = False
-        self._mode = ""
+        #: The mode label of the last tick :meth:`record` noted ("" before the first): a
+        #: nominal tick of the same label changes nothing (the tick skips the call then).
+        self.label = ""
         self.events: list[dict] = []
 
     @property
@@ -330,12 +332,12 @@ class Supervisor:
         """Note the tick's final decision; return its mode label (an event if it changed)."""
         # Decision.mode's nominal case without its call (the usual tick)
         mode = nominal if decision.action is _CONTROL else decision.mode(nominal)
-        if mode != self._mode:
+        if mode != self.label:
             # the settle → track switch is the runner's schedule, not a supervisor event
-            if not (decision.action is Action.CONTROL and self._mode in ("", "settle", "track")):
-                self.events.append({"kind": "mode", "mode": mode, "previous": self._mode,
+            if not (decision.action is Action.CONTROL and self.label in ("", "settle", "track")):
+                self.events.append({"kind": "mode", "mode": mode, "previous": self.label,
                                     "action": decision.action.value, "reason": decision.reason})
-            self._mode = mode
+            self.label = mode
         return mode
 
     def take_events(self) -> list[dict]:

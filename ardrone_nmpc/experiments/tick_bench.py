@@ -55,26 +55,32 @@ class TickSplit:
 
 
 class _Clocks:
-    """A recorder that keeps the two clock cells of each row."""
+    """A recorder that keeps the two clock cells of each row as they are (a float, or what
+    marks none), read as numbers after the flight: no conversion a tick, and no row kept
+    (kept rows are containers the garbage collector walks, ~1 ms a flight)."""
 
     path = None  # no run directory
 
     def __init__(self) -> None:
-        self.solve_us: list[float] = []
-        self.compute_us: list[float] = []
+        self._solve: list = []
+        self._compute: list = []
 
     def write_row(self, row: dict) -> None:
-        self.solve_us.append(_number(row.get("solve_us")))
-        self.compute_us.append(_number(row.get("compute_us")))
+        self._solve.append(row.get("solve_us"))
+        self._compute.append(row.get("compute_us"))
 
     def write_cells(self, cells: list) -> None:
         """A row as the lockstep runner hands it to the recorders that take cells (the run
         directory's and tuning's: ``runs/log_columns.tick_cells``)."""
-        self.solve_us.append(_number(cells[_SOLVE_US]))
-        self.compute_us.append(_number(cells[_COMPUTE_US]))
+        self._solve.append(cells[_SOLVE_US])
+        self._compute.append(cells[_COMPUTE_US])
 
     def event(self, *args, **kwargs) -> None:
         pass
+
+    def clocks(self) -> tuple[list[float], list[float]]:
+        """``solve_us`` and ``compute_us`` of every row, NaN where a row has none."""
+        return list(map(_number, self._solve)), list(map(_number, self._compute))
 
 
 def _number(value) -> float:
@@ -88,10 +94,11 @@ def _fly(cfg, seed: int | None) -> TickSplit:
     t0 = time.perf_counter()
     result = run_lockstep(cfg, recorder=clocks, seed=seed)
     wall_s = time.perf_counter() - t0
-    ticks = len(clocks.compute_us)
-    solved = [s for s in clocks.solve_us if math.isfinite(s)]
+    solve_us, compute_us = clocks.clocks()
+    ticks = len(compute_us)
+    solved = [s for s in solve_us if math.isfinite(s)]
     solve_total = sum(solved)
-    compute_total = sum(c for c in clocks.compute_us if math.isfinite(c))
+    compute_total = sum(c for c in compute_us if math.isfinite(c))
     return TickSplit(
         ticks=ticks, solved_ticks=len(solved), simulated_s=result.end_t_s, wall_s=wall_s,
         update_us=solve_total / len(solved) if solved else math.nan,

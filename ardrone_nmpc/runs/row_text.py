@@ -169,6 +169,7 @@ class BlockCheck:
         self._tick_last: list = []  # the types of tick_cells' last row, and its judgement
         self._tick_last_slots: tuple | bool = False
         self._strings: set[tuple] = set()
+        self._tick_texts: set[tuple] = set()  # tick_cells' text cells that passed
 
     def __call__(self, cells: list, n_str: int) -> bool:
         """Whether the row may be printed in a block. ``n_str``: the str cells a plain row
@@ -194,10 +195,10 @@ class BlockCheck:
     def tick_cells(self, cells: list) -> bool:
         """:meth:`__call__` for a :func:`~ardrone_nmpc.runs.log_columns.tick_cells` row (its
         truth put), whose plan is known: its numeric cells plain numbers, its string cells
-        str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put. True
-        only for rows :meth:`__call__` passes (it may refuse more: those take
-        ``write_row``)."""
-        types = list(map(type, cells))  # one pass: the key holds the string cells' types
+        str without :data:`_SUSPECT` text, its other cells the ``""`` tick_cells put (a row
+        with anything else there takes ``write_row``, which drops those cells, as one row
+        a write does). True only for rows :meth:`__call__` passes (it may refuse more)."""
+        types = list(map(type, cells))  # one pass: the key holds the text cells' types
         if types == self._tick_last:  # as a rule the last row's (compared without a hash)
             int_slots = self._tick_last_slots
         else:
@@ -208,7 +209,8 @@ class BlockCheck:
         for i in int_slots:  # the iteration counts
             if not _INT_MIN <= cells[i] < _INT_LIMIT:
                 return False
-        return self._plain_strings(_STRING_CELLS(cells))
+        texts = _TICK_TEXTS(cells)
+        return texts in self._tick_texts or self._plain_tick_texts(texts)
 
     def _tick_slots(self, types: tuple) -> tuple | bool:
         """:meth:`tick_cells`' judgement of a row whose cells have ``types``: False (not
@@ -217,11 +219,22 @@ class BlockCheck:
         if int_slots is None:
             int_slots = (tuple(i for i in _TICK_NUMBER_SLOTS if types[i] is int)
                          if (set(_TICK_NUMBERS(types)) <= _NUMBER_TYPES
-                             and set(_STRING_CELLS(types)) <= _STR_ONLY) else False)
+                             and set(_TICK_TEXTS(types)) <= _STR_ONLY) else False)
             if len(self._tick_types) >= self._LIMIT:
                 self._tick_types.clear()
             self._tick_types[types] = int_slots
         return int_slots
+
+    def _plain_tick_texts(self, texts: tuple) -> bool:
+        """A tick_cells row's text cells (:data:`_TICK_TEXTS`): its string cells without
+        :data:`_SUSPECT` text, its other cells ``""`` (each tuple passed is remembered)."""
+        if (texts[_N_STRING_COLUMNS:] != _TICK_OTHER_EMPTY
+                or _SUSPECT.search("".join(texts[:_N_STRING_COLUMNS])) is not None):
+            return False
+        if len(self._tick_texts) >= self._LIMIT:
+            self._tick_texts.clear()
+        self._tick_texts.add(texts)
+        return True
 
     def _plain_strings(self, strings: tuple) -> bool:
         """No :data:`_SUSPECT` text in the row's string cells (each tuple seen is remembered)."""
@@ -237,59 +250,49 @@ class BlockCheck:
 #: The numeric cells of a tick_cells row (its absent columns hold tick_cells' own "").
 _TICK_NUMBER_SLOTS = tuple(sorted(_INDEX[k] for k in TICK_CELL_KEYS if k not in STRING_COLUMNS))
 _TICK_NUMBERS = operator.itemgetter(*_TICK_NUMBER_SLOTS)
+#: The other cells of a tick_cells row: its string columns', then those it leaves ``""``.
+_TICK_TEXT_SLOTS = (tuple(_INDEX[c] for c in LOG_COLUMNS if c in STRING_COLUMNS)
+                    + tuple(i for i, c in enumerate(LOG_COLUMNS)
+                            if c not in STRING_COLUMNS and c not in TICK_CELL_KEYS))
+_TICK_TEXTS = operator.itemgetter(*_TICK_TEXT_SLOTS)
+_TICK_OTHER_EMPTY = ("",) * (len(_TICK_TEXT_SLOTS) - _N_STRING_COLUMNS)
 _NUMBER_TYPES = _PLAIN_TYPES - {str}
 
 
 def block_text(rows: list[list]) -> bytes | None:
     """The lines :func:`_plain_line` prints for each of ``rows`` (cells :class:`BlockCheck`
-    passed), joined, from one orjson call for them all (~0.7 µs a row where a call per row
-    costs ~5 µs). None when a cell is ±inf (orjson prints it ``null``, as NaN and None,
-    which print ``nan``: the caller then prints the rows one by one) or the text is not
-    that of such rows.
+    passed), joined: an orjson call a row (~0.7 µs a row where :func:`_plain_line` costs
+    ~5 µs), the rows' texts joined by line breaks and their brackets and quotes dropped in one
+    pass — no string cell holds one (BlockCheck). None when a cell is ±inf (orjson prints it
+    ``null``, as NaN and None, which print ``nan``: the caller then prints the rows one by
+    one) or an int does not fit in 64 bits.
 
     A NaN or None ``nav_state_bits`` (every lockstep tick) goes to orjson as the string
     ``"nan"`` — its text once the quotes are dropped — and back into its row after: a
-    ``null`` left is another cell's NaN, None or ±inf (:func:`_block_nulls`)."""
+    ``null`` left is another cell's NaN, None or ±inf."""
     swapped = []
+    dumps, option = orjson.dumps, orjson.OPT_SERIALIZE_NUMPY
     try:
         for r in rows:
             c = r[_STATE_BITS]
             if c is None or c != c:
                 swapped.append((r, c))
                 r[_STATE_BITS] = "nan"
-        text = orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY)
+        # a call a row and one join: cheaper than one call's text split into its rows
+        lines = [dumps(r, option=option) for r in rows]
+        lines.append(b"")  # the last line's break
+        text = b"\n".join(lines)
+        # (a 'u' first: one byte is found at memchr's speed, and no number's text holds one)
+        if b"u" in text and b"null" in text:  # no string holds one (BlockCheck)
+            if not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows)):
+                return None
+            text = text.replace(b"null", b"nan")  # NaN and None cells
     except TypeError:  # an int beyond 64 bits
         return None
     finally:  # the rows as they were (they are kept)
         for r, c in swapped:
             r[_STATE_BITS] = c
-    # (a 'u' first: one byte is found at memchr's speed, and no number's text holds one)
-    if b"u" in text and b"null" in text:  # no string holds one (BlockCheck)
-        text = _block_nulls(rows)
-        if text is None:
-            return None
-    # each row but the first starts after a '[' (no string holds one, BlockCheck), each but
-    # the last ends with '],' — one byte splits faster than the three of '],['
-    lines = text[2:-2].split(b"[")
-    if len(lines) != len(rows):
-        return None
-    last = lines.pop()
-    lines = [line[:-2] for line in lines]
-    lines += (last, b"")
-    return b"\n".join(lines).translate(None, b'"')  # an empty or string cell: no quotes
-
-
-def _block_nulls(rows: list[list]) -> bytes | None:
-    """:func:`block_text`'s orjson text of ``rows`` with its NaN and None cells printed
-    ``nan``; None if a cell is ±inf."""
-    text = orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY)
-    parts = text.split(b"null")
-    # each null is a NaN, None or ±inf cell: when the NaN and None of nav_state_bits account
-    # for them all, no cell is ±inf — else look at all
-    if (len(parts) - 1 != sum(1 for r in rows if (c := r[_STATE_BITS]) is None or c != c)
-            and not _INFINITIES.isdisjoint(itertools.chain.from_iterable(rows))):
-        return None
-    return b"nan".join(parts)
+    return text.translate(None, b'"[]')  # an empty or string cell: no quotes
 
 
 def _print_non_finite(cells: list) -> int:

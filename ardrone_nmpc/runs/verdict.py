@@ -55,6 +55,8 @@ class VerdictTally:
         self.follow = follow
         self.tracking_ticks = 0
         self.target_seen = False
+        self._mode: str | None = None  # the last mode add_tick judged, and its judgement
+        self._tracking = False
 
     def add(self, row: Mapping[str, Any]) -> None:
         """One logged tick (``t_s``, ``mode``, and ``target_age_ms`` when it saw the target)."""
@@ -65,9 +67,13 @@ class VerdictTally:
 
     def add_tick(self, t_s: float, mode: str) -> None:
         """:meth:`add` of a row without ``target_age_ms`` given as its ``t_s`` and ``mode``
-        (the lockstep runner's usual NMPC tick: no dict built for it)."""
-        if t_s >= 0 and is_tracking(mode):
-            self.tracking_ticks += 1
+        (the lockstep runner's usual NMPC tick: no dict built for it). A mode is judged
+        when it is not the last one's object (tick after tick the same label: no call)."""
+        if t_s >= 0:
+            if mode is not self._mode:
+                self._mode, self._tracking = mode, is_tracking(mode)
+            if self._tracking:
+                self.tracking_ticks += 1
 
     def verdict(self, ending: str) -> str:
         """``ending`` unless it is :data:`COMPLETED` and the run did not do its job."""

@@ -32,10 +32,10 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import MODE_CELL, put_truth, put_truth_cells
+from ardrone_nmpc.runs.log_columns import MODE_CELL, TRUTH_CELLS, put_truth, put_truth_cells
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
-from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule, phase,
+from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule,
                                            write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
 from ardrone_nmpc.runtime.signals import polled_signals
@@ -74,6 +74,7 @@ REFUSED_EVENT = "takeoff_refused"
 #: The ending of a run whose drone landed by itself (the supervisor's ``land-<reason>`` form).
 SELF_LANDED = "land-drone-landed-itself"
 _ENDS = (Action.LAND, Action.STOP)  # the verdicts that end the experiment's ticks
+_CONTROL = Action.CONTROL  # bound once (the usual verdict: tested first, by identity)
 
 
 def _configure(cfg, drone: LockstepDrone, events: list) -> None:
@@ -170,14 +171,13 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     tally = VerdictTally(follow=tick.follow is not None)
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
-    t_exp_of, advance_to, take_events = schedule.t_exp_s, drone.advance_to, drone.take_events
+    advance_to, take_events = drone.advance_to, drone.take_events
     inputs, step, set_command = drone.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
-    for k in range(schedule.n_ticks):
+    for k, t_exp, mode in schedule.ticks():
         check_signals()
-        t_exp = t_exp_of(k)
         t_plant = t_first + k * period
         advance_to(t_plant, t_exp)
         drone_events = take_events()
@@ -190,7 +190,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             ending = SELF_LANDED
             break
         flown = k + 1
-        out = step(inputs(t_plant), t_exp_s=t_exp, mode=phase(t_exp))
+        out = step(inputs(t_plant), t_exp_s=t_exp, mode=mode)
         if out.events:
             write_events(write_event, t_exp, out.events)
         pcmd = out.pcmd
@@ -199,10 +199,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         cells = out.cells
         if cells is not None:  # the usual NMPC tick: its cells in column order, no dict
             if write_cells is not None:
-                put_truth_cells(cells, truth_cells())
+                cells[TRUTH_CELLS] = truth_cells()  # put_truth_cells without its call
                 write_cells(cells)
             label = cells[MODE_CELL]
-            tally_tick(cells[0], label)  # no target: no target_age_ms
+            tally_tick(t_exp, label)  # (t_exp: the row's t_s) no target: no target_age_ms
         else:
             row = out.row
             _record(recorder, row, drone)
@@ -210,7 +210,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             label = row["mode"]
         if progress is not None:
             progress(schedule.fraction_done(k))
-        if out.action in _ENDS:
+        action = out.action
+        if action is not _CONTROL and action in _ENDS:
             ending = label
             break
     ending = tally.verdict(ending)

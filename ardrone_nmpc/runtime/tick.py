@@ -202,19 +202,24 @@ class Tick:
                 cmd = self.control.command(decision.action, solution, x,
                                            self.supervision.vz_ref_mps)
         sent, adapted = done if done else self._after(inputs, decision, x, solution, cmd)
-        label = sup.record(sent.decision, mode)
+        verdict = sent.decision
+        # the supervisor's record when it would note nothing: a control verdict of the label
+        # it noted last (the usual tick; its call costs more than the test)
+        label = (mode if verdict.action is _CONTROL and mode == sup.label
+                 else sup.record(verdict, mode))
         compute_us = (_perf_counter_ns() - t0) * 1e-3
-        events = sup.take_events()  # a list of its own: extended, not copied
+        # a list of its own (extended, not copied); the usual tick has none to take
+        events = sup.take_events() if sup.events else []
         if adapted:
             events += adapted
         if self.cell_rows:  # (positional: the same arguments as tick_row's, in its order)
             cells = tick_cells(t_exp_s, inputs, ages_ms, x, solution, sent, label, compute_us)
             if cells is not None:
-                return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
+                return TickOutput.make(sent.pcmd, sent.progressive, None, verdict.action,
                                        events, cells)
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
-        return TickOutput.make(sent.pcmd, sent.progressive, row, sent.decision.action, events)
+        return TickOutput.make(sent.pcmd, sent.progressive, row, verdict.action, events)
 
     def _before(self, inputs: TickInputs, t_exp_s: float, traj: Trajectory) -> tuple:
         """The stages up to the solve, one by one (every tick the compiled call did not take,

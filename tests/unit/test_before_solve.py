@@ -34,7 +34,7 @@ def config(name: str, *overrides: str):
 def _supervisor(tick: Tick) -> list:
     """What the supervisor carries: counters, latch, mode, pending events."""
     s = tick.supervisor
-    return [s._latched, s._solver_failures, s._solver_good, s._solver_fallback, s._mode,
+    return [s._latched, s._solver_failures, s._solver_good, s._solver_fallback, s.label,
             list(s.events)]
 
 

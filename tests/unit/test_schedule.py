@@ -59,6 +59,21 @@ def test_tick_times_put_experiment_time_zero_on_tick_n_settle():
     assert s.fraction_done(0) == pytest.approx(1 / 63)
 
 
+@pytest.mark.parametrize("settle, duration, period", [
+    (0.5, 3.5, 0.065), (0.0, 1.0, 0.0625), (0.3, 0.0, 0.1), (1.0, 2.0, 1 / 3), (2.0, 0.5, 0.7)])
+def test_ticks_are_each_tick_its_experiment_time_and_phase(settle, duration, period):
+    """The runner's loop (``Schedule.ticks``) gives, for every k in order, exactly what
+    ``t_exp_s(k)`` and ``phase`` give (bit for bit, the very phase string)."""
+    s = Schedule.of(settle_s=settle, duration_s=duration, period_s=period)
+    ticks = list(s.ticks())
+    assert [k for k, _, _ in ticks] == list(range(s.n_ticks))
+    for k, t_exp_s, mode in ticks:
+        expected = s.t_exp_s(k)
+        assert math.copysign(1.0, t_exp_s) == math.copysign(1.0, expected)
+        assert t_exp_s == expected and mode == phase(expected)
+    assert [m for _, _, m in ticks].count("settle") == s.n_settle
+
+
 def test_phase_is_settle_before_zero_and_track_from_zero():
     assert [phase(t) for t in (-1.0, -1e-300, -0.0, 0.0, 1e-300, 5.0)] == [
         "settle", "settle", "track", "track", "track", "track"]

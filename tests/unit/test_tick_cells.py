@@ -274,3 +274,28 @@ def test_block_text_leaves_its_rows_as_they_were(n_rows):
             assert text is None
         else:
             assert text == b"".join(_plain_line(list(r), quotes) for r in rows)
+
+
+@pytest.mark.parametrize("column", ["tick_late_ms", "nav_ctrl_state", "target_x_m",
+                                    "target_age_ms"])
+@pytest.mark.parametrize("value", ["abc", "x[y", "a]b", 'q"', 1.5, None])
+def test_a_cell_tick_cells_leaves_empty_is_written_in_blocks_as_one_row_a_write(
+        tmp_path, column, value):
+    """Something else than the "" tick_cells leaves in a column it lacks: the row is not held
+    for a block (its text would carry the cell, or lose a bracket of it) but written as one
+    row a write writes it — write_row of its dict, which drops the cell."""
+    cfg = _cfg(*FLIGHTS[0])
+    rows = [list(_a_cells_row()) for _ in range(5)]
+    rows[2][LOG_COLUMNS.index(column)] = value
+    written = []
+    for name, rows_per_write in (("one", 1), ("block", 64)):
+        rec = RunRecorder.create(tmp_path / name, cfg, seed=0, rows_per_write=rows_per_write,
+                                 durable=False)
+        with rec:
+            for cells in rows:
+                rec.write_cells(list(cells))
+        written.append((rec.path / "log.csv").read_bytes())
+    assert written[0] == written[1]
+    assert written[0].count(b"\n") == 6
+    assert b"abc" not in written[1] and b"x[y" not in written[1] and b"xy" not in written[1]
+    assert not BlockCheck().tick_cells(rows[2]) and BlockCheck().tick_cells(rows[1])

@@ -44,6 +44,26 @@ def test_a_run_that_only_hovered_in_its_track_window_is_not_completed():
     assert counted.tracking_ticks == 3 and not counted.target_seen
 
 
+def test_add_tick_counts_as_is_tracking_whatever_the_label_objects():
+    """add_tick judges a mode when it is not the last one's object: labels equal but
+    distinct, alternating, or the same object tick after tick count as is_tracking says."""
+    import random
+
+    rng = random.Random(5)
+    labels = ["track", "settle", "fallback-solver", "hold-stale-mocap", "landing", ""]
+    modes = []
+    for _ in range(400):
+        label = rng.choice(labels)
+        # now the same object again, now an equal string of its own
+        modes.append(label if rng.random() < 0.5 else "".join(list(label)))
+    times = [rng.choice((-0.5, 0.0, 1.0)) for _ in modes]
+    tally = VerdictTally(follow=False)
+    for t_s, mode in zip(times, modes):
+        tally.add_tick(t_s, mode)
+    assert tally.tracking_ticks == sum(1 for t_s, m in zip(times, modes)
+                                       if t_s >= 0 and is_tracking(m)) > 0
+
+
 def test_a_landing_or_a_stop_keeps_its_own_ending():
     t = tally(rows("settle", "hover-speed"))
     for ending in ("land-geofence", "stop-emergency", "land-drone-landed-itself"):
