@@ -39,6 +39,7 @@ from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.layout import unpack
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
+from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.entry_points import entry_point, plain
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached_callees
 from ardrone_nmpc.core.monotonic import monotonic_ns
@@ -119,9 +120,12 @@ class ControlTick:
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: both halves can, and
         the solver is a plain C/GMRES one (not wrapped, not a subclass: their overrides are
-        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``."""
+        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``
+        — on a platform whose clock the kernel reads (``core/monotonic.SAME_CLOCK``: Linux;
+        elsewhere the two calls around the solve, timed in Python, take the tick)."""
         nmpc = tick.control.nmpc
-        return (tick.before_solve is not None and tick.after_solve is not None
+        return (monotonic.SAME_CLOCK
+                and tick.before_solve is not None and tick.after_solve is not None
                 and type(nmpc) is CGMRESController and nmpc._step is not None
                 and nmpc._step[0] is cgmres_step
                 and tick.control._solve_prepared == nmpc.solve_prepared)

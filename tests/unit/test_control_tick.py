@@ -286,3 +286,17 @@ def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
     tick.control._x_solve = fresh
     _step(tick, 4)
     assert ct._entry is not None and ct._vetted[2] is fresh
+
+
+def test_a_platform_whose_clock_the_kernel_does_not_read_takes_the_two_calls(monkeypatch):
+    """Not Linux (``core/monotonic.SAME_CLOCK`` False): the call is not built, so it is never
+    compiled — its clock_gettime would not link on Windows, nor time on macOS —, and the
+    two calls around the solve take the ticks."""
+    from ardrone_nmpc.core import monotonic
+
+    monkeypatch.setattr(monotonic, "SAME_CLOCK", False)
+    (tick, rows), (python, python_rows) = _flown("whole", 6), _flown("python", 6)
+    assert tick.control_tick is None and tick.before_solve is not None
+    _same_ticks(rows, python_rows)
+    assert 0.0 < rows[-1]["solve_us"]  # timed in Python
+

@@ -76,3 +76,18 @@ def test_a_kernel_reading_it_is_cached_and_loads(tmp_path):
     assert "data saved to" in logs[0] and "BRACKETED True" in logs[0]
     assert "data saved to" not in logs[1] and "data loaded from" in logs[1]
     assert "BRACKETED True" in logs[1]  # the loaded code reads the clock too
+
+
+def test_where_it_is_not_the_clock_no_call_is_emitted(monkeypatch):
+    """Elsewhere (Windows: no clock_gettime, whose unresolved symbol kills the process when
+    the kernel is linked; macOS: clock id 1 is none) the kernel answers −1 without a call."""
+    from ardrone_nmpc.core import monotonic
+
+    monkeypatch.setattr(monotonic, "SAME_CLOCK", False)
+
+    @njit
+    def read():  # compiled now, with the flag False
+        return monotonic_ns()
+
+    assert read() == -1
+    assert "clock_gettime" not in read.inspect_llvm(read.signatures[0])
