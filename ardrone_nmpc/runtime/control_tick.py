@@ -46,6 +46,7 @@ from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, STATE_DIM
 from ardrone_nmpc.runtime.after_solve import after_solve
+from ardrone_nmpc.runtime.before_solve import _NUMBERS as _BEFORE_NUMBERS
 from ardrone_nmpc.runtime.before_solve import L_SIZE, before_solve
 from ardrone_nmpc.runtime.stages import Solution
 from ardrone_nmpc.runtime.tick_kernels import E_X
@@ -207,14 +208,19 @@ class ControlTick:
         return (mocap_ms, nav_ms), x, sol, (sent, events)
 
     def _vet(self, args: tuple) -> None:
-        """After a call through the dispatcher: the kernel's entry point for these kinds of
-        argument, kept with the arrays of the call if each is of the one kind it is compiled
-        for (``core/entry_points.plain``); else the dispatcher stays (asked again next call).
-        The after-stages' buffers are bound once (``AfterSolve``): not checked per call."""
+        """After a call through the dispatcher: the kernel's entry point for float numbers
+        (each number made a float64, an int64 or a truth by its unboxing: the same value —
+        not the kinds of this call's numbers, whose entry point would unbox a later tick's
+        float heading by ``int()`` after an int one here), kept with the arrays of the call
+        if each is of the one kind it is compiled for (``core/entry_points.plain``); else the
+        dispatcher stays (asked again next call). The after-stages' buffers are bound once
+        (``AfterSolve``): not checked per call."""
+        kinds = list(_NUMBERS)
         for i, (ndim, dtype) in _ARRAYS.items():
             if not plain(args[i], ndim, dtype):
                 return
-        entry = entry_point(control_tick, *args)  # (None: a number of another kind)
+            kinds[i] = args[i]
+        entry = entry_point(control_tick, *kinds)  # (None: not compiled for them yet)
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27, 28, 29, 30))
@@ -225,6 +231,12 @@ _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
            25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 28: (1, _F8), 29: (1, _I8), 30: (2, _F8),
            43: (1, _F8), 45: (1, _F8), 46: (2, _B1)}
+# … and its numbers' kinds (:func:`warm_up_kernels`' call's; None: an array): before_solve's,
+# then initialise, the divergence residual, vz_from_commands, the ż base, lead and limit, the
+# tilt cap, the gain, E, V, Y, the ring's row, has_nav
+_NUMBERS = (*_BEFORE_NUMBERS, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0, None, 0, None, None)
+assert len(_BEFORE_NUMBERS) == _N_BEFORE and len(_NUMBERS) == 47
 
 _warm: list[bool] = []  # loaded (or compiled) in this process
 

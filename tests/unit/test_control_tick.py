@@ -300,3 +300,23 @@ def test_a_platform_whose_clock_the_kernel_does_not_read_takes_the_two_calls(mon
     _same_ticks(rows, python_rows)
     assert 0.0 < rows[-1]["solve_us"]  # timed in Python
 
+
+def _heading_step(tick: Tick, k: int, psi_rad) -> dict:
+    t_s = 2.0 + 0.065 * k
+    pose = MocapPose(t_s, np.array((0.01 * k, -0.02 * k, 1.0)), np.zeros(3), psi_rad)
+    return tick.step(TickInputs(t_s, pose, t_s - 0.01, _nav(), t_s - 0.02, None, -math.inf),
+                     t_exp_s=t_s - 1.0).row
+
+
+def test_an_int_number_on_the_vetting_tick_does_not_make_later_floats_ints():
+    """The entry point kept after a dispatcher's call is the floats' (as the warm-up's call):
+    one kept for an int heading (``MocapPose(…, 0)``) would unbox the next ticks' headings by
+    ``int()`` — 0.3 read as 0 — and fly another flight than the Python stages."""
+    (whole, _), (python, _) = _flown("whole"), _flown("python")
+    whole.control_tick._entry = None  # the next tick through the dispatcher, then vetted
+    headings = (0, 0.3, 0.3, -0.2)
+    rows = [_heading_step(whole, 4 + k, psi) for k, psi in enumerate(headings)]
+    python_rows = [_heading_step(python, 4 + k, psi) for k, psi in enumerate(headings)]
+    assert whole.control_tick._entry is not None  # (the entry point took the later ticks)
+    _same_ticks(rows, python_rows)
+    assert _carried(whole) == _carried(python)
