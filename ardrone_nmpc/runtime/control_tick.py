@@ -139,6 +139,9 @@ class ControlTick:
         self.supervision = tick.supervision
         self.delay = tick.delay
         self.offset = tick.offset
+        # the solve :meth:`takes` found the solver's own: a tick solved by another (a wrapper
+        # bound later, as the two calls around the solve would call) is Python's
+        self._solve = tick.control._solve_prepared
         # the kernel's call: its compiled entry point while the arrays are the ones vetted
         # for it, else the dispatcher (:meth:`_vet`)
         self._entry = None
@@ -156,8 +159,9 @@ class ControlTick:
         from the solution on (their compiled call would decline it too). Nothing done: None
         when a precondition of the call does not hold, False when the stages before the
         solve found the tick not nominal (their compiled call would decline it too)."""
-        nmpc = self.nmpc
-        if nmpc._t0_s is None or nmpc._ramped:  # (the first solve initialises: Python's)
+        nmpc, control = self.nmpc, self.control
+        if (nmpc._t0_s is None or nmpc._ramped  # (the first solve initialises: Python's)
+                or control._solve_prepared is not self._solve):
             return None
         settings = self.after.settings()
         if settings is None:
@@ -166,7 +170,7 @@ class ControlTick:
         if before is None:
             return None
         _, mem, iprm = nmpc._step
-        control, supervision, after = self.control, self.supervision, self.after
+        supervision, after = self.supervision, self.after
         horizon = control._ref_horizon if self.offset is None else control._horizon
         from_commands = control.vz_from_commands
         gain, lead, vz_max, tilt_cap, e, v, y = settings

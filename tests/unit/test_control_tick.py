@@ -324,3 +324,31 @@ def test_an_int_number_on_the_vetting_tick_does_not_make_later_floats_ints():
     assert whole.control_tick._entry is not None  # (the entry point took the later ticks)
     _same_ticks(rows, python_rows)
     assert _carried(whole) == _carried(python)
+
+
+def test_a_solve_bound_after_the_tick_was_built_is_called_as_the_two_calls_call_it():
+    """``Control._solve_prepared`` rebound after ``Tick`` was built (a wrapper: a recorder,
+    an injected fault): the two calls around the solve call it every tick, so the whole call
+    takes no tick while it is not the solver's own — and takes them again once it is."""
+    tick, _ = _flown("whole")
+    control, ct = tick.control, tick.control_tick
+    own, solved = control._solve_prepared, []
+
+    def recorded(t_s, x, ref):
+        solved.append(t_s)
+        return own(t_s, x, ref)
+
+    control._solve_prepared = recorded
+    assert ct.nominal(_inputs(2.3), 1.3, tick.trajectory) is None  # nothing done
+    _step(tick, 4)
+    assert solved == [2.0 + 0.065 * 4 - 1.0]
+    control._solve_prepared = own
+    assert ct.nominal(_inputs(2.0 + 0.065 * 5), 1.0 + 0.065 * 5, tick.trajectory)
+    assert solved == [2.0 + 0.065 * 4 - 1.0]
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
+def test_a_copied_tick_keeps_its_call(copier):
+    clone = copier(_flown("whole")[0])
+    assert clone.control_tick._solve is clone.control._solve_prepared  # (taken: not None)
+    assert clone.control_tick.nominal(_inputs(2.3), 1.3, clone.trajectory)
