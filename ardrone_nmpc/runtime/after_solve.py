@@ -203,8 +203,9 @@ class AfterSolve:
             has, t_nav, roll_deg, pitch_deg = 0, 0.0, 0.0, 0.0
         offset, flags = self._offset
         code, vz, roll, pitch, gaz, yaw, bits, fed = after_solve(
-            zacc, phi, theta, rate, vz_base, lead, vz_max, tilt_cap, gain, e, v, y, self.delay._sent, self.delay._next, self._response_state, has, t_nav,
-            roll_deg, pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
+            zacc, phi, theta, rate, vz_base, lead, vz_max, tilt_cap, gain, e, v, y,
+            self.delay._sent, self.delay._next, self._response_state, has, t_nav, roll_deg,
+            pitch_deg, inputs.t_s, x, sol.ref_now, sol.ref_horizon, offset, flags)
         if code:
             return None
         return self._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,

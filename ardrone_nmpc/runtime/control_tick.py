@@ -39,12 +39,14 @@ from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.layout import unpack
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
+from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.entry_points import entry_point, plain
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, STATE_DIM
 from ardrone_nmpc.runtime.after_solve import after_solve
+from ardrone_nmpc.runtime.before_solve import _NUMBERS as _BEFORE_NUMBERS
 from ardrone_nmpc.runtime.before_solve import L_SIZE, before_solve
 from ardrone_nmpc.runtime.stages import Solution
 from ardrone_nmpc.runtime.tick_kernels import E_X
@@ -119,9 +121,12 @@ class ControlTick:
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: both halves can, and
         the solver is a plain C/GMRES one (not wrapped, not a subclass: their overrides are
-        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``."""
+        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``
+        — on a platform whose clock the kernel reads (``core/monotonic.SAME_CLOCK``: Linux;
+        elsewhere the two calls around the solve, timed in Python, take the tick)."""
         nmpc = tick.control.nmpc
-        return (tick.before_solve is not None and tick.after_solve is not None
+        return (monotonic.SAME_CLOCK
+                and tick.before_solve is not None and tick.after_solve is not None
                 and type(nmpc) is CGMRESController and nmpc._step is not None
                 and nmpc._step[0] is cgmres_step
                 and tick.control._solve_prepared == nmpc.solve_prepared)
@@ -134,6 +139,9 @@ class ControlTick:
         self.supervision = tick.supervision
         self.delay = tick.delay
         self.offset = tick.offset
+        # the solve :meth:`takes` found the solver's own: a tick solved by another (a wrapper
+        # bound later, as the two calls around the solve would call) is Python's
+        self._solve = tick.control._solve_prepared
         # the kernel's call: its compiled entry point while the arrays are the ones vetted
         # for it, else the dispatcher (:meth:`_vet`)
         self._entry = None
@@ -151,8 +159,9 @@ class ControlTick:
         from the solution on (their compiled call would decline it too). Nothing done: None
         when a precondition of the call does not hold, False when the stages before the
         solve found the tick not nominal (their compiled call would decline it too)."""
-        nmpc = self.nmpc
-        if nmpc._t0_s is None or nmpc._ramped:  # (the first solve initialises: Python's)
+        nmpc, control = self.nmpc, self.control
+        if (nmpc._t0_s is None or nmpc._ramped  # (the first solve initialises: Python's)
+                or control._solve_prepared is not self._solve):
             return None
         settings = self.after.settings()
         if settings is None:
@@ -161,7 +170,7 @@ class ControlTick:
         if before is None:
             return None
         _, mem, iprm = nmpc._step
-        control, supervision, after = self.control, self.supervision, self.after
+        supervision, after = self.supervision, self.after
         horizon = control._ref_horizon if self.offset is None else control._horizon
         from_commands = control.vz_from_commands
         gain, lead, vz_max, tilt_cap, e, v, y = settings
@@ -203,14 +212,19 @@ class ControlTick:
         return (mocap_ms, nav_ms), x, sol, (sent, events)
 
     def _vet(self, args: tuple) -> None:
-        """After a call through the dispatcher: the kernel's entry point for these kinds of
-        argument, kept with the arrays of the call if each is of the one kind it is compiled
-        for (``core/entry_points.plain``); else the dispatcher stays (asked again next call).
-        The after-stages' buffers are bound once (``AfterSolve``): not checked per call."""
+        """After a call through the dispatcher: the kernel's entry point for float numbers
+        (each number made a float64, an int64 or a truth by its unboxing: the same value —
+        not the kinds of this call's numbers, whose entry point would unbox a later tick's
+        float heading by ``int()`` after an int one here), kept with the arrays of the call
+        if each is of the one kind it is compiled for (``core/entry_points.plain``); else the
+        dispatcher stays (asked again next call). The after-stages' buffers are bound once
+        (``AfterSolve``): not checked per call."""
+        kinds = list(_NUMBERS)
         for i, (ndim, dtype) in _ARRAYS.items():
             if not plain(args[i], ndim, dtype):
                 return
-        entry = entry_point(control_tick, *args)  # (None: a number of another kind)
+            kinds[i] = args[i]
+        entry = entry_point(control_tick, *kinds)  # (None: not compiled for them yet)
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27, 28, 29, 30))
@@ -221,6 +235,12 @@ _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
            25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 28: (1, _F8), 29: (1, _I8), 30: (2, _F8),
            43: (1, _F8), 45: (1, _F8), 46: (2, _B1)}
+# … and its numbers' kinds (:func:`warm_up_kernels`' call's; None: an array): before_solve's,
+# then initialise, the divergence residual, vz_from_commands, the ż base, lead and limit, the
+# tilt cap, the gain, E, V, Y, the ring's row, has_nav
+_NUMBERS = (*_BEFORE_NUMBERS, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0, None, 0, None, None)
+assert len(_BEFORE_NUMBERS) == _N_BEFORE and len(_NUMBERS) == 47
 
 
 def warm_up_kernels() -> None:

@@ -16,6 +16,7 @@ import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.diverging import DivergingSolver
+from ardrone_nmpc.core.monotonic import SAME_CLOCK
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import control_tick as control_tick_module
@@ -24,6 +25,9 @@ from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
 from ardrone_nmpc.runtime.tick import Tick
 from tests.conftest import nan_equal
 
+# the call is built only where its clock is read (core/monotonic: 64-bit Linux); elsewhere
+# the two calls around the solve take its ticks (test_before_solve, test_after_solve)
+pytestmark = pytest.mark.skipif(not SAME_CLOCK, reason="ControlTick is built on Linux only")
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 _TIMES = ("solve_us", "compute_us", "tick_late_ms")  # the clock's, not the flight's
 _PATHS = ("whole", "halves", "python")
@@ -286,3 +290,65 @@ def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
     tick.control._x_solve = fresh
     _step(tick, 4)
     assert ct._entry is not None and ct._vetted[2] is fresh
+
+
+def test_a_platform_whose_clock_the_kernel_does_not_read_takes_the_two_calls(monkeypatch):
+    """Not Linux (``core/monotonic.SAME_CLOCK`` False): the call is not built, so it is never
+    compiled — its clock_gettime would not link on Windows, nor time on macOS —, and the
+    two calls around the solve take the ticks."""
+    from ardrone_nmpc.core import monotonic
+
+    monkeypatch.setattr(monotonic, "SAME_CLOCK", False)
+    (tick, rows), (python, python_rows) = _flown("whole", 6), _flown("python", 6)
+    assert tick.control_tick is None and tick.before_solve is not None
+    _same_ticks(rows, python_rows)
+    assert 0.0 < rows[-1]["solve_us"]  # timed in Python
+
+
+def _heading_step(tick: Tick, k: int, psi_rad) -> dict:
+    t_s = 2.0 + 0.065 * k
+    pose = MocapPose(t_s, np.array((0.01 * k, -0.02 * k, 1.0)), np.zeros(3), psi_rad)
+    return tick.step(TickInputs(t_s, pose, t_s - 0.01, _nav(), t_s - 0.02, None, -math.inf),
+                     t_exp_s=t_s - 1.0).row
+
+
+def test_an_int_number_on_the_vetting_tick_does_not_make_later_floats_ints():
+    """The entry point kept after a dispatcher's call is the floats' (as the warm-up's call):
+    one kept for an int heading (``MocapPose(…, 0)``) would unbox the next ticks' headings by
+    ``int()`` — 0.3 read as 0 — and fly another flight than the Python stages."""
+    (whole, _), (python, _) = _flown("whole"), _flown("python")
+    whole.control_tick._entry = None  # the next tick through the dispatcher, then vetted
+    headings = (0, 0.3, 0.3, -0.2)
+    rows = [_heading_step(whole, 4 + k, psi) for k, psi in enumerate(headings)]
+    python_rows = [_heading_step(python, 4 + k, psi) for k, psi in enumerate(headings)]
+    assert whole.control_tick._entry is not None  # (the entry point took the later ticks)
+    _same_ticks(rows, python_rows)
+    assert _carried(whole) == _carried(python)
+
+
+def test_a_solve_bound_after_the_tick_was_built_is_called_as_the_two_calls_call_it():
+    """``Control._solve_prepared`` rebound after ``Tick`` was built (a wrapper: a recorder,
+    an injected fault): the two calls around the solve call it every tick, so the whole call
+    takes no tick while it is not the solver's own — and takes them again once it is."""
+    tick, _ = _flown("whole")
+    control, ct = tick.control, tick.control_tick
+    own, solved = control._solve_prepared, []
+
+    def recorded(t_s, x, ref):
+        solved.append(t_s)
+        return own(t_s, x, ref)
+
+    control._solve_prepared = recorded
+    assert ct.nominal(_inputs(2.3), 1.3, tick.trajectory) is None  # nothing done
+    _step(tick, 4)
+    assert solved == [2.0 + 0.065 * 4 - 1.0]
+    control._solve_prepared = own
+    assert ct.nominal(_inputs(2.0 + 0.065 * 5), 1.0 + 0.065 * 5, tick.trajectory)
+    assert solved == [2.0 + 0.065 * 4 - 1.0]
+
+
+@pytest.mark.parametrize("copier", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
+def test_a_copied_tick_keeps_its_call(copier):
+    clone = copier(_flown("whole")[0])
+    assert clone.control_tick._solve is clone.control._solve_prepared  # (taken: not None)
+    assert clone.control_tick.nominal(_inputs(2.3), 1.3, clone.trajectory)
