@@ -61,7 +61,8 @@ with warnings.catch_warnings():
             if re.search(r"vfn?m(add|sub)|%[yz]mm", copy.inspect_asm(sig)):
                 bad.append(name)
 print(json.dumps({
-    "kernels": len(kernels), "others": others, "intrinsics": sorted(intrinsics), "compiled": compiled, "bad_asm": bad,
+    "kernels": len(kernels), "others": others, "intrinsics": sorted(intrinsics),
+    "compiled": compiled, "bad_asm": bad,
     "parallel": [n for n, d in kernels.items() if d.targetoptions.get("parallel")],
     "targets": sorted({type(d.targetdescr).__name__ for d in kernels.values()}),
     "magic": list(cpu_target.target_context.codegen().magic_tuple()[1:]),
