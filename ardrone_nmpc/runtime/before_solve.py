@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.core.entry_points import entry_point, plain
+from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_square
@@ -242,14 +242,9 @@ class BeforeSolve:
         (each number is made a float64, an int64 or a truth by its unboxing, as a Python
         caller's numbers are by the dispatcher's specialisation for them: the same value),
         kept with the stages' arrays of the call if each is of the one kind it is compiled
-        for (``plain``), so that the next calls with them skip the dispatcher's look at 28
+        for (``VettedCall.entry_for``), so that the next calls with them skip the dispatcher's look at 28
         arguments (~0.4 µs); else the dispatcher stays (asked again next call)."""
-        kinds = list(_NUMBERS)
-        for i, ndim in _ARRAYS:
-            if not plain(args[i], ndim):
-                return
-            kinds[i] = args[i]
-        entry = entry_point(before_solve, *kinds)
+        entry = _CALL.entry_for(*(args[i] for i, _ in _ARRAYS))
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
@@ -260,6 +255,8 @@ class BeforeSolve:
 # (the state bits, the pending window: int64; ẋ, ẏ from navdata: a truth; floats else)
 _ARRAYS = ((16, 1), (17, 1), (19, 2), (23, 1), (24, 1), (25, 2), (26, 1), (27, 2))
 _NUMBERS = tuple(0 if i in (3, 20, 21) else False if i == 13 else 0.0 for i in range(28))
+_CALL = VettedCall(before_solve, *(ArrayKind(dict(_ARRAYS)[i]) if i in dict(_ARRAYS) else k
+                                   for i, k in enumerate(_NUMBERS)))
 
 
 def warm_up_kernels() -> None:

@@ -40,7 +40,7 @@ from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.layout import unpack
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
 from ardrone_nmpc.core import monotonic
-from ardrone_nmpc.core.entry_points import entry_point, plain
+from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
@@ -216,15 +216,10 @@ class ControlTick:
         (each number made a float64, an int64 or a truth by its unboxing: the same value —
         not the kinds of this call's numbers, whose entry point would unbox a later tick's
         float heading by ``int()`` after an int one here), kept with the arrays of the call
-        if each is of the one kind it is compiled for (``core/entry_points.plain``); else the
+        if each is of the one kind it is compiled for (``VettedCall.entry_for``); else the
         dispatcher stays (asked again next call). The after-stages' buffers are bound once
         (``AfterSolve``): not checked per call."""
-        kinds = list(_NUMBERS)
-        for i, (ndim, dtype) in _ARRAYS.items():
-            if not plain(args[i], ndim, dtype):
-                return
-            kinds[i] = args[i]
-        entry = entry_point(control_tick, *kinds)  # (None: not compiled for them yet)
+        entry = _CALL.entry_for(*(args[i] for i in _ARRAYS))  # (None: not compiled yet)
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27, 28, 29, 30))
@@ -241,6 +236,8 @@ _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
 _NUMBERS = (*_BEFORE_NUMBERS, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0, None, 0, None, None)
 assert len(_BEFORE_NUMBERS) == _N_BEFORE and len(_NUMBERS) == 47
+_CALL = VettedCall(control_tick, *(ArrayKind(*_ARRAYS[i]) if i in _ARRAYS else k
+                                   for i, k in enumerate(_NUMBERS)))
 
 
 def warm_up_kernels() -> None:

@@ -16,6 +16,7 @@ import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.diverging import DivergingSolver
+from ardrone_nmpc.core.entry_points import VettedCall
 from ardrone_nmpc.core.monotonic import SAME_CLOCK
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
 from ardrone_nmpc.runs.memory import MemoryRecorder
@@ -53,7 +54,7 @@ def _carried(tick: Tick) -> list:
     last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
     return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
             repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
-            sup._solver_good, sup._solver_fallback, sup._latched, sup._mode,
+            sup._solver_good, sup._solver_fallback, sup._latched, sup.label,
             tick.estimation._state.tobytes(), c._x_solve.tobytes(), c._states.tobytes(),
             None if nmpc is None else (nmpc.memory.snapshot().tobytes(), nmpc._t0_s),
             None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
@@ -189,7 +190,10 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
 
     (whole, _), (python, _) = _flown("whole"), _flown("python")
     monkeypatch.setattr(control_tick_module, "control_tick", spy)
-    whole.control_tick._entry = None  # through the module's kernel: the spy
+    # through the module's kernel, the spy, every tick: no entry point vetted for it
+    monkeypatch.setattr(control_tick_module, "_CALL",
+                        VettedCall(spy, *control_tick_module._CALL.kinds))
+    whole.control_tick._entry = None
     asked = []  # the after-stages' own compiled call: not asked after a SOLVED (it would
     # decline), asked on the ticks the whole call does not take (a solver recovered afresh)
     whole.after_solve.nominal = lambda *args: asked.append(args)
