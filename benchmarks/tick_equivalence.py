@@ -31,6 +31,7 @@ CLOCK_COLUMNS = frozenset({"solve_us", "compute_us", "tick_late_ms"})
 
 # (name, config, overrides, seed): short flights, each through what its name says.
 SHORT = ["duration_s=8", "sim.settle_s=1"]
+SQUARE = ["duration_s=12", "sim.settle_s=1"]
 CASES: list[tuple[str, str, list[str], int]] = [
     ("hover", "hover", SHORT, 0),
     ("step_x", "step_x", SHORT, 1),
@@ -75,6 +76,18 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("low_battery_start", "hover", SHORT + ["sim.plant.battery_start_pct=22",
                                             "sim.plant.battery_drain_pct_per_min=30"], 0),
     ("altitude_cap", "step_z", SHORT + ["drone.altitude_max_m=1.3"], 0),
+    # waypoint flights (the square's): the controller's one compiled call takes their usual
+    # ticks (runtime/control_tick), the faults and options its tests hand to Python
+    ("square_navdata_velocity", "square", SQUARE + ["estimator.horizontal_velocity=navdata"], 3),
+    ("square_no_offset_free", "square", SQUARE + ["controller.offset_free.enabled=false"], 0),
+    ("square_no_delay_comp", "square", SQUARE + ["controller.delay_compensation_s=0"], 0),
+    ("square_mocap_dropout", "square", SQUARE + ["faults.mocap_dropout.start_s=4",
+                                                 "faults.mocap_dropout.duration_s=0.2"], 0),
+    ("square_navdata_loss", "square", SQUARE + ["faults.navdata_loss.start_s=4"], 0),
+    ("square_at_loss", "square", SQUARE + ["faults.at_loss.start_s=4",
+                                           "faults.at_loss.probability=0.7"], 0),
+    ("square_delay_jump", "square", SQUARE + ["faults.delay_jump.start_s=4"], 0),
+    ("square_battery_floor", "square", SQUARE + ["faults.battery_floor.start_s=6"], 0),
 ]
 
 
