@@ -9,6 +9,10 @@ stages (monkeypatched here, nothing in the package changes) and prints the cost 
 * solver — ``Control.solve`` (delay prediction, reference lookup, the NMPC);
 * supervisor — the supervisor's checks and verdict bookkeeping, the command mapping
   (``Control.command``, ``Supervision.command``, ``DelayPrediction.push``);
+* controller — the NMPC tick's compiled calls, which do the three above on the nominal tick
+  (``ControlTick.nominal``: the whole controller in one call, ``runtime/control_tick``;
+  ``BeforeSolve.nominal``: the estimate and the solve, on the ticks it does not take): the
+  three above count only the ticks the Python stages take;
 * logging — building the row (``tick_row``, ``put_truth``) and the recorder's
   ``write_row``, for a run directory (``log.csv``) and for an in-memory recorder;
 * rest — the runner's loop and everything not wrapped.
@@ -56,7 +60,8 @@ def _wrap(owner, name: str, bucket: str, acc: dict) -> None:
 
 def _instrument(acc: dict) -> None:
     from ardrone_nmpc import safety
-    from ardrone_nmpc.runtime import after_solve, lockstep, stages, tick
+    from ardrone_nmpc.runtime import (after_solve, before_solve, control_tick, lockstep, stages,
+                                      tick)
     from ardrone_nmpc.sim.plant import AirframePlant
 
     for name in ("advance", "mocap_pose", "navdata"):
@@ -71,6 +76,9 @@ def _instrument(acc: dict) -> None:
     # the nominal tick's stages after the solve in one call: the four above, with the response
     # feed and the integrator's step (unwrapped, in "rest", on the other ticks)
     _wrap(after_solve.AfterSolve, "nominal", "supervisor", acc)
+    # the nominal tick's controller in one compiled call (the stages above unwrapped in it)
+    _wrap(control_tick.ControlTick, "nominal", "controller", acc)
+    _wrap(before_solve.BeforeSolve, "nominal", "controller", acc)
     _wrap(tick, "tick_row", "logging", acc)
     _wrap(lockstep, "put_truth", "logging", acc)
 
@@ -114,7 +122,8 @@ def profile(config: str, repeats: int) -> None:
               f"{plain[kind]:.3f} s plain → {ticks * cfg.loop.period_s / plain[kind]:.0f}× "
               "real time")
         print(f"{'stage':<12}{'µs/tick':>10}{'share':>8}")
-        for name in ("plant", "estimator", "solver", "supervisor", "logging", "rest"):
+        for name in ("plant", "estimator", "solver", "supervisor", "controller", "logging",
+                     "rest"):
             ns = parts.get(name, 0)
             print(f"{name:<12}{ns / ticks / 1e3:>10.1f}{ns / (wall * 1e9):>8.1%}")
     print(f"\nrun directory / in-memory wall: {plain['rundir'] / plain['memory']:.2f}")

@@ -64,17 +64,19 @@ _N_BEFORE = 28  # before_solve's arguments, control_tick's first
 def control_tick(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll_deg,
                  pitch_deg, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
                  nav_vx_mps, nav_vy_mps, est, limits, t_exp_s, ring, first, pending, lead_s,
-                 x_solve, shift, states, work, rows, mem, iprm, horizon, initialise,
-                 divergence_residual, vz_from_commands, vz_ref_last_mps, vz_lead_s, vz_max_mps,
-                 tilt_cap_rad, gain, e, v, y, ring_row, response, has_nav, offset,
+                 x_solve, shift, states, work, rows, vz_ref_last_mps, ring_row, mem, iprm,
+                 horizon, initialise, divergence_residual, vz_from_commands, vz_lead_s,
+                 vz_max_mps, tilt_cap_rad, gain, e, v, y, response, has_nav, offset,
                  offset_flags):
     """The nominal tick's controller, over its state (module docstring).
 
-    ``before_solve``'s 28 arguments; the solver's memory, settings, horizon (the reference it
-    solves against: shifted by the offset-free stage, if any), ``initialise`` (False: its
-    usual tick) and ``divergence_residual``; then ``after_solve``'s numbers (the ż base is
-    the last ż reference with ``vz_from_commands``, else the predicted state's ż) and its
-    buffers (``ring_row`` the delay ring's next row, ``has_nav`` 1).
+    ``before_solve``'s 28 arguments; the two numbers of the tick ``after_solve`` takes (the
+    last ż reference, the delay ring's next row); then what changes only when a writer
+    changes it (``ControlTick``'s prepared tail): the solver's memory, settings, horizon (the
+    reference it solves against: shifted by the offset-free stage, if any), ``initialise``
+    (False: its usual tick) and ``divergence_residual``; ``after_solve``'s other numbers (the
+    ż base is the last ż reference with ``vz_from_commands``, else the predicted state's ż)
+    and its buffers (``has_nav`` 1).
 
     Returns (code, mocap age ms, navdata age ms, the kernel's flag, solve µs, ‖F‖, GMRES and
     Newton iterations, the input z̈, φ, θ, ψ̇, then ``after_solve``'s ż ref, four PCMD
@@ -111,6 +113,7 @@ def control_tick(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
 _OK = SolverStatus.OK
 _OK_TEXT = _OK._value_
 _new_tuple = tuple.__new__
+_UNSET = (object(),) * 9  # (ControlTick._key before its first tail: nothing is this object)
 
 
 class ControlTick:
@@ -136,6 +139,7 @@ class ControlTick:
         self.after = tick.after_solve
         self.control = tick.control
         self.nmpc = tick.control.nmpc
+        self.supervisor = tick.supervisor
         self.supervision = tick.supervision
         self.delay = tick.delay
         self.offset = tick.offset
@@ -146,11 +150,16 @@ class ControlTick:
         # for it, else the dispatcher (:meth:`_vet`)
         self._entry = None
         self._vetted: tuple = ()
+        # the call's tail (:meth:`_prepare`) and the objects it was made of
+        self._tail: tuple = ()
+        self._key: tuple = _UNSET
 
     def __getstate__(self) -> dict:
-        """Without what :meth:`_vet` makes (an entry point does not pickle)."""
+        """Without what :meth:`_vet` and :meth:`_prepare` make (an entry point does not
+        pickle; a copy's arrays and views are made its stages' own again on its first tick)."""
         state = self.__dict__.copy()
         state["_entry"], state["_vetted"] = None, ()
+        state["_tail"], state["_key"] = (), _UNSET
         return state
 
     def nominal(self, inputs, t_exp_s: float, traj):
@@ -161,35 +170,30 @@ class ControlTick:
         solve found the tick not nominal (their compiled call would decline it too)."""
         nmpc, control = self.nmpc, self.control
         if (nmpc._t0_s is None or nmpc._ramped  # (the first solve initialises: Python's)
-                or control._solve_prepared is not self._solve):
+                or control._solve_prepared is not self._solve
+                or self.supervisor._solver_fallback):  # (check_solution's other verdicts)
             return None
-        settings = self.after.settings()
-        if settings is None:
+        supervision = self.supervision
+        horizon = control._ref_horizon if self.offset is None else control._horizon
+        key = self._key  # the tail holds while what it was made of is the stages' still
+        if not (nmpc._step is key[0] and horizon is key[1]
+                and nmpc.divergence_residual is key[2] and control.vz_from_commands is key[3]
+                and supervision.attitude_gain is key[4] and control.vz_lead_s is key[5]
+                and control._vz_max_mps is key[6] and self.supervisor.max_tilt_rad is key[7]
+                and supervision._scales is key[8]) and not self._prepare(horizon):
             return None
         before = self.before.arguments(inputs, t_exp_s, traj)
         if before is None:
             return None
-        _, mem, iprm = nmpc._step
-        supervision, after = self.supervision, self.after
-        horizon = control._ref_horizon if self.offset is None else control._horizon
-        from_commands = control.vz_from_commands
-        gain, lead, vz_max, tilt_cap, e, v, y = settings
-        offset, flags = after._offset
-        vz_last = float(supervision.vz_ref_mps) if from_commands else 0.0
-        ring_row, response = self.delay._next, after._response_state
+        vz_last = float(supervision.vz_ref_mps) if control.vz_from_commands else 0.0
         call, vet = self._entry, self._vetted
         if (call is not None and before[16] is vet[0] and before[19] is vet[1]
                 and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
-                and before[26] is vet[5] and before[27] is vet[6] and mem is vet[7]
-                and iprm is vet[8] and horizon is vet[9]):
-            answer = call(*before, mem, iprm, horizon, False, nmpc.divergence_residual,
-                          from_commands, vz_last, lead, vz_max, tilt_cap, gain, e, v, y,
-                          ring_row, response, 1, offset, flags)
+                and before[26] is vet[5] and before[27] is vet[6]):
+            answer = call(*before, vz_last, self.delay._next, *self._tail)
         else:  # the dispatcher (it looks at every argument's type), then the vetting
             self._entry = None
-            args = (*before, mem, iprm, horizon, False, nmpc.divergence_residual,
-                    from_commands, vz_last, lead, vz_max, tilt_cap, gain, e, v, y, ring_row,
-                    response, 1, offset, flags)
+            args = (*before, vz_last, self.delay._next, *self._tail)
             answer = control_tick(*args)
             self._vet(args)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
@@ -203,13 +207,37 @@ class ControlTick:
             return ((mocap_ms, nav_ms), x,
                     control.solution(control._ref_now, x_solve, result, control._ref_horizon),
                     False)
-        sent, events = after._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz,
-                                      yaw, bits, fed)
+        sent, events = self.after._records(inputs.t_s, zacc, phi, theta, rate, vz, roll, pitch,
+                                           gaz, yaw, bits, fed)
         u = sent.u  # the input solved and sent (read-only): the result's own
         result = _new_tuple(SolveResult, (u, _OK, norm, gmres_it, solve_us, newton_it, False))
         sol = _new_tuple(Solution, (control._ref_now, x_solve, result, u, True, _OK_TEXT, None,
                                     control._ref_horizon))
         return (mocap_ms, nav_ms), x, sol, (sent, events)
+
+    def _prepare(self, horizon) -> bool:
+        """The call's tail (:func:`control_tick`'s arguments from the solver's memory on)
+        from the stages' objects now — the solver's memory, ``horizon``, the settings
+        (``AfterSolve.settings``), the after-stages' buffers —, kept with the objects it was
+        made of: :meth:`nominal` takes it while each is still the stages' (the same object:
+        the same value, already vetted), and makes it again when a writer has replaced one.
+        False (nothing kept) when a precondition of the call does not hold."""
+        nmpc, control, supervision, after = self.nmpc, self.control, self.supervision, self.after
+        # read first: the settings are of these objects (and their class tested by settings)
+        key = (nmpc._step, horizon, nmpc.divergence_residual, control.vz_from_commands,
+               supervision.attitude_gain, control.vz_lead_s, control._vz_max_mps,
+               self.supervisor.max_tilt_rad, supervision._scales)
+        settings = after.settings()
+        if settings is None:
+            return False
+        gain, lead, vz_max, tilt_cap, e, v, y = settings
+        _, mem, iprm = key[0]
+        offset, flags = after._offset
+        self._tail = (mem, iprm, horizon, False, key[2], key[3], lead, vz_max, tilt_cap, gain,
+                      e, v, y, after._response_state, 1, offset, flags)
+        self._key = key
+        self._entry = None  # the tail's arrays vetted on the next call
+        return True
 
     def _vet(self, args: tuple) -> None:
         """After a call through the dispatcher: the kernel's entry point for float numbers
@@ -217,24 +245,24 @@ class ControlTick:
         not the kinds of this call's numbers, whose entry point would unbox a later tick's
         float heading by ``int()`` after an int one here), kept with the arrays of the call
         if each is of the one kind it is compiled for (``VettedCall.entry_for``); else the
-        dispatcher stays (asked again next call). The after-stages' buffers are bound once
-        (``AfterSolve``): not checked per call."""
+        dispatcher stays (asked again next call). The tail's arrays are checked by
+        :meth:`nominal`'s test of what the tail was made of (a new tail: vetted again)."""
         entry = _CALL.entry_for(*(args[i] for i in _ARRAYS))  # (None: not compiled yet)
         if entry is not None:
             self._entry = entry
-            self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27, 28, 29, 30))
+            self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
 
 
 # :func:`control_tick`'s array arguments (position: dimensions, dtype)
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
-           25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 28: (1, _F8), 29: (1, _I8), 30: (2, _F8),
+           25: (2, _F8), 26: (1, _F8), 27: (2, _F8), 30: (1, _F8), 31: (1, _I8), 32: (2, _F8),
            43: (1, _F8), 45: (1, _F8), 46: (2, _B1)}
 # … and its numbers' kinds (:func:`warm_up_kernels`' call's; None: an array): before_solve's,
-# then initialise, the divergence residual, vz_from_commands, the ż base, lead and limit, the
-# tilt cap, the gain, E, V, Y, the ring's row, has_nav
-_NUMBERS = (*_BEFORE_NUMBERS, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0, None, 0, None, None)
+# then the ż base, the ring's row, initialise, the divergence residual, vz_from_commands, lead
+# and limit, the tilt cap, the gain, E, V, Y, has_nav
+_NUMBERS = (*_BEFORE_NUMBERS, 0.0, 0, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, None, 0, None, None)
 assert len(_BEFORE_NUMBERS) == _N_BEFORE and len(_NUMBERS) == 47
 _CALL = VettedCall(control_tick, *(ArrayKind(*_ARRAYS[i]) if i in _ARRAYS else k
                                    for i, k in enumerate(_NUMBERS)))
@@ -250,9 +278,9 @@ def warm_up_kernels() -> None:
     f8 = np.zeros(1)
     control_tick(1.0, 1.0, 1.0, 0, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False,
                  0.0, 0.0, f8, np.zeros(L_SIZE), 0.0, np.zeros((2, 4)), 0, 0, 0.0, f8, f8,
-                 np.zeros((1, STATE_DIM)), f8, np.zeros((1, 1)), f8, np.zeros(6, np.int64),
-                 np.zeros((1, STATE_DIM)), False, 1.0, False, 0.0, 0.065, 0.7, 0.3, 1.0, 1.0,
-                 1.0, 1.0, 0, f8, 1, f8, np.zeros((3, 0), np.bool_))
+                 np.zeros((1, STATE_DIM)), f8, np.zeros((1, 1)), 0.0, 0, f8,
+                 np.zeros(6, np.int64), np.zeros((1, STATE_DIM)), False, 1.0, False, 0.065, 0.7,
+                 0.3, 1.0, 1.0, 1.0, 1.0, f8, 1, f8, np.zeros((3, 0), np.bool_))
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -253,9 +253,10 @@ def test_the_kernel_answers_not_nominal_before_any_write():
     _, mem, iprm = nmpc._step
     offset, flags = after._offset
     answer = control_tick_module.control_tick(
-        *args, mem, iprm, control._horizon, False, nmpc.divergence_residual, False, 0.0,
-        control.vz_lead_s, control._vz_max_mps, tick.supervisor.max_tilt_rad, 1.0,
-        *tick.supervision._scales, tick.delay._next, after._response_state, 1, offset, flags)
+        *args, 0.0, tick.delay._next, mem, iprm, control._horizon, False,
+        nmpc.divergence_residual, False, control.vz_lead_s, control._vz_max_mps,
+        tick.supervisor.max_tilt_rad, 1.0, *tick.supervision._scales, after._response_state, 1,
+        offset, flags)
     assert answer[0] == NOT_NOMINAL
     assert _carried(tick) == before
 
@@ -294,6 +295,28 @@ def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
     tick.control._x_solve = fresh
     _step(tick, 4)
     assert ct._entry is not None and ct._vetted[2] is fresh
+
+
+@pytest.mark.parametrize("setup", [
+    lambda tick: setattr(tick.supervision, "attitude_gain", 1.25),  # as the response fit
+    lambda tick: setattr(tick.control, "vz_lead_s", 0.04),
+    lambda tick: setattr(tick.supervision, "_scales", (0.3, 0.8, 1.5)),
+])
+def test_a_setting_a_writer_replaces_is_the_next_call_s(setup):
+    """The call's tail (ControlTick._prepare) is made again when a writer replaces what it
+    was made of: the next tick computes with the new value, as the Python stages do."""
+    (whole, _), (python, _) = _flown("whole"), _flown("python")
+    ct = whole.control_tick
+    tail, entry = ct._tail, ct._entry
+    assert tail and entry is not None
+    for tick in (whole, python):
+        setup(tick)
+    _same_ticks([_step(whole, k) for k in range(4, 7)], [_step(python, k) for k in range(4, 7)])
+    assert _carried(whole) == _carried(python)
+    assert ct._tail != tail and ct._entry is not None  # made again, and vetted again
+    kept = ct._tail
+    _step(whole, 7)
+    assert ct._tail is kept  # nothing replaced: the same tail
 
 
 def test_a_platform_whose_clock_the_kernel_does_not_read_takes_the_two_calls(monkeypatch):
