@@ -4,7 +4,8 @@
 flies one config in lockstep with ``time.perf_counter_ns`` accumulators wrapped around the
 stages (monkeypatched here, nothing in the package changes) and prints the cost per tick:
 
-* plant — the simulated airframe (``AirframePlant.advance``, ``mocap_pose``, ``navdata``);
+* plant — the simulated drone: the lockstep drone's ``advance_to``, ``set_command`` and
+  ``inputs`` (the airframe, its firmware and sensors, which it alone calls);
 * estimator — ``Estimation.update``;
 * solver — ``Control.solve`` (delay prediction, reference lookup, the NMPC);
 * supervisor — the supervisor's checks and verdict bookkeeping, the command mapping
@@ -13,8 +14,9 @@ stages (monkeypatched here, nothing in the package changes) and prints the cost 
   (``ControlTick.nominal``: the whole controller in one call, ``runtime/control_tick``;
   ``BeforeSolve.nominal``: the estimate and the solve, on the ticks it does not take): the
   three above count only the ticks the Python stages take;
-* logging — building the row (``tick_row``, ``put_truth``) and the recorder's
-  ``write_row``, for a run directory (``log.csv``) and for an in-memory recorder;
+* logging — building the row (``tick_row``, ``put_truth``; ``tick_cells`` and the drone's
+  ``truth_cells`` for a recorder of cells) and the recorder's ``write_row`` or
+  ``write_cells``, for a run directory (``log.csv``) and for an in-memory recorder;
 * rest — the runner's loop and everything not wrapped.
 
 The wrappers add ~0.3 µs per wrapped call; the total is measured without them too.
@@ -62,10 +64,11 @@ def _instrument(acc: dict) -> None:
     from ardrone_nmpc import safety
     from ardrone_nmpc.runtime import (after_solve, before_solve, control_tick, lockstep, stages,
                                       tick)
-    from ardrone_nmpc.sim.plant import AirframePlant
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
-    for name in ("advance", "mocap_pose", "navdata"):
-        _wrap(AirframePlant, name, "plant", acc)
+    for name in ("advance_to", "set_command", "inputs"):
+        _wrap(LockstepDrone, name, "plant", acc)
+    _wrap(LockstepDrone, "truth_cells", "logging", acc)
     _wrap(stages.Estimation, "update", "estimator", acc)
     _wrap(stages.Control, "solve", "solver", acc)
     for name in ("check_feedback", "check_state", "check_solution", "record", "take_events"):
@@ -80,6 +83,7 @@ def _instrument(acc: dict) -> None:
     _wrap(control_tick.ControlTick, "nominal", "controller", acc)
     _wrap(before_solve.BeforeSolve, "nominal", "controller", acc)
     _wrap(tick, "tick_row", "logging", acc)
+    _wrap(tick, "tick_cells", "logging", acc)
     _wrap(lockstep, "put_truth", "logging", acc)
 
 
@@ -93,6 +97,7 @@ def _fly(cfg, kind: str, acc: dict | None) -> tuple[float, int]:
         recorder = RunRecorder.create(tmp, cfg, seed=0) if kind == "rundir" else MemoryRecorder()
         if acc is not None:
             _wrap(recorder, "write_row", "logging", acc)
+            _wrap(recorder, "write_cells", "logging", acc)
         t0 = time.perf_counter()
         result = run_lockstep(cfg, recorder=recorder)
         wall = time.perf_counter() - t0
