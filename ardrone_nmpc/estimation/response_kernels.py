@@ -30,7 +30,7 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_max, py_min, py_square
 from ardrone_nmpc.core.sorted_search import count_at_or_below
-from ardrone_nmpc.estimation.response_lanes import fold_lags
+from ardrone_nmpc.estimation.response_lanes import fit_pairs, fold_lags
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "ESTIMATE_ANSWER", "ESTIMATE_PARAMS", "HEAD",
            "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G",
@@ -406,23 +406,11 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     for a in range(2):
         sy = state[S_SY + a]
         syy[a] = state[S_SYY + a] - sy * sy / n
-    any_ok = False
-    for i in range(K * L):
-        for a in range(2):
-            e = 2 * i + a
-            v = sx[e]
-            c = sxx[e] - v * v / n
-            cy = sxy[e] - v * state[S_SY + a] / n
-            sxx_c[e] = c
-            if c > 1e-12:
-                any_ok = True
-                g = cy / c
-                gain[e] = g
-                rss_axis[e] = syy[a] - g * cy
-            else:
-                gain[e] = 0.0
-                rss_axis[e] = syy[a]
-        rss[i] = (0.0 + rss_axis[2 * i]) + rss_axis[2 * i + 1]  # numpy's sum of two
+    # every grid point's two axes at once (response_lanes: each lane this loop's scalar
+    # expressions, the same bits):
+    # c = Σx² − Σx·Σx / n; c > 1e-12: gain = (Σx·y − Σx·Σy / n) / c, residual Σy²_c − gain·cy
+    any_ok = fit_pairs(state, out, HEAD, K * L, kl2, n, state[S_SY], state[S_SY + 1], syy[0],
+                       syy[1])
     if not any_ok or (0.0 + syy[0]) + syy[1] <= 0.0:
         return -1
     best = 0
