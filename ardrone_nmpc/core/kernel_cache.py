@@ -30,7 +30,8 @@ KERNEL_SOURCES = (
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "runs/path_kernels.py",
-    "reference/kernels.py", "estimation/response_kernels.py", "estimation/disturbance.py",
+    "reference/kernels.py", "estimation/response_kernels.py", "estimation/response_lanes.py",
+    "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
     "runtime/control_tick.py",
 )

@@ -30,6 +30,7 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_max, py_min, py_square
 from ardrone_nmpc.core.sorted_search import count_at_or_below
+from ardrone_nmpc.estimation.response_lanes import fit_pairs, fold_lags
 
 __all__ = ["CMD_NONE", "CMD_RESTART", "CMD_SEND", "ESTIMATE_ANSWER", "ESTIMATE_PARAMS", "HEAD",
            "MEMO_SETS", "S_B", "S_BITS", "S_CAPACITY", "S_COUNT", "S_DELAYS", "S_EULER_MAX", "S_G",
@@ -236,33 +237,10 @@ def fold_sample(times: np.ndarray, n: int, ordered: bool, t_s: float, delays_s: 
         u0, u1 = u[2 * jk], u[2 * jk + 1]
         gk, ek = 2 * jk * L, 2 * k * L  # (jk, 0, 0) in ylag, (k, 0, 0) in each sum
         # the lags without a test per lag (the tracked model's value made after them, the
-        # same expression): ~4 % of the fold
-        if scale:
-            for m in range(L):
-                dk = memo[r + m]
-                g, e = gk + 2 * m, ek + 2 * m
-                q, w = e + kl2, e + 2 * kl2  # Σx², Σx·y
-                v0 = u0 + (ylag[g] - u0) * dk
-                v1 = u1 + (ylag[g + 1] - u1) * dk
-                sums[e] = sums[e] * forget + v0
-                sums[e + 1] = sums[e + 1] * forget + v1
-                sums[q] = sums[q] * forget + v0 * v0
-                sums[q + 1] = sums[q + 1] * forget + v1 * v1
-                sums[w] = sums[w] * forget + v0 * y0
-                sums[w + 1] = sums[w + 1] * forget + v1 * y1
-        else:
-            for m in range(L):
-                dk = memo[r + m]
-                g, e = gk + 2 * m, ek + 2 * m
-                q, w = e + kl2, e + 2 * kl2
-                v0 = u0 + (ylag[g] - u0) * dk
-                v1 = u1 + (ylag[g + 1] - u1) * dk
-                sums[e] += v0
-                sums[e + 1] += v1
-                sums[q] += v0 * v0
-                sums[q + 1] += v1 * v1
-                sums[w] += v0 * y0
-                sums[w + 1] += v1 * y1
+        # same expression), the two axes of each at once (response_lanes: the same bits);
+        # its indices non-negative (a row −1 read as numba reads it: the last)
+        fold_lags(sums, ylag, memo, ek, gk + ylag.size if gk < 0 else gk, r, L, kl2, u0, u1,
+                  y0, y1, forget, scale)
         if ek <= best < ek + 2 * L:  # the tracked model is at this delay
             m = (best - ek) // 2
             dk = memo[r + m]
@@ -428,23 +406,11 @@ def fit_grid(state: np.ndarray, out: np.ndarray) -> int:
     for a in range(2):
         sy = state[S_SY + a]
         syy[a] = state[S_SYY + a] - sy * sy / n
-    any_ok = False
-    for i in range(K * L):
-        for a in range(2):
-            e = 2 * i + a
-            v = sx[e]
-            c = sxx[e] - v * v / n
-            cy = sxy[e] - v * state[S_SY + a] / n
-            sxx_c[e] = c
-            if c > 1e-12:
-                any_ok = True
-                g = cy / c
-                gain[e] = g
-                rss_axis[e] = syy[a] - g * cy
-            else:
-                gain[e] = 0.0
-                rss_axis[e] = syy[a]
-        rss[i] = (0.0 + rss_axis[2 * i]) + rss_axis[2 * i + 1]  # numpy's sum of two
+    # every grid point's two axes at once (response_lanes: each lane this loop's scalar
+    # expressions, the same bits):
+    # c = Σx² − Σx·Σx / n; c > 1e-12: gain = (Σx·y − Σx·Σy / n) / c, residual Σy²_c − gain·cy
+    any_ok = fit_pairs(state, out, HEAD, K * L, kl2, n, state[S_SY], state[S_SY + 1], syy[0],
+                       syy[1])
     if not any_ok or (0.0 + syy[0]) + syy[1] <= 0.0:
         return -1
     best = 0
