@@ -78,8 +78,12 @@ def test_every_kernel_is_a_pinned_cpu_kernel_without_fma_or_avx():
     found = json.loads(out.strip().splitlines()[-1])
     assert found["magic"] == [PINNED_CPU_NAME, PINNED_CPU_FEATURES]
     assert found["kernels"] >= 30 and found["others"] == [] and found["parallel"] == []
-    # the one intrinsic: a libc call (clock_gettime) in its callers' code, no instruction of
-    # its own (core/monotonic.py); a new one is reviewed and listed here
-    assert found["intrinsics"] == ["ardrone_nmpc.core.monotonic.monotonic_ns"]
+    # the intrinsics, each reviewed and listed here: a libc call (clock_gettime) in its
+    # callers' code (core/monotonic.py); the response fit's two-lane SSE2 loops, IEEE
+    # operations without fast-math flags (estimation/response_lanes.py: the asm check above
+    # holds for their callers' code too — no FMA, no AVX register)
+    assert found["intrinsics"] == ["ardrone_nmpc.core.monotonic.monotonic_ns",
+                                   "ardrone_nmpc.estimation.response_lanes.fit_pairs",
+                                   "ardrone_nmpc.estimation.response_lanes.fold_lags"]
     assert found["targets"] == ["CPUTarget"]
     assert found["compiled"] == 2 and found["bad_asm"] == []
