@@ -31,14 +31,16 @@ _NO_WIND = (0.0, 0.0, 0.0)
 N_AUX_STATE = 12  # + η_φ, η_θ of the second-order attitude form
 
 
-@njit(cache=True, inline="always", **INNER_KERNEL)
+@njit(cache=True, **INNER_KERNEL)
 def _rhs(q, second, roll, pitch, gaz, yaw, hold, k, w):
     """The motors-on right-hand side (the one definition) at the state's dynamic part ``q`` =
     (vx, vy, vz, φ, θ, ψ, r, η_φ, η_θ) — x[3:12]; η unused unless ``second`` (the
     second-order attitude form) — as a 12-tuple (its last two 0.0 unless ``second``). ``k`` is
-    ``PlantParams.rhs_coefficients``. On values, not arrays: the RK4 below, inlined, then
-    holds its stages in registers — arrays passed between kernels cost an atomic reference
-    count each at every call (most of the legs kernel's time besides libm's).
+    ``PlantParams.rhs_coefficients``. On values, not arrays: :func:`_rk4_into` holds its
+    stages in tuples — an array passed between kernels costs an atomic reference count at
+    every call (with seven per RK4 step, a third of the legs kernel's time). Not
+    ``inline="always"``: numba would type and lower it once per call site (13 of them, ~2 s
+    more of a cold start); LLVM inlines it where it pays.
 
     The tilt: first order (ref − φ)/τ_a; second order with a zero, observable canonical form
     of (b1·s + b0)/(s² + a1·s + a0): φ' = −a1·φ + η + b1·ref, η' = −a0·φ + b0·ref."""
