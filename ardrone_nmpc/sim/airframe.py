@@ -32,32 +32,21 @@ N_AUX_STATE = 12  # + η_φ, η_θ of the second-order attitude form
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _tilt_rates(x, ref_phi, ref_theta, k, out):
-    """φ', θ' (and η' with the second-order form, a state of 12) towards the tilt references.
+def _rhs(q, second, roll, pitch, gaz, yaw, hold, k, w):
+    """The motors-on right-hand side (the one definition) at the state's dynamic part ``q`` =
+    (vx, vy, vz, φ, θ, ψ, r, η_φ, η_θ) — x[3:12]; η unused unless ``second`` (the
+    second-order attitude form) — as a 12-tuple (its last two 0.0 unless ``second``). ``k`` is
+    ``PlantParams.rhs_coefficients``. On values, not arrays: :func:`_rk4_into` holds its
+    stages in tuples — an array passed between kernels costs an atomic reference count at
+    every call (with seven per RK4 step, a third of the legs kernel's time). Not
+    ``inline="always"``: numba would type and lower it once per call site (13 of them, ~2 s
+    more of a cold start); LLVM inlines it where it pays.
 
-    First order: (ref − φ)/τ_a. Second order with a zero, observable canonical form of
-    (b1·s + b0)/(s² + a1·s + a0): φ' = −a1·φ + η + b1·ref, η' = −a0·φ + b0·ref.
-    """
-    phi, theta = x[6], x[7]
-    if x.shape[0] > N_STATE:
-        a1, a0, b1, b0 = k[9], k[10], k[11], k[12]
-        out[6] = -a1 * phi + x[10] + b1 * ref_phi
-        out[7] = -a1 * theta + x[11] + b1 * ref_theta
-        out[10] = -a0 * phi + b0 * ref_phi
-        out[11] = -a0 * theta + b0 * ref_theta
-    else:
-        inv_tau_tilt = k[5]
-        out[6] = (ref_phi - phi) * inv_tau_tilt
-        out[7] = (ref_theta - theta) * inv_tau_tilt
-
-
-@njit(cache=True, **OUTER_KERNEL)
-def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
-    """The motors-on right-hand side on arrays (the one definition: :func:`airframe_derivative`
-    and :func:`airframe_rk4` both call it). ``k`` is ``PlantParams.rhs_coefficients``."""
+    The tilt: first order (ref − φ)/τ_a; second order with a zero, observable canonical form
+    of (b1·s + b0)/(s² + a1·s + a0): φ' = −a1·φ + η + b1·ref, η' = −a0·φ + b0·ref."""
     e_roll, vz_gain, inv_tau_vz, yaw_gain, inv_tau_yaw = k[0], k[1], k[2], k[3], k[4]
     kd, hold_damping, e_pitch = k[6], k[7], k[8]
-    vx, vy, vz, phi, theta, psi, r = x[3], x[4], x[5], x[6], x[7], x[8], x[9]
+    vx, vy, vz, phi, theta, psi, r = q[0], q[1], q[2], q[3], q[4], q[5], q[6]
     forward = GRAVITY_MPS2 * math.tan(theta)
     right = GRAVITY_MPS2 * math.tan(phi)
     c = math.cos(psi)
@@ -67,42 +56,71 @@ def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     if hold:
         ax -= hold_damping * vx
         ay -= hold_damping * vy
-        _tilt_rates(x, 0.0, 0.0, k, out)
+        ref_phi = ref_theta = 0.0
     else:
-        _tilt_rates(x, roll * e_roll, -pitch * e_pitch, k, out)
-    out[0], out[1], out[2], out[3], out[4] = vx, vy, vz, ax, ay
-    out[5] = gaz * vz_gain - vz * inv_tau_vz + kd * w[2]
-    out[8], out[9] = r, -yaw * yaw_gain - r * inv_tau_yaw
+        ref_phi, ref_theta = roll * e_roll, -pitch * e_pitch
+    if second:
+        a1, a0, b1, b0 = k[9], k[10], k[11], k[12]
+        d_phi = -a1 * phi + q[7] + b1 * ref_phi
+        d_theta = -a1 * theta + q[8] + b1 * ref_theta
+        d_eta_phi = -a0 * phi + b0 * ref_phi
+        d_eta_theta = -a0 * theta + b0 * ref_theta
+    else:
+        inv_tau_tilt = k[5]
+        d_phi = (ref_phi - phi) * inv_tau_tilt
+        d_theta = (ref_theta - theta) * inv_tau_tilt
+        d_eta_phi = d_eta_theta = 0.0
+    return (vx, vy, vz, ax, ay, gaz * vz_gain - vz * inv_tau_vz + kd * w[2], d_phi, d_theta, r,
+            -yaw * yaw_gain - r * inv_tau_yaw, d_eta_phi, d_eta_theta)
 
 
-@njit(cache=True, **INNER_KERNEL)
-def _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, a, b, c, d, t, out):
-    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x`` into ``out``
-    (``a`` … ``t``: scratch arrays of x's size; ``out`` may be ``x``)."""
-    n = x.shape[0]
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _dynamic_part(x, second):
+    """x[3:12] as :func:`_rhs`' ``q`` (η 0.0 for a 10-state)."""
+    return (x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10] if second else 0.0,
+            x[11] if second else 0.0)
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _stage(x, f, d):
+    """An RK4 stage's ``q``: x[3:12] + f·d[3:12] element by element (``x`` a ``q``)."""
+    return (x[0] + f * d[3], x[1] + f * d[4], x[2] + f * d[5], x[3] + f * d[6],
+            x[4] + f * d[7], x[5] + f * d[8], x[6] + f * d[9], x[7] + f * d[10],
+            x[8] + f * d[11])
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
+    """:func:`_rhs` of the state array ``x`` (10 or 12) into ``out`` (its first x.size):
+    :func:`airframe_derivative`'s."""
+    second = x.shape[0] > N_STATE
+    d = _rhs(_dynamic_part(x, second), second, roll, pitch, gaz, yaw, hold, k, w)
+    for i in range(x.shape[0]):
+        out[i] = d[i]
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, out):
+    """One classical RK4 step of :func:`_rhs` from the array ``x`` into ``out`` (``out`` may
+    be ``x``). The stages need only x[3:] (the RHS reads no position): the same arithmetic,
+    element by element, as stepping whole stage arrays."""
+    second = x.shape[0] > N_STATE
     hh = 0.5 * h
-    _airframe_rhs(x, roll, pitch, gaz, yaw, hold, k, w, a)
-    for i in range(n):
-        t[i] = x[i] + hh * a[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
-    for i in range(n):
-        t[i] = x[i] + hh * b[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
-    for i in range(n):
-        t[i] = x[i] + h * c[i]
-    _airframe_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
+    q = _dynamic_part(x, second)
+    a = _rhs(q, second, roll, pitch, gaz, yaw, hold, k, w)
+    b = _rhs(_stage(q, hh, a), second, roll, pitch, gaz, yaw, hold, k, w)
+    c = _rhs(_stage(q, hh, b), second, roll, pitch, gaz, yaw, hold, k, w)
+    d = _rhs(_stage(q, h, c), second, roll, pitch, gaz, yaw, hold, k, w)
     h6 = h / 6.0
-    for i in range(n):
+    for i in range(x.shape[0]):
         out[i] = x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
 
 
 @njit(cache=True, **INNER_KERNEL)
 def _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
-    """One classical RK4 step of :func:`_airframe_rhs` from the array ``x``; a new array."""
-    n = x.shape[0]
-    out = np.empty(n)
-    _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, np.empty(n), np.empty(n), np.empty(n),
-              np.empty(n), np.empty(n), out)
+    """One classical RK4 step of :func:`_rhs` from the array ``x``; a new array."""
+    out = np.empty(x.shape[0])
+    _rk4_into(x, roll, pitch, gaz, yaw, hold, k, w, h, out)
     return out
 
 
@@ -125,7 +143,7 @@ def airframe_rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h):
     return _rk4_array(x, roll, pitch, gaz, yaw, hold, k, w, h)
 
 
-@njit(cache=True, **INNER_KERNEL)
+@njit(cache=True, inline="always", **INNER_KERNEL)
 def shift_ring(ring, head, roll, pitch, gaz, yaw, hold):
     """Queue the command ``roll`` … ``hold`` in the delay ring ``ring`` (m, 5; oldest at
     ``head``) and return the oldest with the new head — the command itself when the ring is
@@ -141,7 +159,7 @@ def shift_ring(ring, head, roll, pitch, gaz, yaw, hold):
     return r, p, g, y, hd, head + 1 if head + 1 < m else 0
 
 
-@njit(cache=True, **INNER_KERNEL)
+@njit(cache=True, inline="always", **INNER_KERNEL)
 def sagged_vz_gain(vz_gain, sag, battery):
     """:meth:`~ardrone_nmpc.sim.plant.PlantParams.vertical_gain` at the battery level
     ``battery`` (%), Python's ``min`` and ``max`` spelled out — for both plants' flying
@@ -151,7 +169,7 @@ def sagged_vz_gain(vz_gain, sag, battery):
     return vz_gain * (1.0 - sag * (1.0 - level / 100.0))
 
 
-@njit(cache=True, **INNER_KERNEL)
+@njit(cache=True, inline="always", **INNER_KERNEL)
 def floor_and_drain(x, battery, drain):
     """The end of a flying step, :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s:
     the floor on the state array ``x`` (z ≤ 0 stops at 0 with no downward speed; a NaN z is
@@ -176,21 +194,17 @@ def flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery
     plant's). With a battery sag ``sag`` > 0 each step's vertical gain is
     :meth:`~ardrone_nmpc.sim.plant.PlantParams.coefficients_at`'s at the battery level before
     it (``vz_gain``: the unsagged one). Returns (steps done, head, battery, state array)."""
-    size = x.shape[0]
     x = x.copy()
-    scratch = np.empty((5, size))
     done, head, battery = flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w,
-                                            h, n, battery, drain, vz_gain, sag, scratch)
+                                            h, n, battery, drain, vz_gain, sag)
     return done, head, battery, x
 
 
 @njit(cache=True, **INNER_KERNEL)
 def flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery, drain,
-                      vz_gain, sag, scratch):
-    """:func:`flying_steps` on ``x`` in place, with the RK4's scratch rows ``scratch`` (5,
-    x's size) given: the lockstep tick flies three legs a tick and allocates them once.
-    Returns (steps done, head, battery)."""
-    k1, k2, k3, k4, tmp = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+                      vz_gain, sag):
+    """:func:`flying_steps` on ``x`` in place (the lockstep tick's legs). Returns (steps
+    done, head, battery)."""
     for i in range(n):
         if not battery - drain > 0.0:
             return i, head, battery
@@ -200,7 +214,7 @@ def flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, ba
             gain = sagged_vz_gain(vz_gain, sag, battery)
             kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
                   k[10], k[11], k[12])
-        _rk4_into(x, r, p, g, y, hd, kk, w, h, k1, k2, k3, k4, tmp, x)
+        _rk4_into(x, r, p, g, y, hd, kk, w, h, x)
         battery = floor_and_drain(x, battery, drain)
     return n, head, battery
 

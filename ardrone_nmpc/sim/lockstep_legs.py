@@ -175,7 +175,7 @@ class CompiledLegs:
         self.firmware = sensors.firmware
         self.buf = buf = np.zeros(ks.BUF_SIZE)  # the kernel's out, iv, sv and p (views)
         self.out, self.iv = buf[ks.B_OUT:ks.B_IV], buf[ks.B_IV:ks.B_SV].view(np.int64)
-        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:ks.B_SCRATCH]
+        self.sv, self.p = buf[ks.B_SV:ks.B_P], buf[ks.B_P:]
         # sv's memory as a memoryview: a pack into it skips numpy's buffer export (~70 ns
         # of every run's one pack)
         self._sv_memory = memoryview(self.sv)

@@ -15,7 +15,6 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-import numpy as np
 
 from ardrone_nmpc.sim.airframe import _rk4_into, flying_steps, sagged_vz_gain, shift_ring
 
@@ -72,12 +71,9 @@ def auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
     settle at ``takeoff_altitude_m`` flies, an empty battery lands). Stops after the step that
     changes the mode. Returns (steps done, head, battery, state array, the mode then:
     ``AUTO_*``)."""
-    size = x.shape[0]
     x = x.copy()
-    k1, k2, k3, k4, tmp = (np.empty(size), np.empty(size), np.empty(size), np.empty(size),
-                           np.empty(size))
     # position hold: True, typed ``bool`` — a literal ``True`` is typed ``Literal[bool](True)``
-    # and would compile _rk4_into and _airframe_rhs a second time (flying_steps passes a
+    # and would type the inlined _rk4_into and _rhs a second time (flying_steps passes a
     # ``bool``): ~0.5 s of a cold start. The same arithmetic either way.
     auto_hold = landing or not landing
     for i in range(n):
@@ -87,7 +83,7 @@ def auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
             gain = sagged_vz_gain(vz_gain, sag, battery)
             kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
                   k[10], k[11], k[12])
-        _rk4_into(x, 0.0, 0.0, gaz_auto, 0.0, auto_hold, kk, w, h, k1, k2, k3, k4, tmp, x)
+        _rk4_into(x, 0.0, 0.0, gaz_auto, 0.0, auto_hold, kk, w, h, x)
         mode = AUTO_SAME
         if not x[2] > 0.0:  # _ground_contact
             if landing:  # touch-down: at rest (_at_rest keeps x, y, ψ)

@@ -35,7 +35,7 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.airframe import N_AUX_STATE, flying_steps_into
+from ardrone_nmpc.sim.airframe import flying_steps_into
 from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps
 
 __all__ = ["lockstep_run"]
@@ -71,13 +71,9 @@ O_T, O_BATTERY, O_STATE = 20, 21, 22
 OUT_SIZE = O_STATE + 10
 #: buf: the four side by side in one float64 array (iv's int64 viewed in place) — the kernel's
 #: one argument for them (every array argument costs the call ~30 ns to unbox); out first,
-#: then iv: the caller reads what a run left (out, iv[I_DONE …]) in one unpack of buf's bytes;
-#: last the RK4's scratch rows (5 of a state's size, at most N_AUX_STATE: written before any
-#: read, every step — here rather than allocated by every run)
+#: then iv: the caller reads what a run left (out, iv[I_DONE …]) in one unpack of buf's bytes
 B_OUT, B_IV, B_SV, B_P = 0, OUT_SIZE, OUT_SIZE + IV_SIZE, OUT_SIZE + IV_SIZE + SV_SIZE
-B_SCRATCH = B_P + P_SIZE
-SCRATCH_SIZE = 5 * N_AUX_STATE
-BUF_SIZE = B_SCRATCH + SCRATCH_SIZE
+BUF_SIZE = B_P + P_SIZE
 MOCAP, NAV = 0, 1
 _TIME_TOL_S = 1e-9  # the plant's (sim/plant.py)
 
@@ -177,7 +173,7 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
+def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
     the Python path must take it (a climb within reach of the cap, a battery that could
     empty on the way, a take-off or landing that ends on the way)."""
@@ -214,7 +210,7 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
     # flying_advance in place (all n steps fly: the battery was checked above)
     done, head, battery = flying_steps_into(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
-        k, (w0, w1, w2), h, n, sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG], scratch)
+        k, (w0, w1, w2), h, n, sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG])
     x[8] = wrap_half_turn(x[8], math.pi)
     sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
         n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
@@ -238,7 +234,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     then into ``out[O_T:]`` (the caller's truth reads). ``iv``, ``sv``, ``p``, ``out``: the
     parts of ``buf``."""
     out, iv = buf[B_OUT:B_IV], buf[B_IV:B_SV].view(np.int64)
-    sv, p = buf[B_SV:B_P], buf[B_P:B_SCRATCH]
+    sv, p = buf[B_SV:B_P], buf[B_P:BUF_SIZE]
     if (iv[I_POS_BIAS] + NEED_BIAS > bias_n.shape[0] or iv[I_POS_MOCAP] + NEED_MOCAP
             > mocap_n.shape[0] or iv[I_POS_NAV] + NEED_NAV > nav_n.shape[0]
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
@@ -276,9 +272,6 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     iv[I_DONE] = 0
     out[O_LAST_NOW] = math.nan
     h = p[P_H]
-    n_x = x.shape[0]  # the RK4's scratch rows, for every leg
-    scratch = (buf[B_SCRATCH:B_SCRATCH + 5 * n_x].reshape((5, n_x)) if 5 * n_x <= SCRATCH_SIZE
-               else np.empty((5, n_x)))
     for i in range(n_events + 1):
         if i < n_events:
             kind = iv[I_KIND0 + i]
@@ -287,7 +280,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
             kind = -1
             t_event = t_s
         ran = t_event > iv[I_STEPS] * h
-        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, scratch):
+        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
             return
         if ran:
             out[O_LAST_NOW] = t_event

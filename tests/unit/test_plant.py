@@ -609,3 +609,38 @@ def test_compiled_rk4_equals_the_python_reference(state, cmd, hold, wind):
     expected = rk4_step(airframe_derivative, state, 0.005, (*cmd, hold), params, tuple(wind))
     got = airframe_rk4(state, *cmd, hold, params.rhs_coefficients, tuple(wind), 0.005)
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
+
+
+def _rk4_of_whole_arrays(x, cmd, hold, k, wind, h):
+    """The RK4 step as the simulator formed it before its stages were held as tuples: every
+    stage a whole state array through the array right-hand side (compiled, so its libm)."""
+    from ardrone_nmpc.sim.airframe import _airframe_rhs
+
+    def rhs(state):
+        out = np.empty(state.size)
+        _airframe_rhs(state, *cmd, hold, k, wind, out)
+        return out
+
+    hh = 0.5 * h
+    a = rhs(x)
+    b = rhs(np.array([x[i] + hh * a[i] for i in range(x.size)]))
+    c = rhs(np.array([x[i] + hh * b[i] for i in range(x.size)]))
+    d = rhs(np.array([x[i] + h * c[i] for i in range(x.size)]))
+    h6 = h / 6.0
+    return np.array([x[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i]) for i in range(x.size)])
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=12, max_size=12),
+       st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), st.booleans(), st.booleans(),
+       st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))
+def test_the_compiled_rk4_gives_the_bits_of_whole_stage_arrays(state, cmd, hold, second, wind):
+    """Its stages skip the position (the RHS reads none) and live in tuples: the same bits as
+    stepping whole arrays, for both attitude forms (10 and 12 states), held or not."""
+    from ardrone_nmpc.sim.airframe import airframe_rk4_array
+
+    params = PlantParams(attitude_model="second_order" if second else "lag")
+    x = np.array(state[:12 if second else 10])
+    k, wind = params.rhs_coefficients, tuple(wind)
+    got = airframe_rk4_array(x, *cmd, hold, k, wind, 0.005)
+    assert got.tobytes() == _rk4_of_whole_arrays(x, cmd, hold, k, wind, 0.005).tobytes()
