@@ -242,8 +242,9 @@ class BeforeSolve:
         (each number is made a float64, an int64 or a truth by its unboxing, as a Python
         caller's numbers are by the dispatcher's specialisation for them: the same value),
         kept with the stages' arrays of the call if each is of the one kind it is compiled
-        for (``VettedCall.entry_for``), so that the next calls with them skip the dispatcher's look at 28
-        arguments (~0.4 µs); else the dispatcher stays (asked again next call)."""
+        for (``VettedCall.entry_for``), so that the next calls with them skip the
+        dispatcher's look at 28 arguments (~0.4 µs); else the dispatcher stays (asked again
+        next call)."""
         entry = _CALL.entry_for(*(args[i] for i, _ in _ARRAYS))
         if entry is not None:
             self._entry = entry
