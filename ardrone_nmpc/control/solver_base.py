@@ -22,7 +22,7 @@ from ardrone_nmpc.control.kernels import (FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_
                                           STAGE_CONDENSED, SolverMemory)
 from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import OcpSpec, SolverStatus, SolveResult
-from ardrone_nmpc.core.entry_points import entry_point, plain
+from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.types import INPUT_DIM, STATE_DIM
 
 _F64 = np.dtype(np.float64)
@@ -33,6 +33,14 @@ _perf_counter_ns = time.perf_counter_ns  # the tick times every solve
 _new_tuple = tuple.__new__
 _X_SHAPE = (STATE_DIM,)
 assert FLAG_OK == 0  # solve_prepared tests a tick's flag for truth
+
+
+def _vetted_call(kernel, mem: np.ndarray, iprm: np.ndarray) -> VettedCall:
+    """The calls of ``kernel(mem, x, ref, iprm, initialise)`` (a C/GMRES tick) by its entry
+    point once the arrays are vetted (``core/entry_points``): ``x`` a plain 1-D and ``ref`` a
+    plain 2-D float64 array, ``mem`` and ``iprm`` of their own kinds."""
+    return VettedCall(kernel, ArrayKind(mem.ndim, mem.dtype), ArrayKind(1), ArrayKind(2),
+                      ArrayKind(iprm.ndim, iprm.dtype), False)
 
 
 class NmpcSolverBase:
@@ -78,7 +86,7 @@ class NmpcSolverBase:
 
     #: what :meth:`_bind_memory` makes of the memory (not copied, not pickled)
     _BOUND = ("U", "dU", "_u", "obstacles", "_stats_values", "_u_copy", "_step", "_kernel",
-              "_entry", "_seen")
+              "_vetted_call")
 
     def _bind_memory(self) -> None:
         """The memory's views under the solver's names and its tick's calls bound once (made
@@ -96,8 +104,8 @@ class NmpcSolverBase:
         # its compiled entry point while ``x`` and ``ref`` are the arrays it vetted
         # (:meth:`_call_unvetted`), never None's (no array is None)
         self._kernel: tuple | None = None if self._step is None else (*self._step, None, None)
-        self._entry = None  # the kernel's entry point for plain arrays, once compiled
-        self._seen = (None, None)  # the arrays of the last call not vetted
+        # that kernel's calls with arrays not vetted (:meth:`_call_unvetted`)
+        self._vetted_call = None if self._step is None else _vetted_call(*self._step)
 
     def __getstate__(self) -> dict:
         """Without the views and calls :meth:`_bind_memory` makes (an entry point does not
@@ -218,21 +226,17 @@ class NmpcSolverBase:
     def _call_unvetted(self, x: np.ndarray, ref: np.ndarray, initialise: bool) -> int:
         """The bound kernel's call with arrays other than the ones vetted: the dispatcher,
         which looks at their types. The same two arrays a second time in a row are vetted —
-        plain (core/entry_points), the kinds the memory's call is compiled for — and kept
-        with its entry point, so that the next calls with them take it at once: the control
+        plain (core/entry_points.VettedCall), the kinds the memory's call is compiled for —
+        and kept with its entry point, so that the next calls with them take it at once: the control
         stage's fast path passes its own arrays every tick, and a caller with new arrays
         every call pays no check."""
-        kernel, mem, iprm = self._step
-        seen = self._seen
-        if x is seen[0] and ref is seen[1] and plain(x) and plain(ref, 2):
-            entry = self._entry
-            if entry is None:  # the dispatcher has compiled (or loaded) their kinds by now
-                entry = self._entry = entry_point(kernel, mem, x, ref, iprm, initialise)
-            if entry is not None:  # (None without the JIT)
-                self._kernel = (entry, mem, iprm, x, ref)
-                return entry(mem, x, ref, iprm, initialise)
-        self._seen = (x, ref)
-        return kernel(mem, x, ref, iprm, initialise)
+        _, mem, iprm = self._step
+        call = self._vetted_call
+        flag = call(mem, x, ref, iprm, initialise)
+        vetted = call.vetted  # (mem, x, ref, iprm) once an entry point was taken for them
+        if vetted and vetted[1] is x and vetted[2] is ref:
+            self._kernel = (call.entry, mem, iprm, x, ref)
+        return flag
 
     def _recover(self, t_s, x, ref, status, elapsed_us) -> SolveResult:
         """Re-initialise and solve afresh from the box centre; report ``status``."""
