@@ -238,7 +238,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     make_spec = st.spec_factory(cfg=cfg, written=written, space=space, scenarios=scen,
                                 objective=obj,
                                 keep_dir=out_dir / "runs" if keep_runs else None)
-    sim_s, flown, interrupted, best_score = 0.0, 0, None, math.inf
+    interrupted, best_score = None, math.inf
+    before: set[int] = set()  # the numbers of the trials finished before this run
     # the engine warms up (a pool: its forkserver loads the kernels) while the study opens
     with open_executor(engine, jobs=max(1, min(jobs, trials)), scheduler=scheduler) as ex:
         created = not out_dir.exists()
@@ -255,6 +256,7 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
                                          obj=obj, command=command)
         try:
             rewrite()
+            before = {t.number for t in st.finished_trials(study.record)}
             best_score = min((t.value for t in st.finished_trials(study.record)),
                              default=math.inf)
             todo = max(0, trials - len(st.finished_trials(study.record)))
@@ -264,10 +266,8 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
             with progress:
                 task = progress.add_task("tune", total=todo)
 
-                def on_result(result) -> None:
-                    nonlocal sim_s, flown, best_score
-                    sim_s += result.sim_s
-                    flown += 1
+                def on_result(result) -> None:  # the bar only: the record counts
+                    nonlocal best_score
                     best_score = min(best_score, result.score)
                     progress.update(task, advance=1, description=f"tune · best {best_score:.4g}")
 
@@ -284,6 +284,10 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     wall_s = time.perf_counter() - wall0
     record = load_record(out_dir)
     done = st.finished_trials(record)
+    # what this run flew, from the record: a signal between a trial's result and its
+    # storing must not make the two counts disagree
+    now = [t for t in done if t.number not in before]
+    flown, sim_s = len(now), sum(_sim_s(t) for t in now)
     if done:
         console.print(fit(_ranked_table(record, space=space, scenarios=scen, top=top), console))
     console.print(f"{len(done)} trials ({flown} flown now, {len(done) - flown} before) × "
@@ -293,6 +297,14 @@ def run_tune_command(*, config: Path, overrides=(), trials: int = 40, jobs: int 
     best = out_dir / st.BEST_FILE
     return TuneOutcome(out_dir, len(done), flown, record.best_value if done else math.nan,
                        best if done else None, wall_s, sim_s, interrupted)
+
+
+def _sim_s(trial) -> float:
+    """The simulated time (s) a stored trial flew (0 where the record holds none)."""
+    from ardrone_nmpc.runs.tune_record import result_of
+
+    sim_s = result_of(trial).get("sim_s")
+    return float(sim_s) if isinstance(sim_s, (int, float)) and math.isfinite(sim_s) else 0.0
 
 
 def register(app: typer.Typer) -> None:

@@ -138,6 +138,37 @@ def test_resume_continues_without_flying_finished_trials_again(tmp_path):
     assert "4 trials (0 flown now, 4 before)" in done.stdout
 
 
+def test_a_signal_between_a_result_and_its_count_does_not_split_the_counts(tmp_path,
+                                                                          monkeypatch):
+    """A Ctrl-C that lands after a trial's result came but before the command counted it
+    (the race of a signal with two jobs, made certain here): the trial is stored, and the
+    closing line counts it as flown now — the counts come from the record."""
+    from ardrone_nmpc.experiments.tune import study as st
+
+    real = st.run_study
+
+    def interrupted_at_the_second_result(study, *, on_result, **kwargs):
+        seen = []
+
+        def late(result):
+            seen.append(result)
+            if len(seen) == 2:
+                raise KeyboardInterrupt  # after run_study holds the result, before the count
+            on_result(result)
+
+        return real(study, on_result=late, **kwargs)
+
+    monkeypatch.setattr(st, "run_study", interrupted_at_the_second_result)
+    result = _tune(tmp_path, "--trials", "4", "--jobs", "1")
+    assert result.exit_code != 0
+    rows = _rows(tmp_path)
+    assert [r["trial"] for r in rows] == ["0", "1"]  # both stored: the second had finished
+    line = " ".join(result.stdout.split())
+    assert "2 trials (2 flown now, 0 before)" in line, line
+    simulated_s = sum(float(r["sim_s"]) for r in rows)
+    assert f"{simulated_s:.0f} s simulated" in line
+
+
 def test_resume_refuses_a_study_of_another_setup(tmp_path):
     assert _tune(tmp_path, "--trials", "1", "--jobs", "1").exit_code == 0
     result = _tune(tmp_path, "--trials", "2", "--jobs", "1", "--resume",
