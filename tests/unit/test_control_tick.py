@@ -23,7 +23,8 @@ from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import control_tick as control_tick_module
 from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
-from ardrone_nmpc.runtime.tick import Tick
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, tick_cells
+from ardrone_nmpc.runtime.tick import Tick, TickOutput
 from tests.conftest import nan_equal
 
 # the call is built only where its clock is read (core/monotonic: 64-bit Linux); elsewhere
@@ -66,16 +67,17 @@ def _fly(cfg, path: str, monkeypatch) -> tuple:
     """A lockstep flight on ``path``: its rows, events, the stages' state after each tick,
     and the compiled call's answers (all done, solved and left to Python, declined)."""
     answers, carried = {"done": 0, "solved": 0, "none": 0}, []
-    init, nominal, step = Tick.__init__, ControlTick.nominal, Tick.step
+    init, answer, step = Tick.__init__, ControlTick.answer, Tick.step
 
     def new_init(self, *args, **kwargs):
         init(self, *args, **kwargs)
         _use(self, path)
 
-    def new_nominal(self, *args):
-        whole = nominal(self, *args)
-        answers["none" if not whole else "solved" if not whole[3] else "done"] += 1
-        return whole
+    def new_answer(self, *args):
+        code = answer(self, *args)
+        answers["none" if code is None or code[0] == NOT_NOMINAL
+                else "solved" if code[0] == SOLVED else "done"] += 1
+        return code
 
     def new_step(self, *args, **kwargs):
         out = step(self, *args, **kwargs)
@@ -84,7 +86,7 @@ def _fly(cfg, path: str, monkeypatch) -> tuple:
 
     with monkeypatch.context() as m:
         m.setattr(Tick, "__init__", new_init)
-        m.setattr(ControlTick, "nominal", new_nominal)
+        m.setattr(ControlTick, "answer", new_answer)
         m.setattr(Tick, "step", new_step)
         recorder = MemoryRecorder()
         run_lockstep(cfg, recorder=recorder)
@@ -128,6 +130,65 @@ def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, w
         assert answers == {"done": 0, "solved": 0, "none": 0}
     _same_flights(flights["whole"], flights["halves"])
     _same_flights(flights["whole"], flights["python"])
+
+
+def _via_records(self, inputs, t_exp_s, mode, answer, t0):
+    """``Tick._nominal_cells``' tick the long way: the records ``ControlTick.finish`` makes
+    and ``tick_cells`` of them, as ``Tick.step`` builds a row that reads them."""
+    ages_ms, x, sol, (sent, adapted) = self.control_tick.finish(inputs, t_exp_s, answer)
+    sup = self.supervisor
+    label = sup.record(sent.decision, mode) if mode != sup.label else mode
+    events = sup.take_events() if sup.events else []
+    cells = tick_cells(t_exp_s, inputs, ages_ms, x, sol, sent, label, 0.0)
+    return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
+                           events + adapted, cells)
+
+
+@pytest.mark.parametrize("overrides", [
+    ["duration_s=8"],  # auto delay and gain (their events), offset-free
+    ["duration_s=5", "estimator.horizontal_velocity=navdata",
+     "controller.offset_free.enabled=false"],
+    ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"],  # the fence: a landing
+])
+def test_a_row_built_from_the_answer_is_the_row_of_its_records(overrides, monkeypatch):
+    """The cells of a tick done whole (``Tick._nominal_cells``: from the answer's numbers)
+    are, bit for bit and of the same types, the cells ``tick_cells`` makes of the records
+    (the clocks aside), and the stages carry the same state on."""
+    cfg = config("square.yaml", *overrides)
+    taken, flights = [], []
+    fast = Tick._nominal_cells
+
+    def counted(self, *args):
+        taken.append(1)
+        return fast(self, *args)
+
+    for lane in (counted, _via_records):
+        carried = []
+        step = Tick.step
+
+        def new_step(self, *args, **kwargs):
+            out = step(self, *args, **kwargs)
+            carried.append(_carried(self))
+            return out
+
+        with monkeypatch.context() as m:
+            m.setattr(Tick, "_nominal_cells", lane)
+            m.setattr(Tick, "step", new_step)
+            recorder = MemoryRecorder()
+            run_lockstep(cfg, recorder=recorder)
+        flights.append((recorder._rows, repr(recorder.events), carried))
+    assert len(taken) > 20  # (the lane taken: the fence lands the third flight early)
+    (rows_a, events_a, carried_a), (rows_b, events_b, carried_b) = flights
+    assert events_a == events_b and carried_a == carried_b and len(rows_a) == len(rows_b)
+    clocks = [LOG_COLUMNS.index(name) for name in ("solve_us", "compute_us")]
+    for i, (p, q) in enumerate(zip(rows_a, rows_b)):
+        assert p.__class__ is q.__class__, i
+        if p.__class__ is dict:  # a tick not done whole (the same path in both flights)
+            p, q = [p.get(k, "") for k in LOG_COLUMNS], [q.get(k, "") for k in LOG_COLUMNS]
+        bad = [LOG_COLUMNS[k] for k in range(len(p))
+               if k not in clocks and (repr(p[k]), type(p[k])) != (repr(q[k]), type(q[k]))]
+        assert not bad, f"row {i}: {bad}"
+        assert all(type(p[k]) is type(q[k]) for k in clocks), i
 
 
 # ----------------------------------------------------------------------------- one tick
