@@ -258,6 +258,8 @@ class AfterSolve:
             return pcmd, u_sent, []
         if fed:  # a new sample: the estimate is fitted when it is read
             response.estimator._estimate = None
+        if t_s < response._next_fit_s:  # (refit's own first test, without its call: no fit due)
+            return pcmd, u_sent, []
         return pcmd, u_sent, response.refit(t_s)
 
 
