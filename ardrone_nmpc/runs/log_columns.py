@@ -31,7 +31,7 @@ __all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMN
            "pose_of_row", "unlogged_pose",
            "measurement_columns", "put_truth", "tick_inputs_of_rows", "tick_row",
            "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "TRUTH_CELLS", "cells_row",
-           "put_truth_cells", "tick_cell_values", "tick_cells"]
+           "nominal_cells", "put_truth_cells", "tick_cell_values", "tick_cells"]
 
 
 class Column(NamedTuple):
@@ -236,21 +236,36 @@ def tick_cells(t_exp_s: float, inputs: TickInputs, ages_ms: tuple[float, float],
             and pose is not None and inputs.target is None and flown is not None
             and sent.decision.action is not _FALLBACK):
         return None
-    # the state and the input unpacked in their orders (_STATE_ORDER, _INPUT_ORDER)
-    x_m, vx_mps, y_m, vy_mps, z_m, vz_mps, psi_rad = x.tolist()
     zacc, phi, theta, psirate = result.u.tolist()
-    ref, pcmd, saturated, state_bits = solution.ref_now.tolist(), sent.pcmd, sent.saturated, \
-        nav.state_bits
-    mocap_age_ms, navdata_age_ms = ages_ms
+    saturated = sent.saturated
+    return nominal_cells(t_exp_s, x, solution.ref_now, zacc, phi, theta, psirate,
+                         flown.vz_ref_mps, sent.pcmd,
+                         saturated if saturated is not None else "0000",
+                         result.solve_time_us, solution.status, result.residual_norm,
+                         result.gmres_iterations, result.newton_iterations, mode, ages_ms[0],
+                         ages_ms[1], nav, compute_us, pose.t_s)
+
+
+def nominal_cells(t_exp_s: float, x: np.ndarray, ref_now: np.ndarray, zacc: float, phi: float,
+                  theta: float, psirate: float, vz_ref_mps: float, pcmd, saturated: str,
+                  solve_us: float, status: str, residual_norm: float, gmres_iterations: int,
+                  newton_iterations: int, mode: str, mocap_age_ms: float,
+                  navdata_age_ms: float, nav, compute_us: float, mocap_t_s: float) -> list:
+    """:func:`tick_cells`' row from its values (the input solved, the ż reference and the
+    ``cmd_saturated`` text sent, the solver's figures): the one home of the usual row's cells
+    — ``Tick``'s nominal tick builds them from the compiled call's answer, with no record
+    between (``runtime/tick.py``)."""
+    # the state unpacked in its order (_STATE_ORDER)
+    x_m, vx_mps, y_m, vy_mps, z_m, vz_mps, psi_rad = x.tolist()
+    ref, state_bits = ref_now.tolist(), nav.state_bits
     return [
         t_exp_s, x_m, y_m, z_m, psi_rad, vx_mps, vy_mps, vz_mps,
         ref[IX_X], ref[IX_Y], ref[IX_Z], ref[IX_PSI], zacc, phi, theta, psirate,
-        flown.vz_ref_mps,
+        vz_ref_mps,
         pcmd.roll_frac, pcmd.pitch_frac, pcmd.gaz_frac, pcmd.yaw_frac,
-        saturated if saturated is not None else "0000",
-        result.solve_time_us, solution.status, result.residual_norm,
-        result.gmres_iterations, result.newton_iterations, mode, mocap_age_ms, navdata_age_ms,
-        nav.battery_pct, "", compute_us, pose.t_s, nav.vx_body_mps, nav.vy_body_mps,
+        saturated, solve_us, status, residual_norm, gmres_iterations, newton_iterations, mode,
+        mocap_age_ms, navdata_age_ms,
+        nav.battery_pct, "", compute_us, mocap_t_s, nav.vx_body_mps, nav.vy_body_mps,
         nav.mode._value_, nav.roll_deg, nav.pitch_deg,  # (.value: an enum property, 0.3 µs)
         state_bits if state_bits is not None else math.nan,
         "", "", "", "", "", "", "", "", "", "", "", ""]

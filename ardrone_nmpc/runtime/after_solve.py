@@ -36,7 +36,7 @@ from ardrone_nmpc.estimation.response_kernels import (CMD_SEND, TIMES_ROUNDED, f
 from ardrone_nmpc.runtime.supervision import CMD_SATURATED_TEXT, Sent
 from ardrone_nmpc.safety import NOMINAL
 
-__all__ = ["AfterSolve", "NOT_NOMINAL", "after_solve", "warm_up_kernels"]
+__all__ = ["AfterSolve", "NOT_NOMINAL", "SATURATED_TEXT", "after_solve", "warm_up_kernels"]
 
 #: :func:`after_solve`'s first answer when the tick is not nominal (nothing written).
 NOT_NOMINAL = -1
@@ -155,7 +155,8 @@ def _freeze(roll, pitch, gaz, yaw, bits, frozen):
 
 # the PcmdCommand flags and the ``cmd_saturated`` text of each set of bits
 _SATURATED = [UNSATURATED] + [tuple(bool(b >> k & 1) for k in range(4)) for b in range(1, 16)]
-_TEXT = [CMD_SATURATED_TEXT[s] for s in _SATURATED]
+#: the ``cmd_saturated`` text of each set of :func:`after_solve`'s saturation bits
+SATURATED_TEXT = tuple(CMD_SATURATED_TEXT[s] for s in _SATURATED)
 _pack_input = struct.Struct(f"{INPUT_DIM}d").pack
 _frombuffer = np.frombuffer
 _make_pcmd = PcmdCommand.make
@@ -235,6 +236,15 @@ class AfterSolve:
 
     def _records(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
         """What the Python stages keep and the tick hands on, from the kernel's answer."""
+        pcmd, u_sent, events = self.written(t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz,
+                                            yaw, bits, fed)
+        return tuple.__new__(Sent, (pcmd, u_sent, True, NOMINAL, _make_cmd(vz, phi, theta, rate),
+                                    SATURATED_TEXT[bits])), events
+
+    def written(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
+        """What the Python stages keep of the kernel's answer, written to them: the PCMD sent,
+        the input sent (``u``: read-only) and the response fit's events — without the
+        :class:`Sent` a row that takes the answer's numbers needs no more of."""
         self.supervisor._solver_failures = 0
         pcmd = _make_pcmd(roll, pitch, gaz, yaw, _SATURATED[bits])
         u_sent = _frombuffer(_pack_input(zacc, phi, theta, rate))
@@ -243,14 +253,14 @@ class AfterSolve:
         supervision.vz_ref_mps = vz
         supervision._last = (pcmd, u_sent)
         self.delay._advance()
-        sent = tuple.__new__(Sent, (pcmd, u_sent, True, NOMINAL,
-                                    _make_cmd(vz, phi, theta, rate), _TEXT[bits]))
         response = self.response
         if response is None:
-            return sent, []
+            return pcmd, u_sent, []
         if fed:  # a new sample: the estimate is fitted when it is read
             response.estimator._estimate = None
-        return sent, response.refit(t_s)
+        if t_s < response._next_fit_s:  # (refit's own first test, without its call: no fit due)
+            return pcmd, u_sent, []
+        return pcmd, u_sent, response.refit(t_s)
 
 
 def warm_up_kernels() -> None:

@@ -168,6 +168,14 @@ class ControlTick:
         from the solution on (their compiled call would decline it too). Nothing done: None
         when a precondition of the call does not hold, False when the stages before the
         solve found the tick not nominal (their compiled call would decline it too)."""
+        answer = self.answer(inputs, t_exp_s, traj)
+        return None if answer is None else self.finish(inputs, t_exp_s, answer)
+
+    def answer(self, inputs, t_exp_s: float, traj) -> tuple | None:
+        """:func:`control_tick`'s answer for this tick (its code first), or None when a
+        precondition of the call does not hold (nothing done). Its code 0 leaves the Python
+        stages to write (:meth:`finish`, or ``AfterSolve.written`` for a row built from the
+        answer's numbers)."""
         nmpc, control = self.nmpc, self.control
         if (nmpc._t0_s is None or nmpc._ramped  # (the first solve initialises: Python's)
                 or control._solve_prepared is not self._solve
@@ -190,20 +198,28 @@ class ControlTick:
         if (call is not None and before[16] is vet[0] and before[19] is vet[1]
                 and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
                 and before[26] is vet[5] and before[27] is vet[6]):
-            answer = call(*before, vz_last, self.delay._next, *self._tail)
-        else:  # the dispatcher (it looks at every argument's type), then the vetting
-            self._entry = None
-            args = (*before, vz_last, self.delay._next, *self._tail)
-            answer = control_tick(*args)
-            self._vet(args)
+            return call(*before, vz_last, self.delay._next, *self._tail)
+        # the dispatcher (it looks at every argument's type), then the vetting
+        self._entry = None
+        args = (*before, vz_last, self.delay._next, *self._tail)
+        answer = control_tick(*args)
+        self._vet(args)
+        return answer
+
+    def finish(self, inputs, t_exp_s: float, answer: tuple):
+        """:meth:`nominal`'s answer from :meth:`answer`'s (not None): the records of the tick
+        (code 0), the solver's answer judged (SOLVED), or False (NOT_NOMINAL)."""
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, bits, fed) = answer
         if code == NOT_NOMINAL:
             return False
+        control = self.control
         x = self.before.estimation._x
-        x_solve = control._x_solve if before[21] else x
+        # (the pending window the call was given: nothing between wrote it)
+        x_solve = control._x_solve if self.delay.count else x
         if code:  # SOLVED: the solver's answer judged as solve_prepared judges it
-            result = nmpc.judged(t_exp_s, x_solve, horizon, flag, solve_us, False)
+            horizon = control._ref_horizon if self.offset is None else control._horizon
+            result = self.nmpc.judged(t_exp_s, x_solve, horizon, flag, solve_us, False)
             return ((mocap_ms, nav_ms), x,
                     control.solution(control._ref_now, x_solve, result, control._ref_horizon),
                     False)

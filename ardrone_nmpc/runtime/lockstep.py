@@ -171,8 +171,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     tally = VerdictTally(follow=tick.follow is not None)
     # the loop's own calls bound once (~1000 ticks a minute of flight): what each does is
     # what its name says, in this order, every tick
-    advance_to, take_events = drone.advance_to, drone.take_events
-    inputs, step, set_command = drone.inputs, tick.step, drone.set_command
+    # (the drone's take_events and inputs are its simulator's and its sensors': theirs bound)
+    advance_to, take_events = drone.advance_to, drone.sim.take_events
+    faulty = drone.sim.faults is not None  # (set when the drone is made, never after)
+    inputs, step, set_command = drone.sensors.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
@@ -180,9 +182,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         check_signals()
         t_plant = t_first + k * period
         advance_to(t_plant, t_exp)
-        drone_events = take_events()
-        if drone_events:
-            _write_events_at(write_event, drone_events)
+        if faulty:  # (a drone without injected faults has no events to take, ever)
+            drone_events = take_events()
+            if drone_events:
+                _write_events_at(write_event, drone_events)
         if drone.self_landing and drone.navdata.mode is not FlightMode.EMERGENCY:
             # the drone's word: no command, no take-off again (an emergency is the
             # supervisor's to report, as in fly, where the tick sees it first)

@@ -15,12 +15,13 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
+from ardrone_nmpc.control.ocp import SolverStatus
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, slot_init
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.reference.trajectories import Trajectory
-from ardrone_nmpc.runs.log_columns import tick_cells, tick_row
-from ardrone_nmpc.runtime.after_solve import AfterSolve
+from ardrone_nmpc.runs.log_columns import nominal_cells, tick_cells, tick_row
+from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT, AfterSolve
 from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
 from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
@@ -37,6 +38,7 @@ __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Tick", "TickOutput",
            "effective_controller", "navdata_velocity_world"]
 
 _CONTROL = Action.CONTROL  # bound once: an enum member's lookup costs ~0.1 µs
+_OK_TEXT = SolverStatus.OK._value_  # the nominal row's solver_status
 _perf_counter_ns = time.perf_counter_ns
 
 
@@ -176,8 +178,14 @@ class Tick:
         sup = self.supervisor
         # the nominal tick: the controller in one compiled call (None, False: not nominal;
         # False: the two calls around the solve would not take it either)
-        whole = (self.control_tick.nominal(inputs, t_exp_s, traj)
-                 if self.control_tick is not None else None)
+        whole = None
+        ct = self.control_tick
+        if ct is not None:
+            answer = ct.answer(inputs, t_exp_s, traj)
+            if answer is not None:
+                if not answer[0] and self.cell_rows and inputs.target is None:
+                    return self._nominal_cells(inputs, t_exp_s, mode, answer, t0)
+                whole = ct.finish(inputs, t_exp_s, answer)
         if whole:
             ages_ms, x, solution, done = whole  # (done False: the stages after, in Python)
             decision = NOMINAL
@@ -220,6 +228,30 @@ class Tick:
         row = tick_row(t_exp_s=t_exp_s, inputs=inputs, ages_ms=ages_ms, x=x, solution=solution,
                        sent=sent, mode=label, compute_us=compute_us)
         return TickOutput.make(sent.pcmd, sent.progressive, row, verdict.action, events)
+
+    def _nominal_cells(self, inputs: TickInputs, t_exp_s: float, mode: str, answer: tuple,
+                       t0: int) -> TickOutput:
+        """:meth:`step`'s rest on a tick the compiled call did whole (code 0) whose row is
+        cells (``tick_cells``' usual row: no target): the Python stages' state written
+        (``AfterSolve.written``), the row built from the answer's numbers — not from the
+        ``Sent``, ``Solution`` and ``SolveResult`` :meth:`ControlTick.finish` makes for a row
+        that reads them (the same values: the input sent is the one solved)."""
+        (_, mocap_ms, nav_ms, _, solve_us, norm, gmres_it, newton_it, zacc, phi, theta, rate,
+         vz, roll, pitch, gaz, yaw, bits, fed) = answer
+        pcmd, _, adapted = self.after_solve.written(inputs.t_s, zacc, phi, theta, rate, vz,
+                                                    roll, pitch, gaz, yaw, bits, fed)
+        sup = self.supervisor
+        label = mode if mode == sup.label else sup.record(NOMINAL, mode)  # (step's test)
+        compute_us = (_perf_counter_ns() - t0) * 1e-3
+        events = sup.take_events() if sup.events else []
+        if adapted:
+            events += adapted
+        ct = self.control_tick
+        cells = nominal_cells(t_exp_s, ct.before.estimation._x, ct.control._ref_now, zacc, phi,
+                              theta, rate, vz, pcmd, SATURATED_TEXT[bits], solve_us,
+                              _OK_TEXT, norm, gmres_it, newton_it, label, mocap_ms, nav_ms,
+                              inputs.navdata, compute_us, inputs.pose.t_s)
+        return TickOutput.make(pcmd, True, None, _CONTROL, events, cells)
 
     def _before(self, inputs: TickInputs, t_exp_s: float, traj: Trajectory) -> tuple:
         """The stages up to the solve, one by one (every tick the compiled call did not take,

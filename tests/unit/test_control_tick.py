@@ -23,7 +23,8 @@ from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import control_tick as control_tick_module
 from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
-from ardrone_nmpc.runtime.tick import Tick
+from ardrone_nmpc.runs.log_columns import tick_cells
+from ardrone_nmpc.runtime.tick import Tick, TickOutput
 from tests.conftest import nan_equal
 
 # the call is built only where its clock is read (core/monotonic: 64-bit Linux); elsewhere
@@ -62,20 +63,22 @@ def _carried(tick: Tick) -> list:
             None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
 
 
-def _fly(cfg, path: str, monkeypatch) -> tuple:
+def _fly(cfg, path: str, monkeypatch, lane=None) -> tuple:
     """A lockstep flight on ``path``: its rows, events, the stages' state after each tick,
-    and the compiled call's answers (all done, solved and left to Python, declined)."""
+    and the compiled call's answers (all done, solved and left to Python, declined);
+    ``lane`` in ``Tick._nominal_cells``' place (default: itself)."""
     answers, carried = {"done": 0, "solved": 0, "none": 0}, []
-    init, nominal, step = Tick.__init__, ControlTick.nominal, Tick.step
+    init, answer, step = Tick.__init__, ControlTick.answer, Tick.step
 
     def new_init(self, *args, **kwargs):
         init(self, *args, **kwargs)
         _use(self, path)
 
-    def new_nominal(self, *args):
-        whole = nominal(self, *args)
-        answers["none" if not whole else "solved" if not whole[3] else "done"] += 1
-        return whole
+    def new_answer(self, *args):
+        code = answer(self, *args)
+        answers["none" if code is None or code[0] == NOT_NOMINAL
+                else "solved" if code[0] == SOLVED else "done"] += 1
+        return code
 
     def new_step(self, *args, **kwargs):
         out = step(self, *args, **kwargs)
@@ -84,8 +87,10 @@ def _fly(cfg, path: str, monkeypatch) -> tuple:
 
     with monkeypatch.context() as m:
         m.setattr(Tick, "__init__", new_init)
-        m.setattr(ControlTick, "nominal", new_nominal)
+        m.setattr(ControlTick, "answer", new_answer)
         m.setattr(Tick, "step", new_step)
+        if lane is not None:
+            m.setattr(Tick, "_nominal_cells", lane)
         recorder = MemoryRecorder()
         run_lockstep(cfg, recorder=recorder)
     return recorder.rows, recorder.events, carried, answers
@@ -128,6 +133,42 @@ def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, w
         assert answers == {"done": 0, "solved": 0, "none": 0}
     _same_flights(flights["whole"], flights["halves"])
     _same_flights(flights["whole"], flights["python"])
+
+
+def _via_records(self, inputs, t_exp_s, mode, answer, t0):
+    """``Tick._nominal_cells``' tick the long way: the records ``ControlTick.finish`` makes
+    and ``tick_cells`` of them, as ``Tick.step`` builds a row that reads them."""
+    ages_ms, x, sol, (sent, adapted) = self.control_tick.finish(inputs, t_exp_s, answer)
+    sup = self.supervisor
+    label = sup.record(sent.decision, mode) if mode != sup.label else mode
+    events = sup.take_events() if sup.events else []
+    cells = tick_cells(t_exp_s, inputs, ages_ms, x, sol, sent, label, 0.0)
+    return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
+                           events + adapted, cells)
+
+
+@pytest.mark.parametrize("overrides", [
+    ["duration_s=8"],  # auto delay and gain (their events), offset-free
+    ["duration_s=5", "estimator.horizontal_velocity=navdata",
+     "controller.offset_free.enabled=false"],
+    ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"],  # the fence: a landing
+])
+def test_a_row_built_from_the_answer_is_the_row_of_its_records(overrides, monkeypatch):
+    """The cells of a tick done whole (``Tick._nominal_cells``: from the answer's numbers)
+    are, bit for bit and of the same types, the cells ``tick_cells`` makes of the records
+    (the clocks aside), and the stages carry the same state on."""
+    cfg = config("square.yaml", *overrides)
+    rows_a, events_a, carried_a, answers = _fly(cfg, "whole", monkeypatch)
+    rows_b, events_b, carried_b, _ = _fly(cfg, "whole", monkeypatch, lane=_via_records)
+    assert answers["done"] > 20  # (the lane taken: the fence lands the third flight early)
+    assert repr(events_a) == repr(events_b) and carried_a == carried_b
+    assert len(rows_a) == len(rows_b)
+    for i, (p, q) in enumerate(zip(rows_a, rows_b)):
+        assert list(p) == list(q), i
+        bad = [k for k in p if k not in _TIMES and (repr(p[k]), type(p[k])) != (repr(q[k]),
+                                                                                 type(q[k]))]
+        assert not bad, f"row {i}: {bad}"
+        assert all(type(p[k]) is type(q[k]) for k in _TIMES if k in p), i
 
 
 # ----------------------------------------------------------------------------- one tick
