@@ -464,9 +464,13 @@ class CompiledLegs:
         passed are the sensors'. Returns the events it left to the Python path (``(t,
         kind)``, in order) and whether the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
-        mode = plant._mode  # a mode the kernel flies, the one the navdata shows
-        if mode is not sensors._nav_mode or not (
-                mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
+        mode = plant._mode  # a mode the kernel flies, the one the navdata shows — or a new
+        new_mode = mode is not sensors._nav_mode  # one its sample may show after the run
+        if new_mode:
+            if not ((mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING)
+                    and sensors.defers_mode(mode)):
+                return None
+        elif not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             return None
         # a quiet firmware: its PCMD applied, not capped, and no watchdog fires by t_s
         pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
@@ -539,6 +543,10 @@ class CompiledLegs:
                 sensors.nav_rx_t_s = t_nav
         if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
+            if new_mode and taken and t_nav is not None:  # its sample taken: the new mode
+                sensors.took_mode(t_nav, mode)            # seen (deferred, as asked above)
             return ALL_DONE
         self.release()  # the Python path goes on from here
+        if new_mode and taken and t_nav is not None:
+            sensors.took_mode(t_nav, mode)
         return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True
