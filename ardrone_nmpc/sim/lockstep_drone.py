@@ -200,9 +200,9 @@ class LockstepDrone(ConfigHandshake):
         """A navdata sample showing the new flight mode ``mode`` makes :meth:`_on_navdata`
         send nothing, whenever in the tick's compiled run it reaches it: no take-off REF is
         held (the guard is off), or ``mode`` is one the guard cannot act on — taking off or
-        flying: the flight bit set, a major neither landing nor an emergency's, none of
-        which a run changes (it stops before a mode change, a new command, a watchdog that
-        fires, the altitude cap)."""
+        flying: the flight bit set, no emergency, a major of taking off, or flying or
+        hovering (the hover watchdog, which may fire in a run, changes one to the other),
+        never a landing's (a run stops before a mode change)."""
         ref = self._ref
         if ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing:
             return True

@@ -22,13 +22,16 @@ client), and is used only when the Python path's tick would do what the kernel d
   LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
   ``_flying_advance`` and ``_auto_advance`` compile), under a firmware and a sampler whose
   classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
-* the navdata's flight mode is the plant's, the one the link's take-off guard saw last (no
-  guard call; the kernel hands back a leg that changes the mode);
-* the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
-  applied and not capped, and by the tick's time no hover, no link-loss watchdog fires (the
-  silence only grows within a tick, so none fires earlier either; the com-watchdog bit,
-  which nothing reads on the way, is latched after the run, as the Python path's calls
-  would have left it).
+* the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
+  or a new one whose sample the sampler lets the guard see after the run
+  (``LockstepSensors.defers_mode``: the guard does nothing then); the kernel hands back a
+  leg that changes the mode;
+* the firmware would change nothing on the way but its flags: its held PCMD is applied and
+  not capped, and by the tick's time no link-loss watchdog fires, nor the hover watchdog
+  unless the plant's command is hover already (the silence only grows within a tick, so
+  none fires earlier either; the com-watchdog bit and the hover watchdog's flags and
+  held PCMD, which nothing reads on the way, are set after the run, as the Python path's
+  calls would have left them).
 
 The kernel itself stops before a leg that a climb near the altitude cap or an emptying
 battery would change, or that ends a take-off or landing (flown, found to, and undone); the
@@ -56,7 +59,7 @@ from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantT
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
-from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
+from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD, _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["ALL_DONE", "SAMPLER_REPLACED", "TRUTH_CELLS_OF", "CompiledLegs"]
@@ -79,6 +82,8 @@ _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
                      (AirframePlant, ("command",)))
 _isfinite = math.isfinite
+#: the plant's command DroneFirmware.apply_command makes of a hover (``_HOVER_CMD``)
+_HOVER_APPLIED = (0.0, 0.0, 0.0, 0.0, False)
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 #: what :meth:`CompiledLegs.run` returns when it ran all the tick's legs (nothing left)
@@ -472,13 +477,15 @@ class CompiledLegs:
                 return None
         elif not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             return None
-        # a quiet firmware: its PCMD applied, not capped, and no watchdog fires by t_s
+        # a quiet firmware: its PCMD applied, not capped, and by t_s no watchdog fires — but
+        # the hover watchdog while the plant's command is hover already (its flags only)
         pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
         if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
             return None
         silence = t_s - last_cmd_t
-        if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
-                and (fw.link_lost or not silence > fw.link_loss_s)):
+        hover_due = silence > fw.hover_after_s and not fw.lost_com_hover
+        if ((hover_due and fw.applied != _HOVER_APPLIED)
+                or not (fw.link_lost or not silence > fw.link_loss_s)):
             return None
         d = plant.__dict__  # (a last run's truth: the arrays hold the state since)
         if (self.live_out is None or len(d) != self._plant_len
@@ -515,10 +522,15 @@ class CompiledLegs:
         self._ran = True
         self.live_raw = raw
         now = o[_R_LAST_NOW]
-        # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
-        # (checked above) — the bit the Python path's calls would have latched by then
+        # a firmware advance ran: its watchdogs, of which only the com watchdog's and the
+        # hover's can act (checked above) — what the Python path's calls would have left by
+        # then: the com-watchdog bit latched; the held PCMD dropped for hover and applied
+        # (the plant's command unchanged: it was hover)
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
+        if hover_due and now == now and now - fw.last_cmd_t > fw.hover_after_s:
+            fw.lost_com_hover = True
+            fw.pcmd = fw._applied_pcmd = _HOVER_CMD
         taken = n_events if done > n_events else done  # the events whose legs it ran
         if taken:  # at most one of each kind (mocap first on a tie), each sample written as
             if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
