@@ -24,8 +24,7 @@ client), and is used only when the Python path's tick would do what the kernel d
   classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
 * the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
   or a new one whose sample the sampler lets the guard see after the run
-  (``LockstepSensors.defers_mode``: the guard does nothing then); the kernel hands back a
-  leg that changes the mode;
+  (``LockstepSensors.defers_mode``: the guard does nothing then);
 * the firmware would change nothing on the way but its flags: its held PCMD is applied and
   not capped, and by the tick's time no link-loss watchdog fires, nor the hover watchdog
   unless the plant's command is hover already (the silence only grows within a tick, so
@@ -34,8 +33,11 @@ client), and is used only when the Python path's tick would do what the kernel d
   calls would have left them).
 
 The kernel itself stops before a leg that a climb near the altitude cap or an emptying
-battery would change, or that ends a take-off or landing (flown, found to, and undone); the
-Python path goes on from there.
+battery would change; the Python path goes on from there. It flies the leg that ends a
+take-off or a landing (the climb settled: FLYING; the touch-down: LANDED) when nothing but
+the plant's mode changes with it — no hover watchdog due, no climb held (what the firmware
+does with those depends on the mode), and a guard that may see the new mode's sample after
+the run — and else hands it back (flown, found to end it, and undone).
 
 :meth:`CompiledLegs.command` is the same kind of shortcut for the tick's PCMD: the chain
 :meth:`SimulatedDrone.execute_pcmd <ardrone_nmpc.sim.drone.SimulatedDrone.execute_pcmd>` →
@@ -64,8 +66,10 @@ from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["ALL_DONE", "SAMPLER_REPLACED", "TRUTH_CELLS_OF", "CompiledLegs"]
 
-# the modes the kernel flies (compared by identity: an Enum hashes in Python)
+# the modes the kernel flies (compared by identity: an Enum hashes in Python), and LANDED,
+# which a landing's end it flies leaves
 _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
+_LANDED = FlightMode.LANDED
 #: What the kernel does in the plant's place: a subclass overriding any of these flies the
 #: Python path (its override would be skipped)
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
@@ -97,17 +101,17 @@ _AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
 # sv[S_PENDING … S_GUST1]: the plant's state the arrays hold between runs
 _PUT_STATE = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
-# sv[S_ROLL … S_T]: the plant's command (held as its _current: the tick's PCMD carried into
+# sv[S_ROLL … S_ENDS]: the plant's command (held as its _current: the tick's PCMD carried into
 # the run's one pack, not packed by CompiledLegs.command), what the firmware, the faults and
 # the modes may change any time, and the tick's time
-_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_ROLL + 1}d").pack_into
+_PUT_INPUTS = struct.Struct(f"{ks.S_ENDS - ks.S_ROLL + 1}d").pack_into
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
 #: its class's HELD_IN_ARRAYS)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
-_O_NAV, _MOCAP = ks.O_NAV, ks.MOCAP
+_O_NAV, _MOCAP, _NAV = ks.O_NAV, ks.MOCAP, ks.NAV
 # byte offsets in buf of the pose's position and XYZ angles, the truth's position and velocity
 _AT_POSITION, _AT_ANGLES = 8 * (ks.B_OUT + ks.O_POSE + 1), 8 * (ks.B_OUT + ks.O_POSE + 4)
 _AT_STATE, _AT_VELOCITY = 8 * (ks.B_OUT + ks.O_STATE), 8 * (ks.B_OUT + ks.O_STATE + 3)
@@ -135,12 +139,12 @@ def _run_layout(floats: tuple, at_ints: int, n_ints: int) -> str:
     return fmt
 
 
-# what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_KIND1] (iv
-# follows out) — one unpack (struct's: half of tolist's cost; 21 objects, not all 36), in
+# what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_CHANGED]
+# (iv follows out) — one unpack (struct's: half of tolist's cost; 22 objects, not all 37), in
 # native mode (the arrays' own types, bit for bit: ~20 % faster than "=", whose standard
 # sizes unpack each double by PyFloat_Unpack8); every field falls on a multiple of 8 bytes,
 # so native alignment adds no padding (checked below)
-_RUN_LAYOUT = _run_layout(_RUN_READ, ks.B_IV + ks.I_DONE, 4)
+_RUN_LAYOUT = _run_layout(_RUN_READ, ks.B_IV + ks.I_DONE, 5)
 if struct.calcsize(_RUN_LAYOUT) != struct.calcsize("=" + _RUN_LAYOUT):
     raise ImportError("lockstep_legs: the run's layout is padded in native mode")
 _GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
@@ -149,8 +153,8 @@ _GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
  _R_PSI) = (_RUN_READ.index(i) for i in (
     ks.O_POSE, ks.O_POSE + 7, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1, ks.O_LAST_NOW, ks.O_T,
     ks.O_STATE, ks.O_STATE + 5, ks.O_STATE + 8))
-_R_DONE = len(_RUN_READ)  # … then the events', and their kinds
-_R_EVENTS, _R_KIND0, _R_KIND1 = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3
+_R_DONE = len(_RUN_READ)  # … then the events', their kinds, the leg that changed the mode
+_R_EVENTS, _R_KIND0, _R_KIND1, _R_CHANGED = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3, _R_DONE + 4
 #: x, y, z, ψ, ż of :attr:`CompiledLegs.live_out` (``LockstepDrone.truth_cells``)
 TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
@@ -506,10 +510,15 @@ class CompiledLegs:
             climbing = lead_s = alt_max_m = 0.0
         kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
                        ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
+        # the take-off's or landing's end flown too, when nothing else changes with the mode
+        # (the hover watchdog and the cap act only on an airborne plant) and the guard may
+        # see its sample after the run
+        ends = 0.0 if mode is _FLYING or hover_due or climbing else (
+            1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED) else 0.0)
         w0, w1, w2 = plant.wind_mps.tolist()
         roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
         _PUT_INPUTS(self._sv_memory, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                    climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+                    climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s, ends)
         self._kernel(*self._args)
         # the bytes of out and iv: the run's floats and counts, the pose's (and the truth's)
         # read-only arrays read from them
@@ -531,7 +540,11 @@ class CompiledLegs:
         if hover_due and now == now and now - fw.last_cmd_t > fw.hover_after_s:
             fw.lost_com_hover = True
             fw.pcmd = fw._applied_pcmd = _HOVER_CMD
+        changed, mode_before = o[_R_CHANGED], mode
+        if changed >= 0:  # the run flew the take-off's or the landing's end (_auto_advance's)
+            mode = plant._mode = _FLYING if mode is _TAKING_OFF else _LANDED
         taken = n_events if done > n_events else done  # the events whose legs it ran
+        t_seen = None  # the time of a sample showing a new mode
         if taken:  # at most one of each kind (mocap first on a tie), each sample written as
             if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
                 t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None  # other
@@ -546,19 +559,26 @@ class CompiledLegs:
                     sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
                 else:
                     sensors.took_pose(t_pose, pose)
-            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode is
-                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's: checked above)
-                # the types of AirframePlant.navdata's values (numpy scalars from its draws)
-                sensors.nav = NavdataSample.make(
-                    o[r], mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
-                    out[q + 5] if o[r + 5] > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
+            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode:
+                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's, at its leg's end)
+                nav_mode = mode_before if changed > (o[_R_KIND0] != _NAV) else mode
+                if nav_mode is _LANDED:  # motors off: AirframePlant.navdata's zeros
+                    sensors.nav = NavdataSample.make(o[r], nav_mode, o[r + 1], o[r + 2],
+                                                     o[r + 3], o[r + 4], 0.0, 0.0, 0.0, 0.0)
+                else:  # the types of AirframePlant.navdata's values (numpy scalars from its
+                    sensors.nav = NavdataSample.make(  # draws)
+                        o[r], nav_mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
+                        out[q + 5] if o[r + 5] > 0.0 else 0.0, out[q + 6], out[q + 7],
+                        out[q + 8])
                 sensors.nav_rx_t_s = t_nav
+                if nav_mode is not sensors._nav_mode:  # the guard sees it after the run (as
+                    t_seen = t_nav                      # asked above)
         if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
-            if new_mode and taken and t_nav is not None:  # its sample taken: the new mode
-                sensors.took_mode(t_nav, mode)            # seen (deferred, as asked above)
+            if t_seen is not None:
+                sensors.took_mode(t_seen, nav_mode)
             return ALL_DONE
         self.release()  # the Python path goes on from here
-        if new_mode and taken and t_nav is not None:
-            sensors.took_mode(t_nav, mode)
+        if t_seen is not None:
+            sensors.took_mode(t_seen, nav_mode)
         return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True

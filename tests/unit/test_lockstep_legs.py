@@ -4,7 +4,8 @@ without, flown with the same commands, hold the same samples, truth and plant st
 tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
 attitude, the watchdogs of a silent link, a draining battery, a scripted target and a
 take-off after a self-landing — and through the automatic take-off and landing, whose
-last legs (the climb settled, the touch-down) the kernel hands back."""
+ends (the climb settled, the touch-down) the kernel flies too (or hands back: a take-off
+whose battery empties)."""
 
 import math
 
@@ -58,20 +59,22 @@ def _light(drone, t_s):
 
 def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     drone = LockstepDrone(cfg)
-    # compiled runs, of them stopped before the last leg: flying, taking off or landing
-    used = [0, 0, 0, 0, 0]  # … and (the last) ticks on which the arrays held the state
-    compiled = drone.sensors._legs
+    # compiled runs, of them stopped before the last leg: flying, taking off or landing;
+    used = [0, 0, 0, 0, 0, 0]  # ticks on which the arrays held the state; runs that flew
+    compiled = drone.sensors._legs  # a take-off's or landing's end
     if not legs:
         drone.sensors._legs = None
     elif compiled is not None:
         run = compiled.run
 
         def counted(t_s):
-            i = 0 if drone.sim.plant.mode is FlightMode.FLYING else 2
+            mode = drone.sim.plant.mode
+            i = 0 if mode is FlightMode.FLYING else 2
             left = run(t_s)
             if left is not None:  # (None: not the kernel's tick, nothing done)
                 used[i] += 1
                 used[i + 1] += left[1]
+                used[5] += drone.sim.plant.mode is not mode
             return left
         compiled.run = counted
     period = cfg.loop.period_s
@@ -141,10 +144,12 @@ def test_compiled_legs_give_the_python_paths_bits(name):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped, auto_used, auto_stopped, _) = _fly(cfg, True, 400, command)
+    compiled, (used, stopped, auto_used, _, _, ends) = _fly(cfg, True, 400, command)
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
-    assert auto_used > 20 and auto_stopped >= 1  # take-off, landing: an end handed back
+    assert auto_used > 20 and ends >= 1  # take-off, landing: their ends too (both,
+    assert ends == 2 or name in ("sag", "battery_empties")  # but a take-off the link-loss
+    # watchdog's tick or an emptying battery ends)
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"
@@ -237,9 +242,9 @@ def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
     assert legs.iv.dtype == np.int64 and legs.out.dtype == legs.p.dtype == np.float64
     assert legs.p[ks.P_K:].tolist() == list(drone.sim.plant.params.rhs_coefficients)
     o, read = legs.live_out, lockstep_legs._RUN_READ
-    assert len(set(read)) == len(read) == len(o) - 4 and max(read) < ks.OUT_SIZE
+    assert len(set(read)) == len(read) == len(o) - 5 and max(read) < ks.OUT_SIZE
     assert np.array(o[:len(read)]).tobytes() == legs.out[list(read)].tobytes()
-    assert o[len(read):] == tuple(legs.iv[ks.I_DONE:ks.I_KIND1 + 1].tolist())
+    assert o[len(read):] == tuple(legs.iv[ks.I_DONE:ks.I_CHANGED + 1].tolist())
     assert o[len(read)] > o[len(read) + 1]  # all legs done: more than the events
     # the truth's cells, and the times the PCMD chain and a REF read, are among them
     assert lockstep_legs.TRUTH_CELLS_OF(o) == tuple(legs.out[[ks.O_STATE + i for i in
