@@ -139,12 +139,12 @@ def _run_layout(floats: tuple, at_ints: int, n_ints: int) -> str:
     return fmt
 
 
-# what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_CHANGED]
-# (iv follows out) — one unpack (struct's: half of tolist's cost; 22 objects, not all 37), in
+# what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_KIND1] (iv
+# follows out) — one unpack (struct's: half of tolist's cost; 21 objects, not all 37), in
 # native mode (the arrays' own types, bit for bit: ~20 % faster than "=", whose standard
 # sizes unpack each double by PyFloat_Unpack8); every field falls on a multiple of 8 bytes,
 # so native alignment adds no padding (checked below)
-_RUN_LAYOUT = _run_layout(_RUN_READ, ks.B_IV + ks.I_DONE, 5)
+_RUN_LAYOUT = _run_layout(_RUN_READ, ks.B_IV + ks.I_DONE, 4)
 if struct.calcsize(_RUN_LAYOUT) != struct.calcsize("=" + _RUN_LAYOUT):
     raise ImportError("lockstep_legs: the run's layout is padded in native mode")
 _GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
@@ -153,8 +153,8 @@ _GET_RUN = struct.Struct(_RUN_LAYOUT).unpack_from
  _R_PSI) = (_RUN_READ.index(i) for i in (
     ks.O_POSE, ks.O_POSE + 7, ks.O_NAV, ks.O_EV_T0, ks.O_EV_T1, ks.O_LAST_NOW, ks.O_T,
     ks.O_STATE, ks.O_STATE + 5, ks.O_STATE + 8))
-_R_DONE = len(_RUN_READ)  # … then the events', their kinds, the leg that changed the mode
-_R_EVENTS, _R_KIND0, _R_KIND1, _R_CHANGED = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3, _R_DONE + 4
+_R_DONE = len(_RUN_READ)  # … then the events', and their kinds
+_R_EVENTS, _R_KIND0, _R_KIND1 = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3
 #: x, y, z, ψ, ż of :attr:`CompiledLegs.live_out` (``LockstepDrone.truth_cells``)
 TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
@@ -467,6 +467,31 @@ class CompiledLegs:
         self._args = (x, rows, buf, *self._blocks)
         self._kernel = _kernel_for(x, rows, self._blocks)
 
+    def _modes_seen(self, o, mode, taken: int) -> None:
+        """After a run begun in ``mode`` that the navdata did not show yet, or that flew the
+        take-off's or the landing's end (``o``: what it left): the plant's mode then (as
+        ``_auto_advance`` leaves it), its navdata sample's — the mode at the end of the
+        sample's leg (LANDED: AirframePlant.navdata's zeros) — and a new one seen by the
+        guard (as :meth:`run` asked, ``defers_mode``)."""
+        sensors, changed = self.sensors, int(self.iv[ks.I_CHANGED])
+        mode_then = mode
+        if changed >= 0:
+            mode_then = self.plant._mode = _FLYING if mode is _TAKING_OFF else _LANDED
+        if taken and o[_R_KIND0] == _NAV:
+            leg = 0
+        elif taken == 2 and o[_R_KIND1] == _NAV:
+            leg = 1
+        else:  # no navdata sample in what the run did
+            return
+        nav = sensors.nav
+        if 0 <= changed <= leg:  # sampled after the change
+            nav = sensors.nav = NavdataSample.make(
+                nav.t_s, mode_then, nav.battery_pct, nav.roll_deg, nav.pitch_deg, nav.yaw_deg,
+                *((0.0, 0.0, 0.0, 0.0) if mode_then is _LANDED else (
+                    nav.altitude_m, nav.vx_body_mps, nav.vy_body_mps, nav.vz_mps)))
+        if nav.mode is not sensors._nav_mode:
+            sensors.took_mode(sensors.nav_rx_t_s, nav.mode)
+
     def run(self, t_s: float) -> tuple[list, bool] | None:
         """The kernel's run to ``t_s`` — None, nothing done, unless the Python path's tick to
         ``t_s`` is what the kernel does (module docstring); the samples of the events it
@@ -508,13 +533,15 @@ class CompiledLegs:
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
-        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
-                       ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
-        # the take-off's or landing's end flown too, when nothing else changes with the mode
-        # (the hover watchdog and the cap act only on an airborne plant) and the guard may
-        # see its sample after the run
-        ends = 0.0 if mode is _FLYING or hover_due or climbing else (
-            1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED) else 0.0)
+        if mode is _FLYING:  # as the kernel takes it
+            kernel_mode, ends = ks.MODE_FLYING, 0.0
+        else:  # the take-off's or landing's end flown too, when nothing else changes with
+            # the mode (the hover watchdog and the cap act only on an airborne plant) and the
+            # guard may see its sample after the run
+            kernel_mode = ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING
+            ends = 0.0 if hover_due or climbing else (
+                1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED)
+                else 0.0)
         w0, w1, w2 = plant.wind_mps.tolist()
         roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
         _PUT_INPUTS(self._sv_memory, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
@@ -540,11 +567,7 @@ class CompiledLegs:
         if hover_due and now == now and now - fw.last_cmd_t > fw.hover_after_s:
             fw.lost_com_hover = True
             fw.pcmd = fw._applied_pcmd = _HOVER_CMD
-        changed, mode_before = o[_R_CHANGED], mode
-        if changed >= 0:  # the run flew the take-off's or the landing's end (_auto_advance's)
-            mode = plant._mode = _FLYING if mode is _TAKING_OFF else _LANDED
         taken = n_events if done > n_events else done  # the events whose legs it ran
-        t_seen = None  # the time of a sample showing a new mode
         if taken:  # at most one of each kind (mocap first on a tie), each sample written as
             if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
                 t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None  # other
@@ -559,26 +582,19 @@ class CompiledLegs:
                     sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
                 else:
                     sensors.took_pose(t_pose, pose)
-            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode:
-                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's, at its leg's end)
-                nav_mode = mode_before if changed > (o[_R_KIND0] != _NAV) else mode
-                if nav_mode is _LANDED:  # motors off: AirframePlant.navdata's zeros
-                    sensors.nav = NavdataSample.make(o[r], nav_mode, o[r + 1], o[r + 2],
-                                                     o[r + 3], o[r + 4], 0.0, 0.0, 0.0, 0.0)
-                else:  # the types of AirframePlant.navdata's values (numpy scalars from its
-                    sensors.nav = NavdataSample.make(  # draws)
-                        o[r], nav_mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
-                        out[q + 5] if o[r + 5] > 0.0 else 0.0, out[q + 6], out[q + 7],
-                        out[q + 8])
+            if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode is
+                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's: checked above, or below)
+                # the types of AirframePlant.navdata's values (numpy scalars from its draws)
+                sensors.nav = NavdataSample.make(
+                    o[r], mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
+                    out[q + 5] if o[r + 5] > 0.0 else 0.0, out[q + 6], out[q + 7], out[q + 8])
                 sensors.nav_rx_t_s = t_nav
-                if nav_mode is not sensors._nav_mode:  # the guard sees it after the run (as
-                    t_seen = t_nav                      # asked above)
         if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
-            if t_seen is not None:
-                sensors.took_mode(t_seen, nav_mode)
+            if new_mode or ends:  # (rare: a take-off's or landing's tick)
+                self._modes_seen(o, mode, taken)
             return ALL_DONE
         self.release()  # the Python path goes on from here
-        if t_seen is not None:
-            sensors.took_mode(t_seen, nav_mode)
+        if new_mode or ends:
+            self._modes_seen(o, mode, taken)
         return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True

@@ -242,9 +242,9 @@ def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
     assert legs.iv.dtype == np.int64 and legs.out.dtype == legs.p.dtype == np.float64
     assert legs.p[ks.P_K:].tolist() == list(drone.sim.plant.params.rhs_coefficients)
     o, read = legs.live_out, lockstep_legs._RUN_READ
-    assert len(set(read)) == len(read) == len(o) - 5 and max(read) < ks.OUT_SIZE
+    assert len(set(read)) == len(read) == len(o) - 4 and max(read) < ks.OUT_SIZE
     assert np.array(o[:len(read)]).tobytes() == legs.out[list(read)].tobytes()
-    assert o[len(read):] == tuple(legs.iv[ks.I_DONE:ks.I_CHANGED + 1].tolist())
+    assert o[len(read):] == tuple(legs.iv[ks.I_DONE:ks.I_KIND1 + 1].tolist())
     assert o[len(read)] > o[len(read) + 1]  # all legs done: more than the events
     # the truth's cells, and the times the PCMD chain and a REF read, are among them
     assert lockstep_legs.TRUTH_CELLS_OF(o) == tuple(legs.out[[ks.O_STATE + i for i in
