@@ -226,6 +226,11 @@ class LockstepDrone(ConfigHandshake):
 
     def land(self) -> None:
         """Hold REF land; the command is reset to hover."""
+        legs = self._legs  # held again (a landing's every tick): the chain written out
+        if (self._ref is _LAND and self._ref_unsent is None and legs is not None
+                and legs.land_again(self._seq + 1)):
+            self._seq += 2
+            return
         self._hold(_LAND)
 
     def emergency(self) -> None:

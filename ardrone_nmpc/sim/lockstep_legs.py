@@ -58,6 +58,7 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.protocol.at import Pcmd
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
@@ -85,9 +86,15 @@ SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
                      (AirframePlant, ("command",)))
+#: … and what :meth:`CompiledLegs.land_again` does besides
+_LANDING_REPLACED = ((SimulatedDrone, ("execute_at",)),
+                     (DroneFirmware, ("execute_datagram", "execute", "_on_ref")))
 _isfinite = math.isfinite
 #: the plant's command DroneFirmware.apply_command makes of a hover (``_HOVER_CMD``)
 _HOVER_APPLIED = (0.0, 0.0, 0.0, 0.0, False)
+_HOVER = Pcmd.hover()  # the firmware's held PCMD of a hover PCMD (DroneFirmware.execute)
+_HOVER_PCMD = (_HOVER.flags, _HOVER.roll_frac, _HOVER.pitch_frac, _HOVER.gaz_frac,
+               _HOVER.yaw_frac)
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 #: what :meth:`CompiledLegs.run` returns when it ran all the tick's legs (nothing left)
@@ -211,6 +218,9 @@ class CompiledLegs:
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
+        #: a landing's REF held again by :meth:`land_again`
+        self.lands_again = self.takes_commands and self.commands_eligible(
+            drone, _LANDING_REPLACED)
         self.counters = drone.counters
 
     @staticmethod
@@ -230,10 +240,11 @@ class CompiledLegs:
         return True
 
     @staticmethod
-    def commands_eligible(drone) -> bool:
-        """A drone whose PCMD chain :meth:`command` may stand in for: none of its drone's,
-        firmware's or plant's classes overrides a method of the chain."""
-        for base, names in _COMMAND_REPLACED:
+    def commands_eligible(drone, chain: tuple = _COMMAND_REPLACED) -> bool:
+        """A drone whose PCMD chain :meth:`command` may stand in for (or another ``chain``:
+        ``(class, method names)`` pairs): none of its drone's, firmware's or plant's classes
+        overrides a method of the chain."""
+        for base, names in chain:
             obj = drone if base is SimulatedDrone else (
                 drone.firmware if base is DroneFirmware else drone.plant)
             kind = type(obj)
@@ -305,6 +316,34 @@ class CompiledLegs:
             else:
                 plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
+
+    def land_again(self, seq: int) -> bool:
+        """:meth:`SimulatedDrone.execute_at <ardrone_nmpc.sim.drone.SimulatedDrone.
+        execute_at>` of the datagram a landing holds every tick — REF land (``seq``), a hover
+        PCMD (``seq + 1``) — at the plant's time, written out as :meth:`command` writes the
+        PCMD's: the same counters and firmware state (both accepted, traffic for the
+        watchdogs; no REF edge, no take-off bit; the hover applied, not capped), the
+        plant's mode and command unchanged — LANDING, hover already. False, nothing done,
+        for any other case (a drone it does not stand in for, a stale number, another mode
+        or command)."""
+        fw, c = self.firmware, self.counters
+        if not (self.lands_again and self.plant._mode is _LANDING and seq > fw.last_seq
+                and fw.applied == _HOVER_APPLIED):
+            return False
+        now = self.t_s()
+        c.at_datagrams_in += 1
+        c.at_commands_in += 2
+        c.at_commands_applied += 2
+        fw.last_seq = seq + 1  # DroneFirmware._accept of each
+        fw.last_cmd_t = now
+        fw.link_lost = False
+        fw.lost_com_hover = False
+        if fw.comwdg_clear == "any":
+            fw.comwdg_latched = False
+        fw.ref_emergency = fw.ref_start = False  # _on_ref of REF land while LANDING
+        fw.pcmd = fw._applied_pcmd = _HOVER_PCMD  # apply_command of the hover: the
+        fw.alt_capped = False                     # plant's command stays
+        return True
 
     def _params(self) -> np.ndarray:
         """The flight's parameters, built anew (:meth:`run` keeps them while the plant's
