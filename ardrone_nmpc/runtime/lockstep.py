@@ -150,16 +150,16 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         raise
     t_takeoff = drone.truth.t_s
     drone.takeoff()
-    truth = drone.truth  # one truth per step of the clock (each read builds one)
-    while truth.mode is not FlightMode.FLYING and truth.t_s < TAKEOFF_TIMEOUT_S:
+    mode, t_now_s = drone.mode_and_t()  # the truth's, without building one each step
+    while mode is not FlightMode.FLYING and t_now_s < TAKEOFF_TIMEOUT_S:
         check_signals()
-        drone.advance_to(truth.t_s + period)
-        truth = drone.truth
-    if truth.mode is not FlightMode.FLYING:
+        drone.advance_to(t_now_s + period)
+        mode, t_now_s = drone.mode_and_t()
+    if mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "
-                           f"(mode {truth.mode.value})")
+                           f"(mode {mode.value})")
     # The settle phase starts now, on whole ticks: experiment time 0 is n_settle ticks later.
-    t_first = truth.t_s
+    t_first = t_now_s
     t_start = t_first + schedule.settle_span_s  # experiment time 0 on the plant clock
     announced = drone.start_experiment(t_start)
     for kind, fields in preflight_events:
@@ -229,8 +229,9 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     else:
         _land(cfg, tick, drone, recorder, write_event, t_first, t_start, flown,
               logged=ending.startswith("land"))
-    return SimResult(flown, drone.truth.mode, recorder.path if recorder is not None else None,
-                     loop_wall_s, ending, drone.truth.t_s - t_start)
+    final_mode, t_final_s = drone.mode_and_t()
+    return SimResult(flown, final_mode, recorder.path if recorder is not None else None,
+                     loop_wall_s, ending, t_final_s - t_start)
 
 
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
@@ -280,10 +281,11 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     k = k0
     # the loop's calls bound once (~40 ticks of descent a flight), as in _fly's loop
     advance_to, take_events, land = drone.advance_to, drone.take_events, drone.land
+    mode_and_t = drone.mode_and_t  # (the truth's, without building one each tick)
     landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
-    truth = drone.truth  # one truth per step of the clock (each read builds one)
-    while truth.mode is not landed and truth.t_s < deadline:
-        if truth.mode is emergency:
+    mode, t_now_s = mode_and_t()
+    while mode is not landed and t_now_s < deadline:
+        if mode is emergency:
             break
         t_plant = t_first + k * period
         advance_to(t_plant, t_plant - t_start)
@@ -295,7 +297,6 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
             out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
             _record_out(recorder, out, drone, "landing")
         k += 1
-        truth = drone.truth
-    mode = truth.mode
-    write_event(truth.t_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
+        mode, t_now_s = mode_and_t()
+    write_event(t_now_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
                 drone_mode=mode.value)

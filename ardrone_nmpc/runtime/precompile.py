@@ -90,7 +90,7 @@ def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
 def compile_kernels() -> None:
     """Compile (or load) the estimation stage's and the attitude estimate's kernels, then the
     simulated drone's: connect, take off, fly a second holding a small command — the calls a
-    lockstep flight makes."""
+    lockstep flight makes — then the plant's own steps, flying and landing."""
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
@@ -113,7 +113,7 @@ def compile_kernels() -> None:
         drone.advance_to(truth.t_s + period)
         truth = drone.truth
     t0 = truth.t_s
-    plant = drone.sim.plant  # its step-by-step path, which a take-off's last leg may take
+    plant = drone.sim.plant  # its step-by-step path: a take-off end the legs hand back
     plant._motors_on_step(plant._current, plant.params.integration_step_s, (0.0, 0.0, 0.0))
     drone.start_experiment(t0)
     for k in range(round(1.0 / period)):
@@ -123,6 +123,11 @@ def compile_kernels() -> None:
         drone.inputs(t)
         drone.set_command(0.01, -0.01, 0.02, 0.01, progressive=True)
         drone.truth_cells()
+    # the plant's own compiled steps, which the compiled legs fly in a clean flight's place
+    # but a flight they cannot fly takes (sensor faults through the wire, an emptying battery)
+    plant.advance(period)  # FLYING: flying_advance
+    plant.land()
+    plant.advance(period)  # the automatic landing: auto_steps
 
 
 def main() -> int:

@@ -19,7 +19,7 @@ import math
 from typing import NamedTuple
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
-from ardrone_nmpc.core.types import PlantTruth, TickInputs
+from ardrone_nmpc.core.types import FlightMode, PlantTruth, TickInputs
 from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
@@ -81,7 +81,8 @@ class LockstepDrone(ConfigHandshake):
         self.config_ids = cfg.drone.config_ids
         self.bootstrap_answers = 0
         self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata,
-                                       on_bootstrap=self._answer_bootstrap)
+                                       on_bootstrap=self._answer_bootstrap,
+                                       defers_mode=self._guard_ignores)
         self._seq = 0
         self._ref: Ref | None = None        # the REF held
         self._ref_unsent: Ref | None = None  # … not yet received by the drone
@@ -144,6 +145,15 @@ class LockstepDrone(ConfigHandshake):
             return legs.truth()
         return self.sim.plant.truth
 
+    def mode_and_t(self) -> tuple[FlightMode, float]:
+        """(mode, t_s) of :attr:`truth`, without building it (a landing's wait, every tick):
+        an airframe's, read while the compiled legs hold its state."""
+        legs = self._legs
+        if legs is None:
+            truth = self.sim.plant.truth
+            return truth.mode, truth.t_s
+        return self.sim.plant._mode, legs.t_s()
+
     def truth_cells(self) -> tuple:
         """(x, y, z, ψ, ż) of :attr:`truth` (the logged truth, every tick): an airframe's read
         from its state, the values :attr:`AirframePlant.truth` would hold, without building
@@ -186,6 +196,18 @@ class LockstepDrone(ConfigHandshake):
             self.self_landing = f"the drone {what}"
             self._hold(Ref.landing())
 
+    def _guard_ignores(self, mode: FlightMode) -> bool:
+        """A navdata sample showing the new flight mode ``mode`` makes :meth:`_on_navdata`
+        send nothing, whenever in the tick's compiled run it reaches it: no take-off REF is
+        held (the guard is off), or ``mode`` is one the guard cannot act on — taking off or
+        flying: the flight bit set, no emergency, a major of taking off, or flying or
+        hovering (the hover watchdog, which may fire in a run, changes one to the other),
+        never a landing's (a run stops before a mode change)."""
+        ref = self._ref
+        if ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing:
+            return True
+        return mode is FlightMode.TAKING_OFF or mode is FlightMode.FLYING
+
     def _answer_bootstrap(self) -> None:
         """A bootstrap packet (the drone lost its client): write ``navdata_demo`` again, as
         :class:`~ardrone_nmpc.links.drone_link.DroneLink` does."""
@@ -204,6 +226,11 @@ class LockstepDrone(ConfigHandshake):
 
     def land(self) -> None:
         """Hold REF land; the command is reset to hover."""
+        legs = self._legs  # held again (a landing's every tick): the chain written out
+        if (self._ref is _LAND and self._ref_unsent is None and legs is not None
+                and legs.land_again(self._seq + 1)):
+            self._seq += 2
+            return
         self._hold(_LAND)
 
     def emergency(self) -> None:

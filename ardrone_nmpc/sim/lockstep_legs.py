@@ -22,17 +22,22 @@ client), and is used only when the Python path's tick would do what the kernel d
   LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
   ``_flying_advance`` and ``_auto_advance`` compile), under a firmware and a sampler whose
   classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
-* the navdata's flight mode is the plant's, the one the link's take-off guard saw last (no
-  guard call; the kernel hands back a leg that changes the mode);
-* the firmware would change nothing on the way but its com-watchdog bit: its held PCMD is
-  applied and not capped, and by the tick's time no hover, no link-loss watchdog fires (the
-  silence only grows within a tick, so none fires earlier either; the com-watchdog bit,
-  which nothing reads on the way, is latched after the run, as the Python path's calls
-  would have left it).
+* the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
+  or a new one whose sample the sampler lets the guard see after the run
+  (``LockstepSensors.defers_mode``: the guard does nothing then);
+* the firmware would change nothing on the way but its flags: its held PCMD is applied and
+  not capped, and by the tick's time no link-loss watchdog fires, nor the hover watchdog
+  unless the plant's command is hover already (the silence only grows within a tick, so
+  none fires earlier either; the com-watchdog bit and the hover watchdog's flags and
+  held PCMD, which nothing reads on the way, are set after the run, as the Python path's
+  calls would have left them).
 
 The kernel itself stops before a leg that a climb near the altitude cap or an emptying
-battery would change, or that ends a take-off or landing (flown, found to, and undone); the
-Python path goes on from there.
+battery would change; the Python path goes on from there. It flies the leg that ends a
+take-off or a landing (the climb settled: FLYING; the touch-down: LANDED) when nothing but
+the plant's mode changes with it — no hover watchdog due, no climb held (what the firmware
+does with those depends on the mode), and a guard that may see the new mode's sample after
+the run — and else hands it back (flown, found to end it, and undone).
 
 :meth:`CompiledLegs.command` is the same kind of shortcut for the tick's PCMD: the chain
 :meth:`SimulatedDrone.execute_pcmd <ardrone_nmpc.sim.drone.SimulatedDrone.execute_pcmd>` →
@@ -53,16 +58,19 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantTruth
+from ardrone_nmpc.protocol.at import Pcmd
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
-from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE, DroneFirmware
+from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD, _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
 
 __all__ = ["ALL_DONE", "SAMPLER_REPLACED", "TRUTH_CELLS_OF", "CompiledLegs"]
 
-# the modes the kernel flies (compared by identity: an Enum hashes in Python)
+# the modes the kernel flies (compared by identity: an Enum hashes in Python), and LANDED,
+# which a landing's end it flies leaves
 _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
+_LANDED = FlightMode.LANDED
 #: What the kernel does in the plant's place: a subclass overriding any of these flies the
 #: Python path (its override would be skipped)
 _REPLACED = ("advance", "_flying_advance", "_substep", "_motors_on_step", "_advance_biases",
@@ -78,7 +86,15 @@ SAMPLER_REPLACED = ("_run_to", "_direct_events", "took_pose", "took_navdata")
 _COMMAND_REPLACED = ((SimulatedDrone, ("execute_pcmd", "_at_lost")),
                      (DroneFirmware, ("execute_pcmd", "_accept", "apply_command")),
                      (AirframePlant, ("command",)))
+#: … and what :meth:`CompiledLegs.land_again` does besides
+_LANDING_REPLACED = ((SimulatedDrone, ("execute_at",)),
+                     (DroneFirmware, ("execute_datagram", "execute", "_on_ref")))
 _isfinite = math.isfinite
+#: the plant's command DroneFirmware.apply_command makes of a hover (``_HOVER_CMD``)
+_HOVER_APPLIED = (0.0, 0.0, 0.0, 0.0, False)
+_HOVER = Pcmd.hover()  # the firmware's held PCMD of a hover PCMD (DroneFirmware.execute)
+_HOVER_PCMD = (_HOVER.flags, _HOVER.roll_frac, _HOVER.pitch_frac, _HOVER.gaz_frac,
+               _HOVER.yaw_frac)
 _lockstep_run = ks.lockstep_run
 _frozen = np.frombuffer  # over immutable bytes: a read-only array
 #: what :meth:`CompiledLegs.run` returns when it ran all the tick's legs (nothing left)
@@ -92,17 +108,17 @@ _AT_POS = 8 * ks.I_POS_BIAS  # iv[I_POS_BIAS … I_POS_NAV]
 # sv[S_PENDING … S_GUST1]: the plant's state the arrays hold between runs
 _PUT_STATE = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").pack_into
 _AT_PENDING = 8 * ks.S_PENDING
-# sv[S_ROLL … S_T]: the plant's command (held as its _current: the tick's PCMD carried into
+# sv[S_ROLL … S_ENDS]: the plant's command (held as its _current: the tick's PCMD carried into
 # the run's one pack, not packed by CompiledLegs.command), what the firmware, the faults and
 # the modes may change any time, and the tick's time
-_PUT_INPUTS = struct.Struct(f"{ks.S_T - ks.S_ROLL + 1}d").pack_into
+_PUT_INPUTS = struct.Struct(f"{ks.S_ENDS - ks.S_ROLL + 1}d").pack_into
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
 #: its class's HELD_IN_ARRAYS)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
-_O_NAV, _MOCAP = ks.O_NAV, ks.MOCAP
+_O_NAV, _MOCAP, _NAV = ks.O_NAV, ks.MOCAP, ks.NAV
 # byte offsets in buf of the pose's position and XYZ angles, the truth's position and velocity
 _AT_POSITION, _AT_ANGLES = 8 * (ks.B_OUT + ks.O_POSE + 1), 8 * (ks.B_OUT + ks.O_POSE + 4)
 _AT_STATE, _AT_VELOCITY = 8 * (ks.B_OUT + ks.O_STATE), 8 * (ks.B_OUT + ks.O_STATE + 3)
@@ -131,7 +147,7 @@ def _run_layout(floats: tuple, at_ints: int, n_ints: int) -> str:
 
 
 # what a run left, from buf's bytes: out's floats a tick reads, then iv[I_DONE … I_KIND1] (iv
-# follows out) — one unpack (struct's: half of tolist's cost; 21 objects, not all 36), in
+# follows out) — one unpack (struct's: half of tolist's cost; 21 objects, not all 37), in
 # native mode (the arrays' own types, bit for bit: ~20 % faster than "=", whose standard
 # sizes unpack each double by PyFloat_Unpack8); every field falls on a multiple of 8 bytes,
 # so native alignment adds no padding (checked below)
@@ -202,6 +218,9 @@ class CompiledLegs:
         drone = sensors.drone
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
         self.takes_commands = drone.faults is None and self.commands_eligible(drone)
+        #: a landing's REF held again by :meth:`land_again`
+        self.lands_again = self.takes_commands and self.commands_eligible(
+            drone, _LANDING_REPLACED)
         self.counters = drone.counters
 
     @staticmethod
@@ -221,10 +240,11 @@ class CompiledLegs:
         return True
 
     @staticmethod
-    def commands_eligible(drone) -> bool:
-        """A drone whose PCMD chain :meth:`command` may stand in for: none of its drone's,
-        firmware's or plant's classes overrides a method of the chain."""
-        for base, names in _COMMAND_REPLACED:
+    def commands_eligible(drone, chain: tuple = _COMMAND_REPLACED) -> bool:
+        """A drone whose PCMD chain :meth:`command` may stand in for (or another ``chain``:
+        ``(class, method names)`` pairs): none of its drone's, firmware's or plant's classes
+        overrides a method of the chain."""
+        for base, names in chain:
             obj = drone if base is SimulatedDrone else (
                 drone.firmware if base is DroneFirmware else drone.plant)
             kind = type(obj)
@@ -296,6 +316,34 @@ class CompiledLegs:
             else:
                 plant.command(roll, pitch, gaz, yaw)  # its ValueError, nothing changed
             fw.applied = cmd
+
+    def land_again(self, seq: int) -> bool:
+        """:meth:`SimulatedDrone.execute_at <ardrone_nmpc.sim.drone.SimulatedDrone.
+        execute_at>` of the datagram a landing holds every tick — REF land (``seq``), a hover
+        PCMD (``seq + 1``) — at the plant's time, written out as :meth:`command` writes the
+        PCMD's: the same counters and firmware state (both accepted, traffic for the
+        watchdogs; no REF edge, no take-off bit; the hover applied, not capped), the
+        plant's mode and command unchanged — LANDING, hover already. False, nothing done,
+        for any other case (a drone it does not stand in for, a stale number, another mode
+        or command)."""
+        fw, c = self.firmware, self.counters
+        if not (self.lands_again and self.plant._mode is _LANDING and seq > fw.last_seq
+                and fw.applied == _HOVER_APPLIED):
+            return False
+        now = self.t_s()
+        c.at_datagrams_in += 1
+        c.at_commands_in += 2
+        c.at_commands_applied += 2
+        fw.last_seq = seq + 1  # DroneFirmware._accept of each
+        fw.last_cmd_t = now
+        fw.link_lost = False
+        fw.lost_com_hover = False
+        if fw.comwdg_clear == "any":
+            fw.comwdg_latched = False
+        fw.ref_emergency = fw.ref_start = False  # _on_ref of REF land while LANDING
+        fw.pcmd = fw._applied_pcmd = _HOVER_PCMD  # apply_command of the hover: the
+        fw.alt_capped = False                     # plant's command stays
+        return True
 
     def _params(self) -> np.ndarray:
         """The flight's parameters, built anew (:meth:`run` keeps them while the plant's
@@ -458,23 +506,54 @@ class CompiledLegs:
         self._args = (x, rows, buf, *self._blocks)
         self._kernel = _kernel_for(x, rows, self._blocks)
 
+    def _modes_seen(self, o, mode, taken: int) -> None:
+        """After a run begun in ``mode`` that the navdata did not show yet, or that flew the
+        take-off's or the landing's end (``o``: what it left): the plant's mode then (as
+        ``_auto_advance`` leaves it), its navdata sample's — the mode at the end of the
+        sample's leg (LANDED: AirframePlant.navdata's zeros) — and a new one seen by the
+        guard (as :meth:`run` asked, ``defers_mode``)."""
+        sensors, changed = self.sensors, int(self.iv[ks.I_CHANGED])
+        mode_then = mode
+        if changed >= 0:
+            mode_then = self.plant._mode = _FLYING if mode is _TAKING_OFF else _LANDED
+        if taken and o[_R_KIND0] == _NAV:
+            leg = 0
+        elif taken == 2 and o[_R_KIND1] == _NAV:
+            leg = 1
+        else:  # no navdata sample in what the run did
+            return
+        nav = sensors.nav
+        if 0 <= changed <= leg:  # sampled after the change
+            nav = sensors.nav = NavdataSample.make(
+                nav.t_s, mode_then, nav.battery_pct, nav.roll_deg, nav.pitch_deg, nav.yaw_deg,
+                *((0.0, 0.0, 0.0, 0.0) if mode_then is _LANDED else (
+                    nav.altitude_m, nav.vx_body_mps, nav.vy_body_mps, nav.vz_mps)))
+        if nav.mode is not sensors._nav_mode:
+            sensors.took_mode(sensors.nav_rx_t_s, nav.mode)
+
     def run(self, t_s: float) -> tuple[list, bool] | None:
         """The kernel's run to ``t_s`` — None, nothing done, unless the Python path's tick to
         ``t_s`` is what the kernel does (module docstring); the samples of the events it
         passed are the sensors'. Returns the events it left to the Python path (``(t,
         kind)``, in order) and whether the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
-        mode = plant._mode  # a mode the kernel flies, the one the navdata shows
-        if mode is not sensors._nav_mode or not (
-                mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
+        mode = plant._mode  # a mode the kernel flies, the one the navdata shows — or a new
+        new_mode = mode is not sensors._nav_mode  # one its sample may show after the run
+        if new_mode:
+            if not ((mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING)
+                    and sensors.defers_mode(mode)):
+                return None
+        elif not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
             return None
-        # a quiet firmware: its PCMD applied, not capped, and no watchdog fires by t_s
+        # a quiet firmware: its PCMD applied, not capped, and by t_s no watchdog fires — but
+        # the hover watchdog while the plant's command is hover already (its flags only)
         pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
         if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
             return None
         silence = t_s - last_cmd_t
-        if not ((fw.lost_com_hover or not silence > fw.hover_after_s)
-                and (fw.link_lost or not silence > fw.link_loss_s)):
+        hover_due = silence > fw.hover_after_s and not fw.lost_com_hover
+        if ((hover_due and fw.applied != _HOVER_APPLIED)
+                or not (fw.link_lost or not silence > fw.link_loss_s)):
             return None
         d = plant.__dict__  # (a last run's truth: the arrays hold the state since)
         if (self.live_out is None or len(d) != self._plant_len
@@ -493,12 +572,19 @@ class CompiledLegs:
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
-        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
-                       ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
+        if mode is _FLYING:  # as the kernel takes it
+            kernel_mode, ends = ks.MODE_FLYING, 0.0
+        else:  # the take-off's or landing's end flown too, when nothing else changes with
+            # the mode (the hover watchdog and the cap act only on an airborne plant) and the
+            # guard may see its sample after the run
+            kernel_mode = ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING
+            ends = 0.0 if hover_due or climbing else (
+                1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED)
+                else 0.0)
         w0, w1, w2 = plant.wind_mps.tolist()
         roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
         _PUT_INPUTS(self._sv_memory, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-                    climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s)
+                    climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s, ends)
         self._kernel(*self._args)
         # the bytes of out and iv: the run's floats and counts, the pose's (and the truth's)
         # read-only arrays read from them
@@ -511,10 +597,15 @@ class CompiledLegs:
         self._ran = True
         self.live_raw = raw
         now = o[_R_LAST_NOW]
-        # a firmware advance ran: its watchdogs, of which only the com watchdog's can act
-        # (checked above) — the bit the Python path's calls would have latched by then
+        # a firmware advance ran: its watchdogs, of which only the com watchdog's and the
+        # hover's can act (checked above) — what the Python path's calls would have left by
+        # then: the com-watchdog bit latched; the held PCMD dropped for hover and applied
+        # (the plant's command unchanged: it was hover)
         if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True
+        if hover_due and now == now and now - fw.last_cmd_t > fw.hover_after_s:
+            fw.lost_com_hover = True
+            fw.pcmd = fw._applied_pcmd = _HOVER_CMD
         taken = n_events if done > n_events else done  # the events whose legs it ran
         if taken:  # at most one of each kind (mocap first on a tie), each sample written as
             if o[_R_KIND0] == _MOCAP:  # the sampler's took_* would (what one writes the
@@ -531,7 +622,7 @@ class CompiledLegs:
                 else:
                     sensors.took_pose(t_pose, pose)
             if t_nav is not None:  # LockstepSensors.took_navdata, spelled out (its mode is
-                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's: checked above)
+                q, r, out = _O_NAV, _R_NAV, self.out  # the plant's: checked above, or below)
                 # the types of AirframePlant.navdata's values (numpy scalars from its draws)
                 sensors.nav = NavdataSample.make(
                     o[r], mode, o[r + 1], o[r + 2], o[r + 3], o[r + 4],
@@ -539,6 +630,10 @@ class CompiledLegs:
                 sensors.nav_rx_t_s = t_nav
         if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
+            if new_mode or ends:  # (rare: a take-off's or landing's tick)
+                self._modes_seen(o, mode, taken)
             return ALL_DONE
         self.release()  # the Python path goes on from here
+        if new_mode or ends:
+            self._modes_seen(o, mode, taken)
         return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True

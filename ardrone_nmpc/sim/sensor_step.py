@@ -11,8 +11,9 @@ between them (the caller checks that nothing the firmware does could change on t
 each leg is checked for what only its start shows — a climb within reach of the altitude
 cap, a battery that could empty — and the run stops before such a leg, untouched, for the
 Python path to go on from there; a take-off's or landing's leg that ends it — the climb
-settled, the touch-down — is flown, found to change the mode, and undone, for the Python
-path too). The arithmetic is the Python's, in its order: the event grid of ``advance_to``'s
+settled, the touch-down — is flown on as the Python path flies it, FLYING or at rest, when
+the caller allows it (``sv[S_ENDS]``: nothing but the plant's mode changes with it), else
+found to change the mode and undone, for the Python path too). The arithmetic is the Python's, in its order: the event grid of ``advance_to``'s
 direct path, :meth:`AirframePlant.advance <ardrone_nmpc.sim.plant.AirframePlant.advance>`
 (whole steps, the remainder carried; :func:`~ardrone_nmpc.sim.plant_step.flying_advance`, the
 turbulence's Gauss–Markov step), :meth:`~ardrone_nmpc.sim.plant.AirframePlant.mocap_pose`
@@ -35,24 +36,28 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.airframe import flying_steps_into
-from ardrone_nmpc.sim.plant_step import AUTO_SAME, advance_biases, auto_steps
+from ardrone_nmpc.sim.airframe import flying_steps_into, shift_ring
+from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_SAME, advance_biases,
+                                         auto_steps)
 
 __all__ = ["lockstep_run"]
 
 # iv: int64 counters (in and out)
 I_STEPS, I_HEAD, I_NEXT_MOCAP, I_NEXT_NAV = 0, 1, 2, 3
 I_POS_BIAS, I_POS_GUST, I_POS_MOCAP, I_POS_NAV = 4, 5, 6, 7
-I_DONE, I_EVENTS, I_KIND0, I_KIND1 = 8, 9, 10, 11
-IV_SIZE = 12
+I_DONE, I_EVENTS, I_KIND0, I_KIND1, I_CHANGED = 8, 9, 10, 11, 12
+IV_SIZE = 13
 # sv: the plant's float state (in and out), the plant's current command (roll, pitch, gaz,
 # yaw, position hold 0/1), the firmware's cap (climbing 0/1, its lead, the cap), the wind,
-# the plant's mode (MODE_*), the tick's time (in: the last thirteen side by side, from the
-# command on, which the caller writes in one pack every run)
+# the plant's mode (MODE_*), the tick's time, whether the run may fly the take-off's or the
+# landing's end (1/0; in: the last fourteen side by side, from the command on, which the
+# caller writes in one pack every run)
 (S_PENDING, S_BATTERY, S_YAW_BIAS, S_VB0, S_VB1, S_GUST0, S_GUST1, S_ROLL, S_PITCH, S_GAZ,
- S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE, S_T) = range(20)
-SV_SIZE = 20
-MODE_FLYING, MODE_TAKING_OFF, MODE_LANDING = 0.0, 1.0, 2.0
+ S_YAW, S_HOLD, S_CLIMBING, S_LEAD, S_ALT_MAX, S_W0, S_W1, S_W2, S_MODE, S_T,
+ S_ENDS) = range(21)
+SV_SIZE = 21
+#: the kernel's modes (LANDED: only after a touch-down the run flew)
+MODE_FLYING, MODE_TAKING_OFF, MODE_LANDING, MODE_LANDED = 0.0, 1.0, 2.0, 3.0
 # p: a flight's parameters (the automatic climb's and descent's gaz, τ_z, the take-off
 # height among them), then the 13 coefficients of the airframe's RHS
 (P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
@@ -138,11 +143,14 @@ def _gust_step(iv, sv, p, n, h, gust_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
+def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n, leg):
     """The automatic take-off's or landing's ``n`` steps (:meth:`AirframePlant.advance
     <ardrone_nmpc.sim.plant.AirframePlant.advance>`: :func:`auto_steps`, the heading's wrap,
-    the biases) — False, with the state and the ring as they were, if they change the
-    mode."""
+    the biases). Steps that change the mode: with ``sv[S_ENDS]`` set, a take-off whose climb
+    settles flies on (the steps left as :func:`flying_steps_into`'s, unless the battery
+    would empty) and a landing that touches down rests (the steps left shift the delay ring
+    only) — the mode then in ``sv[S_MODE]``, this ``leg`` in ``iv[I_CHANGED]``; otherwise
+    False, with the state and the ring as they were."""
     m = ring.shape[0]
     saved = np.empty((m, 5))  # auto_steps shifts the ring in place
     for i in range(m):
@@ -153,11 +161,28 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
         landing, p[P_GAZ_DOWN] if landing else p[P_GAZ_UP], k, w, h, n, sv[S_BATTERY],
         p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG], p[P_TAU_VZ], p[P_TAKEOFF_ALT])
-    if mode != AUTO_SAME or done < n:  # the mode changes on the way: the Python path's
-        for i in range(m):
-            for j in range(5):
-                ring[i, j] = saved[i, j]
-        return False
+    if mode != AUTO_SAME or done < n:  # the mode changes on the way
+        ends = sv[S_ENDS] != 0.0
+        roll, pitch, gaz, yaw, hold = (sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW],
+                                       sv[S_HOLD] != 0.0)
+        if ends and mode == AUTO_FLYING:  # _substep's FLYING steps for the rest
+            flown, head, battery = flying_steps_into(
+                xn, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n - done, battery,
+                p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG])
+            ends = flown == n - done  # (else the battery empties: a mode change again)
+        elif ends and mode == AUTO_LANDED:  # _substep's LANDED steps: the ring shifted
+            for i in range(n - done):
+                head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)[5]
+        else:
+            ends = False
+        if not ends:  # the Python path's
+            for i in range(m):
+                for j in range(5):
+                    ring[i, j] = saved[i, j]
+            return False
+        sv[S_MODE] = MODE_FLYING if mode == AUTO_FLYING else MODE_LANDED
+        iv[I_CHANGED] = leg
+        done = n
     xn[8] = wrap_half_turn(xn[8], math.pi)
     pos = iv[I_POS_BIAS]
     iv[I_POS_BIAS] = pos + 3
@@ -173,10 +198,29 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
-    """The firmware's advance to ``t_event`` (plant time) — False, with nothing changed, if
-    the Python path must take it (a climb within reach of the cap, a battery that could
-    empty on the way, a take-off or landing that ends on the way)."""
+def _landed_leg(x, ring, iv, sv, p, n, h, bias_n):
+    """``n`` steps of a plant that touched down earlier in the run (:meth:`AirframePlant.
+    advance <ardrone_nmpc.sim.plant.AirframePlant.advance>` of a LANDED plant: each
+    ``_substep`` shifts the delay ring only; the heading's wrap, the biases)."""
+    head, hold = iv[I_HEAD], sv[S_HOLD] != 0.0
+    for i in range(n):
+        head = shift_ring(ring, head, sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], hold)[5]
+    x[8] = wrap_half_turn(x[8], math.pi)
+    pos = iv[I_POS_BIAS]
+    iv[I_POS_BIAS] = pos + 3
+    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
+        n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
+        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+    iv[I_HEAD] = head
+    iv[I_STEPS] += n
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, leg):
+    """The firmware's advance to ``t_event`` (plant time), the run's ``leg``-th — False, with
+    nothing changed, if the Python path must take it (a climb within reach of the cap, a
+    battery that could empty on the way, a take-off or landing that ends on the way unless
+    the run may fly its end: :func:`_auto_leg`)."""
     h = p[P_H]
     t_plant = iv[I_STEPS] * h
     if not t_event > t_plant:
@@ -198,8 +242,13 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
     turbulent = p[P_TURB_STD] > 0.0
     if turbulent:
         w0, w1 = w0 + sv[S_GUST0], w1 + sv[S_GUST1]
+    if sv[S_MODE] == MODE_LANDED:
+        _landed_leg(x, ring, iv, sv, p, n, h, bias_n)
+        sv[S_PENDING] = rest
+        _gust_step(iv, sv, p, n, h, gust_n)
+        return True
     if sv[S_MODE] != MODE_FLYING:
-        if not _auto_leg(x, ring, iv, sv, p, k, (w0, w1, w2), h, n, bias_n):
+        if not _auto_leg(x, ring, iv, sv, p, k, (w0, w1, w2), h, n, bias_n, leg):
             return False
         sv[S_PENDING] = rest
         _gust_step(iv, sv, p, n, h, gust_n)
@@ -270,6 +319,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
         n_events = 1
     iv[I_EVENTS] = n_events
     iv[I_DONE] = 0
+    iv[I_CHANGED] = -1
     out[O_LAST_NOW] = math.nan
     h = p[P_H]
     for i in range(n_events + 1):
@@ -280,7 +330,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
             kind = -1
             t_event = t_s
         ran = t_event > iv[I_STEPS] * h
-        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event):
+        if not _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, i):
             return
         if ran:
             out[O_LAST_NOW] = t_event
@@ -295,6 +345,9 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
             out[O_NAV] = iv[I_STEPS] * h
             out[O_NAV + 1] = sv[S_BATTERY]
             _navdata(x, sv, p, nav_n[pos:pos + 7], out[O_NAV:O_EV_T0])
+            if sv[S_MODE] == MODE_LANDED:  # motors off: no altitude, no speeds
+                for j in range(5, 9):
+                    out[O_NAV + j] = 0.0
         iv[I_DONE] = i + 1
     out[O_T] = iv[I_STEPS] * h  # all legs done: the plant's truth now (AirframePlant.t_s)
     out[O_BATTERY] = sv[S_BATTERY]

@@ -62,11 +62,15 @@ class LockstepSensors:
     drone : the simulated drone (advanced by :meth:`advance_to`).
     on_navdata : ``(state bits, ctrl_state major)`` of each navdata sample received.
     on_bootstrap : called for each bootstrap packet received (through the wire).
+    defers_mode : ``defers_mode(mode)``: whether ``on_navdata`` of a sample showing the new
+        flight mode ``mode`` may come after the compiled legs' run of the tick, not at the
+        sample's time (it sends nothing then; :meth:`took_mode`). None: never.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
-                 t_zero_s: float = math.inf, on_bootstrap: Callable | None = None):
+                 t_zero_s: float = math.inf, on_bootstrap: Callable | None = None,
+                 defers_mode: Callable | None = None):
         self._held_by = None  # the compiled legs holding the grids' indices
         self.drone = drone
         self.plant = drone.plant
@@ -75,6 +79,7 @@ class LockstepSensors:
         self.wire = faults is not None and bool(faults.schedule.active & SENSOR_FAULTS)
         self.on_navdata = on_navdata or (lambda state, major: None)
         self.on_bootstrap = on_bootstrap or (lambda: None)
+        self.defers_mode = defers_mode or (lambda mode: False)
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
@@ -189,10 +194,14 @@ class LockstepSensors:
         self.nav = nav
         self.nav_rx_t_s = t_event
         if nav.mode is not self._nav_mode:  # what the guard sees changes with it
-            self._nav_mode = nav.mode
-            status = self.firmware.status(t_event)
-            self.on_navdata(status.state_bits(),
-                            status.ctrl_state(self.firmware.ctrl_codes) >> 16)
+            self.took_mode(t_event, nav.mode)
+
+    def took_mode(self, t_event: float, mode) -> None:
+        """The navdata sample of ``t_event`` shows a new flight mode ``mode``: the drone's
+        state bits and ctrl_state major then, to ``on_navdata``."""
+        self._nav_mode = mode
+        status = self.firmware.status(t_event)
+        self.on_navdata(status.state_bits(), status.ctrl_state(self.firmware.ctrl_codes) >> 16)
 
     # ------------------------------------------------------------------ through the wire
     def _advance_through_wire(self, t_s: float) -> None:

@@ -4,7 +4,8 @@ without, flown with the same commands, hold the same samples, truth and plant st
 tick — through a zig-zag, climbs into the altitude cap, turbulence, the second-order
 attitude, the watchdogs of a silent link, a draining battery, a scripted target and a
 take-off after a self-landing — and through the automatic take-off and landing, whose
-last legs (the climb settled, the touch-down) the kernel hands back."""
+ends (the climb settled, the touch-down) the kernel flies too (or hands back: a take-off
+whose battery empties)."""
 
 import math
 
@@ -58,22 +59,32 @@ def _light(drone, t_s):
 
 def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     drone = LockstepDrone(cfg)
-    # compiled runs, of them stopped before the last leg: flying, taking off or landing
-    used = [0, 0, 0, 0, 0]  # … and (the last) ticks on which the arrays held the state
-    compiled = drone.sensors._legs
+    # compiled runs, of them stopped before the last leg: flying, taking off or landing;
+    used = [0, 0, 0, 0, 0, 0, 0]  # ticks on which the arrays held the state; runs that flew
+    compiled = drone.sensors._legs  # a take-off's or landing's end; REF land held again by
+    # CompiledLegs.land_again
     if not legs:
         drone.sensors._legs = None
     elif compiled is not None:
         run = compiled.run
 
         def counted(t_s):
-            i = 0 if drone.sim.plant.mode is FlightMode.FLYING else 2
+            mode = drone.sim.plant.mode
+            i = 0 if mode is FlightMode.FLYING else 2
             left = run(t_s)
             if left is not None:  # (None: not the kernel's tick, nothing done)
                 used[i] += 1
                 used[i + 1] += left[1]
+                used[5] += drone.sim.plant.mode is not mode
             return left
         compiled.run = counted
+        land_again = compiled.land_again
+
+        def counted_landing(seq):
+            done = land_again(seq)
+            used[6] += done
+            return done
+        compiled.land_again = counted_landing
     period = cfg.loop.period_s
     drone.connect()
     drone.takeoff()
@@ -141,10 +152,15 @@ def test_compiled_legs_give_the_python_paths_bits(name):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped, auto_used, auto_stopped, _) = _fly(cfg, True, 400, command)
+    compiled, (used, stopped, auto_used, _, _, ends, lands_again) = _fly(cfg, True, 400,
+                                                                     command)
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
-    assert auto_used > 20 and auto_stopped >= 1  # take-off, landing: an end handed back
+    assert auto_used > 20 and ends >= 1  # take-off, landing: their ends too (both,
+    assert ends == 2 or name in ("sag", "battery_empties")  # but a take-off the link-loss
+    # watchdog's tick or an emptying battery ends)
+    assert lands_again > 20 or name == "battery_empties"  # REF land held again, written
+    # out (but after a landing of its own)
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"

@@ -157,3 +157,27 @@ def test_a_reference_outside_the_fence_flies_nothing_and_leaves_no_run_directory
         experiment_trajectory(step)
     inside = load_config(None, ["reference.kind=step", "reference.target_m=[0,0,2.5]"])
     experiment_trajectory(inside)                       # on the fence is inside
+
+
+def test_a_reference_is_checked_against_its_fence_once_and_again_for_another_fence(
+        monkeypatch):
+    """experiment_trajectory keeps the references found inside (a sweep flies one many
+    times): the same reference, duration and fence are not sampled again, but a narrower
+    fence or a changed reference are — and refused."""
+    from ardrone_nmpc.reference import experiment
+    from ardrone_nmpc.reference.trajectories import ReferenceError
+
+    square = ["reference.kind=square", "reference.side_m=2"]
+    cfg = load_config(None, square)
+    experiment.experiment_trajectory(cfg)
+    assert experiment._fence_key(cfg) in experiment._INSIDE
+    checked = []
+    check = experiment.check_inside_geofence
+    monkeypatch.setattr(experiment, "check_inside_geofence",
+                        lambda c, t: (checked.append(c), check(c, t)))
+    experiment.experiment_trajectory(load_config(None, square))  # an equal one: not again
+    assert checked == []
+    for overrides in (["safety.geofence_max_m=[1.5,3,2.5]"], ["reference.side_m=4"]):
+        with pytest.raises(ReferenceError, match="leaves the geofence"):
+            experiment.experiment_trajectory(load_config(None, square + overrides))
+    assert len(checked) == 2
