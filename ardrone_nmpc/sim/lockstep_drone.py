@@ -82,7 +82,8 @@ class LockstepDrone(ConfigHandshake):
         self.bootstrap_answers = 0
         self.sensors = LockstepSensors(cfg, self.sim, on_navdata=self._on_navdata,
                                        on_bootstrap=self._answer_bootstrap,
-                                       defers_mode=self._guard_ignores)
+                                       defers_mode=self._guard_ignores,
+                                       watching=self._guard_on)
         self._seq = 0
         self._ref: Ref | None = None        # the REF held
         self._ref_unsent: Ref | None = None  # … not yet received by the drone
@@ -187,9 +188,14 @@ class LockstepDrone(ConfigHandshake):
     def navdata_rx_t_s(self) -> float:
         return self.sensors.nav_rx_t_s
 
-    def _on_navdata(self, state, ctrl_major) -> None:
+    def _guard_on(self) -> bool:
+        """The take-off guard watches the navdata: a take-off REF is held, and the drone has
+        not landed by itself."""
         ref = self._ref
-        if ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing:
+        return not (ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing)
+
+    def _on_navdata(self, state, ctrl_major) -> None:
+        if not self._guard_on():
             return
         what = self._guard.observe(state, ctrl_major)
         if what is not None:  # the take-off bit is dropped at once, and for good
@@ -203,10 +209,8 @@ class LockstepDrone(ConfigHandshake):
         flying: the flight bit set, no emergency, a major of taking off, or flying or
         hovering (the hover watchdog, which may fire in a run, changes one to the other),
         never a landing's (a run stops before a mode change)."""
-        ref = self._ref
-        if ref is None or not ref.is_takeoff or ref.is_emergency or self.self_landing:
-            return True
-        return mode is FlightMode.TAKING_OFF or mode is FlightMode.FLYING
+        return (not self._guard_on() or mode is FlightMode.TAKING_OFF
+                or mode is FlightMode.FLYING)
 
     def _answer_bootstrap(self) -> None:
         """A bootstrap packet (the drone lost its client): write ``navdata_demo`` again, as

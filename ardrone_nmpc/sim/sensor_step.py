@@ -143,6 +143,18 @@ def _gust_step(iv, sv, p, n, h, gust_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def _wrap_and_biases(x, iv, sv, p, dt, bias_n):
+    """The end of a take-off's, landing's or landed advance over ``dt``: the heading
+    wrapped, the navdata biases advanced (:func:`advance_biases`, the next three normals)."""
+    x[8] = wrap_half_turn(x[8], math.pi)
+    pos = iv[I_POS_BIAS]
+    iv[I_POS_BIAS] = pos + 3
+    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
+        dt, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
+        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+
+
+@njit(cache=True, **INNER_KERNEL)
 def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n, leg):
     """The automatic take-off's or landing's ``n`` steps (:meth:`AirframePlant.advance
     <ardrone_nmpc.sim.plant.AirframePlant.advance>`: :func:`auto_steps`, the heading's wrap,
@@ -183,12 +195,7 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n, leg):
         sv[S_MODE] = MODE_FLYING if mode == AUTO_FLYING else MODE_LANDED
         iv[I_CHANGED] = leg
         done = n
-    xn[8] = wrap_half_turn(xn[8], math.pi)
-    pos = iv[I_POS_BIAS]
-    iv[I_POS_BIAS] = pos + 3
-    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
-        n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
-        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+    _wrap_and_biases(xn, iv, sv, p, n * h, bias_n)
     iv[I_HEAD] = head
     iv[I_STEPS] += done
     sv[S_BATTERY] = battery
@@ -205,12 +212,7 @@ def _landed_leg(x, ring, iv, sv, p, n, h, bias_n):
     head, hold = iv[I_HEAD], sv[S_HOLD] != 0.0
     for i in range(n):
         head = shift_ring(ring, head, sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], hold)[5]
-    x[8] = wrap_half_turn(x[8], math.pi)
-    pos = iv[I_POS_BIAS]
-    iv[I_POS_BIAS] = pos + 3
-    sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
-        n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],
-        p[P_YAW_WALK], p[P_VB_STD], p[P_VB_TAU])
+    _wrap_and_biases(x, iv, sv, p, n * h, bias_n)
     iv[I_HEAD] = head
     iv[I_STEPS] += n
 

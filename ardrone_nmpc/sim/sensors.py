@@ -65,12 +65,14 @@ class LockstepSensors:
     defers_mode : ``defers_mode(mode)``: whether ``on_navdata`` of a sample showing the new
         flight mode ``mode`` may come after the compiled legs' run of the tick, not at the
         sample's time (it sends nothing then; :meth:`took_mode`). None: never.
+    watching : ``watching()``: whether ``on_navdata`` looks at the direct path's samples now
+        (the drone's state is not worked out for a callback that ignores it). None: always.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None,
-                 defers_mode: Callable | None = None):
+                 defers_mode: Callable | None = None, watching: Callable | None = None):
         self._held_by = None  # the compiled legs holding the grids' indices
         self.drone = drone
         self.plant = drone.plant
@@ -80,6 +82,7 @@ class LockstepSensors:
         self.on_navdata = on_navdata or (lambda state, major: None)
         self.on_bootstrap = on_bootstrap or (lambda: None)
         self.defers_mode = defers_mode or (lambda mode: False)
+        self.watching = watching or (lambda: True)
         self.t_zero_s = t_zero_s
         self.object_name = cfg.mocap.object_name
         self.mocap_period_s = 1.0 / cfg.sim.mocap_rate_hz
@@ -200,6 +203,8 @@ class LockstepSensors:
         """The navdata sample of ``t_event`` shows a new flight mode ``mode``: the drone's
         state bits and ctrl_state major then, to ``on_navdata``."""
         self._nav_mode = mode
+        if not self.watching():
+            return
         status = self.firmware.status(t_event)
         self.on_navdata(status.state_bits(), status.ctrl_state(self.firmware.ctrl_codes) >> 16)
 
