@@ -37,7 +37,7 @@ from numba import njit
 
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
-from ardrone_nmpc.control.kernels.layout import unpack
+from ardrone_nmpc.control.kernels.layout import NU, u_out_at
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
 from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
@@ -93,10 +93,12 @@ def control_tick(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     t0_ns = monotonic_ns()
     flag = cgmres_step(mem, xs, horizon, iprm, initialise)
     solve_us = (monotonic_ns() - t0_ns) * 1e-3
-    _, _, u, stats, _, _, _, _ = unpack(mem, horizon.shape[0] - 1, iprm[0], iprm[4])
-    norm = stats[3]
-    gmres_it, newton_it = int(stats[1]), int(stats[0])
-    zacc, phi, theta, rate = u[IU_ZACC], u[IU_PHI], u[IU_THETA], u[IU_PSIRATE]
+    u = u_out_at(horizon.shape[0] - 1, iprm[0])  # the answer, read in place (no views)
+    stats = u + NU
+    norm = mem[stats + 3]
+    gmres_it, newton_it = int(mem[stats + 1]), int(mem[stats])
+    zacc, phi = mem[u + IU_ZACC], mem[u + IU_PHI]
+    theta, rate = mem[u + IU_THETA], mem[u + IU_PSIRATE]
     # solve_prepared's verdict (``judged``): on a flag or a divergence it recovers, in Python
     if flag != FLAG_OK or norm > divergence_residual:
         return (SOLVED, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi,

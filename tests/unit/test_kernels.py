@@ -171,3 +171,15 @@ def test_rollout_rk4_matches_the_model_integrator(rng):
     out = np.zeros(7)
     K.rollout_rk4(x, inputs, 0.065, out)
     np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_stages, m, n_obs", [(10, 4, 0), (20, 8, 3), (1, 12, 0)])
+def test_the_answer_is_read_where_unpack_puts_u_out_and_stats(n_stages, m, n_obs):
+    from ardrone_nmpc.control.kernels import layout
+
+    mem = np.zeros(layout.memory_size(n_stages, m, 5, n_obs))
+    _, _, u_out, stats, *_ = layout.unpack(mem, n_stages, m, n_obs)
+    at = layout.u_out_at.py_func(n_stages, m)
+    base = mem.__array_interface__["data"][0]
+    assert u_out.__array_interface__["data"][0] - base == at * mem.itemsize
+    assert stats.__array_interface__["data"][0] - base == (at + layout.NU) * mem.itemsize
