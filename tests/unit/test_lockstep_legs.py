@@ -46,7 +46,7 @@ def _snapshot(drone, t_s):
             fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
             # what the PCMD chain (or CompiledLegs.command in its place) leaves
             plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
-            fw.link_lost, fw.ref_start, drone.sim.counters)
+            fw.link_lost, fw.ref_start, drone.sim.counters, drone._seq)
 
 
 def _light(drone, t_s):
@@ -63,8 +63,8 @@ def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     used = [0, 0, 0, 0, 0, 0, 0]  # ticks on which the arrays held the state; runs that flew
     compiled = drone.sensors._legs  # a take-off's or landing's end; REF land held again by
     # CompiledLegs.land_again
-    if not legs:
-        drone.sensors._legs = None
+    if not legs:  # the Python path: neither the sampler nor the AT sender (land) has legs
+        drone.sensors._legs = drone._legs = None
     elif compiled is not None:
         run = compiled.run
 
@@ -147,15 +147,36 @@ CASES = {
 }
 
 
+def _count_compiled_calls(monkeypatch):
+    """Calls of CompiledLegs.run and .land_again, on any instance, since: a reference flight
+    must make none (the comparison would be the compiled path against itself)."""
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+
+    calls = {"run": 0, "land_again": 0}
+    for name in calls:
+        method = getattr(CompiledLegs, name)
+
+        def counted(self, *a, _name=name, _method=method):
+            calls[_name] += 1
+            return _method(self, *a)
+        monkeypatch.setattr(CompiledLegs, name, counted)
+    return calls
+
+
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_compiled_legs_give_the_python_paths_bits(name):
+def test_compiled_legs_give_the_python_paths_bits(name, monkeypatch):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
+    calls = _count_compiled_calls(monkeypatch)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped, auto_used, _, _, ends, lands_again) = _fly(cfg, True, 400,
-                                                                     command)
+    assert calls == {"run": 0, "land_again": 0}  # the reference is the Python path's own
+    compiled, (used, stopped, auto_used, auto_stopped, _, ends, lands_again) = _fly(
+        cfg, True, 400, command)
+    assert calls["run"] > 100 and (calls["land_again"] > 20 or name == "battery_empties")
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
+    assert auto_stopped >= 1 or name != "battery_empties"  # a take-off's end handed back
+    # (the battery empties in its run) and undone (CompiledLegs._auto_leg)
     assert auto_used > 20 and ends >= 1  # take-off, landing: their ends too (both,
     assert ends == 2 or name in ("sag", "battery_empties")  # but a take-off the link-loss
     # watchdog's tick or an emptying battery ends)
