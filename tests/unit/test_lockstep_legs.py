@@ -443,3 +443,60 @@ def _square_drone_aloft():
     for k in range(1, 80):
         drone.advance_to(k * cfg.loop.period_s)
     return cfg, drone
+
+
+def test_a_mode_whose_guard_is_deferred_is_one_the_take_off_guard_lets_pass():
+    """LockstepDrone._guard_ignores(mode) lets the compiled run show the guard a sample of a
+    new mode only after the run: right only if the guard would do nothing on it. For every
+    mode the firmware reports — every REF held, every history of the guard since the
+    take-off, the firmware's status variants (moving or not, lost com, the altitude cap,
+    fault bits, both ctrl codes) — a deferred mode's status makes the guard (and
+    _on_navdata) do nothing; and the modes the guard acts on are not deferred."""
+    import itertools
+
+    from ardrone_nmpc.config.faults import DRONE_FAULT_BITS
+    from ardrone_nmpc.links.drone_commands import TakeoffGuard
+    from ardrone_nmpc.protocol.at import Ref
+    from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.sensors._legs = drone._legs = None  # the plant's attributes set as they are
+    fw, plant = drone.sim.firmware, drone.sim.plant
+    faults = sum(int(DroneState[name]) for name in DRONE_FAULT_BITS)
+    refs = (None, Ref.takeoff(), Ref.landing(), Ref.emergency())
+    histories = ((False, False), (True, False), (True, True))  # seen airborne, flying
+    variants = list(itertools.product(refs, (None, "landed by itself"), histories,
+                                 ((0, 0.0, 0.0, 0.0, 0.0), (1, 0.1, 0.0, 0.2, 0.0)),
+                                 (False, True), (False, True), (0, faults), CtrlCodes))
+    deferred, acted = set(), set()
+    for mode in FlightMode:
+        for ref, landing, (airborne, flying), pcmd, lost, capped, bits, codes in variants:
+            plant._mode, drone._ref, drone.self_landing = mode, ref, landing
+            fw.pcmd, fw.lost_com_hover, fw.alt_capped = pcmd, lost, capped
+            fw.fault_bits, fw.ctrl_codes = bits, codes
+            status = fw.status(plant.t_s)
+            state, major = status.state_bits(), status.ctrl_state(codes) >> 16
+            guard = TakeoffGuard()
+            guard.seen_airborne, guard.seen_flying = airborne, flying
+            drone._guard = guard
+            said = _copy_guard(guard).observe(state, major)  # (drone._guard's history kept)
+            if drone._guard_ignores(mode):
+                deferred.add(mode)
+                if drone._guard_on():
+                    assert said is None, (mode, ref, airborne, flying, pcmd, lost, codes)
+                drone._on_navdata(state, major)
+                assert drone._ref is ref and drone.self_landing == landing, mode
+            elif said is not None:
+                acted.add(mode)
+    assert {FlightMode.LANDING, FlightMode.LANDED, FlightMode.EMERGENCY} <= acted
+    assert not acted & {FlightMode.TAKING_OFF, FlightMode.FLYING}
+    assert deferred == set(FlightMode)  # (every mode, with no take-off REF held)
+
+
+def _copy_guard(guard):
+    from ardrone_nmpc.links.drone_commands import TakeoffGuard
+
+    copy = TakeoffGuard()
+    copy.seen_airborne, copy.seen_flying = guard.seen_airborne, guard.seen_flying
+    return copy
