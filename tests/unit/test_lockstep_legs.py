@@ -500,3 +500,24 @@ def _copy_guard(guard):
     copy = TakeoffGuard()
     copy.seen_airborne, copy.seen_flying = guard.seen_airborne, guard.seen_flying
     return copy
+
+
+@pytest.mark.parametrize("start_s", [0.5, 3.0, 7.33])
+def test_a_self_landing_under_the_compiled_legs_gives_the_python_paths_bits(start_s,
+                                                                               monkeypatch):
+    """The drone lands by itself while REF take-off is held: the take-off guard sees the
+    landing's first sample inside a compiled run (LockstepDrone._guard_ignores says it must
+    not be deferred) and holds REF land at once — the firmware's last_cmd_t, its com
+    watchdog latch, the link's _seq and the counters, every tick, as the Python path's."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"),
+                      [f"faults.self_land.start_s={start_s}"])
+    calls = _count_compiled_calls(monkeypatch)
+    python, _ = _fly(cfg, False, 200, _zigzag)
+    assert calls == {"run": 0, "land_again": 0}
+    compiled, (used, *_) = _fly(cfg, True, 200, _zigzag)
+    assert used > 5 and calls["run"] > 5
+    for shots in (python, compiled):  # the guard caught it (drone.self_landing, snapshotted)
+        assert "the drone began to land (ctrl_state major 8)" in shots[-1]
+    assert len(python) == len(compiled)
+    for i, (a, b) in enumerate(zip(python, compiled)):
+        assert a == b, f"tick {i}"
