@@ -46,7 +46,8 @@ def _snapshot(drone, t_s):
             fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
             # what the PCMD chain (or CompiledLegs.command in its place) leaves
             plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
-            fw.link_lost, fw.ref_start, drone.sim.counters, drone._seq)
+            fw.link_lost, fw.ref_start, tuple(vars(drone.sim.counters).items()),  # (a copy:
+            drone._seq)  # the counters of this tick, not the flight's last)
 
 
 def _light(drone, t_s):
