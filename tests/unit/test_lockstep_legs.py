@@ -46,7 +46,8 @@ def _snapshot(drone, t_s):
             fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
             # what the PCMD chain (or CompiledLegs.command in its place) leaves
             plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
-            fw.link_lost, fw.ref_start, drone.sim.counters)
+            fw.link_lost, fw.ref_start, tuple(vars(drone.sim.counters).items()),  # (a copy:
+            drone._seq)  # the counters of this tick, not the flight's last)
 
 
 def _light(drone, t_s):
@@ -63,8 +64,8 @@ def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     used = [0, 0, 0, 0, 0, 0, 0]  # ticks on which the arrays held the state; runs that flew
     compiled = drone.sensors._legs  # a take-off's or landing's end; REF land held again by
     # CompiledLegs.land_again
-    if not legs:
-        drone.sensors._legs = None
+    if not legs:  # the Python path: neither the sampler nor the AT sender (land) has legs
+        drone.sensors._legs = drone._legs = None
     elif compiled is not None:
         run = compiled.run
 
@@ -147,15 +148,36 @@ CASES = {
 }
 
 
+def _count_compiled_calls(monkeypatch):
+    """Calls of CompiledLegs.run and .land_again, on any instance, since: a reference flight
+    must make none (the comparison would be the compiled path against itself)."""
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+
+    calls = {"run": 0, "land_again": 0}
+    for name in calls:
+        method = getattr(CompiledLegs, name)
+
+        def counted(self, *a, _name=name, _method=method):
+            calls[_name] += 1
+            return _method(self, *a)
+        monkeypatch.setattr(CompiledLegs, name, counted)
+    return calls
+
+
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_compiled_legs_give_the_python_paths_bits(name):
+def test_compiled_legs_give_the_python_paths_bits(name, monkeypatch):
     overrides, command, stops = CASES[name]
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
+    calls = _count_compiled_calls(monkeypatch)
     python, _ = _fly(cfg, False, 400, command)
-    compiled, (used, stopped, auto_used, _, _, ends, lands_again) = _fly(cfg, True, 400,
-                                                                     command)
+    assert calls == {"run": 0, "land_again": 0}  # the reference is the Python path's own
+    compiled, (used, stopped, auto_used, auto_stopped, _, ends, lands_again) = _fly(
+        cfg, True, 400, command)
+    assert calls["run"] > 100 and (calls["land_again"] > 20 or name == "battery_empties")
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
+    assert auto_stopped >= 1 or name != "battery_empties"  # a take-off's run handed back
+    # to the Python path (the battery might empty on the way: sensor_step._leg)
     assert auto_used > 20 and ends >= 1  # take-off, landing: their ends too (both,
     assert ends == 2 or name in ("sag", "battery_empties")  # but a take-off the link-loss
     # watchdog's tick or an emptying battery ends)
@@ -422,3 +444,81 @@ def _square_drone_aloft():
     for k in range(1, 80):
         drone.advance_to(k * cfg.loop.period_s)
     return cfg, drone
+
+
+def test_a_mode_whose_guard_is_deferred_is_one_the_take_off_guard_lets_pass():
+    """LockstepDrone._guard_ignores(mode) lets the compiled run show the guard a sample of a
+    new mode only after the run: right only if the guard would do nothing on it. For every
+    mode the firmware reports — every REF held, every history of the guard since the
+    take-off, the firmware's status variants (moving or not, lost com, the altitude cap,
+    fault bits, both ctrl codes) — a deferred mode's status makes the guard (and
+    _on_navdata) do nothing; and the modes the guard acts on are not deferred."""
+    import itertools
+
+    from ardrone_nmpc.config.faults import DRONE_FAULT_BITS
+    from ardrone_nmpc.links.drone_commands import TakeoffGuard
+    from ardrone_nmpc.protocol.at import Ref
+    from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.sensors._legs = drone._legs = None  # the plant's attributes set as they are
+    fw, plant = drone.sim.firmware, drone.sim.plant
+    faults = sum(int(DroneState[name]) for name in DRONE_FAULT_BITS)
+    refs = (None, Ref.takeoff(), Ref.landing(), Ref.emergency())
+    histories = ((False, False), (True, False), (True, True))  # seen airborne, flying
+    variants = list(itertools.product(refs, (None, "landed by itself"), histories,
+                                 ((0, 0.0, 0.0, 0.0, 0.0), (1, 0.1, 0.0, 0.2, 0.0)),
+                                 (False, True), (False, True), (0, faults), CtrlCodes))
+    deferred, acted = set(), set()
+    for mode in FlightMode:
+        for ref, landing, (airborne, flying), pcmd, lost, capped, bits, codes in variants:
+            plant._mode, drone._ref, drone.self_landing = mode, ref, landing
+            fw.pcmd, fw.lost_com_hover, fw.alt_capped = pcmd, lost, capped
+            fw.fault_bits, fw.ctrl_codes = bits, codes
+            status = fw.status(plant.t_s)
+            state, major = status.state_bits(), status.ctrl_state(codes) >> 16
+            guard = TakeoffGuard()
+            guard.seen_airborne, guard.seen_flying = airborne, flying
+            drone._guard = guard
+            said = _copy_guard(guard).observe(state, major)  # (drone._guard's history kept)
+            if drone._guard_ignores(mode):
+                deferred.add(mode)
+                if drone._guard_on():
+                    assert said is None, (mode, ref, airborne, flying, pcmd, lost, codes)
+                drone._on_navdata(state, major)
+                assert drone._ref is ref and drone.self_landing == landing, mode
+            elif said is not None:
+                acted.add(mode)
+    assert {FlightMode.LANDING, FlightMode.LANDED, FlightMode.EMERGENCY} <= acted
+    assert not acted & {FlightMode.TAKING_OFF, FlightMode.FLYING}
+    assert deferred == set(FlightMode)  # (every mode, with no take-off REF held)
+
+
+def _copy_guard(guard):
+    from ardrone_nmpc.links.drone_commands import TakeoffGuard
+
+    copy = TakeoffGuard()
+    copy.seen_airborne, copy.seen_flying = guard.seen_airborne, guard.seen_flying
+    return copy
+
+
+@pytest.mark.parametrize("start_s", [0.5, 3.0, 7.33])
+def test_a_self_landing_under_the_compiled_legs_gives_the_python_paths_bits(start_s,
+                                                                               monkeypatch):
+    """The drone lands by itself while REF take-off is held: the take-off guard sees the
+    landing's first sample inside a compiled run (LockstepDrone._guard_ignores says it must
+    not be deferred) and holds REF land at once — the firmware's last_cmd_t, its com
+    watchdog latch, the link's _seq and the counters, every tick, as the Python path's."""
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"),
+                      [f"faults.self_land.start_s={start_s}"])
+    calls = _count_compiled_calls(monkeypatch)
+    python, _ = _fly(cfg, False, 200, _zigzag)
+    assert calls == {"run": 0, "land_again": 0}
+    compiled, (used, *_) = _fly(cfg, True, 200, _zigzag)
+    assert used > 5 and calls["run"] > 5
+    for shots in (python, compiled):  # the guard caught it (drone.self_landing, snapshotted)
+        assert "the drone began to land (ctrl_state major 8)" in shots[-1]
+    assert len(python) == len(compiled)
+    for i, (a, b) in enumerate(zip(python, compiled)):
+        assert a == b, f"tick {i}"
