@@ -88,6 +88,8 @@ CASES: list[tuple[str, str, list[str], int]] = [
                                            "faults.at_loss.probability=0.7"], 0),
     ("square_delay_jump", "square", SQUARE + ["faults.delay_jump.start_s=4"], 0),
     ("square_battery_floor", "square", SQUARE + ["faults.battery_floor.start_s=6"], 0),
+    # a drone that tilts a third of the model's: most nominal ticks saturate the command
+    ("square_saturating", "square", SQUARE + ["controller.attitude_gain=0.3"], 0),
 ]
 
 
