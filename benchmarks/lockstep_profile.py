@@ -4,21 +4,27 @@
 flies one config in lockstep with ``time.perf_counter_ns`` accumulators wrapped around the
 stages (monkeypatched here, nothing in the package changes) and prints the cost per tick:
 
-* plant — the simulated drone: the lockstep drone's ``advance_to``, ``set_command`` and
-  ``inputs`` (the airframe, its firmware and sensors, which it alone calls);
+* plant — the simulated drone (the airframe, its firmware and sensors, which it alone
+  calls): the lockstep drone's ``advance_to`` and ``set_command`` and its sensors'
+  ``inputs`` (``LockstepSensors.inputs``: the loop calls it bound, not the drone's);
 * estimator — ``Estimation.update``;
 * solver — ``Control.solve`` (delay prediction, reference lookup, the NMPC);
 * supervisor — the supervisor's checks and verdict bookkeeping, the command mapping
   (``Control.command``, ``Supervision.command``, ``DelayPrediction.push``);
 * controller — the NMPC tick's compiled calls, which do the three above on the nominal tick
-  (``ControlTick.nominal``: the whole controller in one call, ``runtime/control_tick``;
-  ``BeforeSolve.nominal``: the estimate and the solve, on the ticks it does not take): the
-  three above count only the ticks the Python stages take;
-* logging — building the row (``tick_row``, ``put_truth``; ``tick_cells`` and the drone's
+  (``ControlTick.answer``: the whole controller in one call, ``runtime/control_tick``, then
+  the Python stages' state written from its answer — ``ControlTick.finish``, or
+  ``Tick._nominal_cells`` for a row of cells; ``BeforeSolve.nominal``: the estimate and the
+  solve, on the ticks it does not take): the three above count only the ticks the Python
+  stages take;
+* logging — building the row (``tick_row``, ``put_truth``; ``tick_cells``,
+  ``nominal_cells`` — the nominal tick's, from the compiled call's answer — and the drone's
   ``truth_cells`` for a recorder of cells) and the recorder's ``write_row`` or
   ``write_cells``, for a run directory (``log.csv``) and for an in-memory recorder;
 * rest — the runner's loop and everything not wrapped.
 
+Each bucket has its calls' own time: a wrapped call's wrapped callees count in theirs (a
+run directory's ``write_cells`` calls its ``write_row`` on some rows: counted once).
 The wrappers add ~0.3 µs per wrapped call; the total is measured without them too.
 
 ``python benchmarks/lockstep_profile.py throughput [--jobs 2] [--rounds 2] [--flights
@@ -45,17 +51,24 @@ from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+_NESTED = [0]  # ns spent in wrapped calls under the wrapped call running now
 
 
 def _wrap(owner, name: str, bucket: str, acc: dict) -> None:
+    """``owner.name`` timed into ``acc[bucket]``, less the time of the wrapped calls it makes
+    (theirs go to their own buckets: a call nested in another is counted once)."""
     original = getattr(owner, name)
 
     def timed(*args, **kwargs):
+        outer = _NESTED[0]
+        _NESTED[0] = 0
         t0 = time.perf_counter_ns()
         try:
             return original(*args, **kwargs)
         finally:
-            acc[bucket] += time.perf_counter_ns() - t0
+            dt = time.perf_counter_ns() - t0
+            acc[bucket] += dt - _NESTED[0]
+            _NESTED[0] = outer + dt
 
     setattr(owner, name, timed)
 
@@ -65,9 +78,12 @@ def _instrument(acc: dict) -> None:
     from ardrone_nmpc.runtime import (after_solve, before_solve, control_tick, lockstep, stages,
                                       tick)
     from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+    from ardrone_nmpc.sim.sensors import LockstepSensors
 
-    for name in ("advance_to", "set_command", "inputs"):
+    for name in ("advance_to", "set_command"):
         _wrap(LockstepDrone, name, "plant", acc)
+    # the loop binds the sensors' inputs (LockstepDrone.inputs forwards to it)
+    _wrap(LockstepSensors, "inputs", "plant", acc)
     _wrap(LockstepDrone, "truth_cells", "logging", acc)
     _wrap(stages.Estimation, "update", "estimator", acc)
     _wrap(stages.Control, "solve", "solver", acc)
@@ -79,11 +95,17 @@ def _instrument(acc: dict) -> None:
     # the nominal tick's stages after the solve in one call: the four above, with the response
     # feed and the integrator's step (unwrapped, in "rest", on the other ticks)
     _wrap(after_solve.AfterSolve, "nominal", "supervisor", acc)
-    # the nominal tick's controller in one compiled call (the stages above unwrapped in it)
-    _wrap(control_tick.ControlTick, "nominal", "controller", acc)
+    # the nominal tick's controller in one compiled call (the stages above unwrapped in it):
+    # its answer, then the Python stages' state written from it — by finish (the records a
+    # dict row reads) or by Tick._nominal_cells (a row of cells built from the answer's
+    # numbers: nominal_cells, logging, and the supervisor's calls counted apart)
+    _wrap(control_tick.ControlTick, "answer", "controller", acc)
+    _wrap(control_tick.ControlTick, "finish", "controller", acc)
+    _wrap(tick.Tick, "_nominal_cells", "controller", acc)
     _wrap(before_solve.BeforeSolve, "nominal", "controller", acc)
     _wrap(tick, "tick_row", "logging", acc)
     _wrap(tick, "tick_cells", "logging", acc)
+    _wrap(tick, "nominal_cells", "logging", acc)
     _wrap(lockstep, "put_truth", "logging", acc)
 
 

@@ -88,11 +88,13 @@ CASES: list[tuple[str, str, list[str], int]] = [
                                            "faults.at_loss.probability=0.7"], 0),
     ("square_delay_jump", "square", SQUARE + ["faults.delay_jump.start_s=4"], 0),
     ("square_battery_floor", "square", SQUARE + ["faults.battery_floor.start_s=6"], 0),
+    # a drone that tilts a third of the model's: most nominal ticks saturate the command
+    ("square_saturating", "square", SQUARE + ["controller.attitude_gain=0.3"], 0),
 ]
 
 
 class _Capture:
-    """A recorder that keeps every row and event."""
+    """A recorder that keeps every row and event: rows given as dicts or as cells."""
 
     path = None
 
@@ -102,6 +104,15 @@ class _Capture:
 
     def write_row(self, row) -> None:
         self.rows.append(dict(row))
+
+    def write_cells(self, cells) -> None:
+        """A row given as its cells in ``LOG_COLUMNS`` order (the lockstep runner's nominal
+        tick, as the sweep's, tune's and simulate's recorders take it): kept as the dict
+        ``write_row`` would have been given (``cells_row``, as ``MemoryRecorder.rows`` does),
+        so the cases fly the cells path and compare with a record of the dict path."""
+        from ardrone_nmpc.runs.log_columns import cells_row
+
+        self.rows.append(cells_row(cells))
 
     def event(self, t_s, kind, **fields) -> None:
         fields.pop("wall_s", None)

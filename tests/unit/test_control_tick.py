@@ -152,6 +152,8 @@ def _via_records(self, inputs, t_exp_s, mode, answer, t0):
     ["duration_s=5", "estimator.horizontal_velocity=navdata",
      "controller.offset_free.enabled=false"],
     ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"],  # the fence: a landing
+    # a low attitude gain: most ticks of the lane saturate (their cmd_saturated text)
+    ["duration_s=20", "sim.settle_s=1", "controller.attitude_gain=0.3"],
 ])
 def test_a_row_built_from_the_answer_is_the_row_of_its_records(overrides, monkeypatch):
     """The cells of a tick done whole (``Tick._nominal_cells``: from the answer's numbers)
@@ -161,6 +163,8 @@ def test_a_row_built_from_the_answer_is_the_row_of_its_records(overrides, monkey
     rows_a, events_a, carried_a, answers = _fly(cfg, "whole", monkeypatch)
     rows_b, events_b, carried_b, _ = _fly(cfg, "whole", monkeypatch, lane=_via_records)
     assert answers["done"] > 20  # (the lane taken: the fence lands the third flight early)
+    if "controller.attitude_gain=0.3" in overrides:  # (the flight for the saturation text)
+        assert sum(r["cmd_saturated"] != "0000" for r in rows_a) > 100
     assert repr(events_a) == repr(events_b) and carried_a == carried_b
     assert len(rows_a) == len(rows_b)
     for i, (p, q) in enumerate(zip(rows_a, rows_b)):
