@@ -58,7 +58,8 @@ def _light(drone, t_s):
             _record(inputs.navdata), drone.sim.firmware.comwdg_latched)
 
 
-def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
+def _fly(cfg, legs: bool, ticks: int, command, every: int = 1, takeoff_command=None):
+    """``takeoff_command(k)``: a PCMD sent on the take-off's k-th tick too (None: none)."""
     drone = LockstepDrone(cfg)
     # compiled runs, of them stopped before the last leg: flying, taking off or landing;
     used = [0, 0, 0, 0, 0, 0, 0]  # ticks on which the arrays held the state; runs that flew
@@ -93,6 +94,8 @@ def _fly(cfg, legs: bool, ticks: int, command, every: int = 1):
     while drone.truth.mode is not FlightMode.FLYING:
         drone.advance_to(drone.truth.t_s + period)
         shots.append(_snapshot(drone, drone.truth.t_s))
+        if takeoff_command is not None:
+            drone.set_command(*takeoff_command(len(shots)))
     t_first = drone.truth.t_s
     drone.start_experiment(t_first)
     for k in range(ticks):
@@ -522,3 +525,76 @@ def test_a_self_landing_under_the_compiled_legs_gives_the_python_paths_bits(star
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
         assert a == b, f"tick {i}"
+
+
+def test_a_take_off_handed_back_with_changing_commands_queued(monkeypatch):
+    """A take-off whose climb settles while a climbing PCMD is held is handed back to the
+    Python path (sensor_step._auto_leg: flown, found to end, undone). Commands that change
+    every tick of the take-off leave rows unlike each other in the delay queue at the
+    hand-back: the plant's queue and state, every tick, as the Python path's. (A queue left
+    shifted by the undone leg would not show here — the Python path re-flies the leg, queuing
+    the command over those rows before it reads them: the next test checks the kernel.)"""
+    from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+
+    def rising(k):  # gaz > 0: the firmware watches the cap, the take-off's end handed back
+        return (0.01 * (k % 5), -0.02 * (k % 3), 0.3 + 0.05 * (k % 4), 0.01 * (k % 7))
+
+    queued_at_hand_back = []
+    run = CompiledLegs.run
+
+    def watched(self, t_s):
+        mode = self.plant.mode
+        left = run(self, t_s)
+        if left is not None and left[1] and mode is FlightMode.TAKING_OFF:
+            rows = self.plant._fifo.rows  # (released: the plant's own)
+            queued_at_hand_back.append(len(np.unique(rows, axis=0)))
+        return left
+    monkeypatch.setattr(CompiledLegs, "run", watched)
+    python, _ = _fly(cfg, False, 60, _zigzag, takeoff_command=rising)
+    assert queued_at_hand_back == []  # the reference is the Python path's own
+    compiled, (used, _, auto_used, auto_stopped, *_) = _fly(cfg, True, 60, _zigzag,
+                                                             takeoff_command=rising)
+    assert auto_used > 5 and auto_stopped >= 1 and used > 20
+    assert queued_at_hand_back and min(queued_at_hand_back) > 1  # rows that differ
+    assert len(python) == len(compiled)
+    for i, (a, b) in enumerate(zip(python, compiled)):
+        assert a == b, f"tick {i}"
+
+
+def test_a_take_offs_leg_handed_back_leaves_the_delay_queue_as_it_was():
+    """sensor_step._auto_leg flies a take-off's leg in place and, finding that it ends the
+    climb where the run may not fly the end (``sv[S_ENDS]`` 0), undoes it: the state and the
+    delay queue as they were. The kernel run on the legs' own arrays, a queue of rows unlike
+    each other and the command: after the run the queue is the one the legs it kept left
+    (each of their steps queued the command at the head), no row more — the flight test above
+    cannot see a row more, as the Python path re-flies the leg and queues the same command
+    over it before reading it (an auto step ignores what it pops)."""
+    from ardrone_nmpc.sim import sensor_step as ks
+
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [])
+    drone = LockstepDrone(cfg)
+    drone.connect()
+    drone.takeoff()
+    legs = drone.sensors._legs
+    for k in range(1, 4):  # the take-off's first ticks, compiled (the arrays hold them)
+        drone.advance_to(k * cfg.loop.period_s)
+    assert legs.held() and legs.sv[ks.S_MODE] == ks.MODE_TAKING_OFF
+    iv, sv, ring = legs.iv, legs.sv, legs._args[1]
+    m = ring.shape[0]
+    assert m > 2
+    ring[:] = np.arange(m * 5, dtype=np.float64).reshape(m, 5) / 100.0 + 1.0
+    command = (0.1, -0.2, 0.3, -0.4, 1.0)
+    sv[ks.S_ROLL:ks.S_HOLD + 1] = command
+    sv[ks.S_ENDS] = 0.0  # the end handed back
+    sv[ks.S_T] += 10.0  # far beyond the climb's end
+    rows, head, steps = ring.copy(), int(iv[ks.I_HEAD]), int(iv[ks.I_STEPS])
+    legs._kernel(*legs._args)
+    assert iv[ks.I_DONE] <= iv[ks.I_EVENTS]  # stopped before a leg: handed back
+    assert sv[ks.S_MODE] == ks.MODE_TAKING_OFF
+    kept = int(iv[ks.I_STEPS]) - steps  # the steps of the legs it kept
+    assert kept < m and int(iv[ks.I_HEAD]) == (head + kept) % m
+    for i in range(kept):
+        rows[(head + i) % m] = command
+    assert ring.tobytes() == rows.tobytes()
