@@ -107,7 +107,7 @@ def _via_records(self, inputs, t_exp_s, mode, answer, t0):
     and ``tick_cells`` of them, as ``Tick.step`` builds a row that reads them."""
     ages_ms, x, sol, (sent, adapted) = self.control_tick.finish(inputs, t_exp_s, answer)
     sup = self.supervisor
-    label = sup.record(sent.decision, mode) if mode != sup.label else mode
+    label = sup.record(sent.decision, mode)
     events = sup.take_events() if sup.events else []
     cells = tick_cells(t_exp_s, inputs, ages_ms, x, sol, sent, label, 0.0)
     return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
