@@ -329,7 +329,11 @@ class Supervisor:
 
     # ------------------------------------------------------------------ mode bookkeeping
     def record(self, decision: Decision, nominal: str) -> str:
-        """Note the tick's final decision; return its mode label (an event if it changed)."""
+        """Note the tick's final decision; return its mode label (an event if it changed).
+
+        The one home of the usual tick's test (``Tick.step``, ``Tick._nominal_cells`` call
+        this every tick): a control verdict of the label noted last notes nothing.
+        """
         # Decision.mode's nominal case without its call (the usual tick)
         mode = nominal if decision.action is _CONTROL else decision.mode(nominal)
         if mode != self.label:

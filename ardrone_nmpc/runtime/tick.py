@@ -211,10 +211,7 @@ class Tick:
                                            self.supervision.vz_ref_mps)
         sent, adapted = done if done else self._after(inputs, decision, x, solution, cmd)
         verdict = sent.decision
-        # the supervisor's record when it would note nothing: a control verdict of the label
-        # it noted last (the usual tick; its call costs more than the test)
-        label = (mode if verdict.action is _CONTROL and mode == sup.label
-                 else sup.record(verdict, mode))
+        label = sup.record(verdict, mode)  # (the usual tick: its nominal case, noting nothing)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         # a list of its own (extended, not copied); the usual tick has none to take
         events = sup.take_events() if sup.events else []
@@ -241,7 +238,7 @@ class Tick:
         pcmd, _, adapted = self.after_solve.written(inputs.t_s, zacc, phi, theta, rate, vz,
                                                     roll, pitch, gaz, yaw, bits, fed)
         sup = self.supervisor
-        label = mode if mode == sup.label else sup.record(NOMINAL, mode)  # (step's test)
+        label = sup.record(NOMINAL, mode)
         compute_us = (_perf_counter_ns() - t0) * 1e-3
         events = sup.take_events() if sup.events else []
         if adapted:

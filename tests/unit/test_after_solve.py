@@ -16,13 +16,13 @@ import pytest
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.mapping import UNSATURATED, DroneLimits
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
-from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import after_solve as after_solve_module
 from ardrone_nmpc.runtime.after_solve import NOT_NOMINAL, AfterSolve, after_solve
-from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
+from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runtime.stages import Solution
 from ardrone_nmpc.runtime.tick import Tick
 from tests.conftest import nan_equal
+from tests.tick_flights import fly
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
@@ -31,47 +31,21 @@ def config(name: str, *overrides: str):
     return load_config(CONFIGS / name, list(overrides))
 
 
-def _carried(tick: Tick) -> list:
-    """Everything the stages after the solve carry to the next tick, as bits and types."""
-    s, d, sup, r, o = tick.supervision, tick.delay, tick.supervisor, tick.response, tick.offset
-    last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
-    return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
-            repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
-            sup._solver_good, sup._solver_fallback,
-            None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
-                                    r._next_fit_s),
-            None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
-
-
 def _fly(cfg, *, compiled: bool, monkeypatch) -> tuple[list, list, list, int]:
     """The rows and events of a lockstep flight, the stages' state after each tick, and how
     many ticks the compiled call took."""
-    taken, carried = [0], []
-    original_init, original_nominal, original_step = Tick.__init__, AfterSolve.nominal, Tick.step
+    taken = [0]
 
-    def init(self, *args, **kwargs):
-        original_init(self, *args, **kwargs)
-        self.control_tick = None  # this half on its own (test_control_tick: the whole)
+    def use(tick: Tick) -> None:
+        tick.control_tick = None  # this half on its own (test_control_tick: the whole)
         if not compiled:
-            self.after_solve = None
+            tick.after_solve = None
 
-    def nominal(self, *args):
-        done = original_nominal(self, *args)
+    def tally(done) -> None:
         taken[0] += done is not None
-        return done
 
-    def step(self, *args, **kwargs):
-        out = original_step(self, *args, **kwargs)
-        carried.append(_carried(self))
-        return out
-
-    with monkeypatch.context() as m:
-        m.setattr(Tick, "__init__", init)
-        m.setattr(AfterSolve, "nominal", nominal)
-        m.setattr(Tick, "step", step)
-        recorder = MemoryRecorder()
-        run_lockstep(cfg, recorder=recorder)
-    return recorder.rows, recorder.events, carried, taken[0]
+    rows, events, states = fly(cfg, monkeypatch, use=use, watch=(AfterSolve, "nominal", tally))
+    return rows, events, states, taken[0]
 
 
 @pytest.mark.parametrize("name, overrides", [

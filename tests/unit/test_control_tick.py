@@ -19,13 +19,13 @@ from ardrone_nmpc.control.diverging import DivergingSolver
 from ardrone_nmpc.core.entry_points import VettedCall
 from ardrone_nmpc.core.monotonic import SAME_CLOCK
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
-from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import control_tick as control_tick_module
 from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
-from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
+from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import tick_cells
 from ardrone_nmpc.runtime.tick import Tick, TickOutput
 from tests.conftest import nan_equal
+from tests.tick_flights import carried, fly
 
 # the call is built only where its clock is read (core/monotonic: 64-bit Linux); elsewhere
 # the two calls around the solve take its ticks (test_before_solve, test_after_solve)
@@ -48,52 +48,19 @@ def _use(tick: Tick, path: str) -> None:
         tick.before_solve = tick.after_solve = None
 
 
-def _carried(tick: Tick) -> list:
-    """Everything the stages carry to the next tick, as bits (and the types of numbers)."""
-    s, d, sup, r, o = tick.supervision, tick.delay, tick.supervisor, tick.response, tick.offset
-    c, nmpc = tick.control, tick.control.nmpc
-    last = None if s._last is None else (repr(s._last[0]), s._last[1].tobytes())
-    return [d.ring.tobytes(), d._next, d.first, d.count, d._pushed, d.lead_s, repr(s.zacc_mps2),
-            repr(s.vz_ref_mps), repr(s.attitude_gain), last, sup._solver_failures,
-            sup._solver_good, sup._solver_fallback, sup._latched, sup.label,
-            tick.estimation._state.tobytes(), c._x_solve.tobytes(), c._states.tobytes(),
-            None if nmpc is None else (nmpc.memory.snapshot().tobytes(), nmpc._t0_s),
-            None if r is None else (r.estimator._state.tobytes(), r.estimator._estimate is None,
-                                    r._next_fit_s),
-            None if o is None else (o.integrator._work.tobytes(), o.integrator._flags.tobytes())]
-
-
 def _fly(cfg, path: str, monkeypatch, lane=None) -> tuple:
     """A lockstep flight on ``path``: its rows, events, the stages' state after each tick,
     and the compiled call's answers (all done, solved and left to Python, declined);
     ``lane`` in ``Tick._nominal_cells``' place (default: itself)."""
-    answers, carried = {"done": 0, "solved": 0, "none": 0}, []
-    init, answer, step = Tick.__init__, ControlTick.answer, Tick.step
+    answers = {"done": 0, "solved": 0, "none": 0}
 
-    def new_init(self, *args, **kwargs):
-        init(self, *args, **kwargs)
-        _use(self, path)
-
-    def new_answer(self, *args):
-        code = answer(self, *args)
+    def tally(code) -> None:
         answers["none" if code is None or code[0] == NOT_NOMINAL
                 else "solved" if code[0] == SOLVED else "done"] += 1
-        return code
 
-    def new_step(self, *args, **kwargs):
-        out = step(self, *args, **kwargs)
-        carried.append(_carried(self))
-        return out
-
-    with monkeypatch.context() as m:
-        m.setattr(Tick, "__init__", new_init)
-        m.setattr(ControlTick, "answer", new_answer)
-        m.setattr(Tick, "step", new_step)
-        if lane is not None:
-            m.setattr(Tick, "_nominal_cells", lane)
-        recorder = MemoryRecorder()
-        run_lockstep(cfg, recorder=recorder)
-    return recorder.rows, recorder.events, carried, answers
+    rows, events, states = fly(cfg, monkeypatch, use=lambda tick: _use(tick, path),
+                               watch=(ControlTick, "answer", tally), lane=lane)
+    return rows, events, states, answers
 
 
 def _same_flights(a: tuple, b: tuple) -> None:
@@ -140,7 +107,7 @@ def _via_records(self, inputs, t_exp_s, mode, answer, t0):
     and ``tick_cells`` of them, as ``Tick.step`` builds a row that reads them."""
     ages_ms, x, sol, (sent, adapted) = self.control_tick.finish(inputs, t_exp_s, answer)
     sup = self.supervisor
-    label = sup.record(sent.decision, mode) if mode != sup.label else mode
+    label = sup.record(sent.decision, mode)
     events = sup.take_events() if sup.events else []
     cells = tick_cells(t_exp_s, inputs, ages_ms, x, sol, sent, label, 0.0)
     return TickOutput.make(sent.pcmd, sent.progressive, None, sent.decision.action,
@@ -213,7 +180,7 @@ def _same_ticks(rows_a: list, rows_b: list) -> None:
 def test_the_compiled_ticks_are_the_python_stages():
     (whole, rows), (python, python_rows) = _flown("whole", 8), _flown("python", 8)
     _same_ticks(rows, python_rows)
-    assert _carried(whole) == _carried(python)
+    assert carried(whole) == carried(python)
     assert rows[-1]["solver_status"] == "ok"
     assert 0.0 < rows[-1]["solve_us"] < rows[-1]["compute_us"]  # the solve alone
 
@@ -248,7 +215,7 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
         out += [_step(tick, k) for k in range(4, 8)]
     assert codes and set(codes) == {SOLVED} and len(codes) + len(asked) == 4
     _same_ticks(rows, python_rows)
-    assert _carried(whole) == _carried(python)
+    assert carried(whole) == carried(python)
 
 
 @pytest.mark.parametrize("setup", [
@@ -263,9 +230,9 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
 def test_a_precondition_not_held_leaves_the_tick_with_nothing_written(setup):
     tick, _ = _flown("whole")
     setup(tick)
-    before = _carried(tick)
+    before = carried(tick)
     assert tick.control_tick.nominal(_inputs(2.3), 1.3, tick.trajectory) is None
-    assert _carried(tick) == before
+    assert carried(tick) == before
 
 
 @pytest.mark.parametrize("inputs, answer", [
@@ -281,9 +248,9 @@ def test_a_tick_not_nominal_before_the_solve_writes_nothing(inputs, answer):
     """False: the kernel declined (and before_solve's call would: the tick skips it); None:
     the Python side did, before any call."""
     tick, _ = _flown("whole")
-    before = _carried(tick)
+    before = carried(tick)
     assert tick.control_tick.nominal(inputs, 1.3, tick.trajectory) is answer
-    assert _carried(tick) == before
+    assert carried(tick) == before
     if answer is False:
         assert tick.before_solve.nominal(inputs, 1.3, tick.trajectory) is None
 
@@ -293,7 +260,7 @@ def test_the_kernel_answers_not_nominal_before_any_write():
     ct = tick.control_tick
     args = list(ct.before.arguments(_inputs(2.3), 1.3, tick.trajectory))
     args[4] = -math.inf  # the battery: below any floor
-    before = _carried(tick)
+    before = carried(tick)
     nmpc, control, after = tick.control.nmpc, tick.control, ct.after
     _, mem, iprm = nmpc._step
     offset, flags = after._offset
@@ -303,7 +270,7 @@ def test_the_kernel_answers_not_nominal_before_any_write():
         tick.supervisor.max_tilt_rad, 1.0, *tick.supervision._scales, after._response_state, 1,
         offset, flags)
     assert answer[0] == NOT_NOMINAL
-    assert _carried(tick) == before
+    assert carried(tick) == before
 
 
 @pytest.mark.parametrize("build", [
@@ -326,10 +293,10 @@ def test_a_copied_tick_calls_the_kernel_on_its_own_stages(copier):
     assert ct.before is clone.before_solve and ct.after is clone.after_solve
     assert ct.control is clone.control and ct.nmpc is clone.control.nmpc
     assert ct.delay is clone.delay and ct._entry is None
-    state = _carried(original)
+    state = carried(original)
     python, _ = _flown("python")
     _same_ticks([_step(clone, k) for k in range(4, 6)], [_step(python, k) for k in range(4, 6)])
-    assert _carried(original) == state  # the original's stages untouched
+    assert carried(original) == state  # the original's stages untouched
 
 
 def test_the_entry_point_is_taken_only_with_the_arrays_it_vetted():
@@ -357,7 +324,7 @@ def test_a_setting_a_writer_replaces_is_the_next_call_s(setup):
     for tick in (whole, python):
         setup(tick)
     _same_ticks([_step(whole, k) for k in range(4, 7)], [_step(python, k) for k in range(4, 7)])
-    assert _carried(whole) == _carried(python)
+    assert carried(whole) == carried(python)
     assert ct._tail != tail and ct._entry is not None  # made again, and vetted again
     kept = ct._tail
     _step(whole, 7)
@@ -395,7 +362,7 @@ def test_an_int_number_on_the_vetting_tick_does_not_make_later_floats_ints():
     python_rows = [_heading_step(python, 4 + k, psi) for k, psi in enumerate(headings)]
     assert whole.control_tick._entry is not None  # (the entry point took the later ticks)
     _same_ticks(rows, python_rows)
-    assert _carried(whole) == _carried(python)
+    assert carried(whole) == carried(python)
 
 
 def test_a_solve_bound_after_the_tick_was_built_is_called_as_the_two_calls_call_it():
