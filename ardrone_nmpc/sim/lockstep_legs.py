@@ -538,12 +538,10 @@ class CompiledLegs:
         kind)``, in order) and whether the last leg (to ``t_s``) is left too."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
         mode = plant._mode  # a mode the kernel flies, the one the navdata shows — or a new
+        if not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
+            return None
         new_mode = mode is not sensors._nav_mode  # one its sample may show after the run
-        if new_mode:
-            if not ((mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING)
-                    and sensors.defers_mode(mode)):
-                return None
-        elif not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING):
+        if new_mode and not sensors.defers_mode(mode):
             return None
         # a quiet firmware: its PCMD applied, not capped, and by t_s no watchdog fires — but
         # the hover watchdog while the plant's command is hover already (its flags only)
