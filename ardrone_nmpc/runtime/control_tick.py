@@ -219,9 +219,9 @@ class ControlTick:
         x = self.before.estimation._x
         # (the pending window the call was given: nothing between wrote it)
         x_solve = control._x_solve if self.delay.count else x
-        if code:  # SOLVED: the solver's answer judged as solve_prepared judges it
-            horizon = control._ref_horizon if self.offset is None else control._horizon
-            result = self.nmpc.judged(t_exp_s, x_solve, horizon, flag, solve_us, False)
+        if code:  # SOLVED: the solver's answer judged as solve_prepared judges it, on the
+            # horizon the call was given (the one its prepared tail is of: answer's key)
+            result = self.nmpc.judged(t_exp_s, x_solve, self._key[1], flag, solve_us, False)
             return ((mocap_ms, nav_ms), x,
                     control.solution(control._ref_now, x_solve, result, control._ref_horizon),
                     False)
