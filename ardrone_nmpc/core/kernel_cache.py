@@ -29,11 +29,11 @@ KERNEL_SOURCES = (
     "control/obstacles.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
-    "sim/sensor_step.py", "runs/path_kernels.py",
+    "sim/sensor_step.py", "sim/drone_block.py", "runs/path_kernels.py", "runs/block_row.py",
     "reference/kernels.py", "estimation/response_kernels.py", "estimation/response_lanes.py",
     "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
-    "runtime/control_tick.py",
+    "runtime/control_tick.py", "runtime/lockstep_block.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None
@@ -126,6 +126,15 @@ def _callees_post_order(kernel, seen: set):
             seen.add(id(callee))
             yield from _callees_post_order(callee, seen)
             yield callee
+
+def load_cached(kernel) -> bool:
+    """``kernel``'s specialisations in numba's cache loaded now, its callees' first
+    (:func:`load_cached_callees`) — nothing compiled that the cache does not hold: whether
+    ``kernel`` has machine code in this process now."""
+    if not kernel.overloads:
+        load_cached_callees(kernel)
+        _load_cached(kernel)
+    return bool(kernel.overloads)
 
 
 def _load_cached(kernel) -> None:

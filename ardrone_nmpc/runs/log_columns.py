@@ -17,11 +17,17 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import (
     IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z,
     FlightMode, MocapPose, NavdataSample, TickInputs,
 )
 from ardrone_nmpc.errors import UserError
+from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
+                                          BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
+                                          BR_NEWTON, BR_NORM, BR_SATURATED, BR_SOLVE_US,
+                                          BR_TRUE_PSI, BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y,
+                                          BR_TRUE_Z)
 from ardrone_nmpc.safety import Action
 
 _FALLBACK = Action.FALLBACK  # bound once: an enum member's lookup costs ~0.1 µs
@@ -30,7 +36,7 @@ __all__ = ["COLUMNS", "Column", "LOG_COLUMNS", "REQUIRED_COLUMNS", "RERUN_COLUMN
            "ReplayError", "SAME_POSE_TOLERANCE_S", "STRING_COLUMNS", "UNITS", "link_columns",
            "pose_of_row", "unlogged_pose",
            "measurement_columns", "put_truth", "tick_inputs_of_rows", "tick_row",
-           "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "TRUTH_CELLS", "cells_row",
+           "truth_columns", "MODE_CELL", "TICK_CELL_KEYS", "TRUTH_CELLS", "block_cells", "cells_row",
            "nominal_cells", "put_truth_cells", "tick_cell_values", "tick_cells"]
 
 
@@ -269,6 +275,25 @@ def nominal_cells(t_exp_s: float, x: np.ndarray, ref_now: np.ndarray, zacc: floa
         nav.mode._value_, nav.roll_deg, nav.pitch_deg,  # (.value: an enum property, 0.3 µs)
         state_bits if state_bits is not None else math.nan,
         "", "", "", "", "", "", "", "", "", "", "", ""]
+
+
+_PI = math.pi
+
+
+def block_cells(v: list, nav_vx, nav_vy, saturated: tuple, status: str, mode: str,
+                nav_mode: str) -> list:
+    """The cells of a block's row (``v``: its numbers as floats): :func:`nominal_cells`' of
+    the same tick, its truth put — the same values and types (``nav_vx``, ``nav_vy``: the
+    navdata's speeds, numpy scalars as the sample's; ``saturated``: the texts of the
+    saturation bits; ``status``: the solver's; ``nav_mode``: the sample's mode's value)."""
+    cells = v[:21]
+    psi = v[BR_TRUE_PSI]
+    cells += (saturated[int(v[BR_SATURATED])], v[BR_SOLVE_US], status, v[BR_NORM],
+              int(v[BR_GMRES]), int(v[BR_NEWTON]), mode, v[BR_MOCAP_MS], v[BR_NAV_MS],
+              v[BR_BATTERY], "", v[BR_COMPUTE_US], v[BR_MOCAP_T], nav_vx, nav_vy, nav_mode, v[BR_NAV_ROLL], v[BR_NAV_PITCH], math.nan,
+              "", "", "", "", "", "", "", v[BR_TRUE_X], v[BR_TRUE_Y], v[BR_TRUE_Z],
+              psi if -_PI < psi <= _PI else wrap_angle_rad(psi), v[BR_TRUE_VZ])
+    return cells
 
 
 # tick_cells unpacks the state and the input by position (~0.1 µs less than a subscript a

@@ -241,10 +241,11 @@ class AfterSolve:
         return tuple.__new__(Sent, (pcmd, u_sent, True, NOMINAL, _make_cmd(vz, phi, theta, rate),
                                     SATURATED_TEXT[bits])), events
 
-    def written(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
-        """What the Python stages keep of the kernel's answer, written to them: the PCMD sent,
-        the input sent (``u``: read-only) and the response fit's events — without the
-        :class:`Sent` a row that takes the answer's numbers needs no more of."""
+    def kept(self, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits) -> tuple:
+        """What the supervisor and :class:`Supervision` keep of a nominal tick's answer (the
+        input sent, the ż reference, the PCMD fractions and saturation bits): the PCMD and
+        the input sent (read-only), kept as their last (:meth:`written`'s, and a block of
+        ticks' last one's: ``runtime/lockstep_block``)."""
         self.supervisor._solver_failures = 0
         pcmd = _make_pcmd(roll, pitch, gaz, yaw, _SATURATED[bits])
         u_sent = _frombuffer(_pack_input(zacc, phi, theta, rate))
@@ -252,6 +253,13 @@ class AfterSolve:
         supervision.zacc_mps2 = zacc
         supervision.vz_ref_mps = vz
         supervision._last = (pcmd, u_sent)
+        return pcmd, u_sent
+
+    def written(self, t_s, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed):
+        """What the Python stages keep of the kernel's answer, written to them: the PCMD sent,
+        the input sent (``u``: read-only) and the response fit's events — without the
+        :class:`Sent` a row that takes the answer's numbers needs no more of."""
+        pcmd, u_sent = self.kept(zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits)
         self.delay._advance()
         response = self.response
         if response is None:

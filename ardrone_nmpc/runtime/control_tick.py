@@ -178,6 +178,31 @@ class ControlTick:
         precondition of the call does not hold (nothing done). Its code 0 leaves the Python
         stages to write (:meth:`finish`, or ``AfterSolve.written`` for a row built from the
         answer's numbers)."""
+        tail = self.prepared()
+        if tail is None:
+            return None
+        before = self.before.arguments(inputs, t_exp_s, traj)
+        if before is None:
+            return None
+        vz_last = (float(self.supervision.vz_ref_mps) if self.control.vz_from_commands
+                   else 0.0)
+        call, vet = self._entry, self._vetted
+        if (call is not None and before[16] is vet[0] and before[19] is vet[1]
+                and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
+                and before[26] is vet[5] and before[27] is vet[6]):
+            return call(*before, vz_last, self.delay._next, *tail)
+        # the dispatcher (it looks at every argument's type), then the vetting
+        self._entry = None
+        args = (*before, vz_last, self.delay._next, *tail)
+        answer = control_tick(*args)
+        self._vet(args)
+        return answer
+
+    def prepared(self) -> tuple | None:
+        """The call's tail (:meth:`_prepare`: its arguments from the solver's memory on),
+        or None when a precondition of the call that no tick's inputs change does not hold
+        (nothing done): the solver past its first solve and its ramp, solved by its own
+        ``solve_prepared``, trusted."""
         nmpc, control = self.nmpc, self.control
         if (nmpc._t0_s is None or nmpc._ramped  # (the first solve initialises: Python's)
                 or control._solve_prepared is not self._solve
@@ -192,21 +217,7 @@ class ControlTick:
                 and control._vz_max_mps is key[6] and self.supervisor.max_tilt_rad is key[7]
                 and supervision._scales is key[8]) and not self._prepare(horizon):
             return None
-        before = self.before.arguments(inputs, t_exp_s, traj)
-        if before is None:
-            return None
-        vz_last = float(supervision.vz_ref_mps) if control.vz_from_commands else 0.0
-        call, vet = self._entry, self._vetted
-        if (call is not None and before[16] is vet[0] and before[19] is vet[1]
-                and before[23] is vet[2] and before[24] is vet[3] and before[25] is vet[4]
-                and before[26] is vet[5] and before[27] is vet[6]):
-            return call(*before, vz_last, self.delay._next, *self._tail)
-        # the dispatcher (it looks at every argument's type), then the vetting
-        self._entry = None
-        args = (*before, vz_last, self.delay._next, *self._tail)
-        answer = control_tick(*args)
-        self._vet(args)
-        return answer
+        return self._tail
 
     def finish(self, inputs, t_exp_s: float, answer: tuple):
         """:meth:`nominal`'s answer from :meth:`answer`'s (not None): the records of the tick

@@ -28,15 +28,22 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.control.diverging import diverging_wrapper
+from ardrone_nmpc.core.kernel_cache import load_cached
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.log_columns import MODE_CELL, TRUTH_CELLS, put_truth, put_truth_cells
+from ardrone_nmpc.control.ocp import SolverStatus
+from ardrone_nmpc.runs.block_row import BR_NAV_VX, BR_NAV_VY, BR_T
+from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, block_cells, put_truth,
+                                           put_truth_cells)
 from ardrone_nmpc.runs.verdict import VerdictTally
-from ardrone_nmpc.runtime.precompile import join_child, start_if_cold
+from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
+from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_NONE,
+                                                 TickBlocks, tick_block)
+from ardrone_nmpc.runtime.precompile import background_compiles, join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule,
-                                           write_events)
+                                           phase, write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
 from ardrone_nmpc.runtime.signals import polled_signals
 from ardrone_nmpc.runtime.tick import Tick
@@ -75,6 +82,13 @@ REFUSED_EVENT = "takeoff_refused"
 SELF_LANDED = "land-drone-landed-itself"
 _ENDS = (Action.LAND, Action.STOP)  # the verdicts that end the experiment's ticks
 _CONTROL = Action.CONTROL  # bound once (the usual verdict: tested first, by identity)
+#: The most ticks a block flies in one compiled call (``runtime/lockstep_block``; 0: none,
+#: every tick its own calls): the rows are written, the progress told and a signal seen
+#: after each block
+BLOCK_TICKS = 32
+_OK_TEXT = SolverStatus.OK._value_  # a block's rows' solver_status
+_warming_up = False  # warm_up_blocks' flight: its blocks compile their kernel
+_FLYING_TEXT = FlightMode.FLYING._value_  # … and nav_mode
 
 
 def _configure(cfg, drone: LockstepDrone, events: list) -> None:
@@ -178,10 +192,35 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _cell_sink(recorder)
     tick.cell_rows = recorder is None or write_cells is not None
-    for k, t_exp, mode in schedule.ticks():
+    # (blocks compile their kernel themselves in a warm-up's flight, or with no background
+    # compile to wait for: runtime/precompile)
+    compile_now = _warming_up or not background_compiles()
+    blocks = (TickBlocks(tick, drone, n_max=BLOCK_TICKS, n_settle=schedule.n_settle,
+                         period_s=period, t_first_s=t_first, compile_now=compile_now)
+              if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)
+    n_ticks, n_settle = schedule.n_ticks, schedule.n_settle
+    k = 0
+    while k < n_ticks:
         check_signals()
+        t_exp = (k - n_settle) * period  # (Schedule.ticks' own expressions)
+        mode = phase(t_exp)
+        answer, spent_ns, legs_ran = None, 0, False
+        if blocks is not None:  # the usual ticks, a block of them in one compiled call
+            n, exit_, answer, spent_ns = blocks.fly(
+                k, mode, min(BLOCK_TICKS, (n_settle if t_exp < 0 else n_ticks) - k))
+            if n:
+                _block_rows(blocks.table, n, mode, write_cells, tally_tick)
+                if progress is not None:
+                    for j in range(k, k + n):
+                        progress(schedule.fraction_done(j))
+                k = flown = k + n
+                if exit_ == EXIT_NONE:
+                    continue
+                t_exp = (k - n_settle) * period  # (the block ended before the phase ends)
+            legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
         t_plant = t_first + k * period
-        advance_to(t_plant, t_exp)
+        if not legs_ran:
+            advance_to(t_plant, t_exp)
         if faulty:  # (a drone without injected faults has no events to take, ever)
             drone_events = take_events()
             if drone_events:
@@ -193,7 +232,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             ending = SELF_LANDED
             break
         flown = k + 1
-        out = step(inputs(t_plant), t_exp_s=t_exp, mode=mode)
+        out = step(inputs(t_plant), t_exp_s=t_exp, mode=mode, answer=answer,
+                   spent_ns=spent_ns)
         if out.events:
             write_events(write_event, t_exp, out.events)
         pcmd = out.pcmd
@@ -217,6 +257,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         if action is not _CONTROL and action in _ENDS:
             ending = label
             break
+        k += 1
     ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
     t_end = t_first + flown * period - t_start
@@ -232,6 +273,39 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     final_mode, t_final_s = drone.mode_and_t()
     return SimResult(flown, final_mode, recorder.path if recorder is not None else None,
                      loop_wall_s, ending, t_final_s - t_start)
+
+
+def _block_rows(table, n: int, mode: str, write_cells, tally_tick) -> None:
+    """The rows of a block's ``n`` ticks (``table``'s numbers, ``runtime/lockstep_block``)
+    as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
+    nominal label); none to write without a recorder."""
+    rows = table[:n]
+    if write_cells is None:
+        for t_exp in rows[:, BR_T].tolist():
+            tally_tick(t_exp, mode)
+        return
+    for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY]):
+        cells = block_cells(v, vx, vy, SATURATED_TEXT, _OK_TEXT, mode, _FLYING_TEXT)
+        write_cells(cells)
+        tally_tick(v[0], mode)
+
+
+def warm_up_blocks() -> None:
+    """Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``) loaded from numba's
+    cache, or compiled now by a short square flight (~7 s on an empty cache): the
+    precompile's background child, ``bench --tick`` and the tests call it; a flight does not
+    wait for it (its ticks are then the per-tick path's: the same rows)."""
+    global _warming_up
+    if load_cached(tick_block):
+        return
+    from ardrone_nmpc.config.schema import config_from_dict
+
+    _warming_up = True
+    try:
+        run_lockstep(config_from_dict({"name": "warm-up", "duration_s": 1.0,
+                                       "reference": {"kind": "square"}}))
+    finally:
+        _warming_up = False
 
 
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:

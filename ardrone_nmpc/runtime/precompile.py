@@ -16,6 +16,11 @@ fast-math; ``core/kernel_cache.load_cached_callees``). The runner waits for the 
 numba writes each cache file under a temporary name and renames it, but two processes adding
 *different* signatures of one kernel at once could both claim the same data file name.
 No child when the cache is warm or when ``ARDRONE_NMPC_PRECOMPILE=0``.
+
+Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``, ~7 s to compile, the
+controller's and the drone's kernels inside) is compiled last, by a process of its own that
+the child starts and nobody waits for: a flight flies its ticks one by one until the cache
+holds it (the same rows), the next flights load it.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 #: The environment switch: ``0`` starts no background compile.
@@ -30,6 +36,10 @@ ENV_SWITCH = "ARDRONE_NMPC_PRECOMPILE"
 #: How long :func:`join_child` waits before it stops a child that hangs (its own compile on a
 #: busy machine takes ~10 s)
 JOIN_TIMEOUT_S = 120.0
+#: How long the block compile waits for the runner's controller kernels to be cached (s)
+BLOCK_WAIT_S = 60.0
+#: How long a block compile's lock keeps others from starting one (s)
+BLOCK_LOCK_S = 600.0
 _started = False
 _child: subprocess.Popen | None = None
 
@@ -40,24 +50,39 @@ def cache_is_cold() -> bool:
     first flight of this machine, or of these sources. Reads one small index file."""
     from ardrone_nmpc.sim.sensor_step import lockstep_run
 
-    cache_file = getattr(getattr(lockstep_run, "_cache", None), "_cache_file", None)
-    if cache_file is None:  # caching off (no writable cache dir): nothing to precompile into
-        return False
+    return _in_cache(lockstep_run) is False
+
+
+def background_compiles() -> bool:
+    """Whether kernels are compiled in the background (:data:`ENV_SWITCH` not ``0``): a
+    runner then does not compile blocks of ticks' kernel itself."""
+    return os.environ.get(ENV_SWITCH, "1") != "0"
+
+
+def _in_cache(kernel) -> bool | None:
+    """Whether ``kernel``'s cache index lists machine code (None: caching is off — no
+    writable cache dir: nothing to precompile into)."""
+    cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+    if cache_file is None:
+        return None
     try:
-        return not cache_file._load_index()
+        return bool(cache_file._load_index())
     except Exception:  # an unreadable index: numba recompiles anyway
-        return True
+        return False
 
 
 def start_if_cold() -> subprocess.Popen | None:
     """Start the background compile (module docstring) when the cache is cold, once per
-    process; returns the child (None if none started). Any failure is silent."""
+    process; returns the child (None if none started). Any failure is silent. A cache
+    that lacks only blocks of ticks' kernel gets the block compile alone (no child to wait
+    for)."""
     global _started, _child
-    if _started or os.environ.get(ENV_SWITCH, "1") == "0":
+    if _started or not background_compiles():
         return None
     _started = True
     try:
         if not cache_is_cold():
+            start_block_compile()
             return None
         # this process's package first on the child's path (not the working directory's, as
         # ``-m`` would put first, nor on PYTHONPATH, ahead of the standard library): it
@@ -130,9 +155,77 @@ def compile_kernels() -> None:
     plant.advance(period)  # the automatic landing: auto_steps
 
 
+def start_block_compile() -> subprocess.Popen | None:
+    """Start the compile of blocks of ticks' kernel in a process of its own, which nobody
+    waits for (module docstring) — unless the cache holds it, or another such process
+    started less than :data:`BLOCK_LOCK_S` ago (its lock file is beside the kernel's cache):
+    it waits for the runner's controller kernels to be cached (:data:`BLOCK_WAIT_S` at most:
+    not compiled twice at once on two cores), then compiles ``tick_block``
+    (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
+    from ardrone_nmpc.runtime.lockstep_block import tick_block
+
+    if _in_cache(tick_block) is not False:
+        return None
+    lock = _block_lock(tick_block)
+    try:
+        os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        try:
+            if time.time() - lock.stat().st_mtime < BLOCK_LOCK_S:
+                return None  # another compiles it
+            lock.touch()  # a lock left by a process that died: taken over
+        except OSError:
+            return None
+    except OSError:
+        return None
+    code = _BLOCK_COMPILE.format(root=str(Path(__file__).resolve().parents[2]),
+                                 module=__name__)
+    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, ENV_SWITCH: "0"}, start_new_session=True)
+
+
+def _block_lock(tick_block) -> Path:
+    return Path(tick_block._cache.cache_path) / "lockstep_block.compiling"
+
+
+def wait_for_controller() -> None:
+    """The block compile's wait (:func:`start_block_compile`): until the controller's
+    nominal tick is cached, :data:`BLOCK_WAIT_S` at most."""
+    from ardrone_nmpc.runtime.control_tick import control_tick
+
+    deadline = time.monotonic() + BLOCK_WAIT_S
+    while _in_cache(control_tick) is False and time.monotonic() < deadline:
+        time.sleep(0.5)
+
+
+def release_block_lock() -> None:
+    """The block compile's lock removed (its process ends)."""
+    from ardrone_nmpc.runtime.lockstep_block import tick_block
+
+    _block_lock(tick_block).unlink(missing_ok=True)
+
+
+#: The block compile's process (:func:`start_block_compile`; the runner's module is not
+#: this one's import: it imports this one)
+_BLOCK_COMPILE = """
+import sys
+sys.path.insert(0, {root!r})
+from {module} import release_block_lock, wait_for_controller
+try:
+    wait_for_controller()
+    from ardrone_nmpc.runtime.lockstep import warm_up_blocks
+    warm_up_blocks()
+finally:
+    release_block_lock()
+"""
+
+
 def main() -> int:
-    """The child's entry point (``python -m ardrone_nmpc.runtime.precompile``)."""
+    """The child's entry point (``python -m ardrone_nmpc.runtime.precompile``): the drone's
+    kernels, then the block compile started (it goes on after this child's exit)."""
     compile_kernels()
+    start_block_compile()
     return 0
 
 

@@ -163,11 +163,14 @@ class Tick:
             warm_up_control_tick()
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
-             trajectory: Trajectory | None = None) -> TickOutput:
+             trajectory: Trajectory | None = None, answer: tuple | None = None,
+             spent_ns: int = 0) -> TickOutput:
         """One tick at experiment time ``t_exp_s`` against ``trajectory`` (default: the
         experiment's). ``mode`` labels a nominal row ("track", "settle"); the supervisor's
-        verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`)."""
-        t0 = _perf_counter_ns()
+        verdict replaces it otherwise (module :mod:`ardrone_nmpc.safety`). ``answer``: the
+        compiled controller's answer for this tick made already (``ControlTick.answer``'s,
+        by a block of ticks: ``runtime/lockstep_block``), in ``spent_ns``."""
+        t0 = _perf_counter_ns() - spent_ns
         traj = self.trajectory if trajectory is None else trajectory
         if self.follow is not None:  # reference kind 'follow': the object's newest pose
             target_age_s = inputs.t_s - inputs.target_rx_t_s
@@ -181,7 +184,8 @@ class Tick:
         whole = None
         ct = self.control_tick
         if ct is not None:
-            answer = ct.answer(inputs, t_exp_s, traj)
+            if answer is None:
+                answer = ct.answer(inputs, t_exp_s, traj)
             if answer is not None:
                 if not answer[0] and self.cell_rows and inputs.target is None:
                     return self._nominal_cells(inputs, t_exp_s, mode, answer, t0)

@@ -1,0 +1,247 @@
+"""Blocks of lockstep ticks in one compiled call: the drone's tick, the controller's and the
+row's numbers, tick after tick, while each is the usual one.
+
+The lockstep runner's tick makes two compiled calls — the drone's legs
+(``sim/lockstep_legs``) and the controller's tick (``runtime/control_tick``) — with Python
+around them: objects for the samples, the firmware's PCMD, the stages' written state, the
+row. On the usual tick none of that Python decides anything. :func:`tick_block` flies up to
+``n_max`` ticks without it: :func:`~ardrone_nmpc.sim.drone_block.drone_legs`,
+:func:`~.control_tick.control_tick`, :func:`~ardrone_nmpc.sim.drone_block.drone_command`,
+and a row of numbers a tick (``runs/log_columns.BLOCK_ROW``); :class:`TickBlocks` writes
+back to the Python objects what the last tick left — the same values the per-tick path
+leaves — and the runner writes the rows (docs/architecture.md, "Blocks of ticks").
+
+A tick that is not the usual one ends the block where Python must take over (:data:`EXIT`
+codes): before the tick (a watchdog due, a block of normals short: nothing of it done),
+after its legs (a leg the kernel leaves to Python, a mode change: the legs' own after-run
+code goes on), or after the controller's call (not nominal, a response fit due, a command
+the firmware caps: the tick goes on in ``Tick.step`` from the call's answer).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ardrone_nmpc.core import monotonic
+from ardrone_nmpc.core.entry_points import entry_point
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached
+from ardrone_nmpc.core.monotonic import monotonic_ns
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
+from ardrone_nmpc.runs import block_row as lc
+from ardrone_nmpc.runtime.control_tick import control_tick
+from ardrone_nmpc.runtime.tick_kernels import E_X
+from ardrone_nmpc.sim import drone_block as db
+from ardrone_nmpc.sim import sensor_step as ks
+
+__all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_NONE", "TickBlocks",
+           "tick_block"]
+
+#: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
+#: its start; its legs ran (Python's after-run code goes on); the controller's call answered
+EXIT_NONE, EXIT_BEFORE, EXIT_AFTER_LEGS, EXIT_AFTER_CONTROL = 0, 1, 2, 3
+# c: the controller's numbers a block carries from tick to tick — the input z̈ and ż
+# reference sent last (Supervision's), the delay ring's next row and first pending row —
+# and what it only reads — the pending count, the ring's capacity, the delay's lead, the
+# next response fit's time (inf: none), the state bits —; whether a feed took a sample;
+# the exit tick's call: its time (ns) and answer (19 numbers)
+(C_ZACC, C_VZ_REF, C_NEXT, C_FIRST, C_COUNT, C_CAPACITY, C_LEAD_S, C_NEXT_FIT_S, C_BITS,
+ C_FED, C_SPENT_NS, C_ANSWER) = range(12)
+C_SIZE = C_ANSWER + 19
+# the answer's integer numbers (code, flag, GMRES and Newton iterations, bits, feed code)
+_ANSWER_INTS = (0, 3, 6, 7, 17, 18)
+
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n, gust_n,
+               mocap_n, nav_n, c, table, est, limits, dring, x_solve, shift, states, work,
+               rows, mem, iprm, horizon, divergence_residual, vz_from_commands, vz_lead_s,
+               vz_max_mps, tilt_cap_rad, gain, e, v, y, response, offset, offset_flags):
+    """Ticks ``k0`` … of the lockstep schedule (plant time ``t_first_s + k·period_s``,
+    experiment time ``(k − n_settle)·period_s``) while each is the usual one: returns how
+    many it flew and its exit (``EXIT_*``). ``d``: the drone's numbers
+    (``sim/drone_block``); the legs' arrays; ``c``: the controller's (``C_*``); ``table``:
+    a row of numbers a tick (``BLOCK_ROW``); then :func:`control_tick`'s arrays and settings
+    (its prepared tail's, ``has_nav`` 1, ``initialise`` False)."""
+    out = buf[ks.B_OUT:ks.B_IV]
+    capacity, count = int(c[C_CAPACITY]), int(c[C_COUNT])
+    bits = int(c[C_BITS])
+    for i in range(n_max):
+        k = k0 + i
+        t_s = t_first_s + k * period_s
+        t_exp_s = (k - n_settle) * period_s
+        status = db.drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s)
+        if status == db.LEGS_PARTIAL:
+            return i, EXIT_AFTER_LEGS
+        if status != db.LEGS_DONE:
+            return i, EXIT_BEFORE
+        t0_ns = monotonic_ns()
+        nxt = int(c[C_NEXT])
+        vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
+        answer = control_tick(
+            t_s, d[db.D_POSE_RX], d[db.D_T_NAV], bits, d[db.D_BATTERY], d[db.D_NAV_ROLL],
+            d[db.D_NAV_PITCH], d[db.D_PX], d[db.D_PY], d[db.D_PZ], d[db.D_PSI], d[db.D_POSE_T],
+            c[C_ZACC], False, 0.0, 0.0, est, limits, t_exp_s, dring, int(c[C_FIRST]), count,
+            c[C_LEAD_S], x_solve, shift,
+            states, work, rows, vz_last, nxt, mem, iprm,
+            horizon, False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
+            tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
+        (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
+         rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
+        if (code != 0 or not t_s < c[C_NEXT_FIT_S]  # (a fit due: written's, in Python)
+                or not db.drone_command(d, out, roll, pitch, gaz, yaw)):
+            a = c[C_ANSWER:]
+            a[0], a[1], a[2], a[3], a[4], a[5] = code, mocap_ms, nav_ms, flag, solve_us, norm
+            a[6], a[7], a[8], a[9], a[10], a[11] = gmres_it, newton_it, zacc, phi, theta, rate
+            a[12], a[13], a[14], a[15], a[16], a[17] = vz, roll, pitch, gaz, yaw, sat_bits
+            a[18] = fed
+            c[C_SPENT_NS] = monotonic_ns() - t0_ns
+            return i, EXIT_AFTER_CONTROL
+        # what AfterSolve.written keeps: Supervision's inputs, the delay ring's next row
+        c[C_ZACC], c[C_VZ_REF] = zacc, vz
+        nxt = 0 if nxt + 1 == capacity else nxt + 1
+        c[C_NEXT] = nxt
+        if count:
+            c[C_FIRST] = nxt + capacity - count
+        if fed:
+            c[C_FED] = 1.0
+        compute_us = (monotonic_ns() - t0_ns) * 1e-3
+        _row(table[i], t_exp_s, est, states[0], zacc, phi, theta, rate, vz, roll, pitch,
+             gaz, yaw, sat_bits, solve_us, norm, gmres_it, newton_it, mocap_ms, nav_ms, d,
+             compute_us, out)
+    return n_max, EXIT_NONE
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,
+         sat_bits, solve_us, norm, gmres_it, newton_it, mocap_ms, nav_ms, d, compute_us, out):
+    """One tick's numbers in ``BLOCK_ROW``'s order (``runs/log_columns``)."""
+    x = est[E_X:E_X + STATE_DIM]
+    row[lc.BR_T] = t_exp_s
+    row[lc.BR_X], row[lc.BR_Y], row[lc.BR_Z], row[lc.BR_PSI] = x[0], x[2], x[4], x[6]
+    row[lc.BR_VX], row[lc.BR_VY], row[lc.BR_VZ] = x[1], x[3], x[5]
+    row[lc.BR_X_REF], row[lc.BR_Y_REF] = ref_now[IX_X], ref_now[IX_Y]
+    row[lc.BR_Z_REF], row[lc.BR_PSI_REF] = ref_now[IX_Z], ref_now[IX_PSI]
+    row[lc.BR_ZACC], row[lc.BR_PHI], row[lc.BR_THETA], row[lc.BR_RATE] = zacc, phi, theta, rate
+    row[lc.BR_VZ_REF] = vz
+    row[lc.BR_ROLL], row[lc.BR_PITCH], row[lc.BR_GAZ], row[lc.BR_YAW] = roll, pitch, gaz, yaw
+    row[lc.BR_SATURATED], row[lc.BR_SOLVE_US], row[lc.BR_NORM] = sat_bits, solve_us, norm
+    row[lc.BR_GMRES], row[lc.BR_NEWTON] = gmres_it, newton_it
+    row[lc.BR_MOCAP_MS], row[lc.BR_NAV_MS] = mocap_ms, nav_ms
+    row[lc.BR_BATTERY], row[lc.BR_COMPUTE_US] = d[db.D_BATTERY], compute_us
+    row[lc.BR_MOCAP_T], row[lc.BR_NAV_VX] = d[db.D_POSE_T], d[db.D_NAV_VX]
+    row[lc.BR_NAV_VY], row[lc.BR_NAV_ROLL] = d[db.D_NAV_VY], d[db.D_NAV_ROLL]
+    row[lc.BR_NAV_PITCH] = d[db.D_NAV_PITCH]
+    row[lc.BR_TRUE_X], row[lc.BR_TRUE_Y] = out[ks.O_STATE], out[ks.O_STATE + 1]
+    row[lc.BR_TRUE_Z], row[lc.BR_TRUE_PSI] = out[ks.O_STATE + 2], out[ks.O_STATE + 8]
+    row[lc.BR_TRUE_VZ] = out[ks.O_STATE + 5]
+
+
+class TickBlocks:
+    """The Python side of :func:`tick_block` for one lockstep flight's tick and drone: what
+    a block starts from, and what it leaves written back (module docstring)."""
+
+    @staticmethod
+    def takes(tick, drone, compile_now: bool) -> bool:
+        """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
+        is one compiled call whose rows are cells, with no second object to follow or
+        avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
+        kernel reads: ``core/monotonic.SAME_CLOCK``; ẋ, ẏ estimated without the navdata's
+        speeds) — and :func:`tick_block` has machine code (compiled, or in numba's cache:
+        loaded), unless the blocks may compile it (``compile_now``)."""
+        legs = drone.sensors._legs
+        return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
+                and tick.follow is None and tick.obstacles is None
+                and not tick.estimation.velocity_from_navdata and legs is not None
+                and legs.takes_commands and (compile_now or load_cached(tick_block)))
+
+    def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
+                 t_first_s: float, compile_now: bool) -> None:
+        self.tick, self.drone = tick, drone
+        #: compile :func:`tick_block` when a block finds no machine code for its arguments;
+        #: else that block is not flown — its ticks are the per-tick path's, which leaves the
+        #: same rows (a first flight on an empty cache does not wait ~7 s for it:
+        #: ``runtime/precompile`` compiles it meanwhile)
+        self.compile_now = compile_now
+        self.n_max, self.n_settle = n_max, n_settle
+        self.period_s, self.t_first_s = period_s, t_first_s
+        self.d = np.zeros(db.D_SIZE)
+        self.c = np.zeros(C_SIZE)
+        #: the rows of the last block (:data:`~ardrone_nmpc.runs.log_columns.BLOCK_ROW`
+        #: numbers a tick)
+        self.table = np.zeros((n_max, lc.BLOCK_ROW))
+
+    def fly(self, k: int, mode: str, n_max: int) -> tuple[int, int, tuple | None, int]:
+        """Up to ``n_max`` ticks from tick ``k`` (all of phase ``mode``): ``(n, exit,
+        answer, spent_ns)`` — the ticks flown (their rows: :attr:`table`'s first ``n``),
+        how the block ended (``EXIT_*``: 0 ticks and EXIT_BEFORE when it could not
+        start), and for EXIT_AFTER_CONTROL the controller's call's answer and time (ns)
+        for ``Tick.step`` to go on from."""
+        tick, drone, c = self.tick, self.drone, self.c
+        ct, sup = tick.control_tick, tick.supervisor
+        if sup.label != mode or sup.events or not tick.delay._pushed:
+            return 0, EXIT_BEFORE, None, 0  # (a label to note; the first input unsent)
+        tail = ct.prepared()
+        if tail is None or not drone.block_entry(self.d):
+            return 0, EXIT_BEFORE, None, 0
+        period_s, n_settle = self.period_s, self.n_settle
+        t_s = self.t_first_s + k * period_s
+        before = ct.before.arguments(drone.sensors.inputs(t_s), (k - n_settle) * period_s,
+                                     tick.trajectory)
+        if before is None or before[13]:  # (ẋ, ẏ from the navdata: not in a block)
+            return 0, EXIT_BEFORE, None, 0
+        delay, response = tick.delay, tick.response
+        vz_last = (float(tick.supervision.vz_ref_mps) if tick.control.vz_from_commands
+                   else 0.0)
+        c[:C_SPENT_NS] = (before[12], vz_last, delay._next, before[20], before[21],
+                          delay._capacity, before[22],
+                          math.inf if response is None else response._next_fit_s, before[3],
+                          0.0)
+        (mem, iprm, horizon, _, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
+         response_state, _, offset, flags) = tail
+        args = (n_max, k, self.t_first_s, period_s, n_settle, self.d,
+                *drone.sensors._legs._args, c, self.table, before[16], before[17], before[19],
+                before[23], before[24], before[25], before[26], before[27], mem, iprm, horizon,
+                residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y, response_state,
+                offset, flags)
+        call = entry_point(tick_block, *args)  # (its machine code for these kinds, if any)
+        if call is None:
+            if not self.compile_now:
+                return 0, EXIT_BEFORE, None, 0
+            call = tick_block  # the dispatcher: compiles them
+        n, exit_ = call(*args)
+        legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
+        drone.after_block(self.d, n > 0 or legs_ran,
+                          (k + n - (0 if legs_ran else 1) - n_settle) * period_s)
+        if n:
+            self._written(n)
+        if not legs_ran:
+            return n, exit_, None, 0
+        drone.block_ran_to(self.t_first_s + (k + n) * period_s)
+        if exit_ == EXIT_AFTER_LEGS:
+            return n, exit_, None, 0
+        numbers = c[C_ANSWER:].tolist()
+        for i in _ANSWER_INTS:
+            numbers[i] = int(numbers[i])
+        return n, exit_, tuple(numbers), int(c[C_SPENT_NS])
+
+    def _written(self, n: int) -> None:
+        """What the stages keep after the block's last tick (``AfterSolve.written``'s: the
+        supervisor's and Supervision's, the delay ring's next row, the response's
+        estimate to refit when read)."""
+        tick, c = self.tick, self.c
+        v = self.table[n - 1].tolist()
+        tick.after_solve.kept(v[lc.BR_ZACC], v[lc.BR_PHI], v[lc.BR_THETA], v[lc.BR_RATE],
+                              v[lc.BR_VZ_REF], v[lc.BR_ROLL], v[lc.BR_PITCH], v[lc.BR_GAZ],
+                              v[lc.BR_YAW], int(v[lc.BR_SATURATED]))
+        delay = tick.delay
+        delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
+        if c[C_FED] != 0.0:
+            tick.response.estimator._estimate = None
+
+
+flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py
