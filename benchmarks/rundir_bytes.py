@@ -48,6 +48,10 @@ CLOCK_SUMMARY = (b"solver,solve_time", b"loop,compute")
 def record(out: Path) -> None:
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.experiments.record import record_lockstep
+    from ardrone_nmpc.runtime import lockstep
+
+    if hasattr(lockstep, "warm_up_blocks"):  # blocks of ticks' kernel: the flights fly them
+        lockstep.warm_up_blocks()
 
     for i, (name, sets, seed) in enumerate(CASES):
         cfg = load_config(ROOT / "configs" / f"{name}.yaml", sets)

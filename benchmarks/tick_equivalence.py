@@ -90,6 +90,20 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("square_battery_floor", "square", SQUARE + ["faults.battery_floor.start_s=6"], 0),
     # a drone that tilts a third of the model's: most nominal ticks saturate the command
     ("square_saturating", "square", SQUARE + ["controller.attitude_gain=0.3"], 0),
+    # blocks of ticks (runtime/lockstep_block) fly the usual ticks of these: what ends a
+    # block — a fit due, a leg the kernel leaves, a capped climb, an emptying battery —
+    # and the samples a block's ticks take or not
+    ("square_disturbances", "square", SQUARE + [
+        "sim.vz_gain=0.8", "sim.battery_sag_frac=0.3",
+        "sim.navdata_velocity_bias_mps=[0.05,-0.03]", "sim.plant.turbulence_std_mps=0.3"], 5),
+    ("square_altitude_cap", "square", SQUARE + ["drone.altitude_max_m=1.1"], 0),
+    ("square_fast_refit", "square", SQUARE + ["controller.adaptation.refit_s=0.2"], 2),
+    ("square_fixed_response", "square", SQUARE + ["controller.delay_compensation_s=0.26",
+                                                  "controller.attitude_gain=1.0"], 1),
+    ("square_navdata_200hz", "square", SQUARE + ["sim.navdata_rate_hz=200"], 0),
+    ("square_mocap_10hz", "square", SQUARE + ["sim.mocap_rate_hz=10"], 0),
+    ("square_low_battery", "square", SQUARE + ["sim.plant.battery_start_pct=22",
+                                               "sim.plant.battery_drain_pct_per_min=30"], 0),
 ]
 
 
@@ -135,12 +149,34 @@ def _table(rows: list[dict]) -> tuple[np.ndarray, dict]:
     return values, {"numeric": numeric, "strings": strings}
 
 
+def _count_block_ticks() -> dict | None:
+    """A tree with blocks of ticks (``runtime/lockstep_block``): their kernel loaded or
+    compiled first (else a flight on a cold cache flies none), and a count of the ticks
+    they fly (the gate compares them; a tree without: None)."""
+    from ardrone_nmpc.runtime import lockstep
+
+    if not hasattr(lockstep, "warm_up_blocks"):
+        return None
+    lockstep.warm_up_blocks()
+    counts: dict = {}
+    fly = lockstep.TickBlocks.fly
+
+    def counted(self, *args):
+        answer = fly(self, *args)
+        counts["ticks"] = counts.get("ticks", 0) + answer[0]
+        return answer
+
+    lockstep.TickBlocks.fly = counted
+    return counts
+
+
 def record(path: str, only: set[str] | None) -> None:
     import ardrone_nmpc
     from ardrone_nmpc.config.io import load_config
     from ardrone_nmpc.runtime.lockstep import TakeoffRefused, run_lockstep
 
     out = {"tree": str(Path(ardrone_nmpc.__file__).parents[1]), "cases": {}}
+    in_blocks = _count_block_ticks()
     for name, config, overrides, seed in CASES:
         if only and name not in only:
             continue
@@ -156,7 +192,9 @@ def record(path: str, only: set[str] | None) -> None:
         values, meta = _table(capture.rows)
         out["cases"][name] = {"values": values, **meta, "events": capture.events,
                               "ending": ending}
-        print(f"{name:<20} {len(capture.rows):5d} rows {wall:6.2f} s  {ending}", flush=True)
+        blocks = f" ({in_blocks.pop('ticks', 0)} in blocks)" if in_blocks is not None else ""
+        print(f"{name:<20} {len(capture.rows):5d} rows{blocks} {wall:6.2f} s  {ending}",
+              flush=True)
     with open(path, "wb") as f:
         pickle.dump(out, f)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Callable
 
 from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime import lockstep
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.runtime.tick import Tick
 
@@ -32,6 +33,7 @@ def fly(cfg, monkeypatch, *, use: Callable[[Tick], None],
 
     ``use(tick)`` sets each built tick on its path; ``watch = (owner, name, tally)`` passes
     every answer of ``owner.name`` to ``tally``; ``lane`` takes ``Tick._nominal_cells``' place.
+    Every tick its own (``BLOCK_TICKS`` 0: no block of ticks, whose ticks no step watches).
     """
     states = []
     init, step = Tick.__init__, Tick.step
@@ -46,6 +48,7 @@ def fly(cfg, monkeypatch, *, use: Callable[[Tick], None],
         return out
 
     with monkeypatch.context() as m:
+        m.setattr(lockstep, "BLOCK_TICKS", 0)
         m.setattr(Tick, "__init__", new_init)
         m.setattr(Tick, "step", new_step)
         if watch is not None:

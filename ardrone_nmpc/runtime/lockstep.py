@@ -39,8 +39,9 @@ from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, block_cells, 
                                            put_truth_cells)
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
-from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_NONE,
-                                                 TickBlocks, tick_block)
+from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
+                                                 EXIT_NONE, EXIT_SHORT, TickBlocks,
+                                                 tick_block)
 from ardrone_nmpc.runtime.precompile import background_compiles, join_child, start_if_cold
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule,
                                            phase, write_events)
@@ -88,6 +89,7 @@ _CONTROL = Action.CONTROL  # bound once (the usual verdict: tested first, by ide
 BLOCK_TICKS = 32
 _OK_TEXT = SolverStatus.OK._value_  # a block's rows' solver_status
 _warming_up = False  # warm_up_blocks' flight: its blocks compile their kernel
+_BLOCK_GOES_ON = (EXIT_NONE, EXIT_FIT, EXIT_SHORT)  # a block's ends before no Python tick
 _FLYING_TEXT = FlightMode.FLYING._value_  # … and nav_mode
 
 
@@ -214,9 +216,12 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
                     for j in range(k, k + n):
                         progress(schedule.fraction_done(j))
                 k = flown = k + n
-                if exit_ == EXIT_NONE:
-                    continue
-                t_exp = (k - n_settle) * period  # (the block ended before the phase ends)
+            if exit_ in _BLOCK_GOES_ON:  # (the next tick is a block's again)
+                if exit_ == EXIT_FIT and answer:  # the fit's events, at its tick (k − 1)
+                    write_events(write_event, (k - 1 - n_settle) * period, answer)
+                continue
+            if n:  # the tick it ended at (before the phase ends: its mode)
+                t_exp = (k - n_settle) * period
             legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
         t_plant = t_first + k * period
         if not legs_ran:

@@ -21,6 +21,7 @@ the firmware caps: the tick goes on in ``Tick.step`` from the call's answer).
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 from numba import njit
@@ -37,12 +38,16 @@ from ardrone_nmpc.runtime.tick_kernels import E_X
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 
-__all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_NONE", "TickBlocks",
+__all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
+           "EXIT_SHORT", "TickBlocks",
            "tick_block"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
-EXIT_NONE, EXIT_BEFORE, EXIT_AFTER_LEGS, EXIT_AFTER_CONTROL = 0, 1, 2, 3
+#: (the tick goes on in ``Tick.step``); the last tick flown whole has a response fit due
+#: after it; a block of the drone's normals ran short before the next tick's legs
+(EXIT_NONE, EXIT_BEFORE, EXIT_AFTER_LEGS, EXIT_AFTER_CONTROL, EXIT_FIT,
+ EXIT_SHORT) = range(6)
 # c: the controller's numbers a block carries from tick to tick — the input z̈ and ż
 # reference sent last (Supervision's), the delay ring's next row and first pending row —
 # and what it only reads — the pending count, the ring's capacity, the delay's lead, the
@@ -53,6 +58,7 @@ EXIT_NONE, EXIT_BEFORE, EXIT_AFTER_LEGS, EXIT_AFTER_CONTROL = 0, 1, 2, 3
 C_SIZE = C_ANSWER + 19
 # the answer's integer numbers (code, flag, GMRES and Newton iterations, bits, feed code)
 _ANSWER_INTS = (0, 3, 6, 7, 17, 18)
+_perf_counter_ns = time.perf_counter_ns
 
 
 
@@ -75,10 +81,9 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         t_s = t_first_s + k * period_s
         t_exp_s = (k - n_settle) * period_s
         status = db.drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s)
-        if status == db.LEGS_PARTIAL:
-            return i, EXIT_AFTER_LEGS
         if status != db.LEGS_DONE:
-            return i, EXIT_BEFORE
+            return i, (EXIT_AFTER_LEGS if status == db.LEGS_PARTIAL else
+                       EXIT_SHORT if status == db.LEGS_SHORT else EXIT_BEFORE)
         t0_ns = monotonic_ns()
         nxt = int(c[C_NEXT])
         vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
@@ -92,8 +97,7 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
             tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
-        if (code != 0 or not t_s < c[C_NEXT_FIT_S]  # (a fit due: written's, in Python)
-                or not db.drone_command(d, out, roll, pitch, gaz, yaw)):
+        if code != 0 or not db.drone_command(d, out, roll, pitch, gaz, yaw):
             a = c[C_ANSWER:]
             a[0], a[1], a[2], a[3], a[4], a[5] = code, mocap_ms, nav_ms, flag, solve_us, norm
             a[6], a[7], a[8], a[9], a[10], a[11] = gmres_it, newton_it, zacc, phi, theta, rate
@@ -113,6 +117,8 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         _row(table[i], t_exp_s, est, states[0], zacc, phi, theta, rate, vz, roll, pitch,
              gaz, yaw, sat_bits, solve_us, norm, gmres_it, newton_it, mocap_ms, nav_ms, d,
              compute_us, out)
+        if not t_s < c[C_NEXT_FIT_S]:  # (AfterSolve.written's test: a fit due, in Python)
+            return i + 1, EXIT_FIT
     return n_max, EXIT_NONE
 
 
@@ -175,12 +181,12 @@ class TickBlocks:
         #: numbers a tick)
         self.table = np.zeros((n_max, lc.BLOCK_ROW))
 
-    def fly(self, k: int, mode: str, n_max: int) -> tuple[int, int, tuple | None, int]:
+    def fly(self, k: int, mode: str, n_max: int) -> tuple[int, int, object, int]:
         """Up to ``n_max`` ticks from tick ``k`` (all of phase ``mode``): ``(n, exit,
-        answer, spent_ns)`` — the ticks flown (their rows: :attr:`table`'s first ``n``),
+        more, spent_ns)`` — the ticks flown (their rows: :attr:`table`'s first ``n``),
         how the block ended (``EXIT_*``: 0 ticks and EXIT_BEFORE when it could not
-        start), and for EXIT_AFTER_CONTROL the controller's call's answer and time (ns)
-        for ``Tick.step`` to go on from."""
+        start); for EXIT_AFTER_CONTROL the controller's call's answer and time (ns) for
+        ``Tick.step`` to go on from, for EXIT_FIT the fit's events (at the last tick)."""
         tick, drone, c = self.tick, self.drone, self.c
         ct, sup = tick.control_tick, tick.supervisor
         if sup.label != mode or sup.events or not tick.delay._pushed:
@@ -219,6 +225,13 @@ class TickBlocks:
                           (k + n - (0 if legs_ran else 1) - n_settle) * period_s)
         if n:
             self._written(n)
+        if exit_ == EXIT_FIT:  # the fit AfterSolve.written makes after the last tick
+            t0_ns = _perf_counter_ns()
+            events = response.refit(self.t_first_s + (k + n - 1) * period_s)
+            self.table[n - 1, lc.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
+            return n, exit_, events, 0
+        if exit_ == EXIT_SHORT:  # new blocks of normals; the next tick's a block's again
+            drone.sensors._legs.refill()
         if not legs_ran:
             return n, exit_, None, 0
         drone.block_ran_to(self.t_first_s + (k + n) * period_s)

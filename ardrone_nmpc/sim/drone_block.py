@@ -6,8 +6,8 @@ firmware's tests before the run (its PCMD applied, no watchdog due), the samples
 objects after it, and the tick's PCMD (:meth:`CompiledLegs.command`). Here the same
 tick of a quiet firmware is numbers only — :func:`drone_legs` and :func:`drone_command` —,
 so that a caller compiled itself (``runtime/lockstep_block``) can fly ticks without
-Python; what they leave is in ``d`` (indices ``D_*``), written back to the firmware, the
-plant and the sampler by ``CompiledLegs.after_block``.
+Python; what they start from and leave is in ``d`` (indices ``D_*``): :func:`block_entry`
+fills it from the firmware, the plant and the sampler, :func:`after_block` writes it back.
 
 Each answers "not mine" (the ``LEGS_*`` codes, False) whenever the Python path's tick would
 do anything else — a watchdog due, a leg the kernel leaves to Python, a capped climb or a
@@ -16,15 +16,20 @@ fraction the plant clips — and then changes nothing the Python path does not r
 
 from __future__ import annotations
 
+import math
+import struct
+
 import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL
+from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim import sensor_step as ks
+from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
 
 __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT",
-           "drone_command", "drone_legs"]
+           "after_block", "block_entry", "drone_command", "drone_legs"]
 
 # d: the plant's held command (roll, pitch, gaz, yaw, position hold 0/1); the firmware's
 # applied command (its four fractions, and 1 while it is a progressive one of them); the
@@ -41,6 +46,9 @@ __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT"
  D_T_NAV, D_NAV_T, D_BATTERY, D_NAV_ROLL, D_NAV_PITCH, D_NAV_VX, D_NAV_VY, D_TOOK_NAV,
  D_COMMANDS) = range(43)
 D_SIZE = 43
+_PUT_D = struct.Struct(f"{D_SIZE}d").pack_into  # d filled in one pack
+_FLYING = FlightMode.FLYING
+_NP_F64 = np.float64
 
 #: :func:`drone_legs`' answers: the tick's legs all run; the firmware would do more than
 #: the kernel (nothing run); a block of normals ran short (nothing run); the run left legs
@@ -115,4 +123,73 @@ def drone_command(d, out, roll, pitch, gaz, yaw):
     return True
 
 
-flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py
+flush_stale_caches(__name__)
+
+
+# ---------------------------------------------------------------------- the Python side
+def block_entry(legs, d: np.ndarray, seq: int) -> bool:
+    """``d`` filled from the compiled legs ``legs`` (``CompiledLegs``: their plant,
+    firmware and sampler) for a block of ticks whose first PCMD is number ``seq`` — or
+    False, nothing written, unless the next tick is one the block flies: ``legs.run``'s tick of a FLYING plant the
+    navdata shows FLYING, the arrays holding its state and its flight's parameters, a quiet firmware whose held PCMD is a
+    progressive one, applied, and the next one accepted, PCMDs ``legs.command``'s
+    (no faults), no second object — and samples of the kinds the kernel makes."""
+    plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
+    if not (legs.takes_commands and plant._mode is _FLYING and sensors._nav_mode is _FLYING
+            and sensors.target_cfg is None and legs.live_out is not None
+            and len(plant.__dict__) == legs._plant_len
+            and len(sensors.__dict__) == legs._sensors_len):
+        return False
+    pcmd, old = fw.pcmd, legs._p_key
+    if not (pcmd is fw._applied_pcmd and pcmd[0] & _PROGRESSIVE and not fw.alt_capped
+            and fw.last_cmd_t is not None and not fw.link_lost and not fw.lost_com_hover
+            and (seq == 1 or seq > fw.last_seq)
+            and old and old[0] is plant.params and old[1] is plant.noise
+            and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
+        return False
+    pose, nav = sensors.pose, sensors.nav
+    if not (pose is not None and nav is not None and nav.mode is _FLYING
+            and nav.state_bits is None and pose.t_s.__class__ is float
+            and pose.psi_rad.__class__ is float and nav.t_s.__class__ is float
+            and nav.battery_pct.__class__ is float and nav.roll_deg.__class__ is float
+            and nav.pitch_deg.__class__ is float and nav.vx_body_mps.__class__ is _NP_F64
+            and nav.vy_body_mps.__class__ is _NP_F64):
+        return False  # (the kinds of cells the rows of a block's samples hold)
+    roll, pitch, gaz, yaw, hold = legs._saved["_current"]
+    applied = fw.applied
+    progressive = applied[4] is True
+    px, py, pz = pose.position_m.tolist()
+    w0, w1, w2 = plant.wind_mps.tolist()
+    _PUT_D(d, 0, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
+           *(applied[:4] if progressive else (0.0, 0.0, 0.0, 0.0)),
+           1.0 if progressive else 0.0, *pcmd[1:], fw.last_cmd_t,
+           1.0 if fw.comwdg_latched else 0.0, 1.0 if fw.comwdg_clear == "any" else 0.0,
+           fw.comwdg_s, fw.hover_after_s, fw.link_loss_s, fw._lead_s(),
+           fw.config.altitude_max_m, w0, w1, w2, sensors.mocap_latency_s, math.nan,
+           sensors.pose_rx_t_s, pose.t_s, px, py, pz, pose.psi_rad, 0.0,
+           sensors.nav_rx_t_s, nav.t_s, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
+           nav.vx_body_mps, nav.vy_body_mps, 0.0, 0.0)  # (and no PCMD yet)
+    return True
+
+def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:
+    """What a block of ticks left in ``d`` and ``legs``' arrays, written back as the Python
+    path's ticks would have left it: the firmware's state and counters after the PCMDs
+    it applied (the last one numbered ``seq``), the plant's held command, the newest
+    samples (``ran``: a run of the block did its legs or part of them)."""
+    fw, v = legs.firmware, d.tolist()
+    fw.comwdg_latched = v[D_LATCHED] != 0.0
+    n = int(v[D_COMMANDS])
+    if n:
+        c = legs.counters
+        c.at_datagrams_in += n
+        c.at_commands_in += n
+        c.at_commands_applied += n
+        fw.last_seq = seq
+        fw.last_cmd_t = v[D_LAST_CMD_T]
+        fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, *v[D_CMD_ROLL:D_CMD_YAW + 1])
+        fw.applied = (*v[D_APP_ROLL:D_APP_YAW + 1], True)
+        legs._saved["_current"] = (*v[D_ROLL:D_YAW + 1], v[D_HOLD] != 0.0)
+    if ran:
+        legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
+                       v[D_T_NAV] if v[D_TOOK_NAV] else None)
+  # kernels calling other files: core/kernel_cache.py

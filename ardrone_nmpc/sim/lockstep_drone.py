@@ -24,7 +24,7 @@ from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
-from ardrone_nmpc.sim.drone_block import D_COMMANDS as _D_COMMANDS
+from ardrone_nmpc.sim import drone_block
 from ardrone_nmpc.sim.lockstep_legs import ALL_DONE, TRUTH_CELLS_OF
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
@@ -131,20 +131,20 @@ class LockstepDrone(ConfigHandshake):
 
     def block_entry(self, d) -> bool:
         """``d`` filled for a block of ticks from the next (``sim/drone_block``), or False:
-        the next tick is not one a block flies (``CompiledLegs.block_entry``; a REF waiting
+        the next tick is not one a block flies (``drone_block.block_entry``; a REF waiting
         to be sent, a drone that landed by itself)."""
         legs = self.sensors._legs
         return (legs is not None and self._ref_unsent is None and self.self_landing is None
-                and legs.block_entry(d, self._seq + 1))
+                and drone_block.block_entry(legs, d, self._seq + 1))
 
     def after_block(self, d, ran: bool, t_exp_s: float) -> None:
         """What a block of ticks left (``d``), written back: the PCMDs numbered, the
         firmware's, the plant's and the sampler's state; ``t_exp_s``: the experiment time
         of the last tick whose legs it ran (``ran``)."""
-        self._seq += int(d[_D_COMMANDS])
+        self._seq += int(d[drone_block.D_COMMANDS])
         if ran:
             self.t_exp_s = t_exp_s
-        self.sensors._legs.after_block(d, self._seq, ran)
+        drone_block.after_block(self.sensors._legs, d, self._seq, ran)
 
     def block_ran_to(self, t_s: float) -> None:
         """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block ended

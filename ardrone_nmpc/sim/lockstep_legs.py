@@ -59,7 +59,6 @@ from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, PlantTruth
 from ardrone_nmpc.protocol.at import Pcmd
-from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
@@ -168,9 +167,6 @@ TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
 
 _F64 = np.dtype(np.float64)
-_NP_F64 = np.float64
-# d of a block of ticks, written in one pack (sim/drone_block)
-_PUT_D = struct.Struct(f"{db.D_SIZE}d").pack_into
 _PI = math.pi
 _BUF_KIND = np.empty(0)  # a stand-in of CompiledLegs' buf (a plain 1-D float64) for its kind
 
@@ -494,8 +490,9 @@ class CompiledLegs:
                                self.plant._mode, battery)
 
     # ------------------------------------------------------------------ one tick
-    def _refill(self) -> None:
-        """New blocks of normals for those that ran short (held: the positions in iv)."""
+    def refill(self) -> None:
+        """New blocks of normals for those that ran short (held: the positions in iv; a
+        block of ticks' run found one short: ``sim/drone_block.LEGS_SHORT``)."""
         bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
         iv = self.iv
         bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
@@ -652,79 +649,18 @@ class CompiledLegs:
         raw = self._run_bytes()
         o = _GET_RUN(raw)
         if o[_R_DONE] < 0:  # a block ran short: new ones, and again
-            self._refill()
+            self.refill()
             return self.run(t_s)
         return self._ran_to(raw, o, mode, hover_due, new_mode, ends)
 
-    # ------------------------------------------------------------------ blocks of ticks
-    def block_entry(self, d: np.ndarray, seq: int) -> bool:
-        """``d`` (``sim/drone_block``) filled for a block of ticks whose first PCMD is number
-        ``seq`` — or False, nothing written, unless the next tick is one the block flies:
-        :meth:`run`'s tick of a FLYING plant the navdata shows FLYING, the arrays holding
-        its state and its flight's parameters, a quiet firmware whose held PCMD is a
-        progressive one, applied, and the next one accepted, PCMDs :meth:`command`'s
-        (no faults), no second object — and samples of the kinds the kernel makes."""
-        plant, fw, sensors = self.plant, self.firmware, self.sensors
-        if not (self.takes_commands and plant._mode is _FLYING and sensors._nav_mode is _FLYING
-                and sensors.target_cfg is None and self.live_out is not None
-                and len(plant.__dict__) == self._plant_len
-                and len(sensors.__dict__) == self._sensors_len):
-            return False
-        pcmd, old = fw.pcmd, self._p_key
-        if not (pcmd is fw._applied_pcmd and pcmd[0] & _PROGRESSIVE and not fw.alt_capped
-                and fw.last_cmd_t is not None and not fw.link_lost and not fw.lost_com_hover
-                and (seq == 1 or seq > fw.last_seq)
-                and old and old[0] is plant.params and old[1] is plant.noise
-                and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
-            return False
-        pose, nav = sensors.pose, sensors.nav
-        if not (pose is not None and nav is not None and nav.mode is _FLYING
-                and nav.state_bits is None and pose.t_s.__class__ is float
-                and pose.psi_rad.__class__ is float and nav.t_s.__class__ is float
-                and nav.battery_pct.__class__ is float and nav.roll_deg.__class__ is float
-                and nav.pitch_deg.__class__ is float and nav.vx_body_mps.__class__ is _NP_F64
-                and nav.vy_body_mps.__class__ is _NP_F64):
-            return False  # (the kinds of cells the rows of a block's samples hold)
-        roll, pitch, gaz, yaw, hold = self._saved["_current"]
-        applied = fw.applied
-        progressive = applied[4] is True
-        px, py, pz = pose.position_m.tolist()
-        w0, w1, w2 = plant.wind_mps.tolist()
-        _PUT_D(d, 0, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
-               *(applied[:4] if progressive else (0.0, 0.0, 0.0, 0.0)),
-               1.0 if progressive else 0.0, *pcmd[1:], fw.last_cmd_t,
-               1.0 if fw.comwdg_latched else 0.0, 1.0 if fw.comwdg_clear == "any" else 0.0,
-               fw.comwdg_s, fw.hover_after_s, fw.link_loss_s, fw._lead_s(),
-               fw.config.altitude_max_m, w0, w1, w2, sensors.mocap_latency_s, math.nan,
-               sensors.pose_rx_t_s, pose.t_s, px, py, pz, pose.psi_rad, 0.0,
-               sensors.nav_rx_t_s, nav.t_s, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
-               nav.vx_body_mps, nav.vy_body_mps, 0.0, 0.0)  # (and no PCMD yet)
-        return True
-
-    def after_block(self, d: np.ndarray, seq: int, ran: bool) -> None:
-        """What a block of ticks left in ``d`` and the arrays, written back as the Python
-        path's ticks would have left it: the firmware's state and counters after the PCMDs
-        it applied (the last one numbered ``seq``), the plant's held command, the newest
-        samples (``ran``: a run of the block did its legs or part of them)."""
-        fw, v = self.firmware, d.tolist()
-        fw.comwdg_latched = v[db.D_LATCHED] != 0.0
-        n = int(v[db.D_COMMANDS])
-        if n:
-            c = self.counters
-            c.at_datagrams_in += n
-            c.at_commands_in += n
-            c.at_commands_applied += n
-            fw.last_seq = seq
-            fw.last_cmd_t = v[db.D_LAST_CMD_T]
-            fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, *v[db.D_CMD_ROLL:db.D_CMD_YAW + 1])
-            fw.applied = (*v[db.D_APP_ROLL:db.D_APP_YAW + 1], True)
-            self._saved["_current"] = (*v[db.D_ROLL:db.D_YAW + 1], v[db.D_HOLD] != 0.0)
-        if ran:
-            raw = self._run_bytes()
-            self._ran = True
-            self.live_raw, self.live_out = raw, _GET_RUN(raw)
-            self._took(raw, self.live_out, v[db.D_T_POSE] if v[db.D_TOOK_POSE] else None,
-                       v[db.D_T_NAV] if v[db.D_TOOK_NAV] else None, _FLYING)
+    def ran_block(self, t_pose, t_nav) -> None:
+        """The arrays after a block of ticks' runs (``sim/drone_block``): what a tick reads
+        of the last run, and the newest samples (their event times; None: taken before the
+        block, the sampler's still)."""
+        raw = self._run_bytes()
+        self._ran = True
+        self.live_raw, self.live_out = raw, _GET_RUN(raw)
+        self._took(raw, self.live_out, t_pose, t_nav, _FLYING)
 
     def block_ran_to(self) -> tuple[list, bool]:
         """:meth:`run`'s rest for the tick a block ended after its legs (their run's
