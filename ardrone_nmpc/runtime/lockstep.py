@@ -225,6 +225,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
         t_plant = t_first + k * period
         if not legs_ran:
+            if blocks is not None:  # (what an open chain of blocks left, written back)
+                blocks.close()
             advance_to(t_plant, t_exp)
         if faulty:  # (a drone without injected faults has no events to take, ever)
             drone_events = take_events()
@@ -263,6 +265,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             ending = label
             break
         k += 1
+    if blocks is not None:
+        blocks.close()
     ending = tally.verdict(ending)
     loop_wall_s = time.perf_counter() - wall0
     t_end = t_first + flown * period - t_start

@@ -149,7 +149,13 @@ def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, ga
 
 class TickBlocks:
     """The Python side of :func:`tick_block` for one lockstep flight's tick and drone: what
-    a block starts from, and what it leaves written back (module docstring)."""
+    a block starts from, and what it leaves written back (module docstring).
+
+    Blocks follow one another while nothing but a response fit or new normals comes
+    between (:data:`EXIT_FIT`, :data:`EXIT_SHORT`, a full block): the chain stays *open* —
+    the drone's state and the stages' written numbers are the kernel's (``d``, ``c``),
+    the delay ring's written back only for the fit — and :meth:`close` writes them back
+    before anything else reads them (a Python tick, the landing)."""
 
     @staticmethod
     def takes(tick, drone, compile_now: bool) -> bool:
@@ -177,29 +183,88 @@ class TickBlocks:
         self.period_s, self.t_first_s = period_s, t_first_s
         self.d = np.zeros(db.D_SIZE)
         self.c = np.zeros(C_SIZE)
-        #: the rows of the last block (:data:`~ardrone_nmpc.runs.log_columns.BLOCK_ROW`
+        #: the rows of the last block (:data:`~ardrone_nmpc.runs.block_row.BLOCK_ROW`
         #: numbers a tick)
         self.table = np.zeros((n_max, lc.BLOCK_ROW))
+        self._open = False
+        self._last: list | None = None  # the open chain's last tick's row, its t_exp
+        self._last_t_exp = math.nan
+        self._ran = False  # a run of the open chain did legs
+        # the last call: its arguments and entry point, the legs' arrays and the
+        # controller's tail they were made with
+        self._args: tuple = ()
+        self._call = None
+        self._legs_args = self._tail = None
 
     def fly(self, k: int, mode: str, n_max: int) -> tuple[int, int, object, int]:
         """Up to ``n_max`` ticks from tick ``k`` (all of phase ``mode``): ``(n, exit,
         more, spent_ns)`` — the ticks flown (their rows: :attr:`table`'s first ``n``),
         how the block ended (``EXIT_*``: 0 ticks and EXIT_BEFORE when it could not
         start); for EXIT_AFTER_CONTROL the controller's call's answer and time (ns) for
-        ``Tick.step`` to go on from, for EXIT_FIT the fit's events (at the last tick)."""
+        ``Tick.step`` to go on from, for EXIT_FIT the fit's events (at the last tick).
+        Unless the exit goes on with a block (:data:`EXIT_FIT`, :data:`EXIT_SHORT`,
+        :data:`EXIT_NONE`), everything is written back (:meth:`close`)."""
+        call = self._chained(k, mode, n_max) if self._open else None
+        if call is None:
+            self.close()
+            call = self._entered(k, mode, n_max)
+            if call is None:
+                return 0, EXIT_BEFORE, None, 0
+        n, exit_ = call(*self._args)
+        self._open = True
+        period_s, n_settle = self.period_s, self.n_settle
+        if n:
+            self._last = self.table[n - 1].tolist()
+            self._last_t_exp = (k + n - 1 - n_settle) * period_s
+            self._ran = True
+        if exit_ == EXIT_FIT:  # the fit AfterSolve.written makes after the last tick
+            return n, exit_, self._fit(self.t_first_s + (k + n - 1) * period_s, n), 0
+        if exit_ == EXIT_SHORT:  # new blocks of normals; the next tick's a block's again
+            self.drone.sensors._legs.refill()
+        if exit_ == EXIT_SHORT or exit_ == EXIT_NONE:
+            return n, exit_, None, 0
+        legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
+        if legs_ran:  # (the tick it ended at)
+            self._ran, self._last_t_exp = True, (k + n - n_settle) * period_s
+        self.close()
+        if not legs_ran:
+            return n, exit_, None, 0
+        self.drone.block_ran_to(self.t_first_s + (k + n) * period_s)
+        if exit_ == EXIT_AFTER_LEGS:
+            return n, exit_, None, 0
+        numbers = self.c[C_ANSWER:].tolist()
+        for i in _ANSWER_INTS:
+            numbers[i] = int(numbers[i])
+        return n, exit_, tuple(numbers), int(self.c[C_SPENT_NS])
+
+    def close(self) -> None:
+        """Write back what the open chain of blocks left (the drone's state, the stages'
+        numbers of its last tick); nothing when none is open."""
+        if not self._open:
+            return
+        self._open = False
+        self.drone.after_block(self.d, self._ran, self._last_t_exp)
+        if self._last is not None:
+            self._written()
+        self._last, self._ran = None, False
+
+    def _entered(self, k: int, mode: str, n_max: int):
+        """A block's start from the Python objects: ``d`` and ``c`` filled and the call's
+        arguments made (:attr:`_args`); its entry point, or None — no block (the tick is
+        not one a block flies, or no machine code for its arguments' kinds)."""
         tick, drone, c = self.tick, self.drone, self.c
         ct, sup = tick.control_tick, tick.supervisor
         if sup.label != mode or sup.events or not tick.delay._pushed:
-            return 0, EXIT_BEFORE, None, 0  # (a label to note; the first input unsent)
+            return None  # (a label to note; the first input unsent)
         tail = ct.prepared()
         if tail is None or not drone.block_entry(self.d):
-            return 0, EXIT_BEFORE, None, 0
+            return None
         period_s, n_settle = self.period_s, self.n_settle
         t_s = self.t_first_s + k * period_s
         before = ct.before.arguments(drone.sensors.inputs(t_s), (k - n_settle) * period_s,
                                      tick.trajectory)
         if before is None or before[13]:  # (ẋ, ẏ from the navdata: not in a block)
-            return 0, EXIT_BEFORE, None, 0
+            return None
         delay, response = tick.delay, tick.response
         vz_last = (float(tick.supervision.vz_ref_mps) if tick.control.vz_from_commands
                    else 0.0)
@@ -207,47 +272,67 @@ class TickBlocks:
                           delay._capacity, before[22],
                           math.inf if response is None else response._next_fit_s, before[3],
                           0.0)
-        (mem, iprm, horizon, _, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
-         response_state, _, offset, flags) = tail
-        args = (n_max, k, self.t_first_s, period_s, n_settle, self.d,
-                *drone.sensors._legs._args, c, self.table, before[16], before[17], before[19],
-                before[23], before[24], before[25], before[26], before[27], mem, iprm, horizon,
-                residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y, response_state,
-                offset, flags)
-        call = entry_point(tick_block, *args)  # (its machine code for these kinds, if any)
-        if call is None:
-            if not self.compile_now:
-                return 0, EXIT_BEFORE, None, 0
-            call = tick_block  # the dispatcher: compiles them
-        n, exit_ = call(*args)
-        legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
-        drone.after_block(self.d, n > 0 or legs_ran,
-                          (k + n - (0 if legs_ran else 1) - n_settle) * period_s)
-        if n:
-            self._written(n)
-        if exit_ == EXIT_FIT:  # the fit AfterSolve.written makes after the last tick
-            t0_ns = _perf_counter_ns()
-            events = response.refit(self.t_first_s + (k + n - 1) * period_s)
-            self.table[n - 1, lc.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
-            return n, exit_, events, 0
-        if exit_ == EXIT_SHORT:  # new blocks of normals; the next tick's a block's again
-            drone.sensors._legs.refill()
-        if not legs_ran:
-            return n, exit_, None, 0
-        drone.block_ran_to(self.t_first_s + (k + n) * period_s)
-        if exit_ == EXIT_AFTER_LEGS:
-            return n, exit_, None, 0
-        numbers = c[C_ANSWER:].tolist()
-        for i in _ANSWER_INTS:
-            numbers[i] = int(numbers[i])
-        return n, exit_, tuple(numbers), int(c[C_SPENT_NS])
+        legs_args = drone.sensors._legs._args
+        self._args = (n_max, k, self.t_first_s, period_s, n_settle, self.d, *legs_args, c,
+                      self.table, before[16], before[17], before[19], before[23], before[24],
+                      before[25], before[26], before[27], *_tail_args(tail))
+        return self._vetted(legs_args, tail)
 
-    def _written(self, n: int) -> None:
-        """What the stages keep after the block's last tick (``AfterSolve.written``'s: the
+    def _chained(self, k: int, mode: str, n_max: int):
+        """The next block of an open chain (the Python objects not written back): its entry
+        point with :attr:`_args` made for it, or None — the chain ends here (a label to
+        note; a precondition of the controller's call gone)."""
+        if self.tick.supervisor.label != mode:
+            return None
+        tail = self.tick.control_tick.prepared()
+        if tail is None:
+            return None
+        legs_args = self.drone.sensors._legs._args
+        if legs_args is self._legs_args and tail is self._tail:
+            self._args = (n_max, k, *self._args[2:])
+            return self._call
+        args = self._args
+        n_legs = len(legs_args)
+        at = 6 + n_legs + 10  # (the legs' arrays, then c … the stages' eight arrays)
+        self._args = (n_max, k, *args[2:6], *legs_args, *args[6 + n_legs:at],
+                      *_tail_args(tail))
+        return self._vetted(legs_args, tail)
+
+    def _vetted(self, legs_args: tuple, tail: tuple):
+        """:attr:`_args`' entry point (kept with the legs' arrays and the tail it is for),
+        or the dispatcher when blocks compile (``compile_now``), else None."""
+        call = entry_point(tick_block, *self._args)  # (its machine code for these kinds)
+        if call is None and self.compile_now:
+            call = tick_block  # the dispatcher: compiles them
+        self._call = call
+        self._legs_args, self._tail = (legs_args, tail) if call is not tick_block else (
+            None, None)  # (vetted again after the compile)
+        return call
+
+    def _fit(self, t_s: float, n: int) -> list[dict]:
+        """AfterSolve.written's fit after the tick at plant time ``t_s`` (the block's last,
+        its row the table's ``n``-th): the delay ring written back first (a new delay
+        moves its pending window), the estimate refitted if a feed took a sample; then
+        the chain's numbers of the delay and the next fit. Its time goes to the tick's
+        ``compute_us``, as the per-tick path's."""
+        tick, c = self.tick, self.c
+        delay, response = tick.delay, tick.response
+        delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
+        if c[C_FED] != 0.0:
+            response.estimator._estimate = None
+            c[C_FED] = 0.0
+        t0_ns = _perf_counter_ns()
+        events = response.refit(t_s)
+        self.table[n - 1, lc.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
+        c[C_FIRST], c[C_COUNT], c[C_LEAD_S] = delay.first, delay.count, delay.lead_s
+        c[C_NEXT_FIT_S] = response._next_fit_s
+        return events
+
+    def _written(self) -> None:
+        """What the stages keep after the chain's last tick (``AfterSolve.written``'s: the
         supervisor's and Supervision's, the delay ring's next row, the response's
         estimate to refit when read)."""
-        tick, c = self.tick, self.c
-        v = self.table[n - 1].tolist()
+        tick, c, v = self.tick, self.c, self._last
         tick.after_solve.kept(v[lc.BR_ZACC], v[lc.BR_PHI], v[lc.BR_THETA], v[lc.BR_RATE],
                               v[lc.BR_VZ_REF], v[lc.BR_ROLL], v[lc.BR_PITCH], v[lc.BR_GAZ],
                               v[lc.BR_YAW], int(v[lc.BR_SATURATED]))
@@ -255,6 +340,15 @@ class TickBlocks:
         delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
         if c[C_FED] != 0.0:
             tick.response.estimator._estimate = None
+
+
+def _tail_args(tail: tuple) -> tuple:
+    """:func:`tick_block`'s arguments of the controller's prepared tail (``ControlTick``'s:
+    without ``initialise`` and ``has_nav``, False and 1 in a block)."""
+    (mem, iprm, horizon, _, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
+     response_state, _, offset, flags) = tail
+    return (mem, iprm, horizon, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
+            response_state, offset, flags)
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py
