@@ -27,6 +27,10 @@ FENCE_CHECK_STEP_S = 0.01
 #: ~100 Hz over the whole experiment (~0.2 ms a flight). Only passes are kept; bounded.
 _INSIDE: set = set()
 _INSIDE_MAX = 256
+#: … and the waypoint references made, by the same key: a pure function of it, read and
+#: never written by a flight (their arrays are the compiled tick's), so each flight of a
+#: sweep takes the one made first (~0.2 ms a flight); bounded as :data:`_INSIDE`.
+_MADE: dict = {}
 
 
 class HoldStartThen:
@@ -96,15 +100,24 @@ def experiment_trajectory(cfg):
     through the settle phase, or — kind ``follow`` — the live object (it follows from the
     first tick; it cannot be checked against the geofence before it flies). Raises
     :class:`ReferenceError` for a reference that leaves the geofence (checked once per
-    reference, duration and fence a process flies: :data:`_INSIDE`)."""
+    reference, duration and fence a process flies: :data:`_INSIDE`; a waypoint reference is
+    made once too, :data:`_MADE`)."""
     if cfg.reference.kind == "follow":
         return make_trajectory(cfg.reference)
-    trajectory = make_trajectory(cfg.reference, duration_s=cfg.duration_s)
     key = _fence_key(cfg)
+    made = _MADE.get(key) if key is not None else None
+    if made is not None:
+        return made
+    trajectory = make_trajectory(cfg.reference, duration_s=cfg.duration_s)
     if key is None or key not in _INSIDE:
         check_inside_geofence(cfg, trajectory)
         if key is not None:
             if len(_INSIDE) >= _INSIDE_MAX:
                 _INSIDE.clear()
             _INSIDE.add(key)
-    return HoldStartThen(trajectory)
+    held = HoldStartThen(trajectory)
+    if key is not None and held.waypoint_args is not None:
+        if len(_MADE) >= _INSIDE_MAX:
+            _MADE.clear()
+        _MADE[key] = held
+    return held

@@ -23,13 +23,15 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
-from ardrone_nmpc.core.numerics import INNER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
+from ardrone_nmpc.sim.lockstep_legs import _HOVER_APPLIED, _HOVER_PCMD
 
 __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT",
-           "after_block", "block_entry", "drone_command", "drone_legs"]
+           "after_block", "after_descent", "block_entry", "descent_entry", "drone_command",
+           "drone_descent", "drone_legs"]
 
 # d: the plant's held command (roll, pitch, gaz, yaw, position hold 0/1); the firmware's
 # applied command (its four fractions, and 1 while it is a progressive one of them); the
@@ -47,7 +49,7 @@ __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT"
  D_COMMANDS) = range(43)
 D_SIZE = 43
 _PUT_D = struct.Struct(f"{D_SIZE}d").pack_into  # d filled in one pack
-_FLYING = FlightMode.FLYING
+_FLYING, _LANDING = FlightMode.FLYING, FlightMode.LANDING
 _NP_F64 = np.float64
 
 #: :func:`drone_legs`' answers: the tick's legs all run; the firmware would do more than
@@ -57,9 +59,10 @@ LEGS_DONE, LEGS_NOT_QUIET, LEGS_SHORT, LEGS_PARTIAL = 0, 1, 2, 3
 
 
 @njit(cache=True, **INNER_KERNEL)
-def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s):
-    """``CompiledLegs.run`` of a FLYING plant under a quiet firmware to plant time ``t_s``:
-    its tests, the kernel's run, the com-watchdog bit after it (``LEGS_*``)."""
+def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode):
+    """``CompiledLegs.run`` of a plant in the kernel's ``mode`` (FLYING, or LANDING: no
+    touch-down flown, ``sv[S_ENDS]`` 0) under a quiet firmware to plant time ``t_s``: its
+    tests, the kernel's run, the com-watchdog bit after it (``LEGS_*``)."""
     silence = t_s - d[D_LAST_CMD_T]
     if silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]:
         return LEGS_NOT_QUIET  # a watchdog acts on the way: the Python path's
@@ -72,7 +75,7 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s):
     sv[ks.S_LEAD] = d[D_LEAD_S] if climbing else 0.0
     sv[ks.S_ALT_MAX] = d[D_ALT_MAX] if climbing else 0.0
     sv[ks.S_W0], sv[ks.S_W1], sv[ks.S_W2] = d[D_W0], d[D_W1], d[D_W2]
-    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = ks.MODE_FLYING, t_s, 0.0
+    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = mode, t_s, 0.0
     ks.lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n)
     done, n_events = iv[ks.I_DONE], iv[ks.I_EVENTS]
     if done < 0:
@@ -123,6 +126,31 @@ def drone_command(d, out, roll, pitch, gaz, yaw):
     return True
 
 
+@njit(cache=True, **OUTER_KERNEL)
+def drone_descent(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_first_s, period_s, k0,
+                  n_max, deadline_s):
+    """Ticks ``k0`` … of a landing the runner waits out (plant time ``t_first_s +
+    k·period_s``): each the legs' run of the LANDING plant, then the REF land and hover PCMD
+    the link holds, accepted (``CompiledLegs.land_again``: traffic for the watchdogs, the
+    com-watchdog bit cleared), until the plant's time reaches ``deadline_s`` (the tick that
+    reaches it counted) — ``(ticks, LEGS_*)``: a tick not done whole is the Python path's
+    (its legs ran, or not: the answer says which, as :func:`drone_legs`')."""
+    out = buf[ks.B_OUT:ks.B_IV]
+    for i in range(n_max):
+        status = drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n,
+                            t_first_s + (k0 + i) * period_s, ks.MODE_LANDING)
+        if status != LEGS_DONE:
+            return i, status
+        now = out[ks.O_T]
+        d[D_LAST_CMD_T] = now
+        if d[D_CLEAR_ANY] != 0.0:
+            d[D_LATCHED] = 0.0
+        d[D_COMMANDS] += 1.0
+        if not now < deadline_s:
+            return i + 1, LEGS_DONE
+    return n_max, LEGS_DONE
+
+
 flush_stale_caches(__name__)
 
 
@@ -130,22 +158,13 @@ flush_stale_caches(__name__)
 def block_entry(legs, d: np.ndarray, seq: int) -> bool:
     """``d`` filled from the compiled legs ``legs`` (``CompiledLegs``: their plant,
     firmware and sampler) for a block of ticks whose first PCMD is number ``seq`` — or
-    False, nothing written, unless the next tick is one the block flies: ``legs.run``'s tick of a FLYING plant the
-    navdata shows FLYING, the arrays holding its state and its flight's parameters, a quiet firmware whose held PCMD is a
-    progressive one, applied, and the next one accepted, PCMDs ``legs.command``'s
-    (no faults), no second object — and samples of the kinds the kernel makes."""
+    False, nothing written, unless the next tick is one the block flies: ``legs.run``'s
+    tick of a FLYING plant the navdata shows FLYING (:func:`_quiet`), a held PCMD that is a
+    progressive one, no second object — and samples of the kinds the kernel makes."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
-    if not (legs.takes_commands and plant._mode is _FLYING and sensors._nav_mode is _FLYING
-            and sensors.target_cfg is None and legs.live_out is not None
-            and len(plant.__dict__) == legs._plant_len
-            and len(sensors.__dict__) == legs._sensors_len):
-        return False
-    pcmd, old = fw.pcmd, legs._p_key
-    if not (pcmd is fw._applied_pcmd and pcmd[0] & _PROGRESSIVE and not fw.alt_capped
-            and fw.last_cmd_t is not None and not fw.link_lost and not fw.lost_com_hover
-            and (seq == 1 or seq > fw.last_seq)
-            and old and old[0] is plant.params and old[1] is plant.noise
-            and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign):
+    if not (plant._mode is _FLYING and sensors._nav_mode is _FLYING
+            and sensors.target_cfg is None and fw.pcmd[0] & _PROGRESSIVE
+            and _quiet(legs, seq)):
         return False
     pose, nav = sensors.pose, sensors.nav
     if not (pose is not None and nav is not None and nav.mode is _FLYING
@@ -155,21 +174,59 @@ def block_entry(legs, d: np.ndarray, seq: int) -> bool:
             and nav.pitch_deg.__class__ is float and nav.vx_body_mps.__class__ is _NP_F64
             and nav.vy_body_mps.__class__ is _NP_F64):
         return False  # (the kinds of cells the rows of a block's samples hold)
+    px, py, pz = pose.position_m.tolist()
+    _fill(legs, d, (sensors.pose_rx_t_s, pose.t_s, px, py, pz, pose.psi_rad, 0.0,
+                    sensors.nav_rx_t_s, nav.t_s, nav.battery_pct, nav.roll_deg,
+                    nav.pitch_deg, nav.vx_body_mps, nav.vy_body_mps))
+    return True
+
+
+def descent_entry(legs, d: np.ndarray, seq: int) -> bool:
+    """``d`` filled for :func:`drone_descent` from ticks whose REF land is number ``seq``
+    — or False, nothing written, unless the next tick is one it flies: ``legs.run``'s tick
+    of a LANDING plant the navdata shows LANDING (:func:`_quiet`), the REF land and hover
+    PCMD ``legs.land_again`` holds (the hover applied)."""
+    plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
+    if not (legs.lands_again and plant._mode is _LANDING and sensors._nav_mode is _LANDING
+            and sensors.target_cfg is None and fw.applied == _HOVER_APPLIED
+            and fw.pcmd is _HOVER_PCMD and seq > fw.last_seq and _quiet(legs, seq)):
+        return False
+    _fill(legs, d, (math.nan,) * 7 + (math.nan,) * 7)  # (the samples: the sampler's)
+    return True
+
+
+def _quiet(legs, seq: int) -> bool:
+    """The arrays hold the plant's state and its flight's parameters; a quiet firmware:
+    its held PCMD applied, not capped, traffic seen, no link loss or hover noted, and
+    command number ``seq`` accepted — the PCMDs ``legs.command``'s (no faults)."""
+    plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
+    old = legs._p_key
+    return (legs.takes_commands and legs.live_out is not None
+            and len(plant.__dict__) == legs._plant_len
+            and len(sensors.__dict__) == legs._sensors_len
+            and fw.pcmd is fw._applied_pcmd and not fw.alt_capped
+            and fw.last_cmd_t is not None and not fw.link_lost and not fw.lost_com_hover
+            and (seq == 1 or seq > fw.last_seq)
+            and old and old[0] is plant.params and old[1] is plant.noise
+            and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign)
+
+
+def _fill(legs, d: np.ndarray, links: tuple) -> None:
+    """``d`` from the firmware's and the plant's state, ``links`` its samples' numbers (from
+    ``D_POSE_RX`` to ``D_NAV_VY``), nothing taken or applied yet."""
+    plant, fw = legs.plant, legs.firmware
     roll, pitch, gaz, yaw, hold = legs._saved["_current"]
     applied = fw.applied
     progressive = applied[4] is True
-    px, py, pz = pose.position_m.tolist()
     w0, w1, w2 = plant.wind_mps.tolist()
     _PUT_D(d, 0, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
            *(applied[:4] if progressive else (0.0, 0.0, 0.0, 0.0)),
-           1.0 if progressive else 0.0, *pcmd[1:], fw.last_cmd_t,
+           1.0 if progressive else 0.0, *fw.pcmd[1:], fw.last_cmd_t,
            1.0 if fw.comwdg_latched else 0.0, 1.0 if fw.comwdg_clear == "any" else 0.0,
            fw.comwdg_s, fw.hover_after_s, fw.link_loss_s, fw._lead_s(),
-           fw.config.altitude_max_m, w0, w1, w2, sensors.mocap_latency_s, math.nan,
-           sensors.pose_rx_t_s, pose.t_s, px, py, pz, pose.psi_rad, 0.0,
-           sensors.nav_rx_t_s, nav.t_s, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
-           nav.vx_body_mps, nav.vy_body_mps, 0.0, 0.0)  # (and no PCMD yet)
-    return True
+           fw.config.altitude_max_m, w0, w1, w2, legs.sensors.mocap_latency_s, math.nan,
+           *links[:6], 0.0, *links[7:], 0.0, 0.0)
+
 
 def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:
     """What a block of ticks left in ``d`` and ``legs``' arrays, written back as the Python
@@ -191,5 +248,24 @@ def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:
         legs._saved["_current"] = (*v[D_ROLL:D_YAW + 1], v[D_HOLD] != 0.0)
     if ran:
         legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
-                       v[D_T_NAV] if v[D_TOOK_NAV] else None)
-  # kernels calling other files: core/kernel_cache.py
+                       v[D_T_NAV] if v[D_TOOK_NAV] else None, _FLYING)
+
+
+def after_descent(legs, d: np.ndarray, seq: int, ran: bool) -> None:
+    """What :func:`drone_descent` left, written back as ``legs.land_again`` and the legs'
+    runs would have: each tick's datagram (REF land, hover PCMD) counted and accepted, the
+    last one's PCMD numbered ``seq``; the newest samples (``ran``: a run did legs)."""
+    fw, v = legs.firmware, d.tolist()
+    fw.comwdg_latched = v[D_LATCHED] != 0.0
+    n = int(v[D_COMMANDS])
+    if n:
+        c = legs.counters
+        c.at_datagrams_in += n
+        c.at_commands_in += 2 * n
+        c.at_commands_applied += 2 * n
+        fw.last_seq = seq
+        fw.last_cmd_t = v[D_LAST_CMD_T]
+        fw.ref_emergency = fw.ref_start = False  # (REF land's, while LANDING)
+    if ran:
+        legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
+                       v[D_T_NAV] if v[D_TOOK_NAV] else None, _LANDING)

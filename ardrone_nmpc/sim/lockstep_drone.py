@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.core.types import FlightMode, PlantTruth, TickInputs
 from ardrone_nmpc.links.drone_commands import TakeoffGuard
@@ -35,6 +37,7 @@ _HOVER = Pcmd.hover()
 # REF land made once: a body's checks cost ~3 µs, and the landing holds it every tick of its
 # descent (a Ref is frozen: one instance serves every send)
 _LAND = Ref.landing()
+_DESCENT_TICKS = 64  # the most ticks of a landing one compiled call flies
 _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
@@ -94,6 +97,7 @@ class LockstepDrone(ConfigHandshake):
         # the sampler's compiled legs (None without): the truth of their last run while they
         # hold the state (a legs object no longer used never runs: its live_out stays None)
         self._legs = self.sensors._legs
+        self._descent = np.zeros(drone_block.D_SIZE)  # (descend's numbers)
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
                           and type(plant).truth is AirframePlant.truth)
@@ -146,12 +150,38 @@ class LockstepDrone(ConfigHandshake):
             self.t_exp_s = t_exp_s
         drone_block.after_block(self.sensors._legs, d, self._seq, ran)
 
-    def block_ran_to(self, t_s: float) -> None:
-        """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block ended
-        after its legs."""
-        left = self.sensors._legs.block_ran_to()
+    def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING) -> None:
+        """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block of a
+        plant in ``mode`` ended after its legs."""
+        left = self.sensors._legs.block_ran_to(mode)
         if left is not ALL_DONE:
             self.sensors.go_on(t_s, left)
+
+    def descend(self, t_first_s: float, k: int, period_s: float, deadline_s: float,
+                t_start_s: float) -> tuple[int, bool]:
+        """Ticks ``k`` … of a landing a runner waits out (plant time ``t_first_s +
+        k·period_s``, experiment time that less ``t_start_s``: each :meth:`advance_to`
+        then :meth:`land`) in one compiled call (``sim/drone_block.drone_descent``) while
+        each is the usual one, until the plant's time reaches ``deadline_s``: ``(ticks
+        done, whether the next tick's legs ran)`` — that tick's rest (:meth:`land`, …) is
+        the caller's. ``(0, False)``: nothing done (the tick is not one it flies)."""
+        legs, d = self.sensors._legs, self._descent
+        if not (legs is not None and self._ref is _LAND and self._ref_unsent is None
+                and self.sim.faults is None
+                and drone_block.descent_entry(legs, d, self._seq + 1)):
+            return 0, False
+        n, status = drone_block.drone_descent(d, *legs._args, t_first_s, period_s, k,
+                                              _DESCENT_TICKS, deadline_s)
+        legs_ran = status == drone_block.LEGS_PARTIAL
+        self._seq += 2 * n
+        if n or legs_ran:
+            self.t_exp_s = t_first_s + (k + n - (0 if legs_ran else 1)) * period_s - t_start_s
+        drone_block.after_descent(legs, d, self._seq, n > 0 or legs_ran)
+        if status == drone_block.LEGS_SHORT:
+            legs.refill()
+        if legs_ran:
+            self.block_ran_to(t_first_s + (k + n) * period_s, FlightMode.LANDING)
+        return n, legs_ran
 
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last

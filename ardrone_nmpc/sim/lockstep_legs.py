@@ -653,17 +653,17 @@ class CompiledLegs:
             return self.run(t_s)
         return self._ran_to(raw, o, mode, hover_due, new_mode, ends)
 
-    def ran_block(self, t_pose, t_nav) -> None:
-        """The arrays after a block of ticks' runs (``sim/drone_block``): what a tick reads
-        of the last run, and the newest samples (their event times; None: taken before the
-        block, the sampler's still)."""
+    def ran_block(self, t_pose, t_nav, mode) -> None:
+        """The arrays after a block of ticks' runs (``sim/drone_block``) of a plant in
+        ``mode``: what a tick reads of the last run, and the newest samples (their event
+        times; None: taken before the block, the sampler's still)."""
         raw = self._run_bytes()
         self._ran = True
         self.live_raw, self.live_out = raw, _GET_RUN(raw)
-        self._took(raw, self.live_out, t_pose, t_nav, _FLYING)
+        self._took(raw, self.live_out, t_pose, t_nav, mode)
 
-    def block_ran_to(self) -> tuple[list, bool]:
-        """:meth:`run`'s rest for the tick a block ended after its legs (their run's
-        bytes still in the arrays): what it left to the Python path."""
+    def block_ran_to(self, mode) -> tuple[list, bool]:
+        """:meth:`run`'s rest for the tick a block of a plant in ``mode`` ended after its
+        legs (their run's bytes still in the arrays): what it left to the Python path."""
         raw = self._run_bytes()
-        return self._ran_to(raw, _GET_RUN(raw), _FLYING, False, False, 0.0)
+        return self._ran_to(raw, _GET_RUN(raw), mode, False, False, 0.0)
