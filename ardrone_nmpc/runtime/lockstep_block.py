@@ -7,15 +7,16 @@ around them: objects for the samples, the firmware's PCMD, the stages' written s
 row. On the usual tick none of that Python decides anything. :func:`tick_block` flies up to
 ``n_max`` ticks without it: :func:`~ardrone_nmpc.sim.drone_block.drone_legs`,
 :func:`~.control_tick.control_tick`, :func:`~ardrone_nmpc.sim.drone_block.drone_command`,
-and a row of numbers a tick (``runs/log_columns.BLOCK_ROW``); :class:`TickBlocks` writes
-back to the Python objects what the last tick left — the same values the per-tick path
-leaves — and the runner writes the rows (docs/architecture.md, "Blocks of ticks").
+and a row of numbers a tick (``runs/block_row``); :class:`TickBlocks` writes back to the
+Python objects what the last tick left — the same values the per-tick path leaves — and
+the runner writes the rows (docs/architecture.md, runtime).
 
-A tick that is not the usual one ends the block where Python must take over (:data:`EXIT`
-codes): before the tick (a watchdog due, a block of normals short: nothing of it done),
-after its legs (a leg the kernel leaves to Python, a mode change: the legs' own after-run
-code goes on), or after the controller's call (not nominal, a response fit due, a command
-the firmware caps: the tick goes on in ``Tick.step`` from the call's answer).
+A tick that is not the usual one ends the block where Python must take over (``EXIT_*``):
+before the tick (a watchdog due: nothing of it done), after its legs (a leg the kernel
+leaves to Python, a mode change: the legs' own after-run code goes on), or after the
+controller's call (not nominal, a command the firmware caps: the tick goes on in
+``Tick.step`` from the call's answer). A response fit due after a tick and a block of the
+drone's normals run short end a block too, and are made between two blocks.
 """
 
 from __future__ import annotations
@@ -31,16 +32,15 @@ from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached
 from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
-from ardrone_nmpc.runs import block_row as lc
+from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
+from ardrone_nmpc.runs import block_row as br
 from ardrone_nmpc.runtime.control_tick import control_tick
 from ardrone_nmpc.runtime.tick_kernels import E_X
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 
 __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
-           "EXIT_SHORT", "TickBlocks",
-           "tick_block"]
+           "EXIT_SHORT", "TickBlocks", "tick_block"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
@@ -59,7 +59,6 @@ C_SIZE = C_ANSWER + 19
 # the answer's integer numbers (code, flag, GMRES and Newton iterations, bits, feed code)
 _ANSWER_INTS = (0, 3, 6, 7, 17, 18)
 _perf_counter_ns = time.perf_counter_ns
-
 
 
 @njit(cache=True, **OUTER_KERNEL)
@@ -88,14 +87,14 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         t0_ns = monotonic_ns()
         nxt = int(c[C_NEXT])
         vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
+        # (what the links hold: d's newest pose and navdata sample, no ẋ, ẏ of theirs)
         answer = control_tick(
             t_s, d[db.D_POSE_RX], d[db.D_T_NAV], bits, d[db.D_BATTERY], d[db.D_NAV_ROLL],
             d[db.D_NAV_PITCH], d[db.D_PX], d[db.D_PY], d[db.D_PZ], d[db.D_PSI], d[db.D_POSE_T],
             c[C_ZACC], False, 0.0, 0.0, est, limits, t_exp_s, dring, int(c[C_FIRST]), count,
-            c[C_LEAD_S], x_solve, shift,
-            states, work, rows, vz_last, nxt, mem, iprm,
-            horizon, False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
-            tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
+            c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm, horizon,
+            False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps, tilt_cap_rad,
+            gain, e, v, y, response, 1, offset, offset_flags)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
         if code != 0 or not db.drone_command(d, out, roll, pitch, gaz, yaw):
@@ -126,26 +125,27 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
 @njit(cache=True, **INNER_KERNEL)
 def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw,
          sat_bits, solve_us, norm, gmres_it, newton_it, mocap_ms, nav_ms, d, compute_us, out):
-    """One tick's numbers in ``BLOCK_ROW``'s order (``runs/log_columns``)."""
+    """One tick's numbers in ``runs/block_row``'s order."""
     x = est[E_X:E_X + STATE_DIM]
-    row[lc.BR_T] = t_exp_s
-    row[lc.BR_X], row[lc.BR_Y], row[lc.BR_Z], row[lc.BR_PSI] = x[0], x[2], x[4], x[6]
-    row[lc.BR_VX], row[lc.BR_VY], row[lc.BR_VZ] = x[1], x[3], x[5]
-    row[lc.BR_X_REF], row[lc.BR_Y_REF] = ref_now[IX_X], ref_now[IX_Y]
-    row[lc.BR_Z_REF], row[lc.BR_PSI_REF] = ref_now[IX_Z], ref_now[IX_PSI]
-    row[lc.BR_ZACC], row[lc.BR_PHI], row[lc.BR_THETA], row[lc.BR_RATE] = zacc, phi, theta, rate
-    row[lc.BR_VZ_REF] = vz
-    row[lc.BR_ROLL], row[lc.BR_PITCH], row[lc.BR_GAZ], row[lc.BR_YAW] = roll, pitch, gaz, yaw
-    row[lc.BR_SATURATED], row[lc.BR_SOLVE_US], row[lc.BR_NORM] = sat_bits, solve_us, norm
-    row[lc.BR_GMRES], row[lc.BR_NEWTON] = gmres_it, newton_it
-    row[lc.BR_MOCAP_MS], row[lc.BR_NAV_MS] = mocap_ms, nav_ms
-    row[lc.BR_BATTERY], row[lc.BR_COMPUTE_US] = d[db.D_BATTERY], compute_us
-    row[lc.BR_MOCAP_T], row[lc.BR_NAV_VX] = d[db.D_POSE_T], d[db.D_NAV_VX]
-    row[lc.BR_NAV_VY], row[lc.BR_NAV_ROLL] = d[db.D_NAV_VY], d[db.D_NAV_ROLL]
-    row[lc.BR_NAV_PITCH] = d[db.D_NAV_PITCH]
-    row[lc.BR_TRUE_X], row[lc.BR_TRUE_Y] = out[ks.O_STATE], out[ks.O_STATE + 1]
-    row[lc.BR_TRUE_Z], row[lc.BR_TRUE_PSI] = out[ks.O_STATE + 2], out[ks.O_STATE + 8]
-    row[lc.BR_TRUE_VZ] = out[ks.O_STATE + 5]
+    row[br.BR_T] = t_exp_s
+    row[br.BR_X], row[br.BR_Y], row[br.BR_Z] = x[IX_X], x[IX_Y], x[IX_Z]
+    row[br.BR_PSI], row[br.BR_VX], row[br.BR_VY] = x[IX_PSI], x[IX_VX], x[IX_VY]
+    row[br.BR_VZ] = x[IX_VZ]
+    row[br.BR_X_REF], row[br.BR_Y_REF] = ref_now[IX_X], ref_now[IX_Y]
+    row[br.BR_Z_REF], row[br.BR_PSI_REF] = ref_now[IX_Z], ref_now[IX_PSI]
+    row[br.BR_ZACC], row[br.BR_PHI], row[br.BR_THETA], row[br.BR_RATE] = zacc, phi, theta, rate
+    row[br.BR_VZ_REF] = vz
+    row[br.BR_ROLL], row[br.BR_PITCH], row[br.BR_GAZ], row[br.BR_YAW] = roll, pitch, gaz, yaw
+    row[br.BR_SATURATED], row[br.BR_SOLVE_US], row[br.BR_NORM] = sat_bits, solve_us, norm
+    row[br.BR_GMRES], row[br.BR_NEWTON] = gmres_it, newton_it
+    row[br.BR_MOCAP_MS], row[br.BR_NAV_MS] = mocap_ms, nav_ms
+    row[br.BR_BATTERY], row[br.BR_COMPUTE_US] = d[db.D_BATTERY], compute_us
+    row[br.BR_MOCAP_T], row[br.BR_NAV_VX] = d[db.D_POSE_T], d[db.D_NAV_VX]
+    row[br.BR_NAV_VY], row[br.BR_NAV_ROLL] = d[db.D_NAV_VY], d[db.D_NAV_ROLL]
+    row[br.BR_NAV_PITCH] = d[db.D_NAV_PITCH]
+    row[br.BR_TRUE_X], row[br.BR_TRUE_Y] = out[ks.O_STATE], out[ks.O_STATE + 1]
+    row[br.BR_TRUE_Z], row[br.BR_TRUE_PSI] = out[ks.O_STATE + 2], out[ks.O_STATE + 8]
+    row[br.BR_TRUE_VZ] = out[ks.O_STATE + 5]
 
 
 class TickBlocks:
@@ -184,9 +184,8 @@ class TickBlocks:
         self.period_s, self.t_first_s = period_s, t_first_s
         self.d = np.zeros(db.D_SIZE)
         self.c = np.zeros(C_SIZE)
-        #: the rows of the last block (:data:`~ardrone_nmpc.runs.block_row.BLOCK_ROW`
-        #: numbers a tick)
-        self.table = np.zeros((n_max, lc.BLOCK_ROW))
+        #: the rows of the last block (``runs/block_row``: BLOCK_ROW numbers a tick)
+        self.table = np.zeros((n_max, br.BLOCK_ROW))
         self._open = False
         self._last: list | None = None  # the open chain's last tick's row, its t_exp
         self._last_t_exp = math.nan
@@ -324,7 +323,7 @@ class TickBlocks:
             c[C_FED] = 0.0
         t0_ns = _perf_counter_ns()
         events = response.refit(t_s)
-        self.table[n - 1, lc.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
+        self.table[n - 1, br.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
         c[C_FIRST], c[C_COUNT], c[C_LEAD_S] = delay.first, delay.count, delay.lead_s
         c[C_NEXT_FIT_S] = response._next_fit_s
         return events
@@ -334,9 +333,9 @@ class TickBlocks:
         supervisor's and Supervision's, the delay ring's next row, the response's
         estimate to refit when read)."""
         tick, c, v = self.tick, self.c, self._last
-        tick.after_solve.kept(v[lc.BR_ZACC], v[lc.BR_PHI], v[lc.BR_THETA], v[lc.BR_RATE],
-                              v[lc.BR_VZ_REF], v[lc.BR_ROLL], v[lc.BR_PITCH], v[lc.BR_GAZ],
-                              v[lc.BR_YAW], int(v[lc.BR_SATURATED]))
+        tick.after_solve.kept(v[br.BR_ZACC], v[br.BR_PHI], v[br.BR_THETA], v[br.BR_RATE],
+                              v[br.BR_VZ_REF], v[br.BR_ROLL], v[br.BR_PITCH], v[br.BR_GAZ],
+                              v[br.BR_YAW], int(v[br.BR_SATURATED]))
         delay = tick.delay
         delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
         if c[C_FED] != 0.0:

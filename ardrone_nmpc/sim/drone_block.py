@@ -185,11 +185,13 @@ def descent_entry(legs, d: np.ndarray, seq: int) -> bool:
     """``d`` filled for :func:`drone_descent` from ticks whose REF land is number ``seq``
     — or False, nothing written, unless the next tick is one it flies: ``legs.run``'s tick
     of a LANDING plant the navdata shows LANDING (:func:`_quiet`), the REF land and hover
-    PCMD ``legs.land_again`` holds (the hover applied)."""
+    PCMD ``legs.land_again`` holds (the hover applied; REF land's flags, which it writes
+    again)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
     if not (legs.lands_again and plant._mode is _LANDING and sensors._nav_mode is _LANDING
             and sensors.target_cfg is None and fw.applied == _HOVER_APPLIED
-            and fw.pcmd is _HOVER_PCMD and seq > fw.last_seq and _quiet(legs, seq)):
+            and fw.pcmd is _HOVER_PCMD and not (fw.ref_start or fw.ref_emergency)
+            and seq > fw.last_seq and _quiet(legs, seq)):
         return False
     _fill(legs, d, (math.nan,) * 7 + (math.nan,) * 7)  # (the samples: the sampler's)
     return True
@@ -265,7 +267,6 @@ def after_descent(legs, d: np.ndarray, seq: int, ran: bool) -> None:
         c.at_commands_applied += 2 * n
         fw.last_seq = seq
         fw.last_cmd_t = v[D_LAST_CMD_T]
-        fw.ref_emergency = fw.ref_start = False  # (REF land's, while LANDING)
     if ran:
         legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
                        v[D_T_NAV] if v[D_TOOK_NAV] else None, _LANDING)
