@@ -33,6 +33,8 @@ from pathlib import Path
 
 #: The environment switch: ``0`` starts no background compile.
 ENV_SWITCH = "ARDRONE_NMPC_PRECOMPILE"
+#: … and the block compile's own: ``0`` starts the drone's child alone.
+BLOCKS_SWITCH = "ARDRONE_NMPC_PRECOMPILE_BLOCKS"
 #: How long :func:`join_child` waits before it stops a child that hangs (its own compile on a
 #: busy machine takes ~10 s)
 JOIN_TIMEOUT_S = 120.0
@@ -157,14 +159,15 @@ def compile_kernels() -> None:
 
 def start_block_compile() -> subprocess.Popen | None:
     """Start the compile of blocks of ticks' kernel in a process of its own, which nobody
-    waits for (module docstring) — unless the cache holds it, or another such process
-    started less than :data:`BLOCK_LOCK_S` ago (its lock file is beside the kernel's cache):
+    waits for (module docstring) — unless the cache holds it, :data:`BLOCKS_SWITCH` is
+    ``0``, or another such process started less than :data:`BLOCK_LOCK_S` ago (its lock
+    file is beside the kernel's cache):
     it waits for the runner's controller kernels to be cached (:data:`BLOCK_WAIT_S` at most:
     not compiled twice at once on two cores), then compiles ``tick_block``
     (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
     from ardrone_nmpc.runtime.lockstep_block import tick_block
 
-    if _in_cache(tick_block) is not False:
+    if os.environ.get(BLOCKS_SWITCH, "1") == "0" or _in_cache(tick_block) is not False:
         return None
     lock = _block_lock(tick_block)
     try:

@@ -49,10 +49,12 @@ def test_a_cold_cache_starts_the_child_and_it_fills_the_cache(tmp_path):
     assert _python(_COLD, cache) == "True"
     # the switch on (conftest turns it off for every other test): a child starts, and once it
     # has ended (waited for here) the cache holds the drone's and the attitude fit's kernels
-    assert _python(_START_AND_JOIN, cache, ARDRONE_NMPC_PRECOMPILE="1") == "started 0"
+    assert _python(_START_AND_JOIN, cache, ARDRONE_NMPC_PRECOMPILE="1",
+                   ARDRONE_NMPC_PRECOMPILE_BLOCKS="0") == "started 0"  # (blocks: below)
     assert set(EXPECTED) <= _cached(cache), sorted(_cached(cache))
     assert _python(_COLD, cache) == "False"
-    assert _python(_START, cache, ARDRONE_NMPC_PRECOMPILE="1") == "False"  # warm: no child
+    assert _python(_START, cache, ARDRONE_NMPC_PRECOMPILE="1",
+                   ARDRONE_NMPC_PRECOMPILE_BLOCKS="0") == "False"  # warm: no child
 
 
 def test_a_flight_leaves_the_cache_warm_and_the_switch_starts_no_child(tmp_path):
@@ -75,3 +77,63 @@ def test_a_child_that_outlives_the_wait_is_stopped(tmp_path):
     cache = tmp_path / "cache"
     cache.mkdir()
     assert _python(_START_AND_STOP, cache, ARDRONE_NMPC_PRECOMPILE="1") == "stopped -9"
+
+
+def test_one_block_compile_runs_at_a_time_and_a_dead_ones_lock_is_taken_over(tmp_path,
+                                                                               monkeypatch):
+    """The block compile (precompile.start_block_compile) starts when the cache lacks blocks
+    of ticks' kernel and no other started one less than BLOCK_LOCK_S ago — its lock beside
+    the kernel's cache; an older lock (a process that died) is taken over; none when the
+    cache holds it. (The process itself is not started here: Popen is recorded.)"""
+    import time
+
+    from ardrone_nmpc.runtime import precompile
+
+    started = []
+    monkeypatch.setattr(precompile.subprocess, "Popen",
+                        lambda args, **kw: started.append(args) or "process")
+    lock = tmp_path / "lockstep_block.compiling"
+    monkeypatch.setattr(precompile, "_block_lock", lambda kernel: lock)
+    cached = {"tick_block": False}
+    monkeypatch.setattr(precompile, "_in_cache", lambda kernel: cached["tick_block"])
+    assert precompile.start_block_compile() == "process" and lock.exists()
+    assert "warm_up_blocks" in started[0][-1]  # (the code it runs)
+    assert precompile.start_block_compile() is None  # one runs: none more
+    old = time.time() - precompile.BLOCK_LOCK_S - 1.0
+    os.utime(lock, (old, old))
+    assert precompile.start_block_compile() == "process" and len(started) == 2
+    assert lock.stat().st_mtime > old  # taken over: fresh again
+    lock.unlink()
+    cached["tick_block"] = True
+    assert precompile.start_block_compile() is None and len(started) == 2
+
+
+def test_a_cold_first_flight_flies_tick_by_tick_and_leaves_blocks_compiled_behind(tmp_path):
+    """On an empty cache the first flight does not wait for blocks of ticks' kernel: it
+    flies every tick its own way while a process of its own compiles the kernel (after the
+    flight's controller kernels are cached); then the cache holds it, its lock is gone, and
+    the next process's flight flies its usual ticks in blocks."""
+    import time
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    fly = ("from ardrone_nmpc.config.schema import config_from_dict\n"
+           "from ardrone_nmpc.runtime import lockstep_block\n"
+           "from ardrone_nmpc.runtime.lockstep import run_lockstep\n"
+           "n = []\n"
+           "fly = lockstep_block.TickBlocks.fly\n"
+           "def counted(self, *args):\n"
+           "    answer = fly(self, *args)\n"
+           "    n.append(answer[0])\n"
+           "    return answer\n"
+           "lockstep_block.TickBlocks.fly = counted\n"
+           "run_lockstep(config_from_dict({'name': 't', 'duration_s': 2.0,\n"
+           "                               'reference': {'kind': 'square'}}))\n"
+           "print(sum(n))")
+    assert _python(fly, cache, ARDRONE_NMPC_PRECOMPILE="1") == "0"  # no block: not compiled
+    deadline = time.monotonic() + 300.0  # (the block compile: ~10 s on two idle cores)
+    while not any(cache.rglob("lockstep_block.tick_block-*.nbc")) or any(
+            cache.rglob("lockstep_block.compiling")):
+        assert time.monotonic() < deadline, sorted(p.name for p in cache.rglob("*"))
+        time.sleep(0.5)
+    assert int(_python(fly, cache, ARDRONE_NMPC_PRECOMPILE="1")) > 20
