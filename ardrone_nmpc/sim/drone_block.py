@@ -235,38 +235,37 @@ def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:
     path's ticks would have left it: the firmware's state and counters after the PCMDs
     it applied (the last one numbered ``seq``), the plant's held command, the newest
     samples (``ran``: a run of the block did its legs or part of them)."""
-    fw, v = legs.firmware, d.tolist()
-    fw.comwdg_latched = v[D_LATCHED] != 0.0
-    n = int(v[D_COMMANDS])
-    if n:
-        c = legs.counters
-        c.at_datagrams_in += n
-        c.at_commands_in += n
-        c.at_commands_applied += n
-        fw.last_seq = seq
-        fw.last_cmd_t = v[D_LAST_CMD_T]
+    v = d.tolist()
+    if _written_back(legs, v, 1, seq, _FLYING if ran else None):
+        fw = legs.firmware
         fw.pcmd = fw._applied_pcmd = (_PROGRESSIVE, *v[D_CMD_ROLL:D_CMD_YAW + 1])
         fw.applied = (*v[D_APP_ROLL:D_APP_YAW + 1], True)
         legs._saved["_current"] = (*v[D_ROLL:D_YAW + 1], v[D_HOLD] != 0.0)
-    if ran:
-        legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
-                       v[D_T_NAV] if v[D_TOOK_NAV] else None, _FLYING)
 
 
 def after_descent(legs, d: np.ndarray, seq: int, ran: bool) -> None:
     """What :func:`drone_descent` left, written back as ``legs.land_again`` and the legs'
     runs would have: each tick's datagram (REF land, hover PCMD) counted and accepted, the
     last one's PCMD numbered ``seq``; the newest samples (``ran``: a run did legs)."""
-    fw, v = legs.firmware, d.tolist()
+    _written_back(legs, d.tolist(), 2, seq, _LANDING if ran else None)
+
+
+def _written_back(legs, v: list, per_datagram: int, seq: int, mode) -> bool:
+    """What :func:`after_block` and :func:`after_descent` share (``v``: ``d``'s numbers):
+    the com-watchdog bit; the datagrams of ``per_datagram`` commands accepted (counted,
+    the last numbered ``seq``, the time of the last); the newest samples of a plant in
+    ``mode`` (None: no run did legs). Whether any datagram was."""
+    fw = legs.firmware
     fw.comwdg_latched = v[D_LATCHED] != 0.0
     n = int(v[D_COMMANDS])
     if n:
         c = legs.counters
         c.at_datagrams_in += n
-        c.at_commands_in += 2 * n
-        c.at_commands_applied += 2 * n
+        c.at_commands_in += per_datagram * n
+        c.at_commands_applied += per_datagram * n
         fw.last_seq = seq
         fw.last_cmd_t = v[D_LAST_CMD_T]
-    if ran:
+    if mode is not None:
         legs.ran_block(v[D_T_POSE] if v[D_TOOK_POSE] else None,
-                       v[D_T_NAV] if v[D_TOOK_NAV] else None, _LANDING)
+                       v[D_T_NAV] if v[D_TOOK_NAV] else None, mode)
+    return n > 0
