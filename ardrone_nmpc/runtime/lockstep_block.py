@@ -80,7 +80,7 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         t_s = t_first_s + k * period_s
         t_exp_s = (k - n_settle) * period_s
         status = db.drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s,
-                               ks.MODE_FLYING)
+                               ks.MODE_FLYING, 0.0)
         if status != db.LEGS_DONE:
             return i, (EXIT_AFTER_LEGS if status == db.LEGS_PARTIAL else
                        EXIT_SHORT if status == db.LEGS_SHORT else EXIT_BEFORE)

@@ -59,10 +59,11 @@ LEGS_DONE, LEGS_NOT_QUIET, LEGS_SHORT, LEGS_PARTIAL = 0, 1, 2, 3
 
 
 @njit(cache=True, **INNER_KERNEL)
-def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode):
-    """``CompiledLegs.run`` of a plant in the kernel's ``mode`` (FLYING, or LANDING: no
-    touch-down flown, ``sv[S_ENDS]`` 0) under a quiet firmware to plant time ``t_s``: its
-    tests, the kernel's run, the com-watchdog bit after it (``LEGS_*``)."""
+def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends):
+    """``CompiledLegs.run`` of a plant in the kernel's ``mode`` (FLYING, or LANDING: its
+    touch-down flown if ``ends`` is 1, ``sv[S_ENDS]``) under a quiet firmware to plant time
+    ``t_s``: its tests, the kernel's run, the com-watchdog bit after it (``LEGS_*``; a run
+    that changed the mode is ``LEGS_PARTIAL``: the legs' after-run code shows it)."""
     silence = t_s - d[D_LAST_CMD_T]
     if silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]:
         return LEGS_NOT_QUIET  # a watchdog acts on the way: the Python path's
@@ -75,7 +76,7 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode):
     sv[ks.S_LEAD] = d[D_LEAD_S] if climbing else 0.0
     sv[ks.S_ALT_MAX] = d[D_ALT_MAX] if climbing else 0.0
     sv[ks.S_W0], sv[ks.S_W1], sv[ks.S_W2] = d[D_W0], d[D_W1], d[D_W2]
-    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = mode, t_s, 0.0
+    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = mode, t_s, ends
     ks.lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n)
     done, n_events = iv[ks.I_DONE], iv[ks.I_EVENTS]
     if done < 0:
@@ -128,17 +129,18 @@ def drone_command(d, out, roll, pitch, gaz, yaw):
 
 @njit(cache=True, **OUTER_KERNEL)
 def drone_descent(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_first_s, period_s, k0,
-                  n_max, deadline_s):
+                  n_max, deadline_s, ends):
     """Ticks ``k0`` … of a landing the runner waits out (plant time ``t_first_s +
     k·period_s``): each the legs' run of the LANDING plant, then the REF land and hover PCMD
     the link holds, accepted (``CompiledLegs.land_again``: traffic for the watchdogs, the
     com-watchdog bit cleared), until the plant's time reaches ``deadline_s`` (the tick that
     reaches it counted) — ``(ticks, LEGS_*)``: a tick not done whole is the Python path's
-    (its legs ran, or not: the answer says which, as :func:`drone_legs`')."""
+    (its legs ran, or not: the answer says which, as :func:`drone_legs`'; the touch-down's,
+    flown if ``ends`` is 1, is such a tick)."""
     out = buf[ks.B_OUT:ks.B_IV]
     for i in range(n_max):
         status = drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n,
-                            t_first_s + (k0 + i) * period_s, ks.MODE_LANDING)
+                            t_first_s + (k0 + i) * period_s, ks.MODE_LANDING, ends)
         if status != LEGS_DONE:
             return i, status
         now = out[ks.O_T]

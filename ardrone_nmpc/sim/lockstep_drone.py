@@ -150,10 +150,12 @@ class LockstepDrone(ConfigHandshake):
             self.t_exp_s = t_exp_s
         drone_block.after_block(self.sensors._legs, d, self._seq, ran)
 
-    def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING) -> None:
+    def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING,
+                     ends: float = 0.0) -> None:
         """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block of a
-        plant in ``mode`` ended after its legs."""
-        left = self.sensors._legs.block_ran_to(mode)
+        plant in ``mode`` ended after its legs (``ends`` 1: a run that may fly the mode's
+        end)."""
+        left = self.sensors._legs.block_ran_to(mode, ends)
         if left is not ALL_DONE:
             self.sensors.go_on(t_s, left)
 
@@ -170,8 +172,11 @@ class LockstepDrone(ConfigHandshake):
                 and self.sim.faults is None
                 and drone_block.descent_entry(legs, d, self._seq + 1)):
             return 0, False
+        # (the touch-down flown too where the guard may see its sample after the run, as
+        # CompiledLegs.run flies it: the REF held is a landing's, no climb, no hover due)
+        ends = 1.0 if self.sensors.defers_mode(FlightMode.LANDED) else 0.0
         n, status = drone_block.drone_descent(d, *legs._args, t_first_s, period_s, k,
-                                              _DESCENT_TICKS, deadline_s)
+                                              _DESCENT_TICKS, deadline_s, ends)
         legs_ran = status == drone_block.LEGS_PARTIAL
         self._seq += 2 * n
         if n or legs_ran:
@@ -180,7 +185,7 @@ class LockstepDrone(ConfigHandshake):
         if status == drone_block.LEGS_SHORT:
             legs.refill()
         if legs_ran:
-            self.block_ran_to(t_first_s + (k + n) * period_s, FlightMode.LANDING)
+            self.block_ran_to(t_first_s + (k + n) * period_s, FlightMode.LANDING, ends)
         return n, legs_ran
 
     def take_events(self) -> list[tuple[float, dict]]:

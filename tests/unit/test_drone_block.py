@@ -66,7 +66,7 @@ def test_ticks_as_numbers_leave_the_drone_the_per_tick_path_leaves(sim):
         t = t0 + k * PERIOD_S
         a.advance_to(t, t - t0)
         a.set_command(*cmd)
-        assert drone_legs(d, *legs._args, t, ks.MODE_FLYING) == db.LEGS_DONE
+        assert drone_legs(d, *legs._args, t, ks.MODE_FLYING, 0.0) == db.LEGS_DONE
         assert drone_command(d, out, *cmd)
     n = len(COMMANDS)
     b._seq += n
