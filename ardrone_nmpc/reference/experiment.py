@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
-from ardrone_nmpc.reference.trajectories import (ReferenceError, Trajectory, Waypoints,
-                                                  is_times, make_trajectory)
+from ardrone_nmpc.reference.trajectories import (ReferenceError, Trajectory, is_times,
+                                                  lookup_args, make_trajectory)
 
 #: ``ndarray.min`` of a 1-D array is this reduction (numpy/_core/_methods.py: ``_amin``).
 _min = np.minimum.reduce
@@ -38,11 +38,10 @@ class HoldStartThen:
         start[[1, 3, 5]] = 0.0  # at rest: ẋ, ẏ, ż = 0
         self._start = start
         self.duration_s = trajectory.duration_s
-        # a waypoint trajectory's arrays for the tick's one-call horizon lookup
-        # (runtime/tick_kernels.nmpc_inputs); None for any other kind
-        self.waypoint_args = (trajectory._kernel_args + (start,)
-                              if isinstance(trajectory, Waypoints)
-                              and type(trajectory).state_at is Waypoints.state_at else None)
+        # the arrays of the tick's one-call horizon lookup (runtime/tick_kernels.nmpc_inputs)
+        # of a waypoint trajectory or a set point (hover, step); None for any other kind
+        args = lookup_args(trajectory)
+        self.waypoint_args = None if args is None else args + (start,)
 
     def state_at(self, t_s):
         if is_times(t_s):  # the horizon's times: no conversions; the same reduction as .min()
