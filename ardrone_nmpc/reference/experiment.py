@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
-from ardrone_nmpc.reference.trajectories import (ReferenceError, Trajectory, is_times,
-                                                  lookup_args, make_trajectory)
+from ardrone_nmpc.reference.trajectories import (Hover, ReferenceError, Step, Trajectory,
+                                                  Waypoints, is_times, make_trajectory)
 
 #: ``ndarray.min`` of a 1-D array is this reduction (numpy/_core/_methods.py: ``_amin``).
 _min = np.minimum.reduce
@@ -27,6 +27,18 @@ FENCE_CHECK_STEP_S = 0.01
 #: ~100 Hz over the whole experiment (~0.2 ms a flight). Only passes are kept; bounded.
 _INSIDE: set = set()
 _INSIDE_MAX = 256
+
+
+def lookup_args(trajectory: Trajectory) -> tuple | None:
+    """The arrays of the compiled waypoint lookup (``reference/kernels.waypoint_states``) whose
+    states are ``trajectory.state_at``'s bit for bit: a waypoint path's (``Waypoints``: the
+    square, a path file) or a set point's (``Hover``, ``Step``) — None for any other kind, a
+    subclass that overrides ``state_at`` (its own is called) or a set point the lookup cannot
+    give exactly (``trajectories._set_point_args``)."""
+    for cls in (Waypoints, Hover, Step):
+        if isinstance(trajectory, cls):
+            return trajectory._kernel_args if type(trajectory).state_at is cls.state_at else None
+    return None
 
 
 class HoldStartThen:

@@ -54,7 +54,6 @@ __all__ = [
     "horizon",
     "ignored_fields",
     "input_files",
-    "lookup_args",
     "make_trajectory",
     "path_file",
 ]
@@ -273,18 +272,6 @@ def _set_point_args(before: np.ndarray, after: np.ndarray, step_time_s: float) -
         if (a + 0.0 * (b - a)).tobytes() != a.tobytes():
             return None
     return (np.full(2, step_time_s), positions_m, psi_rad, np.zeros(1), np.zeros((1, 3)))
-
-
-def lookup_args(trajectory: Trajectory) -> tuple | None:
-    """The arrays of the compiled waypoint lookup (``reference/kernels.waypoint_states``) whose
-    states are ``trajectory.state_at``'s bit for bit: a :class:`Waypoints`' (the square, a
-    path file) or a set point's (:class:`Hover`, :class:`Step`) — None for any other kind, a
-    subclass that overrides ``state_at`` (its own is called) or a set point the lookup cannot
-    give exactly (:func:`_set_point_args`)."""
-    for cls in (Waypoints, Hover, Step):
-        if isinstance(trajectory, cls):
-            return trajectory._kernel_args if type(trajectory).state_at is cls.state_at else None
-    return None
 
 
 # ----------------------------------------------------------------------------- piecewise linear

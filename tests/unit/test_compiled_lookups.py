@@ -1,8 +1,8 @@
 """The compiled per-tick lookups give the bits of the numpy expressions they replace (issue 26):
 the waypoint reference (``reference/kernels``; a hover and a step through it too) and the
-attitude-response fit's fold (``estimation/response_kernels``), each against the vectorised numpy formula written from its
-documented definition (``searchsorted``, broadcasting), at ordinary times, on the knots, next
-to them, and at NaN and ±inf."""
+attitude-response fit's fold (``estimation/response_kernels``), each against the vectorised
+numpy formula written from its documented definition (``searchsorted``, broadcasting; a
+step's closed form), at ordinary times, on the knots, next to them, and at NaN and ±inf."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from ardrone_nmpc.core.numerics import callable_from_python
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 from ardrone_nmpc.estimation import response_kernels
-from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.reference.experiment import HoldStartThen, lookup_args
 from ardrone_nmpc.reference.kernels import waypoint_states
-from ardrone_nmpc.reference.trajectories import Hover, Square, Step, Waypoints, lookup_args
+from ardrone_nmpc.reference.trajectories import Hover, Square, Step, Waypoints
 
 # the attitude fit's inner kernels, callable from Python (the same source and options)
 held_count = callable_from_python(response_kernels.held_count)

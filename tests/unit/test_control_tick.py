@@ -280,7 +280,7 @@ def test_the_kernel_answers_not_nominal_before_any_write():
                                   "r_case1.yaml", "stability_n5_dtau03.yaml", "square.yaml"])
 def test_the_set_points_and_waypoints_take_the_call(name):
     """Hover and step references are looked up by the waypoint kernel
-    (``reference/trajectories.lookup_args``): their nominal ticks are the one call's."""
+    (``reference/experiment.lookup_args``): their nominal ticks are the one call's."""
     cfg = config(name)
     assert Tick(cfg, experiment_trajectory(cfg)).control_tick is not None
 
