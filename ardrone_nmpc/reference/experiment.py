@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
-from ardrone_nmpc.reference.trajectories import (ReferenceError, Trajectory, Waypoints,
-                                                  is_times, make_trajectory)
+from ardrone_nmpc.reference.trajectories import (Hover, ReferenceError, Step, Trajectory,
+                                                  Waypoints, is_times, make_trajectory)
 
 #: ``ndarray.min`` of a 1-D array is this reduction (numpy/_core/_methods.py: ``_amin``).
 _min = np.minimum.reduce
@@ -33,6 +33,18 @@ _INSIDE_MAX = 256
 _MADE: dict = {}
 
 
+def lookup_args(trajectory: Trajectory) -> tuple | None:
+    """The arrays of the compiled waypoint lookup (``reference/kernels.waypoint_states``) whose
+    states are ``trajectory.state_at``'s bit for bit: a waypoint path's (``Waypoints``: the
+    square, a path file) or a set point's (``Hover``, ``Step``) — None for any other kind, a
+    subclass that overrides ``state_at`` (its own is called) or a set point the lookup cannot
+    give exactly (``trajectories._set_point_args``)."""
+    for cls in (Waypoints, Hover, Step):
+        if isinstance(trajectory, cls):
+            return trajectory._kernel_args if type(trajectory).state_at is cls.state_at else None
+    return None
+
+
 class HoldStartThen:
     """``trajectory`` for t ≥ 0, its t = 0 point at rest for t < 0 (the settle phase)."""
 
@@ -42,11 +54,10 @@ class HoldStartThen:
         start[[1, 3, 5]] = 0.0  # at rest: ẋ, ẏ, ż = 0
         self._start = start
         self.duration_s = trajectory.duration_s
-        # a waypoint trajectory's arrays for the tick's one-call horizon lookup
-        # (runtime/tick_kernels.nmpc_inputs); None for any other kind
-        self.waypoint_args = (trajectory._kernel_args + (start,)
-                              if isinstance(trajectory, Waypoints)
-                              and type(trajectory).state_at is Waypoints.state_at else None)
+        # the arrays of the tick's one-call horizon lookup (runtime/tick_kernels.nmpc_inputs)
+        # of a waypoint trajectory or a set point (hover, step); None for any other kind
+        args = lookup_args(trajectory)
+        self.waypoint_args = None if args is None else args + (start,)
 
     def state_at(self, t_s):
         if is_times(t_s):  # the horizon's times: no conversions; the same reduction as .min()

@@ -206,6 +206,8 @@ class Hover:
         self._state = _states(1)[0]
         self._state[list(_POS)] = self.position_m
         self._state[IX_PSI] = self.psi_rad
+        # the compiled lookup's arrays: a step at t = −∞ from the point to itself
+        self._kernel_args = _set_point_args(self._state, self._state, -math.inf)
 
     def state_at(self, t_s: np.ndarray) -> np.ndarray:
         out = np.empty((_times(t_s).size, STATE_DIM))  # np.tile's rows, without its µs
@@ -242,6 +244,7 @@ class Step:
         self.step_time_s = float(step_time_s)
         self._before = Hover(self.start_m, self.start_psi_rad).state_at(0.0)[0]
         self._after = Hover(self.target_m, self.target_psi_rad).state_at(0.0)[0]
+        self._kernel_args = _set_point_args(self._before, self._after, self.step_time_s)
 
     def state_at(self, t_s: np.ndarray) -> np.ndarray:
         t = _times(t_s)
@@ -250,6 +253,25 @@ class Step:
     def polyline_m(self) -> np.ndarray:
         """Start and target, (2, 3); (1, 3) if they coincide (a heading-only step)."""
         return _dedupe(np.vstack([self.start_m, self.target_m]))
+
+
+def _set_point_args(before: np.ndarray, after: np.ndarray, step_time_s: float) -> tuple | None:
+    """The arrays of the compiled waypoint lookup (``reference/kernels.waypoint_states``) whose
+    states are ``before`` at t < ``step_time_s`` and ``after`` from it on, both at rest —
+    :meth:`Step.state_at`'s bits — or None where the lookup cannot give them exactly.
+
+    Two knots at ``step_time_s``: the segment between them is never entered, so at or after
+    the step the lookup returns the last knot and +0.0 velocities as they are; before it (and
+    at a NaN time) it computes ``a + 0.0·(b − a)`` from the first knot a: a's bits, except for
+    a −0.0 coordinate (or an overflowing difference) — that set point keeps numpy's path."""
+    positions_m = np.vstack([before[list(_POS)], after[list(_POS)]])
+    psi_rad = np.array([before[IX_PSI], after[IX_PSI]])
+    a = np.append(positions_m[0], psi_rad[0])
+    b = np.append(positions_m[1], psi_rad[1])
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused here
+        if (a + 0.0 * (b - a)).tobytes() != a.tobytes():
+            return None
+    return (np.full(2, step_time_s), positions_m, psi_rad, np.zeros(1), np.zeros((1, 3)))
 
 
 # ----------------------------------------------------------------------------- piecewise linear

@@ -1,8 +1,8 @@
 """The compiled per-tick lookups give the bits of the numpy expressions they replace (issue 26):
-the waypoint reference (``reference/kernels``) and the attitude-response fit's fold
-(``estimation/response_kernels``), each against the vectorised numpy formula written from its
-documented definition (``searchsorted``, broadcasting), at ordinary times, on the knots, next
-to them, and at NaN and ±inf."""
+the waypoint reference (``reference/kernels``; a hover and a step through it too) and the
+attitude-response fit's fold (``estimation/response_kernels``), each against the vectorised
+numpy formula written from its documented definition (``searchsorted``, broadcasting; a
+step's closed form), at ordinary times, on the knots, next to them, and at NaN and ±inf."""
 
 from __future__ import annotations
 
@@ -15,7 +15,9 @@ from ardrone_nmpc.core.numerics import callable_from_python
 from ardrone_nmpc.core.sorted_search import count_at_or_below
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z
 from ardrone_nmpc.estimation import response_kernels
-from ardrone_nmpc.reference.trajectories import Square, Waypoints
+from ardrone_nmpc.reference.experiment import HoldStartThen, lookup_args
+from ardrone_nmpc.reference.kernels import waypoint_states
+from ardrone_nmpc.reference.trajectories import Hover, Square, Step, Waypoints
 
 # the attitude fit's inner kernels, callable from Python (the same source and options)
 held_count = callable_from_python(response_kernels.held_count)
@@ -190,3 +192,79 @@ def test_the_kernels_microseconds_is_round_to_six_decimals_bit_for_bit():
         if answers:
             want = round(t, 6)
             assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want), t
+
+
+# ----------------------------------------------------------------------------- set points
+def _lookup(traj, t: np.ndarray) -> np.ndarray:
+    out = np.full((t.size, 7), np.nan)
+    waypoint_states(*lookup_args(traj), t, out)
+    return out
+
+
+def _set_point_rows(before_m, before_psi, after_m, after_psi, step_time_s, t) -> np.ndarray:
+    """The closed form of a step: ``before`` at t < step time (and at NaN), ``after`` from it
+    on; velocities +0.0."""
+    out = np.zeros((t.size, 7))
+    later = t >= step_time_s
+    for row, point, psi in ((~later, before_m, before_psi), (later, after_m, after_psi)):
+        out[np.ix_(row, [IX_X, IX_Y, IX_Z])] = point
+        out[row, IX_PSI] = psi
+    return out
+
+
+_SET_POINTS = [  # (start, ψ, target, ψ, step time)
+    ([0.0, 0.0, 1.0], 0.0, [-1.5, 0.0, 1.0], 0.0, 1.0),  # the thesis' x step
+    ([0.0, 0.0, 1.0], 0.0, [0.0, 0.0, 1.0], 1.0, 1.0),  # a heading step: one point
+    ([0.3, -0.7, 1.2], -2.5, [-0.1, 0.9, 0.4], 7.0, 0.3),
+    ([-0.0, 0.0, 1.0], -0.0, [-1.0, -0.0, 1.0], -3.0, 2.0),  # −0.0 + −0.0·… stays −0.0
+    ([1e300, 0.0, 1.0], 0.0, [-1e300, 0.0, 1.0], 0.0, -0.4),
+    ([0.1, 0.2, 1.0], 0.0, [0.4, 0.2, 1.0], 0.0, math.inf),
+    ([0.1, 0.2, 1.0], 0.0, [0.4, 0.2, 1.0], 0.0, -math.inf),
+    ([0.1, 0.2, 1.0], 0.0, [0.4, 0.2, 1.0], 0.0, math.nan),
+]
+
+
+def _times_around(step_time_s: float) -> list[np.ndarray]:
+    rng = np.random.default_rng(3)
+    grid = (np.arange(-2.0, 30.0, 0.065)[:, None] + 0.1 * np.arange(16)).ravel()
+    near = np.array([step_time_s, np.nextafter(step_time_s, np.inf),
+                     np.nextafter(step_time_s, -np.inf)])
+    return [np.linspace(-5.0, 35.0, 400_001), grid, rng.uniform(-3.0, 25.0, 3000),
+            near[np.isfinite(near)], np.array([np.nan, np.inf, -np.inf, -0.0, 0.0])]
+
+
+@pytest.mark.parametrize("case", _SET_POINTS)
+def test_set_point_lookup_is_the_step_bit_for_bit(case):
+    """A step and a hover through the waypoint lookup (``lookup_args``): the closed form's
+    bits, and :meth:`Step.state_at`'s / :meth:`Hover.state_at`'s, on a dense grid, the tick's
+    horizon times, the step time and its neighbours, NaN and ±inf."""
+    start, start_psi, target, target_psi, step_time_s = case
+    step = Step(start, start_psi, target, target_psi, step_time_s)
+    hover = Hover(start, start_psi)
+    for t in _times_around(step_time_s):
+        expected = _set_point_rows(start, start_psi, target, target_psi, step_time_s, t)
+        assert _lookup(step, t).tobytes() == expected.tobytes()
+        assert step.state_at(t).tobytes() == expected.tobytes()
+        held = _set_point_rows(start, start_psi, start, start_psi, -math.inf, t)
+        if lookup_args(hover) is not None:  # (a −0.0 hover: the next test)
+            assert _lookup(hover, t).tobytes() == held.tobytes()
+        assert hover.state_at(t).tobytes() == held.tobytes()
+
+
+@pytest.mark.parametrize("traj", [
+    Hover([-0.0, 0.0, 1.0]), Hover([0.0, 0.0, 1.0], -0.0),
+    Step([-0.0, 0.0, 1.0], 0.0, [1.0, 0.0, 1.0], 0.0),  # −0.0 + 0.0 is +0.0
+    Step([0.0, 0.0, 1.0], 1e308, [0.0, 0.0, 1.0], -1e308),  # an overflowing difference
+])
+def test_a_set_point_the_lookup_cannot_give_exactly_keeps_numpy(traj):
+    assert lookup_args(traj) is None
+    assert HoldStartThen(traj).waypoint_args is None
+
+
+def test_a_subclass_that_overrides_state_at_keeps_its_own():
+    class Shifted(Hover):
+        def state_at(self, t_s):
+            return super().state_at(t_s) + 1.0
+
+    assert lookup_args(Shifted([0.0, 0.0, 1.0])) is None
+    assert lookup_args(Hover([0.0, 0.0, 1.0])) is not None

@@ -87,6 +87,9 @@ def _same_flights(a: tuple, b: tuple) -> None:
     ("square.yaml", ["duration_s=6", "faults.battery_floor.start_s=3"], True),  # latched
     ("square.yaml", ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"], True),  # fence
     ("step_x.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"], False),  # wrapped
+    ("hover.yaml", ["duration_s=5"], True),  # a set point: the one-call lookup's too
+    ("step_x.yaml", ["duration_s=5", "reference.step_time_s=0.5"], True),
+    ("step_psi.yaml", ["duration_s=5"], True),
     ("square.yaml", ["duration_s=4", "controller.solver.method=newton"], False),
 ])
 def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, whole,
@@ -273,6 +276,15 @@ def test_the_kernel_answers_not_nominal_before_any_write():
     assert carried(tick) == before
 
 
+@pytest.mark.parametrize("name", ["hover.yaml", "step_x.yaml", "step_z.yaml", "step_psi.yaml",
+                                  "r_case1.yaml", "stability_n5_dtau03.yaml", "square.yaml"])
+def test_the_set_points_and_waypoints_take_the_call(name):
+    """Hover and step references are looked up by the waypoint kernel
+    (``reference/experiment.lookup_args``): their nominal ticks are the one call's."""
+    cfg = config(name)
+    assert Tick(cfg, experiment_trajectory(cfg)).control_tick is not None
+
+
 @pytest.mark.parametrize("build", [
     lambda cfg: Tick(cfg, experiment_trajectory(cfg),
                      wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
@@ -280,6 +292,8 @@ def test_the_kernel_answers_not_nominal_before_any_write():
                      experiment_trajectory(cfg)),
     lambda cfg: Tick(config("obstacle.yaml"), experiment_trajectory(config("obstacle.yaml"))),
     lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
+    # a reference the waypoint kernel does not look up (a curve)
+    lambda cfg: Tick(config("ellipse.yaml"), experiment_trajectory(config("ellipse.yaml"))),
 ])
 def test_a_solver_the_kernel_is_not_is_not_taken(build):
     assert build(config("square.yaml")).control_tick is None

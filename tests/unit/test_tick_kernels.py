@@ -1,7 +1,7 @@
 """The tick's one-call NMPC inputs (``runtime/tick_kernels.nmpc_inputs``, issue 26) give the bits
 of the Python they replace: ``DelayPrediction.predict``, the horizon's times,
-``HoldStartThen.state_at`` of a waypoint trajectory and ``ReferenceIntegrator.shifted`` — and
-``Control.solve`` answers the same through either path."""
+``HoldStartThen.state_at`` of a waypoint trajectory or a set point (hover, step) and
+``ReferenceIntegrator.shifted`` — and ``Control.solve`` answers the same through either path."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from ardrone_nmpc.control.solver import make_nmpc
 from ardrone_nmpc.core.types import STATE_DIM
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator
 from ardrone_nmpc.reference.experiment import HoldStartThen
-from ardrone_nmpc.reference.trajectories import Waypoints, make_trajectory
+from ardrone_nmpc.reference.trajectories import Step, Waypoints, make_trajectory
 from ardrone_nmpc.runtime.stages import Control, DelayPrediction, OffsetFree
 from ardrone_nmpc.runtime.tick import effective_controller
 from ardrone_nmpc.runtime.tick_kernels import W_HEAD, nmpc_inputs, nmpc_work, nmpc_work_views
@@ -31,7 +31,10 @@ def _waypoint_references():
     altitudes = make_trajectory(ReferenceConfig(kind="square_altitudes"), duration_s=25.0)
     path = Waypoints([0.0, 2.0, 3.5, 4.0], [[0, 0, 1], [1, 0, 1], [1, -1, 1.2], [0.5, -1, 1.2]],
                      [0.0, 0.5, 3.0, -3.0])
-    return [HoldStartThen(t) for t in (square, altitudes, path)]
+    hover = make_trajectory(ReferenceConfig(kind="hover", start_m=(0.3, -0.2, 1.1)))
+    step = Step([0.0, 0.0, 1.0], 0.0, [-1.5, 0.5, 1.2], 1.0, step_time_s=1.0)
+    settle_step = Step([0.2, 0.0, 1.0], -0.5, [0.2, 0.0, 1.0], 2.0, step_time_s=-0.2)
+    return [HoldStartThen(t) for t in (square, altitudes, path, hover, step, settle_step)]
 
 
 def _delay(pending: int) -> DelayPrediction:
@@ -50,7 +53,7 @@ def test_nmpc_inputs_is_the_python_it_replaces_bit_for_bit(pending, shift):
     for traj in _waypoint_references():
         assert traj.waypoint_args is not None
         delay = _delay(pending)
-        for t_s in (-2.0, -0.3, -0.07, 0.0, 1e-9, 2.5, 4.99, 12.3, 30.0, math.nan):
+        for t_s in (-2.0, -0.3, -0.07, 0.0, 1e-9, 0.94, 1.0, 2.5, 4.99, 12.3, 30.0, math.nan):
             for dtau in (0.08, 0.1):
                 offsets = np.zeros(n + 2)
                 np.multiply(dtau, np.arange(n + 1, dtype=np.float64), out=offsets[1:])
@@ -93,9 +96,11 @@ class _NotHeld(HoldStartThen):
     one-call path)."""
 
 
+@pytest.mark.parametrize("name", ["square.yaml", "hover.yaml", "step_x.yaml"])
 @pytest.mark.parametrize("shifted", [False, True])
-def test_control_solves_the_same_through_either_path(shifted):
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"))
+def test_control_solves_the_same_through_either_path(shifted, name):
+    step_within = ["reference.step_time_s=0.5"] if name.startswith("step") else []
+    cfg = load_config(str(ROOT / "configs" / name), step_within)
     limits = command_scales(cfg.drone)
     solutions = []
     for wrap in (HoldStartThen, _NotHeld):

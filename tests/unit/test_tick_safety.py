@@ -48,12 +48,28 @@ def test_hold_resends_the_last_command_sent(kind):
     assert not again.progressive and again.row["mode"] == "hover-stale-mocap"
 
 
+class _Answering:
+    """``inner`` whose every solve answers ``answer`` (set it to change the answer) — on either
+    of the control stage's paths; every other attribute is the inner solver's."""
+
+    def __init__(self, inner, answer: SolveResult) -> None:
+        self._inner = inner
+        self.answer = answer
+
+    def solve(self, t_s, x, ref) -> SolveResult:
+        return self.answer
+
+    solve_prepared = solve
+
+    def __getattr__(self, name: str):
+        return getattr(self._inner, name)
+
+
 def _tick_with_solver_status(accept: bool, status: SolverStatus):
     cfg = load_config(None, [f"safety.solver_accept_max_iterations={str(accept).lower()}"])
-    tick = Tick(cfg, experiment_trajectory(cfg))
-    u = np.array([0.0, 0.05, -0.04, 0.0])
-    tick.control.nmpc.solve = lambda t, x, ref: SolveResult(u, status, 1e-3, 5, 30.0, 3)
-    return tick
+    answer = SolveResult(np.array([0.0, 0.05, -0.04, 0.0]), status, 1e-3, 5, 30.0, 3)
+    return Tick(cfg, experiment_trajectory(cfg),
+                wrap_solver=lambda nmpc: _Answering(nmpc, answer))
 
 
 @pytest.mark.parametrize("accept, mode, progressive", [(True, "track", True),
@@ -74,7 +90,7 @@ def test_a_rejected_max_iterations_solve_holds_the_last_good_command():
     assert good.row["mode"] == "track" and good.progressive
     rejected = SolveResult(np.array([0.0, 0.2, 0.2, 0.0]), SolverStatus.MAX_ITERATIONS, 1.0, 5,
                            30.0, 3)
-    tick.control.nmpc.solve = lambda t, x, ref: rejected
+    tick.control.nmpc.answer = rejected
     held = step(tick, 0.065, 0.065)
     assert held.row["mode"] == "hold-solver" and held.pcmd == good.pcmd
     assert math.isclose(held.row["cmd_roll_frac"], good.row["cmd_roll_frac"])
