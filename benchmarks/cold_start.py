@@ -31,7 +31,10 @@ def _child_cpu_s() -> float:
 
 
 def simulate_once(tree: Path, config: Path, cache_dir: Path) -> tuple[float, float]:
-    """Wall and CPU seconds of one ``simulate`` on ``tree`` with the numba cache ``cache_dir``."""
+    """Wall and CPU seconds of one ``simulate`` on ``tree`` with the numba cache ``cache_dir``
+    — then a background compile it left running (blocks of ticks', ``runtime/precompile``)
+    waited for, its seconds after the run printed (it is not the run's: the next run must
+    not share the cores with it)."""
     # cwd=tree: ``python -m`` puts the working directory first on sys.path
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(tree))
     with tempfile.TemporaryDirectory(prefix="cold-logs-") as logs:
@@ -42,6 +45,14 @@ def simulate_once(tree: Path, config: Path, cache_dir: Path) -> tuple[float, flo
         wall, cpu = time.perf_counter() - t0, _child_cpu_s() - cpu0
     if done.returncode != 0:
         sys.exit(f"{tree}: simulate failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    t1 = time.perf_counter()
+    while any(cache_dir.rglob("lockstep_block.compiling")):
+        if time.perf_counter() - t1 > 600.0:
+            sys.exit(f"{tree}: the background compile still runs after 600 s")
+        time.sleep(0.2)
+    if time.perf_counter() - t1 > 0.2:
+        print(f"        (a background compile ended {time.perf_counter() - t1:.1f} s after "
+              "the run)", flush=True)
     return wall, cpu
 
 
