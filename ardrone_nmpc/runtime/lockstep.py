@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.control.diverging import diverging_wrapper
+from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.kernel_cache import load_cached
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
@@ -305,8 +306,8 @@ def warm_up_blocks() -> None:
     precompile's background child, ``bench --tick`` and the tests call it; a flight does not
     wait for it (its ticks are then the per-tick path's: the same rows)."""
     global _warming_up
-    if load_cached(tick_block):
-        return
+    if not monotonic.SAME_CLOCK or load_cached(tick_block):
+        return  # (no blocks flown where the kernel does not read Python's clock: no compile)
     from ardrone_nmpc.config.schema import config_from_dict
 
     _warming_up = True

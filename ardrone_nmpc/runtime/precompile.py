@@ -165,9 +165,13 @@ def start_block_compile() -> subprocess.Popen | None:
     it waits for the runner's controller kernels to be cached (:data:`BLOCK_WAIT_S` at most:
     not compiled twice at once on two cores), then compiles ``tick_block``
     (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
+    from ardrone_nmpc.core import monotonic
     from ardrone_nmpc.runtime.lockstep_block import tick_block
 
-    if os.environ.get(BLOCKS_SWITCH, "1") == "0" or _in_cache(tick_block) is not False:
+    # (no blocks flown where the kernel does not read Python's clock: TickBlocks.takes —
+    # warm_up_blocks' flight would compile nothing, and each process would start one)
+    if (os.environ.get(BLOCKS_SWITCH, "1") == "0" or not monotonic.SAME_CLOCK
+            or _in_cache(tick_block) is not False):
         return None
     lock = _block_lock(tick_block)
     try:
