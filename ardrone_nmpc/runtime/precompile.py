@@ -173,23 +173,37 @@ def start_block_compile() -> subprocess.Popen | None:
     if (os.environ.get(BLOCKS_SWITCH, "1") == "0" or not monotonic.SAME_CLOCK
             or _in_cache(tick_block) is not False):
         return None
+    if not take_block_lock():
+        return None  # another compiles it
+    code = _BLOCK_COMPILE.format(root=str(Path(__file__).resolve().parents[2]),
+                                 module=__name__)
+    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, ENV_SWITCH: "0"}, start_new_session=True)
+
+
+def take_block_lock() -> bool:
+    """The block compile's lock taken (:func:`start_block_compile`'s; also
+    ``runtime/lockstep.warm_up_blocks``' while its flight compiles the kernel, so that no
+    process is started to compile it a second time meanwhile): False when another process
+    took it less than :data:`BLOCK_LOCK_S` ago, or it cannot be made (no cache)."""
+    from ardrone_nmpc.runtime.lockstep_block import tick_block
+
+    if _in_cache(tick_block) is None:  # caching off: no cache directory to lock in
+        return False
     lock = _block_lock(tick_block)
     try:
         os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except FileExistsError:
         try:
             if time.time() - lock.stat().st_mtime < BLOCK_LOCK_S:
-                return None  # another compiles it
+                return False  # another compiles it
             lock.touch()  # a lock left by a process that died: taken over
         except OSError:
-            return None
+            return False
     except OSError:
-        return None
-    code = _BLOCK_COMPILE.format(root=str(Path(__file__).resolve().parents[2]),
-                                 module=__name__)
-    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env={**os.environ, ENV_SWITCH: "0"}, start_new_session=True)
+        return False
+    return True
 
 
 def _block_lock(tick_block) -> Path:

@@ -157,3 +157,26 @@ def test_a_cold_first_flight_flies_tick_by_tick_and_leaves_blocks_compiled_behin
         assert time.monotonic() < deadline, sorted(p.name for p in cache.rglob("*"))
         time.sleep(0.5)
     assert int(_python(fly, cache, ARDRONE_NMPC_PRECOMPILE="1")) > 20
+
+
+def test_warm_up_blocks_starts_no_second_block_compile(tmp_path, monkeypatch):
+    """``warm_up_blocks`` (``bench --tick``, the gates' record) compiles blocks of ticks'
+    kernel in its own flight: that flight's ``start_if_cold`` must not start the block
+    compile's process too — a second ~7 s compile of the same kernel on the same cores,
+    overlapping the flights timed after the warm-up. (The machine code is in this tree's
+    cache: the flight loads it; the cache's answers are made to say it is not.)"""
+    from ardrone_nmpc.runtime import lockstep, precompile
+
+    started = []
+    monkeypatch.setattr(precompile.subprocess, "Popen",
+                        lambda args, **kw: started.append(args) or "process")
+    lock = tmp_path / "lockstep_block.compiling"
+    monkeypatch.setattr(precompile, "_block_lock", lambda kernel: lock)
+    monkeypatch.setattr(precompile, "_started", False)  # (this process's first flight)
+    monkeypatch.setenv("ARDRONE_NMPC_PRECOMPILE", "1")
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: False)  # the drone's: cached
+    monkeypatch.setattr(precompile, "_in_cache", lambda kernel: False)  # … the blocks': not
+    monkeypatch.setattr(lockstep, "load_cached", lambda kernel: False)
+    lockstep.warm_up_blocks()
+    assert not started
+    assert not lock.exists()  # (nothing left locked)
