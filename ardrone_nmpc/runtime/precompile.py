@@ -20,7 +20,9 @@ No child when the cache is warm or when ``ARDRONE_NMPC_PRECOMPILE=0``.
 Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``, ~7 s to compile, the
 controller's and the drone's kernels inside) is compiled last, by a process of its own that
 the child starts and nobody waits for: a flight flies its ticks one by one until the cache
-holds it (the same rows), the next flights load it.
+holds it (the same rows), the next flights load it. One such compile at a time (a lock file
+beside the kernel's cache, held by ``runtime/lockstep.warm_up_blocks`` too while it compiles
+the kernel itself); none where blocks are never flown (``core/monotonic.SAME_CLOCK`` False).
 """
 
 from __future__ import annotations
