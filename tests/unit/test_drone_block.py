@@ -169,13 +169,13 @@ def test_a_watchdog_due_is_left_to_the_per_tick_path_with_nothing_run():
     arrays = [a.tobytes() for a in legs._args]
     before = d.tobytes()
     late_s = d[db.D_LAST_CMD_T] + fw.hover_after_s + PERIOD_S
-    assert drone_legs(d, *legs._args, late_s, ks.MODE_FLYING) == db.LEGS_NOT_QUIET
+    assert drone_legs(d, *legs._args, late_s, ks.MODE_FLYING, 0.0) == db.LEGS_NOT_QUIET
     d[db.D_HOVER_AFTER_S] = math.inf  # (the link loss alone)
     lost_s = d[db.D_LAST_CMD_T] + fw.link_loss_s + PERIOD_S
-    assert drone_legs(d, *legs._args, lost_s, ks.MODE_FLYING) == db.LEGS_NOT_QUIET
+    assert drone_legs(d, *legs._args, lost_s, ks.MODE_FLYING, 0.0) == db.LEGS_NOT_QUIET
     d[db.D_HOVER_AFTER_S] = fw.hover_after_s
     assert d.tobytes() == before
     assert [a.tobytes() for a in legs._args] == arrays
     # the next tick on time is the kernel's
     assert drone_legs(d, *legs._args, d[db.D_LAST_CMD_T] + PERIOD_S,
-                      ks.MODE_FLYING) == db.LEGS_DONE
+                      ks.MODE_FLYING, 0.0) == db.LEGS_DONE
