@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.control.diverging import diverging_wrapper
+from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.kernel_cache import load_cached
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
@@ -42,7 +43,9 @@ from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
 from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
                                                  EXIT_NONE, EXIT_SHORT, TickBlocks,
                                                  tick_block)
-from ardrone_nmpc.runtime.precompile import background_compiles, join_child, start_if_cold
+from ardrone_nmpc.runtime.precompile import (background_compiles, join_child,
+                                             release_block_lock, start_if_cold,
+                                             take_block_lock)
 from ardrone_nmpc.runtime.schedule import (LANDING_TIMEOUT_S, TAKEOFF_TIMEOUT_S, Schedule,
                                            phase, write_events)
 from ardrone_nmpc.runtime.session import FlightSession, PreflightError
@@ -305,16 +308,21 @@ def warm_up_blocks() -> None:
     precompile's background child, ``bench --tick`` and the tests call it; a flight does not
     wait for it (its ticks are then the per-tick path's: the same rows)."""
     global _warming_up
-    if load_cached(tick_block):
-        return
+    if not monotonic.SAME_CLOCK or load_cached(tick_block):
+        return  # (no blocks flown where the kernel does not read Python's clock: no compile)
     from ardrone_nmpc.config.schema import config_from_dict
 
+    # the block compile's lock held meanwhile: the flight's start_if_cold (or its child)
+    # starts no process to compile the kernel a second time (none taken: one runs already)
+    locked = take_block_lock()
     _warming_up = True
     try:
         run_lockstep(config_from_dict({"name": "warm-up", "duration_s": 1.0,
                                        "reference": {"kind": "square"}}))
     finally:
         _warming_up = False
+        if locked:
+            release_block_lock()
 
 
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:

@@ -20,7 +20,9 @@ No child when the cache is warm or when ``ARDRONE_NMPC_PRECOMPILE=0``.
 Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``, ~7 s to compile, the
 controller's and the drone's kernels inside) is compiled last, by a process of its own that
 the child starts and nobody waits for: a flight flies its ticks one by one until the cache
-holds it (the same rows), the next flights load it.
+holds it (the same rows), the next flights load it. One such compile at a time (a lock file
+beside the kernel's cache, held by ``runtime/lockstep.warm_up_blocks`` too while it compiles
+the kernel itself); none where blocks are never flown (``core/monotonic.SAME_CLOCK`` False).
 """
 
 from __future__ import annotations
@@ -165,27 +167,45 @@ def start_block_compile() -> subprocess.Popen | None:
     it waits for the runner's controller kernels to be cached (:data:`BLOCK_WAIT_S` at most:
     not compiled twice at once on two cores), then compiles ``tick_block``
     (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
+    from ardrone_nmpc.core import monotonic
     from ardrone_nmpc.runtime.lockstep_block import tick_block
 
-    if os.environ.get(BLOCKS_SWITCH, "1") == "0" or _in_cache(tick_block) is not False:
+    # (no blocks flown where the kernel does not read Python's clock: TickBlocks.takes —
+    # warm_up_blocks' flight would compile nothing, and each process would start one)
+    if (os.environ.get(BLOCKS_SWITCH, "1") == "0" or not monotonic.SAME_CLOCK
+            or _in_cache(tick_block) is not False):
         return None
+    if not take_block_lock():
+        return None  # another compiles it
+    code = _BLOCK_COMPILE.format(root=str(Path(__file__).resolve().parents[2]),
+                                 module=__name__)
+    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, ENV_SWITCH: "0"}, start_new_session=True)
+
+
+def take_block_lock() -> bool:
+    """The block compile's lock taken (:func:`start_block_compile`'s; also
+    ``runtime/lockstep.warm_up_blocks``' while its flight compiles the kernel, so that no
+    process is started to compile it a second time meanwhile): False when another process
+    took it less than :data:`BLOCK_LOCK_S` ago, or it cannot be made (no cache)."""
+    from ardrone_nmpc.runtime.lockstep_block import tick_block
+
+    if _in_cache(tick_block) is None:  # caching off: no cache directory to lock in
+        return False
     lock = _block_lock(tick_block)
     try:
         os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except FileExistsError:
         try:
             if time.time() - lock.stat().st_mtime < BLOCK_LOCK_S:
-                return None  # another compiles it
+                return False  # another compiles it
             lock.touch()  # a lock left by a process that died: taken over
         except OSError:
-            return None
+            return False
     except OSError:
-        return None
-    code = _BLOCK_COMPILE.format(root=str(Path(__file__).resolve().parents[2]),
-                                 module=__name__)
-    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env={**os.environ, ENV_SWITCH: "0"}, start_new_session=True)
+        return False
+    return True
 
 
 def _block_lock(tick_block) -> Path:

@@ -157,3 +157,25 @@ def _held(drone: LockstepDrone, t_s: float) -> tuple:
             fw.last_cmd_t, fw.link_lost, fw.lost_com_hover, fw.alt_capped, fw.ref_start,
             fw.ref_emergency, tuple(vars(drone.sim.counters).items()), drone._seq,
             drone.mode_and_t())
+
+
+def test_a_watchdog_due_is_left_to_the_per_tick_path_with_nothing_run():
+    """A tick by whose time the hover watchdog or the link loss would act (no command for
+    ``hover_after_s``, ``link_loss_s``) is not the kernel's: ``LEGS_NOT_QUIET``, and neither
+    ``d`` nor the legs' arrays changed (the Python path's ``CompiledLegs.run`` flies it)."""
+    drone, _ = _flying()
+    legs, d, fw = drone.sensors._legs, np.zeros(db.D_SIZE), drone.sim.firmware
+    assert db.block_entry(legs, d, drone._seq + 1)
+    arrays = [a.tobytes() for a in legs._args]
+    before = d.tobytes()
+    late_s = d[db.D_LAST_CMD_T] + fw.hover_after_s + PERIOD_S
+    assert drone_legs(d, *legs._args, late_s, ks.MODE_FLYING, 0.0) == db.LEGS_NOT_QUIET
+    d[db.D_HOVER_AFTER_S] = math.inf  # (the link loss alone)
+    lost_s = d[db.D_LAST_CMD_T] + fw.link_loss_s + PERIOD_S
+    assert drone_legs(d, *legs._args, lost_s, ks.MODE_FLYING, 0.0) == db.LEGS_NOT_QUIET
+    d[db.D_HOVER_AFTER_S] = fw.hover_after_s
+    assert d.tobytes() == before
+    assert [a.tobytes() for a in legs._args] == arrays
+    # the next tick on time is the kernel's
+    assert drone_legs(d, *legs._args, d[db.D_LAST_CMD_T] + PERIOD_S,
+                      ks.MODE_FLYING, 0.0) == db.LEGS_DONE

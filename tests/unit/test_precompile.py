@@ -108,6 +108,26 @@ def test_one_block_compile_runs_at_a_time_and_a_dead_ones_lock_is_taken_over(tmp
     assert precompile.start_block_compile() is None and len(started) == 2
 
 
+def test_no_block_compile_where_blocks_never_fly(tmp_path, monkeypatch):
+    """Where blocks of ticks are never flown (``TickBlocks.takes``: a platform whose clock
+    the kernel does not read, ``core/monotonic.SAME_CLOCK`` False) the kernel is never
+    compiled by ``warm_up_blocks``' flight either: no process is started for it (else every
+    flight's process would start one, whose warm-up flight compiles nothing and releases
+    its lock for the next)."""
+    from ardrone_nmpc.core import monotonic
+    from ardrone_nmpc.runtime import precompile
+
+    started = []
+    monkeypatch.setattr(precompile.subprocess, "Popen",
+                        lambda args, **kw: started.append(args) or "process")
+    lock = tmp_path / "lockstep_block.compiling"
+    monkeypatch.setattr(precompile, "_block_lock", lambda kernel: lock)
+    monkeypatch.setattr(precompile, "_in_cache", lambda kernel: False)
+    monkeypatch.setattr(monotonic, "SAME_CLOCK", False)
+    assert precompile.start_block_compile() is None
+    assert not started and not lock.exists()
+
+
 def test_a_cold_first_flight_flies_tick_by_tick_and_leaves_blocks_compiled_behind(tmp_path):
     """On an empty cache the first flight does not wait for blocks of ticks' kernel: it
     flies every tick its own way while a process of its own compiles the kernel (after the
@@ -137,3 +157,26 @@ def test_a_cold_first_flight_flies_tick_by_tick_and_leaves_blocks_compiled_behin
         assert time.monotonic() < deadline, sorted(p.name for p in cache.rglob("*"))
         time.sleep(0.5)
     assert int(_python(fly, cache, ARDRONE_NMPC_PRECOMPILE="1")) > 20
+
+
+def test_warm_up_blocks_starts_no_second_block_compile(tmp_path, monkeypatch):
+    """``warm_up_blocks`` (``bench --tick``, the gates' record) compiles blocks of ticks'
+    kernel in its own flight: that flight's ``start_if_cold`` must not start the block
+    compile's process too — a second ~7 s compile of the same kernel on the same cores,
+    overlapping the flights timed after the warm-up. (The machine code is in this tree's
+    cache: the flight loads it; the cache's answers are made to say it is not.)"""
+    from ardrone_nmpc.runtime import lockstep, precompile
+
+    started = []
+    monkeypatch.setattr(precompile.subprocess, "Popen",
+                        lambda args, **kw: started.append(args) or "process")
+    lock = tmp_path / "lockstep_block.compiling"
+    monkeypatch.setattr(precompile, "_block_lock", lambda kernel: lock)
+    monkeypatch.setattr(precompile, "_started", False)  # (this process's first flight)
+    monkeypatch.setenv("ARDRONE_NMPC_PRECOMPILE", "1")
+    monkeypatch.setattr(precompile, "cache_is_cold", lambda: False)  # the drone's: cached
+    monkeypatch.setattr(precompile, "_in_cache", lambda kernel: False)  # … the blocks': not
+    monkeypatch.setattr(lockstep, "load_cached", lambda kernel: False)
+    lockstep.warm_up_blocks()
+    assert not started
+    assert not lock.exists()  # (nothing left locked)
