@@ -118,8 +118,8 @@ def join_child(timeout_s: float = JOIN_TIMEOUT_S) -> None:
 
 def compile_kernels() -> None:
     """Compile (or load) the estimation stage's and the attitude estimate's kernels, then the
-    simulated drone's: connect, take off, fly a second holding a small command — the calls a
-    lockstep flight makes — then the plant's own steps, flying and landing."""
+    simulated drone's: connect, take off, fly a second holding a small command, land — the
+    calls a lockstep flight makes — then the plant's own steps, flying and landing."""
     from ardrone_nmpc.config.schema import config_from_dict
     from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
@@ -157,6 +157,7 @@ def compile_kernels() -> None:
     plant.advance(period)  # FLYING: flying_advance
     plant.land()
     plant.advance(period)  # the automatic landing: auto_steps
+    _land(drone, plant.t_s, 0, period)  # (the drone's landing, from the plant's time on)
 
 
 def start_block_compile() -> subprocess.Popen | None:
@@ -242,6 +243,25 @@ try:
 finally:
     release_block_lock()
 """
+
+
+def _land(drone, t0: float, k: int, period: float) -> None:
+    """A landing as the runner waits one out (``runtime/lockstep._land``): the descent's
+    usual ticks in one compiled call (``sim/drone_block.drone_descent``), the others one by
+    one; ~1 s of compile a first flight's landing would wait for."""
+    from ardrone_nmpc.core.types import FlightMode
+
+    drone.land()
+    while drone.mode_and_t()[0] is FlightMode.LANDING and k < 2000:
+        n, legs_ran = drone.descend(t0, k, period, t0 + 60.0, t0)
+        k += n
+        if n and not legs_ran:
+            continue
+        if not legs_ran:
+            t = t0 + k * period
+            drone.advance_to(t, t - t0)
+        drone.land()
+        k += 1
 
 
 def main() -> int:
