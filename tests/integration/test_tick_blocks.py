@@ -1,17 +1,19 @@
 """The lockstep runner's blocks of ticks (``lockstep.BLOCK_TICKS``) change nothing.
 
-Each case is flown twice, with blocks (the module's default ``BLOCK_TICKS``) and without
-(``BLOCK_TICKS = 0``: one tick a loop turn, the Python path), and the two must leave the same
-bits: every row cell and its Python type (the clock cells ``compute_us`` and ``solve_us``
-but their type), the events, the :class:`SimResult`, and the state the objects hold —
-at every tick the block path hands to :meth:`Tick.step` (the per-tick run's state at the
-same tick), when the flight's loop ends (``_land`` called) and after the landing. The
-objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``; nothing in
-the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
-controller takes) with each option that changes its tick, a saturating command, a climb at
-the altitude cap, a supervisor's landing, and flights the blocks must not take (another
-reference, an injected fault). The lead's gate with more flights is
-``benchmarks/tick_equivalence.py``.
+Each case is flown twice, with blocks (the module's ``BLOCK_TICKS``, or a length given) and
+without (``BLOCK_TICKS = 0``: the per-tick path), and the two must leave the same bits: every
+row cell and its Python type (the clock cells ``compute_us`` and ``solve_us``: their type
+only), the events, the ``SimResult``, the ``progress`` calls, and the state the objects hold
+(:func:`state`: the drone's counters, firmware, sensors and plant, the tick's stages) — at
+each ``Tick.step`` the block flight makes (the per-tick flight's state at the same tick's
+step), at each progress call after which both flights stand after the same tick (a block's
+end: :meth:`Flight.block_ends`), when the loop ends (``_land`` called) and after the flight.
+The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``: nothing
+in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
+controller takes) with each option that changes their tick, a saturating command, a climb
+at the altitude cap, a supervisor's landing, and flights no block takes (injected faults,
+other references). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
+lead's gate with more flights: ``benchmarks/tick_equivalence.py``.
 """
 
 from __future__ import annotations
@@ -59,23 +61,38 @@ CASES = [
     ("square_numeric_response", "square",
      ["duration_s=12", *SETTLE, "controller.delay_compensation_s=0.26",
       "controller.attitude_gain=1.0"], 3),
-    ("square_navdata_velocity", "square",
-     ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
+    # no delay compensation: nothing pending, the predicted state the estimate itself
+    ("square_no_delay_comp", "square",
+     ["duration_s=10", *SETTLE, "controller.delay_compensation_s=0"], 9),
+    ("square_uncondensed", "square",
+     ["duration_s=8", *SETTLE, "controller.solver.condensed=false"], 12),
+    # other sample rates and latency (several poses, navdata samples a tick), another period
+    ("square_sensor_rates", "square",
+     ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=240", "sim.navdata_rate_hz=200",
+      "sim.noise.mocap_latency_ms=20"], 10),
+    ("square_period", "square", ["duration_s=8", *SETTLE, "loop.period_s=0.05"], 13),
     ("square_disturbed", "square",
      ["duration_s=12", *SETTLE, "sim.plant.turbulence_std_mps=0.3", "sim.vz_gain=0.8",
       "sim.battery_sag_frac=0.3", "sim.navdata_velocity_bias_mps=[0.05,-0.03]"], 5),
-    ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
     # a drone that tilts a third of the model's: many ticks saturate the command
     ("square_saturating", "square", ["duration_s=12", *SETTLE, "controller.attitude_gain=0.3"],
      0),
-    # the climb to the fourth corner (1.4 m) meets the cap: the firmware caps its gaz (the
-    # legs leave a climb near it to Python: blocks before and between)
+    # the climb to the 1.4 m corner meets the 1.3 m cap: the firmware caps its gaz (the
+    # legs leave a climb near the cap to Python: blocks before and after)
     ("altitude_cap", "square_altitudes", ["duration_s=20", *SETTLE, "drone.altitude_max_m=1.3"],
      0),
     # the battery reaches the floor: the supervisor lands, the descent's ticks logged
     ("low_battery", "square", ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
                                "sim.plant.battery_drain_pct_per_min=30"], 0),
-    # flights no block takes: an injected fault, a reference the compiled controller does not
+    # flights no block takes (as the blocks' first version has it): the navdata's speeds, a
+    # plant, a second object on the mocap stream, an estimator or a reference the compiled
+    # calls do not take, injected faults
+    ("square_navdata_velocity", "square",
+     ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
+    ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
+    ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
+    ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
+     11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
                                        "faults.mocap_dropout.duration_s=0.2"], 0),
     ("fault_battery_floor", "square", ["duration_s=10", *SETTLE,
