@@ -374,40 +374,56 @@ def _result(result) -> tuple:
 
 
 def assert_same_flights(block: Flight, plain: Flight) -> None:
-    """The two flights' rows, events, results and states bit for bit (module docstring)."""
-    for flight in (block, plain):  # rows kept as written (none changed after)
-        kept = [row_bits(r) for r in flight.recorder._rows]
-        assert kept == flight.recorder.written, "a row changed after it was written"
-    rows_b, rows_p = block.recorder.written, plain.recorder.written
+    """The two flights' rows, events, results and states bit for bit (module docstring);
+    a failure tells each kind that differs, the first row and the first state in time that
+    do (a state names the field: most often the cause of the rows')."""
+    problems = [f"{name}: a row changed after it was written"
+                for name, flight in (("blocks", block), ("per tick", plain))
+                if [row_bits(r) for r in flight.recorder._rows] != flight.recorder.written]
+    problems += _rows_apart(block.recorder.written, plain.recorder.written)
+    ev_b, ev_p = _events(block.recorder), _events(plain.recorder)
+    if ev_b != ev_p:
+        k = next((k for k, (x, y) in enumerate(zip(ev_b, ev_p)) if x != y), min(len(ev_b),
+                                                                               len(ev_p)))
+        problems.append(f"events differ from #{k}: {ev_b[k:k + 1]} != {ev_p[k:k + 1]}")
+    if _result(block.result) != _result(plain.result):
+        problems.append(f"results: {_result(block.result)} != {_result(plain.result)}")
+    if bits(block.progress) != bits(plain.progress):
+        problems.append("progress(fraction) calls differ")
+    missing = [p for p in block.seen if p not in plain.seen]
+    if missing:
+        problems.append(f"points the flight without blocks did not reach: {missing}")
+    for point, seen in block.seen.items():  # in the order the block flight saw them
+        other = plain.seen.get(point, {})
+        if not any(name.startswith("tick.") for name in seen):  # (the drone's only)
+            other = {name: v for name, v in other.items() if not name.startswith("tick.")}
+        diff = differences(seen, other)
+        if diff:
+            where = (f"Tick.step's entry at t_exp_s {float.fromhex(point[1])} (call "
+                     f"{point[2]})" if point[0] == "step"
+                     else f"the progress call after tick {point[1]}")
+            problems.append(f"state at {where} (the first that differs):\n  "
+                            + "\n  ".join(diff))
+            break
+    for when, a, b in (("when the loop ended", block.at_loop_end, plain.at_loop_end),
+                       ("after the flight", block.after, plain.after)):
+        diff = differences(a or {}, b or {})
+        if diff:
+            problems.append(f"state {when}:\n  " + "\n  ".join(diff))
+    assert not problems, "blocks != per tick:\n" + "\n".join(problems)
+
+
+def _rows_apart(rows_b: list, rows_p: list) -> list[str]:
+    """The first row that differs (its cells that do), and a count that does."""
     for i, (rb, rp) in enumerate(zip(rows_b, rows_p)):
         if rb != rp:
             cells = [f"{cb[0]}: {cb[1]!r} != {cp[1]!r}" for cb, cp in zip(rb[1], rp[1])
                      if cb != cp]
-            pytest.fail(f"row {i} (of {len(rows_p)}) differs, blocks != per tick: "
-                        f"form {rb[0]} / {rp[0]}; " + "; ".join(cells[:12]))
-    assert len(rows_b) == len(rows_p), f"rows: {len(rows_b)} with blocks, {len(rows_p)} without"
-    ev_b, ev_p = _events(block.recorder), _events(plain.recorder)
-    k = next((k for k, (x, y) in enumerate(zip(ev_b, ev_p)) if x != y), None)
-    assert ev_b == ev_p, (f"events differ from #{k}: {ev_b[k:k + 1]} != {ev_p[k:k + 1]}"
-                          if k is not None else f"events: {len(ev_b)} != {len(ev_p)}")
-    assert _result(block.result) == _result(plain.result)
-    assert bits(block.progress) == bits(plain.progress), "progress(fraction) calls differ"
-    missing = set(block.seen) - set(plain.seen)
-    assert not missing, f"points the flight without blocks did not reach: {sorted(missing)}"
-    for point, seen in block.seen.items():
-        other = plain.seen[point]
-        if not any(name.startswith("tick.") for name in seen):  # (the drone's only)
-            other = {name: v for name, v in other.items() if not name.startswith("tick.")}
-        diff = differences(seen, other)
-        where = (f"Tick.step's entry at t_exp_s {float.fromhex(point[1])} (call {point[2]})"
-                 if point[0] == "step" else f"the progress call after tick {point[1]}")
-        assert not diff, f"state at {where}, blocks != per tick:\n" + "\n".join(diff)
-    assert (block.at_loop_end is None) == (plain.at_loop_end is None)
-    if plain.at_loop_end is not None:
-        diff = differences(block.at_loop_end, plain.at_loop_end)
-        assert not diff, "state when the loop ended, blocks != per tick:\n" + "\n".join(diff)
-    diff = differences(block.after, plain.after)
-    assert not diff, "state after the flight, blocks != per tick:\n" + "\n".join(diff)
+            return [f"row {i} (of {len(rows_p)}) differs, form {rb[0]} / {rp[0]}: "
+                    + "; ".join(cells[:8])]
+    if len(rows_b) != len(rows_p):
+        return [f"rows: {len(rows_b)} with blocks, {len(rows_p)} without"]
+    return []
 
 
 def _config(config: str, overrides: list[str]):
