@@ -301,9 +301,9 @@ class Flight:
 
 
 def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
-        wanted: set | None = None) -> Flight:
+        wanted: set | None = None, recorded: bool = True) -> Flight:
     """Fly ``cfg`` with ``block_ticks`` (None: the module's ``BLOCK_TICKS``; 0: none),
-    watched (:class:`Flight`)."""
+    watched (:class:`Flight`); ``recorded`` False: no recorder (no rows, no events)."""
     flight = Flight(wanted)
     drone_init, tick_init, step, land = (LockstepDrone.__init__, Tick.__init__, Tick.step,
                                          lockstep._land)
@@ -348,19 +348,20 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
         m.setattr(Tick, "__init__", new_tick_init)
         m.setattr(Tick, "step", watched_step)
         m.setattr(lockstep, "_land", watched_land)
-        flight.result = lockstep.run_lockstep(cfg, recorder=flight.recorder, seed=seed,
-                                              progress=progress)
+        flight.result = lockstep.run_lockstep(
+            cfg, recorder=flight.recorder if recorded else None, seed=seed, progress=progress)
     flight.after = state(flight, release=True)
     return flight
 
 
-def fly_both(cfg, seed: int, monkeypatch, block_ticks: int | None = None) -> tuple:
+def fly_both(cfg, seed: int, monkeypatch, block_ticks: int | None = None, *,
+             recorded: bool = True) -> tuple:
     """The flight with blocks, then without, watched at the block flight's step entries and
     at its progress calls that :meth:`Flight.block_ends` finds."""
-    block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks)
+    block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks, recorded=recorded)
     wanted = {p for p in block.seen if p[0] == "step"} | block.block_ends()
     block.seen = {p: s for p, s in block.seen.items() if p in wanted}
-    plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=wanted)
+    plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=wanted, recorded=recorded)
     return block, plain
 
 
@@ -450,12 +451,20 @@ def test_blocks_change_nothing(name, config, overrides, seed, monkeypatch):
 
 
 @pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
-@pytest.mark.parametrize("block_ticks", [1, 7])
-def test_short_blocks_change_nothing(block_ticks, monkeypatch):
+@pytest.mark.parametrize("block_ticks", [1, 7, 1000])
+def test_other_blocks_change_nothing(block_ticks, monkeypatch):
     """Blocks of other lengths than the default: their state written back and taken again
-    at other ticks (1: every tick)."""
+    at other ticks (1: every tick; 1000: a phase's ticks at most)."""
     cfg = _config("square", ["duration_s=12", *SETTLE])
     assert_same_flights(*fly_both(cfg, 8, monkeypatch, block_ticks))
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+def test_blocks_change_nothing_unrecorded(monkeypatch):
+    """A flight without a recorder (its blocks' rows only counted): the same result,
+    progress and states."""
+    cfg = _config("square", ["duration_s=12", *SETTLE])
+    assert_same_flights(*fly_both(cfg, 15, monkeypatch, recorded=False))
 
 
 def test_blocks_take_the_square(monkeypatch):
