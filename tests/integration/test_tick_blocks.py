@@ -70,6 +70,9 @@ CASES = [
     ("square_sensor_rates", "square",
      ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=240", "sim.navdata_rate_hz=200",
       "sim.noise.mocap_latency_ms=20"], 10),
+    ("square_slow_sensors", "square",  # (ticks without a pose, without a navdata sample)
+     ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=30", "sim.navdata_rate_hz=10",
+      "sim.noise.mocap_latency_ms=10"], 16),
     ("square_period", "square", ["duration_s=8", *SETTLE, "loop.period_s=0.05"], 13),
     ("square_disturbed", "square",
      ["duration_s=12", *SETTLE, "sim.plant.turbulence_std_mps=0.3", "sim.vz_gain=0.8",
@@ -451,11 +454,15 @@ def test_blocks_change_nothing(name, config, overrides, seed, monkeypatch):
 
 
 @pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
-@pytest.mark.parametrize("block_ticks", [1, 7, 1000])
-def test_other_blocks_change_nothing(block_ticks, monkeypatch):
+@pytest.mark.parametrize("block_ticks, overrides", [
+    (1, ["sim.mocap_rate_hz=30", "sim.navdata_rate_hz=10"]),  # blocks without a sample
+    (7, []),
+    (1000, []),
+], ids=["1_slow_sensors", "7", "1000"])
+def test_other_blocks_change_nothing(block_ticks, overrides, monkeypatch):
     """Blocks of other lengths than the default: their state written back and taken again
     at other ticks (1: every tick; 1000: a phase's ticks at most)."""
-    cfg = _config("square", ["duration_s=12", *SETTLE])
+    cfg = _config("square", ["duration_s=12", *SETTLE, *overrides])
     assert_same_flights(*fly_both(cfg, 8, monkeypatch, block_ticks))
 
 
