@@ -6,8 +6,8 @@ row cell and its Python type (the clock cells ``compute_us`` and ``solve_us``: t
 only), the events, the ``SimResult``, the ``progress`` calls, and the state the objects hold
 (:func:`state`: the drone's counters, firmware, sensors and plant, the tick's stages) — at
 each ``Tick.step`` the block flight makes (the per-tick flight's state at the same tick's
-step), at each progress call after which both flights stand after the same tick (a block's
-end: :meth:`Flight.block_ends`), when the loop ends (``_land`` called) and after the flight.
+step), at the progress call after each such tick (:meth:`Flight.python_ticks`), when the
+loop ends (``_land`` called) and after the flight.
 The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``: nothing
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
@@ -286,21 +286,19 @@ class Flight:
         if self.wanted is None or point in self.wanted:
             self.seen[point] = state(self, stages_too=stages_too)
 
-    def block_ends(self) -> set:
-        """The progress points whose state is that after their tick in any flight: the
-        last of a run of calls — a block's rows' (its state written back), or a tick's of
-        its own — unless the next thing done is a ``Tick.step`` without the runner's
-        ``advance_to`` first (a block that ended after the next tick's legs, or its
-        controller's call: the drone is a tick on)."""
-        ends, i = set(), -1
-        for at, what in enumerate(self.trail):
-            if what != "progress":
-                continue
-            i += 1
-            after = self.trail[at + 1] if at + 1 < len(self.trail) else None
-            if after != "progress" and after != "step":
-                ends.add(("progress", i))
-        return ends
+    def python_ticks(self) -> set:
+        """The progress points right after a tick ``Tick.step`` took (its row written): the
+        state after that tick in any flight. (Not those after a block's rows: a chain of
+        blocks may write its state back only when Python reads it next.)"""
+        ticks, i, last = set(), -1, None
+        for what in self.trail:
+            if what == "progress":
+                i += 1
+                if last == "step":
+                    ticks.add(("progress", i))
+            if what != "write":
+                last = what
+        return ticks
 
 
 def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
@@ -360,9 +358,9 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
 def fly_both(cfg, seed: int, monkeypatch, block_ticks: int | None = None, *,
              recorded: bool = True) -> tuple:
     """The flight with blocks, then without, watched at the block flight's step entries and
-    at its progress calls that :meth:`Flight.block_ends` finds."""
+    at its progress calls that :meth:`Flight.python_ticks` finds."""
     block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks, recorded=recorded)
-    wanted = {p for p in block.seen if p[0] == "step"} | block.block_ends()
+    wanted = {p for p in block.seen if p[0] == "step"} | block.python_ticks()
     block.seen = {p: s for p, s in block.seen.items() if p in wanted}
     plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=wanted, recorded=recorded)
     return block, plain
