@@ -266,10 +266,18 @@ class Flight:
     time)``: the entry of :meth:`Tick.step`; ``("progress", i)``: the runner's ``i``-th
     ``progress`` call — and when the loop ends (``_land``'s entry) and after the flight.
     ``trail``: the watched calls in order (``step``, ``progress``, ``write`` of a row,
-    ``advance``: the runner's ``LockstepDrone.advance_to``)."""
+    ``advance``: the runner's ``LockstepDrone.advance_to``). ``close_every`` n: after every
+    n-th run of rows (a block's, or a tick's) the blocks' open chain is written back
+    (``TickBlocks.close``, the flight's: :attr:`blocks`) — those progress points:
+    :attr:`closed`."""
 
-    def __init__(self, wanted: set | None) -> None:
+    def __init__(self, wanted: set | None, close_every: int = 0) -> None:
         self.wanted = wanted
+        self.close_every = close_every
+        self.blocks = None
+        self.closed: set = set()
+        self.runs_of_rows = 0
+        self.left_in_run = 0  # progress calls left of the run of rows going on
         self.trail: list[str] = []
         self.drone: LockstepDrone | None = None
         self.tick: Tick | None = None
@@ -302,10 +310,11 @@ class Flight:
 
 
 def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
-        wanted: set | None = None, recorded: bool = True) -> Flight:
+        wanted: set | None = None, recorded: bool = True, close_every: int = 0) -> Flight:
     """Fly ``cfg`` with ``block_ticks`` (None: the module's ``BLOCK_TICKS``; 0: none),
     watched (:class:`Flight`); ``recorded`` False: no recorder (no rows, no events)."""
-    flight = Flight(wanted)
+    flight = Flight(wanted, close_every)
+    blocks_class = getattr(lockstep, "TickBlocks", None)
     drone_init, tick_init, step, land = (LockstepDrone.__init__, Tick.__init__, Tick.step,
                                          lockstep._land)
     advance_to = LockstepDrone.advance_to
@@ -333,13 +342,32 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
         return advance_to(self, *args, **kwargs)
 
     def progress(fraction: float) -> None:
-        flight.trail.append("progress")
-        flight.see(("progress", len(flight.progress)))
+        point = ("progress", len(flight.progress))
+        trail = flight.trail
+        if not flight.left_in_run:  # a run of calls begins: one a row written before it
+            flight.left_in_run = next((n for n in range(len(trail))
+                                       if trail[len(trail) - 1 - n] != "write"), len(trail))
+        trail.append("progress")
         flight.progress.append(fraction)
+        if flight.left_in_run:
+            flight.left_in_run -= 1
+            if not flight.left_in_run and flight.close_every:  # the run's last: its tick's
+                flight.runs_of_rows += 1
+                if flight.runs_of_rows % flight.close_every == 0 and flight.blocks is not None:
+                    flight.blocks.close()
+                    flight.closed.add(point)
+        flight.see(point)
 
     def watched_land(*args, **kwargs):
         flight.at_loop_end = state(flight, release=True)
         return land(*args, **kwargs)
+
+    if close_every:
+        blocks_init = blocks_class.__init__
+
+        def new_blocks_init(self, *args, **kwargs):
+            blocks_init(self, *args, **kwargs)
+            flight.blocks = self
 
     with monkeypatch.context() as m:
         if block_ticks is not None:
@@ -349,6 +377,8 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
         m.setattr(Tick, "__init__", new_tick_init)
         m.setattr(Tick, "step", watched_step)
         m.setattr(lockstep, "_land", watched_land)
+        if close_every:
+            m.setattr(blocks_class, "__init__", new_blocks_init)
         flight.result = lockstep.run_lockstep(
             cfg, recorder=flight.recorder if recorded else None, seed=seed, progress=progress)
     flight.after = state(flight, release=True)
@@ -356,11 +386,14 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
 
 
 def fly_both(cfg, seed: int, monkeypatch, block_ticks: int | None = None, *,
-             recorded: bool = True) -> tuple:
+             recorded: bool = True, close_every: int = 0) -> tuple:
     """The flight with blocks, then without, watched at the block flight's step entries and
-    at its progress calls that :meth:`Flight.python_ticks` finds."""
-    block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks, recorded=recorded)
-    wanted = {p for p in block.seen if p[0] == "step"} | block.python_ticks()
+    at its progress calls that :meth:`Flight.python_ticks` finds (and its chains closed:
+    ``close_every``)."""
+    block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks, recorded=recorded,
+                close_every=close_every)
+    wanted = ({p for p in block.seen if p[0] == "step"} | block.python_ticks()
+              | block.closed)
     block.seen = {p: s for p, s in block.seen.items() if p in wanted}
     plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=wanted, recorded=recorded)
     return block, plain
@@ -462,6 +495,20 @@ def test_other_blocks_change_nothing(block_ticks, overrides, monkeypatch):
     at other ticks (1: every tick; 1000: a phase's ticks at most)."""
     cfg = _config("square", ["duration_s=12", *SETTLE, *overrides])
     assert_same_flights(*fly_both(cfg, 8, monkeypatch, block_ticks))
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+@pytest.mark.parametrize("block_ticks, close_every", [(None, 1), (7, 3)])
+def test_chains_closed_mid_flight(block_ticks, close_every, monkeypatch):
+    """A chain of blocks written back (``TickBlocks.close``) after every ``close_every``-th
+    block's rows: the state then is the per-tick flight's after the same tick, and the
+    flight goes on from it the same (blocks entered again from the Python objects)."""
+    if not hasattr(getattr(lockstep, "TickBlocks", None), "close"):
+        pytest.skip("no lockstep.TickBlocks.close: a chain is not written back on demand")
+    cfg = _config("square", ["duration_s=12", *SETTLE])
+    block, plain = fly_both(cfg, 17, monkeypatch, block_ticks, close_every=close_every)
+    assert len(block.closed) > 5
+    assert_same_flights(block, plain)
 
 
 @pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
