@@ -166,7 +166,7 @@ def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -
         legs.release()
     skip = frozenset() if release else _HELD
     out: dict = {}
-    _attrs(out, "drone", drone)
+    _attrs(out, "drone", drone, arrays=False)  # (its arrays: a compiled call's numbers)
     _attrs(out, "drone._guard", drone._guard)
     _attrs(out, "sim", sim, frozenset({"counters"}))
     _attrs(out, "counters", sim.counters)
