@@ -481,6 +481,7 @@ def test_bits_tell_types_and_payloads_apart():
 @pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
 @pytest.mark.parametrize("name, config, overrides, seed", CASES, ids=[c[0] for c in CASES])
 def test_blocks_change_nothing(name, config, overrides, seed, monkeypatch):
+    """Each case with the module's blocks and without: the same bits (module docstring)."""
     assert_same_flights(*fly_both(_config(config, overrides), seed, monkeypatch))
 
 
