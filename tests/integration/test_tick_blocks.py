@@ -1,0 +1,536 @@
+"""The lockstep runner's blocks of ticks (``lockstep.BLOCK_TICKS``) change nothing.
+
+Each case is flown twice, with blocks (the module's ``BLOCK_TICKS``, or a length given) and
+without (``BLOCK_TICKS = 0``: the per-tick path), and the two must leave the same bits: every
+row cell and its Python type (the clock cells ``compute_us`` and ``solve_us``: their type
+only), the events, the ``SimResult``, the ``progress`` calls, and the state the objects hold
+(:func:`state`: the drone's counters, firmware, sensors and plant, the tick's stages) — at
+each ``Tick.step`` the block flight makes (the per-tick flight's state at the same tick's
+step), at the progress call after each such tick (:meth:`Flight.python_ticks`), when the
+loop ends (``_land`` called) and after the flight.
+The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``: nothing
+in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
+controller takes) with each option that changes their tick, a saturating command, a climb
+at the altitude cap, a supervisor's landing, and flights no block takes (injected faults,
+other references). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
+lead's gate with more flights: ``benchmarks/tick_equivalence.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS
+from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime import lockstep
+from ardrone_nmpc.runtime.tick import Tick
+from ardrone_nmpc.sim.command_fifo import CommandFifo
+from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+from ardrone_nmpc.sim.normal_blocks import NormalBlocks
+from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.sensors import LockstepSensors
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+CLOCK_CELLS = frozenset({"compute_us", "solve_us"})  # wall-clock: their type compared only
+HAS_BLOCKS = hasattr(lockstep, "BLOCK_TICKS")
+NO_BLOCKS = "lockstep.BLOCK_TICKS does not exist (no block path in this tree)"
+SETTLE = ["sim.settle_s=1"]
+# held in the compiled legs' arrays (sim/held_state): in an instance's __dict__ only while
+# released, so compared after a release (at the loop's end, after the flight) and not before
+_HELD = frozenset(AirframePlant.HELD_IN_ARRAYS + LockstepSensors.HELD_IN_ARRAYS
+                  + ("_held_by",))
+# the firmware's cache of the cap's lead time (DroneFirmware._lead_s): filled when first read;
+# the counters (compared on their own)
+_FIRMWARE_SKIP = frozenset({"_lead_params", "_lead", "counters"})
+
+# (name, config, overrides, seed)
+CASES = [
+    ("square", "square", ["duration_s=25"], 0),
+    ("square_altitudes", "square_altitudes", ["duration_s=12", *SETTLE], 1),
+    ("square_no_offset_free", "square",
+     ["duration_s=12", *SETTLE, "controller.offset_free.enabled=false"], 2),
+    # no response estimation: the delay and the gain given
+    ("square_numeric_response", "square",
+     ["duration_s=12", *SETTLE, "controller.delay_compensation_s=0.26",
+      "controller.attitude_gain=1.0"], 3),
+    # no delay compensation: nothing pending, the predicted state the estimate itself
+    ("square_no_delay_comp", "square",
+     ["duration_s=10", *SETTLE, "controller.delay_compensation_s=0"], 9),
+    ("square_uncondensed", "square",
+     ["duration_s=8", *SETTLE, "controller.solver.condensed=false"], 12),
+    # other sample rates and latency (several poses, navdata samples a tick), another period
+    ("square_sensor_rates", "square",
+     ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=240", "sim.navdata_rate_hz=200",
+      "sim.noise.mocap_latency_ms=20"], 10),
+    ("square_slow_sensors", "square",  # (ticks without a pose, without a navdata sample)
+     ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=30", "sim.navdata_rate_hz=10",
+      "sim.noise.mocap_latency_ms=10"], 16),
+    ("square_period", "square", ["duration_s=8", *SETTLE, "loop.period_s=0.05"], 13),
+    ("square_disturbed", "square",
+     ["duration_s=12", *SETTLE, "sim.plant.turbulence_std_mps=0.3", "sim.vz_gain=0.8",
+      "sim.battery_sag_frac=0.3", "sim.navdata_velocity_bias_mps=[0.05,-0.03]"], 5),
+    # a drone that tilts a third of the model's: many ticks saturate the command
+    ("square_saturating", "square", ["duration_s=12", *SETTLE, "controller.attitude_gain=0.3"],
+     0),
+    # the climb to the 1.4 m corner meets the 1.3 m cap: the firmware caps its gaz (the
+    # legs leave a climb near the cap to Python: blocks before and after)
+    ("altitude_cap", "square_altitudes", ["duration_s=20", *SETTLE, "drone.altitude_max_m=1.3"],
+     0),
+    # the battery reaches the floor: the supervisor lands, the descent's ticks logged
+    ("low_battery", "square", ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
+                               "sim.plant.battery_drain_pct_per_min=30"], 0),
+    # flights no block takes (as the blocks' first version has it): the navdata's speeds, a
+    # plant, a second object on the mocap stream, an estimator or a reference the compiled
+    # calls do not take, injected faults
+    ("square_navdata_velocity", "square",
+     ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
+    ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
+    ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
+    ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
+     11),
+    ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
+                                       "faults.mocap_dropout.duration_s=0.2"], 0),
+    ("fault_battery_floor", "square", ["duration_s=10", *SETTLE,
+                                       "faults.battery_floor.start_s=4"], 0),
+    ("hover", "hover", ["duration_s=6", *SETTLE], 0),
+    ("step_z", "step_z", ["duration_s=6", *SETTLE], 0),
+]
+
+
+# ---------------------------------------------------------------- values as bits
+def bits(value, depth: int = 0):
+    """``value`` as a comparable record of its bits and types: floats by their 8 bytes (a
+    NaN's payload, −0.0) and their class (``float`` is not ``np.float64``), arrays by dtype,
+    shape and bytes, records field by field; another object by its class only."""
+    if depth > 6:
+        return ("deep", type(value).__name__)
+    if value is None or value.__class__ is str or value.__class__ is bool:
+        return value
+    kind = type(value).__name__
+    if isinstance(value, enum.Enum):
+        return (kind, value.name)
+    if isinstance(value, float):  # float and np.float64 alike: the double's bytes
+        return (kind, struct.pack("<d", value).hex(), repr(float(value)))
+    if isinstance(value, (int, np.integer, np.bool_)):
+        return (kind, int(value))
+    if isinstance(value, np.generic):  # float32 and others
+        return (kind, value.tobytes().hex())
+    if isinstance(value, np.ndarray):
+        if value.dtype == object:
+            return (kind, value.shape, tuple(bits(v, depth + 1) for v in value.ravel()))
+        return (kind, value.dtype.str, value.shape, np.ascontiguousarray(value).tobytes().hex())
+    if isinstance(value, (bytes, bytearray)):
+        return (kind, bytes(value).hex())
+    if isinstance(value, (tuple, list)):
+        return (kind, tuple(bits(v, depth + 1) for v in value))
+    if isinstance(value, dict):
+        return (kind, tuple((k, bits(v, depth + 1)) for k, v in value.items()))
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return (kind, tuple((f.name, bits(getattr(value, f.name), depth + 1))
+                            for f in dataclasses.fields(value)))
+    if isinstance(value, NormalBlocks):  # where its generator's stream stands: the state
+        # before the blocks drawn ahead and the count consumed since (refills may differ)
+        return (kind, bits(value._state, depth + 1), value._skip + value.pos)
+    if isinstance(value, CommandFifo):
+        return (kind, bits(value.rows, depth + 1), value.head)
+    return ("object", kind)
+
+
+def _attrs(out: dict, prefix: str, obj, skip: frozenset = frozenset(),
+           arrays: bool = True) -> None:
+    """Each attribute in ``obj.__dict__`` (no descriptor read: nothing held is released)."""
+    for name, value in vars(obj).items():
+        if (name in skip or (not arrays and isinstance(value, np.ndarray))
+                or (callable(value) and not isinstance(value, np.ndarray))):
+            continue  # (a callable: a bound kernel or dispatcher, no state)
+        out[f"{prefix}.{name}"] = bits(value)
+
+
+def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -> dict:
+    """What the flight's objects hold now, name → bits: the drone's and (``stages_too``)
+    the tick's stages' (``tick.…``). ``release``: the compiled legs' held state written
+    back first (sim/held_state), then compared too; without, nothing is read that would
+    release it (a mid-flight snapshot must not change the path it watches)."""
+    drone, tick = flight.drone, flight.tick
+    sim, sensors = drone.sim, drone.sensors
+    plant, legs = sim.plant, sensors._legs
+    if release and legs is not None:
+        legs.release()
+    skip = frozenset() if release else _HELD
+    out: dict = {}
+    _attrs(out, "drone", drone, arrays=False)  # (its arrays: a compiled call's numbers)
+    _attrs(out, "drone._guard", drone._guard)
+    _attrs(out, "sim", sim, frozenset({"counters"}))
+    _attrs(out, "counters", sim.counters)
+    _attrs(out, "firmware", sim.firmware, _FIRMWARE_SKIP)
+    _attrs(out, "sensors", sensors, skip)
+    _attrs(out, "sensors.nav_stats", sensors.nav_stats, frozenset({"_lock"}))
+    _attrs(out, "plant", plant, skip)
+    held = legs is not None and legs.held()
+    out["plant._current"] = bits(legs._saved["_current"] if held else plant._current)
+    out["truth"] = bits(drone.truth)
+    out["truth_cells"] = bits(drone.truth_cells())
+    if stages_too:
+        stages(out, tick)
+    return out
+
+
+def stages(out: dict, tick: Tick) -> None:
+    """What the tick's stages carry to the next tick (as ``tests/tick_flights.carried``,
+    by name), and their other scalars and records."""
+    _attrs(out, "tick", tick, arrays=False)
+    for name in ("supervision", "supervisor", "delay", "estimation", "response"):
+        stage = getattr(tick, name)
+        if stage is not None:  # (the delay's ring, the estimate and the filter's state)
+            _attrs(out, f"tick.{name}", stage)
+    control, nmpc = tick.control, tick.control.nmpc
+    # its arrays: the solve's answer, the reference (np.empty until a waypoint solve wrote
+    # it; the predicted state's, _x_solve, until one with a delay did: not compared)
+    _attrs(out, "tick.control", control, arrays=False)
+    if nmpc is not None and control._work_args is not None:
+        out["tick.control._states"] = bits(control._states)
+    if nmpc is not None:
+        _attrs(out, "tick.nmpc", nmpc, arrays=False)
+        out["tick.nmpc.memory"] = bits(nmpc.memory.snapshot())
+    if tick.response is not None:
+        estimator = tick.response.estimator  # its state and estimate (its arrays but
+        _attrs(out, "tick.response.estimator", estimator, arrays=False)  # _state: a fit's)
+        out["tick.response.estimator._state"] = bits(estimator._state)
+        out["tick.response.estimator._estimate"] = bits(estimator._estimate)
+    if tick.offset is not None:
+        _attrs(out, "tick.offset.integrator", tick.offset.integrator)
+
+
+def differences(a: dict, b: dict, limit: int = 12) -> list[str]:
+    """The names whose bits differ (or that one side lacks), with both values."""
+    lines = [f"{name}: {_shown(a.get(name, '<absent>'), b.get(name, '<absent>'))}"
+             for name in sorted(set(a) | set(b)) if a.get(name, ()) != b.get(name, ())]
+    return lines[:limit] + ([f"… {len(lines) - limit} more"] if len(lines) > limit else [])
+
+
+def _shown(a, b) -> str:
+    """Two bits records told apart: an array's first differing element, else both (cut)."""
+    if (isinstance(a, tuple) and isinstance(b, tuple) and a[0] == b[0] == "ndarray"
+            and len(a) == len(b) == 4 and a[1:3] == b[1:3]):
+        x = np.frombuffer(bytes.fromhex(a[3]), a[1])
+        y = np.frombuffer(bytes.fromhex(b[3]), b[1])
+        apart = [i for i in range(x.size) if x[i:i + 1].tobytes() != y[i:i + 1].tobytes()]
+        if apart:
+            i = apart[0]
+            return (f"array {a[1]} {a[2]}: {len(apart)} elements differ, first [flat {i}] "
+                    f"{x[i]!r} != {y[i]!r}")
+    return f"{str(a)[:300]} != {str(b)[:300]}"
+
+
+# ---------------------------------------------------------------- a flight, watched
+class Recorder(MemoryRecorder):
+    """A :class:`MemoryRecorder` (cells taken as they are) that also keeps each row's bits
+    as it was written (a row changed after it was handed over shows), and notes each write
+    in ``trail``."""
+
+    def __init__(self, trail: list) -> None:
+        super().__init__()
+        self.written: list = []
+        self.trail = trail
+
+    def write_cells(self, cells: list) -> None:
+        self.trail.append("write")
+        self.written.append(row_bits(cells))
+        super().write_cells(cells)
+
+    def write_row(self, row) -> None:
+        self.trail.append("write")
+        self.written.append(row_bits(row))
+        super().write_row(row)
+
+
+def row_bits(row) -> tuple:
+    """A row (cells in ``LOG_COLUMNS`` order, or a dict) as (form, (column, bits) …); the
+    clock cells by their type only."""
+    pairs = zip(LOG_COLUMNS, row) if row.__class__ is list else row.items()
+    return (row.__class__.__name__,
+            tuple((c, type(v).__name__ if c in CLOCK_CELLS else bits(v)) for c, v in pairs))
+
+
+class Flight:
+    """One flight's objects, rows, events, result, and the states seen (:func:`state`) at
+    the points ``wanted`` (None: every one) — ``("step", t_exp_s bits, n-th call at that
+    time)``: the entry of :meth:`Tick.step`; ``("progress", i)``: the runner's ``i``-th
+    ``progress`` call — and when the loop ends (``_land``'s entry) and after the flight.
+    ``trail``: the watched calls in order (``step``, ``progress``, ``write`` of a row,
+    ``advance``: the runner's ``LockstepDrone.advance_to``). ``close_every`` n: after every
+    n-th run of rows (a block's, or a tick's) the blocks' open chain is written back
+    (``TickBlocks.close``, the flight's: :attr:`blocks`) — those progress points:
+    :attr:`closed`."""
+
+    def __init__(self, wanted: set | None, close_every: int = 0) -> None:
+        self.wanted = wanted
+        self.close_every = close_every
+        self.blocks = None
+        self.closed: set = set()
+        self.runs_of_rows = 0
+        self.left_in_run = 0  # progress calls left of the run of rows going on
+        self.trail: list[str] = []
+        self.drone: LockstepDrone | None = None
+        self.tick: Tick | None = None
+        self.recorder = Recorder(self.trail)
+        self.steps = 0
+        self.calls: dict = {}  # t_exp_s bits → Tick.step calls at that time
+        self.progress: list[float] = []  # progress(fraction)'s fractions
+        self.seen: dict = {}  # point → state
+        self.at_loop_end: dict | None = None
+        self.after: dict | None = None
+        self.result = None
+
+    def see(self, point: tuple, *, stages_too: bool = True) -> None:
+        if self.wanted is None or point in self.wanted:
+            self.seen[point] = state(self, stages_too=stages_too)
+
+    def python_ticks(self) -> set:
+        """The progress points right after a tick ``Tick.step`` took (its row written): the
+        state after that tick in any flight. (Not those after a block's rows: a chain of
+        blocks may write its state back only when Python reads it next.)"""
+        ticks, i, last = set(), -1, None
+        for what in self.trail:
+            if what == "progress":
+                i += 1
+                if last == "step":
+                    ticks.add(("progress", i))
+            if what != "write":
+                last = what
+        return ticks
+
+
+def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
+        wanted: set | None = None, recorded: bool = True, close_every: int = 0) -> Flight:
+    """Fly ``cfg`` with ``block_ticks`` (None: the module's ``BLOCK_TICKS``; 0: none),
+    watched (:class:`Flight`); ``recorded`` False: no recorder (no rows, no events)."""
+    flight = Flight(wanted, close_every)
+    blocks_class = getattr(lockstep, "TickBlocks", None)
+    drone_init, tick_init, step, land = (LockstepDrone.__init__, Tick.__init__, Tick.step,
+                                         lockstep._land)
+    advance_to = LockstepDrone.advance_to
+
+    def new_drone_init(self, *args, **kwargs):
+        drone_init(self, *args, **kwargs)
+        flight.drone = self
+
+    def new_tick_init(self, *args, **kwargs):
+        tick_init(self, *args, **kwargs)
+        flight.tick = self
+
+    def watched_step(self, inputs, *, t_exp_s, **kwargs):
+        flight.trail.append("step")
+        flight.steps += 1
+        t = float(t_exp_s).hex()
+        n = flight.calls[t] = flight.calls.get(t, -1) + 1  # (a time stepped twice: apart)
+        # a tick whose controller's call a block made already (its answer handed on) has
+        # the stages' state of after that call: the drone's compared only
+        flight.see(("step", t, n), stages_too=kwargs.get("answer") is None)
+        return step(self, inputs, t_exp_s=t_exp_s, **kwargs)
+
+    def watched_advance_to(self, *args, **kwargs):
+        flight.trail.append("advance")
+        return advance_to(self, *args, **kwargs)
+
+    def progress(fraction: float) -> None:
+        point = ("progress", len(flight.progress))
+        trail = flight.trail
+        if not flight.left_in_run:  # a run of calls begins: one a row written before it
+            flight.left_in_run = next((n for n in range(len(trail))
+                                       if trail[len(trail) - 1 - n] != "write"), len(trail))
+        trail.append("progress")
+        flight.progress.append(fraction)
+        if flight.left_in_run:
+            flight.left_in_run -= 1
+            if not flight.left_in_run and flight.close_every:  # the run's last: its tick's
+                flight.runs_of_rows += 1
+                if flight.runs_of_rows % flight.close_every == 0 and flight.blocks is not None:
+                    flight.blocks.close()
+                    flight.closed.add(point)
+        flight.see(point)
+
+    def watched_land(*args, **kwargs):
+        flight.at_loop_end = state(flight, release=True)
+        return land(*args, **kwargs)
+
+    if close_every:
+        blocks_init = blocks_class.__init__
+
+        def new_blocks_init(self, *args, **kwargs):
+            blocks_init(self, *args, **kwargs)
+            flight.blocks = self
+
+    with monkeypatch.context() as m:
+        if block_ticks is not None:
+            m.setattr(lockstep, "BLOCK_TICKS", block_ticks, raising=False)
+        m.setattr(LockstepDrone, "__init__", new_drone_init)
+        m.setattr(LockstepDrone, "advance_to", watched_advance_to)
+        m.setattr(Tick, "__init__", new_tick_init)
+        m.setattr(Tick, "step", watched_step)
+        m.setattr(lockstep, "_land", watched_land)
+        if close_every:
+            m.setattr(blocks_class, "__init__", new_blocks_init)
+        flight.result = lockstep.run_lockstep(
+            cfg, recorder=flight.recorder if recorded else None, seed=seed, progress=progress)
+    flight.after = state(flight, release=True)
+    return flight
+
+
+def fly_both(cfg, seed: int, monkeypatch, block_ticks: int | None = None, *,
+             recorded: bool = True, close_every: int = 0) -> tuple:
+    """The flight with blocks, then without, watched at the block flight's step entries and
+    at its progress calls that :meth:`Flight.python_ticks` finds (and its chains closed:
+    ``close_every``)."""
+    block = fly(cfg, seed, monkeypatch, block_ticks=block_ticks, recorded=recorded,
+                close_every=close_every)
+    wanted = ({p for p in block.seen if p[0] == "step"} | block.python_ticks()
+              | block.closed)
+    block.seen = {p: s for p, s in block.seen.items() if p in wanted}
+    plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=wanted, recorded=recorded)
+    return block, plain
+
+
+def _events(recorder: MemoryRecorder) -> list:
+    return [bits({k: v for k, v in e.items() if k != "wall_s"}) for e in recorder.events]
+
+
+def _result(result) -> tuple:
+    return (result.ticks, result.final_mode, result.run_dir, result.ending,
+            bits(result.end_t_s))
+
+
+def assert_same_flights(block: Flight, plain: Flight) -> None:
+    """The two flights' rows, events, results and states bit for bit (module docstring);
+    a failure tells each kind that differs, the first row and the first state in time that
+    do (a state names the field: most often the cause of the rows')."""
+    problems = [f"{name}: a row changed after it was written"
+                for name, flight in (("blocks", block), ("per tick", plain))
+                if [row_bits(r) for r in flight.recorder._rows] != flight.recorder.written]
+    problems += _rows_apart(block.recorder.written, plain.recorder.written)
+    ev_b, ev_p = _events(block.recorder), _events(plain.recorder)
+    if ev_b != ev_p:
+        k = next((k for k, (x, y) in enumerate(zip(ev_b, ev_p)) if x != y), min(len(ev_b),
+                                                                               len(ev_p)))
+        problems.append(f"events differ from #{k}: {ev_b[k:k + 1]} != {ev_p[k:k + 1]}")
+    if _result(block.result) != _result(plain.result):
+        problems.append(f"results: {_result(block.result)} != {_result(plain.result)}")
+    if bits(block.progress) != bits(plain.progress):
+        problems.append("progress(fraction) calls differ")
+    missing = [p for p in block.seen if p not in plain.seen]
+    if missing:
+        problems.append(f"points the flight without blocks did not reach: {missing}")
+    for point, seen in block.seen.items():  # in the order the block flight saw them
+        other = plain.seen.get(point, {})
+        if not any(name.startswith("tick.") for name in seen):  # (the drone's only)
+            other = {name: v for name, v in other.items() if not name.startswith("tick.")}
+        diff = differences(seen, other)
+        if diff:
+            where = (f"Tick.step's entry at t_exp_s {float.fromhex(point[1])} (call "
+                     f"{point[2]})" if point[0] == "step"
+                     else f"the progress call after tick {point[1]}")
+            problems.append(f"state at {where} (the first that differs):\n  "
+                            + "\n  ".join(diff))
+            break
+    for when, a, b in (("when the loop ended", block.at_loop_end, plain.at_loop_end),
+                       ("after the flight", block.after, plain.after)):
+        diff = differences(a or {}, b or {})
+        if diff:
+            problems.append(f"state {when}:\n  " + "\n  ".join(diff))
+    assert not problems, "blocks != per tick:\n" + "\n".join(problems)
+
+
+def _rows_apart(rows_b: list, rows_p: list) -> list[str]:
+    """The first row that differs (its cells that do), and a count that does."""
+    for i, (rb, rp) in enumerate(zip(rows_b, rows_p)):
+        if rb != rp:
+            cells = [f"{cb[0]}: {cb[1]!r} != {cp[1]!r}" for cb, cp in zip(rb[1], rp[1])
+                     if cb != cp]
+            return [f"row {i} (of {len(rows_p)}) differs, form {rb[0]} / {rp[0]}: "
+                    + "; ".join(cells[:8])]
+    if len(rows_b) != len(rows_p):
+        return [f"rows: {len(rows_b)} with blocks, {len(rows_p)} without"]
+    return []
+
+
+def _config(config: str, overrides: list[str]):
+    return load_config(CONFIGS / f"{config}.yaml", list(overrides))
+
+
+# ---------------------------------------------------------------- the tests
+def test_bits_tell_types_and_payloads_apart():
+    """The comparison sees what ``==`` does not: a float's class, −0.0, a NaN's payload, an
+    int for a float, an array's dtype."""
+    nan2 = struct.unpack("<d", struct.pack("<Q", 0x7FF8000000000001))[0]
+    pairs = [(1.5, np.float64(1.5)), (0.0, -0.0), (math.nan, nan2), (1, 1.0), (True, 1),
+             (np.zeros(2), np.zeros(2, dtype=np.float32)), ((1.0,), [1.0])]
+    for a, b in pairs:
+        assert bits(a) != bits(b), (a, b)
+    assert bits(math.nan) == bits(float("nan"))
+    assert bits(np.array([1.0, math.nan])) == bits(np.array([1.0, math.nan]))
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+@pytest.mark.parametrize("name, config, overrides, seed", CASES, ids=[c[0] for c in CASES])
+def test_blocks_change_nothing(name, config, overrides, seed, monkeypatch):
+    """Each case with the module's blocks and without: the same bits (module docstring)."""
+    assert_same_flights(*fly_both(_config(config, overrides), seed, monkeypatch))
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+@pytest.mark.parametrize("block_ticks, overrides", [
+    (1, ["sim.mocap_rate_hz=30", "sim.navdata_rate_hz=10"]),  # blocks without a sample
+    (7, []),
+    (1000, []),
+], ids=["1_slow_sensors", "7", "1000"])
+def test_other_blocks_change_nothing(block_ticks, overrides, monkeypatch):
+    """Blocks of other lengths than the default: their state written back and taken again
+    at other ticks (1: every tick; 1000: a phase's ticks at most)."""
+    cfg = _config("square", ["duration_s=12", *SETTLE, *overrides])
+    assert_same_flights(*fly_both(cfg, 8, monkeypatch, block_ticks))
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+@pytest.mark.parametrize("block_ticks, close_every", [(None, 1), (7, 3)])
+def test_chains_closed_mid_flight(block_ticks, close_every, monkeypatch):
+    """A chain of blocks written back (``TickBlocks.close``) after every ``close_every``-th
+    block's rows: the state then is the per-tick flight's after the same tick, and the
+    flight goes on from it the same (blocks entered again from the Python objects)."""
+    if not hasattr(getattr(lockstep, "TickBlocks", None), "close"):
+        pytest.skip("no lockstep.TickBlocks.close: a chain is not written back on demand")
+    cfg = _config("square", ["duration_s=12", *SETTLE])
+    block, plain = fly_both(cfg, 17, monkeypatch, block_ticks, close_every=close_every)
+    assert len(block.closed) > 5
+    assert_same_flights(block, plain)
+
+
+@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
+def test_blocks_change_nothing_unrecorded(monkeypatch):
+    """A flight without a recorder (its blocks' rows only counted): the same result,
+    progress and states."""
+    cfg = _config("square", ["duration_s=12", *SETTLE])
+    assert_same_flights(*fly_both(cfg, 15, monkeypatch, recorded=False))
+
+
+def test_blocks_take_the_square(monkeypatch):
+    """The square's usual ticks go in blocks: far fewer ``Tick.step`` calls than rows (and
+    without blocks, one a row)."""
+    cfg = _config("square", ["duration_s=10", *SETTLE])
+    plain = fly(cfg, 0, monkeypatch, block_ticks=0, wanted=set())
+    rows = len(plain.recorder.written)
+    assert plain.steps == rows > 100
+    if not HAS_BLOCKS:
+        pytest.skip(NO_BLOCKS)
+    if lockstep.BLOCK_TICKS <= 1:
+        pytest.skip(f"lockstep.BLOCK_TICKS = {lockstep.BLOCK_TICKS}: no blocks by default")
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    assert len(block.recorder.written) == rows
+    assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"
