@@ -104,6 +104,7 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("square_mocap_10hz", "square", SQUARE + ["sim.mocap_rate_hz=10"], 0),
     ("square_low_battery", "square", SQUARE + ["sim.plant.battery_start_pct=22",
                                                "sim.plant.battery_drain_pct_per_min=30"], 0),
+    ("square_uncondensed", "square", SQUARE + ["controller.solver.condensed=false"], 0),
     # slow mocap against tight limits: hold and hover verdicts between blocks
     ("square_mocap_verdicts", "square", SQUARE + ["sim.mocap_rate_hz=10",
                                                   "safety.mocap_hold_ms=95",

@@ -28,6 +28,7 @@ from ardrone_nmpc.experiments.replay import (
     missing_rerun_columns, rerun, rows_to_inputs,
 )
 from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.runtime import lockstep
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -35,7 +36,8 @@ SHORT = ["duration_s=3.5", "sim.settle_s=0.5"]
 
 
 def simulate_captured(log_dir: Path, config: str, overrides: list[str], monkeypatch):
-    """Simulate into a run directory; return (run, [(inputs, t_exp_s), …] the tick saw)."""
+    """Simulate into a run directory; return (run, [(inputs, t_exp_s), …] the tick saw) —
+    every tick its own step (``BLOCK_TICKS`` 0: a block of ticks makes no step call)."""
     cfg = load_config(CONFIGS / config, SHORT + overrides)
     seen = []
     step = loop.Tick.step
@@ -45,6 +47,7 @@ def simulate_captured(log_dir: Path, config: str, overrides: list[str], monkeypa
         return step(self, inputs, t_exp_s=t_exp_s, **kwargs)
 
     with monkeypatch.context() as m:
+        m.setattr(lockstep, "BLOCK_TICKS", 0)
         m.setattr(loop.Tick, "step", capture)
         with RunRecorder.create(log_dir, cfg, seed=cfg.sim.seed) as recorder:
             run_lockstep(cfg, recorder=recorder)
