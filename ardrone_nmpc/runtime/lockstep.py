@@ -172,7 +172,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     mode, t_now_s = drone.mode_and_t()  # the truth's, without building one each step
     while mode is not FlightMode.FLYING and t_now_s < TAKEOFF_TIMEOUT_S:
         check_signals()
-        drone.advance_to(t_now_s + period)
+        if not drone.ascend(period, TAKEOFF_TIMEOUT_S):  # (its usual ticks in one call)
+            drone.advance_to(t_now_s + period)
         mode, t_now_s = drone.mode_and_t()
     if mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "

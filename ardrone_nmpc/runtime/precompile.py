@@ -137,11 +137,11 @@ def compile_kernels() -> None:
     period = cfg.loop.period_s
     drone.connect()
     drone.takeoff()
-    truth = drone.truth
-    while truth.mode is not FlightMode.FLYING and truth.t_s < 30.0:
-        drone.advance_to(truth.t_s + period)
-        truth = drone.truth
-    t0 = truth.t_s
+    mode, t0 = drone.mode_and_t()
+    while mode is not FlightMode.FLYING and t0 < 30.0:  # (as the runner: drone_ascent)
+        if not drone.ascend(period, 30.0):
+            drone.advance_to(t0 + period)
+        mode, t0 = drone.mode_and_t()
     plant = drone.sim.plant  # its step-by-step path: a take-off end the legs hand back
     plant._motors_on_step(plant._current, plant.params.integration_step_s, (0.0, 0.0, 0.0))
     drone.start_experiment(t0)

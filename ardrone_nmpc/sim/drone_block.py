@@ -26,12 +26,12 @@ from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim import sensor_step as ks
-from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
+from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD, _PROGRESSIVE
 from ardrone_nmpc.sim.lockstep_legs import _HOVER_APPLIED, _HOVER_PCMD
 
 __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT",
-           "after_block", "after_descent", "block_entry", "descent_entry", "drone_command",
-           "drone_descent", "drone_legs"]
+           "after_ascent", "after_block", "after_descent", "ascent_entry", "block_entry",
+           "descent_entry", "drone_ascent", "drone_command", "drone_descent", "drone_legs"]
 
 # d: the plant's held command (roll, pitch, gaz, yaw, position hold 0/1); the firmware's
 # applied command (its four fractions, and 1 while it is a progressive one of them); the
@@ -40,16 +40,17 @@ __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT"
 # the cap's lead and height; the wind; the mocap latency; what the links hold — the newest
 # pose (its event and receipt times, time, position, heading) and navdata sample (its
 # time, battery, roll, pitch, forward and right speeds), 1 once a run of the block took
-# one —; the PCMDs applied
+# one —; the PCMDs applied; the hover watchdog's flag (1: it dropped the held PCMD)
 (D_ROLL, D_PITCH, D_GAZ, D_YAW, D_HOLD, D_APP_ROLL, D_APP_PITCH, D_APP_GAZ, D_APP_YAW,
  D_APPLIED, D_CMD_ROLL, D_CMD_PITCH, D_CMD_GAZ, D_CMD_YAW, D_LAST_CMD_T, D_LATCHED,
  D_CLEAR_ANY, D_COMWDG_S, D_HOVER_AFTER_S, D_LINK_LOSS_S, D_LEAD_S, D_ALT_MAX, D_W0, D_W1,
  D_W2, D_LATENCY, D_T_POSE, D_POSE_RX, D_POSE_T, D_PX, D_PY, D_PZ, D_PSI, D_TOOK_POSE,
  D_T_NAV, D_NAV_T, D_BATTERY, D_NAV_ROLL, D_NAV_PITCH, D_NAV_VX, D_NAV_VY, D_TOOK_NAV,
- D_COMMANDS) = range(43)
-D_SIZE = 43
+ D_COMMANDS, D_LOST_COM_HOVER) = range(44)
+D_SIZE = 44
 _PUT_D = struct.Struct(f"{D_SIZE}d").pack_into  # d filled in one pack
 _FLYING, _LANDING = FlightMode.FLYING, FlightMode.LANDING
+_TAKING_OFF = FlightMode.TAKING_OFF
 _NP_F64 = np.float64
 
 #: :func:`drone_legs`' answers: the tick's legs all run; the firmware would do more than
@@ -67,6 +68,13 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
     silence = t_s - d[D_LAST_CMD_T]
     if silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]:
         return LEGS_NOT_QUIET  # a watchdog acts on the way: the Python path's
+    return _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends):
+    """:func:`drone_legs` past its watchdog tests: the kernel's run, what the links hold
+    after it, the com-watchdog bit (``LEGS_*``)."""
     sv, iv = buf[ks.B_SV:ks.B_P], buf[ks.B_IV:ks.B_SV].view(np.int64)
     out = buf[ks.B_OUT:ks.B_IV]
     climbing = d[D_CMD_GAZ] > 0.0  # the firmware watches the cap
@@ -153,6 +161,38 @@ def drone_descent(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_first_s, pe
     return n_max, LEGS_DONE
 
 
+@njit(cache=True, **OUTER_KERNEL)
+def drone_ascent(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, period_s, n_max,
+                 timeout_s, ends):
+    """Ticks of a take-off the runner waits out, each a run to the plant's time now (``t_s``
+    at first) plus ``period_s`` (``CompiledLegs.run`` of the TAKING_OFF plant under the REF
+    take-off and the hover it holds, no command sent): the hover watchdog's flags set as the
+    run leaves them (the held PCMD a hover already: ``sim/drone_block.ascent_entry``), the
+    climb's end flown if ``ends`` is 1 (not on a tick the hover watchdog is due), until the
+    plant's time reaches ``timeout_s`` (the tick that reaches it counted) — ``(ticks,
+    LEGS_*, its time, hover due, ends)``: a tick not done whole is the Python path's (its
+    legs ran to that time, or not), the last two its run's."""
+    out = buf[ks.B_OUT:ks.B_IV]
+    for i in range(n_max):
+        t_s += period_s
+        silence = t_s - d[D_LAST_CMD_T]
+        if silence > d[D_LINK_LOSS_S]:  # the link-loss watchdog: the Python path's
+            return i, LEGS_NOT_QUIET, t_s, False, 0.0
+        hover_due = silence > d[D_HOVER_AFTER_S] and d[D_LOST_COM_HOVER] == 0.0
+        run_ends = 0.0 if hover_due else ends
+        status = _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s,
+                      ks.MODE_TAKING_OFF, run_ends)
+        if status != LEGS_DONE:
+            return i, status, t_s, hover_due, run_ends
+        now = out[ks.O_LAST_NOW]
+        if hover_due and now == now and now - d[D_LAST_CMD_T] > d[D_HOVER_AFTER_S]:
+            d[D_LOST_COM_HOVER] = 1.0
+        t_s = out[ks.O_T]
+        if not t_s < timeout_s:
+            return i + 1, LEGS_DONE, t_s, False, 0.0
+    return n_max, LEGS_DONE, t_s, False, 0.0
+
+
 flush_stale_caches(__name__)
 
 
@@ -195,24 +235,43 @@ def descent_entry(legs, d: np.ndarray, seq: int) -> bool:
             and fw.pcmd is _HOVER_PCMD and not (fw.ref_start or fw.ref_emergency)
             and seq > fw.last_seq and _quiet(legs, seq)):
         return False
-    _fill(legs, d, (math.nan,) * 7 + (math.nan,) * 7)  # (the samples: the sampler's)
+    _fill(legs, d, (math.nan,) * 14)  # (the samples: the sampler's)
     return True
 
 
 def _quiet(legs, seq: int) -> bool:
-    """The arrays hold the plant's state and its flight's parameters; a quiet firmware:
-    its held PCMD applied, not capped, traffic seen, no link loss or hover noted, and
-    command number ``seq`` accepted — the PCMDs ``legs.command``'s (no faults)."""
+    """:func:`_held`, no hover noted, and command number ``seq`` accepted."""
+    fw = legs.firmware
+    return not fw.lost_com_hover and (seq == 1 or seq > fw.last_seq) and _held(legs)
+
+
+def _held(legs) -> bool:
+    """The arrays hold the plant's state and its flight's parameters; a quiet firmware: its
+    held PCMD applied, not capped, traffic seen, no link loss — the PCMDs
+    ``legs.command``'s (no faults)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
     old = legs._p_key
     return (legs.takes_commands and legs.live_out is not None
             and len(plant.__dict__) == legs._plant_len
             and len(sensors.__dict__) == legs._sensors_len
             and fw.pcmd is fw._applied_pcmd and not fw.alt_capped
-            and fw.last_cmd_t is not None and not fw.link_lost and not fw.lost_com_hover
-            and (seq == 1 or seq > fw.last_seq)
+            and fw.last_cmd_t is not None and not fw.link_lost
             and old and old[0] is plant.params and old[1] is plant.noise
             and old[2] is plant._trim_bias_rad and old[3] == plant._yaw_drift_sign)
+
+
+def ascent_entry(legs, d: np.ndarray) -> bool:
+    """``d`` filled for :func:`drone_ascent` — or False, nothing written, unless the next
+    tick is one it flies: ``legs.run``'s tick of a TAKING_OFF plant the navdata shows
+    TAKING_OFF (:func:`_held`), the held PCMD a hover applied (the REF take-off's: no
+    climb the firmware caps, a hover watchdog that drops nothing)."""
+    plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
+    if not (plant._mode is _TAKING_OFF and sensors._nav_mode is _TAKING_OFF
+            and sensors.target_cfg is None and fw.applied == _HOVER_APPLIED
+            and not fw.pcmd[0] & _PROGRESSIVE and _held(legs)):
+        return False
+    _fill(legs, d, (math.nan,) * 14)  # (the samples: the sampler's)
+    return True
 
 
 def _fill(legs, d: np.ndarray, links: tuple) -> None:
@@ -229,7 +288,7 @@ def _fill(legs, d: np.ndarray, links: tuple) -> None:
            1.0 if fw.comwdg_latched else 0.0, 1.0 if fw.comwdg_clear == "any" else 0.0,
            fw.comwdg_s, fw.hover_after_s, fw.link_loss_s, fw._lead_s(),
            fw.config.altitude_max_m, w0, w1, w2, legs.sensors.mocap_latency_s, math.nan,
-           *links[:6], 0.0, *links[7:], 0.0, 0.0)
+           *links[:6], 0.0, *links[7:], 0.0, 0.0, 1.0 if fw.lost_com_hover else 0.0)
 
 
 def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:
@@ -250,6 +309,18 @@ def after_descent(legs, d: np.ndarray, seq: int, ran: bool) -> None:
     runs would have: each tick's datagram (REF land, hover PCMD) counted and accepted, the
     last one's PCMD numbered ``seq``; the newest samples (``ran``: a run did legs)."""
     _written_back(legs, d.tolist(), 2, seq, _LANDING if ran else None)
+
+
+def after_ascent(legs, d: np.ndarray, ran: bool) -> None:
+    """What :func:`drone_ascent` left, written back as the legs' runs would have: the
+    watchdogs' flags (the hover's: its held PCMD dropped for a hover), the newest samples
+    (``ran``: a run did legs)."""
+    v = d.tolist()
+    _written_back(legs, v, 0, 0, _TAKING_OFF if ran else None)
+    fw = legs.firmware
+    if v[D_LOST_COM_HOVER] != 0.0 and not fw.lost_com_hover:
+        fw.lost_com_hover = True
+        fw.pcmd = fw._applied_pcmd = _HOVER_CMD
 
 
 def _written_back(legs, v: list, per_datagram: int, seq: int, mode) -> bool:

@@ -37,7 +37,7 @@ _HOVER = Pcmd.hover()
 # REF land made once: a body's checks cost ~3 µs, and the landing holds it every tick of its
 # descent (a Ref is frozen: one instance serves every send)
 _LAND = Ref.landing()
-_DESCENT_TICKS = 64  # the most ticks of a landing one compiled call flies
+_DESCENT_TICKS = 64  # the most ticks of a take-off or a landing one compiled call flies
 _ID_KEYS = ("custom:session_id", "custom:profile_id", "custom:application_id")
 
 
@@ -151,13 +151,38 @@ class LockstepDrone(ConfigHandshake):
         drone_block.after_block(self.sensors._legs, d, self._seq, ran)
 
     def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING,
-                     ends: float = 0.0) -> None:
+                     ends: float = 0.0, hover_due: bool = False) -> None:
         """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block of a
         plant in ``mode`` ended after its legs (``ends`` 1: a run that may fly the mode's
-        end)."""
-        left = self.sensors._legs.block_ran_to(mode, ends)
+        end; ``hover_due``: the hover watchdog due in its run)."""
+        left = self.sensors._legs.block_ran_to(mode, ends, hover_due)
         if left is not ALL_DONE:
             self.sensors.go_on(t_s, left)
+
+    def ascend(self, period_s: float, timeout_s: float) -> int:
+        """Ticks of a take-off a runner waits out (each :meth:`advance_to` the plant's time
+        now plus ``period_s``) in one compiled call (``sim/drone_block.drone_ascent``) while
+        each is the usual one, until the plant's time reaches ``timeout_s`` or the climb
+        settles (FLYING): the ticks done (0: the next tick is not one it flies)."""
+        legs, d = self.sensors._legs, self._descent
+        ref = self._ref
+        if not (legs is not None and ref is not None and ref.is_takeoff
+                and self._ref_unsent is None and self.sim.faults is None
+                and drone_block.ascent_entry(legs, d)):
+            return 0
+        # (the climb's end flown too where the guard may see its sample after the run, as
+        # CompiledLegs.run flies it)
+        ends = 1.0 if self.sensors.defers_mode(FlightMode.FLYING) else 0.0
+        n, status, t_s, hover_due, run_ends = drone_block.drone_ascent(
+            d, *legs._args, legs.t_s(), period_s, _DESCENT_TICKS, timeout_s, ends)
+        legs_ran = status == drone_block.LEGS_PARTIAL
+        drone_block.after_ascent(legs, d, n > 0 or legs_ran)
+        if status == drone_block.LEGS_SHORT:
+            legs.refill()
+        if legs_ran:
+            self.block_ran_to(t_s, FlightMode.TAKING_OFF, run_ends, hover_due)
+            n += 1
+        return n
 
     def descend(self, t_first_s: float, k: int, period_s: float, deadline_s: float,
                 t_start_s: float) -> tuple[int, bool]:

@@ -662,9 +662,9 @@ class CompiledLegs:
         self.live_raw, self.live_out = raw, _GET_RUN(raw)
         self._took(raw, self.live_out, t_pose, t_nav, mode)
 
-    def block_ran_to(self, mode, ends: float) -> tuple[list, bool]:
+    def block_ran_to(self, mode, ends: float, hover_due: bool = False) -> tuple[list, bool]:
         """:meth:`run`'s rest for the tick a block of a plant in ``mode`` ended after its
-        legs (their run's bytes still in the arrays; ``ends``: the run's): what it left to
-        the Python path."""
+        legs (their run's bytes still in the arrays; ``ends``, ``hover_due``: the run's):
+        what it left to the Python path."""
         raw = self._run_bytes()
-        return self._ran_to(raw, _GET_RUN(raw), mode, False, False, ends)
+        return self._ran_to(raw, _GET_RUN(raw), mode, hover_due, False, ends)

@@ -18,6 +18,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import lockstep_drone
 from ardrone_nmpc.sim import sensor_step as ks
+from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from tests.unit.test_lockstep_legs import _light, _snapshot
 
@@ -179,3 +180,31 @@ def test_a_watchdog_due_is_left_to_the_per_tick_path_with_nothing_run():
     # the next tick on time is the kernel's
     assert drone_legs(d, *legs._args, d[db.D_LAST_CMD_T] + PERIOD_S,
                       ks.MODE_FLYING, 0.0) == db.LEGS_DONE
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 64])
+def test_a_take_off_waited_out_in_one_call_leaves_what_the_ticks_leave(chunk, monkeypatch):
+    """``LockstepDrone.ascend`` (``drone_ascent``: the hover watchdog due on the way, the
+    climb's end) against ``advance_to`` tick by tick, as the runner waits a take-off out."""
+    monkeypatch.setattr(lockstep_drone, "_DESCENT_TICKS", chunk)
+    cfg = config_from_dict({"name": "t", "duration_s": 5.0, "sim": {"seed": 3}})
+    a, b = LockstepDrone(cfg, seed=3), LockstepDrone(cfg, seed=3)
+    for drone in (a, b):
+        drone.connect()
+        drone.takeoff()
+    compiled = 0
+    while b.mode_and_t()[0] is not FlightMode.FLYING:
+        n = b.ascend(PERIOD_S, 30.0)
+        compiled += n
+        if n == 0:
+            b.advance_to(b.mode_and_t()[1] + PERIOD_S)
+            n = 1
+        for _ in range(n):
+            a.advance_to(a.mode_and_t()[1] + PERIOD_S)
+        t = a.mode_and_t()[1]
+        assert _held(a, t) == _held(b, t)
+    assert a.mode_and_t()[0] is FlightMode.FLYING
+    assert _snapshot(a, t) == _snapshot(b, t)
+    assert a.sim.firmware.lost_com_hover  # (the hover watchdog came due on the way: it holds
+    assert b.sim.firmware.pcmd is a.sim.firmware.pcmd is _HOVER_CMD  # the firmware's hover)
+    assert compiled > 10
