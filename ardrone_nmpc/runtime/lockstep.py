@@ -206,9 +206,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
               if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)
     n_ticks, n_settle = schedule.n_ticks, schedule.n_settle
     k = 0
+    t_exp_s = schedule.t_exp_s  # (Schedule.ticks' own expression, for blocks' jumps in k)
     while k < n_ticks:
         check_signals()
-        t_exp = (k - n_settle) * period  # (Schedule.ticks' own expressions)
+        t_exp = t_exp_s(k)
         mode = phase(t_exp)
         answer, spent_ns, legs_ran = None, 0, False
         if blocks is not None:  # the usual ticks, a block of them in one compiled call
@@ -222,10 +223,10 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
                 k = flown = k + n
             if exit_ in _BLOCK_GOES_ON:  # (the next tick is a block's again)
                 if exit_ == EXIT_FIT and answer:  # the fit's events, at its tick (k − 1)
-                    write_events(write_event, (k - 1 - n_settle) * period, answer)
+                    write_events(write_event, t_exp_s(k - 1), answer)
                 continue
             if n:  # the tick it ended at (before the phase ends: its mode)
-                t_exp = (k - n_settle) * period
+                t_exp = t_exp_s(k)
             legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
         t_plant = t_first + k * period
         if not legs_ran:
