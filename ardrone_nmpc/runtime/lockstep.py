@@ -28,13 +28,13 @@ from pathlib import Path
 from typing import Callable
 
 from ardrone_nmpc.control.diverging import diverging_wrapper
+from ardrone_nmpc.control.ocp import SolverStatus
 from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.kernel_cache import load_cached
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.control.ocp import SolverStatus
 from ardrone_nmpc.runs.block_row import BR_NAV_VX, BR_NAV_VY, BR_T
 from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, block_cells, put_truth,
                                            put_truth_cells)
@@ -383,11 +383,10 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
         legs_ran = False
         if not logged:  # the usual ticks of the descent in one compiled call
             n, legs_ran = drone.descend(t_first, k, period, deadline, t_start)
-            if n and not legs_ran:
-                k += n
+            k += n
+            if n and not legs_ran:  # (ticks done whole: the loop's test again)
                 mode, t_now_s = mode_and_t()
                 continue
-            k += n
         t_plant = t_first + k * period
         if not legs_ran:
             advance_to(t_plant, t_plant - t_start)

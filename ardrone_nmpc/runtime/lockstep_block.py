@@ -315,12 +315,8 @@ class TickBlocks:
         moves its pending window), the estimate refitted if a feed took a sample; then
         the chain's numbers of the delay and the next fit. Its time goes to the tick's
         ``compute_us``, as the per-tick path's."""
-        tick, c = self.tick, self.c
-        delay, response = tick.delay, tick.response
-        delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
-        if c[C_FED] != 0.0:
-            response.estimator._estimate = None
-            c[C_FED] = 0.0
+        c, delay, response = self.c, self.tick.delay, self.tick.response
+        self._ring_and_feed_written()
         t0_ns = _perf_counter_ns()
         events = response.refit(t_s)
         self.table[n - 1, br.BR_COMPUTE_US] += (_perf_counter_ns() - t0_ns) * 1e-3
@@ -332,14 +328,21 @@ class TickBlocks:
         """What the stages keep after the chain's last tick (``AfterSolve.written``'s: the
         supervisor's and Supervision's, the delay ring's next row, the response's
         estimate to refit when read)."""
-        tick, c, v = self.tick, self.c, self._last
+        tick, v = self.tick, self._last
         tick.after_solve.kept(v[br.BR_ZACC], v[br.BR_PHI], v[br.BR_THETA], v[br.BR_RATE],
                               v[br.BR_VZ_REF], v[br.BR_ROLL], v[br.BR_PITCH], v[br.BR_GAZ],
                               v[br.BR_YAW], int(v[br.BR_SATURATED]))
-        delay = tick.delay
-        delay._next, delay.first = int(c[C_NEXT]), int(c[C_FIRST])
+        self._ring_and_feed_written()
+
+    def _ring_and_feed_written(self) -> None:
+        """The delay ring's next and first pending rows written back, and the response's
+        estimate refitted when next read if a feed took a sample since (its flag cleared):
+        what :meth:`_fit` and :meth:`_written` both owe ``AfterSolve.written``."""
+        tick, c = self.tick, self.c
+        tick.delay._next, tick.delay.first = int(c[C_NEXT]), int(c[C_FIRST])
         if c[C_FED] != 0.0:
             tick.response.estimator._estimate = None
+            c[C_FED] = 0.0
 
 
 def _tail_args(tail: tuple) -> tuple:

@@ -97,7 +97,7 @@ class LockstepDrone(ConfigHandshake):
         # the sampler's compiled legs (None without): the truth of their last run while they
         # hold the state (a legs object no longer used never runs: its live_out stays None)
         self._legs = self.sensors._legs
-        self._descent = np.zeros(drone_block.D_SIZE)  # (descend's numbers)
+        self._waited = np.zeros(drone_block.D_SIZE)  # (ascend's and descend's numbers)
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
                           and type(plant).truth is AirframePlant.truth)
@@ -164,7 +164,7 @@ class LockstepDrone(ConfigHandshake):
         now plus ``period_s``) in one compiled call (``sim/drone_block.drone_ascent``) while
         each is the usual one, until the plant's time reaches ``timeout_s`` or the climb
         settles (FLYING): the ticks done (0: the next tick is not one it flies)."""
-        legs, d = self.sensors._legs, self._descent
+        legs, d = self.sensors._legs, self._waited
         ref = self._ref
         if not (legs is not None and ref is not None and ref.is_takeoff
                 and self._ref_unsent is None and self.sim.faults is None
@@ -192,7 +192,7 @@ class LockstepDrone(ConfigHandshake):
         each is the usual one, until the plant's time reaches ``deadline_s``: ``(ticks
         done, whether the next tick's legs ran)`` — that tick's rest (:meth:`land`, …) is
         the caller's. ``(0, False)``: nothing done (the tick is not one it flies)."""
-        legs, d = self.sensors._legs, self._descent
+        legs, d = self.sensors._legs, self._waited
         if not (legs is not None and self._ref is _LAND and self._ref_unsent is None
                 and self.sim.faults is None
                 and drone_block.descent_entry(legs, d, self._seq + 1)):
