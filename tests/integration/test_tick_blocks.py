@@ -40,8 +40,6 @@ from ardrone_nmpc.sim.sensors import LockstepSensors
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 CLOCK_CELLS = frozenset({"compute_us", "solve_us"})  # wall-clock: their type compared only
-HAS_BLOCKS = hasattr(lockstep, "BLOCK_TICKS")
-NO_BLOCKS = "lockstep.BLOCK_TICKS does not exist (no block path in this tree)"
 SETTLE = ["sim.settle_s=1"]
 # held in the compiled legs' arrays (sim/held_state): in an instance's __dict__ only while
 # released, so compared after a release (at the loop's end, after the flight) and not before
@@ -314,7 +312,7 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
     """Fly ``cfg`` with ``block_ticks`` (None: the module's ``BLOCK_TICKS``; 0: none),
     watched (:class:`Flight`); ``recorded`` False: no recorder (no rows, no events)."""
     flight = Flight(wanted, close_every)
-    blocks_class = getattr(lockstep, "TickBlocks", None)
+    blocks_class = lockstep.TickBlocks
     drone_init, tick_init, step, land = (LockstepDrone.__init__, Tick.__init__, Tick.step,
                                          lockstep._land)
     advance_to = LockstepDrone.advance_to
@@ -371,7 +369,7 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
 
     with monkeypatch.context() as m:
         if block_ticks is not None:
-            m.setattr(lockstep, "BLOCK_TICKS", block_ticks, raising=False)
+            m.setattr(lockstep, "BLOCK_TICKS", block_ticks)
         m.setattr(LockstepDrone, "__init__", new_drone_init)
         m.setattr(LockstepDrone, "advance_to", watched_advance_to)
         m.setattr(Tick, "__init__", new_tick_init)
@@ -478,14 +476,12 @@ def test_bits_tell_types_and_payloads_apart():
     assert bits(np.array([1.0, math.nan])) == bits(np.array([1.0, math.nan]))
 
 
-@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
 @pytest.mark.parametrize("name, config, overrides, seed", CASES, ids=[c[0] for c in CASES])
 def test_blocks_change_nothing(name, config, overrides, seed, monkeypatch):
     """Each case with the module's blocks and without: the same bits (module docstring)."""
     assert_same_flights(*fly_both(_config(config, overrides), seed, monkeypatch))
 
 
-@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
 @pytest.mark.parametrize("block_ticks, overrides", [
     (1, ["sim.mocap_rate_hz=30", "sim.navdata_rate_hz=10"]),  # blocks without a sample
     (7, []),
@@ -498,21 +494,17 @@ def test_other_blocks_change_nothing(block_ticks, overrides, monkeypatch):
     assert_same_flights(*fly_both(cfg, 8, monkeypatch, block_ticks))
 
 
-@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
 @pytest.mark.parametrize("block_ticks, close_every", [(None, 1), (7, 3)])
 def test_chains_closed_mid_flight(block_ticks, close_every, monkeypatch):
     """A chain of blocks written back (``TickBlocks.close``) after every ``close_every``-th
     block's rows: the state then is the per-tick flight's after the same tick, and the
     flight goes on from it the same (blocks entered again from the Python objects)."""
-    if not hasattr(getattr(lockstep, "TickBlocks", None), "close"):
-        pytest.skip("no lockstep.TickBlocks.close: a chain is not written back on demand")
     cfg = _config("square", ["duration_s=12", *SETTLE])
     block, plain = fly_both(cfg, 17, monkeypatch, block_ticks, close_every=close_every)
     assert len(block.closed) > 5
     assert_same_flights(block, plain)
 
 
-@pytest.mark.skipif(not HAS_BLOCKS, reason=NO_BLOCKS)
 def test_blocks_change_nothing_unrecorded(monkeypatch):
     """A flight without a recorder (its blocks' rows only counted): the same result,
     progress and states."""
@@ -527,10 +519,7 @@ def test_blocks_take_the_square(monkeypatch):
     plain = fly(cfg, 0, monkeypatch, block_ticks=0, wanted=set())
     rows = len(plain.recorder.written)
     assert plain.steps == rows > 100
-    if not HAS_BLOCKS:
-        pytest.skip(NO_BLOCKS)
-    if lockstep.BLOCK_TICKS <= 1:
-        pytest.skip(f"lockstep.BLOCK_TICKS = {lockstep.BLOCK_TICKS}: no blocks by default")
+    assert lockstep.BLOCK_TICKS > 1  # (blocks by default)
     block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
     assert len(block.recorder.written) == rows
     assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"
