@@ -133,6 +133,12 @@ class _Capture:
 
         self.rows.append(cells_row(cells))
 
+    def write_block(self, rows) -> None:
+        """A block of rows (``runs/block_rows.BlockRows``, as ``MemoryRecorder`` and the
+        bench take them): each row's cells kept as :meth:`write_cells` keeps them."""
+        for cells in rows.cells():
+            self.write_cells(cells)
+
     def event(self, t_s, kind, **fields) -> None:
         fields.pop("wall_s", None)
         self.events.append((t_s, kind, fields))

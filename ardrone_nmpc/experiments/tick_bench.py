@@ -16,6 +16,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 
+from ardrone_nmpc.runs.block_row import BR_COMPUTE_US, BR_SOLVE_US
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS
 
 __all__ = ["TickSplit", "bench_tick"]
@@ -74,6 +75,11 @@ class _Clocks:
         directory's and tuning's: ``runs/log_columns.tick_cells``)."""
         self._solve.append(cells[_SOLVE_US])
         self._compute.append(cells[_COMPUTE_US])
+
+    def write_block(self, rows) -> None:
+        """A block of rows (``runs/block_rows.BlockRows``): its two clocks' columns."""
+        self._solve.extend(rows.column(BR_SOLVE_US))
+        self._compute.extend(rows.column(BR_COMPUTE_US))
 
     def event(self, *args, **kwargs) -> None:
         pass

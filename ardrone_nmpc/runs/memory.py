@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ardrone_nmpc.runs.block_rows import BlockRows
 from ardrone_nmpc.runs.lazy_columns import LazyColumns
 from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, STRING_COLUMNS, TICK_CELL_KEYS,
                                           cells_row)
@@ -78,10 +79,43 @@ _TICK_CELL_SLOTS = [LOG_COLUMNS.index(k) for k in TICK_CELL_KEYS]  # their cells
 
 
 def _row_keys(row) -> Any:
-    return _CELLS if row.__class__ is list else tuple(row)
+    return _CELLS if row.__class__ is list or row.__class__ is BlockRows else tuple(row)
 
 
-def _transposed(rows: list) -> dict[str, tuple | list]:
+def _cell_columns(run: list) -> list:
+    """The columns (``LOG_COLUMNS`` order) of a run of rows of cells and blocks of rows
+    (:class:`~ardrone_nmpc.runs.block_rows.BlockRows`, transposed by their own)."""
+    if all(row.__class__ is list for row in run):
+        return list(zip(*run))
+    pieces = []  # each piece's columns: a block's, or a stretch of cells' transposed
+    for is_block, rows in itertools.groupby(run, key=lambda r: r.__class__ is BlockRows):
+        if is_block:
+            pieces.extend(block.columns() for block in rows)
+        else:
+            pieces.append(list(zip(*rows)))
+    return [list(itertools.chain.from_iterable(piece[i] for piece in pieces))
+            for i in range(len(LOG_COLUMNS))]
+
+
+def _expanded(rows: list) -> list:
+    """``rows`` with each block of rows replaced by its rows' cells."""
+    if not any(row.__class__ is BlockRows for row in rows):
+        return rows
+    out: list = []
+    for row in rows:
+        if row.__class__ is BlockRows:
+            out.extend(row.cells())
+        else:
+            out.append(row)
+    return out
+
+
+def _count(rows: list) -> int:
+    """How many rows ``rows`` hold (a block of rows: its own)."""
+    return sum(len(r) if r.__class__ is BlockRows else 1 for r in rows)
+
+
+def _transposed(rows: list, n_rows: int) -> dict[str, tuple | list]:
     """Each key any row has → its cells over the rows (None where a row lacks it): the rows
     of one key sequence (a runner builds its rows alike tick after tick) transposed at C
     speed, ~10× faster than a ``row.get`` per row and key. A row of cells
@@ -92,8 +126,8 @@ def _transposed(rows: list) -> dict[str, tuple | list]:
                                        key=operator.itemgetter(0)):
         run = [row for _, row in run]
         if keys is _CELLS:  # every column transposed, then those the cells hold
-            columns = list(zip(*run))
-            runs.append((TICK_CELL_KEYS, len(run), [columns[i] for i in _TICK_CELL_SLOTS]))
+            columns = _cell_columns(run)
+            runs.append((TICK_CELL_KEYS, _count(run), [columns[i] for i in _TICK_CELL_SLOTS]))
         else:
             runs.append((keys, len(run), list(zip(*map(dict.values, run)))))
     if len(runs) == 1:
@@ -105,7 +139,7 @@ def _transposed(rows: list) -> dict[str, tuple | list]:
         for key, cells in zip(keys, columns):
             column = out.get(key)
             if column is None:
-                column = out[key] = [None] * len(rows)
+                column = out[key] = [None] * n_rows
             column[done:done + n] = cells
         done += n
     return out
@@ -121,18 +155,19 @@ class MemoryRecorder:
     path = None
 
     def __init__(self) -> None:
-        self._rows: list[Mapping[str, Any] | list] = []  # dicts, or cells (write_cells)
+        # dicts, cells (write_cells) or blocks of rows (write_block)
+        self._rows: list[Mapping[str, Any] | list | BlockRows] = []
         self.events: list[dict[str, Any]] = []
 
     @property
     def rows_written(self) -> int:
-        return len(self._rows)
+        return _count(self._rows)
 
     @property
     def rows(self) -> list[Mapping[str, Any]]:
         """The rows kept, as dicts (a row given as cells: its
         :func:`~ardrone_nmpc.runs.log_columns.cells_row`, built now)."""
-        return [cells_row(r) if r.__class__ is list else r for r in self._rows]
+        return [cells_row(r) if r.__class__ is list else r for r in _expanded(self._rows)]
 
     def write_row(self, row: Mapping[str, Any]) -> None:
         """Keep ``row`` (not copied: the caller must not change it afterwards)."""
@@ -143,6 +178,11 @@ class MemoryRecorder:
         (:func:`~ardrone_nmpc.runs.log_columns.tick_cells`, truth put; not copied): the row
         :func:`~ardrone_nmpc.runs.log_columns.cells_row` gives, without building it."""
         self._rows.append(cells)
+
+    def write_block(self, rows: BlockRows) -> None:
+        """Keep a block of lockstep ticks' rows (not copied): :meth:`write_cells` of each of
+        its rows' cells, made only when the rows or their columns are read."""
+        self._rows.append(rows)
 
     def event(self, t_s: float, kind: str, **fields: Any) -> None:
         self.events.append({"t_s": float(t_s), "kind": str(kind), **fields})
@@ -158,11 +198,12 @@ class MemoryRecorder:
         rows: float64 (missing → NaN) or, for string columns, object arrays (missing → "");
         each made when first read (:class:`~ardrone_nmpc.runs.lazy_columns.LazyColumns`)."""
         rows = self._rows
-        n = len(rows)
-        plain = all(r.__class__ is dict or r.__class__ is list for r in rows)
-        cells_of = _transposed(rows) if n and plain else None
+        n = _count(rows)
+        plain = all(r.__class__ is dict or r.__class__ is list or r.__class__ is BlockRows
+                    for r in rows)
+        cells_of = _transposed(rows, n) if n and plain else None
         if cells_of is None:
-            rows = [cells_row(r) if r.__class__ is list else r for r in rows]
+            rows = [cells_row(r) if r.__class__ is list else r for r in _expanded(rows)]
             extra = set().union(*rows) - set(LOG_COLUMNS) if rows else set()
         else:
             extra = set(cells_of) - set(LOG_COLUMNS)

@@ -75,6 +75,15 @@ class VerdictTally:
             if self._tracking:
                 self.tracking_ticks += 1
 
+    def add_ticks(self, times_s: list[float], mode: str) -> None:
+        """:meth:`add_tick` of ticks at ``times_s``, all of ``mode`` (a block of ticks)."""
+        counted = sum(t_s >= 0 for t_s in times_s)
+        if counted:
+            if mode is not self._mode:
+                self._mode, self._tracking = mode, is_tracking(mode)
+            if self._tracking:
+                self.tracking_ticks += counted
+
     def verdict(self, ending: str) -> str:
         """``ending`` unless it is :data:`COMPLETED` and the run did not do its job."""
         if ending != COMPLETED:

@@ -36,6 +36,7 @@ from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.block_row import BR_NAV_VX, BR_NAV_VY, BR_T
+from ardrone_nmpc.runs.block_rows import BlockRows
 from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, block_cells, put_truth,
                                            put_truth_cells)
 from ardrone_nmpc.runs.verdict import VerdictTally
@@ -196,7 +197,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     faulty = drone.sim.faults is not None  # (set when the drone is made, never after)
     inputs, step, set_command = drone.sensors.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
-    write_cells = _cell_sink(recorder)
+    write_cells = _sink(recorder, "write_cells")
+    write_block = _sink(recorder, "write_block") if write_cells is not None else None
     tick.cell_rows = recorder is None or write_cells is not None
     # (blocks compile their kernel themselves in a warm-up's flight, or with no background
     # compile to wait for: runtime/precompile)
@@ -216,7 +218,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             n, exit_, answer, spent_ns = blocks.fly(
                 k, mode, min(BLOCK_TICKS, (n_settle if t_exp < 0 else n_ticks) - k))
             if n:
-                _block_rows(blocks.table, n, mode, write_cells, tally_tick)
+                _block_rows(blocks.table, n, mode, write_cells, write_block, tally)
                 if progress is not None:
                     for j in range(k, k + n):
                         progress(schedule.fraction_done(j))
@@ -289,15 +291,22 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
                      loop_wall_s, ending, t_final_s - t_start)
 
 
-def _block_rows(table, n: int, mode: str, write_cells, tally_tick) -> None:
+def _block_rows(table, n: int, mode: str, write_cells, write_block,
+                tally: VerdictTally) -> None:
     """The rows of a block's ``n`` ticks (``table``'s numbers, ``runtime/lockstep_block``)
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
-    nominal label); none to write without a recorder."""
+    nominal label): the block itself to a recorder that takes blocks (``write_block``), the
+    rows' cells to one that takes cells; none to write without a recorder."""
+    if write_block is not None:
+        rows = BlockRows(table[:n].copy(), mode, SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT)
+        write_block(rows)
+        tally.add_ticks(rows.times_s(), mode)
+        return
     rows = table[:n]
     if write_cells is None:
-        for t_exp in rows[:, BR_T].tolist():
-            tally_tick(t_exp, mode)
+        tally.add_ticks(rows[:, BR_T].tolist(), mode)
         return
+    tally_tick = tally.add_tick
     for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY]):
         cells = block_cells(v, vx, vy, SATURATED_TEXT, _OK_TEXT, mode, _FLYING_TEXT)
         write_cells(cells)
@@ -333,14 +342,15 @@ def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
         write_events(write_event, t_exp, [event])
 
 
-def _cell_sink(recorder):
-    """The recorder's ``write_cells`` (rows as cells in ``LOG_COLUMNS`` order, no dict:
-    RunRecorder, MemoryRecorder), or None: a recorder that takes dicts only. Looked up on
-    its class: a wrapper that forwards other attributes (the live view's tee) must see
+def _sink(recorder, name: str):
+    """The recorder's ``name`` method — ``write_cells`` (rows as cells in ``LOG_COLUMNS``
+    order, no dict: RunRecorder, MemoryRecorder), ``write_block`` (a block of rows:
+    ``runs/block_rows.BlockRows``) — or None: a recorder that does not take them. Looked up
+    on its class: a wrapper that forwards other attributes (the live view's tee) must see
     every row through its own ``write_row``."""
-    if recorder is None or getattr(type(recorder), "write_cells", None) is None:
+    if recorder is None or getattr(type(recorder), name, None) is None:
         return None
-    return recorder.write_cells
+    return getattr(recorder, name)
 
 
 def _record(recorder, row: dict, drone: LockstepDrone) -> None:

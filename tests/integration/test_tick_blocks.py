@@ -249,6 +249,13 @@ class Recorder(MemoryRecorder):
         self.written.append(row_bits(row))
         super().write_row(row)
 
+    def write_block(self, rows) -> None:
+        """A block of rows (``runs/block_rows``): each row's cells noted as a write."""
+        for cells in rows.cells():
+            self.trail.append("write")
+            self.written.append(row_bits(cells))
+        super().write_block(rows)
+
 
 def row_bits(row) -> tuple:
     """A row (cells in ``LOG_COLUMNS`` order, or a dict) as (form, (column, bits) …); the

@@ -1,0 +1,75 @@
+"""A block of lockstep ticks' rows handed to a recorder at once, as the numbers the block's
+kernel wrote (``runs/block_row``) and their labels: the cells
+(:func:`~ardrone_nmpc.runs.log_columns.block_cells`, row by row) or the columns are made
+when the recorder needs them — a recorder that keeps a few columns, or keeps the rows in
+memory until it is read, makes no row's cells (``write_block``: ``runs/memory``,
+``experiments/tick_bench``; docs/architecture.md, runs).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ardrone_nmpc.core.angles import wrap_angle_rad
+from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
+                                         BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
+                                         BR_NAV_VX, BR_NAV_VY, BR_NEWTON, BR_NORM, BR_SATURATED,
+                                         BR_SOLVE_US, BR_T, BR_TRUE_PSI, BR_TRUE_VZ, BR_TRUE_X,
+                                         BR_TRUE_Y, BR_TRUE_Z)
+from ardrone_nmpc.runs.log_columns import block_cells
+
+__all__ = ["BlockRows"]
+
+_PI = math.pi
+
+
+class BlockRows:
+    """``numbers``: a block's rows (``BLOCK_ROW`` floats a tick, owned: the kernel's table is
+    copied); ``mode``: their mode label; ``saturated``, ``status``, ``nav_mode``: the texts
+    of the saturation bits, the solver's status and the navdata's mode
+    (:func:`~ardrone_nmpc.runs.log_columns.block_cells`'). Their cells, row by row or column
+    by column, are the very values (and types) the per-tick path's rows have."""
+
+    __slots__ = ("numbers", "mode", "saturated", "status", "nav_mode")
+
+    def __init__(self, numbers: np.ndarray, mode: str, saturated: tuple, status: str,
+                 nav_mode: str) -> None:
+        self.numbers, self.mode = numbers, mode
+        self.saturated, self.status, self.nav_mode = saturated, status, nav_mode
+
+    def __len__(self) -> int:
+        return len(self.numbers)
+
+    def times_s(self) -> list[float]:
+        """The rows' experiment times (``t_s``)."""
+        return self.numbers[:, BR_T].tolist()
+
+    def column(self, index: int) -> list[float]:
+        """The rows' numbers at ``runs/block_row`` index ``index`` (floats)."""
+        return self.numbers[:, index].tolist()
+
+    def cells(self) -> list[list]:
+        """Each row's cells in ``LOG_COLUMNS`` order (:func:`block_cells`)."""
+        rows = self.numbers
+        sat, status, mode, nav_mode = self.saturated, self.status, self.mode, self.nav_mode
+        return [block_cells(v, vx, vy, sat, status, mode, nav_mode)
+                for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY])]
+
+    def columns(self) -> list[list]:
+        """Each ``LOG_COLUMNS`` column's cells over the rows: ``zip(*self.cells())``'s values
+        and types, made column by column."""
+        rows = self.numbers
+        n = len(rows)
+        c = rows.T.tolist()
+        sat = self.saturated
+        psi = [p if -_PI < p <= _PI else wrap_angle_rad(p) for p in c[BR_TRUE_PSI]]
+        blank = [""] * n
+        return [*c[:21], [sat[int(b)] for b in c[BR_SATURATED]], c[BR_SOLVE_US],
+                [self.status] * n, c[BR_NORM], [int(i) for i in c[BR_GMRES]],
+                [int(i) for i in c[BR_NEWTON]], [self.mode] * n, c[BR_MOCAP_MS], c[BR_NAV_MS],
+                c[BR_BATTERY], blank, c[BR_COMPUTE_US], c[BR_MOCAP_T],
+                list(rows[:, BR_NAV_VX]), list(rows[:, BR_NAV_VY]), [self.nav_mode] * n,
+                c[BR_NAV_ROLL], c[BR_NAV_PITCH], [math.nan] * n, *([blank] * 7),
+                c[BR_TRUE_X], c[BR_TRUE_Y], c[BR_TRUE_Z], psi, c[BR_TRUE_VZ]]
