@@ -170,12 +170,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
         raise
     t_takeoff = drone.truth.t_s
     drone.takeoff()
-    mode, t_now_s = drone.mode_and_t()  # the truth's, without building one each step
-    while mode is not FlightMode.FLYING and t_now_s < TAKEOFF_TIMEOUT_S:
-        check_signals()
-        if not drone.ascend(period, TAKEOFF_TIMEOUT_S):  # (its usual ticks in one call)
-            drone.advance_to(t_now_s + period)
-        mode, t_now_s = drone.mode_and_t()
+    mode, t_now_s = drone.climb_out(period, TAKEOFF_TIMEOUT_S, check_signals)
     if mode is not FlightMode.FLYING:
         raise RuntimeError(f"simulated take-off did not complete "
                            f"(mode {mode.value})")
@@ -336,6 +331,32 @@ def warm_up_blocks() -> None:
             release_block_lock()
 
 
+def _landing_logged(tick, drone: LockstepDrone, recorder, write_event, t_first: float,
+                    t_start: float, k: int, period: float,
+                    deadline: float) -> tuple[FlightMode, float]:
+    """A landing's ticks logged after a supervisor's landing (:func:`_land`): each tick
+    stepped and recorded as ``landing`` until LANDED, an EMERGENCY or ``deadline``."""
+    # the loop's calls bound once (~40 ticks of descent a flight), as in _fly's loop
+    advance_to, take_events, land = drone.advance_to, drone.take_events, drone.land
+    mode_and_t = drone.mode_and_t  # (the truth's, without building one each tick)
+    landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
+    mode, t_now_s = mode_and_t()
+    while mode is not landed and t_now_s < deadline:
+        if mode is emergency:
+            break
+        t_plant = t_first + k * period
+        advance_to(t_plant, t_plant - t_start)
+        drone_events = take_events()  # the faults that started: mostly none
+        if drone_events:
+            _write_events_at(write_event, drone_events)
+        land()  # REF land, held as the link's keepalive holds it
+        out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
+        _record_out(recorder, out, drone, "landing")
+        k += 1
+        mode, t_now_s = mode_and_t()
+    return mode, t_now_s
+
+
 def _write_events_at(write_event, events: list[tuple[float, dict]]) -> None:
     """``(experiment time, event)`` pairs, each at its time."""
     for t_exp, event in events:
@@ -381,33 +402,12 @@ def _land(cfg, tick, drone: LockstepDrone, recorder, write_event, t_first, t_sta
     drone.land()
     write_event(t_first + k0 * period - t_start, "land")
     deadline = drone.truth.t_s + LANDING_TIMEOUT_S
-    k = k0
-    # the loop's calls bound once (~40 ticks of descent a flight), as in _fly's loop
-    advance_to, take_events, land = drone.advance_to, drone.take_events, drone.land
-    mode_and_t = drone.mode_and_t  # (the truth's, without building one each tick)
-    landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
-    mode, t_now_s = mode_and_t()
-    while mode is not landed and t_now_s < deadline:
-        if mode is emergency:
-            break
-        legs_ran = False
-        if not logged:  # the usual ticks of the descent in one compiled call
-            n, legs_ran = drone.descend(t_first, k, period, deadline, t_start)
-            k += n
-            if n and not legs_ran:  # (ticks done whole: the loop's test again)
-                mode, t_now_s = mode_and_t()
-                continue
-        t_plant = t_first + k * period
-        if not legs_ran:
-            advance_to(t_plant, t_plant - t_start)
-        drone_events = take_events()  # the faults that started: mostly none
-        if drone_events:
-            _write_events_at(write_event, drone_events)
-        land()  # REF land, held as the link's keepalive holds it
-        if logged:
-            out = tick.step(drone.inputs(t_plant), t_exp_s=t_plant - t_start)
-            _record_out(recorder, out, drone, "landing")
-        k += 1
-        mode, t_now_s = mode_and_t()
+    if not logged:  # (the descent's usual ticks in one compiled call)
+        mode, t_now_s = drone.touch_down(
+            t_first, k0, period, deadline, t_start,
+            lambda events: _write_events_at(write_event, events))
+    else:
+        mode, t_now_s = _landing_logged(tick, drone, recorder, write_event, t_first, t_start,
+                                        k0, period, deadline)
     write_event(t_now_s - t_start, "landed" if mode is FlightMode.LANDED else "not-landed",
                 drone_mode=mode.value)

@@ -121,7 +121,6 @@ def compile_kernels() -> None:
     simulated drone's: connect, take off, fly a second holding a small command, land — the
     calls a lockstep flight makes — then the plant's own steps, flying and landing."""
     from ardrone_nmpc.config.schema import config_from_dict
-    from ardrone_nmpc.core.types import FlightMode
     from ardrone_nmpc.estimation.attitude_response import warm_up_kernels
     from ardrone_nmpc.runtime.after_solve import warm_up_kernels as warm_up_after_solve
     from ardrone_nmpc.runtime.tick_kernels import warm_up_kernels as warm_up_tick_kernels
@@ -137,11 +136,7 @@ def compile_kernels() -> None:
     period = cfg.loop.period_s
     drone.connect()
     drone.takeoff()
-    mode, t0 = drone.mode_and_t()
-    while mode is not FlightMode.FLYING and t0 < 30.0:  # (as the runner: drone_ascent)
-        if not drone.ascend(period, 30.0):
-            drone.advance_to(t0 + period)
-        mode, t0 = drone.mode_and_t()
+    _, t0 = drone.climb_out(period, 30.0)  # (as the runner: drone_ascent)
     plant = drone.sim.plant  # its step-by-step path: a take-off end the legs hand back
     plant._motors_on_step(plant._current, plant.params.integration_step_s, (0.0, 0.0, 0.0))
     drone.start_experiment(t0)
@@ -246,22 +241,11 @@ finally:
 
 
 def _land(drone, t0: float, k: int, period: float) -> None:
-    """A landing as the runner waits one out (``runtime/lockstep._land``): the descent's
-    usual ticks in one compiled call (``sim/drone_block.drone_descent``), the others one by
-    one; ~1 s of compile a first flight's landing would wait for."""
-    from ardrone_nmpc.core.types import FlightMode
-
+    """A landing as the runner waits one out (``LockstepDrone.touch_down``: the descent's
+    usual ticks in one compiled call, ``sim/drone_block.drone_descent``); ~1 s of compile a
+    first flight's landing would wait for."""
     drone.land()
-    while drone.mode_and_t()[0] is FlightMode.LANDING and k < 2000:
-        n, legs_ran = drone.descend(t0, k, period, t0 + 60.0, t0)
-        k += n
-        if n and not legs_ran:
-            continue
-        if not legs_ran:
-            t = t0 + k * period
-            drone.advance_to(t, t - t0)
-        drone.land()
-        k += 1
+    drone.touch_down(t0, k, period, t0 + 60.0, t0)
 
 
 def main() -> int:

@@ -213,6 +213,50 @@ class LockstepDrone(ConfigHandshake):
             self.block_ran_to(t_first_s + (k + n) * period_s, FlightMode.LANDING, ends)
         return n, legs_ran
 
+    def climb_out(self, period_s: float, timeout_s: float,
+                  between=None) -> tuple[FlightMode, float]:
+        """A take-off a runner waits out after :meth:`takeoff`: ticks of ``period_s`` — in
+        one call while :meth:`ascend` flies them, else one :meth:`advance_to` each — until
+        the plant flies (FLYING) or its time reaches ``timeout_s``; ``between()`` before
+        each (a signal check). ``(mode, plant time s)`` at the end (the runner's and the
+        precompile's take-off: one home)."""
+        mode, t_s = self.mode_and_t()
+        while mode is not FlightMode.FLYING and t_s < timeout_s:
+            if between is not None:
+                between()
+            if not self.ascend(period_s, timeout_s):
+                self.advance_to(t_s + period_s)
+            mode, t_s = self.mode_and_t()
+        return mode, t_s
+
+    def touch_down(self, t_first_s: float, k: int, period_s: float, deadline_s: float,
+                   t_start_s: float, on_events=None) -> tuple[FlightMode, float]:
+        """A landing a runner waits out, unlogged, after :meth:`land`: ticks ``k`` … (plant
+        time ``t_first_s + k·period_s``, experiment time that less ``t_start_s``) — in one
+        call while :meth:`descend` flies them, else each :meth:`advance_to`, the injected
+        faults' events to ``on_events(events)`` and REF land again — until LANDED, an
+        EMERGENCY or the plant's time at ``deadline_s``: ``(mode, plant time s)`` then."""
+        landed, emergency = FlightMode.LANDED, FlightMode.EMERGENCY
+        mode, t_s = self.mode_and_t()
+        while mode is not landed and t_s < deadline_s:
+            if mode is emergency:
+                break
+            n, legs_ran = self.descend(t_first_s, k, period_s, deadline_s, t_start_s)
+            k += n
+            if n and not legs_ran:  # (ticks done whole: the loop's test again)
+                mode, t_s = self.mode_and_t()
+                continue
+            if not legs_ran:
+                t_plant = t_first_s + k * period_s
+                self.advance_to(t_plant, t_plant - t_start_s)
+            events = self.take_events()  # the faults that started: mostly none
+            if events and on_events is not None:
+                on_events(events)
+            self.land()  # REF land, held as the link's keepalive holds it
+            k += 1
+            mode, t_s = self.mode_and_t()
+        return mode, t_s
+
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
         call."""

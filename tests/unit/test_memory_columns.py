@@ -78,12 +78,14 @@ def test_a_flown_square():
 
     rec = MemoryRecorder()
     run_lockstep(load_config("configs/square.yaml", ["duration_s=5"]), recorder=rec)
-    # the runner's usual rows come as cells (write_cells; a clean square: all of them)
-    kinds = {r.__class__ for r in rec._rows}
-    assert list in kinds
-    _assert_same(rec.columns(), _columns_by_name([cells_row(r) if r.__class__ is list else r
-                                                  for r in rec._rows]))
-    cells = [r for r in rec._rows if r.__class__ is list]  # a run of cells alone, and mixed
+    # the runner's usual rows come as cells (write_cells) and, a block of ticks' rows,
+    # as blocks (write_block: runs/block_rows) — a clean square has both
+    kinds = {r.__class__.__name__ for r in rec._rows}
+    assert {"list", "BlockRows"} <= kinds
+    _assert_same(rec.columns(), _columns_by_name(rec.rows))
+    cells = [c for r in rec._rows  # a run of cells alone, and mixed
+             for c in (r.cells() if r.__class__.__name__ == "BlockRows" else (r,))
+             if c.__class__ is list]
     _assert_same(_recorder_cells(cells).columns(), _columns_by_name(list(map(cells_row, cells))))
     mixed = [{"t_s": -1.0, "mode": "settle", "odd": 2.0}, *cells[:50], {"x_m": 3.0},
              *cells[50:]]
