@@ -203,7 +203,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
               if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)
     n_ticks, n_settle = schedule.n_ticks, schedule.n_settle
     k = 0
-    t_exp_s = schedule.t_exp_s  # (Schedule.ticks' own expression, for blocks' jumps in k)
+    t_exp_s = schedule.t_exp_s  # (k by k, or jumps of a block's ticks)
     while k < n_ticks:
         check_signals()
         t_exp = t_exp_s(k)

@@ -11,7 +11,7 @@ for the real-time one).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -101,18 +101,6 @@ class Schedule:
     def t_exp_s(self, k: int) -> float:
         """Experiment time of tick ``k`` (s; negative while settling)."""
         return (k - self.n_settle) * self.period_s
-
-    def ticks(self) -> Iterator[tuple[int, float, str]]:
-        """``(k, t_exp_s(k), phase(t_exp_s(k)))`` of every tick in order: a runner's loop
-        (one generator step a tick, where the two calls cost ~0.3 µs). The phase is asked
-        until the first ``track`` tick only: the ticks' times rise with k."""
-        n_settle, period_s = self.n_settle, self.period_s
-        mode = None
-        for k in range(self.n_ticks):
-            t_exp_s = (k - n_settle) * period_s  # t_exp_s(k)'s expression
-            if mode is not TRACK:
-                mode = phase(t_exp_s)
-            yield k, t_exp_s, mode
 
     def fraction_done(self, k: int) -> float:
         """The fraction of the run done once tick ``k`` has run."""
