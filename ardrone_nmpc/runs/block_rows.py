@@ -59,17 +59,39 @@ class BlockRows:
 
     def columns(self) -> list[list]:
         """Each ``LOG_COLUMNS`` column's cells over the rows: ``zip(*self.cells())``'s values
-        and types, made column by column."""
+        and types, made column by column (:meth:`column_cells`)."""
+        return [self.column_cells(i) for i in range(len(_SOURCES))]
+
+    def column_cells(self, i: int) -> list:
+        """The cells of ``LOG_COLUMNS[i]`` over the rows (``zip(*self.cells())[i]``)."""
+        kind, at = _SOURCES[i]
         rows = self.numbers
-        n = len(rows)
-        c = rows.T.tolist()
-        sat = self.saturated
-        psi = [p if -_PI < p <= _PI else wrap_angle_rad(p) for p in c[BR_TRUE_PSI]]
-        blank = [""] * n
-        return [*c[:21], [sat[int(b)] for b in c[BR_SATURATED]], c[BR_SOLVE_US],
-                [self.status] * n, c[BR_NORM], [int(i) for i in c[BR_GMRES]],
-                [int(i) for i in c[BR_NEWTON]], [self.mode] * n, c[BR_MOCAP_MS], c[BR_NAV_MS],
-                c[BR_BATTERY], blank, c[BR_COMPUTE_US], c[BR_MOCAP_T],
-                list(rows[:, BR_NAV_VX]), list(rows[:, BR_NAV_VY]), [self.nav_mode] * n,
-                c[BR_NAV_ROLL], c[BR_NAV_PITCH], [math.nan] * n, *([blank] * 7),
-                c[BR_TRUE_X], c[BR_TRUE_Y], c[BR_TRUE_Z], psi, c[BR_TRUE_VZ]]
+        if kind == _NUMBER:
+            return rows[:, at].tolist()
+        if kind == _CONST:
+            return [at] * len(rows)
+        if kind == _INT:
+            return [int(v) for v in rows[:, at].tolist()]
+        if kind == _SCALAR:  # (numpy scalars, as block_cells is given them)
+            return list(rows[:, at])
+        if kind == _ANGLE:
+            return [p if -_PI < p <= _PI else wrap_angle_rad(p) for p in rows[:, at].tolist()]
+        if kind == _SATURATED:
+            sat = self.saturated
+            return [sat[int(b)] for b in rows[:, at].tolist()]
+        return [getattr(self, at)] * len(rows)  # (_LABEL: the mode, the status, nav_mode)
+
+
+# where each LOG_COLUMNS cell of a block's row comes from (block_cells' order): a number of
+# the row, a number as an int, a numpy scalar, the truth's ψ wrapped, the saturation bits'
+# text, a label of the block, or a constant
+_NUMBER, _INT, _SCALAR, _ANGLE, _SATURATED, _LABEL, _CONST = range(7)
+_SOURCES = (*((_NUMBER, i) for i in range(21)), (_SATURATED, BR_SATURATED),
+            (_NUMBER, BR_SOLVE_US), (_LABEL, "status"), (_NUMBER, BR_NORM), (_INT, BR_GMRES),
+            (_INT, BR_NEWTON), (_LABEL, "mode"), (_NUMBER, BR_MOCAP_MS), (_NUMBER, BR_NAV_MS),
+            (_NUMBER, BR_BATTERY), (_CONST, ""), (_NUMBER, BR_COMPUTE_US),
+            (_NUMBER, BR_MOCAP_T), (_SCALAR, BR_NAV_VX), (_SCALAR, BR_NAV_VY),
+            (_LABEL, "nav_mode"), (_NUMBER, BR_NAV_ROLL), (_NUMBER, BR_NAV_PITCH),
+            (_CONST, math.nan), *((_CONST, "") for _ in range(7)), (_NUMBER, BR_TRUE_X),
+            (_NUMBER, BR_TRUE_Y), (_NUMBER, BR_TRUE_Z), (_ANGLE, BR_TRUE_PSI),
+            (_NUMBER, BR_TRUE_VZ))

@@ -63,7 +63,9 @@ def _numbers(cells: list, n: int) -> np.ndarray:
 
 
 def _column(name: str, cells: Sequence | None, n: int) -> np.ndarray:
-    """The array of a column's cells (None: no row has it)."""
+    """The array of a column's cells (None: no row has it; made now: :class:`_Deferred`)."""
+    if cells.__class__ is _Deferred:
+        cells = cells.cells()
     if cells is None:
         return (np.full(n, "", dtype=object) if name in STRING_COLUMNS
                 else np.full(n, math.nan))  # numpy's NaN for None, alike
@@ -82,19 +84,34 @@ def _row_keys(row) -> Any:
     return _CELLS if row.__class__ is list or row.__class__ is BlockRows else tuple(row)
 
 
+class _Deferred:
+    """A column's cells over a run of rows of cells and blocks of rows, made when the column
+    is first read (:func:`_column`): a block gives its column's cells
+    (:meth:`~ardrone_nmpc.runs.block_rows.BlockRows.column_cells`), no column is made for
+    all at once."""
+
+    __slots__ = ("run", "index")
+
+    def __init__(self, run: list, index: int) -> None:
+        self.run, self.index = run, index
+
+    def cells(self) -> list:
+        i, out = self.index, []
+        for row in self.run:
+            if row.__class__ is BlockRows:
+                out += row.column_cells(i)
+            else:
+                out.append(row[i])
+        return out
+
+
 def _cell_columns(run: list) -> list:
-    """The columns (``LOG_COLUMNS`` order) of a run of rows of cells and blocks of rows
-    (:class:`~ardrone_nmpc.runs.block_rows.BlockRows`, transposed by their own)."""
+    """The columns (``LOG_COLUMNS`` order) of a run of rows of cells: transposed at C speed,
+    or — blocks of rows among them (:class:`~ardrone_nmpc.runs.block_rows.BlockRows`) —
+    each made when read (:class:`_Deferred`)."""
     if all(row.__class__ is list for row in run):
         return list(zip(*run))
-    pieces = []  # each piece's columns: a block's, or a stretch of cells' transposed
-    for is_block, rows in itertools.groupby(run, key=lambda r: r.__class__ is BlockRows):
-        if is_block:
-            pieces.extend(block.columns() for block in rows)
-        else:
-            pieces.append(list(zip(*rows)))
-    return [list(itertools.chain.from_iterable(piece[i] for piece in pieces))
-            for i in range(len(LOG_COLUMNS))]
+    return [_Deferred(run, i) for i in range(len(LOG_COLUMNS))]
 
 
 def _expanded(rows: list) -> list:
@@ -140,7 +157,7 @@ def _transposed(rows: list, n_rows: int) -> dict[str, tuple | list]:
             column = out.get(key)
             if column is None:
                 column = out[key] = [None] * n_rows
-            column[done:done + n] = cells
+            column[done:done + n] = cells.cells() if cells.__class__ is _Deferred else cells
         done += n
     return out
 
