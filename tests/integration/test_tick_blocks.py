@@ -11,8 +11,8 @@ loop ends (``_land`` called) and after the flight.
 The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``: nothing
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
-at the altitude cap, a supervisor's landing, and flights no block takes (injected faults,
-other references). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
+at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
+navdata's speeds, and flights no block takes (injected faults, other plants and objects). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
 lead's gate with more flights: ``benchmarks/tick_equivalence.py``.
 """
 
