@@ -128,8 +128,8 @@ class BeforeSolve:
     @staticmethod
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: an NMPC against a
-        waypoint reference or a tabulated curve, the compiled estimator, and the stages' own classes (a subclass'
-        overrides are called: the Python stages take its ticks)."""
+        waypoint reference or a tabulated curve, the compiled estimator, and the stages' own
+        classes (a subclass' overrides are called: the Python stages take its ticks)."""
         traj = tick.trajectory
         return (tick.control.nmpc is not None and traj.__class__ is HoldStartThen
                 and traj.waypoint_args is not None and tick.estimation.compiled

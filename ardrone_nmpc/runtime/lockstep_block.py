@@ -96,10 +96,9 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
             t_s, d[db.D_POSE_RX], d[db.D_T_NAV], bits, d[db.D_BATTERY], d[db.D_NAV_ROLL],
             d[db.D_NAV_PITCH], d[db.D_PX], d[db.D_PY], d[db.D_PZ], d[db.D_PSI], d[db.D_POSE_T],
             c[C_ZACC], by_nav, nav_vx, nav_vy, est, limits, t_exp_s, dring, int(c[C_FIRST]),
-            count,
-            c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm, horizon,
-            False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps, tilt_cap_rad,
-            gain, e, v, y, response, 1, offset, offset_flags)
+            count, c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm,
+            horizon, False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
+            tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
         if code != 0 or not db.drone_command(d, out, roll, pitch, gaz, yaw):
@@ -177,12 +176,12 @@ class TickBlocks:
         """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
         is one compiled call whose rows are cells, with no second object to follow or
         avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
-        kernel reads: ``core/monotonic.SAME_CLOCK``) — and :func:`tick_block` has machine code (compiled, or in numba's cache:
-        loaded), unless the blocks may compile it (``compile_now``)."""
+        kernel reads: ``core/monotonic.SAME_CLOCK``) — and :func:`tick_block` has machine
+        code (compiled, or in numba's cache: loaded), unless the blocks may compile it
+        (``compile_now``)."""
         legs = drone.sensors._legs
         return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
-                and tick.follow is None and tick.obstacles is None
-                and legs is not None
+                and tick.follow is None and tick.obstacles is None and legs is not None
                 and legs.takes_commands and (compile_now or load_cached(tick_block)))
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,

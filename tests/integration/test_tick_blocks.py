@@ -12,8 +12,9 @@ The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init_
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
 at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
-navdata's speeds, and flights no block takes (injected faults, other plants and objects). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
-lead's gate with more flights: ``benchmarks/tick_equivalence.py``.
+navdata's speeds, and flights no block takes (injected faults, other plants and objects).
+Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with
+more flights: ``benchmarks/tick_equivalence.py``.
 """
 
 from __future__ import annotations

@@ -80,7 +80,7 @@ def test_a_block_of_ticks_reads_each_ticks_states_bit_for_bit(lead_s, dtau_s):
 
 def test_a_tick_not_in_the_table_is_found_nowhere():
     """``table_tick`` answers −1 for times the table does not hold — another tick, another
-    lead, a NaN time, −0.0 for +0.0 (a state may differ there: an ellipse's ẋ is −aω·sin) —
+    lead, a NaN time, +0.0 for −0.0 (a state may differ there: an ellipse's ẋ, −aω·sin) —
     and ``nmpc_inputs`` then reads NaN states (``before_solve`` asks first: not nominal)."""
     traj = _curves()[0]
     work, rows = _work(traj, 0.1)
