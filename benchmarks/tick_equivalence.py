@@ -109,6 +109,20 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("square_mocap_verdicts", "square", SQUARE + ["sim.mocap_rate_hz=10",
                                                   "safety.mocap_hold_ms=95",
                                                   "safety.mocap_hover_ms=105"], 0),
+    # curves read from a table of their states (reference/experiment.tabulated) and ẋ, ẏ
+    # from the navdata's speeds, in blocks: the identification flight's every axis, fits
+    # between blocks (a lead that moves: the table's times), no offset-free shift
+    ("identify", "identify", SHORT[1:] + ["duration_s=14", "reference.excitation.axis_s=2.4",
+                                          "reference.excitation.rest_s=0.5",
+                                          "reference.excitation.sweep_m=0.1"], 0),
+    ("ellipse_fast_refit", "ellipse", SHORT + ["controller.adaptation.refit_s=0.2"], 1),
+    ("lorenz_fast_refit", "lorenz", SHORT + ["controller.adaptation.refit_s=0.2"], 2),
+    ("ellipse_no_offset_free", "ellipse", SHORT + ["controller.offset_free.enabled=false"], 0),
+    ("ellipse_navdata_velocity", "ellipse", SHORT + ["estimator.horizontal_velocity=navdata"],
+     3),
+    ("square_navdata_velocity_bias", "square", SQUARE + [
+        "estimator.horizontal_velocity=navdata", "sim.navdata_velocity_bias_mps=[0.05,-0.03]",
+        "sim.plant.turbulence_std_mps=0.3"], 5),
 ]
 
 

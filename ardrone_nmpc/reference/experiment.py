@@ -13,8 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
-from ardrone_nmpc.reference.trajectories import (Hover, ReferenceError, Step, Trajectory,
-                                                  Waypoints, is_times, make_trajectory)
+from ardrone_nmpc.reference.excitation import Excitation
+from ardrone_nmpc.reference.trajectories import (Ellipse, Hover, Lorenz, ReferenceError, Step,
+                                                  Trajectory, Waypoints, is_times,
+                                                  make_trajectory)
 
 #: ``ndarray.min`` of a 1-D array is this reduction (numpy/_core/_methods.py: ``_amin``).
 _min = np.minimum.reduce
@@ -45,6 +47,22 @@ def lookup_args(trajectory: Trajectory) -> tuple | None:
     return None
 
 
+#: The lookup's arrays of a reference the compiled tick reads from a table of its states
+#: (``runtime/tick_kernels.fill_reference_table``): no knots.
+_TABLE_ARGS = (np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
+
+
+def tabulated(trajectory: Trajectory) -> bool:
+    """Whether the compiled tick may read ``trajectory``'s states from a table its own
+    ``state_at`` fills, one call for many ticks' horizon times: a curve whose state at a time
+    is the same bits whatever other times it is asked with — every expression of its
+    ``state_at`` elementwise: :class:`Ellipse` (the C library's cos and sin, numpy's loop
+    calls them per element), :class:`Lorenz` (the dense output's polynomial, per element of
+    its segment), :class:`Excitation` (masks, sums and products). Its own class only: a
+    subclass' ``state_at`` may not be."""
+    return type(trajectory) in (Ellipse, Lorenz, Excitation)
+
+
 class HoldStartThen:
     """``trajectory`` for t ≥ 0, its t = 0 point at rest for t < 0 (the settle phase)."""
 
@@ -55,8 +73,13 @@ class HoldStartThen:
         self._start = start
         self.duration_s = trajectory.duration_s
         # the arrays of the tick's one-call horizon lookup (runtime/tick_kernels.nmpc_inputs)
-        # of a waypoint trajectory or a set point (hover, step); None for any other kind
+        # of a waypoint trajectory or a set point (hover, step), or none for a curve whose
+        # states it reads from a table this object fills (``tabulated``); None else
         args = lookup_args(trajectory)
+        #: the states are a table's, filled by :meth:`state_at` (``tabulated``)
+        self.tabulated = args is None and tabulated(trajectory)
+        if self.tabulated:
+            args = _TABLE_ARGS
         self.waypoint_args = None if args is None else args + (start,)
 
     def state_at(self, t_s):
@@ -127,7 +150,7 @@ def experiment_trajectory(cfg):
                 _INSIDE.clear()
             _INSIDE.add(key)
     held = HoldStartThen(trajectory)
-    if key is not None and held.waypoint_args is not None:
+    if key is not None and held.waypoint_args is not None and not held.tabulated:
         if len(_MADE) >= _INSIDE_MAX:
             _MADE.clear()
         _MADE[key] = held

@@ -14,8 +14,9 @@ answers :data:`NOT_NOMINAL`, with nothing written, when one fails: the caller th
 Python stages, which decide as they always did.
 
 :class:`BeforeSolve` is the Python side: the preconditions (fresh pose and navdata, nothing
-latched, the compiled estimator, a waypoint reference the control stage has packed), the
-call, and the solve itself (``Control._solved``: the solver and the tick's ``Solution``).
+latched, the compiled estimator, a reference the control stage has packed: a waypoint one
+or a table of a curve's states), the call, and the solve itself (``Control._solved``: the
+solver and the tick's ``Solution``).
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ from ardrone_nmpc.core.types import STATE_DIM, FlightMode
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
-from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, kalman_estimate,
-                                               nmpc_inputs, sample_waypoint_work)
+from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, W_KNOTS,
+                                               fill_reference_table, kalman_estimate,
+                                               nmpc_inputs, sample_waypoint_work, table_tick)
 from ardrone_nmpc.safety import ALARM_BITS, Supervisor
 
 __all__ = ["BeforeSolve", "NOT_NOMINAL", "before_solve", "warm_up_kernels"]
@@ -85,6 +87,9 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
             and battery_pct > limits[L_BATTERY_FLOOR_PCT] and nav_ms <= limits[L_NAVDATA_LAND_MS]
             and mocap_ms <= limits[L_MOCAP_NOMINAL_MS]):
         return nothing
+    # a reference table without this tick's times (runtime/tick_kernels.table_tick): Python's
+    if int(work[W_KNOTS]) == 0 and table_tick(t_exp_s, lead_s, work, rows) < 0:
+        return nothing
     # Estimation.update, on a copy of its state: kept only if the tick is nominal
     scratch = limits[L_SCRATCH:L_SCRATCH + E_SIZE]
     for i in range(E_SIZE):
@@ -123,8 +128,8 @@ class BeforeSolve:
     @staticmethod
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: an NMPC against a
-        waypoint reference, the compiled estimator, and the stages' own classes (a subclass'
-        overrides are called: the Python stages take its ticks)."""
+        waypoint reference or a tabulated curve, the compiled estimator, and the stages' own
+        classes (a subclass' overrides are called: the Python stages take its ticks)."""
         traj = tick.trajectory
         return (tick.control.nmpc is not None and traj.__class__ is HoldStartThen
                 and traj.waypoint_args is not None and tick.estimation.compiled
@@ -229,6 +234,9 @@ class BeforeSolve:
             vx = vy = 0.0
         delay, offset = self.delay, self.offset
         shift = _NO_SHIFT if offset is None else offset.integrator.shift
+        if traj.tabulated:  # the reference's states at this tick's times, for the call
+            fill_reference_table(traj, np.array([t_exp_s]), delay.lead_s, control._work,
+                                 control._rows)
         # the bits masked in Python (check_feedback's own ``bits & ALARM_BITS``): a word
         # beyond int64 would not unbox
         return (t_s, pose_rx, nav_rx, 0 if bits is None else bits & ALARM_BITS, battery, roll,

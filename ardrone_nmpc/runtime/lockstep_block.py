@@ -35,7 +35,7 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runs import block_row as br
 from ardrone_nmpc.runtime.control_tick import control_tick
-from ardrone_nmpc.runtime.tick_kernels import E_X
+from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 
@@ -51,10 +51,11 @@ __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "
 # c: the controller's numbers a block carries from tick to tick — the input z̈ and ż
 # reference sent last (Supervision's), the delay ring's next row and first pending row —
 # and what it only reads — the pending count, the ring's capacity, the delay's lead, the
-# next response fit's time (inf: none), the state bits —; whether a feed took a sample;
-# the exit tick's call: its time (ns) and answer (19 numbers)
+# next response fit's time (inf: none), the state bits, ẋ, ẏ from the navdata's speeds
+# (1.0) or not —; whether a feed took a sample; the exit tick's call: its time (ns) and
+# answer (19 numbers)
 (C_ZACC, C_VZ_REF, C_NEXT, C_FIRST, C_COUNT, C_CAPACITY, C_LEAD_S, C_NEXT_FIT_S, C_BITS,
- C_FED, C_SPENT_NS, C_ANSWER) = range(12)
+ C_BY_NAV, C_FED, C_SPENT_NS, C_ANSWER) = range(13)
 C_SIZE = C_ANSWER + 19
 # the answer's integer numbers (code, flag, GMRES and Newton iterations, bits, feed code)
 _ANSWER_INTS = (0, 3, 6, 7, 17, 18)
@@ -75,6 +76,7 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
     out = buf[ks.B_OUT:ks.B_IV]
     capacity, count = int(c[C_CAPACITY]), int(c[C_COUNT])
     bits = int(c[C_BITS])
+    by_nav = c[C_BY_NAV] != 0.0
     for i in range(n_max):
         k = k0 + i
         t_s = t_first_s + k * period_s
@@ -87,14 +89,16 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         t0_ns = monotonic_ns()
         nxt = int(c[C_NEXT])
         vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
-        # (what the links hold: d's newest pose and navdata sample, no ẋ, ẏ of theirs)
+        # (what the links hold: d's newest pose and navdata sample, and ẋ, ẏ from the
+        # navdata's speeds if the estimate takes them)
+        nav_vx, nav_vy = _navdata_velocity_world(d) if by_nav else (0.0, 0.0)
         answer = control_tick(
             t_s, d[db.D_POSE_RX], d[db.D_T_NAV], bits, d[db.D_BATTERY], d[db.D_NAV_ROLL],
             d[db.D_NAV_PITCH], d[db.D_PX], d[db.D_PY], d[db.D_PZ], d[db.D_PSI], d[db.D_POSE_T],
-            c[C_ZACC], False, 0.0, 0.0, est, limits, t_exp_s, dring, int(c[C_FIRST]), count,
-            c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm, horizon,
-            False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps, tilt_cap_rad,
-            gain, e, v, y, response, 1, offset, offset_flags)
+            c[C_ZACC], by_nav, nav_vx, nav_vy, est, limits, t_exp_s, dring, int(c[C_FIRST]),
+            count, c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm,
+            horizon, False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
+            tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
         if code != 0 or not db.drone_command(d, out, roll, pitch, gaz, yaw):
@@ -120,6 +124,15 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         if not t_s < c[C_NEXT_FIT_S]:  # (AfterSolve.written's test: a fit due, in Python)
             return i + 1, EXIT_FIT
     return n_max, EXIT_NONE
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _navdata_velocity_world(d):
+    """``runtime/estimate.navdata_velocity_world`` of d's navdata sample at d's pose's ψ: the
+    same expressions in the same order (cos and sin: the C library's, as Python's math)."""
+    c, s = math.cos(d[db.D_PSI]), math.sin(d[db.D_PSI])
+    fwd, right = d[db.D_NAV_VX], d[db.D_NAV_VY]
+    return fwd * c + right * s, fwd * s - right * c
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -163,13 +176,12 @@ class TickBlocks:
         """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
         is one compiled call whose rows are cells, with no second object to follow or
         avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
-        kernel reads: ``core/monotonic.SAME_CLOCK``; ẋ, ẏ estimated without the navdata's
-        speeds) — and :func:`tick_block` has machine code (compiled, or in numba's cache:
-        loaded), unless the blocks may compile it (``compile_now``)."""
+        kernel reads: ``core/monotonic.SAME_CLOCK``) — and :func:`tick_block` has machine
+        code (compiled, or in numba's cache: loaded), unless the blocks may compile it
+        (``compile_now``)."""
         legs = drone.sensors._legs
         return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
-                and tick.follow is None and tick.obstacles is None
-                and not tick.estimation.velocity_from_navdata and legs is not None
+                and tick.follow is None and tick.obstacles is None and legs is not None
                 and legs.takes_commands and (compile_now or load_cached(tick_block)))
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
@@ -263,7 +275,7 @@ class TickBlocks:
         t_s = self.t_first_s + k * period_s
         before = ct.before.arguments(drone.sensors.inputs(t_s), (k - n_settle) * period_s,
                                      tick.trajectory)
-        if before is None or before[13]:  # (ẋ, ẏ from the navdata: not in a block)
+        if before is None:
             return None
         delay, response = tick.delay, tick.response
         vz_last = (float(tick.supervision.vz_ref_mps) if tick.control.vz_from_commands
@@ -271,8 +283,9 @@ class TickBlocks:
         c[:C_SPENT_NS] = (before[12], vz_last, delay._next, before[20], before[21],
                           delay._capacity, before[22],
                           math.inf if response is None else response._next_fit_s, before[3],
-                          0.0)
+                          float(before[13]), 0.0)
         legs_args = drone.sensors._legs._args
+        n_max = self._tabulated(k, n_max)
         self._args = (n_max, k, self.t_first_s, period_s, n_settle, self.d, *legs_args, c,
                       self.table, before[16], before[17], before[19], before[23], before[24],
                       before[25], before[26], before[27], *_tail_args(tail))
@@ -288,6 +301,7 @@ class TickBlocks:
         if tail is None:
             return None
         legs_args = self.drone.sensors._legs._args
+        n_max = self._tabulated(k, n_max)
         if legs_args is self._legs_args and tail is self._tail:
             self._args = (n_max, k, *self._args[2:])
             return self._call
@@ -297,6 +311,21 @@ class TickBlocks:
         self._args = (n_max, k, *args[2:6], *legs_args, *args[6 + n_legs:at],
                       *_tail_args(tail))
         return self._vetted(legs_args, tail)
+
+    def _tabulated(self, k: int, n_max: int) -> int:
+        """The block's length from tick ``k``: ``n_max``, or for a curve's reference (read
+        from a table: ``runtime/tick_kernels.fill_reference_table``) at most the table's
+        ticks, its states filled at each one's horizon times — the delay's lead is the
+        block's (a fit that moves it ends a block)."""
+        tick = self.tick
+        if not tick.trajectory.tabulated:
+            return n_max
+        control = tick.control
+        n_max = min(n_max, TABLE_TICKS)
+        t_exp_s = (np.arange(k, k + n_max) - self.n_settle) * self.period_s  # tick_block's
+        fill_reference_table(tick.trajectory, t_exp_s, tick.delay.lead_s, control._work,
+                             control._rows)
+        return n_max
 
     def _vetted(self, legs_args: tuple, tail: tuple):
         """:attr:`_args`' entry point (kept with the legs' arrays and the tail it is for),

@@ -33,7 +33,8 @@ from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import TrackedObject
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.supervision import HOVER, Sent, Supervision
-from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work, nmpc_work_views
+from ardrone_nmpc.runtime.tick_kernels import (fill_reference_table, nmpc_inputs, nmpc_work,
+                                               nmpc_work_views)
 from ardrone_nmpc.safety import Action
 
 __all__ = ["HOVER", "OBSTACLE_VELOCITY_FILTER_S", "Control", "DelayPrediction", "Estimation",
@@ -306,11 +307,15 @@ class Control:
         args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
         if (args is not None and x.__class__ is np.ndarray and x.dtype is _F64
                 and x.shape == _X_SHAPE):
-            # a waypoint reference (the square): the delay prediction, the horizon's times,
-            # the lookup and the offset-free shift in one call (runtime/tick_kernels.py),
-            # then the solve without the checks its arrays pass by construction
+            # a waypoint reference (the square) or a curve's table: the delay prediction, the
+            # horizon's times, the lookup and the offset-free shift in one call
+            # (runtime/tick_kernels.py), then the solve without the checks its arrays pass by
+            # construction
             if args is not self._work_args:  # once a flight: its arrays into the work vector
                 self._pack(args)
+            if traj.tabulated:  # a curve: its states at this tick's times into the table
+                fill_reference_table(traj, np.array([t_exp_s]), delay.lead_s, self._work,
+                                     self._rows)
             pending = delay.count
             x_solve = self._x_solve if pending else x
             ref_horizon = self._ref_horizon  # the logged horizon, unshifted

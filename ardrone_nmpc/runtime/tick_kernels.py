@@ -9,7 +9,9 @@ prediction's rollout (:meth:`~ardrone_nmpc.runtime.stages.DelayPrediction.predic
 horizon's times, the reference lookup (``HoldStartThen.state_at`` of a waypoint trajectory)
 and the offset-free shift — each with its arrays to allocate and its numba call to dispatch.
 :func:`nmpc_inputs` runs the same kernels, on the same arrays, in one call: the same bits.
-Other reference kinds keep the general path.
+A curve (ellipse, Lorenz, excitation: ``reference/experiment.tabulated``) is read from a
+table of its states at the horizon's times, filled by its own ``state_at`` for a tick or a
+block of ticks (:func:`fill_reference_table`): the same bits by construction.
 """
 
 from __future__ import annotations
@@ -21,13 +23,14 @@ from numba import njit
 
 from ardrone_nmpc.control.kernels import rollout_rk4_into
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
-__all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES",
-           "kalman_estimate", "nmpc_inputs", "nmpc_work", "nmpc_work_views",
-           "sample_waypoint_work", "warm_up_kernels"]
+__all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "TABLE_TICKS", "W_HEAD", "W_KNOTS",
+           "W_PERIOD", "W_TIMES", "fill_reference_table", "kalman_estimate", "nmpc_inputs",
+           "nmpc_work", "nmpc_work_views", "sample_waypoint_work", "table_tick",
+           "warm_up_kernels"]
 
 
 #: The state slots a reference shift moves (offset-free tracking: x, y, z, ψ), as in
@@ -48,18 +51,66 @@ W_TIMES = 1     # N, the horizon's times (its stages + 1, and the reference now)
 W_KNOTS = 2     # K, the waypoints
 W_HEAD = 3
 _ROLLOUT_SCRATCH = 5 * STATE_DIM  # rollout_rk4_into's
+#: The ticks a reference table holds (:func:`fill_reference_table`): a block's most
+#: (``runtime/lockstep.BLOCK_TICKS``; ``TickBlocks`` flies no longer block against one).
+TABLE_TICKS = 32
 
 
 def nmpc_work(period_s: float, n_times: int,
               waypoint_args: tuple) -> tuple[np.ndarray, np.ndarray]:
     """:func:`nmpc_inputs`' ``work`` (the ``W_*`` slots) and ``rows`` for ``n_times`` horizon
-    times and a waypoint trajectory's arrays; offsets, times, clamp and horizon zero."""
+    times and a waypoint trajectory's arrays; offsets, times, clamp and horizon zero. No
+    knots (K = 0): ``rows`` is a reference table (:func:`fill_reference_table`) of
+    :data:`TABLE_TICKS` ticks, its times NaN (no tick's)."""
     t_knots, positions_m, psi_rad, dt_s, vel_mps, start = waypoint_args
     head = np.array([period_s, n_times, t_knots.size], dtype=np.float64)
     buffers = np.zeros(3 * n_times + (n_times - 1) * STATE_DIM + _ROLLOUT_SCRATCH)
     work = np.concatenate((head, buffers, t_knots, psi_rad, dt_s, start)).astype(np.float64)
+    if t_knots.size == 0:
+        return work, np.full((TABLE_TICKS * n_times, 1 + STATE_DIM), np.nan)
     rows = np.ascontiguousarray(np.concatenate((positions_m, vel_mps)), dtype=np.float64)
     return work, rows
+
+
+def fill_reference_table(traj, t_exp_s: np.ndarray, lead_s: float, work: np.ndarray,
+                         rows: np.ndarray) -> None:
+    """A reference table's first ``len(t_exp_s)`` ticks (``rows``, of :func:`nmpc_work`; n
+    rows a tick: the time, then the state): each tick's horizon times as
+    :func:`nmpc_inputs` makes them — [t, (t + lead) + offsets[1:]], ``Control.solve``'s
+    general path's too — and ``traj.state_at`` at all of them in one call (a tabulated
+    reference's states are elementwise: ``reference/experiment.tabulated``)."""
+    n = int(work[W_TIMES])
+    times = np.add((t_exp_s + lead_s)[:, None], work[W_HEAD:W_HEAD + n])
+    times[:, 0] = t_exp_s
+    flat = times.reshape(-1)
+    m = flat.size
+    rows[:m, 0] = flat
+    rows[:m, 1:] = traj.state_at(flat)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def table_tick(t_s: float, lead_s: float, work: np.ndarray, rows: np.ndarray) -> int:
+    """The tick of the reference table ``rows`` (:func:`fill_reference_table`) whose times
+    are the horizon's at ``t_s`` bit for bit — [t, (t + lead) + offsets[1:]], as
+    :func:`nmpc_inputs` makes them —, or −1: none (a NaN time matches none)."""
+    n = int(work[W_TIMES])
+    base = t_s + lead_s
+    for j in range(rows.shape[0] // n):
+        r = j * n
+        same = _same_bits(rows[r, 0], t_s)
+        i = 1
+        while same and i < n:
+            same = _same_bits(rows[r + i, 0], base + work[W_HEAD + i])
+            i += 1
+        if same:
+            return j
+    return -1
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _same_bits(a: float, b: float) -> bool:
+    """``a`` and ``b`` the same float64 (−0.0 is not +0.0: a state may differ at them)."""
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
 
 
 def nmpc_work_views(work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -86,6 +137,9 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
     * when ``shift`` (4) is not empty, ``horizon`` = ``states[1:]`` with the offset-free shift
       added to x, y, z, ψ (``ReferenceIntegrator.shifted``).
 
+    Without knots (K = 0) the states are the reference table's tick at these times
+    (:func:`table_tick`; the caller has found one: NaN states else).
+
     The clamp is scratch of the times' length. One kernel, its lookup written here rather
     than in a kernel of its own: every compiled level costs a cold start a compile."""
     n = int(work[W_TIMES])
@@ -110,21 +164,27 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
     for i in range(n):
         times[i] = base + work[W_HEAD + i]
     times[0] = t_s
-    inside = True  # min(times) > 0 (NaN is not): nothing held
-    for i in range(n):
-        if not times[i] > 0.0:
-            inside = False
-    if inside:
-        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, times, states)
-    else:
-        for i in range(n):  # np.maximum(t, 0.0): t if t > 0 or NaN, else +0.0 (−0.0 too)
-            t = times[i]
-            clamped[i] = t if (t > 0.0 or t != t) else 0.0
-        waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
+    if nk == 0:  # a reference table's tick
+        j = table_tick(t_s, lead_s, work, rows)
         for i in range(n):
-            if times[i] < 0.0:
-                for c in range(STATE_DIM):
-                    states[i, c] = work[s0 + c]
+            for c in range(STATE_DIM):
+                states[i, c] = rows[j * n + i, 1 + c] if j >= 0 else math.nan
+    else:
+        inside = True  # min(times) > 0 (NaN is not): nothing held
+        for i in range(n):
+            if not times[i] > 0.0:
+                inside = False
+        if inside:
+            waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, times, states)
+        else:
+            for i in range(n):  # np.maximum(t, 0.0): t if t > 0 or NaN, else +0.0 (−0.0 too)
+                t = times[i]
+                clamped[i] = t if (t > 0.0 or t != t) else 0.0
+            waypoint_states(t_knots, positions_m, psi_rad, dt_s, vel_mps, clamped, states)
+            for i in range(n):
+                if times[i] < 0.0:
+                    for c in range(STATE_DIM):
+                        states[i, c] = work[s0 + c]
     if shift.size:
         for j in range(n - 1):
             row = h0 + j * STATE_DIM

@@ -11,9 +11,10 @@ loop ends (``_land`` called) and after the flight.
 The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init__``: nothing
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
-at the altitude cap, a supervisor's landing, and flights no block takes (injected faults,
-other references). Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The
-lead's gate with more flights: ``benchmarks/tick_equivalence.py``.
+at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
+navdata's speeds, and flights no block takes (injected faults, other plants and objects).
+Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with
+more flights: ``benchmarks/tick_equivalence.py``.
 """
 
 from __future__ import annotations
@@ -85,11 +86,23 @@ CASES = [
     # the battery reaches the floor: the supervisor lands, the descent's ticks logged
     ("low_battery", "square", ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
                                "sim.plant.battery_drain_pct_per_min=30"], 0),
-    # flights no block takes (as the blocks' first version has it): the navdata's speeds, a
-    # plant, a second object on the mocap stream, an estimator or a reference the compiled
-    # calls do not take, injected faults
+    # ẋ, ẏ from the navdata's speeds (the block rotates them as the estimate does)
     ("square_navdata_velocity", "square",
      ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
+    # curves read from a table of their states (reference/experiment.tabulated), filled a
+    # tick or a block at a time: the ellipse, Lorenz's (past its end: held), the
+    # identification flight's every axis; fits between blocks; navdata speeds
+    ("ellipse", "ellipse", ["duration_s=10", *SETTLE], 0),
+    ("ellipse_refit_navdata", "ellipse",
+     ["duration_s=8", *SETTLE, "controller.adaptation.refit_s=0.2",
+      "estimator.horizontal_velocity=navdata"], 18),
+    ("lorenz", "lorenz", ["duration_s=8", *SETTLE], 1),
+    ("identify", "identify", ["duration_s=14", *SETTLE, "reference.excitation.axis_s=2.4",
+                              "reference.excitation.rest_s=0.5",
+                              "reference.excitation.sweep_m=0.1"], 2),
+    # flights no block takes (as the blocks' first version has it): a plant, a second
+    # object on the mocap stream, an estimator the compiled calls do not take, injected
+    # faults
     ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
@@ -536,4 +549,18 @@ def test_blocks_take_the_square(monkeypatch):
     assert lockstep.BLOCK_TICKS > 1  # (blocks by default)
     block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
     assert len(block.recorder.written) == rows
+    assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"
+
+
+@pytest.mark.parametrize("config, overrides", [
+    ("ellipse", []), ("lorenz", []), ("identify", []),
+    ("square", ["estimator.horizontal_velocity=navdata"]),
+], ids=["ellipse", "lorenz", "identify", "navdata_velocity"])
+def test_blocks_take_the_curves_and_the_navdata_speeds(config, overrides, monkeypatch):
+    """The curves' usual ticks (their states read from a table) and those of ẋ, ẏ from the
+    navdata's speeds go in blocks: far fewer ``Tick.step`` calls than rows."""
+    cfg = _config(config, ["duration_s=10", *SETTLE, *overrides])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100
     assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"

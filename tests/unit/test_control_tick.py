@@ -19,6 +19,8 @@ from ardrone_nmpc.control.diverging import DivergingSolver
 from ardrone_nmpc.core.entry_points import VettedCall
 from ardrone_nmpc.core.monotonic import SAME_CLOCK
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
+from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.reference.trajectories import Ellipse
 from ardrone_nmpc.runtime import control_tick as control_tick_module
 from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
@@ -90,6 +92,9 @@ def _same_flights(a: tuple, b: tuple) -> None:
     ("hover.yaml", ["duration_s=5"], True),  # a set point: the one-call lookup's too
     ("step_x.yaml", ["duration_s=5", "reference.step_time_s=0.5"], True),
     ("step_psi.yaml", ["duration_s=5"], True),
+    ("ellipse.yaml", ["duration_s=5"], True),  # curves: a table of their states
+    ("lorenz.yaml", ["duration_s=5"], True),
+    ("identify.yaml", ["duration_s=5"], True),
     ("square.yaml", ["duration_s=4", "controller.solver.method=newton"], False),
 ])
 def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, whole,
@@ -277,12 +282,19 @@ def test_the_kernel_answers_not_nominal_before_any_write():
 
 
 @pytest.mark.parametrize("name", ["hover.yaml", "step_x.yaml", "step_z.yaml", "step_psi.yaml",
-                                  "r_case1.yaml", "stability_n5_dtau03.yaml", "square.yaml"])
+                                  "r_case1.yaml", "stability_n5_dtau03.yaml", "square.yaml",
+                                  "ellipse.yaml", "lorenz.yaml", "identify.yaml"])
 def test_the_set_points_and_waypoints_take_the_call(name):
     """Hover and step references are looked up by the waypoint kernel
-    (``reference/experiment.lookup_args``): their nominal ticks are the one call's."""
+    (``reference/experiment.lookup_args``), curves read from a table of their states
+    (``reference/experiment.tabulated``): their nominal ticks are the one call's."""
     cfg = config(name)
     assert Tick(cfg, experiment_trajectory(cfg)).control_tick is not None
+
+
+class _OwnEllipse(Ellipse):
+    def state_at(self, t_s):
+        return super().state_at(t_s)
 
 
 @pytest.mark.parametrize("build", [
@@ -292,10 +304,11 @@ def test_the_set_points_and_waypoints_take_the_call(name):
                      experiment_trajectory(cfg)),
     lambda cfg: Tick(config("obstacle.yaml"), experiment_trajectory(config("obstacle.yaml"))),
     lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
-    # a reference the waypoint kernel does not look up (a curve)
-    lambda cfg: Tick(config("ellipse.yaml"), experiment_trajectory(config("ellipse.yaml"))),
+    # a reference neither looked up nor tabulated (a curve's subclass: its own state_at)
+    lambda cfg: Tick(config("ellipse.yaml"), HoldStartThen(_OwnEllipse())),
 ])
 def test_a_solver_the_kernel_is_not_is_not_taken(build):
+    """(A reference the compiled calls do not take, too.)"""
     assert build(config("square.yaml")).control_tick is None
 
 

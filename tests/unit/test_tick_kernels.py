@@ -96,7 +96,8 @@ class _NotHeld(HoldStartThen):
     one-call path)."""
 
 
-@pytest.mark.parametrize("name", ["square.yaml", "hover.yaml", "step_x.yaml"])
+@pytest.mark.parametrize("name", ["square.yaml", "hover.yaml", "step_x.yaml", "ellipse.yaml",
+                                  "lorenz.yaml", "identify.yaml"])  # (curves: a table's)
 @pytest.mark.parametrize("shifted", [False, True])
 def test_control_solves_the_same_through_either_path(shifted, name):
     step_within = ["reference.step_time_s=0.5"] if name.startswith("step") else []
