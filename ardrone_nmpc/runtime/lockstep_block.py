@@ -164,13 +164,14 @@ class TickBlocks:
         is one compiled call whose rows are cells, with no second object to follow or
         avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
         kernel reads: ``core/monotonic.SAME_CLOCK``; ẋ, ẏ estimated without the navdata's
-        speeds) — and :func:`tick_block` has machine code (compiled, or in numba's cache:
-        loaded), unless the blocks may compile it (``compile_now``)."""
+        speeds; injected faults that leave the sensors alone, the ticks at which none acts:
+        :meth:`fly`) — and :func:`tick_block` has machine code (compiled, or in numba's
+        cache: loaded), unless the blocks may compile it (``compile_now``)."""
         legs = drone.sensors._legs
         return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and tick.follow is None and tick.obstacles is None
                 and not tick.estimation.velocity_from_navdata and legs is not None
-                and legs.takes_commands and (compile_now or load_cached(tick_block)))
+                and legs.stands_in and (compile_now or load_cached(tick_block)))
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
                  t_first_s: float, compile_now: bool) -> None:
@@ -182,6 +183,10 @@ class TickBlocks:
         self.compile_now = compile_now
         self.n_max, self.n_settle = n_max, n_settle
         self.period_s, self.t_first_s = period_s, t_first_s
+        #: the drone's injected faults (None: none), and the first tick at or after the
+        #: last one asked at which one may act (:meth:`_quiet_ticks`)
+        self._faults = drone.sim.faults
+        self._acting_k: float = 0
         self.d = np.zeros(db.D_SIZE)
         self.c = np.zeros(C_SIZE)
         #: the rows of the last block (``runs/block_row``: BLOCK_ROW numbers a tick)
@@ -203,7 +208,13 @@ class TickBlocks:
         start); for EXIT_AFTER_CONTROL the controller's call's answer and time (ns) for
         ``Tick.step`` to go on from, for EXIT_FIT the fit's events (at the last tick).
         Unless the exit goes on with a block (:data:`EXIT_FIT`, :data:`EXIT_SHORT`,
-        :data:`EXIT_NONE`), everything is written back (:meth:`close`)."""
+        :data:`EXIT_NONE`), everything is written back (:meth:`close`). A tick at which
+        an injected fault may act is never a block's (its legs neither: not even begun)."""
+        if self._faults is not None:
+            n_max = min(n_max, self._quiet_ticks(k))
+            if n_max <= 0:
+                self.close()
+                return 0, EXIT_BEFORE, None, 0
         call = self._chained(k, mode, n_max) if self._open else None
         if call is None:
             self.close()
@@ -236,6 +247,30 @@ class TickBlocks:
         for i in _ANSWER_INTS:
             numbers[i] = int(numbers[i])
         return n, exit_, tuple(numbers), int(self.c[C_SPENT_NS])
+
+    def _quiet_ticks(self, k: int) -> float:
+        """How many ticks from tick ``k`` on no injected fault acts at (inf: none acts
+        again): the ticks before the first whose experiment time — the runner's, as
+        ``Schedule.t_exp_s`` makes it — reaches ``ServerFaults.quiet_until_s``. Kept until
+        tick ``k`` reaches that tick: the ticks before it change no fault's state."""
+        if k < self._acting_k:
+            return self._acting_k - k
+        period_s, n_settle = self.period_s, self.n_settle
+        t_exp_s = (k - n_settle) * period_s
+        bound = self._faults.quiet_until_s(t_exp_s)
+        if not bound > t_exp_s:  # (one may act at tick k)
+            self._acting_k = k
+            return 0
+        if bound == math.inf:
+            self._acting_k = math.inf
+            return math.inf
+        j = k + math.ceil((bound - t_exp_s) / period_s)
+        while j > k and (j - 1 - n_settle) * period_s >= bound:
+            j -= 1
+        while (j - n_settle) * period_s < bound:
+            j += 1
+        self._acting_k = j
+        return j - k
 
     def close(self) -> None:
         """Write back what the open chain of blocks left (the drone's state, the stages'

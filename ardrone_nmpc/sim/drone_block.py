@@ -248,10 +248,10 @@ def _quiet(legs, seq: int) -> bool:
 def _held(legs) -> bool:
     """The arrays hold the plant's state and its flight's parameters; a quiet firmware: its
     held PCMD applied, not capped, traffic seen, no link loss — the PCMDs
-    ``legs.command``'s (no faults)."""
+    ``legs.command``'s (a drone it stands in for: the ticks' faults are the caller's)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
     old = legs._p_key
-    return (legs.takes_commands and legs.live_out is not None
+    return (legs.stands_in and legs.live_out is not None
             and len(plant.__dict__) == legs._plant_len
             and len(sensors.__dict__) == legs._sensors_len
             and fw.pcmd is fw._applied_pcmd and not fw.alt_capped

@@ -166,9 +166,10 @@ class LockstepDrone(ConfigHandshake):
         settles (FLYING): the ticks done (0: the next tick is not one it flies)."""
         legs, d = self.sensors._legs, self._waited
         ref = self._ref
+        # (injected faults too: none acts before experiment time — a take-off's ticks are
+        # advance_to's without one — and the ascent sends no command)
         if not (legs is not None and ref is not None and ref.is_takeoff
-                and self._ref_unsent is None and self.sim.faults is None
-                and drone_block.ascent_entry(legs, d)):
+                and self._ref_unsent is None and drone_block.ascent_entry(legs, d)):
             return 0
         # (the climb's end flown too where the guard may see its sample after the run, as
         # CompiledLegs.run flies it)
@@ -335,7 +336,9 @@ class LockstepDrone(ConfigHandshake):
         if ref is None and progressive:  # the firmware takes the PCMD's values as they are
             self._seq = seq + 1
             legs = self.sensors._legs
-            if legs is not None and legs.takes_commands:  # the chain written out
+            # the chain written out, unless an injected AT loss decides this datagram's fate
+            if legs is not None and (legs.takes_commands or legs.stands_in
+                                     and not self.sim.faults.at_loss_acts(self.t_exp_s)):
                 legs.command(seq + 1, float(roll_frac), float(pitch_frac), float(gaz_frac),
                              float(yaw_frac))  # at the plant's time
                 return

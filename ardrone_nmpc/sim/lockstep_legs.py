@@ -44,7 +44,8 @@ the run — and else hands it back (flown, found to end it, and undone).
 :meth:`DroneFirmware.execute_pcmd <ardrone_nmpc.sim.drone_firmware.DroneFirmware.execute_pcmd>`
 (the sequence rule) → ``apply_command`` (the altitude cap) →
 :meth:`AirframePlant.command <ardrone_nmpc.sim.plant.AirframePlant.command>` written out in
-one method, for a drone without injected faults whose classes override none of them.
+one method, for a drone whose classes override none of them, on a tick at which no injected
+fault may drop the datagram.
 """
 
 from __future__ import annotations
@@ -216,8 +217,11 @@ class CompiledLegs:
         self.live_raw = b""
         self._run_bytes = buf[:ks.B_SV].tobytes  # (what a run left: out, iv; a bound method)
         drone = sensors.drone
+        #: :meth:`command` may stand in for the drone's PCMD chain when no injected fault
+        #: may drop the datagram (``LockstepDrone.set_command`` asks the faults)
+        self.stands_in = self.commands_eligible(drone)
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
-        self.takes_commands = drone.faults is None and self.commands_eligible(drone)
+        self.takes_commands = drone.faults is None and self.stands_in
         #: a landing's REF held again by :meth:`land_again`
         self.lands_again = self.takes_commands and self.commands_eligible(
             drone, _LANDING_REPLACED)
