@@ -126,6 +126,11 @@ CASES: list[tuple[str, str, list[str], int]] = [
         "faults.at_loss.start_s=6", "faults.at_loss.duration_s=0.2",
         "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=8.013",
         "faults.wind_gust.duration_s=0.005"], 4),
+    # faults during the landing the runner waits out (its descent in one call between them)
+    ("square_landing_faults", "square", SQUARE + [
+        "faults.at_loss.start_s=12.3", "faults.at_loss.duration_s=0.6",
+        "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=13.2",
+        "faults.wind_gust.duration_s=0.3"], 2),
 ]
 
 

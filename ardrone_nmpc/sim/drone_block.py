@@ -230,7 +230,7 @@ def descent_entry(legs, d: np.ndarray, seq: int) -> bool:
     PCMD ``legs.land_again`` holds (the hover applied; REF land's flags, which it writes
     again)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
-    if not (legs.lands_again and plant._mode is _LANDING and sensors._nav_mode is _LANDING
+    if not (legs.lands_in and plant._mode is _LANDING and sensors._nav_mode is _LANDING
             and sensors.target_cfg is None and fw.applied == _HOVER_APPLIED
             and fw.pcmd is _HOVER_PCMD and not (fw.ref_start or fw.ref_emergency)
             and seq > fw.last_seq and _quiet(legs, seq)):

@@ -269,7 +269,8 @@ class FaultSchedule:
         out = []
         for name in sorted(self.active):
             f = getattr(self.cfg, name)
-            start = getattr(f, "start_s", -math.inf)
+            start = getattr(f, "start_s", None)
+            start = -math.inf if start is None else start  # (fault bits from power-on)
             duration = getattr(f, "duration_s", math.inf)
             if name == "mocap_dropout" and f.repeat_every_s is not None:
                 duration = math.inf

@@ -571,24 +571,24 @@ def test_fault_flights_fly_blocks_as_the_drones_own_chain(monkeypatch):
 
 
 @pytest.mark.parametrize("period_s, n_settle", [(0.05, 20), (0.065, 15), (1 / 30, 31)])
-def test_quiet_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_settle):
-    """``TickBlocks._quiet_ticks``: the ticks from k on whose experiment time (the
-    runner's expression) is below the faults' ``quiet_until_s`` — at tick times exactly,
+def test_plain_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_settle):
+    """``TickBlocks._plain_ticks``: the ticks from k on whose experiment time (the
+    runner's expression) is below the drone's ``plain_until_s`` — at tick times exactly,
     between them, now, never."""
-    class Faults:
+    class Drone:
         bound = math.inf
 
-        def quiet_until_s(self, t_s):
+        def plain_until_s(self, t_s):
             return self.bound
 
     blocks = object.__new__(lockstep.TickBlocks)
-    blocks.period_s, blocks.n_settle, blocks._faults = period_s, n_settle, Faults()
+    blocks.period_s, blocks.n_settle, blocks.drone = period_s, n_settle, Drone()
     t_exp = lockstep.Schedule.t_exp_s.__get__(blocks)  # (the same expression)
     for k in (0, 7, 40, 333):
         for bound in (t_exp(k), t_exp(k + 1), t_exp(k + 12), t_exp(k + 12) + 1e-12,
                       t_exp(k + 12) - 1e-12, t_exp(k) - 5.0, -math.inf, math.inf):
-            blocks._faults.bound, blocks._acting_k = bound, -1
+            blocks.drone.bound, blocks._unplain_k = bound, -1
             want = next((n for n in range(1000) if not t_exp(k + n) < bound), math.inf)
-            assert blocks._quiet_ticks(k) == want, (k, bound)
+            assert blocks._plain_ticks(k) == want, (k, bound)
             if want > 2 and want < math.inf:  # kept: the ticks before it change nothing
-                assert blocks._quiet_ticks(k + 2) == want - 2
+                assert blocks._plain_ticks(k + 2) == want - 2

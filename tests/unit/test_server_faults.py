@@ -237,7 +237,7 @@ QUIET_CASES = {
                   "faults.solver_diverge.start_s=7", "faults.wind_gust.start_s=8"),
     "flight_wide": ("faults.wind.velocity_mps=[0.4,0.1,0]",
                     "faults.outdoor_profile.euler_angle_max_rad=0.35",
-                    "faults.ctrl_codes.codes=fw2.4"),
+                    "faults.ctrl_codes.codes=fw2.4", "faults.drone_faults.start_s=null"),
 }
 
 
