@@ -164,9 +164,10 @@ class TickBlocks:
         is one compiled call whose rows are cells, with no second object to follow or
         avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
         kernel reads: ``core/monotonic.SAME_CLOCK``; ẋ, ẏ estimated without the navdata's
-        speeds; a drone with something injected that leaves the sensors alone: the ticks at
-        which nothing acts, :meth:`fly`) — and :func:`tick_block` has machine code (compiled, or in numba's
-        cache: loaded), unless the blocks may compile it (``compile_now``)."""
+        speeds; a drone with something injected that leaves the sensors alone: the ticks
+        at which nothing acts, :meth:`fly`) — and :func:`tick_block` has machine code
+        (compiled, or in numba's cache: loaded), unless the blocks may compile it
+        (``compile_now``)."""
         legs = drone.sensors._legs
         return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and tick.follow is None and tick.obstacles is None
