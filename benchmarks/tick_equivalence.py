@@ -123,6 +123,28 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("square_navdata_velocity_bias", "square", SQUARE + [
         "estimator.horizontal_velocity=navdata", "sim.navdata_velocity_bias_mps=[0.05,-0.03]",
         "sim.plant.turbulence_std_mps=0.3"], 5),
+    # injected faults that leave the sensors alone: blocks fly the ticks at which none acts
+    # (runtime/lockstep_block), the per-tick path the ticks at which one may
+    ("square_wind", "square", SQUARE + ["faults.wind.velocity_mps=[0.4,-0.2,0]"], 1),
+    ("square_wind_gust", "square", SQUARE + ["faults.wind_gust.start_s=4",
+                                             "faults.wind_gust.velocity_mps=[1.0,0.3,0]"], 0),
+    ("square_emergency", "square", SQUARE + ["faults.emergency.start_s=5"], 0),
+    ("square_self_land", "square", SQUARE + ["faults.self_land.start_s=5"], 0),
+    ("square_outdoor_profile", "square",
+     SQUARE + ["faults.outdoor_profile.euler_angle_max_rad=0.35"], 0),
+    # a one-shot fault due in the settle phase, a delay jump, a short AT-loss window, a gust
+    # between two ticks (no tick inside its window)
+    ("square_fault_mix", "square", SQUARE + [
+        "faults.battery_floor.start_s=-0.5", "faults.battery_floor.level_pct=60",
+        "faults.delay_jump.start_s=3", "faults.delay_jump.delay_s=0.2",
+        "faults.at_loss.start_s=6", "faults.at_loss.duration_s=0.2",
+        "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=8.013",
+        "faults.wind_gust.duration_s=0.005"], 4),
+    # faults during the landing the runner waits out (its descent in one call between them)
+    ("square_landing_faults", "square", SQUARE + [
+        "faults.at_loss.start_s=12.3", "faults.at_loss.duration_s=0.6",
+        "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=13.2",
+        "faults.wind_gust.duration_s=0.3"], 2),
 ]
 
 

@@ -176,13 +176,14 @@ class TickBlocks:
         """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
         is one compiled call whose rows are cells, with no second object to follow or
         avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
-        kernel reads: ``core/monotonic.SAME_CLOCK``) — and :func:`tick_block` has machine
-        code (compiled, or in numba's cache: loaded), unless the blocks may compile it
-        (``compile_now``)."""
+        kernel reads: ``core/monotonic.SAME_CLOCK``; a drone with something injected that
+        leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
+        :func:`tick_block` has machine code (compiled, or in numba's cache: loaded), unless
+        the blocks may compile it (``compile_now``)."""
         legs = drone.sensors._legs
         return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and tick.follow is None and tick.obstacles is None and legs is not None
-                and legs.takes_commands and (compile_now or load_cached(tick_block)))
+                and legs.stands_in and (compile_now or load_cached(tick_block)))
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
                  t_first_s: float, compile_now: bool) -> None:
@@ -194,6 +195,9 @@ class TickBlocks:
         self.compile_now = compile_now
         self.n_max, self.n_settle = n_max, n_settle
         self.period_s, self.t_first_s = period_s, t_first_s
+        #: the first tick at or after the last one asked at which the drone may not be
+        #: plain (:meth:`_plain_ticks`; inf: never)
+        self._unplain_k: float = 0
         self.d = np.zeros(db.D_SIZE)
         self.c = np.zeros(C_SIZE)
         #: the rows of the last block (``runs/block_row``: BLOCK_ROW numbers a tick)
@@ -215,7 +219,13 @@ class TickBlocks:
         start); for EXIT_AFTER_CONTROL the controller's call's answer and time (ns) for
         ``Tick.step`` to go on from, for EXIT_FIT the fit's events (at the last tick).
         Unless the exit goes on with a block (:data:`EXIT_FIT`, :data:`EXIT_SHORT`,
-        :data:`EXIT_NONE`), everything is written back (:meth:`close`)."""
+        :data:`EXIT_NONE`), everything is written back (:meth:`close`). A tick at which
+        the drone may not be plain (``LockstepDrone.plain_until_s``: something injected
+        acts) is never a block's, nor are its legs begun in one."""
+        n_max = min(n_max, self._plain_ticks(k))
+        if n_max <= 0:
+            self.close()
+            return 0, EXIT_BEFORE, None, 0
         call = self._chained(k, mode, n_max) if self._open else None
         if call is None:
             self.close()
@@ -248,6 +258,30 @@ class TickBlocks:
         for i in _ANSWER_INTS:
             numbers[i] = int(numbers[i])
         return n, exit_, tuple(numbers), int(self.c[C_SPENT_NS])
+
+    def _plain_ticks(self, k: int) -> float:
+        """How many ticks from tick ``k`` on the drone is plain at (inf: all): the ticks
+        before the first whose experiment time — the runner's, as ``Schedule.t_exp_s``
+        makes it — reaches ``LockstepDrone.plain_until_s``. Kept until tick ``k`` reaches
+        that tick: plain ticks change nothing injected."""
+        if k < self._unplain_k:
+            return self._unplain_k - k
+        period_s, n_settle = self.period_s, self.n_settle
+        t_exp_s = (k - n_settle) * period_s
+        bound = self.drone.plain_until_s(t_exp_s)
+        if not bound > t_exp_s:  # (not plain at tick k)
+            self._unplain_k = k
+            return 0
+        if bound == math.inf:
+            self._unplain_k = math.inf
+            return math.inf
+        j = k + math.ceil((bound - t_exp_s) / period_s)
+        while j > k and (j - 1 - n_settle) * period_s >= bound:
+            j -= 1
+        while (j - n_settle) * period_s < bound:
+            j += 1
+        self._unplain_k = j
+        return j - k
 
     def close(self) -> None:
         """Write back what the open chain of blocks left (the drone's state, the stages'

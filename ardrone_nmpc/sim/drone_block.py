@@ -230,7 +230,7 @@ def descent_entry(legs, d: np.ndarray, seq: int) -> bool:
     PCMD ``legs.land_again`` holds (the hover applied; REF land's flags, which it writes
     again)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
-    if not (legs.lands_again and plant._mode is _LANDING and sensors._nav_mode is _LANDING
+    if not (legs.lands_in and plant._mode is _LANDING and sensors._nav_mode is _LANDING
             and sensors.target_cfg is None and fw.applied == _HOVER_APPLIED
             and fw.pcmd is _HOVER_PCMD and not (fw.ref_start or fw.ref_emergency)
             and seq > fw.last_seq and _quiet(legs, seq)):
@@ -248,10 +248,10 @@ def _quiet(legs, seq: int) -> bool:
 def _held(legs) -> bool:
     """The arrays hold the plant's state and its flight's parameters; a quiet firmware: its
     held PCMD applied, not capped, traffic seen, no link loss — the PCMDs
-    ``legs.command``'s (no faults)."""
+    ``legs.command``'s (a drone it stands in for: the ticks' faults are the caller's)."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
     old = legs._p_key
-    return (legs.takes_commands and legs.live_out is not None
+    return (legs.stands_in and legs.live_out is not None
             and len(plant.__dict__) == legs._plant_len
             and len(sensors.__dict__) == legs._sensors_len
             and fw.pcmd is fw._applied_pcmd and not fw.alt_capped

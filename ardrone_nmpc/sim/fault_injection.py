@@ -84,6 +84,7 @@ class ServerFaults:
         self._counters = FaultCounters()
         self._events: list[tuple[float, dict]] = []
         self._taken = 0
+        self._spans = schedule.window_spans()  # (quiet_until_s)
 
     # ------------------------------------------------------------------ the clock
 
@@ -126,6 +127,20 @@ class ServerFaults:
                 self._events.extend((t, ev) for ev in events)
         return events
 
+    def quiet_until_s(self, now_s: float) -> float:
+        """The time (servers' clock) from ``now_s`` on before which no fault acts: no plant
+        fault is due (one-shot, a gust's start, blowing or end) and no fault's window is
+        open (AT loss, blackout, the sensors', the solver's). Every decision asked at a time
+        in ``[now_s, answer)`` is then a fault-free drone's, and draws nothing; an answer at
+        or before ``now_s``: one may act at ``now_s``. (The constant wind and the firmware's
+        options act for the whole flight: they are the drone's, not a decision.)"""
+        t = self.t_exp(now_s)
+        bound = math.inf if self._plant_faults is None else self._plant_faults.next_due_s()
+        for start, end in self._spans:
+            if end > t and start < bound:
+                bound = start
+        return bound + self.t0_s
+
     def wakeup_lost(self, now_s: float) -> bool:
         """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""
         return self.schedule.blackout(self.t_exp(now_s))
@@ -136,6 +151,11 @@ class ServerFaults:
             lost = self.schedule.at_lost(self.t_exp(now_s))
             self._counters.at_lost += lost
         return lost
+
+    def at_loss_acts(self, now_s: float) -> bool:
+        """:meth:`at_lost` at ``now_s`` decides (else it answers False, draws and counts
+        nothing)."""
+        return self.schedule.at_loss_acts(self.t_exp(now_s))
 
     def navdata_lost(self, now_s: float) -> bool:
         """The navdata packet due at ``now_s`` is lost (it need not be built)."""

@@ -179,6 +179,18 @@ class FaultSchedule:
         f = self.cfg.at_loss
         return _within(f, t_s) and bool(self.rng.random() < f.probability)
 
+    def at_loss_acts(self, t_s: float) -> bool:
+        """:meth:`at_lost` at ``t_s`` decides (a draw, a blackout): outside, it answers False
+        and draws nothing."""
+        return self.blackout(t_s) or _within(self.cfg.at_loss, t_s)
+
+    def window_spans(self) -> list[tuple[float, float]]:
+        """``(start_s, end_s)`` of every fault that acts over a window (the sensors', AT
+        loss, blackout, a gust, the solver's; a repeated dropout ends never) — the one-shot
+        faults are :meth:`plant_events`, the others act for the whole flight."""
+        return [(start, end) for name, start, end in self.windows()
+                if hasattr(getattr(self.cfg, name), "duration_s")]
+
     def solver_diverges(self, t_s: float) -> bool:
         """The NMPC solution of the tick at ``t_s`` is replaced by a diverged, non-finite one
         (the tick's control stage asks, :class:`~ardrone_nmpc.runtime.stages.Control`)."""
@@ -257,7 +269,8 @@ class FaultSchedule:
         out = []
         for name in sorted(self.active):
             f = getattr(self.cfg, name)
-            start = getattr(f, "start_s", -math.inf)
+            start = getattr(f, "start_s", None)
+            start = -math.inf if start is None else start  # (fault bits from power-on)
             duration = getattr(f, "duration_s", math.inf)
             if name == "mocap_dropout" and f.repeat_every_s is not None:
                 duration = math.inf
@@ -281,6 +294,13 @@ class PlantFaults:
         self.plant = plant
         self._pending = schedule.plant_events()
         self._gust_on = False
+
+    def next_due_s(self) -> float:
+        """When :meth:`update` next changes anything but the wind's array: the first one-shot
+        fault's time (inf: none left); −inf while a gust blows (its end is due)."""
+        if self._gust_on:
+            return -math.inf
+        return self._pending[0][0] if self._pending else math.inf
 
     def update(self, t_s: float) -> list[dict]:
         events = []

@@ -133,6 +133,14 @@ class LockstepDrone(ConfigHandshake):
         if left is not ALL_DONE:  # the Python legs, or what the run left
             sensors.go_on(t_s, left)
 
+    def plain_until_s(self, t_exp_s: float) -> float:
+        """The experiment time from ``t_exp_s`` on before which nothing injected acts on the
+        drone (``ServerFaults.quiet_until_s``: the faults' clock is experiment time here):
+        its ticks then are a fault-free drone's, which blocks of ticks may fly. inf without
+        injected faults; at or before ``t_exp_s``: something may act then."""
+        faults = self.sim.faults
+        return math.inf if faults is None else faults.quiet_until_s(t_exp_s)
+
     def block_entry(self, d) -> bool:
         """``d`` filled for a block of ticks from the next (``sim/drone_block``), or False:
         the next tick is not one a block flies (``drone_block.block_entry``; a REF waiting
@@ -166,9 +174,10 @@ class LockstepDrone(ConfigHandshake):
         settles (FLYING): the ticks done (0: the next tick is not one it flies)."""
         legs, d = self.sensors._legs, self._waited
         ref = self._ref
+        # (injected faults too: none acts before experiment time — a take-off's ticks are
+        # advance_to's without one — and the ascent sends no command)
         if not (legs is not None and ref is not None and ref.is_takeoff
-                and self._ref_unsent is None and self.sim.faults is None
-                and drone_block.ascent_entry(legs, d)):
+                and self._ref_unsent is None and drone_block.ascent_entry(legs, d)):
             return 0
         # (the climb's end flown too where the guard may see its sample after the run, as
         # CompiledLegs.run flies it)
@@ -193,15 +202,17 @@ class LockstepDrone(ConfigHandshake):
         done, whether the next tick's legs ran)`` — that tick's rest (:meth:`land`, …) is
         the caller's. ``(0, False)``: nothing done (the tick is not one it flies)."""
         legs, d = self.sensors._legs, self._waited
-        if not (legs is not None and self._ref is _LAND and self._ref_unsent is None
-                and self.sim.faults is None
+        # (with injected faults: the ticks before the first at which one may act)
+        n_max = _DESCENT_TICKS if self.sim.faults is None else self._plain_descent(
+            t_first_s, k, period_s, t_start_s)
+        if not (n_max and legs is not None and self._ref is _LAND and self._ref_unsent is None
                 and drone_block.descent_entry(legs, d, self._seq + 1)):
             return 0, False
         # (the touch-down flown too where the guard may see its sample after the run, as
         # CompiledLegs.run flies it: the REF held is a landing's, no climb, no hover due)
         ends = 1.0 if self.sensors.defers_mode(FlightMode.LANDED) else 0.0
         n, status = drone_block.drone_descent(d, *legs._args, t_first_s, period_s, k,
-                                              _DESCENT_TICKS, deadline_s, ends)
+                                              n_max, deadline_s, ends)
         legs_ran = status == drone_block.LEGS_PARTIAL
         self._seq += 2 * n
         if n or legs_ran:
@@ -256,6 +267,17 @@ class LockstepDrone(ConfigHandshake):
             k += 1
             mode, t_s = self.mode_and_t()
         return mode, t_s
+    def _plain_descent(self, t_first_s: float, k: int, period_s: float,
+                       t_start_s: float) -> int:
+        """How many of a landing's ticks from ``k`` (at most a descent's) nothing injected
+        acts at: their experiment times, as :meth:`descend` and the runner make them,
+        before :meth:`plain_until_s`."""
+        t_exp_s = t_first_s + k * period_s - t_start_s
+        bound = self.plain_until_s(t_exp_s)
+        n = 0
+        while n < _DESCENT_TICKS and t_first_s + (k + n) * period_s - t_start_s < bound:
+            n += 1
+        return n
 
     def take_events(self) -> list[tuple[float, dict]]:
         """``(experiment time s, event)`` of the injected faults that started since the last
@@ -359,8 +381,11 @@ class LockstepDrone(ConfigHandshake):
 
     def land(self) -> None:
         """Hold REF land; the command is reset to hover."""
-        legs = self._legs  # held again (a landing's every tick): the chain written out
+        legs = self._legs  # held again (a landing's every tick): the chain written out,
+        # unless an injected AT loss decides the datagram's fate
         if (self._ref is _LAND and self._ref_unsent is None and legs is not None
+                and (legs.lands_again or legs.lands_in
+                     and not self.sim.faults.at_loss_acts(self.t_exp_s))
                 and legs.land_again(self._seq + 1)):
             self._seq += 2
             return
@@ -379,7 +404,9 @@ class LockstepDrone(ConfigHandshake):
         if ref is None and progressive:  # the firmware takes the PCMD's values as they are
             self._seq = seq + 1
             legs = self.sensors._legs
-            if legs is not None and legs.takes_commands:  # the chain written out
+            # the chain written out, unless an injected AT loss decides this datagram's fate
+            if legs is not None and (legs.takes_commands or legs.stands_in
+                                     and not self.sim.faults.at_loss_acts(self.t_exp_s)):
                 legs.command(seq + 1, float(roll_frac), float(pitch_frac), float(gaz_frac),
                              float(yaw_frac))  # at the plant's time
                 return

@@ -44,7 +44,8 @@ the run — and else hands it back (flown, found to end it, and undone).
 :meth:`DroneFirmware.execute_pcmd <ardrone_nmpc.sim.drone_firmware.DroneFirmware.execute_pcmd>`
 (the sequence rule) → ``apply_command`` (the altitude cap) →
 :meth:`AirframePlant.command <ardrone_nmpc.sim.plant.AirframePlant.command>` written out in
-one method, for a drone without injected faults whose classes override none of them.
+one method, for a drone whose classes override none of them, on a tick at which no injected
+fault may drop the datagram.
 """
 
 from __future__ import annotations
@@ -216,11 +217,16 @@ class CompiledLegs:
         self.live_raw = b""
         self._run_bytes = buf[:ks.B_SV].tobytes  # (what a run left: out, iv; a bound method)
         drone = sensors.drone
+        #: :meth:`command` may stand in for the drone's PCMD chain when no injected fault
+        #: may drop the datagram (``LockstepDrone.set_command`` asks the faults)
+        self.stands_in = self.commands_eligible(drone)
         #: the tick's PCMD by :meth:`command` (else the drone's own chain)
-        self.takes_commands = drone.faults is None and self.commands_eligible(drone)
+        self.takes_commands = drone.faults is None and self.stands_in
+        #: :meth:`land_again` may stand in for the landing's datagram when no injected
+        #: fault may drop it (``LockstepDrone.land`` asks the faults)
+        self.lands_in = self.stands_in and self.commands_eligible(drone, _LANDING_REPLACED)
         #: a landing's REF held again by :meth:`land_again`
-        self.lands_again = self.takes_commands and self.commands_eligible(
-            drone, _LANDING_REPLACED)
+        self.lands_again = drone.faults is None and self.lands_in
         self.counters = drone.counters
 
     @staticmethod
@@ -256,8 +262,9 @@ class CompiledLegs:
     def command(self, seq: int, roll: float, pitch: float, gaz: float, yaw: float,
                 now: float | None = None) -> None:
         """:meth:`SimulatedDrone.execute_pcmd` of one progressive PCMD (``seq``, the float
-        fractions) at firmware time ``now`` without injected faults, written out (module
-        docstring): the same counters, firmware state and plant command."""
+        fractions) at firmware time ``now`` with no injected fault deciding its datagram's
+        fate, written out (module docstring): the same counters, firmware state and plant
+        command."""
         fw, c = self.firmware, self.counters
         c.at_datagrams_in += 1
         c.at_commands_in += 1
@@ -327,7 +334,7 @@ class CompiledLegs:
         for any other case (a drone it does not stand in for, a stale number, another mode
         or command)."""
         fw, c = self.firmware, self.counters
-        if not (self.lands_again and self.plant._mode is _LANDING and seq > fw.last_seq
+        if not (self.lands_in and self.plant._mode is _LANDING and seq > fw.last_seq
                 and fw.applied == _HOVER_APPLIED):
             return False
         now = self.t_s()

@@ -12,9 +12,10 @@ The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init_
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
 at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
-navdata's speeds, and flights no block takes (injected faults, other plants and objects).
-Without ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with
-more flights: ``benchmarks/tick_equivalence.py``.
+navdata's speeds, injected faults (blocks between the ticks at which one may act), and flights
+no block takes (faults of the sensors' bytes, other plants and objects). Without
+``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with more
+flights: ``benchmarks/tick_equivalence.py``.
 """
 
 from __future__ import annotations
@@ -86,6 +87,22 @@ CASES = [
     # the battery reaches the floor: the supervisor lands, the descent's ticks logged
     ("low_battery", "square", ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
                                "sim.plant.battery_drain_pct_per_min=30"], 0),
+    # injected faults that leave the sensors alone: blocks fly the ticks at which none may
+    # act, the per-tick path the others (a one-shot fault due in the settle phase, a delay
+    # jump, a short window of AT loss, a gust, a constant wind, the outdoor profiles, an
+    # emergency, a landing of the drone's own)
+    ("fault_mix", "square", ["duration_s=12", *SETTLE, "faults.battery_floor.start_s=-0.5",
+                             "faults.battery_floor.level_pct=60", "faults.delay_jump.start_s=3",
+                             "faults.delay_jump.delay_s=0.2", "faults.at_loss.start_s=5",
+                             "faults.at_loss.duration_s=0.3", "faults.at_loss.probability=0.5",
+                             "faults.wind_gust.start_s=7", "faults.wind_gust.duration_s=0.5",
+                             "faults.wind.velocity_mps=[0.3,-0.2,0]"], 7),
+    ("fault_outdoor_profile", "square", ["duration_s=8", *SETTLE,
+                                         "faults.outdoor_profile.euler_angle_max_rad=0.35"], 8),
+    ("fault_emergency", "square", ["duration_s=10", *SETTLE, "faults.emergency.start_s=4"], 0),
+    ("fault_self_land", "square", ["duration_s=10", *SETTLE, "faults.self_land.start_s=4"], 0),
+    ("fault_battery_floor", "square", ["duration_s=10", *SETTLE,
+                                       "faults.battery_floor.start_s=4"], 0),
     # ẋ, ẏ from the navdata's speeds (the block rotates them as the estimate does)
     ("square_navdata_velocity", "square",
      ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
@@ -101,16 +118,16 @@ CASES = [
                               "reference.excitation.rest_s=0.5",
                               "reference.excitation.sweep_m=0.1"], 2),
     # flights no block takes (as the blocks' first version has it): a plant, a second
-    # object on the mocap stream, an estimator the compiled calls do not take, injected
-    # faults
+    # object on the mocap stream, an estimator the compiled calls do not take, faults that
+    # touch the sensors' bytes or the solver
     ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
                                        "faults.mocap_dropout.duration_s=0.2"], 0),
-    ("fault_battery_floor", "square", ["duration_s=10", *SETTLE,
-                                       "faults.battery_floor.start_s=4"], 0),
+    ("fault_solver_diverge", "square", ["duration_s=8", *SETTLE,
+                                        "faults.solver_diverge.start_s=3"], 0),
     ("hover", "hover", ["duration_s=6", *SETTLE], 0),
     ("step_z", "step_z", ["duration_s=6", *SETTLE], 0),
 ]
@@ -187,6 +204,11 @@ def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -
     _attrs(out, "plant", plant, skip)
     held = legs is not None and legs.held()
     out["plant._current"] = bits(legs._saved["_current"] if held else plant._current)
+    faults = sim.faults
+    if faults is not None:  # (their draws, counters, events and plant faults still due)
+        _attrs(out, "faults", faults, frozenset({"_lock", "schedule", "_plant_faults"}))
+        _attrs(out, "faults._plant_faults", faults._plant_faults, frozenset({"plant"}))
+        out["faults.rng"] = bits(repr(faults.schedule.rng.bit_generator.state))
     out["truth"] = bits(drone.truth)
     out["truth_cells"] = bits(drone.truth_cells())
     if stages_too:
@@ -564,3 +586,50 @@ def test_blocks_take_the_curves_and_the_navdata_speeds(config, overrides, monkey
     rows = len(block.recorder.written)
     assert rows > 100
     assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"
+
+
+def _case(name: str) -> tuple:
+    return next(c for c in CASES if c[0] == name)
+
+
+def test_fault_flights_fly_blocks_as_the_drones_own_chain(monkeypatch):
+    """A faulted flight with blocks, and one without whose every PCMD goes through the
+    drone's own chain (``SimulatedDrone.execute_pcmd``, its AT-loss decision asked: as
+    before blocks flew faulted flights) — the same rows, events, result and states at the
+    loop's end and after; and most of its ticks in blocks."""
+    from ardrone_nmpc.sim.fault_injection import ServerFaults
+
+    _, config, overrides, seed = _case("fault_mix")
+    cfg = _config(config, overrides)
+    block = fly(cfg, seed, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert block.steps * 3 < rows, f"{block.steps} Tick.step calls for {rows} rows"
+    monkeypatch.setattr(ServerFaults, "at_loss_acts", lambda self, now_s: True)
+    plain = fly(cfg, seed, monkeypatch, block_ticks=0, wanted=set())
+    assert plain.steps == rows
+    assert plain.drone.sim.faults.counters.at_lost > 0  # (the window drew)
+    assert_same_flights(block, plain)
+
+
+@pytest.mark.parametrize("period_s, n_settle", [(0.05, 20), (0.065, 15), (1 / 30, 31)])
+def test_plain_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_settle):
+    """``TickBlocks._plain_ticks``: the ticks from k on whose experiment time (the
+    runner's expression) is below the drone's ``plain_until_s`` — at tick times exactly,
+    between them, now, never."""
+    class Drone:
+        bound = math.inf
+
+        def plain_until_s(self, t_s):
+            return self.bound
+
+    blocks = object.__new__(lockstep.TickBlocks)
+    blocks.period_s, blocks.n_settle, blocks.drone = period_s, n_settle, Drone()
+    t_exp = lockstep.Schedule.t_exp_s.__get__(blocks)  # (the same expression)
+    for k in (0, 7, 40, 333):
+        for bound in (t_exp(k), t_exp(k + 1), t_exp(k + 12), t_exp(k + 12) + 1e-12,
+                      t_exp(k + 12) - 1e-12, t_exp(k) - 5.0, -math.inf, math.inf):
+            blocks.drone.bound, blocks._unplain_k = bound, -1
+            want = next((n for n in range(1000) if not t_exp(k + n) < bound), math.inf)
+            assert blocks._plain_ticks(k) == want, (k, bound)
+            if want > 2 and want < math.inf:  # kept: the ticks before it change nothing
+                assert blocks._plain_ticks(k + 2) == want - 2

@@ -33,9 +33,11 @@ COMMANDS = [(0.1, -0.05, 0.2, 0.0), (0.1, -0.05, 0.2, 0.0), (-0.2, 0.1, -0.1, 0.
             (-0.3, -0.2, -0.3, 0.1)] * 3
 
 
-def _flying(seed: int = 3, **sim) -> tuple[LockstepDrone, float]:
-    """A lockstep drone taken off and flown a few ticks (the compiled legs hold its state)."""
-    cfg = config_from_dict({"name": "t", "duration_s": 5.0, "sim": {"seed": seed, **sim}})
+def _flying(seed: int = 3, faults: dict | None = None, **sim) -> tuple[LockstepDrone, float]:
+    """A lockstep drone taken off and flown a few ticks (the compiled legs hold its state),
+    with injected ``faults`` (a config section) if given."""
+    cfg = config_from_dict({"name": "t", "duration_s": 5.0, "sim": {"seed": seed, **sim},
+                            "faults": faults or {}})
     drone = LockstepDrone(cfg, seed=seed)
     drone.connect()
     drone.takeoff()
@@ -118,11 +120,19 @@ def _landing(drone: LockstepDrone, t0: float) -> tuple[float, int]:
     return t0, k
 
 
-@pytest.mark.parametrize("chunk", [1, 7, 64])
-def test_a_landing_waited_out_in_one_call_leaves_what_the_ticks_leave(chunk, monkeypatch):
+# faults in the landing (its experiment time from 0 again, _landing's): an AT-loss window
+# and a gust, the descent's calls between them (the ticks at which one may act: the caller's)
+LANDING_FAULTS = {"at_loss": {"start_s": 0.8, "duration_s": 0.4, "probability": 0.5},
+                  "wind_gust": {"start_s": 1.5, "duration_s": 0.2}}
+
+
+@pytest.mark.parametrize("chunk, faults", [(1, None), (7, None), (64, None),
+                                           (7, LANDING_FAULTS), (64, LANDING_FAULTS)])
+def test_a_landing_waited_out_in_one_call_leaves_what_the_ticks_leave(chunk, faults,
+                                                                     monkeypatch):
     monkeypatch.setattr(lockstep_drone, "_DESCENT_TICKS", chunk)
-    a, t0 = _flying()
-    b, _ = _flying()
+    a, t0 = _flying(faults=faults)
+    b, _ = _flying(faults=faults)
     _, k = _landing(a, t0)
     assert _landing(b, t0)[1] == k
     deadline = t0 + 30.0
@@ -148,6 +158,12 @@ def test_a_landing_waited_out_in_one_call_leaves_what_the_ticks_leave(chunk, mon
     assert a.mode_and_t()[0] is b.mode_and_t()[0] is FlightMode.LANDED
     assert _snapshot(a, t) == _snapshot(b, t)
     assert compiled > 10  # (the descent flown in the calls, not tick by tick)
+    if faults is not None:  # the same draws, counters and events; the window's ticks not
+        fa, fb = a.sim.faults, b.sim.faults  # flown in a call
+        assert fa.counters == fb.counters and fa.counters.at_lost > 0
+        assert fa.schedule.rng.bit_generator.state == fb.schedule.rng.bit_generator.state
+        assert fa.events == fb.events and len(fa.events) == 2
+        assert compiled < k - 6
 
 
 def _held(drone: LockstepDrone, t_s: float) -> tuple:

@@ -11,7 +11,7 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.protocol.navdata import NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import Disorder
-from ardrone_nmpc.sim.fault_injection import ServerFaults
+from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
 from ardrone_nmpc.sim.plant import AirframePlant
 from tests.standins.navdata_packets import plain_packet
 
@@ -198,3 +198,85 @@ def test_wire_sensors_report_the_configured_codes_in_transitions():
         majors[codes] = (takeoff_major, seen[-1])
         assert drone.navdata.mode is FlightMode.LANDING  # the client reads both codes alike
     assert majors == {"sdk": (6, 8), "fw2.4": (7, 9)}
+
+
+# ----------------------------------------------------------------------------- quiet spans
+class _RecordingPlant:
+    """The plant calls the plant faults make, recorded (what acted), and the wind set."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+        self.wind_mps = np.zeros(3)
+
+    def set_battery_pct(self, value) -> None:
+        self.calls.append("battery")
+
+    def emergency(self) -> None:
+        self.calls.append("emergency")
+
+    def set_command_delay_s(self, value) -> None:
+        self.calls.append("delay")
+
+    def land(self) -> bool:
+        self.calls.append("land")
+        return True
+
+
+QUIET_CASES = {
+    "plant": ("faults.battery_floor.start_s=-0.5", "faults.delay_jump.start_s=3",
+              "faults.at_loss.start_s=6", "faults.at_loss.duration_s=0.2",
+              "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=8.0013",
+              "faults.wind_gust.duration_s=0.0005", "faults.wind.velocity_mps=[0.4,0.1,0]"),
+    "sensors": ("faults.mocap_dropout.start_s=2", "faults.mocap_dropout.duration_s=0.5",
+                "faults.mocap_dropout.repeat_every_s=3", "faults.navdata_corrupt.start_s=1",
+                "faults.disorder.start_s=0.5", "faults.disorder.stream=mocap",
+                "faults.blackout.start_s=-1", "faults.blackout.duration_s=0.2"),
+    "one_shots": ("faults.emergency.start_s=1", "faults.self_land.start_s=2",
+                  "faults.drone_faults.start_s=3", "faults.mocap_latency.start_s=4",
+                  "faults.mocap_occlusion.start_s=5", "faults.navdata_loss.start_s=6",
+                  "faults.solver_diverge.start_s=7", "faults.wind_gust.start_s=8"),
+    "flight_wide": ("faults.wind.velocity_mps=[0.4,0.1,0]",
+                    "faults.outdoor_profile.euler_angle_max_rad=0.35",
+                    "faults.ctrl_codes.codes=fw2.4", "faults.drone_faults.start_s=null"),
+}
+
+
+def _acts(faults: ServerFaults, plant: _RecordingPlant, t: float, wind) -> bool:
+    """Every decision the drone asks at ``t`` (and the plant faults due): whether any
+    differs from a fault-free drone's — or drew, counted or announced something."""
+    rng_state, counters = faults.schedule.rng.bit_generator.state, faults.counters
+    calls = len(plant.calls)
+    acted = [faults.at_loss_acts(t), faults.at_lost(t), faults.wakeup_lost(t),
+             faults.navdata_lost(t), faults.navdata_datagrams(t, b"nav") != [b"nav"],
+             faults.mocap_frame(t) != NO_MOCAP_FAULT,
+             faults.mocap_datagrams(t, b"mocap") != [b"mocap"],
+             faults.schedule.solver_diverges(t), bool(faults.update_plant(t)),
+             len(plant.calls) != calls, not np.array_equal(plant.wind_mps, wind),
+             faults.schedule.rng.bit_generator.state != rng_state,
+             faults.counters != counters]
+    return any(acted)
+
+
+@pytest.mark.parametrize("name", list(QUIET_CASES))
+def test_no_fault_acts_before_quiet_until(name):
+    """On a fine grid of times (every decision asked at each, the plant faults updated as
+    the ticks would): nothing acts at a time before the answer of ``quiet_until_s`` asked
+    at an earlier one, and where something acts, the answer asked there says so."""
+    plant = _RecordingPlant()
+    faults = server_faults(*QUIET_CASES[name], plant=plant)
+    faults.set_clock(0.0)  # (the lockstep drone's: its clock is experiment time)
+    wind = faults.schedule.wind_mps(-math.inf)
+    plant.wind_mps = wind.copy()
+    bound, quiet, acting = -math.inf, 0, 0
+    for i in range(-2000, 12000):
+        t = i * 1e-3
+        if not t < bound:  # (asked again once reached, as the blocks ask)
+            bound = faults.quiet_until_s(t)
+        acted = _acts(faults, plant, t, wind)
+        assert not (acted and t < bound), f"{name}: a fault acts at {t} before {bound}"
+        quiet += t < bound
+        acting += acted
+    if name == "flight_wide":
+        assert bound == math.inf and quiet == 14000 and not acting
+    else:
+        assert quiet > 1000 and acting > 0
