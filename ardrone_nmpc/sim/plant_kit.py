@@ -42,13 +42,16 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.sim.airframe import floor_and_drain, sagged_vz_gain, shift_ring
+from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
-from ardrone_nmpc.sim.plant_step import advance_biases
+from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_LANDING, AUTO_SAME,
+                                         advance_biases)
 
 if TYPE_CHECKING:
     from ardrone_nmpc.config.schema import DroneConfig, SimConfig
 
-__all__ = ["KIT", "KitModel", "KitPlant", "kit_rk4"]
+__all__ = ["KIT", "N_KIT", "KitModel", "KitPlant", "kit_auto_steps", "kit_flying_steps",
+           "kit_rk4"]
 
 N_KIT = 12   # x, y, z, ψ (world) + roll (2), pitch (2), u, v, vertical (1), ψ_k states
 NO_SENSOR_BIASES = {"navdata_trim_bias_max_rad": 0.0, "navdata_yaw_drift_radps": 0.0,
@@ -162,30 +165,34 @@ def kit_rk4(x0, roll, pitch, gaz, yaw, hold, k, w, h):
     return x, outputs
 
 
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _kit_motors_on(state, kit, roll, pitch, gaz, yaw, hold, k, w, h):
+    """:meth:`KitPlant._motors_on_step` on arrays (``gaz`` times the vertical gain already):
+    the kit's channels ``kit`` (12) take x, y, z, ψ of the plant's ``state`` (10, or more:
+    its first 10), one :func:`kit_rk4` step, written back into both in place."""
+    kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
+    new, out = kit_rk4(kit, roll, pitch, gaz, yaw, hold, k, w, h)
+    for i in range(N_KIT):
+        kit[i] = new[i]
+    vx, vy, vz, phi, theta_k, psi_k_rate = out
+    state[0], state[1], state[2], state[3], state[4] = new[0], new[1], new[2], vx, vy
+    state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, new[3], -psi_k_rate
+
+
 @njit(cache=True, **OUTER_KERNEL)
 def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n,
                        battery, drain, vz_gain, sag, normals, yaw_bias_deg, vel_bias_0,
                        vel_bias_1, yaw_drift_radps, yaw_walk, vel_bias_std, vel_bias_tau_s):
-    """Up to ``n`` FLYING steps of :class:`KitPlant` in one call — each
-    :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in its order: the
-    command ``roll`` … ``hold`` queued in the delay ring ``ring`` (oldest at ``head``) and the
-    oldest flown, :meth:`KitPlant._motors_on_step` (the kit's x, y, z, ψ from the plant's
-    ``state`` (10), gaz times the vertical gain at the battery level, :func:`kit_rk4`), the
-    floor, the drain — stopping before a step whose drain would empty the battery (a mode
-    change, the plant's). If all ``n`` were flown, ψ is wrapped and the biases advanced
+    """Up to ``n`` FLYING steps of :class:`KitPlant` in one call (:func:`kit_flying_steps`
+    on a copy of the plant's ``state`` (10) and on its channels ``kit``, in place). If all
+    ``n`` were flown, ψ is wrapped and the biases advanced
     (:func:`~ardrone_nmpc.sim.plant_step.advance_biases`). Returns (steps done, head,
     battery, state, kit state, yaw offset °, velocity bias 0, velocity bias 1)."""
     state = state.copy()
-    for i in range(n):
-        if not battery - drain > 0.0:
-            return i, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
-        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
-        kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
-        kit, out = kit_rk4(kit, r, p, g * sagged_vz_gain(vz_gain, sag, battery), y, hd, k, w, h)
-        vx, vy, vz, phi, theta_k, psi_k_rate = out
-        state[0], state[1], state[2], state[3], state[4] = kit[0], kit[1], kit[2], vx, vy
-        state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, kit[3], -psi_k_rate
-        battery = floor_and_drain(state, battery, drain)
+    done, head, battery = kit_flying_steps(state, kit, ring, head, roll, pitch, gaz, yaw,
+                                           hold, k, w, h, n, battery, drain, vz_gain, sag)
+    if done < n:
+        return done, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
     state[8] = wrap_half_turn(state[8], math.pi)
     yaw_bias_deg, vel_bias_0, vel_bias_1 = advance_biases(
         n * h, normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,
@@ -193,6 +200,69 @@ def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w
     return n, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
 
 
+@njit(cache=True, **INNER_KERNEL)
+def kit_flying_steps(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery,
+                     drain, vz_gain, sag):
+    """Up to ``n`` FLYING steps of :class:`KitPlant` on ``state`` and ``kit`` in place — each
+    :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in its order: the
+    command ``roll`` … ``hold`` queued in the delay ring ``ring`` (oldest at ``head``) and the
+    oldest flown (:func:`_kit_motors_on`, gaz times the vertical gain at the battery level),
+    the floor, the drain — stopping before a step whose drain would empty the battery (a mode
+    change, the plant's). Returns (steps done, head, battery)."""
+    for i in range(n):
+        if not battery - drain > 0.0:
+            return i, head, battery
+        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
+        _kit_motors_on(state, kit, r, p, g * sagged_vz_gain(vz_gain, sag, battery), y, hd, k,
+                       w, h)
+        battery = floor_and_drain(state, battery, drain)
+    return n, head, battery
+
+
+@njit(cache=True, **INNER_KERNEL)
+def kit_auto_steps(state, kit, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
+                   w, h, n, battery, drain, vz_gain, sag, tau_vz_s, takeoff_altitude_m):
+    """Up to ``n`` steps of :class:`KitPlant`'s automatic take-off (``landing`` False) or
+    landing on ``state`` and ``kit`` in place — :meth:`~ardrone_nmpc.sim.plant.AirframePlant.
+    _substep`'s arithmetic in its order, as :func:`~ardrone_nmpc.sim.plant_step.auto_steps`
+    for the airframe: the command queued and ignored, one step of the automatic climb or
+    descent (:meth:`KitPlant._auto_command`'s gaz ``gaz_auto`` times the vertical gain,
+    position hold), the floor — a landing touches down at rest, the channels at 0
+    (:meth:`KitPlant._at_rest`) —, the drain, the mode's transitions. Stops after the step
+    that changes the mode. Returns (steps done, head, battery, the mode then: ``AUTO_*``)."""
+    auto_hold = landing or not landing  # a bool, not a literal (auto_steps' note)
+    for i in range(n):
+        head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)[5]
+        _kit_motors_on(state, kit, 0.0, 0.0, gaz_auto * sagged_vz_gain(vz_gain, sag, battery),
+                       0.0, auto_hold, k, w, h)
+        mode = AUTO_SAME
+        if not state[2] > 0.0:  # _ground_contact
+            if landing:  # touch-down: at rest (x, y, ψ kept), the channels at 0
+                for j in (2, 3, 4, 5, 6, 7, 9):
+                    state[j] = 0.0
+                for j in range(N_KIT):
+                    kit[j] = 0.0
+                mode = AUTO_LANDED
+            else:  # the floor
+                state[2] = 0.0
+                if 0.0 > state[5]:
+                    state[5] = 0.0
+        left = battery - drain
+        battery = left if left > 0.0 else 0.0
+        if mode == AUTO_LANDED:  # _check_transitions of a LANDED plant: none
+            return i + 1, head, battery, mode
+        if not landing and state[2] + state[5] * tau_vz_s >= takeoff_altitude_m:
+            mode = AUTO_FLYING
+        if battery <= 0.0 and not landing:  # taking off (or flying since this step)
+            mode = AUTO_LANDING
+        if mode != AUTO_SAME:
+            return i + 1, head, battery, mode
+    return n, head, battery, AUTO_SAME
+
+
+# the channels' state too, in the lockstep's compiled legs (sim/lockstep_legs: after the
+# plant's 10-state in their state array)
+@holds_in_arrays("_kit")
 class KitPlant(AirframePlant):
     """:class:`~ardrone_nmpc.sim.plant.AirframePlant` with the kit's channels in flight.
 
