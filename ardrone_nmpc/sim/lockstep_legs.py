@@ -20,8 +20,10 @@ client), and is used only when the Python path's tick would do what the kernel d
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
   LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
-  ``_flying_advance`` and ``_auto_advance`` compile), under a firmware and a sampler whose
-  classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
+  ``_flying_advance`` and ``_auto_advance`` compile) or a
+  :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` on the kit's (its channels after the
+  10-state in the kernel's state array), under a firmware and a sampler whose classes
+  override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
 * the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
   or a new one whose sample the sampler lets the guard see after the run
   (``LockstepSensors.defers_mode``: the guard does nothing then);

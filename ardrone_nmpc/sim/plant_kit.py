@@ -44,8 +44,7 @@ from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.sim.airframe import floor_and_drain, sagged_vz_gain, shift_ring
 from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
-from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_LANDING, AUTO_SAME,
-                                         advance_biases)
+from ardrone_nmpc.sim.plant_step import AUTO_LANDED, AUTO_SAME, advance_biases, auto_step_end
 
 if TYPE_CHECKING:
     from ardrone_nmpc.config.schema import DroneConfig, SimConfig
@@ -235,26 +234,11 @@ def kit_auto_steps(state, kit, ring, head, roll, pitch, gaz, yaw, hold, landing,
         head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)[5]
         _kit_motors_on(state, kit, 0.0, 0.0, gaz_auto * sagged_vz_gain(vz_gain, sag, battery),
                        0.0, auto_hold, k, w, h)
-        mode = AUTO_SAME
-        if not state[2] > 0.0:  # _ground_contact
-            if landing:  # touch-down: at rest (x, y, ψ kept), the channels at 0
-                for j in (2, 3, 4, 5, 6, 7, 9):
-                    state[j] = 0.0
-                for j in range(N_KIT):
-                    kit[j] = 0.0
-                mode = AUTO_LANDED
-            else:  # the floor
-                state[2] = 0.0
-                if 0.0 > state[5]:
-                    state[5] = 0.0
-        left = battery - drain
-        battery = left if left > 0.0 else 0.0
-        if mode == AUTO_LANDED:  # _check_transitions of a LANDED plant: none
-            return i + 1, head, battery, mode
-        if not landing and state[2] + state[5] * tau_vz_s >= takeoff_altitude_m:
-            mode = AUTO_FLYING
-        if battery <= 0.0 and not landing:  # taking off (or flying since this step)
-            mode = AUTO_LANDING
+        battery, mode = auto_step_end(state, battery, drain, landing, tau_vz_s,
+                                      takeoff_altitude_m)
+        if mode == AUTO_LANDED:  # at rest, the channels too (KitPlant._at_rest)
+            for j in range(N_KIT):
+                kit[j] = 0.0
         if mode != AUTO_SAME:
             return i + 1, head, battery, mode
     return n, head, battery, AUTO_SAME

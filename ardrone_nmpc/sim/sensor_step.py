@@ -6,8 +6,9 @@ drone to the newest mocap frame time, draws a pose, to the newest navdata time, 
 sample, then to the tick's time — each leg a firmware advance (plant advance, watchdogs, the
 held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
 legs and samples for an airborne airframe plant — FLYING, or in its automatic take-off or
-landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`) — while nothing but physics happens
-between them (the caller checks that nothing the firmware does could change on the way; here
+landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`), or a thesis_kit plant's
+(:mod:`~ardrone_nmpc.sim.plant_kit`, a state array of ``X_KIT``) — while nothing but
+physics happens between them (the caller checks that nothing the firmware does could change on the way; here
 each leg is checked for what only its start shows — a climb within reach of the altitude
 cap, a battery that could empty — and the run stops before such a leg, untouched, for the
 Python path to go on from there; a take-off's or landing's leg that ends it — the climb
