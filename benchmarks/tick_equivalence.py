@@ -32,6 +32,7 @@ CLOCK_COLUMNS = frozenset({"solve_us", "compute_us", "tick_late_ms"})
 # (name, config, overrides, seed): short flights, each through what its name says.
 SHORT = ["duration_s=8", "sim.settle_s=1"]
 SQUARE = ["duration_s=12", "sim.settle_s=1"]
+KIT = ["sim.plant.profile=thesis_kit"]
 CASES: list[tuple[str, str, list[str], int]] = [
     ("hover", "hover", SHORT, 0),
     ("step_x", "step_x", SHORT, 1),
@@ -145,6 +146,23 @@ CASES: list[tuple[str, str, list[str], int]] = [
         "faults.at_loss.start_s=12.3", "faults.at_loss.duration_s=0.6",
         "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=13.2",
         "faults.wind_gust.duration_s=0.3"], 2),
+    # the thesis_kit plant (sim/plant_kit) in the compiled legs and blocks: its take-off,
+    # flight and landing, the disturbances it feels, an emptying battery, the cap, and a
+    # run of `reproduce` in the thesis' formulation (ẋ, ẏ from the navdata)
+    ("kit_hover", "hover", SHORT + KIT, 0),
+    ("kit_square", "square", SQUARE + KIT, 0),
+    ("kit_square_disturbances", "square", SQUARE + KIT + [
+        "sim.vz_gain=0.8", "sim.battery_sag_frac=0.3",
+        "sim.navdata_velocity_bias_mps=[0.05,-0.03]", "sim.plant.turbulence_std_mps=0.3"], 5),
+    ("kit_wind", "hover", SHORT + KIT + ["faults.wind.velocity_mps=[0.6,0.2,0]"], 0),
+    ("kit_square_low_battery", "square", SQUARE + KIT + [
+        "sim.plant.battery_start_pct=22", "sim.plant.battery_drain_pct_per_min=30"], 0),
+    ("kit_altitude_cap", "step_z", SHORT + KIT + ["drone.altitude_max_m=1.3"], 0),
+    ("kit_reproduce_thesis", "step_psi", SHORT + KIT + [
+        "safety.geofence_min_m=[-50,-50,-1]", "safety.geofence_max_m=[50,50,50]",
+        "controller.delay_compensation_s=0", "controller.vz_lead_s=null",
+        "estimator.horizontal_velocity=navdata", "controller.attitude_gain=1",
+        "controller.planned_tilt_frac=1", "controller.offset_free=false"], 0),
 ]
 
 

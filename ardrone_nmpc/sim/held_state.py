@@ -24,14 +24,14 @@ __all__ = ["HeldInArrays", "holds_in_arrays", "released_state"]
 def holds_in_arrays(*names: str):
     """Class decorator: ``names`` may be held in a holder's arrays — each a
     :class:`HeldInArrays` on the class, the tuple as ``cls.HELD_IN_ARRAYS`` (what the holder
-    takes), and ``__getstate__ = released_state`` (a copy or pickle while held: the
-    attributes, no holder)."""
+    takes; a subclass's adds its names to its base's), and ``__getstate__ = released_state``
+    (a copy or pickle while held: the attributes, no holder)."""
     def decorate(cls):
         for name in names:
             stand_in = HeldInArrays()
             stand_in.__set_name__(cls, name)
             setattr(cls, name, stand_in)
-        cls.HELD_IN_ARRAYS = names
+        cls.HELD_IN_ARRAYS = getattr(cls, "HELD_IN_ARRAYS", ()) + names
         cls.__getstate__ = released_state
         return cls
     return decorate

@@ -20,8 +20,10 @@ client), and is used only when the Python path's tick would do what the kernel d
 
 * the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
   LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
-  ``_flying_advance`` and ``_auto_advance`` compile), under a firmware and a sampler whose
-  classes override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
+  ``_flying_advance`` and ``_auto_advance`` compile) or a
+  :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` on the kit's (its channels after the
+  10-state in the kernel's state array), under a firmware and a sampler whose classes
+  override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
 * the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
   or a new one whose sample the sampler lets the guard see after the run
   (``LockstepSensors.defers_mode``: the guard does nothing then);
@@ -65,6 +67,7 @@ from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD, _PROGRESSIVE, DroneFirmware
 from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.plant_kit import KitPlant
 
 __all__ = ["ALL_DONE", "SAMPLER_REPLACED", "TRUTH_CELLS_OF", "CompiledLegs"]
 
@@ -116,8 +119,10 @@ _PUT_INPUTS = struct.Struct(f"{ks.S_ENDS - ks.S_ROLL + 1}d").pack_into
 _AT_ROLL = 8 * ks.S_ROLL
 _GET_SV = struct.Struct(f"{ks.S_GUST1 - ks.S_PENDING + 1}d").unpack_from  # sv[S_PENDING …]
 #: the plant's attributes the arrays hold between runs (sim/held_state.py; the sampler's:
-#: its class's HELD_IN_ARRAYS)
+#: its class's HELD_IN_ARRAYS) — a thesis_kit plant's, its channels too (``_kit``: in the
+#: state array after the 10-state, ``ks.X_KIT``)
 _PLANT_HELD = AirframePlant.HELD_IN_ARRAYS
+_KIT_HELD = KitPlant.HELD_IN_ARRAYS
 # the kernel's layout, bound once (run reads them every tick)
 _O_NAV, _MOCAP, _NAV = ks.O_NAV, ks.MOCAP, ks.NAV
 # byte offsets in buf of the pose's position and XYZ angles, the truth's position and velocity
@@ -199,6 +204,9 @@ class CompiledLegs:
         self._p_key: tuple = ()
         self.turbulent = False
         self._x = self._x_state = self._x_aux = None  # the last run's state array, its tuples
+        self._x_kit = None  # … and a kit plant's channels (the array released from it)
+        self._kit = isinstance(self.plant, KitPlant)
+        self._plant_held = _KIT_HELD if self._kit else _PLANT_HELD
         # while held (_take … release): (x, fifo, ring, the normal blocks), the blocks'
         # arrays, the kernel's arrays, the attributes taken out, whether a run changed them
         self._held: tuple = ()
@@ -235,7 +243,10 @@ class CompiledLegs:
         when given, a firmware whose class overrides none of what the kernel does in its
         place."""
         # (a class default of a held attribute would shadow its HeldInArrays: _PLANT_HELD)
-        for obj, base, names in ((plant, AirframePlant, _REPLACED + _PLANT_HELD),
+        # the airframe's dynamics, or the kit's (KitPlant's own methods: the kernel's branch)
+        kit = isinstance(plant, KitPlant)
+        for obj, base, names in ((plant, KitPlant if kit else AirframePlant,
+                                  _REPLACED + (_KIT_HELD if kit else _PLANT_HELD)),
                                  (firmware, DroneFirmware, _FIRMWARE_REPLACED)):
             if obj is None and base is DroneFirmware:
                 continue
@@ -380,14 +391,16 @@ class CompiledLegs:
         p[ks.P_BIAS0], p[ks.P_BIAS1] = pp.navdata_velocity_bias_mps
         p[ks.P_VMAX] = pp.control_vz_max_mps
         p[ks.P_VZ_GAIN], p[ks.P_SAG] = pp.vz_gain, pp.battery_sag_frac
-        # AirframePlant._auto_command's gaz
-        p[ks.P_GAZ_UP] = pp.takeoff_climb_mps / pp.control_vz_max_mps
-        p[ks.P_GAZ_DOWN] = -pp.landing_speed_mps / pp.control_vz_max_mps
+        # the plant's _auto_command's gaz (KitPlant's: per unit of the kit's vertical gain)
+        p[ks.P_GAZ_UP] = plant._auto_command(_TAKING_OFF)[2]
+        p[ks.P_GAZ_DOWN] = plant._auto_command(_LANDING)[2]
         p[ks.P_TAU_VZ], p[ks.P_TAKEOFF_ALT] = pp.tau_vz_s, pp.takeoff_altitude_m
         k = pp.rhs_coefficients
         if len(k) != ks.N_K:
             raise ValueError(f"{ks.N_K} RHS coefficients expected, got {len(k)}")
-        p[ks.P_K:] = k
+        p[ks.P_K:ks.P_KIT_K] = k
+        if self._kit:
+            p[ks.P_KIT_K:] = plant._coefficients
         self._p_key = key
         self.turbulent = pp.turbulence_std_mps > 0.0
         return p
@@ -398,7 +411,7 @@ class CompiledLegs:
         ``__dict__``: the arrays hold them until :meth:`release` (sim/held_state.py)."""
         plant, fw, sensors = self.plant, self.firmware, self.sensors
         d = plant.__dict__
-        for name in _PLANT_HELD:  # (a subclass's __init__ may leave one to the class)
+        for name in self._plant_held:  # (a subclass's __init__ may leave one to the class)
             if name not in d:
                 d[name] = getattr(plant, name)
         fifo, bias_n, gust_n = d["_fifo"], d["_bias_normals"], d["_gust_normals"]
@@ -410,15 +423,18 @@ class CompiledLegs:
                    vel_bias[0], vel_bias[1], gust[0], gust[1])
         # the plant's state array: the one the last run left while the plant's state is the
         # one released from it (the same tuples), else a new one
-        if d["_state"] is self._x_state and d["_tilt_aux"] is self._x_aux:
+        if (d["_state"] is self._x_state and d["_tilt_aux"] is self._x_aux
+                and (not self._kit or d["_kit"] is self._x_kit)):
             x = self._x
+        elif self._kit:  # its 10-state and channels (ks.X_KIT; no second-order form)
+            x = self._x = np.array((*d["_state"], *d["_kit"].tolist()), dtype=np.float64)
         else:
             x = self._x = plant._state_array()
         self._held = (x, fifo, fifo.rows, bias_n, gust_n, mocap_n, nav_n)
         self._blocks = (bias_n.values, gust_n.values, mocap_n.values, nav_n.values)
         self._args = (x, fifo.rows, self.buf, *self._blocks)  # the kernel's, in its order
         self._kernel = _kernel_for(x, fifo.rows, self._blocks)
-        self._saved = {name: d.pop(name) for name in _PLANT_HELD}
+        self._saved = {name: d.pop(name) for name in self._plant_held}
         sd = sensors.__dict__
         self._sensors_saved = {name: sd.pop(name) for name in type(sensors).HELD_IN_ARRAYS}
         plant._held_by = sensors._held_by = self
@@ -439,7 +455,10 @@ class CompiledLegs:
              nav_n.pos) = _GET_IV(self.iv)
             pending, battery, yaw_bias, vb0, vb1, gust0, gust1 = _GET_SV(self.sv, _AT_PENDING)
             values = x.tolist()  # AirframePlant._from_state_array
-            if len(values) > N_STATE:
+            if self._kit:  # the kit's channels after its 10-state (its _tilt_aux: unused)
+                saved["_kit"] = self._x_kit = x[N_STATE:].copy()
+                values = values[:N_STATE]
+            elif len(values) > N_STATE:
                 saved["_tilt_aux"] = (values[N_STATE], values[N_STATE + 1])
                 values = values[:N_STATE]
             saved["_state"] = self._x_state = tuple(values)
@@ -452,6 +471,7 @@ class CompiledLegs:
             sensors_saved["_next_mocap_k"], sensors_saved["_next_nav_k"] = next_mocap, next_nav
         else:
             self._x_state, self._x_aux = saved["_state"], saved["_tilt_aux"]
+            self._x_kit = saved.get("_kit")
         for obj, values in ((plant, saved), (sensors, sensors_saved)):
             d = obj.__dict__
             for name, value in values.items():

@@ -42,13 +42,15 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.sim.airframe import floor_and_drain, sagged_vz_gain, shift_ring
+from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
-from ardrone_nmpc.sim.plant_step import advance_biases
+from ardrone_nmpc.sim.plant_step import AUTO_LANDED, AUTO_SAME, advance_biases, auto_step_end
 
 if TYPE_CHECKING:
     from ardrone_nmpc.config.schema import DroneConfig, SimConfig
 
-__all__ = ["KIT", "KitModel", "KitPlant", "kit_rk4"]
+__all__ = ["KIT", "N_KIT", "KitModel", "KitPlant", "kit_auto_steps", "kit_flying_steps",
+           "kit_rk4"]
 
 N_KIT = 12   # x, y, z, ψ (world) + roll (2), pitch (2), u, v, vertical (1), ψ_k states
 NO_SENSOR_BIASES = {"navdata_trim_bias_max_rad": 0.0, "navdata_yaw_drift_radps": 0.0,
@@ -99,8 +101,10 @@ KIT = KitModel()
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
-    """Derivative of the kit state ``x`` (N_KIT); also returns (vx, vy, vz, φ, θ_k, ψ̇_k)."""
+def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w):
+    """Derivative of the kit state ``x`` (N_KIT values, a tuple) as a tuple, and the outputs
+    (vx, vy, vz, φ, θ_k, ψ̇_k). On values, not arrays: :func:`_kit_rk4_into` holds its
+    stages in tuples (no array made per stage)."""
     (ra11, ra12, ra21, ra22, rb1, rb2, rc1, rc2, pa11, pa12, pa21, pa22, pb1, pb2, pc1, pc2,
      av, gv, au, gu, ay, gy, gz_feed, gz_in, gz_pole, hold_u, hold_v) = k
     psi = x[3]
@@ -113,79 +117,89 @@ def _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, out):
     w_v = s * w[0] - c * w[1]
     vz = gz_feed * gaz + x[10]
     psi_k_rate = ay * x[11] + gy * yaw
-    out[0] = c * u + s * v
-    out[1] = s * u - c * v
-    out[2] = vz
-    out[3] = -psi_k_rate               # world ψ is counter-clockwise, the kit's clockwise
-    out[4] = ra11 * x[4] + ra12 * x[5] + rb1 * roll
-    out[5] = ra21 * x[4] + ra22 * x[5] + rb2 * roll
-    out[6] = pa11 * x[6] + pa12 * x[7] + pb1 * pitch
-    out[7] = pa21 * x[6] + pa22 * x[7] + pb2 * pitch
-    out[8] = au * (u - w_u) + gu * theta_k
-    out[9] = av * (v - w_v) + gv * phi
+    vx = c * u + s * v
+    vy = s * u - c * v
+    du = au * (u - w_u) + gu * theta_k
+    dv = av * (v - w_v) + gv * phi
     if hold:
-        out[8] -= hold_u * u
-        out[9] -= hold_v * v
-    out[10] = -gz_pole * x[10] + gz_in * gaz
-    out[11] = psi_k_rate
-    return out[0], out[1], vz, phi, theta_k, psi_k_rate
+        du -= hold_u * u
+        dv -= hold_v * v
+    # world ψ is counter-clockwise (its rate −ψ̇_k), the kit's clockwise
+    return ((vx, vy, vz, -psi_k_rate,
+             ra11 * x[4] + ra12 * x[5] + rb1 * roll, ra21 * x[4] + ra22 * x[5] + rb2 * roll,
+             pa11 * x[6] + pa12 * x[7] + pb1 * pitch, pa21 * x[6] + pa22 * x[7] + pb2 * pitch,
+             du, dv, -gz_pole * x[10] + gz_in * gaz, psi_k_rate),
+            (vx, vy, vz, phi, theta_k, psi_k_rate))
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _kit_values(x):
+    """The kit state array ``x`` (N_KIT) as a tuple."""
+    return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11])
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _kit_stage(q, f, d):
+    """An RK4 stage: q + f·d element by element (tuples)."""
+    return (q[0] + f * d[0], q[1] + f * d[1], q[2] + f * d[2], q[3] + f * d[3],
+            q[4] + f * d[4], q[5] + f * d[5], q[6] + f * d[6], q[7] + f * d[7],
+            q[8] + f * d[8], q[9] + f * d[9], q[10] + f * d[10], q[11] + f * d[11])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _kit_rk4_into(x0, roll, pitch, gaz, yaw, hold, k, w, h, out):
+    """:func:`kit_rk4` from the array ``x0`` into ``out`` (``out`` may be ``x0``); returns
+    the outputs."""
+    if hold:
+        roll = 0.0
+        pitch = 0.0
+    hh = 0.5 * h
+    q = _kit_values(x0)
+    a = _kit_rhs(q, roll, pitch, gaz, yaw, hold, k, w)[0]
+    b = _kit_rhs(_kit_stage(q, hh, a), roll, pitch, gaz, yaw, hold, k, w)[0]
+    c = _kit_rhs(_kit_stage(q, hh, b), roll, pitch, gaz, yaw, hold, k, w)[0]
+    d = _kit_rhs(_kit_stage(q, h, c), roll, pitch, gaz, yaw, hold, k, w)[0]
+    h6 = h / 6.0
+    for i in range(N_KIT):
+        out[i] = q[i] + h6 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
+    return _kit_rhs(_kit_values(out), roll, pitch, gaz, yaw, hold, k, w)[1]
 
 
 @njit(cache=True, **OUTER_KERNEL)
 def kit_rk4(x0, roll, pitch, gaz, yaw, hold, k, w, h):
     """One classical RK4 step of the kit over ``h`` (the commands held); returns the new state
     and the outputs (vx, vy, vz, φ, θ_k, ψ̇_k) at its end. ``hold`` zeroes roll and pitch."""
-    if hold:
-        roll = 0.0
-        pitch = 0.0
-    n = x0.shape[0]
-    a = np.empty(n)
-    b = np.empty(n)
-    c = np.empty(n)
-    d = np.empty(n)
-    t = np.empty(n)
-    hh = 0.5 * h
-    _kit_rhs(x0, roll, pitch, gaz, yaw, hold, k, w, a)
-    for i in range(n):
-        t[i] = x0[i] + hh * a[i]
-    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, b)
-    for i in range(n):
-        t[i] = x0[i] + hh * b[i]
-    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, c)
-    for i in range(n):
-        t[i] = x0[i] + h * c[i]
-    _kit_rhs(t, roll, pitch, gaz, yaw, hold, k, w, d)
-    x = np.empty(n)
-    for i in range(n):
-        x[i] = x0[i] + h / 6.0 * (a[i] + 2.0 * (b[i] + c[i]) + d[i])
-    outputs = _kit_rhs(x, roll, pitch, gaz, yaw, hold, k, w, t)
+    x = np.empty(N_KIT)
+    outputs = _kit_rk4_into(x0, roll, pitch, gaz, yaw, hold, k, w, h, x)
     return x, outputs
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _kit_motors_on(state, kit, roll, pitch, gaz, yaw, hold, k, w, h):
+    """:meth:`KitPlant._motors_on_step` on arrays (``gaz`` times the vertical gain already):
+    the kit's channels ``kit`` (12) take x, y, z, ψ of the plant's ``state`` (10, or more:
+    its first 10), one :func:`kit_rk4` step, written into both in place."""
+    kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
+    vx, vy, vz, phi, theta_k, psi_k_rate = _kit_rk4_into(kit, roll, pitch, gaz, yaw, hold, k,
+                                                         w, h, kit)
+    state[0], state[1], state[2], state[3], state[4] = kit[0], kit[1], kit[2], vx, vy
+    state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, kit[3], -psi_k_rate
 
 
 @njit(cache=True, **OUTER_KERNEL)
 def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n,
                        battery, drain, vz_gain, sag, normals, yaw_bias_deg, vel_bias_0,
                        vel_bias_1, yaw_drift_radps, yaw_walk, vel_bias_std, vel_bias_tau_s):
-    """Up to ``n`` FLYING steps of :class:`KitPlant` in one call — each
-    :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in its order: the
-    command ``roll`` … ``hold`` queued in the delay ring ``ring`` (oldest at ``head``) and the
-    oldest flown, :meth:`KitPlant._motors_on_step` (the kit's x, y, z, ψ from the plant's
-    ``state`` (10), gaz times the vertical gain at the battery level, :func:`kit_rk4`), the
-    floor, the drain — stopping before a step whose drain would empty the battery (a mode
-    change, the plant's). If all ``n`` were flown, ψ is wrapped and the biases advanced
+    """Up to ``n`` FLYING steps of :class:`KitPlant` in one call (:func:`kit_flying_steps`
+    on a copy of the plant's ``state`` (10) and on its channels ``kit``, in place). If all
+    ``n`` were flown, ψ is wrapped and the biases advanced
     (:func:`~ardrone_nmpc.sim.plant_step.advance_biases`). Returns (steps done, head,
     battery, state, kit state, yaw offset °, velocity bias 0, velocity bias 1)."""
     state = state.copy()
-    for i in range(n):
-        if not battery - drain > 0.0:
-            return i, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
-        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
-        kit[0], kit[1], kit[2], kit[3] = state[0], state[1], state[2], state[8]
-        kit, out = kit_rk4(kit, r, p, g * sagged_vz_gain(vz_gain, sag, battery), y, hd, k, w, h)
-        vx, vy, vz, phi, theta_k, psi_k_rate = out
-        state[0], state[1], state[2], state[3], state[4] = kit[0], kit[1], kit[2], vx, vy
-        state[5], state[6], state[7], state[8], state[9] = vz, phi, -theta_k, kit[3], -psi_k_rate
-        battery = floor_and_drain(state, battery, drain)
+    done, head, battery = kit_flying_steps(state, kit, ring, head, roll, pitch, gaz, yaw,
+                                           hold, k, w, h, n, battery, drain, vz_gain, sag)
+    if done < n:
+        return done, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
     state[8] = wrap_half_turn(state[8], math.pi)
     yaw_bias_deg, vel_bias_0, vel_bias_1 = advance_biases(
         n * h, normals, yaw_bias_deg, vel_bias_0, vel_bias_1, yaw_drift_radps, yaw_walk,
@@ -193,6 +207,54 @@ def kit_flying_advance(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w
     return n, head, battery, state, kit, yaw_bias_deg, vel_bias_0, vel_bias_1
 
 
+@njit(cache=True, **INNER_KERNEL)
+def kit_flying_steps(state, kit, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery,
+                     drain, vz_gain, sag):
+    """Up to ``n`` FLYING steps of :class:`KitPlant` on ``state`` and ``kit`` in place — each
+    :meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s arithmetic in its order: the
+    command ``roll`` … ``hold`` queued in the delay ring ``ring`` (oldest at ``head``) and the
+    oldest flown (:func:`_kit_motors_on`, gaz times the vertical gain at the battery level),
+    the floor, the drain — stopping before a step whose drain would empty the battery (a mode
+    change, the plant's). Returns (steps done, head, battery)."""
+    for i in range(n):
+        if not battery - drain > 0.0:
+            return i, head, battery
+        r, p, g, y, hd, head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)
+        _kit_motors_on(state, kit, r, p, g * sagged_vz_gain(vz_gain, sag, battery), y, hd, k,
+                       w, h)
+        battery = floor_and_drain(state, battery, drain)
+    return n, head, battery
+
+
+@njit(cache=True, **INNER_KERNEL)
+def kit_auto_steps(state, kit, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
+                   w, h, n, battery, drain, vz_gain, sag, tau_vz_s, takeoff_altitude_m):
+    """Up to ``n`` steps of :class:`KitPlant`'s automatic take-off (``landing`` False) or
+    landing on ``state`` and ``kit`` in place — :meth:`~ardrone_nmpc.sim.plant.AirframePlant.
+    _substep`'s arithmetic in its order, as :func:`~ardrone_nmpc.sim.plant_step.auto_steps`
+    for the airframe: the command queued and ignored, one step of the automatic climb or
+    descent (:meth:`KitPlant._auto_command`'s gaz ``gaz_auto`` times the vertical gain,
+    position hold), the floor — a landing touches down at rest, the channels at 0
+    (:meth:`KitPlant._at_rest`) —, the drain, the mode's transitions. Stops after the step
+    that changes the mode. Returns (steps done, head, battery, the mode then: ``AUTO_*``)."""
+    auto_hold = landing or not landing  # a bool, not a literal (auto_steps' note)
+    for i in range(n):
+        head = shift_ring(ring, head, roll, pitch, gaz, yaw, hold)[5]
+        _kit_motors_on(state, kit, 0.0, 0.0, gaz_auto * sagged_vz_gain(vz_gain, sag, battery),
+                       0.0, auto_hold, k, w, h)
+        battery, mode = auto_step_end(state, battery, drain, landing, tau_vz_s,
+                                      takeoff_altitude_m)
+        if mode == AUTO_LANDED:  # at rest, the channels too (KitPlant._at_rest)
+            for j in range(N_KIT):
+                kit[j] = 0.0
+        if mode != AUTO_SAME:
+            return i + 1, head, battery, mode
+    return n, head, battery, AUTO_SAME
+
+
+# the channels' state too, in the lockstep's compiled legs (sim/lockstep_legs: after the
+# plant's 10-state in their state array)
+@holds_in_arrays("_kit")
 class KitPlant(AirframePlant):
     """:class:`~ardrone_nmpc.sim.plant.AirframePlant` with the kit's channels in flight.
 

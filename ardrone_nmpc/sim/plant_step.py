@@ -18,8 +18,8 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 
 from ardrone_nmpc.sim.airframe import _rk4_into, flying_steps, sagged_vz_gain, shift_ring
 
-__all__ = ["AUTO_FLYING", "AUTO_LANDED", "AUTO_LANDING", "advance_biases", "auto_steps",
-           "flying_advance"]
+__all__ = ["AUTO_FLYING", "AUTO_LANDED", "AUTO_LANDING", "advance_biases", "auto_step_end",
+           "auto_steps", "flying_advance"]
 
 #: :func:`auto_steps`' mode after its last step: unchanged, or the one it changed to
 AUTO_SAME, AUTO_FLYING, AUTO_LANDING, AUTO_LANDED = 0, 1, 2, 3
@@ -84,27 +84,40 @@ def auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k,
             kk = (k[0], k[1] * gain / vz_gain, k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
                   k[10], k[11], k[12])
         _rk4_into(x, 0.0, 0.0, gaz_auto, 0.0, auto_hold, kk, w, h, x)
-        mode = AUTO_SAME
-        if not x[2] > 0.0:  # _ground_contact
-            if landing:  # touch-down: at rest (_at_rest keeps x, y, ψ)
-                for j in (2, 3, 4, 5, 6, 7, 9):
-                    x[j] = 0.0
-                mode = AUTO_LANDED
-            else:  # the floor
-                x[2] = 0.0
-                if 0.0 > x[5]:
-                    x[5] = 0.0
-        left = battery - drain
-        battery = left if left > 0.0 else 0.0
-        if mode == AUTO_LANDED:  # _check_transitions of a LANDED plant: none
-            return i + 1, head, battery, x, mode
-        if not landing and x[2] + x[5] * tau_vz_s >= takeoff_altitude_m:
-            mode = AUTO_FLYING
-        if battery <= 0.0 and not landing:  # taking off (or flying since this step)
-            mode = AUTO_LANDING
+        battery, mode = auto_step_end(x, battery, drain, landing, tau_vz_s,
+                                      takeoff_altitude_m)
         if mode != AUTO_SAME:
             return i + 1, head, battery, x, mode
     return n, head, battery, x, AUTO_SAME
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def auto_step_end(x, battery, drain, landing, tau_vz_s, takeoff_altitude_m):
+    """The end of a step of the automatic take-off (``landing`` False) or landing on the
+    state array ``x`` (:meth:`~ardrone_nmpc.sim.plant.AirframePlant._substep`'s, after the
+    motors-on step; :func:`auto_steps`' and the kit's ``kit_auto_steps``): the floor — a
+    landing touches down at rest, the hidden attitude states kept —, the drain, the mode's
+    transitions (a take-off whose climb will settle at ``takeoff_altitude_m`` flies, an
+    empty battery lands). Returns (battery, the mode then: ``AUTO_*``)."""
+    mode = AUTO_SAME
+    if not x[2] > 0.0:  # _ground_contact
+        if landing:  # touch-down: at rest (_at_rest keeps x, y, ψ)
+            for j in (2, 3, 4, 5, 6, 7, 9):
+                x[j] = 0.0
+            mode = AUTO_LANDED
+        else:  # the floor
+            x[2] = 0.0
+            if 0.0 > x[5]:
+                x[5] = 0.0
+    left = battery - drain
+    battery = left if left > 0.0 else 0.0
+    if mode == AUTO_LANDED:  # _check_transitions of a LANDED plant: none
+        return battery, mode
+    if not landing and x[2] + x[5] * tau_vz_s >= takeoff_altitude_m:
+        mode = AUTO_FLYING
+    if battery <= 0.0 and not landing:  # taking off (or flying since this step)
+        mode = AUTO_LANDING
+    return battery, mode
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -6,8 +6,9 @@ drone to the newest mocap frame time, draws a pose, to the newest navdata time, 
 sample, then to the tick's time — each leg a firmware advance (plant advance, watchdogs, the
 held command) and each sample a few lines of arithmetic. :func:`lockstep_run` does the same
 legs and samples for an airborne airframe plant — FLYING, or in its automatic take-off or
-landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`) — while nothing but physics happens
-between them (the caller checks that nothing the firmware does could change on the way; here
+landing (:func:`~ardrone_nmpc.sim.plant_step.auto_steps`), or a thesis_kit plant's
+(:mod:`~ardrone_nmpc.sim.plant_kit`, a state array of ``X_KIT``) — while nothing but
+physics happens between them (the caller checks that nothing the firmware does could change on the way; here
 each leg is checked for what only its start shows — a climb within reach of the altitude
 cap, a battery that could empty — and the run stops before such a leg, untouched, for the
 Python path to go on from there; a take-off's or landing's leg that ends it — the climb
@@ -36,7 +37,8 @@ from numba import njit
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
-from ardrone_nmpc.sim.airframe import flying_steps_into, shift_ring
+from ardrone_nmpc.sim.airframe import N_STATE, flying_steps_into, shift_ring
+from ardrone_nmpc.sim.plant_kit import N_KIT, kit_auto_steps, kit_flying_steps
 from ardrone_nmpc.sim.plant_step import (AUTO_FLYING, AUTO_LANDED, AUTO_SAME, advance_biases,
                                          auto_steps)
 
@@ -59,13 +61,19 @@ SV_SIZE = 21
 #: the kernel's modes (LANDED: only after a touch-down the run flew)
 MODE_FLYING, MODE_TAKING_OFF, MODE_LANDING, MODE_LANDED = 0.0, 1.0, 2.0, 3.0
 # p: a flight's parameters (the automatic climb's and descent's gaz, τ_z, the take-off
-# height among them), then the 13 coefficients of the airframe's RHS
+# height among them), then the 13 coefficients of the airframe's RHS, then the thesis_kit
+# plant's 27 (KitModel.coefficients; read only for a kit plant's state array: X_KIT)
 (P_H, P_DRAIN, P_YAW_DRIFT, P_YAW_WALK, P_VB_STD, P_VB_TAU, P_TURB_STD, P_TURB_TAU,
  P_MOCAP_PERIOD, P_MOCAP_LATENCY, P_NAV_PERIOD, P_SP, P_SA, P_ATT_STD, P_YAW_STD, P_ALT_STD,
  P_VEL_STD, P_TRIM0, P_TRIM1, P_BIAS0, P_BIAS1, P_VMAX, P_VZ_GAIN, P_SAG, P_GAZ_UP, P_GAZ_DOWN,
  P_TAU_VZ, P_TAKEOFF_ALT, P_K) = range(29)
 N_K = 13
-P_SIZE = P_K + N_K
+P_KIT_K, N_KIT_K = P_K + N_K, 27
+P_SIZE = P_KIT_K + N_KIT_K
+#: the state array of a thesis_kit plant (sim/plant_kit.KitPlant): its 10-state, then its
+#: channels' 12 (the kernel flies the kit's dynamics for an array of this length; the
+#: airframe's is 10, or 12 with the second-order attitude form)
+X_KIT = N_STATE + N_KIT
 # the normals a run may take: three legs of bias and gust draws, one pose, one navdata sample
 NEED_BIAS, NEED_GUST, NEED_MOCAP, NEED_NAV = 9, 6, 6, 7
 # out: the pose (t, position, XYZ angles, ψ), the navdata sample (t, battery, roll, pitch,
@@ -143,6 +151,49 @@ def _gust_step(iv, sv, p, n, h, gust_n):
 
 
 @njit(cache=True, **INNER_KERNEL)
+def _flying_steps(x, ring, head, roll, pitch, gaz, yaw, hold, k, p, w, h, n, battery):
+    """:func:`flying_steps_into` on the state array ``x`` (the airframe's RHS coefficients
+    ``k``) — or, for a thesis_kit plant's (``X_KIT``), :func:`kit_flying_steps` on its
+    10-state and its channels (the kit's coefficients in ``p``). Returns (steps done, head,
+    battery)."""
+    if x.shape[0] == X_KIT:
+        return kit_flying_steps(x, x[N_STATE:], ring, head, roll, pitch, gaz, yaw, hold,
+                                _kit_coefficients(p), w, h, n, battery, p[P_DRAIN],
+                                p[P_VZ_GAIN], p[P_SAG])
+    return flying_steps_into(x, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n, battery,
+                             p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, k, p, w, h, n, battery):
+    """:func:`auto_steps` of the state array ``x`` (as :func:`_flying_steps` chooses: the
+    airframe's, or a thesis_kit plant's :func:`kit_auto_steps` on a copy). Returns (steps
+    done, head, battery, the new state array, the mode then: ``AUTO_*``)."""
+    gaz_auto = p[P_GAZ_DOWN] if landing else p[P_GAZ_UP]
+    if x.shape[0] == X_KIT:
+        xn = x.copy()
+        done, head, battery, mode = kit_auto_steps(
+            xn, xn[N_STATE:], ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto,
+            _kit_coefficients(p), w, h, n, battery, p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG],
+            p[P_TAU_VZ], p[P_TAKEOFF_ALT])
+        return done, head, battery, xn, mode
+    return auto_steps(x, ring, head, roll, pitch, gaz, yaw, hold, landing, gaz_auto, k, w, h,
+                      n, battery, p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG], p[P_TAU_VZ],
+                      p[P_TAKEOFF_ALT])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _kit_coefficients(p):
+    """The thesis_kit plant's coefficients in ``p`` (``P_KIT_K``): the tuple of
+    ``KitModel.coefficients``."""
+    q = P_KIT_K
+    return (p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6], p[q + 7],
+            p[q + 8], p[q + 9], p[q + 10], p[q + 11], p[q + 12], p[q + 13], p[q + 14],
+            p[q + 15], p[q + 16], p[q + 17], p[q + 18], p[q + 19], p[q + 20], p[q + 21],
+            p[q + 22], p[q + 23], p[q + 24], p[q + 25], p[q + 26])
+
+
+@njit(cache=True, **INNER_KERNEL)
 def _wrap_and_biases(x, iv, sv, p, dt, bias_n):
     """The end of a take-off's, landing's or landed advance over ``dt``: the heading
     wrapped, the navdata biases advanced (:func:`advance_biases`, the next three normals)."""
@@ -168,19 +219,16 @@ def _auto_leg(x, ring, iv, sv, p, k, w, h, n, bias_n, leg):
     for i in range(m):
         for j in range(5):
             saved[i, j] = ring[i, j]
-    landing = sv[S_MODE] == MODE_LANDING
-    done, head, battery, xn, mode = auto_steps(
+    done, head, battery, xn, mode = _auto_steps(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
-        landing, p[P_GAZ_DOWN] if landing else p[P_GAZ_UP], k, w, h, n, sv[S_BATTERY],
-        p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG], p[P_TAU_VZ], p[P_TAKEOFF_ALT])
+        sv[S_MODE] == MODE_LANDING, k, p, w, h, n, sv[S_BATTERY])
     if mode != AUTO_SAME or done < n:  # the mode changes on the way
         ends = sv[S_ENDS] != 0.0
         roll, pitch, gaz, yaw, hold = (sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW],
                                        sv[S_HOLD] != 0.0)
         if ends and mode == AUTO_FLYING:  # _substep's FLYING steps for the rest
-            flown, head, battery = flying_steps_into(
-                xn, ring, head, roll, pitch, gaz, yaw, hold, k, w, h, n - done, battery,
-                p[P_DRAIN], p[P_VZ_GAIN], p[P_SAG])
+            flown, head, battery = _flying_steps(xn, ring, head, roll, pitch, gaz, yaw, hold,
+                                                 k, p, w, h, n - done, battery)
             ends = flown == n - done  # (else the battery empties: a mode change again)
         elif ends and mode == AUTO_LANDED:  # _substep's LANDED steps: the ring shifted
             for i in range(n - done):
@@ -259,9 +307,9 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, leg):
     pos = iv[I_POS_BIAS]
     iv[I_POS_BIAS] = pos + 3
     # flying_advance in place (all n steps fly: the battery was checked above)
-    done, head, battery = flying_steps_into(
+    done, head, battery = _flying_steps(
         x, ring, iv[I_HEAD], sv[S_ROLL], sv[S_PITCH], sv[S_GAZ], sv[S_YAW], sv[S_HOLD] != 0.0,
-        k, (w0, w1, w2), h, n, sv[S_BATTERY], drain, p[P_VZ_GAIN], p[P_SAG])
+        k, p, (w0, w1, w2), h, n, sv[S_BATTERY])
     x[8] = wrap_half_turn(x[8], math.pi)
     sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1] = advance_biases(
         n * h, bias_n[pos:pos + 3], sv[S_YAW_BIAS], sv[S_VB0], sv[S_VB1], p[P_YAW_DRIFT],

@@ -37,16 +37,17 @@ from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
-from ardrone_nmpc.sim.plant import AirframePlant
+from ardrone_nmpc.sim.plant_kit import KitPlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 CLOCK_CELLS = frozenset({"compute_us", "solve_us"})  # wall-clock: their type compared only
 SETTLE = ["sim.settle_s=1"]
+KIT = "sim.plant.profile=thesis_kit"
 # held in the compiled legs' arrays (sim/held_state): in an instance's __dict__ only while
 # released, so compared after a release (at the loop's end, after the flight) and not before
-_HELD = frozenset(AirframePlant.HELD_IN_ARRAYS + LockstepSensors.HELD_IN_ARRAYS
-                  + ("_held_by",))
+# (the kit plant's: the airframe's and its channels')
+_HELD = frozenset(KitPlant.HELD_IN_ARRAYS + LockstepSensors.HELD_IN_ARRAYS + ("_held_by",))
 # the firmware's cache of the cap's lead time (DroneFirmware._lead_s): filled when first read;
 # the counters (compared on their own)
 _FIRMWARE_SKIP = frozenset({"_lead_params", "_lead", "counters"})
@@ -117,10 +118,20 @@ CASES = [
     ("identify", "identify", ["duration_s=14", *SETTLE, "reference.excitation.axis_s=2.4",
                               "reference.excitation.rest_s=0.5",
                               "reference.excitation.sweep_m=0.1"], 2),
-    # flights no block takes (as the blocks' first version has it): a plant, a second
-    # object on the mocap stream, an estimator the compiled calls do not take, faults that
-    # touch the sensors' bytes or the solver
-    ("square_kit", "square", ["duration_s=8", *SETTLE, "sim.plant.profile=thesis_kit"], 6),
+    # the thesis_kit plant (its channels' dynamics in the legs: sim/plant_kit): a square,
+    # disturbed, into the cap, its battery reaching the floor
+    ("square_kit", "square", ["duration_s=8", *SETTLE, KIT], 6),
+    ("square_kit_disturbed", "square",
+     ["duration_s=10", *SETTLE, KIT, "sim.plant.turbulence_std_mps=0.3", "sim.vz_gain=0.8",
+      "sim.battery_sag_frac=0.3"], 5),
+    ("kit_altitude_cap", "square_altitudes",
+     ["duration_s=14", *SETTLE, KIT, "drone.altitude_max_m=1.3"], 0),
+    ("kit_low_battery", "square", ["duration_s=10", *SETTLE, KIT,
+                                   "sim.plant.battery_start_pct=23",
+                                   "sim.plant.battery_drain_pct_per_min=30"], 0),
+    # flights no block takes (as the blocks' first version has it): a second object on the
+    # mocap stream, an estimator the compiled calls do not take, faults that touch the
+    # sensors' bytes or the solver
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
@@ -633,3 +644,11 @@ def test_plain_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_se
             assert blocks._plain_ticks(k) == want, (k, bound)
             if want > 2 and want < math.inf:  # kept: the ticks before it change nothing
                 assert blocks._plain_ticks(k + 2) == want - 2
+
+
+def test_blocks_take_the_kit_square(monkeypatch):
+    """The thesis_kit plant's square goes in blocks too (its dynamics in the legs)."""
+    cfg = _config("square", ["duration_s=10", *SETTLE, KIT])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"

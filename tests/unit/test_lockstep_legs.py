@@ -17,6 +17,7 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+KIT = "sim.plant.profile=thesis_kit"
 
 
 def _value(v):
@@ -42,7 +43,8 @@ def _snapshot(drone, t_s):
             inputs.target_rx_t_s, _record(inputs.pose), _record(inputs.navdata), _record(inputs.target),
             _record(drone.truth), plant._state, plant._tilt_aux, plant._steps,
             plant._pending_s, plant._battery, plant._yaw_bias_deg, plant._vel_bias,
-            plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(), fw.comwdg_latched,
+            plant._gust_mps, plant._fifo.head, plant._fifo.rows.tobytes(),
+            getattr(plant, "_kit", np.zeros(0)).tobytes(), fw.comwdg_latched,
             fw.lost_com_hover, fw.alt_capped, fw.applied, drone.self_landing,
             # what the PCMD chain (or CompiledLegs.command in its place) leaves
             plant._current, plant._mode, fw.pcmd, fw._applied_pcmd, fw.last_seq, fw.last_cmd_t,
@@ -148,6 +150,15 @@ CASES = {
     "battery_empties": (["sim.plant.battery_start_pct=21",
                          "sim.plant.battery_drain_pct_per_min=100"],
                         lambda k: "takeoff" if k % 25 == 0 else _zigzag(k), True),
+    # the thesis_kit plant: its channels' dynamics in the kernel (sim/plant_kit)
+    "kit": ([KIT], _zigzag, False),
+    "kit_climb_into_cap": ([KIT, "drone.altitude_max_m=1.3"],
+                           lambda k: (0.0, 0.01, 0.6 if (k // 40) % 2 == 0 else -0.2, 0.0), True),
+    "kit_sag": ([KIT, "sim.plant.turbulence_std_mps=0.5", "sim.battery_sag_frac=0.3",
+                 "sim.vz_gain=0.9"], _zigzag, False),
+    "kit_battery_empties": ([KIT, "sim.plant.battery_start_pct=21",
+                             "sim.plant.battery_drain_pct_per_min=100"],
+                            lambda k: "takeoff" if k % 25 == 0 else _zigzag(k), True),
 }
 
 
@@ -170,21 +181,22 @@ def _count_compiled_calls(monkeypatch):
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_compiled_legs_give_the_python_paths_bits(name, monkeypatch):
     overrides, command, stops = CASES[name]
+    kind = name.removeprefix("kit_")  # (a kit case asserts as its airframe twin)
     cfg = load_config(str(ROOT / "configs" / "square.yaml"), overrides)
     calls = _count_compiled_calls(monkeypatch)
     python, _ = _fly(cfg, False, 400, command)
     assert calls == {"run": 0, "land_again": 0}  # the reference is the Python path's own
     compiled, (used, stopped, auto_used, auto_stopped, _, ends, lands_again) = _fly(
         cfg, True, 400, command)
-    assert calls["run"] > 100 and (calls["land_again"] > 20 or name == "battery_empties")
+    assert calls["run"] > 100 and (calls["land_again"] > 20 or kind == "battery_empties")
     assert used > 100  # the compiled path flew many ticks
     assert (stopped > 0) == stops  # … and handed legs to the Python path where it must
-    assert auto_stopped >= 1 or name != "battery_empties"  # a take-off's run handed back
+    assert auto_stopped >= 1 or kind != "battery_empties"  # a take-off's run handed back
     # to the Python path (the battery might empty on the way: sensor_step._leg)
     assert auto_used > 20 and ends >= 1  # take-off, landing: their ends too (both,
-    assert ends == 2 or name in ("sag", "battery_empties")  # but a take-off the link-loss
+    assert ends == 2 or kind in ("sag", "battery_empties")  # but a take-off the link-loss
     # watchdog's tick or an emptying battery ends)
-    assert lands_again > 20 or name == "battery_empties"  # REF land held again, written
+    assert lands_again > 20 or kind == "battery_empties"  # REF land held again, written
     # out (but after a landing of its own)
     assert len(python) == len(compiled)
     for i, (a, b) in enumerate(zip(python, compiled)):
@@ -192,7 +204,7 @@ def test_compiled_legs_give_the_python_paths_bits(name, monkeypatch):
 
 
 @pytest.mark.parametrize("name", ["square", "climb_into_cap", "turbulence", "second_order",
-                                  "watchdogs", "sag"])
+                                  "watchdogs", "sag", "kit", "kit_sag"])
 def test_the_state_held_in_the_arrays_gives_the_python_paths_bits(name):
     """Every attribute read only every 23rd tick: between those the compiled legs hold the
     plant's state in their arrays run after run — the PCMD chain, the truth and the samples
@@ -276,7 +288,8 @@ def test_the_kernels_one_buffer_and_what_one_unpack_reads_of_a_run():
         assert not any(np.shares_memory(view, other) for other, _ in views.values()
                        if other is not view), name
     assert legs.iv.dtype == np.int64 and legs.out.dtype == legs.p.dtype == np.float64
-    assert legs.p[ks.P_K:].tolist() == list(drone.sim.plant.params.rhs_coefficients)
+    assert legs.p[ks.P_K:ks.P_KIT_K].tolist() == list(drone.sim.plant.params.rhs_coefficients)
+    assert not legs.p[ks.P_KIT_K:].any()  # (the kit's coefficients: a kit plant's only)
     o, read = legs.live_out, lockstep_legs._RUN_READ
     assert len(set(read)) == len(read) == len(o) - 4 and max(read) < ks.OUT_SIZE
     assert np.array(o[:len(read)]).tobytes() == legs.out[list(read)].tobytes()
@@ -325,26 +338,31 @@ def test_compiled_legs_with_a_scripted_target():
     assert python == compiled
 
 
-def test_other_backends_keep_the_python_path():
-    cfg = load_config(str(ROOT / "configs" / "square.yaml"), ["sim.plant.profile=thesis_kit"])
-    assert LockstepDrone(cfg).sensors._legs is None
+def test_the_kit_plant_flies_the_compiled_legs():
+    cfg = load_config(str(ROOT / "configs" / "square.yaml"), [KIT])
+    assert LockstepDrone(cfg).sensors._legs is not None
 
 
+@pytest.mark.parametrize("kit", [False, True], ids=["airframe", "kit"])
 @pytest.mark.parametrize("name", ["navdata", "mocap_pose", "advance", "_substep",
-                                  "_advance_biases", "_motors_on_step", "truth"])
-def test_a_plant_that_overrides_what_the_kernel_does_keeps_the_python_path(name):
-    """The compiled tick does the airframe's dynamics, sensors and state in the plant's place:
-    a subclass overriding any of them (a test emulator with a biased navdata, say) would see its
-    override skipped aloft, so it flies the Python path; the airframe itself is eligible."""
+                                  "_advance_biases", "_motors_on_step", "truth",
+                                  "_auto_command", "_at_rest", "_flying_advance"])
+def test_a_plant_that_overrides_what_the_kernel_does_keeps_the_python_path(name, kit):
+    """The compiled tick does the airframe's (or the kit's) dynamics, sensors and state in the
+    plant's place: a subclass overriding any of them (a test emulator with a biased navdata,
+    say) would see its override skipped aloft, so it flies the Python path; the airframe and
+    the kit plant themselves are eligible."""
     from ardrone_nmpc.config.sim import NoiseConfig
     from ardrone_nmpc.sim.lockstep_legs import CompiledLegs
     from ardrone_nmpc.sim.plant import AirframePlant, PlantParams
+    from ardrone_nmpc.sim.plant_kit import KitPlant
 
-    base = getattr(AirframePlant, name)
+    plant = KitPlant if kit else AirframePlant
+    base = getattr(plant, name)
     override = property(lambda self: base.fget(self)) if isinstance(base, property) else (
         lambda self, *a, **k: base(self, *a, **k))
-    Overriding = type("Overriding", (AirframePlant,), {name: override})
-    assert CompiledLegs.eligible(AirframePlant(PlantParams(), NoiseConfig(), seed=1))
+    Overriding = type("Overriding", (plant,), {name: override})
+    assert CompiledLegs.eligible(plant(PlantParams(), NoiseConfig(), seed=1))
     assert not CompiledLegs.eligible(Overriding(PlantParams(), NoiseConfig(), seed=1))
 
 

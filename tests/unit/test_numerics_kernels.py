@@ -47,8 +47,8 @@ def dot(a, b):
         s += a[i] * b[i]
     return s
 
-kit_args = (np.zeros(12), 0.3, -0.2, 0.1, 0.2, False, plant_kit.KIT.coefficients(0.5),
-            np.zeros(3), np.zeros(12))
+kit_args = ((0.0,) * 12, 0.3, -0.2, 0.1, 0.2, False, plant_kit.KIT.coefficients(0.5),
+            np.zeros(3))
 compiled, bad = 0, []
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
