@@ -267,6 +267,7 @@ class LockstepDrone(ConfigHandshake):
             k += 1
             mode, t_s = self.mode_and_t()
         return mode, t_s
+
     def _plain_descent(self, t_first_s: float, k: int, period_s: float,
                        t_start_s: float) -> int:
         """How many of a landing's ticks from ``k`` (at most a descent's) nothing injected
