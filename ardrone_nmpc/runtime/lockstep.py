@@ -193,7 +193,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     inputs, step, set_command = drone.sensors.inputs, tick.step, drone.set_command
     truth_cells, tally_add, tally_tick = drone.truth_cells, tally.add, tally.add_tick
     write_cells = _sink(recorder, "write_cells")
-    write_block = _sink(recorder, "write_block") if write_cells is not None else None
+    write_block = _block_sink(recorder) if write_cells is not None else None
     tick.cell_rows = recorder is None or write_cells is not None
     # (blocks compile their kernel themselves in a warm-up's flight, or with no background
     # compile to wait for: runtime/precompile)
@@ -372,6 +372,18 @@ def _sink(recorder, name: str):
     if recorder is None or getattr(type(recorder), name, None) is None:
         return None
     return getattr(recorder, name)
+
+
+def _block_sink(recorder):
+    """The recorder's ``write_block``, unless a class below the one that defines it
+    overrides ``write_cells`` (a subclass that watches each row's cells must see a block's
+    rows through its own ``write_cells``): then None, the rows go one by one."""
+    mro = type(recorder).__mro__
+    cells_at = next(i for i, kind in enumerate(mro) if "write_cells" in kind.__dict__)
+    block_at = next((i for i, kind in enumerate(mro) if "write_block" in kind.__dict__), None)
+    if block_at is None or block_at > cells_at:
+        return None
+    return recorder.write_block
 
 
 def _record(recorder, row: dict, drone: LockstepDrone) -> None:

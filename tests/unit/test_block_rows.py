@@ -137,3 +137,23 @@ def test_a_tally_of_a_block_of_ticks_is_its_ticks_one_by_one(seed):
         block.add_ticks(times, mode)
         assert block.tracking_ticks == one.tracking_ticks
     assert one.tracking_ticks > 0
+
+
+def test_a_recorder_that_watches_cells_below_write_block_is_given_cells():
+    """A subclass overriding ``write_cells`` but not ``write_block`` would miss a block's
+    rows: the runner gives it none (``lockstep._block_sink``); its own ``write_block`` or
+    its base's alone is taken."""
+    from ardrone_nmpc.runtime.lockstep import _block_sink
+
+    class Watching(MemoryRecorder):
+        def write_cells(self, cells):
+            super().write_cells(cells)
+
+    class WatchingBoth(Watching):
+        def write_block(self, rows):
+            super().write_block(rows)
+
+    assert _block_sink(Watching()) is None
+    assert _block_sink(WatchingBoth()).__func__ is WatchingBoth.write_block
+    assert _block_sink(MemoryRecorder()).__func__ is MemoryRecorder.write_block
+    assert _block_sink(_Clocks()).__func__ is _Clocks.write_block
