@@ -51,7 +51,12 @@ def test_fly_sim_flies_and_lands(tmp_path):
     assert set(t.tolist()) <= set(ticks) and np.all(np.diff(t) > 0)
     assert run.n_rows + overruns[0] <= schedule.n_ticks and run.n_rows >= 55
     assert t[-1] >= ticks[-1] - 0.065 * overruns[0]
-    assert set(run.columns["mode"]) <= {"settle", "track"}
+    # settle and track — or a hold where the pose was older than the hold's age (a late
+    # datagram on a loaded machine: the supervisor's to hold, not a fault of the flight)
+    modes, age_ms = run.columns["mode"], run.columns["mocap_age_ms"]
+    held = modes == "hold-stale-mocap"
+    assert set(modes[~held]) <= {"settle", "track"}
+    assert np.all(age_ms[held] > run.config.safety.mocap_hold_ms) and held.mean() < 0.1
     z = run.columns["z_m"][t > 0]
     assert abs(z.mean() - 1.0) < 0.3  # hovering near the reference over UDP
     _assert_one_clock(run, tmp_path)
