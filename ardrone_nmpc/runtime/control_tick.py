@@ -159,7 +159,8 @@ class ControlTick:
         # bound later, as the two calls around the solve would call) is Python's
         self._solve = tick.control._solve_prepared
         #: the compiled call for the solver's kernel (:data:`KERNELS`) and its vetting
-        self.kernel = KERNELS[self.nmpc._step[0]]
+        self._step_kernel = self.nmpc._step[0]
+        self.kernel = KERNELS[self._step_kernel]
         self._call = _CALLS[self.kernel]
         # the kernel's call: its compiled entry point while the arrays are the ones vetted
         # for it, else the dispatcher (:meth:`_vet`)
@@ -280,7 +281,7 @@ class ControlTick:
             return False
         gain, lead, vz_max, tilt_cap, e, v, y = settings
         step, mem, iprm = key[0]
-        if KERNELS.get(step) is not self.kernel:  # (another solver's kernel bound since)
+        if step is not self._step_kernel:  # (another kernel bound since: not the call's)
             return False
         offset, flags = after._offset
         self._tail = (mem, iprm, horizon, False, key[2], key[3], lead, vz_max, tilt_cap, gain,
@@ -319,10 +320,11 @@ _CALLS = {kernel: VettedCall(kernel, *_KINDS) for kernel in KERNELS.values()}
 
 
 def warm_up_kernels(kernel=control_tick) -> None:
-    """Load (or compile) ``kernel`` (:func:`control_tick`, or a twin of :data:`KERNELS`) now — once per process —, its callees from the
-    cache first (``core/kernel_cache.first_warm_up``), not on the first tick aloft: a
-    call of the kinds a tick's is, on a battery below any floor (not nominal at its first
-    test: nothing runs, nothing is written)."""
+    """Load (or compile) ``kernel`` (:func:`control_tick`, or its twin of :data:`KERNELS`)
+    now — once per process —, its callees from the cache first
+    (``core/kernel_cache.first_warm_up``), not on the first tick aloft: a call of the kinds a
+    tick's is, on a battery below any floor (not nominal at its first test: nothing runs,
+    nothing is written)."""
     if not first_warm_up(kernel):
         return
     f8 = np.zeros(1)
