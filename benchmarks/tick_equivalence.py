@@ -163,6 +163,14 @@ CASES: list[tuple[str, str, list[str], int]] = [
         "controller.delay_compensation_s=0", "controller.vz_lead_s=null",
         "estimator.horizontal_velocity=navdata", "controller.attitude_gain=1",
         "controller.planned_tilt_frac=1", "controller.offset_free=false"], 0),
+    # obstacles in the compiled controller's tick (control_tick_obstacles) and in blocks
+    # (tick_block_obstacles); a moving one per tick (its centre fed between ticks)
+    ("obstacle_kit", "obstacle", SHORT + KIT, 1),
+    ("obstacle_navdata", "obstacle", SHORT + [
+        "estimator.horizontal_velocity=navdata", "controller.offset_free.enabled=false"], 2),
+    ("obstacle_gust", "obstacle", SHORT + [
+        "faults.wind_gust.start_s=3.013", "faults.wind_gust.duration_s=0.3"], 3),
+    ("moving_obstacle_kit", "moving_obstacle", SHORT + KIT, 4),
 ]
 
 

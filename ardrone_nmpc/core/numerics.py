@@ -68,3 +68,22 @@ def callable_from_python(kernel):
     options = {k: v for k, v in kernel.targetoptions.items()
                if k not in INNER_KERNEL and k != "nopython"}  # njit sets nopython itself
     return njit(cache=True, **options, **OUTER_KERNEL)(twin)
+
+
+def kernel_twin(kernel, name: str, **replaced):
+    """A twin of the numba ``kernel`` calling other kernels in place of some it calls
+    (``replaced``: global name → kernel): the same source and options, compiled and cached
+    under ``name`` (numba's cache is keyed by the function's name; a kernel taking the callee
+    as an argument would not be cached: a dispatcher's type differs in every process). Its
+    globals are the kernel's module's as they are now, with ``replaced``."""
+    import types
+
+    from numba import njit
+
+    inner = kernel.py_func
+    twin = types.FunctionType(inner.__code__, {**inner.__globals__, **replaced}, name,
+                              inner.__defaults__, inner.__closure__)
+    twin.__qualname__ = name
+    twin.__doc__ = inner.__doc__
+    options = {k: v for k, v in kernel.targetoptions.items() if k != "nopython"}
+    return njit(cache=True, **options)(twin)

@@ -37,13 +37,14 @@ from numba import njit
 
 from ardrone_nmpc.control.cgmres import CGMRESController
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
+from ardrone_nmpc.control.kernels.steps import cgmres_step_obstacles
 from ardrone_nmpc.control.kernels.layout import NU, u_out_at
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
 from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
 from ardrone_nmpc.core.monotonic import monotonic_ns
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import OUTER_KERNEL, kernel_twin
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, STATE_DIM
 from ardrone_nmpc.runtime.after_solve import after_solve
 from ardrone_nmpc.runtime.before_solve import _NUMBERS as _BEFORE_NUMBERS
@@ -51,7 +52,8 @@ from ardrone_nmpc.runtime.before_solve import L_SIZE, before_solve
 from ardrone_nmpc.runtime.stages import Solution
 from ardrone_nmpc.runtime.tick_kernels import E_X
 
-__all__ = ["NOT_NOMINAL", "SOLVED", "ControlTick", "control_tick", "warm_up_kernels"]
+__all__ = ["NOT_NOMINAL", "SOLVED", "ControlTick", "control_tick", "control_tick_obstacles",
+           "warm_up_kernels"]
 
 #: :func:`control_tick`'s code when the tick is not nominal before the solve (nothing written)
 NOT_NOMINAL = -1
@@ -112,6 +114,13 @@ def control_tick(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
             newton_it, zacc, phi, theta, rate, vz, roll, pitch, gaz, yaw, bits, fed)
 
 
+#: :func:`control_tick` solving with the obstacle table (``cgmres_step_obstacles``): a
+#: kernel of its own, so that the obstacle-free flights' compiles nothing more
+control_tick_obstacles = kernel_twin(control_tick, "control_tick_obstacles",
+                                     cgmres_step=cgmres_step_obstacles)
+#: the controller's call by the solver's kernel
+KERNELS = {cgmres_step: control_tick, cgmres_step_obstacles: control_tick_obstacles}
+
 _OK = SolverStatus.OK
 _OK_TEXT = _OK._value_
 _new_tuple = tuple.__new__
@@ -126,14 +135,15 @@ class ControlTick:
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: both halves can, and
         the solver is a plain C/GMRES one (not wrapped, not a subclass: their overrides are
-        called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``
+        called) whose tick is a C/GMRES kernel (:data:`KERNELS`: with obstacles or
+        without), solved by its own ``solve_prepared``
         — on a platform whose clock the kernel reads (``core/monotonic.SAME_CLOCK``: Linux;
         elsewhere the two calls around the solve, timed in Python, take the tick)."""
         nmpc = tick.control.nmpc
         return (monotonic.SAME_CLOCK
                 and tick.before_solve is not None and tick.after_solve is not None
                 and type(nmpc) is CGMRESController and nmpc._step is not None
-                and nmpc._step[0] is cgmres_step
+                and nmpc._step[0] in KERNELS
                 and tick.control._solve_prepared == nmpc.solve_prepared)
 
     def __init__(self, tick) -> None:
@@ -148,6 +158,10 @@ class ControlTick:
         # the solve :meth:`takes` found the solver's own: a tick solved by another (a wrapper
         # bound later, as the two calls around the solve would call) is Python's
         self._solve = tick.control._solve_prepared
+        #: the compiled call for the solver's kernel (:data:`KERNELS`) and its vetting
+        self._step_kernel = self.nmpc._step[0]
+        self.kernel = KERNELS[self._step_kernel]
+        self._call = _CALLS[self.kernel]
         # the kernel's call: its compiled entry point while the arrays are the ones vetted
         # for it, else the dispatcher (:meth:`_vet`)
         self._entry = None
@@ -162,7 +176,13 @@ class ControlTick:
         state = self.__dict__.copy()
         state["_entry"], state["_vetted"] = None, ()
         state["_tail"], state["_key"] = (), _UNSET
+        state["kernel"], state["_call"] = self.kernel.__name__, None  # (by name: KERNELS')
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.kernel = globals()[state["kernel"]]
+        self._call = _CALLS[self.kernel]
 
     def nominal(self, inputs, t_exp_s: float, traj):
         """The nominal tick's feedback ages, estimate, :class:`Solution` and what the stages
@@ -194,7 +214,7 @@ class ControlTick:
         # the dispatcher (it looks at every argument's type), then the vetting
         self._entry = None
         args = (*before, vz_last, self.delay._next, *tail)
-        answer = control_tick(*args)
+        answer = self.kernel(*args)
         self._vet(args)
         return answer
 
@@ -260,7 +280,9 @@ class ControlTick:
         if settings is None:
             return False
         gain, lead, vz_max, tilt_cap, e, v, y = settings
-        _, mem, iprm = key[0]
+        step, mem, iprm = key[0]
+        if step is not self._step_kernel:  # (another kernel bound since: not the call's)
+            return False
         offset, flags = after._offset
         self._tail = (mem, iprm, horizon, False, key[2], key[3], lead, vz_max, tilt_cap, gain,
                       e, v, y, after._response_state, 1, offset, flags)
@@ -276,7 +298,7 @@ class ControlTick:
         if each is of the one kind it is compiled for (``VettedCall.entry_for``); else the
         dispatcher stays (asked again next call). The tail's arrays are checked by
         :meth:`nominal`'s test of what the tail was made of (a new tail: vetted again)."""
-        entry = _CALL.entry_for(*(args[i] for i in _ARRAYS))  # (None: not compiled yet)
+        entry = self._call.entry_for(*(args[i] for i in _ARRAYS))  # (None: not compiled yet)
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
@@ -293,19 +315,20 @@ _ARRAYS = {16: (1, _F8), 17: (1, _F8), 19: (2, _F8), 23: (1, _F8), 24: (1, _F8),
 _NUMBERS = (*_BEFORE_NUMBERS, 0.0, 0, None, None, None, False, 0.0, False, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, None, 0, None, None)
 assert len(_BEFORE_NUMBERS) == _N_BEFORE and len(_NUMBERS) == 47
-_CALL = VettedCall(control_tick, *(ArrayKind(*_ARRAYS[i]) if i in _ARRAYS else k
-                                   for i, k in enumerate(_NUMBERS)))
+_KINDS = tuple(ArrayKind(*_ARRAYS[i]) if i in _ARRAYS else k for i, k in enumerate(_NUMBERS))
+_CALLS = {kernel: VettedCall(kernel, *_KINDS) for kernel in KERNELS.values()}
 
 
-def warm_up_kernels() -> None:
-    """Load (or compile) :func:`control_tick` now — once per process —, its callees from the
-    cache first (``core/kernel_cache.first_warm_up``), not on the first tick aloft: a
-    call of the kinds a tick's is, on a battery below any floor (not nominal at its first
-    test: nothing runs, nothing is written)."""
-    if not first_warm_up(control_tick):
+def warm_up_kernels(kernel=control_tick) -> None:
+    """Load (or compile) ``kernel`` (:func:`control_tick`, or its twin of :data:`KERNELS`)
+    now — once per process —, its callees from the cache first
+    (``core/kernel_cache.first_warm_up``), not on the first tick aloft: a call of the kinds a
+    tick's is, on a battery below any floor (not nominal at its first test: nothing runs,
+    nothing is written)."""
+    if not first_warm_up(kernel):
         return
     f8 = np.zeros(1)
-    control_tick(1.0, 1.0, 1.0, 0, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False,
+    kernel(1.0, 1.0, 1.0, 0, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, False,
                  0.0, 0.0, f8, np.zeros(L_SIZE), 0.0, np.zeros((2, 4)), 0, 0, 0.0, f8, f8,
                  np.zeros((1, STATE_DIM)), f8, np.zeros((1, 1)), 0.0, 0, f8,
                  np.zeros(6, np.int64), np.zeros((1, STATE_DIM)), False, 1.0, False, 0.065, 0.7,

@@ -31,16 +31,16 @@ from ardrone_nmpc.core import monotonic
 from ardrone_nmpc.core.entry_points import entry_point
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches, load_cached
 from ardrone_nmpc.core.monotonic import monotonic_ns
-from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL, kernel_twin
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runs import block_row as br
-from ardrone_nmpc.runtime.control_tick import control_tick
+from ardrone_nmpc.runtime.control_tick import control_tick, control_tick_obstacles
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 
 __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
-           "EXIT_SHORT", "TickBlocks", "tick_block"]
+           "EXIT_SHORT", "TickBlocks", "tick_block", "tick_block_obstacles"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
@@ -161,6 +161,13 @@ def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, ga
     row[br.BR_TRUE_VZ] = out[ks.O_STATE + 5]
 
 
+#: :func:`tick_block` for solvers with obstacles (``control_tick_obstacles``' blocks)
+tick_block_obstacles = kernel_twin(tick_block, "tick_block_obstacles",
+                                   control_tick=control_tick_obstacles)
+#: the blocks' kernel by the controller's (``ControlTick.kernel``)
+BLOCK_KERNELS = {control_tick: tick_block, control_tick_obstacles: tick_block_obstacles}
+
+
 class TickBlocks:
     """The Python side of :func:`tick_block` for one lockstep flight's tick and drone: what
     a block starts from, and what it leaves written back (module docstring).
@@ -179,20 +186,29 @@ class TickBlocks:
         kernel reads: ``core/monotonic.SAME_CLOCK``; a drone with something injected that
         leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
         :func:`tick_block` has machine code (compiled, or in numba's cache: loaded), unless
-        the blocks may compile it (``compile_now``)."""
+        the blocks may compile it (``compile_now``; always for the obstacles' kernel:
+        :func:`~.lockstep.warm_up_blocks` compiles the usual one only)."""
         legs = drone.sensors._legs
-        return (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
+        if not (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and tick.follow is None and tick.obstacles is None and legs is not None
-                and legs.stands_in and (compile_now or load_cached(tick_block)))
+                and legs.stands_in):
+            return False
+        kernel = BLOCK_KERNELS[tick.control_tick.kernel]
+        if kernel is tick_block:
+            return compile_now or load_cached(kernel)
+        load_cached(kernel)  # (its callees' from the cache first, as the usual one's)
+        return True
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
                  t_first_s: float, compile_now: bool) -> None:
         self.tick, self.drone = tick, drone
+        #: the kernel of this flight's blocks (:data:`BLOCK_KERNELS`)
+        self.kernel = BLOCK_KERNELS[tick.control_tick.kernel]
         #: compile :func:`tick_block` when a block finds no machine code for its arguments;
         #: else that block is not flown — its ticks are the per-tick path's, which leaves the
         #: same rows (a first flight on an empty cache does not wait ~7 s for it:
         #: ``runtime/precompile`` compiles it meanwhile)
-        self.compile_now = compile_now
+        self.compile_now = compile_now or self.kernel is not tick_block
         self.n_max, self.n_settle = n_max, n_settle
         self.period_s, self.t_first_s = period_s, t_first_s
         #: the first tick at or after the last one asked at which the drone may not be
@@ -364,11 +380,12 @@ class TickBlocks:
     def _vetted(self, legs_args: tuple, tail: tuple):
         """:attr:`_args`' entry point (kept with the legs' arrays and the tail it is for),
         or the dispatcher when blocks compile (``compile_now``), else None."""
-        call = entry_point(tick_block, *self._args)  # (its machine code for these kinds)
+        kernel = self.kernel
+        call = entry_point(kernel, *self._args)  # (its machine code for these kinds)
         if call is None and self.compile_now:
-            call = tick_block  # the dispatcher: compiles them
+            call = kernel  # the dispatcher: compiles them
         self._call = call
-        self._legs_args, self._tail = (legs_args, tail) if call is not tick_block else (
+        self._legs_args, self._tail = (legs_args, tail) if call is not kernel else (
             None, None)  # (vetted again after the compile)
         return call
 

@@ -160,7 +160,7 @@ class Tick:
         if self.before_solve is not None:  # after its callees' (tick_kernels')
             warm_up_before_solve()
         if self.control_tick is not None:  # after its callees' (the solver's, both halves)
-            warm_up_control_tick()
+            warm_up_control_tick(self.control_tick.kernel)
 
     def step(self, inputs: TickInputs, *, t_exp_s: float, mode: str = "track",
              trajectory: Trajectory | None = None, answer: tuple | None = None,

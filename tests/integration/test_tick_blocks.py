@@ -129,10 +129,16 @@ CASES = [
     ("kit_low_battery", "square", ["duration_s=10", *SETTLE, KIT,
                                    "sim.plant.battery_start_pct=23",
                                    "sim.plant.battery_drain_pct_per_min=30"], 0),
+    # obstacles (the blocks' kernel solving with the obstacle table: tick_block_obstacles):
+    # the avoidance's detour, on the kit plant, with a gust between blocks
+    ("obstacle", "obstacle", ["duration_s=10", *SETTLE], 0),
+    ("obstacle_kit_gust", "obstacle", ["duration_s=8", *SETTLE, KIT, "faults.wind_gust.start_s=3",
+                                       "faults.wind_gust.duration_s=0.3"], 3),
     # flights no block takes (as the blocks' first version has it): a second object on the
     # mocap stream, an estimator the compiled calls do not take, faults that touch the
     # sensors' bytes or the solver
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
+    ("moving_obstacle", "moving_obstacle", ["duration_s=8", *SETTLE], 0),
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
@@ -644,6 +650,19 @@ def test_plain_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_se
             assert blocks._plain_ticks(k) == want, (k, bound)
             if want > 2 and want < math.inf:  # kept: the ticks before it change nothing
                 assert blocks._plain_ticks(k + 2) == want - 2
+
+
+@pytest.mark.parametrize("overrides", [[], [KIT]], ids=["obstacle", "obstacle_kit"])
+def test_blocks_take_the_obstacles(overrides, monkeypatch):
+    """A static obstacle's flight goes in blocks (their kernel solving with the obstacle
+    table), a moving one's does not (its centre is fed between ticks, in Python)."""
+    block = fly(_config("obstacle", ["duration_s=10", *SETTLE, *overrides]), 0, monkeypatch,
+                block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"
+    moving = fly(_config("moving_obstacle", ["duration_s=6", *SETTLE]), 0, monkeypatch,
+                 block_ticks=None, wanted=set())
+    assert moving.steps == len(moving.recorder.written)
 
 
 def test_blocks_take_the_kit_square(monkeypatch):

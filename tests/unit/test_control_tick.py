@@ -22,7 +22,10 @@ from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickIn
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.trajectories import Ellipse
 from ardrone_nmpc.runtime import control_tick as control_tick_module
-from ardrone_nmpc.runtime.control_tick import NOT_NOMINAL, SOLVED, ControlTick
+from ardrone_nmpc.control.kernels import cgmres_step
+from ardrone_nmpc.control.kernels.steps import cgmres_step_obstacles
+from ardrone_nmpc.runtime.control_tick import (
+    KERNELS, NOT_NOMINAL, SOLVED, ControlTick, control_tick, control_tick_obstacles)
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import tick_cells
 from ardrone_nmpc.runtime.tick import Tick, TickOutput
@@ -96,6 +99,10 @@ def _same_flights(a: tuple, b: tuple) -> None:
     ("lorenz.yaml", ["duration_s=5"], True),
     ("identify.yaml", ["duration_s=5"], True),
     ("square.yaml", ["duration_s=4", "controller.solver.method=newton"], False),
+    # obstacles: the call solving with the obstacle table (control_tick_obstacles); a
+    # moving one's centre fed between ticks
+    ("obstacle.yaml", ["duration_s=6"], True),
+    ("moving_obstacle.yaml", ["duration_s=6"], True),
 ])
 def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, whole,
                                                               monkeypatch):
@@ -209,10 +216,9 @@ def test_a_solve_left_to_python_is_the_python_stages(setup, monkeypatch):
         return answer
 
     (whole, _), (python, _) = _flown("whole"), _flown("python")
-    monkeypatch.setattr(control_tick_module, "control_tick", spy)
-    # through the module's kernel, the spy, every tick: no entry point vetted for it
-    monkeypatch.setattr(control_tick_module, "_CALL",
-                        VettedCall(spy, *control_tick_module._CALL.kinds))
+    # through the call's kernel, the spy, every tick: no entry point vetted for it
+    whole.control_tick.kernel = spy
+    whole.control_tick._call = VettedCall(spy, *control_tick_module._KINDS)
     whole.control_tick._entry = None
     asked = []  # the after-stages' own compiled call: not asked after a SOLVED (it would
     # decline), asked on the ticks the whole call does not take (a solver recovered afresh)
@@ -302,7 +308,6 @@ class _OwnEllipse(Ellipse):
                      wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
     lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
                      experiment_trajectory(cfg)),
-    lambda cfg: Tick(config("obstacle.yaml"), experiment_trajectory(config("obstacle.yaml"))),
     lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
     # a reference neither looked up nor tabulated (a curve's subclass: its own state_at)
     lambda cfg: Tick(config("ellipse.yaml"), HoldStartThen(_OwnEllipse())),
@@ -418,3 +423,21 @@ def test_a_copied_tick_keeps_its_call(copier):
     clone = copier(_flown("whole")[0])
     assert clone.control_tick._solve is clone.control._solve_prepared  # (taken: not None)
     assert clone.control_tick.nominal(_inputs(2.3), 1.3, clone.trajectory)
+
+
+@pytest.mark.parametrize("name, kernel", [("square.yaml", control_tick),
+                                          ("obstacle.yaml", control_tick_obstacles),
+                                          ("moving_obstacle.yaml", control_tick_obstacles)])
+def test_the_call_solves_with_the_solvers_kernel(name, kernel):
+    """An obstacle flight's call is the twin calling ``cgmres_step_obstacles``; the others'
+    the obstacle-free one (whose specialisation an obstacle flight does not change)."""
+    tick, _ = _flown("whole", 2, name)
+    assert tick.control_tick.kernel is kernel
+    assert KERNELS[tick.control.nmpc._step[0]] is kernel
+    clone = pickle.loads(pickle.dumps(tick))  # (kept by the kernel's name)
+    assert clone.control_tick.kernel is kernel
+    python, _ = _flown("python", 2, name)
+    _same_ticks([_step(clone, k) for k in range(2, 6)], [_step(python, k) for k in range(2, 6)])
+    assert clone.control_tick._entry is not None  # (the compiled call took them)
+    assert control_tick_obstacles.py_func.__globals__["cgmres_step"] is cgmres_step_obstacles
+    assert control_tick.py_func.__globals__["cgmres_step"] is cgmres_step
