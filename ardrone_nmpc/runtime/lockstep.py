@@ -43,7 +43,7 @@ from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
 from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
                                                  EXIT_NONE, EXIT_SHORT, TickBlocks,
-                                                 tick_block)
+                                                 tick_block, tick_block_obstacles)
 from ardrone_nmpc.runtime.precompile import (background_compiles, join_child,
                                              release_block_lock, start_if_cold,
                                              take_block_lock)
@@ -308,14 +308,30 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
         tally_tick(v[0], mode)
 
 
+# the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles)
+_WARM_UP_SQUARE = {"name": "warm-up", "duration_s": 1.0, "reference": {"kind": "square"}}
+_WARM_UP_OBSTACLE = {"name": "warm-up-obstacle", "duration_s": 1.0,
+                     "reference": {"kind": "step", "target_m": [2.5, 0.0, 1.0]},
+                     "controller": {"obstacles": [{"kind": "cylinder",
+                                                   "center_m": [1.25, 0.0, 1.0],
+                                                   "radius_m": 0.3, "margin_m": 0.3}]}}
+
+
 def warm_up_blocks() -> None:
-    """Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``) loaded from numba's
-    cache, or compiled now by a short square flight (~7 s on an empty cache): the
+    """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, and
+    ``tick_block_obstacles`` for a solver with obstacles) loaded from numba's cache, or
+    compiled now by a short square flight (~7 s on an empty cache) and a short obstacle
+    flight: the
     precompile's background child, ``bench --tick`` and the tests call it; a flight does not
     wait for it (its ticks are then the per-tick path's: the same rows)."""
     global _warming_up
-    if not monotonic.SAME_CLOCK or load_cached(tick_block):
+    if not monotonic.SAME_CLOCK:
         return  # (no blocks flown where the kernel does not read Python's clock: no compile)
+    flights = [cfg for kernel, cfg in ((tick_block, _WARM_UP_SQUARE),
+                                       (tick_block_obstacles, _WARM_UP_OBSTACLE))
+               if not load_cached(kernel)]
+    if not flights:
+        return
     from ardrone_nmpc.config.schema import config_from_dict
 
     # the block compile's lock held meanwhile: the flight's start_if_cold (or its child)
@@ -323,8 +339,8 @@ def warm_up_blocks() -> None:
     locked = take_block_lock()
     _warming_up = True
     try:
-        run_lockstep(config_from_dict({"name": "warm-up", "duration_s": 1.0,
-                                       "reference": {"kind": "square"}}))
+        for cfg in flights:
+            run_lockstep(config_from_dict(cfg))
     finally:
         _warming_up = False
         if locked:

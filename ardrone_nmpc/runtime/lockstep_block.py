@@ -186,18 +186,14 @@ class TickBlocks:
         kernel reads: ``core/monotonic.SAME_CLOCK``; a drone with something injected that
         leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
         :func:`tick_block` has machine code (compiled, or in numba's cache: loaded), unless
-        the blocks may compile it (``compile_now``; always for the obstacles' kernel:
-        :func:`~.lockstep.warm_up_blocks` compiles the usual one only)."""
+        the blocks may compile it (``compile_now``): the obstacles' kernel as the usual one
+        (:func:`~.lockstep.warm_up_blocks` compiles both)."""
         legs = drone.sensors._legs
         if not (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and tick.follow is None and tick.obstacles is None and legs is not None
                 and legs.stands_in):
             return False
-        kernel = BLOCK_KERNELS[tick.control_tick.kernel]
-        if kernel is tick_block:
-            return compile_now or load_cached(kernel)
-        load_cached(kernel)  # (its callees' from the cache first, as the usual one's)
-        return True
+        return compile_now or load_cached(BLOCK_KERNELS[tick.control_tick.kernel])
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
                  t_first_s: float, compile_now: bool) -> None:
@@ -208,7 +204,7 @@ class TickBlocks:
         #: else that block is not flown — its ticks are the per-tick path's, which leaves the
         #: same rows (a first flight on an empty cache does not wait ~7 s for it:
         #: ``runtime/precompile`` compiles it meanwhile)
-        self.compile_now = compile_now or self.kernel is not tick_block
+        self.compile_now = compile_now
         self.n_max, self.n_settle = n_max, n_settle
         self.period_s, self.t_first_s = period_s, t_first_s
         #: the first tick at or after the last one asked at which the drone may not be
