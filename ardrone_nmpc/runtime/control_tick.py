@@ -25,7 +25,9 @@ It answers one of three codes, each leaving the stages' state as the Python path
 :class:`ControlTick` is the Python side: the preconditions of the three calls (those of
 :class:`~.before_solve.BeforeSolve` and :class:`~.after_solve.AfterSolve`, and a plain
 :class:`~ardrone_nmpc.control.cgmres.CGMRESController` without obstacles, past its first solve,
-unwrapped), the call, and the records the tick's row and the Python state need.
+unwrapped — or in a :class:`~ardrone_nmpc.control.diverging.DivergingSolver`, on the ticks
+whose answer it does not mark), the call, and the records the tick's row and the Python
+state need.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.cgmres import CGMRESController
+from ardrone_nmpc.control.diverging import DivergingSolver
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.layout import NU, u_out_at
 from ardrone_nmpc.control.ocp import SolverStatus, SolveResult
@@ -128,19 +131,24 @@ class ControlTick:
         the solver is a plain C/GMRES one (not wrapped, not a subclass: their overrides are
         called) whose tick is the obstacle-free kernel, solved by its own ``solve_prepared``
         — on a platform whose clock the kernel reads (``core/monotonic.SAME_CLOCK``: Linux;
-        elsewhere the two calls around the solve, timed in Python, take the tick)."""
+        elsewhere the two calls around the solve, timed in Python, take the tick). A
+        :class:`DivergingSolver` around such a solver is taken too: its unmarked answer is
+        the inner solver's (:meth:`answer` leaves a marked tick to Python)."""
         nmpc = tick.control.nmpc
+        solver, _ = _solving(nmpc)
         return (monotonic.SAME_CLOCK
                 and tick.before_solve is not None and tick.after_solve is not None
-                and type(nmpc) is CGMRESController and nmpc._step is not None
-                and nmpc._step[0] is cgmres_step
+                and type(solver) is CGMRESController and solver._step is not None
+                and solver._step[0] is cgmres_step
                 and tick.control._solve_prepared == nmpc.solve_prepared)
 
     def __init__(self, tick) -> None:
         self.before = tick.before_solve
         self.after = tick.after_solve
         self.control = tick.control
-        self.nmpc = tick.control.nmpc
+        # the solver that solves (its memory, its verdict), and when its answers are marked
+        # (None: never)
+        self.nmpc, self._marks = _solving(tick.control.nmpc)
         self.supervisor = tick.supervisor
         self.supervision = tick.supervision
         self.delay = tick.delay
@@ -177,7 +185,11 @@ class ControlTick:
         """:func:`control_tick`'s answer for this tick (its code first), or None when a
         precondition of the call does not hold (nothing done). Its code 0 leaves the Python
         stages to write (:meth:`finish`, or ``AfterSolve.written`` for a row built from the
-        answer's numbers)."""
+        answer's numbers). None too on a tick whose answer the solver's wrapper marks: the
+        wrapper's own solve takes it."""
+        marks = self._marks
+        if marks is not None and marks(t_exp_s):
+            return None
         tail = self.prepared()
         if tail is None:
             return None
@@ -280,6 +292,15 @@ class ControlTick:
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
+
+
+def _solving(nmpc) -> tuple:
+    """``(the solver that solves, when its answers are marked)`` of the control stage's
+    ``nmpc``: a :class:`DivergingSolver`'s inner solver and its ``marks``, else ``nmpc``
+    itself and None (nothing marked)."""
+    if type(nmpc) is DivergingSolver:
+        return nmpc.inner, nmpc.marks
+    return nmpc, None
 
 
 # :func:`control_tick`'s array arguments (position: dimensions, dtype)
