@@ -141,6 +141,13 @@ CASES: list[tuple[str, str, list[str], int]] = [
         "faults.at_loss.start_s=6", "faults.at_loss.duration_s=0.2",
         "faults.at_loss.probability=0.5", "faults.wind_gust.start_s=8.013",
         "faults.wind_gust.duration_s=0.005"], 4),
+    # a diverging solver: the compiled tick and blocks outside its window, Python inside —
+    # a window in the track phase, and a short one across fits (a refit every 0.2 s)
+    ("square_solver_diverge", "square", SQUARE + ["faults.solver_diverge.start_s=4",
+                                                  "faults.solver_diverge.duration_s=1"], 0),
+    ("square_solver_diverge_fit", "square", SQUARE + [
+        "controller.adaptation.refit_s=0.2", "faults.solver_diverge.start_s=5.05",
+        "faults.solver_diverge.duration_s=0.5"], 2),
     # faults during the landing the runner waits out (its descent in one call between them)
     ("square_landing_faults", "square", SQUARE + [
         "faults.at_loss.start_s=12.3", "faults.at_loss.duration_s=0.6",

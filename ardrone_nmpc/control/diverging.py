@@ -40,6 +40,17 @@ class DivergingSolver:
             return result._replace(status=SolverStatus.DIVERGED)
         return result
 
+    @property
+    def inner(self):
+        """The solver that solves (its answers are this one's when :meth:`marks` is False)."""
+        return self._inner
+
+    def marks(self, t_s: float) -> bool:
+        """Whether the answer of a solve for ``t_s`` is marked; else it is the inner solver's
+        as it is — a compiled tick of the inner solver may take that tick
+        (``runtime/control_tick.py``)."""
+        return self._diverges(t_s)
+
     def __getattr__(self, name: str):
         return getattr(self._inner, name)
 

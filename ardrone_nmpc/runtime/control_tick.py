@@ -25,7 +25,9 @@ It answers one of three codes, each leaving the stages' state as the Python path
 :class:`ControlTick` is the Python side: the preconditions of the three calls (those of
 :class:`~.before_solve.BeforeSolve` and :class:`~.after_solve.AfterSolve`, and a plain
 :class:`~ardrone_nmpc.control.cgmres.CGMRESController` without obstacles, past its first solve,
-unwrapped), the call, and the records the tick's row and the Python state need.
+unwrapped — or in a :class:`~ardrone_nmpc.control.diverging.DivergingSolver`, on the ticks
+whose answer it does not mark), the call, and the records the tick's row and the Python
+state need.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from ardrone_nmpc.control.cgmres import CGMRESController
+from ardrone_nmpc.control.diverging import DivergingSolver
 from ardrone_nmpc.control.kernels import FLAG_OK, cgmres_step
 from ardrone_nmpc.control.kernels.steps import cgmres_step_obstacles
 from ardrone_nmpc.control.kernels.layout import NU, u_out_at
@@ -138,19 +141,24 @@ class ControlTick:
         called) whose tick is a C/GMRES kernel (:data:`KERNELS`: with obstacles or
         without), solved by its own ``solve_prepared``
         — on a platform whose clock the kernel reads (``core/monotonic.SAME_CLOCK``: Linux;
-        elsewhere the two calls around the solve, timed in Python, take the tick)."""
+        elsewhere the two calls around the solve, timed in Python, take the tick). A
+        :class:`DivergingSolver` around such a solver is taken too: its unmarked answer is
+        the inner solver's (:meth:`answer` leaves a marked tick to Python)."""
         nmpc = tick.control.nmpc
+        solver, _ = _solving(nmpc)
         return (monotonic.SAME_CLOCK
                 and tick.before_solve is not None and tick.after_solve is not None
-                and type(nmpc) is CGMRESController and nmpc._step is not None
-                and nmpc._step[0] in KERNELS
+                and type(solver) is CGMRESController and solver._step is not None
+                and solver._step[0] in KERNELS
                 and tick.control._solve_prepared == nmpc.solve_prepared)
 
     def __init__(self, tick) -> None:
         self.before = tick.before_solve
         self.after = tick.after_solve
         self.control = tick.control
-        self.nmpc = tick.control.nmpc
+        # the solver that solves (its memory, its verdict), and when its answers are marked
+        # (None: never)
+        self.nmpc, self._marks = _solving(tick.control.nmpc)
         self.supervisor = tick.supervisor
         self.supervision = tick.supervision
         self.delay = tick.delay
@@ -197,7 +205,11 @@ class ControlTick:
         """:func:`control_tick`'s answer for this tick (its code first), or None when a
         precondition of the call does not hold (nothing done). Its code 0 leaves the Python
         stages to write (:meth:`finish`, or ``AfterSolve.written`` for a row built from the
-        answer's numbers)."""
+        answer's numbers). None too on a tick whose answer the solver's wrapper marks: the
+        wrapper's own solve takes it."""
+        marks = self._marks
+        if marks is not None and marks(t_exp_s):
+            return None
         tail = self.prepared()
         if tail is None:
             return None
@@ -302,6 +314,15 @@ class ControlTick:
         if entry is not None:
             self._entry = entry
             self._vetted = tuple(args[i] for i in (16, 19, 23, 24, 25, 26, 27))
+
+
+def _solving(nmpc) -> tuple:
+    """``(the solver that solves, when its answers are marked)`` of the control stage's
+    ``nmpc``: a :class:`DivergingSolver`'s inner solver and its ``marks``, else ``nmpc``
+    itself and None (nothing marked)."""
+    if type(nmpc) is DivergingSolver:
+        return nmpc.inner, nmpc.marks
+    return nmpc, None
 
 
 # :func:`control_tick`'s array arguments (position: dimensions, dtype)

@@ -104,6 +104,15 @@ CASES = [
     ("fault_self_land", "square", ["duration_s=10", *SETTLE, "faults.self_land.start_s=4"], 0),
     ("fault_battery_floor", "square", ["duration_s=10", *SETTLE,
                                        "faults.battery_floor.start_s=4"], 0),
+    # a diverging solver: blocks and the compiled tick outside its window, Python inside (the
+    # supervisor's hold, fallback and recovery) — a window in the track phase, one across
+    # fits (a refit every 0.2 s)
+    ("fault_solver_diverge", "square", ["duration_s=8", *SETTLE,
+                                        "faults.solver_diverge.start_s=3"], 0),
+    ("fault_solver_diverge_fit", "square", ["duration_s=10", *SETTLE,
+                                            "controller.adaptation.refit_s=0.2",
+                                            "faults.solver_diverge.start_s=4.05",
+                                            "faults.solver_diverge.duration_s=0.5"], 3),
     # ẋ, ẏ from the navdata's speeds (the block rotates them as the estimate does)
     ("square_navdata_velocity", "square",
      ["duration_s=8", *SETTLE, "estimator.horizontal_velocity=navdata"], 4),
@@ -136,15 +145,13 @@ CASES = [
                                        "faults.wind_gust.duration_s=0.3"], 3),
     # flights no block takes (as the blocks' first version has it): a second object on the
     # mocap stream, an estimator the compiled calls do not take, faults that touch the
-    # sensors' bytes or the solver
+    # sensors' bytes
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
     ("moving_obstacle", "moving_obstacle", ["duration_s=8", *SETTLE], 0),
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
                                        "faults.mocap_dropout.duration_s=0.2"], 0),
-    ("fault_solver_diverge", "square", ["duration_s=8", *SETTLE,
-                                        "faults.solver_diverge.start_s=3"], 0),
     ("hover", "hover", ["duration_s=6", *SETTLE], 0),
     ("step_z", "step_z", ["duration_s=6", *SETTLE], 0),
 ]
@@ -626,6 +633,23 @@ def test_fault_flights_fly_blocks_as_the_drones_own_chain(monkeypatch):
     assert plain.steps == rows
     assert plain.drone.sim.faults.counters.at_lost > 0  # (the window drew)
     assert_same_flights(block, plain)
+
+
+def test_a_diverging_solver_flies_blocks_outside_its_window(monkeypatch):
+    """A flight whose solver diverges from 3 s for 1 s: most of its ticks in blocks, every
+    tick in the window ``Tick.step``'s with its solve marked diverged (the wrapper's), and
+    the ticks after it back in blocks."""
+    _, config, overrides, seed = _case("fault_solver_diverge")
+    block = fly(_config(config, overrides), seed, monkeypatch, block_ticks=None, wanted=set())
+    rows = block.recorder.rows
+    assert block.steps * 3 < len(rows), f"{block.steps} Tick.step calls for {len(rows)} rows"
+    window = [r for r in rows if 3.0 <= r["t_s"] < 4.0]
+    assert len(window) > 10
+    assert all(r["solver_status"] == "diverged" for r in window)
+    assert all(float(r["t_s"]).hex() in block.calls for r in window)  # (Python's ticks)
+    after = [r for r in rows if r["t_s"] >= 4.0 and r["mode"] == "track"]
+    stepped = sum(float(r["t_s"]).hex() in block.calls for r in after)
+    assert after and stepped * 3 < len(after), f"{stepped} of {len(after)} stepped after"
 
 
 @pytest.mark.parametrize("period_s, n_settle", [(0.05, 20), (0.065, 15), (1 / 30, 31)])

@@ -91,7 +91,10 @@ def _same_flights(a: tuple, b: tuple) -> None:
                      "faults.mocap_dropout.duration_s=0.2"], True),  # stale: hold, hover
     ("square.yaml", ["duration_s=6", "faults.battery_floor.start_s=3"], True),  # latched
     ("square.yaml", ["duration_s=6", "faults.wind.velocity_mps=[-3.0,0,0]"], True),  # fence
-    ("step_x.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"], False),  # wrapped
+    # a diverging solver (wrapped): the call outside its window, Python inside
+    ("step_x.yaml", ["duration_s=6", "faults.solver_diverge.start_s=2"], True),
+    ("square.yaml", ["duration_s=8", "faults.solver_diverge.start_s=3",
+                     "faults.solver_diverge.duration_s=0.5"], True),
     ("hover.yaml", ["duration_s=5"], True),  # a set point: the one-call lookup's too
     ("step_x.yaml", ["duration_s=5", "reference.step_time_s=0.5"], True),
     ("step_psi.yaml", ["duration_s=5"], True),
@@ -111,7 +114,7 @@ def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, w
     answers = flights["whole"][3]
     if whole:  # the compiled call took the nominal ticks
         assert answers["done"] > 20
-    else:  # a wrapped or another solver: the call is not built
+    else:  # another solver: the call is not built
         assert answers == {"done": 0, "solved": 0, "none": 0}
     _same_flights(flights["whole"], flights["halves"])
     _same_flights(flights["whole"], flights["python"])
@@ -304,10 +307,11 @@ class _OwnEllipse(Ellipse):
 
 
 @pytest.mark.parametrize("build", [
-    lambda cfg: Tick(cfg, experiment_trajectory(cfg),
-                     wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
     lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
                      experiment_trajectory(cfg)),
+    lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
+                     experiment_trajectory(cfg),
+                     wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
     lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
     # a reference neither looked up nor tabulated (a curve's subclass: its own state_at)
     lambda cfg: Tick(config("ellipse.yaml"), HoldStartThen(_OwnEllipse())),
@@ -315,6 +319,38 @@ class _OwnEllipse(Ellipse):
 def test_a_solver_the_kernel_is_not_is_not_taken(build):
     """(A reference the compiled calls do not take, too.)"""
     assert build(config("square.yaml")).control_tick is None
+
+
+def test_a_wrapped_solver_s_marked_ticks_are_its_own_solve_s(monkeypatch):
+    """A :class:`DivergingSolver` around the plain solver (marking 1.2 s ≤ t < 1.4 s): the
+    call is built on the inner solver's memory and takes the unmarked ticks; a marked tick
+    it leaves to the wrapper's solve with nothing done — the rows and state of the Python
+    stages, the marked ticks' solves diverged."""
+    answered = []
+    answer = ControlTick.answer
+
+    def watched(self, inputs, t_exp_s, traj):
+        got = answer(self, inputs, t_exp_s, traj)
+        answered.append((t_exp_s, got is not None))
+        return got
+
+    monkeypatch.setattr(ControlTick, "answer", watched)
+    cfg = config("square.yaml")
+    flown = {}
+    for path in ("whole", "python"):
+        tick = Tick(cfg, experiment_trajectory(cfg), wrap_solver=lambda nmpc: DivergingSolver(
+            nmpc, lambda t_s: 1.2 <= t_s < 1.4))
+        _use(tick, path)
+        flown[path] = tick, [_step(tick, k) for k in range(12)]
+    (whole, rows), (python, python_rows) = flown["whole"], flown["python"]
+    assert whole.control_tick.nmpc is whole.control.nmpc.inner
+    _same_ticks(rows, python_rows)
+    assert carried(whole) == carried(python)
+    assert [r["solver_status"] == "diverged" for r in rows[4:7]] == [True] * 3
+    assert {t for t, took in answered if 1.2 <= t < 1.4} and not any(
+        took for t, took in answered if 1.2 <= t < 1.4)
+    # (tick 0 solves first: Python; ticks 1–3 the call)
+    assert [took for t, took in answered if t < 1.2] == [False, True, True, True]
 
 
 @pytest.mark.parametrize("copier", [copy.deepcopy, lambda t: pickle.loads(pickle.dumps(t))])
