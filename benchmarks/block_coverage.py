@@ -40,7 +40,10 @@ CASES = [
       "faults.at_loss.duration_s=0.5", "faults.at_loss.probability=0.5"]),
     ("square, mocap dropout", "square",
      ["faults.mocap_dropout.start_s=5", "faults.mocap_dropout.duration_s=0.3"]),
+    ("square, solver made to diverge", "square",
+     ["faults.solver_diverge.start_s=10", "faults.solver_diverge.duration_s=1"]),
     ("obstacle", "obstacle", []),
+    ("moving_obstacle", "moving_obstacle", []),
     ("follow_car", "follow_car", []),
 ]
 
