@@ -35,9 +35,8 @@ from ardrone_nmpc.core.types import FlightMode
 from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
-from ardrone_nmpc.runs.block_row import BR_NAV_VX, BR_NAV_VY, BR_T
 from ardrone_nmpc.runs.block_rows import BlockRows
-from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, block_cells, put_truth,
+from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, put_truth,
                                            put_truth_cells)
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
@@ -292,20 +291,15 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
     nominal label): the block itself to a recorder that takes blocks (``write_block``), the
     rows' cells to one that takes cells; none to write without a recorder."""
+    # (a block kept by its recorder owns its numbers: the table is the next block's)
+    rows = BlockRows(table[:n].copy() if write_block is not None else table[:n], mode,
+                     SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT)
     if write_block is not None:
-        rows = BlockRows(table[:n].copy(), mode, SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT)
         write_block(rows)
-        tally.add_ticks(rows.times_s(), mode)
-        return
-    rows = table[:n]
-    if write_cells is None:
-        tally.add_ticks(rows[:, BR_T].tolist(), mode)
-        return
-    tally_tick = tally.add_tick
-    for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY]):
-        cells = block_cells(v, vx, vy, SATURATED_TEXT, _OK_TEXT, mode, _FLYING_TEXT)
-        write_cells(cells)
-        tally_tick(v[0], mode)
+    elif write_cells is not None:
+        for cells in rows.cells():
+            write_cells(cells)
+    tally.add_ticks(rows.times_s(), mode)
 
 
 # the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles)
