@@ -15,7 +15,12 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   :class:`~ardrone_nmpc.links.mocap_link.MocapLink` and the navdata decoder — at its arrival
   time; a frame's receipt time is its pose time, as on the real link. Every frame costs a
   little speed and draws the noise in another order, so clean runs keep the direct path (and
-  their golden trace).
+  their golden trace). A mocap frame travels decoded (a :class:`~ardrone_nmpc.protocol.mocap.
+  MocapFrame`, through the faults' disorder and the queue, to ``MocapLink.feed_frame``): its
+  datagram holds the poses as float64 and the names as ASCII, so ``decode_mocap`` would give
+  back the same frame — the bytes' encoding and decoding were half of a frame's cost (the
+  first frame is still encoded once, for ``encode_mocap``'s checks of the names). Navdata
+  packets stay bytes: their floats are float32 on the wire, and corruption acts on bytes.
 
 On the direct path a tick in which nothing but physics happens (an airframe flying, taking
 off or landing, a quiet firmware) is one compiled call
@@ -56,6 +61,9 @@ _MOCAP, _NAV = 0, 1
 class LockstepSensors:
     """The sensor side of a lockstep run (module docstring).
 
+    :attr:`frames_as_bytes` (class attribute, False): the wire's mocap frames encoded and
+    decoded as bytes — the reference the decoded hand-over is tested against.
+
     Parameters
     ----------
     cfg : ExperimentConfig.
@@ -69,6 +77,8 @@ class LockstepSensors:
         (the drone's state is not worked out for a callback that ignores it). None: always.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
+
+    frames_as_bytes = False
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None,
@@ -113,8 +123,9 @@ class LockstepSensors:
                                    other_objects=others)                          # opened
         self.nav_stats = LinkStats(window_s=1.0)
         self.nav_malformed = 0
-        self._queue: list = []  # (arrival_s, order, stream, bytes)
+        self._queue: list = []  # (arrival_s, order, stream, bytes or a MocapFrame)
         self._order = 0
+        self._names_checked = False  # (_mocap_frame: the first frame's names encoded)
         # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
         self._legs = None
         if not self.wire:
@@ -249,14 +260,25 @@ class LockstepSensors:
 
         items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
                             self.target_cfg, t_s)
-        data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
+        frame = MocapFrame.of(k & 0xFFFFFFFF, items)
+        if self.frames_as_bytes or not self._names_checked:
+            # the first frame encoded: encode_mocap's checks of the names (its ValueError)
+            data = encode_mocap(frame)
+            self._names_checked = True
+            if not self.frames_as_bytes:
+                data = frame
+        else:
+            data = frame  # (what decode_mocap makes of encode_mocap's bytes: module docstring)
         arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
         for datagram in faults.mocap_datagrams(t_exp, data):
             self._push(arrival, _MOCAP, datagram)
 
     def _receive(self, arrival_s: float, stream: int, data: bytes) -> None:
         if stream == _MOCAP:
-            self.mocap.feed(data, arrival_s)
+            if data.__class__ is MocapFrame:
+                self.mocap.feed_frame(data, arrival_s)
+            else:
+                self.mocap.feed(data, arrival_s)
             return
         stats = self.nav_stats
         stats.record_datagram()

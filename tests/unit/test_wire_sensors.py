@@ -1,0 +1,84 @@
+"""The lockstep wire sensors' shortcuts give the bits of the plain wire path they stand in for.
+
+A flight with a sensor fault takes the wire path (``sim/sensors.py``): every mocap frame and
+navdata packet through the faults to the receiving links. Its shortcuts — mocap frames
+handed over decoded instead of as bytes — are switched off for a reference flight of the
+same config: the two must write the same rows and events and end alike.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.sim.sensors import LockstepSensors
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+WALL_TIME = {"solve_us", "compute_us", "tick_late_ms"}  # measured: differ between flights
+SQUARE = ["duration_s=7", "sim.settle_s=1"]
+# each kind of act on each stream (frames dropped, missing, zero, late, duplicated and
+# reordered; packets lost, corrupted, duplicated and reordered; a blackout), a repeated
+# dropout, and the wire with a scripted second object and with the kit plant
+FLIGHTS = {
+    "dropout": ("square", ["faults.mocap_dropout.start_s=2",
+                           "faults.mocap_dropout.duration_s=0.3"]),
+    "repeated_dropout": ("square", ["faults.mocap_dropout.start_s=1",
+                                    "faults.mocap_dropout.duration_s=0.1",
+                                    "faults.mocap_dropout.repeat_every_s=1.5"]),
+    "occlusion_zero": ("square", ["faults.mocap_occlusion.start_s=2",
+                                  "faults.mocap_occlusion.duration_s=0.3",
+                                  "faults.mocap_occlusion.zero_pose=true"]),
+    "occlusion_missing": ("square", ["faults.mocap_occlusion.start_s=2",
+                                     "faults.mocap_occlusion.duration_s=0.3"]),
+    "latency": ("square", ["faults.mocap_latency.start_s=2", "faults.mocap_latency.duration_s=0.5",
+                           "faults.mocap_latency.extra_latency_ms=120"]),
+    "disorder_mocap": ("square", ["faults.disorder.start_s=1", "faults.disorder.duration_s=2",
+                                  "faults.disorder.stream=mocap"]),
+    "disorder_navdata": ("square", ["faults.disorder.start_s=1", "faults.disorder.duration_s=2",
+                                    "faults.disorder.stream=navdata"]),
+    "navdata_corrupt": ("square", ["faults.navdata_corrupt.start_s=2",
+                                   "faults.navdata_corrupt.duration_s=0.2"]),
+    "blackout": ("square", ["faults.blackout.start_s=2", "faults.blackout.duration_s=0.3"]),
+    "target": ("follow_car", ["faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
+    "kit": ("square", ["sim.plant.profile=thesis_kit", "faults.mocap_dropout.start_s=2",
+                       "faults.mocap_dropout.duration_s=0.2"]),
+}
+
+
+def _fly(name: str) -> tuple:
+    """Every row (but the wall-clock cells), every event (but its wall time) and the ending
+    of the flight ``name``."""
+    config, overrides = FLIGHTS[name]
+    cfg = load_config(CONFIGS / f"{config}.yaml", SQUARE + overrides)
+    memory = MemoryRecorder()
+    result = run_lockstep(cfg, recorder=memory)
+    rows = [{k: ("nan" if isinstance(v, float) and math.isnan(v) else v)
+             for k, v in row.items() if k not in WALL_TIME} for row in memory.rows]
+    events = [{k: v for k, v in e.items() if k != "wall_s"} for e in memory.run_data(
+        cfg, seed=0).events]
+    return rows, events, (result.ticks, result.ending, result.final_mode, result.end_t_s)
+
+
+@pytest.mark.parametrize("name", sorted(FLIGHTS))
+def test_frames_handed_over_decoded_give_the_bytes_bits(name, monkeypatch):
+    monkeypatch.setattr(LockstepSensors, "frames_as_bytes", True)
+    reference = _fly(name)
+    monkeypatch.setattr(LockstepSensors, "frames_as_bytes", False)
+    fed = []  # the shortcut taken: frames reach the link decoded
+    from ardrone_nmpc.links.mocap_link import MocapLink
+
+    feed_frame = MocapLink.feed_frame
+
+    def counted(self, frame, t_s, *args):
+        fed.append(t_s)
+        return feed_frame(self, frame, t_s, *args)
+
+    monkeypatch.setattr(MocapLink, "feed_frame", counted)
+    assert _fly(name) == reference
+    assert fed
