@@ -141,6 +141,11 @@ class ServerFaults:
                 bound = start
         return bound + self.t0_s
 
+    def holds_datagrams(self) -> bool:
+        """A stream's disorder holds a datagram back (the next one of its stream sends it)."""
+        with self._lock:
+            return any(d.holding for d in self._disorder.values())
+
     def wakeup_lost(self, now_s: float) -> bool:
         """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""
         return self.schedule.blackout(self.t_exp(now_s))

@@ -54,6 +54,8 @@ from ardrone_nmpc.sim.target import target_pose
 __all__ = ["LockstepSensors"]
 
 _MOCAP, _NAV = 0, 1
+#: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
+_WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push")
 
 
 # the sensor grids' next indices: held by the compiled legs between their runs
@@ -128,13 +130,19 @@ class LockstepSensors:
         self._names_checked = False  # (_mocap_frame: the first frame's names encoded)
         # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
         self._legs = None
-        if not self.wire:
-            from ardrone_nmpc.sim.lockstep_legs import SAMPLER_REPLACED, CompiledLegs
-            kind = type(self)  # (a sampler overriding its legs keeps them)
-            if CompiledLegs.eligible(self.plant, self.firmware) and all(
-                    getattr(kind, name) is getattr(LockstepSensors, name)
-                    for name in SAMPLER_REPLACED + LockstepSensors.HELD_IN_ARRAYS):
+        # … and the wire path's quiet ticks on the same arrays (sim/quiet_wire.py)
+        self._quiet = None
+        from ardrone_nmpc.sim.lockstep_legs import SAMPLER_REPLACED, CompiledLegs
+        kind = type(self)  # (a sampler overriding its legs keeps them)
+        replaced = SAMPLER_REPLACED + (_WIRE_REPLACED if self.wire else ())
+        if CompiledLegs.eligible(self.plant, self.firmware) and all(
+                getattr(kind, name) is getattr(LockstepSensors, name)
+                for name in replaced + LockstepSensors.HELD_IN_ARRAYS):
+            if not self.wire:
                 self._legs = CompiledLegs(self)
+            else:
+                from ardrone_nmpc.sim.quiet_wire import QuietWire
+                self._quiet = QuietWire(self, CompiledLegs(self))
 
     # ------------------------------------------------------------------ the clock
     def _run_to(self, t_s: float) -> None:
@@ -222,7 +230,17 @@ class LockstepSensors:
     # ------------------------------------------------------------------ through the wire
     def _advance_through_wire(self, t_s: float) -> None:
         """Send every frame due by ``t_s`` and deliver every datagram arrived by then, in
-        arrival order."""
+        arrival order (a quiet tick's legs and samples compiled: sim/quiet_wire.py)."""
+        quiet = self._quiet
+        if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
+            self._send_through_wire(t_s)
+        queue = self._queue
+        while queue and queue[0][0] <= t_s + 1e-12:
+            arrival, _, stream, data = heapq.heappop(queue)
+            self._receive(arrival, stream, data)
+
+    def _send_through_wire(self, t_s: float) -> None:
+        """Run the drone to ``t_s``, sending every frame and packet due on the way."""
         k_mocap = math.floor(t_s / self.mocap_period_s + 1e-9)
         k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
         events = [(k * self.mocap_period_s, _MOCAP, k)
@@ -239,10 +257,6 @@ class LockstepSensors:
                 for data in self.drone.navdata_datagrams(t_event, t_exp):
                     self._push(t_event, _NAV, data)
         self._run_to(t_s)
-        queue = self._queue
-        while queue and queue[0][0] <= t_s + 1e-12:
-            arrival, _, stream, data = heapq.heappop(queue)
-            self._receive(arrival, stream, data)
 
     def _push(self, arrival_s: float, stream: int, data: bytes) -> None:
         # equal arrival times leave in push order: a held-back datagram arrives just after
@@ -256,10 +270,15 @@ class LockstepSensors:
         fault = faults.mocap_frame(t_exp)
         if fault.dropped:
             return
+        self._send_frame(k, t_s, self.plant.mocap_pose(), fault, t_exp)
+
+    def _send_frame(self, k: int, t_s: float, pose, fault, t_exp: float | None) -> None:
+        """Queue the mocap frame ``k`` sampled at ``t_s`` (``pose``: its drawn pose; ``fault``:
+        the faults' decision of it; ``t_exp``: its experiment time for the faults' disorder,
+        None where no fault acts — the frame goes out as it is)."""
         from ardrone_nmpc.sim.mocap_server import frame_items  # (the wire's only: __init__)
 
-        items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
-                            self.target_cfg, t_s)
+        items = frame_items(self.object_name, pose, fault.occlusion, self.target_cfg, t_s)
         frame = MocapFrame.of(k & 0xFFFFFFFF, items)
         if self.frames_as_bytes or not self._names_checked:
             # the first frame encoded: encode_mocap's checks of the names (its ValueError)
@@ -270,7 +289,10 @@ class LockstepSensors:
         else:
             data = frame  # (what decode_mocap makes of encode_mocap's bytes: module docstring)
         arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
-        for datagram in faults.mocap_datagrams(t_exp, data):
+        if t_exp is None:
+            self._push(arrival, _MOCAP, data)
+            return
+        for datagram in self.drone.faults.mocap_datagrams(t_exp, data):
             self._push(arrival, _MOCAP, datagram)
 
     def _receive(self, arrival_s: float, stream: int, data: bytes) -> None:

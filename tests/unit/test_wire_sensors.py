@@ -2,8 +2,9 @@
 
 A flight with a sensor fault takes the wire path (``sim/sensors.py``): every mocap frame and
 navdata packet through the faults to the receiving links. Its shortcuts — mocap frames
-handed over decoded instead of as bytes — are switched off for a reference flight of the
-same config: the two must write the same rows and events and end alike.
+handed over decoded instead of as bytes, the ticks outside the faults' windows flown by one
+compiled call (``sim/quiet_wire.py``) — are switched off for a reference flight of the same
+config: the two must write the same rows and events and end alike.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import pytest
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.sim.quiet_wire import QuietWire
 from ardrone_nmpc.sim.sensors import LockstepSensors
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -48,6 +50,16 @@ FLIGHTS = {
                               "faults.mocap_dropout.duration_s=0.2"]),
     "kit": ("square", ["sim.plant.profile=thesis_kit", "faults.mocap_dropout.start_s=2",
                        "faults.mocap_dropout.duration_s=0.2"]),
+    "turbulence": ("square", ["sim.plant.turbulence_std_mps=0.3", "faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
+    # the compiled legs stop before a climb within reach of the cap, an emptying battery
+    "altitude_cap": ("square", ["drone.altitude_max_m=1.1", "faults.navdata_loss.start_s=2"]),
+    "low_battery": ("square", ["sim.plant.battery_start_pct=22",
+                               "sim.plant.battery_drain_pct_per_min=30",
+                               "faults.navdata_loss.start_s=2"]),
+    # 2 kHz mocap: more frames a tick than the events' first rows
+    "fast_mocap": ("square", ["sim.mocap_rate_hz=2000", "faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
 }
 
 
@@ -82,3 +94,63 @@ def test_frames_handed_over_decoded_give_the_bytes_bits(name, monkeypatch):
     monkeypatch.setattr(MocapLink, "feed_frame", counted)
     assert _fly(name) == reference
     assert fed
+
+
+@pytest.mark.parametrize("name", sorted(FLIGHTS))
+def test_quiet_ticks_compiled_give_the_python_wire_paths_bits(name, monkeypatch):
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _fly(name)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    answers = []  # the ticks flown compiled (True), handed to the Python path (False)
+    run = QuietWire.run
+
+    def counted(self, t_s):
+        answers.append(run(self, t_s))
+        return answers[-1]
+
+    monkeypatch.setattr(QuietWire, "run", counted)
+    assert _fly(name) == reference
+    assert True in answers  # (most ticks, as a rule: the cap's climbs are the Python's)
+
+
+def _plain(obj) -> dict:
+    """``obj``'s attributes of plain values (numbers, strings, tuples; a deque as a list)."""
+    out = {}
+    for key, value in vars(obj).items():
+        if value.__class__.__name__ == "deque":
+            value = list(value)
+        if isinstance(value, (int, float, str, bool, tuple, list, type(None))):
+            out[key] = value
+    return out
+
+
+def _ended_in(name: str, monkeypatch) -> dict:
+    """What the sampler's receiving links, the firmware and the faults hold at the end of
+    the flight ``name``."""
+    samplers = []
+    init = LockstepSensors.__init__
+
+    def kept(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        samplers.append(self)
+
+    monkeypatch.setattr(LockstepSensors, "__init__", kept)
+    _fly(name)
+    monkeypatch.setattr(LockstepSensors, "__init__", init)
+    sensors = samplers[-1]
+    return {"link": _plain(sensors.mocap), "mocap_stats": _plain(sensors.mocap.stats),
+            "nav_stats": _plain(sensors.nav_stats), "nav_malformed": sensors.nav_malformed,
+            "queue": list(sensors._queue), "firmware": _plain(sensors.firmware),
+            "faults": sensors.drone.faults.counters, "plant": (sensors.plant._state, sensors.plant._steps, sensors.plant._battery,
+                      sensors.plant._vel_bias, sensors.plant._yaw_bias_deg)}
+
+
+@pytest.mark.parametrize("name", ["dropout", "disorder_navdata", "altitude_cap", "target"])
+def test_quiet_ticks_leave_the_links_firmware_and_faults_as_the_python_path(name,
+                                                                             monkeypatch):
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _ended_in(name, monkeypatch)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    ended = _ended_in(name, monkeypatch)
+    assert ended == reference
+    assert ended["mocap_stats"]["_packets"] > 100  # (frames went through the link)
