@@ -138,11 +138,13 @@ def _ended_in(name: str, monkeypatch) -> dict:
     _fly(name)
     monkeypatch.setattr(LockstepSensors, "__init__", init)
     sensors = samplers[-1]
+    plant = sensors.plant
     return {"link": _plain(sensors.mocap), "mocap_stats": _plain(sensors.mocap.stats),
             "nav_stats": _plain(sensors.nav_stats), "nav_malformed": sensors.nav_malformed,
             "queue": list(sensors._queue), "firmware": _plain(sensors.firmware),
-            "faults": sensors.drone.faults.counters, "plant": (sensors.plant._state, sensors.plant._steps, sensors.plant._battery,
-                      sensors.plant._vel_bias, sensors.plant._yaw_bias_deg)}
+            "faults": sensors.drone.faults.counters,
+            "plant": (plant._state, plant._steps, plant._battery, plant._vel_bias,
+                      plant._yaw_bias_deg)}
 
 
 @pytest.mark.parametrize("name", ["dropout", "disorder_navdata", "altitude_cap", "target"])
