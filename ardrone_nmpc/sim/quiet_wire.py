@@ -17,8 +17,9 @@ A tick is flown so when the Python path's would do nothing but those legs and dr
 * no fault acts at any of its events (the faults' quiet time lies past the tick; a dropout's
   own test at its first frame, whose window the spans bound by a rounded end), and neither
   stream's disorder holds a datagram back;
-* the plant FLYING on a dynamics the kernel flies (``CompiledLegs.eligible``), the navdata
-  out of bootstrap;
+* the plant airborne — FLYING, or taking off or landing, its end left to the Python path
+  (the kernel stops before the leg that ends it) — on a dynamics the kernel flies
+  (``CompiledLegs.eligible``), the navdata out of bootstrap;
 * a firmware that changes nothing by the tick's time but its com-watchdog bit: its PCMD
   applied and not capped, neither the hover nor the link-loss watchdog firing — so the state
   bits it reports are the tick's first at every packet but for the battery's, which each
@@ -45,7 +46,7 @@ from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT
 
 __all__ = ["QuietWire"]
 
-_FLYING = FlightMode.FLYING
+_FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, FlightMode.LANDING
 _MOCAP = ks.MOCAP
 _T, _K, _S = ws.EV_T, ws.EV_K, ws.EV_SAMPLE
 _N_EVENTS = 16  # ev's rows to start with (grown to a tick's events)
@@ -89,7 +90,9 @@ class QuietWire:
         """The tick to ``t_s`` flown (module docstring), as far as the kernel went: True if
         it ran all the legs, False if the Python path is to fly the tick (or its rest)."""
         legs, fw, plant = self.legs, self.legs.firmware, self.legs.plant
-        if not self.enabled or plant._mode is not _FLYING or fw.config.bootstrap:
+        mode = plant._mode
+        if (not self.enabled or not (mode is _FLYING or mode is _TAKING_OFF or mode is _LANDING)
+                or fw.config.bootstrap):
             return False
         pcmd, last_cmd_t = fw.pcmd, fw.last_cmd_t
         if pcmd is not fw._applied_pcmd or fw.alt_capped or last_cmd_t is None:
@@ -101,7 +104,7 @@ class QuietWire:
             return False
         if not self.quiet(t_s):
             return False
-        legs.pack(t_s, pcmd, _FLYING, 0.0)
+        legs.pack(t_s, pcmd, mode, 0.0)  # (a take-off's or landing's end: the Python's)
         while True:
             ws.wire_run(*legs._args, self.ev)
             iv = legs.iv
@@ -112,18 +115,18 @@ class QuietWire:
                 self.ev = np.zeros((2 * (n_mocap + n_nav), ws.EV_WIDTH))
             legs.refill(ws.normals_needed(n_mocap, n_nav))
         done, n_events = int(iv[ks.I_DONE]), int(iv[ks.I_EVENTS])
-        self._send(self.ev[:min(done, n_events)].tolist())  # (the bit as at the tick's start)
+        self._send(self.ev[:min(done, n_events)].tolist(), mode)  # (the bit as at the start)
         now = legs.out[ks.O_LAST_NOW]  # the com-watchdog bit latched as the legs left it
         if now == now and not fw.comwdg_latched and now - last_cmd_t > fw.comwdg_s:
             fw.comwdg_latched = True  # (CompiledLegs._ran_to's)
-        legs.ran_block(None, None, _FLYING)  # what a tick reads of the run (no sample taken)
+        legs.ran_block(None, None, mode)  # what a tick reads of the run (no sample taken)
         if done <= n_events:  # legs left: the Python path's
             legs.release()
         return done > n_events
 
-    def _send(self, rows: list) -> None:
-        """The frames and packets of the events the run did (``ev``'s rows), as the Python
-        path sends them."""
+    def _send(self, rows: list, mode) -> None:
+        """The frames and packets of the events the run did (``ev``'s rows; the plant in
+        ``mode`` all along), as the Python path sends them."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
         for row in rows:
@@ -131,8 +134,8 @@ class QuietWire:
             if row[0] == _MOCAP:
                 frame(int(row[_K]), t_event, _Pose(sample[1:4], sample[4:7]), NO_MOCAP_FAULT,
                       None)
-            else:  # AirframePlant.navdata's sample (FLYING), the packet of it
+            else:  # AirframePlant.navdata's sample (airborne), the packet of it
                 t, battery, roll, pitch, yaw, altitude, forward, right, down = sample
-                nav = NavdataSample.make(t, _FLYING, battery, roll, pitch, yaw, altitude,
+                nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
                                          forward, right, down)
                 push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
