@@ -57,6 +57,12 @@ FLIGHTS = {
     "low_battery": ("square", ["sim.plant.battery_start_pct=22",
                                "sim.plant.battery_drain_pct_per_min=30",
                                "faults.navdata_loss.start_s=2"]),
+    # navdata at the mocap's rate: every packet ties with a frame (the frame first); 10 Hz
+    # mocap: ticks without a frame
+    "ties": ("square", ["sim.navdata_rate_hz=100", "faults.mocap_dropout.start_s=2",
+                        "faults.mocap_dropout.duration_s=0.2"]),
+    "slow_mocap": ("square", ["sim.mocap_rate_hz=10", "faults.navdata_loss.start_s=2",
+                              "faults.navdata_loss.duration_s=0.2"]),
     # 2 kHz mocap: more frames a tick than the events' first rows
     "fast_mocap": ("square", ["sim.mocap_rate_hz=2000", "faults.mocap_dropout.start_s=2",
                               "faults.mocap_dropout.duration_s=0.2"]),
@@ -156,3 +162,24 @@ def test_quiet_ticks_leave_the_links_firmware_and_faults_as_the_python_path(name
     ended = _ended_in(name, monkeypatch)
     assert ended == reference
     assert ended["mocap_stats"]["_packets"] > 100  # (frames went through the link)
+
+
+@pytest.mark.parametrize("name", ["_advance_through_wire", "_mocap_frame", "_send_frame",
+                                  "_push", "_run_to"])
+def test_a_sampler_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
+        name, monkeypatch):
+    """The quiet ticks stand in for the sampler's wire legs and sends: a sampler class
+    overriding one of those flies every tick on the Python path, so its override runs."""
+    from ardrone_nmpc.sim import lockstep_drone as lockstep_module
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+
+    config, overrides = FLIGHTS["dropout"]
+    cfg = load_config(CONFIGS / f"{config}.yaml", overrides)
+    assert LockstepDrone(cfg).sensors._quiet is not None
+    member = LockstepSensors.__dict__[name]
+    kind = type("Overriding", (LockstepSensors,),
+                {name: lambda self, *a, _m=member, **k: _m(self, *a, **k)})
+    monkeypatch.setattr(lockstep_module, "LockstepSensors", kind)
+    drone = LockstepDrone(cfg)
+    assert isinstance(drone.sensors, kind) and drone.sensors.wire
+    assert drone.sensors._quiet is None and drone.sensors._legs is None
