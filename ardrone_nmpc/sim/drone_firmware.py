@@ -62,7 +62,8 @@ from ardrone_nmpc.protocol.at import (
     Ref,
     parse_datagram_lenient,
 )
-from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState, DroneStatus, encode_drone_navdata
+from ardrone_nmpc.protocol.navdata import (CtrlCodes, DroneState, DroneStatus, Navdata,
+                                           drone_navdata, encode_drone_navdata)
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession, OutdoorProfiles
 
 __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
@@ -398,10 +399,11 @@ class DroneFirmware:
                                     options_mask=self.config.navdata_options,
                                     t_s=self.plant.t_s)
 
-    def packet_of(self, now: float, sample) -> bytes:
+    def packet_of(self, now: float, sample) -> Navdata:
         """:meth:`packet` of a navdata ``sample`` the plant's compiled legs drew at ``now``
-        (out of bootstrap; its ``t_s`` and ``battery_pct``: the plant's then)."""
+        (out of bootstrap; its ``t_s`` and ``battery_pct``: the plant's then), as a receiver
+        decodes it (:func:`~ardrone_nmpc.protocol.navdata.drone_navdata`)."""
         self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
-        return encode_drone_navdata(self.status(now, sample.battery_pct), self.nav_seq,
-                                    sample, codes=self.ctrl_codes,
-                                    options_mask=self.config.navdata_options, t_s=sample.t_s)
+        return drone_navdata(self.status(now, sample.battery_pct), self.nav_seq, sample,
+                             codes=self.ctrl_codes, options_mask=self.config.navdata_options,
+                             t_s=sample.t_s)
