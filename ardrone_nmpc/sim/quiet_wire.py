@@ -16,9 +16,9 @@ receiving links are the Python path's.
 
 A tick is flown so when the Python path's would do nothing but those legs and draws:
 
-* no fault acts at any of its events (the faults' quiet time lies past the tick; a dropout's
-  own test at its first frame, whose window the spans bound by a rounded end), and neither
-  stream's disorder holds a datagram back;
+* no fault acts at any of its events (the faults' quiet time lies past the tick; a
+  dropout's own test at each of its frames: the spans bound its window by a rounded end,
+  and a repeated one's bursts by none), and neither stream's disorder holds a datagram back;
 * the plant airborne — FLYING, or taking off or landing, its end left to the Python path
   (the kernel stops before the leg that ends it) — on a dynamics the kernel flies
   (``CompiledLegs.eligible``), the navdata out of bootstrap;
@@ -38,6 +38,8 @@ battery): the events it did are sent, the Python path goes on with the rest.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -77,16 +79,21 @@ class QuietWire:
 
     def quiet(self, t_s: float) -> bool:
         """No fault can act on the sensors' datagrams from the plant's time to ``t_s``."""
-        sensors, faults = self.sensors, self.faults
+        sensors, faults, legs = self.sensors, self.faults, self.legs
         t_zero = sensors.t_zero_s
-        t_from = self.legs.t_s() - t_zero
-        if not faults.quiet_until_s(t_from) > t_s - t_zero or faults.holds_datagrams():
+        t_from = legs.t_s() - t_zero
+        if (not faults.quiet_until_s(t_from, bursts_asked=True) > t_s - t_zero
+                or faults.holds_datagrams()):
             return False
-        # (mocap_dropped's window ends at start + duration as its phase says, not the span's
-        # rounded sum: asked at the first frame, and so for the later ones)
-        legs = self.legs  # (the grid's next index, held by the legs: read without release)
+        # a dropout asked of each frame (its window ends at start + duration as its phase
+        # says, not at the span's rounded sum; a repeated one's bursts come for ever); the
+        # grid's next index held by the legs: read without releasing them
+        period, dropped = sensors.mocap_period_s, self.schedule.mocap_dropped
         k = int(legs.iv[ks.I_NEXT_MOCAP]) if legs.held() else sensors._next_mocap_k
-        return not self.schedule.mocap_dropped(k * sensors.mocap_period_s - t_zero)
+        for k in range(k, math.floor(t_s / period + 1e-9) + 1):
+            if dropped(k * period - t_zero):
+                return False
+        return True
 
     def run(self, t_s: float) -> bool:
         """The tick to ``t_s`` flown (module docstring), as far as the kernel went: True if
