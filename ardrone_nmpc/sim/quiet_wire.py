@@ -46,7 +46,9 @@ import numpy as np
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim import wire_step as ws
-from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT
+from ardrone_nmpc.sim.drone import SimulatedDrone
+from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
 
 __all__ = ["QuietWire"]
 
@@ -54,6 +56,12 @@ _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, Fligh
 _MOCAP = ks.MOCAP
 _T, _K, _S = ws.EV_T, ws.EV_K, ws.EV_SAMPLE
 _N_EVENTS = 16  # ev's rows to start with (grown to a tick's events)
+#: What a quiet tick does in the drone's, firmware's and faults' place (besides the legs':
+#: CompiledLegs.eligible): a class overriding one of these keeps the Python wire path
+_REPLACED = ((SimulatedDrone, ("navdata_datagrams",)),
+             (DroneFirmware, ("packet", "packet_of", "status", "battery_low")),
+             (ServerFaults, ("mocap_frame", "mocap_datagrams", "navdata_lost",
+                             "navdata_datagrams", "quiet_until_s", "holds_datagrams")))
 
 
 class _Pose:
@@ -76,6 +84,19 @@ class QuietWire:
         self.faults = sensors.drone.faults
         self.schedule = self.faults.schedule
         self.ev = np.zeros((_N_EVENTS, ws.EV_WIDTH))
+
+    @staticmethod
+    def eligible(drone) -> bool:
+        """A drone (its firmware, its faults) whose classes override none of what a quiet
+        tick does in their place."""
+        for base, names in _REPLACED:
+            obj = (drone if base is SimulatedDrone else
+                   drone.firmware if base is DroneFirmware else drone.faults)
+            kind = type(obj)
+            if not (isinstance(obj, base)
+                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+                return False
+        return True
 
     def quiet(self, t_s: float) -> bool:
         """No fault can act on the sensors' datagrams from the plant's time to ``t_s``."""

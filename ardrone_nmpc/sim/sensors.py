@@ -144,7 +144,8 @@ class LockstepSensors:
                 self._legs = CompiledLegs(self)
             else:
                 from ardrone_nmpc.sim.quiet_wire import QuietWire
-                self._quiet = QuietWire(self, CompiledLegs(self))
+                if QuietWire.eligible(drone):
+                    self._quiet = QuietWire(self, CompiledLegs(self))
 
     # ------------------------------------------------------------------ the clock
     def _run_to(self, t_s: float) -> None:

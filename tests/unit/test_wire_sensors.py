@@ -183,3 +183,26 @@ def test_a_sampler_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_
     drone = LockstepDrone(cfg)
     assert isinstance(drone.sensors, kind) and drone.sensors.wire
     assert drone.sensors._quiet is None and drone.sensors._legs is None
+
+
+@pytest.mark.parametrize("owner,name", [
+    ("drone", "navdata_datagrams"), ("firmware", "packet"), ("firmware", "status"),
+    ("faults", "mocap_frame"), ("faults", "quiet_until_s")])
+def test_a_drone_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
+        owner, name):
+    """… and so does a drone, firmware or faults class overriding what they stand in for."""
+    from ardrone_nmpc.sim.drone import SimulatedDrone
+    from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+    from ardrone_nmpc.sim.fault_injection import ServerFaults
+
+    config, overrides = FLIGHTS["dropout"]
+    cfg = load_config(CONFIGS / f"{config}.yaml", overrides)
+    drone = SimulatedDrone.from_config(cfg)
+    assert QuietWire.eligible(drone)
+    base = {"drone": SimulatedDrone, "firmware": DroneFirmware, "faults": ServerFaults}[owner]
+    member = base.__dict__[name]
+    kind = type("Overriding", (base,),
+                {name: lambda self, *a, _m=member, **k: _m(self, *a, **k)})
+    target = {"drone": drone, "firmware": drone.firmware, "faults": drone.faults}[owner]
+    target.__class__ = kind
+    assert not QuietWire.eligible(drone)
