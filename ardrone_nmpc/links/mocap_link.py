@@ -35,7 +35,7 @@ import time
 
 from ardrone_nmpc.links.mocap_source import MocapSource, mocap_pose_of
 from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, open_udp
-from ardrone_nmpc.protocol.mocap import MOCAP_DEFAULT_PORT, MocapError, decode_mocap
+from ardrone_nmpc.protocol.mocap import MOCAP_DEFAULT_PORT, MocapError, MocapFrame, decode_mocap
 
 __all__ = ["MocapLink", "mocap_pose_of"]
 
@@ -171,6 +171,13 @@ class MocapLink(MocapSource):
         thread would: the lockstep simulator delivers its datagrams this way, without a socket."""
         self._handle(data, t_s, sender)
 
+    def feed_frame(self, frame: MocapFrame, t_s: float, sender=("lockstep", 0)) -> None:
+        """:meth:`feed` of a datagram already decoded: ``frame`` is what
+        :func:`~ardrone_nmpc.protocol.mocap.decode_mocap` makes of its bytes (the lockstep
+        simulator's frames: their encoding is exact, float64 poses — no bytes needed)."""
+        self.stats.record_datagram()
+        self._handle_frame(frame, t_s, sender)
+
     def _handle(self, data: bytes, t_s: float, sender) -> None:
         stats = self.stats
         stats.record_datagram()
@@ -180,6 +187,12 @@ class MocapLink(MocapSource):
             stats.record_malformed()
             self._last_error = f"mocap: {exc}"
             return
+        self._handle_frame(frame, t_s, sender)
+
+    def _handle_frame(self, frame: MocapFrame, t_s: float, sender) -> None:
+        """A decoded datagram (counted) from ``sender``: its sender locked, its sequence
+        checked, its poses accepted."""
+        stats = self.stats
         locked, after_silence = self._from_locked_sender(frame, t_s, sender)
         if not locked:
             stats.record_foreign()

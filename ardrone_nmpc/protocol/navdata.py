@@ -39,7 +39,7 @@ __all__ = [
     "CtrlMajor", "ctrl_state_value", "DemoOption", "NavdataOption", "Navdata",
     "navdata_checksum", "empty_vision_detect_option", "encode_navdata", "decode_navdata",
     "CtrlCodes", "DRONE_PHASES", "DroneStatus", "ALWAYS_ON_STATE", "DEFAULT_NAVDATA_OPTIONS",
-    "time_option", "encode_drone_navdata",
+    "time_option", "encode_drone_navdata", "drone_navdata",
 ]
 
 NAVDATA_PORT = 5554
@@ -616,9 +616,19 @@ def encode_drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
     :class:`~ardrone_nmpc.core.types.NavdataSample`, see :meth:`DemoOption.of_sample`; None =
     no demo option), time (bit 1) from ``t_s`` and an empty vision_detect (bit 16).
     """
+    return encode_navdata(drone_navdata(status, sequence, sample, codes=codes,
+                                        options_mask=options_mask, t_s=t_s))
+
+
+def drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
+                  codes: CtrlCodes = CtrlCodes.SDK, options_mask: int = DEFAULT_NAVDATA_OPTIONS,
+                  t_s: float = 0.0) -> Navdata:
+    """:func:`encode_drone_navdata`'s packet before its encoding — what
+    :func:`decode_navdata` gives back of its bytes but for the raw options' payloads (the
+    header's state and sequence; the demo option, whose floats are stored as float32)."""
     state = status.state_bits()
     if status.bootstrap:
-        return encode_navdata(Navdata(state, sequence))
+        return Navdata(state, sequence)
     full = not status.demo
     demo = None
     options: list[NavdataOption] = []
@@ -628,4 +638,4 @@ def encode_drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
         options.append(time_option(t_s))
     if full or options_mask & (1 << OptionTag.VISION_DETECT):
         options.append(empty_vision_detect_option())
-    return encode_navdata(Navdata(state, sequence, demo=demo, options=tuple(options)))
+    return Navdata(state, sequence, demo=demo, options=tuple(options))

@@ -4,10 +4,10 @@ into numba's on-disk cache by a background child while the runner compiles the s
 On an empty cache a flight compiles everything in one process, serially (~13 s on 2 cores):
 the solver first (``Tick``'s warm-up), then the estimation stage's step, the attitude
 estimate's ``feed`` and the NMPC's nominal tick after the solve (``after_solve``), then the
-simulated drone's kernels (``lockstep_run``, ``flying_advance``, ``airframe_rk4`` …), which
-are needed only after the take-off. :func:`start_if_cold` starts ``python -m
-ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the child compiles
-those kernels (:func:`main`) and the runner finds them cached when it gets there.
+simulated drone's kernels (``lockstep_run``, ``wire_run``, ``flying_advance``,
+``airframe_rk4`` …), which are needed only after the take-off. :func:`start_if_cold` starts
+``python -m ardrone_nmpc.runtime.precompile`` once per process when the cache is cold; the
+child compiles those kernels (:func:`main`) and the runner finds them cached when it gets there.
 
 Never harmful: the child is best-effort (its output goes nowhere; the runner compiles whatever
 is not cached yet), and the cached code a process loads is the code it would compile (no
@@ -153,6 +153,14 @@ def compile_kernels() -> None:
     plant.land()
     plant.advance(period)  # the automatic landing: auto_steps
     _land(drone, plant.t_s, 0, period)  # (the drone's landing, from the plant's time on)
+    # the wire path's quiet ticks (sensor faults: sim/quiet_wire) on the legs' own arrays
+    import numpy as np
+
+    from ardrone_nmpc.sim.wire_step import EV_WIDTH, wire_run
+
+    legs = drone.sensors._legs
+    if legs is not None and legs._args:  # (this drone is done with: a run changes nothing
+        wire_run(*legs._args, np.zeros((1, EV_WIDTH)))  # that is read again)
 
 
 def start_block_compile() -> subprocess.Popen | None:

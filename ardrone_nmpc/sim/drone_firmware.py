@@ -62,7 +62,8 @@ from ardrone_nmpc.protocol.at import (
     Ref,
     parse_datagram_lenient,
 )
-from ardrone_nmpc.protocol.navdata import CtrlCodes, DroneState, DroneStatus, encode_drone_navdata
+from ardrone_nmpc.protocol.navdata import (CtrlCodes, DroneState, DroneStatus, Navdata,
+                                           drone_navdata, encode_drone_navdata)
 from ardrone_nmpc.sim.drone_config import ConfigStore, HeldSession, OutdoorProfiles
 
 __all__ = ["DroneFirmware", "DroneServerCounters", "VBAT_LOW_PCT"]
@@ -360,8 +361,9 @@ class DroneFirmware:
 
     # ------------------------------------------------------------------ navdata
 
-    def status(self, now: float) -> DroneStatus:
-        """What the drone reports about itself now."""
+    def status(self, now: float, battery_pct: float | None = None) -> DroneStatus:
+        """What the drone reports about itself now (``battery_pct``: the plant's then, when
+        the caller has it — the compiled legs, holding the plant's state)."""
         flags, roll, pitch, gaz, yaw = self.pcmd
         return DroneStatus(
             self.plant.mode.value,
@@ -371,13 +373,18 @@ class DroneFirmware:
             bootstrap=self.config.bootstrap, demo=self.config.demo,
             com_watchdog=self.comwdg_latched or (self.comwdg_clear == "any"
                                                  and self.silence(now) > self.comwdg_s),
-            com_lost=self.link_lost, battery_low=self.vbat_low, faults=self.fault_bits)
+            com_lost=self.link_lost, battery_low=self.battery_low(
+                self.plant.battery_pct if battery_pct is None else battery_pct),
+            faults=self.fault_bits)
 
     @property
     def vbat_low(self) -> bool:
         """State bit 15: the battery below :attr:`vbat_low_pct`, or the bit injected."""
-        return (self.plant.battery_pct < self.vbat_low_pct
-                or bool(self.fault_bits & DroneState.VBAT_LOW))
+        return self.battery_low(self.plant.battery_pct)
+
+    def battery_low(self, battery_pct: float) -> bool:
+        """:attr:`vbat_low` of a plant's battery at ``battery_pct``."""
+        return battery_pct < self.vbat_low_pct or bool(self.fault_bits & DroneState.VBAT_LOW)
 
     def skip_packet(self) -> None:
         """A packet lost on the way: its sequence number is used all the same."""
@@ -391,3 +398,12 @@ class DroneFirmware:
         return encode_drone_navdata(status, self.nav_seq, sample, codes=self.ctrl_codes,
                                     options_mask=self.config.navdata_options,
                                     t_s=self.plant.t_s)
+
+    def packet_of(self, now: float, sample) -> Navdata:
+        """:meth:`packet` of a navdata ``sample`` the plant's compiled legs drew at ``now``
+        (out of bootstrap; its ``t_s`` and ``battery_pct``: the plant's then), as a receiver
+        decodes it (:func:`~ardrone_nmpc.protocol.navdata.drone_navdata`)."""
+        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
+        return drone_navdata(self.status(now, sample.battery_pct), self.nav_seq, sample,
+                             codes=self.ctrl_codes, options_mask=self.config.navdata_options,
+                             t_s=sample.t_s)

@@ -84,7 +84,8 @@ class ServerFaults:
         self._counters = FaultCounters()
         self._events: list[tuple[float, dict]] = []
         self._taken = 0
-        self._spans = schedule.window_spans()  # (quiet_until_s)
+        self._spans = schedule.window_spans()  # (quiet_until_s; and without a repeated
+        self._spans_bursts_asked = schedule.window_spans(repeated=False)  # dropout's)
 
     # ------------------------------------------------------------------ the clock
 
@@ -127,19 +128,26 @@ class ServerFaults:
                 self._events.extend((t, ev) for ev in events)
         return events
 
-    def quiet_until_s(self, now_s: float) -> float:
+    def quiet_until_s(self, now_s: float, bursts_asked: bool = False) -> float:
         """The time (servers' clock) from ``now_s`` on before which no fault acts: no plant
         fault is due (one-shot, a gust's start, blowing or end) and no fault's window is
         open (AT loss, blackout, the sensors', the solver's). Every decision asked at a time
         in ``[now_s, answer)`` is then a fault-free drone's, and draws nothing; an answer at
         or before ``now_s``: one may act at ``now_s``. (The constant wind and the firmware's
-        options act for the whole flight: they are the drone's, not a decision.)"""
+        options act for the whole flight: they are the drone's, not a decision.)
+        ``bursts_asked``: the caller asks ``schedule.mocap_dropped`` of every mocap frame
+        itself — a repeated dropout's bursts (a window that never ends) are left out."""
         t = self.t_exp(now_s)
         bound = math.inf if self._plant_faults is None else self._plant_faults.next_due_s()
-        for start, end in self._spans:
+        for start, end in self._spans_bursts_asked if bursts_asked else self._spans:
             if end > t and start < bound:
                 bound = start
         return bound + self.t0_s
+
+    def holds_datagrams(self) -> bool:
+        """A stream's disorder holds a datagram back (the next one of its stream sends it)."""
+        with self._lock:
+            return any(d.holding for d in self._disorder.values())
 
     def wakeup_lost(self, now_s: float) -> bool:
         """A datagram on the navdata port at ``now_s`` never reaches the drone (a blackout)."""

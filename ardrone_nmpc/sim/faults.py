@@ -184,12 +184,18 @@ class FaultSchedule:
         and draws nothing."""
         return self.blackout(t_s) or _within(self.cfg.at_loss, t_s)
 
-    def window_spans(self) -> list[tuple[float, float]]:
+    def window_spans(self, repeated: bool = True) -> list[tuple[float, float]]:
         """``(start_s, end_s)`` of every fault that acts over a window (the sensors', AT
-        loss, blackout, a gust, the solver's; a repeated dropout ends never) — the one-shot
-        faults are :meth:`plant_events`, the others act for the whole flight."""
+        loss, blackout, a gust, the solver's; a repeated dropout ends never — left out if
+        not ``repeated``: its bursts are :meth:`mocap_dropped`'s alone) — the one-shot faults
+        are :meth:`plant_events`, the others act for the whole flight."""
         return [(start, end) for name, start, end in self.windows()
-                if hasattr(getattr(self.cfg, name), "duration_s")]
+                if hasattr(getattr(self.cfg, name), "duration_s")
+                and (repeated or not self.repeats(name))]
+
+    def repeats(self, name: str) -> bool:
+        """The fault ``name`` acts in bursts for ever (a repeated mocap dropout)."""
+        return name == "mocap_dropout" and self.cfg.mocap_dropout.repeat_every_s is not None
 
     def solver_diverges(self, t_s: float) -> bool:
         """The NMPC solution of the tick at ``t_s`` is replaced by a diverged, non-finite one
@@ -272,7 +278,7 @@ class FaultSchedule:
             start = getattr(f, "start_s", None)
             start = -math.inf if start is None else start  # (fault bits from power-on)
             duration = getattr(f, "duration_s", math.inf)
-            if name == "mocap_dropout" and f.repeat_every_s is not None:
+            if self.repeats(name):
                 duration = math.inf
             out.append((name, start, start + duration))
         return out

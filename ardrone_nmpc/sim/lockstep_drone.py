@@ -96,7 +96,9 @@ class LockstepDrone(ConfigHandshake):
         self.t_exp_s = -math.inf  # experiment time of the clock now (the faults' clock)
         # the sampler's compiled legs (None without): the truth of their last run while they
         # hold the state (a legs object no longer used never runs: its live_out stays None)
-        self._legs = self.sensors._legs
+        sensors = self.sensors  # (the direct path's, or the wire path's quiet ticks')
+        quiet = getattr(sensors, "_quiet", None)
+        self._legs = sensors._legs if quiet is None else quiet.legs
         self._waited = np.zeros(drone_block.D_SIZE)  # (ascend's and descend's numbers)
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
@@ -404,7 +406,7 @@ class LockstepDrone(ConfigHandshake):
         ref, seq = self._ref_unsent, self._seq  # every tick: spelled out
         if ref is None and progressive:  # the firmware takes the PCMD's values as they are
             self._seq = seq + 1
-            legs = self.sensors._legs
+            legs = self._legs
             # the chain written out, unless an injected AT loss decides this datagram's fate
             if legs is not None and (legs.takes_commands or legs.stands_in
                                      and not self.sim.faults.at_loss_acts(self.t_exp_s)):

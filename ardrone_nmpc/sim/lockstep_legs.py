@@ -171,7 +171,6 @@ _R_EVENTS, _R_KIND0, _R_KIND1 = _R_DONE + 1, _R_DONE + 2, _R_DONE + 3
 #: x, y, z, ψ, ż of :attr:`CompiledLegs.live_out` (``LockstepDrone.truth_cells``)
 TRUTH_CELLS_OF = operator.itemgetter(_R_X, _R_X + 1, _R_X + 2, _R_PSI, _R_VZ)
 
-
 _F64 = np.dtype(np.float64)
 _PI = math.pi
 _BUF_KIND = np.empty(0)  # a stand-in of CompiledLegs' buf (a plain 1-D float64) for its kind
@@ -517,17 +516,17 @@ class CompiledLegs:
                                self.plant._mode, battery)
 
     # ------------------------------------------------------------------ one tick
-    def refill(self) -> None:
+    def refill(self, need: tuple = (ks.NEED_BIAS, ks.NEED_GUST, ks.NEED_MOCAP,
+                                    ks.NEED_NAV)) -> None:
         """New blocks of normals for those that ran short (held: the positions in iv; a
-        block of ticks' run found one short: ``sim/drone_block.LEGS_SHORT``)."""
+        block of ticks' run found one short: ``sim/drone_block.LEGS_SHORT``): ``need``, the
+        normals a run may take of each (biases, gusts, poses, navdata samples)."""
         bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
         iv = self.iv
         bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
-        bias_n.ensure(ks.NEED_BIAS)
-        mocap_n.ensure(ks.NEED_MOCAP)
-        nav_n.ensure(ks.NEED_NAV)
-        if self.turbulent:
-            gust_n.ensure(ks.NEED_GUST)
+        for normals, n in zip(blocks, need):
+            if normals is not gust_n or self.turbulent:
+                normals.ensure(n)
         _PUT_POS(iv, _AT_POS, bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos)
         self._blocks = tuple(b.values for b in blocks)
         x, rows, buf = self._args[:3]
@@ -640,6 +639,26 @@ class CompiledLegs:
         if ((hover_due and fw.applied != _HOVER_APPLIED)
                 or not (fw.link_lost or not silence > fw.link_loss_s)):
             return None
+        ends = 0.0  # FLYING; a take-off's or landing's end flown too, when nothing else
+        if mode is not _FLYING:  # changes with the mode (the hover watchdog and the cap act
+            flags, _, _, fw_gaz, _ = pcmd  # only airborne) and the guard may see it after
+            climbing = flags & _PROGRESSIVE and fw_gaz > 0.0
+            ends = 0.0 if hover_due or climbing else (
+                1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED)
+                else 0.0)
+        self.pack(t_s, pcmd, mode, ends)
+        self._kernel(*self._args)
+        raw = self._run_bytes()  # out's and iv's bytes: the floats, the pose's arrays
+        o = _GET_RUN(raw)
+        if o[_R_DONE] < 0:  # a block ran short: new ones, and again
+            self.refill()
+            return self.run(t_s)
+        return self._ran_to(raw, o, mode, hover_due, new_mode, ends)
+
+    def pack(self, t_s: float, pcmd: tuple, mode, ends: float) -> None:
+        """The arrays ready for a run to ``t_s`` (the plant in ``mode``, the firmware's held
+        ``pcmd``, :meth:`run`'s ``ends``): the state held, the parameters, the inputs."""
+        plant, fw, sensors = self.plant, self.firmware, self.sensors
         d = plant.__dict__  # (a last run's truth: the arrays hold the state since)
         if (self.live_out is None or len(d) != self._plant_len
                 or len(sensors.__dict__) != self._sensors_len):
@@ -657,28 +676,12 @@ class CompiledLegs:
             climbing, lead_s, alt_max_m = 1.0, fw._lead_s(), fw.config.altitude_max_m
         else:
             climbing = lead_s = alt_max_m = 0.0
-        if mode is _FLYING:  # as the kernel takes it
-            kernel_mode, ends = ks.MODE_FLYING, 0.0
-        else:  # the take-off's or landing's end flown too, when nothing else changes with
-            # the mode (the hover watchdog and the cap act only on an airborne plant) and the
-            # guard may see its sample after the run
-            kernel_mode = ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING
-            ends = 0.0 if hover_due or climbing else (
-                1.0 if sensors.defers_mode(_FLYING if mode is _TAKING_OFF else _LANDED)
-                else 0.0)
+        kernel_mode = (ks.MODE_FLYING if mode is _FLYING else  # as the kernel takes it
+                       ks.MODE_TAKING_OFF if mode is _TAKING_OFF else ks.MODE_LANDING)
         w0, w1, w2 = plant.wind_mps.tolist()
         roll, pitch, gaz, yaw, hold = self._saved["_current"]  # the plant's command, held
         _PUT_INPUTS(self._sv_memory, _AT_ROLL, roll, pitch, gaz, yaw, 1.0 if hold else 0.0,
                     climbing, lead_s, alt_max_m, w0, w1, w2, kernel_mode, t_s, ends)
-        self._kernel(*self._args)
-        # the bytes of out and iv: the run's floats and counts, the pose's (and the truth's)
-        # read-only arrays read from them
-        raw = self._run_bytes()
-        o = _GET_RUN(raw)
-        if o[_R_DONE] < 0:  # a block ran short: new ones, and again
-            self.refill()
-            return self.run(t_s)
-        return self._ran_to(raw, o, mode, hover_due, new_mode, ends)
 
     def ran_block(self, t_pose, t_nav, mode) -> None:
         """The arrays after a block of ticks' runs (``sim/drone_block``) of a plant in

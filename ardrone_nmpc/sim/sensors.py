@@ -15,7 +15,14 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   :class:`~ardrone_nmpc.links.mocap_link.MocapLink` and the navdata decoder — at its arrival
   time; a frame's receipt time is its pose time, as on the real link. Every frame costs a
   little speed and draws the noise in another order, so clean runs keep the direct path (and
-  their golden trace).
+  their golden trace). A mocap frame travels decoded (a :class:`~ardrone_nmpc.protocol.mocap.
+  MocapFrame`, through the faults' disorder and the queue, to ``MocapLink.feed_frame``): its
+  datagram holds the poses as float64 and the names as ASCII, so ``decode_mocap`` would give
+  back the same frame — the bytes' encoding and decoding were half of a frame's cost (the
+  first frame is still encoded once, for ``encode_mocap``'s checks of the names). Navdata
+  packets stay bytes (corruption acts on bytes) but a quiet tick's: its packets travel as
+  the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
+  are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
 
 On the direct path a tick in which nothing but physics happens (an airframe flying, taking
 off or landing, a quiet firmware) is one compiled call
@@ -41,7 +48,7 @@ import numpy as np
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
-from ardrone_nmpc.protocol.navdata import DroneState, NavdataError, decode_navdata
+from ardrone_nmpc.protocol.navdata import DroneState, Navdata, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.target import target_pose
@@ -49,12 +56,17 @@ from ardrone_nmpc.sim.target import target_pose
 __all__ = ["LockstepSensors"]
 
 _MOCAP, _NAV = 0, 1
+#: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
+_WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push")
 
 
 # the sensor grids' next indices: held by the compiled legs between their runs
 @holds_in_arrays("_next_mocap_k", "_next_nav_k")
 class LockstepSensors:
     """The sensor side of a lockstep run (module docstring).
+
+    :attr:`frames_as_bytes` (class attribute, False): the wire's mocap frames encoded and
+    decoded as bytes — the reference the decoded hand-over is tested against.
 
     Parameters
     ----------
@@ -69,6 +81,8 @@ class LockstepSensors:
         (the drone's state is not worked out for a callback that ignores it). None: always.
     t_zero_s : plant time of experiment time 0 (the faults' clock); settable later.
     """
+
+    frames_as_bytes = False
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None,
@@ -113,17 +127,25 @@ class LockstepSensors:
                                    other_objects=others)                          # opened
         self.nav_stats = LinkStats(window_s=1.0)
         self.nav_malformed = 0
-        self._queue: list = []  # (arrival_s, order, stream, bytes)
+        self._queue: list = []  # (arrival_s, order, stream, bytes or a MocapFrame)
         self._order = 0
+        self._names_checked = False  # (_mocap_frame: the first frame's names encoded)
         # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
         self._legs = None
-        if not self.wire:
-            from ardrone_nmpc.sim.lockstep_legs import SAMPLER_REPLACED, CompiledLegs
-            kind = type(self)  # (a sampler overriding its legs keeps them)
-            if CompiledLegs.eligible(self.plant, self.firmware) and all(
-                    getattr(kind, name) is getattr(LockstepSensors, name)
-                    for name in SAMPLER_REPLACED + LockstepSensors.HELD_IN_ARRAYS):
+        # … and the wire path's quiet ticks on the same arrays (sim/quiet_wire.py)
+        self._quiet = None
+        from ardrone_nmpc.sim.lockstep_legs import SAMPLER_REPLACED, CompiledLegs
+        kind = type(self)  # (a sampler overriding its legs keeps them)
+        replaced = SAMPLER_REPLACED + (_WIRE_REPLACED if self.wire else ())
+        if CompiledLegs.eligible(self.plant, self.firmware) and all(
+                getattr(kind, name) is getattr(LockstepSensors, name)
+                for name in replaced + LockstepSensors.HELD_IN_ARRAYS):
+            if not self.wire:
                 self._legs = CompiledLegs(self)
+            else:
+                from ardrone_nmpc.sim.quiet_wire import QuietWire
+                if QuietWire.eligible(drone):
+                    self._quiet = QuietWire(self, CompiledLegs(self))
 
     # ------------------------------------------------------------------ the clock
     def _run_to(self, t_s: float) -> None:
@@ -211,7 +233,17 @@ class LockstepSensors:
     # ------------------------------------------------------------------ through the wire
     def _advance_through_wire(self, t_s: float) -> None:
         """Send every frame due by ``t_s`` and deliver every datagram arrived by then, in
-        arrival order."""
+        arrival order (a quiet tick's legs and samples compiled: sim/quiet_wire.py)."""
+        quiet = self._quiet
+        if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
+            self._send_through_wire(t_s)
+        queue = self._queue
+        while queue and queue[0][0] <= t_s + 1e-12:
+            arrival, _, stream, data = heapq.heappop(queue)
+            self._receive(arrival, stream, data)
+
+    def _send_through_wire(self, t_s: float) -> None:
+        """Run the drone to ``t_s``, sending every frame and packet due on the way."""
         k_mocap = math.floor(t_s / self.mocap_period_s + 1e-9)
         k_nav = math.floor(t_s / self.nav_period_s + 1e-9)
         events = [(k * self.mocap_period_s, _MOCAP, k)
@@ -228,10 +260,6 @@ class LockstepSensors:
                 for data in self.drone.navdata_datagrams(t_event, t_exp):
                     self._push(t_event, _NAV, data)
         self._run_to(t_s)
-        queue = self._queue
-        while queue and queue[0][0] <= t_s + 1e-12:
-            arrival, _, stream, data = heapq.heappop(queue)
-            self._receive(arrival, stream, data)
 
     def _push(self, arrival_s: float, stream: int, data: bytes) -> None:
         # equal arrival times leave in push order: a held-back datagram arrives just after
@@ -245,27 +273,49 @@ class LockstepSensors:
         fault = faults.mocap_frame(t_exp)
         if fault.dropped:
             return
+        self._send_frame(k, t_s, self.plant.mocap_pose(), fault, t_exp)
+
+    def _send_frame(self, k: int, t_s: float, pose, fault, t_exp: float | None) -> None:
+        """Queue the mocap frame ``k`` sampled at ``t_s`` (``pose``: its drawn pose; ``fault``:
+        the faults' decision of it; ``t_exp``: its experiment time for the faults' disorder,
+        None where no fault acts — the frame goes out as it is)."""
         from ardrone_nmpc.sim.mocap_server import frame_items  # (the wire's only: __init__)
 
-        items = frame_items(self.object_name, self.plant.mocap_pose(), fault.occlusion,
-                            self.target_cfg, t_s)
-        data = encode_mocap(MocapFrame.of(k & 0xFFFFFFFF, items))
+        items = frame_items(self.object_name, pose, fault.occlusion, self.target_cfg, t_s)
+        frame = MocapFrame.of(k & 0xFFFFFFFF, items)
+        if self.frames_as_bytes or not self._names_checked:
+            # the first frame encoded: encode_mocap's checks of the names (its ValueError)
+            data = encode_mocap(frame)
+            self._names_checked = True
+            if not self.frames_as_bytes:
+                data = frame
+        else:
+            data = frame  # (what decode_mocap makes of encode_mocap's bytes: module docstring)
         arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
-        for datagram in faults.mocap_datagrams(t_exp, data):
+        if t_exp is None:
+            self._push(arrival, _MOCAP, data)
+            return
+        for datagram in self.drone.faults.mocap_datagrams(t_exp, data):
             self._push(arrival, _MOCAP, datagram)
 
     def _receive(self, arrival_s: float, stream: int, data: bytes) -> None:
         if stream == _MOCAP:
-            self.mocap.feed(data, arrival_s)
+            if data.__class__ is MocapFrame:
+                self.mocap.feed_frame(data, arrival_s)
+            else:
+                self.mocap.feed(data, arrival_s)
             return
         stats = self.nav_stats
         stats.record_datagram()
-        try:
-            packet = decode_navdata(data)
-        except NavdataError:
-            stats.record_malformed()
-            self.nav_malformed += 1
-            return
+        if data.__class__ is Navdata:  # a quiet tick's packet, as decoded (sim/quiet_wire)
+            packet = data
+        else:
+            try:
+                packet = decode_navdata(data)
+            except NavdataError:
+                stats.record_malformed()
+                self.nav_malformed += 1
+                return
         if not stats.accept_sequence(packet.sequence):
             return
         if DroneState.NAVDATA_BOOTSTRAP in packet.state:

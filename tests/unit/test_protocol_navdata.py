@@ -453,3 +453,36 @@ def test_drone_encoder_options_follow_the_mask():
     assert time_option(2049.5).payload == struct.pack("<I", (1 << 21) | 500000)
     with pytest.raises(ValueError):
         time_option(float("nan"))
+
+
+@settings(max_examples=200, deadline=None)
+@given(angles=st.lists(st.floats(-400.0, 400.0), min_size=3, max_size=3),
+       speeds=st.lists(st.floats(-50.0, 50.0), min_size=3, max_size=3),
+       altitude=st.floats(0.0, 100.0), battery=st.floats(-5.0, 120.0),
+       sequence=st.integers(1, 0xFFFFFFFF), demo=st.booleans(), t_s=st.floats(0.0, 5000.0))
+def test_the_drones_packet_before_encoding_reads_as_its_bytes_decoded(
+        angles, speeds, altitude, battery, sequence, demo, t_s):
+    """``drone_navdata`` is what a receiver reads of ``encode_drone_navdata``'s bytes: the
+    header's state and sequence, the demo option field for field (the lockstep's quiet ticks
+    hand it over without the bytes)."""
+    from ardrone_nmpc.protocol.navdata import drone_navdata
+
+    status = DroneStatus("flying", moving=True, demo=demo, com_watchdog=True)
+    sample = _sample(battery_pct=battery, roll_deg=angles[0], pitch_deg=angles[1],
+                     yaw_deg=angles[2], altitude_m=altitude, vx_body_mps=speeds[0],
+                     vy_body_mps=speeds[1], vz_mps=speeds[2])
+    built = drone_navdata(status, sequence, sample, t_s=t_s)
+    read = decode_navdata(encode_drone_navdata(status, sequence, sample, t_s=t_s))
+    assert (read.state, read.sequence) == (built.state, built.sequence)
+    assert _demo_values(read.demo) == _demo_values(built.demo)  # bit for bit (−0.0 too)
+    assert [(o.tag, o.payload) for o in read.options] == [
+        (o.tag, o.payload) for o in built.options]
+
+
+def _demo_values(demo) -> bytes:
+    """The demo option's fields as float64 bytes."""
+    from dataclasses import astuple
+
+    values = [float(v) for field in astuple(demo)
+              for v in (field if isinstance(field, tuple) else (field,))]
+    return struct.pack(f"<{len(values)}d", *values)

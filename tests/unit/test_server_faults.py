@@ -280,3 +280,29 @@ def test_no_fault_acts_before_quiet_until(name):
         assert bound == math.inf and quiet == 14000 and not acting
     else:
         assert quiet > 1000 and acting > 0
+
+
+@pytest.mark.parametrize("name", list(QUIET_CASES))
+def test_with_the_bursts_asked_no_fault_but_a_dropout_acts_before_quiet_until(name):
+    """``quiet_until_s(…, bursts_asked=True)`` (the lockstep's quiet wire ticks, which ask
+    ``mocap_dropped`` of every frame): before its answer nothing acts where the schedule
+    drops no frame — and a repeated dropout's bursts no longer end the quiet for good."""
+    plant = _RecordingPlant()
+    faults = server_faults(*QUIET_CASES[name], plant=plant)
+    faults.set_clock(0.0)
+    wind = faults.schedule.wind_mps(-math.inf)
+    plant.wind_mps = wind.copy()
+    bound, quiet, quiet_all = -math.inf, 0, 0
+    for i in range(-2000, 12000):
+        t = i * 1e-3
+        if not t < bound:
+            bound = faults.quiet_until_s(t, bursts_asked=True)
+        quiet += t < faults.quiet_until_s(t, bursts_asked=True)  # (asked now, both ways)
+        quiet_all += t < faults.quiet_until_s(t)
+        dropped = faults.schedule.mocap_dropped(t)
+        acted = _acts(faults, plant, t, wind)
+        assert not (acted and t < bound and not dropped), f"{name}: acts at {t}"
+    if name == "sensors":  # the bursts every 3 s: quiet between them, after the first too
+        assert quiet > quiet_all + 3000
+    else:
+        assert quiet == quiet_all

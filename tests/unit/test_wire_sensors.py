@@ -1,0 +1,208 @@
+"""The lockstep wire sensors' shortcuts give the bits of the plain wire path they stand in for.
+
+A flight with a sensor fault takes the wire path (``sim/sensors.py``): every mocap frame and
+navdata packet through the faults to the receiving links. Its shortcuts — mocap frames
+handed over decoded instead of as bytes, the ticks outside the faults' windows flown by one
+compiled call (``sim/quiet_wire.py``) — are switched off for a reference flight of the same
+config: the two must write the same rows and events and end alike.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime.lockstep import run_lockstep
+from ardrone_nmpc.sim.quiet_wire import QuietWire
+from ardrone_nmpc.sim.sensors import LockstepSensors
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+WALL_TIME = {"solve_us", "compute_us", "tick_late_ms"}  # measured: differ between flights
+SQUARE = ["duration_s=7", "sim.settle_s=1"]
+# each kind of act on each stream (frames dropped, missing, zero, late, duplicated and
+# reordered; packets lost, corrupted, duplicated and reordered; a blackout), a repeated
+# dropout, and the wire with a scripted second object and with the kit plant
+FLIGHTS = {
+    "dropout": ("square", ["faults.mocap_dropout.start_s=2",
+                           "faults.mocap_dropout.duration_s=0.3"]),
+    "repeated_dropout": ("square", ["faults.mocap_dropout.start_s=1",
+                                    "faults.mocap_dropout.duration_s=0.1",
+                                    "faults.mocap_dropout.repeat_every_s=1.5"]),
+    "occlusion_zero": ("square", ["faults.mocap_occlusion.start_s=2",
+                                  "faults.mocap_occlusion.duration_s=0.3",
+                                  "faults.mocap_occlusion.zero_pose=true"]),
+    "occlusion_missing": ("square", ["faults.mocap_occlusion.start_s=2",
+                                     "faults.mocap_occlusion.duration_s=0.3"]),
+    "latency": ("square", ["faults.mocap_latency.start_s=2", "faults.mocap_latency.duration_s=0.5",
+                           "faults.mocap_latency.extra_latency_ms=120"]),
+    "disorder_mocap": ("square", ["faults.disorder.start_s=1", "faults.disorder.duration_s=2",
+                                  "faults.disorder.stream=mocap"]),
+    "disorder_navdata": ("square", ["faults.disorder.start_s=1", "faults.disorder.duration_s=2",
+                                    "faults.disorder.stream=navdata"]),
+    "navdata_corrupt": ("square", ["faults.navdata_corrupt.start_s=2",
+                                   "faults.navdata_corrupt.duration_s=0.2"]),
+    "blackout": ("square", ["faults.blackout.start_s=2", "faults.blackout.duration_s=0.3"]),
+    "target": ("follow_car", ["faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
+    "kit": ("square", ["sim.plant.profile=thesis_kit", "faults.mocap_dropout.start_s=2",
+                       "faults.mocap_dropout.duration_s=0.2"]),
+    "turbulence": ("square", ["sim.plant.turbulence_std_mps=0.3", "faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
+    # the compiled legs stop before a climb within reach of the cap, an emptying battery
+    "altitude_cap": ("square", ["drone.altitude_max_m=1.1", "faults.navdata_loss.start_s=2"]),
+    "low_battery": ("square", ["sim.plant.battery_start_pct=22",
+                               "sim.plant.battery_drain_pct_per_min=30",
+                               "faults.navdata_loss.start_s=2"]),
+    # navdata at the mocap's rate: every packet ties with a frame (the frame first); 10 Hz
+    # mocap: ticks without a frame
+    "ties": ("square", ["sim.navdata_rate_hz=100", "faults.mocap_dropout.start_s=2",
+                        "faults.mocap_dropout.duration_s=0.2"]),
+    "slow_mocap": ("square", ["sim.mocap_rate_hz=10", "faults.navdata_loss.start_s=2",
+                              "faults.navdata_loss.duration_s=0.2"]),
+    # 2 kHz mocap: more frames a tick than the events' first rows
+    "fast_mocap": ("square", ["sim.mocap_rate_hz=2000", "faults.mocap_dropout.start_s=2",
+                              "faults.mocap_dropout.duration_s=0.2"]),
+}
+
+
+def _fly(name: str) -> tuple:
+    """Every row (but the wall-clock cells), every event (but its wall time) and the ending
+    of the flight ``name``."""
+    config, overrides = FLIGHTS[name]
+    cfg = load_config(CONFIGS / f"{config}.yaml", SQUARE + overrides)
+    memory = MemoryRecorder()
+    result = run_lockstep(cfg, recorder=memory)
+    rows = [{k: ("nan" if isinstance(v, float) and math.isnan(v) else v)
+             for k, v in row.items() if k not in WALL_TIME} for row in memory.rows]
+    events = [{k: v for k, v in e.items() if k != "wall_s"} for e in memory.run_data(
+        cfg, seed=0).events]
+    return rows, events, (result.ticks, result.ending, result.final_mode, result.end_t_s)
+
+
+@pytest.mark.parametrize("name", sorted(FLIGHTS))
+def test_frames_handed_over_decoded_give_the_bytes_bits(name, monkeypatch):
+    monkeypatch.setattr(LockstepSensors, "frames_as_bytes", True)
+    reference = _fly(name)
+    monkeypatch.setattr(LockstepSensors, "frames_as_bytes", False)
+    fed = []  # the shortcut taken: frames reach the link decoded
+    from ardrone_nmpc.links.mocap_link import MocapLink
+
+    feed_frame = MocapLink.feed_frame
+
+    def counted(self, frame, t_s, *args):
+        fed.append(t_s)
+        return feed_frame(self, frame, t_s, *args)
+
+    monkeypatch.setattr(MocapLink, "feed_frame", counted)
+    assert _fly(name) == reference
+    assert fed
+
+
+@pytest.mark.parametrize("name", sorted(FLIGHTS))
+def test_quiet_ticks_compiled_give_the_python_wire_paths_bits(name, monkeypatch):
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _fly(name)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    answers = []  # the ticks flown compiled (True), handed to the Python path (False)
+    run = QuietWire.run
+
+    def counted(self, t_s):
+        answers.append(run(self, t_s))
+        return answers[-1]
+
+    monkeypatch.setattr(QuietWire, "run", counted)
+    assert _fly(name) == reference
+    assert True in answers  # (most ticks, as a rule: the cap's climbs are the Python's)
+
+
+def _plain(obj) -> dict:
+    """``obj``'s attributes of plain values (numbers, strings, tuples; a deque as a list)."""
+    out = {}
+    for key, value in vars(obj).items():
+        if value.__class__.__name__ == "deque":
+            value = list(value)
+        if isinstance(value, (int, float, str, bool, tuple, list, type(None))):
+            out[key] = value
+    return out
+
+
+def _ended_in(name: str, monkeypatch) -> dict:
+    """What the sampler's receiving links, the firmware and the faults hold at the end of
+    the flight ``name``."""
+    samplers = []
+    init = LockstepSensors.__init__
+
+    def kept(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        samplers.append(self)
+
+    monkeypatch.setattr(LockstepSensors, "__init__", kept)
+    _fly(name)
+    monkeypatch.setattr(LockstepSensors, "__init__", init)
+    sensors = samplers[-1]
+    plant = sensors.plant
+    return {"link": _plain(sensors.mocap), "mocap_stats": _plain(sensors.mocap.stats),
+            "nav_stats": _plain(sensors.nav_stats), "nav_malformed": sensors.nav_malformed,
+            "queue": list(sensors._queue), "firmware": _plain(sensors.firmware),
+            "faults": sensors.drone.faults.counters,
+            "plant": (plant._state, plant._steps, plant._battery, plant._vel_bias,
+                      plant._yaw_bias_deg)}
+
+
+@pytest.mark.parametrize("name", ["dropout", "disorder_navdata", "altitude_cap", "target"])
+def test_quiet_ticks_leave_the_links_firmware_and_faults_as_the_python_path(name,
+                                                                             monkeypatch):
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _ended_in(name, monkeypatch)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    ended = _ended_in(name, monkeypatch)
+    assert ended == reference
+    assert ended["mocap_stats"]["_packets"] > 100  # (frames went through the link)
+
+
+@pytest.mark.parametrize("name", ["_advance_through_wire", "_mocap_frame", "_send_frame",
+                                  "_push", "_run_to"])
+def test_a_sampler_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
+        name, monkeypatch):
+    """The quiet ticks stand in for the sampler's wire legs and sends: a sampler class
+    overriding one of those flies every tick on the Python path, so its override runs."""
+    from ardrone_nmpc.sim import lockstep_drone as lockstep_module
+    from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
+
+    config, overrides = FLIGHTS["dropout"]
+    cfg = load_config(CONFIGS / f"{config}.yaml", overrides)
+    assert LockstepDrone(cfg).sensors._quiet is not None
+    member = LockstepSensors.__dict__[name]
+    kind = type("Overriding", (LockstepSensors,),
+                {name: lambda self, *a, _m=member, **k: _m(self, *a, **k)})
+    monkeypatch.setattr(lockstep_module, "LockstepSensors", kind)
+    drone = LockstepDrone(cfg)
+    assert isinstance(drone.sensors, kind) and drone.sensors.wire
+    assert drone.sensors._quiet is None and drone.sensors._legs is None
+
+
+@pytest.mark.parametrize("owner,name", [
+    ("drone", "navdata_datagrams"), ("firmware", "packet"), ("firmware", "status"),
+    ("faults", "mocap_frame"), ("faults", "quiet_until_s")])
+def test_a_drone_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
+        owner, name):
+    """… and so does a drone, firmware or faults class overriding what they stand in for."""
+    from ardrone_nmpc.sim.drone import SimulatedDrone
+    from ardrone_nmpc.sim.drone_firmware import DroneFirmware
+    from ardrone_nmpc.sim.fault_injection import ServerFaults
+
+    config, overrides = FLIGHTS["dropout"]
+    cfg = load_config(CONFIGS / f"{config}.yaml", overrides)
+    drone = SimulatedDrone.from_config(cfg)
+    assert QuietWire.eligible(drone)
+    base = {"drone": SimulatedDrone, "firmware": DroneFirmware, "faults": ServerFaults}[owner]
+    member = base.__dict__[name]
+    kind = type("Overriding", (base,),
+                {name: lambda self, *a, _m=member, **k: _m(self, *a, **k)})
+    target = {"drone": drone, "firmware": drone.firmware, "faults": drone.faults}[owner]
+    target.__class__ = kind
+    assert not QuietWire.eligible(drone)
