@@ -178,6 +178,21 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("obstacle_gust", "obstacle", SHORT + [
         "faults.wind_gust.start_s=3.013", "faults.wind_gust.duration_s=0.3"], 3),
     ("moving_obstacle_kit", "moving_obstacle", SHORT + KIT, 4),
+    # a second mocap object in blocks (runtime/second_object): a moving obstacle's frames,
+    # noise and centres, the object logged alone; follow (per tick) flown longer
+    ("moving_obstacle_long", "moving_obstacle", ["duration_s=30"], 3),
+    ("moving_obstacle_fig8", "moving_obstacle", ["duration_s=12", "sim.target.path=figure8"],
+     5),
+    ("moving_obstacle_noiseless", "moving_obstacle", [
+        "duration_s=12", "sim.noise.mocap_position_std_m=0"], 6),
+    ("moving_obstacle_gust", "moving_obstacle", [
+        "duration_s=12", "faults.wind_gust.start_s=3.013", "faults.wind_gust.duration_s=0.3"],
+     7),
+    ("moving_obstacle_navdata", "moving_obstacle", [
+        "duration_s=12", "estimator.horizontal_velocity=navdata"], 8),
+    ("target_logged", "hover", ["duration_s=8", "sim.target.object_name=car",
+                                "sim.target.path=circle"], 2),
+    ("follow_car_long", "follow_car", ["duration_s=20"], 9),
 ]
 
 
