@@ -11,9 +11,10 @@ and a row of numbers a tick (``runs/block_row``); :class:`TickBlocks` writes bac
 Python objects what the last tick left — the same values the per-tick path leaves — and
 the runner writes the rows (docs/architecture.md, runtime).
 
-A second mocap object (``sim.target``: logged, or a moving obstacle's centre) is drawn in
-the block per frame the legs take (``runtime/second_object``), its rows then the per-tick
-path's dicts (``log_columns.target_cells_row``); a followed one is the per-tick path's.
+A second mocap object (``sim.target``: logged, a moving obstacle's centre, or followed: its
+reference's table) is drawn in the block per frame the legs take and observed every tick
+(``runtime/second_object``), its rows then the per-tick path's dicts
+(``log_columns.target_cells_row``).
 
 A tick that is not the usual one ends the block where Python must take over (``EXIT_*``):
 before the tick (a watchdog due: nothing of it done), after its legs (a leg the kernel
@@ -39,8 +40,8 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL, kernel_twin
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runs import block_row as br
 from ardrone_nmpc.runtime.control_tick import control_tick, control_tick_obstacles
-from ardrone_nmpc.runtime.second_object import (O_ON, O_PSI, O_RX, O_T, O_X, SecondObject,
-                                                take_frame)
+from ardrone_nmpc.runtime.second_object import (O_FOLLOW, O_ON, O_PSI, O_RX, O_T, O_X,
+                                                SecondObject, followed, take_frame)
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
@@ -99,6 +100,8 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
             return i, (EXIT_AFTER_LEGS if status == db.LEGS_PARTIAL else
                        EXIT_SHORT if status == db.LEGS_SHORT else EXIT_BEFORE)
         t0_ns = monotonic_ns()
+        if o[O_FOLLOW] != 0.0:  # (Tick.step's observe, then the reference's table)
+            followed(o, t_s, t_exp_s, c[C_LEAD_S], work, rows)
         nxt = int(c[C_NEXT])
         vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
         # (what the links hold: d's newest pose and navdata sample, and ẋ, ẏ from the
@@ -198,8 +201,8 @@ class TickBlocks:
     @staticmethod
     def takes(tick, drone, compile_now: bool) -> bool:
         """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
-        is one compiled call whose rows are cells, with no second object to follow (one
-        logged or avoided: :class:`SecondObject`), and its drone's ticks are the compiled
+        is one compiled call whose rows are cells, with a second object only where the
+        kernel draws it (:meth:`SecondObject.takes`), and its drone's ticks are the compiled
         legs' (on a platform whose clock the kernel reads: ``core/monotonic.SAME_CLOCK``; a
         drone with something injected that
         leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
@@ -218,7 +221,7 @@ class TickBlocks:
         self.tick, self.drone = tick, drone
         #: the kernel of this flight's blocks (:data:`BLOCK_KERNELS`)
         self.kernel = BLOCK_KERNELS[tick.control_tick.kernel]
-        #: the second mocap object's numbers (logged, a moving obstacle's centre)
+        #: the second mocap object's numbers (logged, a moving obstacle's centre, followed)
         self.second = SecondObject(tick, drone.sensors)
         #: the rows have the object's cells
         self.target = drone.sensors.target_cfg is not None
@@ -391,8 +394,8 @@ class TickBlocks:
         ticks, its states filled at each one's horizon times — the delay's lead is the
         block's (a fit that moves it ends a block)."""
         tick = self.tick
-        if not tick.trajectory.tabulated:
-            return n_max
+        if not tick.trajectory.tabulated or tick.follow is not None:
+            return n_max  # (a followed object's: the kernel's, a tick at a time)
         control = tick.control
         n_max = min(n_max, TABLE_TICKS)
         t_exp_s = (np.arange(k, k + n_max) - self.n_settle) * self.period_s  # tick_block's

@@ -13,8 +13,10 @@ filter and the centres in ``TrackedObject.update``'s and ``MovingObstacles.updat
 ``O_*``), and what it leaves written back — the sampler's newest pose of the object, the
 generator, the tracked object's filter.
 
-The ``follow`` reference (``reference/live.LiveTarget``) is not here: its ticks are the
-per-tick path's (no compiled control tick takes that reference).
+A followed object (reference kind ``follow``) is observed every tick (:func:`followed`:
+``LiveTarget.observe``'s filter and freshness) and its reference written into the control
+stage's table at the tick's horizon times (``LiveTarget.state_at``'s arithmetic, where the
+per-tick path's ``fill_reference_table`` calls it): the compiled control tick reads it there.
 """
 
 from __future__ import annotations
@@ -27,22 +29,30 @@ from numba import njit
 from ardrone_nmpc.control.obstacles import OBS_X
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL
-from ardrone_nmpc.core.types import MocapPose
+from ardrone_nmpc.core.types import (IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM,
+                                     MocapPose)
+from ardrone_nmpc.reference.live import MAX_EXTRAPOLATION_S, LiveTarget
 from ardrone_nmpc.runtime.stages import MovingObstacles
+from ardrone_nmpc.runtime.tick_kernels import W_HEAD, W_TIMES
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.target import target_numbers
 
-__all__ = ["SecondObject", "take_frame"]
+__all__ = ["O_FOLLOW", "O_ON", "SecondObject", "followed", "take_frame"]
 
 # o: an object at all (1.0) or none (0.0); its path (1.0: circle), radius, speed, centre,
 # the noise's σ; the normals consumed (from the block's first); its newest pose — the
 # frame's time, receipt time, position, heading — and 1.0 once the kernel took one; then a
 # moving obstacle's (1.0: one), the prediction time, the filter's τ, the tracked object
-# (seen 1.0, time, the pose's stamp, position, heading, velocity), and the table's rows
-# that move (their count, then the rows: O_ROWS …)
+# (seen 1.0, time, the pose's stamp, position, heading, velocity); a followed one's (1.0:
+# one; LiveTarget's settings — the pose's age limit, its prediction 1.0, the object's
+# heading 1.0, the fixed heading, the offset and its frame (1.0: the object's), the start —
+# and whether the pose is fresh 1.0); the obstacle table's rows that move (their count, then
+# the rows: O_ROWS …)
 (O_ON, O_CIRCLE, O_R, O_V, O_CX, O_CY, O_CZ, O_STD, O_USED, O_T, O_RX, O_X, O_Y, O_Z, O_PSI,
  O_TOOK, O_MOVING, O_AHEAD_S, O_TAU_S, O_SEEN, O_TRK_T, O_STAMP, O_TRK_X, O_TRK_Y, O_TRK_Z,
- O_TRK_PSI, O_VX, O_VY, O_VZ, O_N_ROWS, O_ROWS) = range(31)
+ O_TRK_PSI, O_VX, O_VY, O_VZ, O_FOLLOW, O_MAX_AGE_MS, O_PREDICT, O_HEADING, O_FIXED_PSI,
+ O_OX, O_OY, O_OZ, O_OBJECT_FRAME, O_START_X, O_START_Y, O_START_Z, O_FRESH, O_N_ROWS,
+ O_ROWS) = range(44)
 #: normals drawn ahead at a time: several blocks' frames (three a frame, one frame a tick)
 _DRAWN = 1024
 
@@ -62,7 +72,7 @@ def take_frame(o, normals, t_event, rx_s, obstacles):
     o[O_T], o[O_RX], o[O_X], o[O_Y], o[O_Z], o[O_PSI] = t_event, rx_s, px, py, pz, psi
     o[O_TOOK] = 1.0
     if o[O_MOVING] != 0.0:
-        _tracked(o, t_event, px, py, pz, psi)
+        _tracked(o, t_event, t_event, px, py, pz, psi)
         ahead = o[O_AHEAD_S]
         cx = o[O_TRK_X] + o[O_VX] * ahead
         cy = o[O_TRK_Y] + o[O_VY] * ahead
@@ -74,10 +84,56 @@ def take_frame(o, normals, t_event, rx_s, obstacles):
 
 
 @njit(cache=True, **INNER_KERNEL)
-def _tracked(o, t_s, px, py, pz, psi):
-    """``TrackedObject.update`` of the pose stamped ``t_s`` seen at ``t_s``:
+def followed(o, t_s, t_exp_s, lead_s, work, rows):
+    """``LiveTarget.observe`` of the object's newest pose at the tick of plant time ``t_s``
+    (experiment time ``t_exp_s``), then the reference table's first tick
+    (``tick_kernels.fill_reference_table``'s, its horizon times [t, (t + lead) + offsets[1:]])
+    filled by ``LiveTarget.state_at``'s arithmetic, time by time."""
+    age_s = t_s - o[O_RX]
+    age_ms = age_s * 1e3
+    o[O_FRESH] = 1.0 if age_ms <= o[O_MAX_AGE_MS] else 0.0
+    _tracked(o, t_exp_s - age_s, o[O_T], o[O_X], o[O_Y], o[O_Z], o[O_PSI])
+    n = int(work[W_TIMES])
+    base = t_exp_s + lead_s
+    for i in range(n):
+        t = t_exp_s if i == 0 else base + work[W_HEAD + i]
+        rows[i, 0] = t
+        _state_at(o, t, rows[i, 1:])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _state_at(o, t, out):
+    """``LiveTarget.state_at`` of one time ``t`` into ``out`` (7): its expressions
+    element by element (``np.clip``'s bounds: −0.0 and NaN kept)."""
+    for c in range(STATE_DIM):
+        out[c] = 0.0
+    out[IX_PSI] = o[O_TRK_PSI] if o[O_HEADING] != 0.0 else o[O_FIXED_PSI]
+    if o[O_SEEN] == 0.0:
+        out[IX_X], out[IX_Y], out[IX_Z] = o[O_START_X], o[O_START_Y], o[O_START_Z]
+        return
+    vx = vy = vz = 0.0
+    if o[O_PREDICT] != 0.0 and o[O_FRESH] != 0.0:
+        vx, vy, vz = o[O_VX], o[O_VY], o[O_VZ]
+    ahead = t - o[O_TRK_T]
+    if ahead < 0.0:
+        ahead = 0.0
+    elif ahead > MAX_EXTRAPOLATION_S:
+        ahead = MAX_EXTRAPOLATION_S
+    ox, oy, oz = o[O_OX], o[O_OY], o[O_OZ]
+    if o[O_OBJECT_FRAME] != 0.0:  # (LiveTarget._offset_world)
+        c, s = math.cos(o[O_TRK_PSI]), math.sin(o[O_TRK_PSI])
+        ox, oy = c * ox - s * oy, s * ox + c * oy
+    out[IX_X] = (o[O_TRK_X] + ox) + ahead * vx
+    out[IX_Y] = (o[O_TRK_Y] + oy) + ahead * vy
+    out[IX_Z] = (o[O_TRK_Z] + oz) + ahead * vz
+    out[IX_VX], out[IX_VY], out[IX_VZ] = vx, vy, vz
+
+
+@njit(cache=True, **INNER_KERNEL)
+def _tracked(o, t_s, stamp, px, py, pz, psi):
+    """``TrackedObject.update`` of the pose stamped ``stamp`` seen at ``t_s``:
     ``v ← (1 − a)·v + a·Δp/Δt`` element by element, in its order."""
-    if t_s == o[O_STAMP]:
+    if stamp == o[O_STAMP]:
         return
     if o[O_SEEN] != 0.0 and t_s > o[O_TRK_T]:
         dt = t_s - o[O_TRK_T]
@@ -86,7 +142,7 @@ def _tracked(o, t_s, px, py, pz, psi):
         o[O_VY] = (1.0 - a) * o[O_VY] + a * (py - o[O_TRK_Y]) / dt
         o[O_VZ] = (1.0 - a) * o[O_VZ] + a * (pz - o[O_TRK_Z]) / dt
     o[O_TRK_X], o[O_TRK_Y], o[O_TRK_Z], o[O_TRK_PSI] = px, py, pz, psi
-    o[O_TRK_T], o[O_STAMP], o[O_SEEN] = t_s, t_s, 1.0
+    o[O_TRK_T], o[O_STAMP], o[O_SEEN] = t_s, stamp, 1.0
 
 
 flush_stale_caches(__name__)
@@ -117,12 +173,14 @@ class SecondObject:
     @staticmethod
     def takes(tick, sensors) -> bool:
         """Whether the kernel does this flight's object: none, or ``sim.target``'s (a path
-        it knows, numbers it reads as float64s) feeding nothing or moving obstacles (the
-        stage's own class); the ``follow`` reference is the per-tick path's."""
-        cfg = sensors.target_cfg
-        return tick.follow is None and (tick.obstacles is None or (
-            type(tick.obstacles) is MovingObstacles and cfg is not None)) and (
-            cfg is None or cfg.path in ("circle", "figure8"))
+        it knows) feeding nothing, moving obstacles (the stage's own class) or the
+        ``follow`` reference (``LiveTarget``'s own class) — not both."""
+        cfg, follow, moving = sensors.target_cfg, tick.follow, tick.obstacles
+        if cfg is None:
+            return follow is None and moving is None
+        return (cfg.path in ("circle", "figure8")
+                and (moving is None or type(moving) is MovingObstacles)
+                and (follow is None or (type(follow) is LiveTarget and moving is None)))
 
     def entered(self) -> bool:
         """``o`` filled from the sampler's newest pose of the object and the moving
@@ -138,16 +196,18 @@ class SecondObject:
         o[O_CIRCLE:O_TOOK + 1] = (1.0 if cfg.path == "circle" else 0.0, cfg.radius_m,
                                   cfg.speed_mps, *cfg.center_m, sensors._target_std_m, 0.0,
                                   pose.t_s, sensors.target_rx_t_s, x, y, z, pose.psi_rad, 0.0)
-        moving = self.tick.obstacles
+        moving, follow = self.tick.obstacles, self.tick.follow
         if moving is not None:
-            track = moving.track
-            seen = track.position_m is not None
-            stamp = track._stamp
-            o[O_MOVING:O_N_ROWS] = (
-                1.0, moving.ahead_s, track.time_constant_s, 1.0 if seen else 0.0, track.t_s,
-                math.nan if stamp is None else stamp,
-                *(track.position_m.tolist() if seen else (0.0, 0.0, 0.0)), track.psi_rad,
-                *track.velocity_mps.tolist())
+            o[O_MOVING], o[O_AHEAD_S] = 1.0, moving.ahead_s
+            _track_entered(o, moving.track)
+        elif follow is not None:
+            f = follow.cfg
+            _track_entered(o, follow._object)
+            o[O_FOLLOW:O_N_ROWS] = (
+                1.0, f.max_age_ms, 1.0 if f.predict else 0.0,
+                1.0 if f.heading == "object" else 0.0, follow.fixed_psi_rad,
+                *follow._offset.tolist(), 1.0 if f.offset_frame != "world" else 0.0,
+                *follow.start_m.tolist(), 1.0 if follow._fresh else 0.0)
         return True
 
     def drawn(self, n_ticks: int) -> None:
@@ -169,11 +229,19 @@ class SecondObject:
     def written(self) -> None:
         """What the blocks left, written back as the per-tick path leaves it: the
         generator where the frames' draws left it; the sampler's newest pose of the object
-        (``target_pose``'s: read-only arrays); the tracked object's filter."""
+        (``target_pose``'s: read-only arrays); the tracked object's filter — a followed
+        one's, and its pose's freshness, whether a frame was taken or not (``observe``:
+        every tick)."""
         draws, o = self._draws, self.o
         if draws is None:
             return
         draws.sync()
+        follow = self.tick.follow
+        if follow is not None:
+            v = o.tolist()
+            follow._fresh = v[O_FRESH] != 0.0
+            if v[O_SEEN] != 0.0:
+                _track_written(follow._object, v, np.array(v[O_TRK_X:O_TRK_PSI]))
         if o[O_TOOK] == 0.0:
             return
         o[O_TOOK] = 0.0
@@ -188,7 +256,23 @@ class SecondObject:
         sensors.target_rx_t_s = v[O_RX]
         moving = self.tick.obstacles
         if moving is not None:
-            track = moving.track
-            track.position_m, track.psi_rad = pos, v[O_TRK_PSI]
-            track.velocity_mps = np.array(v[O_VX:O_VZ + 1])
-            track.t_s, track._stamp = v[O_TRK_T], v[O_STAMP]
+            _track_written(moving.track, v, pos)
+
+
+def _track_entered(o: np.ndarray, track) -> None:
+    """``o``'s tracked object from ``track`` (a ``TrackedObject``)."""
+    seen = track.position_m is not None
+    stamp = track._stamp
+    o[O_TAU_S:O_FOLLOW] = (
+        track.time_constant_s, 1.0 if seen else 0.0, track.t_s,
+        math.nan if stamp is None else stamp,
+        *(track.position_m.tolist() if seen else (0.0, 0.0, 0.0)), track.psi_rad,
+        *track.velocity_mps.tolist())
+
+
+def _track_written(track, v: list, position_m: np.ndarray) -> None:
+    """``track`` (a ``TrackedObject``) from ``o``'s numbers ``v`` (its position: the pose's
+    array, as ``update`` keeps it)."""
+    track.position_m, track.psi_rad = position_m, v[O_TRK_PSI]
+    track.velocity_mps = np.array(v[O_VX:O_VZ + 1])
+    track.t_s, track._stamp = v[O_TRK_T], v[O_STAMP]

@@ -154,9 +154,14 @@ CASES = [
     ("moving_obstacle_kit_gust", "moving_obstacle",
      ["duration_s=8", *SETTLE, KIT, "faults.wind_gust.start_s=3",
       "faults.wind_gust.duration_s=0.3"], 6),
-    # flights no block takes (as the blocks' first version has it): a followed object, an
-    # estimator the compiled calls do not take, faults that touch the sensors' bytes
+    # a followed object (its reference's table filled in the block): in its frame and
+    # heading, its pose stale on some ticks (age 3 or 8 ms against a 5 ms limit)
     ("follow_car", "follow_car", ["duration_s=8", *SETTLE], 0),
+    ("follow_object_frame_stale", "follow_car",
+     ["duration_s=8", *SETTLE, "reference.follow.offset_frame=object",
+      "reference.follow.heading=object", "reference.follow.max_age_ms=5"], 7),
+    # flights no block takes (as the blocks' first version has it): an estimator the
+    # compiled calls do not take, faults that touch the sensors' bytes
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
@@ -277,6 +282,9 @@ def stages(out: dict, tick: Tick) -> None:
         _attrs(out, "tick.offset.integrator", tick.offset.integrator)
     if tick.obstacles is not None:  # a moving obstacle's tracked object (its filter)
         _attrs(out, "tick.obstacles.track", tick.obstacles.track)
+    if tick.follow is not None:  # a followed one's (its filter, its pose's freshness)
+        _attrs(out, "tick.follow", tick.follow)
+        _attrs(out, "tick.follow._object", tick.follow._object)
 
 
 def differences(a: dict, b: dict, limit: int = 12) -> list[str]:
@@ -637,13 +645,14 @@ def test_blocks_take_a_logged_object(monkeypatch):
     assert np.isfinite(ages[1:]).all()
 
 
-def test_a_followed_object_flies_no_block(monkeypatch):
-    """``follow`` (its reference fed the object's pose each tick): every tick
-    ``Tick.step``'s — no compiled control tick takes that reference."""
-    _, config, overrides, seed = _case("follow_car")
-    block = fly(_config(config, overrides), seed, monkeypatch, block_ticks=None,
-                wanted=set())
-    assert block.steps == len(block.recorder.written)
+def test_a_followed_object_flies_blocks(monkeypatch):
+    """``follow`` (its reference fed the object's pose each tick, its table filled in the
+    block): far fewer ``Tick.step`` calls than rows, and the tally saw the object."""
+    cfg = _config("follow_car", ["duration_s=10", *SETTLE])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"
+    assert block.result.ending == "completed"  # (not failed-no-target)
 
 
 def _case(name: str) -> tuple:

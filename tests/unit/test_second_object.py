@@ -19,7 +19,10 @@ from ardrone_nmpc.core.numerics import callable_from_python
 from ardrone_nmpc.runs.log_columns import (LOG_COLUMNS, TARGET_CELL_KEYS, TICK_CELL_KEYS,
                                            target_cells_row)
 from ardrone_nmpc.runtime import second_object as so
+from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.runtime.stages import MovingObstacles
+from ardrone_nmpc.runtime.tick_kernels import TABLE_TICKS, W_HEAD, W_TIMES
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim import target as target_module
 from ardrone_nmpc.sim.target import target_pose, target_state
@@ -27,6 +30,7 @@ from ardrone_nmpc.sim.target import target_pose, target_state
 # the kernels' twins Python can call (the same source and options: the same machine code)
 target_numbers = callable_from_python(target_module.target_numbers)
 take_frame = callable_from_python(so.take_frame)
+followed = callable_from_python(so.followed)
 
 
 def _bits(x: float) -> bytes:
@@ -113,3 +117,53 @@ def test_a_target_row_has_the_general_rows_keys_in_order():
     assert list(row) == list(TARGET_CELL_KEYS)
     assert all(row[k] == LOG_COLUMNS.index(k) for k in row)
     assert type(row["target_x_m"]) is np.float64 and type(row["target_t_s"]) is float
+
+
+@pytest.mark.parametrize("overrides", [
+    [], ["reference.follow.offset_frame=object", "reference.follow.heading=object"],
+    ["reference.follow.predict=false"]], ids=["world", "object", "no_predict"])
+def test_a_followed_object_is_observed_and_its_table_filled_as_live_targets(overrides):
+    """Ticks with and without a new frame, the pose fresh and stale (a 10 ms limit): the
+    kernel's table rows equal ``LiveTarget.observe`` then ``state_at`` at the horizon times
+    ``fill_reference_table`` makes (its time column too), the freshness and the filter."""
+    ref = load_config(None, ["reference.kind=follow", "reference.start_m=[1,2,1]",
+                             "reference.start_psi_rad=0.3", "reference.follow.max_age_ms=10",
+                             "reference.follow.offset_m=[0.4,-0.2,1.0]", *overrides]).reference
+    live = LiveTarget(ref)
+    cfg, n, lead = _cfg("circle"), 6, 0.26
+    work = np.zeros(W_HEAD + n)
+    work[W_TIMES], work[W_HEAD:] = n, np.arange(n) * 0.1
+    rows = np.full((TABLE_TICKS * n, 8), np.nan)
+    o = _object(cfg, 0.0005, [], 0.0)
+    o[so.O_MOVING], o[so.O_TAU_S] = 0.0, live._object.time_constant_s
+    o[so.O_FOLLOW], o[so.O_MAX_AGE_MS] = 1.0, ref.follow.max_age_ms
+    o[so.O_PREDICT] = 1.0 if ref.follow.predict else 0.0
+    o[so.O_HEADING] = 1.0 if ref.follow.heading == "object" else 0.0
+    o[so.O_FIXED_PSI], o[so.O_OX:so.O_OZ + 1] = live.fixed_psi_rad, ref.follow.offset_m
+    o[so.O_OBJECT_FRAME] = 1.0 if ref.follow.offset_frame == "object" else 0.0
+    o[so.O_START_X:so.O_START_Z + 1] = ref.start_m
+    rng, draws = np.random.default_rng(4), NormalBlocks(np.random.default_rng(4), 64)
+    t_zero, pose, fresh = 2.0, None, set()
+    no_obstacles = np.zeros((0, OBS_COLS))
+    for k in range(12):
+        t_s = t_zero + 0.065 * k
+        if k % 3 != 2:  # a new frame, 3 or 8 ms before the tick; else the last again
+            t_frame = t_s - (0.003 if k % 2 else 0.008)
+            pose = target_pose(cfg, t_frame, rng, 0.0005)
+            draws.ensure(3)
+            o[so.O_USED] = 0.0
+            take_frame(o, draws.values[draws.pos:], t_frame, t_frame, no_obstacles)
+            draws.pos += int(o[so.O_USED])
+        t_exp = t_s - t_zero - 0.5
+        age_s = t_s - o[so.O_RX]
+        live.observe(pose, t_pose_s=t_exp - age_s, age_ms=age_s * 1e3)
+        times = np.add(t_exp + lead, work[W_HEAD:])
+        times[0] = t_exp
+        expected = live.state_at(times)
+        followed(o, t_s, t_exp, lead, work, rows)
+        assert rows[:n, 0].tobytes() == times.tobytes(), k
+        assert rows[:n, 1:].tobytes() == expected.tobytes(), k
+        assert (o[so.O_FRESH] != 0.0) is live._fresh
+        fresh.add(live._fresh)
+        assert o[so.O_VX:so.O_VZ + 1].tobytes() == live._object.velocity_mps.tobytes()
+    assert np.isnan(rows[n:]).all() and fresh == {True, False}
