@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ardrone_nmpc.control.obstacles import OBS_X
+from ardrone_nmpc.control.obstacles import OBS_COLS, OBS_X
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import INNER_KERNEL
 from ardrone_nmpc.core.types import (IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM,
@@ -162,8 +162,10 @@ class SecondObject:
         self.o = np.zeros(O_ROWS + len(rows))
         self.o[O_N_ROWS] = len(rows)
         self.o[O_ROWS:] = rows
-        #: the solver's obstacle table (the moving rows' centres written there)
-        self.obstacles = tick.control.nmpc.obstacles
+        #: the solver's obstacle table (the moving rows' centres written there; none
+        #: without an NMPC: an empty table of the same kind)
+        nmpc = tick.control.nmpc
+        self.obstacles = nmpc.obstacles if nmpc is not None else np.zeros((0, OBS_COLS))
         self._draws = None
         self.normals = np.zeros(0)
         if cfg is not None:
@@ -174,13 +176,15 @@ class SecondObject:
     def takes(tick, sensors) -> bool:
         """Whether the kernel does this flight's object: none, or ``sim.target``'s (a path
         it knows) feeding nothing, moving obstacles (the stage's own class) or the
-        ``follow`` reference (``LiveTarget``'s own class) — not both."""
+        ``follow`` reference of an NMPC (``LiveTarget``'s own class, read from the control
+        stage's table: :func:`followed`) — not both."""
         cfg, follow, moving = sensors.target_cfg, tick.follow, tick.obstacles
         if cfg is None:
             return follow is None and moving is None
         return (cfg.path in ("circle", "figure8")
                 and (moving is None or type(moving) is MovingObstacles)
-                and (follow is None or (type(follow) is LiveTarget and moving is None)))
+                and (follow is None or (type(follow) is LiveTarget and moving is None
+                                        and tick.control.nmpc is not None)))
 
     def entered(self) -> bool:
         """``o`` filled from the sampler's newest pose of the object and the moving
