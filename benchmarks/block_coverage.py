@@ -51,6 +51,8 @@ CASES = [
     ("obstacle", "obstacle", []),
     ("moving_obstacle", "moving_obstacle", []),
     ("follow_car", "follow_car", []),
+    ("hover, a second object logged", "hover",
+     ["sim.target.object_name=car", "sim.target.path=circle"]),
 ]
 
 

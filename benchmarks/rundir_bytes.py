@@ -4,10 +4,11 @@
     python benchmarks/rundir_bytes.py compare A B
 
 ``record`` writes one run directory per case (a config, ``--set`` overrides and a seed:
-square flights long and short, a step, ``follow``, hover, the P controller, faults that
-hold, land and stop, wind, obstacles, excitation) the way ``simulate`` and sweeps do
-(``experiments.record.record_lockstep``, blocks of rows) under ``DIR`` with the tree on
-``sys.path``: ``PYTHONPATH=/tmp/base python benchmarks/rundir_bytes.py record /tmp/a``.
+square flights long and short, a step, ``follow``, a moving obstacle, hover, the P
+controller, faults that hold, land and stop, wind, obstacles, excitation) the way
+``simulate`` and sweeps do (``experiments.record.record_lockstep``, blocks of rows) under
+``DIR`` with the tree on ``sys.path``:
+``PYTHONPATH=/tmp/base python benchmarks/rundir_bytes.py record /tmp/a``.
 ``compare`` checks every file of every case byte for byte — but for what is the clock's:
 the ``solve_us`` and ``compute_us`` cells of ``log.csv`` (a number either way), the
 summary's solve-time and compute rows, the events' ``wall_s`` and ``config.yaml``'s
@@ -29,6 +30,7 @@ CASES: list[tuple[str, list[str], int]] = [
     ("square", SHORT, 3),
     ("step_x", [], 1),
     ("follow_car", ["duration_s=15"], 0),
+    ("moving_obstacle", ["duration_s=15"], 1),
     ("hover", ["duration_s=10"], 2),
     ("step_z", ["controller.kind=p"], 0),
     ("square", [*SHORT, "faults.mocap_dropout.start_s=5", "faults.mocap_dropout.duration_s=2"], 0),

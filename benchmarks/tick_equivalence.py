@@ -209,6 +209,37 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("obstacle_gust", "obstacle", SHORT + [
         "faults.wind_gust.start_s=3.013", "faults.wind_gust.duration_s=0.3"], 3),
     ("moving_obstacle_kit", "moving_obstacle", SHORT + KIT, 4),
+    # a second mocap object in blocks (runtime/second_object): a moving obstacle's frames,
+    # noise and centres, the object logged alone; followed (its reference's table filled in
+    # the kernel), in the object's frame and heading, without prediction, its pose stale on
+    # some ticks (age 3 or 8 ms), on a figure 8 without noise, the kit with the navdata's
+    # speeds, a gust between blocks
+    ("moving_obstacle_long", "moving_obstacle", ["duration_s=30"], 3),
+    ("moving_obstacle_fig8", "moving_obstacle", ["duration_s=12", "sim.target.path=figure8"],
+     5),
+    ("moving_obstacle_noiseless", "moving_obstacle", [
+        "duration_s=12", "sim.noise.mocap_position_std_m=0"], 6),
+    ("moving_obstacle_gust", "moving_obstacle", [
+        "duration_s=12", "faults.wind_gust.start_s=3.013", "faults.wind_gust.duration_s=0.3"],
+     7),
+    ("moving_obstacle_navdata", "moving_obstacle", [
+        "duration_s=12", "estimator.horizontal_velocity=navdata"], 8),
+    ("target_logged", "hover", ["duration_s=8", "sim.target.object_name=car",
+                                "sim.target.path=circle"], 2),
+    ("follow_car_long", "follow_car", ["duration_s=20"], 9),
+    ("follow_object_frame", "follow_car", [
+        "duration_s=12", "reference.follow.offset_frame=object",
+        "reference.follow.heading=object"], 1),
+    ("follow_no_predict", "follow_car", ["duration_s=12", "reference.follow.predict=false"],
+     2),
+    ("follow_stale", "follow_car", ["duration_s=12", "reference.follow.max_age_ms=5"], 3),
+    ("follow_fig8_noiseless", "follow_car", [
+        "duration_s=12", "sim.target.path=figure8", "sim.noise.mocap_position_std_m=0"], 4),
+    ("follow_kit_navdata", "follow_car", [
+        "duration_s=12", "estimator.horizontal_velocity=navdata", *KIT], 5),
+    ("follow_gust", "follow_car", ["duration_s=12", "faults.wind_gust.start_s=3.013",
+                                   "faults.wind_gust.duration_s=0.3"], 6),
+    ("follow_unseen", "follow_car", ["duration_s=6", "sim.target=null"], 7),  # (no-target)
 ]
 
 

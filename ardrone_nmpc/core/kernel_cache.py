@@ -29,11 +29,11 @@ KERNEL_SOURCES = (
     "control/obstacles.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
-    "sim/sensor_step.py", "sim/drone_block.py", "runs/path_kernels.py", "runs/block_row.py",
-    "reference/kernels.py", "estimation/response_kernels.py", "estimation/response_lanes.py",
-    "estimation/disturbance.py",
+    "sim/sensor_step.py", "sim/drone_block.py", "sim/target.py", "runs/path_kernels.py",
+    "runs/block_row.py", "reference/kernels.py", "reference/live.py",
+    "estimation/response_kernels.py", "estimation/response_lanes.py", "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
-    "runtime/control_tick.py", "runtime/lockstep_block.py",
+    "runtime/control_tick.py", "runtime/lockstep_block.py", "runtime/second_object.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None

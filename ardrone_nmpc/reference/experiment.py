@@ -14,6 +14,7 @@ import numpy as np
 
 from ardrone_nmpc.core.types import IX_X, IX_Y, IX_Z
 from ardrone_nmpc.reference.excitation import Excitation
+from ardrone_nmpc.reference.live import TABLE_ARGS
 from ardrone_nmpc.reference.trajectories import (Ellipse, Hover, Lorenz, ReferenceError, Step,
                                                   Trajectory, Waypoints, is_times,
                                                   make_trajectory)
@@ -47,9 +48,6 @@ def lookup_args(trajectory: Trajectory) -> tuple | None:
     return None
 
 
-#: The lookup's arrays of a reference the compiled tick reads from a table of its states
-#: (``runtime/tick_kernels.fill_reference_table``): no knots.
-_TABLE_ARGS = (np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
 
 
 def tabulated(trajectory: Trajectory) -> bool:
@@ -79,7 +77,7 @@ class HoldStartThen:
         #: the states are a table's, filled by :meth:`state_at` (``tabulated``)
         self.tabulated = args is None and tabulated(trajectory)
         if self.tabulated:
-            args = _TABLE_ARGS
+            args = TABLE_ARGS
         self.waypoint_args = None if args is None else args + (start,)
 
     def state_at(self, t_s):

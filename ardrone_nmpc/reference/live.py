@@ -18,9 +18,12 @@ import numpy as np
 
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 
-__all__ = ["LiveTarget", "TrackedObject"]
+__all__ = ["MAX_EXTRAPOLATION_S", "TABLE_ARGS", "LiveTarget", "TrackedObject"]
 
-_MAX_EXTRAPOLATION_S = 3.0  # never plan further ahead on a guessed velocity than this
+MAX_EXTRAPOLATION_S = 3.0  # never plan further ahead on a guessed velocity than this
+#: The lookup's arrays of a reference the compiled tick reads from a table of its states
+#: (``runtime/tick_kernels.fill_reference_table``): no knots.
+TABLE_ARGS = (np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
 
 
 class TrackedObject:
@@ -67,6 +70,10 @@ class LiveTarget:
     """
 
     duration_s = math.inf
+    #: the compiled tick reads its states from a table :meth:`state_at` fills, a tick at a
+    #: time (``reference/experiment.tabulated``: every expression of it elementwise, the
+    #: same bits whatever other times it is asked with)
+    tabulated = True
 
     def __init__(self, ref_cfg) -> None:
         f = ref_cfg.follow
@@ -76,6 +83,8 @@ class LiveTarget:
         self._offset = np.asarray(f.offset_m, dtype=np.float64)
         self._object = TrackedObject(f.velocity_filter_s)  # on the experiment clock
         self._fresh = False
+        #: the compiled tick's lookup arrays (``HoldStartThen.waypoint_args``'): a table's
+        self.waypoint_args = TABLE_ARGS + (self.state_at(0.0)[0],)
 
     # ------------------------------------------------------------------ measurements
     def observe(self, pose, *, t_pose_s: float, age_ms: float) -> None:
@@ -109,7 +118,7 @@ class LiveTarget:
             return out
         moving = self.cfg.predict and self._fresh
         vel = obj.velocity_mps if moving else np.zeros(3)
-        ahead = np.clip(t - obj.t_s, 0.0, _MAX_EXTRAPOLATION_S)
+        ahead = np.clip(t - obj.t_s, 0.0, MAX_EXTRAPOLATION_S)
         base = obj.position_m + self._offset_world()
         out[:, [IX_X, IX_Y, IX_Z]] = base + ahead[:, None] * vel
         out[:, [IX_VX, IX_VY, IX_VZ]] = vel

@@ -16,8 +16,8 @@ from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
                                          BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
                                          BR_NAV_VX, BR_NAV_VY, BR_NEWTON, BR_NORM, BR_SATURATED,
-                                         BR_SOLVE_US, BR_T, BR_TRUE_PSI, BR_TRUE_VZ, BR_TRUE_X,
-                                         BR_TRUE_Y, BR_TRUE_Z)
+                                         BR_SOLVE_US, BR_T, BR_TARGET_X, BR_TRUE_PSI,
+                                         BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y, BR_TRUE_Z)
 from ardrone_nmpc.runs.log_columns import block_cells
 
 __all__ = ["BlockRows"]
@@ -29,15 +29,17 @@ class BlockRows:
     """``numbers``: a block's rows (``BLOCK_ROW`` floats a tick, owned: the kernel's table is
     copied); ``mode``: their mode label; ``saturated``, ``status``, ``nav_mode``: the texts
     of the saturation bits, the solver's status and the navdata's mode
-    (:func:`~ardrone_nmpc.runs.log_columns.block_cells`'). Their cells, row by row or column
-    by column, are the very values (and types) the per-tick path's rows have."""
+    (:func:`~ardrone_nmpc.runs.log_columns.block_cells`'); ``target``: the rows have a
+    second object's cells. Their cells, row by row or column by column, are the very values
+    (and types) the per-tick path's rows have."""
 
-    __slots__ = ("numbers", "mode", "saturated", "status", "nav_mode")
+    __slots__ = ("numbers", "mode", "saturated", "status", "nav_mode", "target")
 
     def __init__(self, numbers: np.ndarray, mode: str, saturated: tuple, status: str,
-                 nav_mode: str) -> None:
+                 nav_mode: str, target: bool = False) -> None:
         self.numbers, self.mode = numbers, mode
         self.saturated, self.status, self.nav_mode = saturated, status, nav_mode
+        self.target = target
 
     def __len__(self) -> int:
         return len(self.numbers)
@@ -54,7 +56,8 @@ class BlockRows:
         """Each row's cells in ``LOG_COLUMNS`` order (:func:`block_cells`)."""
         rows = self.numbers
         sat, status, mode, nav_mode = self.saturated, self.status, self.mode, self.nav_mode
-        return [block_cells(v, vx, vy, sat, status, mode, nav_mode)
+        target = self.target
+        return [block_cells(v, vx, vy, sat, status, mode, nav_mode, target)
                 for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY])]
 
     def columns(self) -> list[list]:
@@ -64,7 +67,7 @@ class BlockRows:
 
     def column_cells(self, i: int) -> list:
         """The cells of ``LOG_COLUMNS[i]`` over the rows (``zip(*self.cells())[i]``)."""
-        kind, at = _SOURCES[i]
+        kind, at = (_TARGET_SOURCES if self.target else _SOURCES)[i]
         rows = self.numbers
         if kind == _NUMBER:
             return rows[:, at].tolist()
@@ -95,3 +98,6 @@ _SOURCES = (*((_NUMBER, i) for i in range(21)), (_SATURATED, BR_SATURATED),
             (_CONST, math.nan), *((_CONST, "") for _ in range(7)), (_NUMBER, BR_TRUE_X),
             (_NUMBER, BR_TRUE_Y), (_NUMBER, BR_TRUE_Z), (_ANGLE, BR_TRUE_PSI),
             (_NUMBER, BR_TRUE_VZ))
+#: … and a row with a second object's cells (``target_x_m`` … ``target_age_ms``: numbers)
+_TARGET_SOURCES = (*_SOURCES[:41], *((_NUMBER, BR_TARGET_X + j) for j in range(6)),
+                   *_SOURCES[47:])

@@ -26,8 +26,8 @@ from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
                                           BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
                                           BR_NEWTON, BR_NORM, BR_SATURATED, BR_SOLVE_US,
-                                          BR_TRUE_PSI, BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y,
-                                          BR_TRUE_Z)
+                                          BR_TARGET_AGE, BR_TARGET_X, BR_TRUE_PSI,
+                                          BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y, BR_TRUE_Z)
 from ardrone_nmpc.safety import Action
 
 _FALLBACK = Action.FALLBACK  # bound once: an enum member's lookup costs ~0.1 µs
@@ -281,19 +281,26 @@ _PI = math.pi
 
 
 def block_cells(v: list, nav_vx, nav_vy, saturated: tuple, status: str, mode: str,
-                nav_mode: str) -> list:
+                nav_mode: str, target: bool = False) -> list:
     """The cells of a block's row (``v``: its numbers as floats): :func:`nominal_cells`' of
     the same tick, its truth put — the same values and types (``nav_vx``, ``nav_vy``: the
     navdata's speeds, numpy scalars as the sample's; ``saturated``: the texts of the
-    saturation bits; ``status``: the solver's; ``nav_mode``: the sample's mode's value)."""
+    saturation bits; ``status``: the solver's; ``nav_mode``: the sample's mode's value);
+    ``target``: a flight with a second object, its cells those of :func:`tick_row`'s row
+    (:func:`_target_columns`: the same values; that row's other cells are these too)."""
     cells = v[:21]
     psi = v[BR_TRUE_PSI]
     cells += (saturated[int(v[BR_SATURATED])], v[BR_SOLVE_US], status, v[BR_NORM],
               int(v[BR_GMRES]), int(v[BR_NEWTON]), mode, v[BR_MOCAP_MS], v[BR_NAV_MS],
-              v[BR_BATTERY], "", v[BR_COMPUTE_US], v[BR_MOCAP_T], nav_vx, nav_vy, nav_mode, v[BR_NAV_ROLL], v[BR_NAV_PITCH], math.nan,
-              "", "", "", "", "", "", "", v[BR_TRUE_X], v[BR_TRUE_Y], v[BR_TRUE_Z],
+              v[BR_BATTERY], "", v[BR_COMPUTE_US], v[BR_MOCAP_T], nav_vx, nav_vy, nav_mode,
+              v[BR_NAV_ROLL], v[BR_NAV_PITCH], math.nan, "",
+              *(v[BR_TARGET_X:BR_TARGET_AGE + 1] if target else _NO_TARGET),
+              v[BR_TRUE_X], v[BR_TRUE_Y], v[BR_TRUE_Z],
               psi if -_PI < psi <= _PI else wrap_angle_rad(psi), v[BR_TRUE_VZ])
     return cells
+
+
+_NO_TARGET = ("",) * 6  # a block's row without a second object: no target cells
 
 
 # tick_cells unpacks the state and the input by position (~0.1 µs less than a subscript a
@@ -323,6 +330,34 @@ tick_cell_values = operator.itemgetter(*(_COLUMN_INDEX[k] for k in TICK_CELL_KEY
 TRUTH_CELLS = slice(_COLUMN_INDEX["x_true_m"], _COLUMN_INDEX["vz_true_mps"] + 1)
 #: The cell of ``mode`` (the lockstep runner relabels its landing rows).
 MODE_CELL = _COLUMN_INDEX["mode"]
+
+
+#: The keys of :func:`tick_row`'s row of a usual NMPC tick that saw a second object, its
+#: truth put (the general path's order: :func:`_target_columns` after the measurements')
+TARGET_CELL_KEYS: tuple[str, ...] = (
+    *TICK_CELL_KEYS[:TICK_CELL_KEYS.index("x_m")], "target_x_m", "target_y_m", "target_z_m",
+    "target_psi_rad", "target_t_s", "target_age_ms",
+    *TICK_CELL_KEYS[TICK_CELL_KEYS.index("x_m"):])
+_target_cell_values = operator.itemgetter(*(_COLUMN_INDEX[k] for k in TARGET_CELL_KEYS))
+
+
+#: the cells :func:`_general_row` reads from arrays: numpy scalars there (the object's
+#: position, the estimate, the reference, the input solved)
+_ARRAY_CELLS = tuple(i for i, k in enumerate(TARGET_CELL_KEYS) if k in {
+    "target_x_m", "target_y_m", "target_z_m", "x_m", "y_m", "z_m", "psi_rad", "vx_mps",
+    "vy_mps", "vz_mps", "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad", "u_zacc_mps2",
+    "u_phi_rad", "u_theta_rad", "u_psirate_radps"})
+_F64 = np.float64
+
+
+def target_cells_row(cells: list) -> dict:
+    """:func:`cells_row` of a usual tick's cells with a second object's
+    (:func:`block_cells`' ``target``): the very dict :func:`tick_row` builds for that tick
+    and :func:`put_truth` completes (same keys, same order, same values and types)."""
+    values = list(_target_cell_values(cells))
+    for i in _ARRAY_CELLS:
+        values[i] = _F64(values[i])
+    return dict(zip(TARGET_CELL_KEYS, values))
 
 
 def put_truth_cells(cells: list, truth: tuple) -> None:

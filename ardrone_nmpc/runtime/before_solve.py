@@ -32,6 +32,7 @@ from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_square
 from ardrone_nmpc.core.types import STATE_DIM, FlightMode
 from ardrone_nmpc.reference.experiment import HoldStartThen
+from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
 from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, W_KNOTS,
@@ -128,10 +129,12 @@ class BeforeSolve:
     @staticmethod
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: an NMPC against a
-        waypoint reference or a tabulated curve, the compiled estimator, and the stages' own
+        waypoint reference, a tabulated curve or a followed object (``LiveTarget``: a table
+        too, filled a tick at a time), the compiled estimator, and the stages' own
         classes (a subclass' overrides are called: the Python stages take its ticks)."""
         traj = tick.trajectory
-        return (tick.control.nmpc is not None and traj.__class__ is HoldStartThen
+        kind = traj.__class__
+        return (tick.control.nmpc is not None and (kind is HoldStartThen or kind is LiveTarget)
                 and traj.waypoint_args is not None and tick.estimation.compiled
                 and type(tick.supervisor) is Supervisor and type(tick.estimation) is Estimation
                 and type(tick.control) is Control)
@@ -208,7 +211,8 @@ class BeforeSolve:
         if pose is None or nav is None or sup._latched is not None or nav.mode is _EMERGENCY:
             return None
         est, control = self.estimation, self.control
-        args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
+        kind = traj.__class__
+        args = traj.waypoint_args if kind is HoldStartThen or kind is LiveTarget else None
         if (args is None or args is not control._work_args or control._dtau_varies
                 or not est._compiled):
             return None  # (the first solve asks Δτ and packs the trajectory: Control.solve)

@@ -37,7 +37,7 @@ from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.block_rows import BlockRows
 from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, put_truth,
-                                           put_truth_cells)
+                                           put_truth_cells, target_cells_row)
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
 from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
@@ -200,6 +200,9 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     blocks = (TickBlocks(tick, drone, n_max=BLOCK_TICKS, n_settle=schedule.n_settle,
                          period_s=period, t_first_s=t_first, compile_now=compile_now)
               if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)
+    # a flight with a second object: its blocks' rows are the per-tick path's dicts
+    write_target_row = (recorder.write_row if blocks is not None and blocks.target
+                        and recorder is not None else None)
     n_ticks, n_settle = schedule.n_ticks, schedule.n_settle
     k = 0
     t_exp_s = schedule.t_exp_s  # (k by k, or jumps of a block's ticks)
@@ -212,7 +215,8 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
             n, exit_, answer, spent_ns = blocks.fly(
                 k, mode, min(BLOCK_TICKS, (n_settle if t_exp < 0 else n_ticks) - k))
             if n:
-                _block_rows(blocks.table, n, mode, write_cells, write_block, tally)
+                _block_rows(blocks.table, n, mode, write_cells, write_block, tally,
+                            write_target_row, blocks.target)
                 if progress is not None:
                     for j in range(k, k + n):
                         progress(schedule.fraction_done(j))
@@ -286,15 +290,24 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
 
 
 def _block_rows(table, n: int, mode: str, write_cells, write_block,
-                tally: VerdictTally) -> None:
+                tally: VerdictTally, write_target_row=None, target: bool = False) -> None:
     """The rows of a block's ``n`` ticks (``table``'s numbers, ``runtime/lockstep_block``)
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
     nominal label): the block itself to a recorder that takes blocks (``write_block``), the
-    rows' cells to one that takes cells; none to write without a recorder."""
+    rows' cells to one that takes cells; none to write without a recorder. A flight with a
+    second object (``target``; its recorder's ``write_row``: ``write_target_row``) logs it
+    in each row: the per-tick path's rows are then dicts (``tick_row``'s), so are these
+    (``log_columns.target_cells_row``)."""
     # (a block kept by its recorder owns its numbers: the table is the next block's)
-    rows = BlockRows(table[:n].copy() if write_block is not None else table[:n], mode,
-                     SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT)
-    if write_block is not None:
+    copy = write_block is not None and not target
+    rows = BlockRows(table[:n].copy() if copy else table[:n], mode,
+                     SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT, target)
+    if target:  # (VerdictTally.add of rows with a finite target_age_ms)
+        tally.target_seen = True
+        if write_target_row is not None:
+            for cells in rows.cells():
+                write_target_row(target_cells_row(cells))
+    elif write_block is not None:
         write_block(rows)
     elif write_cells is not None:
         for cells in rows.cells():

@@ -11,6 +11,11 @@ and a row of numbers a tick (``runs/block_row``); :class:`TickBlocks` writes bac
 Python objects what the last tick left — the same values the per-tick path leaves — and
 the runner writes the rows (docs/architecture.md, runtime).
 
+A second mocap object (``sim.target``: logged, a moving obstacle's centre, or followed: its
+reference's table) is drawn in the block per frame the legs take and observed every tick
+(``runtime/second_object``), its rows then the per-tick path's dicts
+(``log_columns.target_cells_row``).
+
 A tick that is not the usual one ends the block where Python must take over (``EXIT_*``):
 before the tick (a watchdog due: nothing of it done), after its legs (a leg the kernel
 leaves to Python, a mode change: the legs' own after-run code goes on), or after the
@@ -35,6 +40,8 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL, kernel_twin
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runs import block_row as br
 from ardrone_nmpc.runtime.control_tick import control_tick, control_tick_obstacles
+from ardrone_nmpc.runtime.second_object import (O_FOLLOW, O_ON, O_PSI, O_RX, O_T, O_X,
+                                                SecondObject, followed, take_frame)
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
@@ -66,13 +73,15 @@ _perf_counter_ns = time.perf_counter_ns
 def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n, gust_n,
                mocap_n, nav_n, c, table, est, limits, dring, x_solve, shift, states, work,
                rows, mem, iprm, horizon, divergence_residual, vz_from_commands, vz_lead_s,
-               vz_max_mps, tilt_cap_rad, gain, e, v, y, response, offset, offset_flags):
+               vz_max_mps, tilt_cap_rad, gain, e, v, y, response, offset, offset_flags, o,
+               o_normals, obstacles):
     """Ticks ``k0`` … of the lockstep schedule (plant time ``t_first_s + k·period_s``,
     experiment time ``(k − n_settle)·period_s``) while each is the usual one: returns how
     many it flew and its exit (``EXIT_*``). ``d``: the drone's numbers
     (``sim/drone_block``); the legs' arrays; ``c``: the controller's (``C_*``); ``table``:
     a row of numbers a tick (``BLOCK_ROW``); then :func:`control_tick`'s arrays and settings
-    (its prepared tail's, ``has_nav`` 1, ``initialise`` False)."""
+    (its prepared tail's, ``has_nav`` 1, ``initialise`` False); the second object's
+    (``runtime/second_object``: ``o``, its normals, the solver's obstacle table)."""
     out = buf[ks.B_OUT:ks.B_IV]
     capacity, count = int(c[C_CAPACITY]), int(c[C_COUNT])
     bits = int(c[C_BITS])
@@ -81,12 +90,18 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         k = k0 + i
         t_s = t_first_s + k * period_s
         t_exp_s = (k - n_settle) * period_s
+        t_pose = d[db.D_T_POSE]
         status = db.drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s,
                                ks.MODE_FLYING, 0.0)
+        t_new = d[db.D_T_POSE]  # (a frame taken: the sampler's took_pose draws the object)
+        if o[O_ON] != 0.0 and t_new == t_new and t_new != t_pose:
+            take_frame(o, o_normals, t_new, d[db.D_POSE_RX], obstacles)
         if status != db.LEGS_DONE:
             return i, (EXIT_AFTER_LEGS if status == db.LEGS_PARTIAL else
                        EXIT_SHORT if status == db.LEGS_SHORT else EXIT_BEFORE)
         t0_ns = monotonic_ns()
+        if o[O_FOLLOW] != 0.0:  # (Tick.step's observe, then the reference's table)
+            followed(o, t_s, t_exp_s, c[C_LEAD_S], work, rows)
         nxt = int(c[C_NEXT])
         vz_last = c[C_VZ_REF] if vz_from_commands else 0.0
         # (what the links hold: d's newest pose and navdata sample, and ẋ, ẏ from the
@@ -121,6 +136,11 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
         _row(table[i], t_exp_s, est, states[0], zacc, phi, theta, rate, vz, roll, pitch,
              gaz, yaw, sat_bits, solve_us, norm, gmres_it, newton_it, mocap_ms, nav_ms, d,
              compute_us, out)
+        if o[O_ON] != 0.0:  # (log_columns' target cells)
+            row = table[i]
+            row[br.BR_TARGET_X], row[br.BR_TARGET_Y] = o[O_X], o[O_X + 1]
+            row[br.BR_TARGET_Z], row[br.BR_TARGET_PSI] = o[O_X + 2], o[O_PSI]
+            row[br.BR_TARGET_T], row[br.BR_TARGET_AGE] = o[O_T], (t_s - o[O_RX]) * 1e3
         if not t_s < c[C_NEXT_FIT_S]:  # (AfterSolve.written's test: a fit due, in Python)
             return i + 1, EXIT_FIT
     return n_max, EXIT_NONE
@@ -181,16 +201,17 @@ class TickBlocks:
     @staticmethod
     def takes(tick, drone, compile_now: bool) -> bool:
         """Whether blocks may fly some of this flight's ticks: its controller's nominal tick
-        is one compiled call whose rows are cells, with no second object to follow or
-        avoid, and its drone's ticks are the compiled legs' (on a platform whose clock the
-        kernel reads: ``core/monotonic.SAME_CLOCK``; a drone with something injected that
+        is one compiled call whose rows are cells, with a second object only where the
+        kernel draws it (:meth:`SecondObject.takes`), and its drone's ticks are the compiled
+        legs' (on a platform whose clock the kernel reads: ``core/monotonic.SAME_CLOCK``; a
+        drone with something injected that
         leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
         :func:`tick_block` has machine code (compiled, or in numba's cache: loaded), unless
         the blocks may compile it (``compile_now``): the obstacles' kernel as the usual one
         (:func:`~.lockstep.warm_up_blocks` compiles both)."""
         legs = drone.sensors._legs
         if not (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
-                and tick.follow is None and tick.obstacles is None and legs is not None
+                and SecondObject.takes(tick, drone.sensors) and legs is not None
                 and legs.stands_in):
             return False
         return compile_now or load_cached(BLOCK_KERNELS[tick.control_tick.kernel])
@@ -200,6 +221,10 @@ class TickBlocks:
         self.tick, self.drone = tick, drone
         #: the kernel of this flight's blocks (:data:`BLOCK_KERNELS`)
         self.kernel = BLOCK_KERNELS[tick.control_tick.kernel]
+        #: the second mocap object's numbers (logged, a moving obstacle's centre, followed)
+        self.second = SecondObject(tick, drone.sensors)
+        #: the rows have the object's cells
+        self.target = drone.sensors.target_cfg is not None
         #: compile :func:`tick_block` when a block finds no machine code for its arguments;
         #: else that block is not flown — its ticks are the per-tick path's, which leaves the
         #: same rows (a first flight on an empty cache does not wait ~7 s for it:
@@ -244,7 +269,10 @@ class TickBlocks:
             call = self._entered(k, mode, n_max)
             if call is None:
                 return 0, EXIT_BEFORE, None, 0
-        n, exit_ = call(*self._args)
+        second = self.second
+        second.drawn(self._args[0])
+        n, exit_ = call(*self._args, second.o, second.normals, second.obstacles)
+        second.consumed()
         self._open = True
         period_s, n_settle = self.period_s, self.n_settle
         if n:
@@ -302,6 +330,7 @@ class TickBlocks:
             return
         self._open = False
         self.drone.after_block(self.d, self._ran, self._last_t_exp)
+        self.second.written()
         if self._last is not None:
             self._written()
         self._last, self._ran = None, False
@@ -315,7 +344,8 @@ class TickBlocks:
         if sup.label != mode or sup.events or not tick.delay._pushed:
             return None  # (a label to note; the first input unsent)
         tail = ct.prepared()
-        if tail is None or not drone.block_entry(self.d):
+        if (tail is None or not self.second.entered()
+                or not drone.block_entry(self.d, second_object=self.target)):
             return None
         period_s, n_settle = self.period_s, self.n_settle
         t_s = self.t_first_s + k * period_s
@@ -364,8 +394,8 @@ class TickBlocks:
         ticks, its states filled at each one's horizon times — the delay's lead is the
         block's (a fit that moves it ends a block)."""
         tick = self.tick
-        if not tick.trajectory.tabulated:
-            return n_max
+        if not tick.trajectory.tabulated or tick.follow is not None:
+            return n_max  # (a followed object's: the kernel's, a tick at a time)
         control = tick.control
         n_max = min(n_max, TABLE_TICKS)
         t_exp_s = (np.arange(k, k + n_max) - self.n_settle) * self.period_s  # tick_block's
@@ -376,8 +406,9 @@ class TickBlocks:
     def _vetted(self, legs_args: tuple, tail: tuple):
         """:attr:`_args`' entry point (kept with the legs' arrays and the tail it is for),
         or the dispatcher when blocks compile (``compile_now``), else None."""
-        kernel = self.kernel
-        call = entry_point(kernel, *self._args)  # (its machine code for these kinds)
+        kernel, second = self.kernel, self.second
+        call = entry_point(kernel, *self._args, second.o, second.normals,  # (its machine
+                           second.obstacles)                               # code for these)
         if call is None and self.compile_now:
             call = kernel  # the dispatcher: compiles them
         self._call = call

@@ -30,7 +30,7 @@ from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator,
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
 from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
-from ardrone_nmpc.reference.live import TrackedObject
+from ardrone_nmpc.reference.live import LiveTarget, TrackedObject
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.supervision import HOVER, Sent, Supervision
 from ardrone_nmpc.runtime.tick_kernels import (fill_reference_table, nmpc_inputs, nmpc_work,
@@ -304,7 +304,8 @@ class Control:
                 self._offsets_dtau = dtau
             # a Δτ fixed for good (no horizon ramp): the offsets are made, never asked again
             self._dtau_varies = solver.fixed_dtau_s is None
-        args = traj.waypoint_args if traj.__class__ is HoldStartThen else None
+        kind = traj.__class__
+        args = traj.waypoint_args if kind is HoldStartThen or kind is LiveTarget else None
         if (args is not None and x.__class__ is np.ndarray and x.dtype is _F64
                 and x.shape == _X_SHAPE):
             # a waypoint reference (the square) or a curve's table: the delay prediction, the

@@ -149,8 +149,9 @@ class Tick:
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
         # the stages' own (runtime/tick_kernels): those this flight calls
-        waypoints = (trajectory.__class__ is HoldStartThen
-                     and trajectory.waypoint_args is not None)
+        waypoints = ((trajectory.__class__ is HoldStartThen
+                      and trajectory.waypoint_args is not None)
+                     or trajectory.__class__ is LiveTarget)  # (a table of its states)
         warm_up_tick_kernels(estimate=self.estimation.compiled,
                              nmpc=nmpc is not None and waypoints)
         if self.response is not None:  # after the solver's (runtime/precompile.py)

@@ -197,15 +197,16 @@ flush_stale_caches(__name__)
 
 
 # ---------------------------------------------------------------------- the Python side
-def block_entry(legs, d: np.ndarray, seq: int) -> bool:
+def block_entry(legs, d: np.ndarray, seq: int, second_object: bool = False) -> bool:
     """``d`` filled from the compiled legs ``legs`` (``CompiledLegs``: their plant,
     firmware and sampler) for a block of ticks whose first PCMD is number ``seq`` — or
     False, nothing written, unless the next tick is one the block flies: ``legs.run``'s
     tick of a FLYING plant the navdata shows FLYING (:func:`_quiet`), a held PCMD that is a
-    progressive one, no second object — and samples of the kinds the kernel makes."""
+    progressive one, no second object (unless the caller draws its frames:
+    ``second_object``) — and samples of the kinds the kernel makes."""
     plant, fw, sensors = legs.plant, legs.firmware, legs.sensors
     if not (plant._mode is _FLYING and sensors._nav_mode is _FLYING
-            and sensors.target_cfg is None and fw.pcmd[0] & _PROGRESSIVE
+            and (second_object or sensors.target_cfg is None) and fw.pcmd[0] & _PROGRESSIVE
             and _quiet(legs, seq)):
         return False
     pose, nav = sensors.pose, sensors.nav

@@ -143,13 +143,14 @@ class LockstepDrone(ConfigHandshake):
         faults = self.sim.faults
         return math.inf if faults is None else faults.quiet_until_s(t_exp_s)
 
-    def block_entry(self, d) -> bool:
+    def block_entry(self, d, second_object: bool = False) -> bool:
         """``d`` filled for a block of ticks from the next (``sim/drone_block``), or False:
         the next tick is not one a block flies (``drone_block.block_entry``; a REF waiting
-        to be sent, a drone that landed by itself)."""
+        to be sent, a drone that landed by itself); ``second_object``: the block draws the
+        second object's frames."""
         legs = self.sensors._legs
         return (legs is not None and self._ref_unsent is None and self.self_landing is None
-                and drone_block.block_entry(legs, d, self._seq + 1))
+                and drone_block.block_entry(legs, d, self._seq + 1, second_object))
 
     def after_block(self, d, ran: bool, t_exp_s: float) -> None:
         """What a block of ticks left (``d``), written back: the PCMDs numbered, the

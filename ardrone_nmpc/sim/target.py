@@ -9,10 +9,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
+from ardrone_nmpc.core.kernel_cache import flush_stale_caches
+from ardrone_nmpc.core.numerics import INNER_KERNEL
 from ardrone_nmpc.core.types import MocapPose
 
-__all__ = ["target_pose", "target_state"]
+__all__ = ["target_numbers", "target_pose", "target_state"]
 
 
 def target_state(cfg, t_s: float) -> tuple[np.ndarray, float, np.ndarray]:
@@ -46,3 +49,24 @@ def target_pose(cfg, t_s: float, rng: np.random.Generator | None = None,
     rot = np.array([0.0, 0.0, psi])
     rot.setflags(write=False)
     return MocapPose(t_s=t_s, position_m=pos, rotation_xyz_rad=rot, psi_rad=psi)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def target_numbers(circle, r, v, cx, cy, cz, t_s):
+    """:func:`target_state`'s position and heading as numbers, for compiled code (a block of
+    lockstep ticks: ``runtime/second_object``): ``circle`` True for ``path: circle``, else
+    the figure 8 — the same expressions in the same order (cos, sin and atan2: the C
+    library's, as Python's math), so the same bits."""
+    w = v / r
+    a = w * t_s
+    if circle:
+        px, py = cx + r * math.cos(a), cy + r * math.sin(a)
+        vx, vy = -r * w * math.sin(a), r * w * math.cos(a)
+    else:
+        px, py = cx + r * math.sin(a), cy + 0.5 * r * math.sin(2 * a)
+        vx, vy = r * w * math.cos(a), r * w * math.cos(2 * a)
+    psi = math.atan2(vy, vx) if v > 0 else 0.0
+    return px, py, cz, psi
+
+
+flush_stale_caches(__name__)

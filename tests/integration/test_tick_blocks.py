@@ -143,11 +143,25 @@ CASES = [
     ("obstacle", "obstacle", ["duration_s=10", *SETTLE], 0),
     ("obstacle_kit_gust", "obstacle", ["duration_s=8", *SETTLE, KIT, "faults.wind_gust.start_s=3",
                                        "faults.wind_gust.duration_s=0.3"], 3),
-    # flights no block takes (as the blocks' first version has it): a second object on the
-    # mocap stream, an estimator the compiled calls do not take, faults that touch the
-    # sensors' bytes
+    # a second object on the mocap stream (runtime/second_object): logged, a moving
+    # obstacle (its frames' noise, its filter, the obstacle's centre), without noise, on a
+    # figure 8, on the kit plant with a gust between blocks
     ("square_target", "square", ["duration_s=8", *SETTLE, "sim.target.speed_mps=0.3"], 14),
     ("moving_obstacle", "moving_obstacle", ["duration_s=8", *SETTLE], 0),
+    ("moving_obstacle_fig8_noiseless", "moving_obstacle",
+     ["duration_s=10", *SETTLE, "sim.target.path=figure8", "sim.noise.mocap_position_std_m=0"],
+     5),
+    ("moving_obstacle_kit_gust", "moving_obstacle",
+     ["duration_s=8", *SETTLE, KIT, "faults.wind_gust.start_s=3",
+      "faults.wind_gust.duration_s=0.3"], 6),
+    # a followed object (its reference's table filled in the block): in its frame and
+    # heading, its pose stale on some ticks (age 3 or 8 ms against a 5 ms limit)
+    ("follow_car", "follow_car", ["duration_s=8", *SETTLE], 0),
+    ("follow_object_frame_stale", "follow_car",
+     ["duration_s=8", *SETTLE, "reference.follow.offset_frame=object",
+      "reference.follow.heading=object", "reference.follow.max_age_ms=5"], 7),
+    # flights no block takes (as the blocks' first version has it): an estimator the
+    # compiled calls do not take, faults that touch the sensors' bytes
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
@@ -233,6 +247,8 @@ def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -
         _attrs(out, "faults", faults, frozenset({"_lock", "schedule", "_plant_faults"}))
         _attrs(out, "faults._plant_faults", faults._plant_faults, frozenset({"plant"}))
         out["faults.rng"] = bits(repr(faults.schedule.rng.bit_generator.state))
+    # the second object's generator: where its stream stands (its frames' noise)
+    out["sensors._target_rng"] = bits(repr(sensors._target_rng.bit_generator.state))
     out["truth"] = bits(drone.truth)
     out["truth_cells"] = bits(drone.truth_cells())
     if stages_too:
@@ -264,6 +280,11 @@ def stages(out: dict, tick: Tick) -> None:
         out["tick.response.estimator._estimate"] = bits(estimator._estimate)
     if tick.offset is not None:
         _attrs(out, "tick.offset.integrator", tick.offset.integrator)
+    if tick.obstacles is not None:  # a moving obstacle's tracked object (its filter)
+        _attrs(out, "tick.obstacles.track", tick.obstacles.track)
+    if tick.follow is not None:  # a followed one's (its filter, its pose's freshness)
+        _attrs(out, "tick.follow", tick.follow)
+        _attrs(out, "tick.follow._object", tick.follow._object)
 
 
 def differences(a: dict, b: dict, limit: int = 12) -> list[str]:
@@ -612,6 +633,28 @@ def test_blocks_take_the_curves_and_the_navdata_speeds(config, overrides, monkey
     assert block.steps * 4 < rows, f"{block.steps} Tick.step calls for {rows} rows"
 
 
+def test_blocks_take_a_logged_object(monkeypatch):
+    """A flight whose mocap stream has a second object (logged, nothing else) goes in
+    blocks: far fewer ``Tick.step`` calls than rows, every row with the object's cells."""
+    cfg = _config("square", ["duration_s=10", *SETTLE, "sim.target.speed_mps=0.3"])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = block.recorder.written
+    assert len(rows) > 100
+    assert block.steps * 4 < len(rows), f"{block.steps} Tick.step calls for {len(rows)} rows"
+    ages = block.recorder.columns()["target_age_ms"]
+    assert np.isfinite(ages[1:]).all()
+
+
+def test_a_followed_object_flies_blocks(monkeypatch):
+    """``follow`` (its reference fed the object's pose each tick, its table filled in the
+    block): far fewer ``Tick.step`` calls than rows, and the tally saw the object."""
+    cfg = _config("follow_car", ["duration_s=10", *SETTLE])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"
+    assert block.result.ending == "completed"  # (not failed-no-target)
+
+
 def _case(name: str) -> tuple:
     return next(c for c in CASES if c[0] == name)
 
@@ -679,14 +722,12 @@ def test_plain_ticks_end_before_the_first_tick_a_fault_may_act_at(period_s, n_se
 @pytest.mark.parametrize("overrides", [[], [KIT]], ids=["obstacle", "obstacle_kit"])
 def test_blocks_take_the_obstacles(overrides, monkeypatch):
     """A static obstacle's flight goes in blocks (their kernel solving with the obstacle
-    table), a moving one's does not (its centre is fed between ticks, in Python)."""
-    block = fly(_config("obstacle", ["duration_s=10", *SETTLE, *overrides]), 0, monkeypatch,
-                block_ticks=None, wanted=set())
-    rows = len(block.recorder.written)
-    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"
-    moving = fly(_config("moving_obstacle", ["duration_s=6", *SETTLE]), 0, monkeypatch,
-                 block_ticks=None, wanted=set())
-    assert moving.steps == len(moving.recorder.written)
+    table), and a moving one's (its centre moved in the kernel: runtime/second_object)."""
+    for config in ("obstacle", "moving_obstacle"):
+        block = fly(_config(config, ["duration_s=10", *SETTLE, *overrides]), 0, monkeypatch,
+                    block_ticks=None, wanted=set())
+        rows = len(block.recorder.written)
+        assert rows > 100 and block.steps * 4 < rows, (config, block.steps, rows)
 
 
 def test_blocks_take_the_kit_square(monkeypatch):

@@ -16,7 +16,7 @@ import pytest
 
 from ardrone_nmpc.experiments.tick_bench import _Clocks
 from ardrone_nmpc.runs.block_row import (BLOCK_ROW, BR_GMRES, BR_NEWTON, BR_SATURATED, BR_T,
-                                         BR_TRUE_PSI)
+                                         BR_TARGET_X, BR_TRUE_PSI)
 from ardrone_nmpc.runs.block_rows import BlockRows
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, block_cells
 from ardrone_nmpc.runs.memory import MemoryRecorder
@@ -50,13 +50,18 @@ def _block(rows, mode="track") -> BlockRows:
     return BlockRows(rows, mode, SATURATED, "ok", "flying")
 
 
+@pytest.mark.parametrize("target", [False, True], ids=["alone", "second_object"])
 @pytest.mark.parametrize("n", [1, 2, 7, 32])
-def test_cells_are_block_cells_row_by_row_and_columns_the_cells_transposed(n):
+def test_cells_are_block_cells_row_by_row_and_columns_the_cells_transposed(n, target):
     rows = _numbers(np.random.default_rng(n), n)
-    block = _block(rows)
+    block = BlockRows(rows, "track", SATURATED, "ok", "flying", target)
     cells = block.cells()
-    expected = [block_cells(v, vx, vy, SATURATED, "ok", "track", "flying")
+    expected = [block_cells(v, vx, vy, SATURATED, "ok", "track", "flying", target)
                 for v, vx, vy in zip(rows.tolist(), rows[:, 31], rows[:, 32])]
+    at = LOG_COLUMNS.index("target_x_m")
+    # the object's six cells: its numbers (BR_TARGET_X …), or none
+    assert [row[at:at + 6] for row in expected] == (
+        rows[:, BR_TARGET_X:BR_TARGET_X + 6].tolist() if target else [[""] * 6] * n)
     assert [[_bits(c) for c in row] for row in cells] == [
         [_bits(c) for c in row] for row in expected]
     assert all(len(row) == len(LOG_COLUMNS) for row in cells)
