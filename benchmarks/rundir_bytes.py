@@ -42,6 +42,7 @@ CASES: list[tuple[str, list[str], int]] = [
     ("obstacle", [], 0),
     ("lorenz", ["duration_s=15"], 1),
     ("identify", [], 0),
+    ("square", [*SHORT, "controller.solver.method=newton"], 2),  # the thesis' Newton scheme
 ]
 CLOCK_CELLS = ("solve_us", "compute_us")
 CLOCK_SUMMARY = (b"solver,solve_time", b"loop,compute")

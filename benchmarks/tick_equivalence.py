@@ -33,6 +33,9 @@ CLOCK_COLUMNS = frozenset({"solve_us", "compute_us", "tick_late_ms"})
 SHORT = ["duration_s=8", "sim.settle_s=1"]
 SQUARE = ["duration_s=12", "sim.settle_s=1"]
 KIT = ["sim.plant.profile=thesis_kit"]
+NEWTON = ["controller.solver.method=newton"]
+# Newton ticks that stop at their iterations above the tolerance (a share of them)
+TIGHT = ["controller.solver.tolerance=2e-6", "controller.solver.max_newton_iterations=2"]
 CASES: list[tuple[str, str, list[str], int]] = [
     ("hover", "hover", SHORT, 0),
     ("step_x", "step_x", SHORT, 1),
@@ -240,6 +243,26 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("follow_gust", "follow_car", ["duration_s=12", "faults.wind_gust.start_s=3.013",
                                    "faults.wind_gust.duration_s=0.3"], 6),
     ("follow_unseen", "follow_car", ["duration_s=6", "sim.target=null"], 7),  # (no-target)
+    # the thesis' Newton scheme in the compiled controller's tick (control_tick_newton) and
+    # in blocks (tick_block_newton): clean flights, a waypoint and a curve's reference, the
+    # kit plant, fits between blocks; ticks stopped above the tolerance (max-iterations:
+    # Python's verdict), accepted or flown by the P fallback; a diverging solver; obstacles
+    ("newton_square", "square", SQUARE + NEWTON, 0),
+    ("newton_hover_kit", "hover", SHORT + KIT + NEWTON, 1),
+    ("newton_ellipse", "ellipse", SHORT + NEWTON, 2),
+    ("newton_square_wind_fit", "square", SQUARE + NEWTON + [
+        "faults.wind.velocity_mps=[0.4,-0.2,0]", "controller.adaptation.refit_s=0.2"], 3),
+    ("newton_square_tolerance", "square", SQUARE + NEWTON + TIGHT, 0),
+    ("newton_square_rejected", "square", SQUARE + NEWTON + TIGHT + [
+        "safety.solver_accept_max_iterations=false"], 2),
+    ("newton_square_solver_diverge", "square", SQUARE + NEWTON + [
+        "faults.solver_diverge.start_s=4", "faults.solver_diverge.duration_s=1"], 0),
+    ("newton_obstacle", "obstacle", SHORT + NEWTON, 1),
+    # the P controller (thesis eq. 4.16; the per-tick Python stages)
+    ("p_square", "square", SQUARE + ["controller.kind=p"], 0),
+    ("p_wind", "hover", SHORT + ["controller.kind=p", "faults.wind.velocity_mps=[0.6,0.2,0]"],
+     1),
+    ("p_delay_jump", "step_x", SHORT + ["controller.kind=p", "faults.delay_jump.start_s=2"], 2),
 ]
 
 

@@ -50,6 +50,21 @@ class NewtonGMRESController(NmpcSolverBase):
                          divergence_residual=divergence_residual, newton_kmax=kmax)
         self.memory.bound_epsilon = bound_epsilon
         self.active = np.zeros((spec.horizon_steps, 4), dtype=np.int8)
+        self._bind_newton()
+
+    #: what :meth:`_bind_newton` makes (not copied, not pickled)
+    _BOUND = (*NmpcSolverBase._BOUND, "newton_call")
+
+    def _bind_newton(self) -> None:
+        """:attr:`newton_call` made of the memory and the active set (again for a copy)."""
+        #: ``(kernel, memory, settings, active set)``: a tick is
+        #: ``kernel(memory, x, ref, settings, active)`` — :meth:`_tick`'s call, bound for the
+        #: controller's one compiled call (``runtime/control_tick``), which calls the kernel
+        self.newton_call = (*self.memory.newton_call(), self.active)
+
+    def __setstate__(self, state: dict) -> None:
+        super().__setstate__(state)
+        self._bind_newton()
 
     @classmethod
     def from_config(cls, controller, *, period_s: float) -> "NewtonGMRESController":

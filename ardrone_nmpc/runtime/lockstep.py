@@ -42,7 +42,8 @@ from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
 from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
                                                  EXIT_NONE, EXIT_SHORT, TickBlocks,
-                                                 tick_block, tick_block_obstacles)
+                                                 tick_block, tick_block_newton,
+                                                 tick_block_obstacles)
 from ardrone_nmpc.runtime.precompile import (background_compiles, join_child,
                                              release_block_lock, start_if_cold,
                                              take_block_lock)
@@ -315,8 +316,11 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
     tally.add_ticks(rows.times_s(), mode)
 
 
-# the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles)
+# the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles),
+# the square by the thesis' Newton scheme (tick_block_newton)
 _WARM_UP_SQUARE = {"name": "warm-up", "duration_s": 1.0, "reference": {"kind": "square"}}
+_WARM_UP_NEWTON = {**_WARM_UP_SQUARE, "name": "warm-up-newton",
+                   "controller": {"solver": {"method": "newton"}}}
 _WARM_UP_OBSTACLE = {"name": "warm-up-obstacle", "duration_s": 1.0,
                      "reference": {"kind": "step", "target_m": [2.5, 0.0, 1.0]},
                      "controller": {"obstacles": [{"kind": "cylinder",
@@ -325,17 +329,18 @@ _WARM_UP_OBSTACLE = {"name": "warm-up-obstacle", "duration_s": 1.0,
 
 
 def warm_up_blocks() -> None:
-    """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, and
-    ``tick_block_obstacles`` for a solver with obstacles) loaded from numba's cache, or
-    compiled now by a short square flight (~7 s on an empty cache) and a short obstacle
-    flight: the
+    """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, then
+    ``tick_block_obstacles`` for a solver with obstacles and ``tick_block_newton`` for the
+    thesis' Newton scheme) loaded from numba's cache, or compiled now by a short square
+    flight (~7 s on an empty cache), a short obstacle flight and a short Newton square: the
     precompile's background child, ``bench --tick`` and the tests call it; a flight does not
     wait for it (its ticks are then the per-tick path's: the same rows)."""
     global _warming_up
     if not monotonic.SAME_CLOCK:
         return  # (no blocks flown where the kernel does not read Python's clock: no compile)
     flights = [cfg for kernel, cfg in ((tick_block, _WARM_UP_SQUARE),
-                                       (tick_block_obstacles, _WARM_UP_OBSTACLE))
+                                       (tick_block_obstacles, _WARM_UP_OBSTACLE),
+                                       (tick_block_newton, _WARM_UP_NEWTON))
                if not load_cached(kernel)]
     if not flights:
         return

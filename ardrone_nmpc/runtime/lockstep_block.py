@@ -39,7 +39,9 @@ from ardrone_nmpc.core.monotonic import monotonic_ns
 from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL, kernel_twin
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runs import block_row as br
-from ardrone_nmpc.runtime.control_tick import control_tick, control_tick_obstacles
+from ardrone_nmpc.runtime.control_tick import (control_tick, control_tick_newton,
+                                               control_tick_newton_obstacles,
+                                               control_tick_obstacles)
 from ardrone_nmpc.runtime.second_object import (O_FOLLOW, O_ON, O_PSI, O_RX, O_T, O_X,
                                                 SecondObject, followed, take_frame)
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
@@ -47,7 +49,8 @@ from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 
 __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
-           "EXIT_SHORT", "TickBlocks", "tick_block", "tick_block_obstacles"]
+           "EXIT_SHORT", "TickBlocks", "tick_block", "tick_block_newton",
+           "tick_block_newton_obstacles", "tick_block_obstacles"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
@@ -72,16 +75,16 @@ _perf_counter_ns = time.perf_counter_ns
 @njit(cache=True, **OUTER_KERNEL)
 def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n, gust_n,
                mocap_n, nav_n, c, table, est, limits, dring, x_solve, shift, states, work,
-               rows, mem, iprm, horizon, divergence_residual, vz_from_commands, vz_lead_s,
-               vz_max_mps, tilt_cap_rad, gain, e, v, y, response, offset, offset_flags, o,
-               o_normals, obstacles):
+               rows, mem, iprm, horizon, step_arg, divergence_residual, vz_from_commands,
+               vz_lead_s, vz_max_mps, tilt_cap_rad, gain, e, v, y, response, offset,
+               offset_flags, o, o_normals, obstacles):
     """Ticks ``k0`` … of the lockstep schedule (plant time ``t_first_s + k·period_s``,
     experiment time ``(k − n_settle)·period_s``) while each is the usual one: returns how
     many it flew and its exit (``EXIT_*``). ``d``: the drone's numbers
     (``sim/drone_block``); the legs' arrays; ``c``: the controller's (``C_*``); ``table``:
     a row of numbers a tick (``BLOCK_ROW``); then :func:`control_tick`'s arrays and settings
-    (its prepared tail's, ``has_nav`` 1, ``initialise`` False); the second object's
-    (``runtime/second_object``: ``o``, its normals, the solver's obstacle table)."""
+    (its prepared tail's, ``has_nav`` 1); the second object's (``runtime/second_object``:
+    ``o``, its normals, the solver's obstacle table)."""
     out = buf[ks.B_OUT:ks.B_IV]
     capacity, count = int(c[C_CAPACITY]), int(c[C_COUNT])
     bits = int(c[C_BITS])
@@ -112,7 +115,7 @@ def tick_block(n_max, k0, t_first_s, period_s, n_settle, d, x, ring, buf, bias_n
             d[db.D_NAV_PITCH], d[db.D_PX], d[db.D_PY], d[db.D_PZ], d[db.D_PSI], d[db.D_POSE_T],
             c[C_ZACC], by_nav, nav_vx, nav_vy, est, limits, t_exp_s, dring, int(c[C_FIRST]),
             count, c[C_LEAD_S], x_solve, shift, states, work, rows, vz_last, nxt, mem, iprm,
-            horizon, False, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
+            horizon, step_arg, divergence_residual, vz_from_commands, vz_lead_s, vz_max_mps,
             tilt_cap_rad, gain, e, v, y, response, 1, offset, offset_flags)
         (code, mocap_ms, nav_ms, flag, solve_us, norm, gmres_it, newton_it, zacc, phi, theta,
          rate, vz, roll, pitch, gaz, yaw, sat_bits, fed) = answer
@@ -184,8 +187,16 @@ def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, ga
 #: :func:`tick_block` for solvers with obstacles (``control_tick_obstacles``' blocks)
 tick_block_obstacles = kernel_twin(tick_block, "tick_block_obstacles",
                                    control_tick=control_tick_obstacles)
+#: … for the thesis' Newton scheme (``control_tick_newton``'s blocks), without obstacles
+#: and with
+tick_block_newton = kernel_twin(tick_block, "tick_block_newton",
+                                control_tick=control_tick_newton)
+tick_block_newton_obstacles = kernel_twin(tick_block, "tick_block_newton_obstacles",
+                                          control_tick=control_tick_newton_obstacles)
 #: the blocks' kernel by the controller's (``ControlTick.kernel``)
-BLOCK_KERNELS = {control_tick: tick_block, control_tick_obstacles: tick_block_obstacles}
+BLOCK_KERNELS = {control_tick: tick_block, control_tick_obstacles: tick_block_obstacles,
+                 control_tick_newton: tick_block_newton,
+                 control_tick_newton_obstacles: tick_block_newton_obstacles}
 
 
 class TickBlocks:
@@ -207,8 +218,9 @@ class TickBlocks:
         drone with something injected that
         leaves the sensors alone: the ticks at which nothing acts, :meth:`fly`) — and
         :func:`tick_block` has machine code (compiled, or in numba's cache: loaded), unless
-        the blocks may compile it (``compile_now``): the obstacles' kernel as the usual one
-        (:func:`~.lockstep.warm_up_blocks` compiles both)."""
+        the blocks may compile it (``compile_now``): the obstacles' and the Newton scheme's
+        kernels as the usual one (:func:`~.lockstep.warm_up_blocks` compiles the usual one,
+        the obstacles' and Newton's)."""
         legs = drone.sensors._legs
         if not (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and SecondObject.takes(tick, drone.sensors) and legs is not None
@@ -454,11 +466,11 @@ class TickBlocks:
 
 def _tail_args(tail: tuple) -> tuple:
     """:func:`tick_block`'s arguments of the controller's prepared tail (``ControlTick``'s:
-    without ``initialise`` and ``has_nav``, False and 1 in a block)."""
-    (mem, iprm, horizon, _, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
-     response_state, _, offset, flags) = tail
-    return (mem, iprm, horizon, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v, y,
-            response_state, offset, flags)
+    without ``has_nav``, 1 in a block)."""
+    (mem, iprm, horizon, step_arg, residual, from_commands, lead, vz_max, tilt_cap, gain, e, v,
+     y, response_state, _, offset, flags) = tail
+    return (mem, iprm, horizon, step_arg, residual, from_commands, lead, vz_max, tilt_cap,
+            gain, e, v, y, response_state, offset, flags)
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

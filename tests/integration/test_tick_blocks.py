@@ -44,6 +44,9 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 CLOCK_CELLS = frozenset({"compute_us", "solve_us"})  # wall-clock: their type compared only
 SETTLE = ["sim.settle_s=1"]
 KIT = "sim.plant.profile=thesis_kit"
+NEWTON = "controller.solver.method=newton"
+# Newton ticks that stop at their iterations above the tolerance (a share of them)
+TIGHT = ["controller.solver.tolerance=2e-6", "controller.solver.max_newton_iterations=2"]
 # held in the compiled legs' arrays (sim/held_state): in an instance's __dict__ only while
 # released, so compared after a release (at the loop's end, after the flight) and not before
 # (the kit plant's: the airframe's and its channels')
@@ -143,6 +146,21 @@ CASES = [
     ("obstacle", "obstacle", ["duration_s=10", *SETTLE], 0),
     ("obstacle_kit_gust", "obstacle", ["duration_s=8", *SETTLE, KIT, "faults.wind_gust.start_s=3",
                                        "faults.wind_gust.duration_s=0.3"], 3),
+    # the thesis' Newton scheme (the blocks' kernel calling its tick: tick_block_newton): a
+    # square, the kit plant's hover, ticks stopped above the tolerance (Python's verdict:
+    # accepted, or the P fallback flies them), a diverging solver's window, an obstacle
+    ("newton_square", "square", ["duration_s=12", *SETTLE, NEWTON], 0),
+    ("newton_hover_kit", "hover", ["duration_s=6", *SETTLE, KIT, NEWTON], 1),
+    ("newton_tolerance", "square", ["duration_s=10", *SETTLE, NEWTON, *TIGHT], 2),
+    ("newton_rejected", "square", ["duration_s=10", *SETTLE, NEWTON, *TIGHT,
+                                   "safety.solver_accept_max_iterations=false"], 3),
+    ("newton_solver_diverge", "square", ["duration_s=8", *SETTLE, NEWTON,
+                                         "faults.solver_diverge.start_s=3"], 4),
+    ("newton_obstacle", "obstacle", ["duration_s=8", *SETTLE, NEWTON], 5),
+    # the P controller (thesis eq. 4.16): the Python stages' ticks, a wind
+    ("p_square", "square", ["duration_s=8", *SETTLE, "controller.kind=p"], 6),
+    ("p_wind", "hover", ["duration_s=6", *SETTLE, "controller.kind=p",
+                         "faults.wind.velocity_mps=[0.6,0.2,0]"], 7),
     # a second object on the mocap stream (runtime/second_object): logged, a moving
     # obstacle (its frames' noise, its filter, the obstacle's centre), without noise, on a
     # figure 8, on the kit plant with a gust between blocks
@@ -733,6 +751,18 @@ def test_blocks_take_the_obstacles(overrides, monkeypatch):
 def test_blocks_take_the_kit_square(monkeypatch):
     """The thesis_kit plant's square goes in blocks too (its dynamics in the legs)."""
     cfg = _config("square", ["duration_s=10", *SETTLE, KIT])
+    block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
+    rows = len(block.recorder.written)
+    assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"
+
+
+@pytest.mark.parametrize("config, overrides", [("square", []), ("square", [KIT]),
+                                              ("obstacle", [])],
+                         ids=["square", "square_kit", "obstacle"])
+def test_blocks_take_the_newton_scheme(config, overrides, monkeypatch):
+    """The thesis' Newton scheme's usual ticks go in blocks (their kernel calling its
+    tick), with obstacles too."""
+    cfg = _config(config, ["duration_s=10", *SETTLE, NEWTON, *overrides])
     block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
     rows = len(block.recorder.written)
     assert rows > 100 and block.steps * 4 < rows, f"{block.steps} Tick.step calls, {rows} rows"

@@ -16,16 +16,20 @@ import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.control.diverging import DivergingSolver
+from ardrone_nmpc.control.newton import NewtonGMRESController
 from ardrone_nmpc.core.entry_points import VettedCall
 from ardrone_nmpc.core.monotonic import SAME_CLOCK
 from ardrone_nmpc.core.types import FlightMode, MocapPose, NavdataSample, TickInputs
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.trajectories import Ellipse
 from ardrone_nmpc.runtime import control_tick as control_tick_module
-from ardrone_nmpc.control.kernels import cgmres_step
-from ardrone_nmpc.control.kernels.steps import cgmres_step_obstacles
+from ardrone_nmpc.control.kernels import FLAG_BAD_INPUT, FLAG_NON_FINITE, FLAG_OK, cgmres_step
+from ardrone_nmpc.control.kernels.steps import (cgmres_step_obstacles, newton_step,
+                                                newton_step_obstacles)
 from ardrone_nmpc.runtime.control_tick import (
-    KERNELS, NOT_NOMINAL, SOLVED, ControlTick, control_tick, control_tick_obstacles)
+    FLAG_ABOVE_TOLERANCE, KERNELS, NOT_NOMINAL, SOLVED, ControlTick, control_tick,
+    control_tick_newton, control_tick_newton_obstacles, control_tick_obstacles,
+    newton_step_judged, newton_step_judged_obstacles)
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory
 from ardrone_nmpc.runs.log_columns import tick_cells
 from ardrone_nmpc.runtime.tick import Tick, TickOutput
@@ -38,6 +42,9 @@ pytestmark = pytest.mark.skipif(not SAME_CLOCK, reason="ControlTick is built on 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 _TIMES = ("solve_us", "compute_us", "tick_late_ms")  # the clock's, not the flight's
 _PATHS = ("whole", "halves", "python")
+NEWTON = "controller.solver.method=newton"
+# Newton ticks that stop at their iterations above the tolerance (a share of them)
+TIGHT = ["controller.solver.tolerance=2e-6", "controller.solver.max_newton_iterations=2"]
 
 
 def config(name: str, *overrides: str):
@@ -101,7 +108,16 @@ def _same_flights(a: tuple, b: tuple) -> None:
     ("ellipse.yaml", ["duration_s=5"], True),  # curves: a table of their states
     ("lorenz.yaml", ["duration_s=5"], True),
     ("identify.yaml", ["duration_s=5"], True),
-    ("square.yaml", ["duration_s=4", "controller.solver.method=newton"], False),
+    # the thesis' Newton scheme (control_tick_newton): its ticks to tolerance, ticks stopped
+    # above it (SOLVED: Python's verdict, accepted or the P fallback's), a diverging
+    # solver's window, an obstacle's table
+    ("square.yaml", ["duration_s=6", NEWTON], True),
+    ("square.yaml", ["duration_s=6", NEWTON, *TIGHT], True),
+    ("square.yaml", ["duration_s=6", NEWTON, *TIGHT,
+                     "safety.solver_accept_max_iterations=false"], True),
+    ("square.yaml", ["duration_s=8", NEWTON, "faults.solver_diverge.start_s=3",
+                     "faults.solver_diverge.duration_s=0.5"], True),
+    ("obstacle.yaml", ["duration_s=6", NEWTON], True),
     # obstacles: the call solving with the obstacle table (control_tick_obstacles); a
     # moving one's centre fed between ticks
     ("obstacle.yaml", ["duration_s=6"], True),
@@ -114,6 +130,8 @@ def test_a_flight_gives_the_rows_and_state_of_the_other_paths(name, overrides, w
     answers = flights["whole"][3]
     if whole:  # the compiled call took the nominal ticks
         assert answers["done"] > 20
+        if TIGHT[0] in overrides:  # … and left those above the tolerance to Python
+            assert answers["solved"] > 5
     else:  # another solver: the call is not built
         assert answers == {"done": 0, "solved": 0, "none": 0}
     _same_flights(flights["whole"], flights["halves"])
@@ -172,10 +190,11 @@ def _inputs(t_s: float, position=(0.0, 0.0, 1.0), nav=None, mocap_age_s=0.01) ->
                       None, -math.inf)
 
 
-def _flown(path: str, ticks: int = 4, name: str = "square.yaml") -> tuple[Tick, list]:
+def _flown(path: str, ticks: int = 4, name: str = "square.yaml",
+           *overrides: str) -> tuple[Tick, list]:
     """A flight's tick after ``ticks`` ticks of its start (the first solves in Python), on
     ``path``, and their rows."""
-    cfg = config(name)
+    cfg = config(name, *overrides)
     tick = Tick(cfg, experiment_trajectory(cfg))
     _use(tick, path)
     rows = [_step(tick, k) for k in range(ticks)]
@@ -306,13 +325,17 @@ class _OwnEllipse(Ellipse):
         return super().state_at(t_s)
 
 
+class _OwnNewton(NewtonGMRESController):
+    def _tick(self, x, ref, initialise: bool) -> int:
+        return super()._tick(x, ref, initialise)
+
+
 @pytest.mark.parametrize("build", [
-    lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
-                     experiment_trajectory(cfg)),
-    lambda cfg: Tick(config("square.yaml", "controller.solver.method=newton"),
-                     experiment_trajectory(cfg),
-                     wrap_solver=lambda nmpc: DivergingSolver(nmpc, lambda t_s: False)),
     lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
+    # a Newton solver's subclass (its own tick)
+    lambda cfg: Tick(config("square.yaml", NEWTON), experiment_trajectory(cfg),
+                     wrap_solver=lambda nmpc: _OwnNewton.from_config(
+                         config("square.yaml", NEWTON).controller, period_s=0.065)),
     # a reference neither looked up nor tabulated (a curve's subclass: its own state_at)
     lambda cfg: Tick(config("ellipse.yaml"), HoldStartThen(_OwnEllipse())),
 ])
@@ -477,3 +500,42 @@ def test_the_call_solves_with_the_solvers_kernel(name, kernel):
     assert clone.control_tick._entry is not None  # (the compiled call took them)
     assert control_tick_obstacles.py_func.__globals__["cgmres_step"] is cgmres_step_obstacles
     assert control_tick.py_func.__globals__["cgmres_step"] is cgmres_step
+
+
+@pytest.mark.parametrize("name, kernel, step, judged", [
+    ("square.yaml", control_tick_newton, newton_step, newton_step_judged),
+    ("obstacle.yaml", control_tick_newton_obstacles, newton_step_obstacles,
+     newton_step_judged_obstacles)])
+def test_a_newton_flight_s_call_solves_with_the_newton_kernel(name, kernel, step, judged):
+    """The thesis' Newton scheme's call is the twin whose solve is the solver's own Newton
+    kernel (with or without the obstacle table), its active set passed in: the rows of the
+    Python stages, the copy's too."""
+    tick, _ = _flown("whole", 2, name, NEWTON)
+    assert tick.control_tick.kernel is kernel and KERNELS[step] is kernel
+    assert tick.control.nmpc.newton_call[0] is step
+    assert kernel.py_func.__globals__["cgmres_step"] is judged
+    assert judged.py_func.__globals__["newton_step"] is step
+    clone = pickle.loads(pickle.dumps(tick))  # (kept by the kernel's name)
+    assert clone.control_tick.kernel is kernel
+    assert clone.control.nmpc.newton_call[3] is clone.control.nmpc.active  # (its own)
+    python, _ = _flown("python", 2, name, NEWTON)
+    _same_ticks([_step(clone, k) for k in range(2, 8)], [_step(python, k) for k in range(2, 8)])
+    assert clone.control_tick._entry is not None  # (the compiled call took them)
+    np.testing.assert_array_equal(clone.control.nmpc.active, python.control.nmpc.active)
+
+
+def test_a_newton_tick_above_its_tolerance_is_judged_in_python():
+    """A Newton tick that stops at its iterations above the tolerance answers SOLVED with
+    :data:`FLAG_ABOVE_TOLERANCE` (no flag of the kernels'), and is judged as
+    ``solve_prepared`` judges it: ``max-iterations``, its ‖F‖ above the tolerance."""
+    assert FLAG_ABOVE_TOLERANCE not in (FLAG_OK, FLAG_BAD_INPUT, FLAG_NON_FINITE)
+    tick, _ = _flown("whole", 2, "square.yaml", NEWTON, "controller.solver.tolerance=1e-12",
+                     "controller.solver.max_newton_iterations=1")
+    ct = tick.control_tick
+    inputs, t_exp_s = _inputs(2.2, position=(0.02, -0.04, 1.01)), 1.2
+    answer = ct.answer(inputs, t_exp_s, tick.trajectory)
+    assert answer[0] == SOLVED and answer[3] == FLAG_ABOVE_TOLERANCE
+    assert answer[5] > 1e-12 and answer[7] == 1  # (‖F‖, Newton iterations)
+    _, _, solution, done = ct.finish(inputs, t_exp_s, answer)
+    assert done is False
+    assert solution.status == "max-iterations" and not solution.result.reinitialised

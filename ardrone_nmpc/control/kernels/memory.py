@@ -180,6 +180,11 @@ class SolverMemory:
         """One Newton tick with the eq. 3.25 active set ``active`` (N, 4) int8."""
         return self._newton(self._mem, x, ref, self._iprm, active)
 
+    def newton_call(self) -> tuple:
+        """``(kernel, memory, settings)``: :meth:`newton_step` is
+        ``kernel(memory, x, ref, settings, active)`` (for a caller that binds them once)."""
+        return self._newton, self._mem, self._iprm
+
     # --- for tests and benchmarks of single kernels -----------------------------------
     @property
     def weights(self) -> np.ndarray:
