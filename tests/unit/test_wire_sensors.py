@@ -206,3 +206,30 @@ def test_a_drone_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_pa
     target = {"drone": drone, "firmware": drone.firmware, "faults": drone.faults}[owner]
     target.__class__ = kind
     assert not QuietWire.eligible(drone)
+
+
+def _latches(name: str, monkeypatch) -> list:
+    """The firmware's com-watchdog latch after every tick's wire advance of the flight
+    ``name`` (with ``comwdg_clear`` "any" the state bit is the latch or the silence, so the
+    latch shows in no row or packet: the firmware's state itself is compared)."""
+    latches = []
+    advance = LockstepSensors._advance_through_wire
+
+    def kept(self, t_s):
+        advance(self, t_s)
+        latches.append((t_s, self.firmware.comwdg_latched))
+
+    monkeypatch.setattr(LockstepSensors, "_advance_through_wire", kept)
+    _fly(name)
+    monkeypatch.setattr(LockstepSensors, "_advance_through_wire", advance)
+    return latches
+
+
+def test_quiet_ticks_latch_the_com_watchdog_tick_by_tick_as_the_python_path(monkeypatch):
+    """The latch the Python path's watchdogs set on the way (a command every tick clears
+    it: the flight's end alone does not show a latch left unset mid-flight)."""
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _latches("dropout", monkeypatch)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    assert _latches("dropout", monkeypatch) == reference
+    assert sum(latched for _, latched in reference) > len(reference) // 2  # (most ticks)
