@@ -303,7 +303,9 @@ class TickBlocks:
         self.close()
         if not legs_ran:
             return n, exit_, None, 0
-        self.drone.block_ran_to(self.t_first_s + (k + n) * period_s)
+        # (the object's pose of the tick's frame: the kernel's, written back by close)
+        self.drone.block_ran_to(self.t_first_s + (k + n) * period_s,
+                                target_drawn=self.target)
         if exit_ == EXIT_AFTER_LEGS:
             return n, exit_, None, 0
         numbers = self.c[C_ANSWER:].tolist()

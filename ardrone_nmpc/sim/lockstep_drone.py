@@ -162,11 +162,13 @@ class LockstepDrone(ConfigHandshake):
         drone_block.after_block(self.sensors._legs, d, self._seq, ran)
 
     def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING,
-                     ends: float = 0.0, hover_due: bool = False) -> None:
+                     ends: float = 0.0, hover_due: bool = False,
+                     target_drawn: bool = False) -> None:
         """The rest of :meth:`advance_to` to plant time ``t_s`` for the tick a block of a
         plant in ``mode`` ended after its legs (``ends`` 1: a run that may fly the mode's
-        end; ``hover_due``: the hover watchdog due in its run)."""
-        left = self.sensors._legs.block_ran_to(mode, ends, hover_due)
+        end; ``hover_due``: the hover watchdog due in its run; ``target_drawn``: the block
+        drew the second object's pose of the run's frame — ``runtime/second_object``)."""
+        left = self.sensors._legs.block_ran_to(mode, ends, hover_due, target_drawn)
         if left is not ALL_DONE:
             self.sensors.go_on(t_s, left)
 

@@ -559,10 +559,11 @@ class CompiledLegs:
             sensors.took_mode(sensors.nav_rx_t_s, nav.mode)
 
     def _ran_to(self, raw: bytes, o: tuple, mode, hover_due: bool, new_mode: bool,
-                ends: float) -> tuple[list, bool]:
+                ends: float, target_drawn: bool = False) -> tuple[list, bool]:
         """:meth:`run`'s rest after a kernel run that did something (``raw``, ``o``: its
         bytes and floats; begun in ``mode``, with :meth:`run`'s findings): the firmware's
-        flags, the samples, the mode — what the run left to the Python path."""
+        flags, the samples, the mode — what the run left to the Python path
+        (``target_drawn``: :meth:`_took`'s)."""
         fw = self.firmware
         done, n_events = o[_R_DONE], o[_R_EVENTS]
         self._ran = True
@@ -583,7 +584,7 @@ class CompiledLegs:
                 t_pose, t_nav = o[_R_EV_T0], o[_R_EV_T1] if taken == 2 else None
             else:
                 t_pose, t_nav = o[_R_EV_T1] if taken == 2 else None, o[_R_EV_T0]
-            self._took(raw, o, t_pose, t_nav, mode)
+            self._took(raw, o, t_pose, t_nav, mode, target_drawn)
         if done > n_events:  # all the legs (the usual tick)
             self.live_out = o
             if new_mode or ends:  # (rare: a take-off's or landing's tick)
@@ -594,7 +595,8 @@ class CompiledLegs:
             self._modes_seen(o, mode, taken)
         return [(o[_R_EV_T0], o[_R_KIND0]), (o[_R_EV_T1], o[_R_KIND1])][done:n_events], True
 
-    def _took(self, raw: bytes, o: tuple, t_pose, t_nav, mode) -> None:
+    def _took(self, raw: bytes, o: tuple, t_pose, t_nav, mode,
+              target_drawn: bool = False) -> None:
         """The samples a run (or a block of runs: its last) left in ``out`` — the pose of
         event time ``t_pose``, the navdata sample of ``t_nav`` (None: not taken) — written
         as the sampler's took_* would (what one writes the other reads not; ``mode``: the
@@ -605,7 +607,11 @@ class CompiledLegs:
             # views of out's bytes: the values of o's floats, bit for bit)
             pose = MocapPose.make(o[_R_POSE_T], _frozen(raw, _F64, 3, _AT_POSITION),
                                   _frozen(raw, _F64, 3, _AT_ANGLES), o[_R_POSE_PSI])
-            if sensors.target_cfg is None:  # LockstepSensors.took_pose, spelled out
+            # LockstepSensors.took_pose, spelled out — without the second object's draw
+            # where a block's kernel drew its pose of this frame (``target_drawn``:
+            # runtime/second_object.take_frame, written back before): drawn once, as the
+            # per-tick path draws it
+            if sensors.target_cfg is None or target_drawn:
                 sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
             else:
                 sensors.took_pose(t_pose, pose)
@@ -692,9 +698,11 @@ class CompiledLegs:
         self.live_raw, self.live_out = raw, _GET_RUN(raw)
         self._took(raw, self.live_out, t_pose, t_nav, mode)
 
-    def block_ran_to(self, mode, ends: float, hover_due: bool = False) -> tuple[list, bool]:
+    def block_ran_to(self, mode, ends: float, hover_due: bool = False,
+                     target_drawn: bool = False) -> tuple[list, bool]:
         """:meth:`run`'s rest for the tick a block of a plant in ``mode`` ended after its
-        legs (their run's bytes still in the arrays; ``ends``, ``hover_due``: the run's):
+        legs (their run's bytes still in the arrays; ``ends``, ``hover_due``: the run's;
+        ``target_drawn``: the block drew the second object's pose of the run's frame):
         what it left to the Python path."""
         raw = self._run_bytes()
-        return self._ran_to(raw, _GET_RUN(raw), mode, hover_due, False, ends)
+        return self._ran_to(raw, _GET_RUN(raw), mode, hover_due, False, ends, target_drawn)

@@ -178,6 +178,13 @@ CASES = [
     ("follow_object_frame_stale", "follow_car",
      ["duration_s=8", *SETTLE, "reference.follow.offset_frame=object",
       "reference.follow.heading=object", "reference.follow.max_age_ms=5"], 7),
+    # a block that ends after a tick's legs (the battery's floor: an emptying battery's
+    # leg) or after its controller's call (Newton above its tolerance): the frame the
+    # kernel drew the object's pose of is not drawn again by the Python path going on
+    ("moving_obstacle_low_battery", "moving_obstacle",
+     ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
+      "sim.plant.battery_drain_pct_per_min=30"], 7),
+    ("follow_newton_tolerance", "follow_car", ["duration_s=8", *SETTLE, NEWTON, *TIGHT], 1),
     # flights no block takes (as the blocks' first version has it): an estimator the
     # compiled calls do not take, faults that touch the sensors' bytes
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
