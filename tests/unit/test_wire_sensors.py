@@ -9,6 +9,7 @@ config: the two must write the same rows and events and end alike.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -18,14 +19,15 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.sim.quiet_wire import QuietWire
-from ardrone_nmpc.sim.sensors import LockstepSensors
+from ardrone_nmpc.sim.sensors import _NAV, LockstepSensors
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 WALL_TIME = {"solve_us", "compute_us", "tick_late_ms"}  # measured: differ between flights
 SQUARE = ["duration_s=7", "sim.settle_s=1"]
 # each kind of act on each stream (frames dropped, missing, zero, late, duplicated and
 # reordered; packets lost, corrupted, duplicated and reordered; a blackout), a repeated
-# dropout, and the wire with a scripted second object and with the kit plant
+# dropout, the wire with a scripted second object and with the kit plant, the drone's own
+# reports (SENSOR_FAULTS that act on the packets for the whole flight or from a time on)
 FLIGHTS = {
     "dropout": ("square", ["faults.mocap_dropout.start_s=2",
                            "faults.mocap_dropout.duration_s=0.3"]),
@@ -63,6 +65,14 @@ FLIGHTS = {
                         "faults.mocap_dropout.duration_s=0.2"]),
     "slow_mocap": ("square", ["sim.mocap_rate_hz=10", "faults.navdata_loss.start_s=2",
                               "faults.navdata_loss.duration_s=0.2"]),
+    # the drone's own reports, for the whole flight or from a time on (SENSOR_FAULTS: the
+    # wire path all flight long): another firmware's ctrl_state codes (a take-off's and a
+    # landing's ticks), fault bits from 3 s, a VBAT_LOW level the battery crosses mid-flight
+    "ctrl_codes": ("square", ["faults.ctrl_codes.codes=fw2.4"]),
+    "drone_faults": ("square", ["faults.drone_faults.bits=[MOTORS]",
+                                "faults.drone_faults.start_s=3.0"]),
+    "vbat_low": ("square", ["faults.vbat_low.threshold_pct=30", "sim.plant.battery_start_pct=32",
+                            "sim.plant.battery_drain_pct_per_min=30"]),
     # 2 kHz mocap: more frames a tick than the events' first rows
     "fast_mocap": ("square", ["sim.mocap_rate_hz=2000", "faults.mocap_dropout.start_s=2",
                               "faults.mocap_dropout.duration_s=0.2"]),
@@ -78,9 +88,19 @@ def _fly(name: str) -> tuple:
     result = run_lockstep(cfg, recorder=memory)
     rows = [{k: ("nan" if isinstance(v, float) and math.isnan(v) else v)
              for k, v in row.items() if k not in WALL_TIME} for row in memory.rows]
-    events = [{k: v for k, v in e.items() if k != "wall_s"} for e in memory.run_data(
-        cfg, seed=0).events]
+    events = [{k: _nan_free(v) for k, v in e.items() if k != "wall_s"}
+              for e in memory.run_data(cfg, seed=0).events]
     return rows, events, (result.ticks, result.ending, result.final_mode, result.end_t_s)
+
+
+def _nan_free(value):
+    """``value`` with its NaNs as "nan", in lists too (a fault window's end: NaN for the
+    faults that act all flight long — NaN equals nothing, itself included)."""
+    if isinstance(value, float) and math.isnan(value):
+        return "nan"
+    if isinstance(value, (list, tuple)):
+        return [_nan_free(v) for v in value]
+    return value
 
 
 @pytest.mark.parametrize("name", sorted(FLIGHTS))
@@ -233,3 +253,51 @@ def test_quiet_ticks_latch_the_com_watchdog_tick_by_tick_as_the_python_path(monk
     monkeypatch.setattr(QuietWire, "enabled", True)
     assert _latches("dropout", monkeypatch) == reference
     assert sum(latched for _, latched in reference) > len(reference) // 2  # (most ticks)
+
+
+def _packets(name: str, monkeypatch) -> list:
+    """Every navdata packet the sampler received in the flight ``name``: its arrival, and
+    what a receiver reads of it — the header's state and sequence, the demo option's
+    fields with their types, the other options' tags and payloads (a packet that does not
+    decode: its bytes)."""
+    from ardrone_nmpc.protocol.navdata import Navdata, NavdataError, decode_navdata
+
+    packets = []
+    receive = LockstepSensors._receive
+
+    def kept(self, arrival_s, stream, data):
+        if stream == _NAV:
+            packet = data
+            if data.__class__ is not Navdata:
+                try:
+                    packet = decode_navdata(data)
+                except NavdataError:
+                    packet = None
+            packets.append((arrival_s, bytes(data) if packet is None else (
+                int(packet.state), packet.sequence,
+                None if packet.demo is None else [(type(v).__name__, v) for v in
+                                                  _fields_of(packet.demo)],
+                [(o.tag, o.payload) for o in packet.options])))
+        return receive(self, arrival_s, stream, data)
+
+    monkeypatch.setattr(LockstepSensors, "_receive", kept)
+    _fly(name)
+    monkeypatch.setattr(LockstepSensors, "_receive", receive)
+    return packets
+
+
+def _fields_of(record) -> list:
+    """A (slotted) dataclass' field values in order."""
+    return [getattr(record, f.name) for f in dataclasses.fields(record)]
+
+
+@pytest.mark.parametrize("name", ["ctrl_codes", "drone_faults", "vbat_low", "dropout"])
+def test_quiet_ticks_send_the_python_paths_navdata_packets(name, monkeypatch):
+    """The packets a quiet tick hands over built (``DroneFirmware.packet_of``) read as the
+    Python path's bytes do, packet by packet — the firmware's options for the whole flight
+    too (another firmware's ctrl_state codes show in no row: the packets are compared)."""
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _packets(name, monkeypatch)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    assert _packets(name, monkeypatch) == reference
+    assert len(reference) > 50  # (the shortest: the VBAT_LOW landing)
