@@ -243,6 +243,13 @@ CASES: list[tuple[str, str, list[str], int]] = [
     ("follow_gust", "follow_car", ["duration_s=12", "faults.wind_gust.start_s=3.013",
                                    "faults.wind_gust.duration_s=0.3"], 6),
     ("follow_unseen", "follow_car", ["duration_s=6", "sim.target=null"], 7),  # (no-target)
+    # blocks ending after a tick's legs or its controller's call with a second object (the
+    # object drawn once for the tick's frame: review17's find)
+    ("moving_obstacle_low_battery", "moving_obstacle", [
+        "duration_s=10", "sim.settle_s=1", "sim.plant.battery_start_pct=23",
+        "sim.plant.battery_drain_pct_per_min=30"], 7),
+    ("follow_newton_tolerance", "follow_car", ["duration_s=8", "sim.settle_s=1", *NEWTON,
+                                               *TIGHT], 1),
     # the thesis' Newton scheme in the compiled controller's tick (control_tick_newton) and
     # in blocks (tick_block_newton): clean flights, a waypoint and a curve's reference, the
     # kit plant, fits between blocks; ticks stopped above the tolerance (max-iterations:
