@@ -35,7 +35,14 @@ import time
 
 from ardrone_nmpc.links.mocap_source import MocapSource, mocap_pose_of
 from ardrone_nmpc.links.udp import RECV_BUFFER_BYTES, Clock, open_udp
-from ardrone_nmpc.protocol.mocap import MOCAP_DEFAULT_PORT, MocapError, MocapFrame, decode_mocap
+from ardrone_nmpc.protocol.mocap import (
+    _MM_PER_M,  # (MocapObjectPose.from_si's scale: feed_object_frames)
+    MOCAP_DEFAULT_PORT,
+    MocapError,
+    MocapFrame,
+    MocapObjectPose,
+    decode_mocap,
+)
 
 __all__ = ["MocapLink", "mocap_pose_of"]
 
@@ -177,6 +184,41 @@ class MocapLink(MocapSource):
         simulator's frames: their encoding is exact, float64 poses — no bytes needed)."""
         self.stats.record_datagram()
         self._handle_frame(frame, t_s, sender)
+
+    def feed_object_frames(self, frames, sender=("lockstep", 0)) -> None:
+        """:meth:`feed_frame` of each frame of ``frames`` in turn, of frames carrying the
+        object ``object_name`` alone: ``(frame_number, t_s, position_m, rotation_xyz_rad)``
+        each — the frame ``MocapFrame.of(frame_number, [MocapObjectPose.from_si(object_name,
+        position_m, rotation_xyz_rad)])`` received at ``t_s``. The link's state left is the
+        calls' one by one (its sender's counts and silence, the stream's statistics, the
+        freshness rules'); the frames are not built (the lockstep simulator's quiet ticks)."""
+        name = self.object_name
+        frames = list(frames)
+        while frames and (self._sender != sender or name in self.other_objects):
+            number, t_s, position_m, rotation = frames.pop(0)  # (sender lock, events)
+            self.feed_frame(MocapFrame.of(number, [MocapObjectPose.from_si(
+                name, position_m, rotation)]), t_s, sender)
+        if not frames:
+            return
+        restart_s = self.restart_silence_s
+        numbered = []
+        with self._lock:  # (_from_locked_sender's, the sender locked and carrying the object)
+            count = self._frames[sender]
+            last_t = self._sender_t_s
+            for number, t_s, _, _ in frames:
+                numbered.append((number, t_s, t_s - last_t >= restart_s))
+                last_t = t_s
+            count[0] += len(frames)
+            count[1] = frames[-1][0]
+            self._sender_t_s = last_t
+        accepted = self.stats.record_numbered(numbered)
+        object_frames = []  # (MocapObjectPose.from_si's floats)
+        for (_, t_s, (x, y, z), (rx, ry, rz)), ok in zip(frames, accepted):
+            if ok:
+                object_frames.append((t_s, (float(x) * _MM_PER_M, float(y) * _MM_PER_M,
+                                            float(z) * _MM_PER_M),
+                                      (float(rx), float(ry), float(rz))))
+        self.accept_object_frames(object_frames)
 
     def _handle(self, data: bytes, t_s: float, sender) -> None:
         stats = self.stats

@@ -247,3 +247,52 @@ class MocapSource:
             self._rx_t_s = t_s
         self._poses += 1
         counts[self.object_name] = counts.get(self.object_name, 0) + 1
+
+    def accept_object_frames(self, frames) -> None:
+        """:meth:`accept_frame` of each frame of ``frames`` in turn, of frames carrying the
+        object ``object_name`` alone: ``(t_s, translation_mm, rotation_xyz_rad)`` each (the
+        :class:`MocapObjectPose`'s floats). The state left is the calls' one by one; only the
+        newest fresh pose is made a record (a lockstep receiver's bulk receipt)."""
+        if not frames:
+            return
+        name = self.object_name
+        self._names_seen = (name,)
+        limit = self.repeat_limit
+        last_values, same = self._last_values, self._same_count
+        rx_t, max_gap = self._rx_t_s, self._max_gap_s
+        zero = repeats = fresh = 0
+        newest = None
+        isfinite = math.isfinite
+        for t_s, translation_mm, rotation in frames:
+            values = translation_mm + rotation
+            a, b, c, d, e, f = values  # MocapObjectPose.fresh: any(values), all finite
+            if not ((a or b or c or d or e or f) and isfinite(a) and isfinite(b)
+                    and isfinite(c) and isfinite(d) and isfinite(e) and isfinite(f)):
+                zero += 1
+                last_values, same = None, 0
+                continue
+            bits = _POSE_BITS.pack(*values)
+            if bits == last_values:
+                same += 1
+            else:
+                last_values, same = bits, 1
+            if limit is not None and same >= limit:
+                repeats += 1
+                continue
+            if isfinite(rx_t):
+                max_gap = max(max_gap, t_s - rx_t)
+            rx_t, newest = t_s, (t_s, translation_mm, rotation)
+            fresh += 1
+        self._last_values, self._same_count = last_values, same
+        self._zero += zero
+        self._repeats += repeats
+        self._max_gap_s = max_gap
+        if newest is not None:
+            t_s, translation_mm, rotation = newest
+            record = mocap_pose_of(MocapObjectPose(name, translation_mm, rotation), t_s)
+            with self._lock:
+                self._pose = record
+                self._rx_t_s = t_s
+            self._poses += fresh
+            counts = self._fresh_counts
+            counts[name] = counts.get(name, 0) + fresh

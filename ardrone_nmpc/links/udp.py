@@ -171,20 +171,23 @@ class LinkStats:
         if seq is None:
             return True
         with self._lock:
-            last = self._last_seq
-            if last is None:
-                self._last_seq = seq
-                return True
-            if seq > last:
-                self._lost += seq - last - 1
-                self._last_seq = seq
-                return True
-            if restart_ok or last - seq > self.restart_backjump:
-                self._restarts += 1
-                self._last_seq = seq
-                return True
-            self._out_of_order += 1
-            return False
+            return self._accept_locked(seq, restart_ok)
+
+    def _accept_locked(self, seq: int, restart_ok: bool) -> bool:
+        last = self._last_seq
+        if last is None:
+            self._last_seq = seq
+            return True
+        if seq > last:
+            self._lost += seq - last - 1
+            self._last_seq = seq
+            return True
+        if restart_ok or last - seq > self.restart_backjump:
+            self._restarts += 1
+            self._last_seq = seq
+            return True
+        self._out_of_order += 1
+        return False
 
     def reset_sequence(self) -> None:
         """Forget the last sequence number (after a re-wake: the sender may restart at 1)."""
@@ -194,12 +197,31 @@ class LinkStats:
     def record_packet(self, t_s: float) -> None:
         """One accepted packet received at ``t_s``."""
         with self._lock:
-            self._packets += 1
-            self._last_rx_t_s = t_s
-            self._times.append(t_s)
-            cutoff = t_s - self.window_s
-            while self._times and self._times[0] < cutoff:
-                self._times.popleft()
+            self._record_locked(t_s)
+
+    def _record_locked(self, t_s: float) -> None:
+        self._packets += 1
+        self._last_rx_t_s = t_s
+        times = self._times
+        times.append(t_s)
+        cutoff = t_s - self.window_s
+        while times and times[0] < cutoff:
+            times.popleft()
+
+    def record_numbered(self, numbered) -> list[bool]:
+        """:meth:`record_datagram`, :meth:`accept_sequence` and, if accepted,
+        :meth:`record_packet` of each ``(seq, t_s, restart_ok)`` of ``numbered`` in turn
+        (``seq`` an int), under one lock: the state the calls one by one leave (a lockstep
+        receiver's bulk receipt). Returns whether each was accepted."""
+        accepted = []
+        with self._lock:
+            self._datagrams += len(numbered)
+            for seq, t_s, restart_ok in numbered:
+                ok = self._accept_locked(seq, restart_ok)
+                if ok:
+                    self._record_locked(t_s)
+                accepted.append(ok)
+        return accepted
 
     # ----------------------------------------------------------------------------- readers
 

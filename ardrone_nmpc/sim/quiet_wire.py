@@ -12,7 +12,9 @@ the Python path would — the frame built from the pose drawn, the packet built 
 firmware from the sample drawn (:meth:`DroneFirmware.packet_of
 <ardrone_nmpc.sim.drone_firmware.DroneFirmware.packet_of>`: the packet as its bytes decode,
 handed over without them as the frames are) — into the same queue, in the same order; the
-receiving links are the Python path's.
+receiving links are the Python path's, but a frame goes as its numbers (``LockstepSensors.
+push_object_frame``: nothing reads the frame object) and is received with the other such
+frames arrived in a row in one bulk call (``MocapLink.feed_object_frames``).
 
 A tick is flown so when the Python path's would do nothing but those legs and draws:
 
@@ -159,9 +161,18 @@ class QuietWire:
         ``mode`` all along), as the Python path sends them."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
+        # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
+        # would queue a MocapFrame of the object alone, as it is
+        numbers = (sensors._names_checked and not sensors.frames_as_bytes
+                   and sensors.target_cfg is None)
+        push_numbers = sensors.push_object_frame
+        latency_s = sensors.mocap_latency_s + NO_MOCAP_FAULT.extra_latency_s
         for row in rows:
             t_event, sample = row[_T], row[_S:]
             if row[0] == _MOCAP:
+                if numbers:
+                    push_numbers(t_event + latency_s, int(row[_K]), sample[1:4], sample[4:7])
+                    continue
                 frame(int(row[_K]), t_event, _Pose(sample[1:4], sample[4:7]), NO_MOCAP_FAULT,
                       None)
             else:  # AirframePlant.navdata's sample (airborne), the packet of it

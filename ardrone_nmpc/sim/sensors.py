@@ -23,6 +23,12 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   packets stay bytes (corruption acts on bytes) but a quiet tick's: its packets travel as
   the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
   are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
+  A quiet tick's frames (the object alone, as they are) travel as their numbers
+  (:class:`ObjectFrame`) and the ones that arrive in a row by a tick are received together
+  (:meth:`MocapLink.feed_object_frames
+  <ardrone_nmpc.links.mocap_link.MocapLink.feed_object_frames>`: the link's state left as
+  by ``feed_frame`` of each in turn; only the newest fresh pose made a record) — the tick
+  reads only what the newest leaves.
 
 On the direct path a tick in which nothing but physics happens (an airframe flying, taking
 off or landing, a quiet firmware) is one compiled call
@@ -47,17 +53,37 @@ import numpy as np
 
 from ardrone_nmpc.core.types import TickInputs
 from ardrone_nmpc.links.udp import LinkStats
-from ardrone_nmpc.protocol.mocap import MocapFrame, encode_mocap
+from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, Navdata, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.held_state import holds_in_arrays
 from ardrone_nmpc.sim.target import target_pose
 
-__all__ = ["LockstepSensors"]
+__all__ = ["LockstepSensors", "ObjectFrame"]
 
 _MOCAP, _NAV = 0, 1
 #: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
-_WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push")
+_WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push", "_receive",
+                  "push_object_frame")
+
+
+class ObjectFrame:
+    """A quiet tick's mocap frame on its way (sim/quiet_wire.py): the frame
+    ``MocapFrame.of(number, [MocapObjectPose.from_si(object_name, position_m,
+    rotation_xyz_rad)])`` as its numbers — received in bulk
+    (:meth:`MocapLink.feed_object_frames
+    <ardrone_nmpc.links.mocap_link.MocapLink.feed_object_frames>`), never built."""
+
+    __slots__ = ("number", "position_m", "rotation_xyz_rad")
+
+    def __init__(self, number: int, position_m, rotation_xyz_rad) -> None:
+        self.number = number
+        self.position_m, self.rotation_xyz_rad = position_m, rotation_xyz_rad
+
+    def frame(self, object_name: str) -> MocapFrame:
+        """The frame it stands for."""
+        return MocapFrame.of(self.number, [MocapObjectPose.from_si(
+            object_name, self.position_m, self.rotation_xyz_rad)])
 
 
 # the sensor grids' next indices: held by the compiled legs between their runs
@@ -237,10 +263,19 @@ class LockstepSensors:
         quiet = self._quiet
         if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
             self._send_through_wire(t_s)
-        queue = self._queue
+        queue, quiet_frames = self._queue, []
         while queue and queue[0][0] <= t_s + 1e-12:
             arrival, _, stream, data = heapq.heappop(queue)
+            if data.__class__ is ObjectFrame:  # received together, in order
+                quiet_frames.append((data.number, arrival, data.position_m,
+                                     data.rotation_xyz_rad))
+                continue
+            if quiet_frames:
+                self.mocap.feed_object_frames(quiet_frames)
+                quiet_frames = []
             self._receive(arrival, stream, data)
+        if quiet_frames:
+            self.mocap.feed_object_frames(quiet_frames)
 
     def _send_through_wire(self, t_s: float) -> None:
         """Run the drone to ``t_s``, sending every frame and packet due on the way."""
@@ -266,6 +301,12 @@ class LockstepSensors:
         # the one that overtook it
         heapq.heappush(self._queue, (arrival_s, self._order, stream, data))
         self._order += 1
+
+    def push_object_frame(self, arrival_s: float, k: int, position_m, rotation_xyz_rad) -> None:
+        """Queue the mocap frame ``k`` of the object alone at ``position_m``,
+        ``rotation_xyz_rad``, as it is, to arrive at ``arrival_s`` — as numbers
+        (:class:`ObjectFrame`: a quiet tick's, sim/quiet_wire.py)."""
+        self._push(arrival_s, _MOCAP, ObjectFrame(k & 0xFFFFFFFF, position_m, rotation_xyz_rad))
 
     def _mocap_frame(self, k: int, t_s: float) -> None:
         faults = self.drone.faults

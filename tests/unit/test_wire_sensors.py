@@ -19,7 +19,9 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.sim.quiet_wire import QuietWire
-from ardrone_nmpc.sim.sensors import _NAV, LockstepSensors
+from ardrone_nmpc.links.mocap_link import MocapLink
+from ardrone_nmpc.sim.sensors import _NAV, LockstepSensors, ObjectFrame
+from tests.link_state import link_state
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 WALL_TIME = {"solve_us", "compute_us", "tick_late_ms"}  # measured: differ between flights
@@ -109,8 +111,6 @@ def test_frames_handed_over_decoded_give_the_bytes_bits(name, monkeypatch):
     reference = _fly(name)
     monkeypatch.setattr(LockstepSensors, "frames_as_bytes", False)
     fed = []  # the shortcut taken: frames reach the link decoded
-    from ardrone_nmpc.links.mocap_link import MocapLink
-
     feed_frame = MocapLink.feed_frame
 
     def counted(self, frame, t_s, *args):
@@ -165,9 +165,12 @@ def _ended_in(name: str, monkeypatch) -> dict:
     monkeypatch.setattr(LockstepSensors, "__init__", init)
     sensors = samplers[-1]
     plant = sensors.plant
-    return {"link": _plain(sensors.mocap), "mocap_stats": _plain(sensors.mocap.stats),
+    name = sensors.object_name  # (a quiet tick's frame on its way: the frame it stands for)
+    queue = [item if item[3].__class__ is not ObjectFrame else item[:3] + (item[3].frame(name),)
+             for item in sorted(sensors._queue)]
+    return {"link": link_state(sensors.mocap), "mocap_stats": _plain(sensors.mocap.stats),
             "nav_stats": _plain(sensors.nav_stats), "nav_malformed": sensors.nav_malformed,
-            "queue": list(sensors._queue), "firmware": _plain(sensors.firmware),
+            "queue": queue, "firmware": _plain(sensors.firmware),
             "faults": sensors.drone.faults.counters,
             "plant": (plant._state, plant._steps, plant._battery, plant._vel_bias,
                       plant._yaw_bias_deg)}
@@ -179,13 +182,22 @@ def test_quiet_ticks_leave_the_links_firmware_and_faults_as_the_python_path(name
     monkeypatch.setattr(QuietWire, "enabled", False)
     reference = _ended_in(name, monkeypatch)
     monkeypatch.setattr(QuietWire, "enabled", True)
+    bulk = []  # the quiet ticks' frames received in bulk (ObjectFrame)
+    feed = MocapLink.feed_object_frames
+
+    def counted(self, frames, *args):
+        bulk.extend(frames)
+        return feed(self, frames, *args)
+
+    monkeypatch.setattr(MocapLink, "feed_object_frames", counted)
     ended = _ended_in(name, monkeypatch)
     assert ended == reference
     assert ended["mocap_stats"]["_packets"] > 100  # (frames went through the link)
+    assert len(bulk) > (100 if name != "target" else -1)  # (the target's: frame by frame)
 
 
 @pytest.mark.parametrize("name", ["_advance_through_wire", "_mocap_frame", "_send_frame",
-                                  "_push", "_run_to"])
+                                  "_push", "_receive", "push_object_frame", "_run_to"])
 def test_a_sampler_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
         name, monkeypatch):
     """The quiet ticks stand in for the sampler's wire legs and sends: a sampler class
