@@ -1,53 +1,50 @@
 """The direct sensor path's tick in one compiled call, when nothing but physics happens in it.
 
-:class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the
-plant's state for
-:meth:`LockstepSensors.advance_to <ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>` (and
-for ``LockstepDrone.advance_to``, which calls :meth:`CompiledLegs.run` without the sampler's
-frame, then hands what it left to the sampler's ``go_on``). Between
-its runs the kernel's arrays hold that state (the plant's clock, battery, biases, gusts,
-command, delay ring and state vector, the normal blocks' and the sensor grids' positions):
-packing it from the attributes and writing it back every tick cost as much as the
-physics. The attributes leave the instances' ``__dict__`` meanwhile, and any read of one —
-the plant's Python path, the firmware, a fault, a test — writes them all back first
-(:mod:`~ardrone_nmpc.sim.held_state`); a write meanwhile is newer than the arrays and is
-kept, and the next run takes the state again. What a tick reads between runs comes from
-the arrays: the samples, and the truth of the last run (:meth:`CompiledLegs.truth`,
-:meth:`CompiledLegs.live` for ``LockstepDrone.truth_cells`` and the PCMD chain) — unless a
-held attribute was written since (then the attributes, released, are read). It
-reads and writes the plant's and the firmware's internals (it is their compiled path, not a
-client), and is used only when the Python path's tick would do what the kernel does:
+:class:`CompiledLegs` runs :func:`~ardrone_nmpc.sim.sensor_step.lockstep_run` on the plant's
+state for :meth:`LockstepSensors.advance_to
+<ardrone_nmpc.sim.sensors.LockstepSensors.advance_to>` (and for ``LockstepDrone.advance_to``,
+which calls :meth:`CompiledLegs.run` without the sampler's frame, then hands what it left to
+the sampler's ``go_on``). Between its runs the kernel's arrays hold that state (the plant's
+clock, battery, biases, gusts, command, delay ring and state vector, the normal blocks' and the
+sensor grids' positions): packing it from the attributes and writing it back every tick cost as
+much as the physics. The attributes leave the instances' ``__dict__`` meanwhile, and any read
+of one — the plant's Python path, the firmware, a fault, a test — writes them all back first
+(:mod:`~ardrone_nmpc.sim.held_state`); a write meanwhile is newer than the arrays and is kept,
+and the next run takes the state again. What a tick reads between runs comes from the arrays:
+the samples, and the truth of the last run (:meth:`CompiledLegs.truth`,
+:meth:`CompiledLegs.live` for ``LockstepDrone.truth_cells`` and the PCMD chain) — unless a held
+attribute was written since (then the attributes, released, are read). It reads and writes the
+plant's and the firmware's internals (it is their compiled path, not a client), and is used
+only when the Python path's tick would do what the kernel does:
 
-* the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or
-  LANDING on its own dynamics (no other backend's ``_motors_on_step``: what
-  ``_flying_advance`` and ``_auto_advance`` compile) or a
-  :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` on the kit's (its channels after the
-  10-state in the kernel's state array), under a firmware and a sampler whose classes
-  override none of what the kernel does in their place (:meth:`CompiledLegs.eligible`);
-* the navdata's flight mode is the plant's, the one the link's take-off guard saw last —
-  or a new one whose sample the sampler lets the guard see after the run
+* the plant is an :class:`~ardrone_nmpc.sim.plant.AirframePlant` FLYING, TAKING_OFF or LANDING
+  on its own dynamics (no other backend's ``_motors_on_step``: what ``_flying_advance`` and
+  ``_auto_advance`` compile) or a :class:`~ardrone_nmpc.sim.plant_kit.KitPlant` on the kit's
+  (its channels after the 10-state in the kernel's state array), under a firmware and a sampler
+  whose classes override none of what the kernel does in their place
+  (:meth:`CompiledLegs.eligible`);
+* the navdata's flight mode is the plant's, the one the link's take-off guard saw last — or a
+  new one whose sample the sampler lets the guard see after the run
   (``LockstepSensors.defers_mode``: the guard does nothing then);
-* the firmware would change nothing on the way but its flags: its held PCMD is applied and
-  not capped, and by the tick's time no link-loss watchdog fires, nor the hover watchdog
-  unless the plant's command is hover already (the silence only grows within a tick, so
-  none fires earlier either; the com-watchdog bit and the hover watchdog's flags and
-  held PCMD, which nothing reads on the way, are set after the run, as the Python path's
-  calls would have left them).
+* the firmware would change nothing on the way but its flags: its held PCMD is applied and not
+  capped, and by the tick's time no link-loss watchdog fires, nor the hover watchdog unless the
+  plant's command is hover already (the silence only grows within a tick, so none fires earlier
+  either; the com-watchdog bit and the hover watchdog's flags and held PCMD, which nothing
+  reads on the way, are set after the run, as the Python path's calls would have left them).
 
-The kernel itself stops before a leg that a climb near the altitude cap or an emptying
-battery would change; the Python path goes on from there. It flies the leg that ends a
-take-off or a landing (the climb settled: FLYING; the touch-down: LANDED) when nothing but
-the plant's mode changes with it — no hover watchdog due, no climb held (what the firmware
-does with those depends on the mode), and a guard that may see the new mode's sample after
-the run — and else hands it back (flown, found to end it, and undone).
+The kernel itself stops before a leg that a climb near the altitude cap or an emptying battery
+would change; the Python path goes on from there. It flies the leg that ends a take-off or a
+landing (the climb settled: FLYING; the touch-down: LANDED) when nothing but the plant's mode
+changes with it — no hover watchdog due, no climb held (what the firmware does with those
+depends on the mode), and a guard that may see the new mode's sample after the run — and else
+hands it back (flown, found to end it, and undone).
 
 :meth:`CompiledLegs.command` is the same kind of shortcut for the tick's PCMD: the chain
 :meth:`SimulatedDrone.execute_pcmd <ardrone_nmpc.sim.drone.SimulatedDrone.execute_pcmd>` →
 :meth:`DroneFirmware.execute_pcmd <ardrone_nmpc.sim.drone_firmware.DroneFirmware.execute_pcmd>`
-(the sequence rule) → ``apply_command`` (the altitude cap) →
-:meth:`AirframePlant.command <ardrone_nmpc.sim.plant.AirframePlant.command>` written out in
-one method, for a drone whose classes override none of them, on a tick at which no injected
-fault may drop the datagram.
+(the sequence rule) → ``apply_command`` (the altitude cap) → :meth:`AirframePlant.command
+<ardrone_nmpc.sim.plant.AirframePlant.command>` written out in one method, for a drone whose
+classes override none of them, on a tick at which no injected fault may drop the datagram.
 """
 
 from __future__ import annotations
@@ -519,8 +516,7 @@ class CompiledLegs:
     def refill(self, need: tuple = (ks.NEED_BIAS, ks.NEED_GUST, ks.NEED_MOCAP,
                                     ks.NEED_NAV)) -> None:
         """New blocks of normals for those that ran short (held: the positions in iv; a
-        block of ticks' run found one short: ``sim/drone_block.LEGS_SHORT``): ``need``, the
-        normals a run may take of each (biases, gusts, poses, navdata samples)."""
+        block's run found one short: ``sim/drone_block.LEGS_SHORT``); ``need``: of each."""
         bias_n, gust_n, mocap_n, nav_n = blocks = self._held[3:]
         iv = self.iv
         bias_n.pos, gust_n.pos, mocap_n.pos, nav_n.pos = _GET_POS(iv, _AT_POS)
@@ -561,9 +557,8 @@ class CompiledLegs:
     def _ran_to(self, raw: bytes, o: tuple, mode, hover_due: bool, new_mode: bool,
                 ends: float, target_drawn: bool = False) -> tuple[list, bool]:
         """:meth:`run`'s rest after a kernel run that did something (``raw``, ``o``: its
-        bytes and floats; begun in ``mode``, with :meth:`run`'s findings): the firmware's
-        flags, the samples, the mode — what the run left to the Python path
-        (``target_drawn``: :meth:`_took`'s)."""
+        bytes and floats; begun in ``mode``, with :meth:`run`'s findings; ``target_drawn``:
+        :meth:`_took`'s): the firmware's flags, the samples, the mode — the Python path's."""
         fw = self.firmware
         done, n_events = o[_R_DONE], o[_R_EVENTS]
         self._ran = True
@@ -607,10 +602,8 @@ class CompiledLegs:
             # views of out's bytes: the values of o's floats, bit for bit)
             pose = MocapPose.make(o[_R_POSE_T], _frozen(raw, _F64, 3, _AT_POSITION),
                                   _frozen(raw, _F64, 3, _AT_ANGLES), o[_R_POSE_PSI])
-            # LockstepSensors.took_pose, spelled out — without the second object's draw
-            # where a block's kernel drew its pose of this frame (``target_drawn``:
-            # runtime/second_object.take_frame, written back before): drawn once, as the
-            # per-tick path draws it
+            # LockstepSensors.took_pose, spelled out — but not the second object's draw if a
+            # block's kernel drew this frame's (``target_drawn``: second_object.take_frame)
             if sensors.target_cfg is None or target_drawn:
                 sensors.pose, sensors.pose_rx_t_s = pose, t_pose + sensors.mocap_latency_s
             else:
@@ -702,7 +695,6 @@ class CompiledLegs:
                      target_drawn: bool = False) -> tuple[list, bool]:
         """:meth:`run`'s rest for the tick a block of a plant in ``mode`` ended after its
         legs (their run's bytes still in the arrays; ``ends``, ``hover_due``: the run's;
-        ``target_drawn``: the block drew the second object's pose of the run's frame):
-        what it left to the Python path."""
+        ``target_drawn``: the block drew the second object's pose of the run's frame)."""
         raw = self._run_bytes()
         return self._ran_to(raw, _GET_RUN(raw), mode, hover_due, False, ends, target_drawn)

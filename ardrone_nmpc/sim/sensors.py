@@ -328,6 +328,11 @@ class LockstepSensors:
             # the first frame encoded: encode_mocap's checks of the names (its ValueError)
             data = encode_mocap(frame)
             self._names_checked = True
+            # a link of another kind (a swapped mocap source: a subclass's) takes bytes
+            from ardrone_nmpc.links.mocap_link import MocapLink  # (the wire's only)
+
+            if not isinstance(self.mocap, MocapLink):
+                self.frames_as_bytes = True
             if not self.frames_as_bytes:
                 data = frame
         else:
