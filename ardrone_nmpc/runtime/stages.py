@@ -32,6 +32,7 @@ from ardrone_nmpc.estimation.disturbance import ReferenceIntegrator, frozen_axes
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget, TrackedObject
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
+from ardrone_nmpc.runtime.p_tick import p_tick, p_work
 from ardrone_nmpc.runtime.supervision import HOVER, Sent, Supervision
 from ardrone_nmpc.runtime.tick_kernels import (fill_reference_table, nmpc_inputs, nmpc_work,
                                                nmpc_work_views)
@@ -51,6 +52,7 @@ _NO_SHIFT = np.zeros(0)  # nmpc_inputs: no offset-free shift
 _ALL_FROZEN = (True, True, True, True)  # OffsetFree: no axis integrates
 _F64 = np.dtype(np.float64)
 _X_SHAPE = (STATE_DIM,)
+_REF_SHAPE = (1, STATE_DIM)
 # a Solution from all its fields without the NamedTuple's Python ``__new__`` (a frame a tick)
 _new_tuple = tuple.__new__
 
@@ -233,6 +235,8 @@ class Control:
         self.vz_from_commands = cfg.estimator.kind == "none"
         self.accept_max_iterations = cfg.safety.solver_accept_max_iterations
         self._vz_max_mps = limits.control_vz_max_mps
+        self._p_args: tuple | None = None  # the waypoint_args _p_work was made of
+        self._p_work: tuple | None = None  # p_tick's work and rows (None: Python's path)
         if nmpc is not None:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
@@ -289,8 +293,7 @@ class Control:
         ``ref_horizon`` are the stage's own arrays, overwritten by the next call (as the
         estimate ``x`` is): copy them to keep them; ``result`` is the answer's own."""
         if self.nmpc is None:
-            ref_now = traj.state_at(t_exp_s)[0]
-            return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
+            return self._p_solve(t_exp_s, x, traj)
         solver = self.nmpc
         delay = self.delay
         if self._dtau_varies:
@@ -337,6 +340,25 @@ class Control:
         ref_horizon = states[1:]
         horizon = ref_horizon if offset is None else offset.integrator.shifted(ref_horizon)
         return self._solved(t_exp_s, x_solve, states[0], horizon, ref_horizon, solver.solve)
+
+    def _p_solve(self, t_exp_s: float, x, traj) -> Solution:
+        """The P controller's answer: against a waypoint reference in one compiled call
+        (runtime/p_tick.py, the same bits), else ``state_at`` and ``p_control``."""
+        kind = traj.__class__
+        args = traj.waypoint_args if kind is HoldStartThen or kind is LiveTarget else None
+        if (args is not None and x.__class__ is np.ndarray and x.dtype is _F64
+                and x.shape == _X_SHAPE):
+            if args is not self._p_args:  # once a flight: its arrays into the work vector
+                self._p_args, self._p_work = args, p_work(self.delay.period_s, args)
+            if self._p_work is not None:
+                g = self.p_gains
+                ref = np.empty(_REF_SHAPE)  # the Solution's own (the Python path's too)
+                vz, phi, theta, rate = p_tick(x, t_exp_s, g.k1_per_s, g.k2_rad_per_mps,
+                                              g.k3_rad_per_mps, g.k4_per_s, ref,
+                                              *self._p_work)
+                return Solution(ref[0], x, p_command=AttitudeCommand(vz, phi, theta, rate))
+        ref_now = traj.state_at(t_exp_s)[0]
+        return Solution(ref_now, x, p_command=p_control(x, ref_now, self.p_gains))
 
     def _pack(self, args: tuple) -> None:
         """:func:`~ardrone_nmpc.runtime.tick_kernels.nmpc_work` of the waypoint trajectory's

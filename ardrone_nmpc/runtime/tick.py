@@ -27,6 +27,7 @@ from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
 from ardrone_nmpc.runtime.control_tick import ControlTick
 from ardrone_nmpc.runtime.control_tick import warm_up_kernels as warm_up_control_tick
+from ardrone_nmpc.runtime.p_tick import warm_up_kernels as warm_up_p_tick
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
     OffsetFree, ResponseEstimation, Supervision, feedback_ages_ms, navdata_velocity_world,
@@ -154,6 +155,8 @@ class Tick:
                      or trajectory.__class__ is LiveTarget)  # (a table of its states)
         warm_up_tick_kernels(estimate=self.estimation.compiled,
                              nmpc=nmpc is not None and waypoints)
+        if nmpc is None and waypoints:  # the P controller's tick (runtime/p_tick.py)
+            warm_up_p_tick()
         if self.response is not None:  # after the solver's (runtime/precompile.py)
             self.response.warm_up()
         if nmpc is not None:  # last: its callees (the feed's) are loaded or compiled by now
