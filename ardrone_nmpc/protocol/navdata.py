@@ -21,7 +21,11 @@ speeds (vy > 0 to the right, vz > 0 down). The records keep the wire units in th
 
 Every simulated drone builds its packets with :func:`encode_drone_navdata` from a
 :class:`DroneStatus` (what the drone knows about itself: flight phase, command, link), so the
-state bits and the ctrl_state codes of a flight state are written in one place.
+state bits and the ctrl_state codes of a flight state are written in one place. A lockstep
+quiet tick hands its packet over as :func:`drone_navdata` builds it (one a tick): that builder,
+:meth:`DemoOption.of_sample` and :func:`time_option` make their records without the
+constructors' per-field checks, which hold by construction (a value they would refuse takes
+the checked path and raises as it does), the demo's six floats rounded to float32 in one pack.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from __future__ import annotations
 import enum
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 __all__ = [
     "NAVDATA_PORT", "NAVDATA_WAKEUP", "NAVDATA_MAGIC", "NAVDATA_MAGIC_ALT", "NAVDATA_MAX_BYTES",
@@ -68,6 +72,7 @@ _OPTION_HEAD = struct.Struct(OPTION_HEAD_FORMAT)
 _CHECKSUM = struct.Struct(CHECKSUM_FORMAT)
 _DEMO = struct.Struct(DEMO_FORMAT)
 _F32 = struct.Struct("<f")
+_F32X6 = struct.Struct("<6f")  # DemoOption.of_sample's six floats, rounded in one go
 
 
 class NavdataError(ValueError):
@@ -292,13 +297,38 @@ class DemoOption:
     def of_sample(cls, sample, ctrl_state: int) -> DemoOption:
         """The demo option a drone sends for a :class:`~ardrone_nmpc.core.types.NavdataSample`
         (the inverse of reading one): the battery as a whole percent clamped to 0–100, the
-        rest as :meth:`from_si`."""
-        return cls.from_si(
-            ctrl_state=ctrl_state,
-            battery_pct=int(round(min(100.0, max(0.0, sample.battery_pct)))),
-            pitch_deg=sample.pitch_deg, roll_deg=sample.roll_deg, yaw_deg=sample.yaw_deg,
-            altitude_m=sample.altitude_m, vx_body_mps=sample.vx_body_mps,
-            vy_body_mps=sample.vy_body_mps, vz_mps=sample.vz_mps)
+        rest as :meth:`from_si`.
+
+        Built without :meth:`__post_init__`'s per-field checks (a simulated drone builds one
+        per packet): the six floats rounded to float32 by one pack, as the wire does; any value
+        a check would refuse goes through :meth:`from_si`, which raises as it always has."""
+        battery_pct = int(round(min(100.0, max(0.0, sample.battery_pct))))
+        altitude_m = sample.altitude_m
+        try:
+            floats = _F32X6.unpack(_F32X6.pack(
+                sample.pitch_deg * 1000.0, sample.roll_deg * 1000.0, sample.yaw_deg * 1000.0,
+                sample.vx_body_mps * 1000.0, sample.vy_body_mps * 1000.0,
+                sample.vz_mps * 1000.0))
+            altitude_mm = round(altitude_m * 1000.0) if math.isfinite(altitude_m) else None
+        except (OverflowError, TypeError, ValueError, struct.error):
+            floats = altitude_mm = None
+        if (floats is None or type(altitude_mm) is not int
+                or not _I32_MIN <= altitude_mm <= _I32_MAX
+                or type(ctrl_state) is not int or not 0 <= ctrl_state <= _U32_MAX):
+            return cls.from_si(
+                ctrl_state=ctrl_state, battery_pct=battery_pct, pitch_deg=sample.pitch_deg,
+                roll_deg=sample.roll_deg, yaw_deg=sample.yaw_deg, altitude_m=altitude_m,
+                vx_body_mps=sample.vx_body_mps, vy_body_mps=sample.vy_body_mps,
+                vz_mps=sample.vz_mps)
+        demo = object.__new__(cls)
+        s = object.__setattr__
+        theta, phi, psi, vx, vy, vz = floats
+        for name, value in zip(_DEMO_SAMPLE_FIELDS, (ctrl_state, battery_pct, theta, phi, psi,
+                                                     altitude_mm, vx, vy, vz)):
+            s(demo, name, value)
+        for name, value in _DEMO_CONSTANT_FIELDS:
+            s(demo, name, value)
+        return demo
 
     @property
     def ctrl_major(self) -> int:
@@ -344,6 +374,13 @@ class DemoOption:
     def vz_mps(self) -> float:
         """Body-frame vertical speed (m/s), **down positive**."""
         return self.vz_mmps / 1000.0
+
+
+_DEMO_SAMPLE_FIELDS = ("ctrl_state", "battery_pct", "theta_mdeg", "phi_mdeg", "psi_mdeg",
+                       "altitude_mm", "vx_mmps", "vy_mmps", "vz_mmps")
+#: The demo option's fields a sample leaves at their defaults (as checked: of_sample's)
+_DEMO_CONSTANT_FIELDS = tuple((f.name, getattr(DemoOption(), f.name))
+                              for f in fields(DemoOption) if f.name not in _DEMO_SAMPLE_FIELDS)
 
 
 @dataclass(frozen=True, slots=True)
@@ -420,6 +457,9 @@ def navdata_checksum(data: bytes) -> int:
 def empty_vision_detect_option() -> NavdataOption:
     """vision_detect (tag 16, 328 bytes) with nb_detected = 0, as in default demo packets."""
     return NavdataOption(VISION_DETECT_TAG, bytes(VISION_DETECT_SIZE - OPTION_HEAD_BYTES))
+
+
+_EMPTY_VISION_DETECT = empty_vision_detect_option()  # (frozen: shared by every packet)
 
 
 def _encode_demo(d: DemoOption) -> bytes:
@@ -511,6 +551,14 @@ _AIRBORNE_PHASES = ("taking_off", "flying", "landing")
 ALWAYS_ON_STATE = (DroneState.ALTITUDE | DroneState.PIC_VERSION | DroneState.ATCODEC_THREAD_ON
                    | DroneState.NAVDATA_THREAD_ON | DroneState.VIDEO_THREAD_ON
                    | DroneState.ACQ_THREAD_ON)
+# state_bits' flags as ints (a flag's ``|`` builds a member each time)
+_ALWAYS_ON_BITS = int(ALWAYS_ON_STATE)
+_BIT_FLY, _BIT_EMERGENCY, _BIT_USER_EL, _BIT_START, _BIT_COMMAND = (
+    int(DroneState.FLY), int(DroneState.EMERGENCY), int(DroneState.USER_EL),
+    int(DroneState.USER_FEEDBACK_START), int(DroneState.COMMAND))
+_BIT_BOOTSTRAP, _BIT_DEMO, _BIT_COM_WATCHDOG, _BIT_COM_LOST, _BIT_VBAT_LOW = (
+    int(DroneState.NAVDATA_BOOTSTRAP), int(DroneState.NAVDATA_DEMO),
+    int(DroneState.COM_WATCHDOG), int(DroneState.COM_LOST), int(DroneState.VBAT_LOW))
 #: ``general:navdata_options`` default: demo + vision_detect (65537).
 DEFAULT_NAVDATA_OPTIONS = (1 << OptionTag.DEMO) | (1 << OptionTag.VISION_DETECT)
 
@@ -554,22 +602,22 @@ class DroneStatus:
             raise ValueError(f"phase must be one of {DRONE_PHASES}, got {self.phase!r}")
 
     def state_bits(self) -> DroneState:
-        """The header's state bits."""
-        s = ALWAYS_ON_STATE | DroneState(self.faults & 0xFFFFFFFF)
-        flags = ((self.phase in _AIRBORNE_PHASES, DroneState.FLY),
-                 (self.phase == "emergency", DroneState.EMERGENCY),
-                 (self.phase == "emergency" and self.user_emergency, DroneState.USER_EL),
-                 (self.start_button, DroneState.USER_FEEDBACK_START),
-                 (self.ack, DroneState.COMMAND),
-                 (self.bootstrap, DroneState.NAVDATA_BOOTSTRAP | DroneState.NAVDATA_DEMO),
-                 (not self.bootstrap and self.demo, DroneState.NAVDATA_DEMO),
-                 (self.com_watchdog, DroneState.COM_WATCHDOG),
-                 (self.com_lost, DroneState.COM_LOST),
-                 (self.battery_low, DroneState.VBAT_LOW))
+        """The header's state bits (OR-ed as ints, then made one flag)."""
+        s = _ALWAYS_ON_BITS | (self.faults & 0xFFFFFFFF)
+        flags = ((self.phase in _AIRBORNE_PHASES, _BIT_FLY),
+                 (self.phase == "emergency", _BIT_EMERGENCY),
+                 (self.phase == "emergency" and self.user_emergency, _BIT_USER_EL),
+                 (self.start_button, _BIT_START),
+                 (self.ack, _BIT_COMMAND),
+                 (self.bootstrap, _BIT_BOOTSTRAP | _BIT_DEMO),
+                 (not self.bootstrap and self.demo, _BIT_DEMO),
+                 (self.com_watchdog, _BIT_COM_WATCHDOG),
+                 (self.com_lost, _BIT_COM_LOST),
+                 (self.battery_low, _BIT_VBAT_LOW))
         for on, bits in flags:
             if on:
                 s |= bits
-        return s
+        return DroneState(s)
 
     def ctrl_state(self, codes: CtrlCodes = CtrlCodes.SDK) -> int:
         """``major << 16 | minor``: LANDED 2, emergency DEFAULT 0 (as node-ar-drone's docs
@@ -602,7 +650,10 @@ def time_option(t_s: float) -> NavdataOption:
         raise ValueError(f"t_s must be finite and >= 0, got {t_s!r}")
     sec = int(t_s)
     usec = int((t_s - sec) * 1e6)
-    return NavdataOption(OptionTag.TIME, _TIME.pack(((sec & 0x7FF) << 21) | (usec & 0x1FFFFF)))
+    option = object.__new__(NavdataOption)  # (its tag and 4-byte payload need no check)
+    object.__setattr__(option, "tag", OptionTag.TIME)
+    object.__setattr__(option, "payload", _TIME.pack(((sec & 0x7FF) << 21) | (usec & 0x1FFFFF)))
+    return option
 
 
 def encode_drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
@@ -625,7 +676,9 @@ def drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
                   t_s: float = 0.0) -> Navdata:
     """:func:`encode_drone_navdata`'s packet before its encoding — what
     :func:`decode_navdata` gives back of its bytes but for the raw options' payloads (the
-    header's state and sequence; the demo option, whose floats are stored as float32)."""
+    header's state and sequence; the demo option, whose floats are stored as float32). Built
+    without :class:`Navdata`'s checks but the sequence's (the rest hold by construction); the
+    empty vision_detect option shared by every packet (frozen)."""
     state = status.state_bits()
     if status.bootstrap:
         return Navdata(state, sequence)
@@ -637,5 +690,13 @@ def drone_navdata(status: DroneStatus, sequence: int, sample=None, *,
     if full or options_mask & (1 << OptionTag.TIME):
         options.append(time_option(t_s))
     if full or options_mask & (1 << OptionTag.VISION_DETECT):
-        options.append(empty_vision_detect_option())
-    return Navdata(state, sequence, demo=demo, options=tuple(options))
+        options.append(_EMPTY_VISION_DETECT)
+    _uint("sequence", sequence)
+    # the rest of Navdata's checks hold by construction: built without them (one a packet)
+    packet = object.__new__(Navdata)
+    s = object.__setattr__
+    for name, value in (("state", state), ("sequence", sequence), ("vision_flag", 0),
+                        ("demo", demo), ("options", tuple(options)),
+                        ("magic", NAVDATA_MAGIC)):
+        s(packet, name, value)
+    return packet

@@ -74,6 +74,7 @@ VBAT_LOW_PCT = 20.0
 
 _HOVER_CMD = (0, 0.0, 0.0, 0.0, 0.0)      # (flags, roll, pitch, gaz, yaw)
 _PROGRESSIVE = int(PcmdFlag.PROGRESSIVE)  # a plain int: IntFlag arithmetic is slow per tick
+_VBAT_LOW = int(DroneState.VBAT_LOW)  # (the same: battery_low's, once a packet)
 # The firmware's 200 Hz control loop: how often a climb near the cap is checked on a plant
 # that does not integrate in steps of its own (``params.integration_step_s``).
 CONTROL_LOOP_S = 0.005
@@ -384,7 +385,7 @@ class DroneFirmware:
 
     def battery_low(self, battery_pct: float) -> bool:
         """:attr:`vbat_low` of a plant's battery at ``battery_pct``."""
-        return battery_pct < self.vbat_low_pct or bool(self.fault_bits & DroneState.VBAT_LOW)
+        return battery_pct < self.vbat_low_pct or bool(self.fault_bits & _VBAT_LOW)
 
     def skip_packet(self) -> None:
         """A packet lost on the way: its sequence number is used all the same."""

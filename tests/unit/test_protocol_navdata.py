@@ -486,3 +486,59 @@ def _demo_values(demo) -> bytes:
     values = [float(v) for field in astuple(demo)
               for v in (field if isinstance(field, tuple) else (field,))]
     return struct.pack(f"<{len(values)}d", *values)
+
+
+_FLOATS_ANY = st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(
+    [3.4028235e35, 3.4028236e35, -3.5e35, 2147483.6474, 2147483.6476, -0.0, 5e-42])
+
+
+@settings(max_examples=300, deadline=None)
+@given(values=st.lists(_FLOATS_ANY, min_size=7, max_size=7), battery=_FLOATS_ANY,
+       ctrl_state=st.integers(0, 0xFFFFFFFF))
+def test_the_demo_option_of_a_sample_is_the_checked_one(values, battery, ctrl_state):
+    """``of_sample`` (built without the per-field checks, its floats rounded in one pack) is,
+    field for field, the option the checked constructor builds of the same values; a value
+    the checks refuse (beyond float32 or int32, a non-finite altitude) raises as they do."""
+    import math
+    from dataclasses import fields
+
+    roll, pitch, yaw, altitude, vx, vy, vz = values
+    sample = _sample(battery_pct=battery, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw,
+                     altitude_m=altitude, vx_body_mps=vx, vy_body_mps=vy, vz_mps=vz)
+
+    def checked():  # every field through __post_init__'s one-field-at-a-time float32 rounding
+        if not math.isfinite(altitude):
+            raise ValueError("from_si refuses a non-finite altitude")
+        alt_mm = round(altitude * 1000.0)  # (inf beyond 1.8e305 m: OverflowError)
+        return DemoOption(ctrl_state=ctrl_state,
+                          battery_pct=int(round(min(100.0, max(0.0, battery)))),
+                          theta_mdeg=pitch * 1000.0, phi_mdeg=roll * 1000.0,
+                          psi_mdeg=yaw * 1000.0, altitude_mm=alt_mm, vx_mmps=vx * 1000.0,
+                          vy_mmps=vy * 1000.0, vz_mmps=vz * 1000.0)
+
+    try:
+        expected = checked()
+    except (ValueError, OverflowError) as refused:
+        with pytest.raises(type(refused)):
+            DemoOption.of_sample(sample, ctrl_state)
+        return
+    built = DemoOption.of_sample(sample, ctrl_state)
+    assert _demo_values(built) == _demo_values(expected)  # bit for bit (−0.0, NaN too)
+    assert [type(getattr(built, f.name)) for f in fields(DemoOption)] == [
+        type(getattr(expected, f.name)) for f in fields(DemoOption)]
+
+
+@pytest.mark.parametrize("demo", [True, False])
+def test_the_drones_packet_is_the_checked_navdata(demo):
+    """``drone_navdata`` (built without Navdata's checks) equals the Navdata the checked
+    constructor makes of its parts; a sequence beyond u32 is refused as it is there."""
+    from ardrone_nmpc.protocol.navdata import drone_navdata
+
+    status = DroneStatus("flying", moving=True, demo=demo, battery_low=True, faults=1 << 7)
+    built = drone_navdata(status, 7, _sample(), t_s=12.5)
+    expected = Navdata(DroneState(int(built.state)), 7, demo=built.demo,
+                       options=tuple(NavdataOption(o.tag, o.payload) for o in built.options))
+    assert built == expected and type(built.state) is DroneState
+    assert int(built.state) == int(status.state_bits()) and built.state & DroneState.VBAT_LOW
+    with pytest.raises(ValueError):
+        drone_navdata(status, 2**32, _sample())
