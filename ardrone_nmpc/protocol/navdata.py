@@ -21,11 +21,8 @@ speeds (vy > 0 to the right, vz > 0 down). The records keep the wire units in th
 
 Every simulated drone builds its packets with :func:`encode_drone_navdata` from a
 :class:`DroneStatus` (what the drone knows about itself: flight phase, command, link), so the
-state bits and the ctrl_state codes of a flight state are written in one place. A lockstep
-quiet tick hands its packet over as :func:`drone_navdata` builds it (one a tick): that builder,
-:meth:`DemoOption.of_sample` and :func:`time_option` make their records without the
-constructors' per-field checks, which hold by construction (a value they would refuse takes
-the checked path and raises as it does), the demo's six floats rounded to float32 in one pack.
+state bits and the ctrl_state codes of a flight state are written in one place;
+:func:`drone_navdata` builds a lockstep tick's packet without the per-field checks (theirs).
 """
 
 from __future__ import annotations
