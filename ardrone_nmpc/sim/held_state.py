@@ -18,7 +18,7 @@ attributes: the stand-ins, their names (what a holder takes) and that ``__getsta
 
 from __future__ import annotations
 
-__all__ = ["HeldInArrays", "holds_in_arrays", "released_state"]
+__all__ = ["HeldInArrays", "holds_in_arrays", "overrides_none", "released_state"]
 
 
 def holds_in_arrays(*names: str):
@@ -73,3 +73,10 @@ def released_state(obj):
         if obj.__dict__.get("_held_by") is not None:  # a holder not holding obj (a clone
             obj.__dict__["_held_by"] = None           # of vars(obj) while held): nobody's
     return object.__getstate__(obj)
+
+
+def overrides_none(obj, base: type, names) -> bool:
+    """``obj`` is a ``base`` whose class overrides none of ``names`` (what a compiled path
+    does in its place: an override would be skipped)."""
+    kind = type(obj)
+    return isinstance(obj, base) and all(getattr(kind, n) is getattr(base, n) for n in names)

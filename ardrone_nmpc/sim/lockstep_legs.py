@@ -63,6 +63,7 @@ from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.airframe import N_STATE
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import _HOVER_CMD, _PROGRESSIVE, DroneFirmware
+from ardrone_nmpc.sim.held_state import overrides_none
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.plant_kit import KitPlant
 
@@ -246,9 +247,7 @@ class CompiledLegs:
                                  (firmware, DroneFirmware, _FIRMWARE_REPLACED)):
             if obj is None and base is DroneFirmware:
                 continue
-            kind = type(obj)
-            if not (isinstance(obj, base)
-                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+            if not overrides_none(obj, base, names):
                 return False
         return True
 
@@ -260,9 +259,7 @@ class CompiledLegs:
         for base, names in chain:
             obj = drone if base is SimulatedDrone else (
                 drone.firmware if base is DroneFirmware else drone.plant)
-            kind = type(obj)
-            if not (isinstance(obj, base)
-                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+            if not overrides_none(obj, base, names):
                 return False
         return True
 

@@ -51,6 +51,7 @@ from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import DroneFirmware
 from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
+from ardrone_nmpc.sim.held_state import overrides_none
 
 __all__ = ["QuietWire"]
 
@@ -94,9 +95,7 @@ class QuietWire:
         for base, names in _REPLACED:
             obj = (drone if base is SimulatedDrone else
                    drone.firmware if base is DroneFirmware else drone.faults)
-            kind = type(obj)
-            if not (isinstance(obj, base)
-                    and all(getattr(kind, name) is getattr(base, name) for name in names)):
+            if not overrides_none(obj, base, names):
                 return False
         return True
 
