@@ -34,7 +34,11 @@ import numpy as np
 
 from ardrone_nmpc.core.types import MocapPose
 from ardrone_nmpc.links.udp import Clock, LinkStats
-from ardrone_nmpc.protocol.mocap import MocapObjectPose
+from ardrone_nmpc.protocol.mocap import (
+    _MM_PER_M,  # (MocapObjectPose's scale: _pose_of_floats)
+    MocapObjectPose,
+    rotation_heading_rad,
+)
 
 __all__ = ["MOCAP_KINDS", "MocapSource", "MocapConnectError", "mocap_pose_of"]
 
@@ -56,6 +60,17 @@ def mocap_pose_of(pose: MocapObjectPose, t_s: float) -> MocapPose:
     """A decoded wire pose as the :class:`MocapPose` record stamped ``t_s`` (SI units)."""
     return MocapPose(t_s=t_s, position_m=_readonly(pose.position_m),
                      rotation_xyz_rad=_readonly(pose.rotation_xyz_rad), psi_rad=pose.psi_rad)
+
+
+def _pose_of_floats(t_s: float, translation_mm, rotation_xyz_rad) -> MocapPose:
+    """``mocap_pose_of(MocapObjectPose(name, translation_mm, rotation_xyz_rad), t_s)`` of two
+    triples of floats, the wire pose not built (its checks and ``fresh`` are the caller's):
+    :class:`MocapObjectPose`'s own conversions, metres = millimetres / 1000 and the heading of
+    :func:`rotation_heading_rad` (a bulk receipt's newest pose)."""
+    x, y, z = translation_mm
+    return MocapPose(t_s=t_s, position_m=_readonly((x / _MM_PER_M, y / _MM_PER_M, z / _MM_PER_M)),
+                     rotation_xyz_rad=_readonly(rotation_xyz_rad),
+                     psi_rad=rotation_heading_rad(*rotation_xyz_rad))
 
 
 class MocapSource:
@@ -289,7 +304,7 @@ class MocapSource:
         self._max_gap_s = max_gap
         if newest is not None:
             t_s, translation_mm, rotation = newest
-            record = mocap_pose_of(MocapObjectPose(name, translation_mm, rotation), t_s)
+            record = _pose_of_floats(t_s, translation_mm, rotation)
             with self._lock:
                 self._pose = record
                 self._rx_t_s = t_s

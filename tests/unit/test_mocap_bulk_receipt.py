@@ -146,3 +146,38 @@ def test_record_numbered_leaves_the_stats_as_the_calls_one_by_one(seed):
     state = {k: bits(v) for k, v in vars(reference).items() if k != "_lock"}
     assert {k: bits(v) for k, v in vars(bulk).items() if k != "_lock"} == state
     assert True in accepted and reference.datagrams == len(numbered)
+
+
+def _record_bits(record) -> tuple:
+    return (bits(record.t_s), tuple(bits(v) for v in record.position_m),
+            tuple(bits(v) for v in record.rotation_xyz_rad), bits(record.psi_rad),
+            record.position_m.flags.writeable, record.rotation_xyz_rad.flags.writeable)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_newest_pose_record_is_the_wire_poses_one(seed):
+    """``_pose_of_floats`` (the bulk receipt's record, no wire pose built) is bit for bit
+    ``mocap_pose_of`` of the :class:`MocapObjectPose` of the same floats."""
+    from ardrone_nmpc.links.mocap_source import _pose_of_floats, mocap_pose_of
+
+    rng = random.Random(seed)
+    for _ in range(200):
+        position_m, rotation = _pose(rng, None)
+        translation_mm = tuple(float(v) * 1000.0 for v in position_m)
+        rotation = tuple(float(v) for v in rotation)
+        t_s = rng.uniform(0.0, 100.0)
+        reference = mocap_pose_of(MocapObjectPose(NAME, translation_mm, rotation), t_s)
+        assert _record_bits(_pose_of_floats(t_s, translation_mm, rotation)) == \
+            _record_bits(reference)
+
+
+def test_the_newest_pose_record_in_closed_form():
+    """Metres are millimetres / 1000; a rotation about z alone is the heading."""
+    from ardrone_nmpc.links.mocap_source import _pose_of_floats
+
+    record = _pose_of_floats(2.5, (1500.0, -250.0, 1000.0), (0.0, 0.0, 0.5))
+    assert record.t_s == 2.5
+    assert list(record.position_m) == [1.5, -0.25, 1.0]
+    assert list(record.rotation_xyz_rad) == [0.0, 0.0, 0.5]
+    assert record.psi_rad == pytest.approx(0.5, abs=1e-15)
+    assert not record.position_m.flags.writeable
