@@ -23,8 +23,8 @@ from ardrone_nmpc.control.obstacles import OBS_X, OBS_Z
 from ardrone_nmpc.control.ocp import SolveResult, SolverStatus
 from ardrone_nmpc.control.proportional import PGains, p_control
 from ardrone_nmpc.core.types import (
-    INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_VZ, IX_Z, STATE_DIM, AttitudeCommand,
-    MocapPose, TickInputs,
+    INPUT_DIM, IU_PHI, IU_PSIRATE, IU_THETA, IU_ZACC, IX_PSI, IX_VZ, IX_Z, STATE_DIM,
+    AttitudeCommand, MocapPose, TickInputs,
 )
 from ardrone_nmpc.estimation.attitude_response import AttitudeResponseEstimator, warm_up_kernels
 from ardrone_nmpc.estimation.response_kernels import CMD_RESTART, CMD_SEND
@@ -346,8 +346,9 @@ class Control:
         (runtime/p_tick.py, the same bits), else ``state_at`` and ``p_control``."""
         kind = traj.__class__
         args = traj.waypoint_args if kind is HoldStartThen or kind is LiveTarget else None
+        # a heading not finite: p_control's answer (its NaN's sign) or its ValueError
         if (args is not None and x.__class__ is np.ndarray and x.dtype is _F64
-                and x.shape == _X_SHAPE):
+                and x.shape == _X_SHAPE and math.isfinite(x[IX_PSI])):
             if args is not self._p_args:  # once a flight: its arrays into the work vector
                 self._p_args, self._p_work = args, p_work(self.delay.period_s, args)
             if self._p_work is not None:

@@ -51,3 +51,28 @@ def test_p_tick_is_the_python_p_tick_bit_for_bit(traj):
 def test_a_table_keeps_the_python_path():
     args = (np.zeros(0),) * 5 + (np.zeros(7),)
     assert p_work(0.01, args) is None
+
+
+@pytest.mark.parametrize("psi", [math.nan, math.inf, -math.inf])
+def test_a_nonfinite_heading_gets_the_python_answer(psi):
+    """``Control._p_solve`` with a heading that is not finite: what ``p_control`` gives (the
+    sign of its NaN) or raises (``math.cos(inf)``), as before p_tick — the kernel would give
+    a NaN of the other sign, or NaN for inf. (A stand-in for the stage's own attributes.)"""
+    from types import SimpleNamespace
+
+    from ardrone_nmpc.runtime.stages import Control
+
+    traj = next(_trajectories())
+    stage = SimpleNamespace(p_gains=_GAINS, delay=SimpleNamespace(period_s=0.065),
+                            _p_args=None, _p_work=None)
+    x = np.array([0.1, -0.2, 0.3, 0.0, 1.0, -0.0, psi])
+    ref = traj.state_at(0.0)[0]
+    try:
+        want = p_control(x, ref, _GAINS)
+    except ValueError:
+        with pytest.raises(ValueError):
+            Control._p_solve(stage, 0.0, x, traj)
+        return
+    got = Control._p_solve(stage, 0.0, x, traj).p_command
+    fields = ("vz_ref_mps", "phi_rad", "theta_rad", "psirate_radps")
+    assert _bits([getattr(got, f) for f in fields]) == _bits([getattr(want, f) for f in fields])
