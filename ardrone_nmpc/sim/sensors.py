@@ -56,7 +56,7 @@ from ardrone_nmpc.links.udp import LinkStats
 from ardrone_nmpc.protocol.mocap import MocapFrame, MocapObjectPose, encode_mocap
 from ardrone_nmpc.protocol.navdata import DroneState, Navdata, NavdataError, decode_navdata
 from ardrone_nmpc.sim.faults import SENSOR_FAULTS
-from ardrone_nmpc.sim.held_state import holds_in_arrays
+from ardrone_nmpc.sim.held_state import holds_in_arrays, overrides_none
 from ardrone_nmpc.sim.target import target_pose
 
 __all__ = ["LockstepSensors", "ObjectFrame"]
@@ -328,10 +328,12 @@ class LockstepSensors:
             # the first frame encoded: encode_mocap's checks of the names (its ValueError)
             data = encode_mocap(frame)
             self._names_checked = True
-            # a link of another kind (a swapped mocap source: a subclass's) takes bytes
+            # a link of another kind (a swapped mocap source: a subclass's), or a MocapLink
+            # whose class overrides the bytes' receipt (skipped by the decoded hand-overs),
+            # takes bytes
             from ardrone_nmpc.links.mocap_link import MocapLink  # (the wire's only)
 
-            if not isinstance(self.mocap, MocapLink):
+            if not overrides_none(self.mocap, MocapLink, ("feed", "_handle", "_handle_frame")):
                 self.frames_as_bytes = True
             if not self.frames_as_bytes:
                 data = frame
