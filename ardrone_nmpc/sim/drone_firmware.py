@@ -325,6 +325,13 @@ class DroneFirmware:
         """Seconds since the last accepted command (inf before the first)."""
         return math.inf if self.last_cmd_t is None else now - self.last_cmd_t
 
+    def latch_after_run(self, now: float) -> None:
+        """The com-watchdog bit as :meth:`watchdogs` would have latched it by ``now``, the
+        last firmware time of a compiled run of the legs (NaN: none ran) — the other
+        watchdogs were checked not to fire (``CompiledLegs``, ``QuietWire``)."""
+        if now == now and not self.comwdg_latched and now - self.last_cmd_t > self.comwdg_s:
+            self.comwdg_latched = True
+
     def watchdogs(self, now: float) -> None:
         silence = self.silence(now)
         if silence > self.comwdg_s:
@@ -389,14 +396,19 @@ class DroneFirmware:
 
     def skip_packet(self) -> None:
         """A packet lost on the way: its sequence number is used all the same."""
+        self._next_sequence()
+
+    def _next_sequence(self) -> int:
+        """The next packet's sequence number, taken (from 1 again after 2³² − 1)."""
         self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
+        return self.nav_seq
 
     def packet(self, now: float) -> bytes:
         """The next navdata packet (its sequence counts up from 1 across stream restarts)."""
-        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
+        seq = self._next_sequence()
         status = self.status(now)
         sample = None if status.bootstrap else self.plant.navdata()
-        return encode_drone_navdata(status, self.nav_seq, sample, codes=self.ctrl_codes,
+        return encode_drone_navdata(status, seq, sample, codes=self.ctrl_codes,
                                     options_mask=self.config.navdata_options,
                                     t_s=self.plant.t_s)
 
@@ -404,7 +416,7 @@ class DroneFirmware:
         """:meth:`packet` of a navdata ``sample`` the plant's compiled legs drew at ``now``
         (out of bootstrap; its ``t_s`` and ``battery_pct``: the plant's then), as a receiver
         decodes it (:func:`~ardrone_nmpc.protocol.navdata.drone_navdata`)."""
-        self.nav_seq = self.nav_seq + 1 if self.nav_seq < 0xFFFFFFFF else 1
-        return drone_navdata(self.status(now, sample.battery_pct), self.nav_seq, sample,
+        seq = self._next_sequence()
+        return drone_navdata(self.status(now, sample.battery_pct), seq, sample,
                              codes=self.ctrl_codes, options_mask=self.config.navdata_options,
                              t_s=sample.t_s)

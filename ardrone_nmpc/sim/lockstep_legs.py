@@ -565,8 +565,7 @@ class CompiledLegs:
         # hover's can act (checked above) — what the Python path's calls would have left by
         # then: the com-watchdog bit latched; the held PCMD dropped for hover and applied
         # (the plant's command unchanged: it was hover)
-        if now == now and not fw.comwdg_latched and now - fw.last_cmd_t > fw.comwdg_s:
-            fw.comwdg_latched = True
+        fw.latch_after_run(now)
         if hover_due and now == now and now - fw.last_cmd_t > fw.hover_after_s:
             fw.lost_com_hover = True
             fw.pcmd = fw._applied_pcmd = _HOVER_CMD

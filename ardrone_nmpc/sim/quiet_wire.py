@@ -147,9 +147,7 @@ class QuietWire:
             legs.refill(ws.normals_needed(n_mocap, n_nav))
         done, n_events = int(iv[ks.I_DONE]), int(iv[ks.I_EVENTS])
         self._send(self.ev[:min(done, n_events)].tolist(), mode)  # (the bit as at the start)
-        now = legs.out[ks.O_LAST_NOW]  # the com-watchdog bit latched as the legs left it
-        if now == now and not fw.comwdg_latched and now - last_cmd_t > fw.comwdg_s:
-            fw.comwdg_latched = True  # (CompiledLegs._ran_to's)
+        fw.latch_after_run(legs.out[ks.O_LAST_NOW])  # (as the legs left it)
         legs.ran_block(None, None, mode)  # what a tick reads of the run (no sample taken)
         if done <= n_events:  # legs left: the Python path's
             legs.release()

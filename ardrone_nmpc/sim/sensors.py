@@ -324,19 +324,20 @@ class LockstepSensors:
 
         items = frame_items(self.object_name, pose, fault.occlusion, self.target_cfg, t_s)
         frame = MocapFrame.of(k & 0xFFFFFFFF, items)
-        if self.frames_as_bytes or not self._names_checked:
+        if not self._names_checked:
             # the first frame encoded: encode_mocap's checks of the names (its ValueError)
-            data = encode_mocap(frame)
+            encoded = encode_mocap(frame)
             self._names_checked = True
             # a link of another kind (a swapped mocap source: a subclass's), or a MocapLink
             # whose class overrides the bytes' receipt (skipped by the decoded hand-overs),
-            # takes bytes
+            # takes bytes — decided once, at the first frame
             from ardrone_nmpc.links.mocap_link import MocapLink  # (the wire's only)
 
             if not overrides_none(self.mocap, MocapLink, ("feed", "_handle", "_handle_frame")):
                 self.frames_as_bytes = True
-            if not self.frames_as_bytes:
-                data = frame
+            data = encoded if self.frames_as_bytes else frame
+        elif self.frames_as_bytes:
+            data = encode_mocap(frame)
         else:
             data = frame  # (what decode_mocap makes of encode_mocap's bytes: module docstring)
         arrival = t_s + (self.mocap_latency_s + fault.extra_latency_s)
