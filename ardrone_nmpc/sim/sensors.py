@@ -24,7 +24,9 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
   are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
   A quiet tick's frames (the object alone, as they are) travel as their numbers
-  (:class:`ObjectFrame`) and the ones that arrive in a row by a tick are received together
+  (:class:`ObjectFrame`; those that arrive within the tick off the queue, their places in it
+  noted) and the ones that arrive by a tick are received together — a quiet navdata packet
+  between them touches nothing of the mocap link's —
   (:meth:`MocapLink.feed_object_frames
   <ardrone_nmpc.links.mocap_link.MocapLink.feed_object_frames>`: the link's state left as
   by ``feed_frame`` of each in turn; only the newest fresh pose made a record) — the tick
