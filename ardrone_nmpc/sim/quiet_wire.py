@@ -146,16 +146,16 @@ class QuietWire:
                 self.ev = np.zeros((2 * (n_mocap + n_nav), ws.EV_WIDTH))
             legs.refill(ws.normals_needed(n_mocap, n_nav))
         done, n_events = int(iv[ks.I_DONE]), int(iv[ks.I_EVENTS])
-        self._send(self.ev[:min(done, n_events)].tolist(), mode)  # (the bit as at the start)
+        self._send(self.ev[:min(done, n_events)].tolist(), mode, t_s)  # (the bit: the start's)
         fw.latch_after_run(legs.out[ks.O_LAST_NOW])  # (as the legs left it)
         legs.ran_block(None, None, mode)  # what a tick reads of the run (no sample taken)
         if done <= n_events:  # legs left: the Python path's
             legs.release()
         return done > n_events
 
-    def _send(self, rows: list, mode) -> None:
+    def _send(self, rows: list, mode, t_s: float) -> None:
         """The frames and packets of the events the run did (``ev``'s rows; the plant in
-        ``mode`` all along), as the Python path sends them."""
+        ``mode`` all along) in the tick to ``t_s``, as the Python path sends them."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
         # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
@@ -168,7 +168,8 @@ class QuietWire:
             t_event, sample = row[_T], row[_S:]
             if row[0] == _MOCAP:
                 if numbers:
-                    push_numbers(t_event + latency_s, int(row[_K]), sample[1:4], sample[4:7])
+                    push_numbers(t_event + latency_s, int(row[_K]), sample[1:4], sample[4:7],
+                                 t_s)
                     continue
                 frame(int(row[_K]), t_event, _Pose(sample[1:4], sample[4:7]), NO_MOCAP_FAULT,
                       None)

@@ -321,6 +321,24 @@ def _leg(x, ring, iv, sv, p, k, bias_n, gust_n, t_event, leg):
     return True
 
 
+@njit(cache=True, **INNER_KERNEL)
+def leg_coefficients(p):
+    """The 13 coefficients of ``p[P_K:]`` as the tuple :func:`_leg` takes (read once a run:
+    ``lockstep_run``'s and ``wire_step.wire_run``'s)."""
+    return (p[P_K], p[P_K + 1], p[P_K + 2], p[P_K + 3], p[P_K + 4], p[P_K + 5], p[P_K + 6],
+            p[P_K + 7], p[P_K + 8], p[P_K + 9], p[P_K + 10], p[P_K + 11], p[P_K + 12])
+
+
+@njit(cache=True, **INNER_KERNEL)
+def truth_out(x, out, iv, sv, h):
+    """All legs done: the plant's truth now (AirframePlant.t_s, its battery and state) into
+    ``out[O_T:]`` — a run's last write (``lockstep_run``'s and ``wire_step.wire_run``'s)."""
+    out[O_T] = iv[I_STEPS] * h
+    out[O_BATTERY] = sv[S_BATTERY]
+    for i in range(10):
+        out[O_STATE + i] = x[i]
+
+
 @njit(cache=True, **OUTER_KERNEL)
 def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
     """The direct sensor path's advance to ``sv[S_T]`` (module docstring): the due mocap and
@@ -339,8 +357,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
             or (p[P_TURB_STD] > 0.0 and iv[I_POS_GUST] + NEED_GUST > gust_n.shape[0])):
         iv[I_DONE] = -1
         return
-    k = (p[P_K], p[P_K + 1], p[P_K + 2], p[P_K + 3], p[P_K + 4], p[P_K + 5], p[P_K + 6],
-         p[P_K + 7], p[P_K + 8], p[P_K + 9], p[P_K + 10], p[P_K + 11], p[P_K + 12])
+    k = leg_coefficients(p)
     t_s = sv[S_T]
     mocap_period, nav_period = p[P_MOCAP_PERIOD], p[P_NAV_PERIOD]
     k_mocap = math.floor((t_s - p[P_MOCAP_LATENCY]) / mocap_period + 1e-9)
@@ -399,10 +416,7 @@ def lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n):
                 for j in range(5, 9):
                     out[O_NAV + j] = 0.0
         iv[I_DONE] = i + 1
-    out[O_T] = iv[I_STEPS] * h  # all legs done: the plant's truth now (AirframePlant.t_s)
-    out[O_BATTERY] = sv[S_BATTERY]
-    for i in range(10):
-        out[O_STATE + i] = x[i]
+    truth_out(x, out, iv, sv, h)
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -24,7 +24,9 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
   are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
   A quiet tick's frames (the object alone, as they are) travel as their numbers
-  (:class:`ObjectFrame`) and the ones that arrive in a row by a tick are received together
+  (:class:`ObjectFrame`; those that arrive within the tick off the queue, their places in it
+  noted) and the ones that arrive by a tick are received together — a quiet navdata packet
+  between them touches nothing of the mocap link's —
   (:meth:`MocapLink.feed_object_frames
   <ardrone_nmpc.links.mocap_link.MocapLink.feed_object_frames>`: the link's state left as
   by ``feed_frame`` of each in turn; only the newest fresh pose made a record) — the tick
@@ -62,6 +64,18 @@ from ardrone_nmpc.sim.target import target_pose
 __all__ = ["LockstepSensors", "ObjectFrame"]
 
 _MOCAP, _NAV = 0, 1
+_BOOTSTRAP_BIT = int(DroneState.NAVDATA_BOOTSTRAP)
+_navdata_sample_of = None  # links.drone_link's, imported by the wire's first packet
+
+
+def _import_navdata_sample_of():
+    """``links.drone_link.navdata_sample_of``, imported once (the wire's only: a direct run's
+    process does without the link's module)."""
+    global _navdata_sample_of
+    from ardrone_nmpc.links.drone_link import navdata_sample_of
+
+    _navdata_sample_of = navdata_sample_of
+    return navdata_sample_of
 #: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
 _WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push", "_receive",
                   "push_object_frame")
@@ -155,6 +169,9 @@ class LockstepSensors:
         self.nav_malformed = 0
         self._queue: list = []  # (arrival_s, order, stream, bytes or a MocapFrame)
         self._order = 0
+        # a quiet tick's frames that arrive within it, kept off the queue (their place in
+        # it: (arrival_s, order, number, position_m, rotation_xyz_rad)): push_object_frame
+        self._arrived: list = []
         self._names_checked = False  # (_mocap_frame: the first frame's names encoded)
         # the direct path's compiled tick (sim/lockstep_legs.py), for the plants it can fly
         self._legs = None
@@ -263,19 +280,38 @@ class LockstepSensors:
         quiet = self._quiet
         if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
             self._send_through_wire(t_s)
-        queue, quiet_frames = self._queue, []
+        queue, quiet_frames, arrived = self._queue, [], self._arrived
+        if arrived and not all(item[3].__class__ is ObjectFrame
+                               or item[3].__class__ is Navdata for item in queue):
+            self._queue_arrived()  # (a datagram of the Python path's on its way)
         while queue and queue[0][0] <= t_s + 1e-12:
             arrival, _, stream, data = heapq.heappop(queue)
             if data.__class__ is ObjectFrame:  # received together, in order
                 quiet_frames.append((data.number, arrival, data.position_m,
                                      data.rotation_xyz_rad))
                 continue
-            if quiet_frames:
+            # (a quiet tick's navdata packet between them — its sample, the guard's look —
+            # touches nothing of the mocap link's: the frames go on together, one bulk call
+            # a tick; anything else is received after those before it)
+            if quiet_frames and data.__class__ is not Navdata:
                 self.mocap.feed_object_frames(quiet_frames)
                 quiet_frames = []
             self._receive(arrival, stream, data)
+        if arrived:  # after the queue's frames, all sampled earlier: their arrival order
+            quiet_frames += [(number, arrival, position_m, rotation)
+                             for arrival, _, number, position_m, rotation in arrived]
+            arrived.clear()
         if quiet_frames:
             self.mocap.feed_object_frames(quiet_frames)
+
+    def _queue_arrived(self) -> None:
+        """The quiet tick's frames kept off the queue (:meth:`push_object_frame`) put in
+        their places in it: received in its order, among datagrams of the Python path's."""
+        queue = self._queue
+        for arrival, order, number, position_m, rotation in self._arrived:
+            heapq.heappush(queue, (arrival, order, _MOCAP,
+                                   ObjectFrame(number, position_m, rotation)))
+        self._arrived.clear()
 
     def _send_through_wire(self, t_s: float) -> None:
         """Run the drone to ``t_s``, sending every frame and packet due on the way."""
@@ -302,10 +338,19 @@ class LockstepSensors:
         heapq.heappush(self._queue, (arrival_s, self._order, stream, data))
         self._order += 1
 
-    def push_object_frame(self, arrival_s: float, k: int, position_m, rotation_xyz_rad) -> None:
+    def push_object_frame(self, arrival_s: float, k: int, position_m, rotation_xyz_rad,
+                          t_s: float = -math.inf) -> None:
         """Queue the mocap frame ``k`` of the object alone at ``position_m``,
         ``rotation_xyz_rad``, as it is, to arrive at ``arrival_s`` — as numbers
-        (:class:`ObjectFrame`: a quiet tick's, sim/quiet_wire.py)."""
+        (:class:`ObjectFrame`: a quiet tick's, sim/quiet_wire.py). One that arrives by the
+        tick's time ``t_s`` is kept off the queue (:attr:`_arrived`, its place in the queue
+        noted): the tick's receipt takes it after the queue's frames, or puts it in its
+        place when a datagram of the Python path's is on its way."""
+        if arrival_s <= t_s + 1e-12:  # (the receipt's test)
+            self._arrived.append((arrival_s, self._order, k & 0xFFFFFFFF, position_m,
+                                  rotation_xyz_rad))
+            self._order += 1
+            return
         self._push(arrival_s, _MOCAP, ObjectFrame(k & 0xFFFFFFFF, position_m, rotation_xyz_rad))
 
     def _mocap_frame(self, k: int, t_s: float) -> None:
@@ -367,11 +412,10 @@ class LockstepSensors:
                 return
         if not stats.accept_sequence(packet.sequence):
             return
-        if DroneState.NAVDATA_BOOTSTRAP in packet.state:
+        if packet.state & _BOOTSTRAP_BIT:  # (DroneState.NAVDATA_BOOTSTRAP in the flags)
             self.on_bootstrap()
-        from ardrone_nmpc.links.drone_link import navdata_sample_of  # (the wire's only)
-
-        sample = navdata_sample_of(packet, arrival_s)
+        sample_of = _navdata_sample_of or _import_navdata_sample_of()
+        sample = sample_of(packet, arrival_s)
         if sample is not None:
             stats.record_packet(arrival_s)
             self.nav, self.nav_rx_t_s = sample, arrival_s

@@ -29,7 +29,8 @@ from numba import njit
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
 from ardrone_nmpc.sim import sensor_step as ks
-from ardrone_nmpc.sim.sensor_step import _leg, _mocap_pose, _navdata
+from ardrone_nmpc.sim.sensor_step import (_leg, _mocap_pose, _navdata, leg_coefficients,
+                                          truth_out)
 
 __all__ = ["wire_run", "EV_KIND", "EV_T", "EV_K", "EV_SAMPLE", "EV_WIDTH", "normals_needed"]
 
@@ -72,9 +73,7 @@ def wire_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n, ev):
         iv[ks.I_DONE] = -1
         iv[ks.I_EVENTS], iv[ks.I_KIND0] = n_mocap, n_nav
         return
-    k = (p[ks.P_K], p[ks.P_K + 1], p[ks.P_K + 2], p[ks.P_K + 3], p[ks.P_K + 4],
-         p[ks.P_K + 5], p[ks.P_K + 6], p[ks.P_K + 7], p[ks.P_K + 8], p[ks.P_K + 9],
-         p[ks.P_K + 10], p[ks.P_K + 11], p[ks.P_K + 12])
+    k = leg_coefficients(p)
     n_events = n_mocap + n_nav
     iv[ks.I_EVENTS] = n_events
     iv[ks.I_DONE] = 0
@@ -117,10 +116,7 @@ def wire_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n, ev):
                 sample[1] = sv[ks.S_BATTERY]
                 _navdata(x, sv, p, nav_n[pos:pos + 7], sample)
         iv[ks.I_DONE] = i + 1
-    out[ks.O_T] = iv[ks.I_STEPS] * h  # all legs done: the plant's truth now
-    out[ks.O_BATTERY] = sv[ks.S_BATTERY]
-    for i in range(10):
-        out[ks.O_STATE + i] = x[i]
+    truth_out(x, out, iv, sv, h)  # all legs done: the plant's truth now
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -313,3 +313,46 @@ def test_quiet_ticks_send_the_python_paths_navdata_packets(name, monkeypatch):
     monkeypatch.setattr(QuietWire, "enabled", True)
     assert _packets(name, monkeypatch) == reference
     assert len(reference) > 50  # (the shortest: the VBAT_LOW landing)
+
+
+@pytest.mark.parametrize("name", ["latency", "disorder_mocap"])
+def test_quiet_frames_kept_off_the_queue_take_their_places_behind_late_datagrams(
+        name, monkeypatch):
+    # a quiet tick's frames that arrive within it skip the queue; a delayed or held-back
+    # datagram of the Python path's on its way puts them back in their places (the order
+    # the queue gives): links, firmware and faults end as the Python path leaves them
+    monkeypatch.setattr(QuietWire, "enabled", False)
+    reference = _ended_in(name, monkeypatch)
+    monkeypatch.setattr(QuietWire, "enabled", True)
+    queued = []
+    queue_arrived = LockstepSensors._queue_arrived
+
+    def counted(self):
+        queued.append(len(self._arrived))
+        return queue_arrived(self)
+
+    monkeypatch.setattr(LockstepSensors, "_queue_arrived", counted)
+    assert _ended_in(name, monkeypatch) == reference
+    assert queued and min(queued) > 0  # (the branch taken, with frames to place)
+
+
+def test_a_quiet_ticks_frames_go_to_the_link_together_across_its_navdata_packets(monkeypatch):
+    # navdata at the mocap's rate: packets arrive between a tick's frames; the frames are
+    # received in one bulk call a tick all the same, and the flight's bits are the Python
+    # path's (test_quiet_ticks_compiled_give_the_python_wire_paths_bits' "ties")
+    calls, packets = [], []
+    feed, receive = MocapLink.feed_object_frames, LockstepSensors._receive
+
+    def fed(self, frames, *args):
+        calls.append([t for _, t, _, _ in frames])
+        return feed(self, frames, *args)
+
+    def received(self, arrival_s, stream, data):
+        if stream == _NAV:
+            packets.append(arrival_s)
+        return receive(self, arrival_s, stream, data)
+
+    monkeypatch.setattr(MocapLink, "feed_object_frames", fed)
+    monkeypatch.setattr(LockstepSensors, "_receive", received)
+    _fly("ties")
+    assert any(times[0] < t < times[-1] for times in calls for t in packets)
