@@ -35,7 +35,7 @@ KERNEL_SOURCES = (
     "estimation/response_kernels.py", "estimation/response_lanes.py", "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
     "runtime/control_tick.py", "runtime/lockstep_block.py", "runtime/second_object.py",
-    "runtime/p_tick.py",
+    "runtime/p_tick.py", "runtime/control_tick_p.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None

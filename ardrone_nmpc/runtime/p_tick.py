@@ -20,11 +20,11 @@ from numba import njit
 
 from ardrone_nmpc.core.angle_kernels import wrap_half_turn
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.runtime.tick_kernels import nmpc_inputs, nmpc_work
 
-__all__ = ["p_tick", "p_work", "warm_up_kernels"]
+__all__ = ["p_law", "p_tick", "p_work", "warm_up_kernels"]
 
 _NOTHING = np.zeros((1, 4))  # no input pending (the P controller predicts no delay)
 _NO_SHIFT = np.zeros(0)
@@ -38,13 +38,11 @@ def p_work(period_s: float, waypoint_args: tuple) -> tuple[np.ndarray, np.ndarra
     return nmpc_work(period_s, 1, waypoint_args)
 
 
-@njit(cache=True, **OUTER_KERNEL)
-def p_tick(x: np.ndarray, t_s: float, k1: float, k2: float, k3: float, k4: float,
-           ref: np.ndarray, work: np.ndarray, rows: np.ndarray) -> tuple:
-    """``ref`` (1, 7) = the reference at ``t_s`` and ``p_control(x, ref[0], gains)``'s
-    ``(vz_ref_mps, phi_rad, theta_rad, psirate_radps)``, unclipped."""
-    nmpc_inputs(x, _NOTHING, 0, 0, x, t_s, 0.0, _NO_SHIFT, ref, work, rows)
-    r = ref[0]
+@njit(cache=True, **INNER_KERNEL)
+def p_law(x, r, k1, k2, k3, k4):
+    """``p_control(x, r, gains)``'s ``(vz_ref_mps, phi_rad, theta_rad, psirate_radps)``, its
+    arithmetic in its order (unclipped): :func:`p_tick`'s and the P controller's compiled
+    nominal tick's (``runtime/control_tick_p``)."""
     psi = x[IX_PSI]
     ex = r[IX_X] - x[IX_X] - x[IX_VX]
     ey = r[IX_Y] - x[IX_Y] - x[IX_VY]
@@ -53,6 +51,15 @@ def p_tick(x: np.ndarray, t_s: float, k1: float, k2: float, k3: float, k4: float
     e_left = -s * ex + c * ey
     return (k1 * (r[IX_Z] - x[IX_Z]), -k2 * e_left, k3 * e_forward,
             k4 * wrap_half_turn(r[IX_PSI] - psi, math.pi))
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def p_tick(x: np.ndarray, t_s: float, k1: float, k2: float, k3: float, k4: float,
+           ref: np.ndarray, work: np.ndarray, rows: np.ndarray) -> tuple:
+    """``ref`` (1, 7) = the reference at ``t_s`` and ``p_control(x, ref[0], gains)``'s
+    ``(vz_ref_mps, phi_rad, theta_rad, psirate_radps)``, unclipped."""
+    nmpc_inputs(x, _NOTHING, 0, 0, x, t_s, 0.0, _NO_SHIFT, ref, work, rows)
+    return p_law(x, ref[0], k1, k2, k3, k4)
 
 
 def warm_up_kernels() -> None:

@@ -172,12 +172,14 @@ def start_block_compile() -> subprocess.Popen | None:
     not compiled twice at once on two cores), then compiles ``tick_block``
     (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
     from ardrone_nmpc.core import monotonic
-    from ardrone_nmpc.runtime.lockstep_block import tick_block
+    from ardrone_nmpc.runtime.lockstep_block import BLOCK_KERNELS
 
     # (no blocks flown where the kernel does not read Python's clock: TickBlocks.takes —
-    # warm_up_blocks' flight would compile nothing, and each process would start one)
+    # warm_up_blocks' flight would compile nothing, and each process would start one);
+    # any block kernel not cached (the P controller's, the Newton scheme's with obstacles:
+    # not a flight's foreground compile either)
     if (os.environ.get(BLOCKS_SWITCH, "1") == "0" or not monotonic.SAME_CLOCK
-            or _in_cache(tick_block) is not False):
+            or all(_in_cache(k) is not False for k in BLOCK_KERNELS.values())):
         return None
     if not take_block_lock():
         return None  # another compiles it

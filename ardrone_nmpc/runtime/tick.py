@@ -27,6 +27,7 @@ from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
 from ardrone_nmpc.runtime.control_tick import ControlTick
 from ardrone_nmpc.runtime.control_tick import warm_up_kernels as warm_up_control_tick
+from ardrone_nmpc.runtime.control_tick_p import PControlTick
 from ardrone_nmpc.runtime.p_tick import warm_up_kernels as warm_up_p_tick
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
@@ -138,15 +139,16 @@ class Tick:
         ahead_s = self.delay.lead_s + ctl.obstacle_lookahead_s
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
-        #: The stages after the solve in one compiled call on the nominal tick (None: the
-        #: P controller, whose ticks the Python stages take)
-        self.after_solve = AfterSolve(self) if nmpc is not None else None
+        #: The stages after the solve in one compiled call on the nominal tick (the NMPC's;
+        #: the P controller's within its whole tick's call, ``runtime/control_tick_p``)
+        self.after_solve = AfterSolve(self)
         #: The stages before the solve, likewise (None: the P controller's, or a flight whose
         #: estimator, reference or stages the compiled call does not take)
         self.before_solve = BeforeSolve(self) if BeforeSolve.takes(self) else None
-        #: The controller's whole nominal tick — both, and the solve between — in one
-        #: compiled call (None: a flight or solver it does not take)
-        self.control_tick = ControlTick(self) if ControlTick.takes(self) else None
+        #: The controller's whole nominal tick — both, and the solve (or P's law) between —
+        #: in one compiled call (None: a flight or solver it does not take)
+        self.control_tick = (ControlTick(self) if ControlTick.takes(self) else
+                             PControlTick(self) if PControlTick.takes(self) else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
         # the stages' own (runtime/tick_kernels): those this flight calls
@@ -191,7 +193,7 @@ class Tick:
             if answer is None:
                 answer = ct.answer(inputs, t_exp_s, traj)
             if answer is not None:
-                if not answer[0] and self.cell_rows and inputs.target is None:
+                if not answer[0] and self.cell_rows and inputs.target is None and ct.cells:
                     return self._nominal_cells(inputs, t_exp_s, mode, answer, t0)
                 whole = ct.finish(inputs, t_exp_s, answer)
         if whole:
