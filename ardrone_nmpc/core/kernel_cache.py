@@ -26,7 +26,7 @@ from pathlib import Path
 KERNEL_SOURCES = (
     "model.py", "core/numerics.py", "core/types.py", "core/angles.py", "core/angle_kernels.py",
     "core/sorted_search.py", "core/python_floats.py", "core/monotonic.py", "control/gmres.py",
-    "control/obstacles.py",
+    "control/obstacles.py", "control/proportional.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "sim/wire_step.py", "sim/drone_block.py", "sim/target.py",

@@ -53,19 +53,25 @@ def _bits(value):
     return type(value).__name__, value
 
 
-def _fly(cfg, seed: int, block_ticks: int, monkeypatch) -> tuple:
-    """The flight's rows (keys and cells' bits, the clock's type only), events and ending,
-    and how many of its ticks blocks flew."""
-    monkeypatch.setattr(lockstep, "BLOCK_TICKS", block_ticks)
+def _counted(monkeypatch) -> list:
+    """``[ticks blocks flew]``, counted from now on (``TickBlocks.fly`` wrapped)."""
     flown = [0]
     fly = lb.TickBlocks.fly
 
-    def counted(self, k, mode, n_max):
-        answer = fly(self, k, mode, n_max)
+    def counted(self, *args):
+        answer = fly(self, *args)
         flown[0] += answer[0]
         return answer
 
     monkeypatch.setattr(lb.TickBlocks, "fly", counted)
+    return flown
+
+
+def _fly(cfg, seed: int, block_ticks: int, monkeypatch) -> tuple:
+    """The flight's rows (keys and cells' bits, the clock's type only), events and ending,
+    and how many of its ticks blocks flew."""
+    monkeypatch.setattr(lockstep, "BLOCK_TICKS", block_ticks)
+    flown = _counted(monkeypatch)
     recorder = MemoryRecorder()
     result = lockstep.run_lockstep(cfg, recorder=recorder, seed=seed)
     rows = [[(k, type(v).__name__ if k == "compute_us" else _bits(v)) for k, v in row.items()]
@@ -100,15 +106,7 @@ def test_a_p_flight_s_rows_have_no_solver_cells(monkeypatch):
     flight's ticks but its first few are blocks'."""
     cfg = load_config(CONFIGS / "square.yaml", SHORT)
     recorder = MemoryRecorder()
-    flown = [0]
-    fly = lb.TickBlocks.fly
-
-    def counted(self, k, mode, n_max):
-        answer = fly(self, k, mode, n_max)
-        flown[0] += answer[0]
-        return answer
-
-    monkeypatch.setattr(lb.TickBlocks, "fly", counted)
+    flown = _counted(monkeypatch)
     result = lockstep.run_lockstep(cfg, recorder=recorder)
     assert flown[0] >= result.ticks - 3
     for row in recorder.rows:
