@@ -143,8 +143,12 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
+    # (blocks compile their kernel themselves in a warm-up's flight, or with no background
+    # compile to wait for: runtime/precompile; so does the P controller's compiled tick)
+    compile_now = _warming_up or not background_compiles()
     tick = Tick(cfg, trajectory if trajectory is not None else experiment_trajectory(cfg),
-                wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
+                wrap_solver=diverging_wrapper(drone.sim.solver_divergence),
+                compile_now=compile_now)
     join_child()  # the drone's kernels, compiled meanwhile, are cached before it takes off
     period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
@@ -196,9 +200,6 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     write_cells = _sink(recorder, "write_cells")
     write_block = _block_sink(recorder) if write_cells is not None else None
     tick.cell_rows = recorder is None or write_cells is not None
-    # (blocks compile their kernel themselves in a warm-up's flight, or with no background
-    # compile to wait for: runtime/precompile)
-    compile_now = _warming_up or not background_compiles()
     blocks = (TickBlocks(tick, drone, n_max=BLOCK_TICKS, n_settle=schedule.n_settle,
                          period_s=period, t_first_s=t_first, compile_now=compile_now)
               if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)

@@ -141,3 +141,18 @@ def test_the_law_s_vz_passes_the_stages_after_it_to_the_bit(vz):
     assert answer[0] == 0
     assert struct.pack("<d", answer[1]) == struct.pack("<d", vz)
     assert ring[0].tolist() == [0.0, 0.01, -0.02, 0.1]  # (the z̈ sent: 0)
+
+
+@pytest.mark.parametrize("compile_now, cached, taken", [
+    (False, False, False),  # a cold cache: p_tick's call a tick, the compile the background's
+    (False, True, True), (True, False, True),  # (compile_now: compiled by its warm-up)
+])
+def test_p_s_compiled_tick_waits_for_the_background_compile(compile_now, cached, taken,
+                                                              monkeypatch):
+    from ardrone_nmpc.reference.experiment import experiment_trajectory
+    from ardrone_nmpc.runtime import tick as tick_module
+
+    monkeypatch.setattr(tick_module, "load_cached", lambda kernel: cached)
+    cfg = load_config(CONFIGS / "square.yaml", ["controller.kind=p"])
+    tick = Tick(cfg, experiment_trajectory(cfg), compile_now=compile_now)
+    assert isinstance(tick.control_tick, PControlTick) is taken
