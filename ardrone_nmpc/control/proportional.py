@@ -23,9 +23,10 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from ardrone_nmpc.core.angles import wrap_angle_rad
-from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, AttitudeCommand
+from ardrone_nmpc.core.types import (IX_PSI, IX_VX, IX_VY, IX_X, IX_Y, IX_Z, STATE_DIM,
+                                     AttitudeCommand)
 
-__all__ = ["PGains", "p_control"]
+__all__ = ["PGains", "p_control", "p_law"]
 
 
 @dataclass(frozen=True)
@@ -91,16 +92,38 @@ def p_control(
         ``(x_d − x − ẋ, y_d − y − ẏ)`` rotated into the body frame by ψ;
         ``psirate_radps = k4 · wrap(ψ_d − ψ)``. Unclipped.
     """
-    psi = float(state[IX_PSI])
+    g = gains
+    vz, phi, theta, rate = p_law(_floats(state, _STATE_USED), _floats(reference, _REF_USED),
+                                 g.k1_per_s, g.k2_rad_per_mps, g.k3_rad_per_mps, g.k4_per_s)
+    return AttitudeCommand(vz_ref_mps=vz, phi_rad=phi, theta_rad=theta, psirate_radps=rate)
+
+
+def p_law(x, r, k1, k2, k3, k4):
+    """Eq. 4.16 in the body frame (:func:`p_control`'s law, unclipped) of the state ``x`` and
+    the reference ``r`` (indexed as the state), the gains as numbers: ``(vz_ref_mps, phi_rad,
+    theta_rad, psirate_radps)``. The one home of its arithmetic: :func:`p_control` calls it
+    on Python floats, and it is compiled as it is — its heading wrapped by the compiled
+    twin of :func:`~ardrone_nmpc.core.angles.wrap_angle_rad` — for the compiled P ticks
+    (``runtime/p_tick.p_law``)."""
+    psi = x[IX_PSI]
     # Desired world velocity = position error (unit gain), minus the measured velocity.
-    ex = float(reference[IX_X]) - float(state[IX_X]) - float(state[IX_VX])
-    ey = float(reference[IX_Y]) - float(state[IX_Y]) - float(state[IX_VY])
+    ex = r[IX_X] - x[IX_X] - x[IX_VX]
+    ey = r[IX_Y] - x[IX_Y] - x[IX_VY]
     c, s = math.cos(psi), math.sin(psi)
     e_forward = c * ex + s * ey
     e_left = -s * ex + c * ey
-    return AttitudeCommand(
-        vz_ref_mps=gains.k1_per_s * (float(reference[IX_Z]) - float(state[IX_Z])),
-        phi_rad=-gains.k2_rad_per_mps * e_left,  # φ > 0 pushes right (−left), eq. 3.13
-        theta_rad=gains.k3_rad_per_mps * e_forward,
-        psirate_radps=gains.k4_per_s * wrap_angle_rad(float(reference[IX_PSI]) - psi),
-    )
+    # φ > 0 pushes right (−left), eq. 3.13
+    return (k1 * (r[IX_Z] - x[IX_Z]), -k2 * e_left, k3 * e_forward,
+            k4 * wrap_angle_rad(r[IX_PSI] - psi))
+
+
+_STATE_USED = (IX_PSI, IX_X, IX_VX, IX_Y, IX_VY, IX_Z)  # (float() of each, in this order)
+_REF_USED = (IX_X, IX_Y, IX_Z, IX_PSI)
+
+
+def _floats(values: Sequence[float], used: tuple[int, ...]) -> list[float]:
+    """``float()`` of ``values``' entries at ``used`` (a list indexed as the state; 0 else)."""
+    out = [0.0] * STATE_DIM
+    for i in used:
+        out[i] = float(values[i])
+    return out

@@ -26,7 +26,7 @@ from pathlib import Path
 KERNEL_SOURCES = (
     "model.py", "core/numerics.py", "core/types.py", "core/angles.py", "core/angle_kernels.py",
     "core/sorted_search.py", "core/python_floats.py", "core/monotonic.py", "control/gmres.py",
-    "control/obstacles.py",
+    "control/obstacles.py", "control/proportional.py",
     "control/kernels/layout.py", "control/kernels/residual.py", "control/kernels/solve.py",
     "control/kernels/steps.py", "sim/airframe.py", "sim/plant_step.py", "sim/plant_kit.py",
     "sim/sensor_step.py", "sim/wire_step.py", "sim/drone_block.py", "sim/target.py",
@@ -35,7 +35,7 @@ KERNEL_SOURCES = (
     "estimation/response_kernels.py", "estimation/response_lanes.py", "estimation/disturbance.py",
     "runtime/tick_kernels.py", "runtime/after_solve.py", "runtime/before_solve.py",
     "runtime/control_tick.py", "runtime/lockstep_block.py", "runtime/second_object.py",
-    "runtime/p_tick.py",
+    "runtime/p_tick.py", "runtime/control_tick_p.py",
 )
 _PACKAGE = Path(__file__).resolve().parents[1]
 _digest: str | None = None

@@ -76,14 +76,21 @@ def kernel_twin(kernel, name: str, **replaced):
     under ``name`` (numba's cache is keyed by the function's name; a kernel taking the callee
     as an argument would not be cached: a dispatcher's type differs in every process). Its
     globals are the kernel's module's as they are now, with ``replaced``."""
+    options = {k: v for k, v in kernel.targetoptions.items() if k != "nopython"}
+    return compiled_twin(kernel.py_func, name, options, **replaced)
+
+
+def compiled_twin(function, name: str, options: dict, **replaced):
+    """The Python ``function`` compiled with numba ``options`` (:data:`INNER_KERNEL`, …) and
+    cached under ``name``, calling ``replaced`` (global name → kernel) in place of what it
+    calls: one source for the Python path and the compiled one (:func:`kernel_twin`'s
+    way)."""
     import types
 
     from numba import njit
 
-    inner = kernel.py_func
-    twin = types.FunctionType(inner.__code__, {**inner.__globals__, **replaced}, name,
-                              inner.__defaults__, inner.__closure__)
+    twin = types.FunctionType(function.__code__, {**function.__globals__, **replaced}, name,
+                              function.__defaults__, function.__closure__)
     twin.__qualname__ = name
-    twin.__doc__ = inner.__doc__
-    options = {k: v for k, v in kernel.targetoptions.items() if k != "nopython"}
+    twin.__doc__ = function.__doc__
     return njit(cache=True, **options)(twin)

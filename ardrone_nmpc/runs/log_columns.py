@@ -342,12 +342,15 @@ _target_cell_values = operator.itemgetter(*(_COLUMN_INDEX[k] for k in TARGET_CEL
 
 
 #: the cells :func:`_general_row` reads from arrays: numpy scalars there (the object's
-#: position, the estimate, the reference, the input solved)
-_ARRAY_CELLS = tuple(i for i, k in enumerate(TARGET_CELL_KEYS) if k in {
+#: position, the estimate, the reference, the input solved — the P controller's: floats)
+_INPUT_KEYS = ("u_zacc_mps2", "u_phi_rad", "u_theta_rad", "u_psirate_radps")
+_ARRAY_KEYS = frozenset({
     "target_x_m", "target_y_m", "target_z_m", "x_m", "y_m", "z_m", "psi_rad", "vx_mps",
-    "vy_mps", "vz_mps", "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad", "u_zacc_mps2",
-    "u_phi_rad", "u_theta_rad", "u_psirate_radps"})
+    "vy_mps", "vz_mps", "x_ref_m", "y_ref_m", "z_ref_m", "psi_ref_rad", *_INPUT_KEYS})
+_ARRAY_CELLS = tuple(i for i, k in enumerate(TARGET_CELL_KEYS) if k in _ARRAY_KEYS)
 _F64 = np.float64
+#: the solver's cells: a P controller's row has none (:func:`_solution_columns`)
+_SOLVER_KEYS = ("solve_us", "residual_norm", "gmres_iterations", "newton_iterations")
 
 
 def target_cells_row(cells: list) -> dict:
@@ -363,6 +366,33 @@ def target_cells_row(cells: list) -> dict:
 def put_truth_cells(cells: list, truth: tuple) -> None:
     """:func:`put_truth` for a :func:`tick_cells` row: ``(x, y, z, ψ, ż)`` into its slots."""
     cells[TRUTH_CELLS] = truth
+
+
+def _p_keys(keys: tuple[str, ...]) -> tuple:
+    """A P row's keys (``keys`` without the solver's), their cells' getter, where its
+    numpy scalars sit (the arrays' cells but the input's: P's command is floats), and its
+    ``solver_status`` and z̈ cells."""
+    p_keys = tuple(k for k in keys if k not in _SOLVER_KEYS)
+    arrays = tuple(i for i, k in enumerate(p_keys)
+                   if k in _ARRAY_KEYS and k not in _INPUT_KEYS)
+    return (p_keys, operator.itemgetter(*(_COLUMN_INDEX[k] for k in p_keys)), arrays,
+            p_keys.index("solver_status"), p_keys.index("u_zacc_mps2"))
+
+
+_P_ROWS = (_p_keys(TICK_CELL_KEYS), _p_keys(TARGET_CELL_KEYS))
+
+
+def p_cells_row(cells: list, target: bool = False) -> dict:
+    """The P controller's nominal row from a block's cells (:func:`block_cells`'; its
+    ``target``: a second object's): the very dict :func:`tick_row` builds for that tick
+    (:func:`_general_row`: no solver's cells, no z̈, an empty ``solver_status``) and
+    :func:`put_truth` completes — same keys, same order, same values and types."""
+    keys, values_of, arrays, status, zacc = _P_ROWS[target]
+    values = list(values_of(cells))
+    for i in arrays:
+        values[i] = _F64(values[i])
+    values[status], values[zacc] = "", math.nan
+    return dict(zip(keys, values))
 
 
 def cells_row(cells: list) -> dict:

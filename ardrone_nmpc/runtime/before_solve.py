@@ -146,6 +146,9 @@ class BeforeSolve:
         self.control = tick.control
         self.delay = tick.control.delay
         self.offset = tick.offset
+        #: the P controller's (``runtime/control_tick_p``: :meth:`arguments` only, its
+        #: reference's lookup ``p_tick``'s)
+        self._p = tick.control.nmpc is None
         self._limits = np.zeros(L_SIZE)
         self._cfg = None  # the safety config the limits are of
         # the kernel's call: its compiled entry point (core/entry_points) while the stages'
@@ -213,9 +216,18 @@ class BeforeSolve:
         est, control = self.estimation, self.control
         kind = traj.__class__
         args = traj.waypoint_args if kind is HoldStartThen or kind is LiveTarget else None
-        if (args is None or args is not control._work_args or control._dtau_varies
+        if self._p:  # the P controller's lookup: its first tick packs the waypoints (_p_solve)
+            if args is None or args is not control._p_args or not est._compiled:
+                return None
+            work = control._p_work
+            if work is None:
+                return None  # (no knots: a table, the Python path's)
+            work, rows = work
+        elif (args is None or args is not control._work_args or control._dtau_varies
                 or not est._compiled):
             return None  # (the first solve asks Δτ and packs the trajectory: Control.solve)
+        else:
+            work, rows = control._work, control._rows
         pos = pose.position_m
         t_s, pose_rx, nav_rx = inputs.t_s, inputs.pose_rx_t_s, inputs.navdata_rx_t_s
         battery, roll, pitch = nav.battery_pct, nav.roll_deg, nav.pitch_deg
@@ -246,8 +258,7 @@ class BeforeSolve:
         return (t_s, pose_rx, nav_rx, 0 if bits is None else bits & ALARM_BITS, battery, roll,
                 pitch, px, py, pz, pose.psi_rad, pose.t_s, self.supervision.zacc_mps2, by_nav,
                 vx, vy, est._state, self._limits, t_exp_s, delay.ring, delay.first, delay.count,
-                delay.lead_s, control._x_solve, shift, control._states, control._work,
-                control._rows)
+                delay.lead_s, control._x_solve, shift, control._states, work, rows)
 
     def _vet(self, args: tuple) -> None:
         """After a call through the dispatcher: the kernel's entry point for float numbers

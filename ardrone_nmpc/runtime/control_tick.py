@@ -173,6 +173,10 @@ class ControlTick:
     """The Python side of :func:`control_tick` for one tick's stages (``Tick``'s), built on
     their :class:`~.before_solve.BeforeSolve` and :class:`~.after_solve.AfterSolve`."""
 
+    #: its nominal row is cells (``Tick.step``'s ``nominal_cells``; the P controller's is
+    #: its own row: ``runtime/control_tick_p``)
+    cells = True
+
     @staticmethod
     def takes(tick) -> bool:
         """Whether the compiled call can take ``tick``'s nominal ticks: both halves can, and

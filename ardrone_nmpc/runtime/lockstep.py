@@ -36,14 +36,15 @@ from ardrone_nmpc.errors import UserError
 from ardrone_nmpc.links.drone_config import LinkError
 from ardrone_nmpc.reference.experiment import experiment_trajectory
 from ardrone_nmpc.runs.block_rows import BlockRows
-from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, put_truth,
+from ardrone_nmpc.runs.log_columns import (MODE_CELL, TRUTH_CELLS, p_cells_row, put_truth,
                                            put_truth_cells, target_cells_row)
 from ardrone_nmpc.runs.verdict import VerdictTally
 from ardrone_nmpc.runtime.after_solve import SATURATED_TEXT
 from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_LEGS, EXIT_FIT,
                                                  EXIT_NONE, EXIT_SHORT, TickBlocks,
                                                  tick_block, tick_block_newton,
-                                                 tick_block_obstacles)
+                                                 tick_block_newton_obstacles,
+                                                 tick_block_obstacles, tick_block_p)
 from ardrone_nmpc.runtime.precompile import (background_compiles, join_child,
                                              release_block_lock, start_if_cold,
                                              take_block_lock)
@@ -142,8 +143,12 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     schedule = Schedule.from_config(cfg)
     seed = cfg.sim.seed if seed is None else seed
     drone = LockstepDrone(cfg, seed=seed, plant=plant)
+    # (blocks compile their kernel themselves in a warm-up's flight, or with no background
+    # compile to wait for: runtime/precompile; so does the P controller's compiled tick)
+    compile_now = _warming_up or not background_compiles()
     tick = Tick(cfg, trajectory if trajectory is not None else experiment_trajectory(cfg),
-                wrap_solver=diverging_wrapper(drone.sim.solver_divergence))
+                wrap_solver=diverging_wrapper(drone.sim.solver_divergence),
+                compile_now=compile_now)
     join_child()  # the drone's kernels, compiled meanwhile, are cached before it takes off
     period = schedule.period_s
     write_event = recorder.event if recorder is not None else (lambda *a, **k: None)
@@ -195,15 +200,13 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
     write_cells = _sink(recorder, "write_cells")
     write_block = _block_sink(recorder) if write_cells is not None else None
     tick.cell_rows = recorder is None or write_cells is not None
-    # (blocks compile their kernel themselves in a warm-up's flight, or with no background
-    # compile to wait for: runtime/precompile)
-    compile_now = _warming_up or not background_compiles()
     blocks = (TickBlocks(tick, drone, n_max=BLOCK_TICKS, n_settle=schedule.n_settle,
                          period_s=period, t_first_s=t_first, compile_now=compile_now)
               if BLOCK_TICKS > 0 and TickBlocks.takes(tick, drone, compile_now) else None)
-    # a flight with a second object: its blocks' rows are the per-tick path's dicts
-    write_target_row = (recorder.write_row if blocks is not None and blocks.target
-                        and recorder is not None else None)
+    # a flight with a second object, or the P controller's: its blocks' rows are the
+    # per-tick path's dicts
+    write_dict_row = (recorder.write_row if blocks is not None
+                      and (blocks.target or blocks.p) and recorder is not None else None)
     n_ticks, n_settle = schedule.n_ticks, schedule.n_settle
     k = 0
     t_exp_s = schedule.t_exp_s  # (k by k, or jumps of a block's ticks)
@@ -217,7 +220,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
                 k, mode, min(BLOCK_TICKS, (n_settle if t_exp < 0 else n_ticks) - k))
             if n:
                 _block_rows(blocks.table, n, mode, write_cells, write_block, tally,
-                            write_target_row, blocks.target)
+                            write_dict_row, blocks.target, blocks.p)
                 if progress is not None:
                     for j in range(k, k + n):
                         progress(schedule.fraction_done(j))
@@ -291,23 +294,27 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
 
 
 def _block_rows(table, n: int, mode: str, write_cells, write_block,
-                tally: VerdictTally, write_target_row=None, target: bool = False) -> None:
+                tally: VerdictTally, write_dict_row=None, target: bool = False,
+                p: bool = False) -> None:
     """The rows of a block's ``n`` ticks (``table``'s numbers, ``runtime/lockstep_block``)
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
     nominal label): the block itself to a recorder that takes blocks (``write_block``), the
     rows' cells to one that takes cells; none to write without a recorder. A flight with a
     second object (``target``; its recorder's ``write_row``: ``write_target_row``) logs it
     in each row: the per-tick path's rows are then dicts (``tick_row``'s), so are these
-    (``log_columns.target_cells_row``)."""
+    (``log_columns.target_cells_row``); so are the P controller's (``p``: ``p_cells_row``,
+    its rows without the solver's cells), given to ``write_dict_row``."""
     # (a block kept by its recorder owns its numbers: the table is the next block's)
-    copy = write_block is not None and not target
+    dicts = target or p
+    copy = write_block is not None and not dicts
     rows = BlockRows(table[:n].copy() if copy else table[:n], mode,
                      SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT, target)
     if target:  # (VerdictTally.add of rows with a finite target_age_ms)
         tally.target_seen = True
-        if write_target_row is not None:
+    if dicts:
+        if write_dict_row is not None:
             for cells in rows.cells():
-                write_target_row(target_cells_row(cells))
+                write_dict_row(p_cells_row(cells, target) if p else target_cells_row(cells))
     elif write_block is not None:
         write_block(rows)
     elif write_cells is not None:
@@ -317,7 +324,8 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
 
 
 # the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles),
-# the square by the thesis' Newton scheme (tick_block_newton)
+# the square by the thesis' Newton scheme (tick_block_newton), the obstacle's step by it
+# (tick_block_newton_obstacles), the square by the P controller (tick_block_p)
 _WARM_UP_SQUARE = {"name": "warm-up", "duration_s": 1.0, "reference": {"kind": "square"}}
 _WARM_UP_NEWTON = {**_WARM_UP_SQUARE, "name": "warm-up-newton",
                    "controller": {"solver": {"method": "newton"}}}
@@ -326,22 +334,29 @@ _WARM_UP_OBSTACLE = {"name": "warm-up-obstacle", "duration_s": 1.0,
                      "controller": {"obstacles": [{"kind": "cylinder",
                                                    "center_m": [1.25, 0.0, 1.0],
                                                    "radius_m": 0.3, "margin_m": 0.3}]}}
+_WARM_UP_NEWTON_OBSTACLE = {**_WARM_UP_OBSTACLE, "name": "warm-up-newton-obstacle",
+                            "controller": {**_WARM_UP_OBSTACLE["controller"],
+                                           **_WARM_UP_NEWTON["controller"]}}
+_WARM_UP_P = {**_WARM_UP_SQUARE, "name": "warm-up-p", "controller": {"kind": "p"}}
+#: each block kernel's warm-up flight (warm_up_blocks)
+_WARM_UPS = ((tick_block, _WARM_UP_SQUARE), (tick_block_obstacles, _WARM_UP_OBSTACLE),
+             (tick_block_newton, _WARM_UP_NEWTON),
+             (tick_block_newton_obstacles, _WARM_UP_NEWTON_OBSTACLE),
+             (tick_block_p, _WARM_UP_P))
 
 
 def warm_up_blocks() -> None:
     """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, then
-    ``tick_block_obstacles`` for a solver with obstacles and ``tick_block_newton`` for the
-    thesis' Newton scheme) loaded from numba's cache, or compiled now by a short square
-    flight (~7 s on an empty cache), a short obstacle flight and a short Newton square: the
-    precompile's background child, ``bench --tick`` and the tests call it; a flight does not
-    wait for it (its ticks are then the per-tick path's: the same rows)."""
+    ``tick_block_obstacles`` for a solver with obstacles, ``tick_block_newton`` and
+    ``tick_block_newton_obstacles`` for the thesis' Newton scheme, ``tick_block_p`` for the
+    P controller) loaded from numba's cache, or compiled now by a short flight each
+    (:data:`_WARM_UPS`: the square's ~7 s on an empty cache): the precompile's background
+    child, ``bench --tick`` and the tests call it; a flight does not wait for it (its ticks
+    are then the per-tick path's: the same rows)."""
     global _warming_up
     if not monotonic.SAME_CLOCK:
         return  # (no blocks flown where the kernel does not read Python's clock: no compile)
-    flights = [cfg for kernel, cfg in ((tick_block, _WARM_UP_SQUARE),
-                                       (tick_block_obstacles, _WARM_UP_OBSTACLE),
-                                       (tick_block_newton, _WARM_UP_NEWTON))
-               if not load_cached(kernel)]
+    flights = [cfg for kernel, cfg in _WARM_UPS if not load_cached(kernel)]
     if not flights:
         return
     from ardrone_nmpc.config.schema import config_from_dict

@@ -42,6 +42,7 @@ from ardrone_nmpc.runs import block_row as br
 from ardrone_nmpc.runtime.control_tick import (control_tick, control_tick_newton,
                                                control_tick_newton_obstacles,
                                                control_tick_obstacles)
+from ardrone_nmpc.runtime.control_tick_p import PControlTick, control_tick_p
 from ardrone_nmpc.runtime.second_object import (O_FOLLOW, O_ON, O_PSI, O_RX, O_T, O_X,
                                                 SecondObject, followed, take_frame)
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
@@ -50,7 +51,7 @@ from ardrone_nmpc.sim import sensor_step as ks
 
 __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
            "EXIT_SHORT", "TickBlocks", "tick_block", "tick_block_newton",
-           "tick_block_newton_obstacles", "tick_block_obstacles"]
+           "tick_block_newton_obstacles", "tick_block_obstacles", "tick_block_p"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
@@ -193,10 +194,13 @@ tick_block_newton = kernel_twin(tick_block, "tick_block_newton",
                                 control_tick=control_tick_newton)
 tick_block_newton_obstacles = kernel_twin(tick_block, "tick_block_newton_obstacles",
                                           control_tick=control_tick_newton_obstacles)
+#: … for the P controller (``runtime/control_tick_p``: control_tick's arguments and answer)
+tick_block_p = kernel_twin(tick_block, "tick_block_p", control_tick=control_tick_p)
 #: the blocks' kernel by the controller's (``ControlTick.kernel``)
 BLOCK_KERNELS = {control_tick: tick_block, control_tick_obstacles: tick_block_obstacles,
                  control_tick_newton: tick_block_newton,
-                 control_tick_newton_obstacles: tick_block_newton_obstacles}
+                 control_tick_newton_obstacles: tick_block_newton_obstacles,
+                 control_tick_p: tick_block_p}
 
 
 class TickBlocks:
@@ -237,6 +241,9 @@ class TickBlocks:
         self.second = SecondObject(tick, drone.sensors)
         #: the rows have the object's cells
         self.target = drone.sensors.target_cfg is not None
+        #: the P controller's rows (``runtime/control_tick_p``): the per-tick path's dicts,
+        #: without the solver's cells (``log_columns.p_cells_row``)
+        self.p = isinstance(tick.control_tick, PControlTick)
         #: compile :func:`tick_block` when a block finds no machine code for its arguments;
         #: else that block is not flown — its ticks are the per-tick path's, which leaves the
         #: same rows (a first flight on an empty cache does not wait ~7 s for it:

@@ -17,10 +17,11 @@ numba writes each cache file under a temporary name and renames it, but two proc
 *different* signatures of one kernel at once could both claim the same data file name.
 No child when the cache is warm or when ``ARDRONE_NMPC_PRECOMPILE=0``.
 
-Blocks of ticks' kernel (``runtime/lockstep_block.tick_block``, ~7 s to compile, the
-controller's and the drone's kernels inside) is compiled last, by a process of its own that
-the child starts and nobody waits for: a flight flies its ticks one by one until the cache
-holds it (the same rows), the next flights load it. One such compile at a time (a lock file
+Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, ~7 s to compile, the
+controller's and the drone's kernels inside, and its twins — obstacles, Newton, Newton with
+obstacles, the P controller's: ``BLOCK_KERNELS``) are compiled last, by a process of its own
+that the child starts and nobody waits for: a flight flies its ticks one by one until the
+cache holds its kernel (the same rows), the next flights load it. One such compile at a time (a lock file
 beside the kernel's cache, held by ``runtime/lockstep.warm_up_blocks`` too while it compiles
 the kernel itself); none where blocks are never flown (``core/monotonic.SAME_CLOCK`` False).
 """
@@ -164,20 +165,22 @@ def compile_kernels() -> None:
 
 
 def start_block_compile() -> subprocess.Popen | None:
-    """Start the compile of blocks of ticks' kernel in a process of its own, which nobody
-    waits for (module docstring) — unless the cache holds it, :data:`BLOCKS_SWITCH` is
+    """Start the compile of blocks of ticks' kernels in a process of its own, which nobody
+    waits for (module docstring) — unless the cache holds them all, :data:`BLOCKS_SWITCH` is
     ``0``, or another such process started less than :data:`BLOCK_LOCK_S` ago (its lock
     file is beside the kernel's cache):
     it waits for the runner's controller kernels to be cached (:data:`BLOCK_WAIT_S` at most:
-    not compiled twice at once on two cores), then compiles ``tick_block``
-    (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
+    not compiled twice at once on two cores), then compiles the block kernels the cache
+    lacks (``runtime/lockstep.warm_up_blocks``) and removes the lock."""
     from ardrone_nmpc.core import monotonic
-    from ardrone_nmpc.runtime.lockstep_block import tick_block
+    from ardrone_nmpc.runtime.lockstep_block import BLOCK_KERNELS
 
     # (no blocks flown where the kernel does not read Python's clock: TickBlocks.takes —
-    # warm_up_blocks' flight would compile nothing, and each process would start one)
+    # warm_up_blocks' flight would compile nothing, and each process would start one);
+    # any block kernel not cached (the P controller's, the Newton scheme's with obstacles:
+    # not a flight's foreground compile either)
     if (os.environ.get(BLOCKS_SWITCH, "1") == "0" or not monotonic.SAME_CLOCK
-            or _in_cache(tick_block) is not False):
+            or all(_in_cache(k) is not False for k in BLOCK_KERNELS.values())):
         return None
     if not take_block_lock():
         return None  # another compiles it

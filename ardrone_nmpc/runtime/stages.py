@@ -237,7 +237,13 @@ class Control:
         self._vz_max_mps = limits.control_vz_max_mps
         self._p_args: tuple | None = None  # the waypoint_args _p_work was made of
         self._p_work: tuple | None = None  # p_tick's work and rows (None: Python's path)
-        if nmpc is not None:
+        if nmpc is None:  # the P controller's compiled nominal tick's (runtime/control_tick_p):
+            # the reference now (its Solution's: overwritten by the next tick) and a state
+            # it does not predict (no input pending in its lookup)
+            self._x_solve = np.empty(STATE_DIM)
+            self._states = np.empty(_REF_SHAPE)
+            self._ref_now, self._ref_horizon = self._states[0], self._states[1:]
+        else:
             self._stage_index = np.arange(nmpc.spec.horizon_steps + 1, dtype=np.float64)
             self._offsets = np.zeros(nmpc.spec.horizon_steps + 2)
             self._offsets_dtau = math.nan  # the Δτ _offsets were made with
@@ -269,9 +275,9 @@ class Control:
         ``_states``, the offsets and shifted horizon of ``_work`` — are made views of the
         copied arrays again (else the copy would log and solve against stale arrays)."""
         self.__dict__.update(state)
+        self._ref_now, self._ref_horizon = self._states[0], self._states[1:]
         if self.nmpc is None:
             return
-        self._ref_now, self._ref_horizon = self._states[0], self._states[1:]
         if self._work is not None:
             self._offsets, _, _, self._horizon = nmpc_work_views(self._work)
 

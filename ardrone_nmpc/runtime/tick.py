@@ -16,6 +16,7 @@ from typing import Callable
 
 from ardrone_nmpc.control.mapping import DroneLimits, PcmdCommand, command_scales
 from ardrone_nmpc.control.ocp import SolverStatus
+from ardrone_nmpc.core.kernel_cache import load_cached
 from ardrone_nmpc.core.types import IU_PHI, IU_PSIRATE, IU_THETA, TickInputs, slot_init
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
@@ -27,6 +28,7 @@ from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.before_solve import warm_up_kernels as warm_up_before_solve
 from ardrone_nmpc.runtime.control_tick import ControlTick
 from ardrone_nmpc.runtime.control_tick import warm_up_kernels as warm_up_control_tick
+from ardrone_nmpc.runtime.control_tick_p import PControlTick, control_tick_p
 from ardrone_nmpc.runtime.p_tick import warm_up_kernels as warm_up_p_tick
 from ardrone_nmpc.runtime.stages import (
     HOVER, OBSTACLE_VELOCITY_FILTER_S, Control, DelayPrediction, Estimation, MovingObstacles,
@@ -83,6 +85,15 @@ def effective_controller(controller, limits: DroneLimits):
     return controller.model_copy(update={"u_min": tuple(lo), "u_max": tuple(hi)})
 
 
+def _p_tick_ready(tick, compile_now: bool) -> bool:
+    """The P controller's compiled tick takes ``tick``'s (``PControlTick.takes``) and has
+    machine code — numba's cache holds it, or ``compile_now`` (then its warm-up compiles it,
+    as the NMPC's): the lockstep runner's first P flight on an empty cache flies ``p_tick``'s
+    one call a tick (the same rows) and leaves the compile to the background block compile
+    (``runtime/precompile``: ``lockstep.warm_up_blocks``), not to its start."""
+    return PControlTick.takes(tick) and (compile_now or load_cached(control_tick_p))
+
+
 class Tick:
     """The stages of one experiment's tick, with their state.
 
@@ -94,10 +105,12 @@ class Tick:
         object's pose every tick.
     wrap_solver : what the runner wraps the NMPC solver in (a simulation's injected
         divergence, :class:`~ardrone_nmpc.control.diverging.DivergingSolver`); None: nothing.
+    compile_now : compile the P controller's compiled tick now if numba's cache lacks it
+        (False: the lockstep runner's, when a background compile makes it: ``_p_tick_ready``).
     """
 
     def __init__(self, cfg, trajectory: Trajectory, *,
-                 wrap_solver: Callable | None = None):
+                 wrap_solver: Callable | None = None, compile_now: bool = True):
         self.cfg = cfg
         self.trajectory = trajectory
         #: Hand the usual NMPC tick's row as cells in column order (``TickOutput.cells``, no
@@ -138,15 +151,16 @@ class Tick:
         ahead_s = self.delay.lead_s + ctl.obstacle_lookahead_s
         self.obstacles = (MovingObstacles(nmpc, moving, ahead_s)
                           if nmpc is not None and moving else None)
-        #: The stages after the solve in one compiled call on the nominal tick (None: the
-        #: P controller, whose ticks the Python stages take)
-        self.after_solve = AfterSolve(self) if nmpc is not None else None
+        #: The stages after the solve in one compiled call on the nominal tick (the NMPC's;
+        #: the P controller's within its whole tick's call, ``runtime/control_tick_p``)
+        self.after_solve = AfterSolve(self)
         #: The stages before the solve, likewise (None: the P controller's, or a flight whose
         #: estimator, reference or stages the compiled call does not take)
         self.before_solve = BeforeSolve(self) if BeforeSolve.takes(self) else None
-        #: The controller's whole nominal tick — both, and the solve between — in one
-        #: compiled call (None: a flight or solver it does not take)
-        self.control_tick = ControlTick(self) if ControlTick.takes(self) else None
+        #: The controller's whole nominal tick — both, and the solve (or P's law) between —
+        #: in one compiled call (None: a flight or solver it does not take)
+        self.control_tick = (ControlTick(self) if ControlTick.takes(self) else
+                             PControlTick(self) if _p_tick_ready(self, compile_now) else None)
         if nmpc is not None:  # load (or compile) the kernels now, not on the first tick aloft
             self.delay.warm_up(self.control.warm_up())
         # the stages' own (runtime/tick_kernels): those this flight calls
@@ -191,7 +205,7 @@ class Tick:
             if answer is None:
                 answer = ct.answer(inputs, t_exp_s, traj)
             if answer is not None:
-                if not answer[0] and self.cell_rows and inputs.target is None:
+                if not answer[0] and self.cell_rows and inputs.target is None and ct.cells:
                     return self._nominal_cells(inputs, t_exp_s, mode, answer, t0)
                 whole = ct.finish(inputs, t_exp_s, answer)
         if whole:

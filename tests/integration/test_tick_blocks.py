@@ -157,7 +157,7 @@ CASES = [
     ("newton_solver_diverge", "square", ["duration_s=8", *SETTLE, NEWTON,
                                          "faults.solver_diverge.start_s=3"], 4),
     ("newton_obstacle", "obstacle", ["duration_s=8", *SETTLE, NEWTON], 5),
-    # the P controller (thesis eq. 4.16): the Python stages' ticks, a wind
+    # the P controller (thesis eq. 4.16): its blocks (runtime/control_tick_p), a wind
     ("p_square", "square", ["duration_s=8", *SETTLE, "controller.kind=p"], 6),
     ("p_wind", "hover", ["duration_s=6", *SETTLE, "controller.kind=p",
                          "faults.wind.velocity_mps=[0.6,0.2,0]"], 7),

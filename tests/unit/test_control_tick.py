@@ -331,7 +331,9 @@ class _OwnNewton(NewtonGMRESController):
 
 
 @pytest.mark.parametrize("build", [
-    lambda cfg: Tick(config("square.yaml", "controller.kind=p"), experiment_trajectory(cfg)),
+    # the P controller against a curve's table (runtime/control_tick_p: waypoints only)
+    lambda cfg: Tick(config("ellipse.yaml", "controller.kind=p"),
+                     experiment_trajectory(config("ellipse.yaml"))),
     # a Newton solver's subclass (its own tick)
     lambda cfg: Tick(config("square.yaml", NEWTON), experiment_trajectory(cfg),
                      wrap_solver=lambda nmpc: _OwnNewton.from_config(
