@@ -300,10 +300,10 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
     nominal label): the block itself to a recorder that takes blocks (``write_block``), the
     rows' cells to one that takes cells; none to write without a recorder. A flight with a
-    second object (``target``; its recorder's ``write_row``: ``write_target_row``) logs it
-    in each row: the per-tick path's rows are then dicts (``tick_row``'s), so are these
-    (``log_columns.target_cells_row``); so are the P controller's (``p``: ``p_cells_row``,
-    its rows without the solver's cells), given to ``write_dict_row``."""
+    second object (``target``) logs it in each row: the per-tick path's rows are then dicts
+    (``tick_row``'s), so are these (``log_columns.target_cells_row``); so are the P
+    controller's (``p``: ``p_cells_row``, its rows without the solver's cells) — each given
+    to ``write_dict_row`` (the recorder's ``write_row``)."""
     # (a block kept by its recorder owns its numbers: the table is the next block's)
     dicts = target or p
     copy = write_block is not None and not dicts

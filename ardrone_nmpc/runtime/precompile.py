@@ -21,9 +21,9 @@ Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, ~7 s to compile
 controller's and the drone's kernels inside, and its twins — obstacles, Newton, Newton with
 obstacles, the P controller's: ``BLOCK_KERNELS``) are compiled last, by a process of its own
 that the child starts and nobody waits for: a flight flies its ticks one by one until the
-cache holds its kernel (the same rows), the next flights load it. One such compile at a time (a lock file
-beside the kernel's cache, held by ``runtime/lockstep.warm_up_blocks`` too while it compiles
-the kernel itself); none where blocks are never flown (``core/monotonic.SAME_CLOCK`` False).
+cache holds its kernel (the same rows), the next flights load it. One such compile at a time
+(a lock file beside the kernel's cache, held by ``runtime/lockstep.warm_up_blocks`` too
+while it compiles the kernels itself); none where blocks are never flown (``core/monotonic.SAME_CLOCK`` False).
 """
 
 from __future__ import annotations

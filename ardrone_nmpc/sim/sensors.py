@@ -76,6 +76,8 @@ def _import_navdata_sample_of():
 
     _navdata_sample_of = navdata_sample_of
     return navdata_sample_of
+
+
 #: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
 _WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push", "_receive",
                   "push_object_frame")

@@ -1,13 +1,16 @@
 """The P controller's flights fly blocks of ticks (``runtime/control_tick_p``,
 ``lockstep_block.tick_block_p``), and their rows are the per-tick path's.
 
-The oracle is the per-tick path (``lockstep.BLOCK_TICKS = 0``: ``Tick.step``'s Python
-stages and ``p_tick``): each flight is flown both ways and every row must be the same keys
-in the same order with the same values' bits and Python types (the clock cell
-``compute_us``: its type only) — so ``log.csv``'s bytes are the same too —, the same
-events and ending. Flights: a wind, a command delay and a delay jump (the response fit's
-events between blocks), the drone's and P's own gains not 1 (commands beyond the tilt cap:
-ticks whose law's answer Python sends), a supervisor's landing with its logged descent.
+The oracle is the per-tick path as it was before P's compiled tick (``lockstep.BLOCK_TICKS
+= 0`` and no ``PControlTick``: ``Tick.step``'s Python stages and ``p_tick``): each flight is
+flown both ways and every row must be the same keys in the same order with the same values'
+bits and Python types (the clock cell ``compute_us``: its type only) — so ``log.csv``'s
+bytes are the same too —, the same events and ending. Flights: a wind, a command delay and
+a delay jump (the response fit's events between blocks), the drone's and P's own gains not 1
+(commands beyond the tilt cap: ticks whose law's answer Python sends), a supervisor's
+landing with its logged descent, an emergency stop mid-flight, a moving obstacle (a second
+object: rows with its cells, ``p_cells_row(…, target=True)``). The compiled tick one tick at
+a time leaves the Python stages' state after every tick, too.
 """
 
 from __future__ import annotations
@@ -26,7 +29,9 @@ from ardrone_nmpc.runtime import lockstep
 from ardrone_nmpc.runtime import lockstep_block as lb
 from ardrone_nmpc.runtime.after_solve import after_solve
 from ardrone_nmpc.runtime.control_tick_p import PControlTick
+from ardrone_nmpc.runtime import tick as tick_module
 from ardrone_nmpc.runtime.tick import Tick
+from tests.tick_flights import carried, fly
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 SHORT = ["duration_s=6", "sim.settle_s=1", "controller.kind=p"]
@@ -43,6 +48,9 @@ CASES = [
     ("landing", "square", ["duration_s=10", "sim.settle_s=1", "controller.kind=p",
                            "sim.plant.battery_start_pct=23",
                            "sim.plant.battery_drain_pct_per_min=30"], 0),
+    ("emergency", "square", [*SHORT, "faults.emergency.start_s=3"], 0),
+    # a second object in the mocap frames: rows with its cells (blocks.target and blocks.p)
+    ("moving_obstacle", "moving_obstacle", SHORT, 1),
 ]
 
 
@@ -67,10 +75,18 @@ def _counted(monkeypatch) -> list:
     return flown
 
 
+def _python_p_ticks(monkeypatch) -> None:
+    """P's ticks the Python stages' and ``p_tick``'s, as before its compiled tick: no
+    :class:`PControlTick` built (so no block either)."""
+    monkeypatch.setattr(tick_module, "_p_tick_ready", lambda tick, compile_now: False)
+
+
 def _fly(cfg, seed: int, block_ticks: int, monkeypatch) -> tuple:
     """The flight's rows (keys and cells' bits, the clock's type only), events and ending,
-    and how many of its ticks blocks flew."""
+    and how many of its ticks blocks flew (``block_ticks`` 0: the Python stages' ticks)."""
     monkeypatch.setattr(lockstep, "BLOCK_TICKS", block_ticks)
+    if block_ticks == 0:
+        _python_p_ticks(monkeypatch)
     flown = _counted(monkeypatch)
     recorder = MemoryRecorder()
     result = lockstep.run_lockstep(cfg, recorder=recorder, seed=seed)
@@ -99,6 +115,45 @@ def test_p_block_rows_are_the_per_tick_path_s(name, config, overrides, seed, mon
     assert end_b == end_p
     if name == "landing":
         assert end_b[1] == "land-battery" and ("mode", ("str", "landing")) in rows_b[-1]
+    if name == "emergency":
+        assert end_b[1] == "stop-emergency"
+    if name == "moving_obstacle":  # (the object's cells in every row)
+        assert all(dict(row)["target_x_m"][0] == "float64" for row in rows_b[5:])
+
+
+@pytest.mark.parametrize("overrides", [
+    [*SHORT, "sim.plant.command_delay_s=0.4", "controller.adaptation.refit_s=0.2"],
+    [*SHORT, "faults.battery_floor.start_s=3"],
+    CASES[2][2],  # (commands beyond the tilt cap: clipped, in the ring as sent)
+], ids=["refits", "battery_floor", "gains"])
+def test_p_s_compiled_tick_leaves_the_python_stages_state(overrides, monkeypatch):
+    """Tick by tick (no blocks), P's compiled tick leaves every stage as the Python stages
+    and ``p_tick`` do (``tick_flights.carried``: the delay ring, the supervisor, the
+    estimate, the response fit, …) — but ``Control._x_solve`` and ``_states``, the compiled
+    tick's scratch (the Python P path writes neither: ``np.empty``'s bits)."""
+    cfg = load_config(CONFIGS / "square.yaml", overrides)
+    built = []
+
+    def use(tick) -> None:
+        built.append(isinstance(tick.control_tick, PControlTick))
+        state = carried(tick)  # (the scratch's place in it)
+        assert state[scratch] == [tick.control._x_solve.tobytes(), tick.control._states.tobytes()]
+
+    scratch = slice(16, 18)  # (carried's c._x_solve, c._states)
+    rows_c, events_c, states_c = fly(cfg, monkeypatch, use=use)
+    with monkeypatch.context() as m:
+        _python_p_ticks(m)
+        rows_p, events_p, states_p = fly(cfg, monkeypatch, use=lambda tick: None)
+    assert built == [True]
+    assert len(states_c) == len(states_p) > 50
+    for k, (a, b) in enumerate(zip(states_c, states_p)):
+        del a[scratch], b[scratch]
+        assert a == b, f"tick {k}"
+    assert [[_bits(v) for k, v in r.items() if k != "compute_us"] for r in rows_c] == \
+        [[_bits(v) for k, v in r.items() if k != "compute_us"] for r in rows_p]
+    unclocked = [[{k: v for k, v in e.items() if k != "wall_s"} for e in events]
+                 for events in (events_c, events_p)]
+    assert pickle.dumps(unclocked[0]) == pickle.dumps(unclocked[1])
 
 
 def test_a_p_flight_s_rows_have_no_solver_cells(monkeypatch):
