@@ -45,7 +45,9 @@ import math
 
 import numpy as np
 
+from ardrone_nmpc.core.angles import wrap_angle_deg
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
+from ardrone_nmpc.protocol.navdata import DroneState, OptionTag
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.drone import SimulatedDrone
@@ -59,6 +61,10 @@ _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, Fligh
 _MOCAP = ks.MOCAP
 _T, _K, _S = ws.EV_T, ws.EV_K, ws.EV_SAMPLE
 _N_EVENTS = 16  # ev's rows to start with (grown to a tick's events)
+_OK, _STATE, _DEMO = ws.EV_OK, ws.EV_STATE, ws.EV_DEMO
+_BOOTSTRAP_BIT, _DEMO_OPTION = int(DroneState.NAVDATA_BOOTSTRAP), 1 << OptionTag.DEMO
+#: (state word, ctrl_state) → (the DroneState, the flight mode navdata_sample_of reads)
+_DECODED: dict = {}
 #: What a quiet tick does in the drone's, firmware's and faults' place (besides the legs':
 #: CompiledLegs.eligible): a class overriding one of these keeps the Python wire path
 _REPLACED = ((SimulatedDrone, ("navdata_datagrams",)),
@@ -158,13 +164,14 @@ class QuietWire:
         ``mode`` all along) in the tick to ``t_s``, as the Python path sends them."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
+        receipt = None  # (the tick's packets as numbers: _receipt, at its first packet)
         # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
         # would queue a MocapFrame of the object alone, as it is
         numbers = (sensors._names_checked and not sensors.frames_as_bytes
                    and sensors.target_cfg is None)
         push_numbers = sensors.push_object_frame
         latency_s = sensors.mocap_latency_s + NO_MOCAP_FAULT.extra_latency_s
-        for row in rows:
+        for i, row in enumerate(rows):
             t_event, sample = row[_T], row[_S:]
             if row[0] == _MOCAP:
                 if numbers:
@@ -173,8 +180,65 @@ class QuietWire:
                     continue
                 frame(int(row[_K]), t_event, _Pose(sample[1:4], sample[4:7]), NO_MOCAP_FAULT,
                       None)
-            else:  # AirframePlant.navdata's sample (airborne), the packet of it
-                t, battery, roll, pitch, yaw, altitude, forward, right, down = sample
-                nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
-                                         forward, right, down)
-                push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
+                continue
+            # AirframePlant.navdata's sample (airborne), the packet of it: as the numbers
+            # its receipt reads (wire_step.navdata_packets), or built
+            if receipt is None:
+                receipt = self._receipt(len(rows))
+            if receipt and self.ev[i, _OK]:
+                self._packet(receipt, t_event, self.ev[i].tolist())
+                continue
+            t, battery, roll, pitch, yaw, altitude, forward, right, down = sample[:9]
+            nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
+                                     forward, right, down)
+            push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
+
+    def _receipt(self, n_rows: int) -> tuple | bool:
+        """The tick's packets as numbers (``ev[:n_rows]``'s navdata rows worked out by
+        ``wire_step.navdata_packets``): ``(the firmware's ctrl_state, its major)`` — or False
+        where they go built: the sampler's receipt patched or its stats of another kind
+        (``LockstepSensors.receives_quiet_packets``), a state
+        word with the bootstrap bit (the receipt answers it) or packets without the demo
+        option (no sample: the receipt reads none). The state word the firmware's
+        (``DroneFirmware.status``) but for the bits a packet's own time and battery give."""
+        sensors, fw = self.sensors, self.sensors.firmware
+        if not sensors.receives_quiet_packets():
+            return False
+        status = fw.status(-math.inf, math.inf)  # (no silence, no low battery: the tick's)
+        state = int(status.state_bits())
+        if state & _BOOTSTRAP_BIT or not (not status.demo
+                                          or fw.config.navdata_options & _DEMO_OPTION):
+            return False
+        by_command = not fw.comwdg_latched and fw.comwdg_clear == "any"
+        ws.navdata_packets(self.ev, n_rows, state,
+                           float(fw.last_cmd_t) if by_command else math.inf,
+                           float(fw.comwdg_s), float(fw.vbat_low_pct))
+        ctrl_state = status.ctrl_state(fw.ctrl_codes)
+        return ctrl_state, ctrl_state >> 16
+
+    def _packet(self, receipt: tuple, t_event: float, row: list) -> None:
+        """The packet of the navdata row ``row`` (``ev``'s, worked out) sent at ``t_event``,
+        as the numbers its receipt reads (its sequence number taken, as ``packet_of``)."""
+        ctrl_state, major = receipt
+        word = int(row[_STATE])
+        decoded = _DECODED.get((word, ctrl_state))
+        if decoded is None:
+            decoded = _decoded(word, ctrl_state)
+        battery, roll, pitch, yaw, altitude, forward, right, down = row[_DEMO:_DEMO + 8]
+        sample = NavdataSample.make(t_event, decoded[1], battery, roll, pitch,
+                                    wrap_angle_deg(yaw), altitude, forward, right, down,
+                                    ctrl_state, word)
+        sensors = self.sensors
+        sensors.push_quiet_packet(t_event, sensors.firmware._next_sequence(), decoded[0],
+                                  major, sample)
+
+
+def _decoded(word: int, ctrl_state: int) -> tuple:
+    """``_DECODED``'s entry of a state word and ctrl_state (a few a flight: kept)."""
+    from ardrone_nmpc.links.drone_link import flight_mode_of  # (the wire's only)
+
+    if len(_DECODED) > 256:
+        _DECODED.clear()
+    state = DroneState(word)
+    _DECODED[word, ctrl_state] = decoded = (state, flight_mode_of(state, ctrl_state >> 16))
+    return decoded
