@@ -53,6 +53,7 @@ from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import DroneFirmware
 from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.sim.held_state import overrides_none
 
 __all__ = ["QuietWire"]
@@ -65,6 +66,7 @@ _OK, _STATE, _DEMO = ws.EV_OK, ws.EV_STATE, ws.EV_DEMO
 _BOOTSTRAP_BIT, _DEMO_OPTION = int(DroneState.NAVDATA_BOOTSTRAP), 1 << OptionTag.DEMO
 #: (state word, ctrl_state) → (the DroneState, the flight mode navdata_sample_of reads)
 _DECODED: dict = {}
+_DROPPED = FaultSchedule.mocap_dropped  # (a schedule's own: asked of each frame)
 #: What a quiet tick does in the drone's, firmware's and faults' place (besides the legs':
 #: CompiledLegs.eligible): a class overriding one of these keeps the Python wire path
 _REPLACED = ((SimulatedDrone, ("navdata_datagrams",)),
@@ -116,7 +118,10 @@ class QuietWire:
         # a dropout asked of each frame (its window ends at start + duration as its phase
         # says, not at the span's rounded sum; a repeated one's bursts come for ever); the
         # grid's next index held by the legs: read without releasing them
-        period, dropped = sensors.mocap_period_s, self.schedule.mocap_dropped
+        schedule = self.schedule
+        if schedule.cfg.mocap_dropout is None and type(schedule).mocap_dropped is _DROPPED:
+            return True  # (no dropout: no frame of the tick's is dropped)
+        period, dropped = sensors.mocap_period_s, schedule.mocap_dropped
         k = int(legs.iv[ks.I_NEXT_MOCAP]) if legs.held() else sensors._next_mocap_k
         for k in range(k, math.floor(t_s / period + 1e-9) + 1):
             if dropped(k * period - t_zero):
