@@ -95,6 +95,7 @@ class QuietWire:
         self.faults = sensors.drone.faults
         self.schedule = self.faults.schedule
         self.ev = np.zeros((_N_EVENTS, ws.EV_WIDTH))
+        self._status_key, self._status_of = None, None  # (_status's)
 
     @staticmethod
     def eligible(drone) -> bool:
@@ -209,17 +210,30 @@ class QuietWire:
         sensors, fw = self.sensors, self.sensors.firmware
         if not sensors.receives_quiet_packets():
             return False
-        status = fw.status(-math.inf, math.inf)  # (no silence, no low battery: the tick's)
-        state = int(status.state_bits())
-        if state & _BOOTSTRAP_BIT or not (not status.demo
-                                          or fw.config.navdata_options & _DEMO_OPTION):
+        state, ctrl_state, demo_sent = self._status(fw)
+        if state & _BOOTSTRAP_BIT or not demo_sent:
             return False
         by_command = not fw.comwdg_latched and fw.comwdg_clear == "any"
         ws.navdata_packets(self.ev, n_rows, state,
                            float(fw.last_cmd_t) if by_command else math.inf,
                            float(fw.comwdg_s), float(fw.vbat_low_pct))
-        ctrl_state = status.ctrl_state(fw.ctrl_codes)
         return ctrl_state, ctrl_state >> 16
+
+    def _status(self, fw) -> tuple:
+        """``(state word, ctrl_state, demo option sent)`` of ``DroneFirmware.status`` at no
+        silence and no low battery (the bits a packet's own time and battery add: _receipt),
+        worked out again only when what it reads of the firmware changes (a tick's packets,
+        most ticks', share it; a command heard: ``run`` flies no tick before the first)."""
+        config = fw.config
+        key = (fw.plant.mode, fw.pcmd, fw.alt_capped, fw.lost_com_hover, fw.user_emergency,
+               fw.ref_start, fw.ack, config.bootstrap, config.demo, config.navdata_options,
+               fw.comwdg_latched, fw.link_lost, fw.fault_bits, fw.ctrl_codes)
+        if key != self._status_key:
+            status = fw.status(-math.inf, math.inf)
+            self._status_key = key
+            self._status_of = (int(status.state_bits()), status.ctrl_state(fw.ctrl_codes),
+                               bool(not status.demo or config.navdata_options & _DEMO_OPTION))
+        return self._status_of
 
     def _packet(self, receipt: tuple, t_event: float, row: list) -> None:
         """The packet of the navdata row ``row`` (``ev``'s, worked out) sent at ``t_event``,

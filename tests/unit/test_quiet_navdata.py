@@ -164,3 +164,55 @@ def test_a_flights_quiet_packets_received_as_numbers_leave_what_the_packets_leav
     assert none == 0 and quiet > 50  # (as numbers: most packets)
     assert ended == reference
     assert len(reference[0]) > 50 and reference[2][0]["_packets"] > 50
+
+
+def _flip(name: str):
+    """A change of the firmware's ``name`` (or its config's, its plant's) that ``status``
+    shows."""
+    from ardrone_nmpc.protocol.navdata import CtrlCodes
+    return {
+        "pcmd": lambda fw: setattr(fw, "pcmd", (1, 0.1, 0.0, 0.0, 0.0)),
+        "alt_capped": lambda fw: setattr(fw, "alt_capped", True),
+        "lost_com_hover": lambda fw: setattr(fw, "lost_com_hover", True),
+        "user_emergency": lambda fw: setattr(fw, "user_emergency", True),
+        "ref_start": lambda fw: setattr(fw, "ref_start", not fw.ref_start),
+        "ack": lambda fw: setattr(fw, "ack", True),
+        "demo": lambda fw: setattr(fw.config, "demo", not fw.config.demo),
+        "navdata_options": lambda fw: setattr(fw.config, "navdata_options", 0),
+        "comwdg_latched": lambda fw: setattr(fw, "comwdg_latched", not fw.comwdg_latched),
+        "link_lost": lambda fw: setattr(fw, "link_lost", True),
+        "fault_bits": lambda fw: setattr(fw, "fault_bits", int(DroneState.CUTOUT)),
+        "ctrl_codes": lambda fw: setattr(fw, "ctrl_codes", CtrlCodes.FIRMWARE_2_4),
+        "mode": lambda fw: setattr(fw.plant, "_mode", FlightMode.LANDING),
+        "bootstrap": lambda fw: setattr(fw.config, "bootstrap", True),
+    }[name]
+
+
+@pytest.mark.parametrize("name", ["pcmd", "alt_capped", "lost_com_hover", "user_emergency",
+                                  "ref_start", "ack", "demo", "navdata_options",
+                                  "comwdg_latched", "link_lost", "fault_bits",
+                                  "ctrl_codes", "mode", "bootstrap"])
+def test_the_tick_state_kept_across_ticks_follows_what_the_firmware_reports(name):
+    """``QuietWire._status`` (kept while the firmware's status inputs stay) against
+    ``DroneFirmware.status`` itself after a change of each of them."""
+    from ardrone_nmpc.protocol.navdata import OptionTag
+
+    cfg = load_config(CONFIGS / "square.yaml", list(FLIGHTS["dropout"][1]))
+    drone = LockstepDrone(cfg)
+    quiet, fw = drone.sensors._quiet, drone.sensors.firmware
+    # (a phase in which the change shows: the codes a transition's, the user's emergency
+    # an emergency's)
+    fw.plant._mode = {"ctrl_codes": FlightMode.TAKING_OFF,
+                      "user_emergency": FlightMode.EMERGENCY}.get(name, FlightMode.FLYING)
+    fw.config.bootstrap, fw.last_cmd_t = False, 0.0  # (a command heard: a quiet tick's)
+
+    def fresh():
+        status = fw.status(-math.inf, math.inf)
+        return (int(status.state_bits()), status.ctrl_state(fw.ctrl_codes),
+                bool(not status.demo or fw.config.navdata_options & (1 << OptionTag.DEMO)))
+
+    before = quiet._status(fw)
+    assert before == fresh()
+    _flip(name)(fw)
+    assert fresh() != before  # (the change shows in the status)
+    assert quiet._status(fw) == fresh()
