@@ -8,8 +8,11 @@ count nothing and hand the datagram on as it is (``ServerFaults.quiet_until_s``)
 :class:`QuietWire` flies the tick's legs and draws its samples in one compiled call
 (:func:`~ardrone_nmpc.sim.wire_step.wire_run`, on the arrays of the direct path's
 :class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`), then sends each frame and packet as
-the Python path would — the frame built from the pose drawn, the packet built by the
-firmware from the sample drawn (:meth:`DroneFirmware.packet_of
+the Python path would — the frame built from the pose drawn, the packet as the numbers
+its receipt reads of the decoded packet (:func:`~ardrone_nmpc.sim.wire_step.navdata_packets`:
+the state word, the demo sample through the float32 / mm codec; ``QuietPacket``, received
+by ``LockstepSensors._receive_quiet``), or built by the firmware from the sample drawn
+where those cannot stand in (:meth:`DroneFirmware.packet_of
 <ardrone_nmpc.sim.drone_firmware.DroneFirmware.packet_of>`: the packet as its bytes decode,
 handed over without them as the frames are) — into the same queue, in the same order; the
 receiving links are the Python path's, but a frame goes as its numbers (``LockstepSensors.

@@ -21,8 +21,11 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   back the same frame — the bytes' encoding and decoding were half of a frame's cost (the
   first frame is still encoded once, for ``encode_mocap``'s checks of the names). Navdata
   packets stay bytes (corruption acts on bytes) but a quiet tick's: its packets travel as
-  the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
-  are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
+  what their receipt reads of them (:class:`QuietPacket`: the sequence, the state word, the
+  major and the sample, worked out compiled through the wire's float32 — what
+  ``decode_navdata`` would give back of their bytes), or, where those numbers cannot stand in
+  (sim/quiet_wire.py), as the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built
+  as, whose demo floats are stored as the wire's float32.
   A quiet tick's frames (the object alone, as they are) travel as their numbers
   (:class:`ObjectFrame`; those that arrive within the tick off the queue, their places in it
   noted) and the ones that arrive by a tick are received together — a quiet navdata packet
