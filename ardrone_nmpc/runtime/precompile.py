@@ -155,13 +155,16 @@ def compile_kernels() -> None:
     plant.advance(period)  # the automatic landing: auto_steps
     _land(drone, plant.t_s, 0, period)  # (the drone's landing, from the plant's time on)
     # the wire path's quiet ticks (sensor faults: sim/quiet_wire) on the legs' own arrays
+    import math
+
     import numpy as np
 
-    from ardrone_nmpc.sim.wire_step import EV_WIDTH, wire_run
+    from ardrone_nmpc.sim.wire_step import EV_WIDTH, navdata_packets, wire_run
 
     legs = drone.sensors._legs
     if legs is not None and legs._args:  # (this drone is done with: a run changes nothing
         wire_run(*legs._args, np.zeros((1, EV_WIDTH)))  # that is read again)
+    navdata_packets(np.zeros((1, EV_WIDTH)), 1, 0, math.inf, 0.05, 20.0)  # (quiet packets)
 
 
 def start_block_compile() -> subprocess.Popen | None:

@@ -372,10 +372,8 @@ class DroneFirmware:
     def status(self, now: float, battery_pct: float | None = None) -> DroneStatus:
         """What the drone reports about itself now (``battery_pct``: the plant's then, when
         the caller has it — the compiled legs, holding the plant's state)."""
-        flags, roll, pitch, gaz, yaw = self.pcmd
         return DroneStatus(
-            self.plant.mode.value,
-            moving=bool(flags & _PROGRESSIVE) and any((roll, pitch, gaz, yaw)),
+            self.plant.mode.value, moving=self.moving,
             alt_out_zone=self.alt_capped, lost_com=self.lost_com_hover,
             user_emergency=self.user_emergency, start_button=self.ref_start, ack=self.ack,
             bootstrap=self.config.bootstrap, demo=self.config.demo,
@@ -384,6 +382,13 @@ class DroneFirmware:
             com_lost=self.link_lost, battery_low=self.battery_low(
                 self.plant.battery_pct if battery_pct is None else battery_pct),
             faults=self.fault_bits)
+
+    @property
+    def moving(self) -> bool:
+        """A progressive PCMD with a non-zero value held: what :meth:`status` reports of the
+        command (ctrl_state FLYING, else HOVERING)."""
+        flags, roll, pitch, gaz, yaw = self.pcmd
+        return bool(flags & _PROGRESSIVE) and any((roll, pitch, gaz, yaw))
 
     @property
     def vbat_low(self) -> bool:

@@ -8,8 +8,11 @@ count nothing and hand the datagram on as it is (``ServerFaults.quiet_until_s``)
 :class:`QuietWire` flies the tick's legs and draws its samples in one compiled call
 (:func:`~ardrone_nmpc.sim.wire_step.wire_run`, on the arrays of the direct path's
 :class:`~ardrone_nmpc.sim.lockstep_legs.CompiledLegs`), then sends each frame and packet as
-the Python path would — the frame built from the pose drawn, the packet built by the
-firmware from the sample drawn (:meth:`DroneFirmware.packet_of
+the Python path would — the frame built from the pose drawn, the packet as the numbers
+its receipt reads of the decoded packet (:func:`~ardrone_nmpc.sim.wire_step.navdata_packets`:
+the state word, the demo sample through the float32 / mm codec; ``QuietPacket``, received
+by ``LockstepSensors._receive_quiet``), or built by the firmware from the sample drawn
+where those cannot stand in (:meth:`DroneFirmware.packet_of
 <ardrone_nmpc.sim.drone_firmware.DroneFirmware.packet_of>`: the packet as its bytes decode,
 handed over without them as the frames are) — into the same queue, in the same order; the
 receiving links are the Python path's, but a frame goes as its numbers (``LockstepSensors.
@@ -45,12 +48,15 @@ import math
 
 import numpy as np
 
+from ardrone_nmpc.core.angles import wrap_angle_deg
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
+from ardrone_nmpc.protocol.navdata import DroneState, OptionTag
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.drone import SimulatedDrone
 from ardrone_nmpc.sim.drone_firmware import DroneFirmware
 from ardrone_nmpc.sim.fault_injection import NO_MOCAP_FAULT, ServerFaults
+from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.sim.held_state import overrides_none
 
 __all__ = ["QuietWire"]
@@ -59,10 +65,15 @@ _FLYING, _TAKING_OFF, _LANDING = FlightMode.FLYING, FlightMode.TAKING_OFF, Fligh
 _MOCAP = ks.MOCAP
 _T, _K, _S = ws.EV_T, ws.EV_K, ws.EV_SAMPLE
 _N_EVENTS = 16  # ev's rows to start with (grown to a tick's events)
+_OK, _STATE, _DEMO = ws.EV_OK, ws.EV_STATE, ws.EV_DEMO
+_BOOTSTRAP_BIT, _DEMO_OPTION = int(DroneState.NAVDATA_BOOTSTRAP), 1 << OptionTag.DEMO
+#: (state word, ctrl_state) → (the DroneState, the flight mode navdata_sample_of reads)
+_DECODED: dict = {}
+_DROPPED = FaultSchedule.mocap_dropped  # (a schedule's own: asked of each frame)
 #: What a quiet tick does in the drone's, firmware's and faults' place (besides the legs':
 #: CompiledLegs.eligible): a class overriding one of these keeps the Python wire path
 _REPLACED = ((SimulatedDrone, ("navdata_datagrams",)),
-             (DroneFirmware, ("packet", "packet_of", "status", "battery_low")),
+             (DroneFirmware, ("packet", "packet_of", "status", "moving", "battery_low")),
              (ServerFaults, ("mocap_frame", "mocap_datagrams", "navdata_lost",
                              "navdata_datagrams", "quiet_until_s", "holds_datagrams")))
 
@@ -87,6 +98,7 @@ class QuietWire:
         self.faults = sensors.drone.faults
         self.schedule = self.faults.schedule
         self.ev = np.zeros((_N_EVENTS, ws.EV_WIDTH))
+        self._status_key, self._status_of = None, None  # (_status's)
 
     @staticmethod
     def eligible(drone) -> bool:
@@ -110,7 +122,10 @@ class QuietWire:
         # a dropout asked of each frame (its window ends at start + duration as its phase
         # says, not at the span's rounded sum; a repeated one's bursts come for ever); the
         # grid's next index held by the legs: read without releasing them
-        period, dropped = sensors.mocap_period_s, self.schedule.mocap_dropped
+        schedule = self.schedule
+        if schedule.cfg.mocap_dropout is None and type(schedule).mocap_dropped is _DROPPED:
+            return True  # (no dropout: no frame of the tick's is dropped)
+        period, dropped = sensors.mocap_period_s, schedule.mocap_dropped
         k = int(legs.iv[ks.I_NEXT_MOCAP]) if legs.held() else sensors._next_mocap_k
         for k in range(k, math.floor(t_s / period + 1e-9) + 1):
             if dropped(k * period - t_zero):
@@ -158,13 +173,14 @@ class QuietWire:
         ``mode`` all along) in the tick to ``t_s``, as the Python path sends them."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
+        receipt = None  # (the tick's packets as numbers: _receipt, at its first packet)
         # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
         # would queue a MocapFrame of the object alone, as it is
         numbers = (sensors._names_checked and not sensors.frames_as_bytes
                    and sensors.target_cfg is None)
         push_numbers = sensors.push_object_frame
         latency_s = sensors.mocap_latency_s + NO_MOCAP_FAULT.extra_latency_s
-        for row in rows:
+        for i, row in enumerate(rows):
             t_event, sample = row[_T], row[_S:]
             if row[0] == _MOCAP:
                 if numbers:
@@ -173,8 +189,78 @@ class QuietWire:
                     continue
                 frame(int(row[_K]), t_event, _Pose(sample[1:4], sample[4:7]), NO_MOCAP_FAULT,
                       None)
-            else:  # AirframePlant.navdata's sample (airborne), the packet of it
-                t, battery, roll, pitch, yaw, altitude, forward, right, down = sample
-                nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
-                                         forward, right, down)
-                push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
+                continue
+            # AirframePlant.navdata's sample (airborne), the packet of it: as the numbers
+            # its receipt reads (wire_step.navdata_packets), or built
+            if receipt is None:
+                receipt = self._receipt(len(rows))
+            if receipt and self.ev[i, _OK]:
+                self._packet(receipt, t_event, self.ev[i].tolist())
+                continue
+            t, battery, roll, pitch, yaw, altitude, forward, right, down = sample[:9]
+            nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
+                                     forward, right, down)
+            push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
+
+    def _receipt(self, n_rows: int) -> tuple | bool:
+        """The tick's packets as numbers (``ev[:n_rows]``'s navdata rows worked out by
+        ``wire_step.navdata_packets``): ``(the firmware's ctrl_state, its major)`` — or False
+        where they go built: the sampler's receipt patched or its stats of another kind
+        (``LockstepSensors.receives_quiet_packets``), a state
+        word with the bootstrap bit (the receipt answers it) or packets without the demo
+        option (no sample: the receipt reads none). The state word the firmware's
+        (``DroneFirmware.status``) but for the bits a packet's own time and battery give."""
+        sensors, fw = self.sensors, self.sensors.firmware
+        if not sensors.receives_quiet_packets():
+            return False
+        state, ctrl_state, demo_sent = self._status(fw)
+        if state & _BOOTSTRAP_BIT or not demo_sent:
+            return False
+        by_command = not fw.comwdg_latched and fw.comwdg_clear == "any"
+        ws.navdata_packets(self.ev, n_rows, state,
+                           float(fw.last_cmd_t) if by_command else math.inf,
+                           float(fw.comwdg_s), float(fw.vbat_low_pct))
+        return ctrl_state, ctrl_state >> 16
+
+    def _status(self, fw) -> tuple:
+        """``(state word, ctrl_state, demo option sent)`` of ``DroneFirmware.status`` at no
+        silence and no low battery (the bits a packet's own time and battery add: _receipt),
+        worked out again only when what it reads of the firmware changes (a tick's packets,
+        most ticks', share it; a command heard: ``run`` flies no tick before the first)."""
+        config = fw.config
+        key = (fw.plant.mode, fw.moving, fw.alt_capped, fw.lost_com_hover, fw.user_emergency,
+               fw.ref_start, fw.ack, config.bootstrap, config.demo, config.navdata_options,
+               fw.comwdg_latched, fw.link_lost, fw.fault_bits, fw.ctrl_codes)
+        if key != self._status_key:
+            status = fw.status(-math.inf, math.inf)
+            self._status_key = key
+            self._status_of = (int(status.state_bits()), status.ctrl_state(fw.ctrl_codes),
+                               bool(not status.demo or config.navdata_options & _DEMO_OPTION))
+        return self._status_of
+
+    def _packet(self, receipt: tuple, t_event: float, row: list) -> None:
+        """The packet of the navdata row ``row`` (``ev``'s, worked out) sent at ``t_event``,
+        as the numbers its receipt reads (its sequence number taken, as ``packet_of``)."""
+        ctrl_state, major = receipt
+        word = int(row[_STATE])
+        decoded = _DECODED.get((word, ctrl_state))
+        if decoded is None:
+            decoded = _decoded(word, ctrl_state)
+        battery, roll, pitch, yaw, altitude, forward, right, down = row[_DEMO:_DEMO + 8]
+        sample = NavdataSample.make(t_event, decoded[1], battery, roll, pitch,
+                                    wrap_angle_deg(yaw), altitude, forward, right, down,
+                                    ctrl_state, word)
+        sensors = self.sensors
+        sensors.push_quiet_packet(t_event, sensors.firmware._next_sequence(), decoded[0],
+                                  major, sample)
+
+
+def _decoded(word: int, ctrl_state: int) -> tuple:
+    """``_DECODED``'s entry of a state word and ctrl_state (a few a flight: kept)."""
+    from ardrone_nmpc.links.drone_link import flight_mode_of  # (the wire's only)
+
+    if len(_DECODED) > 256:
+        _DECODED.clear()
+    state = DroneState(word)
+    _DECODED[word, ctrl_state] = decoded = (state, flight_mode_of(state, ctrl_state >> 16))
+    return decoded

@@ -21,8 +21,11 @@ altitude cap) forward between those events. Two ways to hand the samples over:
   back the same frame — the bytes' encoding and decoding were half of a frame's cost (the
   first frame is still encoded once, for ``encode_mocap``'s checks of the names). Navdata
   packets stay bytes (corruption acts on bytes) but a quiet tick's: its packets travel as
-  the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built as, whose demo floats
-  are stored as the wire's float32 — what ``decode_navdata`` would give back of their bytes.
+  what their receipt reads of them (:class:`QuietPacket`: the sequence, the state word, the
+  major and the sample, worked out compiled through the wire's float32 — what
+  ``decode_navdata`` would give back of their bytes), or, where those numbers cannot stand in
+  (sim/quiet_wire.py), as the :class:`~ardrone_nmpc.protocol.navdata.Navdata` they are built
+  as, whose demo floats are stored as the wire's float32.
   A quiet tick's frames (the object alone, as they are) travel as their numbers
   (:class:`ObjectFrame`; those that arrive within the tick off the queue, their places in it
   noted) and the ones that arrive by a tick are received together — a quiet navdata packet
@@ -61,7 +64,7 @@ from ardrone_nmpc.sim.faults import SENSOR_FAULTS
 from ardrone_nmpc.sim.held_state import holds_in_arrays, overrides_none
 from ardrone_nmpc.sim.target import target_pose
 
-__all__ = ["LockstepSensors", "ObjectFrame"]
+__all__ = ["LockstepSensors", "ObjectFrame", "QuietPacket"]
 
 _MOCAP, _NAV = 0, 1
 _BOOTSTRAP_BIT = int(DroneState.NAVDATA_BOOTSTRAP)
@@ -80,7 +83,8 @@ def _import_navdata_sample_of():
 
 #: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
 _WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push", "_receive",
-                  "push_object_frame")
+                  "_receive_quiet", "push_object_frame", "push_quiet_packet",
+                  "receives_quiet_packets")
 
 
 class ObjectFrame:
@@ -100,6 +104,23 @@ class ObjectFrame:
         """The frame it stands for."""
         return MocapFrame.of(self.number, [MocapObjectPose.from_si(
             object_name, self.position_m, self.rotation_xyz_rad)])
+
+
+class QuietPacket:
+    """A quiet tick's navdata packet on its way (sim/quiet_wire.py) as what its receipt
+    reads of the decoded packet: its ``sequence``, its ``state`` (a DroneState, as the
+    take-off guard is shown it), its ctrl_state major and the sample
+    ``navdata_sample_of`` makes of it at its arrival — never built as a packet."""
+
+    __slots__ = ("sequence", "state", "ctrl_major", "sample")
+
+    def __init__(self, sequence: int, state: DroneState, ctrl_major: int, sample) -> None:
+        self.sequence, self.state, self.ctrl_major, self.sample = (sequence, state,
+                                                                   ctrl_major, sample)
+
+
+#: what a quiet tick queues: received without flushing the frames received together before
+_QUIET_DATA = (ObjectFrame, Navdata, QuietPacket)
 
 
 # the sensor grids' next indices: held by the compiled legs between their runs
@@ -283,14 +304,16 @@ class LockstepSensors:
         if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
             self._send_through_wire(t_s)
         queue, quiet_frames, arrived = self._queue, [], self._arrived
-        if arrived and not all(item[3].__class__ is ObjectFrame
-                               or item[3].__class__ is Navdata for item in queue):
+        if arrived and not all(item[3].__class__ in _QUIET_DATA for item in queue):
             self._queue_arrived()  # (a datagram of the Python path's on its way)
         while queue and queue[0][0] <= t_s + 1e-12:
             arrival, _, stream, data = heapq.heappop(queue)
             if data.__class__ is ObjectFrame:  # received together, in order
                 quiet_frames.append((data.number, arrival, data.position_m,
                                      data.rotation_xyz_rad))
+                continue
+            if data.__class__ is QuietPacket:  # (touches nothing of the mocap link's)
+                self._receive_quiet(arrival, data)
                 continue
             # (a quiet tick's navdata packet between them — its sample, the guard's look —
             # touches nothing of the mocap link's: the frames go on together, one bulk call
@@ -355,6 +378,18 @@ class LockstepSensors:
             return
         self._push(arrival_s, _MOCAP, ObjectFrame(k & 0xFFFFFFFF, position_m, rotation_xyz_rad))
 
+    def push_quiet_packet(self, arrival_s: float, sequence: int, state: DroneState,
+                          ctrl_major: int, sample) -> None:
+        """Queue a quiet tick's navdata packet as its numbers (:class:`QuietPacket`) to
+        arrive at ``arrival_s`` (sim/quiet_wire.py: where
+        :meth:`receives_quiet_packets`)."""
+        self._push(arrival_s, _NAV, QuietPacket(sequence, state, ctrl_major, sample))
+
+    def receives_quiet_packets(self) -> bool:
+        """Whether :meth:`_receive`'s navdata receipt is the one :meth:`_receive_quiet`
+        stands in for: not patched, the stats a :class:`LinkStats`."""
+        return type(self)._receive is _RECEIVE and self.nav_stats.__class__ is LinkStats
+
     def _mocap_frame(self, k: int, t_s: float) -> None:
         faults = self.drone.faults
         t_exp = t_s - self.t_zero_s
@@ -394,6 +429,14 @@ class LockstepSensors:
         for datagram in self.drone.faults.mocap_datagrams(t_exp, data):
             self._push(arrival, _MOCAP, datagram)
 
+    def _receive_quiet(self, arrival_s: float, packet: QuietPacket) -> None:
+        """:meth:`_receive` of a quiet tick's navdata packet as its numbers: the stats'
+        three calls under one lock, the sample and the guard's look as the decoded packet
+        gives them (no bootstrap bit: sim/quiet_wire.py sends those as packets)."""
+        if self.nav_stats.record_numbered(((packet.sequence, arrival_s, False),))[0]:
+            self.nav, self.nav_rx_t_s = packet.sample, arrival_s
+            self.on_navdata(packet.state, packet.ctrl_major)
+
     def _receive(self, arrival_s: float, stream: int, data: bytes) -> None:
         if stream == _MOCAP:
             if data.__class__ is MocapFrame:
@@ -422,3 +465,6 @@ class LockstepSensors:
             stats.record_packet(arrival_s)
             self.nav, self.nav_rx_t_s = sample, arrival_s
             self.on_navdata(packet.state, packet.demo.ctrl_major)
+
+
+_RECEIVE = LockstepSensors._receive  # (as defined: one patched keeps the packets built)

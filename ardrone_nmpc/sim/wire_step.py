@@ -28,17 +28,26 @@ from numba import njit
 
 from ardrone_nmpc.core.kernel_cache import flush_stale_caches
 from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.protocol.navdata import DroneState
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim.sensor_step import (_leg, _mocap_pose, _navdata, leg_coefficients,
                                           truth_out)
 
-__all__ = ["wire_run", "EV_KIND", "EV_T", "EV_K", "EV_SAMPLE", "EV_WIDTH", "normals_needed"]
+__all__ = ["wire_run", "navdata_packets", "EV_KIND", "EV_T", "EV_K", "EV_SAMPLE", "EV_OK",
+           "EV_STATE", "EV_DEMO", "EV_WIDTH", "normals_needed"]
 
 # a row of ev: the event's kind (ks.MOCAP, ks.NAV), its sampling time, its grid index, then
 # its sample: the plant's time, and the pose (position, XYZ angles, ψ) or the navdata
-# sample (battery, roll, pitch, yaw, altitude, forward, right, down) — out's layouts
+# sample (battery, roll, pitch, yaw, altitude, forward, right, down) — out's layouts; then a
+# navdata row's packet as its receiver reads it (navdata_packets): 1 if the numbers hold it,
+# its state word, and its demo option's sample (battery as a whole %, roll, pitch, yaw
+# unwrapped, altitude, forward, right, down: through the float32 / mm wire values)
 EV_KIND, EV_T, EV_K, EV_SAMPLE = 0, 1, 2, 3
-EV_WIDTH = EV_SAMPLE + (ks.O_EV_T0 - ks.O_NAV)
+EV_OK = EV_SAMPLE + (ks.O_EV_T0 - ks.O_NAV)
+EV_STATE, EV_DEMO = EV_OK + 1, EV_OK + 2
+EV_WIDTH = EV_DEMO + 8
+_COM_WATCHDOG, _VBAT_LOW = int(DroneState.COM_WATCHDOG), int(DroneState.VBAT_LOW)
+_I32_MIN, _I32_MAX = -2.0 ** 31, 2.0 ** 31 - 1.0
 
 
 @njit(cache=True)
@@ -117,6 +126,42 @@ def wire_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n, ev):
                 _navdata(x, sv, p, nav_n[pos:pos + 7], sample)
         iv[ks.I_DONE] = i + 1
     truth_out(x, out, iv, sv, h)  # all legs done: the plant's truth now
+
+
+@njit(cache=True, **OUTER_KERNEL)
+def navdata_packets(ev, n, state, watchdog_from_t, comwdg_s, vbat_low_pct):
+    """The packet of each navdata row of ``ev[:n]`` as a receiver decodes it (``EV_OK:``,
+    ``DroneFirmware.packet_of``'s and ``decode_navdata``'s numbers): its state word — the
+    tick's ``state`` with the com-watchdog bit once ``t − watchdog_from_t > comwdg_s`` (the
+    bit a command clears, by each packet's time; +inf: the tick's alone) and the low-battery
+    bit below ``vbat_low_pct`` — and the demo option's sample: the battery a whole percent
+    in 0–100, the angles and speeds ×1000 through float32 and back, the altitude through
+    whole mm (rounded half to even, as Python's ``round``). ``EV_OK`` 0: a value the wire's
+    checks would refuse or carry as no finite number (its packet the Python's)."""
+    for i in range(n):
+        row = ev[i]
+        if row[EV_KIND] != ks.NAV:
+            continue
+        sample, demo = row[EV_SAMPLE:], row[EV_DEMO:]
+        battery = sample[1]
+        word = state
+        if row[EV_T] - watchdog_from_t > comwdg_s:
+            word |= _COM_WATCHDOG
+        if battery < vbat_low_pct:
+            word |= _VBAT_LOW
+        row[EV_STATE] = word
+        whole = battery if battery > 0.0 else 0.0  # (max(0, ·), then min(100, ·): a NaN 0)
+        demo[0] = np.rint(whole if whole < 100.0 else 100.0)
+        ok = True
+        for j in (1, 2, 3, 5, 6, 7):  # roll, pitch, yaw, forward, right, down
+            wire = sample[j + 1] * 1000.0
+            single = np.float32(wire)
+            ok = ok and math.isfinite(wire) and math.isfinite(single)
+            demo[j] = np.float64(single) / 1000.0
+        mm = np.rint(sample[5] * 1000.0) + 0.0  # (Python's round: an int, no −0)
+        ok = ok and math.isfinite(mm) and _I32_MIN <= mm <= _I32_MAX
+        demo[4] = mm / 1000.0
+        row[EV_OK] = 1.0 if ok else 0.0
 
 
 flush_stale_caches(__name__)  # kernels calling other files: core/kernel_cache.py

@@ -197,7 +197,8 @@ def test_quiet_ticks_leave_the_links_firmware_and_faults_as_the_python_path(name
 
 
 @pytest.mark.parametrize("name", ["_advance_through_wire", "_mocap_frame", "_send_frame",
-                                  "_push", "_receive", "push_object_frame", "_run_to"])
+                                  "_push", "_receive", "push_object_frame", "_run_to",
+                                  "_receive_quiet", "push_quiet_packet"])
 def test_a_sampler_that_overrides_what_the_quiet_ticks_do_keeps_the_python_wire_path(
         name, monkeypatch):
     """The quiet ticks stand in for the sampler's wire legs and sends: a sampler class
