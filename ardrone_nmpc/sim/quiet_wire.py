@@ -177,7 +177,7 @@ class QuietWire:
         # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
         # would queue a MocapFrame of the object alone, as it is
         numbers = (sensors._names_checked and not sensors.frames_as_bytes
-                   and sensors.target_cfg is None)
+                   and sensors.frames_in_bulk and sensors.target_cfg is None)
         push_numbers = sensors.push_object_frame
         latency_s = sensors.mocap_latency_s + NO_MOCAP_FAULT.extra_latency_s
         for i, row in enumerate(rows):

@@ -130,6 +130,9 @@ class LockstepSensors:
 
     :attr:`frames_as_bytes` (class attribute, False): the wire's mocap frames encoded and
     decoded as bytes — the reference the decoded hand-over is tested against.
+    :attr:`frames_in_bulk` (True): a quiet tick's frames received in one
+    ``feed_object_frames`` call — not for a link whose class overrides ``feed_frame`` alone
+    (each frame then goes through its override).
 
     Parameters
     ----------
@@ -146,6 +149,7 @@ class LockstepSensors:
     """
 
     frames_as_bytes = False
+    frames_in_bulk = True
 
     def __init__(self, cfg, drone, on_navdata: Callable | None = None,
                  t_zero_s: float = math.inf, on_bootstrap: Callable | None = None,
@@ -417,6 +421,9 @@ class LockstepSensors:
 
             if not overrides_none(self.mocap, MocapLink, ("feed", "_handle", "_handle_frame")):
                 self.frames_as_bytes = True
+            elif not overrides_none(self.mocap, MocapLink, ("feed_frame",)) and \
+                    overrides_none(self.mocap, MocapLink, ("feed_object_frames",)):
+                self.frames_in_bulk = False  # (the bulk receipt would skip its feed_frame)
             data = encoded if self.frames_as_bytes else frame
         elif self.frames_as_bytes:
             data = encode_mocap(frame)
