@@ -195,16 +195,10 @@ class ControlTick:
                 and tick.control._solve_prepared == nmpc.solve_prepared)
 
     def __init__(self, tick) -> None:
-        self.before = tick.before_solve
-        self.after = tick.after_solve
-        self.control = tick.control
+        self._stages(tick, tick.before_solve)
         # the solver that solves (its memory, its verdict), and when its answers are marked
         # (None: never)
         self.nmpc, self._marks = _solving(tick.control.nmpc)
-        self.supervisor = tick.supervisor
-        self.supervision = tick.supervision
-        self.delay = tick.delay
-        self.offset = tick.offset
         # the solve :meth:`takes` found the solver's own: a tick solved by another (a wrapper
         # bound later, as the two calls around the solve would call) is Python's
         self._solve = tick.control._solve_prepared
@@ -214,6 +208,18 @@ class ControlTick:
         self.kernel = KERNELS[self._step_kernel]
         self._call = _CALLS[self.kernel]
         self._arrays_at = _ARRAYS_OF[self.kernel]  # (its array arguments' positions)
+
+    def _stages(self, tick, before) -> None:
+        """The tick's stages the call reads and writes (``before``: the stages before the
+        solve's :class:`~.before_solve.BeforeSolve`), and the call's vetting and tail, not
+        yet made — what every controller's compiled tick keeps (``runtime/control_tick_p``)."""
+        self.before = before
+        self.after = tick.after_solve
+        self.control = tick.control
+        self.supervisor = tick.supervisor
+        self.supervision = tick.supervision
+        self.delay = tick.delay
+        self.offset = tick.offset
         # the kernel's call: its compiled entry point while the arrays are the ones vetted
         # for it, else the dispatcher (:meth:`_vet`)
         self._entry = None

@@ -39,7 +39,7 @@ from ardrone_nmpc.core.types import STATE_DIM, AttitudeCommand
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.runtime.after_solve import after_solve
 from ardrone_nmpc.runtime.before_solve import BeforeSolve, before_solve
-from ardrone_nmpc.runtime.control_tick import (_ARRAYS_OF, _KINDS, _UNSET, NOT_NOMINAL, SOLVED,
+from ardrone_nmpc.runtime.control_tick import (_ARRAYS_OF, _KINDS, NOT_NOMINAL, SOLVED,
                                                ControlTick, control_tick)
 from ardrone_nmpc.runtime.estimate import Estimation
 from ardrone_nmpc.runtime.p_tick import p_law
@@ -114,22 +114,12 @@ class PControlTick(ControlTick):
                 and type(tick.estimation) is Estimation and type(tick.control) is Control
                 and type(tick.supervision) is Supervision)
 
-    def __init__(self, tick) -> None:  # (ControlTick's attributes, P's values)
-        self.before = BeforeSolve(tick)
-        self.after = tick.after_solve
-        self.control = tick.control
+    def __init__(self, tick) -> None:  # (ControlTick's stages, P's kernel: no solver)
+        self._stages(tick, BeforeSolve(tick))
         self.nmpc, self._marks = None, None
-        self.supervisor = tick.supervisor
-        self.supervision = tick.supervision
-        self.delay = tick.delay
-        self.offset = tick.offset
         self.kernel = control_tick_p
         self._call = _CALL
         self._arrays_at = _ARRAYS_OF[control_tick]
-        self._entry = None
-        self._vetted: tuple = ()
-        self._tail: tuple = ()
-        self._key: tuple = _UNSET
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
