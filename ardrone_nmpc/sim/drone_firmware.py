@@ -383,6 +383,16 @@ class DroneFirmware:
                 self.plant.battery_pct if battery_pct is None else battery_pct),
             faults=self.fault_bits)
 
+    def status_inputs(self) -> tuple:
+        """What :meth:`status` reads of the firmware and its plant, but for the time and the
+        battery it is given: equal inputs, the same status at the same time and battery (a
+        quiet tick's packets, most ticks', share one: ``sim/quiet_wire``). Kept beside
+        :meth:`status`: what it comes to read, this holds too."""
+        config = self.config
+        return (self.plant.mode, self.moving, self.alt_capped, self.lost_com_hover,
+                self.user_emergency, self.ref_start, self.ack, config.bootstrap, config.demo,
+                self.comwdg_latched, self.link_lost, self.fault_bits, self.ctrl_codes)
+
     @property
     def moving(self) -> bool:
         """A progressive PCMD with a non-zero value held: what :meth:`status` reports of the

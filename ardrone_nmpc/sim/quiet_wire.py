@@ -73,7 +73,8 @@ _DROPPED = FaultSchedule.mocap_dropped  # (a schedule's own: asked of each frame
 #: What a quiet tick does in the drone's, firmware's and faults' place (besides the legs':
 #: CompiledLegs.eligible): a class overriding one of these keeps the Python wire path
 _REPLACED = ((SimulatedDrone, ("navdata_datagrams",)),
-             (DroneFirmware, ("packet", "packet_of", "status", "moving", "battery_low")),
+             (DroneFirmware, ("packet", "packet_of", "status", "status_inputs", "moving",
+                              "battery_low")),
              (ServerFaults, ("mocap_frame", "mocap_datagrams", "navdata_lost",
                              "navdata_datagrams", "quiet_until_s", "holds_datagrams")))
 
@@ -228,9 +229,7 @@ class QuietWire:
         worked out again only when what it reads of the firmware changes (a tick's packets,
         most ticks', share it; a command heard: ``run`` flies no tick before the first)."""
         config = fw.config
-        key = (fw.plant.mode, fw.moving, fw.alt_capped, fw.lost_com_hover, fw.user_emergency,
-               fw.ref_start, fw.ack, config.bootstrap, config.demo, config.navdata_options,
-               fw.comwdg_latched, fw.link_lost, fw.fault_bits, fw.ctrl_codes)
+        key = (fw.status_inputs(), config.navdata_options)
         if key != self._status_key:
             status = fw.status(-math.inf, math.inf)
             self._status_key = key
