@@ -15,10 +15,10 @@ import numpy as np
 from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
                                          BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
-                                         BR_NAV_VX, BR_NAV_VY, BR_NEWTON, BR_NORM, BR_SATURATED,
-                                         BR_SOLVE_US, BR_T, BR_TARGET_X, BR_TRUE_PSI,
+                                         BR_NAV_STATE, BR_NAV_VX, BR_NAV_VY, BR_NEWTON,
+                                         BR_NORM, BR_SATURATED, BR_SOLVE_US, BR_T, BR_TARGET_X, BR_TRUE_PSI,
                                          BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y, BR_TRUE_Z)
-from ardrone_nmpc.runs.log_columns import block_cells
+from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, block_cells
 
 __all__ = ["BlockRows"]
 
@@ -30,16 +30,18 @@ class BlockRows:
     copied); ``mode``: their mode label; ``saturated``, ``status``, ``nav_mode``: the texts
     of the saturation bits, the solver's status and the navdata's mode
     (:func:`~ardrone_nmpc.runs.log_columns.block_cells`'); ``target``: the rows have a
-    second object's cells. Their cells, row by row or column by column, are the very values
+    second object's cells; ``wire``: its navdata samples came through the wire (a sensor
+    fault: ``sim/wire_block``), their speeds Python floats and their state word in the
+    rows. Their cells, row by row or column by column, are the very values
     (and types) the per-tick path's rows have."""
 
-    __slots__ = ("numbers", "mode", "saturated", "status", "nav_mode", "target")
+    __slots__ = ("numbers", "mode", "saturated", "status", "nav_mode", "target", "wire")
 
     def __init__(self, numbers: np.ndarray, mode: str, saturated: tuple, status: str,
-                 nav_mode: str, target: bool = False) -> None:
+                 nav_mode: str, target: bool = False, wire: bool = False) -> None:
         self.numbers, self.mode = numbers, mode
         self.saturated, self.status, self.nav_mode = saturated, status, nav_mode
-        self.target = target
+        self.target, self.wire = target, wire
 
     def __len__(self) -> int:
         return len(self.numbers)
@@ -57,6 +59,9 @@ class BlockRows:
         rows = self.numbers
         sat, status, mode, nav_mode = self.saturated, self.status, self.mode, self.nav_mode
         target = self.target
+        if self.wire:
+            return [block_cells(v, v[BR_NAV_VX], v[BR_NAV_VY], sat, status, mode, nav_mode,
+                                target, int(v[BR_NAV_STATE])) for v in rows.tolist()]
         return [block_cells(v, vx, vy, sat, status, mode, nav_mode, target)
                 for v, vx, vy in zip(rows.tolist(), rows[:, BR_NAV_VX], rows[:, BR_NAV_VY])]
 
@@ -68,6 +73,8 @@ class BlockRows:
     def column_cells(self, i: int) -> list:
         """The cells of ``LOG_COLUMNS[i]`` over the rows (``zip(*self.cells())[i]``)."""
         kind, at = (_TARGET_SOURCES if self.target else _SOURCES)[i]
+        if self.wire and i in _WIRE_KINDS:
+            kind, at = _WIRE_KINDS[i]
         rows = self.numbers
         if kind == _NUMBER:
             return rows[:, at].tolist()
@@ -98,6 +105,10 @@ _SOURCES = (*((_NUMBER, i) for i in range(21)), (_SATURATED, BR_SATURATED),
             (_CONST, math.nan), *((_CONST, "") for _ in range(7)), (_NUMBER, BR_TRUE_X),
             (_NUMBER, BR_TRUE_Y), (_NUMBER, BR_TRUE_Z), (_ANGLE, BR_TRUE_PSI),
             (_NUMBER, BR_TRUE_VZ))
+#: … through the wire (``BlockRows.wire``): the speeds' cells floats, the state word an int
+_WIRE_KINDS = {LOG_COLUMNS.index("nav_vx_body_mps"): (_NUMBER, BR_NAV_VX),
+               LOG_COLUMNS.index("nav_vy_body_mps"): (_NUMBER, BR_NAV_VY),
+               LOG_COLUMNS.index("nav_state_bits"): (_INT, BR_NAV_STATE)}
 #: … and a row with a second object's cells (``target_x_m`` … ``target_age_ms``: numbers)
 _TARGET_SOURCES = (*_SOURCES[:41], *((_NUMBER, BR_TARGET_X + j) for j in range(6)),
                    *_SOURCES[47:])

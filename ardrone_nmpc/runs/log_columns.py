@@ -281,19 +281,20 @@ _PI = math.pi
 
 
 def block_cells(v: list, nav_vx, nav_vy, saturated: tuple, status: str, mode: str,
-                nav_mode: str, target: bool = False) -> list:
+                nav_mode: str, target: bool = False, nav_state=math.nan) -> list:
     """The cells of a block's row (``v``: its numbers as floats): :func:`nominal_cells`' of
     the same tick, its truth put — the same values and types (``nav_vx``, ``nav_vy``: the
     navdata's speeds, numpy scalars as the sample's; ``saturated``: the texts of the
     saturation bits; ``status``: the solver's; ``nav_mode``: the sample's mode's value);
     ``target``: a flight with a second object, its cells those of :func:`tick_row`'s row
-    (:func:`_target_columns`: the same values; that row's other cells are these too)."""
+    (:func:`_target_columns`: the same values; that row's other cells are these too);
+    ``nav_state``: the sample's state word (an int through the wire; NaN: none)."""
     cells = v[:21]
     psi = v[BR_TRUE_PSI]
     cells += (saturated[int(v[BR_SATURATED])], v[BR_SOLVE_US], status, v[BR_NORM],
               int(v[BR_GMRES]), int(v[BR_NEWTON]), mode, v[BR_MOCAP_MS], v[BR_NAV_MS],
               v[BR_BATTERY], "", v[BR_COMPUTE_US], v[BR_MOCAP_T], nav_vx, nav_vy, nav_mode,
-              v[BR_NAV_ROLL], v[BR_NAV_PITCH], math.nan, "",
+              v[BR_NAV_ROLL], v[BR_NAV_PITCH], nav_state, "",
               *(v[BR_TARGET_X:BR_TARGET_AGE + 1] if target else _NO_TARGET),
               v[BR_TRUE_X], v[BR_TRUE_Y], v[BR_TRUE_Z],
               psi if -_PI < psi <= _PI else wrap_angle_rad(psi), v[BR_TRUE_VZ])

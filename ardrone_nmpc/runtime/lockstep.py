@@ -44,7 +44,8 @@ from ardrone_nmpc.runtime.lockstep_block import (EXIT_AFTER_CONTROL, EXIT_AFTER_
                                                  EXIT_NONE, EXIT_SHORT, TickBlocks,
                                                  tick_block, tick_block_newton,
                                                  tick_block_newton_obstacles,
-                                                 tick_block_obstacles, tick_block_p)
+                                                 tick_block_obstacles, tick_block_p,
+                                                 tick_block_wire)
 from ardrone_nmpc.runtime.precompile import (background_compiles, join_child,
                                              release_block_lock, start_if_cold,
                                              take_block_lock)
@@ -220,7 +221,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
                 k, mode, min(BLOCK_TICKS, (n_settle if t_exp < 0 else n_ticks) - k))
             if n:
                 _block_rows(blocks.table, n, mode, write_cells, write_block, tally,
-                            write_dict_row, blocks.target, blocks.p)
+                            write_dict_row, blocks.target, blocks.p, blocks.wire)
                 if progress is not None:
                     for j in range(k, k + n):
                         progress(schedule.fraction_done(j))
@@ -295,7 +296,7 @@ def _fly(cfg, recorder, seed: int | None, progress, plant, check_signals,
 
 def _block_rows(table, n: int, mode: str, write_cells, write_block,
                 tally: VerdictTally, write_dict_row=None, target: bool = False,
-                p: bool = False) -> None:
+                p: bool = False, wire: bool = False) -> None:
     """The rows of a block's ``n`` ticks (``table``'s numbers, ``runtime/lockstep_block``)
     as the per-tick path writes and counts them (their mode: the phase's, the supervisor's
     nominal label): the block itself to a recorder that takes blocks (``write_block``), the
@@ -303,12 +304,13 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
     second object (``target``) logs it in each row: the per-tick path's rows are then dicts
     (``tick_row``'s), so are these (``log_columns.target_cells_row``); so are the P
     controller's (``p``: ``p_cells_row``, its rows without the solver's cells) — each given
-    to ``write_dict_row`` (the recorder's ``write_row``)."""
+    to ``write_dict_row`` (the recorder's ``write_row``); ``wire``: a flight's whose samples
+    come through the wire (``BlockRows.wire``)."""
     # (a block kept by its recorder owns its numbers: the table is the next block's)
     dicts = target or p
     copy = write_block is not None and not dicts
     rows = BlockRows(table[:n].copy() if copy else table[:n], mode,
-                     SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT, target)
+                     SATURATED_TEXT, _OK_TEXT, _FLYING_TEXT, target, wire)
     if target:  # (VerdictTally.add of rows with a finite target_age_ms)
         tally.target_seen = True
     if dicts:
@@ -338,11 +340,13 @@ _WARM_UP_NEWTON_OBSTACLE = {**_WARM_UP_OBSTACLE, "name": "warm-up-newton-obstacl
                             "controller": {**_WARM_UP_OBSTACLE["controller"],
                                            **_WARM_UP_NEWTON["controller"]}}
 _WARM_UP_P = {**_WARM_UP_SQUARE, "name": "warm-up-p", "controller": {"kind": "p"}}
+_WARM_UP_WIRE = {**_WARM_UP_SQUARE, "name": "warm-up-wire",
+                 "faults": {"mocap_dropout": {"start_s": 0.5, "duration_s": 0.1}}}
 #: each block kernel's warm-up flight (warm_up_blocks)
 _WARM_UPS = ((tick_block, _WARM_UP_SQUARE), (tick_block_obstacles, _WARM_UP_OBSTACLE),
              (tick_block_newton, _WARM_UP_NEWTON),
              (tick_block_newton_obstacles, _WARM_UP_NEWTON_OBSTACLE),
-             (tick_block_p, _WARM_UP_P))
+             (tick_block_p, _WARM_UP_P), (tick_block_wire, _WARM_UP_WIRE))
 
 
 def warm_up_blocks() -> None:

@@ -48,10 +48,12 @@ from ardrone_nmpc.runtime.second_object import (O_FOLLOW, O_ON, O_PSI, O_RX, O_T
 from ardrone_nmpc.runtime.tick_kernels import E_X, TABLE_TICKS, fill_reference_table
 from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
+from ardrone_nmpc.sim import wire_block
 
 __all__ = ["EXIT_AFTER_CONTROL", "EXIT_AFTER_LEGS", "EXIT_BEFORE", "EXIT_FIT", "EXIT_NONE",
            "EXIT_SHORT", "TickBlocks", "tick_block", "tick_block_newton",
-           "tick_block_newton_obstacles", "tick_block_obstacles", "tick_block_p"]
+           "tick_block_newton_obstacles", "tick_block_obstacles", "tick_block_p",
+           "tick_block_wire"]
 
 #: :func:`tick_block`'s exits: all ``n_max`` ticks flown; the next tick is Python's from
 #: its start; its legs ran (Python's after-run code goes on); the controller's call answered
@@ -183,6 +185,7 @@ def _row(row, t_exp_s, est, ref_now, zacc, phi, theta, rate, vz, roll, pitch, ga
     row[br.BR_TRUE_X], row[br.BR_TRUE_Y] = out[ks.O_STATE], out[ks.O_STATE + 1]
     row[br.BR_TRUE_Z], row[br.BR_TRUE_PSI] = out[ks.O_STATE + 2], out[ks.O_STATE + 8]
     row[br.BR_TRUE_VZ] = out[ks.O_STATE + 5]
+    row[br.BR_NAV_STATE] = d[db.D_NAV_STATE]
 
 
 #: :func:`tick_block` for solvers with obstacles (``control_tick_obstacles``' blocks)
@@ -196,11 +199,15 @@ tick_block_newton_obstacles = kernel_twin(tick_block, "tick_block_newton_obstacl
                                           control_tick=control_tick_newton_obstacles)
 #: … for the P controller (``runtime/control_tick_p``: control_tick's arguments and answer)
 tick_block_p = kernel_twin(tick_block, "tick_block_p", control_tick=control_tick_p)
+#: … for a flight with a sensor fault: the wire's quiet ticks (``sim/wire_block``'s legs)
+tick_block_wire = kernel_twin(tick_block, "tick_block_wire", db=wire_block)
 #: the blocks' kernel by the controller's (``ControlTick.kernel``)
 BLOCK_KERNELS = {control_tick: tick_block, control_tick_obstacles: tick_block_obstacles,
                  control_tick_newton: tick_block_newton,
                  control_tick_newton_obstacles: tick_block_newton_obstacles,
                  control_tick_p: tick_block_p}
+#: … through the wire (a flight with a sensor fault: ``sim/wire_block``)
+WIRE_BLOCK_KERNELS = {control_tick: tick_block_wire}
 
 
 class TickBlocks:
@@ -225,18 +232,21 @@ class TickBlocks:
         the blocks may compile it (``compile_now``): the obstacles' and the Newton scheme's
         kernels as the usual one (:func:`~.lockstep.warm_up_blocks` compiles the usual one,
         the obstacles' and Newton's)."""
-        legs = drone.sensors._legs
+        legs = drone._legs
         if not (monotonic.SAME_CLOCK and tick.control_tick is not None and tick.cell_rows
                 and SecondObject.takes(tick, drone.sensors) and legs is not None
                 and legs.stands_in):
             return False
-        return compile_now or load_cached(BLOCK_KERNELS[tick.control_tick.kernel])
+        kernel = _kernels(drone).get(tick.control_tick.kernel)
+        return kernel is not None and (compile_now or load_cached(kernel))
 
     def __init__(self, tick, drone, *, n_max: int, n_settle: int, period_s: float,
                  t_first_s: float, compile_now: bool) -> None:
         self.tick, self.drone = tick, drone
         #: the kernel of this flight's blocks (:data:`BLOCK_KERNELS`)
-        self.kernel = BLOCK_KERNELS[tick.control_tick.kernel]
+        self.kernel = _kernels(drone)[tick.control_tick.kernel]
+        #: the sensors' datagrams through the wire (a sensor fault: ``sim/wire_block``)
+        self.wire = drone.sensors.wire
         #: the second mocap object's numbers (logged, a moving obstacle's centre, followed)
         self.second = SecondObject(tick, drone.sensors)
         #: the rows have the object's cells
@@ -254,7 +264,8 @@ class TickBlocks:
         #: the first tick at or after the last one asked at which the drone may not be
         #: plain (:meth:`_plain_ticks`; inf: never)
         self._unplain_k: float = 0
-        self.d = np.zeros(db.D_SIZE)
+        self.d = (wire_block.wire_d(_wire_rows(drone.sensors, n_max, period_s)) if self.wire
+                  else np.zeros(db.D_SIZE))
         self.c = np.zeros(C_SIZE)
         #: the rows of the last block (``runs/block_row``: BLOCK_ROW numbers a tick)
         self.table = np.zeros((n_max, br.BLOCK_ROW))
@@ -299,9 +310,17 @@ class TickBlocks:
             self._last_t_exp = (k + n - 1 - n_settle) * period_s
             self._ran = True
         if exit_ == EXIT_FIT:  # the fit AfterSolve.written makes after the last tick
+            if self.wire:
+                self.drone.blocks_sent(self.d)
             return n, exit_, self._fit(self.t_first_s + (k + n - 1) * period_s, n), 0
         if exit_ == EXIT_SHORT:  # new blocks of normals; the next tick's a block's again
-            self.drone.sensors._legs.refill()
+            legs = self.drone._legs
+            if self.wire:  # (as many as the tick's frames and packets take)
+                legs.refill(wire_block.normals_short(legs))
+            else:
+                legs.refill()
+        if self.wire and (exit_ == EXIT_SHORT or exit_ == EXIT_NONE):  # (the chain goes on:
+            self.drone.blocks_sent(self.d)                     # the links' state before it)
         if exit_ == EXIT_SHORT or exit_ == EXIT_NONE:
             return n, exit_, None, 0
         legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL
@@ -381,7 +400,7 @@ class TickBlocks:
                           delay._capacity, before[22],
                           math.inf if response is None else response._next_fit_s, before[3],
                           float(before[13]), 0.0)
-        legs_args = drone.sensors._legs._args
+        legs_args = drone._legs._args
         n_max = self._tabulated(k, n_max)
         self._args = (n_max, k, self.t_first_s, period_s, n_settle, self.d, *legs_args, c,
                       self.table, before[16], before[17], before[19], before[23], before[24],
@@ -397,7 +416,7 @@ class TickBlocks:
         tail = self.tick.control_tick.prepared()
         if tail is None:
             return None
-        legs_args = self.drone.sensors._legs._args
+        legs_args = self.drone._legs._args
         n_max = self._tabulated(k, n_max)
         if legs_args is self._legs_args and tail is self._tail:
             self._args = (n_max, k, *self._args[2:])
@@ -471,6 +490,21 @@ class TickBlocks:
         if c[C_FED] != 0.0:
             tick.response.estimator._estimate = None
             c[C_FED] = 0.0
+
+
+def _kernels(drone) -> dict:
+    """The block kernels by the controller's for ``drone``'s sensors (through the wire:
+    the usual controller's alone)."""
+    return WIRE_BLOCK_KERNELS if drone.sensors.wire else BLOCK_KERNELS
+
+
+def _wire_rows(sensors, n_max: int, period_s: float) -> int:
+    """Room for the events of ``n_max`` ticks of ``period_s`` through the wire and the
+    frames on their way at the first (``sim/wire_block``'s rows)."""
+    per_tick = (math.ceil(period_s / sensors.mocap_period_s)
+                + math.ceil(period_s / sensors.nav_period_s) + 2)
+    in_transit = 2 * (math.ceil(sensors.mocap_latency_s / sensors.mocap_period_s) + 2)
+    return n_max * per_tick + in_transit
 
 
 def _tail_args(tail: tuple) -> tuple:

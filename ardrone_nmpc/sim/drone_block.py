@@ -31,7 +31,8 @@ from ardrone_nmpc.sim.lockstep_legs import _HOVER_APPLIED, _HOVER_PCMD
 
 __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT",
            "after_ascent", "after_block", "after_descent", "ascent_entry", "block_entry",
-           "descent_entry", "drone_ascent", "drone_command", "drone_descent", "drone_legs"]
+           "descent_entry", "drone_ascent", "drone_command", "drone_descent", "drone_legs",
+           "set_run_inputs"]
 
 # d: the plant's held command (roll, pitch, gaz, yaw, position hold 0/1); the firmware's
 # applied command (its four fractions, and 1 while it is a progressive one of them); the
@@ -40,14 +41,15 @@ __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT"
 # the cap's lead and height; the wind; the mocap latency; what the links hold — the newest
 # pose (its event and receipt times, time, position, heading) and navdata sample (its
 # time, battery, roll, pitch, forward and right speeds), 1 once a run of the block took
-# one —; the PCMDs applied; the hover watchdog's flag (1: it dropped the held PCMD)
+# one —; the PCMDs applied; the hover watchdog's flag (1: it dropped the held PCMD); the
+# navdata sample's state word (NaN: none, the direct path's; sim/wire_block's)
 (D_ROLL, D_PITCH, D_GAZ, D_YAW, D_HOLD, D_APP_ROLL, D_APP_PITCH, D_APP_GAZ, D_APP_YAW,
  D_APPLIED, D_CMD_ROLL, D_CMD_PITCH, D_CMD_GAZ, D_CMD_YAW, D_LAST_CMD_T, D_LATCHED,
  D_CLEAR_ANY, D_COMWDG_S, D_HOVER_AFTER_S, D_LINK_LOSS_S, D_LEAD_S, D_ALT_MAX, D_W0, D_W1,
  D_W2, D_LATENCY, D_T_POSE, D_POSE_RX, D_POSE_T, D_PX, D_PY, D_PZ, D_PSI, D_TOOK_POSE,
  D_T_NAV, D_NAV_T, D_BATTERY, D_NAV_ROLL, D_NAV_PITCH, D_NAV_VX, D_NAV_VY, D_TOOK_NAV,
- D_COMMANDS, D_LOST_COM_HOVER) = range(44)
-D_SIZE = 44
+ D_COMMANDS, D_LOST_COM_HOVER, D_NAV_STATE) = range(45)
+D_SIZE = 45
 _PUT_D = struct.Struct(f"{D_SIZE}d").pack_into  # d filled in one pack
 _FLYING, _LANDING = FlightMode.FLYING, FlightMode.LANDING
 _TAKING_OFF = FlightMode.TAKING_OFF
@@ -75,16 +77,9 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
 def _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends):
     """:func:`drone_legs` past its watchdog tests: the kernel's run, what the links hold
     after it, the com-watchdog bit (``LEGS_*``)."""
-    sv, iv = buf[ks.B_SV:ks.B_P], buf[ks.B_IV:ks.B_SV].view(np.int64)
+    iv = buf[ks.B_IV:ks.B_SV].view(np.int64)
     out = buf[ks.B_OUT:ks.B_IV]
-    climbing = d[D_CMD_GAZ] > 0.0  # the firmware watches the cap
-    sv[ks.S_ROLL], sv[ks.S_PITCH], sv[ks.S_GAZ] = d[D_ROLL], d[D_PITCH], d[D_GAZ]
-    sv[ks.S_YAW], sv[ks.S_HOLD] = d[D_YAW], d[D_HOLD]
-    sv[ks.S_CLIMBING] = 1.0 if climbing else 0.0
-    sv[ks.S_LEAD] = d[D_LEAD_S] if climbing else 0.0
-    sv[ks.S_ALT_MAX] = d[D_ALT_MAX] if climbing else 0.0
-    sv[ks.S_W0], sv[ks.S_W1], sv[ks.S_W2] = d[D_W0], d[D_W1], d[D_W2]
-    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = mode, t_s, ends
+    set_run_inputs(d, buf[ks.B_SV:ks.B_P], t_s, mode, ends)
     ks.lockstep_run(x, ring, buf, bias_n, gust_n, mocap_n, nav_n)
     done, n_events = iv[ks.I_DONE], iv[ks.I_EVENTS]
     if done < 0:
@@ -108,6 +103,20 @@ def _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends):
     if done <= n_events or iv[ks.I_CHANGED] >= 0:
         return LEGS_PARTIAL
     return LEGS_DONE
+
+
+@njit(cache=True, **INNER_KERNEL)
+def set_run_inputs(d, sv, t_s, mode, ends):
+    """The run's inputs in ``sv`` (``CompiledLegs.pack``'s): the plant's held command, the
+    cap's test while the last PCMD climbs, the wind, the mode, the time, ``ends``."""
+    climbing = d[D_CMD_GAZ] > 0.0  # the firmware watches the cap
+    sv[ks.S_ROLL], sv[ks.S_PITCH], sv[ks.S_GAZ] = d[D_ROLL], d[D_PITCH], d[D_GAZ]
+    sv[ks.S_YAW], sv[ks.S_HOLD] = d[D_YAW], d[D_HOLD]
+    sv[ks.S_CLIMBING] = 1.0 if climbing else 0.0
+    sv[ks.S_LEAD] = d[D_LEAD_S] if climbing else 0.0
+    sv[ks.S_ALT_MAX] = d[D_ALT_MAX] if climbing else 0.0
+    sv[ks.S_W0], sv[ks.S_W1], sv[ks.S_W2] = d[D_W0], d[D_W1], d[D_W2]
+    sv[ks.S_MODE], sv[ks.S_T], sv[ks.S_ENDS] = mode, t_s, ends
 
 
 @njit(cache=True, **INNER_KERNEL)
@@ -289,7 +298,8 @@ def _fill(legs, d: np.ndarray, links: tuple) -> None:
            1.0 if fw.comwdg_latched else 0.0, 1.0 if fw.comwdg_clear == "any" else 0.0,
            fw.comwdg_s, fw.hover_after_s, fw.link_loss_s, fw._lead_s(),
            fw.config.altitude_max_m, w0, w1, w2, legs.sensors.mocap_latency_s, math.nan,
-           *links[:6], 0.0, *links[7:], 0.0, 0.0, 1.0 if fw.lost_com_hover else 0.0)
+           *links[:6], 0.0, *links[7:], 0.0, 0.0, 1.0 if fw.lost_com_hover else 0.0,
+           math.nan)
 
 
 def after_block(legs, d: np.ndarray, seq: int, ran: bool) -> None:

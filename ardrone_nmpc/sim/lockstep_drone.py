@@ -26,7 +26,7 @@ from ardrone_nmpc.links.drone_commands import TakeoffGuard
 from ardrone_nmpc.links.drone_config import ConfigHandshake, LinkError, parse_config_text
 from ardrone_nmpc.protocol.at import AtBody, Config, ConfigIds, Pcmd, PcmdFlag, Ref
 from ardrone_nmpc.sim.drone import SimulatedDrone
-from ardrone_nmpc.sim import drone_block
+from ardrone_nmpc.sim import drone_block, wire_block
 from ardrone_nmpc.sim.lockstep_legs import ALL_DONE, TRUTH_CELLS_OF
 from ardrone_nmpc.sim.plant import AirframePlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
@@ -99,6 +99,7 @@ class LockstepDrone(ConfigHandshake):
         sensors = self.sensors  # (the direct path's, or the wire path's quiet ticks')
         quiet = getattr(sensors, "_quiet", None)
         self._legs = sensors._legs if quiet is None else quiet.legs
+        self._wire_rest = False  # (a wire block's last run stopped before a leg: blocks_sent)
         self._waited = np.zeros(drone_block.D_SIZE)  # (ascend's and descend's numbers)
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
@@ -141,16 +142,23 @@ class LockstepDrone(ConfigHandshake):
         its ticks then are a fault-free drone's, which blocks of ticks may fly. inf without
         injected faults; at or before ``t_exp_s``: something may act then."""
         faults = self.sim.faults
-        return math.inf if faults is None else faults.quiet_until_s(t_exp_s)
+        if faults is None:
+            return math.inf
+        if self.sensors.wire:  # (the wire's quiet ticks: sim/wire_block)
+            return wire_block.quiet_until_s(self.sensors, self._legs)
+        return faults.quiet_until_s(t_exp_s)
 
     def block_entry(self, d, second_object: bool = False) -> bool:
         """``d`` filled for a block of ticks from the next (``sim/drone_block``), or False:
         the next tick is not one a block flies (``drone_block.block_entry``; a REF waiting
         to be sent, a drone that landed by itself); ``second_object``: the block draws the
         second object's frames."""
-        legs = self.sensors._legs
-        return (legs is not None and self._ref_unsent is None and self.self_landing is None
-                and drone_block.block_entry(legs, d, self._seq + 1, second_object))
+        legs = self._legs
+        if legs is None or self._ref_unsent is not None or self.self_landing is not None:
+            return False
+        if self.sensors.wire:
+            return wire_block.wire_block_entry(legs, d, self._seq + 1)
+        return drone_block.block_entry(legs, d, self._seq + 1, second_object)
 
     def after_block(self, d, ran: bool, t_exp_s: float) -> None:
         """What a block of ticks left (``d``), written back: the PCMDs numbered, the
@@ -159,7 +167,15 @@ class LockstepDrone(ConfigHandshake):
         self._seq += int(d[drone_block.D_COMMANDS])
         if ran:
             self.t_exp_s = t_exp_s
-        drone_block.after_block(self.sensors._legs, d, self._seq, ran)
+        drone_block.after_block(self._legs, d, self._seq, ran)
+        if self.sensors.wire:  # the frames and packets of its ticks sent and received
+            self._wire_rest = wire_block.sent(self._legs, d)
+
+    def blocks_sent(self, d) -> None:
+        """A chain of blocks of the wire's ticks goes on: the frames and packets of its
+        ticks so far sent and received (``sim/wire_block.sent``; the drone's state stays
+        the chain's)."""
+        wire_block.sent(self._legs, d)
 
     def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING,
                      ends: float = 0.0, hover_due: bool = False,
@@ -168,9 +184,17 @@ class LockstepDrone(ConfigHandshake):
         plant in ``mode`` ended after its legs (``ends`` 1: a run that may fly the mode's
         end; ``hover_due``: the hover watchdog due in its run; ``target_drawn``: the block
         drew the second object's pose of the run's frame — ``runtime/second_object``)."""
-        left = self.sensors._legs.block_ran_to(mode, ends, hover_due, target_drawn)
+        sensors = self.sensors
+        if sensors.wire:  # (a quiet tick's: its run's frames and packets sent, received)
+            if self._wire_rest:  # the rest of a run that stopped before a leg
+                self._wire_rest = False
+                self._legs.release()
+                sensors._send_through_wire(t_s)
+                sensors.deliver(t_s)
+            return
+        left = sensors._legs.block_ran_to(mode, ends, hover_due, target_drawn)
         if left is not ALL_DONE:
-            self.sensors.go_on(t_s, left)
+            sensors.go_on(t_s, left)
 
     def ascend(self, period_s: float, timeout_s: float) -> int:
         """Ticks of a take-off a runner waits out (each :meth:`advance_to` the plant's time

@@ -162,19 +162,20 @@ class QuietWire:
                 self.ev = np.zeros((2 * (n_mocap + n_nav), ws.EV_WIDTH))
             legs.refill(ws.normals_needed(n_mocap, n_nav))
         done, n_events = int(iv[ks.I_DONE]), int(iv[ks.I_EVENTS])
-        self._send(self.ev[:min(done, n_events)].tolist(), mode, t_s)  # (the bit: the start's)
+        self.send(self.ev[:min(done, n_events)].tolist(), mode, t_s)  # (the bit: the start's)
         fw.latch_after_run(legs.out[ks.O_LAST_NOW])  # (as the legs left it)
         legs.ran_block(None, None, mode)  # what a tick reads of the run (no sample taken)
         if done <= n_events:  # legs left: the Python path's
             legs.release()
         return done > n_events
 
-    def _send(self, rows: list, mode, t_s: float) -> None:
-        """The frames and packets of the events the run did (``ev``'s rows; the plant in
-        ``mode`` all along) in the tick to ``t_s``, as the Python path sends them."""
+    def send(self, rows: list, mode, t_s: float, receipt: tuple | None = None) -> None:
+        """The frames and packets of the events the run did (``ev``'s rows, as lists; the
+        plant in ``mode`` all along) in the tick to ``t_s``, as the Python path sends them;
+        ``receipt``: :meth:`_receipt`'s answer, the rows' packets worked out already (a
+        block's: ``sim/wire_block``) — None: worked out here, in ``ev``, at the first."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
-        receipt = None  # (the tick's packets as numbers: _receipt, at its first packet)
         # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
         # would queue a MocapFrame of the object alone, as it is
         numbers = (sensors._names_checked and not sensors.frames_as_bytes
@@ -195,8 +196,11 @@ class QuietWire:
             # its receipt reads (wire_step.navdata_packets), or built
             if receipt is None:
                 receipt = self._receipt(len(rows))
-            if receipt and self.ev[i, _OK]:
-                self._packet(receipt, t_event, self.ev[i].tolist())
+                if receipt:  # (the rows' packets worked out in ev)
+                    rows[i:] = self.ev[i:len(rows)].tolist()
+                    row = rows[i]
+            if receipt and row[_OK]:
+                self._packet(receipt, t_event, row)
                 continue
             t, battery, roll, pitch, yaw, altitude, forward, right, down = sample[:9]
             nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,

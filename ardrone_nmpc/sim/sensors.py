@@ -82,8 +82,8 @@ def _import_navdata_sample_of():
 
 
 #: what the wire path's quiet ticks (sim/quiet_wire.py) do in the sampler's place
-_WIRE_REPLACED = ("_advance_through_wire", "_mocap_frame", "_send_frame", "_push", "_receive",
-                  "_receive_quiet", "push_object_frame", "push_quiet_packet",
+_WIRE_REPLACED = ("_advance_through_wire", "deliver", "_mocap_frame", "_send_frame", "_push",
+                  "_receive", "_receive_quiet", "push_object_frame", "push_quiet_packet",
                   "receives_quiet_packets")
 
 
@@ -307,6 +307,11 @@ class LockstepSensors:
         quiet = self._quiet
         if quiet is None or not quiet.run(t_s):  # (or the rest of what it ran)
             self._send_through_wire(t_s)
+        self.deliver(t_s)
+
+    def deliver(self, t_s: float) -> None:
+        """Hand the links every datagram arrived by ``t_s``, in arrival order (a quiet
+        tick's frames arrived in a row in one bulk receipt)."""
         queue, quiet_frames, arrived = self._queue, [], self._arrived
         if arrived and not all(item[3].__class__ in _QUIET_DATA for item in queue):
             self._queue_arrived()  # (a datagram of the Python path's on its way)
