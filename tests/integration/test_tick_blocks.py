@@ -12,8 +12,9 @@ The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init_
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
 at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
-navdata's speeds, injected faults (blocks between the ticks at which one may act), and flights
-no block takes (faults of the sensors' bytes, other plants and objects). Without
+navdata's speeds, injected faults (blocks between the ticks at which one may act), faults of
+the sensors' bytes (the wire's blocks: the receiving link's whole state and the datagrams on
+their way compared too), and flights no block takes. Without
 ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with more
 flights: ``benchmarks/tick_equivalence.py``.
 """
@@ -39,6 +40,8 @@ from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
 from ardrone_nmpc.sim.plant_kit import KitPlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
+from tests.link_state import bits as link_bits
+from tests.link_state import link_state
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 CLOCK_CELLS = frozenset({"compute_us", "solve_us"})  # wall-clock: their type compared only
@@ -185,12 +188,56 @@ CASES = [
      ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
       "sim.plant.battery_drain_pct_per_min=30"], 7),
     ("follow_newton_tolerance", "follow_car", ["duration_s=8", *SETTLE, NEWTON, *TIGHT], 1),
-    # flights no block takes (as the blocks' first version has it): an estimator the
-    # compiled calls do not take, faults that touch the sensors' bytes
+    # flights no block takes: an estimator the compiled calls do not take
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
      11),
+    # faults that touch the sensors' bytes (every frame and packet through the wire:
+    # sim/wire_block's blocks between the faults' windows): each stream's loss, a repeated
+    # dropout, a zero pose, extra latency, both disorders, corruption, a blackout (the
+    # drone's bootstrap answered), other rates and latency, the kit plant with turbulence
     ("fault_mocap_dropout", "square", ["duration_s=10", *SETTLE, "faults.mocap_dropout.start_s=4",
                                        "faults.mocap_dropout.duration_s=0.2"], 0),
+    ("wire_navdata_loss", "square", ["duration_s=8", *SETTLE, "faults.navdata_loss.start_s=4",
+                                     "faults.navdata_loss.duration_s=0.3"], 1),
+    # (a window shorter than the feedback's limit, ending within a tick)
+    ("wire_navdata_loss_short", "square", ["duration_s=8", *SETTLE,
+                                           "faults.navdata_loss.start_s=3.01",
+                                           "faults.navdata_loss.duration_s=0.05"], 12),
+    ("wire_repeated_dropout", "square", ["duration_s=8", *SETTLE,
+                                         "faults.mocap_dropout.start_s=2",
+                                         "faults.mocap_dropout.duration_s=0.1",
+                                         "faults.mocap_dropout.repeat_every_s=1.5"], 2),
+    ("wire_occlusion_zero", "square", ["duration_s=8", *SETTLE,
+                                       "faults.mocap_occlusion.start_s=3",
+                                       "faults.mocap_occlusion.duration_s=0.3",
+                                       "faults.mocap_occlusion.zero_pose=true"], 3),
+    ("wire_latency", "square", ["duration_s=8", *SETTLE, "faults.mocap_latency.start_s=3",
+                                "faults.mocap_latency.duration_s=1"], 4),
+    ("wire_disorder_mocap", "square", ["duration_s=8", *SETTLE, "faults.disorder.start_s=3",
+                                       "faults.disorder.duration_s=1",
+                                       "faults.disorder.stream=mocap"], 5),
+    ("wire_disorder_navdata", "square", ["duration_s=8", *SETTLE, "faults.disorder.start_s=3",
+                                         "faults.disorder.duration_s=1",
+                                         "faults.disorder.stream=navdata"], 6),
+    ("wire_corrupt", "square", ["duration_s=8", *SETTLE, "faults.navdata_corrupt.start_s=3",
+                                "faults.navdata_corrupt.duration_s=0.3"], 7),
+    ("wire_blackout", "square", ["duration_s=8", *SETTLE, "faults.blackout.start_s=3",
+                                 "faults.blackout.duration_s=0.3"], 8),
+    ("wire_sensor_rates", "square", ["duration_s=8", *SETTLE, "sim.mocap_rate_hz=240",
+                                     "sim.navdata_rate_hz=200", "sim.noise.mocap_latency_ms=20",
+                                     "faults.mocap_dropout.start_s=3",
+                                     "faults.mocap_dropout.duration_s=0.2"], 9),
+    # the battery's low bit in the packets (a worn battery's level, above the floor: an alarm
+    # the block ends at, the supervisor lands) — a dropout after the flight's end: the wire
+    ("wire_low_battery", "square", ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=32",
+                                    "faults.vbat_low.threshold_pct=30",
+                                    "sim.plant.battery_drain_pct_per_min=30",
+                                    "faults.mocap_dropout.start_s=30",
+                                    "faults.mocap_dropout.duration_s=0.2"], 11),
+    ("wire_kit_turbulent", "square", ["duration_s=8", *SETTLE, KIT,
+                                      "sim.plant.turbulence_std_mps=0.3",
+                                      "faults.mocap_dropout.start_s=3",
+                                      "faults.mocap_dropout.duration_s=0.2"], 10),
     ("hover", "hover", ["duration_s=6", *SETTLE], 0),
     ("step_z", "step_z", ["duration_s=6", *SETTLE], 0),
 ]
@@ -252,7 +299,7 @@ def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -
     release it (a mid-flight snapshot must not change the path it watches)."""
     drone, tick = flight.drone, flight.tick
     sim, sensors = drone.sim, drone.sensors
-    plant, legs = sim.plant, sensors._legs
+    plant, legs = sim.plant, drone._legs  # (the direct path's, or the wire's quiet ticks')
     if release and legs is not None:
         legs.release()
     skip = frozenset() if release else _HELD
@@ -274,6 +321,11 @@ def state(flight: "Flight", *, release: bool = False, stages_too: bool = True) -
         out["faults.rng"] = bits(repr(faults.schedule.rng.bit_generator.state))
     # the second object's generator: where its stream stands (its frames' noise)
     out["sensors._target_rng"] = bits(repr(sensors._target_rng.bit_generator.state))
+    if sensors.wire:  # the receiving link's whole state, the datagrams on their way
+        for name, value in link_state(sensors.mocap).items():
+            out[f"sensors.mocap.{name}"] = bits(repr(value))
+        out["sensors._queue"] = bits(repr([(a, o, s, link_bits(x)) for a, o, s, x in  # (a
+                                           sorted(sensors._queue)]))  # heap: its order)
     out["truth"] = bits(drone.truth)
     out["truth_cells"] = bits(drone.truth_cells())
     if stages_too:
@@ -701,6 +753,20 @@ def test_fault_flights_fly_blocks_as_the_drones_own_chain(monkeypatch):
     assert plain.steps == rows
     assert plain.drone.sim.faults.counters.at_lost > 0  # (the window drew)
     assert_same_flights(block, plain)
+
+
+@pytest.mark.parametrize("name", ["fault_mocap_dropout", "wire_navdata_loss",
+                                  "wire_repeated_dropout", "wire_disorder_navdata",
+                                  "wire_sensor_rates", "wire_kit_turbulent"])
+def test_sensor_fault_flights_fly_blocks_between_the_faults_windows(name, monkeypatch):
+    """A flight with a fault on the sensors' bytes (every frame and packet through the
+    wire: sim/wire_block) flies most of its ticks in blocks — the ticks outside the
+    faults' windows — and the ticks inside them are ``Tick.step``'s."""
+    _, config, overrides, seed = _case(name)
+    block = fly(_config(config, overrides), seed, monkeypatch, block_ticks=None, wanted=set())
+    rows = block.recorder.rows
+    assert block.drone.sensors.wire
+    assert block.steps * 3 < len(rows), f"{block.steps} Tick.step calls for {len(rows)} rows"
 
 
 def test_a_diverging_solver_flies_blocks_outside_its_window(monkeypatch):
