@@ -73,7 +73,7 @@ _BOOTSTRAP_BIT = int(DroneState.NAVDATA_BOOTSTRAP)
 def wire_d(cap: int) -> np.ndarray:
     """A ``d`` for blocks of the wire's ticks with room for ``cap`` events."""
     d = np.zeros(W_ROWS + cap * _EV)
-    d[W_CAP] = cap
+    d[W_CAP], d[W_WHOLE] = cap, 1.0
     return d
 
 
@@ -249,24 +249,25 @@ def sent(legs, d: np.ndarray) -> bool:
     for a run that stopped before a leg (the tick's rest is the Python path's: the
     caller's, then the receipt); the frames still on their way kept as the rows. Whether
     the receipt waits for the tick's rest."""
+    rest = d[W_WHOLE] == 0.0
+    d[W_WHOLE] = 1.0  # (the run's rest handed over)
     n0, n = int(d[W_N0]), int(d[W_N])
-    if n == n0:
-        return False
-    sensors, fw = legs.sensors, legs.firmware
-    t_run = d[W_T_RUN]
-    rows = d[W_ROWS + n0 * _EV:W_ROWS + n * _EV].reshape((n - n0, _EV)).tolist()
-    ctrl_state = int(d[W_CTRL])
-    latched = fw.comwdg_latched  # (a built packet's status: as the last run's tick began)
-    fw.comwdg_latched = d[W_LATCHED0] != 0.0
-    try:
-        sensors._quiet.send(rows, _FLYING, t_run, (ctrl_state, ctrl_state >> 16))
-    finally:
-        fw.comwdg_latched = latched
-    if d[W_WHOLE] == 0.0:
+    if n > n0:
+        sensors, fw = legs.sensors, legs.firmware
+        rows = d[W_ROWS + n0 * _EV:W_ROWS + n * _EV].reshape((n - n0, _EV)).tolist()
+        ctrl_state = int(d[W_CTRL])
+        latched = fw.comwdg_latched  # (a built packet's status: as the last run's tick began)
+        fw.comwdg_latched = d[W_LATCHED0] != 0.0
+        try:
+            sensors._quiet.send(rows, _FLYING, d[W_T_RUN], (ctrl_state, ctrl_state >> 16))
+        finally:
+            fw.comwdg_latched = latched
+    if rest:  # (a run stopped before a leg, its events or none: the caller's to go on)
         _kept(d, [])
         return True
-    sensors.deliver(t_run)
-    _kept(d, _queued_frames(sensors))
+    if n > n0:
+        legs.sensors.deliver(d[W_T_RUN])
+        _kept(d, _queued_frames(legs.sensors))
     return False
 
 

@@ -234,6 +234,10 @@ CASES = [
                                     "sim.plant.battery_drain_pct_per_min=30",
                                     "faults.mocap_dropout.start_s=30",
                                     "faults.mocap_dropout.duration_s=0.2"], 11),
+    # a climb near the cap (the legs stop before its leg: the tick's rest Python's)
+    ("wire_altitude_cap", "square_altitudes", ["duration_s=12", *SETTLE,
+                                               "drone.altitude_max_m=1.3",
+                                               "faults.navdata_loss.start_s=30"], 13),
     ("wire_kit_turbulent", "square", ["duration_s=8", *SETTLE, KIT,
                                       "sim.plant.turbulence_std_mps=0.3",
                                       "faults.mocap_dropout.start_s=3",

@@ -17,6 +17,7 @@ import pytest
 
 from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.runs.memory import MemoryRecorder
+from ardrone_nmpc.runtime import lockstep
 from ardrone_nmpc.runtime.lockstep import run_lockstep
 from ardrone_nmpc.sim.quiet_wire import QuietWire
 from ardrone_nmpc.links.mocap_link import MocapLink
@@ -253,7 +254,8 @@ def _latches(name: str, monkeypatch) -> list:
         latches.append((t_s, self.firmware.comwdg_latched))
 
     monkeypatch.setattr(LockstepSensors, "_advance_through_wire", kept)
-    _fly(name)
+    monkeypatch.setattr(lockstep, "BLOCK_TICKS", 0)  # (tick by tick: blocks of quiet ticks
+    _fly(name)                                       # write it back: test_tick_blocks)
     monkeypatch.setattr(LockstepSensors, "_advance_through_wire", advance)
     return latches
 
