@@ -327,7 +327,8 @@ def _block_rows(table, n: int, mode: str, write_cells, write_block,
 
 # the warm-up's flights: a square (tick_block), an obstacle's step (tick_block_obstacles),
 # the square by the thesis' Newton scheme (tick_block_newton), the obstacle's step by it
-# (tick_block_newton_obstacles), the square by the P controller (tick_block_p)
+# (tick_block_newton_obstacles), the square by the P controller (tick_block_p), the square
+# with a mocap dropout: its sensors through the wire (tick_block_wire)
 _WARM_UP_SQUARE = {"name": "warm-up", "duration_s": 1.0, "reference": {"kind": "square"}}
 _WARM_UP_NEWTON = {**_WARM_UP_SQUARE, "name": "warm-up-newton",
                    "controller": {"solver": {"method": "newton"}}}
@@ -353,7 +354,7 @@ def warm_up_blocks() -> None:
     """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, then
     ``tick_block_obstacles`` for a solver with obstacles, ``tick_block_newton`` and
     ``tick_block_newton_obstacles`` for the thesis' Newton scheme, ``tick_block_p`` for the
-    P controller) loaded from numba's cache, or compiled now by a short flight each
+    P controller, ``tick_block_wire`` for a fault on the sensors' bytes) loaded from numba's cache, or compiled now by a short flight each
     (:data:`_WARM_UPS`: the square's ~7 s on an empty cache): the precompile's background
     child, ``bench --tick`` and the tests call it; a flight does not wait for it (its ticks
     are then the per-tick path's: the same rows)."""
