@@ -309,9 +309,10 @@ class TickBlocks:
             self._last = self.table[n - 1].tolist()
             self._last_t_exp = (k + n - 1 - n_settle) * period_s
             self._ran = True
+        if self.wire and (exit_ == EXIT_FIT or exit_ == EXIT_SHORT  # (a chain that goes on:
+                          or exit_ == EXIT_NONE):                # the links' state first)
+            self.drone.blocks_sent(self.d)
         if exit_ == EXIT_FIT:  # the fit AfterSolve.written makes after the last tick
-            if self.wire:
-                self.drone.blocks_sent(self.d)
             return n, exit_, self._fit(self.t_first_s + (k + n - 1) * period_s, n), 0
         if exit_ == EXIT_SHORT:  # new blocks of normals; the next tick's a block's again
             legs = self.drone._legs
@@ -319,8 +320,6 @@ class TickBlocks:
                 legs.refill(wire_block.normals_short(legs))
             else:
                 legs.refill()
-        if self.wire and (exit_ == EXIT_SHORT or exit_ == EXIT_NONE):  # (the chain goes on:
-            self.drone.blocks_sent(self.d)                     # the links' state before it)
         if exit_ == EXIT_SHORT or exit_ == EXIT_NONE:
             return n, exit_, None, 0
         legs_ran = exit_ == EXIT_AFTER_LEGS or exit_ == EXIT_AFTER_CONTROL

@@ -99,7 +99,7 @@ class LockstepDrone(ConfigHandshake):
         sensors = self.sensors  # (the direct path's, or the wire path's quiet ticks')
         quiet = getattr(sensors, "_quiet", None)
         self._legs = sensors._legs if quiet is None else quiet.legs
-        self._wire_rest = False  # (a wire block's last run stopped before a leg: blocks_sent)
+        self._wire_rest = False  # (a wire block's last run stopped before a leg: after_block)
         self._waited = np.zeros(drone_block.D_SIZE)  # (ascend's and descend's numbers)
         plant = self.sim.plant  # the airframe's truth without a PlantTruth (truth_cells)
         self._airframe = (isinstance(plant, AirframePlant)
@@ -144,8 +144,9 @@ class LockstepDrone(ConfigHandshake):
         faults = self.sim.faults
         if faults is None:
             return math.inf
-        if self.sensors.wire:  # (the wire's quiet ticks: sim/wire_block)
-            return wire_block.quiet_until_s(self.sensors, self._legs)
+        if self.sensors.wire:  # (the wire's quiet ticks: sim/wire_block — from the plant's
+            return wire_block.quiet_until_s(self.sensors, self._legs)  # time, the tick's first
+            # legs', not t_exp_s: a bound no later)
         return faults.quiet_until_s(t_exp_s)
 
     def block_entry(self, d, second_object: bool = False) -> bool:
@@ -167,15 +168,16 @@ class LockstepDrone(ConfigHandshake):
         self._seq += int(d[drone_block.D_COMMANDS])
         if ran:
             self.t_exp_s = t_exp_s
-        drone_block.after_block(self._legs, d, self._seq, ran)
+        drone_block.after_block(self._legs, d[:drone_block.D_SIZE], self._seq, ran)
         if self.sensors.wire:  # the frames and packets of its ticks sent and received
             self._wire_rest = wire_block.sent(self._legs, d)
 
     def blocks_sent(self, d) -> None:
         """A chain of blocks of the wire's ticks goes on: the frames and packets of its
         ticks so far sent and received (``sim/wire_block.sent``; the drone's state stays
-        the chain's)."""
-        wire_block.sent(self._legs, d)
+        the chain's: its exits that go on leave no run stopped before a leg)."""
+        rest = wire_block.sent(self._legs, d)
+        assert not rest, "a chain of blocks went on after a run stopped before a leg"
 
     def block_ran_to(self, t_s: float, mode: FlightMode = FlightMode.FLYING,
                      ends: float = 0.0, hover_due: bool = False,

@@ -13,7 +13,7 @@ back, the heading of its angles) and the newest packet. ``tick_block``'s twin wi
 module in ``drone_block``'s place (``runtime/lockstep_block.tick_block_wire``) flies them.
 
 The links themselves stay Python's: every event of the block is kept in ``d``'s rows
-(``W_*``) and, after the block, :func:`after_wire_block` sends each frame and packet as
+(``W_*``) and, after the block, :func:`sent` sends each frame and packet as
 the quiet tick does and the sampler receives them (``LockstepSensors.deliver``) — the
 same calls in the same order, a block's frames in one bulk receipt —, so the links' state
 is theirs. Whenever the numbers could differ from what the links would hold — a packet
@@ -68,6 +68,10 @@ _EV = ws.EV_WIDTH
 _MM_PER_M = 1000.0
 _POSE_BITS = struct.Struct("<6d")  # (links/mocap_source's: a pose's values as its bytes)
 _BOOTSTRAP_BIT = int(DroneState.NAVDATA_BOOTSTRAP)
+_COM_WATCHDOG = int(DroneState.COM_WATCHDOG)
+_TICKS_OF_NORMALS = 16  # (refilled for as many ticks as the short one: fewer refills)
+_MARGIN_S = 1e-6  # (a tick's experiment time and the faults' clock: rounded apart)
+_SCAN_FRAMES = 4096  # frames a dropout is asked of ahead (~40 s at 100 Hz)
 
 
 def wire_d(cap: int) -> np.ndarray:
@@ -102,7 +106,7 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
     taken = n_events if done > n_events else done
     # each packet as its receiver decodes it: the status's word, the com-watchdog bit as
     # the tick began (latched) or by the packet's time (a command clears it), the battery's
-    word = int(d[W_STATE]) | (ws._COM_WATCHDOG if latched0 != 0.0 else 0)
+    word = int(d[W_STATE]) | (_COM_WATCHDOG if latched0 != 0.0 else 0)
     from_t = d[D_LAST_CMD_T] if latched0 == 0.0 else math.inf
     ws.navdata_packets(rows[n:], taken, word, from_t, d[D_COMWDG_S], d[W_VBAT_LOW])
     d[W_N], d[W_T_RUN], d[W_LATCHED0] = n + taken, t_s, latched0
@@ -220,7 +224,9 @@ def wire_block_entry(legs, d: np.ndarray, seq: int) -> bool:
     db._fill(legs, d, (pose_rx, pose.t_s, px, py, pz, pose.psi_rad, 0.0, sensors.nav_rx_t_s,
                        nav.t_s, nav.battery_pct, nav.roll_deg, nav.pitch_deg,
                        nav.vx_body_mps, nav.vy_body_mps))
-    d[D_NAV_STATE], d[W_STATE], d[W_CTRL] = nav.state_bits, state, ctrl_state
+    # (the com-watchdog bit: the kernel's, as each tick begins and by each packet's time —
+    # a latch the block's first command clears is not the word's)
+    d[D_NAV_STATE], d[W_STATE], d[W_CTRL] = nav.state_bits, state & ~_COM_WATCHDOG, ctrl_state
     d[W_BITS], d[W_ALARM] = nav.state_bits & ALARM_BITS, ALARM_BITS
     d[W_VBAT_LOW] = fw.vbat_low_pct
     d[W_LAST:W_LAST + 6] = (math.nan if mocap._last_values is None
@@ -298,11 +304,6 @@ def _mocap_link_class():
     from ardrone_nmpc.links.mocap_link import MocapLink  # (the wire's only)
 
     return MocapLink
-
-
-_TICKS_OF_NORMALS = 16  # (refilled for as many ticks as the short one: fewer refills)
-_MARGIN_S = 1e-6  # (a tick's experiment time and the faults' clock: rounded apart)
-_SCAN_FRAMES = 4096  # frames a dropout is asked of ahead (~40 s at 100 Hz)
 
 
 def quiet_until_s(sensors, legs) -> float:

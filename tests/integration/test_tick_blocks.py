@@ -38,6 +38,7 @@ from ardrone_nmpc.runtime.tick import Tick
 from ardrone_nmpc.sim.command_fifo import CommandFifo
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from ardrone_nmpc.sim.normal_blocks import NormalBlocks
+from ardrone_nmpc.sim import wire_block
 from ardrone_nmpc.sim.plant_kit import KitPlant
 from ardrone_nmpc.sim.sensors import LockstepSensors
 from tests.link_state import bits as link_bits
@@ -771,6 +772,40 @@ def test_sensor_fault_flights_fly_blocks_between_the_faults_windows(name, monkey
     rows = block.recorder.rows
     assert block.drone.sensors.wire
     assert block.steps * 3 < len(rows), f"{block.steps} Tick.step calls for {len(rows)} rows"
+
+
+def test_a_wire_block_entered_with_the_com_watchdog_latched(monkeypatch):
+    """A command lost at a Python tick of a wire flight (sent, never received: patched)
+    leaves the firmware's com-watchdog bit latched when the next block begins; the block's
+    first command clears it and each packet then shows the bit by its own time, as the
+    per-tick path's (a block that kept the entry's bit in every packet's word logged it in
+    50 rows: review of the wire's blocks)."""
+    cfg = _config("square", ["duration_s=8", *SETTLE, "faults.mocap_dropout.start_s=3",
+                             "faults.mocap_dropout.duration_s=0.2"])
+    first = fly(cfg, 1, monkeypatch, block_ticks=None, wanted=set())
+    stepped = sorted(float.fromhex(t) for t in first.calls)  # (a block follows the tick)
+    lost_at = next(t for t in stepped if t > 0.5
+                   and not any(abs(u - t - 0.065) < 1e-9 for u in stepped))
+    set_command, entry = LockstepDrone.set_command, wire_block.wire_block_entry
+    latched_at_entry = []
+
+    def losing(self, *args, **kwargs):
+        if abs(self.t_exp_s - lost_at) < 1e-9:
+            self._seq += 1  # (its number taken)
+            return None
+        return set_command(self, *args, **kwargs)
+
+    def watched(legs, d, seq):
+        entered = entry(legs, d, seq)
+        if entered and legs.firmware.comwdg_latched:
+            latched_at_entry.append(seq)
+        return entered
+
+    monkeypatch.setattr(LockstepDrone, "set_command", losing)
+    monkeypatch.setattr(wire_block, "wire_block_entry", watched)
+    block, plain = fly_both(cfg, 1, monkeypatch)
+    assert latched_at_entry
+    assert_same_flights(block, plain)
 
 
 def test_a_diverging_solver_flies_blocks_outside_its_window(monkeypatch):

@@ -21,6 +21,7 @@ from ardrone_nmpc.config.io import load_config
 from ardrone_nmpc.core.types import FlightMode, NavdataSample
 from ardrone_nmpc.links.drone_link import navdata_sample_of
 from ardrone_nmpc.protocol.navdata import DroneState, decode_navdata, encode_drone_navdata
+from ardrone_nmpc.runtime import lockstep
 from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.lockstep_drone import LockstepDrone
 from ardrone_nmpc.sim.quiet_wire import QuietWire
@@ -149,7 +150,8 @@ def _receipts(name: str) -> tuple:
         patched.setattr(LockstepDrone, "_on_navdata", seen)
         patched.setattr(LockstepSensors, "_advance_through_wire", kept)
         patched.setattr(LockstepSensors, "_receive_quiet", counted)
-        _fly(name)
+        patched.setattr(lockstep, "BLOCK_TICKS", 0)  # (tick by tick: a block's receipt is
+        _fly(name)                                   # test_tick_blocks')
     return (shown, records, stats), quiet[0]
 
 
