@@ -71,7 +71,7 @@ _BOOTSTRAP_BIT = int(DroneState.NAVDATA_BOOTSTRAP)
 _COM_WATCHDOG = int(DroneState.COM_WATCHDOG)
 _TICKS_OF_NORMALS = 16  # (refilled for as many ticks as the short one: fewer refills)
 _MARGIN_S = 1e-6  # (a tick's experiment time and the faults' clock: rounded apart)
-_SCAN_FRAMES = 4096  # frames a dropout is asked of ahead (~40 s at 100 Hz)
+_SCAN_FRAMES = 512  # frames a dropout is asked of ahead (~5 s at 100 Hz)
 
 
 def wire_d(cap: int) -> np.ndarray:
@@ -313,20 +313,31 @@ def quiet_until_s(sensors, legs) -> float:
     as far as :data:`_SCAN_FRAMES` of them), less a margin for the two clocks' rounding."""
     faults = sensors.drone.faults
     t_zero = sensors.t_zero_s
-    t_from = legs.t_s() - t_zero
-    bound = faults.quiet_until_s(t_from, bursts_asked=True)
+    bound = faults.quiet_until_s(legs.t_s() - t_zero, bursts_asked=True)
     schedule = faults.schedule
     if schedule.cfg.mocap_dropout is not None or type(schedule).mocap_dropped is not \
             _DROPPED:
-        period, dropped = sensors.mocap_period_s, schedule.mocap_dropped
+        period = sensors.mocap_period_s
         k = int(legs.iv[ks.I_NEXT_MOCAP]) if legs.held() else sensors._next_mocap_k
-        for k in range(k, k + _SCAN_FRAMES):
-            t_frame = k * period - t_zero
-            if not t_frame < bound:
-                break
-            if dropped(t_frame):
-                bound = t_frame
-                break
-        else:
-            bound = min(bound, (k + 1) * period - t_zero)
+        last = math.ceil((bound + t_zero) / period) if bound < math.inf else math.inf
+        j = _first_dropped(sensors._quiet, schedule.mocap_dropped, k,
+                           min(k + _SCAN_FRAMES, last), period, t_zero)
+        bound = min(bound, j * period - t_zero)
     return bound - _MARGIN_S
+
+
+def _first_dropped(quiet, dropped, k: int, end: int, period: float, t_zero: float) -> int:
+    """The first frame from ``k`` before ``end`` that ``dropped`` drops, else ``end`` —
+    each frame asked once (``quiet.dropout_scan``: the frames asked last, ``(first, next,
+    dropped)``: those from ``first`` before ``next`` not dropped, ``next`` dropped or not
+    asked yet)."""
+    first, j, hit = quiet.dropout_scan
+    if not first <= k <= j:
+        first, j, hit = k, k, False
+    while not hit and j < end:
+        if dropped(j * period - t_zero):
+            hit = True
+        else:
+            j += 1
+    quiet.dropout_scan = (first, j, hit)
+    return j
