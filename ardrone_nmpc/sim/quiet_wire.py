@@ -100,7 +100,7 @@ class QuietWire:
         self.schedule = self.faults.schedule
         self.ev = np.zeros((_N_EVENTS, ws.EV_WIDTH))
         self._status_key, self._status_of = None, None  # (_status's)
-        self.dropout_scan = (0, 0, False)  # (sim/wire_block's blocks: the frames asked)
+        self.dropout_scan = (0, 0, False, math.nan)  # (sim/wire_block's: the frames asked)
 
     @staticmethod
     def eligible(drone) -> bool:

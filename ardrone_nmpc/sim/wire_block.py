@@ -329,15 +329,15 @@ def quiet_until_s(sensors, legs) -> float:
 def _first_dropped(quiet, dropped, k: int, end: int, period: float, t_zero: float) -> int:
     """The first frame from ``k`` before ``end`` that ``dropped`` drops, else ``end`` —
     each frame asked once (``quiet.dropout_scan``: the frames asked last, ``(first, next,
-    dropped)``: those from ``first`` before ``next`` not dropped, ``next`` dropped or not
-    asked yet)."""
-    first, j, hit = quiet.dropout_scan
-    if not first <= k <= j:
+    dropped, t_zero)``: those from ``first`` before ``next`` not dropped, ``next`` dropped or
+    not asked yet, on the faults' clock of ``t_zero``)."""
+    first, j, hit, asked_t_zero = quiet.dropout_scan
+    if not (first <= k <= j and asked_t_zero == t_zero):
         first, j, hit = k, k, False
     while not hit and j < end:
         if dropped(j * period - t_zero):
             hit = True
         else:
             j += 1
-    quiet.dropout_scan = (first, j, hit)
+    quiet.dropout_scan = (first, j, hit, t_zero)
     return j

@@ -119,3 +119,41 @@ def test_a_packet_the_block_cannot_stand_for_ends_it():
     assert not links_hold(d, rows, 0, 1, 0.065)
     row[ws.EV_STATE], row[ws.EV_OK] = 0x301 | (1 << 30), 1.0  # (no alarm: the com watchdog)
     assert links_hold(d, rows, 0, 1, 0.065)
+
+
+class _Quiet:
+    dropout_scan = (0, 0, False, math.nan)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_first_dropped_frame_asked_once_per_frame_is_the_scans(seed):
+    """``_first_dropped`` (each frame asked once across the blocks' bounds) against asking
+    every frame from ``k``: the same first dropped frame, or the end; a frame not dropped
+    asked once while the clock stays."""
+    rng = random.Random(seed)
+    period, start, duration, every = 0.01, rng.uniform(0, 3), rng.uniform(0.02, 0.4), \
+        rng.choice([None, 1.0, 2.5])
+    asked = []
+
+    def rule(t_s):  # (FaultSchedule.mocap_dropped's)
+        phase = t_s - start
+        if phase < 0:
+            return False
+        return (phase % every if every else phase) < duration
+
+    def dropped(t_s):
+        asked.append(round(t_s / period))
+        return rule(t_s)
+
+    quiet, k, t_zero = _Quiet(), 0, 0.0
+    for _ in range(60):
+        k += rng.randrange(0, 40)
+        end = k + rng.randrange(1, 600)
+        expected = next((j for j in range(k, end) if rule(j * period - t_zero)), end)
+        found = wb._first_dropped(quiet, dropped, k, end, period, t_zero)
+        assert found == expected or (found > end and expected == end)
+        if k < found < end:
+            k = found  # (the flight reaches the dropped frame: asked again from there)
+    assert len(asked) <= len(set(asked)) + 60  # (once a frame; a dropped one once a query)
+    quiet.dropout_scan = (0, 10 ** 6, False, 5.0)  # (another clock: asked afresh)
+    assert wb._first_dropped(quiet, dropped, 0, 10 ** 6, period, 0.0) < 10 ** 6
