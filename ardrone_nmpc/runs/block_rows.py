@@ -16,8 +16,9 @@ from ardrone_nmpc.core.angles import wrap_angle_rad
 from ardrone_nmpc.runs.block_row import (BR_BATTERY, BR_COMPUTE_US, BR_GMRES, BR_MOCAP_MS,
                                          BR_MOCAP_T, BR_NAV_MS, BR_NAV_PITCH, BR_NAV_ROLL,
                                          BR_NAV_STATE, BR_NAV_VX, BR_NAV_VY, BR_NEWTON,
-                                         BR_NORM, BR_SATURATED, BR_SOLVE_US, BR_T, BR_TARGET_X, BR_TRUE_PSI,
-                                         BR_TRUE_VZ, BR_TRUE_X, BR_TRUE_Y, BR_TRUE_Z)
+                                         BR_NORM, BR_SATURATED, BR_SOLVE_US, BR_T,
+                                         BR_TARGET_X, BR_TRUE_PSI, BR_TRUE_VZ, BR_TRUE_X,
+                                         BR_TRUE_Y, BR_TRUE_Z)
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS, block_cells
 
 __all__ = ["BlockRows"]

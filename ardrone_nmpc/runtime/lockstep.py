@@ -354,10 +354,11 @@ def warm_up_blocks() -> None:
     """Blocks of ticks' kernels (``runtime/lockstep_block.tick_block``, then
     ``tick_block_obstacles`` for a solver with obstacles, ``tick_block_newton`` and
     ``tick_block_newton_obstacles`` for the thesis' Newton scheme, ``tick_block_p`` for the
-    P controller, ``tick_block_wire`` for a fault on the sensors' bytes) loaded from numba's cache, or compiled now by a short flight each
-    (:data:`_WARM_UPS`: the square's ~7 s on an empty cache): the precompile's background
-    child, ``bench --tick`` and the tests call it; a flight does not wait for it (its ticks
-    are then the per-tick path's: the same rows)."""
+    P controller, ``tick_block_wire`` for a fault on the sensors' bytes) loaded from numba's
+    cache, or compiled now by a short flight each (:data:`_WARM_UPS`: the square's ~7 s on
+    an empty cache): the precompile's background child, ``bench --tick`` and the tests call
+    it; a flight does not wait for it (its ticks are then the per-tick path's: the same
+    rows)."""
     global _warming_up
     if not monotonic.SAME_CLOCK:
         return  # (no blocks flown where the kernel does not read Python's clock: no compile)

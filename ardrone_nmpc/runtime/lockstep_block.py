@@ -264,8 +264,8 @@ class TickBlocks:
         #: the first tick at or after the last one asked at which the drone may not be
         #: plain (:meth:`_plain_ticks`; inf: never)
         self._unplain_k: float = 0
-        self.d = (wire_block.wire_d(_wire_rows(drone.sensors, n_max, period_s)) if self.wire
-                  else np.zeros(db.D_SIZE))
+        self.d = (wire_block.wire_d(wire_block.row_capacity(drone.sensors, n_max, period_s))
+                  if self.wire else np.zeros(db.D_SIZE))
         self.c = np.zeros(C_SIZE)
         #: the rows of the last block (``runs/block_row``: BLOCK_ROW numbers a tick)
         self.table = np.zeros((n_max, br.BLOCK_ROW))
@@ -495,15 +495,6 @@ def _kernels(drone) -> dict:
     """The block kernels by the controller's for ``drone``'s sensors (through the wire:
     the usual controller's alone)."""
     return WIRE_BLOCK_KERNELS if drone.sensors.wire else BLOCK_KERNELS
-
-
-def _wire_rows(sensors, n_max: int, period_s: float) -> int:
-    """Room for the events of ``n_max`` ticks of ``period_s`` through the wire and the
-    frames on their way at the first (``sim/wire_block``'s rows)."""
-    per_tick = (math.ceil(period_s / sensors.mocap_period_s)
-                + math.ceil(period_s / sensors.nav_period_s) + 2)
-    in_transit = 2 * (math.ceil(sensors.mocap_latency_s / sensors.mocap_period_s) + 2)
-    return n_max * per_tick + in_transit
 
 
 def _tail_args(tail: tuple) -> tuple:

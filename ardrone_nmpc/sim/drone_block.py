@@ -32,7 +32,7 @@ from ardrone_nmpc.sim.lockstep_legs import _HOVER_APPLIED, _HOVER_PCMD
 __all__ = ["D_SIZE", "LEGS_DONE", "LEGS_NOT_QUIET", "LEGS_PARTIAL", "LEGS_SHORT",
            "after_ascent", "after_block", "after_descent", "ascent_entry", "block_entry",
            "descent_entry", "drone_ascent", "drone_command", "drone_descent", "drone_legs",
-           "set_run_inputs"]
+           "set_run_inputs", "watchdog_due"]
 
 # d: the plant's held command (roll, pitch, gaz, yaw, position hold 0/1); the firmware's
 # applied command (its four fractions, and 1 while it is a progressive one of them); the
@@ -67,10 +67,17 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
     touch-down flown if ``ends`` is 1, ``sv[S_ENDS]``) under a quiet firmware to plant time
     ``t_s``: its tests, the kernel's run, the com-watchdog bit after it (``LEGS_*``; a run
     that changed the mode is ``LEGS_PARTIAL``: the legs' after-run code shows it)."""
-    silence = t_s - d[D_LAST_CMD_T]
-    if silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]:
+    if watchdog_due(d, t_s):
         return LEGS_NOT_QUIET  # a watchdog acts on the way: the Python path's
     return _run(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
+
+
+@njit(cache=True, **INNER_KERNEL)
+def watchdog_due(d, t_s):
+    """The hover or the link-loss watchdog fires by plant time ``t_s`` (the silence since
+    the last accepted command past its time)."""
+    silence = t_s - d[D_LAST_CMD_T]
+    return silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]
 
 
 @njit(cache=True, **INNER_KERNEL)

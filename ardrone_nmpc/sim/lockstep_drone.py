@@ -144,9 +144,9 @@ class LockstepDrone(ConfigHandshake):
         faults = self.sim.faults
         if faults is None:
             return math.inf
-        if self.sensors.wire:  # (the wire's quiet ticks: sim/wire_block — from the plant's
-            return wire_block.quiet_until_s(self.sensors, self._legs)  # time, the tick's first
-            # legs', not t_exp_s: a bound no later)
+        if self.sensors.wire:  # the wire's quiet ticks (sim/wire_block): from the plant's
+            # time, where the tick's first legs begin, not t_exp_s — a bound no later
+            return wire_block.quiet_until_s(self.sensors, self._legs)
         return faults.quiet_until_s(t_exp_s)
 
     def block_entry(self, d, second_object: bool = False) -> bool:

@@ -177,10 +177,7 @@ class QuietWire:
         block's: ``sim/wire_block``) — None: worked out here, in ``ev``, at the first."""
         sensors = self.sensors
         firmware, push, frame = sensors.firmware, sensors._push, sensors._send_frame
-        # the frames as numbers (received in bulk: sensors.ObjectFrame) where _send_frame
-        # would queue a MocapFrame of the object alone, as it is
-        numbers = (sensors._names_checked and not sensors.frames_as_bytes
-                   and sensors.frames_in_bulk and sensors.target_cfg is None)
+        numbers = self.frames_as_numbers()
         push_numbers = sensors.push_object_frame
         latency_s = sensors.mocap_latency_s + NO_MOCAP_FAULT.extra_latency_s
         for i, row in enumerate(rows):
@@ -207,6 +204,14 @@ class QuietWire:
             nav = NavdataSample.make(t, mode, battery, roll, pitch, yaw, altitude,
                                      forward, right, down)
             push(t_event, ks.NAV, firmware.packet_of(t_event, nav))
+
+    def frames_as_numbers(self) -> bool:
+        """Whether the frames go as their numbers (received in bulk: ``sensors.
+        ObjectFrame``): where ``_send_frame`` would queue a ``MocapFrame`` of the object
+        alone, as it is, to a link that takes frames decoded and in bulk."""
+        sensors = self.sensors
+        return (sensors._names_checked and not sensors.frames_as_bytes
+                and sensors.frames_in_bulk and sensors.target_cfg is None)
 
     def _receipt(self, n_rows: int) -> tuple | bool:
         """The tick's packets as numbers (``ev[:n_rows]``'s navdata rows worked out by

@@ -39,27 +39,24 @@ from ardrone_nmpc.sim import drone_block as db
 from ardrone_nmpc.sim import sensor_step as ks
 from ardrone_nmpc.sim import wire_step as ws
 from ardrone_nmpc.sim.drone_block import (  # noqa: F401 (what tick_block reads of its db)
-    D_BATTERY, D_CLEAR_ANY, D_CMD_GAZ, D_CMD_PITCH, D_CMD_ROLL, D_CMD_YAW, D_COMWDG_S,
-    D_HOVER_AFTER_S, D_LAST_CMD_T, D_LATCHED, D_LATENCY, D_LINK_LOSS_S, D_NAV_PITCH,
-    D_NAV_ROLL, D_NAV_STATE, D_NAV_T, D_NAV_VX, D_NAV_VY, D_POSE_RX, D_POSE_T, D_PSI, D_PX,
-    D_PY, D_PZ,
-    D_SIZE, D_T_NAV, D_T_POSE, LEGS_DONE, LEGS_NOT_QUIET, LEGS_PARTIAL, LEGS_SHORT,
-    drone_command, set_run_inputs)
+    D_BATTERY, D_CMD_GAZ, D_CMD_PITCH, D_CMD_ROLL, D_CMD_YAW, D_COMWDG_S, D_LAST_CMD_T,
+    D_LATCHED, D_LATENCY, D_NAV_PITCH, D_NAV_ROLL, D_NAV_STATE, D_NAV_T, D_NAV_VX, D_NAV_VY,
+    D_POSE_RX, D_POSE_T, D_PSI, D_PX, D_PY, D_PZ, D_SIZE, D_T_NAV, D_T_POSE, LEGS_DONE,
+    LEGS_NOT_QUIET, LEGS_PARTIAL, LEGS_SHORT, drone_command, set_run_inputs, watchdog_due)
 from ardrone_nmpc.sim.drone_firmware import _PROGRESSIVE
 from ardrone_nmpc.sim.faults import FaultSchedule
 from ardrone_nmpc.sim.sensors import ObjectFrame
 
-__all__ = ["W_ROWS", "drone_legs", "normals_short", "sent", "quiet_until_s", "wire_block_entry",
-           "wire_d"]
+__all__ = ["W_ROWS", "drone_legs", "normals_short", "quiet_until_s", "row_capacity", "sent",
+           "wire_block_entry", "wire_d"]
 
 # d's wire part, after drone_block's numbers: the state word of the firmware's status at
-# the block's entry (no silence, no low battery: sim/quiet_wire's _status) and its
-# ctrl_state, the alarm bits
-# the controller's call was entered with (a packet showing others ends the block) and their
-# mask (safety's), the low-battery threshold (%); the rows used, the first row of a frame not yet received,
-# the rows kept from the entry (frames in transit: their arrival in EV_T), the rows'
-# capacity; the last run's time, whether its tick began latched (0/1) and whether it did
-# all its legs (0/1);
+# the block's entry (no silence, no low battery, no com-watchdog bit: sim/quiet_wire's
+# _status) and its ctrl_state; the alarm bits the controller's call was entered with (a
+# packet showing others ends the block) and their mask (safety's); the low-battery
+# threshold (%); the rows used, the first row of a frame not yet received, the rows kept
+# from the entry (frames in transit: their arrival in EV_T), the rows' capacity; the last
+# run's time, whether its tick began latched (0/1) and whether it did all its legs (0/1);
 # the last frame's six wire values (mm, rad: a repeat's test; NaN: none)
 (W_STATE, W_CTRL, W_BITS, W_ALARM, W_VBAT_LOW, W_N, W_RX, W_N0, W_CAP, W_T_RUN, W_LATCHED0,
  W_WHOLE, W_LAST) = range(D_SIZE, D_SIZE + 13)
@@ -72,6 +69,15 @@ _COM_WATCHDOG = int(DroneState.COM_WATCHDOG)
 _TICKS_OF_NORMALS = 16  # (refilled for as many ticks as the short one: fewer refills)
 _MARGIN_S = 1e-6  # (a tick's experiment time and the faults' clock: rounded apart)
 _SCAN_FRAMES = 512  # frames a dropout is asked of ahead (~5 s at 100 Hz)
+
+
+def row_capacity(sensors, n_max: int, period_s: float) -> int:
+    """Rows for the frames and packets of ``n_max`` of the wire's ticks of ``period_s`` and
+    the frames on their way at the first."""
+    per_tick = (math.ceil(period_s / sensors.mocap_period_s)
+                + math.ceil(period_s / sensors.nav_period_s) + 2)
+    in_transit = 2 * (math.ceil(sensors.mocap_latency_s / sensors.mocap_period_s) + 2)
+    return n_max * per_tick + in_transit
 
 
 def wire_d(cap: int) -> np.ndarray:
@@ -87,8 +93,7 @@ def drone_legs(d, x, ring, buf, bias_n, gust_n, mocap_n, nav_n, t_s, mode, ends)
     tick's run by ``wire_run`` with every event into ``d``'s rows, what the links hold after
     it — ``LEGS_*`` (``LEGS_PARTIAL`` too when the links' numbers are Python's to work
     out); nothing run when the rows have no room for the tick's events (LEGS_NOT_QUIET)."""
-    silence = t_s - d[D_LAST_CMD_T]
-    if silence > d[D_HOVER_AFTER_S] or silence > d[D_LINK_LOSS_S]:
+    if watchdog_due(d, t_s):
         return LEGS_NOT_QUIET  # a watchdog acts on the way: the Python path's
     if (d[D_CMD_ROLL] == 0.0 and d[D_CMD_PITCH] == 0.0 and d[D_CMD_GAZ] == 0.0
             and d[D_CMD_YAW] == 0.0):
@@ -186,9 +191,8 @@ def wire_block_entry(legs, d: np.ndarray, seq: int) -> bool:
     sensors, fw = legs.sensors, legs.firmware
     quiet, mocap = sensors._quiet, sensors.mocap
     if not (quiet is not None and quiet.enabled and legs.plant._mode is _FLYING
-            and sensors.target_cfg is None and sensors._names_checked
-            and not sensors.frames_as_bytes and sensors.frames_in_bulk
-            and not sensors._arrived and sensors.receives_quiet_packets()
+            and quiet.frames_as_numbers() and not sensors._arrived
+            and sensors.receives_quiet_packets()
             and fw.comwdg_clear == "any" and not fw.config.bootstrap
             and fw.pcmd[0] & _PROGRESSIVE and fw.moving and mocap._sender == _SENDER
             and mocap.object_name not in mocap.other_objects
