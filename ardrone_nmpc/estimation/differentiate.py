@@ -141,7 +141,7 @@ class BackwardDifference:
 
     def state(self) -> tuple[tuple[float, ...] | None, tuple[float, ...]]:
         """(previous position or None, velocity): what a compiled step carries on from
-        (``runtime/tick_kernels.kalman_estimate``, the same arithmetic)."""
+        (``runtime/tick_kernels.estimate_step``, the same arithmetic)."""
         return self._prev, self._vel
 
     def set_state(self, previous_m: tuple[float, ...] | None,

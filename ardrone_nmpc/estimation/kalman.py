@@ -153,7 +153,7 @@ class ScalarKalmanVz:
 
     def state(self) -> tuple[float, float, float, float, bool]:
         """(z anchor, ż, P, K, initialised): what a compiled step carries on from
-        (``runtime/tick_kernels.kalman_estimate``, the same arithmetic)."""
+        (``runtime/tick_kernels.estimate_step``, the same arithmetic)."""
         return self._z_m, self._vz, self._p, self._k, self._initialised
 
     def set_state(self, z_m: float, vz_mps: float, p: float, k: float,

@@ -147,11 +147,13 @@ class LuenbergerVz:
         g_prev, g_new, g_u : ndarray (2,)
             Input columns for z[k−1] (m), z[k] (m) and u (m/s²).
         """
-        c = self._coefficients(float(dt_s))
+        c = self.coefficients(float(dt_s))
         phi = np.array([[c[0], c[1]], [c[2], c[3]]])
         return phi, np.array(c[4:6]), np.array(c[6:8]), np.array(c[8:10])
 
-    def _coefficients(self, dt: float) -> tuple[float, ...]:
+    def coefficients(self, dt: float) -> tuple[float, ...]:
+        """The ten numbers of one :meth:`update` over ``dt`` (s, > 0): Φ row by row, then
+        g_prev, g_new, g_u (:meth:`discrete_matrices`), cached per Δt."""
         cached = self._cache.get(dt)
         if cached is not None:
             self._cache.move_to_end(dt)
@@ -202,12 +204,23 @@ class LuenbergerVz:
             self._z_prev = z
             self._initialised = True
             return self._vz
-        p00, p01, p10, p11, a0, a1, b0, b1, c0, c1 = self._coefficients(dt)
+        p00, p01, p10, p11, a0, a1, b0, b1, c0, c1 = self.coefficients(dt)
         zp, zh, vz = self._z_prev, self._zhat, self._vz
         self._zhat = p00 * zh + p01 * vz + a0 * zp + b0 * z + c0 * u
         self._vz = p10 * zh + p11 * vz + a1 * zp + b1 * z + c1 * u
         self._z_prev = z
         return self._vz
+
+    def state(self) -> tuple[float, float, float, bool]:
+        """(ẑ, ż, z[k−1], initialised): what a compiled step carries on from
+        (``runtime/tick_kernels.estimate_step``, the same arithmetic)."""
+        return self._zhat, self._vz, self._z_prev, self._initialised
+
+    def set_state(self, z_m: float, vz_mps: float, z_prev_m: float,
+                  initialised: bool) -> None:
+        """Put back a :meth:`state` (after a compiled step carried it on)."""
+        self._zhat, self._vz, self._z_prev = z_m, vz_mps, z_prev_m
+        self._initialised = bool(initialised)
 
     @property
     def vz_mps(self) -> float:

@@ -28,15 +28,15 @@ from numba import njit
 
 from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.kernel_cache import first_warm_up, flush_stale_caches
-from ardrone_nmpc.core.numerics import OUTER_KERNEL
+from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.python_floats import py_square
 from ardrone_nmpc.core.types import STATE_DIM, FlightMode
 from ardrone_nmpc.reference.experiment import HoldStartThen
 from ardrone_nmpc.reference.live import LiveTarget
 from ardrone_nmpc.runtime.estimate import Estimation, navdata_velocity_world
 from ardrone_nmpc.runtime.stages import Control
-from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_X, ESTIMATED, W_KNOTS,
-                                               fill_reference_table, kalman_estimate,
+from ardrone_nmpc.runtime.tick_kernels import (E_SIZE, E_STEP, E_X, ESTIMATED, W_KNOTS,
+                                               estimate_step, fill_reference_table,
                                                nmpc_inputs, sample_waypoint_work, table_tick)
 from ardrone_nmpc.safety import ALARM_BITS, Supervisor
 
@@ -56,8 +56,8 @@ L_MAX_SPEED_MPS = 9
 L_TILT_CAP_DEG = 10
 L_ALARM_BITS = 11       # the fault bits acted on (safety's mask: read, not compiled in)
 L_TWO = 12              # 2.0, read at run time: the speed's squares are pow's (py_square)
-L_SCRATCH = 13          # (E_SIZE) the estimator's state, stepped here before it is kept
-L_SIZE = L_SCRATCH + E_SIZE
+L_SCRATCH = 13          # (E_STEP) what the estimator's step writes, as it was before
+L_SIZE = L_SCRATCH + E_STEP
 
 _EMERGENCY = FlightMode.EMERGENCY
 _NDARRAY = np.ndarray
@@ -75,7 +75,7 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     The tick's time and the feedback's receipt times (``t_s``, ``*_rx_t_s``); the navdata's
     fault bits (0: none reported), battery and tilt; the pose (``px`` … ``pose_t_s``), the z̈
     applied since the last (``zacc_mps2``) and, ``navdata_velocity`` set, ẋ, ẏ from navdata
-    (rotated by the caller) for the estimator's state ``est`` (``kalman_estimate``'s);
+    (rotated by the caller) for the estimator's state ``est`` (``estimate_step``'s);
     ``limits`` the supervisor's (``L_*``); then ``nmpc_inputs``' arguments.
 
     Returns (code, mocap age, navdata age) in ms; code :data:`NOT_NOMINAL` when the tick is
@@ -91,36 +91,41 @@ def before_solve(t_s, pose_rx_t_s, navdata_rx_t_s, state_bits, battery_pct, roll
     # a reference table without this tick's times (runtime/tick_kernels.table_tick): Python's
     if int(work[W_KNOTS]) == 0 and table_tick(t_exp_s, lead_s, work, rows) < 0:
         return nothing
-    # Estimation.update, on a copy of its state: kept only if the tick is nominal
-    scratch = limits[L_SCRATCH:L_SCRATCH + E_SIZE]
-    for i in range(E_SIZE):
-        scratch[i] = est[i]
-    if kalman_estimate(scratch, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
-                       nav_vx_mps, nav_vy_mps) != ESTIMATED:
-        return nothing
-    # check_state: finite, inside the geofence, not too fast (Python's ``** 2``: the C
-    # library's pow, not x · x, which differs in the last bit for ~0.1 % of x), not too tilted
-    for i in range(STATE_DIM):
-        if not math.isfinite(scratch[E_X + i]):
-            return nothing
-    for k in range(3):  # x, y, z: slots 0, 2, 4
-        v = scratch[E_X + 2 * k]
-        if not (limits[L_FENCE_LO + k] <= v <= limits[L_FENCE_HI + k]):
-            return nothing
-    two = limits[L_TWO]
-    speed = math.sqrt(py_square(scratch[E_X + 1], two) + py_square(scratch[E_X + 3], two)
-                      + py_square(scratch[E_X + 5], two))
-    if not speed <= limits[L_MAX_SPEED_MPS]:
-        return nothing
-    cap_deg = limits[L_TILT_CAP_DEG]
-    if not (-cap_deg <= roll_deg <= cap_deg and -cap_deg <= pitch_deg <= cap_deg):
+    # Estimation.update, its state's written slots kept: put back unless the tick is nominal
+    kept = limits[L_SCRATCH:L_SCRATCH + E_STEP]
+    for i in range(E_STEP):
+        kept[i] = est[i]
+    if estimate_step(est, px, py, pz, psi_rad, pose_t_s, zacc_mps2, navdata_velocity,
+                     nav_vx_mps, nav_vy_mps) != ESTIMATED:
+        return nothing  # (it wrote nothing)
+    if not _state_checked(est[E_X:E_X + STATE_DIM], roll_deg, pitch_deg, limits):
+        for i in range(E_STEP):
+            est[i] = kept[i]
         return nothing
     # --- nominal: from here on the stages' state is written
-    for i in range(E_SIZE):
-        est[i] = scratch[i]
     nmpc_inputs(est[E_X:E_X + STATE_DIM], sent, first, pending, x_solve, t_exp_s, lead_s, shift,
                 states, work, rows)
     return (0, mocap_ms, nav_ms)
+
+
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _state_checked(x, roll_deg, pitch_deg, limits) -> bool:
+    """``Supervisor.check_state``'s nominal answer for the estimate ``x``."""
+    # finite, inside the geofence, not too fast (Python's ``** 2``: the C library's pow, not
+    # x · x, which differs in the last bit for ~0.1 % of x), not too tilted
+    for i in range(STATE_DIM):
+        if not math.isfinite(x[i]):
+            return False
+    for k in range(3):  # x, y, z: slots 0, 2, 4
+        v = x[2 * k]
+        if not (limits[L_FENCE_LO + k] <= v <= limits[L_FENCE_HI + k]):
+            return False
+    two = limits[L_TWO]
+    speed = math.sqrt(py_square(x[1], two) + py_square(x[3], two) + py_square(x[5], two))
+    if not speed <= limits[L_MAX_SPEED_MPS]:
+        return False
+    cap_deg = limits[L_TILT_CAP_DEG]
+    return -cap_deg <= roll_deg <= cap_deg and -cap_deg <= pitch_deg <= cap_deg
 
 
 class BeforeSolve:

@@ -17,22 +17,25 @@ from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_
 from ardrone_nmpc.core.types import MocapPose, NavdataSample
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
 from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
+from ardrone_nmpc.estimation.luenberger import LuenbergerVz
 from ardrone_nmpc.runtime.tick_kernels import (
     E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
-    E_Q, E_R, E_SIZE, E_VEL_X, E_VEL_Y, E_VZ, E_X, E_Z, ESTIMATED, kalman_estimate,
+    E_Q, E_R, E_SIZE, E_TABLE, E_VEL_X, E_VEL_Y, E_VZ, E_VZ_KIND, E_X, E_Z, E_Z_PREV,
+    ESTIMATED, LU_ENTRIES, LU_ENTRY, NO_COEFFICIENTS, VZ_KALMAN, VZ_LUENBERGER, estimate_step,
 )
 
 __all__ = ["Estimation", "navdata_velocity_world"]
 
 # the estimate's slots in index order, written in one assignment (seven cost ~0.5 µs more)
 assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
-assert ESTIMATED == 0  # Estimation.update tests kalman_estimate's answer for truth
+assert ESTIMATED == 0  # Estimation.update tests estimate_step's answer for truth
 _NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the general spelling)
 
 
-#: ``kalman_estimate``'s call on an estimation's own state and float numbers (the flags: bools)
-_KALMAN = VettedCall(kalman_estimate, ArrayKind(1), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0,
-                     0.0)
+#: ``estimate_step``'s call on an estimation's own state and float numbers (the flags: bools)
+_STEP = VettedCall(estimate_step, ArrayKind(1), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+#: the ż estimators the compiled step carries on, and its name for each
+_VZ_KINDS = {ScalarKalmanVz: VZ_KALMAN, LuenbergerVz: VZ_LUENBERGER}
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -64,10 +67,10 @@ class Estimation:
         self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
         self._last_pose_t_s: float | None = None
         self._x = np.zeros(STATE_DIM)
-        # the Kalman filter's and the difference's state in one buffer, updated by one
-        # compiled call (runtime/tick_kernels.kalman_estimate) until someone asks for the
-        # estimator objects themselves: they get it back (_leave_compiled)
-        self._compiled = type(self._vz_estimator) is ScalarKalmanVz
+        # the ż estimator's (Kalman filter or Luenberger observer) and the difference's state in
+        # one buffer, updated by one compiled call (runtime/tick_kernels.estimate_step) until
+        # someone asks for the estimator objects themselves: they get it back (_leave_compiled)
+        self._compiled = type(self._vz_estimator) in _VZ_KINDS
         if self._compiled:
             self._state = np.zeros(E_SIZE)
             self._bind_state()
@@ -75,7 +78,7 @@ class Estimation:
 
     def _bind_state(self) -> None:
         """The estimate as a view of the compiled step's state (it writes it there), and the
-        step's call: ``kalman_estimate``'s compiled entry point for this state once known
+        step's call: ``estimate_step``'s compiled entry point for this state once known
         (core/entry_points.VettedCall.bind: the dispatcher on the first call if not yet), which
         skips the dispatcher's look-up of ten arguments' types. The state is a plain float64
         vector (VettedCall checks it); of the numbers,
@@ -83,13 +86,13 @@ class Estimation:
         ``float()`` in the entry point's unboxing, by the dispatcher's specialisation for
         another number's type in the kernel, the same value either way."""
         self._x = self._state[E_X:E_X + STATE_DIM]
-        _KALMAN.bind(self, "_kalman", self._state)
+        _STEP.bind(self, "_step", self._state)
 
     def __getstate__(self) -> dict:
         """Without what :meth:`_bind_state` makes (an entry point does not pickle)."""
         state = self.__dict__.copy()
         if "_state" in state:
-            del state["_x"], state["_kalman"]
+            del state["_x"], state["_step"]
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -120,15 +123,22 @@ class Estimation:
 
     @property
     def compiled(self) -> bool:
-        """True while the compiled step (``kalman_estimate``) holds the estimators' state."""
+        """True while the compiled step (``estimate_step``) holds the estimators' state."""
         return self._compiled
 
     def _to_compiled(self) -> None:
         s = self._state
         s[E_HAS_POSE] = self._last_pose_t_s is not None
         s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
-        s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = self._vz_estimator.constants
-        s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = self._vz_estimator.state()
+        vz = self._vz_estimator
+        s[E_VZ_KIND] = _VZ_KINDS[type(vz)]
+        if s[E_VZ_KIND] == VZ_KALMAN:
+            s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = vz.constants
+            s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = vz.state()
+        else:
+            s[E_Z], s[E_VZ], s[E_Z_PREV], s[E_INIT] = vz.state()
+        s[E_TABLE:E_TABLE + LU_ENTRIES * LU_ENTRY:LU_ENTRY] = math.nan  # no Δt yet
+        self._next_entry = 0
         previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
         s[E_HAS_PREV] = previous is not None
         s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
@@ -142,8 +152,22 @@ class Estimation:
         (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
          vel_x, vel_y) = self._state[:E_X].tolist()
         self._last_pose_t_s = last_t if has_pose else None
-        self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
+        if self._state[E_VZ_KIND] == VZ_KALMAN:
+            self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
+        else:
+            self._vz_estimator.set_state(z, vz, float(self._state[E_Z_PREV]), initialised != 0.0)
         self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
+
+    def _add_coefficients(self, t_s) -> None:
+        """The observer's coefficients for the Δt from the last pose to ``t_s`` (the step's own
+        difference, in float64) into the step's table, over its oldest entry; they are its
+        Python object's (``LuenbergerVz.coefficients``): the same bits either way."""
+        s = self._state
+        dt = float(t_s) - float(s[E_LAST_T])
+        at = E_TABLE + self._next_entry * LU_ENTRY
+        s[at + 1:at + LU_ENTRY] = self._vz_estimator.coefficients(dt)
+        s[at] = dt
+        self._next_entry = (self._next_entry + 1) % LU_ENTRIES
 
     def update(self, pose: MocapPose, navdata: NavdataSample | None,
                zacc_mps2: float) -> np.ndarray:
@@ -156,13 +180,18 @@ class Estimation:
         if self._compiled:
             # ``not``: ESTIMATED is 0 (one comparison a tick less)
             if navdata is None or not self.velocity_from_navdata:
-                if not self._kalman(self._state, px, py, pz, pose.psi_rad, pose.t_s,
-                                    zacc_mps2, False, 0.0, 0.0):
-                    return self._x
+                navdata_velocity, vx, vy = False, 0.0, 0.0
             else:
+                navdata_velocity = True
                 vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-                if not self._kalman(self._state, px, py, pz, pose.psi_rad, pose.t_s,
-                                    zacc_mps2, True, vx, vy):
+            code = self._step(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+                              navdata_velocity, vx, vy)
+            if not code:
+                return self._x
+            if code == NO_COEFFICIENTS:  # a Δt the observer's table lacks: added, stepped
+                self._add_coefficients(pose.t_s)
+                if not self._step(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+                                  navdata_velocity, vx, vy):
                     return self._x
             self._leave_compiled()  # refused: the estimators raise their own error below
         if pose.t_s != self._last_pose_t_s:

@@ -1,8 +1,11 @@
 """The tick stages' compiled steps (issue 26): the estimate, and the NMPC's inputs — the state
 the new command will meet and the reference it is solved against — each in one call.
 
-:func:`kalman_estimate` is the estimation stage's update with its default ż filter (Kalman)
-and the backward difference of x, y: six Python calls and their checks, one compiled one.
+:func:`estimate_step` is the estimation stage's update with its ż filter (the Kalman filter
+or the Luenberger observer) and the backward difference of x, y: six Python calls and their
+checks, one compiled one. The observer's coefficients for each Δt come from its own Python
+object (an expm each), kept in a small table in the state: a Δt not in it is answered
+:data:`NO_COEFFICIENTS` and the caller fills it (``runtime/estimate``).
 
 ``Control.solve`` made four calls of its own a tick before the solver's — the delay
 prediction's rollout (:meth:`~ardrone_nmpc.runtime.stages.DelayPrediction.predict`), the
@@ -27,9 +30,9 @@ from ardrone_nmpc.core.numerics import INNER_KERNEL, OUTER_KERNEL
 from ardrone_nmpc.core.types import IX_PSI, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.reference.kernels import waypoint_states
 
-__all__ = ["E_SIZE", "E_X", "ESTIMATED", "REFUSED", "TABLE_TICKS", "W_HEAD", "W_KNOTS",
-           "W_PERIOD", "W_TIMES", "fill_reference_table", "kalman_estimate", "nmpc_inputs",
-           "nmpc_work", "nmpc_work_views", "sample_waypoint_work", "table_tick",
+__all__ = ["E_SIZE", "E_STEP", "E_X", "ESTIMATED", "NO_COEFFICIENTS", "REFUSED", "TABLE_TICKS",
+           "W_HEAD", "W_KNOTS", "W_PERIOD", "W_TIMES", "estimate_step", "fill_reference_table",
+           "nmpc_inputs", "nmpc_work", "nmpc_work_views", "sample_waypoint_work", "table_tick",
            "warm_up_kernels"]
 
 
@@ -194,32 +197,40 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
                 work[row + _SHIFTED[k]] += shift[k]
 
 
-# The estimation stage's state for :func:`kalman_estimate` (``Estimation``: a Kalman ż filter
-# and the backward difference of x, y), one float64 buffer: these slots.
+# The estimation stage's state for :func:`estimate_step` (``Estimation``: a Kalman ż filter or
+# a Luenberger observer, and the backward difference of x, y), one float64 buffer: these slots.
 E_HAS_POSE = 0      # 1.0 once a pose was seen
 E_LAST_T = 1        # that pose's time
 E_Q, E_R, E_P0 = 2, 3, 4          # the filter's constants (ScalarKalmanVz's q, r, p0)
 E_MIDPOINT = 5      # 1.0: the difference models ż at mid-tick (measurement_at_midpoint)
-E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor, ż, P, K, initialised
+E_Z, E_VZ, E_P, E_K, E_INIT = 6, 7, 8, 9, 10  # its z anchor (observer: ẑ), ż, P, K, initialised
 E_HAS_PREV = 11     # the difference's previous position is held
 E_PREV_X, E_PREV_Y = 12, 13
 E_VEL_X, E_VEL_Y = 14, 15         # its velocity
-E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's view: one argument less)
-E_SIZE = 23
-#: What :func:`kalman_estimate` returns.
-ESTIMATED, REFUSED = 0, 1
+E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's view)
+E_VZ_KIND = 23      # VZ_KALMAN or VZ_LUENBERGER
+E_Z_PREV = 24       # the observer's z[k−1]
+E_STEP = 25         # the slots a step writes (before these: what before_solve puts back)
+E_TABLE = 25        # (LU_ENTRIES × LU_ENTRY) the observer's coefficients: Δt, then the ten of
+LU_ENTRY = 11       # LuenbergerVz.coefficients(Δt); an unused entry's Δt is NaN
+LU_ENTRIES = 32     # (its own cache's size: a lockstep flight sees ~15 Δt, its pose stamps')
+E_SIZE = E_TABLE + LU_ENTRIES * LU_ENTRY
+VZ_KALMAN, VZ_LUENBERGER = 0.0, 1.0
+#: What :func:`estimate_step` returns.
+ESTIMATED, REFUSED, NO_COEFFICIENTS = 0, 1, 2
 
 
 @njit(cache=True, **OUTER_KERNEL)
-def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
-                    zacc_mps2: float, navdata: bool, nav_vx_mps: float,
-                    nav_vy_mps: float) -> int:
-    """``Estimation.update`` with a ``ScalarKalmanVz`` and the backward difference of x, y
-    (their ``reset``/``update``, the same expressions in the same order) into the estimate
-    ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ are
-    ``nav_v*_mps`` (navdata, rotated by the caller), else the difference's. Returns :data:`REFUSED`, with nothing changed, for
-    an input the Python estimators refuse (non-finite, a time not after the last): the caller
-    raises their error."""
+def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
+                  zacc_mps2: float, navdata: bool, nav_vx_mps: float, nav_vy_mps: float) -> int:
+    """``Estimation.update`` with a ``ScalarKalmanVz`` or a ``LuenbergerVz`` and the backward
+    difference of x, y (their ``reset``/``update``, the same expressions in the same order)
+    into the estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots);
+    ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by the caller), else the
+    difference's. Returns, with nothing changed, :data:`REFUSED` for an input the Python
+    estimators refuse (non-finite, a time not after the last: the caller raises their error)
+    and :data:`NO_COEFFICIENTS` when the observer's table lacks this Δt (the caller adds it)."""
+    luenberger = s[E_VZ_KIND] == VZ_LUENBERGER
     if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
         if s[E_HAS_POSE] == 0.0:  # reset(z), then the difference's first position (dt = 1)
             if not (math.isfinite(pz) and math.isfinite(px) and math.isfinite(py)):
@@ -229,6 +240,7 @@ def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: flo
             s[E_P] = s[E_P0]
             s[E_K] = math.nan
             s[E_INIT] = 0.0
+            s[E_Z_PREV] = pz
             s[E_VEL_X] = 0.0
             s[E_VEL_Y] = 0.0
         else:
@@ -238,7 +250,18 @@ def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: flo
                 return REFUSED
             if s[E_INIT] == 0.0:  # the filter's first update only anchors z
                 s[E_Z] = pz
+                s[E_Z_PREV] = pz
                 s[E_INIT] = 1.0
+            elif luenberger:
+                c = _coefficients_at(s, dt)
+                if c < 0:
+                    return NO_COEFFICIENTS
+                u = zacc_mps2
+                zp, zh, vz = s[E_Z_PREV], s[E_Z], s[E_VZ]
+                s[E_Z] = s[c] * zh + s[c + 1] * vz + s[c + 4] * zp + s[c + 6] * pz + s[c + 8] * u
+                s[E_VZ] = (s[c + 2] * zh + s[c + 3] * vz + s[c + 5] * zp + s[c + 7] * pz
+                           + s[c + 9] * u)
+                s[E_Z_PREV] = pz
             else:
                 u = zacc_mps2
                 y = (pz - s[E_Z]) / dt
@@ -268,6 +291,16 @@ def kalman_estimate(s: np.ndarray, px: float, py: float, pz: float, psi_rad: flo
     return ESTIMATED
 
 
+@njit(cache=True, inline="always", **INNER_KERNEL)
+def _coefficients_at(s: np.ndarray, dt: float) -> int:
+    """Where the observer's ten coefficients for ``dt`` start in ``s``; −1: not in its table."""
+    for i in range(LU_ENTRIES):
+        at = E_TABLE + i * LU_ENTRY
+        if s[at] == dt:
+            return at + 1
+    return -1
+
+
 def sample_waypoint_work() -> tuple[int, np.ndarray, np.ndarray]:
     """A sample waypoint flight's :func:`nmpc_work`: ``(n, work, rows)`` for a two-waypoint
     trajectory and one stage (``n`` = 3 times) — what a warm-up calls the kernels taking
@@ -279,14 +312,14 @@ def sample_waypoint_work() -> tuple[int, np.ndarray, np.ndarray]:
 
 
 def warm_up_kernels(*, estimate: bool = True, nmpc: bool = True) -> None:
-    """Load (or compile) :func:`kalman_estimate` and :func:`nmpc_inputs` now — once per
+    """Load (or compile) :func:`estimate_step` and :func:`nmpc_inputs` now — once per
     process — not on the first tick aloft (``Tick``: each only if its flight uses it, a
     compile costs a cold start ~0.2 s and ~1 s of CPU; ``runtime/precompile.py`` compiles the
     estimate's in the background). Their callees are loaded from the cache first
     (``core/kernel_cache.first_warm_up``: the rollout's own machine code, cached or compiled
     alike)."""
-    if estimate and first_warm_up(kalman_estimate):
-        kalman_estimate(np.zeros(E_SIZE), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+    if estimate and first_warm_up(estimate_step):
+        estimate_step(np.zeros(E_SIZE), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
     if nmpc and first_warm_up(nmpc_inputs):
         n, work, rows = sample_waypoint_work()
         x = np.zeros(STATE_DIM)

@@ -189,8 +189,17 @@ CASES = [
      ["duration_s=10", *SETTLE, "sim.plant.battery_start_pct=23",
       "sim.plant.battery_drain_pct_per_min=30"], 7),
     ("follow_newton_tolerance", "follow_car", ["duration_s=8", *SETTLE, NEWTON, *TIGHT], 1),
-    # flights no block takes: an estimator the compiled calls do not take
+    # the Luenberger observer (its coefficients' table in the estimate's state: a Δt not
+    # in it, a tick for Python), with the P controller, through a mocap dropout
     ("square_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger"],
+     11),
+    ("p_luenberger", "square", ["duration_s=8", *SETTLE, "estimator.kind=luenberger",
+                                "controller.kind=p"], 12),
+    ("dropout_luenberger", "square", ["duration_s=10", *SETTLE, "estimator.kind=luenberger",
+                                      "faults.mocap_dropout.start_s=4",
+                                      "faults.mocap_dropout.duration_s=0.2"], 13),
+    # flights no block takes: an estimator the compiled calls do not take
+    ("square_difference", "square", ["duration_s=8", *SETTLE, "estimator.kind=difference"],
      11),
     # faults that touch the sensors' bytes (every frame and packet through the wire:
     # sim/wire_block's blocks between the faults' windows): each stream's loss, a repeated
@@ -704,10 +713,14 @@ def test_blocks_take_the_square(monkeypatch):
 @pytest.mark.parametrize("config, overrides", [
     ("ellipse", []), ("lorenz", []), ("identify", []),
     ("square", ["estimator.horizontal_velocity=navdata"]),
-], ids=["ellipse", "lorenz", "identify", "navdata_velocity"])
+    ("square", ["estimator.kind=luenberger"]), ("altitude_luenberger", []),
+    ("square", ["estimator.kind=luenberger", "controller.kind=p"]),
+], ids=["ellipse", "lorenz", "identify", "navdata_velocity", "luenberger",
+        "altitude_luenberger", "p_luenberger"])
 def test_blocks_take_the_curves_and_the_navdata_speeds(config, overrides, monkeypatch):
-    """The curves' usual ticks (their states read from a table) and those of ẋ, ẏ from the
-    navdata's speeds go in blocks: far fewer ``Tick.step`` calls than rows."""
+    """The curves' usual ticks (their states read from a table), those of ẋ, ẏ from the
+    navdata's speeds and those of the Luenberger observer go in blocks: far fewer
+    ``Tick.step`` calls than rows."""
     cfg = _config(config, ["duration_s=10", *SETTLE, *overrides])
     block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())
     rows = len(block.recorder.written)

@@ -19,7 +19,7 @@ from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime.before_solve import BeforeSolve
 from ardrone_nmpc.runtime.lockstep import experiment_trajectory, run_lockstep
 from ardrone_nmpc.runtime.tick import Tick
-from ardrone_nmpc.runtime.tick_kernels import E_X, kalman_estimate
+from ardrone_nmpc.runtime.tick_kernels import E_X, estimate_step
 from ardrone_nmpc.safety import NOMINAL, Action, Decision
 from tests.conftest import nan_equal
 
@@ -239,7 +239,7 @@ def test_the_speed_is_squared_as_python_squares():
                     1.02 + rng.uniform(-0.01, 0.01))
         inputs = _inputs(2.26, position=position)
         s = tick.estimation._state.copy()  # Estimation.update's step, on a copy
-        assert kalman_estimate(s, *position, 0.02, 2.26, 0.0, False, 0.0, 0.0) == 0
+        assert estimate_step(s, *position, 0.02, 2.26, 0.0, False, 0.0, 0.0) == 0
         x = s[E_X:E_X + 7].tolist()
         by_pow = math.sqrt(x[1] ** 2 + x[3] ** 2 + x[5] ** 2)
         by_mul = math.sqrt(x[1] * x[1] + x[3] * x[3] + x[5] * x[5])

@@ -172,7 +172,7 @@ def test_a_p_flight_s_rows_have_no_solver_cells(monkeypatch):
 
 @pytest.mark.parametrize("overrides, taken", [
     (["controller.kind=p"], True),
-    (["controller.kind=p", "estimator.kind=luenberger"], False),  # (not the compiled one)
+    (["controller.kind=p", "estimator.kind=difference"], False),  # (not a compiled one)
 ])
 def test_the_p_controller_s_tick_is_compiled_against_waypoints(overrides, taken):
     cfg = load_config(CONFIGS / "square.yaml", overrides)

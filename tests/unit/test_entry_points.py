@@ -133,9 +133,9 @@ def test_a_vetted_call_copied_or_pickled_starts_afresh_with_the_same_kernel():
         twin(a, b, 0.5, True, 3)
         assert len(calls) == 2 and twin.entry is None  # a first sight: the dispatcher
         del calls[1:]
-    from ardrone_nmpc.runtime.estimate import _KALMAN  # a module-level kernel pickles
-    twin = pickle.loads(pickle.dumps(_KALMAN))
-    assert twin.kernel is _KALMAN.kernel and twin.kinds == _KALMAN.kinds and twin.entry is None
+    from ardrone_nmpc.runtime.estimate import _STEP  # a module-level kernel pickles
+    twin = pickle.loads(pickle.dumps(_STEP))
+    assert twin.kernel is _STEP.kernel and twin.kinds == _STEP.kinds and twin.entry is None
 
 
 class _Owner:

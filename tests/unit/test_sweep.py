@@ -417,7 +417,7 @@ from ardrone_nmpc.runs.path_kernels import polyline_distances_m
 from ardrone_nmpc.core.kernel_cache import warmed
 from ardrone_nmpc.runtime import tick_kernels
 warm_up()
-print(warmed(tick_kernels.kalman_estimate), warmed(tick_kernels.nmpc_inputs),
+print(warmed(tick_kernels.estimate_step), warmed(tick_kernels.nmpc_inputs),
       len(polyline_distances_m.overloads))
 """
 

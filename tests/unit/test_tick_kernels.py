@@ -234,10 +234,14 @@ def _estimations(*overrides: str):
     return compiled, python
 
 
+@pytest.mark.parametrize("kind", ["kalman", "luenberger"])
 @pytest.mark.parametrize("horizontal", ["difference", "navdata"])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
-    compiled, python = _estimations(f"horizontal_velocity={horizontal}")
+def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed, kind):
+    """Either ż estimator: the compiled step's estimate is the objects' own, bit for bit, over
+    poses of ~60 distinct Δt (more than the observer's table holds: entries replaced), a
+    pose seen again and a gap; then the objects carry on from the state it reached."""
+    compiled, python = _estimations(f"horizontal_velocity={horizontal}", f"kind={kind}")
     assert compiled._compiled and not python._compiled
     for k, (p, zacc) in enumerate(_poses(seed)):
         nav = _nav(k) if k % 3 else None
@@ -248,8 +252,7 @@ def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
     # the objects, asked for, hold the state the compiled step reached: the same from here on
     kf, kp = compiled.vz_estimator, python.vz_estimator
     assert not compiled._compiled
-    assert (kf.z_m, kf.vz_mps, kf.covariance, kf.gain) == (kp.z_m, kp.vz_mps, kp.covariance,
-                                                           kp.gain)
+    assert kf.state() == kp.state() and kf.vz_mps == kp.vz_mps and kf.z_m == kp.z_m
     assert compiled.xy_difference.velocity_mps == python.xy_difference.velocity_mps
     for p, zacc in _poses(seed + 10):
         shifted = type(p)(p.t_s + 100.0, p.position_m, p.rotation_xyz_rad, p.psi_rad)
@@ -257,12 +260,43 @@ def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed):
                 == python.update(shifted, None, zacc).tobytes())
 
 
+def test_the_observer_s_step_asks_for_a_missing_interval_and_writes_nothing():
+    """The compiled step of a Luenberger observer meets a Δt its table lacks: it answers
+    NO_COEFFICIENTS with its state untouched; the stage adds the Δt's coefficients (the
+    object's own) and steps; the next pose at the same Δt finds them (no entry added)."""
+    from ardrone_nmpc.core.types import MocapPose
+    from ardrone_nmpc.runtime.tick_kernels import (E_TABLE, LU_ENTRY, NO_COEFFICIENTS,
+                                                   estimate_step)
+
+    def pose(t_s):  # times on a binary grid: every Δt is exactly 1/16 s
+        return MocapPose(t_s, np.array([0.0, 0.0, 1.0 + t_s]), np.zeros(3), 0.0)
+
+    est, _ = _estimations("kind=luenberger")
+    keys = est._state[E_TABLE:E_TABLE + 3 * LU_ENTRY:LU_ENTRY]  # (a view)
+    est.update(pose(0.0), None, 0.5)  # resets
+    est.update(pose(0.0625), None, 0.5)  # anchors ẑ: no coefficients asked
+    assert np.isnan(keys).all()
+    state = est._state.copy()
+    assert estimate_step(state, 0.0, 0.0, 1.125, 0.0, 0.125, 0.5, False, 0.0, 0.0) == (
+        NO_COEFFICIENTS)
+    assert state.tobytes() == est._state.tobytes()  # nothing written
+    est.update(pose(0.125), None, 0.5)
+    assert est._compiled and keys[0] == 0.0625 and np.isnan(keys[1:]).all()
+    assert est._state[E_TABLE + 1:E_TABLE + LU_ENTRY].tolist() == list(
+        est._vz_estimator.coefficients(0.0625))
+    est._compiled = True  # (the property above left it: back, the state unchanged)
+    est.update(pose(0.1875), None, 0.5)
+    assert np.isnan(keys[1:]).all()  # found: no new entry
+    est.update(pose(0.3125), None, 0.5)
+    assert keys[1] == 0.125
+
+
 def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does():
     """The compiled step is called by its entry point once known (no look-up of the
     arguments' types): numbers of other types than float — ints, numpy scalars — give the
     bits the dispatcher's own specialisation for them gives."""
     from ardrone_nmpc.core.types import MocapPose
-    from ardrone_nmpc.runtime.tick_kernels import E_X, kalman_estimate
+    from ardrone_nmpc.runtime.tick_kernels import E_X, estimate_step
 
     est, _ = _estimations()
     kinds = (np.float32, int, np.float64, np.int64, float)
@@ -272,13 +306,13 @@ def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does
                         kind(p.psi_rad))
         state = est._state.copy()
         estimate = est.update(odd, None, kind(zacc)).copy()
-        assert kalman_estimate(state, *odd.position_m.tolist(), odd.psi_rad, odd.t_s,
+        assert estimate_step(state, *odd.position_m.tolist(), odd.psi_rad, odd.t_s,
                                kind(zacc), False, 0.0, 0.0) == 0
-        assert estimate.tobytes() == state[E_X:].tobytes() and est._state.tobytes() == (
+        assert estimate.tobytes() == state[E_X:E_X + 7].tobytes() and est._state.tobytes() == (
             state.tobytes()), k
-    from ardrone_nmpc.runtime.estimate import _KALMAN
-    entry = _KALMAN.entry_for(est._state)
-    assert entry is not None and est._kalman is entry  # the entry point
+    from ardrone_nmpc.runtime.estimate import _STEP
+    entry = _STEP.entry_for(est._state)
+    assert entry is not None and est._step is entry  # the entry point
 
 
 @pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
@@ -312,11 +346,12 @@ def test_a_copied_estimation_estimates_as_the_original(copier, compiled):
 # the first pose only resets the estimators: a bad z̈ or interval needs a pose before it
 @pytest.mark.parametrize("first,bad", [(True, "z"), (True, "x"), (True, "t_nan")]
                          + [(False, b) for b in ("z", "x", "zacc", "dt", "t_nan")])
-def test_the_compiled_estimate_refuses_what_the_estimators_refuse(bad, first):
+@pytest.mark.parametrize("kind", ["kalman", "luenberger"])
+def test_the_compiled_estimate_refuses_what_the_estimators_refuse(bad, first, kind):
     from ardrone_nmpc.core.types import MocapPose
     from ardrone_nmpc.estimation.base import EstimatorError
 
-    compiled, python = _estimations()
+    compiled, python = _estimations(f"kind={kind}")
     if not first:
         for est in (compiled, python):
             est.update(MocapPose(1.0, np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0), None, 0.0)
