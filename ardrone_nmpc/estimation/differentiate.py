@@ -32,6 +32,13 @@ class NoVz:
     def vz_mps(self) -> float:
         return 0.0
 
+    def state(self) -> tuple:
+        """Nothing: what a compiled step carries on (``runtime/tick_kernels.estimate_step``)."""
+        return ()
+
+    def set_state(self) -> None:
+        """Put back a :meth:`state` (nothing)."""
+
     def __repr__(self) -> str:
         return "NoVz()"
 
@@ -59,6 +66,15 @@ class FiniteDifferenceVz:
         self._initialised = True
         self._z_m = z
         return self._vz
+
+    def state(self) -> tuple[float, float, bool]:
+        """(z anchor, ż, initialised): what a compiled step carries on
+        (``runtime/tick_kernels.estimate_step``, the same arithmetic)."""
+        return self._z_m, self._vz, self._initialised
+
+    def set_state(self, z_m: float, vz_mps: float, initialised: bool) -> None:
+        """Put back a :meth:`state` (after a compiled step carried it on)."""
+        self._z_m, self._vz, self._initialised = z_m, vz_mps, bool(initialised)
 
     @property
     def vz_mps(self) -> float:

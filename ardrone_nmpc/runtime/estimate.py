@@ -16,12 +16,14 @@ from ardrone_nmpc.core.entry_points import ArrayKind, VettedCall
 from ardrone_nmpc.core.types import IX_PSI, IX_VX, IX_VY, IX_VZ, IX_X, IX_Y, IX_Z, STATE_DIM
 from ardrone_nmpc.core.types import MocapPose, NavdataSample
 from ardrone_nmpc.estimation import BackwardDifference, make_vz_estimator
+from ardrone_nmpc.estimation.differentiate import FiniteDifferenceVz, NoVz
 from ardrone_nmpc.estimation.kalman import ScalarKalmanVz
 from ardrone_nmpc.estimation.luenberger import LuenbergerVz
 from ardrone_nmpc.runtime.tick_kernels import (
     E_HAS_POSE, E_HAS_PREV, E_INIT, E_K, E_LAST_T, E_MIDPOINT, E_P, E_P0, E_PREV_X, E_PREV_Y,
     E_Q, E_R, E_SIZE, E_TABLE, E_VEL_X, E_VEL_Y, E_VZ, E_VZ_KIND, E_X, E_Z, E_Z_PREV,
-    ESTIMATED, LU_ENTRIES, LU_ENTRY, NO_COEFFICIENTS, VZ_KALMAN, VZ_LUENBERGER, estimate_step,
+    ESTIMATED, LU_ENTRIES, LU_ENTRY, NO_COEFFICIENTS, VZ_DIFFERENCE, VZ_KALMAN, VZ_LUENBERGER,
+    VZ_NONE, estimate_step,
 )
 
 __all__ = ["Estimation", "navdata_velocity_world"]
@@ -34,8 +36,12 @@ _NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the gen
 
 #: ``estimate_step``'s call on an estimation's own state and float numbers (the flags: bools)
 _STEP = VettedCall(estimate_step, ArrayKind(1), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
-#: the ż estimators the compiled step carries on, and its name for each
-_VZ_KINDS = {ScalarKalmanVz: VZ_KALMAN, LuenbergerVz: VZ_LUENBERGER}
+#: the ż estimators the compiled step carries on: its name for each, and the slots their
+#: ``state()`` goes to (``set_state`` takes it back)
+_VZ_KINDS = {ScalarKalmanVz: (VZ_KALMAN, (E_Z, E_VZ, E_P, E_K, E_INIT)),
+             LuenbergerVz: (VZ_LUENBERGER, (E_Z, E_VZ, E_Z_PREV, E_INIT)),
+             FiniteDifferenceVz: (VZ_DIFFERENCE, (E_Z, E_VZ, E_INIT)),
+             NoVz: (VZ_NONE, ())}
 
 
 def navdata_velocity_world(nav: NavdataSample, psi_rad: float) -> tuple[float, float]:
@@ -67,8 +73,8 @@ class Estimation:
         self.velocity_from_navdata = est_cfg.horizontal_velocity == "navdata"
         self._last_pose_t_s: float | None = None
         self._x = np.zeros(STATE_DIM)
-        # the ż estimator's (Kalman filter or Luenberger observer) and the difference's state in
-        # one buffer, updated by one compiled call (runtime/tick_kernels.estimate_step) until
+        # the ż estimator's (any of estimator.kind's) and the difference's state in one buffer,
+        # updated by one compiled call (runtime/tick_kernels.estimate_step) until
         # someone asks for the estimator objects themselves: they get it back (_leave_compiled)
         self._compiled = type(self._vz_estimator) in _VZ_KINDS
         if self._compiled:
@@ -131,12 +137,10 @@ class Estimation:
         s[E_HAS_POSE] = self._last_pose_t_s is not None
         s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
         vz = self._vz_estimator
-        s[E_VZ_KIND] = _VZ_KINDS[type(vz)]
+        s[E_VZ_KIND], slots = _VZ_KINDS[type(vz)]
         if s[E_VZ_KIND] == VZ_KALMAN:
             s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = vz.constants
-            s[E_Z], s[E_VZ], s[E_P], s[E_K], s[E_INIT] = vz.state()
-        else:
-            s[E_Z], s[E_VZ], s[E_Z_PREV], s[E_INIT] = vz.state()
+        s[list(slots)] = vz.state()
         s[E_TABLE:E_TABLE + LU_ENTRIES * LU_ENTRY:LU_ENTRY] = math.nan  # no Δt yet
         self._next_entry = 0
         previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
@@ -149,13 +153,11 @@ class Estimation:
         if not self._compiled:
             return
         self._compiled = False
-        (has_pose, last_t, _, _, _, _, z, vz, p, k, initialised, has_prev, prev_x, prev_y,
-         vel_x, vel_y) = self._state[:E_X].tolist()
+        (has_pose, last_t, *_, has_prev, prev_x, prev_y, vel_x, vel_y) = (
+            self._state[:E_X].tolist())
         self._last_pose_t_s = last_t if has_pose else None
-        if self._state[E_VZ_KIND] == VZ_KALMAN:
-            self._vz_estimator.set_state(z, vz, p, k, initialised != 0.0)
-        else:
-            self._vz_estimator.set_state(z, vz, float(self._state[E_Z_PREV]), initialised != 0.0)
+        _, slots = _VZ_KINDS[type(self._vz_estimator)]
+        self._vz_estimator.set_state(*self._state[list(slots)].tolist())
         self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
 
     def _add_coefficients(self, t_s) -> None:

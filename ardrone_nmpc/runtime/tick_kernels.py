@@ -208,14 +208,15 @@ E_HAS_PREV = 11     # the difference's previous position is held
 E_PREV_X, E_PREV_Y = 12, 13
 E_VEL_X, E_VEL_Y = 14, 15         # its velocity
 E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's view)
-E_VZ_KIND = 23      # VZ_KALMAN or VZ_LUENBERGER
+E_VZ_KIND = 23      # VZ_KALMAN, VZ_LUENBERGER, VZ_DIFFERENCE or VZ_NONE
 E_Z_PREV = 24       # the observer's z[k−1]
 E_STEP = 25         # the slots a step writes (before these: what before_solve puts back)
 E_TABLE = 25        # (LU_ENTRIES × LU_ENTRY) the observer's coefficients: Δt, then the ten of
 LU_ENTRY = 11       # LuenbergerVz.coefficients(Δt); an unused entry's Δt is NaN
 LU_ENTRIES = 32     # (its own cache's size: a lockstep flight sees ~15 Δt, its pose stamps')
 E_SIZE = E_TABLE + LU_ENTRIES * LU_ENTRY
-VZ_KALMAN, VZ_LUENBERGER = 0.0, 1.0
+#: the ż estimators (``estimator.kind``): kalman, luenberger, difference, none (ż ≡ 0)
+VZ_KALMAN, VZ_LUENBERGER, VZ_DIFFERENCE, VZ_NONE = 0.0, 1.0, 2.0, 3.0
 #: What :func:`estimate_step` returns.
 ESTIMATED, REFUSED, NO_COEFFICIENTS = 0, 1, 2
 
@@ -223,14 +224,14 @@ ESTIMATED, REFUSED, NO_COEFFICIENTS = 0, 1, 2
 @njit(cache=True, **OUTER_KERNEL)
 def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
                   zacc_mps2: float, navdata: bool, nav_vx_mps: float, nav_vy_mps: float) -> int:
-    """``Estimation.update`` with a ``ScalarKalmanVz`` or a ``LuenbergerVz`` and the backward
-    difference of x, y (their ``reset``/``update``, the same expressions in the same order)
+    """``Estimation.update`` with its ż estimator (``s[E_VZ_KIND]``: a ``ScalarKalmanVz``, a
+    ``LuenbergerVz``, a ``FiniteDifferenceVz`` or a ``NoVz``) and the backward difference of x, y (their ``reset``/``update``, the same expressions in the same order)
     into the estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots);
     ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by the caller), else the
     difference's. Returns, with nothing changed, :data:`REFUSED` for an input the Python
     estimators refuse (non-finite, a time not after the last: the caller raises their error)
     and :data:`NO_COEFFICIENTS` when the observer's table lacks this Δt (the caller adds it)."""
-    luenberger = s[E_VZ_KIND] == VZ_LUENBERGER
+    kind = s[E_VZ_KIND]
     if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
         if s[E_HAS_POSE] == 0.0:  # reset(z), then the difference's first position (dt = 1)
             if not (math.isfinite(pz) and math.isfinite(px) and math.isfinite(py)):
@@ -252,7 +253,7 @@ def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float
                 s[E_Z] = pz
                 s[E_Z_PREV] = pz
                 s[E_INIT] = 1.0
-            elif luenberger:
+            elif kind == VZ_LUENBERGER:
                 c = _coefficients_at(s, dt)
                 if c < 0:
                     return NO_COEFFICIENTS
@@ -262,7 +263,7 @@ def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float
                 s[E_VZ] = (s[c + 2] * zh + s[c + 3] * vz + s[c + 5] * zp + s[c + 7] * pz
                            + s[c + 9] * u)
                 s[E_Z_PREV] = pz
-            else:
+            elif kind == VZ_KALMAN:
                 u = zacc_mps2
                 y = (pz - s[E_Z]) / dt
                 vz_prior = s[E_VZ] + dt * u
@@ -273,6 +274,10 @@ def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float
                 s[E_P] = (1.0 - k) * p_prior
                 s[E_K] = k
                 s[E_Z] = pz
+            elif kind == VZ_DIFFERENCE:
+                s[E_VZ] = (pz - s[E_Z]) / dt
+                s[E_Z] = pz
+            # (VZ_NONE: ż stays the 0.0 of the reset)
             if s[E_HAS_PREV] != 0.0:
                 s[E_VEL_X] = (px - s[E_PREV_X]) / dt
                 s[E_VEL_Y] = (py - s[E_PREV_Y]) / dt

@@ -12,9 +12,9 @@ The objects are caught by wrapping ``LockstepDrone.__init__`` and ``Tick.__init_
 in the product is changed for it. Cases: waypoint flights (the ones whose ticks the compiled
 controller takes) with each option that changes their tick, a saturating command, a climb
 at the altitude cap, a supervisor's landing, curves read from a table, ẋ, ẏ from the
-navdata's speeds, injected faults (blocks between the ticks at which one may act), faults of
-the sensors' bytes (the wire's blocks: the receiving link's whole state and the datagrams on
-their way compared too), and flights no block takes. Without
+navdata's speeds, every ż estimator, injected faults (blocks between the ticks at which one
+may act), faults of the sensors' bytes (the wire's blocks: the receiving link's whole state
+and the datagrams on their way compared too). Without
 ``BLOCK_TICKS`` (a tree before blocks) the comparisons skip. The lead's gate with more
 flights: ``benchmarks/tick_equivalence.py``.
 """
@@ -198,9 +198,10 @@ CASES = [
     ("dropout_luenberger", "square", ["duration_s=10", *SETTLE, "estimator.kind=luenberger",
                                       "faults.mocap_dropout.start_s=4",
                                       "faults.mocap_dropout.duration_s=0.2"], 13),
-    # flights no block takes: an estimator the compiled calls do not take
+    # the other ż estimators: the difference, none (ż ≡ 0: the thesis' first altitude flight)
     ("square_difference", "square", ["duration_s=8", *SETTLE, "estimator.kind=difference"],
      11),
+    ("altitude_none", "altitude_none", ["duration_s=8", *SETTLE], 3),
     # faults that touch the sensors' bytes (every frame and packet through the wire:
     # sim/wire_block's blocks between the faults' windows): each stream's loss, a repeated
     # dropout, a zero pose, extra latency, both disorders, corruption, a blackout (the
@@ -715,11 +716,12 @@ def test_blocks_take_the_square(monkeypatch):
     ("square", ["estimator.horizontal_velocity=navdata"]),
     ("square", ["estimator.kind=luenberger"]), ("altitude_luenberger", []),
     ("square", ["estimator.kind=luenberger", "controller.kind=p"]),
+    ("square", ["estimator.kind=difference"]), ("altitude_none", []),
 ], ids=["ellipse", "lorenz", "identify", "navdata_velocity", "luenberger",
-        "altitude_luenberger", "p_luenberger"])
+        "altitude_luenberger", "p_luenberger", "difference", "altitude_none"])
 def test_blocks_take_the_curves_and_the_navdata_speeds(config, overrides, monkeypatch):
     """The curves' usual ticks (their states read from a table), those of ẋ, ẏ from the
-    navdata's speeds and those of the Luenberger observer go in blocks: far fewer
+    navdata's speeds and those of the other ż estimators go in blocks: far fewer
     ``Tick.step`` calls than rows."""
     cfg = _config(config, ["duration_s=10", *SETTLE, *overrides])
     block = fly(cfg, 0, monkeypatch, block_ticks=None, wanted=set())

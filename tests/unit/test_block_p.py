@@ -170,12 +170,14 @@ def test_a_p_flight_s_rows_have_no_solver_cells(monkeypatch):
         assert row["solver_status"] == "" and math.isnan(row["u_zacc_mps2"])
 
 
-@pytest.mark.parametrize("overrides, taken", [
-    (["controller.kind=p"], True),
-    (["controller.kind=p", "estimator.kind=difference"], False),  # (not a compiled one)
+@pytest.mark.parametrize("config, overrides, taken", [
+    ("square", ["controller.kind=p"], True),
+    *(("square", ["controller.kind=p", f"estimator.kind={kind}"], True)
+      for kind in ("luenberger", "difference", "none")),  # (every ż estimator: compiled)
+    ("ellipse", ["controller.kind=p"], False),  # (a curve's table: not p_tick's)
 ])
-def test_the_p_controller_s_tick_is_compiled_against_waypoints(overrides, taken):
-    cfg = load_config(CONFIGS / "square.yaml", overrides)
+def test_the_p_controller_s_tick_is_compiled_against_waypoints(config, overrides, taken):
+    cfg = load_config(CONFIGS / f"{config}.yaml", overrides)
     from ardrone_nmpc.reference.experiment import experiment_trajectory
 
     tick = Tick(cfg, experiment_trajectory(cfg))
