@@ -35,6 +35,8 @@ CASES = [
     ("square, navdata speeds", "square", ["estimator.horizontal_velocity=navdata"]),
     ("square, Luenberger", "square", ["estimator.kind=luenberger"]),
     ("altitude_luenberger", "altitude_luenberger", []),
+    ("square, difference ż", "square", ["estimator.kind=difference"]),
+    ("altitude_none", "altitude_none", []),
     ("square, wind, delay 0.4 s, gain 2", "square",
      [WIND, "sim.plant.command_delay_s=0.4", "sim.plant.attitude_gain=2.0"]),
     ("square, delay 0.2 s, gain 0.6, lag 0.2 s", "square",

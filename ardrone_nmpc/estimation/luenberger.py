@@ -19,8 +19,9 @@ only sampled, so the observer needs a guess of y between samples:
   a 1 m/s ramp and −84 mm/s per m/s² of constant z̈ (checked against a fine ODE solve).
 
 Both are exact integrals of the continuous observer, computed from the matrix exponential of
-an augmented 5×5 system (state [x̂, y, ẏ, u]) and cached per Δt (small LRU), so a constant tick
-period costs one expm in total and each update is a dozen float operations.
+an augmented 5×5 system (state [x̂, y, ẏ, u]) and cached per Δt (small LRU, shared by the
+observers of one gain in a process), so a constant tick period costs one expm in total and
+each update is a dozen float operations.
 """
 
 from __future__ import annotations
@@ -36,6 +37,10 @@ __all__ = ["LuenbergerVz", "observer_gain", "observer_matrix", "THESIS_LAMBDA0_P
 
 THESIS_LAMBDA0_PER_S = 5.0
 _CACHE_SIZE = 32  # distinct dt values kept; jittery real-time dt evicts, lockstep dt always hits
+#: the coefficients by Δt of each (gain, measurement hold), shared by a process' observers (a
+#: sweep's flights meet the same Δt: one expm each); a pure function of the key, so sharing
+#: changes no bit
+_SHARED_CACHES: dict[tuple, OrderedDict[float, tuple[float, ...]]] = {}
 
 # Observer system matrices of eq. 4.11 (for reference and tests).
 A_MATRIX = np.array([[0.0, 1.0], [0.0, 0.0]])
@@ -116,7 +121,7 @@ class LuenbergerVz:
                 f"measurement_hold must be 'model' or 'zoh', got {measurement_hold!r}"
             )
         self._hold = measurement_hold
-        self._cache: OrderedDict[float, tuple[float, ...]] = OrderedDict()
+        self._cache = _SHARED_CACHES.setdefault((self._gain, self._hold), OrderedDict())
         self.reset(0.0, 0.0)
 
     # -- discretisation -------------------------------------------------------------------
@@ -177,6 +182,11 @@ class LuenbergerVz:
         if len(self._cache) > _CACHE_SIZE:
             self._cache.popitem(last=False)
         return coeffs
+
+    def cached_coefficients(self) -> list[tuple[float, tuple[float, ...]]]:
+        """The (Δt, :meth:`coefficients`) pairs known now, the latest used last (at most 32:
+        what a compiled step's table starts with, ``runtime/estimate``)."""
+        return list(self._cache.items())
 
     # -- estimator interface --------------------------------------------------------------
     def reset(self, z_m: float, vz_mps: float = 0.0) -> None:

@@ -143,6 +143,9 @@ class Estimation:
         s[list(slots)] = vz.state()
         s[E_TABLE:E_TABLE + LU_ENTRIES * LU_ENTRY:LU_ENTRY] = math.nan  # no Δt yet
         self._next_entry = 0
+        if s[E_VZ_KIND] == VZ_LUENBERGER:  # but those the observer knows (earlier flights')
+            for dt_s, _ in vz.cached_coefficients()[-LU_ENTRIES:]:
+                self._add_coefficients(dt_s)
         previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
         s[E_HAS_PREV] = previous is not None
         s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
@@ -160,15 +163,13 @@ class Estimation:
         self._vz_estimator.set_state(*self._state[list(slots)].tolist())
         self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
 
-    def _add_coefficients(self, t_s) -> None:
-        """The observer's coefficients for the Δt from the last pose to ``t_s`` (the step's own
-        difference, in float64) into the step's table, over its oldest entry; they are its
-        Python object's (``LuenbergerVz.coefficients``): the same bits either way."""
+    def _add_coefficients(self, dt_s: float) -> None:
+        """The observer's coefficients for ``dt_s`` into the step's table, over its oldest
+        entry: its Python object's (``LuenbergerVz.coefficients``), the same bits either way."""
         s = self._state
-        dt = float(t_s) - float(s[E_LAST_T])
         at = E_TABLE + self._next_entry * LU_ENTRY
-        s[at + 1:at + LU_ENTRY] = self._vz_estimator.coefficients(dt)
-        s[at] = dt
+        s[at + 1:at + LU_ENTRY] = self._vz_estimator.coefficients(dt_s)
+        s[at] = dt_s
         self._next_entry = (self._next_entry + 1) % LU_ENTRIES
 
     def update(self, pose: MocapPose, navdata: NavdataSample | None,
@@ -191,7 +192,8 @@ class Estimation:
             if not code:
                 return self._x
             if code == NO_COEFFICIENTS:  # a Δt the observer's table lacks: added, stepped
-                self._add_coefficients(pose.t_s)
+                # (the step's own Δt: its float64 difference)
+                self._add_coefficients(float(pose.t_s) - float(self._state[E_LAST_T]))
                 if not self._step(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
                                   navdata_velocity, vx, vy):
                     return self._x

@@ -260,11 +260,14 @@ def test_the_compiled_estimate_is_the_python_one_bit_for_bit(horizontal, seed, k
                 == python.update(shifted, None, zacc).tobytes())
 
 
-def test_the_observer_s_step_asks_for_a_missing_interval_and_writes_nothing():
+def test_the_observer_s_step_asks_for_a_missing_interval_and_writes_nothing(monkeypatch):
     """The compiled step of a Luenberger observer meets a Δt its table lacks: it answers
     NO_COEFFICIENTS with its state untouched; the stage adds the Δt's coefficients (the
     object's own) and steps; the next pose at the same Δt finds them (no entry added)."""
     from ardrone_nmpc.core.types import MocapPose
+    from ardrone_nmpc.estimation import luenberger
+
+    monkeypatch.setattr(luenberger, "_SHARED_CACHES", {})  # no Δt known in this process
     from ardrone_nmpc.runtime.tick_kernels import (E_TABLE, LU_ENTRY, NO_COEFFICIENTS,
                                                    estimate_step)
 
@@ -289,6 +292,32 @@ def test_the_observer_s_step_asks_for_a_missing_interval_and_writes_nothing():
     assert np.isnan(keys[1:]).all()  # found: no new entry
     est.update(pose(0.3125), None, 0.5)
     assert keys[1] == 0.125
+
+
+def test_an_observer_s_table_starts_with_the_intervals_its_process_knows(monkeypatch):
+    """A Luenberger observer's compiled step starts with the coefficients of the Δt the
+    process' observers of its gain met (a sweep's next flight): a second flight of the same
+    poses asks for none, and its estimates are still the Python objects' bit for bit."""
+    from ardrone_nmpc.estimation import luenberger
+    from ardrone_nmpc.runtime.tick_kernels import E_TABLE, LU_ENTRIES, LU_ENTRY
+
+    monkeypatch.setattr(luenberger, "_SHARED_CACHES", {})
+    poses = [(p, zacc) for p, zacc in _poses(3) if p.t_s < 1.0]  # (fewer Δt than entries)
+    first, _ = _estimations("kind=luenberger")
+    assert np.isnan(first._state[E_TABLE::LU_ENTRY]).all()
+    for p, zacc in poses:
+        first.update(p, None, zacc)
+    met = first._state[E_TABLE::LU_ENTRY]
+    met = set(met[~np.isnan(met)].tolist())
+    assert 3 < len(met) < LU_ENTRIES
+    second, python = _estimations("kind=luenberger")
+    assert met <= set(second._state[E_TABLE::LU_ENTRY].tolist())
+    added = []
+    monkeypatch.setattr(type(second), "_add_coefficients",
+                        lambda self, dt_s: added.append(dt_s))  # (asked: fails below)
+    for p, zacc in poses:
+        assert second.update(p, None, zacc).tobytes() == python.update(p, None, zacc).tobytes()
+    assert second._compiled and added == []
 
 
 def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does():
