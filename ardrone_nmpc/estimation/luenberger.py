@@ -39,8 +39,9 @@ THESIS_LAMBDA0_PER_S = 5.0
 _CACHE_SIZE = 32  # distinct dt values kept; jittery real-time dt evicts, lockstep dt always hits
 #: the coefficients by Δt of each (gain, measurement hold), shared by a process' observers (a
 #: sweep's flights meet the same Δt: one expm each); a pure function of the key, so sharing
-#: changes no bit
-_SHARED_CACHES: dict[tuple, OrderedDict[float, tuple[float, ...]]] = {}
+#: changes no bit. The latest 64 gains' (a tune of the gain: a new one each trial)
+_SHARED_CACHES: OrderedDict[tuple, OrderedDict[float, tuple[float, ...]]] = OrderedDict()
+_SHARED_GAINS = 64
 
 # Observer system matrices of eq. 4.11 (for reference and tests).
 A_MATRIX = np.array([[0.0, 1.0], [0.0, 0.0]])
@@ -87,6 +88,19 @@ def _check_gain(gain: Sequence[float]) -> tuple[float, float]:
     return k1, k2
 
 
+def _shared_cache(key: tuple) -> OrderedDict[float, tuple[float, ...]]:
+    """The process' coefficient cache of ``key`` (gain, hold), made if new (the oldest gain's
+    forgotten beyond :data:`_SHARED_GAINS`: an observer holding it keeps it as its own)."""
+    cache = _SHARED_CACHES.get(key)
+    if cache is None:
+        cache = _SHARED_CACHES[key] = OrderedDict()
+        if len(_SHARED_CACHES) > _SHARED_GAINS:
+            _SHARED_CACHES.popitem(last=False)
+    else:
+        _SHARED_CACHES.move_to_end(key)
+    return cache
+
+
 class LuenbergerVz:
     """Luenberger observer of eq. 4.11 for ż, exactly discretised for each tick's Δt.
 
@@ -121,7 +135,7 @@ class LuenbergerVz:
                 f"measurement_hold must be 'model' or 'zoh', got {measurement_hold!r}"
             )
         self._hold = measurement_hold
-        self._cache = _SHARED_CACHES.setdefault((self._gain, self._hold), OrderedDict())
+        self._cache = _shared_cache((self._gain, self._hold))
         self.reset(0.0, 0.0)
 
     # -- discretisation -------------------------------------------------------------------

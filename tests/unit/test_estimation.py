@@ -224,6 +224,23 @@ class TestLuenberger:
             obs.update(0.0, 0.0, 0.06 + 1e-5 * k)
         assert len(obs._cache) <= 32
 
+    def test_the_cache_is_shared_by_one_gain_s_observers_and_bounded(self, monkeypatch):
+        from collections import OrderedDict
+
+        from ardrone_nmpc.estimation import luenberger
+
+        monkeypatch.setattr(luenberger, "_SHARED_CACHES", OrderedDict())
+        a, b = LuenbergerVz(gain=(10.0, 25.0)), LuenbergerVz(gain=(10.0, 25.0))
+        zoh = LuenbergerVz(gain=(10.0, 25.0), measurement_hold="zoh")
+        assert a._cache is b._cache and zoh._cache is not a._cache
+        assert a.coefficients(DT) == b.cached_coefficients()[0][1]
+        assert zoh.coefficients(DT) != a.coefficients(DT)  # (a key of its own)
+        for k in range(luenberger._SHARED_GAINS):  # a tune's gains: the oldest forgotten
+            LuenbergerVz(gain=(1.0 + k, 1.0))
+        assert len(luenberger._SHARED_CACHES) == luenberger._SHARED_GAINS
+        assert a._cache is not LuenbergerVz(gain=(10.0, 25.0))._cache
+        assert a.coefficients(DT) == LuenbergerVz(gain=(10.0, 25.0)).coefficients(DT)
+
     @pytest.mark.parametrize("gain", [(-10.0, 25.0), (10.0, 0.0), (10.0, -25.0), (0.0, 25.0)])
     def test_non_hurwitz_gain_rejected(self, gain):
         with pytest.raises(ValueError, match="Hurwitz"):
