@@ -48,8 +48,8 @@ def make_vz_estimator(
 
     Parameters
     ----------
-    kind : {"kalman", "luenberger", "difference"}
-        Which estimator.
+    kind : {"kalman", "luenberger", "difference", "none"}
+        Which estimator ("none": ż ≡ 0).
     kalman_q, kalman_r, kalman_p0 : float
         Kalman process/measurement variance per step and initial covariance, (m/s)².
         Defaults: the thesis' Q = 2.8559e-4, R = 3.2e-3, and P0 = 1e-2.

@@ -240,6 +240,7 @@ class BeforeSolve:
         # Python floats (as the links give them): numpy's scalars answer numpy ages, float32
         # ones compare in float32 (NEP 50) — the Python stages' ticks, not the kernel's
         if not (pos.__class__ is _NDARRAY and t_s.__class__ is _FLOAT
+                and pose.t_s.__class__ is _FLOAT
                 and pose_rx.__class__ is _FLOAT and nav_rx.__class__ is _FLOAT
                 and battery.__class__ is _FLOAT and roll.__class__ is _FLOAT
                 and pitch.__class__ is _FLOAT):

@@ -32,6 +32,7 @@ __all__ = ["Estimation", "navdata_velocity_world"]
 assert (IX_X, IX_VX, IX_Y, IX_VY, IX_Z, IX_VZ, IX_PSI) == tuple(range(STATE_DIM))
 assert ESTIMATED == 0  # Estimation.update tests estimate_step's answer for truth
 _NDARRAY = np.ndarray  # a pose's position: an ndarray (a subclass takes the general spelling)
+_FLOAT = float
 
 
 #: ``estimate_step``'s call on an estimation's own state and float numbers (the flags: bools)
@@ -180,6 +181,11 @@ class Estimation:
         """
         pos = pose.position_m  # as Python floats: numpy's scalars cost ~10× to handle
         px, py, pz = pos.tolist() if pos.__class__ is _NDARRAY else map(float, pos)
+        t_s = pose.t_s
+        if t_s.__class__ is not _FLOAT and not isinstance(t_s, (float, int)):
+            # a float32 stamp, say: the Python path's Δt is its type's difference, the
+            # step's a float64's — the objects carry on
+            self._leave_compiled()
         if self._compiled:
             # ``not``: ESTIMATED is 0 (one comparison a tick less)
             if navdata is None or not self.velocity_from_navdata:

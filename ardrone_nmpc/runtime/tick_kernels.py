@@ -1,9 +1,9 @@
 """The tick stages' compiled steps (issue 26): the estimate, and the NMPC's inputs — the state
 the new command will meet and the reference it is solved against — each in one call.
 
-:func:`estimate_step` is the estimation stage's update with its ż filter (the Kalman filter
-or the Luenberger observer) and the backward difference of x, y: six Python calls and their
-checks, one compiled one. The observer's coefficients for each Δt come from its own Python
+:func:`estimate_step` is the estimation stage's update with its ż estimator (any
+``estimator.kind``: the Kalman filter, the Luenberger observer, the difference, none) and the
+backward difference of x, y: six Python calls and their checks, one compiled one. The observer's coefficients for each Δt come from its own Python
 object (an expm each), kept in a small table in the state: a Δt not in it is answered
 :data:`NO_COEFFICIENTS` and the caller fills it (``runtime/estimate``).
 
@@ -197,8 +197,8 @@ def nmpc_inputs(x: np.ndarray, sent: np.ndarray, first: int, pending: int, x_sol
                 work[row + _SHIFTED[k]] += shift[k]
 
 
-# The estimation stage's state for :func:`estimate_step` (``Estimation``: a Kalman ż filter or
-# a Luenberger observer, and the backward difference of x, y), one float64 buffer: these slots.
+# The estimation stage's state for :func:`estimate_step` (``Estimation``: its ż estimator and
+# the backward difference of x, y), one float64 buffer: these slots.
 E_HAS_POSE = 0      # 1.0 once a pose was seen
 E_LAST_T = 1        # that pose's time
 E_Q, E_R, E_P0 = 2, 3, 4          # the filter's constants (ScalarKalmanVz's q, r, p0)
@@ -225,8 +225,8 @@ ESTIMATED, REFUSED, NO_COEFFICIENTS = 0, 1, 2
 def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float, t_s: float,
                   zacc_mps2: float, navdata: bool, nav_vx_mps: float, nav_vy_mps: float) -> int:
     """``Estimation.update`` with its ż estimator (``s[E_VZ_KIND]``: a ``ScalarKalmanVz``, a
-    ``LuenbergerVz``, a ``FiniteDifferenceVz`` or a ``NoVz``) and the backward difference of x, y (their ``reset``/``update``, the same expressions in the same order)
-    into the estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots);
+    ``LuenbergerVz``, a ``FiniteDifferenceVz`` or a ``NoVz``) and the backward difference of
+    x, y (their ``reset``/``update``, the same expressions in the same order) into the estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots);
     ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by the caller), else the
     difference's. Returns, with nothing changed, :data:`REFUSED` for an input the Python
     estimators refuse (non-finite, a time not after the last: the caller raises their error)

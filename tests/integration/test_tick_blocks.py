@@ -25,12 +25,14 @@ import dataclasses
 import enum
 import math
 import struct
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ardrone_nmpc.config.io import load_config
+from ardrone_nmpc.estimation import luenberger
 from ardrone_nmpc.runs.log_columns import LOG_COLUMNS
 from ardrone_nmpc.runs.memory import MemoryRecorder
 from ardrone_nmpc.runtime import lockstep
@@ -549,6 +551,9 @@ def fly(cfg, seed: int, monkeypatch, *, block_ticks: int | None,
     with monkeypatch.context() as m:
         if block_ticks is not None:
             m.setattr(lockstep, "BLOCK_TICKS", block_ticks)
+        # the Luenberger observer's coefficients by Δt are the process' (earlier flights' fill
+        # its step's table: a cache of a pure function): each flight starts with none known
+        m.setattr(luenberger, "_SHARED_CACHES", OrderedDict())
         m.setattr(LockstepDrone, "__init__", new_drone_init)
         m.setattr(LockstepDrone, "advance_to", watched_advance_to)
         m.setattr(Tick, "__init__", new_tick_init)

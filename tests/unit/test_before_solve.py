@@ -261,6 +261,9 @@ def test_the_speed_is_squared_as_python_squares():
     # numpy ages: the row's cells numpy scalars in Python
     ("t_s np.float64", lambda i: dataclasses.replace(i, t_s=np.float64(i.t_s))),
     ("pose_rx float32", lambda i: dataclasses.replace(i, pose_rx_t_s=np.float32(i.pose_rx_t_s))),
+    # a float32 pose stamp: the estimators' Δt a float32 difference (the objects' own)
+    ("pose stamp float32", lambda i: dataclasses.replace(i, pose=dataclasses.replace(
+        i.pose, t_s=np.float32(i.pose.t_s)))),
     # a float32 battery at a floor float32 rounds to: Python compares in float32 (NEP 50)
     ("battery float32", lambda i: dataclasses.replace(i, navdata=dataclasses.replace(
         i.navdata, battery_pct=np.float32(20.1)))),

@@ -6,6 +6,7 @@ of the Python they replace: ``DelayPrediction.predict``, the horizon's times,
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 
 import numpy as np
 import pytest
@@ -267,7 +268,7 @@ def test_the_observer_s_step_asks_for_a_missing_interval_and_writes_nothing(monk
     from ardrone_nmpc.core.types import MocapPose
     from ardrone_nmpc.estimation import luenberger
 
-    monkeypatch.setattr(luenberger, "_SHARED_CACHES", {})  # no Δt known in this process
+    monkeypatch.setattr(luenberger, "_SHARED_CACHES", OrderedDict())  # no Δt known in this process
     from ardrone_nmpc.runtime.tick_kernels import (E_TABLE, LU_ENTRY, NO_COEFFICIENTS,
                                                    estimate_step)
 
@@ -301,7 +302,7 @@ def test_an_observer_s_table_starts_with_the_intervals_its_process_knows(monkeyp
     from ardrone_nmpc.estimation import luenberger
     from ardrone_nmpc.runtime.tick_kernels import E_TABLE, LU_ENTRIES, LU_ENTRY
 
-    monkeypatch.setattr(luenberger, "_SHARED_CACHES", {})
+    monkeypatch.setattr(luenberger, "_SHARED_CACHES", OrderedDict())
     poses = [(p, zacc) for p, zacc in _poses(3) if p.t_s < 1.0]  # (fewer Δt than entries)
     first, _ = _estimations("kind=luenberger")
     assert np.isnan(first._state[E_TABLE::LU_ENTRY]).all()
@@ -329,10 +330,11 @@ def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does
 
     est, _ = _estimations()
     kinds = (np.float32, int, np.float64, np.int64, float)
+    stamps = (float, int, np.float64)  # (others are the objects': the next test)
     for k, (p, zacc) in enumerate(_poses(4)):
         kind = kinds[k % len(kinds)]  # (the times' int parts do not decrease)
-        odd = MocapPose(kind(0.5 * k), p.position_m.astype(np.float32), p.rotation_xyz_rad,
-                        kind(p.psi_rad))
+        odd = MocapPose(stamps[k % 3](0.5 * k), p.position_m.astype(np.float32),
+                        p.rotation_xyz_rad, kind(p.psi_rad))
         state = est._state.copy()
         estimate = est.update(odd, None, kind(zacc)).copy()
         assert estimate_step(state, *odd.position_m.tolist(), odd.psi_rad, odd.t_s,
@@ -344,9 +346,25 @@ def test_the_estimate_by_the_entry_point_takes_any_number_as_the_dispatcher_does
     assert entry is not None and est._step is entry  # the entry point
 
 
+@pytest.mark.parametrize("stamp", [np.float32, np.int64])
+@pytest.mark.parametrize("kind", ["kalman", "luenberger", "difference", "none"])
+def test_a_stamp_of_another_type_is_the_objects_own(kind, stamp):
+    """A pose stamp the Python path subtracts in its own type (a float32: a float32 Δt)
+    hands the estimate to the estimator objects: the same bits as theirs (a review's find:
+    the step's float64 Δt gave ẋ 0.62499998196 where they give 0.62499999069)."""
+    from ardrone_nmpc.core.types import MocapPose
+
+    compiled, python = _estimations(f"kind={kind}")
+    for k, (p, zacc) in enumerate(_poses(5)):
+        odd = MocapPose(stamp(0.5 * k + 0.1), p.position_m, p.rotation_xyz_rad, p.psi_rad)
+        assert (compiled.update(odd, None, zacc).tobytes()
+                == python.update(odd, None, zacc).tobytes()), k
+    assert not compiled._compiled
+
+
 @pytest.mark.parametrize("copier", ["deepcopy", "pickle"])
 @pytest.mark.parametrize("compiled", [True, False])
-@pytest.mark.parametrize("kind", ["kalman", "luenberger"])
+@pytest.mark.parametrize("kind", ["kalman", "luenberger", "difference", "none"])
 def test_a_copied_estimation_estimates_as_the_original(copier, compiled, kind):
     """A deep or pickled copy of the estimation stage mid-flight answers as the original, bit
     for bit, in its own array (a view of its own state while the compiled step holds it),
