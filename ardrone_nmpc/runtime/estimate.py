@@ -138,15 +138,16 @@ class Estimation:
         s[E_HAS_POSE] = self._last_pose_t_s is not None
         s[E_LAST_T] = self._last_pose_t_s if self._last_pose_t_s is not None else math.nan
         vz = self._vz_estimator
-        s[E_VZ_KIND], slots = _VZ_KINDS[type(vz)]
-        if s[E_VZ_KIND] == VZ_KALMAN:
+        kind, slots = _VZ_KINDS[type(vz)]
+        s[E_VZ_KIND] = kind
+        if kind == VZ_KALMAN:
             s[E_Q], s[E_R], s[E_P0], s[E_MIDPOINT] = vz.constants
         s[list(slots)] = vz.state()
         s[E_TABLE:E_TABLE + LU_ENTRIES * LU_ENTRY:LU_ENTRY] = math.nan  # no Δt yet
         self._next_entry = 0
-        if s[E_VZ_KIND] == VZ_LUENBERGER:  # but those the observer knows (earlier flights')
-            for dt_s, _ in vz.cached_coefficients()[-LU_ENTRIES:]:
-                self._add_coefficients(dt_s)
+        if kind == VZ_LUENBERGER:  # but those the observer knows (earlier flights')
+            for dt_s, coefficients in vz.cached_coefficients()[-LU_ENTRIES:]:
+                self._add_coefficients(dt_s, coefficients)
         previous, (s[E_VEL_X], s[E_VEL_Y]) = self._xy_difference.state()
         s[E_HAS_PREV] = previous is not None
         s[E_PREV_X], s[E_PREV_Y] = previous if previous is not None else (0.0, 0.0)
@@ -164,12 +165,12 @@ class Estimation:
         self._vz_estimator.set_state(*self._state[list(slots)].tolist())
         self._xy_difference.set_state((prev_x, prev_y) if has_prev else None, (vel_x, vel_y))
 
-    def _add_coefficients(self, dt_s: float) -> None:
-        """The observer's coefficients for ``dt_s`` into the step's table, over its oldest
+    def _add_coefficients(self, dt_s: float, coefficients: tuple) -> None:
+        """The observer's ``coefficients`` for ``dt_s`` into the step's table, over its oldest
         entry: its Python object's (``LuenbergerVz.coefficients``), the same bits either way."""
         s = self._state
         at = E_TABLE + self._next_entry * LU_ENTRY
-        s[at + 1:at + LU_ENTRY] = self._vz_estimator.coefficients(dt_s)
+        s[at + 1:at + LU_ENTRY] = coefficients
         s[at] = dt_s
         self._next_entry = (self._next_entry + 1) % LU_ENTRIES
 
@@ -193,14 +194,14 @@ class Estimation:
             else:
                 navdata_velocity = True
                 vx, vy = navdata_velocity_world(navdata, pose.psi_rad)
-            code = self._step(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+            code = self._step(self._state, px, py, pz, pose.psi_rad, t_s, zacc_mps2,
                               navdata_velocity, vx, vy)
             if not code:
                 return self._x
             if code == NO_COEFFICIENTS:  # a Δt the observer's table lacks: added, stepped
-                # (the step's own Δt: its float64 difference)
-                self._add_coefficients(float(pose.t_s) - float(self._state[E_LAST_T]))
-                if not self._step(self._state, px, py, pz, pose.psi_rad, pose.t_s, zacc_mps2,
+                dt_s = float(t_s) - float(self._state[E_LAST_T])  # (the step's: float64)
+                self._add_coefficients(dt_s, self._vz_estimator.coefficients(dt_s))
+                if not self._step(self._state, px, py, pz, pose.psi_rad, t_s, zacc_mps2,
                                   navdata_velocity, vx, vy):
                     return self._x
             self._leave_compiled()  # refused: the estimators raise their own error below

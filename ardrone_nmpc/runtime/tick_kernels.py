@@ -3,9 +3,10 @@ the new command will meet and the reference it is solved against — each in one
 
 :func:`estimate_step` is the estimation stage's update with its ż estimator (any
 ``estimator.kind``: the Kalman filter, the Luenberger observer, the difference, none) and the
-backward difference of x, y: six Python calls and their checks, one compiled one. The observer's coefficients for each Δt come from its own Python
-object (an expm each), kept in a small table in the state: a Δt not in it is answered
-:data:`NO_COEFFICIENTS` and the caller fills it (``runtime/estimate``).
+backward difference of x, y: six Python calls and their checks, one compiled one. The
+observer's coefficients for each Δt come from its own Python object (an expm each), kept in a
+small table in the state: a Δt not in it is answered :data:`NO_COEFFICIENTS` and the caller
+fills it (``runtime/estimate``).
 
 ``Control.solve`` made four calls of its own a tick before the solver's — the delay
 prediction's rollout (:meth:`~ardrone_nmpc.runtime.stages.DelayPrediction.predict`), the
@@ -211,7 +212,7 @@ E_X = 16            # (7) the estimate [x, ẋ, y, ẏ, z, ż, ψ] (the caller's
 E_VZ_KIND = 23      # VZ_KALMAN, VZ_LUENBERGER, VZ_DIFFERENCE or VZ_NONE
 E_Z_PREV = 24       # the observer's z[k−1]
 E_STEP = 25         # the slots a step writes (before these: what before_solve puts back)
-E_TABLE = 25        # (LU_ENTRIES × LU_ENTRY) the observer's coefficients: Δt, then the ten of
+E_TABLE = E_STEP    # (LU_ENTRIES × LU_ENTRY) the observer's coefficients: Δt, then the ten of
 LU_ENTRY = 11       # LuenbergerVz.coefficients(Δt); an unused entry's Δt is NaN
 LU_ENTRIES = 32     # (its own cache's size: a lockstep flight sees ~15 Δt, its pose stamps')
 E_SIZE = E_TABLE + LU_ENTRIES * LU_ENTRY
@@ -226,11 +227,12 @@ def estimate_step(s: np.ndarray, px: float, py: float, pz: float, psi_rad: float
                   zacc_mps2: float, navdata: bool, nav_vx_mps: float, nav_vy_mps: float) -> int:
     """``Estimation.update`` with its ż estimator (``s[E_VZ_KIND]``: a ``ScalarKalmanVz``, a
     ``LuenbergerVz``, a ``FiniteDifferenceVz`` or a ``NoVz``) and the backward difference of
-    x, y (their ``reset``/``update``, the same expressions in the same order) into the estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots);
-    ``navdata``: ẋ, ẏ are ``nav_v*_mps`` (navdata, rotated by the caller), else the
-    difference's. Returns, with nothing changed, :data:`REFUSED` for an input the Python
-    estimators refuse (non-finite, a time not after the last: the caller raises their error)
-    and :data:`NO_COEFFICIENTS` when the observer's table lacks this Δt (the caller adds it)."""
+    x, y (their ``reset``/``update``, the same expressions in the same order) into the
+    estimate ``s[E_X:E_X + 7]`` over the state ``s`` (the ``E_*`` slots); ``navdata``: ẋ, ẏ
+    are ``nav_v*_mps`` (navdata, rotated by the caller), else the difference's. Returns, with
+    nothing changed, :data:`REFUSED` for an input the Python estimators refuse (non-finite, a
+    time not after the last: the caller raises their error) and :data:`NO_COEFFICIENTS` when
+    the observer's table lacks this Δt (the caller adds it)."""
     kind = s[E_VZ_KIND]
     if s[E_HAS_POSE] == 0.0 or t_s != s[E_LAST_T]:
         if s[E_HAS_POSE] == 0.0:  # reset(z), then the difference's first position (dt = 1)

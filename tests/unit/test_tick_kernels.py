@@ -315,7 +315,7 @@ def test_an_observer_s_table_starts_with_the_intervals_its_process_knows(monkeyp
     assert met <= set(second._state[E_TABLE::LU_ENTRY].tolist())
     added = []
     monkeypatch.setattr(type(second), "_add_coefficients",
-                        lambda self, dt_s: added.append(dt_s))  # (asked: fails below)
+                        lambda self, dt_s, coefficients: added.append(dt_s))  # (asked: fails)
     for p, zacc in poses:
         assert second.update(p, None, zacc).tobytes() == python.update(p, None, zacc).tobytes()
     assert second._compiled and added == []
